@@ -1,0 +1,136 @@
+//! The decision record: one per decision cycle, every stage in order. This is the schema of the
+//! decision log (docs/decision-log.md); bump [`SCHEMA_VERSION`] on any incompatible change.
+
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// One MDP's view of the cycle.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct MdpProposal {
+    /// MDP name from params (`navigation`, `landing`, `tracking`, `monolithic`, `reference`).
+    pub mdp: String,
+    /// This MDP's local state.
+    pub state: String,
+    /// The chosen MDP action (as named in params) and the primitive actions it stands for.
+    pub action: String,
+    pub actions: Vec<String>,
+    /// Optimal expected value at `state` under the active policy's rewards.
+    pub value: f64,
+    /// Solver iterations (horizon for finite-horizon solves).
+    pub iterations: u32,
+}
+
+/// A behaviour conflict between primitive actions and how the policy resolved it.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Conflict {
+    pub kept: String,
+    pub dropped: Vec<String>,
+    /// The rule from params/policies.toml that decided it.
+    pub rule: String,
+}
+
+/// One application variant placed on the platform.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct PlacementRecord {
+    pub app: String,
+    pub version: String,
+    /// S, M or F.
+    pub implementation: String,
+    /// SW, HW or SW-HW.
+    pub support: String,
+    pub tiles: Vec<u8>,
+    pub cpu_share: f64,
+    pub ms_per_frame: f64,
+}
+
+/// What the resource arbitration did this cycle.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct ResourcesRecord {
+    pub placements: Vec<PlacementRecord>,
+    pub cpu_load: f64,
+    pub tiles_used: u8,
+    pub reconfigurations: u32,
+    /// Human-readable: "tracking V3 -> V1: insufficient resources (cpu 1.12 > 1.00)".
+    pub degraded: Vec<String>,
+    pub dropped: Vec<String>,
+    /// The paper's Resources column: "10 + 5 + 394 ms".
+    pub summary: String,
+}
+
+/// PANORAMA margins and re-allocation this cycle.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct GuaranteeRecord {
+    /// Activity being flown (index and name).
+    pub activity: usize,
+    pub activity_name: String,
+    /// goal - (measured so far + estimated remainder), per end-oriented goal name (`energy_j`, `duration_s`).
+    pub margins: BTreeMap<String, f64>,
+    pub goals: BTreeMap<String, f64>,
+    /// measured - estimated so far, per goal.
+    pub drift: BTreeMap<String, f64>,
+    /// Set when this cycle re-allocated the remaining activities.
+    pub reallocation: Option<Reallocation>,
+    /// True when no allocation of the remaining activities meets every goal.
+    pub infeasible: bool,
+}
+
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Reallocation {
+    pub reason: String,
+    /// Activity name -> chosen implementation alternative, for the remaining activities.
+    pub allocation: Vec<(String, String)>,
+    pub margins_after: BTreeMap<String, f64>,
+}
+
+/// A vehicle command and what became of it (fly only; simulate records the intent).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct CommandRecord {
+    /// Primitive action that caused it (`take_off`, `return_to_base`, ...).
+    pub action: String,
+    /// MAVLink command or protocol step (`MAV_CMD_NAV_TAKEOFF`, `MISSION_UPLOAD`, `SET_MODE GUIDED`).
+    pub command: String,
+    /// `ACCEPTED`, `DENIED`, `FAILED`, `TIMEOUT`, `PENDING`, `SIMULATED`, ...
+    pub result: String,
+    pub attempts: u32,
+    pub latency_ms: Option<f64>,
+}
+
+/// Everything one decision cycle saw and decided, in stage order.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct DecisionRecord {
+    pub cycle: u64,
+    /// Seconds since the run started (simulate: step index times the step length).
+    pub time_s: f64,
+    /// Mission (shared) state: `base`, `wp1`, `wpi`, `wpf`, `target`, `v3`, `landing`, ...
+    pub state: String,
+    /// What triggered or happened at this cycle (`target detected`, `obstacle detected`, ...).
+    pub events: Vec<String>,
+    /// Raw observations by name (units in docs/params.md).
+    pub observations: BTreeMap<String, f64>,
+    /// BN evidence: node -> state.
+    pub evidence: BTreeMap<String, String>,
+    /// Named probabilities published by the health managers.
+    pub probabilities: BTreeMap<String, f64>,
+    pub proposals: Vec<MdpProposal>,
+    pub conflicts: Vec<Conflict>,
+    /// Final primitive action set after behaviour and resource arbitration.
+    pub actions: Vec<String>,
+    pub resources: Option<ResourcesRecord>,
+    pub guarantee: Option<GuaranteeRecord>,
+    pub commands: Vec<CommandRecord>,
+    pub link_events: Vec<String>,
+    /// Telemetry worth plotting that is not an observation (altitude_m, battery_pct, mode).
+    pub vehicle: BTreeMap<String, serde_json::Value>,
+}
+
+/// What the core asks the shell to do this cycle.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Plan {
+    /// Primitive vehicle actions (`take_off`, `follow_trajectory`, `avoid_obstacle`, `land`,
+    /// `replan_and_land`, `return_to_base`), mapped to MAVLink by params/commands.toml.
+    pub vehicle_actions: Vec<String>,
+    /// Application variants to run on the modeled platform.
+    pub applications: Vec<PlacementRecord>,
+}
