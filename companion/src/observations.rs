@@ -1,0 +1,25 @@
+//! One timestamped snapshot of everything observed: autopilot telemetry and onboard monitors.
+//! The shell (simulation world or MAVLink) fills it; the pure core only reads it.
+
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// Observation names and units are data (params/observations.toml, documented in docs/params.md):
+/// `vibration_mps2`, `wind_mps`, `battery_pct`, `gps_fix`, `gps_sats`, `luminosity_lux`,
+/// `target_speed_rel`, `cpu_load`, `free_tiles`, `obstacle_m`, `target_detected`, ...
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Observations {
+    pub time_s: f64,
+    pub values: BTreeMap<String, f64>,
+    /// Discrete happenings since the last snapshot (`target detected`, `obstacle detected`).
+    pub events: Vec<String>,
+}
+
+impl Observations {
+    pub fn get(&self, name: &str) -> Option<f64> {
+        self.values.get(name).copied()
+    }
+    pub fn set(&mut self, name: &str, value: f64) {
+        self.values.insert(name.to_string(), value);
+    }
+}
