@@ -10,6 +10,10 @@ use std::collections::BTreeMap;
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Observations {
     pub time_s: f64,
+    /// The mission state as the shell observes it (GPS waypoint reached, MISSION_CURRENT, target
+    /// detected/tracked by the onboard application): `base`, `wp1`, `wpi`, `wpf`, `target`, `v3`, ...
+    #[serde(default)]
+    pub state: String,
     pub values: BTreeMap<String, f64>,
     /// Discrete happenings since the last snapshot (`target detected`, `obstacle detected`).
     pub events: Vec<String>,

@@ -57,6 +57,9 @@ pub struct ResourcesRecord {
     pub dropped: Vec<String>,
     /// The paper's Resources column: "10 + 5 + 394 ms".
     pub summary: String,
+    /// Electrical power of the platform (CPU load and active tiles), W.
+    #[serde(default)]
+    pub power_w: f64,
 }
 
 /// PANORAMA margins and re-allocation this cycle.

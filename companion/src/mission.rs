@@ -1,0 +1,260 @@
+//! The mission as the decision core reads it: the primitive action catalogue (params/actions.toml)
+//! and params/mission.toml (model sets, horizon, projections of the shared mission state).
+
+use crate::observations::Observations;
+use crate::spec::{SpecError, read_toml};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// Safety-first or mission-first (the BFM paper's two policies).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Policy {
+    Safety,
+    Mission,
+}
+
+impl Policy {
+    pub fn name(self) -> &'static str {
+        match self {
+            Policy::Safety => "safety",
+            Policy::Mission => "mission",
+        }
+    }
+}
+
+impl std::str::FromStr for Policy {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "safety" => Ok(Policy::Safety),
+            "mission" => Ok(Policy::Mission),
+            o => Err(format!("unknown policy `{o}` (safety, mission)")),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ActionKind {
+    Vehicle,
+    Application,
+}
+
+/// One primitive action (the paper's A1..A17).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Action {
+    pub id: String,
+    pub paper: String,
+    pub kind: ActionKind,
+    pub label: String,
+    /// Application variant it runs on the platform (fpga_model), if any.
+    pub app: Option<String>,
+    pub version: Option<String>,
+}
+
+#[derive(Debug, Clone)]
+pub struct ActionCatalogue {
+    pub actions: Vec<Action>,
+}
+
+#[derive(Deserialize)]
+struct ActionsFile {
+    action: Vec<Action>,
+}
+
+impl ActionCatalogue {
+    pub fn load(params: &Path) -> Result<Self, SpecError> {
+        let file = params.join("actions.toml");
+        let f: ActionsFile = read_toml(&file)?;
+        let mut seen = std::collections::BTreeSet::new();
+        for (i, a) in f.action.iter().enumerate() {
+            if !seen.insert(a.id.clone()) {
+                return Err(SpecError::new(
+                    &file,
+                    format!("action[{i}].id"),
+                    format!("duplicate action `{}`", a.id),
+                ));
+            }
+            if a.app.is_some() != a.version.is_some() {
+                return Err(SpecError::new(
+                    &file,
+                    format!("action[{i}]"),
+                    "`app` and `version` go together",
+                ));
+            }
+            if a.kind == ActionKind::Application && a.app.is_none() {
+                return Err(SpecError::new(
+                    &file,
+                    format!("action[{i}]"),
+                    "an application action needs `app` and `version`",
+                ));
+            }
+        }
+        Ok(Self { actions: f.action })
+    }
+
+    pub fn get(&self, id: &str) -> Option<&Action> {
+        self.actions.iter().find(|a| a.id == id)
+    }
+
+    pub fn label<'a>(&'a self, id: &'a str) -> &'a str {
+        self.get(id).map_or(id, |a| a.label.as_str())
+    }
+
+    /// The primitive action that runs `app`/`version`, preferring `track_*`-style dedicated ones.
+    pub fn for_variant(&self, app: &str, version: &str) -> Option<&Action> {
+        let mut it = self
+            .actions
+            .iter()
+            .filter(|a| a.app.as_deref() == Some(app) && a.version.as_deref() == Some(version));
+        let first = it.next()?;
+        Some(it.find(|a| a.id.starts_with("track_")).unwrap_or(first))
+    }
+}
+
+/// One projection rule (params/mission.toml).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProjectionRule {
+    #[serde(default)]
+    pub states: Vec<String>,
+    pub observation: Option<String>,
+    pub below: Option<f64>,
+    pub above: Option<f64>,
+    pub state: String,
+}
+
+impl ProjectionRule {
+    fn matches(&self, obs: &Observations) -> bool {
+        if !self.states.is_empty() && !self.states.iter().any(|s| *s == obs.state) {
+            return false;
+        }
+        match &self.observation {
+            None => true,
+            Some(name) => obs.get(name).is_some_and(|v| {
+                self.below.is_none_or(|b| v < b) && self.above.is_none_or(|a| v > a)
+            }),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GuaranteeCoupling {
+    pub infeasible_p_battery: f64,
+}
+
+/// params/mission.toml.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MissionFile {
+    pub horizon: usize,
+    pub models: BTreeMap<String, Vec<String>>,
+    pub guarantee: GuaranteeCoupling,
+    #[serde(default)]
+    pub projection: BTreeMap<String, Vec<ProjectionRule>>,
+}
+
+impl MissionFile {
+    pub fn load(params: &Path) -> Result<Self, SpecError> {
+        let file = params.join("mission.toml");
+        let m: MissionFile = read_toml(&file)?;
+        if m.horizon == 0 {
+            return Err(SpecError::new(&file, "horizon", "must be at least 1"));
+        }
+        for (name, rules) in &m.projection {
+            for (i, r) in rules.iter().enumerate() {
+                if r.observation.is_some() && r.below.is_none() && r.above.is_none() {
+                    return Err(SpecError::new(
+                        &file,
+                        format!("projection.{name}[{i}]"),
+                        "an observation rule needs `below` or `above`",
+                    ));
+                }
+            }
+        }
+        if !(0.0..=1.0).contains(&m.guarantee.infeasible_p_battery) {
+            return Err(SpecError::new(
+                &file,
+                "guarantee.infeasible_p_battery",
+                "is not a probability",
+            ));
+        }
+        Ok(m)
+    }
+
+    /// The state MDP `mdp` is in, given the shared state and observations.
+    pub fn project<'a>(&'a self, mdp: &str, obs: &'a Observations) -> &'a str {
+        self.projection
+            .get(mdp)
+            .and_then(|rules| rules.iter().find(|r| r.matches(obs)))
+            .map_or(obs.state.as_str(), |r| r.state.as_str())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn obs(state: &str, vals: &[(&str, f64)]) -> Observations {
+        let mut o = Observations {
+            state: state.into(),
+            ..Default::default()
+        };
+        for (k, v) in vals {
+            o.set(k, *v);
+        }
+        o
+    }
+
+    #[test]
+    fn projection_rules_first_match_wins_and_fall_back_to_shared_state() {
+        let params = crate::spec::default_params_dir();
+        let m = MissionFile::load(&params).unwrap();
+        // An obstacle closer than 10 m puts navigation in obstacle_detected whatever the phase.
+        assert_eq!(
+            m.project("navigation", &obs("v3", &[("obstacle_m", 4.0)])),
+            "obstacle_detected"
+        );
+        // Tracking phases hover at the final waypoint for navigation.
+        assert_eq!(
+            m.project("navigation", &obs("v3", &[("obstacle_m", 50.0)])),
+            "wpf"
+        );
+        // Landing: a found T zone wins over the plain hover projection.
+        assert_eq!(
+            m.project("landing", &obs("v1", &[("zone_t_found", 1.0)])),
+            "zone_t_ok"
+        );
+        assert_eq!(
+            m.project("landing", &obs("v1", &[("zone_t_found", 0.0)])),
+            "wpf"
+        );
+        // No rule: the shared state itself.
+        assert_eq!(m.project("tracking", &obs("v2", &[])), "v2");
+        assert_eq!(m.project("navigation", &obs("wpi", &[])), "wpi");
+    }
+
+    #[test]
+    fn action_catalogue_rejects_duplicates_and_half_variants() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(
+            dir.path().join("actions.toml"),
+            "[[action]]\nid='a'\npaper='A1'\nkind='vehicle'\nlabel='a'\n[[action]]\nid='a'\npaper='A2'\nkind='vehicle'\nlabel='b'\n",
+        )
+        .unwrap();
+        let e = ActionCatalogue::load(dir.path()).unwrap_err();
+        assert_eq!(e.entry, "action[1].id");
+        std::fs::write(
+            dir.path().join("actions.toml"),
+            "[[action]]\nid='a'\npaper='A1'\nkind='application'\nlabel='a'\napp='tracking'\n",
+        )
+        .unwrap();
+        let e = ActionCatalogue::load(dir.path()).unwrap_err();
+        assert_eq!(e.entry, "action[0]");
+        assert!(e.reason.contains("together"), "{}", e.reason);
+    }
+}
