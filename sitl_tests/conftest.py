@@ -88,8 +88,12 @@ def standin():
         return sa
 
     yield make
+    errors = []
     for sa in started:
         sa.stop()
+        errors += [e.data for e in sa.rec.of("handler_error")]
+    if errors:
+        pytest.fail(f"stand-in handler errors (a fixture bug): {errors[:5]}")
 
 
 @pytest.fixture

@@ -656,7 +656,11 @@ class StandinAutopilot:
             return
         handler = getattr(self, "_h_" + t, None)
         if handler is not None:
-            handler(link, m)
+            try:
+                handler(link, m)
+            except Exception as e:  # a fixture bug must show up in the recording, not kill the link thread
+                self.counters["handler_errors"] = self.counters.get("handler_errors", 0) + 1
+                self.rec.add(self.wall(), self._sim, "handler_error", type=t, error=repr(e))
 
     def _route(self, src_link: Link, m: Any, tsys: int, tcomp: int) -> None:
         if len(self.links) < 2:
@@ -794,7 +798,7 @@ class StandinAutopilot:
             return
         count = len(self.mission) if m.mission_type == mavlink.MAV_MISSION_TYPE_MISSION else 0
         self._request_warning_sent = False
-        link.send(mavlink.MAVLink_mission_count_message(src[0], src[1], count, m.mission_type, 0))
+        link.send(mavlink.MAVLink_mission_count_message(src[0], src[1], count, m.mission_type))
 
     def _h_MISSION_REQUEST_INT(self, link: Link, m: Any) -> None:
         self._mission_request(link, m, want_int=True)
@@ -1089,7 +1093,7 @@ class StandinAutopilot:
                 "x": int(round(lat * 1e7)), "y": int(round(lon * 1e7)), "z": float(alt), "mission_type": 0}
 
     def _mission_ack(self, link: Link, dest: Tuple[int, int], result: int, mission_type: int = 0) -> None:
-        link.send(mavlink.MAVLink_mission_ack_message(dest[0], dest[1], result, mission_type, 0))
+        link.send(mavlink.MAVLink_mission_ack_message(dest[0], dest[1], result, mission_type))
         self.rec.add(self.wall(), self._sim, "mission_ack_tx", result=result, dest=list(dest))
 
     def _send_mission_request(self) -> None:
@@ -1177,10 +1181,12 @@ class StandinAutopilot:
             return
         if m.seq != 0 and m.seq >= len(self.mission):
             # "try to educate the GCS on the actual size of the mission" (MissionItemProtocol_Waypoints::get_item)
-            link.send(mavlink.MAVLink_mission_count_message(src[0], src[1], len(self.mission), 0, 0))
+            link.send(mavlink.MAVLink_mission_count_message(src[0], src[1], len(self.mission), 0))
             self._mission_ack(link, src, mavlink.MAV_MISSION_ERROR)
             return
-        it = dict(self.mission[m.seq]) if m.seq < len(self.mission) else self._home_item()
+        # seq 0 always reads back the vehicle's current home (AP_Mission::read_cmd_from_storage:
+        # "special handling for command #0 which is home"), whatever was uploaded there
+        it = self._home_item() if m.seq == 0 else dict(self.mission[m.seq])
         current = 1 if (m.seq == self.mission_current and m.seq != 0) else 0
         args = (src[0], src[1], m.seq, it["frame"], it["command"], current, 1, it["param1"], it["param2"], it["param3"], it["param4"])
         if want_int:
