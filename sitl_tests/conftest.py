@@ -146,7 +146,7 @@ class FlightRun:
     started: float = field(default_factory=time.monotonic)
 
     def records(self) -> List[Dict[str, Any]]:
-        return read_decision_log(self.log_dir)
+        return read_decision_log(self.log_dir, fallback=self.stdout_path)
 
     def output(self) -> str:
         return f"cmd: {' '.join(self.cmd)}\n--- stdout\n{self.stdout_path.read_text()[-3000:]}\n--- stderr\n{self.stderr_path.read_text()[-3000:]}"

@@ -24,24 +24,34 @@ def companion_fly_cmd(exe: str, connect_url: str, log_dir: Path, mission: Option
     if mission is not None:
         cmd += ["--mission", str(mission)]
     if signing_key_file is not None:
-        # the key file holds the 32-byte MAVLink 2 secret key as 64 hex characters
-        cmd += ["--signing-key-file", str(signing_key_file)]
+        # a file holding the 32-byte MAVLink 2 secret key as 64 hex digits
+        cmd += ["--signing-key", str(signing_key_file)]
     return cmd + list(extra)
+
+
+# Seconds of silence after which the companion counts the autopilot as lost (`fly --link-timeout`, default 3s).
+COMPANION_LINK_TIMEOUT_S = 3.0
 
 
 # ------------------------------------------------------------------------------------------------
 # Decision log (JSON Lines of DecisionRecord, companion/src/record.rs); a header line without `cycle` is skipped.
 # ------------------------------------------------------------------------------------------------
 
-def read_decision_log(log_dir: Path) -> List[Dict[str, Any]]:
+def read_decision_log(log_dir: Path, fallback: Optional[Path] = None) -> List[Dict[str, Any]]:
+    """Records from every *.jsonl under `log_dir`; when there is none, from `fallback` (the run's stdout,
+    where `fly` writes JSON lines when no log dir is given)."""
     records: List[Dict[str, Any]] = []
     files = sorted(glob.glob(str(Path(log_dir) / "**" / "*.jsonl"), recursive=True))
+    if not files and fallback is not None and Path(fallback).exists():
+        files = [str(fallback)]
     for f in files:
         with open(f) as fh:
             for n, line in enumerate(fh, 1):
                 line = line.strip()
                 if not line:
                     continue
+                if f == str(fallback) and not line.startswith("{"):
+                    continue                      # human output mixed into stdout
                 try:
                     obj = json.loads(line)
                 except json.JSONDecodeError as e:

@@ -18,7 +18,7 @@ from typing import Any, Callable, Dict, List, Optional
 
 import pytest
 
-from helpers import all_actions, tracking_versions
+from helpers import COMPANION_LINK_TIMEOUT_S, all_actions, tracking_versions
 from standin_autopilot import mavlink
 
 pytestmark = pytest.mark.companion_fly
@@ -225,7 +225,7 @@ def test_obstacle_triggers_avoidance_command(autopilot_factory, fly, monitors_fa
 @pytest.mark.standin_only
 def test_five_second_link_cut(autopilot_factory, fly, monitors_factory):
     ap = autopilot_factory()
-    grace = 3.0     # wall seconds the companion may take to notice the silence
+    grace = COMPANION_LINK_TIMEOUT_S + 0.5    # wall seconds the companion may take to notice the silence
 
     def scenario(ctx: Ctx) -> None:
         nominal_target(ctx)
