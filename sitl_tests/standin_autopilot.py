@@ -121,6 +121,15 @@ DEFAULT_INTERVALS_MS: Dict[int, int] = {
     mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR: 200,
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: 5000,
     mavlink.MAVLINK_MSG_ID_SYSTEM_TIME: 5000,
+    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: -1,   # off by default, as with SR*_POSITION on most links
+}
+# Ids ArduPilot maps to an ap_message that the stand-in accepts interval requests for but never generates.
+KNOWN_NOT_GENERATED = {
+    mavlink.MAVLINK_MSG_ID_RAW_IMU, mavlink.MAVLINK_MSG_ID_SCALED_IMU, mavlink.MAVLINK_MSG_ID_SCALED_PRESSURE,
+    mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW, mavlink.MAVLINK_MSG_ID_RC_CHANNELS, mavlink.MAVLINK_MSG_ID_NAV_CONTROLLER_OUTPUT,
+    mavlink.MAVLINK_MSG_ID_POSITION_TARGET_GLOBAL_INT, mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED,
+    mavlink.MAVLINK_MSG_ID_TERRAIN_REPORT, mavlink.MAVLINK_MSG_ID_AHRS, mavlink.MAVLINK_MSG_ID_POWER_STATUS,
+    mavlink.MAVLINK_MSG_ID_MEMINFO, mavlink.MAVLINK_MSG_ID_RANGEFINDER, mavlink.MAVLINK_MSG_ID_GIMBAL_DEVICE_ATTITUDE_STATUS,
 }
 HEARTBEAT_INTERVAL_S = 1.0
 
@@ -958,11 +967,12 @@ class StandinAutopilot:
     def _set_interval(self, mid: int, interval_us: float) -> int:
         # GCS_MAVLINK::set_message_interval (GCS_Common.cpp): -1 disables, 0 restores the default,
         # otherwise interval in us; an id with no ap_message fails with a STATUSTEXT.
-        if mid not in DEFAULT_INTERVALS_MS and mid != mavlink.MAVLINK_MSG_ID_HEARTBEAT:
+        if mid not in DEFAULT_INTERVALS_MS and mid != mavlink.MAVLINK_MSG_ID_HEARTBEAT and mid not in KNOWN_NOT_GENERATED:
             self._statustext(f"No ap_message for mavlink id ({mid})", mavlink.MAV_SEVERITY_INFO)
             return mavlink.MAV_RESULT_FAILED
-        if mid == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
-            return mavlink.MAV_RESULT_ACCEPTED   # stand-in: heartbeat stays 1 Hz
+        if mid == mavlink.MAVLINK_MSG_ID_HEARTBEAT or mid in KNOWN_NOT_GENERATED:
+            self.rec.add(self.wall(), self._sim, "interval", msgid=mid, ms=None)
+            return mavlink.MAV_RESULT_ACCEPTED   # stand-in: heartbeat stays 1 Hz; the others are never generated
         if interval_us < 0:
             self.intervals_ms[mid] = -1
         elif interval_us == 0:
@@ -1669,6 +1679,8 @@ class StandinAutopilot:
             cm = 4001 if d is None else max(20, int(d * 100))   # out of range reads above max_distance
             return M.MAVLink_distance_sensor_message(tboot, 20, 4000, cm, M.MAV_DISTANCE_SENSOR_LASER, 0,
                                                      int(self.params["SIM_OBST_ORIENT"]), 0, 0.35, 0.35, [1, 0, 0, 0], 100)
+        if mid == M.MAVLINK_MSG_ID_LOCAL_POSITION_NED:
+            return M.MAVLink_local_position_ned_message(tboot, v.north, v.east, -v.alt, v.vn, v.ve, v.vd)
         if mid == M.MAVLINK_MSG_ID_HOME_POSITION:
             hl, hn, ha = self.home
             return M.MAVLink_home_position_message(int(hl * 1e7), int(hn * 1e7), int(ha * 1000), 0, 0, 0, [1, 0, 0, 0], 0, 0, 0, 0)

@@ -590,3 +590,14 @@ def test_udp_listen(standin, client):
     c = client(f"udpout:127.0.0.1:{port}")
     c.mav.heartbeat_send(6, 8, 0, 0, 0)                     # the stand-in replies to the last sender
     assert c.wait("HEARTBEAT", timeout=5).autopilot == mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
+
+
+def test_local_position_ned_is_off_until_requested(standin, client):
+    sa = standin(**FAST)
+    c = client(sa.url)
+    c.wait("HEARTBEAT", timeout=5)
+    assert c.none_within("LOCAL_POSITION_NED", 1.0)
+    lpn = mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED
+    assert c.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, lpn, 200000).result == mavlink.MAV_RESULT_ACCEPTED
+    m = c.wait("LOCAL_POSITION_NED", timeout=3)
+    assert (m.x, m.y, m.z) == (0.0, 0.0, 0.0)               # on the ground at home, NED
