@@ -56,7 +56,8 @@ def _companion_fly_unavailable() -> Optional[str]:
         _fly_probe = f"`{exe} fly --help` could not run: {e}"
         return _fly_probe
     if out.returncode != 0:
-        _fly_probe = f"`companion fly --help` failed (exit {out.returncode}): {(out.stderr or out.stdout).strip()[:300]}"
+        said = " ".join((out.stderr or out.stdout).split())[:200]
+        _fly_probe = f"`companion fly --help` failed (exit {out.returncode}): {said}"
         return _fly_probe
     _fly_probe = ""
     return None
