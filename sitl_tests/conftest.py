@@ -1,0 +1,206 @@
+"""Fixtures for the SITL tests.
+
+* `standin`: a factory that starts the stand-in ArduCopter (standin_autopilot.py, a test fixture) on a free
+  loopback port and stops it afterwards.
+* `autopilot`: what the companion flies against: the stand-in, or the real SITL named by env `SITL_URL`
+  (then tests marked `standin_only` are skipped, since a real SITL has no hazard hooks or recording).
+* `fly`: starts the real companion (`$COMPANION_BIN fly ...`, command line built by helpers.companion_fly_cmd)
+  with its own log dir, and collects its decision log.
+
+Tests marked `companion_fly` are skipped only when `$COMPANION_BIN fly --help` fails (the subcommand is still
+being written); the skip reason carries its output.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Optional
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from helpers import GcsClient, companion_fly_cmd, read_decision_log  # noqa: E402
+from standin_autopilot import OnboardMonitors, StandinAutopilot, StandinConfig  # noqa: E402
+
+SITL_URL = os.environ.get("SITL_URL")                                   # e.g. tcp:127.0.0.1:5762 (ArduPilot SERIAL1)
+SITL_MONITOR_URL = os.environ.get("SITL_MONITOR_URL", "tcp:127.0.0.1:5763")   # a second SITL port for the monitors
+STANDIN_SPEEDUP = float(os.environ.get("STANDIN_SPEEDUP", "4"))
+FLY_TIMEOUT_S = float(os.environ.get("SITL_FLY_TIMEOUT", "240"))
+
+
+def pytest_configure(config: Any) -> None:
+    config.addinivalue_line("markers", "companion_fly: needs `companion fly` (skipped while `fly --help` fails)")
+    config.addinivalue_line("markers", "standin_only: needs the stand-in's hazard injection or recording (skipped with SITL_URL)")
+
+
+_fly_probe: Optional[str] = None
+
+
+def _companion_fly_unavailable() -> Optional[str]:
+    """None when `$COMPANION_BIN fly --help` succeeds, else the reason."""
+    global _fly_probe
+    if _fly_probe is not None:
+        return _fly_probe or None
+    exe = os.environ.get("COMPANION_BIN")
+    if not exe:
+        _fly_probe = "COMPANION_BIN is not set (scripts/test.sh sets it)"
+        return _fly_probe
+    try:
+        out = subprocess.run([exe, "fly", "--help"], capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired) as e:
+        _fly_probe = f"`{exe} fly --help` could not run: {e}"
+        return _fly_probe
+    if out.returncode != 0:
+        said = " ".join((out.stderr or out.stdout).split())[:200]
+        _fly_probe = f"`companion fly --help` failed (exit {out.returncode}): {said}"
+        return _fly_probe
+    _fly_probe = ""
+    return None
+
+
+def pytest_collection_modifyitems(config: Any, items: List[Any]) -> None:
+    for item in items:
+        if SITL_URL and item.get_closest_marker("standin_only"):
+            item.add_marker(pytest.mark.skip(reason=f"SITL_URL={SITL_URL}: this test needs the stand-in's hazard injection/recording"))
+        if item.get_closest_marker("companion_fly"):
+            reason = _companion_fly_unavailable()
+            if reason:
+                item.add_marker(pytest.mark.skip(reason=reason))
+
+
+# ------------------------------------------------------------------------------------------------
+# stand-in
+# ------------------------------------------------------------------------------------------------
+
+@pytest.fixture
+def standin():
+    """Factory: standin(**StandinConfig fields) -> started StandinAutopilot on 127.0.0.1:<free port>."""
+    started: List[StandinAutopilot] = []
+
+    def make(**overrides: Any) -> StandinAutopilot:
+        overrides.setdefault("listen", "tcp:127.0.0.1:0")
+        sa = StandinAutopilot(StandinConfig(**overrides)).start()
+        started.append(sa)
+        return sa
+
+    yield make
+    errors = []
+    for sa in started:
+        sa.stop()
+        errors += [e.data for e in sa.rec.of("handler_error")]
+    if errors:
+        pytest.fail(f"stand-in handler errors (a fixture bug): {errors[:5]}")
+
+
+@pytest.fixture
+def client():
+    """Factory: client(url, **kw) -> GcsClient, closed afterwards."""
+    made: List[GcsClient] = []
+
+    def make(url: str, **kw: Any) -> GcsClient:
+        c = GcsClient(url, **kw)
+        made.append(c)
+        return c
+
+    yield make
+    for c in made:
+        c.close()
+
+
+# ------------------------------------------------------------------------------------------------
+# companion runs
+# ------------------------------------------------------------------------------------------------
+
+@dataclass
+class Autopilot:
+    url: str                                   # what the companion connects to
+    monitor_url: str                           # where the onboard monitors connect
+    standin: Optional[StandinAutopilot] = None  # None against a real SITL
+    signing_key: Optional[bytes] = None
+
+
+@pytest.fixture
+def autopilot_factory(standin):
+    def make(**overrides: Any) -> Autopilot:
+        if SITL_URL:
+            return Autopilot(url=SITL_URL, monitor_url=SITL_MONITOR_URL, signing_key=overrides.get("signing_key"))
+        overrides.setdefault("speedup", STANDIN_SPEEDUP)
+        overrides.setdefault("ekf_ready_s", 8.0)
+        sa = standin(**overrides)
+        return Autopilot(url=sa.url, monitor_url=sa.url, standin=sa, signing_key=overrides.get("signing_key"))
+
+    return make
+
+
+@dataclass
+class FlightRun:
+    proc: subprocess.Popen
+    log_dir: Path
+    stdout_path: Path
+    stderr_path: Path
+    cmd: List[str]
+    started: float = field(default_factory=time.monotonic)
+
+    def records(self) -> List[Dict[str, Any]]:
+        return read_decision_log(self.log_dir, fallback=self.stdout_path)
+
+    def output(self) -> str:
+        return f"cmd: {' '.join(self.cmd)}\n--- stdout\n{self.stdout_path.read_text()[-3000:]}\n--- stderr\n{self.stderr_path.read_text()[-3000:]}"
+
+    def wait_exit(self, timeout: float) -> Optional[int]:
+        try:
+            return self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return None
+
+
+@pytest.fixture
+def fly(tmp_path):
+    """Factory: fly(autopilot, mission=None, extra=()) -> FlightRun of `companion fly` (killed at teardown)."""
+    runs: List[FlightRun] = []
+
+    def start(ap: Autopilot, mission: Optional[Path] = None, extra: tuple = ()) -> FlightRun:
+        exe = os.environ["COMPANION_BIN"]
+        n = len(runs)
+        log_dir = tmp_path / f"companion-log-{n}"
+        log_dir.mkdir()
+        key_file = None
+        if ap.signing_key is not None:
+            key_file = tmp_path / f"signing-{n}.key"
+            key_file.write_text(ap.signing_key.hex())
+        cmd = companion_fly_cmd(exe, ap.url, log_dir, mission=mission, signing_key_file=key_file, extra=extra)
+        out, err = tmp_path / f"companion-{n}.out", tmp_path / f"companion-{n}.err"
+        proc = subprocess.Popen(cmd, stdout=open(out, "w"), stderr=open(err, "w"), stdin=subprocess.DEVNULL,
+                                env={**os.environ, "RUST_BACKTRACE": "1"})
+        run = FlightRun(proc, log_dir, out, err, cmd)
+        runs.append(run)
+        return run
+
+    yield start
+    for r in runs:
+        if r.proc.poll() is None:
+            r.proc.terminate()
+            try:
+                r.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                r.proc.kill()
+                r.proc.wait(timeout=10)
+
+
+@pytest.fixture
+def monitors_factory():
+    made: List[OnboardMonitors] = []
+
+    def make(ap: Autopilot, **kw: Any) -> OnboardMonitors:
+        m = OnboardMonitors(ap.monitor_url, signing_key=ap.signing_key, **kw).start()
+        made.append(m)
+        return m
+
+    yield make
+    for m in made:
+        m.stop()
