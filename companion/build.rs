@@ -26,10 +26,10 @@ fn main() {
     }
     watch.push("packed-refs".to_string());
     for p in watch {
-        if let Some(path) = git(&["rev-parse", "--git-path", &p]) {
-            if std::path::Path::new(&path).exists() {
-                println!("cargo:rerun-if-changed={path}");
-            }
+        if let Some(path) = git(&["rev-parse", "--git-path", &p])
+            && std::path::Path::new(&path).exists()
+        {
+            println!("cargo:rerun-if-changed={path}");
         }
     }
     println!("cargo:rerun-if-changed=build.rs");

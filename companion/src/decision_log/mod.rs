@@ -200,6 +200,18 @@ pub fn create_run_dir(base: &Path, now: SystemTime) -> io::Result<PathBuf> {
     ))
 }
 
+/// Create a fresh run folder under `base` (see [`create_run_dir`]) and start its decision log.
+/// The folder is [`DecisionLog::dir`]; the CLI prints it.
+pub fn start_run(
+    base: &Path,
+    now: SystemTime,
+    header: Header,
+    opts: WriterOptions,
+) -> io::Result<DecisionLog> {
+    let dir = create_run_dir(base, now)?;
+    DecisionLog::start(&dir, header, opts)
+}
+
 /// Path of rotation part `k` in `dir`: part 0 is `decisions.jsonl`, part k is `decisions.k.jsonl`.
 pub fn part_path(dir: &Path, k: u32) -> PathBuf {
     if k == 0 {

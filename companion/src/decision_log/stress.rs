@@ -6,10 +6,11 @@ use std::io;
 use std::path::Path;
 use std::time::SystemTime;
 
-/// Write synthetic records into `dir` (which must exist) as fast as the producer can, forever.
+/// Write synthetic records into `dir` (created if missing) as fast as the producer can, forever.
 /// Cycle numbers count every attempt, so a dropped record shows as a gap in `cycle` matched by
 /// a loss line. `rotate_bytes` small makes the kill land across rotations too.
 pub fn log_stress(dir: &Path, rotate_bytes: u64) -> io::Result<()> {
+    std::fs::create_dir_all(dir)?;
     let header = Header::new("companion __log-stress", SystemTime::now());
     let log = DecisionLog::start(
         dir,

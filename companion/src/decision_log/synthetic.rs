@@ -194,7 +194,7 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
     if state == "wpf" && prev_state == "wpi" {
         events.push("target detected".to_string());
     }
-    if obstacle && !((i - 1) as f64 / n as f64 >= 0.40) {
+    if obstacle && ((i - 1) as f64 / n as f64) < 0.40 {
         events.push("obstacle detected".to_string());
     }
     if first_degraded {

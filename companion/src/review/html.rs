@@ -34,6 +34,12 @@ fn num(v: f64) -> String {
     }
 }
 
+/// Times: up to two decimals, trailing zeros trimmed (`6`, `7.5`, `0.25`).
+fn t(v: f64) -> String {
+    let s = format!("{v:.2}");
+    s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
 const PALETTE: [&str; 10] = [
     "#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf",
     "#7f7f7f", "#bcbd22",
@@ -55,7 +61,10 @@ pub(crate) struct VMark {
 
 /// "Nice" tick values covering [lo, hi] (steps of 1, 2 or 5 times a power of ten).
 pub(crate) fn ticks(lo: f64, hi: f64, target: usize) -> Vec<f64> {
-    if !(hi > lo) || !lo.is_finite() || !hi.is_finite() {
+    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater)
+        || !lo.is_finite()
+        || !hi.is_finite()
+    {
         return vec![lo];
     }
     let raw = (hi - lo) / target.max(1) as f64;
@@ -535,7 +544,7 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
             p.last_cycle,
             p.records,
             cycles,
-            num(p.start_s),
+            t(p.start_s),
             esc(&p.state),
             actions_html(&p.actions),
             events_html(&p.events),
@@ -569,7 +578,7 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
             r.actions.len(),
             row.events.len(),
             r.cycle,
-            num(r.time_s),
+            t(r.time_s),
             esc(&r.state),
             actions_html(&r.actions),
             events_html(&row.events),
@@ -759,7 +768,7 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
                     r#"<tr class="command-row {}"><td class="num">{}</td><td class="num">{}</td><td>{}</td><td><code>{}</code></td><td class="{}">{}</td><td class="num">{}</td><td class="num">{}</td></tr>"#,
                     if ok { "ok" } else { "failed" },
                     r.cycle,
-                    num(r.time_s),
+                    t(r.time_s),
                     esc(&c.action),
                     esc(&c.command),
                     if ok { "ok" } else { "failed" },
