@@ -426,3 +426,34 @@ fn process_killed_with_sigkill_leaves_a_readable_log() {
         );
     }
 }
+
+#[test]
+fn review_of_a_damaged_newer_log_still_reports_everything_readable() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("decisions.jsonl");
+    let mut h = serde_json::to_value(header()).unwrap();
+    h["schema"] = serde_json::json!(SCHEMA_VERSION + 1);
+    let last = record_line(5);
+    write(
+        &p,
+        &format!(
+            "{h}\n{}\n{}\nnot json at all\n{}\n{{\"kind\":\"loss\",\"dropped\":3}}\n{}\n{}",
+            record_line(0),
+            record_line(1),
+            record_line(2),
+            record_line(6),
+            &last[..10]
+        ),
+    );
+    let out = dir.path().join("r.html");
+    let written = companion::review::run(&p, Some(&out), false).unwrap();
+    assert_eq!(written.as_deref(), Some(out.as_path()));
+    let html = std::fs::read_to_string(&out).unwrap();
+    assert_eq!(html.matches("class=\"timeline-row").count(), 4); // cycles 0, 1, 2, 6
+    assert!(html.contains("data-corrupted=\"1\" data-truncated=\"true\""));
+    assert!(html.contains(&format!("data-newer-schema=\"{}\"", SCHEMA_VERSION + 1)));
+    assert!(html.contains("data-line=\"4\"")); // the non-JSON line
+    assert!(html.contains("data-line=\"8\"")); // the cut-off last line
+    assert!(html.contains("data-losses=\"1\" data-dropped=\"3\""));
+    assert!(html.contains("log truncated"));
+}

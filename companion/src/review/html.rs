@@ -352,8 +352,17 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
             h.schema
         );
     }
-    let files: Vec<String> = log.files.iter().map(|f| f.display().to_string()).collect();
-    let _ = write!(o, " · {}</p></header><main>", esc(&files.join(", ")));
+    let files = match log.files.as_slice() {
+        [] => String::new(),
+        [one] => one.display().to_string(),
+        [first, .., last] => format!(
+            "{} parts: {} … {}",
+            log.files.len(),
+            first.display(),
+            last.file_name().unwrap_or_default().to_string_lossy()
+        ),
+    };
+    let _ = write!(o, " · {}</p></header><main>", esc(&files));
 
     // Summary.
     let _ = write!(
@@ -491,15 +500,28 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
     for n in &log.notes {
         let _ = write!(o, "<li class=\"note\">{}</li>", esc(n));
     }
-    for c in &log.corrupted {
-        let _ = write!(
-            o,
+    let corrupted_li = |c: &crate::decision_log::ReadIssue| {
+        format!(
             r#"<li class="bad corrupted" data-line="{}">skipped {}:{}: {}</li>"#,
             c.line,
             esc(&c.file.display().to_string()),
             c.line,
             esc(&c.reason)
+        )
+    };
+    for c in log.corrupted.iter().take(20) {
+        o.push_str(&corrupted_li(c));
+    }
+    if log.corrupted.len() > 20 {
+        let _ = write!(
+            o,
+            "<li><details><summary>{} more skipped lines</summary><ul>",
+            log.corrupted.len() - 20
         );
+        for c in &log.corrupted[20..] {
+            o.push_str(&corrupted_li(c));
+        }
+        o.push_str("</ul></details></li>");
     }
     if let Some(t) = &log.truncated {
         let _ = write!(
@@ -511,12 +533,23 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
             esc(&t.reason)
         );
     }
-    for l in &log.losses {
+    if !log.losses.is_empty() {
         let _ = write!(
             o,
-            r#"<li class="bad loss">{} records/events lost before record {} (writer fell behind)</li>"#,
-            l.dropped, l.before_record
+            r#"<li class="bad loss" data-losses="{}" data-dropped="{}">{} records/events lost in {} place(s): the log writer fell behind<details><summary>where</summary><ul>"#,
+            log.losses.len(),
+            log.dropped(),
+            log.dropped(),
+            log.losses.len()
         );
+        for l in &log.losses {
+            let _ = write!(
+                o,
+                "<li>{} lost before record {}</li>",
+                l.dropped, l.before_record
+            );
+        }
+        o.push_str("</ul></details></li>");
     }
     if !log.ended_cleanly && log.truncated.is_none() {
         o.push_str("<li class=\"note\">no end line: the run did not close its log (killed or still running)</li>");

@@ -50,7 +50,7 @@ pub fn render_terminal(log: &LogRead, s: &Summary, phases: &[Phase], color: bool
     let mut o = String::new();
     let _ = writeln!(o, "{}", st.paint("1", "Summary"));
     let mut kv = |k: &str, v: String| {
-        let _ = writeln!(o, "  {k:<20} {v}");
+        let _ = writeln!(o, "  {k:<24} {v}");
     };
     kv("outcome", s.outcome.clone());
     kv(
