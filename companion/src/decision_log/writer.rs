@@ -172,7 +172,8 @@ impl DecisionLog {
     }
 
     /// Drain the queue, write the final loss line (if any) and the end line, sync, and return
-    /// what was written.
+    /// what was written. Blocks until the writer thread is done: from async code call it in
+    /// `tokio::task::spawn_blocking`.
     pub fn close(mut self) -> WriterStats {
         self.shutdown()
     }
