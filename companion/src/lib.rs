@@ -4,8 +4,10 @@
 //! driven by `sim` (a seeded discrete-step world) or by `link` (MAVLink). Everything
 //! mission-specific is loaded from `params/` by `spec` and the stage modules.
 
+pub mod decision_log;
 pub mod mission;
 pub mod observations;
 pub mod record;
+pub mod review;
 pub mod sim;
 pub mod spec;

@@ -8,6 +8,7 @@ pub const SCHEMA_VERSION: u32 = 1;
 
 /// One MDP's view of the cycle.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct MdpProposal {
     /// MDP name from params (`navigation`, `landing`, `tracking`, `monolithic`, `reference`).
     pub mdp: String,
@@ -24,6 +25,7 @@ pub struct MdpProposal {
 
 /// A behaviour conflict between primitive actions and how the policy resolved it.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct Conflict {
     pub kept: String,
     pub dropped: Vec<String>,
@@ -33,6 +35,7 @@ pub struct Conflict {
 
 /// One application variant placed on the platform.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct PlacementRecord {
     pub app: String,
     pub version: String,
@@ -47,6 +50,7 @@ pub struct PlacementRecord {
 
 /// What the resource arbitration did this cycle.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct ResourcesRecord {
     pub placements: Vec<PlacementRecord>,
     pub cpu_load: f64,
@@ -64,6 +68,7 @@ pub struct ResourcesRecord {
 
 /// PANORAMA margins and re-allocation this cycle.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct GuaranteeRecord {
     /// Activity being flown (index and name).
     pub activity: usize,
@@ -80,6 +85,7 @@ pub struct GuaranteeRecord {
 }
 
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct Reallocation {
     pub reason: String,
     /// Activity name -> chosen implementation alternative, for the remaining activities.
@@ -89,6 +95,7 @@ pub struct Reallocation {
 
 /// A vehicle command and what became of it (fly only; simulate records the intent).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct CommandRecord {
     /// Primitive action that caused it (`take_off`, `return_to_base`, ...).
     pub action: String,
@@ -102,6 +109,7 @@ pub struct CommandRecord {
 
 /// Everything one decision cycle saw and decided, in stage order.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct DecisionRecord {
     pub cycle: u64,
     /// Seconds since the run started (simulate: step index times the step length).
@@ -130,6 +138,7 @@ pub struct DecisionRecord {
 
 /// What the core asks the shell to do this cycle.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct Plan {
     /// Primitive vehicle actions (`take_off`, `follow_trajectory`, `avoid_obstacle`, `land`,
     /// `replan_and_land`, `return_to_base`), mapped to MAVLink by params/commands.toml.
