@@ -66,7 +66,9 @@ pub fn margins(p: &Problem, choice: &[usize], m: &Measured) -> MarginReport {
 /// The reduced mission scenario from the current activity: goals lowered by what was measured,
 /// the current activity's costs scaled by its unflown fraction, IAs using a failed resource
 /// removed. Returns the problem and, per reduced activity, the original IA index of each IA.
+/// A finished current activity (`fraction >= 1`) is not part of the reduced mission.
 pub fn reduced_problem(p: &Problem, m: &Measured, failed: &[String]) -> (Problem, Vec<Vec<usize>>) {
+    let m = &start_of_rest(m);
     let f = m.fraction.clamp(0.0, 1.0);
     let goals = p
         .goals
@@ -117,9 +119,18 @@ pub fn reallocate(
 ) -> Result<Vec<usize>, Infeasible> {
     let (rp, map) = reduced_problem(p, m, failed);
     let a = allocate(&rp, sel)?;
+    let from = start_of_rest(m).activity;
     let mut out = choice.to_vec();
     for (k, &i) in a.choice.iter().enumerate() {
-        out[m.activity + k] = map[k][i];
+        out[from + k] = map[k][i];
     }
     Ok(out)
+}
+
+fn start_of_rest(m: &Measured) -> Measured {
+    if m.fraction >= 1.0 {
+        Measured { activity: m.activity + 1, fraction: 0.0, so_far: m.so_far.clone() }
+    } else {
+        m.clone()
+    }
 }
