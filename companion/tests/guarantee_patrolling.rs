@@ -17,7 +17,10 @@ fn nga_matches_the_paper_exactly() {
     // Section 7.2.1: NGA ~ 7.7e14; Table 5 n_IA row: 21 12 4 3 2 3 12 21 21 4 3 2 3 21 21 12 21.
     let s = spec();
     let counts: Vec<usize> = s.problem.activities.iter().map(|a| a.ias.len()).collect();
-    assert_eq!(counts, vec![21, 12, 4, 3, 2, 3, 12, 21, 21, 4, 3, 2, 3, 21, 21, 12, 21]);
+    assert_eq!(
+        counts,
+        vec![21, 12, 4, 3, 2, 3, 12, 21, 21, 4, 3, 2, 3, 21, 21, 12, 21]
+    );
     assert_eq!(panorama::nga(&s.problem), Some(768_288_795_144_192));
     let j = check_json(params(), "patrolling").unwrap();
     assert_eq!(j["guarantee"]["nga"].as_u64(), Some(768_288_795_144_192));
@@ -27,17 +30,29 @@ fn nga_matches_the_paper_exactly() {
 fn ras0_is_table_6() {
     let s = spec();
     let r = Guarantee::pre_flight(&s).unwrap();
-    let names: Vec<&str> =
-        r.choice.iter().enumerate().map(|(j, &i)| s.problem.activities[j].ias[i].name.as_str()).collect();
+    let names: Vec<&str> = r
+        .choice
+        .iter()
+        .enumerate()
+        .map(|(j, &i)| s.problem.activities[j].ias[i].name.as_str())
+        .collect();
     // PANORAMA Table 6, RAS0 row.
     let table6 = [
-        "M5 L2", "M5 L2", "M5 L2", "T1 L2", "D2", "T1 L2", "M5 L2", "M5 L2", "M5 L2", "M5 L2", "T1 L2", "D2",
-        "T1 L2", "M5 L2", "M5 L2", "M5 L2", "M3 L1",
+        "M5 L2", "M5 L2", "M5 L2", "T1 L2", "D2", "T1 L2", "M5 L2", "M5 L2", "M5 L2", "M5 L2",
+        "T1 L2", "D2", "T1 L2", "M5 L2", "M5 L2", "M5 L2", "M3 L1",
     ];
     assert_eq!(names, table6);
     // Table 6's speed row: 0.41 .33 .33 - - - .33 .41 .41 .41 - - - .41 .41 .33 .41.
-    let v: Vec<Option<f64>> = s.activities.iter().zip(&r.choice).map(|(a, &i)| a.ia_speed[i]).collect();
-    let want = [0.41, 0.33, 0.33, 0.0, 0.0, 0.0, 0.33, 0.41, 0.41, 0.41, 0.0, 0.0, 0.0, 0.41, 0.41, 0.33, 0.41];
+    let v: Vec<Option<f64>> = s
+        .activities
+        .iter()
+        .zip(&r.choice)
+        .map(|(a, &i)| a.ia_speed[i])
+        .collect();
+    let want = [
+        0.41, 0.33, 0.33, 0.0, 0.0, 0.0, 0.33, 0.41, 0.41, 0.41, 0.0, 0.0, 0.0, 0.41, 0.41, 0.33,
+        0.41,
+    ];
     for (got, w) in v.iter().zip(want) {
         assert_eq!(got.unwrap_or(0.0), w);
     }
@@ -54,8 +69,12 @@ fn energy_drift_then_laser_fault_table_7() {
     let p = &s.problem;
     let e = p.goals.iter().position(|x| x.name == "energy_j").unwrap();
     // Plan's energy up to the end of A8 (index 7).
-    let est: f64 = (0..8).map(|j| p.activities[j].ias[g.choice()[j]].cost[e]).sum();
-    let est_t: f64 = (0..8).map(|j| p.activities[j].ias[g.choice()[j]].cost[1 - e]).sum();
+    let est: f64 = (0..8)
+        .map(|j| p.activities[j].ias[g.choice()[j]].cost[e])
+        .sum();
+    let est_t: f64 = (0..8)
+        .map(|j| p.activities[j].ias[g.choice()[j]].cost[1 - e])
+        .sum();
     // TRAS1: at the end of A8 the robot has used 400 J more than planned (odometry drift,
     // obstacles, model error).
     let rec = g.watch(Progress {
@@ -77,13 +96,20 @@ fn energy_drift_then_laser_fault_table_7() {
     assert_eq!(row1.label, "RAS1");
     // With a 400 J overrun the row is exactly Table 7's RAS1 (A8..A17): the sonar-only M1 replaces
     // M5/M3 in A16 and A17.
-    let table7_ras1 = ["M5 L2", "M5 L2", "M5 L2", "T1 L2", "D2", "T1 L2", "M5 L2", "M5 L2", "M1 L2", "M1 L1"];
-    let got: Vec<&str> = row1.cells[7..].iter().map(|c| c.as_deref().unwrap()).collect();
+    let table7_ras1 = [
+        "M5 L2", "M5 L2", "M5 L2", "T1 L2", "D2", "T1 L2", "M5 L2", "M5 L2", "M1 L2", "M1 L1",
+    ];
+    let got: Vec<&str> = row1.cells[7..]
+        .iter()
+        .map(|c| c.as_deref().unwrap())
+        .collect();
     assert_eq!(got, table7_ras1);
     assert!(row1.cells[..7].iter().all(|c| c.is_none()));
 
     // TRAS2: laser2 fails during A14 (index 13).
-    let est: f64 = (0..13).map(|j| p.activities[j].ias[g.choice()[j]].cost[e]).sum();
+    let est: f64 = (0..13)
+        .map(|j| p.activities[j].ias[g.choice()[j]].cost[e])
+        .sum();
     let failed = vec!["laser2".to_string()];
     let rec = g.watch(Progress {
         activity_index: 13,
@@ -98,7 +124,11 @@ fn energy_drift_then_laser_fault_table_7() {
     assert!(re.margins_after.values().all(|m| *m >= 0.0));
     for j in 13..17 {
         let ia = &p.activities[j].ias[g.choice()[j]];
-        assert!(!ia.resources.contains(&"laser2".to_string()), "{} still uses laser2", ia.name);
+        assert!(
+            !ia.resources.contains(&"laser2".to_string()),
+            "{} still uses laser2",
+            ia.name
+        );
     }
     // Table 7 RAS2 starts with M3 L2 in A14 (M5 -> M3: one laser instead of two).
     assert_eq!(g.ras_rows()[2].cells[13].as_deref(), Some("M3 L2"));

@@ -32,17 +32,40 @@ fn instance(r: &mut SplitMix, goals: usize, correlated: bool) -> Problem {
             ias: (0..r.range(2, 8))
                 .map(|i| {
                     let cost: Vec<f64> = (0..goals).map(|_| 1.0 + 19.0 * r.unit()).collect();
-                    let capability = if correlated { cost.iter().sum::<f64>() + 5.0 * r.unit() } else { 20.0 * r.unit() };
-                    Ia { name: format!("ia{i}"), cost, capability, resources: vec![] }
+                    let capability = if correlated {
+                        cost.iter().sum::<f64>() + 5.0 * r.unit()
+                    } else {
+                        20.0 * r.unit()
+                    };
+                    Ia {
+                        name: format!("ia{i}"),
+                        cost,
+                        capability,
+                        resources: vec![],
+                    }
                 })
                 .collect(),
         })
         .collect();
     let goals = (0..goals)
         .map(|g| {
-            let lo: f64 = activities.iter().map(|a| a.ias.iter().map(|x| x.cost[g]).fold(f64::INFINITY, f64::min)).sum();
-            let hi: f64 = activities.iter().map(|a| a.ias.iter().map(|x| x.cost[g]).fold(0.0, f64::max)).sum();
-            Goal { name: format!("g{g}"), bound: lo + (hi - lo) * r.unit() }
+            let lo: f64 = activities
+                .iter()
+                .map(|a| {
+                    a.ias
+                        .iter()
+                        .map(|x| x.cost[g])
+                        .fold(f64::INFINITY, f64::min)
+                })
+                .sum();
+            let hi: f64 = activities
+                .iter()
+                .map(|a| a.ias.iter().map(|x| x.cost[g]).fold(0.0, f64::max))
+                .sum();
+            Goal {
+                name: format!("g{g}"),
+                bound: lo + (hi - lo) * r.unit(),
+            }
         })
         .collect();
     Problem { goals, activities }
@@ -52,8 +75,13 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let seed = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(2024);
     let n: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(2000);
-    println!("seed {seed}, {n} instances per row; gap = (optimum - RAS0) / optimum of the summed score");
-    println!("{:<28} {:>8} {:>9} {:>10} {:>9} {:>9} {:>11}", "family", "solved", "optimal%", "mean gap%", "p95 gap%", "max gap%", "missed sol.");
+    println!(
+        "seed {seed}, {n} instances per row; gap = (optimum - RAS0) / optimum of the summed score"
+    );
+    println!(
+        "{:<28} {:>8} {:>9} {:>10} {:>9} {:>9} {:>11}",
+        "family", "solved", "optimal%", "mean gap%", "p95 gap%", "max gap%", "missed sol."
+    );
     let mut r = SplitMix(seed);
     for goals in [1, 2] {
         for correlated in [true, false] {
@@ -80,7 +108,14 @@ fn main() {
             let mean = gaps.iter().sum::<f64>() / gaps.len().max(1) as f64;
             let p95 = gaps.get(gaps.len() * 95 / 100).copied().unwrap_or(0.0);
             let max = gaps.last().copied().unwrap_or(0.0);
-            let family = format!("{goals} goal(s), {}", if correlated { "capability~cost" } else { "independent" });
+            let family = format!(
+                "{goals} goal(s), {}",
+                if correlated {
+                    "capability~cost"
+                } else {
+                    "independent"
+                }
+            );
             println!(
                 "{family:<28} {:>8} {:>9.1} {:>10.2} {:>9.2} {:>9.2} {:>11}",
                 gaps.len(),

@@ -129,7 +129,11 @@ pub fn reallocate(
 
 fn start_of_rest(m: &Measured) -> Measured {
     if m.fraction >= 1.0 {
-        Measured { activity: m.activity + 1, fraction: 0.0, so_far: m.so_far.clone() }
+        Measured {
+            activity: m.activity + 1,
+            fraction: 0.0,
+            so_far: m.so_far.clone(),
+        }
     } else {
         m.clone()
     }
