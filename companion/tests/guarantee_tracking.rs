@@ -329,3 +329,20 @@ fn unknown_task_and_constraint_class_and_syntax_are_rejected() {
     let missing = load_mission(params(), "no_such_mission").unwrap_err();
     assert!(missing.file.ends_with("missions/no_such_mission.toml"));
 }
+
+/// RAS0 against the exact optimum (branch-and-bound, checked by exhaustive search: NGA 147 456).
+#[test]
+fn ras0_gap_on_the_tracking_mission() {
+    let s = spec();
+    let r = Guarantee::pre_flight(&s).unwrap();
+    let ras0 = s.problem.score(&r.choice, s.selection);
+    let brute = panorama::exhaustive(&s.problem, s.selection).unwrap();
+    match panorama::exact(&s.problem, s.selection, u64::MAX) {
+        panorama::Exact::Optimal(o) => {
+            assert!((o.score - brute.score).abs() < 1e-9);
+            assert!(o.score >= ras0 - 1e-9);
+            println!("tracking: RAS0 capability {ras0}, optimum {}", o.score);
+        }
+        other => panic!("{other:?}"),
+    }
+}
