@@ -918,7 +918,23 @@ impl Guarantee {
             why.push(format!("failed resource in plan: {}", shown.join(", ")));
         }
         let reason = why.join("; ");
-        match panorama::reallocate(p, &self.choice, &m, &failed, self.spec.selection) {
+        let mut reason = reason;
+        let found = panorama::reallocate_or_exact(
+            p,
+            &self.choice,
+            &m,
+            &failed,
+            self.spec.selection,
+            EXACT_FALLBACK_NODES,
+        )
+        .map(|(c, exact)| {
+            if exact {
+                // The paper's greedy can miss a feasible allocation when goals interact.
+                reason.push_str(" (exact search: the paper's algorithm found none)");
+            }
+            c
+        });
+        match found {
             Ok(c) => {
                 let after = panorama::margins(p, &c, &m);
                 self.choice = c;
@@ -956,6 +972,9 @@ impl Guarantee {
         rec
     }
 }
+
+/// Node budget of the exact fallback: bounded work per cycle.
+const EXACT_FALLBACK_NODES: u64 = 200_000;
 
 // ---------------------------------------------------------------- views
 

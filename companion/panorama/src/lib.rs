@@ -21,7 +21,9 @@ use serde::{Deserialize, Serialize};
 mod combine;
 mod margins;
 pub use combine::{CoreConstraint, Task, Tio, combine};
-pub use margins::{MarginReport, Measured, margins, reallocate, reduced_problem};
+pub use margins::{
+    MarginReport, Measured, margins, reallocate, reallocate_or_exact, reduced_problem,
+};
 
 /// An end-oriented goal: the mission total of indicator `name` must stay `<= bound`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

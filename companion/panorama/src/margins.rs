@@ -1,6 +1,6 @@
 //! Online performance management (paper section 7.3): margins, drift and the reduced mission.
 
-use crate::{Activity, Goal, Infeasible, Problem, Selection, allocate};
+use crate::{Activity, Exact, Goal, Infeasible, Problem, Selection, allocate, exact};
 use serde::{Deserialize, Serialize};
 
 /// What has been measured so far: the activity being flown (index into the problem), the fraction
@@ -137,4 +137,33 @@ fn start_of_rest(m: &Measured) -> Measured {
     } else {
         m.clone()
     }
+}
+
+/// [`reallocate`], and when the paper's algorithm finds nothing, a bounded [`exact`] search on the
+/// same reduced mission (its greedy reduction per goal can cut away what a later goal needs).
+/// Returns the choice and whether the exact search produced it; the paper's [`Infeasible`] when
+/// neither finds an allocation.
+pub fn reallocate_or_exact(
+    p: &Problem,
+    choice: &[usize],
+    m: &Measured,
+    failed: &[String],
+    sel: Selection,
+    max_nodes: u64,
+) -> Result<(Vec<usize>, bool), Infeasible> {
+    let e = match reallocate(p, choice, m, failed, sel) {
+        Ok(c) => return Ok((c, false)),
+        Err(e) => e,
+    };
+    let (rp, map) = reduced_problem(p, m, failed);
+    let a = match exact(&rp, sel, max_nodes) {
+        Exact::Optimal(a) | Exact::Aborted(Some(a)) => a,
+        _ => return Err(e),
+    };
+    let from = p.activities.len() - rp.activities.len();
+    let mut out = choice.to_vec();
+    for (k, &i) in a.choice.iter().enumerate() {
+        out[from + k] = map[k][i];
+    }
+    Ok((out, true))
 }

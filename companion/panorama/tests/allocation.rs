@@ -208,6 +208,55 @@ fn failed_resource_removes_ias() {
     );
 }
 
+/// Two goals where the first goal's reduction cuts away the only feasible allocation: g1 lowers A2
+/// to d, then g2 finds nothing; (a, c) satisfies both. The fallback finds it.
+#[test]
+fn exact_fallback_when_the_greedy_misses() {
+    let p = Problem {
+        goals: vec![
+            Goal {
+                name: "g1".into(),
+                bound: 4.0,
+            },
+            Goal {
+                name: "g2".into(),
+                bound: 10.0,
+            },
+        ],
+        activities: vec![
+            act(
+                "A1",
+                vec![
+                    ia("a", &[1.0, 5.0], 1.0, &[]),
+                    ia("b", &[3.0, 1.0], 2.0, &[]),
+                ],
+            ),
+            act(
+                "A2",
+                vec![
+                    ia("c", &[3.0, 1.0], 1.0, &[]),
+                    ia("d", &[1.0, 10.0], 2.0, &[]),
+                ],
+            ),
+        ],
+    };
+    assert!(
+        matches!(allocate(&p, Selection::MostCapable), Err(Infeasible::Goal { ref goal, .. }) if goal == "g2")
+    );
+    let m = Measured {
+        activity: 0,
+        fraction: 0.0,
+        so_far: vec![0.0, 0.0],
+    };
+    let (c, used_exact) =
+        reallocate_or_exact(&p, &[1, 1], &m, &[], Selection::MostCapable, 1000).unwrap();
+    assert_eq!((c, used_exact), (vec![0, 0], true));
+    // Really infeasible: the paper's error comes back.
+    let mut q = p.clone();
+    q.goals[1].bound = 5.0;
+    assert!(reallocate_or_exact(&q, &[1, 1], &m, &[], Selection::MostCapable, 1000).is_err());
+}
+
 /// Reference for one goal: the same backwards search written as a linear scan from the top.
 fn reference_one_goal(p: &Problem, sel: Selection) -> Option<Vec<usize>> {
     let n = p.activities.len();
