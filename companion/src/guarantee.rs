@@ -445,14 +445,13 @@ fn compile(path: &Path, f: MissionFile) -> Result<MissionSpec, SpecError> {
             }
             finite_nonneg(format!("{e}.time_s"), tio.time_s, "time")?;
             finite_nonneg(format!("{e}.cpu_load"), tio.cpu_load, "CPU load")?;
-            if let Some(v) = tio.v_max_mps {
-                if !(v.is_finite() && v > 0.0) {
+            if let Some(v) = tio.v_max_mps
+                && !(v.is_finite() && v > 0.0) {
                     return Err(err(
                         format!("{e}.v_max_mps"),
                         format!("must be > 0, got {v}"),
                     ));
                 }
-            }
             if (tio.tiles > 0 || tio.cpu_load > 0.0) && f.compute.is_none() {
                 return Err(err(
                     e,
@@ -558,7 +557,7 @@ fn compile(path: &Path, f: MissionFile) -> Result<MissionSpec, SpecError> {
         let combos = panorama::combine(&ts, &rules);
         if combos.is_empty() {
             return Err(err(
-                format!("{e}"),
+                e.to_string(),
                 format!(
                     "activity `{}` has no implementation alternative left after its constraints {:?}",
                     a.name, a.constraints
@@ -618,17 +617,16 @@ fn compile(path: &Path, f: MissionFile) -> Result<MissionSpec, SpecError> {
                 .join(" ");
             if !energy.is_finite() || energy < 0.0 {
                 return Err(err(
-                    format!("{e}"),
+                    e.to_string(),
                     format!(
                         "IA `{name}` has negative or non-finite energy {energy} J (check the propulsion model)"
                     ),
                 ));
             }
-            if let Some(c) = &f.compute {
-                if cpu > c.cores + 1e-9 || tiles as usize > tiles_total {
+            if let Some(c) = &f.compute
+                && (cpu > c.cores + 1e-9 || tiles as usize > tiles_total) {
                     continue; // never placeable on the platform: not an alternative
                 }
-            }
             for k in 1..=tiles as usize {
                 resources.insert(tile_slot(k));
             }
@@ -650,7 +648,7 @@ fn compile(path: &Path, f: MissionFile) -> Result<MissionSpec, SpecError> {
         }
         if ias.is_empty() {
             return Err(err(
-                format!("{e}"),
+                e.to_string(),
                 format!(
                     "activity `{}`: no alternative fits the platform's CPU and tiles",
                     a.name
@@ -883,8 +881,7 @@ impl Guarantee {
         }
         let uses_failed: Vec<String> = (at..n)
             .flat_map(|j| p.activities[j].ias[self.choice[j]].resources.iter())
-            .filter(|r| failed.contains(r))
-            .map(|r| r.clone())
+            .filter(|r| failed.contains(r)).cloned()
             .collect::<BTreeSet<_>>()
             .into_iter()
             .collect();

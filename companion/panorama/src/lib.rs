@@ -332,6 +332,7 @@ pub fn exact(problem: &Problem, sel: Selection, max_nodes: u64) -> Exact {
     let mut max_rest = vec![0.0; n + 1];
     for j in (0..n).rev() {
         let a = &problem.activities[j];
+        #[allow(clippy::needless_range_loop)] // reads row j + 1 while writing row j
         for g in 0..ng {
             let m = opts[j]
                 .iter()
@@ -384,11 +385,10 @@ pub fn exact(problem: &Problem, sel: Selection, max_nodes: u64) -> Exact {
                 let ia = &self.p.activities[j].ias[i];
                 let s = score + self.sel.score(ia);
                 let ub = (s + self.max_rest[j + 1]).min(cap + 1e-9 * cap.abs().max(1.0));
-                if let Some((b, _)) = &self.best {
-                    if ub <= *b {
+                if let Some((b, _)) = &self.best
+                    && ub <= *b {
                         continue;
                     }
-                }
                 let ok = (0..costs.len()).all(|g| {
                     fits(
                         costs[g] + ia.cost[g] + self.min_rest[j + 1][g],
