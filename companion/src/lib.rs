@@ -5,6 +5,7 @@
 //! mission-specific is loaded from `params/` by `spec` and the stage modules.
 
 pub mod decision_log;
+pub mod guarantee;
 pub mod mission;
 pub mod observations;
 pub mod record;

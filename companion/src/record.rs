@@ -82,6 +82,12 @@ pub struct GuaranteeRecord {
     pub reallocation: Option<Reallocation>,
     /// True when no allocation of the remaining activities meets every goal.
     pub infeasible: bool,
+    /// When `infeasible`: why (trigger, failing goal and excess).
+    #[serde(default)]
+    pub infeasible_reason: Option<String>,
+    /// Resources reported failed so far (their IAs are excluded from re-allocations).
+    #[serde(default)]
+    pub failed_resources: Vec<String>,
 }
 
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
