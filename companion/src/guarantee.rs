@@ -446,12 +446,13 @@ fn compile(path: &Path, f: MissionFile) -> Result<MissionSpec, SpecError> {
             finite_nonneg(format!("{e}.time_s"), tio.time_s, "time")?;
             finite_nonneg(format!("{e}.cpu_load"), tio.cpu_load, "CPU load")?;
             if let Some(v) = tio.v_max_mps
-                && !(v.is_finite() && v > 0.0) {
-                    return Err(err(
-                        format!("{e}.v_max_mps"),
-                        format!("must be > 0, got {v}"),
-                    ));
-                }
+                && !(v.is_finite() && v > 0.0)
+            {
+                return Err(err(
+                    format!("{e}.v_max_mps"),
+                    format!("must be > 0, got {v}"),
+                ));
+            }
             if (tio.tiles > 0 || tio.cpu_load > 0.0) && f.compute.is_none() {
                 return Err(err(
                     e,
@@ -624,9 +625,10 @@ fn compile(path: &Path, f: MissionFile) -> Result<MissionSpec, SpecError> {
                 ));
             }
             if let Some(c) = &f.compute
-                && (cpu > c.cores + 1e-9 || tiles as usize > tiles_total) {
-                    continue; // never placeable on the platform: not an alternative
-                }
+                && (cpu > c.cores + 1e-9 || tiles as usize > tiles_total)
+            {
+                continue; // never placeable on the platform: not an alternative
+            }
             for k in 1..=tiles as usize {
                 resources.insert(tile_slot(k));
             }
@@ -881,7 +883,8 @@ impl Guarantee {
         }
         let uses_failed: Vec<String> = (at..n)
             .flat_map(|j| p.activities[j].ias[self.choice[j]].resources.iter())
-            .filter(|r| failed.contains(r)).cloned()
+            .filter(|r| failed.contains(r))
+            .cloned()
             .collect::<BTreeSet<_>>()
             .into_iter()
             .collect();

@@ -386,9 +386,10 @@ pub fn exact(problem: &Problem, sel: Selection, max_nodes: u64) -> Exact {
                 let s = score + self.sel.score(ia);
                 let ub = (s + self.max_rest[j + 1]).min(cap + 1e-9 * cap.abs().max(1.0));
                 if let Some((b, _)) = &self.best
-                    && ub <= *b {
-                        continue;
-                    }
+                    && ub <= *b
+                {
+                    continue;
+                }
                 let ok = (0..costs.len()).all(|g| {
                     fits(
                         costs[g] + ia.cost[g] + self.min_rest[j + 1][g],

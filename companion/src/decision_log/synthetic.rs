@@ -349,6 +349,7 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
             degraded: res_degraded,
             dropped: vec![],
             summary: summary.into(),
+            ..Default::default()
         }),
         guarantee: Some(GuaranteeRecord {
             activity: if f < 0.22 {
@@ -374,6 +375,7 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
             ]),
             reallocation,
             infeasible: false,
+            ..Default::default()
         }),
         commands,
         link_events,
