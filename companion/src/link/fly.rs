@@ -228,6 +228,7 @@ pub async fn run_with<D: Decider, S: RecordSink>(
             _ = async { match stop_at { Some(t) => tokio::time::sleep_until(t).await, None => std::future::pending().await } } => break,
         }
         send(&mut encoder, &vehicle, &link.outbound, &out).await;
+        vehicle.stamp_latency(trigger.unwrap_or_else(now), now());
         // Significant telemetry (a new obstacle, a found target, a crossed battery threshold, a
         // mode change, a command result, link loss) triggers a cycle now.
         if trigger.is_some() && vehicle.has_events() {
@@ -280,8 +281,9 @@ async fn run_cycle_at<D: Decider, S: RecordSink>(
     let events = vehicle.take_events();
     let obs = vehicle.observations(now(), events.clone());
     let (plan, mut rec) = decider.step(&obs);
-    let msgs = vehicle.request_actions(now(), trigger_at, &plan.vehicle_actions);
+    let msgs = vehicle.request_actions(now(), &plan.vehicle_actions);
     send(encoder, vehicle, tx, &msgs).await;
+    vehicle.stamp_latency(trigger_at, now());
     report.cycles += 1;
     rec.cycle = report.cycles;
     rec.time_s = obs.time_s;

@@ -73,10 +73,6 @@ struct Job {
     steps: VecDeque<(String, Step)>,
     running: Running,
     arm_attempts: u32,
-    /// When the decision that started this job was triggered (for latency).
-    trigger_at: Duration,
-    /// Latency is recorded for the first message the job sends.
-    first_sent: bool,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -367,14 +363,9 @@ impl Vehicle {
         out
     }
 
-    /// The decision core asked for these vehicle actions (triggered at `trigger_at`).
+    /// The decision core asked for these vehicle actions.
     /// The same action already running or done is not restarted; a different one replaces it.
-    pub fn request_actions(
-        &mut self,
-        now: Duration,
-        trigger_at: Duration,
-        actions: &[String],
-    ) -> Vec<Msg> {
+    pub fn request_actions(&mut self, now: Duration, actions: &[String]) -> Vec<Msg> {
         if actions.is_empty() {
             return Vec::new();
         }
@@ -437,19 +428,32 @@ impl Vehicle {
             steps,
             running: Running::Idle,
             arm_attempts: 0,
-            trigger_at,
-            first_sent: false,
         });
         self.last = Some((key, JobStatus::Running));
         self.advance_job(now)
     }
 
-    fn latency(job: &mut Job, now: Duration) -> Option<f64> {
-        if job.first_sent {
-            None
-        } else {
-            job.first_sent = true;
-            Some(now.saturating_sub(job.trigger_at).as_secs_f64() * 1000.0)
+    /// Latency of everything sent since the last call: from the message (or decision trigger)
+    /// that caused it, `trigger_at`, to the moment it was handed to the transport, `sent_at`.
+    /// The shell calls this right after sending, so the measurement includes decision and
+    /// encoding time, which the injected clock of the state machines cannot see.
+    pub fn stamp_latency(&mut self, trigger_at: Duration, sent_at: Duration) {
+        let ms = sent_at.saturating_sub(trigger_at).as_secs_f64() * 1000.0;
+        for r in self
+            .records
+            .iter_mut()
+            .filter(|r| r.result == "SENT" && r.latency_ms.is_none())
+        {
+            r.latency_ms = Some(ms);
+        }
+        for p in self.purposes.values_mut() {
+            if let Purpose::Step {
+                latency_ms: l @ None,
+                ..
+            } = p
+            {
+                *l = Some(ms);
+            }
         }
     }
 
@@ -611,13 +615,12 @@ impl Vehicle {
                             out.extend(msgs);
                             let job = self.job.as_mut().expect("job checked above");
                             job.running = Running::Mission;
-                            let latency_ms = Self::latency(job, now);
                             self.records.push(CommandRecord {
                                 action,
                                 command: "MISSION_UPLOAD".into(),
                                 result: "SENT".into(),
                                 attempts: 1,
-                                latency_ms,
+                                latency_ms: None,
                             });
                             return out;
                         }
@@ -702,20 +705,19 @@ impl Vehicle {
                 out.extend(msgs);
                 let job = self.job.as_mut().expect("issue runs inside a job");
                 job.running = Running::Command(ticket);
-                let latency_ms = Self::latency(job, now);
                 self.records.push(CommandRecord {
                     action: action.to_string(),
                     command: name.clone(),
                     result: "SENT".into(),
                     attempts: 1,
-                    latency_ms,
+                    latency_ms: None,
                 });
                 self.purposes.insert(
                     ticket,
                     Purpose::Step {
                         action: action.to_string(),
                         name,
-                        latency_ms,
+                        latency_ms: None,
                     },
                 );
                 false
@@ -1008,8 +1010,9 @@ mod tests {
         let mut v = vehicle();
         connected(&mut v, 0);
         v.on_frame(s(0.1), &not_ready());
-        let out = v.request_actions(s(0.2), s(0.15), &["take_off".into()]);
+        let out = v.request_actions(s(0.2), &["take_off".into()]);
         assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        v.stamp_latency(s(0.15), s(0.2));
         let recs = v.take_records();
         assert_eq!(recs[0].latency_ms, Some(50.0));
         let out = v.on_frame(
@@ -1046,10 +1049,7 @@ mod tests {
         );
         assert!(!v.busy());
         // Asking again for the finished action does nothing.
-        assert!(
-            v.request_actions(s(7.0), s(7.0), &["take_off".into()])
-                .is_empty()
-        );
+        assert!(v.request_actions(s(7.0), &["take_off".into()]).is_empty());
     }
 
     #[test]
@@ -1059,7 +1059,7 @@ mod tests {
         for f in ready_frames() {
             v.on_frame(s(0.1), &f);
         }
-        let out = v.request_actions(s(0.2), s(0.2), &["take_off".into()]);
+        let out = v.request_actions(s(0.2), &["take_off".into()]);
         assert_eq!(
             commands(&out),
             vec![MavCmd::MAV_CMD_COMPONENT_ARM_DISARM],
@@ -1097,7 +1097,7 @@ mod tests {
         let mut v = vehicle();
         connected(&mut v, 4);
         v.on_frame(s(0.1), &not_ready());
-        v.request_actions(s(0.2), s(0.2), &["take_off".into()]);
+        v.request_actions(s(0.2), &["take_off".into()]);
         for t in 1..=61 {
             v.on_frame(s(t as f64), &hb(4, false));
             assert!(commands(&v.tick(s(t as f64 + 0.5))).is_empty());
@@ -1114,7 +1114,7 @@ mod tests {
     fn link_loss_drops_commands_and_resume_does_not_replay() {
         let mut v = vehicle();
         connected(&mut v, 0);
-        let out = v.request_actions(s(1.0), s(1.0), &["return_to_base".into()]);
+        let out = v.request_actions(s(1.0), &["return_to_base".into()]);
         assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
         // Silence: the autopilot is gone.
         assert!(
@@ -1136,10 +1136,7 @@ mod tests {
         for t in [5.0, 10.0, 20.0] {
             assert!(v.tick(s(t)).is_empty(), "nothing sent while lost");
         }
-        assert!(
-            v.request_actions(s(20.0), s(20.0), &["take_off".into()])
-                .is_empty()
-        );
+        assert!(v.request_actions(s(20.0), &["take_off".into()]).is_empty());
         assert!(
             v.take_records()
                 .iter()
@@ -1160,7 +1157,7 @@ mod tests {
         v.on_frame(s(23.0), &hb(0, false));
         assert!(commands(&v.tick(s(24.0))).is_empty());
         // A fresh decision may command again.
-        let out = v.request_actions(s(25.0), s(25.0), &["return_to_base".into()]);
+        let out = v.request_actions(s(25.0), &["return_to_base".into()]);
         assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
     }
 
@@ -1195,10 +1192,7 @@ mod tests {
     fn unmapped_actions_are_recorded_not_sent() {
         let mut v = vehicle();
         connected(&mut v, 0);
-        assert!(
-            v.request_actions(s(1.0), s(1.0), &["track_v3".into()])
-                .is_empty()
-        );
+        assert!(v.request_actions(s(1.0), &["track_v3".into()]).is_empty());
         assert!(v.take_records()[0].result.starts_with("UNMAPPED"));
     }
 
