@@ -227,14 +227,15 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
         "{:?}",
         log.commands
     );
-    // Streams requested in both sessions: all 12 after connect, again after the reconnect.
+    // Streams requested in both sessions: all 14 of params/link.toml after connect, again after
+    // the reconnect.
     let streams = |s| {
         log.commands
             .iter()
             .filter(|c| c.0 == s && c.1 == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL)
             .count()
     };
-    assert_eq!(streams(1), 12);
+    assert_eq!(streams(1), 14);
     assert!(
         streams(2) >= 1,
         "streams re-requested after reconnect: {:?}",
@@ -259,4 +260,94 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
             .any(|r| r.link_events.iter().any(|e| e.starts_with("disconnected")))
     );
     assert!(records.windows(2).all(|w| w[1].cycle == w[0].cycle + 1));
+}
+
+/// UDP + signing: our frames arrive signed with the shared key (checked with the crate's
+/// verifier), unsigned commands addressed to us are refused and counted, signed ones pass.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn fly_over_udp_signs_frames_and_refuses_unsigned_commands() {
+    use mavlink::{MAVLinkMessageRaw, MavlinkReader, SigningConfig, SigningData};
+    let key = [0x5au8; 32];
+    let dir = tempfile::tempdir().unwrap();
+    let key_path = dir.path().join("key.hex");
+    std::fs::write(&key_path, "5a".repeat(32)).unwrap();
+
+    let sock = tokio::net::UdpSocket::bind("127.0.0.1:0").await.unwrap();
+    let port = sock.local_addr().unwrap().port();
+    let peer = tokio::spawn(async move {
+        let verifier = SigningData::from_config(SigningConfig::new(key, 0, false, false));
+        let signer = SigningData::from_config(SigningConfig::new(key, 1, true, false));
+        let (mut signed_ok, mut unsigned) = (0u32, 0u32);
+        let mut buf = vec![0u8; 2048];
+        let mut seq = 0u8;
+        let v = Vehicle {
+            mode: 4,
+            armed: false,
+            alt_m: 0.0,
+        };
+        let cmd = Msg::COMMAND_LONG(COMMAND_LONG_DATA {
+            command: MavCmd::MAV_CMD_DO_SET_MODE,
+            target_system: 1,
+            target_component: 191,
+            ..COMMAND_LONG_DATA::DEFAULT
+        });
+        let deadline = tokio::time::Instant::now() + Duration::from_millis(2500);
+        let mut from = None;
+        while tokio::time::Instant::now() < deadline {
+            if let Ok(Ok((n, addr))) =
+                tokio::time::timeout(Duration::from_millis(100), sock.recv_from(&mut buf)).await
+            {
+                from = Some(addr);
+                let mut r = MavlinkReader::new(&buf[..n]);
+                while let Ok(raw) = r.read_any_raw_message::<Msg>() {
+                    match raw {
+                        MAVLinkMessageRaw::V2(m)
+                            if m.incompatibility_flags() & 1 == 1
+                                && verifier.verify_signature(&m) =>
+                        {
+                            signed_ok += 1
+                        }
+                        _ => unsigned += 1,
+                    }
+                }
+            }
+            if let Some(addr) = from {
+                let mut bytes = Vec::new();
+                for m in telemetry(v) {
+                    bytes.extend(frame(&mut seq, &m));
+                }
+                bytes.extend(frame(&mut seq, &cmd)); // unsigned command to us: refused
+                let h = MavHeader {
+                    system_id: 255,
+                    component_id: 190,
+                    sequence: 0,
+                };
+                mavlink::write_v2_msg_signed(&mut bytes, h, &cmd, Some(&signer)).unwrap(); // signed: passes
+                let _ = sock.send_to(&bytes, addr).await;
+            }
+        }
+        (signed_ok, unsigned)
+    });
+
+    let args = FlyArgs {
+        connect: url::parse(&format!("udpout:127.0.0.1:{port}")).unwrap(),
+        mission: None,
+        policy: "mission".into(),
+        signing_key: Some(key_path),
+        onboard: None,
+        link_timeout: parse_duration("3s").unwrap(),
+        params: None,
+        duration: Some(parse_duration("3s").unwrap()),
+    };
+    let mut records: Vec<DecisionRecord> = Vec::new();
+    let report = run_with(args, ScriptedDecider::new(20.0, 6, "mission"), &mut records)
+        .await
+        .unwrap();
+    let (signed_ok, unsigned) = peer.await.unwrap();
+    assert!(signed_ok >= 2, "our heartbeats arrive signed and verify");
+    assert_eq!(unsigned, 0, "nothing we send is unsigned or badly signed");
+    assert!(report.ingest.unsigned_commands_refused >= 1);
+    assert_eq!(report.ingest.bad_signatures, 0);
+    // Every unsigned command was refused; each signed one was accepted alongside the telemetry.
+    assert!(report.ingest.frames_ok >= 6 * report.ingest.unsigned_commands_refused);
 }

@@ -10,6 +10,7 @@
 //! - `DENIED`, `FAILED`, `UNSUPPORTED`, `CANCELLED`, ...: final, never retried;
 //! - commands marked `no_blind_retry` (arming) are sent once: a lost ACK or a temporary
 //!   rejection ends them as failed, and the caller decides whether the autopilot is ready again.
+//!
 //! Every submitted command ends in exactly one [`CommandEvent::Finished`].
 
 use super::dialect::{COMMAND_INT_DATA, COMMAND_LONG_DATA, MavCmd, MavFrame, MavResult};

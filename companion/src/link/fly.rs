@@ -231,7 +231,8 @@ pub async fn run_with<D: Decider, S: RecordSink>(
         vehicle.stamp_latency(trigger.unwrap_or_else(now), now());
         // Significant telemetry (a new obstacle, a found target, a crossed battery threshold, a
         // mode change, a command result, link loss) triggers a cycle now.
-        if trigger.is_some() && vehicle.has_events() {
+        // Link loss found by the protocol tick counts too (its trigger is the tick itself).
+        if vehicle.has_events() && vehicle.target.is_some() {
             let t = trigger.unwrap_or_else(now);
             run_cycle_at(
                 &mut decider,

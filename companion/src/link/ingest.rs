@@ -93,11 +93,8 @@ impl Ingest {
         self.stats.bytes_in += bytes.len() as u64;
         self.reader.get_mut().0.extend(bytes);
         let mut out = Vec::new();
-        loop {
-            // An error here is the reader running out of bytes: the rest waits for the next chunk.
-            let Ok(raw) = self.reader.read_any_raw_message::<Msg>() else {
-                break;
-            };
+        // An error is the reader running out of bytes: the rest waits for the next chunk.
+        while let Ok(raw) = self.reader.read_any_raw_message::<Msg>() {
             let (len, signed) = match &raw {
                 MAVLinkMessageRaw::V1(r) => (r.raw_bytes().len(), false),
                 MAVLinkMessageRaw::V2(r) => {
