@@ -1208,4 +1208,178 @@ mod tests {
         }
         assert!(!v.liveness.alive());
     }
+
+    fn route_vehicle() -> Vehicle {
+        use crate::link::actions::{Route, Waypoint};
+        let mut t = table();
+        t.actions.insert(
+            "follow_trajectory".into(),
+            vec![Step::UploadMission, Step::Mode("AUTO".into())],
+        );
+        t.actions.insert(
+            "avoid_obstacle".into(),
+            vec![Step::Reposition(Offset {
+                forward_m: 0.0,
+                right_m: 8.0,
+                up_m: 0.0,
+            })],
+        );
+        let route = Route {
+            waypoints: vec![Waypoint::Relative {
+                north_m: 100.0,
+                east_m: 0.0,
+                alt_m: 20.0,
+            }],
+            altitude_m: 20.0,
+            search_time_limit_s: None,
+            takeoff_first: false,
+        };
+        let cfg = VehicleConfig {
+            streams: vec![],
+            ..VehicleConfig::default()
+        };
+        let mut v = Vehicle::new(cfg, t, Some(route));
+        v.on_frame(s(0.0), &hb(4, true));
+        v.on_frame(
+            s(0.0),
+            &frame(Msg::HOME_POSITION(HOME_POSITION_DATA {
+                latitude: 473_977_420,
+                longitude: 85_455_940,
+                altitude: 488_000,
+                ..HOME_POSITION_DATA::DEFAULT
+            })),
+        );
+        v.on_frame(
+            s(0.0),
+            &frame(Msg::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
+                lat: 473_977_420,
+                lon: 85_455_940,
+                relative_alt: 20_000,
+                hdg: 9000,
+                ..GLOBAL_POSITION_INT_DATA::DEFAULT
+            })),
+        );
+        v.take_records();
+        v
+    }
+
+    /// Run the autopilot side of upload + download; `stored` is what the autopilot keeps.
+    fn serve_upload(v: &mut Vehicle, first: Vec<Msg>, stored_alt: f32) -> Vec<Msg> {
+        let count = match &first[0] {
+            Msg::MISSION_COUNT(c) => c.count,
+            other => panic!("expected MISSION_COUNT, got {other:?}"),
+        };
+        let mut items = Vec::new();
+        for seq in 0..count {
+            let out = v.on_frame(
+                s(1.0),
+                &frame(Msg::MISSION_REQUEST_INT(MISSION_REQUEST_INT_DATA {
+                    seq,
+                    target_system: 1,
+                    target_component: 191,
+                    ..MISSION_REQUEST_INT_DATA::DEFAULT
+                })),
+            );
+            match &out[0] {
+                Msg::MISSION_ITEM_INT(i) => items.push(i.clone()),
+                other => panic!("{other:?}"),
+            }
+        }
+        let out = v.on_frame(
+            s(1.1),
+            &frame(Msg::MISSION_ACK(MISSION_ACK_DATA {
+                mavtype: MavMissionResult::MAV_MISSION_ACCEPTED,
+                ..MISSION_ACK_DATA::DEFAULT
+            })),
+        );
+        assert!(
+            matches!(out[0], Msg::MISSION_REQUEST_LIST(_)),
+            "verification download starts: {out:?}"
+        );
+        let mut out = v.on_frame(
+            s(1.2),
+            &frame(Msg::MISSION_COUNT(MISSION_COUNT_DATA {
+                count,
+                ..MISSION_COUNT_DATA::DEFAULT
+            })),
+        );
+        for (i, mut it) in items.into_iter().enumerate() {
+            if i > 0 {
+                it.z = stored_alt;
+            }
+            assert!(
+                matches!(out[0], Msg::MISSION_REQUEST_INT(MISSION_REQUEST_INT_DATA { seq, .. }) if seq as usize == i),
+                "{out:?}"
+            );
+            out = v.on_frame(s(1.3), &frame(Msg::MISSION_ITEM_INT(it)));
+        }
+        out
+    }
+
+    #[test]
+    fn follow_trajectory_uploads_verifies_then_switches_to_auto() {
+        let mut v = route_vehicle();
+        let out = v.request_actions(s(1.0), &["follow_trajectory".into()]);
+        let out = serve_upload(&mut v, out, 20.0);
+        assert!(
+            matches!(out[0], Msg::MISSION_ACK(_)),
+            "download acknowledged"
+        );
+        assert_eq!(
+            commands(&out),
+            vec![MavCmd::MAV_CMD_DO_SET_MODE],
+            "AUTO only after the verified upload"
+        );
+        match &out[1] {
+            Msg::COMMAND_LONG(c) => assert_eq!(c.param2, 3.0, "ArduPilot AUTO"),
+            other => panic!("{other:?}"),
+        }
+        assert!(
+            v.take_records()
+                .iter()
+                .any(|r| r.result.starts_with("ACCEPTED (verified 2 items)"))
+        );
+    }
+
+    #[test]
+    fn a_mission_that_does_not_verify_is_never_flown() {
+        let mut v = route_vehicle();
+        let out = v.request_actions(s(1.0), &["follow_trajectory".into()]);
+        let out = serve_upload(&mut v, out, 35.0);
+        assert!(
+            commands(&out).is_empty(),
+            "no AUTO after a mismatch: {out:?}"
+        );
+        assert!(!v.busy());
+        let recs = v.take_records();
+        assert!(
+            recs.iter()
+                .any(|r| r.result.contains("VerifyMismatch") && r.result.contains("altitude")),
+            "{recs:?}"
+        );
+        assert!(
+            recs.iter()
+                .any(|r| r.command == "SET_MODE AUTO" && r.result.starts_with("SKIPPED"))
+        );
+    }
+
+    #[test]
+    fn sidestep_is_to_the_right_of_the_heading() {
+        let mut v = route_vehicle();
+        // Heading east (90 deg): 8 m to the right is 8 m south.
+        let out = v.request_actions(s(1.0), &["avoid_obstacle".into()]);
+        match &out[0] {
+            Msg::COMMAND_INT(c) => {
+                assert_eq!(c.command, MavCmd::MAV_CMD_DO_REPOSITION);
+                let (n, e) =
+                    crate::link::telemetry::offset_m((473_977_420, 85_455_940), (c.x, c.y));
+                assert!(
+                    (n + 8.0).abs() < 0.05 && e.abs() < 0.05,
+                    "north {n} east {e}"
+                );
+                assert_eq!(c.z, 20.0);
+            }
+            other => panic!("{other:?}"),
+        }
+    }
 }
