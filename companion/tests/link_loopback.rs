@@ -186,12 +186,34 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
     let log = Arc::new(Mutex::new(PeerLog::default()));
     let peer = tokio::spawn(autopilot(listener, log.clone()));
 
+    // An onboard monitor (the tracker) on its own UDP link reports a detection.
+    let onboard_port = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let monitor = tokio::spawn(async move {
+        let s = tokio::net::UdpSocket::bind("127.0.0.1:0").await.unwrap();
+        let mut seq = 0u8;
+        for i in 0..50u32 {
+            let det = if i < 10 { 0.0 } else { 1.0 };
+            let m = Msg::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA {
+                time_boot_ms: i * 100,
+                value: det,
+                name: "tgt_det".into(),
+            });
+            let _ = s
+                .send_to(&frame(&mut seq, &m), ("127.0.0.1", onboard_port))
+                .await;
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    });
     let args = FlyArgs {
         connect: url::parse(&format!("tcp:127.0.0.1:{port}")).unwrap(),
         mission: None,
         policy: "safety".into(),
         signing_key: None,
-        onboard: None,
+        onboard: Some(url::parse(&format!("udpin:127.0.0.1:{onboard_port}")).unwrap()),
         link_timeout: parse_duration("3s").unwrap(),
         params: None,
         duration: Some(parse_duration("6s").unwrap()),
@@ -200,6 +222,7 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
     let mut records: Vec<DecisionRecord> = Vec::new();
     let report = run_with(args, decider, &mut records).await.unwrap();
     peer.abort();
+    monitor.abort();
 
     let log = log.lock().unwrap();
     // Identity: our heartbeat is an onboard controller, component 191, not an autopilot.
@@ -260,6 +283,16 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
             .any(|r| r.link_events.iter().any(|e| e.starts_with("disconnected")))
     );
     assert!(records.windows(2).all(|w| w[1].cycle == w[0].cycle + 1));
+    // The onboard monitor's detection reached the observations and triggered a cycle.
+    assert!(
+        records
+            .iter()
+            .any(|r| r.events.iter().any(|e| e == "target detected"))
+    );
+    assert_eq!(
+        records.last().unwrap().observations.get("target_detected"),
+        Some(&1.0)
+    );
 }
 
 /// UDP + signing: our frames arrive signed with the shared key (checked with the crate's

@@ -167,13 +167,12 @@ pub async fn run_with<D: Decider, S: RecordSink>(
     let mut ingest = Ingest::new(signing());
     let mut encoder = Encoder::new(signing());
     let mut link = transport::spawn(args.connect.clone(), Duration::from_secs(1));
-    let (mut onboard_rx, mut onboard_ingest) = match &args.onboard {
-        Some(u) => {
-            let h = transport::spawn(u.clone(), Duration::from_secs(1));
-            (Some(h.inbound), Ingest::new(signing()))
-        }
-        None => (None, Ingest::new(None)),
-    };
+    // Receive-only, but the handle (and its outbound sender) must live as long as the loop.
+    let mut onboard = args
+        .onboard
+        .clone()
+        .map(|u| transport::spawn(u, Duration::from_secs(1)));
+    let mut onboard_ingest = Ingest::new(signing());
 
     let start = Instant::now();
     let now = || start.elapsed();
@@ -208,14 +207,20 @@ pub async fn run_with<D: Decider, S: RecordSink>(
                 Some(Inbound::Disconnected(why)) => transport_events.push(format!("disconnected: {why}")),
                 None => anyhow::bail!("the transport task stopped"),
             },
-            m = async { match &mut onboard_rx { Some(r) => r.recv().await, None => std::future::pending().await } } => {
-                if let Some(Inbound::Bytes(b)) = m {
+            m = async { match &mut onboard { Some(h) => h.inbound.recv().await, None => std::future::pending().await } } => match m {
+                Some(Inbound::Bytes(b)) => {
                     let t = now();
                     for f in onboard_ingest.push(&b) {
                         vehicle.on_monitor_frame(t, &f);
                     }
                     trigger = Some(t);
                 }
+                Some(Inbound::Connected(name)) => {
+                    onboard_ingest.reset();
+                    transport_events.push(format!("onboard connected {name}"));
+                }
+                Some(Inbound::Disconnected(why)) => transport_events.push(format!("onboard disconnected: {why}")),
+                None => anyhow::bail!("the onboard transport task stopped"),
             },
             _ = heartbeat.tick() => out.push(Vehicle::heartbeat()),
             _ = tick.tick() => out.extend(vehicle.tick(now())),
