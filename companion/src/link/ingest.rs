@@ -304,6 +304,22 @@ mod tests {
     }
 
     #[test]
+    fn mavlink1_frames_are_accepted() {
+        // ArduPilot starts MAVLink 1 on some ports until it hears MAVLink 2.
+        let mut buf = Vec::new();
+        let h = MavHeader {
+            system_id: 1,
+            component_id: 1,
+            sequence: 3,
+        };
+        mavlink::write_v1_msg(&mut buf, h, &heartbeat()).unwrap();
+        let got = Ingest::new(None).push(&buf);
+        assert_eq!(got.len(), 1);
+        assert_eq!(got[0].version, MavlinkVersion::V1);
+        assert_eq!(got[0].msg, heartbeat());
+    }
+
+    #[test]
     fn without_signing_unsigned_commands_pass() {
         let mut ing = Ingest::new(None);
         assert_eq!(

@@ -313,7 +313,9 @@ impl Vehicle {
     pub fn on_reconnect(&mut self, now: Duration) {
         if self.liveness.alive() {
             // Force a regain on the next message so streams are re-requested.
+            let losses = self.liveness.losses;
             self.liveness = Liveness::new(self.cfg.link_timeout);
+            self.liveness.losses = losses;
             self.liveness.on_message(now);
             self.stream_queue = self.cfg.streams.iter().copied().collect();
             self.link_event("transport reconnected".into(), true);
