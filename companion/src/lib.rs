@@ -6,6 +6,7 @@
 
 pub mod decision_log;
 pub mod guarantee;
+pub mod link;
 pub mod mission;
 pub mod observations;
 pub mod record;

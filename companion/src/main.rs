@@ -44,11 +44,18 @@ enum Command {
         #[arg(long, default_value_t = 20)]
         frames: u32,
     },
+    /// Fly a real autopilot over MAVLink (ArduPilot or PX4; SITL or hardware).
+    Fly(companion::link::fly::FlyArgs),
 }
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
+        // TODO(lead): replace the scripted stand-in with the decision core's `Decider`.
+        Command::Fly(args) => {
+            let decider = companion::link::fly::ScriptedDecider::from_args(&args)?;
+            companion::link::fly::run(args, decider)
+        }
         Command::Simulate | Command::Check => {
             anyhow::bail!("not yet implemented")
         }
