@@ -320,6 +320,8 @@ impl Telemetry {
         values.insert("armed".into(), if self.armed { 1.0 } else { 0.0 });
         Observations {
             time_s: now.as_secs_f64(),
+            // The mission state is estimated by the fly loop (it knows the route progress).
+            state: String::new(),
             values,
             events,
         }
