@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 use fpga_model::*;
+use std::sync::OnceLock;
 
 pub struct Params {
     pub platform: Platform,
@@ -10,7 +11,13 @@ pub struct Params {
     pub mission: ResourcePolicy,
 }
 
-pub fn params() -> Params {
+/// Parsed once per test binary.
+pub fn params() -> &'static Params {
+    static P: OnceLock<Params> = OnceLock::new();
+    P.get_or_init(load)
+}
+
+fn load() -> Params {
     let platform: Platform = toml::from_str(include_str!("../../../params/platform.toml")).unwrap();
     platform.validate().unwrap();
     let file: VariantsFile = toml::from_str(include_str!("../../../params/variants.toml")).unwrap();
