@@ -6,4 +6,5 @@
 
 pub mod observations;
 pub mod record;
+pub mod resources;
 pub mod spec;
