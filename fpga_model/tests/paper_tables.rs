@@ -30,7 +30,7 @@ fn vibration_before_the_event_runs_everything_as_table5() {
     let p = params();
     let healthy = PlatformState::new(&p.platform);
     for policy in [&p.safety, &p.mission] {
-        let (s, _) = run(&p, policy, &healthy, &vibration_requests());
+        let (s, _) = run(p, policy, &healthy, &vibration_requests());
         // Table 5 "V3 and obstacle detection and emergency area search": 10 + 5 + 7 ms.
         assert_eq!(s.summary, "10 + 5 + 7 ms", "{}", policy.name);
         assert_eq!(placed(&s, "tracking").unwrap().implementation, F);
@@ -43,14 +43,14 @@ fn vibration_before_the_event_runs_everything_as_table5() {
 fn vibration_insufficient_resources_safety_degrades_v3_to_v1() {
     let p = params();
     let (_, mut state) = run(
-        &p,
+        p,
         &p.safety,
         &PlatformState::new(&p.platform),
         &vibration_requests(),
     );
     // "Insufficient resources to execute V3": one tile fails.
     state.fail_tile(3);
-    let (s, _) = run(&p, &p.safety, &state, &vibration_requests());
+    let (s, _) = run(p, &p.safety, &state, &vibration_requests());
     let t = placed(&s, "tracking").unwrap();
     assert_eq!((t.version.as_str(), t.implementation), ("V1", M)); // Table 4: V3 -> V1, "10 + 1"
     assert_eq!(s.degraded.len(), 1);
@@ -79,13 +79,13 @@ fn vibration_insufficient_resources_safety_degrades_v3_to_v1() {
 fn vibration_insufficient_resources_mission_drops_landing_search_keeps_v3() {
     let p = params();
     let (_, mut state) = run(
-        &p,
+        p,
         &p.mission,
         &PlatformState::new(&p.platform),
         &vibration_requests(),
     );
     state.fail_tile(3);
-    let (s, _) = run(&p, &p.mission, &state, &vibration_requests());
+    let (s, _) = run(p, &p.mission, &state, &vibration_requests());
     let t = placed(&s, "tracking").unwrap();
     assert_eq!((t.version.as_str(), t.implementation), ("V3", F));
     assert!(s.degraded.is_empty());
@@ -113,12 +113,12 @@ fn vibration_table4_reading_with_emergency_search_in_software() {
         Request::new("obstacle_detection", "lidar", 10.0),
         Request::new("landing_search", "emergency", 3.0),
     ];
-    let (s, mut state) = run(&p, &p.safety, &PlatformState::new(&p.platform), &reqs);
+    let (s, mut state) = run(p, &p.safety, &PlatformState::new(&p.platform), &reqs);
     assert_eq!(s.summary, "10 + 5 + 255 ms"); // Table 4, tracking phase 3, first row
     for t in 1..4 {
         state.fail_tile(t);
     }
-    let (s, _) = run(&p, &p.safety, &state, &reqs);
+    let (s, _) = run(p, &p.safety, &state, &reqs);
     assert_eq!(placed(&s, "tracking").unwrap().version, "V1");
     assert_eq!(s.summary, "10 + 1 + 5 + 255 ms");
     assert!(s.dropped.is_empty());
@@ -142,12 +142,12 @@ fn high_speed_table6_phases_before_the_event() {
         Request::new("obstacle_detection", "lidar", 10.0),
         Request::new("landing_search", "zone_t", 5.0),
     ];
-    assert_eq!(run(&p, &p.safety, &st, &phase1).0.summary, "10 + 5 + 7 ms");
+    assert_eq!(run(p, &p.safety, &st, &phase1).0.summary, "10 + 5 + 7 ms");
     let mut high = phase1.clone();
     high[0] = Request::new("tracking", "V2", 1.0);
-    assert_eq!(run(&p, &p.safety, &st, &high).0.summary, "730 + 5 + 7 ms");
+    assert_eq!(run(p, &p.safety, &st, &high).0.summary, "730 + 5 + 7 ms");
     assert_eq!(
-        run(&p, &p.safety, &st, &high_speed_requests()).0.summary,
+        run(p, &p.safety, &st, &high_speed_requests()).0.summary,
         "730 + 5 + 7 ms"
     );
 }
@@ -164,7 +164,7 @@ fn high_speed_event(p: &common::Params) -> PlatformState {
 #[test]
 fn high_speed_insufficient_resources_safety_degrades_v2_to_v5() {
     let p = params();
-    let (s, _) = run(&p, &p.safety, &high_speed_event(&p), &high_speed_requests());
+    let (s, _) = run(p, &p.safety, &high_speed_event(p), &high_speed_requests());
     let t = placed(&s, "tracking").unwrap();
     assert_eq!((t.version.as_str(), t.implementation), ("V5", S));
     assert_eq!(
@@ -182,12 +182,7 @@ fn high_speed_insufficient_resources_safety_degrades_v2_to_v5() {
 #[test]
 fn high_speed_insufficient_resources_mission_keeps_v2_drops_landing() {
     let p = params();
-    let (s, _) = run(
-        &p,
-        &p.mission,
-        &high_speed_event(&p),
-        &high_speed_requests(),
-    );
+    let (s, _) = run(p, &p.mission, &high_speed_event(p), &high_speed_requests());
     let t = placed(&s, "tracking").unwrap();
     // V2 stays; with the landing search gone its 2-tile HW version fits (the SW one would not:
     // 0.45 + 0.025 + 0.365 > 0.8).
@@ -229,12 +224,12 @@ fn high_speed_table7_mission_fast_v2_then_higher_speed_drops_landing() {
     let st = PlatformState::new(&p.platform);
     // Drone 20 m/s, target 50 m/s: tracking 30 / 0.28875 = 103.9 fps (only V2 F, 7 ms),
     // emergency search 20 / 5.775 = 3.46 fps (S, 255 ms, fits on the CPU).
-    let (s, st) = run(&p, &p.mission, &st, &table7_requests(&p, 20.0, 50.0));
+    let (s, st) = run(p, &p.mission, &st, &table7_requests(p, 20.0, 50.0));
     assert_eq!(s.summary, "7 + 5 + 255 ms"); // Table 7, tracking phase 2, second row
     assert_eq!(placed(&s, "tracking").unwrap().tiles, vec![0, 1, 2, 3]);
     // Higher speed target: drone 30 m/s after a 70 m/s target. Tracking 138.5 fps (still V2 F),
     // the emergency search now needs 5.19 fps: only its F version, whose tiles V2 F holds.
-    let (s, _) = run(&p, &p.mission, &st, &table7_requests(&p, 30.0, 70.0));
+    let (s, _) = run(p, &p.mission, &st, &table7_requests(p, 30.0, 70.0));
     let t = placed(&s, "tracking").unwrap();
     assert_eq!((t.version.as_str(), t.implementation), ("V2", F));
     assert_eq!(
@@ -251,10 +246,10 @@ fn higher_speed_under_safety_gives_up_tracking_not_landing() {
     // Same event under safety: V2 -> V5 is tried, but no V5 reaches 138.5 fps (fastest 10 ms),
     // so tracking gives way and the landing search keeps its tiles.
     let (s, _) = run(
-        &p,
+        p,
         &p.safety,
         &PlatformState::new(&p.platform),
-        &table7_requests(&p, 30.0, 70.0),
+        &table7_requests(p, 30.0, 70.0),
     );
     assert!(placed(&s, "tracking").is_none());
     assert_eq!(placed(&s, "landing_search").unwrap().implementation, F);
@@ -272,11 +267,11 @@ fn cpu_core_lost_moves_zone_search_to_the_fpga() {
         Request::new("landing_search", "zone_t", 2.0),
         Request::new("obstacle_detection", "lidar", 10.0),
     ];
-    let (s, mut st) = run(&p, &p.safety, &PlatformState::new(&p.platform), &reqs);
+    let (s, mut st) = run(p, &p.safety, &PlatformState::new(&p.platform), &reqs);
     assert_eq!(s.summary, "394 + 5 ms"); // Table 4 WPi reading: 0.394 + 0.025 of the CPU
     st.cores_online = 1;
     // One core left, budget 0.8 of it = 0.4 of the nominal CPU < 0.394 + 0.025.
-    let (s, _) = run(&p, &p.safety, &st, &reqs);
+    let (s, _) = run(p, &p.safety, &st, &reqs);
     assert_eq!(s.summary, "7 + 5 ms");
     assert_eq!(s.reconfigurations, 2);
     assert!(s.dropped.is_empty() && s.degraded.is_empty());
@@ -293,7 +288,7 @@ fn cpu_monitor_over_budget_drops_software_only_applications_with_a_reason() {
         Request::new("obstacle_detection", "lidar", 10.0),
         Request::new("tracking", "V0", 25.0),
     ];
-    let (s, _) = run(&p, &p.safety, &st, &reqs);
+    let (s, _) = run(p, &p.safety, &st, &reqs);
     // Tracking has a HW version (V0 M) and still runs; LIDAR detection has none.
     assert_eq!(placed(&s, "tracking").unwrap().implementation, M);
     assert_eq!(s.dropped.len(), 1);
@@ -321,7 +316,7 @@ fn a_less_important_app_is_re_placed_when_a_more_important_one_gave_way() {
         Request::new("obstacle_detection", "lidar", 10.0),
         Request::new("landing_search", "zone_t", 5.0),
     ];
-    let (s, _) = run(&p, &p.safety, &st, &reqs);
+    let (s, _) = run(p, &p.safety, &st, &reqs);
     assert_eq!(placed(&s, "tracking").unwrap().tiles, vec![0]);
     assert_eq!(
         s.dropped.iter().map(|d| d.app.as_str()).collect::<Vec<_>>(),
@@ -334,7 +329,7 @@ fn unreachable_rate_degrades_along_the_path_or_drops() {
     let p = params();
     let st = PlatformState::new(&p.platform);
     // V3's fastest is 10 ms (100 fps); 120 fps needs V1 F (7 ms) under the V3 -> V1 path.
-    let (s, _) = run(&p, &p.safety, &st, &[Request::new("tracking", "V3", 120.0)]);
+    let (s, _) = run(p, &p.safety, &st, &[Request::new("tracking", "V3", 120.0)]);
     assert_eq!(placed(&s, "tracking").unwrap().version, "V1");
     assert!(
         s.degraded[0]
@@ -342,7 +337,7 @@ fn unreachable_rate_degrades_along_the_path_or_drops() {
             .contains("no implementation of tracking V3 reaches 120.0 fps")
     );
     // V4 has no path: dropped.
-    let (s, _) = run(&p, &p.safety, &st, &[Request::new("tracking", "V4", 120.0)]);
+    let (s, _) = run(p, &p.safety, &st, &[Request::new("tracking", "V4", 120.0)]);
     assert!(s.placements.is_empty());
     assert!(s.dropped[0].reason.contains("fastest 10 ms"));
 }
@@ -357,7 +352,7 @@ fn bad_requests_are_reported_not_placed() {
         Request::new("landing_search", "zone_t", 1.0),
         Request::new("landing_search", "emergency", 1.0),
     ];
-    let (s, _) = run(&p, &p.safety, &st, &reqs);
+    let (s, _) = run(p, &p.safety, &st, &reqs);
     let reasons: Vec<&str> = s.dropped.iter().map(|d| d.reason.as_str()).collect();
     assert!(reasons[0].starts_with("unknown variant tracking V9"));
     assert!(reasons[1].starts_with("invalid required rate"));
@@ -368,7 +363,7 @@ fn bad_requests_are_reported_not_placed() {
 #[test]
 fn nothing_requested_is_the_papers_dash() {
     let p = params();
-    let (s, _) = run(&p, &p.safety, &PlatformState::new(&p.platform), &[]);
+    let (s, _) = run(p, &p.safety, &PlatformState::new(&p.platform), &[]);
     assert_eq!(s.summary, "-");
     assert_eq!((s.tiles_used, s.free_tiles, s.cpu_load), (0, 4, 0.0));
     assert_eq!(s.power_w, p.platform.power.base_w);

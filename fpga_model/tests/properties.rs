@@ -103,13 +103,13 @@ proptest! {
     #[test]
     fn placement_never_exceeds_tiles_or_cpu_budget(c in arb_case()) {
         let p = params();
-        let st = state_of(&p, &c);
+        let st = state_of(p, &c);
         let policy = if c.safety { &p.safety } else { &p.mission };
         let (s, after) = schedule(&p.platform, &p.catalogue, policy, &st, &c.requests);
         let mut used = BTreeSet::new();
         let mut cpu = 0.0;
         for pl in &s.placements {
-            let v = variant_of(&p, pl);
+            let v = variant_of(p, pl);
             prop_assert_eq!(pl.tiles.len(), usize::from(v.tiles));
             prop_assert!(v.meets(pl.required_fps));
             for &t in &pl.tiles {
@@ -124,7 +124,7 @@ proptest! {
         prop_assert!(used.len() <= healthy(&st));
         prop_assert_eq!(usize::from(s.tiles_used), used.len());
         if cpu > 0.0 {
-            prop_assert!(cpu <= cpu_cap(&p, &st) + 1e-9, "cpu {} over cap {}", cpu, cpu_cap(&p, &st));
+            prop_assert!(cpu <= cpu_cap(p, &st) + 1e-9, "cpu {} over cap {}", cpu, cpu_cap(p, &st));
         }
         // Every request is either placed or reported dropped.
         prop_assert_eq!(s.placements.len() + s.dropped.len(), c.requests.len());
@@ -133,14 +133,14 @@ proptest! {
     #[test]
     fn just_enough_never_picks_faster_when_a_slower_one_fits(c in arb_case()) {
         let p = params();
-        let st = state_of(&p, &c);
+        let st = state_of(p, &c);
         let policy = if c.safety { &p.safety } else { &p.mission };
         let (s, _) = schedule(&p.platform, &p.catalogue, policy, &st, &c.requests);
         let share = |v: &Variant, fps: f64| v.sw_ms() * fps / 1000.0 / 2.0;
-        let tiles: usize = s.placements.iter().map(|pl| usize::from(variant_of(&p, pl).tiles)).sum();
-        let cpu: f64 = s.placements.iter().map(|pl| share(variant_of(&p, pl), pl.required_fps)).sum();
+        let tiles: usize = s.placements.iter().map(|pl| usize::from(variant_of(p, pl).tiles)).sum();
+        let cpu: f64 = s.placements.iter().map(|pl| share(variant_of(p, pl), pl.required_fps)).sum();
         for pl in &s.placements {
-            let chosen = variant_of(&p, pl);
+            let chosen = variant_of(p, pl);
             for alt in p.catalogue.implementations(&pl.app, &pl.version) {
                 if alt.ms_per_frame() <= chosen.ms_per_frame() || !alt.meets(pl.required_fps) {
                     continue;
@@ -150,7 +150,7 @@ proptest! {
                 let sh = share(alt, pl.required_fps);
                 let all_cpu = cpu - share(chosen, pl.required_fps) + sh;
                 let any_sw = all_cpu > 0.0;
-                let fits = t <= healthy(&st) && (!any_sw || all_cpu <= cpu_cap(&p, &st) - 1e-9);
+                let fits = t <= healthy(&st) && (!any_sw || all_cpu <= cpu_cap(p, &st) - 1e-9);
                 prop_assert!(!fits, "{} {}: slower {} would fit instead of {}", pl.app, pl.version, alt.implementation, chosen.implementation);
             }
         }
@@ -159,7 +159,7 @@ proptest! {
     #[test]
     fn removing_a_fault_never_makes_a_feasible_set_infeasible(c in arb_case(), which in 0u8..6) {
         let p = params();
-        let st = state_of(&p, &c);
+        let st = state_of(p, &c);
         let policy = if c.safety { &p.safety } else { &p.mission };
         let (s, _) = schedule(&p.platform, &p.catalogue, policy, &st, &c.requests);
         prop_assume!(s.dropped.is_empty() && s.degraded.is_empty());
