@@ -368,3 +368,30 @@ fn nothing_requested_is_the_papers_dash() {
     assert_eq!((s.tiles_used, s.free_tiles, s.cpu_load), (0, 4, 0.0));
     assert_eq!(s.power_w, p.platform.power.base_w);
 }
+
+#[test]
+fn request_priority_overrides_the_policy_rank() {
+    let p = params();
+    let mut st = PlatformState::new(&p.platform);
+    st.fail_tile(3);
+    // Under mission first, but the decision layer ranks the landing search first this cycle:
+    // tracking is now the one that gives way, along its V3 -> V1 path, as under safety first.
+    let mut reqs = vibration_requests();
+    reqs[2].priority = Some(0);
+    let (s, _) = run(p, &p.mission, &st, &reqs);
+    assert_eq!(placed(&s, "tracking").unwrap().version, "V1");
+    assert!(s.dropped.is_empty());
+}
+
+#[test]
+fn monitor_reading_becomes_external_load() {
+    let p = params();
+    let mut st = PlatformState::new(&p.platform);
+    // 90 % of both cores busy, of which the placements account for 0.1 of the nominal CPU.
+    st.set_monitored_load(&p.platform, 0.9, 0.1);
+    assert!((st.external_cpu_load - 0.8).abs() < 1e-12);
+    // One core online: 90 % of it is 0.45 of the nominal CPU.
+    st.cores_online = 1;
+    st.set_monitored_load(&p.platform, 0.9, 0.1);
+    assert!((st.external_cpu_load - 0.35).abs() < 1e-12);
+}
