@@ -10,6 +10,7 @@ pub mod link;
 pub mod mission;
 pub mod observations;
 pub mod record;
+pub mod resources;
 pub mod review;
 pub mod sim;
 pub mod spec;

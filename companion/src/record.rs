@@ -61,7 +61,19 @@ pub struct ResourcesRecord {
     pub dropped: Vec<String>,
     /// The paper's Resources column: "10 + 5 + 394 ms".
     pub summary: String,
-    /// Electrical power of the platform (CPU load and active tiles), W.
+    /// Resource policy that resolved conflicts (`safety`, `mission`).
+    #[serde(default)]
+    pub policy: String,
+    /// Healthy tiles left unused after placement (the resource BN's `free_tiles`).
+    #[serde(default)]
+    pub free_tiles: u8,
+    /// Tiles that are out of service this cycle.
+    #[serde(default)]
+    pub failed_tiles: Vec<u8>,
+    /// Partial reconfiguration time spent this cycle.
+    #[serde(default)]
+    pub reconfiguration_ms: f64,
+    /// Estimated board power (params/platform.toml power model).
     #[serde(default)]
     pub power_w: f64,
 }
