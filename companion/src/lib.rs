@@ -4,6 +4,7 @@
 //! driven by `sim` (a seeded discrete-step world) or by `link` (MAVLink). Everything
 //! mission-specific is loaded from `params/` by `spec` and the stage modules.
 
+pub mod mission_mdp;
 pub mod observations;
 pub mod record;
 pub mod spec;
