@@ -198,16 +198,23 @@ impl MissionMdp {
             .position(|p| p == policy)
             .ok_or_else(|| InstantiateError::UnknownPolicy(policy.to_string()))?;
         for (k, name) in self.vars.iter().enumerate() {
-            let v = lookup(name).ok_or_else(|| InstantiateError::MissingProbability(name.clone()))?;
+            let v =
+                lookup(name).ok_or_else(|| InstantiateError::MissingProbability(name.clone()))?;
             if !(0.0..=1.0).contains(&v) {
-                return Err(InstantiateError::BadProbability { name: name.clone(), value: v });
+                return Err(InstantiateError::BadProbability {
+                    name: name.clone(),
+                    value: v,
+                });
             }
             self.values[k] = v;
         }
         self.fill(pi);
         self.mdp
             .validate()
-            .map_err(|err| InstantiateError::Invalid { mdp: self.name.clone(), err })?;
+            .map_err(|err| InstantiateError::Invalid {
+                mdp: self.name.clone(),
+                err,
+            })?;
         Ok(&self.mdp)
     }
 
@@ -257,7 +264,11 @@ impl MissionMdps {
                 ));
             }
             if !(0.0..=1.0).contains(v) {
-                return Err(SpecError::new(&index_path, format!("check_point.{k}"), "not in [0, 1]"));
+                return Err(SpecError::new(
+                    &index_path,
+                    format!("check_point.{k}"),
+                    "not in [0, 1]",
+                ));
             }
         }
         let mut names: Vec<String> = index.concurrent.clone();
@@ -267,12 +278,20 @@ impl MissionMdps {
         let mut mdps = Vec::new();
         for n in &names {
             if !seen.insert(n.clone()) {
-                return Err(SpecError::new(&index_path, "concurrent", format!("MDP '{n}' listed twice")));
+                return Err(SpecError::new(
+                    &index_path,
+                    "concurrent",
+                    format!("MDP '{n}' listed twice"),
+                ));
             }
             let path = dir.join(format!("{n}.toml"));
             let m = load_mdp(&path, known_probability_names, &index.check_point)?;
             if m.name != *n {
-                return Err(SpecError::new(&path, "name", format!("is '{}', expected '{n}' (file name)", m.name)));
+                return Err(SpecError::new(
+                    &path,
+                    "name",
+                    format!("is '{}', expected '{n}' (file name)", m.name),
+                ));
             }
             if let Some(first) = mdps.first() {
                 let first: &MissionMdp = first;
@@ -280,7 +299,12 @@ impl MissionMdps {
                     return Err(SpecError::new(
                         &path,
                         "reward",
-                        format!("policies {:?} differ from {:?} in {}", m.policies, first.policies, first.file.display()),
+                        format!(
+                            "policies {:?} differ from {:?} in {}",
+                            m.policies,
+                            first.policies,
+                            first.file.display()
+                        ),
                     ));
                 }
             }
@@ -320,11 +344,18 @@ impl MissionMdps {
     }
     /// Policy names (identical in every MDP).
     pub fn policies(&self) -> &[String] {
-        self.mdps.first().map(|m| m.policies.as_slice()).unwrap_or(&[])
+        self.mdps
+            .first()
+            .map(|m| m.policies.as_slice())
+            .unwrap_or(&[])
     }
     /// Union of the primitive actions of every MDP (sorted).
     pub fn primitive_actions(&self) -> Vec<String> {
-        let set: BTreeSet<&String> = self.mdps.iter().flat_map(|m| m.does.iter().flatten()).collect();
+        let set: BTreeSet<&String> = self
+            .mdps
+            .iter()
+            .flat_map(|m| m.does.iter().flatten())
+            .collect();
         set.into_iter().cloned().collect()
     }
 }
@@ -346,7 +377,11 @@ pub fn load_mdp(
     }
     for (i, s) in f.states.iter().enumerate() {
         if f.states[..i].contains(s) {
-            return Err(err(path, format!("states[{i}]"), format!("state '{s}' listed twice")));
+            return Err(err(
+                path,
+                format!("states[{i}]"),
+                format!("state '{s}' listed twice"),
+            ));
         }
     }
     let state = |s: &str| f.states.iter().position(|x| x == s);
@@ -358,10 +393,18 @@ pub fn load_mdp(
     }
     for (i, a) in f.action.iter().enumerate() {
         if f.action[..i].iter().any(|b| b.name == a.name) {
-            return Err(err(path, format!("action[{i}].name"), format!("action '{}' declared twice", a.name)));
+            return Err(err(
+                path,
+                format!("action[{i}].name"),
+                format!("action '{}' declared twice", a.name),
+            ));
         }
         if a.does.is_empty() {
-            return Err(err(path, format!("action[{i}].does"), "empty: an action must stand for primitive actions"));
+            return Err(err(
+                path,
+                format!("action[{i}].does"),
+                "empty: an action must stand for primitive actions",
+            ));
         }
     }
     let action = |a: &str| f.action.iter().position(|x| x.name == a);
@@ -379,19 +422,31 @@ pub fn load_mdp(
     // Transitions.
     let mut rows: Vec<(usize, usize, Vec<(usize, Expr)>, String)> = Vec::new();
     for (s_name, acts) in &f.transitions {
-        let s = state(s_name)
-            .ok_or_else(|| err(path, format!("transitions.{s_name}"), format!("unknown state '{s_name}'")))?;
+        let s = state(s_name).ok_or_else(|| {
+            err(
+                path,
+                format!("transitions.{s_name}"),
+                format!("unknown state '{s_name}'"),
+            )
+        })?;
         for (a_name, nexts) in acts {
             let entry = format!("transitions.{s_name}.\"{a_name}\"");
-            let a = action(a_name).ok_or_else(|| err(path, &entry, format!("unknown action '{a_name}'")))?;
+            let a = action(a_name)
+                .ok_or_else(|| err(path, &entry, format!("unknown action '{a_name}'")))?;
             if nexts.is_empty() {
                 return Err(err(path, &entry, "action has no transition"));
             }
             let mut tr = Vec::new();
             for (n_name, p) in nexts {
-                let n = state(n_name)
-                    .ok_or_else(|| err(path, format!("{entry}.{n_name}"), format!("unknown state '{n_name}'")))?;
-                let e = Expr::parse(&p.text(), &mut slot).map_err(|r| err(path, format!("{entry}.{n_name}"), r))?;
+                let n = state(n_name).ok_or_else(|| {
+                    err(
+                        path,
+                        format!("{entry}.{n_name}"),
+                        format!("unknown state '{n_name}'"),
+                    )
+                })?;
+                let e = Expr::parse(&p.text(), &mut slot)
+                    .map_err(|r| err(path, format!("{entry}.{n_name}"), r))?;
                 tr.push((n, e));
             }
             rows.push((s, a, tr, entry));
@@ -415,7 +470,10 @@ pub fn load_mdp(
         return Err(err(
             path,
             format!("states[{u}]"),
-            format!("state '{}' unreachable from initial state '{}'", f.states[u], f.initial),
+            format!(
+                "state '{}' unreachable from initial state '{}'",
+                f.states[u], f.initial
+            ),
         ));
     }
     // Rewards.
@@ -429,16 +487,22 @@ pub fn load_mdp(
         let mut ar: Vec<Option<Expr>> = vec![None; f.action.len()];
         for (a_name, r) in &spec.action {
             let entry = format!("reward.{pol}.action.\"{a_name}\"");
-            let a = action(a_name).ok_or_else(|| err(path, &entry, format!("unknown action '{a_name}'")))?;
+            let a = action(a_name)
+                .ok_or_else(|| err(path, &entry, format!("unknown action '{a_name}'")))?;
             ar[a] = Some(Expr::parse(&r.text(), &mut slot).map_err(|r| err(path, &entry, r))?);
         }
         if let Some(a) = ar.iter().position(|x| x.is_none()) {
-            return Err(err(path, format!("reward.{pol}.action"), format!("no reward for action '{}'", f.action[a].name)));
+            return Err(err(
+                path,
+                format!("reward.{pol}.action"),
+                format!("no reward for action '{}'", f.action[a].name),
+            ));
         }
         let mut er: Vec<Option<Expr>> = vec![None; f.states.len()];
         for (s_name, r) in &spec.enter {
             let entry = format!("reward.{pol}.enter.{s_name}");
-            let s = state(s_name).ok_or_else(|| err(path, &entry, format!("unknown state '{s_name}'")))?;
+            let s = state(s_name)
+                .ok_or_else(|| err(path, &entry, format!("unknown state '{s_name}'")))?;
             er[s] = Some(Expr::parse(&r.text(), &mut slot).map_err(|r| err(path, &entry, r))?);
         }
         policies.push(pol.clone());
@@ -455,7 +519,8 @@ pub fn load_mdp(
         .build_unchecked()
         .map_err(|e| err(path, "transitions", e.to_string()))?;
     let mut trans_expr = vec![Expr::constant(0.0); mdp.n_transitions()];
-    let mut choice_reward: Vec<Vec<Expr>> = vec![vec![Expr::constant(0.0); mdp.n_choices()]; policies.len()];
+    let mut choice_reward: Vec<Vec<Expr>> =
+        vec![vec![Expr::constant(0.0); mdp.n_choices()]; policies.len()];
     for (s, a, tr, _) in &rows {
         let c = mdp.choice_index(*s, *a).expect("built from these rows");
         for (t, (_, e)) in mdp.transition_range(c).zip(tr) {
@@ -486,18 +551,34 @@ pub fn load_mdp(
     let mut points: Vec<(String, Vec<f64>)> = vec![
         ("all probabilities 0".into(), vec![0.0; k]),
         ("all probabilities 1".into(), vec![1.0; k]),
-        ("the check point".into(), m.vars.iter().map(|v| check_point.get(v).copied().unwrap_or(0.5)).collect()),
+        (
+            "the check point".into(),
+            m.vars
+                .iter()
+                .map(|v| check_point.get(v).copied().unwrap_or(0.5))
+                .collect(),
+        ),
     ];
     let mut rng = SplitMix64(0x5eed_0f_b0f_u64);
     for i in 0..RANDOM_CHECK_POINTS {
-        points.push((format!("random point {i}"), (0..k).map(|_| rng.unit()).collect()));
+        points.push((
+            format!("random point {i}"),
+            (0..k).map(|_| rng.unit()).collect(),
+        ));
     }
     for (label, pt) in &points {
         m.values.copy_from_slice(pt);
         for (s, a, tr, entry) in &rows {
             let sum: f64 = tr.iter().map(|(_, e)| e.eval(pt)).sum();
             if (sum - 1.0).abs() > LOAD_SUM_TOLERANCE || !sum.is_finite() {
-                return Err(err(path, entry, format!("probabilities sum to {sum} at {label} ({})", fmt_point(&m.vars, pt))));
+                return Err(err(
+                    path,
+                    entry,
+                    format!(
+                        "probabilities sum to {sum} at {label} ({})",
+                        fmt_point(&m.vars, pt)
+                    ),
+                ));
             }
             let _ = (s, a);
             for (n, e) in tr {
@@ -506,7 +587,10 @@ pub fn load_mdp(
                     return Err(err(
                         path,
                         format!("{entry}.{}", f.states[*n]),
-                        format!("probability {p} outside [0, 1] at {label} ({})", fmt_point(&m.vars, pt)),
+                        format!(
+                            "probability {p} outside [0, 1] at {label} ({})",
+                            fmt_point(&m.vars, pt)
+                        ),
                     ));
                 }
             }
@@ -514,7 +598,11 @@ pub fn load_mdp(
         for pi in 0..m.policies.len() {
             m.fill(pi);
             if let Some(c) = m.mdp.rewards().iter().position(|r| !r.is_finite()) {
-                return Err(err(path, format!("reward.{}", m.policies[pi]), format!("reward of choice {c} not finite at {label}")));
+                return Err(err(
+                    path,
+                    format!("reward.{}", m.policies[pi]),
+                    format!("reward of choice {c} not finite at {label}"),
+                ));
             }
         }
     }
@@ -525,7 +613,11 @@ pub fn load_mdp(
 }
 
 fn fmt_point(vars: &[String], pt: &[f64]) -> String {
-    vars.iter().zip(pt).map(|(n, v)| format!("{n}={v:.3}")).collect::<Vec<_>>().join(", ")
+    vars.iter()
+        .zip(pt)
+        .map(|(n, v)| format!("{n}={v:.3}"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// Tiny deterministic generator for the load-time check points (fixed seed: reproducible).
@@ -598,13 +690,21 @@ impl BehaviourConflicts {
             if known_actions.iter().any(|a| pattern_matches(p, a)) {
                 Ok(())
             } else {
-                Err(err(path, entry, format!("'{p}' matches no known primitive action")))
+                Err(err(
+                    path,
+                    entry,
+                    format!("'{p}' matches no known primitive action"),
+                ))
             }
         };
         let mut rules = Vec::new();
         for (i, r) in f.antagonistic.iter().enumerate() {
             if f.antagonistic[..i].iter().any(|q| q.name == r.name) {
-                return Err(err(path, format!("antagonistic[{i}].name"), format!("rule '{}' given twice", r.name)));
+                return Err(err(
+                    path,
+                    format!("antagonistic[{i}].name"),
+                    format!("rule '{}' given twice", r.name),
+                ));
             }
             for (g, group) in [("a", &r.a), ("b", &r.b)] {
                 if group.is_empty() {
@@ -614,25 +714,43 @@ impl BehaviourConflicts {
                     check_pattern(format!("antagonistic[{i}].{g}[{j}]"), p)?;
                     for (pol, order) in &f.priority {
                         if !order.contains(p) {
-                            return Err(err(path, format!("priority.{pol}"), format!("'{p}' (rule '{}') not ranked", r.name)));
+                            return Err(err(
+                                path,
+                                format!("priority.{pol}"),
+                                format!("'{p}' (rule '{}') not ranked", r.name),
+                            ));
                         }
                     }
                 }
             }
             if r.a.iter().any(|p| r.b.contains(p)) {
-                return Err(err(path, format!("antagonistic[{i}]"), "a pattern is in both groups"));
+                return Err(err(
+                    path,
+                    format!("antagonistic[{i}]"),
+                    "a pattern is in both groups",
+                ));
             }
-            rules.push(Rule { name: r.name.clone(), groups: [r.a.clone(), r.b.clone()] });
+            rules.push(Rule {
+                name: r.name.clone(),
+                groups: [r.a.clone(), r.b.clone()],
+            });
         }
         for (pol, order) in &f.priority {
             for (j, p) in order.iter().enumerate() {
                 check_pattern(format!("priority.{pol}[{j}]"), p)?;
                 if order[..j].contains(p) {
-                    return Err(err(path, format!("priority.{pol}[{j}]"), format!("'{p}' ranked twice")));
+                    return Err(err(
+                        path,
+                        format!("priority.{pol}[{j}]"),
+                        format!("'{p}' ranked twice"),
+                    ));
                 }
             }
         }
-        Ok(Self { rules, priority: f.priority })
+        Ok(Self {
+            rules,
+            priority: f.priority,
+        })
     }
 
     pub fn policies(&self) -> impl Iterator<Item = &str> {
@@ -654,10 +772,18 @@ impl BehaviourConflicts {
             .ok_or_else(|| InstantiateError::UnknownPolicy(policy.to_string()))?;
         let mut kept: Vec<String> = actions.iter().map(|a| a.as_ref().to_string()).collect();
         let mut conflicts = Vec::new();
-        let rank = |group: &[String]| group.iter().filter_map(|p| order.iter().position(|q| q == p)).min();
+        let rank = |group: &[String]| {
+            group
+                .iter()
+                .filter_map(|p| order.iter().position(|q| q == p))
+                .min()
+        };
         for rule in &self.rules {
             let present = |g: &[String]| -> Vec<String> {
-                kept.iter().filter(|a| g.iter().any(|p| pattern_matches(p, a))).cloned().collect()
+                kept.iter()
+                    .filter(|a| g.iter().any(|p| pattern_matches(p, a)))
+                    .cloned()
+                    .collect()
             };
             let (in_a, in_b) = (present(&rule.groups[0]), present(&rule.groups[1]));
             if in_a.is_empty() || in_b.is_empty() {
@@ -666,7 +792,11 @@ impl BehaviourConflicts {
             let a_wins = rank(&rule.groups[0]) <= rank(&rule.groups[1]);
             let (win, lose) = if a_wins { (in_a, in_b) } else { (in_b, in_a) };
             kept.retain(|a| !lose.contains(a));
-            conflicts.push(Conflict { kept: win.join("+"), dropped: lose, rule: rule.name.clone() });
+            conflicts.push(Conflict {
+                kept: win.join("+"),
+                dropped: lose,
+                rule: rule.name.clone(),
+            });
         }
         Ok((kept, conflicts))
     }

@@ -11,13 +11,22 @@ use std::hint::black_box;
 
 fn paper_models() -> Vec<(String, Mdp)> {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/models");
-    ["reference", "navigation", "landing", "tracking", "monolithic"]
-        .iter()
-        .map(|n| {
-            let text = std::fs::read_to_string(dir.join(format!("{n}.json"))).expect("exported model");
-            (n.to_string(), serde_json::from_str(&text).expect("valid model json"))
-        })
-        .collect()
+    [
+        "reference",
+        "navigation",
+        "landing",
+        "tracking",
+        "monolithic",
+    ]
+    .iter()
+    .map(|n| {
+        let text = std::fs::read_to_string(dir.join(format!("{n}.json"))).expect("exported model");
+        (
+            n.to_string(),
+            serde_json::from_str(&text).expect("valid model json"),
+        )
+    })
+    .collect()
 }
 
 /// Random sparse MDP: every action admissible everywhere, `k` successors per (state, action),
@@ -25,7 +34,9 @@ fn paper_models() -> Vec<(String, Mdp)> {
 fn random_mdp(n: usize, m: usize, k: usize, seed: u64) -> Mdp {
     let mut x = seed;
     let mut next = move || {
-        x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        x = x
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         (x >> 11) as f64 / (1u64 << 53) as f64
     };
     let mut b = MdpBuilder::new(n, m);
@@ -53,7 +64,10 @@ fn random_mdp(n: usize, m: usize, k: usize, seed: u64) -> Mdp {
 }
 
 fn paper(c: &mut Criterion) {
-    let cfg = Config { gamma: 0.95, ..Config::default() };
+    let cfg = Config {
+        gamma: 0.95,
+        ..Config::default()
+    };
     let mut g = c.benchmark_group("paper");
     for (name, mdp) in paper_models() {
         let mut ws = Workspace::with_capacity(mdp.n_states(), 100, true);
@@ -61,17 +75,36 @@ fn paper(c: &mut Criterion) {
             b.iter(|| black_box(ws.finite_horizon(black_box(&mdp), 100).decision(0)))
         });
         g.bench_function(BenchmarkId::new("policy_iteration", &name), |b| {
-            b.iter(|| black_box(ws.policy_iteration(black_box(&mdp), &cfg).unwrap().stats.iterations))
+            b.iter(|| {
+                black_box(
+                    ws.policy_iteration(black_box(&mdp), &cfg)
+                        .unwrap()
+                        .stats
+                        .iterations,
+                )
+            })
         });
         g.bench_function(BenchmarkId::new("value_iteration", &name), |b| {
-            b.iter(|| black_box(ws.value_iteration(black_box(&mdp), &cfg).unwrap().stats.iterations))
+            b.iter(|| {
+                black_box(
+                    ws.value_iteration(black_box(&mdp), &cfg)
+                        .unwrap()
+                        .stats
+                        .iterations,
+                )
+            })
         });
     }
     g.finish();
 }
 
 fn scaling(c: &mut Criterion) {
-    let cfg = Config { gamma: 0.95, tolerance: 1e-6, eval_sweeps: 20, ..Config::default() };
+    let cfg = Config {
+        gamma: 0.95,
+        tolerance: 1e-6,
+        eval_sweeps: 20,
+        ..Config::default()
+    };
     let mut g = c.benchmark_group("scaling");
     g.sample_size(10);
     for n in [10usize, 100, 1000, 10000] {
@@ -81,7 +114,14 @@ fn scaling(c: &mut Criterion) {
             b.iter(|| black_box(ws.finite_horizon(&mdp, 100).decision(0)))
         });
         g.bench_function(BenchmarkId::new("modified_policy_iteration", n), |b| {
-            b.iter(|| black_box(ws.modified_policy_iteration(&mdp, &cfg).unwrap().stats.iterations))
+            b.iter(|| {
+                black_box(
+                    ws.modified_policy_iteration(&mdp, &cfg)
+                        .unwrap()
+                        .stats
+                        .iterations,
+                )
+            })
         });
         // Dense O(n^3) evaluation: only up to 1000 states (10000 would need 800 MB).
         if n <= 1000 {

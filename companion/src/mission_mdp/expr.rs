@@ -22,11 +22,20 @@ enum Node {
 impl Expr {
     /// Parse `text`; `slot` maps a name to its variable slot (or `None` if the name is unknown).
     pub fn parse(text: &str, slot: &mut dyn FnMut(&str) -> Option<usize>) -> Result<Self, String> {
-        let mut p = Parser { s: text.as_bytes(), i: 0, nodes: Vec::new(), slot };
+        let mut p = Parser {
+            s: text.as_bytes(),
+            i: 0,
+            nodes: Vec::new(),
+            slot,
+        };
         let root = p.expr(0)?;
         p.ws();
         if p.i != p.s.len() {
-            return Err(format!("unexpected '{}' at column {} in \"{text}\"", p.s[p.i] as char, p.i + 1));
+            return Err(format!(
+                "unexpected '{}' at column {} in \"{text}\"",
+                p.s[p.i] as char,
+                p.i + 1
+            ));
         }
         let mut nodes = p.nodes;
         // The root is the last node pushed by construction.
@@ -37,7 +46,9 @@ impl Expr {
 
     /// A constant expression.
     pub fn constant(x: f64) -> Self {
-        Expr { nodes: vec![Node::Const(x)] }
+        Expr {
+            nodes: vec![Node::Const(x)],
+        }
     }
 
     pub fn eval(&self, vars: &[f64]) -> f64 {
@@ -58,7 +69,9 @@ impl Expr {
 
     /// Variable slots used (with repetitions).
     pub fn vars(&self) -> impl Iterator<Item = usize> + '_ {
-        self.nodes.iter().filter_map(|n| if let Node::Var(k) = n { Some(*k) } else { None })
+        self.nodes
+            .iter()
+            .filter_map(|n| if let Node::Var(k) = n { Some(*k) } else { None })
     }
 }
 
@@ -94,7 +107,11 @@ impl Parser<'_, '_> {
         while let Some(c @ (b'+' | b'-')) = self.peek() {
             self.i += 1;
             let b = self.term(depth)?;
-            a = self.push(if c == b'+' { Node::Add(a, b) } else { Node::Sub(a, b) });
+            a = self.push(if c == b'+' {
+                Node::Add(a, b)
+            } else {
+                Node::Sub(a, b)
+            });
         }
         Ok(a)
     }
@@ -104,7 +121,11 @@ impl Parser<'_, '_> {
         while let Some(c @ (b'*' | b'/')) = self.peek() {
             self.i += 1;
             let b = self.factor(depth)?;
-            a = self.push(if c == b'*' { Node::Mul(a, b) } else { Node::Div(a, b) });
+            a = self.push(if c == b'*' {
+                Node::Mul(a, b)
+            } else {
+                Node::Div(a, b)
+            });
         }
         Ok(a)
     }
@@ -147,7 +168,9 @@ impl Parser<'_, '_> {
             }
             Some(c) if c.is_ascii_alphabetic() || c == b'_' => {
                 let st = self.i;
-                while self.i < self.s.len() && (self.s[self.i].is_ascii_alphanumeric() || self.s[self.i] == b'_') {
+                while self.i < self.s.len()
+                    && (self.s[self.i].is_ascii_alphanumeric() || self.s[self.i] == b'_')
+                {
                     self.i += 1;
                 }
                 let name = std::str::from_utf8(&self.s[st..self.i]).unwrap_or("");
@@ -156,7 +179,11 @@ impl Parser<'_, '_> {
                     None => Err(format!("unknown probability name '{name}'")),
                 }
             }
-            Some(c) => Err(format!("unexpected '{}' at column {}", c as char, self.i + 1)),
+            Some(c) => Err(format!(
+                "unexpected '{}' at column {}",
+                c as char,
+                self.i + 1
+            )),
         }
     }
 }
@@ -191,7 +218,9 @@ mod tests {
 
     #[test]
     fn rejects_bad_text() {
-        for bad in ["", "1 -", "(1", "1)", "P_nope", "1 + * 2", "1..2", "2 P_sys", "#"] {
+        for bad in [
+            "", "1 -", "(1", "1)", "P_nope", "1 + * 2", "1..2", "2 P_sys", "#",
+        ] {
             assert!(Expr::parse(bad, &mut names).is_err(), "{bad:?} accepted");
         }
         let deep = format!("{}1{}", "(".repeat(200), ")".repeat(200));
