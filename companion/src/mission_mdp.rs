@@ -4,10 +4,10 @@
 
 pub mod expr;
 
-use crate::record::Conflict;
+use crate::record::{Conflict, MdpProposal};
 use crate::spec::{SpecError, read_toml};
 use expr::Expr;
-use mdp_engine::{Mdp, MdpBuilder, MdpError};
+use mdp_engine::{Mdp, MdpBuilder, MdpError, Workspace};
 use serde::Deserialize;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::path::{Path, PathBuf};
@@ -100,6 +100,14 @@ pub enum InstantiateError {
     UnknownPolicy(String),
     #[error("mdp '{mdp}': {err}")]
     Invalid { mdp: String, err: MdpError },
+}
+
+/// A stage-0 decision: the MDP action index (see [`MissionMdp::action_name`],
+/// [`MissionMdp::primitives`]) and the optimal expected total reward from the current state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Decision {
+    pub action: usize,
+    pub value: f64,
 }
 
 /// One MDP from params, compiled: the engine model plus the expressions that fill it.
@@ -216,6 +224,38 @@ impl MissionMdp {
                 err,
             })?;
         Ok(&self.mdp)
+    }
+
+    /// One decision cycle for this MDP: instantiate with `probs` under `policy`, solve the
+    /// finite horizon (`horizon` steps, the paper uses 100) in `ws`, and return the stage-0
+    /// action at `state` with its value. `Ok(None)` when `state` is terminal. Allocation-free
+    /// once `ws` has seen this model size and horizon.
+    pub fn decide(
+        &mut self,
+        ws: &mut Workspace,
+        state: usize,
+        probs: &BTreeMap<String, f64>,
+        policy: &str,
+        horizon: usize,
+    ) -> Result<Option<Decision>, InstantiateError> {
+        let mdp = self.instantiate(probs, policy)?;
+        let fh = ws.finite_horizon(mdp, horizon);
+        Ok(fh.decision(state).map(|action| Decision {
+            action,
+            value: fh.value(0, state),
+        }))
+    }
+
+    /// The decision as a decision-log entry (allocates the strings).
+    pub fn proposal(&self, state: usize, d: &Decision, horizon: usize) -> MdpProposal {
+        MdpProposal {
+            mdp: self.name.clone(),
+            state: self.states[state].clone(),
+            action: self.actions[d.action].clone(),
+            actions: self.does[d.action].clone(),
+            value: d.value,
+            iterations: horizon as u32,
+        }
     }
 
     /// Evaluate every expression at `self.values` into the engine model.

@@ -231,6 +231,28 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 40, ..ProptestConfig::default() })]
+
+    /// Too big for brute force: the three solvers agree with each other, and the policy each
+    /// returns is optimal when evaluated exactly.
+    #[test]
+    fn solvers_agree_on_larger_models(r in raw(25, 4), gamma in 0.5..0.97f64) {
+        let m = build(&r, false);
+        let cfg = Config { gamma, tolerance: 1e-10, max_iterations: 100_000, eval_sweeps: 10 };
+        let mut ws = Workspace::new();
+        let pi = ws.policy_iteration(&m, &cfg).unwrap().values().to_vec();
+        let vi = ws.value_iteration(&m, &cfg).unwrap();
+        prop_assert!(vi.stats.converged);
+        let vi_pol: Vec<usize> = vi.policy().iter().map(|a| a.unwrap_or(0)).collect();
+        prop_assert!(close(vi.values(), &pi, 1e-7));
+        let mpi = ws.modified_policy_iteration(&m, &cfg).unwrap();
+        prop_assert!(close(mpi.values(), &pi, 1e-7));
+        let v = eval_lu(&m, &vi_pol, gamma).unwrap();
+        prop_assert!(close(v.as_slice(), &pi, 1e-6));
+    }
+}
+
 #[test]
 fn workspace_reuse_gives_identical_answers() {
     let r = Raw {

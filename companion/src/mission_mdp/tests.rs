@@ -259,6 +259,14 @@ fn reference_aborts_where_bfm_switches_version() {
             "{pol}: BFM switches V0 -> V3"
         );
     }
+    // At the 7.1 point itself (P_track = P_V0 = 0.2, assumed) both policies already give up.
+    for pol in ["safety", "mission"] {
+        assert_eq!(
+            decide(&mut all, "reference", "S5", &paper_point(), pol),
+            "A5",
+            "{pol}"
+        );
+    }
     let mut nominal = paper_point();
     nominal.insert("P_track".into(), 0.9);
     for pol in ["safety", "mission"] {
@@ -377,6 +385,25 @@ fn instantiate_fills_probabilities_and_rewards() {
     let c = mdp.choices(wpi).find(|c| c.action == act).unwrap();
     let i = c.next.iter().position(|n| *n as usize == wpf).unwrap();
     assert!((c.prob[i] - (1.0 - 0.1 * 0.9) * 0.8 * 0.9 * 0.4).abs() < 1e-12);
+}
+
+#[test]
+fn decide_and_proposal() {
+    let mut all = load_all();
+    let p = paper_point();
+    let m = all.get_mut("navigation").unwrap();
+    let mut ws = Workspace::new();
+    let wpi = m.state_index("wpi").unwrap();
+    let d = m.decide(&mut ws, wpi, &p, "safety", 100).unwrap().unwrap();
+    let rec = m.proposal(wpi, &d, 100);
+    assert_eq!(rec.mdp, "navigation");
+    assert_eq!(rec.state, "wpi");
+    assert_eq!(rec.action, "A2+A11");
+    assert_eq!(rec.actions, ["follow_trajectory", "detect_obstacles_lidar"]);
+    assert_eq!(rec.iterations, 100);
+    assert!(rec.value > 0.0);
+    let landing = m.state_index("landing").unwrap();
+    assert_eq!(m.decide(&mut ws, landing, &p, "safety", 100).unwrap(), None);
 }
 
 #[test]
