@@ -404,6 +404,9 @@ fn err(path: &Path, entry: impl Into<String>, reason: impl Into<String>) -> Spec
     SpecError::new(path, entry, reason)
 }
 
+/// One parsed transition row: state, action, (next state, probability), entry path for errors.
+type Row = (usize, usize, Vec<(usize, Expr)>, String);
+
 /// Load, validate and compile one MDP file.
 pub fn load_mdp(
     path: &Path,
@@ -460,7 +463,7 @@ pub fn load_mdp(
         }))
     };
     // Transitions.
-    let mut rows: Vec<(usize, usize, Vec<(usize, Expr)>, String)> = Vec::new();
+    let mut rows: Vec<Row> = Vec::new();
     for (s_name, acts) in &f.transitions {
         let s = state(s_name).ok_or_else(|| {
             err(
@@ -599,7 +602,7 @@ pub fn load_mdp(
                 .collect(),
         ),
     ];
-    let mut rng = SplitMix64(0x5eed_0f_b0f_u64);
+    let mut rng = SplitMix64(0x0005_eed0_fb0f_u64);
     for i in 0..RANDOM_CHECK_POINTS {
         points.push((
             format!("random point {i}"),

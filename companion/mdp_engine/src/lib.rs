@@ -118,12 +118,15 @@ pub struct Choice<'a> {
     pub prob: &'a [f64],
 }
 
+/// (state, action, reward, transitions) as given to [`MdpBuilder::choice`].
+type PendingChoice = (usize, usize, f64, Vec<(usize, f64)>);
+
 /// Collects choices in any order, then builds an [`Mdp`].
 #[derive(Debug, Clone)]
 pub struct MdpBuilder {
     n_states: usize,
     n_actions: usize,
-    choices: Vec<(usize, usize, f64, Vec<(usize, f64)>)>,
+    choices: Vec<PendingChoice>,
 }
 
 impl MdpBuilder {
