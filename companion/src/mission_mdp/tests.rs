@@ -297,6 +297,9 @@ fn mission_policy_tracks_whenever_safety_does() {
             let (pb, pv) = (b as f64 / 10.0, q as f64 / 10.0);
             p.insert("P_battery".into(), pb);
             p.insert("P_sys".into(), 0.5 + 0.5 * pb);
+            for v in ["P_V0", "P_V1", "P_V2", "P_V4", "P_V5"] {
+                p.insert(v.into(), 0.0);
+            }
             p.insert("P_V3".into(), pv);
             p.insert("P_track".into(), pv);
             for (mdp, state) in [
@@ -339,6 +342,18 @@ fn low_battery_sends_safety_home_first() {
     assert_eq!(decide(&mut all, "navigation", "wpf", &p, "mission"), "A11");
     p.insert("P_battery".into(), 0.2);
     assert_eq!(decide(&mut all, "navigation", "wpf", &p, "mission"), "A10");
+    // Mission-first lets tracking beat return_to_base in arbitration, so the tracking MDP itself
+    // must give up with a nearly empty battery, even with the best version.
+    p.insert("P_battery".into(), 0.05);
+    for pol in ["safety", "mission"] {
+        assert_eq!(decide(&mut all, "tracking", "v3", &p, pol), "A10", "{pol}");
+        let a = decide(&mut all, "monolithic", "v3", &p, pol);
+        assert_eq!(
+            primitives_of(&all, "monolithic", &a),
+            ["return_to_base"],
+            "{pol}"
+        );
+    }
 }
 
 /// In-place instantiation against hand computation, including the folded enter rewards.
