@@ -95,6 +95,7 @@ pub enum SolveError {
 /// A sparse MDP in compressed (CSR-like) storage: states -> choices (admissible actions, sorted by
 /// action index) -> transitions.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "MdpRaw")]
 pub struct Mdp {
     n_actions: usize,
     /// `state_start[s]..state_start[s+1]` are the choices of state `s`.
@@ -105,6 +106,68 @@ pub struct Mdp {
     choice_start: Vec<u32>,
     next: Vec<u32>,
     prob: Vec<f64>,
+}
+
+/// Serialized form of [`Mdp`]; deserialization checks the layout before trusting it, so a
+/// malformed file is an error, never a panic in a solver.
+#[derive(Deserialize)]
+struct MdpRaw {
+    n_actions: usize,
+    state_start: Vec<u32>,
+    choice_action: Vec<u32>,
+    choice_reward: Vec<f64>,
+    choice_start: Vec<u32>,
+    next: Vec<u32>,
+    prob: Vec<f64>,
+}
+
+impl TryFrom<MdpRaw> for Mdp {
+    type Error = String;
+    fn try_from(r: MdpRaw) -> Result<Self, String> {
+        let offsets_ok = |v: &[u32], end: usize| {
+            v.first() == Some(&0)
+                && v.windows(2).all(|w| w[0] <= w[1])
+                && v.last().map(|x| *x as usize) == Some(end)
+        };
+        let n_states = r.state_start.len().saturating_sub(1);
+        let n_choices = r.choice_action.len();
+        if !offsets_ok(&r.state_start, n_choices) {
+            return Err("state_start is not a valid offset array".into());
+        }
+        if r.choice_reward.len() != n_choices || r.choice_start.len() != n_choices + 1 {
+            return Err("choice arrays have inconsistent lengths".into());
+        }
+        if !offsets_ok(&r.choice_start, r.next.len()) || r.prob.len() != r.next.len() {
+            return Err("choice_start / next / prob are inconsistent".into());
+        }
+        if r.next.iter().any(|n| *n as usize >= n_states) {
+            return Err("next state out of range".into());
+        }
+        for s in 0..n_states {
+            let acts = &r.choice_action[r.state_start[s] as usize..r.state_start[s + 1] as usize];
+            if acts.iter().any(|a| *a as usize >= r.n_actions)
+                || acts.windows(2).any(|w| w[0] >= w[1])
+            {
+                return Err(format!(
+                    "state {s}: actions out of range or not strictly increasing"
+                ));
+            }
+        }
+        if r.choice_start.windows(2).any(|w| w[0] == w[1]) {
+            return Err("a choice has no transition".into());
+        }
+        let m = Mdp {
+            n_actions: r.n_actions,
+            state_start: r.state_start,
+            choice_action: r.choice_action,
+            choice_reward: r.choice_reward,
+            choice_start: r.choice_start,
+            next: r.next,
+            prob: r.prob,
+        };
+        m.validate().map_err(|e| e.to_string())?;
+        Ok(m)
+    }
 }
 
 /// One admissible (state, action) pair seen through [`Mdp::choices`].
@@ -965,6 +1028,28 @@ mod tests {
         let mut b = MdpBuilder::new(2, 1);
         b.choice(1, 0, 0.0, &[(0, 0.5), (0, 0.5)]);
         assert!(matches!(b.build(), Err(MdpError::DuplicateNext { .. })));
+    }
+
+    #[test]
+    fn deserialization_rejects_inconsistent_layouts() {
+        let mut b = MdpBuilder::new(2, 2);
+        b.choice(0, 1, 1.0, &[(1, 1.0)])
+            .choice(1, 0, 0.0, &[(0, 0.5), (1, 0.5)]);
+        let m = b.build().unwrap();
+        let json = serde_json::to_string(&m).unwrap();
+        assert_eq!(serde_json::from_str::<Mdp>(&json).unwrap(), m);
+        for (from, to) in [
+            ("\"next\":[1,0,1]", "\"next\":[1,0,2]"), // next state out of range
+            ("\"prob\":[1.0,0.5,0.5]", "\"prob\":[1.0,0.5]"), // length mismatch
+            ("\"prob\":[1.0,0.5,0.5]", "\"prob\":[1.0,0.5,0.6]"), // row sum
+            ("\"n_actions\":2", "\"n_actions\":1"),   // action out of range
+            ("\"state_start\":[0,1,2]", "\"state_start\":[0,2,1]"), // offsets not monotone
+            ("\"choice_start\":[0,1,3]", "\"choice_start\":[0,1,4]"),
+        ] {
+            assert!(json.contains(from), "{json}");
+            let bad = json.replace(from, to);
+            assert!(serde_json::from_str::<Mdp>(&bad).is_err(), "accepted {bad}");
+        }
     }
 
     #[test]
