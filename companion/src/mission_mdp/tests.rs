@@ -332,12 +332,12 @@ fn mission_policy_tracks_whenever_safety_does() {
 }
 
 /// Safety-first heads home earlier as the battery drains: navigation returns to base from the
-/// tracking area at a battery level where mission-first still stays.
+/// tracking area at a battery level (0.5) where mission-first still stays.
 #[test]
 fn low_battery_sends_safety_home_first() {
     let mut all = load_all();
     let mut p = paper_point();
-    p.insert("P_battery".into(), 0.6);
+    p.insert("P_battery".into(), 0.5);
     assert_eq!(decide(&mut all, "navigation", "wpf", &p, "safety"), "A10");
     assert_eq!(decide(&mut all, "navigation", "wpf", &p, "mission"), "A11");
     p.insert("P_battery".into(), 0.2);
@@ -379,9 +379,9 @@ fn instantiate_fills_probabilities_and_rewards() {
     };
     assert_eq!(prob_of(coll), 0.5);
     assert_eq!(prob_of(avoid), 0.5);
-    // R = (2 - 8 * (1 - 0.8)) + 0.5 * (-100)
+    // R = (2 - 5 * (1 - 0.8)) + 0.5 * (-100)
     assert!(
-        (c.reward - (2.0 - 8.0 * 0.2 - 50.0)).abs() < 1e-12,
+        (c.reward - (2.0 - 5.0 * 0.2 - 50.0)).abs() < 1e-12,
         "{}",
         c.reward
     );
@@ -390,7 +390,7 @@ fn instantiate_fills_probabilities_and_rewards() {
     q.insert("P_obs".into(), 0.9);
     let mdp = m.instantiate(&q, "mission").unwrap();
     let c = mdp.choices(od).find(|c| c.action == a11).unwrap();
-    assert!((c.reward - (2.0 - 4.0 * 0.2 - 90.0)).abs() < 1e-12);
+    assert!((c.reward - (2.0 - 3.0 * 0.2 - 90.0)).abs() < 1e-12);
     let wpi = m.state_index("wpi").unwrap();
     let (wpf, act) = (
         m.state_index("wpf").unwrap(),
