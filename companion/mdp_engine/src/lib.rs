@@ -549,7 +549,9 @@ impl Workspace {
             resize(&mut self.fh_values, (horizon + 1) * n, 0.0);
             resize(&mut self.fh_policy, horizon * n, NONE);
         }
-        if dense_solve && (self.mat.nrows() != n) {
+        // The dense matrix only grows; smaller models use its top-left block, so alternating
+        // between models of different sizes does not reallocate.
+        if dense_solve && self.mat.nrows() < n {
             self.mat = DMatrix::zeros(n, n);
             self.rhs = DVector::zeros(n);
         }
@@ -733,7 +735,11 @@ impl Workspace {
         let n = mdp.n_states();
         let a = &mut self.mat;
         let b = &mut self.rhs;
-        a.fill(0.0);
+        for j in 0..n {
+            for i in 0..n {
+                a[(i, j)] = 0.0;
+            }
+        }
         for s in 0..n {
             a[(s, s)] = 1.0;
             let c = self.pchoice[s];
@@ -747,7 +753,7 @@ impl Workspace {
                 a[(s, mdp.next[t] as usize)] -= gamma * mdp.prob[t];
             }
         }
-        if !solve_in_place(a, b) {
+        if !solve_block_in_place(a, b, n) {
             return false;
         }
         self.v[..n].copy_from_slice(&b.as_slice()[..n]);
@@ -816,7 +822,18 @@ fn check_gamma(g: f64) -> Result<(), SolveError> {
 /// column-oriented for nalgebra's column-major storage. Allocation-free. False if singular.
 pub fn solve_in_place(a: &mut DMatrix<f64>, b: &mut DVector<f64>) -> bool {
     let n = a.nrows();
-    let scale = a.iter().fold(0.0_f64, |m, x| m.max(x.abs())).max(1.0);
+    solve_block_in_place(a, b, n)
+}
+
+/// [`solve_in_place`] on the top-left `n x n` block of `a` and the first `n` entries of `b`
+/// (entries outside the block are ignored, and may be changed).
+fn solve_block_in_place(a: &mut DMatrix<f64>, b: &mut DVector<f64>, n: usize) -> bool {
+    let mut scale: f64 = 1.0;
+    for j in 0..n {
+        for i in 0..n {
+            scale = scale.max(a[(i, j)].abs());
+        }
+    }
     for k in 0..n {
         let mut p = k;
         let mut best = a[(k, k)].abs();

@@ -124,7 +124,8 @@ proptest! {
         let m = build(&r, false);
         let best = brute_optimal(&m, gamma);
         let cfg = Config { gamma, tolerance: 1e-11, max_iterations: 100_000, eval_sweeps: 5 };
-        let mut ws = Workspace::new();
+        // Oversized workspace: the dense evaluation runs on the top-left block of a 10x10 matrix.
+        let mut ws = Workspace::with_capacity(10, 0, true);
         let mut policies = vec![];
         for which in 0..3 {
             let sol = match which {

@@ -66,4 +66,20 @@ fn warm_resolves_do_not_allocate() {
         before,
         "steady-state solves allocated"
     );
+
+    // Alternating with a smaller model reuses the (larger) buffers.
+    let mut b = MdpBuilder::new(2, 1);
+    b.choice(0, 0, 1.0, &[(1, 1.0)])
+        .choice(1, 0, 0.0, &[(0, 0.5), (1, 0.5)]);
+    let small = b.build().unwrap();
+    let before = ALLOCS.load(Ordering::SeqCst);
+    for _ in 0..3 {
+        std::hint::black_box(warm(&mut ws, &small));
+        std::hint::black_box(warm(&mut ws, &m));
+    }
+    assert_eq!(
+        ALLOCS.load(Ordering::SeqCst),
+        before,
+        "alternating model sizes allocated"
+    );
 }
