@@ -3,11 +3,7 @@
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(
-    name = "companion",
-    version,
-    about = "BFM flight companion: health BNs, concurrent MDPs, just-enough variants, MAVLink"
-)]
+#[command(name = "companion", version, about = "BFM flight companion: health BNs, concurrent MDPs, just-enough variants, MAVLink")]
 struct Cli {
     #[command(subcommand)]
     command: Command,

@@ -15,27 +15,13 @@ pub struct SpecError {
 
 impl fmt::Display for SpecError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "{}: {}: {}",
-            self.file.display(),
-            self.entry,
-            self.reason
-        )
+        write!(f, "{}: {}: {}", self.file.display(), self.entry, self.reason)
     }
 }
 
 impl SpecError {
-    pub fn new(
-        file: impl AsRef<Path>,
-        entry: impl Into<String>,
-        reason: impl Into<String>,
-    ) -> Self {
-        Self {
-            file: file.as_ref().to_path_buf(),
-            entry: entry.into(),
-            reason: reason.into(),
-        }
+    pub fn new(file: impl AsRef<Path>, entry: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self { file: file.as_ref().to_path_buf(), entry: entry.into(), reason: reason.into() }
     }
 }
 
