@@ -8,6 +8,7 @@ pub mod decision_log;
 pub mod guarantee;
 pub mod link;
 pub mod mission;
+pub mod mission_mdp;
 pub mod observations;
 pub mod record;
 pub mod resources;
