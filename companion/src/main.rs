@@ -14,13 +14,14 @@ enum Command {
     /// Fly the paper's tracking mission in a seeded discrete-step world (no autopilot needed).
     Simulate,
     /// Validate params/ and print the health managers, platform and pre-flight allocation.
-    Check,
+    Check(companion::check::CheckArgs),
 }
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
-        Command::Simulate | Command::Check => {
+        Command::Check(args) => companion::check::run(&args),
+        Command::Simulate => {
             anyhow::bail!("not yet implemented")
         }
     }

@@ -18,7 +18,6 @@ struct Separator {
     /// Tree edge: `child` sends to `parent` in the collect pass.
     child: usize,
     parent: usize,
-    vars: Vec<usize>,
     /// Clique entry -> separator entry, for the child and the parent clique.
     map_child: Vec<u32>,
     map_parent: Vec<u32>,
@@ -195,7 +194,6 @@ impl Engine {
                         parent: p,
                         map_child: index_map(&cl_vars[c], &vars, &card),
                         map_parent: index_map(&cl_vars[p], &vars, &card),
-                        vars,
                         old: vec![1.0; size],
                         new: vec![0.0; size],
                     });
