@@ -40,7 +40,9 @@ pub fn parse_pairs(s: &str) -> anyhow::Result<Vec<(String, String)>> {
     s.split(',')
         .filter(|x| !x.trim().is_empty())
         .map(|kv| {
-            let (k, v) = kv.split_once('=').with_context(|| format!("`{kv}` is not NAME=VALUE"))?;
+            let (k, v) = kv
+                .split_once('=')
+                .with_context(|| format!("`{kv}` is not NAME=VALUE"))?;
             Ok((k.trim().to_string(), v.trim().to_string()))
         })
         .collect()
@@ -48,8 +50,14 @@ pub fn parse_pairs(s: &str) -> anyhow::Result<Vec<(String, String)>> {
 
 /// Build the whole report as JSON plus human text.
 pub fn report(args: &CheckArgs) -> anyhow::Result<(Value, String)> {
-    let params = args.params.clone().unwrap_or_else(crate::spec::default_params_dir);
-    let cx = CheckContext { params: &params, args };
+    let params = args
+        .params
+        .clone()
+        .unwrap_or_else(crate::spec::default_params_dir);
+    let cx = CheckContext {
+        params: &params,
+        args,
+    };
     let mut obj = serde_json::Map::new();
     let mut text = String::new();
     for (key, f) in SECTIONS {
@@ -71,7 +79,12 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
 }
 
 fn fmt_dist(states: &[String], p: &[f64]) -> String {
-    states.iter().zip(p).map(|(s, x)| format!("{s} {x:.4}")).collect::<Vec<_>>().join(", ")
+    states
+        .iter()
+        .zip(p)
+        .map(|(s, x)| format!("{s} {x:.4}"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// Health managers: nodes with roles, states and posteriors; published probabilities.
@@ -91,7 +104,13 @@ pub fn health_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
         writeln!(text, "evidence: {}", ev.join(", "))?;
     }
     for m in &model.managers {
-        writeln!(text, "health manager `{}` ({}): {}", m.name, m.file.display(), m.description)?;
+        writeln!(
+            text,
+            "health manager `{}` ({}): {}",
+            m.name,
+            m.file.display(),
+            m.description
+        )?;
         let mut nodes = Vec::new();
         for n in &m.nodes {
             let post = m.marginal(&n.name).unwrap_or(&[]);
@@ -102,7 +121,9 @@ pub fn health_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
                 n.name,
                 n.role,
                 fmt_dist(&n.states, post),
-                observed.map(|s| format!("  <- evidence {s}")).unwrap_or_default()
+                observed
+                    .map(|s| format!("  <- evidence {s}"))
+                    .unwrap_or_default()
             )?;
             nodes.push(json!({
                 "name": n.name,

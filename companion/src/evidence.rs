@@ -64,7 +64,11 @@ impl ObservationMap {
         for (i, o) in observations.iter().enumerate() {
             let entry = |k: &str| format!("observation[{i}]({}).{k}", o.name);
             if names.insert(o.name.clone(), i).is_some() {
-                return Err(SpecError::new(file, entry("name"), "duplicate observation name"));
+                return Err(SpecError::new(
+                    file,
+                    entry("name"),
+                    "duplicate observation name",
+                ));
             }
             if let Some(j) = nodes.insert(o.node.clone(), i) {
                 return Err(SpecError::new(
@@ -74,24 +78,38 @@ impl ObservationMap {
                 ));
             }
             if let Some(t) = o.thresholds.iter().find(|t| !t.is_finite()) {
-                return Err(SpecError::new(file, entry("thresholds"), format!("{t} is not finite")));
+                return Err(SpecError::new(
+                    file,
+                    entry("thresholds"),
+                    format!("{t} is not finite"),
+                ));
             }
             if let Some(w) = o.thresholds.windows(2).find(|w| w[0] >= w[1]) {
                 return Err(SpecError::new(
                     file,
                     entry("thresholds"),
-                    format!("thresholds out of order: {} then {} (must strictly increase)", w[0], w[1]),
+                    format!(
+                        "thresholds out of order: {} then {} (must strictly increase)",
+                        w[0], w[1]
+                    ),
                 ));
             }
             if o.states.len() != o.thresholds.len() + 1 {
                 return Err(SpecError::new(
                     file,
                     entry("states"),
-                    format!("{} states for {} thresholds (need one more state)", o.states.len(), o.thresholds.len()),
+                    format!(
+                        "{} states for {} thresholds (need one more state)",
+                        o.states.len(),
+                        o.thresholds.len()
+                    ),
                 ));
             }
         }
-        Ok(Self { file: file.to_path_buf(), observations })
+        Ok(Self {
+            file: file.to_path_buf(),
+            observations,
+        })
     }
 
     pub fn get(&self, name: &str) -> Option<&ObservationSpec> {

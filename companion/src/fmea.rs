@@ -180,7 +180,11 @@ pub struct Publish {
 impl Publish {
     pub fn expr(&self) -> String {
         let p = format!("P({} = {})", self.node, self.state);
-        if self.complement { format!("1 - {p}") } else { p }
+        if self.complement {
+            format!("1 - {p}")
+        } else {
+            p
+        }
     }
 }
 
@@ -235,7 +239,11 @@ fn check_prob(file: &Path, entry: &str, v: f64) -> Result<f64, SpecError> {
     if v.is_finite() && (0.0..=1.0).contains(&v) {
         Ok(v)
     } else {
-        Err(err(file, entry, format!("{v} is not a probability in [0, 1]")))
+        Err(err(
+            file,
+            entry,
+            format!("{v} is not a probability in [0, 1]"),
+        ))
     }
 }
 
@@ -259,7 +267,11 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
         entry: String,
     ) -> Result<(), SpecError> {
         match role.get(name) {
-            Some(old) if old != r => Err(err(file, entry, format!("node `{name}` is used as {r} but already as {old}"))),
+            Some(old) if old != r => Err(err(
+                file,
+                entry,
+                format!("node `{name}` is used as {r} but already as {old}"),
+            )),
             Some(_) => Ok(()),
             None => {
                 role.insert(name.to_string(), r.to_string());
@@ -269,22 +281,54 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
         }
     }
     for (i, row) in spec.fmea.iter().enumerate() {
-        assign(file, &mut role, &mut order, &row.error, "error", format!("fmea[{i}].error"))?;
+        assign(
+            file,
+            &mut role,
+            &mut order,
+            &row.error,
+            "error",
+            format!("fmea[{i}].error"),
+        )?;
         for m in &row.monitors {
-            assign(file, &mut role, &mut order, m, "monitor", format!("fmea[{i}].monitors"))?;
+            assign(
+                file,
+                &mut role,
+                &mut order,
+                m,
+                "monitor",
+                format!("fmea[{i}].monitors"),
+            )?;
         }
         for c in &row.contexts {
-            assign(file, &mut role, &mut order, c, "context", format!("fmea[{i}].contexts"))?;
+            assign(
+                file,
+                &mut role,
+                &mut order,
+                c,
+                "context",
+                format!("fmea[{i}].contexts"),
+            )?;
         }
         for s in &row.solutions {
-            assign(file, &mut role, &mut order, s, "solution", format!("fmea[{i}].solutions"))?;
+            assign(
+                file,
+                &mut role,
+                &mut order,
+                s,
+                "solution",
+                format!("fmea[{i}].solutions"),
+            )?;
         }
     }
     for (name, ns) in &spec.node {
         let entry = format!("node.{name}.role");
         match (&ns.role, role.get(name)) {
             (Some(r), _) if !ROLES.contains(&r.as_str()) => {
-                return Err(err(file, entry, format!("unknown role `{r}` (one of {})", ROLES.join(", "))));
+                return Err(err(
+                    file,
+                    entry,
+                    format!("unknown role `{r}` (one of {})", ROLES.join(", ")),
+                ));
             }
             (Some(r), _) => assign(file, &mut role, &mut order, name, r, entry)?,
             (None, Some(_)) => {}
@@ -304,14 +348,20 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
             (Some(s), _) => s.clone(),
             (None, Some(d)) => d,
             (None, None) => {
-                return Err(err(file, format!("node.{n}.states"), format!("a {r} node must list its states")));
+                return Err(err(
+                    file,
+                    format!("node.{n}.states"),
+                    format!("a {r} node must list its states"),
+                ));
             }
         };
         if s.is_empty() {
             return Err(err(file, format!("node.{n}.states"), "no states"));
         }
-        let binary_rule = matches!(r.as_str(), "error" | "monitor" | "monitor_health" | "version" | "activation")
-            && ns(n).cpt.is_none();
+        let binary_rule = matches!(
+            r.as_str(),
+            "error" | "monitor" | "monitor_health" | "version" | "activation"
+        ) && ns(n).cpt.is_none();
         if binary_rule && s.len() != 2 {
             return Err(err(
                 file,
@@ -325,12 +375,23 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
         let s = states
             .get(node)
             .ok_or_else(|| err(file, entry.clone(), format!("unknown node `{node}`")))?;
-        s.iter()
-            .position(|x| x == st)
-            .ok_or_else(|| err(file, entry, format!("node `{node}` has no state `{st}` (states: {})", s.join(", "))))
+        s.iter().position(|x| x == st).ok_or_else(|| {
+            err(
+                file,
+                entry,
+                format!(
+                    "node `{node}` has no state `{st}` (states: {})",
+                    s.join(", ")
+                ),
+            )
+        })
     };
     let known = |node: &str, entry: String| -> Result<(), SpecError> {
-        if states.contains_key(node) { Ok(()) } else { Err(err(file, entry, format!("unknown node `{node}`"))) }
+        if states.contains_key(node) {
+            Ok(())
+        } else {
+            Err(err(file, entry, format!("unknown node `{node}`")))
+        }
     };
 
     // Errors fixed by each solution, and the solutions of each error.
@@ -374,13 +435,20 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
                 }
             }
             "qos" | "version" => {
-                let errs = spec_n
-                    .errors
-                    .as_ref()
-                    .ok_or_else(|| err(file, format!("node.{n}.errors"), format!("a {r} node must list `errors`")))?;
+                let errs = spec_n.errors.as_ref().ok_or_else(|| {
+                    err(
+                        file,
+                        format!("node.{n}.errors"),
+                        format!("a {r} node must list `errors`"),
+                    )
+                })?;
                 for e in errs {
                     if role.get(e).map(String::as_str) != Some("error") {
-                        return Err(err(file, format!("node.{n}.errors"), format!("`{e}` is not an error node")));
+                        return Err(err(
+                            file,
+                            format!("node.{n}.errors"),
+                            format!("`{e}` is not an error node"),
+                        ));
                     }
                     push(&mut parents, e);
                 }
@@ -393,10 +461,18 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
                 }
             }
             "activation" => {
-                for (key, v) in [("version", &spec_n.version), ("tiles", &spec_n.tiles), ("cpu", &spec_n.cpu)] {
-                    let v = v
-                        .as_ref()
-                        .ok_or_else(|| err(file, format!("node.{n}.{key}"), format!("an activation node needs `{key}`")))?;
+                for (key, v) in [
+                    ("version", &spec_n.version),
+                    ("tiles", &spec_n.tiles),
+                    ("cpu", &spec_n.cpu),
+                ] {
+                    let v = v.as_ref().ok_or_else(|| {
+                        err(
+                            file,
+                            format!("node.{n}.{key}"),
+                            format!("an activation node needs `{key}`"),
+                        )
+                    })?;
                     known(v, format!("node.{n}.{key}"))?;
                     push(&mut parents, v);
                 }
@@ -409,7 +485,11 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
                 if let Some(prev) = &spec_n.previous {
                     known(prev, format!("node.{n}.previous"))?;
                     if states[prev] != states[n] {
-                        return Err(err(file, format!("node.{n}.previous"), "`previous` must have the same states"));
+                        return Err(err(
+                            file,
+                            format!("node.{n}.previous"),
+                            "`previous` must have the same states",
+                        ));
                     }
                     push(&mut parents, prev);
                 }
@@ -418,7 +498,11 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
         }
         if let Some(extra) = &spec_n.parents {
             if matches!(r, "context" | "resource" | "solution" | "import") {
-                return Err(err(file, format!("node.{n}.parents"), format!("a {r} node is a root")));
+                return Err(err(
+                    file,
+                    format!("node.{n}.parents"),
+                    format!("a {r} node is a root"),
+                ));
             }
             for p in extra {
                 push(&mut parents, p);
@@ -458,11 +542,20 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
                     }
                     for p in spec_n.drain.keys() {
                         if !parents[1..].contains(p) {
-                            return Err(err(file, format!("node.{n}.drain.{p}"), format!("`{p}` is not a parent")));
+                            return Err(err(
+                                file,
+                                format!("node.{n}.drain.{p}"),
+                                format!("`{p}` is not a parent"),
+                            ));
                         }
                     }
                     Box::new(move |a| {
-                        let s = stay * a[1..].iter().zip(&drains).map(|(&x, d)| d[x]).product::<f64>();
+                        let s = stay
+                            * a[1..]
+                                .iter()
+                                .zip(&drains)
+                                .map(|(&x, d)| d[x])
+                                .product::<f64>();
                         let mut row = vec![0.0; k];
                         if a[0] + 1 >= k {
                             row[k - 1] = 1.0;
@@ -474,10 +567,13 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
                     })
                 }
                 "state" if parents.is_empty() => {
-                    let prior = spec_n
-                        .prior
-                        .clone()
-                        .ok_or_else(|| err(file, entry("prior"), "a root state node needs `prior` (or `cpt`)"))?;
+                    let prior = spec_n.prior.clone().ok_or_else(|| {
+                        err(
+                            file,
+                            entry("prior"),
+                            "a root state node needs `prior` (or `cpt`)",
+                        )
+                    })?;
                     Box::new(move |_| Ok(prior.clone()))
                 }
                 "context" | "resource" | "solution" | "import" => {
@@ -490,7 +586,9 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
                             if r == "import" || k == 1 {
                                 vec![1.0 / k as f64; k]
                             } else {
-                                std::iter::once(0.9).chain(std::iter::repeat_n(0.1 / (k - 1) as f64, k - 1)).collect()
+                                std::iter::once(0.9)
+                                    .chain(std::iter::repeat_n(0.1 / (k - 1) as f64, k - 1))
+                                    .collect()
                             }
                         }
                     };
@@ -509,7 +607,9 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
                                 ));
                             }
                             Some(s) => s.clone(),
-                            None => std::iter::once(0.0).chain(std::iter::repeat_n(0.8, ps.len() - 1)).collect(),
+                            None => std::iter::once(0.0)
+                                .chain(std::iter::repeat_n(0.8, ps.len() - 1))
+                                .collect(),
                         };
                         for &v in &s {
                             check_prob(file, &format!("node.{n}.strength.{p}"), v)?;
@@ -518,33 +618,64 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
                     }
                     for p in spec_n.strength.keys() {
                         if !parents.contains(p) {
-                            return Err(err(file, format!("node.{n}.strength.{p}"), format!("`{p}` is not a parent")));
+                            return Err(err(
+                                file,
+                                format!("node.{n}.strength.{p}"),
+                                format!("`{p}` is not a parent"),
+                            ));
                         }
                     }
                     Box::new(move |a| {
-                        let off: f64 = (1.0 - leak) * a.iter().zip(&strengths).map(|(&s, st)| 1.0 - st[s]).product::<f64>();
+                        let off: f64 = (1.0 - leak)
+                            * a.iter()
+                                .zip(&strengths)
+                                .map(|(&s, st)| 1.0 - st[s])
+                                .product::<f64>();
                         Ok(vec![off, 1.0 - off])
                     })
                 }
                 "monitor" => {
-                    let sens = check_prob(file, &entry("sensitivity"), spec_n.sensitivity.unwrap_or(0.95))?;
-                    let fa = check_prob(file, &entry("false_alarm"), spec_n.false_alarm.unwrap_or(0.05))?;
-                    let fy = check_prob(file, &entry("faulty_alarm"), spec_n.faulty_alarm.unwrap_or(0.5))?;
-                    let hpos = spec_n.health.as_ref().and_then(|h| parents.iter().position(|p| p == h));
+                    let sens = check_prob(
+                        file,
+                        &entry("sensitivity"),
+                        spec_n.sensitivity.unwrap_or(0.95),
+                    )?;
+                    let fa = check_prob(
+                        file,
+                        &entry("false_alarm"),
+                        spec_n.false_alarm.unwrap_or(0.05),
+                    )?;
+                    let fy = check_prob(
+                        file,
+                        &entry("faulty_alarm"),
+                        spec_n.faulty_alarm.unwrap_or(0.5),
+                    )?;
+                    let hpos = spec_n
+                        .health
+                        .as_ref()
+                        .and_then(|h| parents.iter().position(|p| p == h));
                     Box::new(move |a| {
                         if let Some(h) = hpos
                             && a[h] != 0
                         {
                             return Ok(vec![1.0 - fy, fy]);
                         }
-                        let present = a.iter().enumerate().filter(|(i, s)| Some(*i) != hpos && **s != 0).count();
+                        let present = a
+                            .iter()
+                            .enumerate()
+                            .filter(|(i, s)| Some(*i) != hpos && **s != 0)
+                            .count();
                         let ok = (1.0 - fa) * (1.0 - sens).powi(present as i32);
                         Ok(vec![ok, 1.0 - ok])
                     })
                 }
                 "qos" => {
                     let table = spec_n.by_uncorrected.clone().unwrap_or_else(|| {
-                        vec![vec![0.90, 0.08, 0.02], vec![0.10, 0.50, 0.40], vec![0.02, 0.18, 0.80]]
+                        vec![
+                            vec![0.90, 0.08, 0.02],
+                            vec![0.10, 0.50, 0.40],
+                            vec![0.02, 0.18, 0.80],
+                        ]
                     });
                     for (i, row) in table.iter().enumerate() {
                         if row.len() != k {
@@ -565,22 +696,37 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
                         .map(|e| {
                             let sols = solutions_of.get(e.as_str()).cloned().unwrap_or_default();
                             let ep = parents.iter().position(|p| p == e).unwrap_or(0);
-                            (ep, sols.iter().filter_map(|s| parents.iter().position(|p| p == s)).collect())
+                            (
+                                ep,
+                                sols.iter()
+                                    .filter_map(|s| parents.iter().position(|p| p == s))
+                                    .collect(),
+                            )
                         })
                         .collect();
                     Box::new(move |a| {
-                        let k = fixes.iter().filter(|(e, sols)| a[*e] != 0 && sols.iter().all(|&s| a[s] == 0)).count();
+                        let k = fixes
+                            .iter()
+                            .filter(|(e, sols)| a[*e] != 0 && sols.iter().all(|&s| a[s] == 0))
+                            .count();
                         Ok(table[k.min(table.len() - 1)].clone())
                     })
                 }
                 "version" => {
-                    let sols = spec_n
-                        .solutions
-                        .clone()
-                        .ok_or_else(|| err(file, entry("solutions"), "a version node must list `solutions` (may be empty)"))?;
+                    let sols = spec_n.solutions.clone().ok_or_else(|| {
+                        err(
+                            file,
+                            entry("solutions"),
+                            "a version node must list `solutions` (may be empty)",
+                        )
+                    })?;
                     for s in &sols {
                         if role.get(s).map(String::as_str) != Some("solution") {
-                            return Err(err(file, entry("solutions"), format!("`{s}` is not a solution node")));
+                            return Err(err(
+                                file,
+                                entry("solutions"),
+                                format!("`{s}` is not a solution node"),
+                            ));
                         }
                     }
                     let p_ok = check_prob(file, &entry("p_ok"), spec_n.p_ok.unwrap_or(0.95))?;
@@ -589,12 +735,24 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
                     // For each error parent: is it fixed by one of this version's solutions?
                     let fixed: Vec<bool> = parents
                         .iter()
-                        .map(|e| solutions_of.get(e.as_str()).is_some_and(|s| s.iter().any(|x| sols.contains(x))))
+                        .map(|e| {
+                            solutions_of
+                                .get(e.as_str())
+                                .is_some_and(|s| s.iter().any(|x| sols.contains(x)))
+                        })
                         .collect();
                     let n_fixable = fixed.iter().filter(|&&f| f).count();
                     Box::new(move |a| {
-                        let uncorrected = a.iter().zip(&fixed).filter(|(s, f)| **s != 0 && !**f).count();
-                        let used = a.iter().zip(&fixed).filter(|(s, f)| **s != 0 && **f).count();
+                        let uncorrected = a
+                            .iter()
+                            .zip(&fixed)
+                            .filter(|(s, f)| **s != 0 && !**f)
+                            .count();
+                        let used = a
+                            .iter()
+                            .zip(&fixed)
+                            .filter(|(s, f)| **s != 0 && **f)
+                            .count();
                         // Solutions running for an error that is absent cost resources for nothing.
                         let unneeded = n_fixable - used;
                         let p = p_ok * miss.powi(uncorrected as i32) * extra.powi(unneeded as i32);
@@ -603,9 +761,14 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
                 }
                 "activation" => {
                     let p_fit = check_prob(file, &entry("p_fit"), spec_n.p_fit.unwrap_or(1.0))?;
-                    let p_nofit = check_prob(file, &entry("p_nofit"), spec_n.p_nofit.unwrap_or(0.05))?;
+                    let p_nofit =
+                        check_prob(file, &entry("p_nofit"), spec_n.p_nofit.unwrap_or(0.05))?;
                     if spec_n.implementations.is_empty() {
-                        return Err(err(file, entry("implementations"), "an activation node needs implementations"));
+                        return Err(err(
+                            file,
+                            entry("implementations"),
+                            "an activation node needs implementations",
+                        ));
                     }
                     let version_on = 1usize; // `activate` is the second state of a version node.
                     let tiles_node = spec_n.tiles.clone().unwrap_or_default();
@@ -614,10 +777,20 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
                         .iter()
                         .map(|s| s.parse::<u32>())
                         .collect::<Result<_, _>>()
-                        .map_err(|_| err(file, entry("tiles"), format!("states of `{tiles_node}` must be tile counts")))?;
+                        .map_err(|_| {
+                            err(
+                                file,
+                                entry("tiles"),
+                                format!("states of `{tiles_node}` must be tile counts"),
+                            )
+                        })?;
                     let mut impls = Vec::new();
                     for (i, im) in spec_n.implementations.iter().enumerate() {
-                        let c = state_idx(&cpu_node, &im.cpu, format!("node.{n}.implementations[{i}].cpu"))?;
+                        let c = state_idx(
+                            &cpu_node,
+                            &im.cpu,
+                            format!("node.{n}.implementations[{i}].cpu"),
+                        )?;
                         impls.push((im.tiles, c, im.fast));
                     }
                     let has_perf = spec_n.performance.is_some();
@@ -627,13 +800,19 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
                         }
                         let (free, cpu) = (tile_counts[a[1]], a[2]);
                         let need_fast = has_perf && a[3] != 0;
-                        let fits = impls.iter().any(|&(t, c, fast)| free >= t && cpu <= c && (fast || !need_fast));
+                        let fits = impls
+                            .iter()
+                            .any(|&(t, c, fast)| free >= t && cpu <= c && (fast || !need_fast));
                         let p = if fits { p_fit } else { p_nofit };
                         Ok(vec![1.0 - p, p])
                     })
                 }
                 _ => {
-                    return Err(err(file, entry("cpt"), format!("a {r} node needs an explicit `cpt`")));
+                    return Err(err(
+                        file,
+                        entry("cpt"),
+                        format!("a {r} node needs an explicit `cpt`"),
+                    ));
                 }
             };
             let mut cpt = Vec::with_capacity(rows * k);
@@ -654,14 +833,21 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
         for (oi, o) in spec_n.overrides.iter().enumerate() {
             let oe = format!("node.{n}.override[{oi}]");
             if o.p.len() != k {
-                return Err(err(file, format!("{oe}.p"), format!("{} values for {k} states", o.p.len())));
+                return Err(err(
+                    file,
+                    format!("{oe}.p"),
+                    format!("{} values for {k} states", o.p.len()),
+                ));
             }
             let mut fixed = Vec::new();
             for (p, s) in &o.when {
-                let pos = parents
-                    .iter()
-                    .position(|x| x == p)
-                    .ok_or_else(|| err(file, format!("{oe}.when.{p}"), format!("`{p}` is not a parent of `{n}`")))?;
+                let pos = parents.iter().position(|x| x == p).ok_or_else(|| {
+                    err(
+                        file,
+                        format!("{oe}.when.{p}"),
+                        format!("`{p}` is not a parent of `{n}`"),
+                    )
+                })?;
                 fixed.push((pos, state_idx(p, s, format!("{oe}.when.{p}"))?));
             }
             if cpt.len() != rows * k {
@@ -682,10 +868,13 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
             }
         }
         if r == "import" {
-            let from = spec_n
-                .from
-                .as_ref()
-                .ok_or_else(|| err(file, entry("from"), "an import node needs `from = \"MANAGER.NODE\"`"))?;
+            let from = spec_n.from.as_ref().ok_or_else(|| {
+                err(
+                    file,
+                    entry("from"),
+                    "an import node needs `from = \"MANAGER.NODE\"`",
+                )
+            })?;
             let (m, src) = from
                 .split_once('.')
                 .ok_or_else(|| err(file, entry("from"), format!("`{from}` is not MANAGER.NODE")))?;
@@ -705,24 +894,46 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
     let mut publish = Vec::new();
     for (name, expr) in &spec.publish {
         let entry = format!("publish.{name}");
-        let (node, state, complement) = parse_publish(expr)
-            .ok_or_else(|| err(file, &entry, format!("`{expr}` is not `P(NODE = STATE)` or `1 - P(NODE = STATE)`")))?;
+        let (node, state, complement) = parse_publish(expr).ok_or_else(|| {
+            err(
+                file,
+                &entry,
+                format!("`{expr}` is not `P(NODE = STATE)` or `1 - P(NODE = STATE)`"),
+            )
+        })?;
         if !states.contains_key(&node) {
-            return Err(err(file, &entry, format!("publishes from missing node `{node}`")));
+            return Err(err(
+                file,
+                &entry,
+                format!("publishes from missing node `{node}`"),
+            ));
         }
         state_idx(&node, &state, entry)?;
-        publish.push(Publish { name: name.clone(), node, state, complement });
+        publish.push(Publish {
+            name: name.clone(),
+            node,
+            state,
+            complement,
+        });
     }
     for (i, c) in spec.carry.iter().enumerate() {
         let e = format!("carry[{i}]");
         let (Some(f), Some(t)) = (network.id(&c.from), network.id(&c.to)) else {
-            return Err(err(file, e, format!("unknown node in `{}` -> `{}`", c.from, c.to)));
+            return Err(err(
+                file,
+                e,
+                format!("unknown node in `{}` -> `{}`", c.from, c.to),
+            ));
         };
         if network.node(f).states != network.node(t).states {
             return Err(err(file, e, "`from` and `to` must have the same states"));
         }
         if !network.node(t).parents.is_empty() {
-            return Err(err(file, e, format!("`{}` must be a root to receive a carried belief", c.to)));
+            return Err(err(
+                file,
+                e,
+                format!("`{}` must be a root to receive a carried belief", c.to),
+            ));
         }
     }
     Ok(CompiledHm {
@@ -740,11 +951,16 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
 fn bn_to_spec(file: &Path, e: BnError) -> SpecError {
     let (entry, reason) = match &e {
         BnError::CptRow { node, row, .. } => (format!("node.{node}.cpt[{row}]"), e.to_string()),
-        BnError::CptSize { node, .. } | BnError::Probability { node, .. } => (format!("node.{node}.cpt"), e.to_string()),
+        BnError::CptSize { node, .. } | BnError::Probability { node, .. } => {
+            (format!("node.{node}.cpt"), e.to_string())
+        }
         BnError::UnknownParent { node, .. } | BnError::DuplicateParent { node, .. } => {
             (format!("node.{node}.parents"), e.to_string())
         }
-        BnError::Cycle(nodes) => (format!("node.{}", nodes.first().cloned().unwrap_or_default()), e.to_string()),
+        BnError::Cycle(nodes) => (
+            format!("node.{}", nodes.first().cloned().unwrap_or_default()),
+            e.to_string(),
+        ),
         BnError::DuplicateState { node, .. } => (format!("node.{node}.states"), e.to_string()),
         _ => ("-".to_string(), e.to_string()),
     };

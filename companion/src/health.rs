@@ -22,7 +22,11 @@ pub enum HealthError {
     #[error("no health manager has a node `{0}`")]
     UnknownNode(String),
     #[error("node `{node}` has no state `{state}` (states: {states})")]
-    UnknownState { node: String, state: String, states: String },
+    UnknownState {
+        node: String,
+        state: String,
+        states: String,
+    },
     #[error("observation `{name}`: `{value}` is not a number")]
     BadValue { name: String, value: String },
     #[error("health manager `{manager}`: {error}")]
@@ -48,7 +52,10 @@ pub struct Manager {
 impl Manager {
     /// Posterior marginal of a node from the last evaluation.
     pub fn marginal(&self, node: &str) -> Option<&[f64]> {
-        self.engine.network().id(node).map(|id| self.engine.marginal(id))
+        self.engine
+            .network()
+            .id(node)
+            .map(|id| self.engine.marginal(id))
     }
     pub fn engine(&self) -> &Engine {
         &self.engine
@@ -72,15 +79,25 @@ impl HealthModel {
             .filter(|p| p.extension().is_some_and(|x| x == "toml"))
             .collect();
         files.sort();
-        let hms = files.iter().map(|f| load_hm(f)).collect::<Result<Vec<_>, _>>()?;
+        let hms = files
+            .iter()
+            .map(|f| load_hm(f))
+            .collect::<Result<Vec<_>, _>>()?;
         let obs = ObservationMap::load(&params_dir.join("observations.toml"))?;
         Self::from_parts(hms, obs)
     }
 
     /// Wire compiled managers together: resolve imports, order by them, check that publish
     /// names are unique and that every observation targets an existing node and state.
-    pub fn from_parts(hms: Vec<CompiledHm>, observations: ObservationMap) -> Result<HealthModel, SpecError> {
-        let index: BTreeMap<&str, usize> = hms.iter().enumerate().map(|(i, h)| (h.name.as_str(), i)).collect();
+    pub fn from_parts(
+        hms: Vec<CompiledHm>,
+        observations: ObservationMap,
+    ) -> Result<HealthModel, SpecError> {
+        let index: BTreeMap<&str, usize> = hms
+            .iter()
+            .enumerate()
+            .map(|(i, h)| (h.name.as_str(), i))
+            .collect();
         if index.len() != hms.len() {
             let mut seen = BTreeMap::new();
             for h in &hms {
@@ -98,19 +115,25 @@ impl HealthModel {
         for (i, h) in hms.iter().enumerate() {
             for (local, m, src) in &h.imports {
                 let entry = format!("node.{local}.from");
-                let &j = index
-                    .get(m.as_str())
-                    .ok_or_else(|| SpecError::new(&h.file, &entry, format!("no health manager `{m}`")))?;
-                let sid = hms[j]
-                    .network
-                    .id(src)
-                    .ok_or_else(|| SpecError::new(&h.file, &entry, format!("manager `{m}` has no node `{src}`")))?;
+                let &j = index.get(m.as_str()).ok_or_else(|| {
+                    SpecError::new(&h.file, &entry, format!("no health manager `{m}`"))
+                })?;
+                let sid = hms[j].network.id(src).ok_or_else(|| {
+                    SpecError::new(
+                        &h.file,
+                        &entry,
+                        format!("manager `{m}` has no node `{src}`"),
+                    )
+                })?;
                 let lid = h.network.id(local).expect("compiled node");
                 if hms[j].network.node(sid).states != h.network.node(lid).states {
                     return Err(SpecError::new(
                         &h.file,
                         entry,
-                        format!("states differ from `{m}.{src}` ({:?})", hms[j].network.node(sid).states),
+                        format!(
+                            "states differ from `{m}.{src}` ({:?})",
+                            hms[j].network.node(sid).states
+                        ),
                     ));
                 }
                 deps[i].push(j);
@@ -118,7 +141,12 @@ impl HealthModel {
         }
         let mut order = Vec::new();
         let mut mark = vec![0u8; hms.len()];
-        fn visit(i: usize, deps: &[Vec<usize>], mark: &mut [u8], order: &mut Vec<usize>) -> Result<(), usize> {
+        fn visit(
+            i: usize,
+            deps: &[Vec<usize>],
+            mark: &mut [u8],
+            order: &mut Vec<usize>,
+        ) -> Result<(), usize> {
             match mark[i] {
                 2 => return Ok(()),
                 1 => return Err(i),
@@ -133,8 +161,13 @@ impl HealthModel {
             Ok(())
         }
         for i in 0..hms.len() {
-            visit(i, &deps, &mut mark, &mut order)
-                .map_err(|j| SpecError::new(&hms[j].file, "node", "imports between health managers form a cycle"))?;
+            visit(i, &deps, &mut mark, &mut order).map_err(|j| {
+                SpecError::new(
+                    &hms[j].file,
+                    "node",
+                    "imports between health managers form a cycle",
+                )
+            })?;
         }
         let mut publishers: BTreeMap<&str, &str> = BTreeMap::new();
         for h in &hms {
@@ -158,7 +191,11 @@ impl HealthModel {
                             return Err(SpecError::new(
                                 &observations.file,
                                 format!("observation[{i}]({}).states", o.name),
-                                format!("node `{}` in {} has no state `{s}`", o.node, h.file.display()),
+                                format!(
+                                    "node `{}` in {} has no state `{s}`",
+                                    o.node,
+                                    h.file.display()
+                                ),
                             ));
                         }
                     }
@@ -184,12 +221,22 @@ impl HealthModel {
                 .iter()
                 .map(|(local, m, src)| {
                     let j = index[m.as_str()];
-                    (net.id(local).unwrap(), pos[&j], hms[j].network.id(src).unwrap())
+                    (
+                        net.id(local).unwrap(),
+                        pos[&j],
+                        hms[j].network.id(src).unwrap(),
+                    )
                 })
                 .collect();
-            let carry: Vec<(NodeId, NodeId)> =
-                h.carry.iter().map(|c| (net.id(&c.from).unwrap(), net.id(&c.to).unwrap())).collect();
-            let initial = carry.iter().map(|&(_, t)| (t, net.node(t).cpt.clone())).collect();
+            let carry: Vec<(NodeId, NodeId)> = h
+                .carry
+                .iter()
+                .map(|c| (net.id(&c.from).unwrap(), net.id(&c.to).unwrap()))
+                .collect();
+            let initial = carry
+                .iter()
+                .map(|&(_, t)| (t, net.node(t).cpt.clone()))
+                .collect();
             let published = h
                 .publish
                 .iter()
@@ -214,13 +261,19 @@ impl HealthModel {
                 published,
             });
         }
-        Ok(HealthModel { managers, observations })
+        Ok(HealthModel {
+            managers,
+            observations,
+        })
     }
 
     /// Every named probability, in name order.
     pub fn publishes(&self) -> Vec<String> {
-        let mut v: Vec<String> =
-            self.managers.iter().flat_map(|m| m.publish.iter().map(|p| p.name.clone())).collect();
+        let mut v: Vec<String> = self
+            .managers
+            .iter()
+            .flat_map(|m| m.publish.iter().map(|p| p.name.clone()))
+            .collect();
         v.sort();
         v
     }
@@ -236,7 +289,10 @@ impl HealthModel {
 
     /// Evaluate every manager under `evidence` (applied to each manager holding the node) and
     /// return all published probabilities; then advance the dynamic managers by one slice.
-    pub fn evaluate(&mut self, evidence: &BTreeMap<String, String>) -> Result<BTreeMap<String, f64>, HealthError> {
+    pub fn evaluate(
+        &mut self,
+        evidence: &BTreeMap<String, String>,
+    ) -> Result<BTreeMap<String, f64>, HealthError> {
         let mut out = BTreeMap::new();
         self.evaluate_into(evidence, &mut out)?;
         Ok(out)
@@ -256,11 +312,13 @@ impl HealthModel {
                 let net = m.engine.network();
                 if let Some(id) = net.id(node) {
                     found = true;
-                    let s = net.state(id, state).map_err(|_| HealthError::UnknownState {
-                        node: node.clone(),
-                        state: state.clone(),
-                        states: net.node(id).states.join(", "),
-                    })?;
+                    let s = net
+                        .state(id, state)
+                        .map_err(|_| HealthError::UnknownState {
+                            node: node.clone(),
+                            state: state.clone(),
+                            states: net.node(id).states.join(", "),
+                        })?;
                     ev.set_state(id, s);
                 }
             }
@@ -281,14 +339,23 @@ impl HealthModel {
                         let p: Vec<f64> = prior.iter().map(|x| x / s).collect();
                         m.engine.set_cpt(local, &p)
                     })
-                    .map_err(|error| HealthError::Inference { manager: m.name.clone(), error })?;
+                    .map_err(|error| HealthError::Inference {
+                        manager: m.name.clone(),
+                        error,
+                    })?;
             }
             m.engine
                 .propagate(&per[i])
-                .map_err(|error| HealthError::Inference { manager: m.name.clone(), error })?;
+                .map_err(|error| HealthError::Inference {
+                    manager: m.name.clone(),
+                    error,
+                })?;
             for &(k, id, s, complement) in &m.published {
                 let p = m.engine.marginal(id)[s];
-                out.insert(m.publish[k].name.clone(), if complement { 1.0 - p } else { p });
+                out.insert(
+                    m.publish[k].name.clone(),
+                    if complement { 1.0 - p } else { p },
+                );
             }
         }
         for m in &mut self.managers {
@@ -298,7 +365,10 @@ impl HealthModel {
                 let b: Vec<f64> = b.iter().map(|x| x / s).collect();
                 m.engine
                     .set_cpt(to, &b)
-                    .map_err(|error| HealthError::Inference { manager: m.name.clone(), error })?;
+                    .map_err(|error| HealthError::Inference {
+                        manager: m.name.clone(),
+                        error,
+                    })?;
             }
         }
         Ok(())
@@ -310,24 +380,37 @@ impl HealthModel {
         for m in &self.managers {
             for &(_, to) in &m.carry {
                 let net = m.engine.network();
-                out.insert((m.name.clone(), net.node(to).name.clone()), net.node(to).cpt.clone());
+                out.insert(
+                    (m.name.clone(), net.node(to).name.clone()),
+                    net.node(to).cpt.clone(),
+                );
             }
         }
         out
     }
 
     /// Restore carried beliefs (e.g. from a saved mission state).
-    pub fn set_belief(&mut self, belief: &BTreeMap<(String, String), Vec<f64>>) -> Result<(), HealthError> {
+    pub fn set_belief(
+        &mut self,
+        belief: &BTreeMap<(String, String), Vec<f64>>,
+    ) -> Result<(), HealthError> {
         for ((mn, node), b) in belief {
             let m = self
                 .managers
                 .iter_mut()
                 .find(|m| &m.name == mn)
                 .ok_or_else(|| HealthError::UnknownNode(format!("{mn}.{node}")))?;
-            let id = m.engine.network().id(node).ok_or_else(|| HealthError::UnknownNode(node.clone()))?;
+            let id = m
+                .engine
+                .network()
+                .id(node)
+                .ok_or_else(|| HealthError::UnknownNode(node.clone()))?;
             m.engine
                 .set_cpt(id, b)
-                .map_err(|error| HealthError::Inference { manager: mn.clone(), error })?;
+                .map_err(|error| HealthError::Inference {
+                    manager: mn.clone(),
+                    error,
+                })?;
         }
         Ok(())
     }
@@ -344,17 +427,25 @@ impl HealthModel {
     /// Resolve user-typed evidence (`--evidence wind=strong,qos=high,wind_mps=12`): a key is a
     /// node name, a node name without its role prefix (`A_`, `S_`, `U_`, `C_`, `H_S_`), any of
     /// them case-insensitively, or an observation name with a numeric value.
-    pub fn resolve_evidence(&self, pairs: &[(String, String)]) -> Result<BTreeMap<String, String>, HealthError> {
+    pub fn resolve_evidence(
+        &self,
+        pairs: &[(String, String)],
+    ) -> Result<BTreeMap<String, String>, HealthError> {
         let mut out = BTreeMap::new();
         for (k, v) in pairs {
             if let Some(o) = self.observations.get(k) {
-                let x: f64 = v.parse().map_err(|_| HealthError::BadValue { name: k.clone(), value: v.clone() })?;
+                let x: f64 = v.parse().map_err(|_| HealthError::BadValue {
+                    name: k.clone(),
+                    value: v.clone(),
+                })?;
                 if let Some(s) = o.state(x) {
                     out.insert(o.node.clone(), s.to_string());
                 }
                 continue;
             }
-            let node = self.find_node(k).ok_or_else(|| HealthError::UnknownNode(k.clone()))?;
+            let node = self
+                .find_node(k)
+                .ok_or_else(|| HealthError::UnknownNode(k.clone()))?;
             let states = &node.states;
             let s = states
                 .iter()

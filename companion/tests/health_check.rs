@@ -3,8 +3,16 @@
 use std::process::Command;
 
 fn check(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_companion")).arg("check").args(args).output().unwrap();
-    (out.status.success(), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+    let out = Command::new(env!("CARGO_BIN_EXE_companion"))
+        .arg("check")
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
 }
 
 #[test]
@@ -31,11 +39,28 @@ fn json_lists_managers_nodes_and_publishes() {
 
 #[test]
 fn evidence_shows_figure_4() {
-    let (ok, out, err) = check(&["--json", "--evidence", "wind=strong,target_speed=high,qos=high"]);
+    let (ok, out, err) = check(&[
+        "--json",
+        "--evidence",
+        "wind=strong,target_speed=high,qos=high",
+    ]);
     assert!(ok, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
-    let apps = v["health"].as_array().unwrap().iter().find(|h| h["name"] == "applications").unwrap();
-    let node = |n: &str| apps["nodes"].as_array().unwrap().iter().find(|x| x["name"] == n).unwrap().clone();
+    let apps = v["health"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|h| h["name"] == "applications")
+        .unwrap();
+    let node = |n: &str| {
+        apps["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|x| x["name"] == n)
+            .unwrap()
+            .clone()
+    };
     let stab = node("C_stabilization")["posterior"][1].as_f64().unwrap();
     let roi = node("C_roi_resize")["posterior"][1].as_f64().unwrap();
     assert_eq!((stab * 100.0).round() / 100.0, 0.60);
@@ -44,7 +69,10 @@ fn evidence_shows_figure_4() {
     // Human output names the evidence.
     let (ok, out, _) = check(&["--evidence", "luminosity=low"]);
     assert!(ok);
-    assert!(out.contains("A_luminosity") && out.contains("<- evidence low"), "{out}");
+    assert!(
+        out.contains("A_luminosity") && out.contains("<- evidence low"),
+        "{out}"
+    );
     assert!(out.contains("publishes P_V3"), "{out}");
 }
 

@@ -6,7 +6,10 @@ use companion::spec::{SpecError, default_params_dir};
 use std::path::{Path, PathBuf};
 
 /// Copy params/health and params/observations.toml into a temp dir, apply `edit` to one file.
-fn load_edited(file: &str, edit: impl Fn(String) -> String) -> (tempfile::TempDir, Result<HealthModel, SpecError>) {
+fn load_edited(
+    file: &str,
+    edit: impl Fn(String) -> String,
+) -> (tempfile::TempDir, Result<HealthModel, SpecError>) {
     let src = default_params_dir();
     let dir = tempfile::tempdir().unwrap();
     std::fs::create_dir_all(dir.path().join("health")).unwrap();
@@ -14,7 +17,11 @@ fn load_edited(file: &str, edit: impl Fn(String) -> String) -> (tempfile::TempDi
         let p = f.unwrap().path();
         std::fs::copy(&p, dir.path().join("health").join(p.file_name().unwrap())).unwrap();
     }
-    std::fs::copy(src.join("observations.toml"), dir.path().join("observations.toml")).unwrap();
+    std::fs::copy(
+        src.join("observations.toml"),
+        dir.path().join("observations.toml"),
+    )
+    .unwrap();
     let target: PathBuf = dir.path().join(file);
     let text = std::fs::read_to_string(&target).unwrap();
     let edited = edit(text.clone());
@@ -41,14 +48,24 @@ fn shipped_params_load() {
 fn cpt_row_not_summing_to_one() {
     expect_err(
         "health/sensors.toml",
-        |t| t.replace("[0.1, 0.9], [0.5, 0.5], [0.6001", "[0.1, 0.8], [0.5, 0.5], [0.6001"),
+        |t| {
+            t.replace(
+                "[0.1, 0.9], [0.5, 0.5], [0.6001",
+                "[0.1, 0.8], [0.5, 0.5], [0.6001",
+            )
+        },
         "node.N_next.cpt[0]",
         "sums to 0.9",
     );
     // A root prior too.
     expect_err(
         "health/applications.toml",
-        |t| t.replace("prior = [0.8, 0.2]\n[node.A_vibration]", "prior = [0.8, 0.3]\n[node.A_vibration]"),
+        |t| {
+            t.replace(
+                "prior = [0.8, 0.2]\n[node.A_vibration]",
+                "prior = [0.8, 0.3]\n[node.A_vibration]",
+            )
+        },
         "node.A_wind.cpt[0]",
         "not 1",
     );
@@ -66,7 +83,13 @@ fn unknown_state_names() {
     // In an override's `when`.
     expect_err(
         "health/applications.toml",
-        |t| t.replacen("U_vibration = \"present\", U_point_lost", "U_vibration = \"shaking\", U_point_lost", 1),
+        |t| {
+            t.replacen(
+                "U_vibration = \"present\", U_point_lost",
+                "U_vibration = \"shaking\", U_point_lost",
+                1,
+            )
+        },
         "node.C_V1.override[0].when.U_vibration",
         "no state `shaking`",
     );
@@ -80,14 +103,25 @@ fn unknown_state_names() {
     // In the observation mapping.
     expect_err(
         "observations.toml",
-        |t| t.replace("states = [\"calm\", \"strong\"]", "states = [\"calm\", \"gale\"]"),
+        |t| {
+            t.replace(
+                "states = [\"calm\", \"strong\"]",
+                "states = [\"calm\", \"gale\"]",
+            )
+        },
         "observation[1](wind_mps).states",
         "no state `gale`",
     );
     // In an implementation's CPU state.
     expect_err(
         "health/resources.toml",
-        |t| t.replacen("{ name = \"S\", tiles = 0, cpu = \"low\" }", "{ name = \"S\", tiles = 0, cpu = \"idle\" }", 1),
+        |t| {
+            t.replacen(
+                "{ name = \"S\", tiles = 0, cpu = \"low\" }",
+                "{ name = \"S\", tiles = 0, cpu = \"idle\" }",
+                1,
+            )
+        },
         "node.R_V0.implementations[0].cpu",
         "no state `idle`",
     );
@@ -99,7 +133,10 @@ fn cycle() {
     expect_err(
         "health/sensors.toml",
         |t| {
-            t.replace("[node.U_gps_error]\nleak = 0.01", "[node.U_gps_error]\nparents = [\"N_next\"]\nleak = 0.01")
+            t.replace(
+                "[node.U_gps_error]\nleak = 0.01",
+                "[node.U_gps_error]\nparents = [\"N_next\"]\nleak = 0.01",
+            )
         },
         "node.U_gps_error",
         "cycle",
@@ -110,11 +147,21 @@ fn cycle() {
 fn published_probability_naming_a_missing_node() {
     expect_err(
         "health/system.toml",
-        |t| t.replace("P_sys = \"P(U_system_fault = absent)\"", "P_sys = \"P(U_system_failure = absent)\""),
+        |t| {
+            t.replace(
+                "P_sys = \"P(U_system_fault = absent)\"",
+                "P_sys = \"P(U_system_failure = absent)\"",
+            )
+        },
         "publish.P_sys",
         "missing node `U_system_failure`",
     );
-    expect_err("health/system.toml", |t| t.replace("P(U_crash = present)", "U_crash is present"), "publish.P_crash", "not `P(NODE = STATE)`");
+    expect_err(
+        "health/system.toml",
+        |t| t.replace("P(U_crash = present)", "U_crash is present"),
+        "publish.P_crash",
+        "not `P(NODE = STATE)`",
+    );
 }
 
 #[test]
@@ -127,7 +174,12 @@ fn thresholds_out_of_order() {
     );
     expect_err(
         "observations.toml",
-        |t| t.replace("thresholds = [0.5, 1.5, 2.5, 3.5]", "thresholds = [0.5, 1.5, 1.5, 3.5]"),
+        |t| {
+            t.replace(
+                "thresholds = [0.5, 1.5, 2.5, 3.5]",
+                "thresholds = [0.5, 1.5, 1.5, 3.5]",
+            )
+        },
         "observation[9](free_tiles).thresholds",
         "out of order",
     );
@@ -151,13 +203,24 @@ fn other_structural_errors() {
     // Import from a missing manager / node, and with the wrong states.
     expect_err(
         "health/system.toml",
-        |t| t.replace("from = \"sensors.U_gps_error\"", "from = \"sensor.U_gps_error\""),
+        |t| {
+            t.replace(
+                "from = \"sensors.U_gps_error\"",
+                "from = \"sensor.U_gps_error\"",
+            )
+        },
         "node.U_gps_error.from",
         "no health manager `sensor`",
     );
     expect_err(
         "health/resources.toml",
-        |t| t.replacen("from = \"applications.C_V0\"\nstates = [\"deactivate\", \"activate\"]", "from = \"applications.C_V0\"\nstates = [\"off\", \"on\"]", 1),
+        |t| {
+            t.replacen(
+                "from = \"applications.C_V0\"\nstates = [\"deactivate\", \"activate\"]",
+                "from = \"applications.C_V0\"\nstates = [\"off\", \"on\"]",
+                1,
+            )
+        },
         "node.C_V0.from",
         "states differ",
     );
@@ -171,7 +234,12 @@ fn other_structural_errors() {
     // Unknown keys are typos, not silently ignored.
     let text = std::fs::read_to_string(default_params_dir().join("health/system.toml")).unwrap();
     let line = text.lines().position(|l| l.starts_with("stay = ")).unwrap() + 1;
-    expect_err("health/system.toml", |t| t.replace("stay = 0.8476", "stai = 0.8476"), &format!("line {line}"), "unknown field");
+    expect_err(
+        "health/system.toml",
+        |t| t.replace("stay = 0.8476", "stai = 0.8476"),
+        &format!("line {line}"),
+        "unknown field",
+    );
     // The same probability published twice.
     expect_err(
         "health/system.toml",

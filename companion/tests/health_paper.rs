@@ -11,13 +11,24 @@ fn model() -> HealthModel {
 }
 
 fn ev(pairs: &[(&str, &str)]) -> BTreeMap<String, String> {
-    pairs.iter().map(|(a, b)| (a.to_string(), b.to_string())).collect()
+    pairs
+        .iter()
+        .map(|(a, b)| (a.to_string(), b.to_string()))
+        .collect()
 }
 
 fn post(m: &mut HealthModel, pairs: &[(&str, &str)], hm: &str, node: &str, state: &str) -> f64 {
     m.evaluate(&ev(pairs)).unwrap();
     let mgr = m.manager(hm).unwrap();
-    let i = mgr.nodes.iter().find(|n| n.name == node).unwrap().states.iter().position(|s| s == state).unwrap();
+    let i = mgr
+        .nodes
+        .iter()
+        .find(|n| n.name == node)
+        .unwrap()
+        .states
+        .iter()
+        .position(|s| s == state)
+        .unwrap();
     mgr.marginal(node).unwrap()[i]
 }
 
@@ -29,7 +40,13 @@ fn round2(x: f64) -> f64 {
 fn figure_3_low_luminosity_gives_tracking_qos_good_10_percent() {
     // BFM paper section 4.1: "luminosity = low ... the probability of the QoS tracking is good at 10%".
     let mut m = model();
-    let p = post(&mut m, &[("A_luminosity", "low")], "applications", "QoS", "high");
+    let p = post(
+        &mut m,
+        &[("A_luminosity", "low")],
+        "applications",
+        "QoS",
+        "high",
+    );
     assert_eq!(round2(p), 0.10, "{p}");
     // And without that evidence the QoS is better: the evidence is what drives it down.
     let p0 = post(&mut m, &[], "applications", "QoS", "high");
@@ -40,7 +57,11 @@ fn figure_3_low_luminosity_gives_tracking_qos_good_10_percent() {
 fn figure_4_wind_and_target_speed_with_qos_high() {
     // BFM paper section 4.2: "60% to activate the stabilization and 72% ... increasing the R.O.I. size".
     let mut m = model();
-    let e = [("A_wind", "strong"), ("A_target_speed", "high"), ("QoS", "high")];
+    let e = [
+        ("A_wind", "strong"),
+        ("A_target_speed", "high"),
+        ("QoS", "high"),
+    ];
     let stab = post(&mut m, &e, "applications", "C_stabilization", "activate");
     let roi = post(&mut m, &e, "applications", "C_roi_resize", "activate");
     assert_eq!(round2(stab), 0.60, "{stab}");
@@ -53,21 +74,47 @@ fn figure_4_wind_and_target_speed_with_qos_high() {
 fn figure_4_through_user_typed_evidence() {
     // The CLI spelling: wind=strong,target_speed=high,qos=high.
     let mut m = model();
-    let pairs: Vec<(String, String)> = [("wind", "strong"), ("target_speed", "HIGH"), ("qos", "high")]
-        .iter()
-        .map(|(a, b)| (a.to_string(), b.to_string()))
-        .collect();
+    let pairs: Vec<(String, String)> = [
+        ("wind", "strong"),
+        ("target_speed", "HIGH"),
+        ("qos", "high"),
+    ]
+    .iter()
+    .map(|(a, b)| (a.to_string(), b.to_string()))
+    .collect();
     let e = m.resolve_evidence(&pairs).unwrap();
-    assert_eq!(e, ev(&[("A_wind", "strong"), ("A_target_speed", "high"), ("QoS", "high")]));
+    assert_eq!(
+        e,
+        ev(&[
+            ("A_wind", "strong"),
+            ("A_target_speed", "high"),
+            ("QoS", "high")
+        ])
+    );
     m.evaluate(&e).unwrap();
-    let stab = m.manager("applications").unwrap().marginal("C_stabilization").unwrap()[1];
+    let stab = m
+        .manager("applications")
+        .unwrap()
+        .marginal("C_stabilization")
+        .unwrap()[1];
     assert_eq!(round2(stab), 0.60);
     // Observation names with raw values resolve through params/observations.toml.
-    let e = m.resolve_evidence(&[("wind_mps".into(), "12.5".into())]).unwrap();
+    let e = m
+        .resolve_evidence(&[("wind_mps".into(), "12.5".into())])
+        .unwrap();
     assert_eq!(e, ev(&[("A_wind", "strong")]));
-    assert!(m.resolve_evidence(&[("windd".into(), "strong".into())]).is_err());
-    assert!(m.resolve_evidence(&[("wind".into(), "gale".into())]).is_err());
-    assert!(m.resolve_evidence(&[("wind_mps".into(), "fast".into())]).is_err());
+    assert!(
+        m.resolve_evidence(&[("windd".into(), "strong".into())])
+            .is_err()
+    );
+    assert!(
+        m.resolve_evidence(&[("wind".into(), "gale".into())])
+            .is_err()
+    );
+    assert!(
+        m.resolve_evidence(&[("wind_mps".into(), "fast".into())])
+            .is_err()
+    );
 }
 
 /// The section 7.1 reference snapshot: vibrations, everything else nominal, resources free.
@@ -123,7 +170,9 @@ fn section_7_1_vibration_context_values() {
 }
 
 fn best(p: &BTreeMap<String, f64>) -> Vec<String> {
-    let mut v: Vec<(String, f64)> = (0..6).map(|i| (format!("V{i}"), p[&format!("P_V{i}")])).collect();
+    let mut v: Vec<(String, f64)> = (0..6)
+        .map(|i| (format!("V{i}"), p[&format!("P_V{i}")]))
+        .collect();
     v.sort_by(|a, b| b.1.total_cmp(&a.1));
     v.into_iter().map(|x| x.0).collect()
 }
@@ -166,7 +215,12 @@ fn versions_respond_to_hazards() {
     no_tiles.set("free_tiles", 0.0);
     let p = eval(&mut m, &no_tiles);
     // (only the 5 % chance that the performance node still asks for speed is lost)
-    assert!(p["P_V3"] > 0.9 * full["P_V3"], "{} vs {}", p["P_V3"], full["P_V3"]);
+    assert!(
+        p["P_V3"] > 0.9 * full["P_V3"],
+        "{} vs {}",
+        p["P_V3"],
+        full["P_V3"]
+    );
     assert!(p["P_V4"] < 0.5 * full["P_V4"]);
     // A fast target needs a fast (FPGA) implementation: without tiles, V2 drops too.
     let mut fast_no_tiles = fast.clone();
@@ -180,10 +234,21 @@ fn versions_respond_to_hazards() {
 fn every_shared_probability_is_published() {
     let m = model();
     let names = m.publishes();
-    let mut want = vec!["P_sys", "P_battery", "P_obs", "P_SI", "P_SF", "P_appT", "P_appZ", "P_crash", "P_detect", "P_track"]
-        .into_iter()
-        .map(String::from)
-        .collect::<Vec<_>>();
+    let mut want = vec![
+        "P_sys",
+        "P_battery",
+        "P_obs",
+        "P_SI",
+        "P_SF",
+        "P_appT",
+        "P_appZ",
+        "P_crash",
+        "P_detect",
+        "P_track",
+    ]
+    .into_iter()
+    .map(String::from)
+    .collect::<Vec<_>>();
     want.extend((0..6).map(|i| format!("P_V{i}")));
     for w in &want {
         assert!(names.contains(w), "{w} not published: {names:?}");
@@ -225,7 +290,12 @@ fn battery_belief_is_carried_between_cycles() {
     // The carried prior of E_t is the last posterior of E_t1 (hand check of the carry).
     m.reset();
     m.evaluate(&e).unwrap();
-    let e_t1 = m.manager("system").unwrap().marginal("E_t1").unwrap().to_vec();
+    let e_t1 = m
+        .manager("system")
+        .unwrap()
+        .marginal("E_t1")
+        .unwrap()
+        .to_vec();
     let b = m.belief();
     let carried = &b[&("system".to_string(), "E_t".to_string())];
     for (a, b) in carried.iter().zip(&e_t1) {
@@ -242,7 +312,14 @@ fn observation_thresholds_map_to_states() {
     o.set("battery_pct", 60.0); // on a threshold: the upper state
     o.set("luminosity_lux", f64::NAN); // not finite: no evidence
     let e = m.evidence(&o);
-    assert_eq!(e, ev(&[("A_cpu_load", "low"), ("A_free_tiles", "2"), ("S_battery", "high")]));
+    assert_eq!(
+        e,
+        ev(&[
+            ("A_cpu_load", "low"),
+            ("A_free_tiles", "2"),
+            ("S_battery", "high")
+        ])
+    );
     o.set("cpu_load", 0.3);
     assert_eq!(m.evidence(&o)["A_cpu_load"], "medium");
     o.set("cpu_load", 0.85);

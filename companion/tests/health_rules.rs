@@ -47,8 +47,18 @@ role = "monitor_health"
 P_e = "1 - P(U_e = present)"
 "#,
     );
-    let roles: Vec<(&str, &str)> = h.nodes.iter().map(|n| (n.name.as_str(), n.role.as_str())).collect();
-    for want in [("U_e", "error"), ("S_m", "monitor"), ("A_a", "context"), ("C_s", "solution"), ("H_S_m", "monitor_health")] {
+    let roles: Vec<(&str, &str)> = h
+        .nodes
+        .iter()
+        .map(|n| (n.name.as_str(), n.role.as_str()))
+        .collect();
+    for want in [
+        ("U_e", "error"),
+        ("S_m", "monitor"),
+        ("A_a", "context"),
+        ("C_s", "solution"),
+        ("H_S_m", "monitor_health"),
+    ] {
         assert!(roles.contains(&want), "{roles:?}");
     }
     // Default context prior: nominal 0.9.
@@ -64,7 +74,10 @@ P_e = "1 - P(U_e = present)"
     }
     close(&cpt(&h, "U_e"), &want);
     // Monitor rows: (error, health) = (absent, ok), (absent, faulty), (present, ok), (present, faulty).
-    close(&cpt(&h, "S_m"), &[0.9, 0.1, 0.5, 0.5, 0.9 * 0.1, 1.0 - 0.09, 0.5, 0.5]);
+    close(
+        &cpt(&h, "S_m"),
+        &[0.9, 0.1, 0.5, 0.5, 0.9 * 0.1, 1.0 - 0.09, 0.5, 0.5],
+    );
     assert_eq!(h.publish[0].expr(), "1 - P(U_e = present)");
 }
 
@@ -128,7 +141,10 @@ implementations = [{ name = "S", tiles = 0, cpu = "low" }, { name = "F", tiles =
     // Version: p = 0.95 * 0.1^(unfixed present) * 0.5^(own solutions whose error is absent).
     // Rows (U_x, U_y): (a,a): extra 1 -> 0.475; (a,p): miss 1, extra 1 -> 0.0475;
     // (p,a): 0.95; (p,p): overridden 0.7.
-    close(&cpt(&h, "V"), &[0.525, 0.475, 0.9525, 0.0475, 0.05, 0.95, 0.3, 0.7]);
+    close(
+        &cpt(&h, "V"),
+        &[0.525, 0.475, 0.9525, 0.0475, 0.05, 0.95, 0.3, 0.7],
+    );
     // Activation rows (V, T, L): off -> 0; on: fits if (T>=0 and L<=low) or (T>=2).
     let r = cpt(&h, "R");
     let mut want = Vec::new();
@@ -172,6 +188,9 @@ drain = { W = [1.0, 0.5] }
     );
     close(
         &cpt(&h, "E1"),
-        &[0.8, 0.2, 0.0, 0.4, 0.6, 0.0, 0.0, 0.8, 0.2, 0.0, 0.4, 0.6, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0],
+        &[
+            0.8, 0.2, 0.0, 0.4, 0.6, 0.0, 0.0, 0.8, 0.2, 0.0, 0.4, 0.6, 0.0, 0.0, 1.0, 0.0, 0.0,
+            1.0,
+        ],
     );
 }

@@ -140,7 +140,10 @@ impl Engine {
         let mut cl_vars: Vec<Vec<usize>> = Vec::new();
         for (i, c) in candidates.iter().enumerate() {
             let contained = candidates.iter().enumerate().any(|(j, d)| {
-                j != i && c.len() <= d.len() && c.iter().all(|x| d.contains(x)) && (c.len() < d.len() || j < i)
+                j != i
+                    && c.len() <= d.len()
+                    && c.iter().all(|x| d.contains(x))
+                    && (c.len() < d.len() || j < i)
             });
             if !contained {
                 cl_vars.push(c.clone());
@@ -186,8 +189,11 @@ impl Engine {
                 if !seen[c] {
                     seen[c] = true;
                     queue.push_back(c);
-                    let vars: Vec<usize> =
-                        cl_vars[c].iter().copied().filter(|x| cl_vars[p].contains(x)).collect();
+                    let vars: Vec<usize> = cl_vars[c]
+                        .iter()
+                        .copied()
+                        .filter(|x| cl_vars[p].contains(x))
+                        .collect();
                     let size: usize = vars.iter().map(|&v| card[v]).product();
                     seps.push(Separator {
                         child: c,
@@ -204,7 +210,11 @@ impl Engine {
             .into_iter()
             .map(|vars| {
                 let size = vars.iter().map(|&v| card[v]).product();
-                Clique { vars, base: vec![1.0; size], pot: vec![1.0; size] }
+                Clique {
+                    vars,
+                    base: vec![1.0; size],
+                    pot: vec![1.0; size],
+                }
             })
             .collect();
         // Assign CPTs (smallest clique holding the family) and homes (smallest clique holding the node).
@@ -267,7 +277,10 @@ impl Engine {
     }
     /// Variables of each clique.
     pub fn cliques(&self) -> Vec<Vec<NodeId>> {
-        self.cliques.iter().map(|c| c.vars.iter().map(|&i| NodeId(i)).collect()).collect()
+        self.cliques
+            .iter()
+            .map(|c| c.vars.iter().map(|&i| NodeId(i)).collect())
+            .collect()
     }
     /// Largest clique table (entries): the cost driver of a query.
     pub fn max_clique_size(&self) -> usize {
@@ -282,7 +295,11 @@ impl Engine {
         let c = self.cpt_home[id.0];
         let mut clique = std::mem::replace(
             &mut self.cliques[c],
-            Clique { vars: Vec::new(), base: Vec::new(), pot: Vec::new() },
+            Clique {
+                vars: Vec::new(),
+                base: Vec::new(),
+                pot: Vec::new(),
+            },
         );
         self.rebuild_base(&mut clique, c);
         self.cliques[c] = clique;
@@ -294,9 +311,10 @@ impl Engine {
             return Err(BnError::UnknownNode(node.to_string()));
         };
         match f {
-            Finding::State(s) if *s >= x.states.len() => {
-                Err(BnError::UnknownState { node: x.name.clone(), state: format!("#{s}") })
-            }
+            Finding::State(s) if *s >= x.states.len() => Err(BnError::UnknownState {
+                node: x.name.clone(),
+                state: format!("#{s}"),
+            }),
             Finding::State(_) => Ok(()),
             Finding::Likelihood(l) if l.len() != x.states.len() => Err(BnError::LikelihoodLength {
                 node: x.name.clone(),
@@ -307,7 +325,9 @@ impl Engine {
                 if l.iter().all(|v| v.is_finite() && *v >= 0.0) && l.iter().any(|&v| v > 0.0) {
                     Ok(())
                 } else {
-                    Err(BnError::InvalidLikelihood { node: x.name.clone() })
+                    Err(BnError::InvalidLikelihood {
+                        node: x.name.clone(),
+                    })
                 }
             }
         }
@@ -373,7 +393,11 @@ impl Engine {
             }
             for (x, &j) in self.cliques[sep.child].pot.iter_mut().zip(&sep.map_child) {
                 let old = sep.old[j as usize];
-                *x = if old > 0.0 { *x * sep.new[j as usize] / old } else { 0.0 };
+                *x = if old > 0.0 {
+                    *x * sep.new[j as usize] / old
+                } else {
+                    0.0
+                };
             }
         }
         for (i, m) in self.marginals.iter_mut().enumerate() {

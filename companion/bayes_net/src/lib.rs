@@ -43,18 +43,34 @@ pub enum BnError {
     DuplicateParent { node: String, parent: String },
     #[error("cycle through nodes {0:?}")]
     Cycle(Vec<String>),
-    #[error("node `{node}`: CPT has {got} entries, expected {expected} ({rows} rows x {states} states)")]
-    CptSize { node: String, expected: usize, got: usize, rows: usize, states: usize },
+    #[error(
+        "node `{node}`: CPT has {got} entries, expected {expected} ({rows} rows x {states} states)"
+    )]
+    CptSize {
+        node: String,
+        expected: usize,
+        got: usize,
+        rows: usize,
+        states: usize,
+    },
     #[error("node `{node}`: CPT row {row} sums to {sum}, not 1")]
     CptRow { node: String, row: usize, sum: f64 },
     #[error("node `{node}`: CPT entry {index} is {value}, not a probability")]
-    Probability { node: String, index: usize, value: f64 },
+    Probability {
+        node: String,
+        index: usize,
+        value: f64,
+    },
     #[error("unknown node {0}")]
     UnknownNode(String),
     #[error("node `{node}` has no state `{state}`")]
     UnknownState { node: String, state: String },
     #[error("node `{node}`: likelihood has {got} entries, expected {expected}")]
-    LikelihoodLength { node: String, expected: usize, got: usize },
+    LikelihoodLength {
+        node: String,
+        expected: usize,
+        got: usize,
+    },
     #[error("node `{node}`: likelihood must be finite, non-negative and not all zero")]
     InvalidLikelihood { node: String },
     #[error("the evidence has probability zero")]
@@ -73,7 +89,10 @@ pub struct Node {
 impl Node {
     /// Number of parent state combinations (CPT rows).
     pub fn rows(&self, net: &Network) -> usize {
-        self.parents.iter().map(|p| net.nodes[p.0].states.len()).product()
+        self.parents
+            .iter()
+            .map(|p| net.nodes[p.0].states.len())
+            .product()
     }
 }
 
@@ -126,7 +145,10 @@ impl NetworkBuilder {
             let mut seen = BTreeSet::new();
             for s in &p.states {
                 if !seen.insert(s) {
-                    return Err(BnError::DuplicateState { node: p.name.clone(), state: s.clone() });
+                    return Err(BnError::DuplicateState {
+                        node: p.name.clone(),
+                        state: s.clone(),
+                    });
                 }
             }
         }
@@ -139,13 +161,25 @@ impl NetworkBuilder {
                     parent: q.clone(),
                 })?;
                 if parents.contains(&NodeId(id)) {
-                    return Err(BnError::DuplicateParent { node: p.name.clone(), parent: q.clone() });
+                    return Err(BnError::DuplicateParent {
+                        node: p.name.clone(),
+                        parent: q.clone(),
+                    });
                 }
                 parents.push(NodeId(id));
             }
-            nodes.push(Node { name: p.name.clone(), states: p.states.clone(), parents, cpt: p.cpt.clone() });
+            nodes.push(Node {
+                name: p.name.clone(),
+                states: p.states.clone(),
+                parents,
+                cpt: p.cpt.clone(),
+            });
         }
-        let net = Network { index, order: Vec::new(), nodes };
+        let net = Network {
+            index,
+            order: Vec::new(),
+            nodes,
+        };
         for i in 0..net.nodes.len() {
             net.check_cpt(NodeId(i), &net.nodes[i].cpt)?;
         }
@@ -184,11 +218,17 @@ impl Network {
     }
     /// Index of `state` in node `id`.
     pub fn state(&self, id: NodeId, state: &str) -> Result<usize, BnError> {
-        let n = self.nodes.get(id.0).ok_or_else(|| BnError::UnknownNode(id.to_string()))?;
-        n.states.iter().position(|s| s == state).ok_or_else(|| BnError::UnknownState {
-            node: n.name.clone(),
-            state: state.to_string(),
-        })
+        let n = self
+            .nodes
+            .get(id.0)
+            .ok_or_else(|| BnError::UnknownNode(id.to_string()))?;
+        n.states
+            .iter()
+            .position(|s| s == state)
+            .ok_or_else(|| BnError::UnknownState {
+                node: n.name.clone(),
+                state: state.to_string(),
+            })
     }
 
     /// Hard evidence from `(node name, state name)` pairs.
@@ -198,7 +238,9 @@ impl Network {
     ) -> Result<Evidence, BnError> {
         let mut ev = Evidence::new();
         for (n, s) in pairs {
-            let id = self.id(n).ok_or_else(|| BnError::UnknownNode(n.to_string()))?;
+            let id = self
+                .id(n)
+                .ok_or_else(|| BnError::UnknownNode(n.to_string()))?;
             ev.set_state(id, self.state(id, s)?);
         }
         Ok(ev)
@@ -206,9 +248,16 @@ impl Network {
 
     /// Validate a CPT for node `id` against its shape.
     pub fn check_cpt(&self, id: NodeId, cpt: &[f64]) -> Result<(), BnError> {
-        let n = self.nodes.get(id.0).ok_or_else(|| BnError::UnknownNode(id.to_string()))?;
+        let n = self
+            .nodes
+            .get(id.0)
+            .ok_or_else(|| BnError::UnknownNode(id.to_string()))?;
         let k = n.states.len();
-        let rows: usize = n.parents.iter().map(|p| self.nodes[p.0].states.len()).product();
+        let rows: usize = n
+            .parents
+            .iter()
+            .map(|p| self.nodes[p.0].states.len())
+            .product();
         if cpt.len() != rows * k {
             return Err(BnError::CptSize {
                 node: n.name.clone(),
@@ -220,13 +269,21 @@ impl Network {
         }
         for (i, &v) in cpt.iter().enumerate() {
             if !(v.is_finite() && (0.0..=1.0).contains(&v)) {
-                return Err(BnError::Probability { node: n.name.clone(), index: i, value: v });
+                return Err(BnError::Probability {
+                    node: n.name.clone(),
+                    index: i,
+                    value: v,
+                });
             }
         }
         for (r, row) in cpt.chunks(k).enumerate() {
             let sum: f64 = row.iter().sum();
             if (sum - 1.0).abs() > ROW_TOLERANCE {
-                return Err(BnError::CptRow { node: n.name.clone(), row: r, sum });
+                return Err(BnError::CptRow {
+                    node: n.name.clone(),
+                    row: r,
+                    sum,
+                });
             }
         }
         Ok(())
@@ -253,7 +310,10 @@ impl Network {
             }
         }
         if order.len() < n {
-            let cyc = (0..n).filter(|&i| indeg[i] > 0).map(|i| self.nodes[i].name.clone()).collect();
+            let cyc = (0..n)
+                .filter(|&i| indeg[i] > 0)
+                .map(|i| self.nodes[i].name.clone())
+                .collect();
             return Err(BnError::Cycle(cyc));
         }
         Ok(order)

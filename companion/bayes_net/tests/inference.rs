@@ -67,7 +67,11 @@ fn case() -> impl Strategy<Value = Case> {
         let weights = prop::collection::vec(0.0f64..1.0, 4096);
         let perm = Just((0..n).collect::<Vec<_>>()).prop_shuffle();
         let evidence = prop::collection::vec(
-            (0..n, prop::option::of(0usize..4), prop::collection::vec(0.05f64..1.0, 4)),
+            (
+                0..n,
+                prop::option::of(0usize..4),
+                prop::collection::vec(0.05f64..1.0, 4),
+            ),
             0..4,
         );
         (card, parents, density, weights, perm, evidence).prop_map(
@@ -76,13 +80,21 @@ fn case() -> impl Strategy<Value = Case> {
                 let parents = (0..n)
                     .map(|i| {
                         (0..i)
-                            .filter(|&j| pmask[i][j] && weights[(i * 31 + j * 7) % weights.len()] < density)
+                            .filter(|&j| {
+                                pmask[i][j] && weights[(i * 31 + j * 7) % weights.len()] < density
+                            })
                             .rev()
                             .take(3)
                             .collect()
                     })
                     .collect();
-                Case { card, parents, weights, perm, evidence }
+                Case {
+                    card,
+                    parents,
+                    weights,
+                    perm,
+                    evidence,
+                }
             },
         )
     })
@@ -193,7 +205,12 @@ fn sprinkler() -> Network {
     // P(W|S,R)=0.99, P(W|S,~R)=0.9, P(W|~S,R)=0.9, P(W|~S,~R)=0.
     let mut b = NetworkBuilder::new();
     let tf = ["false", "true"];
-    b.add_node("W", &tf, &["S", "R"], vec![1.0, 0.0, 0.1, 0.9, 0.1, 0.9, 0.01, 0.99]);
+    b.add_node(
+        "W",
+        &tf,
+        &["S", "R"],
+        vec![1.0, 0.0, 0.1, 0.9, 0.1, 0.9, 0.01, 0.99],
+    );
     b.add_node("C", &tf, &[] as &[&str], vec![0.5, 0.5]);
     b.add_node("S", &tf, &["C"], vec![0.5, 0.5, 0.9, 0.1]);
     b.add_node("R", &tf, &["C"], vec![0.8, 0.2, 0.2, 0.8]);
@@ -204,15 +221,27 @@ fn sprinkler() -> Network {
 fn sprinkler_published_posteriors() {
     let net = sprinkler();
     let mut e = net.compile();
-    let (s, r, w) = (net.id("S").unwrap(), net.id("R").unwrap(), net.id("W").unwrap());
+    let (s, r, w) = (
+        net.id("S").unwrap(),
+        net.id("R").unwrap(),
+        net.id("W").unwrap(),
+    );
     e.propagate(&Evidence::new()).unwrap();
     // Murphy: P(W=1) = 0.6471.
     assert!((e.marginal(w)[1] - 0.6471).abs() < 5e-5);
     let ev = net.evidence([("W", "true")]).unwrap();
     e.propagate(&ev).unwrap();
     // Murphy: P(S=1|W=1) = 0.2781/0.6471 = 0.4298, P(R=1|W=1) = 0.4581/0.6471 = 0.7079.
-    assert!((e.marginal(s)[1] - 0.4298).abs() < 5e-5, "{:?}", e.marginal(s));
-    assert!((e.marginal(r)[1] - 0.7079).abs() < 5e-5, "{:?}", e.marginal(r));
+    assert!(
+        (e.marginal(s)[1] - 0.4298).abs() < 5e-5,
+        "{:?}",
+        e.marginal(s)
+    );
+    assert!(
+        (e.marginal(r)[1] - 0.7079).abs() < 5e-5,
+        "{:?}",
+        e.marginal(r)
+    );
     // Explaining away (Murphy): P(S=1|W=1,R=1) = 0.1945.
     let ev = net.evidence([("W", "true"), ("R", "true")]).unwrap();
     assert!((e.posterior(&ev, s).unwrap()[1] - 0.1945).abs() < 5e-5);
@@ -230,13 +259,30 @@ fn asia_prior_marginals() {
     b.add_node("tub", &yn, &["asia"], vec![0.05, 0.95, 0.01, 0.99]);
     b.add_node("lung", &yn, &["smoke"], vec![0.1, 0.9, 0.01, 0.99]);
     b.add_node("bronc", &yn, &["smoke"], vec![0.6, 0.4, 0.3, 0.7]);
-    b.add_node("either", &yn, &["lung", "tub"], vec![1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 1.0]);
+    b.add_node(
+        "either",
+        &yn,
+        &["lung", "tub"],
+        vec![1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 1.0],
+    );
     b.add_node("xray", &yn, &["either"], vec![0.98, 0.02, 0.05, 0.95]);
-    b.add_node("dysp", &yn, &["bronc", "either"], vec![0.9, 0.1, 0.8, 0.2, 0.7, 0.3, 0.1, 0.9]);
+    b.add_node(
+        "dysp",
+        &yn,
+        &["bronc", "either"],
+        vec![0.9, 0.1, 0.8, 0.2, 0.7, 0.3, 0.1, 0.9],
+    );
     let net = b.build().unwrap();
     let mut e = net.compile();
     e.propagate(&Evidence::new()).unwrap();
-    for (n, p) in [("tub", 0.0104), ("lung", 0.055), ("bronc", 0.45), ("either", 0.064828), ("xray", 0.11029), ("dysp", 0.43597)] {
+    for (n, p) in [
+        ("tub", 0.0104),
+        ("lung", 0.055),
+        ("bronc", 0.45),
+        ("either", 0.064828),
+        ("xray", 0.11029),
+        ("dysp", 0.43597),
+    ] {
         let got = e.marginal(net.id(n).unwrap())[0];
         assert!((got - p).abs() < 5e-6, "{n}: {got} vs {p}");
     }
@@ -271,7 +317,14 @@ fn build_errors() {
 
     let mut b = NetworkBuilder::new();
     b.add_node("a", &["x", "y"], &none, vec![0.5, 0.5, 0.5]);
-    assert!(matches!(b.build(), Err(BnError::CptSize { expected: 2, got: 3, .. })));
+    assert!(matches!(
+        b.build(),
+        Err(BnError::CptSize {
+            expected: 2,
+            got: 3,
+            ..
+        })
+    ));
 
     let mut b = NetworkBuilder::new();
     b.add_node("a", &["x", "y"], &["b"], vec![0.5, 0.5, 0.5, 0.5]);
@@ -288,7 +341,10 @@ fn build_errors() {
 
     let mut b = NetworkBuilder::new();
     b.add_node("a", &["x", "y"], &none, vec![1.5, -0.5]);
-    assert!(matches!(b.build(), Err(BnError::Probability { index: 0, .. })));
+    assert!(matches!(
+        b.build(),
+        Err(BnError::Probability { index: 0, .. })
+    ));
 
     let mut b = NetworkBuilder::new();
     b.add_node("a", &["x", "x"], &none, vec![0.5, 0.5]);
@@ -309,23 +365,47 @@ fn query_errors() {
     let net = sprinkler();
     let mut e = net.compile();
     let s = net.id("S").unwrap();
-    assert!(matches!(net.evidence([("S", "maybe")]), Err(BnError::UnknownState { .. })));
-    assert!(matches!(net.evidence([("Q", "true")]), Err(BnError::UnknownNode(_))));
+    assert!(matches!(
+        net.evidence([("S", "maybe")]),
+        Err(BnError::UnknownState { .. })
+    ));
+    assert!(matches!(
+        net.evidence([("Q", "true")]),
+        Err(BnError::UnknownNode(_))
+    ));
     let mut ev = Evidence::new();
     ev.set_state(s, 7);
-    assert!(matches!(e.propagate(&ev), Err(BnError::UnknownState { .. })));
+    assert!(matches!(
+        e.propagate(&ev),
+        Err(BnError::UnknownState { .. })
+    ));
     let mut ev = Evidence::new();
     ev.set_likelihood(s, vec![1.0]);
-    assert!(matches!(e.propagate(&ev), Err(BnError::LikelihoodLength { expected: 2, got: 1, .. })));
+    assert!(matches!(
+        e.propagate(&ev),
+        Err(BnError::LikelihoodLength {
+            expected: 2,
+            got: 1,
+            ..
+        })
+    ));
     let mut ev = Evidence::new();
     ev.set_likelihood(s, vec![0.0, 0.0]);
-    assert!(matches!(e.propagate(&ev), Err(BnError::InvalidLikelihood { .. })));
+    assert!(matches!(
+        e.propagate(&ev),
+        Err(BnError::InvalidLikelihood { .. })
+    ));
     let mut ev = Evidence::new();
     ev.set_state(NodeId(99), 0);
     assert!(matches!(e.propagate(&ev), Err(BnError::UnknownNode(_))));
     // W=true is impossible when neither S nor R.
-    let ev = net.evidence([("W", "true"), ("S", "false"), ("R", "false")]).unwrap();
+    let ev = net
+        .evidence([("W", "true"), ("S", "false"), ("R", "false")])
+        .unwrap();
     assert_eq!(e.propagate(&ev), Err(BnError::ImpossibleEvidence));
     // set_cpt validates too.
-    assert!(matches!(e.set_cpt(s, &[0.5, 0.5]), Err(BnError::CptSize { .. })));
+    assert!(matches!(
+        e.set_cpt(s, &[0.5, 0.5]),
+        Err(BnError::CptSize { .. })
+    ));
 }
