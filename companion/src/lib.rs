@@ -4,8 +4,13 @@
 //! driven by `sim` (a seeded discrete-step world) or by `link` (MAVLink). Everything
 //! mission-specific is loaded from `params/` by `spec` and the stage modules.
 
+pub mod check;
+pub mod decision;
 pub mod decision_log;
+pub mod evidence;
+pub mod fmea;
 pub mod guarantee;
+pub mod health;
 pub mod link;
 pub mod mission;
 pub mod mission_mdp;
