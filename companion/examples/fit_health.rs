@@ -1,4 +1,6 @@
-//! Scratch: fit the params to the paper's worked examples. Prints the fitted numbers.
+//! How the fitted numbers in params/health were found (docs/params/health.md): solves for the
+//! paper's worked examples and prints the values, then the versions under a few hazards.
+//! Run from the workspace root: `cargo run -p companion --example fit_health`.
 use companion::evidence::ObservationMap;
 use companion::fmea::{CptSpec, HmFile, compile_hm};
 use companion::health::HealthModel;
@@ -115,7 +117,7 @@ fn main() {
     }
     f(&x, &mut files);
     // (c) version rows: linear in the overridden row value.
-    let mut m = model(&files);
+    let m = model(&files);
     let ev = m.evidence(&reference());
     println!("reference evidence {ev:?}");
     let targets = [
@@ -126,7 +128,7 @@ fn main() {
         ("C_V5", 0.47),
     ];
     for (v, t) in targets {
-        let mut val = |r: f64, files: &mut BTreeMap<&str, HmFile>| {
+        let val = |r: f64, files: &mut BTreeMap<&str, HmFile>| {
             let a = files.get_mut("applications").unwrap();
             a.node.get_mut(v).unwrap().overrides[0].p = vec![1.0 - r, r];
             let mut m = model(files);
@@ -139,12 +141,12 @@ fn main() {
         println!("{v}: p0 {p0:.4} p1 {p1:.4} -> r = {r:.4}");
     }
     // Scalars by bisection on the reference.
-    let mut bis = |name: &str,
-                   files: &mut BTreeMap<&str, HmFile>,
-                   set: &dyn Fn(&mut BTreeMap<&str, HmFile>, f64),
-                   target: f64,
-                   lo: f64,
-                   hi: f64| {
+    let bis = |name: &str,
+               files: &mut BTreeMap<&str, HmFile>,
+               set: &dyn Fn(&mut BTreeMap<&str, HmFile>, f64),
+               target: f64,
+               lo: f64,
+               hi: f64| {
         let (mut lo, mut hi) = (lo, hi);
         let g = |x: f64, files: &mut BTreeMap<&str, HmFile>| {
             set(files, x);

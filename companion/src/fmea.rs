@@ -142,6 +142,9 @@ pub struct NodeSpec {
     pub drain: BTreeMap<String, Vec<f64>>,
 }
 
+/// Generates one CPT row from the parents' state indices.
+type RowRule = Box<dyn FnMut(&[usize]) -> Result<Vec<f64>, SpecError>>;
+
 /// Node roles, named as in the paper.
 pub const ROLES: &[&str] = &[
     "qos",
@@ -519,7 +522,7 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
         let mut cpt: Vec<f64> = if let Some(c) = &spec_n.cpt {
             c.flat()
         } else {
-            let mut rule: Box<dyn FnMut(&[usize]) -> Result<Vec<f64>, SpecError>> = match r {
+            let mut rule: RowRule = match r {
                 "state" if spec_n.previous.is_some() => {
                     let stay = check_prob(file, &entry("stay"), spec_n.stay.unwrap_or(0.9))?;
                     let mut drains = Vec::new();

@@ -326,6 +326,7 @@ impl HealthModel {
                 return Err(HealthError::UnknownNode(node.clone()));
             }
         }
+        #[allow(clippy::needless_range_loop)] // split_at_mut needs the index
         for i in 0..self.managers.len() {
             let (done, rest) = self.managers.split_at_mut(i);
             let m = &mut rest[0];

@@ -250,8 +250,8 @@ impl Engine {
             marginals,
             net,
         };
-        for c in 0..cliques.len() {
-            e.rebuild_base(&mut cliques[c], c);
+        for (c, clique) in cliques.iter_mut().enumerate() {
+            e.rebuild_base(clique, c);
         }
         e.cliques = cliques;
         e

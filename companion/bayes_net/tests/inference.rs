@@ -137,6 +137,7 @@ fn build(c: &Case) -> (Network, Vec<NodeId>) {
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(300))]
+    #[allow(clippy::needless_range_loop)]
     #[test]
     fn junction_tree_matches_enumeration(c in case()) {
         let (net, ids) = build(&c);
@@ -173,6 +174,7 @@ proptest! {
     }
 
     #[test]
+    #[allow(clippy::needless_range_loop)]
     fn set_cpt_matches_rebuilt_network(c in case(), root_w in prop::collection::vec(0.01f64..1.0, 4)) {
         let (net, ids) = build(&c);
         // Replace the first root's CPT in the compiled engine and in a freshly built copy.
