@@ -13,9 +13,22 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/pip install --quiet --disable-pip-version-check -r sitl_tests/requirements.txt
 
+echo "== system: chromium for the review report test"
+if ! command -v chromium >/dev/null 2>&1; then
+  if command -v apt-get >/dev/null 2>&1; then
+    SUDO=""
+    if [ "$(id -u)" != "0" ]; then SUDO="sudo"; fi
+    $SUDO apt-get update
+    $SUDO apt-get install -y chromium
+  else
+    echo "chromium is missing and apt-get is unavailable: install Debian's chromium (or put a chromium on PATH) to run sitl_tests/test_review_report.py" >&2
+    exit 1
+  fi
+fi
+
 echo "== build: companion binary for sitl_tests"
 cargo build --quiet --bin companion
-export COMPANION_BIN="$PWD/target/debug/companion"
+export COMPANION_BIN="${CARGO_TARGET_DIR:-$PWD/target}/debug/companion"
 
 echo "== python: pytest sitl_tests"
 set +e

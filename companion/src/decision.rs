@@ -1,18 +1,21 @@
 //! One decision cycle: observations -> evidence -> health -> concurrent MDPs -> behaviour
 //! arbitration -> resource arbitration (fpga_model) -> guarantee (PANORAMA) -> plan + record.
 //!
-//! `step` is pure: everything it needs comes in as the loaded [`Model`], the [`MissionState`]
-//! carried between cycles and one [`Observations`] snapshot. No clock, file or randomness.
+//! `Core::step` is pure: everything it needs comes in as the loaded [`Model`], the state the
+//! core carries between cycles (its own fields) and one [`Observations`] snapshot. No clock, file,
+//! socket or randomness.
 
+use crate::guarantee::{Guarantee, MissionSpec, Progress};
 use crate::health::HealthModel;
-use crate::mission::{ActionCatalogue, ActionKind, MissionFile};
 pub use crate::mission::Policy;
+use crate::mission::{ActionCatalogue, ActionKind, MissionFile};
 use crate::mission_mdp::{BehaviourConflicts, MissionMdps};
 use crate::observations::Observations;
-use crate::record::{DecisionRecord, MdpProposal, Plan};
-use crate::resources::Resources;
+use crate::record::{DecisionRecord, Plan};
+use crate::resources::ResourceSpec;
 use crate::spec::SpecError;
-use std::collections::BTreeMap;
+use fpga_model::{PlatformState, Request};
+use mdp_engine::Workspace;
 use std::path::Path;
 
 /// Which decision model drives a run.
@@ -48,14 +51,16 @@ impl std::str::FromStr for ModelKind {
     }
 }
 
-/// Everything loaded from params/ once at start-up.
+/// Everything loaded from params/ once at start-up. Immutable; each [`Core`] clones the parts it
+/// updates in place (the battery DBN's slice, the MDPs' transition storage).
 pub struct Model {
     pub mission: MissionFile,
     pub actions: ActionCatalogue,
     pub health: HealthModel,
     pub mdps: MissionMdps,
     pub conflicts: BehaviourConflicts,
-    pub resources: Resources,
+    pub resources: ResourceSpec,
+    pub guarantee: MissionSpec,
 }
 
 impl Model {
@@ -63,127 +68,327 @@ impl Model {
         let mission = MissionFile::load(params)?;
         let actions = ActionCatalogue::load(params)?;
         let health = HealthModel::load(params)?;
-        let names: Vec<String> = health.publishes().iter().map(|s| s.to_string()).collect();
+        let names = health.publishes();
         let name_refs: Vec<&str> = names.iter().map(String::as_str).collect();
         let mdps = MissionMdps::load(params, &name_refs)?;
-        let conflicts = BehaviourConflicts::load(params)?;
-        let resources = Resources::load(params)?;
-        let file = params.join("mission.toml");
-        for (kind, list) in &mission.models {
-            for (i, m) in list.iter().enumerate() {
-                if mdps.get(m).is_none() {
-                    return Err(SpecError::new(&file, format!("models.{kind}[{i}]"), format!("no MDP named `{m}` in params/mdp/")));
+        let ids: Vec<&str> = actions.actions.iter().map(|a| a.id.as_str()).collect();
+        let conflicts = BehaviourConflicts::load(&params.join("policies.toml"), &ids)?;
+        let resources = ResourceSpec::load(params)?;
+        let guarantee = crate::guarantee::load_mission(params, &mission.guarantee.mission)?;
+        let file = params.join("actions.toml");
+        for a in mdps.primitive_actions() {
+            if actions.get(&a).is_none() {
+                return Err(SpecError::new(
+                    &file,
+                    "action",
+                    format!("MDP action `{a}` is not in the catalogue"),
+                ));
+            }
+        }
+        for (i, a) in actions.actions.iter().enumerate() {
+            if let (Some(app), Some(v)) = (&a.app, &a.version) {
+                if !resources.catalogue.has_version(app, v) {
+                    return Err(SpecError::new(
+                        &file,
+                        format!("action[{i}]"),
+                        format!("variant {app}/{v} is not in params/variants.toml"),
+                    ));
                 }
             }
         }
-        Ok(Model { mission, actions, health, mdps, conflicts, resources })
+        Ok(Model {
+            mission,
+            actions,
+            health,
+            mdps,
+            conflicts,
+            resources,
+            guarantee,
+        })
     }
 
-    fn mdp_names(&self, kind: ModelKind) -> &[String] {
-        self.mission.models.get(kind.name()).map_or(&[], Vec::as_slice)
+    /// The MDP names a model kind runs concurrently.
+    pub fn mdp_names(&self, kind: ModelKind) -> Vec<String> {
+        match kind {
+            ModelKind::Bfm => self.mdps.concurrent().to_vec(),
+            ModelKind::Monolithic => self
+                .mdps
+                .monolithic()
+                .map(str::to_owned)
+                .into_iter()
+                .collect(),
+            ModelKind::Reference => self
+                .mdps
+                .reference()
+                .map(str::to_owned)
+                .into_iter()
+                .collect(),
+        }
     }
 }
 
-/// What the core carries from one cycle to the next.
-pub struct MissionState {
-    pub cycle: u64,
-    pub health: crate::health::HealthState,
-    pub platform: fpga_model::PlatformState,
-    /// Set by the guarantee stage when no allocation meets the goals.
-    pub guarantee_infeasible: bool,
-}
-
-/// A decision core bound to a model, a model kind and a policy: `step` once per cycle.
+/// A decision core bound to a model, a model kind and a policy; `step` once per cycle.
 pub struct Core<'m> {
     pub model: &'m Model,
     pub kind: ModelKind,
     pub policy: Policy,
-    pub state: MissionState,
+    cycle: u64,
+    mdp_names: Vec<String>,
+    health: HealthModel,
+    mdps: MissionMdps,
+    workspace: Workspace,
+    platform: PlatformState,
+    guarantee: Option<Guarantee>,
+    /// Set when the guarantee stage found no allocation meeting the goals.
+    guarantee_infeasible: bool,
+    failed_resources: Vec<String>,
 }
 
 impl<'m> Core<'m> {
     pub fn new(model: &'m Model, kind: ModelKind, policy: Policy) -> Self {
-        let state = MissionState {
+        Core {
+            model,
+            kind,
+            policy,
             cycle: 0,
-            health: model.health.initial_state(),
-            platform: model.resources.initial_state(),
+            mdp_names: model.mdp_names(kind),
+            health: model.health.clone(),
+            mdps: model.mdps.clone(),
+            workspace: Workspace::new(),
+            platform: PlatformState::new(&model.resources.platform),
+            guarantee: Guarantee::start(model.guarantee.clone()).ok(),
             guarantee_infeasible: false,
-        };
-        Core { model, kind, policy, state }
-    }
-
-    pub fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
-        step(self.model, self.kind, self.policy, &mut self.state, obs)
-    }
-}
-
-/// One decision cycle.
-pub fn step(
-    model: &Model,
-    kind: ModelKind,
-    policy: Policy,
-    st: &mut MissionState,
-    obs: &Observations,
-) -> (Plan, DecisionRecord) {
-    let mut rec = DecisionRecord {
-        cycle: st.cycle,
-        time_s: obs.time_s,
-        state: obs.state.clone(),
-        events: obs.events.clone(),
-        observations: obs.values.clone(),
-        ..Default::default()
-    };
-    st.cycle += 1;
-
-    // evidence -> health
-    rec.evidence = model.health.evidence(obs);
-    rec.probabilities = model.health.evaluate(&mut st.health, &rec.evidence);
-    if st.guarantee_infeasible {
-        let cap = model.mission.guarantee.infeasible_p_battery;
-        if let Some(p) = rec.probabilities.get_mut("P_battery") {
-            *p = p.min(cap);
+            failed_resources: Vec::new(),
         }
     }
 
-    // decision: every MDP of the model, solved at its projected state
-    let mut merged: Vec<String> = Vec::new();
-    for name in model.mdp_names(kind) {
-        let local = model.mission.project(name, obs);
-        let Some(p) = model.mdps.decide(name, &rec.probabilities, policy, local, model.mission.horizon) else {
-            rec.events.push(format!("{name}: state `{local}` unknown to this MDP"));
-            continue;
+    /// One decision cycle.
+    pub fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
+        let model = self.model;
+        let policy = self.policy.name();
+        let mut rec = DecisionRecord {
+            cycle: self.cycle,
+            time_s: obs.time_s,
+            state: obs.state.clone(),
+            events: obs.events.clone(),
+            observations: obs.values.clone(),
+            ..Default::default()
         };
-        for a in &p.actions {
-            if !merged.contains(a) {
-                merged.push(a.clone());
+        self.cycle += 1;
+
+        // evidence -> health
+        rec.evidence = self.health.evidence(obs);
+        match self.health.evaluate(&rec.evidence) {
+            Ok(p) => rec.probabilities = p,
+            Err(e) => rec.events.push(format!("health: {e}")),
+        }
+        if self.guarantee_infeasible {
+            let cap = model.mission.guarantee.infeasible_p_battery;
+            if let Some(p) = rec.probabilities.get_mut("P_battery") {
+                *p = p.min(cap);
             }
         }
-        rec.proposals.push(p);
-    }
 
-    // behaviour arbitration
-    let (kept, conflicts) = model.conflicts.resolve(&merged, policy);
-    rec.conflicts = conflicts;
-
-    // resource arbitration: application actions become variant requests on the platform
-    let (actions, resources) = model.resources.arbitrate(&kept, policy, obs, &model.actions, &mut st.platform);
-    for d in resources.degraded.iter().chain(&resources.dropped) {
-        rec.events.push(d.clone());
-    }
-    rec.actions = actions;
-    rec.resources = Some(resources);
-
-    // plan
-    let mut plan = Plan::default();
-    for a in &rec.actions {
-        if model.actions.get(a).is_some_and(|x| x.kind == ActionKind::Vehicle) {
-            plan.vehicle_actions.push(a.clone());
+        // decision: every MDP of the model, solved at its projected state
+        let mut merged: Vec<String> = Vec::new();
+        for name in &self.mdp_names {
+            let local = model.mission.project(name, obs);
+            let Some(mdp) = self.mdps.get_mut(name) else {
+                continue;
+            };
+            let Some(s) = mdp.state_index(local) else {
+                rec.events
+                    .push(format!("{name}: state `{local}` unknown to this MDP"));
+                continue;
+            };
+            match mdp.decide(
+                &mut self.workspace,
+                s,
+                &rec.probabilities,
+                policy,
+                model.mission.horizon,
+            ) {
+                Ok(Some(d)) => {
+                    let p = mdp.proposal(s, &d, model.mission.horizon);
+                    for a in &p.actions {
+                        if !merged.contains(a) {
+                            merged.push(a.clone());
+                        }
+                    }
+                    rec.proposals.push(p);
+                }
+                Ok(None) => {}
+                Err(e) => rec.events.push(format!("{name}: {e}")),
+            }
         }
+
+        // behaviour arbitration
+        let kept = match model.conflicts.resolve(&merged, policy) {
+            Ok((kept, conflicts)) => {
+                rec.conflicts = conflicts;
+                kept
+            }
+            Err(e) => {
+                rec.events.push(format!("arbitration: {e}"));
+                merged
+            }
+        };
+
+        // resource arbitration: application actions become variant requests on the platform
+        rec.actions = self.arbitrate_resources(&kept, obs, &mut rec);
+
+        // guarantee: PANORAMA margins on the activity being flown
+        self.watch_guarantee(obs, &mut rec);
+
+        // plan
+        let mut plan = Plan::default();
+        for a in &rec.actions {
+            if model
+                .actions
+                .get(a)
+                .is_some_and(|x| x.kind == ActionKind::Vehicle)
+            {
+                plan.vehicle_actions.push(a.clone());
+            }
+        }
+        if let Some(r) = &rec.resources {
+            plan.applications = r.placements.clone();
+        }
+        (plan, rec)
     }
-    if let Some(r) = &rec.resources {
-        plan.applications = r.placements.clone();
+
+    /// Request every application action's variant at the rate the situation needs, schedule them
+    /// under the policy, and rewrite the action set with what actually runs.
+    fn arbitrate_resources(
+        &mut self,
+        kept: &[String],
+        obs: &Observations,
+        rec: &mut DecisionRecord,
+    ) -> Vec<String> {
+        let model = self.model;
+        // Faults and monitor readings the shell reports.
+        let failed = obs.get("failed_tiles").unwrap_or(0.0).max(0.0) as usize;
+        // The last `failed` tiles are out of service (which ones fail does not matter to the model).
+        let n = self.platform.tiles.len();
+        for (i, t) in self.platform.tiles.iter_mut().enumerate() {
+            t.failed = i >= n.saturating_sub(failed);
+        }
+        self.platform.external_cpu_load = obs.get("external_cpu_load").unwrap_or(0.0).max(0.0);
+
+        let mut requests: Vec<Request> = Vec::new();
+        let mut owners: Vec<&str> = Vec::new();
+        for a in kept {
+            let Some(act) = model.actions.get(a) else {
+                continue;
+            };
+            let (Some(app), Some(version)) = (&act.app, &act.version) else {
+                continue;
+            };
+            if requests.iter().any(|r| &r.app == app) {
+                continue; // one variant per application (target detection shares the tracker)
+            }
+            let speed = model
+                .mission
+                .rates
+                .get(app.as_str())
+                .and_then(|obs_name| obs.get(obs_name))
+                .unwrap_or(0.0);
+            let fps = model
+                .resources
+                .required_fps(app, [0.0, 0.0], [speed, 0.0])
+                .unwrap_or(1.0);
+            requests.push(Request::new(app, version, fps));
+            owners.push(a);
+        }
+        let (schedule, next) =
+            match model
+                .resources
+                .schedule(self.policy.name(), &self.platform, &requests)
+            {
+                Ok(x) => x,
+                Err(e) => {
+                    rec.events.push(format!("resources: {e}"));
+                    return kept.to_vec();
+                }
+            };
+        self.platform = next;
+        let record = crate::resources::to_record(&schedule);
+
+        // Rewrite: an application action stays only if its app is placed, under the placed version.
+        let mut actions = Vec::with_capacity(kept.len());
+        for a in kept {
+            let act = model.actions.get(a);
+            match act.and_then(|x| x.app.as_deref()) {
+                None => actions.push(a.clone()),
+                Some(app) => {
+                    let placed = record.placements.iter().find(|p| p.app == app);
+                    if let Some(p) = placed {
+                        // A degraded variant is named by the action that runs it (track_v3 -> track_v1).
+                        let same =
+                            act.and_then(|x| x.version.as_deref()) == Some(p.version.as_str());
+                        let id = if same || !owners.contains(&a.as_str()) {
+                            a.clone()
+                        } else {
+                            model
+                                .actions
+                                .for_variant(app, &p.version)
+                                .map_or(a.clone(), |x| x.id.clone())
+                        };
+                        if !actions.contains(&id) {
+                            actions.push(id);
+                        }
+                    } else if act.is_some_and(|x| x.kind == ActionKind::Vehicle) {
+                        actions.push(a.clone());
+                    }
+                }
+            }
+        }
+        for d in record.degraded.iter().chain(&record.dropped) {
+            rec.events.push(d.clone());
+        }
+        rec.resources = Some(record);
+        actions
     }
-    (plan, rec)
+
+    fn watch_guarantee(&mut self, obs: &Observations, rec: &mut DecisionRecord) {
+        let Some(g) = self.guarantee.as_mut() else {
+            return;
+        };
+        let coupling = &self.model.mission.guarantee;
+        let Some(&activity_index) = coupling.activity_of_state.get(&obs.state) else {
+            return;
+        };
+        for (resource, observation) in &coupling.failures {
+            if obs.get(observation).is_some_and(|v| v > 0.5)
+                && !self.failed_resources.contains(resource)
+            {
+                self.failed_resources.push(resource.clone());
+            }
+        }
+        let failed_tiles = obs.get("failed_tiles").unwrap_or(0.0).max(0.0) as usize;
+        let tile_names: Vec<String> = (0..failed_tiles.min(self.platform.tiles.len()))
+            .map(|k| format!("tile{}", self.platform.tiles.len() - 1 - k))
+            .collect();
+        let mut failed = self.failed_resources.clone();
+        failed.extend(tile_names);
+        let record = g.watch(Progress {
+            activity_index,
+            activity_fraction: 0.0,
+            energy_used_j: obs.get("energy_consumed_j"),
+            battery_remaining_pct: obs.get("battery_pct"),
+            elapsed_s: obs.time_s,
+            failed_resources: &failed,
+        });
+        if let Some(r) = &record.reallocation {
+            rec.events.push(format!("re-allocation: {}", r.reason));
+        }
+        if record.infeasible && !self.guarantee_infeasible {
+            rec.events
+                .push("guarantee: no allocation meets the goals".into());
+        }
+        self.guarantee_infeasible = record.infeasible;
+        rec.guarantee = Some(record);
+    }
 }
 
 /// The decision table in the shape of the BFM paper's Tables 4 to 7: consecutive cycles with the
@@ -207,8 +412,18 @@ pub fn table(records: &[DecisionRecord], model: &Model) -> String {
             r.cycle.to_string(),
             r.state.clone(),
             labels.join(" / "),
-            if events.is_empty() { "no event".into() } else { events },
-            r.resources.as_ref().map_or("-".into(), |x| if x.summary.is_empty() { "-".into() } else { x.summary.clone() }),
+            if events.is_empty() {
+                "no event".into()
+            } else {
+                events
+            },
+            r.resources.as_ref().map_or("-".into(), |x| {
+                if x.summary.is_empty() {
+                    "-".into()
+                } else {
+                    x.summary.clone()
+                }
+            }),
         ]);
     }
     let header = ["step", "state", "set of actions", "events", "resources"];
@@ -218,24 +433,28 @@ pub fn table(records: &[DecisionRecord], model: &Model) -> String {
             *w = (*w).max(c.chars().count());
         }
     }
-    width[2] = width[2].min(70);
     let mut out = String::new();
     let line = |cells: [&str; 5], out: &mut String| {
         for (i, c) in cells.iter().enumerate() {
-            let pad = width[i].saturating_sub(c.chars().count());
             out.push_str(c);
-            out.push_str(&" ".repeat(pad));
-            out.push_str(if i < 4 { " | " } else { "\n" });
+            if i < 4 {
+                out.push_str(&" ".repeat(width[i].saturating_sub(c.chars().count())));
+                out.push_str(" | ");
+            }
         }
+        out.push('\n');
     };
     line(header, &mut out);
-    out.push_str(&width.iter().map(|w| "-".repeat(*w)).collect::<Vec<_>>().join("-+-"));
+    out.push_str(
+        &width
+            .iter()
+            .map(|w| "-".repeat(*w))
+            .collect::<Vec<_>>()
+            .join("-+-"),
+    );
     out.push('\n');
     for row in &rows {
         line([&row[0], &row[1], &row[2], &row[3], &row[4]], &mut out);
     }
     out
 }
-
-/// Probabilities keyed by name, as the decision layer consumes them.
-pub type Probabilities = BTreeMap<String, f64>;

@@ -4,8 +4,19 @@
 //! driven by `sim` (a seeded discrete-step world) or by `link` (MAVLink). Everything
 //! mission-specific is loaded from `params/` by `spec` and the stage modules.
 
+pub mod check;
+pub mod decision;
+pub mod decision_log;
+pub mod evidence;
+pub mod fmea;
+pub mod guarantee;
+pub mod health;
+pub mod link;
 pub mod mission;
+pub mod mission_mdp;
 pub mod observations;
 pub mod record;
+pub mod resources;
+pub mod review;
 pub mod sim;
 pub mod spec;

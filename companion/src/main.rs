@@ -1,31 +1,261 @@
 //! `companion`: the command-line edge. Parses arguments, owns I/O and time, calls the pure core.
 
-use clap::{Parser, Subcommand};
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand, ValueEnum};
+use companion::decision::{Core, Model, ModelKind, Policy};
+use companion::link::fly::{Decider, FlyArgs};
+use companion::sim::{self, Scenario, WorldSpec};
+use companion::spec::default_params_dir;
+use std::io::IsTerminal;
+use std::path::PathBuf;
 
 #[derive(Parser)]
 #[command(
     name = "companion",
     version,
-    about = "BFM flight companion: health BNs, concurrent MDPs, just-enough variants, MAVLink"
+    about = "BFM flight companion: health BNs from FMEA tables, concurrent MDPs, just-enough variants, PANORAMA margins, MAVLink"
 )]
 struct Cli {
     #[command(subcommand)]
     command: Command,
 }
 
+#[derive(Clone, Copy, ValueEnum)]
+enum PolicyArg {
+    Safety,
+    Mission,
+}
+
+impl From<PolicyArg> for Policy {
+    fn from(p: PolicyArg) -> Self {
+        match p {
+            PolicyArg::Safety => Policy::Safety,
+            PolicyArg::Mission => Policy::Mission,
+        }
+    }
+}
+
+#[derive(clap::Args)]
+struct SimulateArgs {
+    /// Scenario name in params/scenarios/ or a path to a scenario file.
+    #[arg(long, default_value = "complete-1")]
+    scenario: String,
+    #[arg(long, value_enum, default_value = "safety")]
+    policy: PolicyArg,
+    /// bfm (the three concurrent MDPs), reference (Figure 1), monolithic (section 5), or a
+    /// comma-separated list run side by side on the same seeds.
+    #[arg(long, default_value = "bfm")]
+    model: String,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Runs on seeds seed, seed+1, ...: tracking time reported as mean and 95% CI.
+    #[arg(long, default_value_t = 1)]
+    runs: u32,
+    /// Steps per run (the paper's 100).
+    #[arg(long)]
+    steps: Option<u32>,
+    /// One JSON object on stdout (schema in docs/simulation.md).
+    #[arg(long)]
+    json: bool,
+    /// Where run folders go (a new `<UTC time>/` inside, printed at the start).
+    #[arg(long, default_value = companion::decision_log::DEFAULT_RUNS_DIR)]
+    runs_dir: PathBuf,
+    /// Do not write a run folder.
+    #[arg(long)]
+    no_log: bool,
+    /// The params directory (default: $COMPANION_PARAMS, else the repository's params/).
+    #[arg(long)]
+    params: Option<PathBuf>,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Fly the paper's tracking mission in a seeded discrete-step world (no autopilot needed).
-    Simulate,
-    /// Validate params/ and print the health managers, platform and pre-flight allocation.
-    Check,
+    Simulate(SimulateArgs),
+    /// Validate params/ and print the health managers, MDPs, platform and pre-flight allocation.
+    Check(companion::check::CheckArgs),
+    /// Fly a real autopilot over MAVLink (ArduPilot or PX4; SITL or hardware).
+    Fly(FlyArgs),
+    /// Post-flight review of a run folder or decision log: an HTML report (or --summary).
+    Review {
+        /// Run folder (runs/<UTC time>/) or a decisions*.jsonl file.
+        run_or_log: PathBuf,
+        /// Where to write the HTML report (default: report.html in the run folder).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Print the summary and timeline in the terminal (no HTML unless --out is given).
+        #[arg(long)]
+        summary: bool,
+    },
+    /// Test helper: write decision records into DIR until killed.
+    #[command(name = "__log-stress", hide = true)]
+    LogStress {
+        dir: PathBuf,
+        #[arg(long, default_value_t = 64 * 1024 * 1024)]
+        rotate_bytes: u64,
+    },
+    /// Test helper: write a sample .tlog of N frames.
+    #[command(name = "__tlog-sample", hide = true)]
+    TlogSample {
+        path: PathBuf,
+        #[arg(long, default_value_t = 20)]
+        frames: u32,
+    },
 }
 
-fn main() -> anyhow::Result<()> {
+fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
-        Command::Simulate | Command::Check => {
-            anyhow::bail!("not yet implemented")
+        Command::Simulate(args) => {
+            let params = args.params.clone().unwrap_or_else(default_params_dir);
+            simulate(&params, args)
+        }
+        Command::Check(args) => companion::check::run(&args),
+        Command::Fly(args) => fly(args),
+        Command::Review {
+            run_or_log,
+            out,
+            summary,
+        } => {
+            companion::review::run(&run_or_log, out.as_deref(), summary)?;
+            Ok(())
+        }
+        Command::LogStress { dir, rotate_bytes } => Ok(
+            companion::decision_log::stress::log_stress(&dir, rotate_bytes)?,
+        ),
+        Command::TlogSample { path, frames } => {
+            Ok(companion::decision_log::stress::tlog_sample(&path, frames)?)
         }
     }
+}
+
+/// The real decision core behind the fly loop.
+struct CoreDecider {
+    core: Core<'static>,
+}
+
+impl Decider for CoreDecider {
+    fn step(
+        &mut self,
+        obs: &companion::observations::Observations,
+    ) -> (companion::record::Plan, companion::record::DecisionRecord) {
+        self.core.step(obs)
+    }
+}
+
+fn fly(args: FlyArgs) -> Result<()> {
+    let params = args.params.clone().unwrap_or_else(default_params_dir);
+    let model: &'static Model =
+        Box::leak(Box::new(Model::load(&params).context("loading params")?));
+    let policy: Policy = args
+        .policy
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!(e))?;
+    let decider = CoreDecider {
+        core: Core::new(model, ModelKind::Bfm, policy),
+    };
+    companion::link::fly::run(args, decider)
+}
+
+fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
+    let world = WorldSpec::load(params)?;
+    let mut scenario = Scenario::load(params, &args.scenario)?;
+    if let Some(s) = args.steps {
+        scenario.steps = s;
+    }
+    let kinds: Vec<ModelKind> = args
+        .model
+        .split(',')
+        .map(|m| m.trim().parse::<ModelKind>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| anyhow::anyhow!("--model: {e}"))?;
+    let policy: Policy = args.policy.into();
+    let model = Model::load(params).context("loading params")?;
+    let runs = args.runs.max(1);
+    let progress = (!args.json && runs > 1 && std::io::stderr().is_terminal()).then(|| {
+        let pb = indicatif::ProgressBar::new(runs as u64 * kinds.len() as u64);
+        pb.set_style(
+            indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} runs {elapsed}").unwrap(),
+        );
+        pb
+    });
+
+    let mut per_model = Vec::new();
+    let mut first_records = None;
+    for kind in &kinds {
+        let mut steps = Vec::with_capacity(runs as usize);
+        for r in 0..runs {
+            let seed = args.seed + r as u64;
+            let mut core = Core::new(&model, *kind, policy);
+            let result = sim::run(&world, &scenario, seed, |obs| core.step(obs));
+            steps.push(result.tracking_steps as f64);
+            if first_records.is_none() {
+                first_records = Some((kind.name(), result));
+            }
+            if let Some(pb) = &progress {
+                pb.inc(1);
+            }
+        }
+        per_model.push((kind.name(), steps));
+    }
+    if let Some(pb) = progress {
+        pb.finish_and_clear();
+    }
+    let (first_kind, first) = first_records.expect("at least one run");
+
+    if args.json {
+        let tracking: serde_json::Map<String, serde_json::Value> = per_model
+            .iter()
+            .map(|(name, xs)| {
+                let (mean, ci) = sim::mean_ci95(xs);
+                (
+                    name.to_string(),
+                    serde_json::json!({ "mean": mean, "ci95": ci, "runs": xs }),
+                )
+            })
+            .collect();
+        let out = serde_json::json!({
+            "scenario": scenario.name,
+            "policy": policy.name(),
+            "runs": runs,
+            "steps": scenario.steps,
+            "seed": args.seed,
+            "models": kinds.iter().map(|k| k.name()).collect::<Vec<_>>(),
+            "tracking_steps": tracking,
+            "first_run": { "model": first_kind, "outcome": first.outcome, "tracking_steps": first.tracking_steps, "battery_pct_end": first.battery_pct_end },
+            "decisions": first.records,
+        });
+        println!("{}", serde_json::to_string(&out)?);
+        return Ok(());
+    }
+
+    println!(
+        "scenario {} ({}), policy {}, model {}, seed {}, {} steps",
+        scenario.name,
+        scenario.description,
+        policy.name(),
+        first_kind,
+        args.seed,
+        scenario.steps
+    );
+    println!();
+    print!("{}", companion::decision::table(&first.records, &model));
+    println!();
+    println!(
+        "outcome: {:?} after {} steps, battery {:.0}% left; tracking time {} steps",
+        first.outcome, first.steps_flown, first.battery_pct_end, first.tracking_steps
+    );
+    if runs > 1 {
+        println!();
+        println!(
+            "tracking time over {runs} seeds ({}..{}):",
+            args.seed,
+            args.seed + runs as u64 - 1
+        );
+        for (name, xs) in &per_model {
+            let (mean, ci) = sim::mean_ci95(xs);
+            println!("  {name:<11} {mean:6.1} steps  ± {ci:.1} (95% CI)");
+        }
+    }
+    Ok(())
 }

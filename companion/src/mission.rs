@@ -141,10 +141,18 @@ impl ProjectionRule {
     }
 }
 
+/// How the decision core feeds and reads the PANORAMA guarantee stage.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GuaranteeCoupling {
+    /// The PANORAMA mission (params/missions/NAME.toml) whose margins are watched.
+    pub mission: String,
     pub infeasible_p_battery: f64,
+    /// Shared mission state -> index of the activity being flown.
+    pub activity_of_state: BTreeMap<String, usize>,
+    /// Resource name (as in the mission file) -> observation that reports it failed (> 0.5).
+    #[serde(default)]
+    pub failures: BTreeMap<String, String>,
 }
 
 /// params/mission.toml.
@@ -152,7 +160,9 @@ pub struct GuaranteeCoupling {
 #[serde(deny_unknown_fields)]
 pub struct MissionFile {
     pub horizon: usize,
-    pub models: BTreeMap<String, Vec<String>>,
+    /// Application -> the observation (m/s) giving the relative speed its frame rate must follow
+    /// (the BFM paper's section 4.3.2 performance constraint; formula in params/platform.toml).
+    pub rates: BTreeMap<String, String>,
     pub guarantee: GuaranteeCoupling,
     #[serde(default)]
     pub projection: BTreeMap<String, Vec<ProjectionRule>>,

@@ -8,6 +8,7 @@ pub const SCHEMA_VERSION: u32 = 1;
 
 /// One MDP's view of the cycle.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct MdpProposal {
     /// MDP name from params (`navigation`, `landing`, `tracking`, `monolithic`, `reference`).
     pub mdp: String,
@@ -24,6 +25,7 @@ pub struct MdpProposal {
 
 /// A behaviour conflict between primitive actions and how the policy resolved it.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct Conflict {
     pub kept: String,
     pub dropped: Vec<String>,
@@ -33,6 +35,7 @@ pub struct Conflict {
 
 /// One application variant placed on the platform.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct PlacementRecord {
     pub app: String,
     pub version: String,
@@ -47,6 +50,7 @@ pub struct PlacementRecord {
 
 /// What the resource arbitration did this cycle.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct ResourcesRecord {
     pub placements: Vec<PlacementRecord>,
     pub cpu_load: f64,
@@ -57,13 +61,26 @@ pub struct ResourcesRecord {
     pub dropped: Vec<String>,
     /// The paper's Resources column: "10 + 5 + 394 ms".
     pub summary: String,
-    /// Electrical power of the platform (CPU load and active tiles), W.
+    /// Resource policy that resolved conflicts (`safety`, `mission`).
+    #[serde(default)]
+    pub policy: String,
+    /// Healthy tiles left unused after placement (the resource BN's `free_tiles`).
+    #[serde(default)]
+    pub free_tiles: u8,
+    /// Tiles that are out of service this cycle.
+    #[serde(default)]
+    pub failed_tiles: Vec<u8>,
+    /// Partial reconfiguration time spent this cycle.
+    #[serde(default)]
+    pub reconfiguration_ms: f64,
+    /// Estimated board power (params/platform.toml power model).
     #[serde(default)]
     pub power_w: f64,
 }
 
 /// PANORAMA margins and re-allocation this cycle.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct GuaranteeRecord {
     /// Activity being flown (index and name).
     pub activity: usize,
@@ -77,9 +94,16 @@ pub struct GuaranteeRecord {
     pub reallocation: Option<Reallocation>,
     /// True when no allocation of the remaining activities meets every goal.
     pub infeasible: bool,
+    /// When `infeasible`: why (trigger, failing goal and excess).
+    #[serde(default)]
+    pub infeasible_reason: Option<String>,
+    /// Resources reported failed so far (their IAs are excluded from re-allocations).
+    #[serde(default)]
+    pub failed_resources: Vec<String>,
 }
 
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct Reallocation {
     pub reason: String,
     /// Activity name -> chosen implementation alternative, for the remaining activities.
@@ -89,6 +113,7 @@ pub struct Reallocation {
 
 /// A vehicle command and what became of it (fly only; simulate records the intent).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct CommandRecord {
     /// Primitive action that caused it (`take_off`, `return_to_base`, ...).
     pub action: String,
@@ -102,6 +127,7 @@ pub struct CommandRecord {
 
 /// Everything one decision cycle saw and decided, in stage order.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct DecisionRecord {
     pub cycle: u64,
     /// Seconds since the run started (simulate: step index times the step length).
@@ -130,6 +156,7 @@ pub struct DecisionRecord {
 
 /// What the core asks the shell to do this cycle.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct Plan {
     /// Primitive vehicle actions (`take_off`, `follow_trajectory`, `avoid_obstacle`, `land`,
     /// `replan_and_land`, `return_to_base`), mapped to MAVLink by params/commands.toml.

@@ -21,6 +21,11 @@ use std::path::{Path, PathBuf};
 pub struct WorldSpec {
     pub step_s: f64,
     pub initial_state: String,
+    /// Reconfigurable tiles on the board (params/platform.toml says 4).
+    pub tiles: u32,
+    /// The application whose variants the resource BN assesses; the monitors report the
+    /// occupancy of the others (see `advance`).
+    pub assessed_app: String,
     pub route: Route,
     pub vehicle: Vehicle,
     pub baseline: BTreeMap<String, f64>,
@@ -275,7 +280,7 @@ impl<'a> World<'a> {
             active: vec![None; scenario.hazards.len()],
             obstacle_unavoided_steps: 0,
             cpu_load: 0.0,
-            free_tiles: 4.0,
+            free_tiles: spec.tiles as f64,
             tracking_steps: 0,
             outcome: None,
         };
@@ -420,8 +425,17 @@ impl<'a> World<'a> {
             self.battery_wh -= (prop_w + compute_w) * self.spec.step_s / 3600.0;
         }
         if let Some(r) = &record.resources {
-            self.cpu_load = r.cpu_load;
-            self.free_tiles = 4.0 - r.tiles_used as f64;
+            // The monitors report what the OTHER applications occupy: the assessed application's
+            // own variant is what the resource BN decides about, so its share counts as available.
+            let others = r
+                .placements
+                .iter()
+                .filter(|p| p.app != self.spec.assessed_app);
+            let (cpu, tiles) = others.fold((0.0, 0usize), |(c, t), p| {
+                (c + p.cpu_share, t + p.tiles.len())
+            });
+            self.cpu_load = cpu;
+            self.free_tiles = self.spec.tiles as f64 - tiles as f64;
         }
 
         // Obstacles: avoided, or a collision after the grace period.

@@ -47,7 +47,8 @@ pub fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, SpecE
         let entry = e
             .span()
             .map(|s| {
-                let line = text[..s.start.min(text.len())].lines().count().max(1);
+                // 1-based line of the span start (`lines().count()` is one short at a line start).
+                let line = text[..s.start.min(text.len())].matches('\n').count() + 1;
                 format!("line {line}")
             })
             .unwrap_or_else(|| "-".into());

@@ -1,1 +1,49 @@
-//! Placeholder: being written.
+//! Model of the BFM paper's mission board (TeraSIC SoCKit, Cyclone V SoC): four dynamically
+//! reconfigurable FPGA tiles, a dual Cortex-A9 at 925 MHz with a load budget, the Table 2 variant
+//! catalogue, and the "just enough" scheduler that places requested application variants and
+//! resolves resource conflicts by a policy given as data (section 6.3, Tables 4-7).
+//!
+//! Pure: no I/O, no clock, no randomness. Every type is serde so `companion` loads it from
+//! `params/` (`platform.toml`, `variants.toml`, `resource_policies.toml`) and validates it here.
+
+mod catalogue;
+mod platform;
+mod policy;
+mod schedule;
+
+pub use catalogue::{Catalogue, Implementation, Support, Variant, VariantsFile};
+pub use platform::{Performance, Platform, PowerModel};
+pub use policy::{PoliciesFile, ResourcePolicy};
+pub use schedule::{
+    Degradation, Dropped, Placement, PlatformState, Request, Schedule, Tile, schedule,
+};
+
+/// A model input that is inconsistent. `entry` is a dotted path inside the params file it came
+/// from (`variant[3].tiles`), so the loader can name file, entry and reason.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{entry}: {reason}")]
+pub struct ModelError {
+    pub entry: String,
+    pub reason: String,
+}
+
+impl ModelError {
+    pub fn new(entry: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self {
+            entry: entry.into(),
+            reason: reason.into(),
+        }
+    }
+}
+
+/// Milliseconds as the paper writes them: `10`, `0.5`, `1000`.
+pub fn fmt_ms(ms: f64) -> String {
+    if ms.fract() == 0.0 && ms.abs() < 1e15 {
+        format!("{ms:.0}")
+    } else {
+        format!("{ms}")
+    }
+}
+
+/// Relative tolerance for rate and budget comparisons (floating sums of table values).
+pub(crate) const EPS: f64 = 1e-9;

@@ -1,1 +1,361 @@
-//! Placeholder: being written.
+//! Discrete Bayesian networks with exact inference compiled once.
+//!
+//! Build a [`Network`] with [`NetworkBuilder`] (validated: CPT sizes, rows summing to 1, unknown
+//! parents, cycles), then [`Network::compile`] it into an [`Engine`]: a junction tree whose
+//! cliques come from a min-fill elimination order, with every index map and buffer allocated at
+//! compile time. A query ([`Engine::propagate`]) is two Hugin passes over that fixed structure and
+//! computes the posterior marginal of every node at once; it does not allocate.
+//!
+//! CPT layout: row-major over the parents' state combinations (first parent most significant),
+//! one row of `states.len()` probabilities per combination. A root node's CPT is its prior.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::fmt;
+
+mod engine;
+pub use engine::Engine;
+
+/// Tolerance on a CPT row sum.
+pub const ROW_TOLERANCE: f64 = 1e-9;
+
+/// Index of a node in its [`Network`] (insertion order).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct NodeId(pub usize);
+
+impl fmt::Display for NodeId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "#{}", self.0)
+    }
+}
+
+/// Everything that can be wrong with a network or a query.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BnError {
+    #[error("duplicate node name `{0}`")]
+    DuplicateNode(String),
+    #[error("node `{0}` has no states")]
+    NoStates(String),
+    #[error("node `{node}` lists state `{state}` twice")]
+    DuplicateState { node: String, state: String },
+    #[error("node `{node}` names unknown parent `{parent}`")]
+    UnknownParent { node: String, parent: String },
+    #[error("node `{node}` lists parent `{parent}` twice")]
+    DuplicateParent { node: String, parent: String },
+    #[error("cycle through nodes {0:?}")]
+    Cycle(Vec<String>),
+    #[error(
+        "node `{node}`: CPT has {got} entries, expected {expected} ({rows} rows x {states} states)"
+    )]
+    CptSize {
+        node: String,
+        expected: usize,
+        got: usize,
+        rows: usize,
+        states: usize,
+    },
+    #[error("node `{node}`: CPT row {row} sums to {sum}, not 1")]
+    CptRow { node: String, row: usize, sum: f64 },
+    #[error("node `{node}`: CPT entry {index} is {value}, not a probability")]
+    Probability {
+        node: String,
+        index: usize,
+        value: f64,
+    },
+    #[error("unknown node {0}")]
+    UnknownNode(String),
+    #[error("node `{node}` has no state `{state}`")]
+    UnknownState { node: String, state: String },
+    #[error("node `{node}`: likelihood has {got} entries, expected {expected}")]
+    LikelihoodLength {
+        node: String,
+        expected: usize,
+        got: usize,
+    },
+    #[error("node `{node}`: likelihood must be finite, non-negative and not all zero")]
+    InvalidLikelihood { node: String },
+    #[error("the evidence has probability zero")]
+    ImpossibleEvidence,
+}
+
+/// One node: name, state names, parents and CPT.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Node {
+    pub name: String,
+    pub states: Vec<String>,
+    pub parents: Vec<NodeId>,
+    pub cpt: Vec<f64>,
+}
+
+impl Node {
+    /// Number of parent state combinations (CPT rows).
+    pub fn rows(&self, net: &Network) -> usize {
+        self.parents
+            .iter()
+            .map(|p| net.nodes[p.0].states.len())
+            .product()
+    }
+}
+
+struct PendingNode {
+    name: String,
+    states: Vec<String>,
+    parents: Vec<String>,
+    cpt: Vec<f64>,
+}
+
+/// Collects nodes in any order; [`NetworkBuilder::build`] resolves and validates them.
+#[derive(Default)]
+pub struct NetworkBuilder {
+    pending: Vec<PendingNode>,
+}
+
+impl NetworkBuilder {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Add a node. Parents are named, so they may be added later; the returned id is the
+    /// insertion index, which is the node's [`NodeId`] in the built network.
+    pub fn add_node<S: AsRef<str>, P: AsRef<str>>(
+        &mut self,
+        name: &str,
+        states: &[S],
+        parents: &[P],
+        cpt: Vec<f64>,
+    ) -> NodeId {
+        self.pending.push(PendingNode {
+            name: name.to_string(),
+            states: states.iter().map(|s| s.as_ref().to_string()).collect(),
+            parents: parents.iter().map(|s| s.as_ref().to_string()).collect(),
+            cpt,
+        });
+        NodeId(self.pending.len() - 1)
+    }
+
+    /// Resolve parent names and validate every node; see [`BnError`] for what is rejected.
+    pub fn build(self) -> Result<Network, BnError> {
+        let mut index = BTreeMap::new();
+        for (i, p) in self.pending.iter().enumerate() {
+            if index.insert(p.name.clone(), i).is_some() {
+                return Err(BnError::DuplicateNode(p.name.clone()));
+            }
+            if p.states.is_empty() {
+                return Err(BnError::NoStates(p.name.clone()));
+            }
+            let mut seen = BTreeSet::new();
+            for s in &p.states {
+                if !seen.insert(s) {
+                    return Err(BnError::DuplicateState {
+                        node: p.name.clone(),
+                        state: s.clone(),
+                    });
+                }
+            }
+        }
+        let mut nodes = Vec::with_capacity(self.pending.len());
+        for p in &self.pending {
+            let mut parents = Vec::with_capacity(p.parents.len());
+            for q in &p.parents {
+                let id = *index.get(q).ok_or_else(|| BnError::UnknownParent {
+                    node: p.name.clone(),
+                    parent: q.clone(),
+                })?;
+                if parents.contains(&NodeId(id)) {
+                    return Err(BnError::DuplicateParent {
+                        node: p.name.clone(),
+                        parent: q.clone(),
+                    });
+                }
+                parents.push(NodeId(id));
+            }
+            nodes.push(Node {
+                name: p.name.clone(),
+                states: p.states.clone(),
+                parents,
+                cpt: p.cpt.clone(),
+            });
+        }
+        let net = Network {
+            index,
+            order: Vec::new(),
+            nodes,
+        };
+        for i in 0..net.nodes.len() {
+            net.check_cpt(NodeId(i), &net.nodes[i].cpt)?;
+        }
+        let order = net.topological_order()?;
+        Ok(Network { order, ..net })
+    }
+}
+
+/// A validated, acyclic discrete Bayesian network.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Network {
+    nodes: Vec<Node>,
+    index: BTreeMap<String, usize>,
+    order: Vec<NodeId>,
+}
+
+impl Network {
+    pub fn len(&self) -> usize {
+        self.nodes.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.nodes.is_empty()
+    }
+    pub fn nodes(&self) -> &[Node] {
+        &self.nodes
+    }
+    pub fn node(&self, id: NodeId) -> &Node {
+        &self.nodes[id.0]
+    }
+    pub fn id(&self, name: &str) -> Option<NodeId> {
+        self.index.get(name).map(|&i| NodeId(i))
+    }
+    /// Parents before children.
+    pub fn topological(&self) -> &[NodeId] {
+        &self.order
+    }
+    /// Index of `state` in node `id`.
+    pub fn state(&self, id: NodeId, state: &str) -> Result<usize, BnError> {
+        let n = self
+            .nodes
+            .get(id.0)
+            .ok_or_else(|| BnError::UnknownNode(id.to_string()))?;
+        n.states
+            .iter()
+            .position(|s| s == state)
+            .ok_or_else(|| BnError::UnknownState {
+                node: n.name.clone(),
+                state: state.to_string(),
+            })
+    }
+
+    /// Hard evidence from `(node name, state name)` pairs.
+    pub fn evidence<'a>(
+        &self,
+        pairs: impl IntoIterator<Item = (&'a str, &'a str)>,
+    ) -> Result<Evidence, BnError> {
+        let mut ev = Evidence::new();
+        for (n, s) in pairs {
+            let id = self
+                .id(n)
+                .ok_or_else(|| BnError::UnknownNode(n.to_string()))?;
+            ev.set_state(id, self.state(id, s)?);
+        }
+        Ok(ev)
+    }
+
+    /// Validate a CPT for node `id` against its shape.
+    pub fn check_cpt(&self, id: NodeId, cpt: &[f64]) -> Result<(), BnError> {
+        let n = self
+            .nodes
+            .get(id.0)
+            .ok_or_else(|| BnError::UnknownNode(id.to_string()))?;
+        let k = n.states.len();
+        let rows: usize = n
+            .parents
+            .iter()
+            .map(|p| self.nodes[p.0].states.len())
+            .product();
+        if cpt.len() != rows * k {
+            return Err(BnError::CptSize {
+                node: n.name.clone(),
+                expected: rows * k,
+                got: cpt.len(),
+                rows,
+                states: k,
+            });
+        }
+        for (i, &v) in cpt.iter().enumerate() {
+            if !(v.is_finite() && (0.0..=1.0).contains(&v)) {
+                return Err(BnError::Probability {
+                    node: n.name.clone(),
+                    index: i,
+                    value: v,
+                });
+            }
+        }
+        for (r, row) in cpt.chunks(k).enumerate() {
+            let sum: f64 = row.iter().sum();
+            if (sum - 1.0).abs() > ROW_TOLERANCE {
+                return Err(BnError::CptRow {
+                    node: n.name.clone(),
+                    row: r,
+                    sum,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    fn topological_order(&self) -> Result<Vec<NodeId>, BnError> {
+        let n = self.nodes.len();
+        let mut indeg: Vec<usize> = self.nodes.iter().map(|x| x.parents.len()).collect();
+        let mut children = vec![Vec::new(); n];
+        for (i, x) in self.nodes.iter().enumerate() {
+            for p in &x.parents {
+                children[p.0].push(i);
+            }
+        }
+        let mut ready: Vec<usize> = (0..n).filter(|&i| indeg[i] == 0).rev().collect();
+        let mut order = Vec::with_capacity(n);
+        while let Some(i) = ready.pop() {
+            order.push(NodeId(i));
+            for &c in &children[i] {
+                indeg[c] -= 1;
+                if indeg[c] == 0 {
+                    ready.push(c);
+                }
+            }
+        }
+        if order.len() < n {
+            let cyc = (0..n)
+                .filter(|&i| indeg[i] > 0)
+                .map(|i| self.nodes[i].name.clone())
+                .collect();
+            return Err(BnError::Cycle(cyc));
+        }
+        Ok(order)
+    }
+
+    /// Compile the junction tree once (min-fill elimination order); see [`Engine`].
+    pub fn compile(&self) -> Engine {
+        Engine::new(self.clone())
+    }
+}
+
+/// What is known about one node.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Finding {
+    /// Hard evidence: the node is in this state.
+    State(usize),
+    /// Soft (virtual) evidence: a likelihood per state, `P(observation | state)` up to a factor.
+    Likelihood(Vec<f64>),
+}
+
+/// A set of findings. Several findings on one node multiply.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Evidence {
+    pub findings: Vec<(NodeId, Finding)>,
+}
+
+impl Evidence {
+    pub fn new() -> Self {
+        Self::default()
+    }
+    pub fn set_state(&mut self, node: NodeId, state: usize) -> &mut Self {
+        self.findings.push((node, Finding::State(state)));
+        self
+    }
+    pub fn set_likelihood(&mut self, node: NodeId, likelihood: Vec<f64>) -> &mut Self {
+        self.findings.push((node, Finding::Likelihood(likelihood)));
+        self
+    }
+    pub fn clear(&mut self) {
+        self.findings.clear();
+    }
+    pub fn is_empty(&self) -> bool {
+        self.findings.is_empty()
+    }
+}

@@ -1,1 +1,1133 @@
-//! Placeholder: being written.
+//! Sparse finite MDPs and their solvers.
+//!
+//! * [`Mdp`]: per state, the admissible actions only (an action not admissible in a state is
+//!   simply absent), each with a reward `R(s,a)` and a sparse list of `(next_state, probability)`.
+//!   A state with no admissible action is *terminal*: its value is 0 and it has no decision.
+//!   The structure is fixed at build time; probabilities and rewards can be overwritten in place
+//!   ([`Mdp::probs_mut`], [`Mdp::rewards_mut`]) so re-instantiating with new probabilities costs
+//!   no allocation.
+//! * [`Workspace`]: preallocated solver buffers, reused across solves. After the first solve of a
+//!   given size (and horizon), re-solving allocates nothing.
+//! * Solvers (methods on [`Workspace`]): finite-horizon undiscounted backward induction (the BFM
+//!   paper's eq. 1–3), value iteration, policy iteration (eq. 4–5, policy evaluation by a dense
+//!   in-place linear solve on a nalgebra matrix) and modified policy iteration.
+//!
+//! **Tie-breaking** is deterministic everywhere: a later action (higher action index) replaces the
+//! current best only if its Q-value is larger by more than [`TIE_TOLERANCE`] relative to the best
+//! (`q > best + TIE_TOLERANCE * max(1, |best|)`). So among (numerically) equal Q-values the lowest
+//! action index wins. The infinite-horizon solvers all finish with one greedy extraction from their
+//! final values using this rule, so they return comparable policies.
+//!
+//! **Discounting.** `gamma` must be in `(0, 1]`. With `gamma < 1` every solver converges. With
+//! `gamma = 1` (total reward) the policy-evaluation system `(I - P_pi) v = r_pi` (terminal states
+//! fixed at 0) is nonsingular exactly when every non-terminal state reaches a terminal state with
+//! probability 1 under `pi` (a *proper* policy); policy iteration returns
+//! [`SolveError::Singular`] otherwise, and value iteration / modified policy iteration may stop at
+//! `max_iterations` with `converged = false`.
+
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+use std::ops::Range;
+
+pub type StateId = usize;
+pub type ActionId = usize;
+
+/// Relative margin by which a Q-value must beat the current best to replace it (see crate docs).
+pub const TIE_TOLERANCE: f64 = 1e-12;
+/// Tolerance on `sum_s' p(s'|s,a) = 1` used by [`Mdp::validate`].
+pub const ROW_SUM_TOLERANCE: f64 = 1e-9;
+/// A pivot smaller than this (relative to the largest matrix entry) makes the evaluation singular.
+pub const SINGULAR_TOLERANCE: f64 = 1e-12;
+
+const NONE: u32 = u32::MAX;
+
+/// Why an MDP could not be built or is not a valid stochastic model.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MdpError {
+    #[error("state {state} out of range (n_states = {n_states})")]
+    StateOutOfRange { state: usize, n_states: usize },
+    #[error("action {action} out of range (n_actions = {n_actions})")]
+    ActionOutOfRange { action: usize, n_actions: usize },
+    #[error("action {action} given twice for state {state}")]
+    DuplicateChoice { state: usize, action: usize },
+    #[error("state {state}, action {action}: no transition")]
+    NoTransition { state: usize, action: usize },
+    #[error("state {state}, action {action}: next state {next} given twice")]
+    DuplicateNext {
+        state: usize,
+        action: usize,
+        next: usize,
+    },
+    #[error("state {state}, action {action}: probability {prob} to {next} not in [0, 1]")]
+    BadProbability {
+        state: usize,
+        action: usize,
+        next: usize,
+        prob: f64,
+    },
+    #[error("state {state}, action {action}: probabilities sum to {sum}, not 1")]
+    RowSum {
+        state: usize,
+        action: usize,
+        sum: f64,
+    },
+    #[error("state {state}, action {action}: reward {reward} is not finite")]
+    BadReward {
+        state: usize,
+        action: usize,
+        reward: f64,
+    },
+    #[error("too many states, actions or transitions for 32-bit indices")]
+    TooLarge,
+}
+
+/// Why a solve failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SolveError {
+    #[error("discount factor {0} not in (0, 1]")]
+    BadGamma(f64),
+    #[error(
+        "policy evaluation singular at iteration {iteration} (improper policy with gamma = 1?)"
+    )]
+    Singular { iteration: u32 },
+}
+
+/// A sparse MDP in compressed (CSR-like) storage: states -> choices (admissible actions, sorted by
+/// action index) -> transitions.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "MdpRaw")]
+pub struct Mdp {
+    n_actions: usize,
+    /// `state_start[s]..state_start[s+1]` are the choices of state `s`.
+    state_start: Vec<u32>,
+    choice_action: Vec<u32>,
+    choice_reward: Vec<f64>,
+    /// `choice_start[c]..choice_start[c+1]` are the transitions of choice `c`.
+    choice_start: Vec<u32>,
+    next: Vec<u32>,
+    prob: Vec<f64>,
+}
+
+/// Serialized form of [`Mdp`]; deserialization checks the layout before trusting it, so a
+/// malformed file is an error, never a panic in a solver.
+#[derive(Deserialize)]
+struct MdpRaw {
+    n_actions: usize,
+    state_start: Vec<u32>,
+    choice_action: Vec<u32>,
+    choice_reward: Vec<f64>,
+    choice_start: Vec<u32>,
+    next: Vec<u32>,
+    prob: Vec<f64>,
+}
+
+impl TryFrom<MdpRaw> for Mdp {
+    type Error = String;
+    fn try_from(r: MdpRaw) -> Result<Self, String> {
+        let offsets_ok = |v: &[u32], end: usize| {
+            v.first() == Some(&0)
+                && v.windows(2).all(|w| w[0] <= w[1])
+                && v.last().map(|x| *x as usize) == Some(end)
+        };
+        let n_states = r.state_start.len().saturating_sub(1);
+        let n_choices = r.choice_action.len();
+        if !offsets_ok(&r.state_start, n_choices) {
+            return Err("state_start is not a valid offset array".into());
+        }
+        if r.choice_reward.len() != n_choices || r.choice_start.len() != n_choices + 1 {
+            return Err("choice arrays have inconsistent lengths".into());
+        }
+        if !offsets_ok(&r.choice_start, r.next.len()) || r.prob.len() != r.next.len() {
+            return Err("choice_start / next / prob are inconsistent".into());
+        }
+        if r.next.iter().any(|n| *n as usize >= n_states) {
+            return Err("next state out of range".into());
+        }
+        for s in 0..n_states {
+            let acts = &r.choice_action[r.state_start[s] as usize..r.state_start[s + 1] as usize];
+            if acts.iter().any(|a| *a as usize >= r.n_actions)
+                || acts.windows(2).any(|w| w[0] >= w[1])
+            {
+                return Err(format!(
+                    "state {s}: actions out of range or not strictly increasing"
+                ));
+            }
+        }
+        if r.choice_start.windows(2).any(|w| w[0] == w[1]) {
+            return Err("a choice has no transition".into());
+        }
+        let m = Mdp {
+            n_actions: r.n_actions,
+            state_start: r.state_start,
+            choice_action: r.choice_action,
+            choice_reward: r.choice_reward,
+            choice_start: r.choice_start,
+            next: r.next,
+            prob: r.prob,
+        };
+        m.validate().map_err(|e| e.to_string())?;
+        Ok(m)
+    }
+}
+
+/// One admissible (state, action) pair seen through [`Mdp::choices`].
+#[derive(Debug, Clone, Copy)]
+pub struct Choice<'a> {
+    /// Global choice index (for [`Mdp::rewards_mut`] and [`Mdp::transition_range`]).
+    pub index: usize,
+    pub action: ActionId,
+    pub reward: f64,
+    pub next: &'a [u32],
+    pub prob: &'a [f64],
+}
+
+/// (state, action, reward, transitions) as given to [`MdpBuilder::choice`].
+type PendingChoice = (usize, usize, f64, Vec<(usize, f64)>);
+
+/// Collects choices in any order, then builds an [`Mdp`].
+#[derive(Debug, Clone)]
+pub struct MdpBuilder {
+    n_states: usize,
+    n_actions: usize,
+    choices: Vec<PendingChoice>,
+}
+
+impl MdpBuilder {
+    pub fn new(n_states: usize, n_actions: usize) -> Self {
+        Self {
+            n_states,
+            n_actions,
+            choices: Vec::new(),
+        }
+    }
+
+    /// Make `action` admissible in `state` with reward `reward` and transitions `(next, p)`.
+    /// Transitions keep the given order (callers may rely on it to overwrite probabilities).
+    pub fn choice(
+        &mut self,
+        state: StateId,
+        action: ActionId,
+        reward: f64,
+        transitions: &[(StateId, f64)],
+    ) -> &mut Self {
+        self.choices
+            .push((state, action, reward, transitions.to_vec()));
+        self
+    }
+
+    /// Check indices and duplicates, lay out the storage and [`Mdp::validate`] it.
+    pub fn build(self) -> Result<Mdp, MdpError> {
+        let mdp = self.build_unchecked()?;
+        mdp.validate()?;
+        Ok(mdp)
+    }
+
+    /// Like [`MdpBuilder::build`] but without checking probabilities and rewards, for callers that
+    /// fill them in afterwards (then call [`Mdp::validate`]).
+    pub fn build_unchecked(mut self) -> Result<Mdp, MdpError> {
+        let n_states = self.n_states;
+        let n_actions = self.n_actions;
+        let total: usize = self.choices.iter().map(|c| c.3.len()).sum();
+        if n_states >= NONE as usize
+            || n_actions >= NONE as usize
+            || self.choices.len() >= NONE as usize
+            || total >= NONE as usize
+        {
+            return Err(MdpError::TooLarge);
+        }
+        for (s, a, _, tr) in &self.choices {
+            if *s >= n_states {
+                return Err(MdpError::StateOutOfRange {
+                    state: *s,
+                    n_states,
+                });
+            }
+            if *a >= n_actions {
+                return Err(MdpError::ActionOutOfRange {
+                    action: *a,
+                    n_actions,
+                });
+            }
+            if tr.is_empty() {
+                return Err(MdpError::NoTransition {
+                    state: *s,
+                    action: *a,
+                });
+            }
+            for (i, (n, _)) in tr.iter().enumerate() {
+                if *n >= n_states {
+                    return Err(MdpError::StateOutOfRange {
+                        state: *n,
+                        n_states,
+                    });
+                }
+                if tr[..i].iter().any(|(m, _)| m == n) {
+                    return Err(MdpError::DuplicateNext {
+                        state: *s,
+                        action: *a,
+                        next: *n,
+                    });
+                }
+            }
+        }
+        self.choices.sort_by_key(|c| (c.0, c.1));
+        for w in self.choices.windows(2) {
+            if w[0].0 == w[1].0 && w[0].1 == w[1].1 {
+                return Err(MdpError::DuplicateChoice {
+                    state: w[0].0,
+                    action: w[0].1,
+                });
+            }
+        }
+        let mut mdp = Mdp {
+            n_actions,
+            state_start: Vec::with_capacity(n_states + 1),
+            choice_action: Vec::with_capacity(self.choices.len()),
+            choice_reward: Vec::with_capacity(self.choices.len()),
+            choice_start: Vec::with_capacity(self.choices.len() + 1),
+            next: Vec::with_capacity(total),
+            prob: Vec::with_capacity(total),
+        };
+        let mut c = 0;
+        for s in 0..n_states {
+            mdp.state_start.push(mdp.choice_action.len() as u32);
+            while c < self.choices.len() && self.choices[c].0 == s {
+                let (_, a, r, tr) = &self.choices[c];
+                mdp.choice_action.push(*a as u32);
+                mdp.choice_reward.push(*r);
+                mdp.choice_start.push(mdp.next.len() as u32);
+                for (n, p) in tr {
+                    mdp.next.push(*n as u32);
+                    mdp.prob.push(*p);
+                }
+                c += 1;
+            }
+        }
+        mdp.state_start.push(mdp.choice_action.len() as u32);
+        mdp.choice_start.push(mdp.next.len() as u32);
+        Ok(mdp)
+    }
+}
+
+impl Mdp {
+    pub fn n_states(&self) -> usize {
+        self.state_start.len() - 1
+    }
+    pub fn n_actions(&self) -> usize {
+        self.n_actions
+    }
+    /// Number of admissible (state, action) pairs.
+    pub fn n_choices(&self) -> usize {
+        self.choice_action.len()
+    }
+    /// Number of stored (nonzero-pattern) transitions.
+    pub fn n_transitions(&self) -> usize {
+        self.next.len()
+    }
+    /// True when the state has no admissible action (value 0, no decision).
+    pub fn is_terminal(&self, s: StateId) -> bool {
+        self.state_start[s] == self.state_start[s + 1]
+    }
+
+    /// The admissible actions of `s`, in increasing action index.
+    pub fn choices(&self, s: StateId) -> impl Iterator<Item = Choice<'_>> + '_ {
+        let r = self.state_start[s] as usize..self.state_start[s + 1] as usize;
+        r.map(move |c| {
+            let t = self.transition_range(c);
+            Choice {
+                index: c,
+                action: self.choice_action[c] as usize,
+                reward: self.choice_reward[c],
+                next: &self.next[t.clone()],
+                prob: &self.prob[t],
+            }
+        })
+    }
+
+    /// Global index of choice `(s, a)`, or `None` when `a` is not admissible in `s`.
+    pub fn choice_index(&self, s: StateId, a: ActionId) -> Option<usize> {
+        let lo = self.state_start[s] as usize;
+        let hi = self.state_start[s + 1] as usize;
+        self.choice_action[lo..hi]
+            .binary_search(&(a as u32))
+            .ok()
+            .map(|i| lo + i)
+    }
+
+    /// Indices into [`Mdp::probs_mut`] / [`Mdp::next_states`] of choice `c`'s transitions.
+    pub fn transition_range(&self, c: usize) -> Range<usize> {
+        self.choice_start[c] as usize..self.choice_start[c + 1] as usize
+    }
+    pub fn next_states(&self) -> &[u32] {
+        &self.next
+    }
+    pub fn probs(&self) -> &[f64] {
+        &self.prob
+    }
+    pub fn probs_mut(&mut self) -> &mut [f64] {
+        &mut self.prob
+    }
+    pub fn rewards(&self) -> &[f64] {
+        &self.choice_reward
+    }
+    /// Rewards indexed by choice index.
+    pub fn rewards_mut(&mut self) -> &mut [f64] {
+        &mut self.choice_reward
+    }
+    /// The state a choice belongs to (linear in the number of states; for diagnostics).
+    fn state_of_choice(&self, c: usize) -> StateId {
+        self.state_start.partition_point(|&x| x as usize <= c) - 1
+    }
+
+    /// Check every probability is in `[0, 1]`, every row sums to 1 (within
+    /// [`ROW_SUM_TOLERANCE`]) and every reward is finite.
+    pub fn validate(&self) -> Result<(), MdpError> {
+        for c in 0..self.n_choices() {
+            let action = self.choice_action[c] as usize;
+            let reward = self.choice_reward[c];
+            if !reward.is_finite() {
+                return Err(MdpError::BadReward {
+                    state: self.state_of_choice(c),
+                    action,
+                    reward,
+                });
+            }
+            let mut sum = 0.0;
+            for t in self.transition_range(c) {
+                let p = self.prob[t];
+                if !(-ROW_SUM_TOLERANCE..=1.0 + ROW_SUM_TOLERANCE).contains(&p) {
+                    return Err(MdpError::BadProbability {
+                        state: self.state_of_choice(c),
+                        action,
+                        next: self.next[t] as usize,
+                        prob: p,
+                    });
+                }
+                sum += p;
+            }
+            if (sum - 1.0).abs() > ROW_SUM_TOLERANCE {
+                return Err(MdpError::RowSum {
+                    state: self.state_of_choice(c),
+                    action,
+                    sum,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// `R(s,a) + gamma * sum p(s'|s,a) v(s')` for choice `c`.
+    #[inline]
+    fn q(&self, c: usize, gamma: f64, v: &[f64]) -> f64 {
+        let t = self.transition_range(c);
+        let mut acc = 0.0;
+        for (n, p) in self.next[t.clone()].iter().zip(&self.prob[t]) {
+            acc += p * v[*n as usize];
+        }
+        self.choice_reward[c] + gamma * acc
+    }
+
+    /// Best choice of `s` under `v` (lowest action index among ties), its Q-value, or `None` for a
+    /// terminal state.
+    #[inline]
+    fn greedy(&self, s: StateId, gamma: f64, v: &[f64]) -> Option<(usize, f64)> {
+        let lo = self.state_start[s] as usize;
+        let hi = self.state_start[s + 1] as usize;
+        if lo == hi {
+            return None;
+        }
+        let mut best = (lo, self.q(lo, gamma, v));
+        for c in lo + 1..hi {
+            let q = self.q(c, gamma, v);
+            if beats(q, best.1) {
+                best = (c, q);
+            }
+        }
+        Some(best)
+    }
+}
+
+#[inline]
+fn beats(q: f64, best: f64) -> bool {
+    q > best + TIE_TOLERANCE * best.abs().max(1.0)
+}
+
+/// Settings for the infinite-horizon solvers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Config {
+    /// Discount factor in `(0, 1]`.
+    pub gamma: f64,
+    /// Stop when the sup-norm change between successive value estimates (value iteration) or the
+    /// Bellman residual (modified policy iteration) is below this.
+    pub tolerance: f64,
+    /// Upper bound on iterations (sweeps for VI, improvements for PI/MPI).
+    pub max_iterations: u32,
+    /// Modified policy iteration: partial evaluation sweeps per improvement.
+    pub eval_sweeps: u32,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            gamma: 0.95,
+            tolerance: 1e-9,
+            max_iterations: 100_000,
+            eval_sweeps: 20,
+        }
+    }
+}
+
+/// How a solve went.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Stats {
+    /// Finite horizon: the horizon. VI: sweeps. PI: policy evaluations (the paper's Table 9 count).
+    /// MPI: improvement steps.
+    pub iterations: u32,
+    /// `max_s |max_a Q(s,a) - v(s)|` at the returned values (finite horizon: 0).
+    pub residual: f64,
+    pub converged: bool,
+}
+
+/// Preallocated solver buffers. Create once, solve many times; buffers grow to the largest model
+/// (and horizon) seen and are then reused without allocation.
+#[derive(Debug, Clone)]
+pub struct Workspace {
+    n: usize,
+    v: Vec<f64>,
+    v2: Vec<f64>,
+    policy: Vec<u32>,
+    /// Chosen choice index per state (internal to PI/MPI).
+    pchoice: Vec<u32>,
+    horizon: usize,
+    /// `(horizon + 1) * n` values, stage-major; stage `horizon` is the zero terminal value.
+    fh_values: Vec<f64>,
+    /// `horizon * n` actions, stage-major.
+    fh_policy: Vec<u32>,
+    mat: DMatrix<f64>,
+    rhs: DVector<f64>,
+}
+
+impl Default for Workspace {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Workspace {
+    pub fn new() -> Self {
+        Self {
+            n: 0,
+            v: Vec::new(),
+            v2: Vec::new(),
+            policy: Vec::new(),
+            pchoice: Vec::new(),
+            horizon: 0,
+            fh_values: Vec::new(),
+            fh_policy: Vec::new(),
+            mat: DMatrix::zeros(0, 0),
+            rhs: DVector::zeros(0),
+        }
+    }
+
+    /// Preallocate for `n_states` states, a finite horizon up to `horizon`, and (when
+    /// `dense_solve`) the `n_states x n_states` policy-evaluation matrix.
+    pub fn with_capacity(n_states: usize, horizon: usize, dense_solve: bool) -> Self {
+        let mut ws = Self::new();
+        ws.reserve(n_states, horizon, dense_solve);
+        ws
+    }
+
+    /// Grow buffers (never shrinks); no allocation when already large enough.
+    pub fn reserve(&mut self, n: usize, horizon: usize, dense_solve: bool) {
+        self.n = n;
+        resize(&mut self.v, n, 0.0);
+        resize(&mut self.v2, n, 0.0);
+        resize(&mut self.policy, n, NONE);
+        resize(&mut self.pchoice, n, NONE);
+        if horizon > 0 {
+            self.horizon = horizon;
+            resize(&mut self.fh_values, (horizon + 1) * n, 0.0);
+            resize(&mut self.fh_policy, horizon * n, NONE);
+        }
+        // The dense matrix only grows; smaller models use its top-left block, so alternating
+        // between models of different sizes does not reallocate.
+        if dense_solve && self.mat.nrows() < n {
+            self.mat = DMatrix::zeros(n, n);
+            self.rhs = DVector::zeros(n);
+        }
+    }
+
+    /// Finite-horizon undiscounted backward induction (paper eq. 1–3): `V_H = 0` and
+    /// `V_t(s) = max_a R(s,a) + sum_s' p(s'|s,a) V_{t+1}(s')` for `t = H-1 .. 0`. Stage `t` is the
+    /// decision taken with `H - t` steps to go; `t = 0` is the decision to execute now.
+    pub fn finite_horizon(&mut self, mdp: &Mdp, horizon: usize) -> FiniteHorizonSolution<'_> {
+        let n = mdp.n_states();
+        self.reserve(n, horizon, false);
+        self.horizon = horizon;
+        let (vals, pol) = (&mut self.fh_values, &mut self.fh_policy);
+        vals[horizon * n..(horizon + 1) * n].fill(0.0);
+        for t in (0..horizon).rev() {
+            let (cur, next) = vals[t * n..(t + 2) * n].split_at_mut(n);
+            for s in 0..n {
+                match mdp.greedy(s, 1.0, next) {
+                    Some((c, q)) => {
+                        cur[s] = q;
+                        pol[t * n + s] = mdp.choice_action[c];
+                    }
+                    None => {
+                        cur[s] = 0.0;
+                        pol[t * n + s] = NONE;
+                    }
+                }
+            }
+        }
+        FiniteHorizonSolution {
+            ws: self,
+            n,
+            horizon,
+        }
+    }
+
+    /// Value iteration from `v = 0`: `v <- T v` until the sup-norm change is below
+    /// `cfg.tolerance` or `cfg.max_iterations` sweeps.
+    pub fn value_iteration(&mut self, mdp: &Mdp, cfg: &Config) -> Result<Solution<'_>, SolveError> {
+        check_gamma(cfg.gamma)?;
+        let n = mdp.n_states();
+        self.reserve(n, 0, false);
+        self.v[..n].fill(0.0);
+        let mut iterations = 0;
+        let mut converged = false;
+        while iterations < cfg.max_iterations {
+            let mut diff: f64 = 0.0;
+            for s in 0..n {
+                let q = mdp.greedy(s, cfg.gamma, &self.v[..n]).map_or(0.0, |b| b.1);
+                diff = diff.max((q - self.v[s]).abs());
+                self.v2[s] = q;
+            }
+            std::mem::swap(&mut self.v, &mut self.v2);
+            iterations += 1;
+            if diff < cfg.tolerance || !diff.is_finite() {
+                converged = diff.is_finite();
+                break;
+            }
+        }
+        Ok(self.finish(mdp, cfg.gamma, iterations, converged))
+    }
+
+    /// Policy iteration (paper eq. 4–5). Starts from the greedy policy for immediate rewards;
+    /// evaluates each policy exactly by solving `(I - gamma P_pi) v = r_pi` (terminal rows fixed to
+    /// `v = 0`) with Gaussian elimination with partial pivoting in the preallocated nalgebra
+    /// matrix; improves by switching a state's action only when another is strictly better (so it
+    /// cannot cycle); stops when the policy is stable. `Stats::iterations` counts evaluations.
+    /// Dense: O(|S|^2) memory and O(|S|^3) time per evaluation.
+    pub fn policy_iteration(
+        &mut self,
+        mdp: &Mdp,
+        cfg: &Config,
+    ) -> Result<Solution<'_>, SolveError> {
+        check_gamma(cfg.gamma)?;
+        let n = mdp.n_states();
+        self.reserve(n, 0, true);
+        self.v[..n].fill(0.0);
+        for s in 0..n {
+            self.pchoice[s] = mdp
+                .greedy(s, cfg.gamma, &self.v[..n])
+                .map_or(NONE, |b| b.0 as u32);
+        }
+        let mut iterations = 0;
+        let mut converged = false;
+        while iterations < cfg.max_iterations {
+            iterations += 1;
+            if !self.evaluate_exact(mdp, cfg.gamma) {
+                return Err(SolveError::Singular {
+                    iteration: iterations,
+                });
+            }
+            if !self.improve(mdp, cfg.gamma) {
+                converged = true;
+                break;
+            }
+        }
+        Ok(self.finish(mdp, cfg.gamma, iterations, converged))
+    }
+
+    /// Modified policy iteration (Puterman 6.5): from `v0 = min(0, min R) / (1 - gamma)` (or 0 when
+    /// `gamma = 1`), repeat: greedy policy for `v`; stop if the Bellman residual is below
+    /// `cfg.tolerance`; else apply that policy's operator `cfg.eval_sweeps` times.
+    pub fn modified_policy_iteration(
+        &mut self,
+        mdp: &Mdp,
+        cfg: &Config,
+    ) -> Result<Solution<'_>, SolveError> {
+        check_gamma(cfg.gamma)?;
+        let n = mdp.n_states();
+        self.reserve(n, 0, false);
+        let v0 = if cfg.gamma < 1.0 {
+            let rmin = mdp.choice_reward.iter().copied().fold(0.0, f64::min);
+            rmin / (1.0 - cfg.gamma)
+        } else {
+            0.0
+        };
+        for s in 0..n {
+            self.v[s] = if mdp.is_terminal(s) { 0.0 } else { v0 };
+        }
+        let mut iterations = 0;
+        let mut converged = false;
+        while iterations < cfg.max_iterations {
+            iterations += 1;
+            let mut residual: f64 = 0.0;
+            for s in 0..n {
+                let (c, q) = match mdp.greedy(s, cfg.gamma, &self.v[..n]) {
+                    Some(b) => (b.0 as u32, b.1),
+                    None => (NONE, 0.0),
+                };
+                self.pchoice[s] = c;
+                residual = residual.max((q - self.v[s]).abs());
+                self.v2[s] = q;
+            }
+            std::mem::swap(&mut self.v, &mut self.v2);
+            if residual < cfg.tolerance || !residual.is_finite() {
+                converged = residual.is_finite();
+                break;
+            }
+            for _ in 1..cfg.eval_sweeps.max(1) {
+                for s in 0..n {
+                    let c = self.pchoice[s];
+                    self.v2[s] = if c == NONE {
+                        0.0
+                    } else {
+                        mdp.q(c as usize, cfg.gamma, &self.v[..n])
+                    };
+                }
+                std::mem::swap(&mut self.v, &mut self.v2);
+            }
+        }
+        Ok(self.finish(mdp, cfg.gamma, iterations, converged))
+    }
+
+    /// Evaluate the stationary policy `policy[s]` (an action admissible in `s`, or anything for a
+    /// terminal state) exactly. Returns the values, or `None` when the system is singular or an
+    /// action is not admissible.
+    pub fn evaluate_policy(
+        &mut self,
+        mdp: &Mdp,
+        policy: &[ActionId],
+        gamma: f64,
+    ) -> Option<&[f64]> {
+        let n = mdp.n_states();
+        self.reserve(n, 0, true);
+        for s in 0..n {
+            self.pchoice[s] = if mdp.is_terminal(s) {
+                NONE
+            } else {
+                mdp.choice_index(s, *policy.get(s)?)? as u32
+            };
+        }
+        if self.evaluate_exact(mdp, gamma) {
+            Some(&self.v[..n])
+        } else {
+            None
+        }
+    }
+
+    /// Solve `(I - gamma P_pi) v = r_pi` for the policy in `pchoice` into `v`. False if singular.
+    fn evaluate_exact(&mut self, mdp: &Mdp, gamma: f64) -> bool {
+        let n = mdp.n_states();
+        let a = &mut self.mat;
+        let b = &mut self.rhs;
+        for j in 0..n {
+            for i in 0..n {
+                a[(i, j)] = 0.0;
+            }
+        }
+        for s in 0..n {
+            a[(s, s)] = 1.0;
+            let c = self.pchoice[s];
+            if c == NONE {
+                b[s] = 0.0;
+                continue;
+            }
+            let c = c as usize;
+            b[s] = mdp.choice_reward[c];
+            for t in mdp.transition_range(c) {
+                a[(s, mdp.next[t] as usize)] -= gamma * mdp.prob[t];
+            }
+        }
+        if !solve_block_in_place(a, b, n) {
+            return false;
+        }
+        self.v[..n].copy_from_slice(&b.as_slice()[..n]);
+        true
+    }
+
+    /// Policy improvement on `pchoice` given `v`. Returns true if any state changed.
+    fn improve(&mut self, mdp: &Mdp, gamma: f64) -> bool {
+        let n = mdp.n_states();
+        let mut changed = false;
+        for s in 0..n {
+            let cur = self.pchoice[s];
+            if cur == NONE {
+                continue;
+            }
+            let (best_c, best_q) = mdp.greedy(s, gamma, &self.v[..n]).expect("non-terminal");
+            let cur_q = mdp.q(cur as usize, gamma, &self.v[..n]);
+            if best_c != cur as usize && beats(best_q, cur_q) {
+                self.pchoice[s] = best_c as u32;
+                changed = true;
+            }
+        }
+        changed
+    }
+
+    /// Greedy extraction (lowest-index tie-breaking) and Bellman residual at the final values.
+    fn finish(&mut self, mdp: &Mdp, gamma: f64, iterations: u32, converged: bool) -> Solution<'_> {
+        let n = mdp.n_states();
+        let mut residual: f64 = 0.0;
+        for s in 0..n {
+            match mdp.greedy(s, gamma, &self.v[..n]) {
+                Some((c, q)) => {
+                    self.policy[s] = mdp.choice_action[c];
+                    residual = residual.max((q - self.v[s]).abs());
+                }
+                None => self.policy[s] = NONE,
+            }
+        }
+        Solution {
+            values: &self.v[..n],
+            policy: &self.policy[..n],
+            stats: Stats {
+                iterations,
+                residual,
+                converged,
+            },
+        }
+    }
+}
+
+fn resize<T: Copy>(v: &mut Vec<T>, n: usize, fill: T) {
+    if v.len() < n {
+        v.resize(n, fill);
+    }
+}
+
+fn check_gamma(g: f64) -> Result<(), SolveError> {
+    if g > 0.0 && g <= 1.0 {
+        Ok(())
+    } else {
+        Err(SolveError::BadGamma(g))
+    }
+}
+
+/// Solve `a x = b` in place (x overwrites b) by Gaussian elimination with partial pivoting,
+/// column-oriented for nalgebra's column-major storage. Allocation-free. False if singular.
+pub fn solve_in_place(a: &mut DMatrix<f64>, b: &mut DVector<f64>) -> bool {
+    let n = a.nrows();
+    solve_block_in_place(a, b, n)
+}
+
+/// [`solve_in_place`] on the top-left `n x n` block of `a` and the first `n` entries of `b`
+/// (entries outside the block are ignored, and may be changed).
+fn solve_block_in_place(a: &mut DMatrix<f64>, b: &mut DVector<f64>, n: usize) -> bool {
+    let mut scale: f64 = 1.0;
+    for j in 0..n {
+        for i in 0..n {
+            scale = scale.max(a[(i, j)].abs());
+        }
+    }
+    for k in 0..n {
+        let mut p = k;
+        let mut best = a[(k, k)].abs();
+        for i in k + 1..n {
+            let x = a[(i, k)].abs();
+            if x > best {
+                best = x;
+                p = i;
+            }
+        }
+        if best.is_nan() || best <= SINGULAR_TOLERANCE * scale {
+            return false;
+        }
+        if p != k {
+            a.swap_rows(k, p);
+            b.swap_rows(k, p);
+        }
+        let pivot = a[(k, k)];
+        for i in k + 1..n {
+            a[(i, k)] /= pivot;
+        }
+        let bk = b[k];
+        for i in k + 1..n {
+            b[i] -= a[(i, k)] * bk;
+        }
+        for j in k + 1..n {
+            let akj = a[(k, j)];
+            if akj != 0.0 {
+                for i in k + 1..n {
+                    let l = a[(i, k)];
+                    a[(i, j)] -= l * akj;
+                }
+            }
+        }
+    }
+    for k in (0..n).rev() {
+        let mut x = b[k];
+        for j in k + 1..n {
+            x -= a[(k, j)] * b[j];
+        }
+        b[k] = x / a[(k, k)];
+    }
+    true
+}
+
+/// Result of [`Workspace::finite_horizon`], borrowing the workspace.
+#[derive(Debug)]
+pub struct FiniteHorizonSolution<'a> {
+    ws: &'a Workspace,
+    n: usize,
+    horizon: usize,
+}
+
+impl FiniteHorizonSolution<'_> {
+    pub fn horizon(&self) -> usize {
+        self.horizon
+    }
+    /// Optimal expected total reward from `s` with `horizon - t` steps to go.
+    pub fn value(&self, t: usize, s: StateId) -> f64 {
+        self.ws.fh_values[t * self.n + s]
+    }
+    /// Values at stage `t` (`t = horizon` is all zeros).
+    pub fn values_at(&self, t: usize) -> &[f64] {
+        &self.ws.fh_values[t * self.n..(t + 1) * self.n]
+    }
+    /// Optimal action at stage `t < horizon` in `s`, `None` for a terminal state.
+    pub fn action(&self, t: usize, s: StateId) -> Option<ActionId> {
+        let a = self.ws.fh_policy[t * self.n + s];
+        (a != NONE).then_some(a as usize)
+    }
+    /// The decision to execute now (stage 0); `None` for terminal states or horizon 0.
+    pub fn decision(&self, s: StateId) -> Option<ActionId> {
+        if self.horizon == 0 {
+            None
+        } else {
+            self.action(0, s)
+        }
+    }
+    pub fn stats(&self) -> Stats {
+        Stats {
+            iterations: self.horizon as u32,
+            residual: 0.0,
+            converged: true,
+        }
+    }
+}
+
+/// Result of an infinite-horizon solve, borrowing the workspace.
+#[derive(Debug)]
+pub struct Solution<'a> {
+    values: &'a [f64],
+    policy: &'a [u32],
+    pub stats: Stats,
+}
+
+impl Solution<'_> {
+    pub fn values(&self) -> &[f64] {
+        self.values
+    }
+    pub fn value(&self, s: StateId) -> f64 {
+        self.values[s]
+    }
+    /// Greedy action in `s` (lowest index among ties), `None` for a terminal state.
+    pub fn action(&self, s: StateId) -> Option<ActionId> {
+        let a = self.policy[s];
+        (a != NONE).then_some(a as usize)
+    }
+    /// The policy as action indices, `None` for terminal states (allocates; for tests/tools).
+    pub fn policy(&self) -> Vec<Option<ActionId>> {
+        (0..self.policy.len()).map(|s| self.action(s)).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two-state chain by hand: s0 --a0 (r=1)--> s1 (terminal) or s0 --a1 (r=0)--> s0 w.p. 1/2,
+    /// s1 w.p. 1/2. With gamma = 1/2: Q(a1) = 0 + 0.5 * 0.5 * v0; v0 = max(1, 0.25 v0) = 1.
+    #[test]
+    fn hand_computed_two_states() {
+        let mut b = MdpBuilder::new(2, 2);
+        b.choice(0, 0, 1.0, &[(1, 1.0)])
+            .choice(0, 1, 0.0, &[(0, 0.5), (1, 0.5)]);
+        let m = b.build().unwrap();
+        let cfg = Config {
+            gamma: 0.5,
+            ..Config::default()
+        };
+        let mut ws = Workspace::new();
+        let s = ws.policy_iteration(&m, &cfg).unwrap();
+        assert!((s.value(0) - 1.0).abs() < 1e-12);
+        assert_eq!(s.action(0), Some(0));
+        assert_eq!(s.action(1), None);
+        assert_eq!(s.value(1), 0.0);
+    }
+
+    /// Finite horizon by hand: "wait" (action 0, reward 1, self loop) versus "cash" (action 1,
+    /// reward 5, to a terminal state). With h steps to go V_h = max(1 + V_{h-1}, 5): V_1 = 5
+    /// (cash), then V_h = h + 4 (wait). With a wait reward of 0 instead, V_h = 5 for all h and
+    /// from h = 2 on both actions tie, so the lowest index (wait) must be chosen.
+    #[test]
+    fn finite_horizon_by_hand() {
+        for wait_reward in [1.0, 0.0] {
+            let mut b = MdpBuilder::new(2, 2);
+            b.choice(0, 0, wait_reward, &[(0, 1.0)])
+                .choice(0, 1, 5.0, &[(1, 1.0)]);
+            let m = b.build().unwrap();
+            let mut ws = Workspace::new();
+            for h in 1..10usize {
+                let fh = ws.finite_horizon(&m, h);
+                let expected = if wait_reward == 1.0 {
+                    h as f64 + 4.0
+                } else {
+                    5.0
+                };
+                assert_eq!(fh.value(0, 0), expected, "h={h}");
+                assert_eq!(fh.decision(0), Some(if h == 1 { 1 } else { 0 }), "h={h}");
+                // The last stage always cashes in.
+                assert_eq!(fh.action(h - 1, 0), Some(1));
+                assert_eq!(fh.decision(1), None);
+            }
+        }
+    }
+
+    #[test]
+    fn builder_rejects_bad_input() {
+        let mut b = MdpBuilder::new(2, 1);
+        b.choice(0, 0, 0.0, &[(1, 0.5)]);
+        assert!(matches!(
+            b.build(),
+            Err(MdpError::RowSum {
+                state: 0,
+                action: 0,
+                ..
+            })
+        ));
+        let mut b = MdpBuilder::new(2, 1);
+        b.choice(0, 0, 0.0, &[(2, 1.0)]);
+        assert!(matches!(
+            b.build(),
+            Err(MdpError::StateOutOfRange { state: 2, .. })
+        ));
+        let mut b = MdpBuilder::new(2, 1);
+        b.choice(0, 1, 0.0, &[(1, 1.0)]);
+        assert!(matches!(
+            b.build(),
+            Err(MdpError::ActionOutOfRange { action: 1, .. })
+        ));
+        let mut b = MdpBuilder::new(2, 1);
+        b.choice(0, 0, 0.0, &[(1, 1.0)])
+            .choice(0, 0, 0.0, &[(1, 1.0)]);
+        assert!(matches!(b.build(), Err(MdpError::DuplicateChoice { .. })));
+        let mut b = MdpBuilder::new(2, 1);
+        b.choice(0, 0, 0.0, &[]);
+        assert!(matches!(b.build(), Err(MdpError::NoTransition { .. })));
+        let mut b = MdpBuilder::new(2, 1);
+        b.choice(1, 0, 0.0, &[(0, 1.5), (1, -0.5)]);
+        assert!(matches!(
+            b.build(),
+            Err(MdpError::BadProbability { state: 1, .. })
+        ));
+        let mut b = MdpBuilder::new(2, 1);
+        b.choice(1, 0, f64::NAN, &[(0, 1.0)]);
+        assert!(matches!(
+            b.build(),
+            Err(MdpError::BadReward { state: 1, .. })
+        ));
+        let mut b = MdpBuilder::new(2, 1);
+        b.choice(1, 0, 0.0, &[(0, 0.5), (0, 0.5)]);
+        assert!(matches!(b.build(), Err(MdpError::DuplicateNext { .. })));
+    }
+
+    #[test]
+    fn deserialization_rejects_inconsistent_layouts() {
+        let mut b = MdpBuilder::new(2, 2);
+        b.choice(0, 1, 1.0, &[(1, 1.0)])
+            .choice(1, 0, 0.0, &[(0, 0.5), (1, 0.5)]);
+        let m = b.build().unwrap();
+        let json = serde_json::to_string(&m).unwrap();
+        assert_eq!(serde_json::from_str::<Mdp>(&json).unwrap(), m);
+        for (from, to) in [
+            ("\"next\":[1,0,1]", "\"next\":[1,0,2]"), // next state out of range
+            ("\"prob\":[1.0,0.5,0.5]", "\"prob\":[1.0,0.5]"), // length mismatch
+            ("\"prob\":[1.0,0.5,0.5]", "\"prob\":[1.0,0.5,0.6]"), // row sum
+            ("\"n_actions\":2", "\"n_actions\":1"),   // action out of range
+            ("\"state_start\":[0,1,2]", "\"state_start\":[0,2,1]"), // offsets not monotone
+            ("\"choice_start\":[0,1,3]", "\"choice_start\":[0,1,4]"),
+        ] {
+            assert!(json.contains(from), "{json}");
+            let bad = json.replace(from, to);
+            assert!(serde_json::from_str::<Mdp>(&bad).is_err(), "accepted {bad}");
+        }
+    }
+
+    #[test]
+    fn improper_policy_with_gamma_one_is_singular() {
+        // Only action: self loop with reward 1 -> infinite total reward.
+        let mut b = MdpBuilder::new(1, 1);
+        b.choice(0, 0, 1.0, &[(0, 1.0)]);
+        let m = b.build().unwrap();
+        let cfg = Config {
+            gamma: 1.0,
+            ..Config::default()
+        };
+        let mut ws = Workspace::new();
+        assert_eq!(
+            ws.policy_iteration(&m, &cfg).unwrap_err(),
+            SolveError::Singular { iteration: 1 }
+        );
+        assert!(matches!(
+            ws.policy_iteration(&m, &Config { gamma: 0.0, ..cfg }),
+            Err(SolveError::BadGamma(_))
+        ));
+        let vi = ws
+            .value_iteration(
+                &m,
+                &Config {
+                    max_iterations: 50,
+                    ..cfg
+                },
+            )
+            .unwrap();
+        assert!(!vi.stats.converged);
+        assert_eq!(vi.stats.iterations, 50);
+    }
+
+    #[test]
+    fn solve_in_place_matches_nalgebra_lu() {
+        let a0 = DMatrix::from_row_slice(3, 3, &[0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 4.0]);
+        let b0 = DVector::from_row_slice(&[1.0, 2.0, 3.0]);
+        let expect = a0.clone().lu().solve(&b0).unwrap();
+        let (mut a, mut b) = (a0, b0);
+        assert!(solve_in_place(&mut a, &mut b));
+        assert!((b - expect).amax() < 1e-12);
+    }
+
+    #[test]
+    fn in_place_update_changes_decision() {
+        // s0: a0 (reward 0) -> s1 w.p. p, terminal s2 otherwise; a1 (reward 0.3) -> s2.
+        // s1: a0 reward 1 -> s2. Horizon 2: a0 is worth p * 1, a1 is worth 0.3.
+        let mut b = MdpBuilder::new(3, 2);
+        b.choice(0, 0, 0.0, &[(1, 0.5), (2, 0.5)])
+            .choice(0, 1, 0.3, &[(2, 1.0)])
+            .choice(1, 0, 1.0, &[(2, 1.0)]);
+        let mut m = b.build().unwrap();
+        let mut ws = Workspace::new();
+        assert_eq!(ws.finite_horizon(&m, 2).decision(0), Some(0));
+        let c = m.choice_index(0, 0).unwrap();
+        let r = m.transition_range(c);
+        m.probs_mut()[r.start] = 0.2;
+        m.probs_mut()[r.start + 1] = 0.8;
+        m.validate().unwrap();
+        assert_eq!(ws.finite_horizon(&m, 2).decision(0), Some(1));
+        assert_eq!(m.choice_index(1, 1), None);
+    }
+}

@@ -1,0 +1,169 @@
+//! Online performance management (paper section 7.3): margins, drift and the reduced mission.
+
+use crate::{Activity, Exact, Goal, Infeasible, Problem, Selection, allocate, exact};
+use serde::{Deserialize, Serialize};
+
+/// What has been measured so far: the activity being flown (index into the problem), the fraction
+/// of it already flown (0 at its start, 1 at its end; 0 is the conservative choice when unknown),
+/// and the measured total per goal since the mission started.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Measured {
+    pub activity: usize,
+    pub fraction: f64,
+    pub so_far: Vec<f64>,
+}
+
+/// Per goal (same order as the problem's goals).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MarginReport {
+    /// What the plan expected to have spent by now.
+    pub estimated_so_far: Vec<f64>,
+    /// What the plan expects to spend from now to the end.
+    pub remainder: Vec<f64>,
+    /// `goal - (measured so far + remainder)`: paper eq. 7 with `FPerf(MS)(t)` = measured + remainder.
+    pub margin: Vec<f64>,
+    /// `measured so far - estimated so far`.
+    pub drift: Vec<f64>,
+}
+
+fn split(p: &Problem, choice: &[usize], m: &Measured, g: usize) -> (f64, f64) {
+    let f = m.fraction.clamp(0.0, 1.0);
+    let mut before = 0.0;
+    let mut after = 0.0;
+    for (j, (a, &i)) in p.activities.iter().zip(choice).enumerate() {
+        let c = a.ias[i].cost[g];
+        match j.cmp(&m.activity) {
+            std::cmp::Ordering::Less => before += c,
+            std::cmp::Ordering::Equal => {
+                before += f * c;
+                after += (1.0 - f) * c;
+            }
+            std::cmp::Ordering::Greater => after += c,
+        }
+    }
+    (before, after)
+}
+
+/// Margins and drift of allocation `choice` given the measurements.
+pub fn margins(p: &Problem, choice: &[usize], m: &Measured) -> MarginReport {
+    let mut r = MarginReport {
+        estimated_so_far: vec![],
+        remainder: vec![],
+        margin: vec![],
+        drift: vec![],
+    };
+    for (g, goal) in p.goals.iter().enumerate() {
+        let (before, after) = split(p, choice, m, g);
+        let measured = m.so_far.get(g).copied().unwrap_or(0.0);
+        r.estimated_so_far.push(before);
+        r.remainder.push(after);
+        r.margin.push(goal.bound - (measured + after));
+        r.drift.push(measured - before);
+    }
+    r
+}
+
+/// The reduced mission scenario from the current activity: goals lowered by what was measured,
+/// the current activity's costs scaled by its unflown fraction, IAs using a failed resource
+/// removed. Returns the problem and, per reduced activity, the original IA index of each IA.
+/// A finished current activity (`fraction >= 1`) is not part of the reduced mission.
+pub fn reduced_problem(p: &Problem, m: &Measured, failed: &[String]) -> (Problem, Vec<Vec<usize>>) {
+    let m = &start_of_rest(m);
+    let f = m.fraction.clamp(0.0, 1.0);
+    let goals = p
+        .goals
+        .iter()
+        .enumerate()
+        .map(|(g, goal)| Goal {
+            name: goal.name.clone(),
+            bound: goal.bound - m.so_far.get(g).copied().unwrap_or(0.0),
+        })
+        .collect();
+    let mut map = Vec::new();
+    let activities = p
+        .activities
+        .iter()
+        .enumerate()
+        .skip(m.activity)
+        .map(|(j, a)| {
+            let keep: Vec<usize> = (0..a.ias.len())
+                .filter(|&i| !a.ias[i].resources.iter().any(|r| failed.contains(r)))
+                .collect();
+            let scale = if j == m.activity { 1.0 - f } else { 1.0 };
+            let ias = keep
+                .iter()
+                .map(|&i| {
+                    let mut ia = a.ias[i].clone();
+                    ia.cost.iter_mut().for_each(|c| *c *= scale);
+                    ia
+                })
+                .collect();
+            map.push(keep);
+            Activity {
+                name: a.name.clone(),
+                ias,
+            }
+        })
+        .collect();
+    (Problem { goals, activities }, map)
+}
+
+/// A new RAS for the reduced mission (paper section 7.3.2): the same allocation algorithm on
+/// [`reduced_problem`]. Returns the full-length choice (activities already flown keep theirs).
+pub fn reallocate(
+    p: &Problem,
+    choice: &[usize],
+    m: &Measured,
+    failed: &[String],
+    sel: Selection,
+) -> Result<Vec<usize>, Infeasible> {
+    let (rp, map) = reduced_problem(p, m, failed);
+    let a = allocate(&rp, sel)?;
+    let from = start_of_rest(m).activity;
+    let mut out = choice.to_vec();
+    for (k, &i) in a.choice.iter().enumerate() {
+        out[from + k] = map[k][i];
+    }
+    Ok(out)
+}
+
+fn start_of_rest(m: &Measured) -> Measured {
+    if m.fraction >= 1.0 {
+        Measured {
+            activity: m.activity + 1,
+            fraction: 0.0,
+            so_far: m.so_far.clone(),
+        }
+    } else {
+        m.clone()
+    }
+}
+
+/// [`reallocate`], and when the paper's algorithm finds nothing, a bounded [`exact`] search on the
+/// same reduced mission (its greedy reduction per goal can cut away what a later goal needs).
+/// Returns the choice and whether the exact search produced it; the paper's [`Infeasible`] when
+/// neither finds an allocation.
+pub fn reallocate_or_exact(
+    p: &Problem,
+    choice: &[usize],
+    m: &Measured,
+    failed: &[String],
+    sel: Selection,
+    max_nodes: u64,
+) -> Result<(Vec<usize>, bool), Infeasible> {
+    let e = match reallocate(p, choice, m, failed, sel) {
+        Ok(c) => return Ok((c, false)),
+        Err(e) => e,
+    };
+    let (rp, map) = reduced_problem(p, m, failed);
+    let a = match exact(&rp, sel, max_nodes) {
+        Exact::Optimal(a) | Exact::Aborted(Some(a)) => a,
+        _ => return Err(e),
+    };
+    let from = p.activities.len() - rp.activities.len();
+    let mut out = choice.to_vec();
+    for (k, &i) in a.choice.iter().enumerate() {
+        out[from + k] = map[k][i];
+    }
+    Ok((out, true))
+}

@@ -1,0 +1,152 @@
+//! `companion check`: load every params file and show what it compiles to.
+//!
+//! The report is a list of sections, each a JSON value under its key plus a human rendering.
+//! Adding a section (platform, variants, guarantee) is one line in [`SECTIONS`].
+
+use crate::health::HealthModel;
+use anyhow::Context;
+use serde_json::{Value, json};
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct CheckArgs {
+    /// Print the report as JSON (`{"health": [...], ...}`).
+    #[arg(long)]
+    pub json: bool,
+    /// Evidence for the health BNs: `NAME=STATE` or `OBSERVATION=VALUE`, comma-separated.
+    /// NAME is a node name, case-insensitive, with or without its role prefix
+    /// (`wind=strong,target_speed=high,qos=high`; `luminosity_lux=20`).
+    #[arg(long)]
+    pub evidence: Option<String>,
+    /// The params directory (default: $COMPANION_PARAMS or the workspace's params/).
+    #[arg(long)]
+    pub params: Option<PathBuf>,
+}
+
+/// What a section builder gets.
+pub struct CheckContext<'a> {
+    pub params: &'a Path,
+    pub args: &'a CheckArgs,
+}
+
+/// A section: its JSON value and its human text.
+pub type SectionFn = fn(&CheckContext) -> anyhow::Result<(Value, String)>;
+
+/// The report sections, in order.
+pub const SECTIONS: &[(&str, SectionFn)] = &[("health", health_section)];
+
+/// Parse `a=b,c=d`.
+pub fn parse_pairs(s: &str) -> anyhow::Result<Vec<(String, String)>> {
+    s.split(',')
+        .filter(|x| !x.trim().is_empty())
+        .map(|kv| {
+            let (k, v) = kv
+                .split_once('=')
+                .with_context(|| format!("`{kv}` is not NAME=VALUE"))?;
+            Ok((k.trim().to_string(), v.trim().to_string()))
+        })
+        .collect()
+}
+
+/// Build the whole report as JSON plus human text.
+pub fn report(args: &CheckArgs) -> anyhow::Result<(Value, String)> {
+    let params = args
+        .params
+        .clone()
+        .unwrap_or_else(crate::spec::default_params_dir);
+    let cx = CheckContext {
+        params: &params,
+        args,
+    };
+    let mut obj = serde_json::Map::new();
+    let mut text = String::new();
+    for (key, f) in SECTIONS {
+        let (v, t) = f(&cx).with_context(|| format!("check {key}"))?;
+        obj.insert(key.to_string(), v);
+        text.push_str(&t);
+    }
+    Ok((Value::Object(obj), text))
+}
+
+pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
+    let (v, text) = report(args)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        print!("{text}");
+    }
+    Ok(())
+}
+
+fn fmt_dist(states: &[String], p: &[f64]) -> String {
+    states
+        .iter()
+        .zip(p)
+        .map(|(s, x)| format!("{s} {x:.4}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Health managers: nodes with roles, states and posteriors; published probabilities.
+pub fn health_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
+    use std::fmt::Write;
+    let mut model = HealthModel::load(cx.params)?;
+    let pairs = match &cx.args.evidence {
+        Some(s) => parse_pairs(s)?,
+        None => Vec::new(),
+    };
+    let evidence = model.resolve_evidence(&pairs)?;
+    let values = model.evaluate(&evidence)?;
+    let mut text = String::new();
+    let mut items = Vec::new();
+    if !evidence.is_empty() {
+        let ev: Vec<String> = evidence.iter().map(|(k, v)| format!("{k}={v}")).collect();
+        writeln!(text, "evidence: {}", ev.join(", "))?;
+    }
+    for m in &model.managers {
+        writeln!(
+            text,
+            "health manager `{}` ({}): {}",
+            m.name,
+            m.file.display(),
+            m.description
+        )?;
+        let mut nodes = Vec::new();
+        for n in &m.nodes {
+            let post = m.marginal(&n.name).unwrap_or(&[]);
+            let observed = evidence.get(&n.name);
+            writeln!(
+                text,
+                "  {:<22} {:<15} [{}]{}",
+                n.name,
+                n.role,
+                fmt_dist(&n.states, post),
+                observed
+                    .map(|s| format!("  <- evidence {s}"))
+                    .unwrap_or_default()
+            )?;
+            nodes.push(json!({
+                "name": n.name,
+                "role": n.role,
+                "states": n.states,
+                "parents": n.parents,
+                "posterior": post,
+                "evidence": observed,
+            }));
+        }
+        let mut publishes = Vec::new();
+        for p in &m.publish {
+            let v = values.get(&p.name).copied().unwrap_or(f64::NAN);
+            writeln!(text, "  publishes {:<10} = {:.4}   {}", p.name, v, p.expr())?;
+            publishes.push(json!({ "name": p.name, "query": p.expr(), "value": v }));
+        }
+        items.push(json!({
+            "name": m.name,
+            "file": m.file.display().to_string(),
+            "description": m.description,
+            "nodes": nodes,
+            "publishes": publishes,
+        }));
+    }
+    Ok((Value::Array(items), text))
+}

@@ -1,0 +1,129 @@
+//! Raw observations to BN evidence: each observation names a node and ordered thresholds
+//! (params/observations.toml). A value `v` maps to `states[i]` where `i` counts the thresholds
+//! `t <= v` (a value on a threshold goes to the upper state). A missing or non-finite value puts
+//! no evidence on its node.
+
+use crate::observations::Observations;
+use crate::spec::{SpecError, read_toml};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ObservationsFile {
+    #[serde(default)]
+    observation: Vec<ObservationSpec>,
+}
+
+/// One observation and how it discretises.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObservationSpec {
+    pub name: String,
+    #[serde(default)]
+    pub unit: String,
+    /// The BN node (in any health manager) that receives the evidence.
+    pub node: String,
+    /// Strictly increasing; `states.len() == thresholds.len() + 1`.
+    pub thresholds: Vec<f64>,
+    pub states: Vec<String>,
+    #[serde(default)]
+    pub description: String,
+}
+
+impl ObservationSpec {
+    /// The state a value falls in.
+    pub fn state(&self, value: f64) -> Option<&str> {
+        if !value.is_finite() {
+            return None;
+        }
+        let i = self.thresholds.iter().filter(|&&t| t <= value).count();
+        Some(&self.states[i])
+    }
+}
+
+/// The validated observation mapping.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ObservationMap {
+    pub file: PathBuf,
+    pub observations: Vec<ObservationSpec>,
+}
+
+impl ObservationMap {
+    pub fn load(path: &Path) -> Result<Self, SpecError> {
+        let f: ObservationsFile = read_toml(path)?;
+        Self::new(path, f.observation)
+    }
+
+    /// Validate: unique names, one observation per node, thresholds strictly increasing and
+    /// finite, one more state than thresholds.
+    pub fn new(file: &Path, observations: Vec<ObservationSpec>) -> Result<Self, SpecError> {
+        let mut names = BTreeMap::new();
+        let mut nodes = BTreeMap::new();
+        for (i, o) in observations.iter().enumerate() {
+            let entry = |k: &str| format!("observation[{i}]({}).{k}", o.name);
+            if names.insert(o.name.clone(), i).is_some() {
+                return Err(SpecError::new(
+                    file,
+                    entry("name"),
+                    "duplicate observation name",
+                ));
+            }
+            if let Some(j) = nodes.insert(o.node.clone(), i) {
+                return Err(SpecError::new(
+                    file,
+                    entry("node"),
+                    format!("node `{}` already receives observation[{j}]", o.node),
+                ));
+            }
+            if let Some(t) = o.thresholds.iter().find(|t| !t.is_finite()) {
+                return Err(SpecError::new(
+                    file,
+                    entry("thresholds"),
+                    format!("{t} is not finite"),
+                ));
+            }
+            if let Some(w) = o.thresholds.windows(2).find(|w| w[0] >= w[1]) {
+                return Err(SpecError::new(
+                    file,
+                    entry("thresholds"),
+                    format!(
+                        "thresholds out of order: {} then {} (must strictly increase)",
+                        w[0], w[1]
+                    ),
+                ));
+            }
+            if o.states.len() != o.thresholds.len() + 1 {
+                return Err(SpecError::new(
+                    file,
+                    entry("states"),
+                    format!(
+                        "{} states for {} thresholds (need one more state)",
+                        o.states.len(),
+                        o.thresholds.len()
+                    ),
+                ));
+            }
+        }
+        Ok(Self {
+            file: file.to_path_buf(),
+            observations,
+        })
+    }
+
+    pub fn get(&self, name: &str) -> Option<&ObservationSpec> {
+        self.observations.iter().find(|o| o.name == name)
+    }
+
+    /// Evidence (node -> state) for every observation present in the snapshot.
+    pub fn evidence(&self, obs: &Observations) -> BTreeMap<String, String> {
+        let mut out = BTreeMap::new();
+        for o in &self.observations {
+            if let Some(s) = obs.get(&o.name).and_then(|v| o.state(v)) {
+                out.insert(o.node.clone(), s.to_string());
+            }
+        }
+        out
+    }
+}

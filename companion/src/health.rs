@@ -1,0 +1,480 @@
+//! The health managers (BFM paper section 4): every params/health/*.toml FMEA file compiled to a
+//! BN once at load, evaluated together each cycle into the named probabilities the MDPs consume
+//! (`P_sys`, `P_V3`, ...).
+//!
+//! Managers may import another manager's node (its posterior marginal becomes the prior of a
+//! local root: sensor and system health feed application health, application suitability feeds
+//! the resource-aware versions), so they are evaluated in import order. A dynamic manager carries
+//! its slice-t+1 belief into its slice-t prior between calls; that belief is the model's only
+//! mutable state, exposed by [`HealthModel::belief`] / [`HealthModel::set_belief`].
+
+use crate::evidence::ObservationMap;
+use crate::fmea::{CompiledHm, NodeInfo, Publish, load_hm};
+use crate::observations::Observations;
+use crate::spec::SpecError;
+use bayes_net::{BnError, Engine, Evidence, NodeId};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// A query failed at run time (only reachable with hand-written evidence).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum HealthError {
+    #[error("no health manager has a node `{0}`")]
+    UnknownNode(String),
+    #[error("node `{node}` has no state `{state}` (states: {states})")]
+    UnknownState {
+        node: String,
+        state: String,
+        states: String,
+    },
+    #[error("observation `{name}`: `{value}` is not a number")]
+    BadValue { name: String, value: String },
+    #[error("health manager `{manager}`: {error}")]
+    Inference { manager: String, error: BnError },
+}
+
+/// One compiled health manager.
+#[derive(Debug, Clone)]
+pub struct Manager {
+    pub name: String,
+    pub description: String,
+    pub file: PathBuf,
+    pub nodes: Vec<NodeInfo>,
+    pub publish: Vec<Publish>,
+    engine: Engine,
+    /// Prior CPTs as loaded, to reset carried beliefs.
+    initial: Vec<(NodeId, Vec<f64>)>,
+    imports: Vec<(NodeId, usize, NodeId)>,
+    carry: Vec<(NodeId, NodeId)>,
+    published: Vec<(usize, NodeId, usize, bool)>,
+}
+
+impl Manager {
+    /// Posterior marginal of a node from the last evaluation.
+    pub fn marginal(&self, node: &str) -> Option<&[f64]> {
+        self.engine
+            .network()
+            .id(node)
+            .map(|id| self.engine.marginal(id))
+    }
+    pub fn engine(&self) -> &Engine {
+        &self.engine
+    }
+}
+
+/// All health managers plus the observation mapping.
+#[derive(Debug, Clone)]
+pub struct HealthModel {
+    pub managers: Vec<Manager>,
+    pub observations: ObservationMap,
+}
+
+impl HealthModel {
+    /// Load `params_dir/observations.toml` and every `params_dir/health/*.toml`.
+    pub fn load(params_dir: &Path) -> Result<HealthModel, SpecError> {
+        let dir = params_dir.join("health");
+        let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+            .map_err(|e| SpecError::new(&dir, "-", format!("cannot list: {e}")))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+            .collect();
+        files.sort();
+        let hms = files
+            .iter()
+            .map(|f| load_hm(f))
+            .collect::<Result<Vec<_>, _>>()?;
+        let obs = ObservationMap::load(&params_dir.join("observations.toml"))?;
+        Self::from_parts(hms, obs)
+    }
+
+    /// Wire compiled managers together: resolve imports, order by them, check that publish
+    /// names are unique and that every observation targets an existing node and state.
+    pub fn from_parts(
+        hms: Vec<CompiledHm>,
+        observations: ObservationMap,
+    ) -> Result<HealthModel, SpecError> {
+        let index: BTreeMap<&str, usize> = hms
+            .iter()
+            .enumerate()
+            .map(|(i, h)| (h.name.as_str(), i))
+            .collect();
+        if index.len() != hms.len() {
+            let mut seen = BTreeMap::new();
+            for h in &hms {
+                if let Some(prev) = seen.insert(h.name.as_str(), &h.file) {
+                    return Err(SpecError::new(
+                        &h.file,
+                        "name",
+                        format!("manager `{}` is also defined in {}", h.name, prev.display()),
+                    ));
+                }
+            }
+        }
+        // Import edges and a topological order over managers.
+        let mut deps: Vec<Vec<usize>> = vec![Vec::new(); hms.len()];
+        for (i, h) in hms.iter().enumerate() {
+            for (local, m, src) in &h.imports {
+                let entry = format!("node.{local}.from");
+                let &j = index.get(m.as_str()).ok_or_else(|| {
+                    SpecError::new(&h.file, &entry, format!("no health manager `{m}`"))
+                })?;
+                let sid = hms[j].network.id(src).ok_or_else(|| {
+                    SpecError::new(
+                        &h.file,
+                        &entry,
+                        format!("manager `{m}` has no node `{src}`"),
+                    )
+                })?;
+                let lid = h.network.id(local).expect("compiled node");
+                if hms[j].network.node(sid).states != h.network.node(lid).states {
+                    return Err(SpecError::new(
+                        &h.file,
+                        entry,
+                        format!(
+                            "states differ from `{m}.{src}` ({:?})",
+                            hms[j].network.node(sid).states
+                        ),
+                    ));
+                }
+                deps[i].push(j);
+            }
+        }
+        let mut order = Vec::new();
+        let mut mark = vec![0u8; hms.len()];
+        fn visit(
+            i: usize,
+            deps: &[Vec<usize>],
+            mark: &mut [u8],
+            order: &mut Vec<usize>,
+        ) -> Result<(), usize> {
+            match mark[i] {
+                2 => return Ok(()),
+                1 => return Err(i),
+                _ => {}
+            }
+            mark[i] = 1;
+            for &j in &deps[i] {
+                visit(j, deps, mark, order)?;
+            }
+            mark[i] = 2;
+            order.push(i);
+            Ok(())
+        }
+        for i in 0..hms.len() {
+            visit(i, &deps, &mut mark, &mut order).map_err(|j| {
+                SpecError::new(
+                    &hms[j].file,
+                    "node",
+                    "imports between health managers form a cycle",
+                )
+            })?;
+        }
+        let mut publishers: BTreeMap<&str, &str> = BTreeMap::new();
+        for h in &hms {
+            for p in &h.publish {
+                if let Some(other) = publishers.insert(&p.name, &h.name) {
+                    return Err(SpecError::new(
+                        &h.file,
+                        format!("publish.{}", p.name),
+                        format!("also published by manager `{other}`"),
+                    ));
+                }
+            }
+        }
+        for (i, o) in observations.observations.iter().enumerate() {
+            let mut found = false;
+            for h in &hms {
+                if let Some(id) = h.network.id(&o.node) {
+                    found = true;
+                    for s in &o.states {
+                        if h.network.state(id, s).is_err() {
+                            return Err(SpecError::new(
+                                &observations.file,
+                                format!("observation[{i}]({}).states", o.name),
+                                format!(
+                                    "node `{}` in {} has no state `{s}`",
+                                    o.node,
+                                    h.file.display()
+                                ),
+                            ));
+                        }
+                    }
+                }
+            }
+            if !found {
+                return Err(SpecError::new(
+                    &observations.file,
+                    format!("observation[{i}]({}).node", o.name),
+                    format!("no health manager has a node `{}`", o.node),
+                ));
+            }
+        }
+        // Build managers in evaluation order; remap import sources to positions in that order.
+        let pos: BTreeMap<usize, usize> = order.iter().enumerate().map(|(p, &i)| (i, p)).collect();
+        let mut managers = Vec::new();
+        for &i in &order {
+            let h = &hms[i];
+            let net = &h.network;
+            let mut engine = net.compile();
+            let imports = h
+                .imports
+                .iter()
+                .map(|(local, m, src)| {
+                    let j = index[m.as_str()];
+                    (
+                        net.id(local).unwrap(),
+                        pos[&j],
+                        hms[j].network.id(src).unwrap(),
+                    )
+                })
+                .collect();
+            let carry: Vec<(NodeId, NodeId)> = h
+                .carry
+                .iter()
+                .map(|c| (net.id(&c.from).unwrap(), net.id(&c.to).unwrap()))
+                .collect();
+            let initial = carry
+                .iter()
+                .map(|&(_, t)| (t, net.node(t).cpt.clone()))
+                .collect();
+            let published = h
+                .publish
+                .iter()
+                .enumerate()
+                .map(|(k, p)| {
+                    let id = net.id(&p.node).unwrap();
+                    (k, id, net.state(id, &p.state).unwrap(), p.complement)
+                })
+                .collect();
+            // Marginals are defined from the start (prior, before any evidence).
+            let _ = engine.propagate(&Evidence::new());
+            managers.push(Manager {
+                name: h.name.clone(),
+                description: h.description.clone(),
+                file: h.file.clone(),
+                nodes: h.nodes.clone(),
+                publish: h.publish.clone(),
+                engine,
+                initial,
+                imports,
+                carry,
+                published,
+            });
+        }
+        Ok(HealthModel {
+            managers,
+            observations,
+        })
+    }
+
+    /// Every named probability, in name order.
+    pub fn publishes(&self) -> Vec<String> {
+        let mut v: Vec<String> = self
+            .managers
+            .iter()
+            .flat_map(|m| m.publish.iter().map(|p| p.name.clone()))
+            .collect();
+        v.sort();
+        v
+    }
+
+    pub fn manager(&self, name: &str) -> Option<&Manager> {
+        self.managers.iter().find(|m| m.name == name)
+    }
+
+    /// Discretise a snapshot into evidence (node -> state).
+    pub fn evidence(&self, obs: &Observations) -> BTreeMap<String, String> {
+        self.observations.evidence(obs)
+    }
+
+    /// Evaluate every manager under `evidence` (applied to each manager holding the node) and
+    /// return all published probabilities; then advance the dynamic managers by one slice.
+    pub fn evaluate(
+        &mut self,
+        evidence: &BTreeMap<String, String>,
+    ) -> Result<BTreeMap<String, f64>, HealthError> {
+        let mut out = BTreeMap::new();
+        self.evaluate_into(evidence, &mut out)?;
+        Ok(out)
+    }
+
+    /// As [`HealthModel::evaluate`], filling the caller's map.
+    pub fn evaluate_into(
+        &mut self,
+        evidence: &BTreeMap<String, String>,
+        out: &mut BTreeMap<String, f64>,
+    ) -> Result<(), HealthError> {
+        // Resolve everything first so a bad entry changes no state.
+        let mut per: Vec<Evidence> = vec![Evidence::new(); self.managers.len()];
+        for (node, state) in evidence {
+            let mut found = false;
+            for (m, ev) in self.managers.iter().zip(per.iter_mut()) {
+                let net = m.engine.network();
+                if let Some(id) = net.id(node) {
+                    found = true;
+                    let s = net
+                        .state(id, state)
+                        .map_err(|_| HealthError::UnknownState {
+                            node: node.clone(),
+                            state: state.clone(),
+                            states: net.node(id).states.join(", "),
+                        })?;
+                    ev.set_state(id, s);
+                }
+            }
+            if !found {
+                return Err(HealthError::UnknownNode(node.clone()));
+            }
+        }
+        #[allow(clippy::needless_range_loop)] // split_at_mut needs the index
+        for i in 0..self.managers.len() {
+            let (done, rest) = self.managers.split_at_mut(i);
+            let m = &mut rest[0];
+            for &(local, src_m, src) in &m.imports {
+                let prior = done[src_m].engine.marginal(src);
+                m.engine
+                    .set_cpt(local, prior)
+                    .or_else(|_| {
+                        // Renormalise tiny rounding drift of a marginal.
+                        let s: f64 = prior.iter().sum();
+                        let p: Vec<f64> = prior.iter().map(|x| x / s).collect();
+                        m.engine.set_cpt(local, &p)
+                    })
+                    .map_err(|error| HealthError::Inference {
+                        manager: m.name.clone(),
+                        error,
+                    })?;
+            }
+            m.engine
+                .propagate(&per[i])
+                .map_err(|error| HealthError::Inference {
+                    manager: m.name.clone(),
+                    error,
+                })?;
+            for &(k, id, s, complement) in &m.published {
+                let p = m.engine.marginal(id)[s];
+                out.insert(
+                    m.publish[k].name.clone(),
+                    if complement { 1.0 - p } else { p },
+                );
+            }
+        }
+        for m in &mut self.managers {
+            for &(from, to) in &m.carry {
+                let b = m.engine.marginal(from).to_vec();
+                let s: f64 = b.iter().sum();
+                let b: Vec<f64> = b.iter().map(|x| x / s).collect();
+                m.engine
+                    .set_cpt(to, &b)
+                    .map_err(|error| HealthError::Inference {
+                        manager: m.name.clone(),
+                        error,
+                    })?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The carried (dynamic) beliefs: (manager, node) -> prior for the next evaluation.
+    pub fn belief(&self) -> BTreeMap<(String, String), Vec<f64>> {
+        let mut out = BTreeMap::new();
+        for m in &self.managers {
+            for &(_, to) in &m.carry {
+                let net = m.engine.network();
+                out.insert(
+                    (m.name.clone(), net.node(to).name.clone()),
+                    net.node(to).cpt.clone(),
+                );
+            }
+        }
+        out
+    }
+
+    /// Restore carried beliefs (e.g. from a saved mission state).
+    pub fn set_belief(
+        &mut self,
+        belief: &BTreeMap<(String, String), Vec<f64>>,
+    ) -> Result<(), HealthError> {
+        for ((mn, node), b) in belief {
+            let m = self
+                .managers
+                .iter_mut()
+                .find(|m| &m.name == mn)
+                .ok_or_else(|| HealthError::UnknownNode(format!("{mn}.{node}")))?;
+            let id = m
+                .engine
+                .network()
+                .id(node)
+                .ok_or_else(|| HealthError::UnknownNode(node.clone()))?;
+            m.engine
+                .set_cpt(id, b)
+                .map_err(|error| HealthError::Inference {
+                    manager: mn.clone(),
+                    error,
+                })?;
+        }
+        Ok(())
+    }
+
+    /// Forget carried beliefs: back to the priors in the params files.
+    pub fn reset(&mut self) {
+        for m in &mut self.managers {
+            for (id, cpt) in m.initial.clone() {
+                m.engine.set_cpt(id, &cpt).expect("loaded CPT is valid");
+            }
+        }
+    }
+
+    /// Resolve user-typed evidence (`--evidence wind=strong,qos=high,wind_mps=12`): a key is a
+    /// node name, a node name without its role prefix (`A_`, `S_`, `U_`, `C_`, `H_S_`), any of
+    /// them case-insensitively, or an observation name with a numeric value.
+    pub fn resolve_evidence(
+        &self,
+        pairs: &[(String, String)],
+    ) -> Result<BTreeMap<String, String>, HealthError> {
+        let mut out = BTreeMap::new();
+        for (k, v) in pairs {
+            if let Some(o) = self.observations.get(k) {
+                let x: f64 = v.parse().map_err(|_| HealthError::BadValue {
+                    name: k.clone(),
+                    value: v.clone(),
+                })?;
+                if let Some(s) = o.state(x) {
+                    out.insert(o.node.clone(), s.to_string());
+                }
+                continue;
+            }
+            let node = self
+                .find_node(k)
+                .ok_or_else(|| HealthError::UnknownNode(k.clone()))?;
+            let states = &node.states;
+            let s = states
+                .iter()
+                .find(|s| s.eq_ignore_ascii_case(v))
+                .ok_or_else(|| HealthError::UnknownState {
+                    node: node.name.clone(),
+                    state: v.clone(),
+                    states: states.join(", "),
+                })?;
+            out.insert(node.name.clone(), s.clone());
+        }
+        Ok(out)
+    }
+
+    fn find_node(&self, key: &str) -> Option<&NodeInfo> {
+        let all = || self.managers.iter().flat_map(|m| m.nodes.iter());
+        let strip = |n: &str| -> String {
+            let l = n.to_ascii_lowercase();
+            for p in ["h_s_", "a_h_", "a_", "s_", "u_", "c_"] {
+                if let Some(r) = l.strip_prefix(p) {
+                    return r.to_string();
+                }
+            }
+            l
+        };
+        all()
+            .find(|n| n.name == key)
+            .or_else(|| all().find(|n| n.name.eq_ignore_ascii_case(key)))
+            .or_else(|| all().find(|n| strip(&n.name) == key.to_ascii_lowercase()))
+    }
+}

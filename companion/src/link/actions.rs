@@ -1,0 +1,634 @@
+//! Primitive vehicle actions as data: `params/commands.toml` maps `take_off`, `follow_trajectory`,
+//! `avoid_obstacle`, `land`, `replan_and_land`, `return_to_base` to MAVLink steps, and
+//! `params/missions/*_route.toml` gives the route `follow_trajectory` uploads.
+//! `params/link.toml` gives stream rates, onboard monitor names and event thresholds.
+
+use super::dialect::MavCmd;
+use super::mission::MissionItem;
+use super::telemetry::{TelemetryConfig, displace};
+use crate::spec::{SpecError, read_toml};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// One step of an action, as written in commands.toml (exactly one key per step).
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawStep {
+    mode: Option<String>,
+    arm: Option<bool>,
+    command: Option<String>,
+    params: Option<Vec<f32>>,
+    upload_mission: Option<bool>,
+    reposition: Option<Offset>,
+    goto_zone: Option<bool>,
+}
+
+/// Metres relative to the vehicle: forward along its heading, to its right, up.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Offset {
+    #[serde(default)]
+    pub forward_m: f64,
+    #[serde(default)]
+    pub right_m: f64,
+    #[serde(default)]
+    pub up_m: f64,
+}
+
+/// A step the executor runs.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Step {
+    /// Switch flight mode by name (GUIDED, AUTO, LOITER, RTL, LAND, BRAKE).
+    Mode(String),
+    /// Arm, once the autopilot reports ready.
+    Arm,
+    /// A COMMAND_LONG with these seven params.
+    Command { command: MavCmd, params: [f32; 7] },
+    /// Upload the route (verified by download).
+    UploadMission,
+    /// MAV_CMD_DO_REPOSITION to an offset from the vehicle.
+    Reposition(Offset),
+    /// MAV_CMD_DO_REPOSITION to the zone the landing-zone monitor reported, if any.
+    GotoZone,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAction {
+    steps: Vec<RawStep>,
+    #[serde(default)]
+    description: String,
+}
+
+/// Vehicle action name -> steps.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ActionTable {
+    pub actions: BTreeMap<String, Vec<Step>>,
+}
+
+fn parse_cmd(name: &str) -> Option<MavCmd> {
+    // The generated enum is serde-tagged: {"type": "MAV_CMD_..."}.
+    serde_json::from_value(serde_json::json!({ "type": name })).ok()
+}
+
+impl ActionTable {
+    pub fn load(path: &Path) -> Result<Self, SpecError> {
+        let raw: BTreeMap<String, RawAction> = read_toml(path)?;
+        let mut actions = BTreeMap::new();
+        for (name, a) in raw {
+            let _ = a.description;
+            if a.steps.is_empty() {
+                return Err(SpecError::new(
+                    path,
+                    format!("{name}.steps"),
+                    "an action needs at least one step",
+                ));
+            }
+            let mut steps = Vec::new();
+            for (i, s) in a.steps.iter().enumerate() {
+                let entry = format!("{name}.steps[{i}]");
+                let set = [
+                    s.mode.is_some(),
+                    s.arm.is_some(),
+                    s.command.is_some(),
+                    s.upload_mission.is_some(),
+                    s.reposition.is_some(),
+                    s.goto_zone.is_some(),
+                ]
+                .iter()
+                .filter(|b| **b)
+                .count();
+                if set != 1 {
+                    return Err(SpecError::new(
+                        path,
+                        entry,
+                        "a step has exactly one of mode, arm, command, upload_mission, reposition, goto_zone",
+                    ));
+                }
+                if s.params.is_some() && s.command.is_none() {
+                    return Err(SpecError::new(path, entry, "params only go with command"));
+                }
+                let step = if let Some(m) = &s.mode {
+                    if super::modes::set_mode_command(super::modes::Flavor::ArduPilot, m).is_none()
+                    {
+                        return Err(SpecError::new(path, entry, format!("unknown mode {m:?}")));
+                    }
+                    Step::Mode(m.clone())
+                } else if let Some(arm) = s.arm {
+                    if !arm {
+                        return Err(SpecError::new(
+                            path,
+                            entry,
+                            "arm = false is not a step (disarming is the autopilot's job)",
+                        ));
+                    }
+                    Step::Arm
+                } else if let Some(c) = &s.command {
+                    let command = parse_cmd(c).ok_or_else(|| {
+                        SpecError::new(path, &entry, format!("unknown MAVLink command {c:?}"))
+                    })?;
+                    let p = s.params.clone().unwrap_or_default();
+                    if p.len() > 7 {
+                        return Err(SpecError::new(
+                            path,
+                            entry,
+                            format!("{} params; a command has at most 7", p.len()),
+                        ));
+                    }
+                    if p.iter().any(|v| !v.is_finite()) {
+                        return Err(SpecError::new(path, entry, "params must be finite numbers"));
+                    }
+                    let mut params = [0.0f32; 7];
+                    params[..p.len()].copy_from_slice(&p);
+                    Step::Command { command, params }
+                } else if s.upload_mission == Some(true) {
+                    Step::UploadMission
+                } else if let Some(o) = s.reposition {
+                    if ![o.forward_m, o.right_m, o.up_m]
+                        .iter()
+                        .all(|v| v.is_finite())
+                    {
+                        return Err(SpecError::new(path, entry, "offsets must be finite"));
+                    }
+                    Step::Reposition(o)
+                } else if s.goto_zone == Some(true) {
+                    Step::GotoZone
+                } else {
+                    return Err(SpecError::new(
+                        path,
+                        entry,
+                        "upload_mission / goto_zone must be true",
+                    ));
+                };
+                steps.push(step);
+            }
+            actions.insert(name, steps);
+        }
+        Ok(Self { actions })
+    }
+}
+
+/// A route, relative to home (default) or absolute.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRoute {
+    #[serde(default = "relative")]
+    frame: String,
+    /// Altitude above home for waypoints that give none (m).
+    altitude_m: f64,
+    /// Give up searching after this long (s); the decision core reads it.
+    #[serde(default)]
+    search_time_limit_s: Option<f64>,
+    /// Put a NAV_TAKEOFF first so AUTO works from the ground too.
+    #[serde(default = "yes")]
+    takeoff_first: bool,
+    #[serde(default)]
+    description: String,
+    waypoint: Vec<RawWaypoint>,
+}
+
+fn relative() -> String {
+    "relative".into()
+}
+fn yes() -> bool {
+    true
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawWaypoint {
+    north_m: Option<f64>,
+    east_m: Option<f64>,
+    lat_deg: Option<f64>,
+    lon_deg: Option<f64>,
+    alt_m: Option<f64>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Waypoint {
+    /// Metres north / east of home.
+    Relative {
+        north_m: f64,
+        east_m: f64,
+        alt_m: f64,
+    },
+    Absolute {
+        lat_e7: i32,
+        lon_e7: i32,
+        alt_m: f64,
+    },
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct Route {
+    pub waypoints: Vec<Waypoint>,
+    pub altitude_m: f64,
+    pub search_time_limit_s: Option<f64>,
+    pub takeoff_first: bool,
+}
+
+impl Route {
+    pub fn load(path: &Path) -> Result<Self, SpecError> {
+        let raw: RawRoute = read_toml(path)?;
+        let _ = raw.description;
+        let rel = match raw.frame.as_str() {
+            "relative" => true,
+            "absolute" => false,
+            other => {
+                return Err(SpecError::new(
+                    path,
+                    "frame",
+                    format!("{other:?}: expected \"relative\" (to home) or \"absolute\""),
+                ));
+            }
+        };
+        if !(raw.altitude_m.is_finite() && raw.altitude_m > 0.0) {
+            return Err(SpecError::new(
+                path,
+                "altitude_m",
+                "must be a positive number of metres above home",
+            ));
+        }
+        if let Some(t) = raw.search_time_limit_s
+            && !(t.is_finite() && t > 0.0)
+        {
+            return Err(SpecError::new(
+                path,
+                "search_time_limit_s",
+                "must be positive",
+            ));
+        }
+        if raw.waypoint.is_empty() {
+            return Err(SpecError::new(
+                path,
+                "waypoint",
+                "a route needs at least one waypoint",
+            ));
+        }
+        let mut waypoints = Vec::new();
+        for (i, w) in raw.waypoint.iter().enumerate() {
+            let entry = format!("waypoint[{i}]");
+            let alt_m = w.alt_m.unwrap_or(raw.altitude_m);
+            if !alt_m.is_finite() || alt_m < 0.0 {
+                return Err(SpecError::new(
+                    path,
+                    format!("{entry}.alt_m"),
+                    "must be a non-negative number of metres above home",
+                ));
+            }
+            let wp = if rel {
+                if w.lat_deg.is_some() || w.lon_deg.is_some() {
+                    return Err(SpecError::new(
+                        path,
+                        entry,
+                        "relative route: use north_m / east_m, not lat_deg / lon_deg",
+                    ));
+                }
+                let (Some(n), Some(e)) = (w.north_m, w.east_m) else {
+                    return Err(SpecError::new(path, entry, "needs north_m and east_m"));
+                };
+                if !n.is_finite() || !e.is_finite() || n.abs() > 50_000.0 || e.abs() > 50_000.0 {
+                    return Err(SpecError::new(
+                        path,
+                        entry,
+                        "offsets must be finite and within 50 km of home",
+                    ));
+                }
+                Waypoint::Relative {
+                    north_m: n,
+                    east_m: e,
+                    alt_m,
+                }
+            } else {
+                if w.north_m.is_some() || w.east_m.is_some() {
+                    return Err(SpecError::new(
+                        path,
+                        entry,
+                        "absolute route: use lat_deg / lon_deg, not north_m / east_m",
+                    ));
+                }
+                let (Some(lat), Some(lon)) = (w.lat_deg, w.lon_deg) else {
+                    return Err(SpecError::new(path, entry, "needs lat_deg and lon_deg"));
+                };
+                if !(-90.0..=90.0).contains(&lat) || !(-180.0..=180.0).contains(&lon) {
+                    return Err(SpecError::new(
+                        path,
+                        entry,
+                        "latitude must be in -90..90 and longitude in -180..180",
+                    ));
+                }
+                Waypoint::Absolute {
+                    lat_e7: (lat * 1e7).round() as i32,
+                    lon_e7: (lon * 1e7).round() as i32,
+                    alt_m,
+                }
+            };
+            waypoints.push(wp);
+        }
+        Ok(Self {
+            waypoints,
+            altitude_m: raw.altitude_m,
+            search_time_limit_s: raw.search_time_limit_s,
+            takeoff_first: raw.takeoff_first,
+        })
+    }
+
+    /// Mission items for upload: seq 0 home, then an optional takeoff, then the waypoints.
+    pub fn items(&self, home: (i32, i32)) -> Vec<MissionItem> {
+        use super::dialect::MavFrame;
+        let mut items = vec![MissionItem {
+            frame: MavFrame::MAV_FRAME_GLOBAL,
+            ..MissionItem::waypoint(home.0, home.1, 0.0)
+        }];
+        if self.takeoff_first {
+            items.push(MissionItem {
+                command: MavCmd::MAV_CMD_NAV_TAKEOFF,
+                ..MissionItem::waypoint(0, 0, self.altitude_m as f32)
+            });
+        }
+        for w in &self.waypoints {
+            let (x, y, alt) = match *w {
+                Waypoint::Relative {
+                    north_m,
+                    east_m,
+                    alt_m,
+                } => {
+                    let (x, y) = displace(home, north_m, east_m);
+                    (x, y, alt_m)
+                }
+                Waypoint::Absolute {
+                    lat_e7,
+                    lon_e7,
+                    alt_m,
+                } => (lat_e7, lon_e7, alt_m),
+            };
+            items.push(MissionItem::waypoint(x, y, alt as f32));
+        }
+        items
+    }
+}
+
+/// `params/link.toml`: stream rates and telemetry settings.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LinkParams {
+    /// Message name -> rate in Hz, requested with MAV_CMD_SET_MESSAGE_INTERVAL.
+    pub streams: BTreeMap<String, f32>,
+    pub telemetry: TelemetryConfig,
+    /// Seconds between decision cycles when nothing significant happens.
+    pub decision_period_s: f64,
+    /// Seconds to wait for the autopilot to report ready before an arm step fails.
+    pub arm_wait_s: f64,
+    /// Arm attempts, each only after a fresh ready report.
+    pub max_arm_attempts: u32,
+}
+
+impl LinkParams {
+    pub fn load(path: &Path) -> Result<Self, SpecError> {
+        let p: LinkParams = read_toml(path)?;
+        for (name, hz) in &p.streams {
+            if <super::Msg as mavlink::Message>::message_id_from_name(name).is_none() {
+                return Err(SpecError::new(
+                    path,
+                    format!("streams.{name}"),
+                    "unknown MAVLink message name",
+                ));
+            }
+            if !(hz.is_finite() && *hz > 0.0 && *hz <= 100.0) {
+                return Err(SpecError::new(
+                    path,
+                    format!("streams.{name}"),
+                    "rate must be in (0, 100] Hz",
+                ));
+            }
+        }
+        if !(p.decision_period_s.is_finite() && p.decision_period_s > 0.0) {
+            return Err(SpecError::new(
+                path,
+                "decision_period_s",
+                "must be positive",
+            ));
+        }
+        if !(p.arm_wait_s.is_finite() && p.arm_wait_s > 0.0) {
+            return Err(SpecError::new(path, "arm_wait_s", "must be positive"));
+        }
+        if p.max_arm_attempts == 0 {
+            return Err(SpecError::new(
+                path,
+                "max_arm_attempts",
+                "must be at least 1",
+            ));
+        }
+        let t = &p.telemetry;
+        if !(t.obstacle_near_m.is_finite() && t.obstacle_near_m > 0.0) {
+            return Err(SpecError::new(
+                path,
+                "telemetry.obstacle_near_m",
+                "must be positive",
+            ));
+        }
+        if t.battery_thresholds_pct
+            .iter()
+            .any(|v| !(0.0..=100.0).contains(v))
+        {
+            return Err(SpecError::new(
+                path,
+                "telemetry.battery_thresholds_pct",
+                "percentages must be in 0..100",
+            ));
+        }
+        Ok(p)
+    }
+
+    /// (message id, rate Hz) in a stable order.
+    pub fn stream_ids(&self) -> Vec<(u32, f32)> {
+        self.streams
+            .iter()
+            .filter_map(|(n, hz)| {
+                <super::Msg as mavlink::Message>::message_id_from_name(n).map(|id| (id, *hz))
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::spec::default_params_dir;
+
+    fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> std::path::PathBuf {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    #[test]
+    fn shipped_params_load() {
+        let dir = default_params_dir();
+        let t = ActionTable::load(&dir.join("commands.toml")).unwrap();
+        for a in [
+            "take_off",
+            "follow_trajectory",
+            "avoid_obstacle",
+            "land",
+            "replan_and_land",
+            "return_to_base",
+        ] {
+            assert!(t.actions.contains_key(a), "{a} missing");
+        }
+        assert_eq!(t.actions["take_off"][1], Step::Arm);
+        assert!(matches!(
+            t.actions["take_off"][2],
+            Step::Command {
+                command: MavCmd::MAV_CMD_NAV_TAKEOFF,
+                ..
+            }
+        ));
+        assert_eq!(t.actions["return_to_base"], vec![Step::Mode("RTL".into())]);
+        let r = Route::load(&dir.join("missions/tracking_route.toml")).unwrap();
+        assert!(r.waypoints.len() >= 3);
+        let lp = LinkParams::load(&dir.join("link.toml")).unwrap();
+        assert_eq!(lp.stream_ids().len(), 14);
+    }
+
+    #[test]
+    fn bad_commands_are_rejected_with_entry() {
+        let d = tempfile::tempdir().unwrap();
+        let cases = [
+            ("[x]\nsteps = []\n", "x.steps", "at least one"),
+            (
+                "[x]\nsteps = [{ mode = \"WARP\" }]\n",
+                "x.steps[0]",
+                "unknown mode",
+            ),
+            (
+                "[x]\nsteps = [{ command = \"MAV_CMD_FLY_TO_MOON\" }]\n",
+                "x.steps[0]",
+                "unknown MAVLink command",
+            ),
+            (
+                "[x]\nsteps = [{ mode = \"RTL\", arm = true }]\n",
+                "x.steps[0]",
+                "exactly one",
+            ),
+            (
+                "[x]\nsteps = [{ arm = false }]\n",
+                "x.steps[0]",
+                "not a step",
+            ),
+            (
+                "[x]\nsteps = [{ command = \"MAV_CMD_NAV_LAND\", params = [1,2,3,4,5,6,7,8] }]\n",
+                "x.steps[0]",
+                "at most 7",
+            ),
+            (
+                "[x]\nsteps = [{ mode = \"RTL\", params = [1] }]\n",
+                "x.steps[0]",
+                "only go with command",
+            ),
+        ];
+        for (text, entry, why) in cases {
+            let p = write(&d, "c.toml", text);
+            let e = ActionTable::load(&p).expect_err(text);
+            assert_eq!(e.entry, entry, "{text}");
+            assert!(e.reason.contains(why), "{text}: {e}");
+        }
+        let p = write(&d, "c.toml", "[x]\nstepz = []\n");
+        assert!(ActionTable::load(&p).is_err());
+    }
+
+    #[test]
+    fn bad_routes_are_rejected_with_entry() {
+        let d = tempfile::tempdir().unwrap();
+        let cases = [
+            (
+                "altitude_m = 20\nwaypoint = []\n",
+                "waypoint",
+                "at least one",
+            ),
+            (
+                "altitude_m = -1\n[[waypoint]]\nnorth_m = 1\neast_m = 1\n",
+                "altitude_m",
+                "positive",
+            ),
+            (
+                "frame = \"polar\"\naltitude_m = 20\n[[waypoint]]\nnorth_m = 1\neast_m = 1\n",
+                "frame",
+                "expected",
+            ),
+            (
+                "altitude_m = 20\n[[waypoint]]\nnorth_m = 1\n",
+                "waypoint[0]",
+                "north_m and east_m",
+            ),
+            (
+                "altitude_m = 20\n[[waypoint]]\nlat_deg = 1\nlon_deg = 1\n",
+                "waypoint[0]",
+                "relative route",
+            ),
+            (
+                "frame = \"absolute\"\naltitude_m = 20\n[[waypoint]]\nlat_deg = 91\nlon_deg = 1\n",
+                "waypoint[0]",
+                "latitude",
+            ),
+            (
+                "altitude_m = 20\n[[waypoint]]\nnorth_m = 1\neast_m = 1\nalt_m = -5\n",
+                "waypoint[0].alt_m",
+                "non-negative",
+            ),
+            (
+                "altitude_m = 20\n[[waypoint]]\nnorth_m = 1e9\neast_m = 1\n",
+                "waypoint[0]",
+                "50 km",
+            ),
+        ];
+        for (text, entry, why) in cases {
+            let p = write(&d, "r.toml", text);
+            let e = Route::load(&p).expect_err(text);
+            assert_eq!(e.entry, entry, "{text}");
+            assert!(e.reason.contains(why), "{text}: {e}");
+        }
+    }
+
+    #[test]
+    fn relative_route_items_start_at_home() {
+        let d = tempfile::tempdir().unwrap();
+        let p = write(
+            &d,
+            "r.toml",
+            "altitude_m = 25\n[[waypoint]]\nnorth_m = 100\neast_m = 0\n[[waypoint]]\nnorth_m = 0\neast_m = 50\nalt_m = 30\n",
+        );
+        let r = Route::load(&p).unwrap();
+        let home = (473_977_420, 85_455_940);
+        let items = r.items(home);
+        assert_eq!(items.len(), 4);
+        assert_eq!((items[0].x, items[0].y), home);
+        assert_eq!(items[1].command, MavCmd::MAV_CMD_NAV_TAKEOFF);
+        assert_eq!(items[1].z, 25.0);
+        // 100 m north = 100 / 111319.49 deg = 8983 * 1e-7 deg.
+        assert_eq!(items[2].x - home.0, 8983);
+        assert_eq!(items[2].y, home.1);
+        assert_eq!(items[3].z, 30.0);
+        assert_eq!(items[2].z, 25.0);
+    }
+
+    #[test]
+    fn bad_link_params() {
+        let d = tempfile::tempdir().unwrap();
+        let base = "decision_period_s = 1.0\narm_wait_s = 30\nmax_arm_attempts = 3\n[telemetry]\nobstacle_near_m = 15\nbattery_thresholds_pct = [30]\ndistance_max_age_s = 2\n";
+        let p = write(
+            &d,
+            "l.toml",
+            &format!("{base}[streams]\nNOT_A_MESSAGE = 2\n"),
+        );
+        assert_eq!(
+            LinkParams::load(&p).unwrap_err().entry,
+            "streams.NOT_A_MESSAGE"
+        );
+        let p = write(&d, "l.toml", &format!("{base}[streams]\nWIND = 0\n"));
+        assert!(LinkParams::load(&p).unwrap_err().reason.contains("rate"));
+        let p = write(&d, "l.toml", &format!("{base}[streams]\nWIND = 1\n"));
+        assert_eq!(LinkParams::load(&p).unwrap().stream_ids(), vec![(168, 1.0)]);
+    }
+}

@@ -1,0 +1,493 @@
+//! `companion fly`: the imperative shell around the link protocol and the decision core.
+//!
+//! Tasks: the transport supervisor(s) (bytes in/out, reconnect), and one loop that owns the
+//! protocol state ([`Vehicle`]), the clock, the 1 Hz heartbeat, the 10 Hz protocol tick and the
+//! decision cycles: one on every significant event, and one every `decision_period_s` otherwise.
+//! Each cycle's record goes to a [`RecordSink`] with the commands it sent (latency measured from
+//! the message that triggered the cycle to the command handed to the transport) and the results
+//! of earlier commands that finished since.
+
+use super::Msg;
+use super::actions::{ActionTable, LinkParams, Route};
+use super::ingest::{self, Encoder, Ingest};
+use super::liveness::parse_duration;
+use super::transport::{self, Inbound};
+use super::url::{self, ConnectUrl};
+use super::vehicle::{Vehicle, VehicleConfig};
+use crate::observations::Observations;
+use crate::record::{DecisionRecord, Plan};
+use anyhow::Context;
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Duration;
+use tokio::time::Instant;
+
+/// The decision core as the shell sees it: one observation snapshot in, one plan and its record out.
+pub trait Decider {
+    fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord);
+}
+
+/// Where decision records go (the log helper provides the file writer).
+pub trait RecordSink {
+    fn write(&mut self, rec: &DecisionRecord) -> std::io::Result<()>;
+}
+
+/// One JSON object per line.
+pub struct JsonLines<W: Write>(pub W);
+
+impl<W: Write> RecordSink for JsonLines<W> {
+    fn write(&mut self, rec: &DecisionRecord) -> std::io::Result<()> {
+        serde_json::to_writer(&mut self.0, rec)?;
+        self.0.write_all(b"\n")?;
+        self.0.flush()
+    }
+}
+
+impl RecordSink for Vec<DecisionRecord> {
+    fn write(&mut self, rec: &DecisionRecord) -> std::io::Result<()> {
+        self.push(rec.clone());
+        Ok(())
+    }
+}
+
+fn parse_policy(s: &str) -> Result<String, String> {
+    match s {
+        "safety" | "mission" => Ok(s.to_string()),
+        other => Err(format!("{other:?}: expected safety or mission")),
+    }
+}
+
+/// `companion fly` arguments.
+#[derive(Debug, Clone, clap::Args)]
+pub struct FlyArgs {
+    /// Autopilot connection: serial:/dev/ttyAMA0:921600, udpin:0.0.0.0:14550, udpout:HOST:PORT,
+    /// tcp:HOST:PORT, tcpin:ADDR:PORT.
+    #[arg(long, value_parser = url::parse)]
+    pub connect: ConnectUrl,
+    /// Route for follow_trajectory (default params/missions/tracking_route.toml).
+    #[arg(long)]
+    pub mission: Option<PathBuf>,
+    /// Arbitration policy: safety (safety-first) or mission (mission-first).
+    #[arg(long, default_value = "safety", value_parser = parse_policy)]
+    pub policy: String,
+    /// MAVLink 2 signing key (32 raw bytes or 64 hex digits): sign outgoing frames, refuse
+    /// unsigned commands addressed to us.
+    #[arg(long)]
+    pub signing_key: Option<PathBuf>,
+    /// Second MAVLink connection carrying onboard monitors (NAMED_VALUE_FLOAT, ...).
+    #[arg(long, value_parser = url::parse)]
+    pub onboard: Option<ConnectUrl>,
+    /// Silence after which the autopilot counts as lost (e.g. 3s, 500ms).
+    #[arg(long, default_value = "3s", value_parser = parse_duration)]
+    pub link_timeout: Duration,
+    /// Params directory (default: $COMPANION_PARAMS or the workspace params/).
+    #[arg(long)]
+    pub params: Option<PathBuf>,
+    /// Stop after this long (e.g. 60s); default: until Ctrl-C.
+    #[arg(long, value_parser = parse_duration)]
+    pub duration: Option<Duration>,
+}
+
+/// What the run saw, for tests and the exit message.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct FlyReport {
+    pub cycles: u64,
+    pub ingest: ingest::IngestStats,
+    pub frames_out: u64,
+    pub link_losses: u32,
+}
+
+/// Everything loaded from params before any socket opens.
+pub struct FlySetup {
+    pub link: LinkParams,
+    pub actions: ActionTable,
+    pub route: Route,
+    pub key: Option<[u8; 32]>,
+}
+
+impl FlySetup {
+    pub fn load(args: &FlyArgs) -> anyhow::Result<Self> {
+        let dir = args
+            .params
+            .clone()
+            .unwrap_or_else(crate::spec::default_params_dir);
+        let link = LinkParams::load(&dir.join("link.toml"))?;
+        let actions = ActionTable::load(&dir.join("commands.toml"))?;
+        let route_path = args
+            .mission
+            .clone()
+            .unwrap_or_else(|| dir.join("missions/tracking_route.toml"));
+        let route = Route::load(&route_path)?;
+        let key = match &args.signing_key {
+            Some(p) => Some(ingest::load_signing_key(p)?),
+            None => None,
+        };
+        Ok(Self {
+            link,
+            actions,
+            route,
+            key,
+        })
+    }
+}
+
+/// Blocking entry point for the CLI: records as JSON lines on stdout.
+pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the tokio runtime")?;
+    let mut sink = JsonLines(std::io::stdout());
+    let report = rt.block_on(run_with(args, decider, &mut sink))?;
+    eprintln!(
+        "companion fly: {}",
+        serde_json::to_string(&report).unwrap_or_default()
+    );
+    Ok(())
+}
+
+/// The fly loop; returns when `duration` elapses, on Ctrl-C, or when the transport task dies.
+pub async fn run_with<D: Decider, S: RecordSink>(
+    args: FlyArgs,
+    mut decider: D,
+    sink: &mut S,
+) -> anyhow::Result<FlyReport> {
+    let setup = FlySetup::load(&args)?;
+    let cfg = VehicleConfig {
+        link_timeout: args.link_timeout,
+        streams: setup.link.stream_ids(),
+        telemetry: setup.link.telemetry.clone(),
+        arm_wait: Duration::from_secs_f64(setup.link.arm_wait_s),
+        max_arm_attempts: setup.link.max_arm_attempts,
+        ..VehicleConfig::default()
+    };
+    let mut vehicle = Vehicle::new(cfg, setup.actions, Some(setup.route));
+    let signing = || setup.key.map(ingest::signing_data);
+    let mut ingest = Ingest::new(signing());
+    let mut encoder = Encoder::new(signing());
+    let mut link = transport::spawn(args.connect.clone(), Duration::from_secs(1));
+    // Receive-only, but the handle (and its outbound sender) must live as long as the loop.
+    let mut onboard = args
+        .onboard
+        .clone()
+        .map(|u| transport::spawn(u, Duration::from_secs(1)));
+    let mut onboard_ingest = Ingest::new(signing());
+
+    let start = Instant::now();
+    let now = || start.elapsed();
+    let mut heartbeat = tokio::time::interval(Duration::from_secs(1));
+    let mut tick = tokio::time::interval(Duration::from_millis(100));
+    let mut periodic = tokio::time::interval(Duration::from_secs_f64(setup.link.decision_period_s));
+    periodic.tick().await; // the first tick is immediate; the first cycle waits for telemetry
+    let stop_at = args.duration.map(|d| start + d);
+    let mut report = FlyReport::default();
+    let mut transport_events: Vec<String> = Vec::new();
+    let ctrl_c = tokio::signal::ctrl_c();
+    tokio::pin!(ctrl_c);
+
+    loop {
+        let mut out: Vec<Msg> = Vec::new();
+        let mut trigger: Option<Duration> = None;
+        tokio::select! {
+            m = link.inbound.recv() => match m {
+                Some(Inbound::Bytes(b)) => {
+                    let t = now();
+                    for f in ingest.push(&b) {
+                        out.extend(vehicle.on_frame(t, &f));
+                    }
+                    ingest.set_our_system(vehicle.our_system());
+                    trigger = Some(t);
+                }
+                Some(Inbound::Connected(name)) => {
+                    ingest.reset();
+                    vehicle.on_reconnect(now());
+                    transport_events.push(format!("connected {name}"));
+                }
+                Some(Inbound::Disconnected(why)) => transport_events.push(format!("disconnected: {why}")),
+                None => anyhow::bail!("the transport task stopped"),
+            },
+            m = async { match &mut onboard { Some(h) => h.inbound.recv().await, None => std::future::pending().await } } => match m {
+                Some(Inbound::Bytes(b)) => {
+                    let t = now();
+                    for f in onboard_ingest.push(&b) {
+                        vehicle.on_monitor_frame(t, &f);
+                    }
+                    trigger = Some(t);
+                }
+                Some(Inbound::Connected(name)) => {
+                    onboard_ingest.reset();
+                    transport_events.push(format!("onboard connected {name}"));
+                }
+                Some(Inbound::Disconnected(why)) => transport_events.push(format!("onboard disconnected: {why}")),
+                None => anyhow::bail!("the onboard transport task stopped"),
+            },
+            _ = heartbeat.tick() => out.push(Vehicle::heartbeat()),
+            _ = tick.tick() => out.extend(vehicle.tick(now())),
+            _ = periodic.tick() => {
+                if vehicle.target.is_some() {
+                    run_cycle_at(&mut decider, &mut vehicle, &mut encoder, &link.outbound, sink, now(), now, &mut report, &mut transport_events).await?;
+                }
+            },
+            _ = &mut ctrl_c => break,
+            _ = async { match stop_at { Some(t) => tokio::time::sleep_until(t).await, None => std::future::pending().await } } => break,
+        }
+        send(&mut encoder, &vehicle, &link.outbound, &out).await;
+        vehicle.stamp_latency(trigger.unwrap_or_else(now), now());
+        // Significant telemetry (a new obstacle, a found target, a crossed battery threshold, a
+        // mode change, a command result, link loss) triggers a cycle now.
+        // Link loss found by the protocol tick counts too (its trigger is the tick itself).
+        if vehicle.has_events() && vehicle.target.is_some() {
+            let t = trigger.unwrap_or_else(now);
+            run_cycle_at(
+                &mut decider,
+                &mut vehicle,
+                &mut encoder,
+                &link.outbound,
+                sink,
+                t,
+                now,
+                &mut report,
+                &mut transport_events,
+            )
+            .await?;
+        }
+    }
+    report.ingest = ingest.stats;
+    report.frames_out = encoder.frames_out;
+    report.link_losses = vehicle.liveness.losses;
+    Ok(report)
+}
+
+async fn send(
+    encoder: &mut Encoder,
+    vehicle: &Vehicle,
+    tx: &tokio::sync::mpsc::Sender<Vec<u8>>,
+    msgs: &[Msg],
+) {
+    encoder.system_id = vehicle.our_system();
+    for m in msgs {
+        // A full queue means the transport is stuck or reconnecting: drop rather than block.
+        let _ = tx.try_send(encoder.encode(m));
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+async fn run_cycle_at<D: Decider, S: RecordSink>(
+    decider: &mut D,
+    vehicle: &mut Vehicle,
+    encoder: &mut Encoder,
+    tx: &tokio::sync::mpsc::Sender<Vec<u8>>,
+    sink: &mut S,
+    trigger_at: Duration,
+    now: impl Fn() -> Duration,
+    report: &mut FlyReport,
+    transport_events: &mut Vec<String>,
+) -> anyhow::Result<()> {
+    let events = vehicle.take_events();
+    let obs = vehicle.observations(now(), events.clone());
+    let (plan, mut rec) = decider.step(&obs);
+    let msgs = vehicle.request_actions(now(), &plan.vehicle_actions);
+    send(encoder, vehicle, tx, &msgs).await;
+    vehicle.stamp_latency(trigger_at, now());
+    report.cycles += 1;
+    rec.cycle = report.cycles;
+    rec.time_s = obs.time_s;
+    if rec.events.is_empty() {
+        rec.events = events;
+    }
+    if rec.observations.is_empty() {
+        rec.observations = obs.values.clone();
+    }
+    rec.commands.extend(vehicle.take_records());
+    rec.link_events.append(transport_events);
+    rec.link_events.extend(vehicle.take_link_events());
+    rec.vehicle.extend(vehicle.telemetry.vehicle());
+    rec.vehicle.insert(
+        "link_alive".into(),
+        serde_json::Value::from(vehicle.liveness.alive()),
+    );
+    sink.write(&rec).context("writing the decision record")?;
+    Ok(())
+}
+
+/// A tiny rule-based stand-in for the decision core, for link tests and for flying before the
+/// real core is wired in: take off, fly the route, sidestep obstacles, return on low battery,
+/// land when the route is done.
+pub struct ScriptedDecider {
+    pub takeoff_alt_m: f64,
+    /// Mission seq of the last waypoint.
+    pub last_seq: u16,
+    pub low_battery_pct: f64,
+    pub policy: String,
+    phase: &'static str,
+    avoid_until: f64,
+}
+
+impl ScriptedDecider {
+    pub fn new(takeoff_alt_m: f64, last_seq: u16, policy: &str) -> Self {
+        Self {
+            takeoff_alt_m,
+            last_seq,
+            low_battery_pct: 20.0,
+            policy: policy.to_string(),
+            phase: "base",
+            avoid_until: 0.0,
+        }
+    }
+
+    /// Built from the route the fly arguments name.
+    pub fn from_args(args: &FlyArgs) -> anyhow::Result<Self> {
+        let setup = FlySetup::load(args)?;
+        let last = setup.route.items((0, 0)).len().saturating_sub(1) as u16;
+        Ok(Self::new(setup.route.altitude_m, last, &args.policy))
+    }
+}
+
+impl Decider for ScriptedDecider {
+    fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
+        let alt = obs.get("altitude_m").unwrap_or(0.0);
+        let battery = obs.get("battery_pct").unwrap_or(100.0);
+        let seq = obs.get("mission_seq").unwrap_or(0.0) as u16;
+        let speed = obs.get("groundspeed_mps").unwrap_or(0.0);
+        let obstacle = obs.events.iter().any(|e| e == "obstacle detected");
+        let airborne = alt > 0.8 * self.takeoff_alt_m;
+        let action = if battery <= self.low_battery_pct && self.phase != "landing" {
+            self.phase = "return";
+            "return_to_base"
+        } else {
+            match self.phase {
+                "base" if airborne => {
+                    self.phase = "wpi";
+                    "follow_trajectory"
+                }
+                "base" => "take_off",
+                "wpi" if obstacle => {
+                    self.phase = "wp_avoid";
+                    self.avoid_until = obs.time_s + 5.0;
+                    "avoid_obstacle"
+                }
+                "wpi" if seq >= self.last_seq && speed < 1.0 => {
+                    self.phase = "landing";
+                    "land"
+                }
+                "wpi" => "follow_trajectory",
+                "wp_avoid" if obs.time_s >= self.avoid_until => {
+                    self.phase = "wpi";
+                    "follow_trajectory"
+                }
+                "wp_avoid" => "avoid_obstacle",
+                "return" => "return_to_base",
+                _ => "land",
+            }
+        };
+        let plan = Plan {
+            vehicle_actions: vec![action.to_string()],
+            applications: vec![],
+        };
+        let rec = DecisionRecord {
+            state: self.phase.to_string(),
+            actions: vec![action.to_string()],
+            events: obs.events.clone(),
+            observations: obs.values.clone(),
+            ..Default::default()
+        };
+        (plan, rec)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn obs(t: f64, vals: &[(&str, f64)], events: &[&str]) -> Observations {
+        let mut o = Observations {
+            time_s: t,
+            ..Default::default()
+        };
+        for (k, v) in vals {
+            o.set(k, *v);
+        }
+        o.events = events.iter().map(|s| s.to_string()).collect();
+        o
+    }
+
+    #[test]
+    fn scripted_decider_flies_the_tracking_pattern() {
+        let mut d = ScriptedDecider::new(10.0, 6, "safety");
+        let act =
+            |d: &mut ScriptedDecider, o: Observations| d.step(&o).0.vehicle_actions[0].clone();
+        assert_eq!(
+            act(&mut d, obs(0.0, &[("altitude_m", 0.0)], &[])),
+            "take_off"
+        );
+        assert_eq!(
+            act(&mut d, obs(5.0, &[("altitude_m", 9.5)], &[])),
+            "follow_trajectory"
+        );
+        assert_eq!(
+            act(
+                &mut d,
+                obs(6.0, &[("altitude_m", 20.0)], &["obstacle detected"])
+            ),
+            "avoid_obstacle"
+        );
+        assert_eq!(
+            act(&mut d, obs(8.0, &[("altitude_m", 20.0)], &[])),
+            "avoid_obstacle"
+        );
+        assert_eq!(
+            act(&mut d, obs(11.0, &[("altitude_m", 20.0)], &[])),
+            "follow_trajectory"
+        );
+        assert_eq!(
+            act(
+                &mut d,
+                obs(
+                    50.0,
+                    &[
+                        ("altitude_m", 20.0),
+                        ("mission_seq", 6.0),
+                        ("groundspeed_mps", 0.2)
+                    ],
+                    &[]
+                )
+            ),
+            "land"
+        );
+        let mut d = ScriptedDecider::new(10.0, 6, "safety");
+        assert_eq!(
+            act(&mut d, obs(0.0, &[("battery_pct", 15.0)], &[])),
+            "return_to_base"
+        );
+    }
+
+    #[test]
+    fn json_lines_sink_writes_one_object_per_line() {
+        let mut buf = Vec::new();
+        {
+            let mut s = JsonLines(&mut buf);
+            s.write(&DecisionRecord {
+                cycle: 1,
+                ..Default::default()
+            })
+            .unwrap();
+            s.write(&DecisionRecord {
+                cycle: 2,
+                ..Default::default()
+            })
+            .unwrap();
+        }
+        let text = String::from_utf8(buf).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 2);
+        let back: DecisionRecord = serde_json::from_str(lines[1]).unwrap();
+        assert_eq!(back.cycle, 2);
+    }
+
+    #[test]
+    fn policy_values() {
+        assert!(parse_policy("safety").is_ok() && parse_policy("mission").is_ok());
+        assert!(parse_policy("yolo").is_err());
+    }
+}

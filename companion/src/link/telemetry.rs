@@ -1,0 +1,647 @@
+//! Telemetry → [`Observations`], and the significant events that trigger a decision cycle.
+//!
+//! Units and sources are listed in docs/mavlink.md. Onboard monitors (other onboard components:
+//! the tracker, the landing-zone finder, the platform monitor) publish NAMED_VALUE_FLOAT; their
+//! names map to observation names through `params/link.toml` `[onboard]`.
+
+use super::Msg;
+use super::dialect::*;
+use crate::observations::Observations;
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+/// Thresholds and name mappings, from `params/link.toml`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TelemetryConfig {
+    /// NAMED_VALUE_FLOAT name -> observation name.
+    #[serde(default)]
+    pub onboard: BTreeMap<String, String>,
+    /// An obstacle closer than this (m) is an `obstacle detected` event.
+    pub obstacle_near_m: f64,
+    /// Battery percentages whose downward crossing is an event.
+    pub battery_thresholds_pct: Vec<f64>,
+    /// Distance readings older than this are ignored (s).
+    pub distance_max_age_s: f64,
+    /// `target_detected` above this counts as a detection.
+    #[serde(default = "half")]
+    pub detection_threshold: f64,
+}
+
+fn half() -> f64 {
+    0.5
+}
+
+impl Default for TelemetryConfig {
+    fn default() -> Self {
+        let onboard = [
+            ("tgt_det", "target_detected"),
+            ("tgt_spd", "target_speed_rel"),
+            ("trk_conf", "track_confidence"),
+            ("lum", "luminosity_lux"),
+            ("cpu_load", "cpu_load"),
+            ("free_tiles", "free_tiles"),
+        ]
+        .into_iter()
+        .map(|(a, b)| (a.to_string(), b.to_string()))
+        .collect();
+        Self {
+            onboard,
+            obstacle_near_m: 15.0,
+            battery_thresholds_pct: vec![50.0, 30.0, 20.0, 10.0],
+            distance_max_age_s: 2.0,
+            detection_threshold: 0.5,
+        }
+    }
+}
+
+/// Where the vehicle is (for relative missions and sidesteps).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Position {
+    pub lat_e7: i32,
+    pub lon_e7: i32,
+    pub alt_rel_m: f64,
+    pub alt_amsl_m: f64,
+    /// Heading in degrees, None when the autopilot does not know.
+    pub heading_deg: Option<f64>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct Telemetry {
+    pub cfg: TelemetryConfig,
+    values: BTreeMap<String, f64>,
+    pub position: Option<Position>,
+    /// HOME_POSITION (lat e7, lon e7, amsl m).
+    pub home: Option<(i32, i32, f64)>,
+    pub mode: Option<String>,
+    pub custom_mode: u32,
+    pub armed: bool,
+    pub landed_state: Option<String>,
+    pub mission_seq: Option<u16>,
+    distances: BTreeMap<u8, (f64, Duration)>,
+    obstacle_scan: Option<(f64, Duration)>,
+    pub last_text: Option<String>,
+}
+
+impl Telemetry {
+    pub fn new(cfg: TelemetryConfig) -> Self {
+        Self {
+            cfg,
+            ..Default::default()
+        }
+    }
+
+    pub fn get(&self, name: &str) -> Option<f64> {
+        self.values.get(name).copied()
+    }
+
+    /// Update from one message. Returns significant events (`obstacle detected`, ...).
+    pub fn on_message(
+        &mut self,
+        now: Duration,
+        msg: &Msg,
+        mode_name: impl Fn(u32) -> String,
+    ) -> Vec<String> {
+        let before_obstacle = self.obstacle_m(now);
+        let before_target = self.get("target_detected");
+        let before_battery = self.get("battery_pct");
+        let mut events = Vec::new();
+        match msg {
+            Msg::HEARTBEAT(h) => {
+                let armed = h
+                    .base_mode
+                    .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+                if armed != self.armed {
+                    events.push(if armed {
+                        "armed".to_string()
+                    } else {
+                        "disarmed".to_string()
+                    });
+                    self.armed = armed;
+                }
+                let name = mode_name(h.custom_mode);
+                if self.mode.as_deref() != Some(name.as_str()) {
+                    events.push(format!("mode {name}"));
+                    self.mode = Some(name);
+                }
+                self.custom_mode = h.custom_mode;
+            }
+            Msg::SYS_STATUS(s) => {
+                if s.battery_remaining >= 0 && !self.values.contains_key("battery_status_pct") {
+                    self.set("battery_pct", s.battery_remaining as f64);
+                }
+                if s.voltage_battery != u16::MAX {
+                    self.set("battery_v", s.voltage_battery as f64 / 1000.0);
+                }
+            }
+            Msg::BATTERY_STATUS(b) if b.id == 0 => {
+                if b.battery_remaining >= 0 {
+                    self.set("battery_pct", b.battery_remaining as f64);
+                    self.set("battery_status_pct", b.battery_remaining as f64);
+                }
+                if b.energy_consumed >= 0 {
+                    self.set("energy_consumed_j", b.energy_consumed as f64 * 100.0); // hJ -> J
+                }
+                if b.current_consumed >= 0 {
+                    self.set("consumed_mah", b.current_consumed as f64);
+                }
+            }
+            Msg::GLOBAL_POSITION_INT(p) => {
+                let heading_deg = (p.hdg != u16::MAX).then(|| p.hdg as f64 / 100.0);
+                let pos = Position {
+                    lat_e7: p.lat,
+                    lon_e7: p.lon,
+                    alt_rel_m: p.relative_alt as f64 / 1000.0,
+                    alt_amsl_m: p.alt as f64 / 1000.0,
+                    heading_deg,
+                };
+                self.position = Some(pos);
+                self.set("lat_deg", p.lat as f64 * 1e-7);
+                self.set("lon_deg", p.lon as f64 * 1e-7);
+                self.set("altitude_m", pos.alt_rel_m);
+                self.set(
+                    "groundspeed_mps",
+                    ((p.vx as f64).hypot(p.vy as f64)) / 100.0,
+                );
+                if let Some((hl, ho, _)) = self.home {
+                    let (n, e) = offset_m((hl, ho), (p.lat, p.lon));
+                    self.set("distance_home_m", n.hypot(e));
+                }
+            }
+            Msg::HOME_POSITION(h) => {
+                self.home = Some((h.latitude, h.longitude, h.altitude as f64 / 1000.0))
+            }
+            Msg::GPS_RAW_INT(g) => {
+                self.set("gps_fix", g.fix_type as u8 as f64);
+                if g.satellites_visible != u8::MAX {
+                    self.set("gps_sats", g.satellites_visible as f64);
+                }
+            }
+            Msg::VIBRATION(v) => {
+                self.set(
+                    "vibration_mps2",
+                    v.vibration_x.max(v.vibration_y).max(v.vibration_z) as f64,
+                );
+                self.set(
+                    "vibration_clipping",
+                    (v.clipping_0 as f64) + (v.clipping_1 as f64) + (v.clipping_2 as f64),
+                );
+            }
+            Msg::WIND(w) => {
+                self.set("wind_mps", w.speed as f64);
+                self.set("wind_dir_deg", w.direction as f64);
+            }
+            Msg::EXTENDED_SYS_STATE(e) => {
+                let s = format!("{:?}", e.landed_state)
+                    .trim_start_matches("MAV_LANDED_STATE_")
+                    .to_string();
+                if self.landed_state.as_deref() != Some(s.as_str()) {
+                    self.landed_state = Some(s);
+                }
+            }
+            Msg::MISSION_CURRENT(m) => {
+                if self.mission_seq != Some(m.seq) {
+                    self.mission_seq = Some(m.seq);
+                    events.push(format!("waypoint {}", m.seq));
+                }
+                self.set("mission_seq", m.seq as f64);
+            }
+            Msg::DISTANCE_SENSOR(d) => {
+                // Horizontal sensors only (yaw rotations 0..7); the downward rangefinder is altitude.
+                let horizontal = (d.orientation as u32) <= 7;
+                let valid =
+                    d.current_distance >= d.min_distance && d.current_distance <= d.max_distance;
+                if horizontal && valid {
+                    self.distances
+                        .insert(d.id, (d.current_distance as f64 / 100.0, now));
+                } else if horizontal {
+                    self.distances.remove(&d.id);
+                }
+            }
+            Msg::OBSTACLE_DISTANCE(o) => {
+                // UINT16_MAX: sector unknown; max_distance + 1: nothing there (MAVLink spec).
+                let nearest = o
+                    .distances
+                    .iter()
+                    .filter(|&&d| d != u16::MAX && d >= o.min_distance && d <= o.max_distance)
+                    .min()
+                    .map(|&d| d as f64 / 100.0);
+                self.obstacle_scan = nearest.map(|m| (m, now));
+            }
+            Msg::CAMERA_TRACKING_IMAGE_STATUS(c) => {
+                let active = c
+                    .tracking_status
+                    .contains(CameraTrackingStatusFlags::CAMERA_TRACKING_STATUS_FLAGS_ACTIVE)
+                    && !c
+                        .tracking_status
+                        .contains(CameraTrackingStatusFlags::CAMERA_TRACKING_STATUS_FLAGS_ERROR);
+                self.set("target_detected", if active { 1.0 } else { 0.0 });
+                if active && !c.point_x.is_nan() {
+                    self.set("target_x", c.point_x as f64);
+                    self.set("target_y", c.point_y as f64);
+                }
+            }
+            Msg::NAMED_VALUE_FLOAT(n) => {
+                let name = n.name.to_str().unwrap_or("").trim().to_string();
+                if !name.is_empty() && n.value.is_finite() {
+                    let obs = self
+                        .cfg
+                        .onboard
+                        .get(&name)
+                        .cloned()
+                        .unwrap_or_else(|| format!("onboard.{name}"));
+                    self.set(&obs, n.value as f64);
+                }
+            }
+            Msg::STATUSTEXT(t) => {
+                self.last_text = Some(t.text.to_str().unwrap_or("").to_string());
+            }
+            _ => {}
+        }
+        // Threshold crossings.
+        let near = self.cfg.obstacle_near_m;
+        match (before_obstacle, self.obstacle_m(now)) {
+            (b, Some(a)) if a < near && b.is_none_or(|b| b >= near) => {
+                events.push("obstacle detected".into())
+            }
+            (Some(b), a) if b < near && a.is_none_or(|a| a >= near) => {
+                events.push("obstacle cleared".into())
+            }
+            _ => {}
+        }
+        let th = self.cfg.detection_threshold;
+        match (
+            before_target.unwrap_or(0.0) > th,
+            self.get("target_detected").unwrap_or(0.0) > th,
+        ) {
+            (false, true) => events.push("target detected".into()),
+            (true, false) => events.push("target lost".into()),
+            _ => {}
+        }
+        if let (Some(b), Some(a)) = (before_battery, self.get("battery_pct")) {
+            for &t in &self.cfg.battery_thresholds_pct {
+                if b > t && a <= t {
+                    events.push(format!("battery below {t}%"));
+                }
+            }
+        }
+        events
+    }
+
+    fn set(&mut self, name: &str, v: f64) {
+        self.values.insert(name.to_string(), v);
+    }
+
+    /// Nearest horizontal obstacle from fresh distance sensors and the proximity scan.
+    pub fn obstacle_m(&self, now: Duration) -> Option<f64> {
+        let max_age = Duration::from_secs_f64(self.cfg.distance_max_age_s);
+        let fresh = |t: &Duration| now.saturating_sub(*t) <= max_age;
+        self.distances
+            .values()
+            .filter(|(_, t)| fresh(t))
+            .map(|(d, _)| *d)
+            .chain(
+                self.obstacle_scan
+                    .iter()
+                    .filter(|(_, t)| fresh(t))
+                    .map(|(d, _)| *d),
+            )
+            .reduce(f64::min)
+    }
+
+    /// One snapshot for the decision core.
+    pub fn observations(&self, now: Duration, events: Vec<String>) -> Observations {
+        let mut values = self.values.clone();
+        values.remove("battery_status_pct");
+        if let Some(o) = self.obstacle_m(now) {
+            values.insert("obstacle_m".into(), o);
+        }
+        values.insert("armed".into(), if self.armed { 1.0 } else { 0.0 });
+        Observations {
+            time_s: now.as_secs_f64(),
+            // The mission state is estimated by the fly loop (it knows the route progress).
+            state: String::new(),
+            values,
+            events,
+        }
+    }
+
+    /// Telemetry worth plotting that is not an observation.
+    pub fn vehicle(&self) -> BTreeMap<String, serde_json::Value> {
+        let mut v = BTreeMap::new();
+        if let Some(m) = &self.mode {
+            v.insert("mode".into(), serde_json::Value::from(m.clone()));
+        }
+        v.insert("armed".into(), serde_json::Value::from(self.armed));
+        if let Some(p) = &self.position {
+            v.insert("altitude_m".into(), serde_json::Value::from(p.alt_rel_m));
+        }
+        if let Some(b) = self.get("battery_pct") {
+            v.insert("battery_pct".into(), serde_json::Value::from(b));
+        }
+        if let Some(s) = &self.landed_state {
+            v.insert("landed_state".into(), serde_json::Value::from(s.clone()));
+        }
+        if let Some(s) = self.mission_seq {
+            v.insert("mission_seq".into(), serde_json::Value::from(s));
+        }
+        v
+    }
+}
+
+/// Metres north and east from `a` to `b` (equirectangular; fine over a mission's few km).
+pub fn offset_m(a: (i32, i32), b: (i32, i32)) -> (f64, f64) {
+    const M_PER_DEG: f64 = 111_319.49;
+    let lat = a.0 as f64 * 1e-7;
+    let n = (b.0 as f64 - a.0 as f64) * 1e-7 * M_PER_DEG;
+    let e = (b.1 as f64 - a.1 as f64) * 1e-7 * M_PER_DEG * lat.to_radians().cos();
+    (n, e)
+}
+
+/// The point `north`, `east` metres from `a`, in degrees * 1e7.
+pub fn displace(a: (i32, i32), north_m: f64, east_m: f64) -> (i32, i32) {
+    const M_PER_DEG: f64 = 111_319.49;
+    let lat = a.0 as f64 * 1e-7;
+    let dlat = north_m / M_PER_DEG;
+    let dlon = east_m / (M_PER_DEG * lat.to_radians().cos().max(1e-6));
+    (
+        (a.0 as f64 + dlat * 1e7).round() as i32,
+        (a.1 as f64 + dlon * 1e7).round() as i32,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn s(v: f64) -> Duration {
+        Duration::from_secs_f64(v)
+    }
+    fn name(n: u32) -> String {
+        format!("M{n}")
+    }
+
+    fn dist(id: u8, cm: u16, orientation: MavSensorOrientation) -> Msg {
+        Msg::DISTANCE_SENSOR(DISTANCE_SENSOR_DATA {
+            min_distance: 20,
+            max_distance: 4000,
+            current_distance: cm,
+            id,
+            orientation,
+            ..DISTANCE_SENSOR_DATA::DEFAULT
+        })
+    }
+
+    fn nvf(n: &str, v: f32) -> Msg {
+        Msg::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA {
+            time_boot_ms: 0,
+            value: v,
+            name: n.into(),
+        })
+    }
+
+    #[test]
+    fn obstacle_events_from_forward_sensor_only() {
+        let mut t = Telemetry::new(TelemetryConfig::default());
+        assert!(
+            t.on_message(
+                s(0.0),
+                &dist(1, 500, MavSensorOrientation::MAV_SENSOR_ROTATION_PITCH_270),
+                name
+            )
+            .is_empty(),
+            "downward rangefinder is altitude"
+        );
+        assert_eq!(
+            t.on_message(
+                s(0.1),
+                &dist(0, 3000, MavSensorOrientation::MAV_SENSOR_ROTATION_NONE),
+                name
+            ),
+            Vec::<String>::new()
+        );
+        assert_eq!(
+            t.on_message(
+                s(0.2),
+                &dist(0, 1200, MavSensorOrientation::MAV_SENSOR_ROTATION_NONE),
+                name
+            ),
+            vec!["obstacle detected"]
+        );
+        assert_eq!(t.observations(s(0.3), vec![]).get("obstacle_m"), Some(12.0));
+        assert!(
+            t.on_message(
+                s(0.3),
+                &dist(0, 1100, MavSensorOrientation::MAV_SENSOR_ROTATION_NONE),
+                name
+            )
+            .is_empty(),
+            "still near: no new event"
+        );
+        assert_eq!(
+            t.on_message(
+                s(0.4),
+                &dist(0, 2500, MavSensorOrientation::MAV_SENSOR_ROTATION_NONE),
+                name
+            ),
+            vec!["obstacle cleared"]
+        );
+        // Stale readings vanish.
+        t.on_message(
+            s(0.5),
+            &dist(0, 800, MavSensorOrientation::MAV_SENSOR_ROTATION_NONE),
+            name,
+        );
+        assert_eq!(t.observations(s(3.0), vec![]).get("obstacle_m"), None);
+    }
+
+    #[test]
+    fn obstacle_distance_scan_ignores_unknown_and_empty_sectors() {
+        let mut t = Telemetry::new(TelemetryConfig::default());
+        let mut distances = [u16::MAX; 72];
+        distances[3] = 4001; // max_distance + 1: nothing there
+        distances[10] = 900;
+        distances[11] = 10; // below min_distance: invalid
+        let m = Msg::OBSTACLE_DISTANCE(OBSTACLE_DISTANCE_DATA {
+            distances,
+            min_distance: 20,
+            max_distance: 4000,
+            increment: 5,
+            ..OBSTACLE_DISTANCE_DATA::DEFAULT
+        });
+        assert_eq!(t.on_message(s(0.0), &m, name), vec!["obstacle detected"]);
+        assert_eq!(t.obstacle_m(s(0.0)), Some(9.0));
+    }
+
+    #[test]
+    fn onboard_monitors_map_names_and_target_events() {
+        let mut t = Telemetry::new(TelemetryConfig::default());
+        assert_eq!(
+            t.on_message(s(0.0), &nvf("tgt_det", 1.0), name),
+            vec!["target detected"]
+        );
+        t.on_message(s(0.0), &nvf("lum", 350.0), name);
+        t.on_message(s(0.0), &nvf("mystery", 2.0), name);
+        let o = t.observations(s(0.0), vec![]);
+        assert_eq!(o.get("luminosity_lux"), Some(350.0));
+        assert_eq!(o.get("onboard.mystery"), Some(2.0));
+        assert_eq!(
+            t.on_message(s(1.0), &nvf("tgt_det", 0.0), name),
+            vec!["target lost"]
+        );
+        let track = |flags| {
+            Msg::CAMERA_TRACKING_IMAGE_STATUS(CAMERA_TRACKING_IMAGE_STATUS_DATA {
+                tracking_status: flags,
+                point_x: 0.4,
+                point_y: 0.6,
+                ..CAMERA_TRACKING_IMAGE_STATUS_DATA::DEFAULT
+            })
+        };
+        assert_eq!(
+            t.on_message(
+                s(2.0),
+                &track(CameraTrackingStatusFlags::CAMERA_TRACKING_STATUS_FLAGS_ACTIVE),
+                name
+            ),
+            vec!["target detected"]
+        );
+        assert_eq!(t.get("target_x"), Some(0.4f32 as f64));
+    }
+
+    #[test]
+    fn battery_thresholds_fire_once_on_the_way_down() {
+        let mut t = Telemetry::new(TelemetryConfig::default());
+        let bat = |p: i8| {
+            Msg::BATTERY_STATUS(BATTERY_STATUS_DATA {
+                battery_remaining: p,
+                energy_consumed: 360,
+                current_consumed: 1200,
+                ..BATTERY_STATUS_DATA::DEFAULT
+            })
+        };
+        assert!(t.on_message(s(0.0), &bat(55), name).is_empty());
+        assert_eq!(
+            t.on_message(s(1.0), &bat(49), name),
+            vec!["battery below 50%"]
+        );
+        assert!(t.on_message(s(2.0), &bat(49), name).is_empty());
+        assert_eq!(
+            t.on_message(s(3.0), &bat(15), name),
+            vec!["battery below 30%", "battery below 20%"]
+        );
+        assert_eq!(t.get("energy_consumed_j"), Some(36_000.0));
+        // SYS_STATUS does not override BATTERY_STATUS once that is heard.
+        t.on_message(
+            s(4.0),
+            &Msg::SYS_STATUS(SYS_STATUS_DATA {
+                battery_remaining: 90,
+                ..SYS_STATUS_DATA::DEFAULT
+            }),
+            name,
+        );
+        assert_eq!(t.get("battery_pct"), Some(15.0));
+    }
+
+    #[test]
+    fn mode_and_arming_changes_are_events() {
+        let mut t = Telemetry::new(TelemetryConfig::default());
+        let hb = |mode: u32, armed: bool| {
+            Msg::HEARTBEAT(HEARTBEAT_DATA {
+                custom_mode: mode,
+                base_mode: if armed {
+                    MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED
+                        | MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+                } else {
+                    MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+                },
+                ..HEARTBEAT_DATA::DEFAULT
+            })
+        };
+        assert_eq!(t.on_message(s(0.0), &hb(4, false), name), vec!["mode M4"]);
+        assert!(t.on_message(s(1.0), &hb(4, false), name).is_empty());
+        assert_eq!(
+            t.on_message(s(2.0), &hb(3, true), name),
+            vec!["armed", "mode M3"]
+        );
+    }
+
+    #[test]
+    fn position_vibration_wind_gps() {
+        let mut t = Telemetry::new(TelemetryConfig::default());
+        t.on_message(
+            s(0.0),
+            &Msg::HOME_POSITION(HOME_POSITION_DATA {
+                latitude: 473_977_420,
+                longitude: 85_455_940,
+                altitude: 488_000,
+                ..HOME_POSITION_DATA::DEFAULT
+            }),
+            name,
+        );
+        // 0.0009 deg north = 100.19 m.
+        t.on_message(
+            s(0.0),
+            &Msg::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
+                lat: 473_986_420,
+                lon: 85_455_940,
+                relative_alt: 20_000,
+                vx: 300,
+                vy: 400,
+                hdg: 9000,
+                ..GLOBAL_POSITION_INT_DATA::DEFAULT
+            }),
+            name,
+        );
+        t.on_message(
+            s(0.0),
+            &Msg::VIBRATION(VIBRATION_DATA {
+                vibration_x: 3.0,
+                vibration_y: 12.5,
+                vibration_z: 7.0,
+                ..VIBRATION_DATA::DEFAULT
+            }),
+            name,
+        );
+        t.on_message(
+            s(0.0),
+            &Msg::WIND(WIND_DATA {
+                direction: 270.0,
+                speed: 6.5,
+                speed_z: 0.0,
+            }),
+            name,
+        );
+        t.on_message(
+            s(0.0),
+            &Msg::GPS_RAW_INT(GPS_RAW_INT_DATA {
+                fix_type: GpsFixType::GPS_FIX_TYPE_3D_FIX,
+                satellites_visible: 11,
+                ..GPS_RAW_INT_DATA::DEFAULT
+            }),
+            name,
+        );
+        let o = t.observations(s(0.0), vec![]);
+        assert_eq!(o.get("altitude_m"), Some(20.0));
+        assert_eq!(o.get("groundspeed_mps"), Some(5.0));
+        assert!((o.get("distance_home_m").unwrap() - 100.19).abs() < 0.05);
+        assert_eq!(o.get("vibration_mps2"), Some(12.5));
+        assert_eq!(o.get("wind_mps"), Some(6.5));
+        assert_eq!(
+            (o.get("gps_fix"), o.get("gps_sats")),
+            (Some(3.0), Some(11.0))
+        );
+        assert_eq!(t.position.unwrap().heading_deg, Some(90.0));
+    }
+
+    #[test]
+    fn displace_and_offset_are_inverse() {
+        let home = (473_977_420, 85_455_940);
+        let p = displace(home, 120.0, -45.0);
+        let (n, e) = offset_m(home, p);
+        assert!(
+            (n - 120.0).abs() < 0.02 && (e + 45.0).abs() < 0.02,
+            "{n} {e}"
+        );
+    }
+}

@@ -1,0 +1,1387 @@
+//! The whole link protocol for one autopilot, sans IO: identity, streams, liveness, readiness,
+//! telemetry, commands, missions, and the executor that turns primitive vehicle actions into
+//! protocol steps. `fly` feeds it frames and clock ticks and sends what it returns.
+
+use super::Msg;
+use super::actions::{ActionTable, Offset, Route, Step};
+use super::command::{
+    CommandClient, CommandConfig, CommandEvent, CommandSpec, FailReason, Outcome,
+};
+use super::dialect::*;
+use super::ingest::Frame;
+use super::liveness::{Liveness, LivenessEvent};
+use super::mission::{MissionClient, MissionConfig, MissionEvent, MissionOp};
+use super::modes::{self, Flavor};
+use super::readiness::Readiness;
+use super::telemetry::{Telemetry, TelemetryConfig, displace};
+use crate::observations::Observations;
+use crate::record::CommandRecord;
+use std::collections::{BTreeMap, VecDeque};
+use std::time::Duration;
+
+#[derive(Debug, Clone)]
+pub struct VehicleConfig {
+    pub command: CommandConfig,
+    pub mission: MissionConfig,
+    pub link_timeout: Duration,
+    /// (message id, Hz) requested with SET_MESSAGE_INTERVAL.
+    pub streams: Vec<(u32, f32)>,
+    pub telemetry: TelemetryConfig,
+    pub arm_wait: Duration,
+    pub max_arm_attempts: u32,
+}
+
+impl Default for VehicleConfig {
+    fn default() -> Self {
+        Self {
+            command: CommandConfig::default(),
+            mission: MissionConfig::default(),
+            link_timeout: Duration::from_secs(3),
+            streams: Vec::new(),
+            telemetry: TelemetryConfig::default(),
+            arm_wait: Duration::from_secs(60),
+            max_arm_attempts: 3,
+        }
+    }
+}
+
+/// What a command ticket is for.
+#[derive(Debug, Clone)]
+enum Purpose {
+    Stream(u32),
+    Step {
+        action: String,
+        name: String,
+        latency_ms: Option<f64>,
+    },
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Running {
+    /// Nothing issued for the current step yet.
+    Idle,
+    Command(u64),
+    Mission,
+    WaitReady {
+        since: Duration,
+    },
+}
+
+#[derive(Debug, Clone)]
+struct Job {
+    key: String,
+    steps: VecDeque<(String, Step)>,
+    running: Running,
+    arm_attempts: u32,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum JobStatus {
+    Running,
+    Done,
+    Failed(Duration),
+}
+
+/// The link protocol state for one autopilot.
+pub struct Vehicle {
+    pub cfg: VehicleConfig,
+    /// (system, component) of the autopilot, once its HEARTBEAT is seen.
+    pub target: Option<(u8, u8)>,
+    pub flavor: Flavor,
+    pub commands: CommandClient,
+    pub mission: MissionClient,
+    pub liveness: Liveness,
+    pub readiness: Readiness,
+    pub telemetry: Telemetry,
+    pub actions: ActionTable,
+    pub route: Option<Route>,
+    purposes: BTreeMap<u64, Purpose>,
+    job: Option<Job>,
+    last: Option<(String, JobStatus)>,
+    stream_queue: VecDeque<(u32, f32)>,
+    /// Significant events since the last `take_events` (trigger a decision cycle).
+    events: Vec<String>,
+    /// Command records since the last `take_records`.
+    records: Vec<CommandRecord>,
+    link_events: Vec<String>,
+    /// Retry a failed action asked for again no sooner than this.
+    pub retry_failed_after: Duration,
+}
+
+impl Vehicle {
+    pub fn new(cfg: VehicleConfig, actions: ActionTable, route: Option<Route>) -> Self {
+        Self {
+            commands: CommandClient::new(cfg.command),
+            mission: MissionClient::new(cfg.mission),
+            liveness: Liveness::new(cfg.link_timeout),
+            telemetry: Telemetry::new(cfg.telemetry.clone()),
+            readiness: Readiness::default(),
+            cfg,
+            target: None,
+            flavor: Flavor::Other,
+            actions,
+            route,
+            purposes: BTreeMap::new(),
+            job: None,
+            last: None,
+            stream_queue: VecDeque::new(),
+            events: Vec::new(),
+            records: Vec::new(),
+            link_events: Vec::new(),
+            retry_failed_after: Duration::from_secs(5),
+        }
+    }
+
+    /// The system id we use in our headers: the autopilot's (we are a component of its vehicle).
+    pub fn our_system(&self) -> u8 {
+        self.target.map(|t| t.0).unwrap_or(super::DEFAULT_SYSTEM_ID)
+    }
+
+    /// Our 1 Hz HEARTBEAT: an onboard controller, not an autopilot.
+    pub fn heartbeat() -> Msg {
+        Msg::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: 0,
+            mavtype: MavType::MAV_TYPE_ONBOARD_CONTROLLER,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+            base_mode: MavModeFlag::empty(),
+            system_status: MavState::MAV_STATE_ACTIVE,
+            mavlink_version: 3,
+        })
+    }
+
+    pub fn has_events(&self) -> bool {
+        !self.events.is_empty()
+    }
+    pub fn take_events(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.events)
+    }
+    pub fn take_records(&mut self) -> Vec<CommandRecord> {
+        std::mem::take(&mut self.records)
+    }
+    pub fn take_link_events(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.link_events)
+    }
+
+    pub fn observations(&self, now: Duration, events: Vec<String>) -> Observations {
+        self.telemetry.observations(now, events)
+    }
+
+    fn link_event(&mut self, e: String, significant: bool) {
+        if significant {
+            self.events.push(e.clone());
+        }
+        self.link_events.push(e);
+    }
+
+    /// A frame from the autopilot link.
+    pub fn on_frame(&mut self, now: Duration, f: &Frame) -> Vec<Msg> {
+        let sys = f.header.system_id.min(255) as u8;
+        let comp = f.header.component_id;
+        if self.target.is_none()
+            && let Msg::HEARTBEAT(h) = &f.msg
+            && h.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID
+            && !matches!(
+                h.mavtype,
+                MavType::MAV_TYPE_GCS
+                    | MavType::MAV_TYPE_ONBOARD_CONTROLLER
+                    | MavType::MAV_TYPE_GIMBAL
+                    | MavType::MAV_TYPE_CAMERA
+            )
+        {
+            self.target = Some((sys, comp));
+            self.flavor = Flavor::from_autopilot(h.autopilot);
+            self.commands.set_target(sys, comp);
+            self.mission.set_target(sys, comp);
+            self.link_event(format!("autopilot {sys}/{comp} ({:?})", self.flavor), false);
+        }
+        let from_autopilot = self.target == Some((sys, comp));
+        if !from_autopilot {
+            // Onboard monitors speak on the same link from their own components.
+            return self.on_monitor_frame(now, f);
+        }
+        let mut out = Vec::new();
+        if let Some(ev) = self.liveness.on_message(now) {
+            out.extend(self.on_liveness(now, ev));
+        }
+        if let Msg::SYSTEM_TIME(t) = &f.msg
+            && let Some(ev) = self.liveness.on_boot_time(t.time_boot_ms)
+        {
+            out.extend(self.on_liveness(now, ev));
+        }
+        let flavor = self.flavor;
+        let ev = self
+            .telemetry
+            .on_message(now, &f.msg, |m| modes::mode_name(flavor, m));
+        self.events.extend(ev);
+        match &f.msg {
+            Msg::HEARTBEAT(h) => {
+                self.readiness.armed = h
+                    .base_mode
+                    .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED)
+            }
+            Msg::SYS_STATUS(s) => self.readiness.on_sys_status(now, s),
+            Msg::EKF_STATUS_REPORT(e) => self.readiness.on_ekf(now, e),
+            Msg::STATUSTEXT(t) => {
+                let text = t.text.to_str().unwrap_or("").to_string();
+                self.readiness.on_text(now, &text);
+                if (t.severity as u8) <= (MavSeverity::MAV_SEVERITY_WARNING as u8) {
+                    self.link_event(format!("autopilot: {text}"), false);
+                }
+            }
+            Msg::COMMAND_ACK(a) => {
+                let (msgs, evs) = self.commands.on_ack(now, a);
+                out.extend(msgs);
+                out.extend(self.on_command_events(now, evs));
+            }
+            _ => {}
+        }
+        let (msgs, evs) = self.mission.on_message(now, &f.msg);
+        out.extend(msgs);
+        out.extend(self.on_mission_events(now, evs));
+        out.extend(self.pump(now));
+        out
+    }
+
+    /// A frame from an onboard monitor (on the autopilot link from another component, or on
+    /// the `--onboard` link): telemetry only.
+    pub fn on_monitor_frame(&mut self, now: Duration, f: &Frame) -> Vec<Msg> {
+        if matches!(
+            f.msg,
+            Msg::NAMED_VALUE_FLOAT(_)
+                | Msg::CAMERA_TRACKING_IMAGE_STATUS(_)
+                | Msg::OBSTACLE_DISTANCE(_)
+                | Msg::DISTANCE_SENSOR(_)
+        ) {
+            let flavor = self.flavor;
+            let ev = self
+                .telemetry
+                .on_message(now, &f.msg, |m| modes::mode_name(flavor, m));
+            self.events.extend(ev);
+        }
+        Vec::new()
+    }
+
+    fn on_liveness(&mut self, now: Duration, ev: LivenessEvent) -> Vec<Msg> {
+        match ev {
+            LivenessEvent::Connected | LivenessEvent::Regained | LivenessEvent::Rebooted => {
+                if ev == LivenessEvent::Rebooted {
+                    self.readiness.reset();
+                    self.drop_everything(now, "autopilot rebooted");
+                }
+                let name = match ev {
+                    LivenessEvent::Connected => "link connected",
+                    LivenessEvent::Regained => "link regained",
+                    _ => "autopilot rebooted",
+                };
+                self.link_event(name.into(), true);
+                self.stream_queue = self.cfg.streams.iter().copied().collect();
+                Vec::new()
+            }
+            LivenessEvent::Lost => {
+                self.drop_everything(now, "link lost");
+                self.link_event("link lost".into(), true);
+                Vec::new()
+            }
+        }
+    }
+
+    /// Stop commanding: pending commands, mission transfer and the running action end now, and
+    /// none of them is replayed later.
+    fn drop_everything(&mut self, now: Duration, why: &str) {
+        let evs = self.commands.cancel_all(now, why);
+        let _ = self.on_command_events(now, evs);
+        if let Some(ev) = self.mission.cancel(why) {
+            let _ = self.on_mission_events(now, vec![ev]);
+        }
+        if let Some(job) = self.job.take() {
+            for (action, step) in job.steps {
+                self.records.push(CommandRecord {
+                    action,
+                    command: step_name(&step),
+                    result: format!("CANCELLED ({why})"),
+                    attempts: 0,
+                    latency_ms: None,
+                });
+            }
+            self.last = Some((job.key, JobStatus::Failed(now)));
+        }
+        self.stream_queue.clear();
+        self.purposes.clear();
+    }
+
+    /// Transport reconnected: the new stream is a new session (re-request streams on first message).
+    pub fn on_reconnect(&mut self, now: Duration) {
+        if self.liveness.alive() {
+            // Force a regain on the next message so streams are re-requested.
+            let losses = self.liveness.losses;
+            self.liveness = Liveness::new(self.cfg.link_timeout);
+            self.liveness.losses = losses;
+            self.liveness.on_message(now);
+            self.stream_queue = self.cfg.streams.iter().copied().collect();
+            self.link_event("transport reconnected".into(), true);
+        }
+    }
+
+    /// Advance time.
+    pub fn tick(&mut self, now: Duration) -> Vec<Msg> {
+        let mut out = Vec::new();
+        if let Some(ev) = self.liveness.tick(now) {
+            out.extend(self.on_liveness(now, ev));
+        }
+        if !self.liveness.alive() {
+            return out;
+        }
+        let (msgs, evs) = self.commands.tick(now);
+        out.extend(msgs);
+        out.extend(self.on_command_events(now, evs));
+        let (msgs, evs) = self.mission.tick(now);
+        out.extend(msgs);
+        out.extend(self.on_mission_events(now, evs));
+        out.extend(self.pump(now));
+        out
+    }
+
+    /// Send the next stream request and advance the running job.
+    fn pump(&mut self, now: Duration) -> Vec<Msg> {
+        let mut out = Vec::new();
+        if !self.liveness.alive() || self.target.is_none() {
+            return out;
+        }
+        if !self
+            .commands
+            .in_flight(MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL)
+            && let Some((id, hz)) = self.stream_queue.pop_front()
+        {
+            let spec = CommandSpec::long(
+                MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                [id as f32, 1e6 / hz, 0., 0., 0., 0., 0.],
+            );
+            if let Ok((ticket, msgs)) = self.commands.submit(now, spec) {
+                self.purposes.insert(ticket, Purpose::Stream(id));
+                out.extend(msgs);
+            }
+        }
+        out.extend(self.advance_job(now));
+        out
+    }
+
+    /// The decision core asked for these vehicle actions.
+    /// The same action already running or done is not restarted; a different one replaces it.
+    pub fn request_actions(&mut self, now: Duration, actions: &[String]) -> Vec<Msg> {
+        if actions.is_empty() {
+            return Vec::new();
+        }
+        let key = actions.join("+");
+        if let Some(job) = &self.job
+            && job.key == key
+        {
+            return Vec::new();
+        }
+        if let Some((k, status)) = &self.last
+            && *k == key
+        {
+            match status {
+                JobStatus::Done | JobStatus::Running => return Vec::new(),
+                JobStatus::Failed(at) if now < *at + self.retry_failed_after => return Vec::new(),
+                JobStatus::Failed(_) => {}
+            }
+        }
+        if !self.liveness.alive() || self.target.is_none() {
+            for a in actions {
+                self.records.push(CommandRecord {
+                    action: a.clone(),
+                    command: "-".into(),
+                    result: "NOT_SENT (no link)".into(),
+                    attempts: 0,
+                    latency_ms: None,
+                });
+            }
+            return Vec::new();
+        }
+        let mut steps = VecDeque::new();
+        for a in actions {
+            match self.actions.actions.get(a) {
+                Some(s) => steps.extend(s.iter().cloned().map(|st| (a.clone(), st))),
+                None => self.records.push(CommandRecord {
+                    action: a.clone(),
+                    command: "-".into(),
+                    result: "UNMAPPED (not in commands.toml)".into(),
+                    attempts: 0,
+                    latency_ms: None,
+                }),
+            }
+        }
+        if let Some(old) = self.job.take() {
+            for (action, step) in old.steps {
+                self.records.push(CommandRecord {
+                    action,
+                    command: step_name(&step),
+                    result: "SUPERSEDED".into(),
+                    attempts: 0,
+                    latency_ms: None,
+                });
+            }
+        }
+        if steps.is_empty() {
+            return Vec::new();
+        }
+        self.job = Some(Job {
+            key: key.clone(),
+            steps,
+            running: Running::Idle,
+            arm_attempts: 0,
+        });
+        self.last = Some((key, JobStatus::Running));
+        self.advance_job(now)
+    }
+
+    /// Latency of everything sent since the last call: from the message (or decision trigger)
+    /// that caused it, `trigger_at`, to the moment it was handed to the transport, `sent_at`.
+    /// The shell calls this right after sending, so the measurement includes decision and
+    /// encoding time, which the injected clock of the state machines cannot see.
+    pub fn stamp_latency(&mut self, trigger_at: Duration, sent_at: Duration) {
+        let ms = sent_at.saturating_sub(trigger_at).as_secs_f64() * 1000.0;
+        for r in self
+            .records
+            .iter_mut()
+            .filter(|r| r.result == "SENT" && r.latency_ms.is_none())
+        {
+            r.latency_ms = Some(ms);
+        }
+        for p in self.purposes.values_mut() {
+            if let Purpose::Step {
+                latency_ms: l @ None,
+                ..
+            } = p
+            {
+                *l = Some(ms);
+            }
+        }
+    }
+
+    fn job_failed(&mut self, now: Duration) {
+        if let Some(job) = self.job.take() {
+            for (action, step) in job.steps.into_iter().skip(1) {
+                self.records.push(CommandRecord {
+                    action,
+                    command: step_name(&step),
+                    result: "SKIPPED (earlier step failed)".into(),
+                    attempts: 0,
+                    latency_ms: None,
+                });
+            }
+            self.last = Some((job.key, JobStatus::Failed(now)));
+        }
+    }
+
+    fn step_done(&mut self) {
+        if let Some(job) = &mut self.job {
+            job.steps.pop_front();
+            job.running = Running::Idle;
+            job.arm_attempts = 0;
+        }
+    }
+
+    /// Run steps until one has to wait.
+    fn advance_job(&mut self, now: Duration) -> Vec<Msg> {
+        let mut out = Vec::new();
+        loop {
+            let Some(job) = &mut self.job else { return out };
+            let Some((action, step)) = job.steps.front().cloned() else {
+                let key = job.key.clone();
+                self.job = None;
+                self.last = Some((key, JobStatus::Done));
+                return out;
+            };
+            match (&job.running, &step) {
+                (Running::Command(_) | Running::Mission, _) => return out,
+                (Running::Idle, Step::Mode(name)) => {
+                    if modes::is_in_mode(self.flavor, self.telemetry.custom_mode, name)
+                        && self.telemetry.mode.is_some()
+                    {
+                        self.records.push(CommandRecord {
+                            action,
+                            command: format!("SET_MODE {name}"),
+                            result: "ALREADY".into(),
+                            attempts: 0,
+                            latency_ms: None,
+                        });
+                        self.step_done();
+                        continue;
+                    }
+                    match modes::set_mode_command(self.flavor, name) {
+                        Some(spec) => {
+                            if !self.issue(now, &action, format!("SET_MODE {name}"), spec, &mut out)
+                            {
+                                return out;
+                            }
+                        }
+                        None => {
+                            self.records.push(CommandRecord {
+                                action,
+                                command: format!("SET_MODE {name}"),
+                                result: format!("FAILED (no {name} mode for {:?})", self.flavor),
+                                attempts: 0,
+                                latency_ms: None,
+                            });
+                            self.job_failed(now);
+                        }
+                    }
+                }
+                (Running::Idle | Running::WaitReady { .. }, Step::Arm) => {
+                    if self.telemetry.armed {
+                        self.records.push(CommandRecord {
+                            action,
+                            command: "ARM".into(),
+                            result: "ALREADY".into(),
+                            attempts: 0,
+                            latency_ms: None,
+                        });
+                        self.step_done();
+                        continue;
+                    }
+                    match self.readiness.check() {
+                        Ok(()) => {
+                            let spec = CommandSpec::long(
+                                MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                                [1., 0., 0., 0., 0., 0., 0.],
+                            )
+                            .once();
+                            if let Some(j) = &mut self.job {
+                                j.arm_attempts += 1;
+                            }
+                            if !self.issue(now, &action, "ARM".into(), spec, &mut out) {
+                                return out;
+                            }
+                        }
+                        Err(why) => {
+                            let since = match job.running {
+                                Running::WaitReady { since } => since,
+                                _ => {
+                                    job.running = Running::WaitReady { since: now };
+                                    self.records.push(CommandRecord {
+                                        action: action.clone(),
+                                        command: "ARM".into(),
+                                        result: format!("WAITING_READY ({})", why.join("; ")),
+                                        attempts: 0,
+                                        latency_ms: None,
+                                    });
+                                    now
+                                }
+                            };
+                            if now.saturating_sub(since) >= self.cfg.arm_wait {
+                                self.records.push(CommandRecord {
+                                    action,
+                                    command: "ARM".into(),
+                                    result: format!("NOT_READY ({})", why.join("; ")),
+                                    attempts: 0,
+                                    latency_ms: None,
+                                });
+                                self.job_failed(now);
+                            }
+                            return out;
+                        }
+                    }
+                }
+                (Running::Idle, Step::Command { command, params }) => {
+                    let spec = CommandSpec::long(*command, *params);
+                    if !self.issue(now, &action, format!("{command:?}"), spec, &mut out) {
+                        return out;
+                    }
+                }
+                (Running::Idle, Step::UploadMission) => {
+                    let home = self
+                        .telemetry
+                        .home
+                        .map(|h| (h.0, h.1))
+                        .or_else(|| self.telemetry.position.map(|p| (p.lat_e7, p.lon_e7)));
+                    let (Some(route), Some(home)) = (&self.route, home) else {
+                        let why = if self.route.is_none() {
+                            "no route loaded"
+                        } else {
+                            "no home position yet"
+                        };
+                        self.records.push(CommandRecord {
+                            action,
+                            command: "MISSION_UPLOAD".into(),
+                            result: format!("FAILED ({why})"),
+                            attempts: 0,
+                            latency_ms: None,
+                        });
+                        self.job_failed(now);
+                        continue;
+                    };
+                    let items = route.items(home);
+                    match self.mission.upload(now, items) {
+                        Ok(msgs) => {
+                            out.extend(msgs);
+                            let job = self.job.as_mut().expect("job checked above");
+                            job.running = Running::Mission;
+                            self.records.push(CommandRecord {
+                                action,
+                                command: "MISSION_UPLOAD".into(),
+                                result: "SENT".into(),
+                                attempts: 1,
+                                latency_ms: None,
+                            });
+                            return out;
+                        }
+                        Err(_) => return out, // another transfer still running: wait for it
+                    }
+                }
+                (Running::Idle, Step::Reposition(o)) => match self.reposition_spec(*o) {
+                    Some(spec) => {
+                        if !self.issue(now, &action, "MAV_CMD_DO_REPOSITION".into(), spec, &mut out)
+                        {
+                            return out;
+                        }
+                    }
+                    None => {
+                        self.records.push(CommandRecord {
+                            action,
+                            command: "MAV_CMD_DO_REPOSITION".into(),
+                            result: "FAILED (no position/heading yet)".into(),
+                            attempts: 0,
+                            latency_ms: None,
+                        });
+                        self.job_failed(now);
+                    }
+                },
+                (Running::Idle, Step::GotoZone) => {
+                    let zone = (
+                        self.telemetry.get("zone_north_m"),
+                        self.telemetry.get("zone_east_m"),
+                        self.telemetry.position,
+                    );
+                    match zone {
+                        (Some(n), Some(e), Some(p)) => {
+                            let (x, y) = displace((p.lat_e7, p.lon_e7), n, e);
+                            let spec = CommandSpec::int(
+                                MavCmd::MAV_CMD_DO_REPOSITION,
+                                MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                                [-1.0, 1.0, 0.0, f32::NAN],
+                                x,
+                                y,
+                                p.alt_rel_m as f32,
+                            );
+                            if !self.issue(
+                                now,
+                                &action,
+                                "MAV_CMD_DO_REPOSITION (zone)".into(),
+                                spec,
+                                &mut out,
+                            ) {
+                                return out;
+                            }
+                        }
+                        _ => {
+                            self.records.push(CommandRecord {
+                                action,
+                                command: "MAV_CMD_DO_REPOSITION (zone)".into(),
+                                result: "SKIPPED (no zone reported; landing here)".into(),
+                                attempts: 0,
+                                latency_ms: None,
+                            });
+                            self.step_done();
+                        }
+                    }
+                }
+                (Running::WaitReady { .. }, _) => {
+                    job.running = Running::Idle;
+                }
+            }
+        }
+    }
+
+    /// Submit a step's command; false when it has to wait (in flight or sent).
+    fn issue(
+        &mut self,
+        now: Duration,
+        action: &str,
+        name: String,
+        spec: CommandSpec,
+        out: &mut Vec<Msg>,
+    ) -> bool {
+        match self.commands.submit(now, spec) {
+            Ok((ticket, msgs)) => {
+                out.extend(msgs);
+                let job = self.job.as_mut().expect("issue runs inside a job");
+                job.running = Running::Command(ticket);
+                self.records.push(CommandRecord {
+                    action: action.to_string(),
+                    command: name.clone(),
+                    result: "SENT".into(),
+                    attempts: 1,
+                    latency_ms: None,
+                });
+                self.purposes.insert(
+                    ticket,
+                    Purpose::Step {
+                        action: action.to_string(),
+                        name,
+                        latency_ms: None,
+                    },
+                );
+                false
+            }
+            // Same command id still in flight (a stream request or a superseded step): next tick.
+            Err(_) => false,
+        }
+    }
+
+    fn reposition_spec(&self, o: Offset) -> Option<CommandSpec> {
+        let p = self.telemetry.position?;
+        let h = p.heading_deg?.to_radians();
+        let north = o.forward_m * h.cos() - o.right_m * h.sin();
+        let east = o.forward_m * h.sin() + o.right_m * h.cos();
+        let (x, y) = displace((p.lat_e7, p.lon_e7), north, east);
+        // param1 -1: default speed; param2 1: MAV_DO_REPOSITION_FLAGS_CHANGE_MODE; param4 NaN: keep yaw.
+        Some(CommandSpec::int(
+            MavCmd::MAV_CMD_DO_REPOSITION,
+            MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT,
+            [-1.0, 1.0, 0.0, f32::NAN],
+            x,
+            y,
+            (p.alt_rel_m + o.up_m) as f32,
+        ))
+    }
+
+    fn on_command_events(&mut self, now: Duration, evs: Vec<CommandEvent>) -> Vec<Msg> {
+        let mut out = Vec::new();
+        for ev in evs {
+            let CommandEvent::Finished {
+                ticket,
+                command,
+                outcome,
+                attempts,
+                ..
+            } = ev
+            else {
+                continue;
+            };
+            match self.purposes.remove(&ticket) {
+                Some(Purpose::Stream(id)) => {
+                    let name = <Msg as mavlink::Message>::default_message_from_id(id)
+                        .map(|m| mavlink::Message::message_name(&m))
+                        .unwrap_or("?");
+                    self.link_event(format!("stream {name}: {}", outcome.label()), false);
+                }
+                Some(Purpose::Step {
+                    action,
+                    name,
+                    latency_ms,
+                }) => {
+                    self.records.push(CommandRecord {
+                        action: action.clone(),
+                        command: name,
+                        result: outcome.label(),
+                        attempts,
+                        latency_ms,
+                    });
+                    self.events
+                        .push(format!("command {action} {}", outcome.label()));
+                    let is_current =
+                        matches!(&self.job, Some(j) if j.running == Running::Command(ticket));
+                    if !is_current {
+                        continue;
+                    }
+                    match outcome {
+                        Outcome::Acked => self.step_done(),
+                        Outcome::Failed(reason)
+                            if command == MavCmd::MAV_CMD_COMPONENT_ARM_DISARM =>
+                        {
+                            // Not ready after all: wait for a fresh ready report, never resend blindly.
+                            self.readiness.invalidate(now);
+                            let attempts_used =
+                                self.job.as_ref().map(|j| j.arm_attempts).unwrap_or(0);
+                            if matches!(reason, FailReason::Cancelled(_))
+                                || attempts_used >= self.cfg.max_arm_attempts
+                            {
+                                self.job_failed(now);
+                            } else if let Some(j) = &mut self.job {
+                                j.running = Running::WaitReady { since: now };
+                            }
+                        }
+                        Outcome::Failed(_) => self.job_failed(now),
+                    }
+                }
+                None => {}
+            }
+        }
+        out.extend(self.advance_job(now));
+        out
+    }
+
+    fn on_mission_events(&mut self, now: Duration, evs: Vec<MissionEvent>) -> Vec<Msg> {
+        for ev in evs {
+            let action = self
+                .job
+                .as_ref()
+                .and_then(|j| j.steps.front().map(|s| s.0.clone()))
+                .unwrap_or_default();
+            let in_job = matches!(&self.job, Some(j) if j.running == Running::Mission);
+            match ev {
+                MissionEvent::Uploaded { count } => self.link_event(
+                    format!("mission uploaded ({count} items), verifying"),
+                    false,
+                ),
+                MissionEvent::Done {
+                    op: MissionOp::UploadVerified,
+                    items,
+                } => {
+                    self.records.push(CommandRecord {
+                        action,
+                        command: "MISSION_UPLOAD".into(),
+                        result: format!("ACCEPTED (verified {} items)", items.len()),
+                        attempts: 1,
+                        latency_ms: None,
+                    });
+                    if in_job {
+                        self.step_done();
+                    }
+                }
+                MissionEvent::Done { .. } => {}
+                MissionEvent::Failed { op, error } => {
+                    self.records.push(CommandRecord {
+                        action,
+                        command: format!("{op:?}"),
+                        result: format!("FAILED ({error:?})"),
+                        attempts: 1,
+                        latency_ms: None,
+                    });
+                    self.events.push("command mission FAILED".into());
+                    if in_job {
+                        self.job_failed(now);
+                    }
+                }
+            }
+        }
+        self.advance_job(now)
+    }
+
+    /// Whether an action is being executed (for tests and the log).
+    pub fn busy(&self) -> bool {
+        self.job.is_some()
+    }
+}
+
+fn step_name(s: &Step) -> String {
+    match s {
+        Step::Mode(m) => format!("SET_MODE {m}"),
+        Step::Arm => "ARM".into(),
+        Step::Command { command, .. } => format!("{command:?}"),
+        Step::UploadMission => "MISSION_UPLOAD".into(),
+        Step::Reposition(_) => "MAV_CMD_DO_REPOSITION".into(),
+        Step::GotoZone => "MAV_CMD_DO_REPOSITION (zone)".into(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mavlink::{MavHeader, MavlinkVersion};
+
+    fn s(v: f64) -> Duration {
+        Duration::from_secs_f64(v)
+    }
+
+    fn frame(msg: Msg) -> Frame {
+        Frame {
+            header: MavHeader {
+                system_id: 1,
+                component_id: 1,
+                sequence: 0,
+            },
+            msg,
+            signed: false,
+            version: MavlinkVersion::V2,
+        }
+    }
+
+    fn hb(mode: u32, armed: bool) -> Frame {
+        frame(Msg::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: mode,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+            base_mode: if armed {
+                MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED
+                    | MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+            } else {
+                MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+            },
+            system_status: MavState::MAV_STATE_STANDBY,
+            mavlink_version: 3,
+        }))
+    }
+
+    fn ready_frames() -> Vec<Frame> {
+        let bit = MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK;
+        vec![
+            frame(Msg::SYS_STATUS(SYS_STATUS_DATA {
+                onboard_control_sensors_present: bit,
+                onboard_control_sensors_enabled: bit,
+                onboard_control_sensors_health: bit,
+                ..SYS_STATUS_DATA::DEFAULT
+            })),
+            frame(Msg::EKF_STATUS_REPORT(EKF_STATUS_REPORT_DATA {
+                flags: EkfStatusFlags::EKF_ATTITUDE
+                    | EkfStatusFlags::EKF_VELOCITY_HORIZ
+                    | EkfStatusFlags::EKF_POS_HORIZ_ABS
+                    | EkfStatusFlags::EKF_POS_VERT_ABS,
+                ..EKF_STATUS_REPORT_DATA::DEFAULT
+            })),
+        ]
+    }
+
+    fn not_ready() -> Frame {
+        let bit = MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK;
+        frame(Msg::SYS_STATUS(SYS_STATUS_DATA {
+            onboard_control_sensors_present: bit,
+            onboard_control_sensors_enabled: bit,
+            ..SYS_STATUS_DATA::DEFAULT
+        }))
+    }
+
+    fn ack(command: MavCmd, result: MavResult) -> Frame {
+        frame(Msg::COMMAND_ACK(COMMAND_ACK_DATA {
+            command,
+            result,
+            ..COMMAND_ACK_DATA::DEFAULT
+        }))
+    }
+
+    fn table() -> ActionTable {
+        let mut t = ActionTable::default();
+        t.actions.insert(
+            "take_off".into(),
+            vec![
+                Step::Mode("GUIDED".into()),
+                Step::Arm,
+                Step::Command {
+                    command: MavCmd::MAV_CMD_NAV_TAKEOFF,
+                    params: [0., 0., 0., 0., 0., 0., 10.],
+                },
+            ],
+        );
+        t.actions
+            .insert("return_to_base".into(), vec![Step::Mode("RTL".into())]);
+        t
+    }
+
+    fn vehicle() -> Vehicle {
+        let cfg = VehicleConfig {
+            streams: vec![(168, 1.0)],
+            ..VehicleConfig::default()
+        };
+        Vehicle::new(cfg, table(), None)
+    }
+
+    fn commands(out: &[Msg]) -> Vec<MavCmd> {
+        out.iter()
+            .filter_map(|m| {
+                if let Msg::COMMAND_LONG(c) = m {
+                    Some(c.command)
+                } else {
+                    None
+                }
+            })
+            .collect()
+    }
+
+    /// Connect, let the stream request complete.
+    fn connected(v: &mut Vehicle, mode: u32) {
+        let out = v.on_frame(s(0.0), &hb(mode, false));
+        assert_eq!(v.target, Some((1, 1)));
+        assert_eq!(
+            commands(&out),
+            vec![MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL],
+            "streams requested on connect"
+        );
+        v.on_frame(
+            s(0.05),
+            &ack(
+                MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                MavResult::MAV_RESULT_ACCEPTED,
+            ),
+        );
+        assert!(v.take_events().contains(&"link connected".to_string()));
+    }
+
+    #[test]
+    fn take_off_waits_for_readiness_before_arming() {
+        let mut v = vehicle();
+        connected(&mut v, 0);
+        v.on_frame(s(0.1), &not_ready());
+        let out = v.request_actions(s(0.2), &["take_off".into()]);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        v.stamp_latency(s(0.15), s(0.2));
+        let recs = v.take_records();
+        assert_eq!(recs[0].latency_ms, Some(50.0));
+        let out = v.on_frame(
+            s(0.3),
+            &ack(MavCmd::MAV_CMD_DO_SET_MODE, MavResult::MAV_RESULT_ACCEPTED),
+        );
+        assert!(
+            commands(&out).is_empty(),
+            "must not arm a vehicle that reports not ready"
+        );
+        assert!(
+            v.take_records()
+                .iter()
+                .any(|r| r.result.starts_with("WAITING_READY"))
+        );
+        v.on_frame(s(3.0), &hb(4, false));
+        assert!(commands(&v.tick(s(5.0))).is_empty());
+        let mut out = Vec::new();
+        for f in ready_frames() {
+            out.extend(v.on_frame(s(6.0), &f));
+        }
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_COMPONENT_ARM_DISARM]);
+        let out = v.on_frame(
+            s(6.1),
+            &ack(
+                MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                MavResult::MAV_RESULT_ACCEPTED,
+            ),
+        );
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_NAV_TAKEOFF]);
+        v.on_frame(
+            s(6.2),
+            &ack(MavCmd::MAV_CMD_NAV_TAKEOFF, MavResult::MAV_RESULT_ACCEPTED),
+        );
+        assert!(!v.busy());
+        // Asking again for the finished action does nothing.
+        assert!(v.request_actions(s(7.0), &["take_off".into()]).is_empty());
+    }
+
+    #[test]
+    fn failed_arm_is_retried_only_after_a_fresh_ready_report() {
+        let mut v = vehicle();
+        connected(&mut v, 4);
+        for f in ready_frames() {
+            v.on_frame(s(0.1), &f);
+        }
+        let out = v.request_actions(s(0.2), &["take_off".into()]);
+        assert_eq!(
+            commands(&out),
+            vec![MavCmd::MAV_CMD_COMPONENT_ARM_DISARM],
+            "already GUIDED: straight to arm"
+        );
+        // ArduPilot refuses: prearm failed.
+        let out = v.on_frame(
+            s(0.3),
+            &ack(
+                MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                MavResult::MAV_RESULT_FAILED,
+            ),
+        );
+        assert!(commands(&out).is_empty());
+        assert!(commands(&v.tick(s(2.0))).is_empty(), "no blind retry");
+        assert!(commands(&v.on_frame(s(2.5), &not_ready())).is_empty());
+        let out = v.on_frame(s(3.0), &ready_frames()[0]);
+        assert_eq!(
+            commands(&out),
+            vec![MavCmd::MAV_CMD_COMPONENT_ARM_DISARM],
+            "retried after the autopilot reported ready again"
+        );
+        let out = v.on_frame(
+            s(3.1),
+            &ack(
+                MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                MavResult::MAV_RESULT_ACCEPTED,
+            ),
+        );
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_NAV_TAKEOFF]);
+    }
+
+    #[test]
+    fn arm_gives_up_when_never_ready() {
+        let mut v = vehicle();
+        connected(&mut v, 4);
+        v.on_frame(s(0.1), &not_ready());
+        v.request_actions(s(0.2), &["take_off".into()]);
+        for t in 1..=61 {
+            v.on_frame(s(t as f64), &hb(4, false));
+            assert!(commands(&v.tick(s(t as f64 + 0.5))).is_empty());
+        }
+        assert!(!v.busy());
+        assert!(
+            v.take_records()
+                .iter()
+                .any(|r| r.result.starts_with("NOT_READY"))
+        );
+    }
+
+    #[test]
+    fn link_loss_drops_commands_and_resume_does_not_replay() {
+        let mut v = vehicle();
+        connected(&mut v, 0);
+        let out = v.request_actions(s(1.0), &["return_to_base".into()]);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        // Silence: the autopilot is gone.
+        assert!(
+            commands(&v.tick(s(2.5)))
+                .iter()
+                .all(|c| *c == MavCmd::MAV_CMD_DO_SET_MODE),
+            "resend while alive is fine"
+        );
+        let out = v.tick(s(4.1));
+        assert!(out.is_empty());
+        assert!(!v.liveness.alive());
+        assert!(v.take_events().contains(&"link lost".to_string()));
+        assert!(
+            v.take_records()
+                .iter()
+                .any(|r| r.result.contains("CANCELLED"))
+        );
+        assert_eq!(v.commands.pending_count(), 0);
+        for t in [5.0, 10.0, 20.0] {
+            assert!(v.tick(s(t)).is_empty(), "nothing sent while lost");
+        }
+        assert!(v.request_actions(s(20.0), &["take_off".into()]).is_empty());
+        assert!(
+            v.take_records()
+                .iter()
+                .any(|r| r.result.starts_with("NOT_SENT"))
+        );
+        // Autopilot back: only stream requests go out, never the old SET_MODE.
+        let out = v.on_frame(s(21.0), &hb(0, false));
+        assert!(v.take_events().contains(&"link regained".to_string()));
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL]);
+        let out = v.on_frame(
+            s(21.1),
+            &ack(
+                MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                MavResult::MAV_RESULT_ACCEPTED,
+            ),
+        );
+        assert!(commands(&out).is_empty());
+        v.on_frame(s(23.0), &hb(0, false));
+        assert!(commands(&v.tick(s(24.0))).is_empty());
+        // A fresh decision may command again.
+        let out = v.request_actions(s(25.0), &["return_to_base".into()]);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+    }
+
+    #[test]
+    fn reboot_re_requests_streams_and_resets_readiness() {
+        let mut v = vehicle();
+        connected(&mut v, 0);
+        for f in ready_frames() {
+            v.on_frame(s(0.1), &f);
+        }
+        assert!(v.readiness.check().is_ok());
+        v.on_frame(
+            s(1.0),
+            &frame(Msg::SYSTEM_TIME(SYSTEM_TIME_DATA {
+                time_unix_usec: 0,
+                time_boot_ms: 90_000,
+            })),
+        );
+        let out = v.on_frame(
+            s(2.0),
+            &frame(Msg::SYSTEM_TIME(SYSTEM_TIME_DATA {
+                time_unix_usec: 0,
+                time_boot_ms: 500,
+            })),
+        );
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL]);
+        assert!(v.take_events().contains(&"autopilot rebooted".to_string()));
+        assert!(v.readiness.check().is_err());
+    }
+
+    #[test]
+    fn unmapped_actions_are_recorded_not_sent() {
+        let mut v = vehicle();
+        connected(&mut v, 0);
+        assert!(v.request_actions(s(1.0), &["track_v3".into()]).is_empty());
+        assert!(v.take_records()[0].result.starts_with("UNMAPPED"));
+    }
+
+    #[test]
+    fn other_components_do_not_keep_the_link_alive() {
+        let mut v = vehicle();
+        connected(&mut v, 0);
+        let mut gcs = hb(0, false);
+        gcs.header.component_id = 190;
+        for t in 1..10 {
+            v.on_frame(s(t as f64), &gcs);
+            v.tick(s(t as f64));
+        }
+        assert!(!v.liveness.alive());
+    }
+
+    fn route_vehicle() -> Vehicle {
+        use crate::link::actions::{Route, Waypoint};
+        let mut t = table();
+        t.actions.insert(
+            "follow_trajectory".into(),
+            vec![Step::UploadMission, Step::Mode("AUTO".into())],
+        );
+        t.actions.insert(
+            "avoid_obstacle".into(),
+            vec![Step::Reposition(Offset {
+                forward_m: 0.0,
+                right_m: 8.0,
+                up_m: 0.0,
+            })],
+        );
+        let route = Route {
+            waypoints: vec![Waypoint::Relative {
+                north_m: 100.0,
+                east_m: 0.0,
+                alt_m: 20.0,
+            }],
+            altitude_m: 20.0,
+            search_time_limit_s: None,
+            takeoff_first: false,
+        };
+        let cfg = VehicleConfig {
+            streams: vec![],
+            ..VehicleConfig::default()
+        };
+        let mut v = Vehicle::new(cfg, t, Some(route));
+        v.on_frame(s(0.0), &hb(4, true));
+        v.on_frame(
+            s(0.0),
+            &frame(Msg::HOME_POSITION(HOME_POSITION_DATA {
+                latitude: 473_977_420,
+                longitude: 85_455_940,
+                altitude: 488_000,
+                ..HOME_POSITION_DATA::DEFAULT
+            })),
+        );
+        v.on_frame(
+            s(0.0),
+            &frame(Msg::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
+                lat: 473_977_420,
+                lon: 85_455_940,
+                relative_alt: 20_000,
+                hdg: 9000,
+                ..GLOBAL_POSITION_INT_DATA::DEFAULT
+            })),
+        );
+        v.take_records();
+        v
+    }
+
+    /// Run the autopilot side of upload + download; `stored` is what the autopilot keeps.
+    fn serve_upload(v: &mut Vehicle, first: Vec<Msg>, stored_alt: f32) -> Vec<Msg> {
+        let count = match &first[0] {
+            Msg::MISSION_COUNT(c) => c.count,
+            other => panic!("expected MISSION_COUNT, got {other:?}"),
+        };
+        let mut items = Vec::new();
+        for seq in 0..count {
+            let out = v.on_frame(
+                s(1.0),
+                &frame(Msg::MISSION_REQUEST_INT(MISSION_REQUEST_INT_DATA {
+                    seq,
+                    target_system: 1,
+                    target_component: 191,
+                    ..MISSION_REQUEST_INT_DATA::DEFAULT
+                })),
+            );
+            match &out[0] {
+                Msg::MISSION_ITEM_INT(i) => items.push(i.clone()),
+                other => panic!("{other:?}"),
+            }
+        }
+        let out = v.on_frame(
+            s(1.1),
+            &frame(Msg::MISSION_ACK(MISSION_ACK_DATA {
+                mavtype: MavMissionResult::MAV_MISSION_ACCEPTED,
+                ..MISSION_ACK_DATA::DEFAULT
+            })),
+        );
+        assert!(
+            matches!(out[0], Msg::MISSION_REQUEST_LIST(_)),
+            "verification download starts: {out:?}"
+        );
+        let mut out = v.on_frame(
+            s(1.2),
+            &frame(Msg::MISSION_COUNT(MISSION_COUNT_DATA {
+                count,
+                ..MISSION_COUNT_DATA::DEFAULT
+            })),
+        );
+        for (i, mut it) in items.into_iter().enumerate() {
+            if i > 0 {
+                it.z = stored_alt;
+            }
+            assert!(
+                matches!(out[0], Msg::MISSION_REQUEST_INT(MISSION_REQUEST_INT_DATA { seq, .. }) if seq as usize == i),
+                "{out:?}"
+            );
+            out = v.on_frame(s(1.3), &frame(Msg::MISSION_ITEM_INT(it)));
+        }
+        out
+    }
+
+    #[test]
+    fn follow_trajectory_uploads_verifies_then_switches_to_auto() {
+        let mut v = route_vehicle();
+        let out = v.request_actions(s(1.0), &["follow_trajectory".into()]);
+        let out = serve_upload(&mut v, out, 20.0);
+        assert!(
+            matches!(out[0], Msg::MISSION_ACK(_)),
+            "download acknowledged"
+        );
+        assert_eq!(
+            commands(&out),
+            vec![MavCmd::MAV_CMD_DO_SET_MODE],
+            "AUTO only after the verified upload"
+        );
+        match &out[1] {
+            Msg::COMMAND_LONG(c) => assert_eq!(c.param2, 3.0, "ArduPilot AUTO"),
+            other => panic!("{other:?}"),
+        }
+        assert!(
+            v.take_records()
+                .iter()
+                .any(|r| r.result.starts_with("ACCEPTED (verified 2 items)"))
+        );
+    }
+
+    #[test]
+    fn a_mission_that_does_not_verify_is_never_flown() {
+        let mut v = route_vehicle();
+        let out = v.request_actions(s(1.0), &["follow_trajectory".into()]);
+        let out = serve_upload(&mut v, out, 35.0);
+        assert!(
+            commands(&out).is_empty(),
+            "no AUTO after a mismatch: {out:?}"
+        );
+        assert!(!v.busy());
+        let recs = v.take_records();
+        assert!(
+            recs.iter()
+                .any(|r| r.result.contains("VerifyMismatch") && r.result.contains("altitude")),
+            "{recs:?}"
+        );
+        assert!(
+            recs.iter()
+                .any(|r| r.command == "SET_MODE AUTO" && r.result.starts_with("SKIPPED"))
+        );
+    }
+
+    #[test]
+    fn sidestep_is_to_the_right_of_the_heading() {
+        let mut v = route_vehicle();
+        // Heading east (90 deg): 8 m to the right is 8 m south.
+        let out = v.request_actions(s(1.0), &["avoid_obstacle".into()]);
+        match &out[0] {
+            Msg::COMMAND_INT(c) => {
+                assert_eq!(c.command, MavCmd::MAV_CMD_DO_REPOSITION);
+                let (n, e) =
+                    crate::link::telemetry::offset_m((473_977_420, 85_455_940), (c.x, c.y));
+                assert!(
+                    (n + 8.0).abs() < 0.05 && e.abs() < 0.05,
+                    "north {n} east {e}"
+                );
+                assert_eq!(c.z, 20.0);
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+}

@@ -1,0 +1,849 @@
+//! The mission's MDPs as data (`params/mdp/*.toml`) and the behaviour-conflict rules
+//! (`params/policies.toml`), loaded, validated and compiled once; then re-instantiated in place
+//! with each cycle's named probabilities. Format: docs/params/mdp.md.
+
+pub mod expr;
+
+use crate::record::{Conflict, MdpProposal};
+use crate::spec::{SpecError, read_toml};
+use expr::Expr;
+use mdp_engine::{Mdp, MdpBuilder, MdpError, Workspace};
+use serde::Deserialize;
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::path::{Path, PathBuf};
+
+/// Number of pseudo-random probability points (besides the all-0 and all-1 corners and the
+/// index's check point) at which every row must sum to 1.
+pub const RANDOM_CHECK_POINTS: usize = 64;
+/// Tolerance of the load-time row-sum check.
+pub const LOAD_SUM_TOLERANCE: f64 = 1e-9;
+
+// ---------------------------------------------------------------- file formats
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct IndexFile {
+    /// MDP names (files `params/mdp/<name>.toml`) solved concurrently.
+    concurrent: Vec<String>,
+    #[serde(default)]
+    monolithic: Option<String>,
+    #[serde(default)]
+    reference: Option<String>,
+    /// Named probability values at which rows are also checked (the paper's section 7.1 point).
+    #[serde(default)]
+    check_point: BTreeMap<String, f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MdpFile {
+    name: String,
+    #[serde(default)]
+    #[allow(dead_code)]
+    source: Option<String>,
+    initial: String,
+    states: Vec<String>,
+    action: Vec<ActionSpec>,
+    /// state -> action -> next state -> probability expression.
+    #[serde(default)]
+    transitions: BTreeMap<String, BTreeMap<String, BTreeMap<String, Num>>>,
+    /// policy -> rewards.
+    reward: BTreeMap<String, RewardSpec>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ActionSpec {
+    name: String,
+    does: Vec<String>,
+    #[serde(default)]
+    #[allow(dead_code)]
+    note: Option<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RewardSpec {
+    /// Action name -> reward expression `R(a)` (same in every state where `a` is admissible).
+    action: BTreeMap<String, Num>,
+    /// State name -> reward for entering it, folded into `R(s,a) += sum p(s'|s,a) enter(s')`.
+    #[serde(default)]
+    enter: BTreeMap<String, Num>,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged)]
+enum Num {
+    Number(f64),
+    Text(String),
+}
+
+impl Num {
+    fn text(&self) -> String {
+        match self {
+            Num::Number(x) => format!("{x}"),
+            Num::Text(s) => s.clone(),
+        }
+    }
+}
+
+// ---------------------------------------------------------------- compiled model
+
+/// Why an MDP could not be instantiated with the given probabilities.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum InstantiateError {
+    #[error("probability {0} not provided")]
+    MissingProbability(String),
+    #[error("probability {name} = {value} not in [0, 1]")]
+    BadProbability { name: String, value: f64 },
+    #[error("unknown policy '{0}'")]
+    UnknownPolicy(String),
+    #[error("mdp '{mdp}': {err}")]
+    Invalid { mdp: String, err: MdpError },
+}
+
+/// A stage-0 decision: the MDP action index (see [`MissionMdp::action_name`],
+/// [`MissionMdp::primitives`]) and the optimal expected total reward from the current state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Decision {
+    pub action: usize,
+    pub value: f64,
+}
+
+/// One MDP from params, compiled: the engine model plus the expressions that fill it.
+#[derive(Debug, Clone)]
+pub struct MissionMdp {
+    name: String,
+    file: PathBuf,
+    states: Vec<String>,
+    initial: usize,
+    actions: Vec<String>,
+    does: Vec<Vec<String>>,
+    /// Probability names used by this MDP; slot `k` of every expression is `vars[k]`.
+    vars: Vec<String>,
+    values: Vec<f64>,
+    /// Expression per engine transition index.
+    trans_expr: Vec<Expr>,
+    policies: Vec<String>,
+    /// Per policy: action reward expression per engine choice index.
+    choice_reward: Vec<Vec<Expr>>,
+    /// Per policy: enter reward per state (`None` = 0).
+    enter_reward: Vec<Vec<Option<Expr>>>,
+    mdp: Mdp,
+}
+
+impl MissionMdp {
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+    pub fn file(&self) -> &Path {
+        &self.file
+    }
+    pub fn n_states(&self) -> usize {
+        self.states.len()
+    }
+    pub fn n_actions(&self) -> usize {
+        self.actions.len()
+    }
+    pub fn state_index(&self, name: &str) -> Option<usize> {
+        self.states.iter().position(|s| s == name)
+    }
+    pub fn state_name(&self, s: usize) -> &str {
+        &self.states[s]
+    }
+    pub fn states(&self) -> &[String] {
+        &self.states
+    }
+    pub fn initial_state(&self) -> usize {
+        self.initial
+    }
+    pub fn action_index(&self, name: &str) -> Option<usize> {
+        self.actions.iter().position(|a| a == name)
+    }
+    /// The MDP action's name as in params (`"A2+A11"`).
+    pub fn action_name(&self, a: usize) -> &str {
+        &self.actions[a]
+    }
+    pub fn action_names(&self) -> &[String] {
+        &self.actions
+    }
+    /// The primitive actions an MDP action stands for (`["follow_trajectory", "detect_obstacles_lidar"]`).
+    pub fn primitives(&self, a: usize) -> &[String] {
+        &self.does[a]
+    }
+    /// Probability names this MDP reads.
+    pub fn probability_names(&self) -> &[String] {
+        &self.vars
+    }
+    pub fn policies(&self) -> &[String] {
+        &self.policies
+    }
+    /// The engine model as last instantiated (at load: the first check point, first policy).
+    pub fn mdp(&self) -> &Mdp {
+        &self.mdp
+    }
+
+    /// Fill transition probabilities and rewards in place from named probabilities for `policy`.
+    /// Allocation-free. Fails when a probability is missing or outside `[0, 1]`, or the result
+    /// is not a stochastic model.
+    pub fn instantiate(
+        &mut self,
+        probs: &BTreeMap<String, f64>,
+        policy: &str,
+    ) -> Result<&Mdp, InstantiateError> {
+        self.instantiate_with(|n| probs.get(n).copied(), policy)
+    }
+
+    /// Like [`MissionMdp::instantiate`] with any lookup from probability name to value.
+    pub fn instantiate_with(
+        &mut self,
+        lookup: impl Fn(&str) -> Option<f64>,
+        policy: &str,
+    ) -> Result<&Mdp, InstantiateError> {
+        let pi = self
+            .policies
+            .iter()
+            .position(|p| p == policy)
+            .ok_or_else(|| InstantiateError::UnknownPolicy(policy.to_string()))?;
+        for (k, name) in self.vars.iter().enumerate() {
+            let v =
+                lookup(name).ok_or_else(|| InstantiateError::MissingProbability(name.clone()))?;
+            if !(0.0..=1.0).contains(&v) {
+                return Err(InstantiateError::BadProbability {
+                    name: name.clone(),
+                    value: v,
+                });
+            }
+            self.values[k] = v;
+        }
+        self.fill(pi);
+        self.mdp
+            .validate()
+            .map_err(|err| InstantiateError::Invalid {
+                mdp: self.name.clone(),
+                err,
+            })?;
+        Ok(&self.mdp)
+    }
+
+    /// One decision cycle for this MDP: instantiate with `probs` under `policy`, solve the
+    /// finite horizon (`horizon` steps, the paper uses 100) in `ws`, and return the stage-0
+    /// action at `state` with its value. `Ok(None)` when `state` is terminal. Allocation-free
+    /// once `ws` has seen this model size and horizon.
+    pub fn decide(
+        &mut self,
+        ws: &mut Workspace,
+        state: usize,
+        probs: &BTreeMap<String, f64>,
+        policy: &str,
+        horizon: usize,
+    ) -> Result<Option<Decision>, InstantiateError> {
+        let mdp = self.instantiate(probs, policy)?;
+        let fh = ws.finite_horizon(mdp, horizon);
+        Ok(fh.decision(state).map(|action| Decision {
+            action,
+            value: fh.value(0, state),
+        }))
+    }
+
+    /// The decision as a decision-log entry (allocates the strings).
+    pub fn proposal(&self, state: usize, d: &Decision, horizon: usize) -> MdpProposal {
+        MdpProposal {
+            mdp: self.name.clone(),
+            state: self.states[state].clone(),
+            action: self.actions[d.action].clone(),
+            actions: self.does[d.action].clone(),
+            value: d.value,
+            iterations: horizon as u32,
+        }
+    }
+
+    /// Evaluate every expression at `self.values` into the engine model.
+    fn fill(&mut self, policy: usize) {
+        let vals = &self.values;
+        for (p, e) in self.mdp.probs_mut().iter_mut().zip(&self.trans_expr) {
+            *p = e.eval(vals);
+        }
+        for c in 0..self.mdp.n_choices() {
+            let mut r = self.choice_reward[policy][c].eval(vals);
+            let range = self.mdp.transition_range(c);
+            for t in range {
+                let next = self.mdp.next_states()[t] as usize;
+                if let Some(e) = &self.enter_reward[policy][next] {
+                    r += self.mdp.probs()[t] * e.eval(vals);
+                }
+            }
+            self.mdp.rewards_mut()[c] = r;
+        }
+    }
+}
+
+/// All MDPs listed in `params/mdp/index.toml`.
+#[derive(Debug, Clone)]
+pub struct MissionMdps {
+    mdps: Vec<MissionMdp>,
+    concurrent: Vec<String>,
+    monolithic: Option<String>,
+    reference: Option<String>,
+    check_point: BTreeMap<String, f64>,
+}
+
+impl MissionMdps {
+    /// Load `params_dir/mdp/index.toml` and every MDP it lists. `known_probability_names` are the
+    /// names the health BNs publish; any other name in an expression is an error.
+    pub fn load(params_dir: &Path, known_probability_names: &[&str]) -> Result<Self, SpecError> {
+        let dir = params_dir.join("mdp");
+        let index_path = dir.join("index.toml");
+        let index: IndexFile = read_toml(&index_path)?;
+        for (k, v) in &index.check_point {
+            if !known_probability_names.contains(&k.as_str()) {
+                return Err(SpecError::new(
+                    &index_path,
+                    format!("check_point.{k}"),
+                    "unknown probability name",
+                ));
+            }
+            if !(0.0..=1.0).contains(v) {
+                return Err(SpecError::new(
+                    &index_path,
+                    format!("check_point.{k}"),
+                    "not in [0, 1]",
+                ));
+            }
+        }
+        let mut names: Vec<String> = index.concurrent.clone();
+        names.extend(index.monolithic.iter().cloned());
+        names.extend(index.reference.iter().cloned());
+        let mut seen = BTreeSet::new();
+        let mut mdps = Vec::new();
+        for n in &names {
+            if !seen.insert(n.clone()) {
+                return Err(SpecError::new(
+                    &index_path,
+                    "concurrent",
+                    format!("MDP '{n}' listed twice"),
+                ));
+            }
+            let path = dir.join(format!("{n}.toml"));
+            let m = load_mdp(&path, known_probability_names, &index.check_point)?;
+            if m.name != *n {
+                return Err(SpecError::new(
+                    &path,
+                    "name",
+                    format!("is '{}', expected '{n}' (file name)", m.name),
+                ));
+            }
+            if let Some(first) = mdps.first() {
+                let first: &MissionMdp = first;
+                if first.policies != m.policies {
+                    return Err(SpecError::new(
+                        &path,
+                        "reward",
+                        format!(
+                            "policies {:?} differ from {:?} in {}",
+                            m.policies,
+                            first.policies,
+                            first.file.display()
+                        ),
+                    ));
+                }
+            }
+            mdps.push(m);
+        }
+        Ok(Self {
+            mdps,
+            concurrent: index.concurrent,
+            monolithic: index.monolithic,
+            reference: index.reference,
+            check_point: index.check_point,
+        })
+    }
+
+    pub fn get(&self, name: &str) -> Option<&MissionMdp> {
+        self.mdps.iter().find(|m| m.name == name)
+    }
+    pub fn get_mut(&mut self, name: &str) -> Option<&mut MissionMdp> {
+        self.mdps.iter_mut().find(|m| m.name == name)
+    }
+    pub fn all(&self) -> &[MissionMdp] {
+        &self.mdps
+    }
+    /// Names of the concurrent MDPs, in index order.
+    pub fn concurrent(&self) -> &[String] {
+        &self.concurrent
+    }
+    pub fn monolithic(&self) -> Option<&str> {
+        self.monolithic.as_deref()
+    }
+    pub fn reference(&self) -> Option<&str> {
+        self.reference.as_deref()
+    }
+    /// The index's check point (paper section 7.1 values plus stated assumptions).
+    pub fn check_point(&self) -> &BTreeMap<String, f64> {
+        &self.check_point
+    }
+    /// Policy names (identical in every MDP).
+    pub fn policies(&self) -> &[String] {
+        self.mdps
+            .first()
+            .map(|m| m.policies.as_slice())
+            .unwrap_or(&[])
+    }
+    /// Union of the primitive actions of every MDP (sorted).
+    pub fn primitive_actions(&self) -> Vec<String> {
+        let set: BTreeSet<&String> = self
+            .mdps
+            .iter()
+            .flat_map(|m| m.does.iter().flatten())
+            .collect();
+        set.into_iter().cloned().collect()
+    }
+}
+
+fn err(path: &Path, entry: impl Into<String>, reason: impl Into<String>) -> SpecError {
+    SpecError::new(path, entry, reason)
+}
+
+/// One parsed transition row: state, action, (next state, probability), entry path for errors.
+type Row = (usize, usize, Vec<(usize, Expr)>, String);
+
+/// Load, validate and compile one MDP file.
+pub fn load_mdp(
+    path: &Path,
+    known: &[&str],
+    check_point: &BTreeMap<String, f64>,
+) -> Result<MissionMdp, SpecError> {
+    let f: MdpFile = read_toml(path)?;
+    // States.
+    if f.states.is_empty() {
+        return Err(err(path, "states", "no state"));
+    }
+    for (i, s) in f.states.iter().enumerate() {
+        if f.states[..i].contains(s) {
+            return Err(err(
+                path,
+                format!("states[{i}]"),
+                format!("state '{s}' listed twice"),
+            ));
+        }
+    }
+    let state = |s: &str| f.states.iter().position(|x| x == s);
+    let initial = state(&f.initial)
+        .ok_or_else(|| err(path, "initial", format!("unknown state '{}'", f.initial)))?;
+    // Actions.
+    if f.action.is_empty() {
+        return Err(err(path, "action", "no action"));
+    }
+    for (i, a) in f.action.iter().enumerate() {
+        if f.action[..i].iter().any(|b| b.name == a.name) {
+            return Err(err(
+                path,
+                format!("action[{i}].name"),
+                format!("action '{}' declared twice", a.name),
+            ));
+        }
+        if a.does.is_empty() {
+            return Err(err(
+                path,
+                format!("action[{i}].does"),
+                "empty: an action must stand for primitive actions",
+            ));
+        }
+    }
+    let action = |a: &str| f.action.iter().position(|x| x.name == a);
+    // Probability name slots.
+    let mut vars: Vec<String> = Vec::new();
+    let mut slot = |name: &str| -> Option<usize> {
+        if !known.contains(&name) {
+            return None;
+        }
+        Some(vars.iter().position(|v| v == name).unwrap_or_else(|| {
+            vars.push(name.to_string());
+            vars.len() - 1
+        }))
+    };
+    // Transitions.
+    let mut rows: Vec<Row> = Vec::new();
+    for (s_name, acts) in &f.transitions {
+        let s = state(s_name).ok_or_else(|| {
+            err(
+                path,
+                format!("transitions.{s_name}"),
+                format!("unknown state '{s_name}'"),
+            )
+        })?;
+        for (a_name, nexts) in acts {
+            let entry = format!("transitions.{s_name}.\"{a_name}\"");
+            let a = action(a_name)
+                .ok_or_else(|| err(path, &entry, format!("unknown action '{a_name}'")))?;
+            if nexts.is_empty() {
+                return Err(err(path, &entry, "action has no transition"));
+            }
+            let mut tr = Vec::new();
+            for (n_name, p) in nexts {
+                let n = state(n_name).ok_or_else(|| {
+                    err(
+                        path,
+                        format!("{entry}.{n_name}"),
+                        format!("unknown state '{n_name}'"),
+                    )
+                })?;
+                let e = Expr::parse(&p.text(), &mut slot)
+                    .map_err(|r| err(path, format!("{entry}.{n_name}"), r))?;
+                tr.push((n, e));
+            }
+            rows.push((s, a, tr, entry));
+        }
+    }
+    // Reachability from the initial state (structural).
+    let mut reach = vec![false; f.states.len()];
+    reach[initial] = true;
+    let mut queue = VecDeque::from([initial]);
+    while let Some(s) = queue.pop_front() {
+        for (_, _, tr, _) in rows.iter().filter(|r| r.0 == s) {
+            for (n, _) in tr {
+                if !reach[*n] {
+                    reach[*n] = true;
+                    queue.push_back(*n);
+                }
+            }
+        }
+    }
+    if let Some(u) = reach.iter().position(|r| !r) {
+        return Err(err(
+            path,
+            format!("states[{u}]"),
+            format!(
+                "state '{}' unreachable from initial state '{}'",
+                f.states[u], f.initial
+            ),
+        ));
+    }
+    // Rewards.
+    if f.reward.is_empty() {
+        return Err(err(path, "reward", "no policy rewards"));
+    }
+    let mut policies = Vec::new();
+    let mut action_reward: Vec<Vec<Expr>> = Vec::new();
+    let mut enter_reward: Vec<Vec<Option<Expr>>> = Vec::new();
+    for (pol, spec) in &f.reward {
+        let mut ar: Vec<Option<Expr>> = vec![None; f.action.len()];
+        for (a_name, r) in &spec.action {
+            let entry = format!("reward.{pol}.action.\"{a_name}\"");
+            let a = action(a_name)
+                .ok_or_else(|| err(path, &entry, format!("unknown action '{a_name}'")))?;
+            ar[a] = Some(Expr::parse(&r.text(), &mut slot).map_err(|r| err(path, &entry, r))?);
+        }
+        if let Some(a) = ar.iter().position(|x| x.is_none()) {
+            return Err(err(
+                path,
+                format!("reward.{pol}.action"),
+                format!("no reward for action '{}'", f.action[a].name),
+            ));
+        }
+        let mut er: Vec<Option<Expr>> = vec![None; f.states.len()];
+        for (s_name, r) in &spec.enter {
+            let entry = format!("reward.{pol}.enter.{s_name}");
+            let s = state(s_name)
+                .ok_or_else(|| err(path, &entry, format!("unknown state '{s_name}'")))?;
+            er[s] = Some(Expr::parse(&r.text(), &mut slot).map_err(|r| err(path, &entry, r))?);
+        }
+        policies.push(pol.clone());
+        action_reward.push(ar.into_iter().flatten().collect());
+        enter_reward.push(er);
+    }
+    // Engine model (probabilities filled below).
+    let mut b = MdpBuilder::new(f.states.len(), f.action.len());
+    for (s, a, tr, _) in &rows {
+        let t: Vec<(usize, f64)> = tr.iter().map(|(n, _)| (*n, 0.0)).collect();
+        b.choice(*s, *a, 0.0, &t);
+    }
+    let mdp = b
+        .build_unchecked()
+        .map_err(|e| err(path, "transitions", e.to_string()))?;
+    let mut trans_expr = vec![Expr::constant(0.0); mdp.n_transitions()];
+    let mut choice_reward: Vec<Vec<Expr>> =
+        vec![vec![Expr::constant(0.0); mdp.n_choices()]; policies.len()];
+    for (s, a, tr, _) in &rows {
+        let c = mdp.choice_index(*s, *a).expect("built from these rows");
+        for (t, (_, e)) in mdp.transition_range(c).zip(tr) {
+            trans_expr[t] = e.clone();
+        }
+        for (p, ar) in action_reward.iter().enumerate() {
+            choice_reward[p][c] = ar[*a].clone();
+        }
+    }
+    let values = vec![0.0; vars.len()];
+    let mut m = MissionMdp {
+        name: f.name.clone(),
+        file: path.to_path_buf(),
+        states: f.states.clone(),
+        initial,
+        actions: f.action.iter().map(|a| a.name.clone()).collect(),
+        does: f.action.iter().map(|a| a.does.clone()).collect(),
+        vars,
+        values,
+        trans_expr,
+        policies,
+        choice_reward,
+        enter_reward,
+        mdp,
+    };
+    // Row sums at: all 0, all 1, the check point (missing names at 0.5), pseudo-random points.
+    let k = m.vars.len();
+    let mut points: Vec<(String, Vec<f64>)> = vec![
+        ("all probabilities 0".into(), vec![0.0; k]),
+        ("all probabilities 1".into(), vec![1.0; k]),
+        (
+            "the check point".into(),
+            m.vars
+                .iter()
+                .map(|v| check_point.get(v).copied().unwrap_or(0.5))
+                .collect(),
+        ),
+    ];
+    let mut rng = SplitMix64(0x0005_eed0_fb0f_u64);
+    for i in 0..RANDOM_CHECK_POINTS {
+        points.push((
+            format!("random point {i}"),
+            (0..k).map(|_| rng.unit()).collect(),
+        ));
+    }
+    for (label, pt) in &points {
+        m.values.copy_from_slice(pt);
+        for (s, a, tr, entry) in &rows {
+            let sum: f64 = tr.iter().map(|(_, e)| e.eval(pt)).sum();
+            if (sum - 1.0).abs() > LOAD_SUM_TOLERANCE || !sum.is_finite() {
+                return Err(err(
+                    path,
+                    entry,
+                    format!(
+                        "probabilities sum to {sum} at {label} ({})",
+                        fmt_point(&m.vars, pt)
+                    ),
+                ));
+            }
+            let _ = (s, a);
+            for (n, e) in tr {
+                let p = e.eval(pt);
+                if !(-LOAD_SUM_TOLERANCE..=1.0 + LOAD_SUM_TOLERANCE).contains(&p) {
+                    return Err(err(
+                        path,
+                        format!("{entry}.{}", f.states[*n]),
+                        format!(
+                            "probability {p} outside [0, 1] at {label} ({})",
+                            fmt_point(&m.vars, pt)
+                        ),
+                    ));
+                }
+            }
+        }
+        for pi in 0..m.policies.len() {
+            m.fill(pi);
+            if let Some(c) = m.mdp.rewards().iter().position(|r| !r.is_finite()) {
+                return Err(err(
+                    path,
+                    format!("reward.{}", m.policies[pi]),
+                    format!("reward of choice {c} not finite at {label}"),
+                ));
+            }
+        }
+    }
+    // Leave the model instantiated at the check point, first policy.
+    m.values.copy_from_slice(&points[2].1);
+    m.fill(0);
+    Ok(m)
+}
+
+fn fmt_point(vars: &[String], pt: &[f64]) -> String {
+    vars.iter()
+        .zip(pt)
+        .map(|(n, v)| format!("{n}={v:.3}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Tiny deterministic generator for the load-time check points (fixed seed: reproducible).
+struct SplitMix64(u64);
+impl SplitMix64 {
+    fn unit(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        (z >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+// ---------------------------------------------------------------- behaviour conflicts
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PoliciesFile {
+    #[serde(default)]
+    #[allow(dead_code)]
+    source: Option<String>,
+    antagonistic: Vec<RuleSpec>,
+    /// Policy -> primitive-action patterns, highest priority first.
+    priority: BTreeMap<String, Vec<String>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RuleSpec {
+    name: String,
+    a: Vec<String>,
+    b: Vec<String>,
+    #[serde(default)]
+    #[allow(dead_code)]
+    source: Option<String>,
+}
+
+#[derive(Debug, Clone)]
+struct Rule {
+    name: String,
+    groups: [Vec<String>; 2],
+}
+
+/// Antagonistic primitive actions (BFM section 6.2) and each policy's priority order.
+/// Patterns are primitive action names, or a prefix followed by `*` (`track_v*`).
+#[derive(Debug, Clone)]
+pub struct BehaviourConflicts {
+    rules: Vec<Rule>,
+    priority: BTreeMap<String, Vec<String>>,
+}
+
+fn pattern_matches(pattern: &str, action: &str) -> bool {
+    match pattern.strip_suffix('*') {
+        Some(prefix) => action.starts_with(prefix),
+        None => pattern == action,
+    }
+}
+
+impl BehaviourConflicts {
+    /// Load `params/policies.toml`. `known_actions` are the primitive actions (e.g.
+    /// [`MissionMdps::primitive_actions`]); every pattern must match at least one.
+    pub fn load(path: &Path, known_actions: &[&str]) -> Result<Self, SpecError> {
+        let f: PoliciesFile = read_toml(path)?;
+        if f.priority.is_empty() {
+            return Err(err(path, "priority", "no policy"));
+        }
+        let check_pattern = |entry: String, p: &str| -> Result<(), SpecError> {
+            if known_actions.iter().any(|a| pattern_matches(p, a)) {
+                Ok(())
+            } else {
+                Err(err(
+                    path,
+                    entry,
+                    format!("'{p}' matches no known primitive action"),
+                ))
+            }
+        };
+        let mut rules = Vec::new();
+        for (i, r) in f.antagonistic.iter().enumerate() {
+            if f.antagonistic[..i].iter().any(|q| q.name == r.name) {
+                return Err(err(
+                    path,
+                    format!("antagonistic[{i}].name"),
+                    format!("rule '{}' given twice", r.name),
+                ));
+            }
+            for (g, group) in [("a", &r.a), ("b", &r.b)] {
+                if group.is_empty() {
+                    return Err(err(path, format!("antagonistic[{i}].{g}"), "empty group"));
+                }
+                for (j, p) in group.iter().enumerate() {
+                    check_pattern(format!("antagonistic[{i}].{g}[{j}]"), p)?;
+                    for (pol, order) in &f.priority {
+                        if !order.contains(p) {
+                            return Err(err(
+                                path,
+                                format!("priority.{pol}"),
+                                format!("'{p}' (rule '{}') not ranked", r.name),
+                            ));
+                        }
+                    }
+                }
+            }
+            if r.a.iter().any(|p| r.b.contains(p)) {
+                return Err(err(
+                    path,
+                    format!("antagonistic[{i}]"),
+                    "a pattern is in both groups",
+                ));
+            }
+            rules.push(Rule {
+                name: r.name.clone(),
+                groups: [r.a.clone(), r.b.clone()],
+            });
+        }
+        for (pol, order) in &f.priority {
+            for (j, p) in order.iter().enumerate() {
+                check_pattern(format!("priority.{pol}[{j}]"), p)?;
+                if order[..j].contains(p) {
+                    return Err(err(
+                        path,
+                        format!("priority.{pol}[{j}]"),
+                        format!("'{p}' ranked twice"),
+                    ));
+                }
+            }
+        }
+        Ok(Self {
+            rules,
+            priority: f.priority,
+        })
+    }
+
+    pub fn policies(&self) -> impl Iterator<Item = &str> {
+        self.priority.keys().map(String::as_str)
+    }
+
+    /// Apply every antagonistic rule in file order: when actions of both groups are present,
+    /// the group holding the higher-ranked pattern (under `policy`) keeps its actions and the
+    /// other group's actions are dropped. Returns the kept actions (input order) and one
+    /// [`Conflict`] per rule that fired.
+    pub fn resolve<S: AsRef<str>>(
+        &self,
+        actions: &[S],
+        policy: &str,
+    ) -> Result<(Vec<String>, Vec<Conflict>), InstantiateError> {
+        let order = self
+            .priority
+            .get(policy)
+            .ok_or_else(|| InstantiateError::UnknownPolicy(policy.to_string()))?;
+        let mut kept: Vec<String> = actions.iter().map(|a| a.as_ref().to_string()).collect();
+        let mut conflicts = Vec::new();
+        let rank = |group: &[String]| {
+            group
+                .iter()
+                .filter_map(|p| order.iter().position(|q| q == p))
+                .min()
+        };
+        for rule in &self.rules {
+            let present = |g: &[String]| -> Vec<String> {
+                kept.iter()
+                    .filter(|a| g.iter().any(|p| pattern_matches(p, a)))
+                    .cloned()
+                    .collect()
+            };
+            let (in_a, in_b) = (present(&rule.groups[0]), present(&rule.groups[1]));
+            if in_a.is_empty() || in_b.is_empty() {
+                continue;
+            }
+            let a_wins = rank(&rule.groups[0]) <= rank(&rule.groups[1]);
+            let (win, lose) = if a_wins { (in_a, in_b) } else { (in_b, in_a) };
+            kept.retain(|a| !lose.contains(a));
+            conflicts.push(Conflict {
+                kept: win.join("+"),
+                dropped: lose,
+                rule: rule.name.clone(),
+            });
+        }
+        Ok((kept, conflicts))
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,620 @@
+//! Resources stage: loads the platform (`params/platform.toml`), the Table 2 variant catalogue
+//! (`params/variants.toml`) and the resource policies (`params/resource_policies.toml`) into
+//! `fpga_model` types, turns a schedule into the decision record, and gives the resource health
+//! BN its observations (`free_tiles`, `cpu_load`). Format: docs/params/platform.md.
+
+use crate::observations::Observations;
+use crate::record::{PlacementRecord, ResourcesRecord};
+use crate::spec::{SpecError, read_toml};
+use fpga_model::{
+    Catalogue, Platform, PlatformState, PoliciesFile, Request, ResourcePolicy, Schedule,
+    VariantsFile,
+};
+use serde_json::{Value, json};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+pub const PLATFORM_FILE: &str = "platform.toml";
+pub const VARIANTS_FILE: &str = "variants.toml";
+pub const POLICIES_FILE: &str = "resource_policies.toml";
+
+/// Everything the scheduler needs, validated.
+#[derive(Debug, Clone)]
+pub struct ResourceSpec {
+    pub platform: Platform,
+    pub catalogue: Catalogue,
+    /// By name (`safety`, `mission`).
+    pub policies: BTreeMap<String, ResourcePolicy>,
+    /// Where the policies came from, for error messages.
+    pub policies_file: PathBuf,
+}
+
+impl ResourceSpec {
+    /// Load the three files from a params directory.
+    pub fn load(params_dir: &Path) -> Result<Self, SpecError> {
+        let platform = load_platform(&params_dir.join(PLATFORM_FILE))?;
+        let catalogue = load_variants(&params_dir.join(VARIANTS_FILE), &platform)?;
+        let policies_file = params_dir.join(POLICIES_FILE);
+        let policies = load_policies(&policies_file, &catalogue)?;
+        Ok(Self {
+            platform,
+            catalogue,
+            policies,
+            policies_file,
+        })
+    }
+
+    /// A policy by name; unknown names are a spec error naming the policies file.
+    pub fn policy(&self, name: &str) -> Result<&ResourcePolicy, SpecError> {
+        self.policies.get(name).ok_or_else(|| {
+            let known: Vec<&str> = self.policies.keys().map(String::as_str).collect();
+            SpecError::new(
+                &self.policies_file,
+                name,
+                format!("unknown resource policy (known: {})", known.join(", ")),
+            )
+        })
+    }
+
+    /// One scheduling decision under the named policy.
+    pub fn schedule(
+        &self,
+        policy: &str,
+        state: &PlatformState,
+        requests: &[Request],
+    ) -> Result<(Schedule, PlatformState), SpecError> {
+        let policy = self.policy(policy)?;
+        Ok(fpga_model::schedule(
+            &self.platform,
+            &self.catalogue,
+            policy,
+            state,
+            requests,
+        ))
+    }
+
+    /// Required frame rate of `app` from the drone's and the watched thing's velocities (m/s),
+    /// by the section 4.3.2 model in platform.toml; `None` when params give the app no model.
+    pub fn required_fps(
+        &self,
+        app: &str,
+        drone_velocity: [f64; 2],
+        target_velocity: [f64; 2],
+    ) -> Option<f64> {
+        self.platform
+            .required_fps(app, drone_velocity, target_velocity)
+    }
+}
+
+pub fn load_platform(path: &Path) -> Result<Platform, SpecError> {
+    let platform: Platform = read_toml(path)?;
+    platform
+        .validate()
+        .map_err(|e| SpecError::new(path, e.entry, e.reason))?;
+    Ok(platform)
+}
+
+pub fn load_variants(path: &Path, platform: &Platform) -> Result<Catalogue, SpecError> {
+    let file: VariantsFile = read_toml(path)?;
+    Catalogue::new(file.variant, platform).map_err(|e| SpecError::new(path, e.entry, e.reason))
+}
+
+pub fn load_policies(
+    path: &Path,
+    catalogue: &Catalogue,
+) -> Result<BTreeMap<String, ResourcePolicy>, SpecError> {
+    let mut file: PoliciesFile = read_toml(path)?;
+    if file.is_empty() {
+        return Err(SpecError::new(path, "-", "no resource policy defined"));
+    }
+    for (name, policy) in file.iter_mut() {
+        policy.name = name.clone();
+        policy
+            .validate(name, catalogue)
+            .map_err(|e| SpecError::new(path, e.entry, e.reason))?;
+    }
+    Ok(file)
+}
+
+/// The placements as the plan's application list.
+pub fn placement_records(schedule: &Schedule) -> Vec<PlacementRecord> {
+    schedule
+        .placements
+        .iter()
+        .map(|p| PlacementRecord {
+            app: p.app.clone(),
+            version: p.version.clone(),
+            implementation: p.implementation.to_string(),
+            support: p.support.to_string(),
+            tiles: p.tiles.clone(),
+            cpu_share: p.cpu_share,
+            ms_per_frame: p.ms_per_frame,
+        })
+        .collect()
+}
+
+/// The decision record's resources section.
+pub fn to_record(schedule: &Schedule) -> ResourcesRecord {
+    ResourcesRecord {
+        placements: placement_records(schedule),
+        cpu_load: schedule.cpu_load,
+        tiles_used: schedule.tiles_used,
+        reconfigurations: schedule.reconfigurations,
+        degraded: schedule
+            .degraded
+            .iter()
+            .map(|d| format!("{} {} -> {}: {}", d.app, d.from, d.to, d.reason))
+            .collect(),
+        dropped: schedule
+            .dropped
+            .iter()
+            .map(|d| format!("{} {}: {}", d.app, d.version, d.reason))
+            .collect(),
+        summary: schedule.summary.clone(),
+        policy: schedule.policy.clone(),
+        free_tiles: schedule.free_tiles,
+        failed_tiles: schedule.failed_tiles.clone(),
+        reconfiguration_ms: schedule.reconfiguration_ms,
+        power_w: schedule.power_w,
+    }
+}
+
+/// What the resource health BN observes after scheduling (section 4.3.1, Figure 5).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ResourceObservations {
+    /// Healthy tiles not in use.
+    pub free_tiles: f64,
+    /// Utilisation of the online cores (0..1, may exceed 1 when external load alone is over).
+    pub cpu_load: f64,
+}
+
+impl ResourceObservations {
+    /// Write them into an observation snapshot under the names `free_tiles` and `cpu_load`.
+    pub fn apply(&self, obs: &mut Observations) {
+        obs.set("free_tiles", self.free_tiles);
+        obs.set("cpu_load", self.cpu_load);
+    }
+}
+
+pub fn observations(schedule: &Schedule) -> ResourceObservations {
+    ResourceObservations {
+        free_tiles: f64::from(schedule.free_tiles),
+        cpu_load: schedule.cpu_load,
+    }
+}
+
+fn platform_json(p: &Platform) -> Value {
+    json!({
+        "board": p.board,
+        "device": p.device,
+        "tiles": p.tiles,
+        "cpu": {
+            "cores": p.cpu_cores,
+            "mhz": p.cpu_mhz,
+            "budget": p.cpu_budget,
+            "thresholds": p.cpu_thresholds,
+        },
+        "reconfiguration_ms_per_tile": p.reconfiguration_ms_per_tile,
+        "power": p.power,
+        "performance": p.performance,
+    })
+}
+
+fn variants_json(spec: &ResourceSpec) -> Value {
+    let cores = spec.platform.cpu_cores;
+    Value::Array(
+        spec.catalogue
+            .variants()
+            .iter()
+            .map(|v| {
+                json!({
+                    "app": v.app,
+                    "version": v.version,
+                    "description": v.description,
+                    "implementation": v.implementation,
+                    "support": v.support,
+                    "ms_per_frame": v.ms_per_frame(),
+                    "ms": v.ms,
+                    "sw_ms": v.sw_ms(),
+                    "hw_ms": v.hw_ms(),
+                    "max_fps": v.max_fps(),
+                    "tiles": v.tiles,
+                    "cpu_share": v.full_duty_cpu_share(cores),
+                    "u_app": v.u_app(cores),
+                    "source": v.source,
+                    "note": v.note,
+                })
+            })
+            .collect(),
+    )
+}
+
+/// `companion check --json` part: `{"platform": {...}, "variants": [...], "resource_policies": {...}}`.
+/// A variant's `cpu_share` is its back-to-back share of the nominal CPU, `u_app` = tiles + that.
+pub fn check_json_of(spec: &ResourceSpec) -> Value {
+    let policies: serde_json::Map<String, Value> = spec
+        .policies
+        .iter()
+        .map(|(name, p)| {
+            (
+                name.clone(),
+                json!({"priority": p.priority, "degrade": p.degrade}),
+            )
+        })
+        .collect();
+    json!({
+        "platform": platform_json(&spec.platform),
+        "variants": variants_json(spec),
+        "resource_policies": policies,
+    })
+}
+
+/// Load `params_dir` and return the check JSON.
+pub fn check_json(params_dir: &Path) -> Result<Value, SpecError> {
+    Ok(check_json_of(&ResourceSpec::load(params_dir)?))
+}
+
+/// `companion check` human part: the platform line and the Table 2 catalogue as a table.
+pub fn check_text(spec: &ResourceSpec) -> String {
+    use std::fmt::Write;
+    let p = &spec.platform;
+    let mut out = String::new();
+    let pct = |x: f64| format!("{:.0} %", x * 100.0);
+    let _ = writeln!(
+        out,
+        "Platform: {} ({}): {} tiles, {} x Cortex-A9 @ {} MHz, CPU budget {}, CPU thresholds {}, reconfiguration {} ms/tile",
+        p.board,
+        p.device,
+        p.tiles,
+        p.cpu_cores,
+        p.cpu_mhz,
+        pct(p.cpu_budget),
+        p.cpu_thresholds
+            .iter()
+            .map(|&t| pct(t))
+            .collect::<Vec<_>>()
+            .join(" / "),
+        fpga_model::fmt_ms(p.reconfiguration_ms_per_tile),
+    );
+    let _ = writeln!(
+        out,
+        "{:<20} {:<14} {:<4} {:<7} {:>12} {:>5} {:>6} {:>6}",
+        "app", "version", "impl", "support", "ms/frame", "tiles", "cpu", "U_App"
+    );
+    for v in spec.catalogue.variants() {
+        let _ = writeln!(
+            out,
+            "{:<20} {:<14} {:<4} {:<7} {:>12} {:>5} {:>6.3} {:>6.3}",
+            v.app,
+            v.version,
+            v.implementation.to_string(),
+            v.support.to_string(),
+            v.ms_label(),
+            v.tiles,
+            v.full_duty_cpu_share(p.cpu_cores),
+            v.u_app(p.cpu_cores),
+        );
+    }
+    let mut names: Vec<&str> = spec.policies.keys().map(String::as_str).collect();
+    names.sort_unstable();
+    for name in names {
+        let pol = &spec.policies[name];
+        let _ = writeln!(
+            out,
+            "Resource policy {name}: {} (gives way last to first)",
+            pol.priority.join(" > ")
+        );
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::spec::default_params_dir;
+
+    fn real() -> ResourceSpec {
+        ResourceSpec::load(&default_params_dir()).expect("shipped params load")
+    }
+
+    /// A params dir with the shipped files, one of them replaced by `text`.
+    fn with_file(name: &str, text: &str) -> (tempfile::TempDir, PathBuf) {
+        let dir = tempfile::tempdir().unwrap();
+        for f in [PLATFORM_FILE, VARIANTS_FILE, POLICIES_FILE] {
+            std::fs::copy(default_params_dir().join(f), dir.path().join(f)).unwrap();
+        }
+        std::fs::write(dir.path().join(name), text).unwrap();
+        let p = dir.path().to_path_buf();
+        (dir, p)
+    }
+
+    fn shipped(name: &str) -> String {
+        std::fs::read_to_string(default_params_dir().join(name)).unwrap()
+    }
+
+    /// Replace exactly one occurrence of `from` in the shipped file `name`, load, return the error.
+    fn error_after(name: &str, from: &str, to: &str) -> SpecError {
+        let text = shipped(name);
+        assert_eq!(
+            text.matches(from).count(),
+            1,
+            "pattern {from:?} must occur once in {name}"
+        );
+        let (_dir, path) = with_file(name, &text.replacen(from, to, 1));
+        let err = ResourceSpec::load(&path).expect_err("must be rejected");
+        assert_eq!(err.file, path.join(name));
+        err
+    }
+
+    #[test]
+    fn shipped_params_load() {
+        let spec = real();
+        assert_eq!(spec.platform.tiles, 4);
+        assert_eq!(spec.catalogue.variants().len(), 27);
+        assert!(spec.policy("safety").is_ok() && spec.policy("mission").is_ok());
+    }
+
+    #[test]
+    fn missing_file_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let err = ResourceSpec::load(dir.path()).unwrap_err();
+        assert_eq!(err.file, dir.path().join(PLATFORM_FILE));
+        assert!(err.reason.starts_with("cannot read"), "{err}");
+    }
+
+    #[test]
+    fn toml_syntax_error_names_the_line() {
+        let err = error_after(
+            VARIANTS_FILE,
+            "app = \"path_planning\"",
+            "app = path_planning\"",
+        );
+        assert!(err.entry.starts_with("line "), "{err}");
+    }
+
+    #[test]
+    fn platform_zero_tiles() {
+        let err = error_after(PLATFORM_FILE, "tiles = 4 ", "tiles = 0 ");
+        assert_eq!(err.entry, "tiles");
+    }
+
+    #[test]
+    fn platform_budget_over_one() {
+        let err = error_after(PLATFORM_FILE, "cpu_budget = 0.8", "cpu_budget = 1.5");
+        assert_eq!(err.entry, "cpu_budget");
+    }
+
+    #[test]
+    fn platform_thresholds_must_increase() {
+        let err = error_after(
+            PLATFORM_FILE,
+            "cpu_thresholds = [0.3, 0.8]",
+            "cpu_thresholds = [0.8, 0.3]",
+        );
+        assert_eq!(err.entry, "cpu_thresholds[1]");
+    }
+
+    #[test]
+    fn platform_negative_reconfiguration_time() {
+        let err = error_after(
+            PLATFORM_FILE,
+            "reconfiguration_ms_per_tile = 20.0",
+            "reconfiguration_ms_per_tile = -1.0",
+        );
+        assert_eq!(err.entry, "reconfiguration_ms_per_tile");
+    }
+
+    #[test]
+    fn platform_bad_performance_parameter() {
+        let err = error_after(PLATFORM_FILE, "window_m = 1.155", "window_m = 0.0");
+        assert_eq!(err.entry, "performance.tracking.window_m");
+    }
+
+    #[test]
+    fn variant_more_tiles_than_the_platform() {
+        // V2 F (the 9th variant) uses 4 tiles.
+        let err = error_after(
+            VARIANTS_FILE,
+            "ms = [7.0]\ntiles = 4",
+            "ms = [7.0]\ntiles = 5",
+        );
+        assert_eq!(err.entry, "variant[8].tiles");
+        assert!(err.reason.contains("platform has 4"), "{err}");
+    }
+
+    #[test]
+    fn variant_negative_ms() {
+        let err = error_after(
+            VARIANTS_FILE,
+            "ms = [285.0]\ntiles = 0",
+            "ms = [-285.0]\ntiles = 0",
+        );
+        assert_eq!(err.entry, "variant[0].ms[0]");
+    }
+
+    #[test]
+    fn variant_software_with_tiles() {
+        let err = error_after(
+            VARIANTS_FILE,
+            "ms = [730.0]\ntiles = 0",
+            "ms = [730.0]\ntiles = 1",
+        );
+        assert_eq!(err.entry, "variant[6].tiles");
+    }
+
+    #[test]
+    fn variant_sw_hw_without_a_hw_part() {
+        let err = error_after(
+            VARIANTS_FILE,
+            "parts = [\"HW\", \"SW\"]",
+            "parts = [\"SW\", \"SW\"]",
+        );
+        assert_eq!(err.entry, "variant[4].parts");
+    }
+
+    #[test]
+    fn variant_duplicate_implementation() {
+        let err = error_after(
+            VARIANTS_FILE,
+            "version = \"fusion\"\ndescription = \"IR + ultrasonic sensor fusion\"",
+            "version = \"lidar\"\ndescription = \"IR + ultrasonic sensor fusion\"",
+        );
+        assert_eq!(err.entry, "variant[23].implementation");
+    }
+
+    #[test]
+    fn variant_unknown_support_label() {
+        let err = error_after(
+            VARIANTS_FILE,
+            "support = \"SW-HW\"\nms = [30.0, 10.0]",
+            "support = \"GPU\"\nms = [30.0, 10.0]",
+        );
+        assert!(err.entry.starts_with("line "), "{err}");
+        assert!(err.reason.contains("GPU"), "{err}");
+    }
+
+    #[test]
+    fn policy_unknown_app() {
+        let err = error_after(
+            POLICIES_FILE,
+            "priority = [\"obstacle_detection\", \"obstacle_avoidance\", \"landing_search\"",
+            "priority = [\"obstacle_detection\", \"obstacle_avoidance\", \"landing_serch\"",
+        );
+        assert_eq!(err.entry, "safety.priority[2]");
+        assert!(err.reason.contains("landing_serch"), "{err}");
+    }
+
+    #[test]
+    fn policy_app_not_ranked() {
+        let err = error_after(
+            POLICIES_FILE,
+            ", \"path_planning\", \"tracking\"]",
+            ", \"tracking\"]",
+        );
+        assert_eq!(err.entry, "safety.priority");
+        assert!(err.reason.contains("path_planning"), "{err}");
+    }
+
+    #[test]
+    fn policy_app_ranked_twice() {
+        let err = error_after(
+            POLICIES_FILE,
+            "\"path_planning\", \"tracking\"]",
+            "\"tracking\", \"tracking\"]",
+        );
+        assert_eq!(err.entry, "safety.priority[4]");
+    }
+
+    #[test]
+    fn policy_unknown_degrade_version() {
+        let err = error_after(
+            POLICIES_FILE,
+            "V3 = [\"V1\"]   # Table 4",
+            "V3 = [\"V7\"]   # Table 4",
+        );
+        assert_eq!(err.entry, "safety.degrade.tracking.V3[0]");
+    }
+
+    #[test]
+    fn policy_unknown_degrade_app() {
+        let err = error_after(
+            POLICIES_FILE,
+            "[safety.degrade.tracking]",
+            "[safety.degrade.trackin]",
+        );
+        assert_eq!(err.entry, "safety.degrade.trackin");
+    }
+
+    #[test]
+    fn no_policy_at_all() {
+        let (_dir, path) = with_file(POLICIES_FILE, "# nothing\n");
+        let err = ResourceSpec::load(&path).unwrap_err();
+        assert_eq!(err.reason, "no resource policy defined");
+    }
+
+    #[test]
+    fn unknown_policy_name() {
+        let err = real().policy("reckless").unwrap_err();
+        assert_eq!(err.entry, "reckless");
+        assert!(err.reason.contains("mission, safety"), "{err}");
+    }
+
+    #[test]
+    fn record_and_observations_from_the_vibration_event() {
+        let spec = real();
+        let mut state = PlatformState::new(&spec.platform);
+        state.fail_tile(3);
+        let reqs = [
+            Request::new("tracking", "V3", 25.0),
+            Request::new("obstacle_detection", "lidar", 10.0),
+            Request::new("landing_search", "emergency", 5.0),
+        ];
+        let (s, _) = spec.schedule("safety", &state, &reqs).unwrap();
+        let rec = to_record(&s);
+        assert_eq!(rec.summary, "10 + 1 + 5 + 7 ms");
+        assert_eq!(rec.placements[0].implementation, "M");
+        assert_eq!(rec.placements[0].support, "SW-HW");
+        assert_eq!(rec.degraded.len(), 1);
+        assert!(
+            rec.degraded[0].starts_with("tracking V3 -> V1: insufficient resources"),
+            "{}",
+            rec.degraded[0]
+        );
+        assert_eq!(
+            (rec.tiles_used, rec.free_tiles, rec.failed_tiles.clone()),
+            (3, 0, vec![3])
+        );
+        // Tiles used 3 of which all newly configured from a blank board: 3 x 20 ms.
+        assert_eq!(rec.reconfigurations, 3);
+        assert_eq!(rec.reconfiguration_ms, 60.0);
+        // CPU: lidar 5 ms x 10 fps + V1's SW 1 ms x 25 fps = 75 ms/s over 2 cores.
+        let mut obs = Observations::default();
+        observations(&s).apply(&mut obs);
+        assert_eq!(obs.get("free_tiles"), Some(0.0));
+        assert!((obs.get("cpu_load").unwrap() - 0.0375).abs() < 1e-12);
+        // Power: 2.5 W + 3 tiles x 0.4 W + 1.2 W x 0.0375.
+        assert!((rec.power_w - (2.5 + 1.2 + 1.2 * 0.0375)).abs() < 1e-12);
+        // The record round-trips through JSON.
+        let back: ResourcesRecord =
+            serde_json::from_value(serde_json::to_value(&rec).unwrap()).unwrap();
+        assert_eq!(back, rec);
+    }
+
+    #[test]
+    fn check_json_lists_platform_and_every_variant() {
+        let v = check_json(&default_params_dir()).unwrap();
+        assert_eq!(v["platform"]["tiles"], 4);
+        assert_eq!(v["platform"]["cpu"]["cores"], 2);
+        assert_eq!(v["platform"]["cpu"]["mhz"], 925.0);
+        let variants = v["variants"].as_array().unwrap();
+        assert_eq!(variants.len(), 27);
+        let v3m = variants
+            .iter()
+            .find(|x| x["app"] == "tracking" && x["version"] == "V3" && x["implementation"] == "M")
+            .unwrap();
+        assert_eq!(v3m["support"], "SW-HW");
+        assert_eq!(v3m["ms_per_frame"], 295.0);
+        assert_eq!(v3m["tiles"], 1);
+        assert!((v3m["u_app"].as_f64().unwrap() - (1.0 + 285.0 / 295.0 / 2.0)).abs() < 1e-12);
+        for x in variants {
+            for key in [
+                "app",
+                "version",
+                "implementation",
+                "support",
+                "ms_per_frame",
+                "tiles",
+                "cpu_share",
+                "u_app",
+            ] {
+                assert!(!x[key].is_null(), "{key} missing in {x}");
+            }
+        }
+        let text = check_text(&real());
+        assert_eq!(
+            text.lines().filter(|l| l.starts_with("tracking ")).count(),
+            18
+        );
+        assert!(text.contains("10 + 1"), "{text}");
+    }
+}

@@ -1,0 +1,348 @@
+//! The BFM tracking mission under PANORAMA: pre-flight, (a) energy drift, (b) lidar and tile
+//! failures, (c) an impossible goal; and every kind of bad mission file the loader rejects.
+
+use companion::guarantee::*;
+use std::path::Path;
+
+fn params() -> &'static Path {
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../params"))
+}
+
+fn text() -> String {
+    std::fs::read_to_string(params().join("missions/tracking.toml")).unwrap()
+}
+
+fn spec() -> MissionSpec {
+    load_mission(params(), "tracking").unwrap()
+}
+
+fn ia_name(s: &MissionSpec, g: &Guarantee, j: usize) -> String {
+    s.problem.activities[j].ias[g.choice()[j]].name.clone()
+}
+
+#[test]
+fn loads_by_name_and_by_path() {
+    let a = spec();
+    let b = load_mission(
+        params(),
+        params().join("missions/tracking.toml").to_str().unwrap(),
+    )
+    .unwrap();
+    assert_eq!(a.problem, b.problem);
+    // Energy goal from the battery: (74 Wh x 0.85 - 7.4 Wh) x 3600 s/h.
+    let e = a.problem.goals.iter().find(|g| g.name == ENERGY).unwrap();
+    assert!((e.bound - (74.0 * 0.85 - 7.4) * 3600.0).abs() < 1e-6);
+    // IA counts: 2 x 2, GPS-degraded forces vision (1 x 2), tracking 2 x 2 x 18, landing 2 x 2 x 4.
+    let counts: Vec<usize> = a.problem.activities.iter().map(|x| x.ias.len()).collect();
+    assert_eq!(counts, vec![4, 4, 2, 4, 72, 16]);
+    assert_eq!(panorama::nga(&a.problem), Some(4 * 4 * 2 * 4 * 72 * 16));
+    let j = check_json(params(), "tracking").unwrap();
+    assert_eq!(j["guarantee"]["nga"].as_u64(), Some(147_456));
+    assert!(j["guarantee"]["margins"]["energy_j"].as_f64().unwrap() >= 0.0);
+    assert_eq!(j["guarantee"]["activities"].as_array().unwrap().len(), 6);
+}
+
+#[test]
+fn hover_power_matches_the_model_by_hand() {
+    // Take-off IA "gps lidar": 30 m at 2.5 m/s = 12 s. Rotary-wing P(2.5) by hand:
+    // blade 60 (1 + 3 x 6.25 / 6400) = 60.17578; r = 6.25 / 39.69 = 0.157470;
+    // induced 140 sqrt(sqrt(1 + r^2 / 4) - r / 2) = 140 sqrt(0.924359) = 134.6011 (to 1e-3);
+    // parasitic 0.5 x 1.225 x 0.05 x 15.625 = 0.478516. Payload 8 + 0.5 + 3 + 1.5 x 0.025 W.
+    let s = spec();
+    let a = &s.problem.activities[0];
+    let i = a.ias.iter().position(|x| x.name == "gps lidar").unwrap();
+    let r: f64 = 6.25 / (6.3 * 6.3);
+    let induced = 140.0 * ((1.0 + r * r / 4.0).sqrt() - r / 2.0).sqrt();
+    assert!((induced - 134.6011).abs() < 1e-3, "{induced}");
+    let p = 60.0 * (1.0 + 3.0 * 6.25 / 6400.0) + induced + 0.5 * 1.225 * 0.05 * 15.625;
+    let payload = 8.0 + 0.5 + 3.0 + 1.5 * (0.02 + 0.005);
+    let e = s
+        .problem
+        .goals
+        .iter()
+        .position(|g| g.name == ENERGY)
+        .unwrap();
+    assert!(
+        (a.ias[i].cost[e] - (p + payload) * 12.0).abs() < 1e-6,
+        "{}",
+        a.ias[i].cost[e]
+    );
+    assert!((a.ias[i].cost[1 - e] - 12.0).abs() < 1e-9);
+}
+
+/// (a) Energy drift: wind makes the first activities cost more than planned; the margin turns
+/// negative at the obstacle-dense zone and a re-allocation of the remaining activities restores it.
+#[test]
+fn energy_drift_reallocation_restores_margin() {
+    let s = spec();
+    let mut g = Guarantee::start(s.clone()).unwrap();
+    let p = &s.problem;
+    let e = p.goals.iter().position(|x| x.name == ENERGY).unwrap();
+    let at = 3; // obstacle_dense
+    let est: f64 = (0..at)
+        .map(|j| p.activities[j].ias[g.choice()[j]].cost[e])
+        .sum();
+    let total: f64 = (0..p.activities.len())
+        .map(|j| p.activities[j].ias[g.choice()[j]].cost[e])
+        .sum();
+    let margin0 = p.goals[e].bound - total;
+    let overrun = margin0 + 1500.0; // 1.5 kJ more than the whole margin
+    let rec = g.watch(Progress {
+        activity_index: at,
+        activity_fraction: 0.0,
+        energy_used_j: Some(est + overrun),
+        battery_remaining_pct: None,
+        elapsed_s: 130.0,
+        failed_resources: &[],
+    });
+    assert!((rec.margins["energy_j"] + 1500.0).abs() < 1e-6, "{rec:?}");
+    assert!((rec.drift["energy_j"] - overrun).abs() < 1e-6);
+    let re = rec.reallocation.as_ref().expect("re-allocated");
+    assert!(!rec.infeasible);
+    assert!(re.margins_after["energy_j"] >= 0.0, "{re:?}");
+    assert_eq!(re.allocation.len(), 3);
+    // The next cycle with the same measurement sees the new plan's non-negative margin.
+    let again = g.watch(Progress {
+        activity_index: at,
+        activity_fraction: 0.0,
+        energy_used_j: Some(est + overrun),
+        battery_remaining_pct: None,
+        elapsed_s: 130.0,
+        failed_resources: &[],
+    });
+    assert!(again.reallocation.is_none() && again.margins["energy_j"] >= 0.0);
+    println!("{}", render_ras_table(&s, g.ras_rows()));
+}
+
+/// Energy from the battery percentage when the consumed energy is not reported.
+#[test]
+fn battery_percentage_is_converted() {
+    let s = spec();
+    let mut g = Guarantee::start(s.clone()).unwrap();
+    let mk = |pct: f64| Progress {
+        activity_index: 1,
+        activity_fraction: 0.0,
+        energy_used_j: None,
+        battery_remaining_pct: Some(pct),
+        elapsed_s: 12.0,
+        failed_resources: &[],
+    };
+    g.watch(mk(98.0)); // first reading is the reference
+    let r = g.watch(mk(95.0));
+    let est0: f64 = s.problem.activities[0].ias[g.choice()[0]].cost[0];
+    // 3 % of 74 Wh = 7992 J used, plan said est0.
+    assert!(
+        (r.drift["energy_j"] - (0.03 * 74.0 * 3600.0 - est0)).abs() < 1e-6,
+        "{r:?}"
+    );
+}
+
+/// (b) Lidar failure during the transit: the remaining activities switch to IR/US fusion and the
+/// re-allocation keeps every margin non-negative.
+#[test]
+fn lidar_failure_reallocation() {
+    let s = spec();
+    let mut g = Guarantee::start(s.clone()).unwrap();
+    assert!(ia_name(&s, &g, 2).contains("lidar"));
+    let failed = vec!["lidar".to_string()];
+    let rec = g.watch(Progress {
+        activity_index: 1,
+        activity_fraction: 0.5,
+        energy_used_j: None,
+        battery_remaining_pct: None,
+        elapsed_s: 40.0,
+        failed_resources: &failed,
+    });
+    let re = rec.reallocation.expect("re-allocated");
+    assert!(re.reason.contains("lidar"), "{}", re.reason);
+    assert!(re.margins_after.values().all(|m| *m >= 0.0), "{re:?}");
+    for j in 1..6 {
+        assert!(
+            ia_name(&s, &g, j).contains("fusion"),
+            "{}",
+            ia_name(&s, &g, j)
+        );
+    }
+    assert_eq!(rec.failed_resources, failed);
+}
+
+/// (b') Three FPGA tiles fail during the tracking: two-tile (F) variants are no longer placeable.
+#[test]
+fn tile_failure_reallocation() {
+    let s = spec();
+    let mut g = Guarantee::start(s.clone()).unwrap();
+    assert!(ia_name(&s, &g, 4).ends_with(".F"), "{}", ia_name(&s, &g, 4));
+    let failed: Vec<String> = ["tile0", "tile1", "tile2"]
+        .iter()
+        .map(|x| x.to_string())
+        .collect();
+    let rec = g.watch(Progress {
+        activity_index: 4,
+        activity_fraction: 0.2,
+        energy_used_j: None,
+        battery_remaining_pct: None,
+        elapsed_s: 250.0,
+        failed_resources: &failed,
+    });
+    let re = rec.reallocation.expect("re-allocated");
+    assert!(re.reason.contains("FPGA tile"), "{}", re.reason);
+    assert!(re.margins_after.values().all(|m| *m >= 0.0));
+    let track = ia_name(&s, &g, 4);
+    // Most capable with at most one tile: V4 or V5 in M (capability 4.25).
+    assert!(
+        track.ends_with("V4.M") || track.ends_with("V5.M"),
+        "{track}"
+    );
+    assert!(!ia_name(&s, &g, 5).ends_with(".F") || ia_name(&s, &g, 5).contains("zone_t.F"));
+}
+
+/// (c) An impossible goal is reported with the numbers, before and during the flight.
+#[test]
+fn impossible_goal_is_infeasible_with_numbers() {
+    let t = text().replace("bound = 1500.0", "bound = 500.0");
+    let s = parse_mission(Path::new("tracking-500s.toml"), &t).unwrap();
+    // Fastest IAs: take-off 12 s, transit 60 s, GPS-degraded 50 s (vision), obstacle-dense
+    // 41.67 s, tracking 600 s, landing 25 + 20 + 20 s: 828.67 s > 500 s.
+    let fastest = 12.0 + 60.0 + 50.0 + 250.0 / 6.0 + 600.0 + 25.0 + 20.0 + 20.0;
+    match Guarantee::pre_flight(&s) {
+        Err(panorama::Infeasible::Goal {
+            goal,
+            minimum,
+            bound,
+            excess,
+        }) => {
+            assert_eq!(goal, "duration_s");
+            assert!((minimum - fastest).abs() < 1e-6, "{minimum}");
+            assert_eq!(bound, 500.0);
+            assert!((excess - (fastest - 500.0)).abs() < 1e-6);
+        }
+        other => panic!("{other:?}"),
+    }
+    let j = check_json_spec(&s);
+    assert_eq!(j["guarantee"]["infeasible"]["constraint"], "duration_s");
+    assert!(j["guarantee"]["ras0"].is_null());
+    assert!(check_text_spec(&s).contains("INFEASIBLE"));
+    // In flight: a huge overrun leaves no allocation; the record says so.
+    let mut g = Guarantee::start(spec()).unwrap();
+    let rec = g.watch(Progress {
+        activity_index: 4,
+        activity_fraction: 0.0,
+        energy_used_j: Some(199_000.0),
+        battery_remaining_pct: None,
+        elapsed_s: 200.0,
+        failed_resources: &[],
+    });
+    assert!(rec.infeasible && rec.reallocation.is_none());
+    let why = rec.infeasible_reason.unwrap();
+    assert!(why.contains("energy_j") && why.contains("exceeds"), "{why}");
+}
+
+fn rejected(t: &str) -> companion::spec::SpecError {
+    parse_mission(Path::new("bad.toml"), t).expect_err("must be rejected")
+}
+
+#[test]
+fn unknown_tio_is_rejected() {
+    let t = text()
+        + "\n[constraints.odd]\nrules = [{ kind = \"only\", task = \"tracking\", tios = [\"V9.F\"] }]\n";
+    let e = rejected(&t);
+    assert_eq!(e.file, Path::new("bad.toml"));
+    assert_eq!(e.entry, "constraints.odd.rules[0].tios");
+    assert!(e.reason.contains("unknown TIO `V9.F`"), "{e}");
+}
+
+#[test]
+fn unknown_resource_of_a_tio_is_rejected() {
+    let t = text().replace(
+        "resources = [\"ir\", \"us\"]",
+        "resources = [\"ir\", \"sonar\"]",
+    );
+    let e = rejected(&t);
+    assert_eq!(e.entry, "tasks.obstacle_detection.tios[1].resources");
+    assert!(e.reason.contains("sonar"));
+}
+
+#[test]
+fn negative_energy_is_rejected() {
+    let e = rejected(&text().replace(
+        "[resources.lidar]\npower_w = 3.0",
+        "[resources.lidar]\npower_w = -3.0",
+    ));
+    assert_eq!(e.entry, "resources.lidar.power_w");
+    assert!(e.reason.contains("negative"), "{e}");
+    let e = rejected(&text().replace("reserve_wh = 7.4", "reserve_wh = 70.0"));
+    assert_eq!(e.entry, "goals.energy_j.bound");
+    // A propulsion fit that goes negative at the flown speed.
+    let p = text().replace("blade_profile_w = 60.0", "blade_profile_w = -600.0");
+    let e = rejected(&p);
+    assert!(e.entry.starts_with("activities["), "{e}");
+    assert!(e.reason.contains("negative"), "{e}");
+}
+
+#[test]
+fn empty_activity_after_core_filter_is_rejected() {
+    let t = text()
+        + "\n[constraints.no_camera]\nrules = [{ kind = \"forbid\", task = \"localisation\", resource = \"camera\" }]\n";
+    let t = t.replace(
+        "constraints = [\"gps_degraded\"]",
+        "constraints = [\"gps_degraded\", \"no_camera\"]",
+    );
+    let e = rejected(&t);
+    assert_eq!(e.entry, "activities[2]");
+    assert!(
+        e.reason.contains("transit_gps_degraded")
+            && e.reason.contains("no implementation alternative"),
+        "{e}"
+    );
+}
+
+#[test]
+fn goal_order_naming_an_unknown_goal_is_rejected() {
+    let e = rejected(&text().replace(
+        "goal_order = [\"energy_j\", \"duration_s\"]",
+        "goal_order = [\"energy_j\", \"time_s\"]",
+    ));
+    assert_eq!(e.entry, "mission.goal_order[1]");
+    assert!(e.reason.contains("unknown goal `time_s`"), "{e}");
+    // A defined goal left out of the order is an error too (it would be silently ignored).
+    let e = rejected(&text().replace(
+        "goal_order = [\"energy_j\", \"duration_s\"]",
+        "goal_order = [\"energy_j\"]",
+    ));
+    assert_eq!(e.entry, "goals.duration_s");
+}
+
+#[test]
+fn unknown_task_and_constraint_class_and_syntax_are_rejected() {
+    let e = rejected(&text().replace(
+        "tasks = [\"localisation\", \"obstacle_detection\", \"tracking\"]",
+        "tasks = [\"localisation\", \"tracker\"]",
+    ));
+    assert_eq!(e.entry, "activities[4].tasks[1]");
+    let e = rejected(&text().replace(
+        "constraints = [\"gps_degraded\"]",
+        "constraints = [\"gps_denied\"]",
+    ));
+    assert_eq!(e.entry, "activities[2].constraints[0]");
+    let e = rejected("[mission\nname=");
+    assert_eq!(e.file, Path::new("bad.toml"));
+    let missing = load_mission(params(), "no_such_mission").unwrap_err();
+    assert!(missing.file.ends_with("missions/no_such_mission.toml"));
+}
+
+/// RAS0 against the exact optimum (branch-and-bound, checked by exhaustive search: NGA 147 456).
+#[test]
+fn ras0_gap_on_the_tracking_mission() {
+    let s = spec();
+    let r = Guarantee::pre_flight(&s).unwrap();
+    let ras0 = s.problem.score(&r.choice, s.selection);
+    let brute = panorama::exhaustive(&s.problem, s.selection).unwrap();
+    match panorama::exact(&s.problem, s.selection, u64::MAX) {
+        panorama::Exact::Optimal(o) => {
+            assert!((o.score - brute.score).abs() < 1e-9);
+            assert!(o.score >= ras0 - 1e-9);
+            println!("tracking: RAS0 capability {ras0}, optimum {}", o.score);
+        }
+        other => panic!("{other:?}"),
+    }
+}
