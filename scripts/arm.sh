@@ -88,15 +88,14 @@ run_target() {
     aarch64-*) qemu=qemu-aarch64; sysroot=/usr/aarch64-linux-gnu; strip=aarch64-linux-gnu-strip ;;
   esac
 
-  stage "$t: cargo build --release -p companion"
-  cargo build --quiet --release --target "$t" -p companion
-
-  stage "$t: cargo test (release profile) under $qemu: engines + companion lib"
-  # The pure engine crates, then the companion library (unit tests; the integration tests and
-  # benches are host-side concerns).
-  cargo test --quiet --release --target "$t" \
-    -p bayes_net -p mdp_engine -p fpga_model -p panorama 2>&1
-  cargo test --quiet --release --target "$t" -p companion --lib 2>&1
+  # One package set and one target selection for both commands: cargo then resolves features
+  # once (dev-dependencies switch on extra features of shared crates such as serde, which would
+  # otherwise rebuild mavlink and tokio a second time), and `cargo test` rebuilds nothing.
+  local sel=(--release --target "$t" -p companion -p bayes_net -p mdp_engine -p fpga_model -p panorama --tests)
+  stage "$t: cargo build --release: companion binary + test binaries"
+  cargo build --quiet "${sel[@]}" --bins
+  stage "$t: cargo test (release profile) under $qemu: engines + companion (unit and integration tests)"
+  cargo test --quiet "${sel[@]}" 2>&1
 
   local bin="$target_dir/$t/release/companion"
   stage "$t: the binary under $qemu"
@@ -106,8 +105,10 @@ run_target() {
   local sim_help
   sim_help="$("${run[@]}" simulate --help 2>/dev/null || true)"
   if grep -q -- '--runs' <<<"$sim_help" && grep -q -- '--json' <<<"$sim_help"; then
-    local out
-    out="$("${run[@]}" simulate --json --runs 3)" || die "$t: companion simulate --json --runs 3 failed"
+    local out extra=()
+    # No run folder from a smoke test.
+    grep -q -- '--no-log' <<<"$sim_help" && extra+=(--no-log)
+    out="$("${run[@]}" simulate --json --runs 3 "${extra[@]}")" || die "$t: companion simulate --json --runs 3 failed"
     python3 -c 'import json,sys; json.loads(sys.stdin.read())' <<<"$out" 2>/dev/null ||
       printf '%s\n' "$out" | python3 -c 'import json,sys; [json.loads(l) for l in sys.stdin if l.strip()]' ||
       die "$t: simulate --json printed something that is not JSON (nor JSON lines)"
