@@ -5,9 +5,10 @@
 # C libraries, qemu-user; rustup's rust-std for the targets) and skips what is already there, so a
 # second run is incremental. Linkers and qemu runners come from .cargo/config.toml.
 #
-#   scripts/arm.sh             armv7 (the SoCKit)
-#   scripts/arm.sh --aarch64   armv7, then the same for aarch64-unknown-linux-gnu
-#   scripts/arm.sh --install   install only
+#   scripts/arm.sh                     armv7 (the SoCKit)
+#   scripts/arm.sh --aarch64           aarch64-unknown-linux-gnu only
+#   scripts/arm.sh --armv7 --aarch64   both
+#   scripts/arm.sh --install           install only (for the selected targets)
 #
 # Tests run in the release profile on purpose: the test builds then reuse the dependencies
 # (tokio, mavlink's generated dialects) already compiled for the release binary, which halves a
@@ -16,17 +17,20 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+want_armv7=0
 want_aarch64=0
 install_only=0
 for a in "$@"; do
   case "$a" in
+    --armv7) want_armv7=1 ;;
     --aarch64) want_aarch64=1 ;;
     --install) install_only=1 ;;
-    -h | --help) sed -n '2,15p' "$0"; exit 0 ;;
+    -h | --help) sed -n '2,16p' "$0"; exit 0 ;;
     *) echo "arm.sh: unknown argument '$a' (try --help)" >&2; exit 2 ;;
   esac
 done
 
+[ "$want_aarch64" = 1 ] || want_armv7=1
 t0=$SECONDS
 stage() { echo "== arm: $* (t=$((SECONDS - t0))s)"; }
 die() { echo "arm.sh: $*" >&2; exit 1; }
@@ -34,11 +38,11 @@ die() { echo "arm.sh: $*" >&2; exit 1; }
 # ---------------------------------------------------------------- install what is missing
 # Debian package -> a file it provides that we use (checked instead of asking dpkg, so a tool
 # installed some other way also counts).
-declare -A provides=(
-  [gcc-arm-linux-gnueabihf]=/usr/bin/arm-linux-gnueabihf-gcc
-  [libc6-dev-armhf-cross]=/usr/arm-linux-gnueabihf/lib/libc.so
-  [qemu-user]=/usr/bin/qemu-arm
-)
+declare -A provides=([qemu-user]=/usr/bin/qemu-arm)
+if [ "$want_armv7" = 1 ]; then
+  provides[gcc-arm-linux-gnueabihf]=/usr/bin/arm-linux-gnueabihf-gcc
+  provides[libc6-dev-armhf-cross]=/usr/arm-linux-gnueabihf/lib/libc.so
+fi
 if [ "$want_aarch64" = 1 ]; then
   provides[gcc-aarch64-linux-gnu]=/usr/bin/aarch64-linux-gnu-gcc
   provides[libc6-dev-arm64-cross]=/usr/aarch64-linux-gnu/lib/libc.so
@@ -64,7 +68,8 @@ if [ "${#missing[@]}" -gt 0 ]; then
   done
 fi
 
-targets=(armv7-unknown-linux-gnueabihf)
+targets=()
+[ "$want_armv7" = 1 ] && targets+=(armv7-unknown-linux-gnueabihf)
 [ "$want_aarch64" = 1 ] && targets+=(aarch64-unknown-linux-gnu)
 installed_targets="$(rustup target list --installed 2>/dev/null || true)"
 for t in "${targets[@]}"; do
