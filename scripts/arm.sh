@@ -89,8 +89,8 @@ target_dir="${CARGO_TARGET_DIR:-$(cargo metadata --no-deps --format-version 1 |
 run_target() {
   local t="$1" qemu sysroot strip
   case "$t" in
-    armv7-*) qemu=qemu-arm; sysroot=/usr/arm-linux-gnueabihf; strip=arm-linux-gnueabihf-strip ;;
-    aarch64-*) qemu=qemu-aarch64; sysroot=/usr/aarch64-linux-gnu; strip=aarch64-linux-gnu-strip ;;
+    armv7-*) qemu="qemu-arm"; sysroot=/usr/arm-linux-gnueabihf; strip="arm-linux-gnueabihf-strip" ;;
+    aarch64-*) qemu="qemu-aarch64"; sysroot=/usr/aarch64-linux-gnu; strip="aarch64-linux-gnu-strip" ;;
   esac
 
   # One package set and one target selection for both commands: cargo then resolves features

@@ -57,12 +57,12 @@ elf_machine() { od -An -tx1 -j18 -N2 "$1" | tr -d ' \n'; }
 count() {
   local prog
   prog="$(command -v "$1" || true)"
-  [ -n "$prog" ] && [ -f "$prog" ] || die "no such program: $1"
+  if [ -z "$prog" ] || [ ! -f "$prog" ]; then die "no such program: $1"; fi
   shift
   local qemu="" sysroot=""
   case "$(elf_machine "$prog")" in
-    2800) qemu=qemu-arm; sysroot=/usr/arm-linux-gnueabihf ;;
-    b700) qemu=qemu-aarch64; sysroot=/usr/aarch64-linux-gnu ;;
+    2800) qemu="qemu-arm"; sysroot=/usr/arm-linux-gnueabihf ;;
+    b700) qemu="qemu-aarch64"; sysroot=/usr/aarch64-linux-gnu ;;
     3e00) ;;
     *) die "$prog: not an ARM, AArch64 or x86-64 ELF binary" ;;
   esac
