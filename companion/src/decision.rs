@@ -142,6 +142,10 @@ pub struct Core<'m> {
     /// Set when the guarantee stage found no allocation meeting the goals.
     guarantee_infeasible: bool,
     failed_resources: Vec<String>,
+    /// The activity being flown and when (observation time, s) it started.
+    activity_started: Option<(usize, f64)>,
+    /// Degradations and drops in force after the last cycle.
+    last_degraded: Vec<String>,
 }
 
 impl<'m> Core<'m> {
@@ -159,6 +163,8 @@ impl<'m> Core<'m> {
             guarantee: Guarantee::start(model.guarantee.clone()).ok(),
             guarantee_infeasible: false,
             failed_resources: Vec::new(),
+            activity_started: None,
+            last_degraded: Vec::new(),
         }
     }
 
@@ -343,9 +349,19 @@ impl<'m> Core<'m> {
                 }
             }
         }
-        for d in record.degraded.iter().chain(&record.dropped) {
-            rec.events.push(d.clone());
+        // Degradations are events when they start, not on every cycle they last.
+        let now: Vec<String> = record
+            .degraded
+            .iter()
+            .chain(&record.dropped)
+            .cloned()
+            .collect();
+        for d in &now {
+            if !self.last_degraded.contains(d) {
+                rec.events.push(d.clone());
+            }
         }
+        self.last_degraded = now;
         rec.resources = Some(record);
         actions
     }
@@ -371,9 +387,22 @@ impl<'m> Core<'m> {
             .collect();
         let mut failed = self.failed_resources.clone();
         failed.extend(tile_names);
+        // How far into the activity: time spent in it over its estimated duration (capped below
+        // 1 so an overrunning activity still counts its remainder as not yet flown).
+        let started = match self.activity_started {
+            Some((a, t)) if a == activity_index => t,
+            _ => {
+                self.activity_started = Some((activity_index, obs.time_s));
+                obs.time_s
+            }
+        };
+        let fraction = g
+            .estimated(activity_index, "duration_s")
+            .filter(|d| *d > 0.0)
+            .map_or(0.0, |d| ((obs.time_s - started) / d).min(0.95));
         let record = g.watch(Progress {
             activity_index,
-            activity_fraction: 0.0,
+            activity_fraction: fraction,
             energy_used_j: obs.get("energy_consumed_j"),
             battery_remaining_pct: obs.get("battery_pct"),
             elapsed_s: obs.time_s,

@@ -415,8 +415,10 @@ impl<'a> World<'a> {
 
         // Battery: propulsion (hover, climb, wind) plus the platform's compute power.
         let wind = values.get("wind_mps").copied().unwrap_or(0.0);
+        // `extra_power_w`: a hazard's unplanned draw (heavier payload, a worn motor, icing).
+        let extra = values.get("extra_power_w").copied().unwrap_or(0.0);
         let mut prop_w =
-            self.spec.vehicle.hover_w + self.spec.vehicle.wind_w_per_mps2 * wind * wind;
+            self.spec.vehicle.hover_w + self.spec.vehicle.wind_w_per_mps2 * wind * wind + extra;
         if self.phase == "base" && has("take_off") {
             prop_w *= self.spec.vehicle.climb_factor;
         }
