@@ -1,0 +1,128 @@
+#!/usr/bin/env bash
+# The companion on ARM: cross-builds the release binary for the SoCKit's Cortex-A9
+# (armv7-unknown-linux-gnueabihf), runs the engine test suites and the binary under qemu-user, and
+# reports the stripped binary's size. Installs what is missing first (Debian's cross gcc, the ARM
+# C libraries, qemu-user; rustup's rust-std for the targets) and skips what is already there, so a
+# second run is incremental. Linkers and qemu runners come from .cargo/config.toml.
+#
+#   scripts/arm.sh             armv7 (the SoCKit)
+#   scripts/arm.sh --aarch64   armv7, then the same for aarch64-unknown-linux-gnu
+#   scripts/arm.sh --install   install only
+#
+# Tests run in the release profile on purpose: the test builds then reuse the dependencies
+# (tokio, mavlink's generated dialects) already compiled for the release binary, which halves a
+# cold run, and they exercise the code generation that ships. Parallelism: cargo's own
+# CARGO_BUILD_JOBS. See docs/deploy-arm.md.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+want_aarch64=0
+install_only=0
+for a in "$@"; do
+  case "$a" in
+    --aarch64) want_aarch64=1 ;;
+    --install) install_only=1 ;;
+    -h | --help) sed -n '2,15p' "$0"; exit 0 ;;
+    *) echo "arm.sh: unknown argument '$a' (try --help)" >&2; exit 2 ;;
+  esac
+done
+
+t0=$SECONDS
+stage() { echo "== arm: $* (t=$((SECONDS - t0))s)"; }
+die() { echo "arm.sh: $*" >&2; exit 1; }
+
+# ---------------------------------------------------------------- install what is missing
+# Debian package -> a file it provides that we use (checked instead of asking dpkg, so a tool
+# installed some other way also counts).
+declare -A provides=(
+  [gcc-arm-linux-gnueabihf]=/usr/bin/arm-linux-gnueabihf-gcc
+  [libc6-dev-armhf-cross]=/usr/arm-linux-gnueabihf/lib/libc.so
+  [qemu-user]=/usr/bin/qemu-arm
+)
+if [ "$want_aarch64" = 1 ]; then
+  provides[gcc-aarch64-linux-gnu]=/usr/bin/aarch64-linux-gnu-gcc
+  provides[libc6-dev-arm64-cross]=/usr/aarch64-linux-gnu/lib/libc.so
+fi
+missing=()
+for pkg in "${!provides[@]}"; do
+  [ -e "${provides[$pkg]}" ] || missing+=("$pkg")
+done
+if [ "${#missing[@]}" -gt 0 ]; then
+  stage "installing Debian packages: ${missing[*]}"
+  command -v apt-get >/dev/null || die "missing ${missing[*]} and no apt-get here: install the cross gcc, ARM libc and qemu-user by hand (docs/deploy-arm.md)"
+  sudo=""
+  if [ "$(id -u)" != 0 ]; then
+    command -v sudo >/dev/null || die "missing ${missing[*]}: need root (or sudo) to apt-get install them"
+    sudo="sudo"
+  fi
+  export DEBIAN_FRONTEND=noninteractive
+  $sudo apt-get update -q >/dev/null || die "apt-get update failed (no network to Debian's mirror?)"
+  $sudo apt-get install -y -q --no-install-recommends "${missing[@]}" >/dev/null ||
+    die "apt-get install ${missing[*]} failed"
+  for pkg in "${missing[@]}"; do
+    [ -e "${provides[$pkg]}" ] || die "installed $pkg but ${provides[$pkg]} is still missing"
+  done
+fi
+
+targets=(armv7-unknown-linux-gnueabihf)
+[ "$want_aarch64" = 1 ] && targets+=(aarch64-unknown-linux-gnu)
+installed_targets="$(rustup target list --installed 2>/dev/null || true)"
+for t in "${targets[@]}"; do
+  if ! grep -qx "$t" <<<"$installed_targets"; then
+    stage "rustup target add $t"
+    command -v rustup >/dev/null || die "no rustup: the standard library for $t cannot be added (install it for your toolchain by hand)"
+    rustup target add "$t" || die "rustup target add $t failed (rustup's dist server unreachable?)"
+  fi
+done
+[ "$install_only" = 1 ] && { stage "install done"; exit 0; }
+
+target_dir="${CARGO_TARGET_DIR:-$(cargo metadata --no-deps --format-version 1 |
+  sed -n 's/.*"target_directory":"\([^"]*\)".*/\1/p')}"
+[ -n "$target_dir" ] || die "could not find cargo's target directory"
+
+# ---------------------------------------------------------------- per target
+run_target() {
+  local t="$1" qemu sysroot strip
+  case "$t" in
+    armv7-*) qemu=qemu-arm; sysroot=/usr/arm-linux-gnueabihf; strip=arm-linux-gnueabihf-strip ;;
+    aarch64-*) qemu=qemu-aarch64; sysroot=/usr/aarch64-linux-gnu; strip=aarch64-linux-gnu-strip ;;
+  esac
+
+  # One package set and one target selection for both commands: cargo then resolves features
+  # once (dev-dependencies switch on extra features of shared crates such as serde, which would
+  # otherwise rebuild mavlink and tokio a second time), and `cargo test` rebuilds nothing.
+  local sel=(--release --target "$t" -p companion -p bayes_net -p mdp_engine -p fpga_model -p panorama --tests)
+  stage "$t: cargo build --release: companion binary + test binaries"
+  cargo build --quiet "${sel[@]}" --bins
+  stage "$t: cargo test (release profile) under $qemu: engines + companion (unit and integration tests)"
+  cargo test --quiet "${sel[@]}" 2>&1
+
+  local bin="$target_dir/$t/release/companion"
+  stage "$t: the binary under $qemu"
+  local run=("$qemu" -L "$sysroot" "$bin")
+  "${run[@]}" --help >/dev/null || die "$t: companion --help failed under $qemu"
+  # `simulate --json --runs 3` once the subcommand has those flags; until then --help is the smoke.
+  local sim_help
+  sim_help="$("${run[@]}" simulate --help 2>/dev/null || true)"
+  if grep -q -- '--runs' <<<"$sim_help" && grep -q -- '--json' <<<"$sim_help"; then
+    local out extra=()
+    # No run folder from a smoke test.
+    grep -q -- '--no-log' <<<"$sim_help" && extra+=(--no-log)
+    out="$("${run[@]}" simulate --json --runs 3 "${extra[@]}")" || die "$t: companion simulate --json --runs 3 failed"
+    python3 -c 'import json,sys; json.loads(sys.stdin.read())' <<<"$out" 2>/dev/null ||
+      printf '%s\n' "$out" | python3 -c 'import json,sys; [json.loads(l) for l in sys.stdin if l.strip()]' ||
+      die "$t: simulate --json printed something that is not JSON (nor JSON lines)"
+    echo "   simulate --json --runs 3: ok ($(wc -c <<<"$out") bytes of JSON)"
+  else
+    echo "   companion --help: ok (simulate has no --json/--runs yet)"
+  fi
+
+  local stripped="$target_dir/$t/release/companion.stripped"
+  "$strip" -o "$stripped" "$bin"
+  echo "   size: $(stat -c %s "$bin") bytes as built, $(stat -c %s "$stripped") bytes stripped ($stripped)"
+}
+
+for t in "${targets[@]}"; do
+  run_target "$t"
+done
+stage "done"
