@@ -669,7 +669,8 @@ mod tests {
         let v = &w.vehicle;
         let wind = w.baseline["wind_mps"];
         let per_step_pct =
-            (v.hover_w + v.wind_w_per_mps2 * wind * wind + 10.0) * w.step_s / 3600.0 / v.battery_wh * 100.0;
+            (v.hover_w + v.wind_w_per_mps2 * wind * wind + 10.0) * w.step_s / 3600.0 / v.battery_wh
+                * 100.0;
         let batt: Vec<f64> = r
             .records
             .iter()

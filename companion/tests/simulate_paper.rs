@@ -25,8 +25,9 @@ fn run(scenario: &str, kind: ModelKind, policy: Policy, seed: u64) -> RunResult 
 }
 
 fn mean_tracking(scenario: &str, kind: ModelKind, policy: Policy) -> (f64, f64) {
-    let xs: Vec<f64> =
-        (0..SEEDS).map(|s| run(scenario, kind, policy, s).tracking_steps as f64).collect();
+    let xs: Vec<f64> = (0..SEEDS)
+        .map(|s| run(scenario, kind, policy, s).tracking_steps as f64)
+        .collect();
     sim::mean_ci95(&xs)
 }
 
@@ -64,7 +65,10 @@ fn table8_mission_policy_tracks_at_least_as_long_as_safety() {
     }
 }
 
-fn first_with<'a>(records: &'a [DecisionRecord], f: impl Fn(&DecisionRecord) -> bool) -> Option<&'a DecisionRecord> {
+fn first_with<'a>(
+    records: &'a [DecisionRecord],
+    f: impl Fn(&DecisionRecord) -> bool,
+) -> Option<&'a DecisionRecord> {
     records.iter().find(|r| f(r))
 }
 
@@ -79,31 +83,76 @@ fn has(r: &DecisionRecord, a: &str) -> bool {
 /// detection and landing-zone search stay.
 #[test]
 fn tables_4_and_6_safety_policy_decisions() {
-    for (scenario, version, degraded) in [("complete-1", "track_v3", "track_v1"), ("complete-2", "track_v2", "track_v5")] {
+    for (scenario, version, degraded) in [
+        ("complete-1", "track_v3", "track_v1"),
+        ("complete-2", "track_v2", "track_v5"),
+    ] {
         let r = run(scenario, ModelKind::Bfm, Policy::Safety, 1).records;
         assert_eq!(r[0].state, "base");
         assert!(has(&r[0], "take_off"), "{scenario}: {:?}", r[0].actions);
         let wp1 = first_with(&r, |x| x.state == "wp1").unwrap();
-        assert!(has(wp1, "follow_trajectory") && has(wp1, "detect_obstacles_lidar"), "{:?}", wp1.actions);
-        let wpi = first_with(&r, |x| x.state == "wpi").unwrap();
-        assert!(has(wpi, "search_zone_t"), "{scenario} wpi: {:?}", wpi.actions);
-        let wpf = first_with(&r, |x| x.state == "wpf").unwrap();
-        assert!(has(wpf, "detect_target") && has(wpf, "search_zone_t"), "{scenario} wpf: {:?}", wpf.actions);
-        let tracking = first_with(&r, |x| has(x, version)).unwrap_or_else(|| panic!("{scenario}: never ran {version}"));
-        assert!(has(tracking, "detect_obstacles_lidar"), "{:?}", tracking.actions);
-        let obstacle = first_with(&r, |x| x.events.iter().any(|e| e == "obstacle detected")).unwrap();
-        assert!(has(obstacle, "avoid_obstacle"), "{scenario}: {:?}", obstacle.actions);
-        assert!(!obstacle.actions.iter().any(|a| a.starts_with("track_")), "{scenario}: tracking during avoidance");
-        let insufficient = first_with(&r, |x| x.events.iter().any(|e| e == "insufficient resources")).unwrap();
-        assert!(has(insufficient, degraded), "{scenario}: {:?}", insufficient.actions);
-        assert!(has(insufficient, "detect_obstacles_lidar"), "{:?}", insufficient.actions);
         assert!(
-            insufficient.actions.iter().any(|a| a.starts_with("search_")),
+            has(wp1, "follow_trajectory") && has(wp1, "detect_obstacles_lidar"),
+            "{:?}",
+            wp1.actions
+        );
+        let wpi = first_with(&r, |x| x.state == "wpi").unwrap();
+        assert!(
+            has(wpi, "search_zone_t"),
+            "{scenario} wpi: {:?}",
+            wpi.actions
+        );
+        let wpf = first_with(&r, |x| x.state == "wpf").unwrap();
+        assert!(
+            has(wpf, "detect_target") && has(wpf, "search_zone_t"),
+            "{scenario} wpf: {:?}",
+            wpf.actions
+        );
+        let tracking = first_with(&r, |x| has(x, version))
+            .unwrap_or_else(|| panic!("{scenario}: never ran {version}"));
+        assert!(
+            has(tracking, "detect_obstacles_lidar"),
+            "{:?}",
+            tracking.actions
+        );
+        let obstacle =
+            first_with(&r, |x| x.events.iter().any(|e| e == "obstacle detected")).unwrap();
+        assert!(
+            has(obstacle, "avoid_obstacle"),
+            "{scenario}: {:?}",
+            obstacle.actions
+        );
+        assert!(
+            !obstacle.actions.iter().any(|a| a.starts_with("track_")),
+            "{scenario}: tracking during avoidance"
+        );
+        let insufficient = first_with(&r, |x| {
+            x.events.iter().any(|e| e == "insufficient resources")
+        })
+        .unwrap();
+        assert!(
+            has(insufficient, degraded),
+            "{scenario}: {:?}",
+            insufficient.actions
+        );
+        assert!(
+            has(insufficient, "detect_obstacles_lidar"),
+            "{:?}",
+            insufficient.actions
+        );
+        assert!(
+            insufficient
+                .actions
+                .iter()
+                .any(|a| a.starts_with("search_")),
             "{scenario}: landing search dropped under safety: {:?}",
             insufficient.actions
         );
         let res = insufficient.resources.as_ref().unwrap();
-        assert!(!res.degraded.is_empty(), "{scenario}: no degradation recorded");
+        assert!(
+            !res.degraded.is_empty(),
+            "{scenario}: no degradation recorded"
+        );
     }
 }
 
@@ -112,10 +161,24 @@ fn tables_4_and_6_safety_policy_decisions() {
 #[test]
 fn table5_mission_policy_keeps_v3_and_drops_landing_search() {
     let r = run("complete-1", ModelKind::Bfm, Policy::Mission, 1).records;
-    let insufficient = first_with(&r, |x| x.events.iter().any(|e| e == "insufficient resources")).unwrap();
+    let insufficient = first_with(&r, |x| {
+        x.events.iter().any(|e| e == "insufficient resources")
+    })
+    .unwrap();
     assert!(has(insufficient, "track_v3"), "{:?}", insufficient.actions);
-    assert!(has(insufficient, "detect_obstacles_lidar"), "{:?}", insufficient.actions);
-    assert!(!insufficient.actions.iter().any(|a| a.starts_with("search_")), "{:?}", insufficient.actions);
+    assert!(
+        has(insufficient, "detect_obstacles_lidar"),
+        "{:?}",
+        insufficient.actions
+    );
+    assert!(
+        !insufficient
+            .actions
+            .iter()
+            .any(|a| a.starts_with("search_")),
+        "{:?}",
+        insufficient.actions
+    );
     assert!(!insufficient.resources.as_ref().unwrap().dropped.is_empty());
 }
 
@@ -152,7 +215,11 @@ fn monolithic_and_concurrent_reach_the_same_decisions() {
             for (x, y) in a.iter().zip(&b).take(horizon) {
                 let ax = norm(&x.actions);
                 let bx = norm(&y.actions);
-                assert_eq!(ax, bx, "{scenario} {policy:?} cycle {} state {}", x.cycle, x.state);
+                assert_eq!(
+                    ax, bx,
+                    "{scenario} {policy:?} cycle {} state {}",
+                    x.cycle, x.state
+                );
             }
         }
     }
