@@ -168,6 +168,20 @@ impl<'m> Core<'m> {
         }
     }
 
+    /// The PANORAMA allocations in force so far (RAS0 then each re-allocation), in the shape of
+    /// PANORAMA's Table 7; `None` when the guarantee stage is off (pre-flight infeasible).
+    pub fn allocation_table(&self) -> Option<String> {
+        let g = self.guarantee.as_ref()?;
+        Some(crate::guarantee::render_ras_table(&g.spec, g.ras_rows()))
+    }
+
+    /// Number of re-allocations so far (RAS0 not counted).
+    pub fn reallocations(&self) -> usize {
+        self.guarantee
+            .as_ref()
+            .map_or(0, |g| g.ras_rows().len().saturating_sub(1))
+    }
+
     /// One decision cycle.
     pub fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
         let model = self.model;

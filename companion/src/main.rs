@@ -182,12 +182,16 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
 
     let mut per_model = Vec::new();
     let mut first_records = None;
+    let mut first_allocations: Option<(usize, Option<String>)> = None;
     for kind in &kinds {
         let mut steps = Vec::with_capacity(runs as usize);
         for r in 0..runs {
             let seed = args.seed + r as u64;
             let mut core = Core::new(&model, *kind, policy);
             let result = sim::run(&world, &scenario, seed, |obs| core.step(obs));
+            if first_allocations.is_none() {
+                first_allocations = Some((core.reallocations(), core.allocation_table()));
+            }
             steps.push(result.tracking_steps as f64);
             if first_records.is_none() {
                 first_records = Some((kind.name(), result));
@@ -241,6 +245,13 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
     println!();
     print!("{}", companion::decision::table(&first.records, &model));
     println!();
+    if let Some((n, Some(table))) = &first_allocations {
+        if *n > 0 {
+            println!();
+            println!("PANORAMA allocations ({n} re-allocation(s)):");
+            print!("{table}");
+        }
+    }
     println!(
         "outcome: {:?} after {} steps, battery {:.0}% left; tracking time {} steps",
         first.outcome, first.steps_flown, first.battery_pct_end, first.tracking_steps

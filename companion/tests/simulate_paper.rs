@@ -236,3 +236,60 @@ fn runs_are_reproducible_and_records_carry_every_stage() {
     assert_eq!(r.proposals.len(), 3, "navigation, landing, tracking");
     assert!(r.resources.is_some() && r.guarantee.is_some());
 }
+
+/// PANORAMA P3 in the decision cycle: an energy drift and a lidar failure each trigger a
+/// re-allocation of the remaining activities that restores every margin to non-negative.
+#[test]
+fn drift_and_failure_reallocate_and_restore_margins() {
+    for scenario in ["energy-drift", "lidar-failure"] {
+        let r = run(scenario, ModelKind::Bfm, Policy::Safety, 1).records;
+        let realloc = r
+            .iter()
+            .filter_map(|x| x.guarantee.as_ref()?.reallocation.as_ref())
+            .next()
+            .unwrap_or_else(|| panic!("{scenario}: no re-allocation"));
+        assert!(
+            realloc.margins_after.values().all(|m| *m >= 0.0),
+            "{scenario}: margins after re-allocation {:?}",
+            realloc.margins_after
+        );
+    }
+    // Without a hazard, no re-allocation before the tracking phase ends.
+    let r = run("nominal", ModelKind::Bfm, Policy::Safety, 1).records;
+    let first = r.iter().position(|x| {
+        x.guarantee
+            .as_ref()
+            .is_some_and(|g| g.reallocation.is_some())
+    });
+    let tracking_start = r.iter().position(|x| x.state == "target").unwrap();
+    assert!(
+        first.is_none_or(|i| i > tracking_start + 30),
+        "nominal re-allocated at {first:?}"
+    );
+}
+
+/// An infeasible guarantee is never silent: the decision layer sees P_battery capped and ends
+/// the mission (land or return) on the next cycles.
+#[test]
+fn infeasible_guarantee_ends_the_mission() {
+    let r = run("energy-drift", ModelKind::Bfm, Policy::Safety, 1).records;
+    let i = r
+        .iter()
+        .position(|x| x.guarantee.as_ref().is_some_and(|g| g.infeasible))
+        .expect("the drift makes the goals infeasible at some point");
+    assert!(
+        r[i].events.iter().any(|e| e.contains("no allocation")),
+        "{:?}",
+        r[i].events
+    );
+    let after = &r[i + 1];
+    assert!(after.probabilities["P_battery"] <= 0.05 + 1e-12);
+    assert!(
+        after
+            .actions
+            .iter()
+            .any(|a| a == "land" || a == "return_to_base" || a == "replan_and_land"),
+        "{:?}",
+        after.actions
+    );
+}
