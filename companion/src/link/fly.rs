@@ -246,6 +246,8 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
         mission: MissionState::new(&setup.route, setup.takeoff_alt_m),
         precedence: setup.link.vehicle_action_precedence.clone(),
         pending_events: Vec::new(),
+        ingest: Default::default(),
+        ingest_reported: Default::default(),
     };
     let cfg = VehicleConfig {
         link_timeout: args.link_timeout,
@@ -293,6 +295,7 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
                         out.extend(vehicle.on_frame(t, &f));
                     }
                     ingest.set_our_system(vehicle.our_system());
+                    shell.ingest = ingest.stats.clone();
                     trigger = Some(t);
                 }
                 Some(Inbound::Connected(name)) => {
@@ -389,7 +392,36 @@ struct Shell {
     precedence: Vec<String>,
     /// Events of the shell itself (the mission's end) for the next record.
     pending_events: Vec<String>,
+    /// Ingest counters now, and as last reported in a record's link_events.
+    ingest: ingest::IngestStats,
+    ingest_reported: ingest::IngestStats,
 }
+
+impl Shell {
+    /// A link event when bad input arrived since the last report: malformed frames or bad
+    /// signatures, or more unframed bytes than one frame still arriving could explain.
+    fn ingest_note(&mut self) -> Option<String> {
+        let (now, was) = (&self.ingest, &self.ingest_reported);
+        let grew = now.frames_malformed > was.frames_malformed
+            || now.bad_signatures > was.bad_signatures
+            || now.unsigned_commands_refused > was.unsigned_commands_refused
+            || now.bytes_unframed() > was.bytes_unframed() + MAX_FRAME_BYTES;
+        if !grew {
+            return None;
+        }
+        self.ingest_reported = now.clone();
+        Some(format!(
+            "ingest: {} bytes outside valid frames (garbage or corrupt), {} malformed frames, {} bad signatures, {} unsigned commands refused (since start)",
+            now.bytes_unframed(),
+            now.frames_malformed,
+            now.bad_signatures,
+            now.unsigned_commands_refused
+        ))
+    }
+}
+
+/// Longest MAVLink 2 frame (signed): a frame still arriving is at most this many bytes.
+const MAX_FRAME_BYTES: u64 = 280;
 
 #[allow(clippy::too_many_arguments)]
 async fn run_cycle_at<D: Decider, S: RecordSink>(
@@ -416,7 +448,7 @@ async fn run_cycle_at<D: Decider, S: RecordSink>(
     let (plan, mut rec) = decider.step(&obs);
     shell.mission.after_plan(&rec.actions);
     let mut chosen = mission_state::select_vehicle_action(&plan.vehicle_actions, &shell.precedence);
-    if let Some(why) = shell.mission.mission_end(obs.time_s) {
+    if let Some(why) = shell.mission.mission_end(&obs) {
         // The mission's end, not the core's decision: recorded as an event with the action.
         rec.events.push(format!("{why}: land"));
         rec.actions.push("land".into());
@@ -443,6 +475,7 @@ async fn run_cycle_at<D: Decider, S: RecordSink>(
     }
     rec.commands.extend(vehicle.take_records());
     rec.link_events.append(transport_events);
+    rec.link_events.extend(shell.ingest_note());
     rec.link_events.extend(vehicle.take_link_events());
     rec.vehicle.extend(vehicle.telemetry.vehicle());
     rec.vehicle.insert(

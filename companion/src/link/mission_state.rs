@@ -95,6 +95,7 @@ impl MissionState {
 
     /// Update from one snapshot; returns the state for `obs.state`.
     pub fn update(&mut self, obs: &Observations, extra: &Extra) -> &str {
+        let clock = mission_clock(obs);
         let armed = obs.get("armed").unwrap_or(0.0) > 0.5;
         let alt = obs.get("altitude_m").unwrap_or(0.0);
         let seq = obs.get("mission_seq").map(|s| s as u16);
@@ -121,9 +122,9 @@ impl MissionState {
         } else if past(&self.state)
             || (seq.is_some_and(|s| s >= self.last_seq) && speed < self.arrived_speed_mps)
         {
-            self.wpf_at.get_or_insert(obs.time_s);
+            self.wpf_at.get_or_insert(clock);
             if detected {
-                self.tracking_since.get_or_insert(obs.time_s);
+                self.tracking_since.get_or_insert(clock);
                 self.tracking.clone().unwrap_or_else(|| "target".into())
             } else {
                 self.tracking = None;
@@ -156,15 +157,21 @@ impl MissionState {
             .iter()
             .find_map(|a| a.strip_prefix("track_v"))
             .map(|v| format!("v{v}"));
-        if self.flown && actions.iter().any(|a| LANDING_ACTIONS.contains(&a.as_str())) {
+        if self.flown
+            && actions
+                .iter()
+                .any(|a| LANDING_ACTIONS.contains(&a.as_str()))
+        {
             self.landing = true;
         }
     }
 
     /// The mission's own end (not a decision of the core, which tracks for as long as it can):
     /// after tracking for `tracking_time_limit_s`, or searching at wpf for `search_time_limit_s`
-    /// without a target, the mission script lands. Returns the reason once.
-    pub fn mission_end(&mut self, time_s: f64) -> Option<String> {
+    /// without a target, the mission script lands. Returns the reason once. Times are on the
+    /// mission clock (see [`mission_clock`]).
+    pub fn mission_end(&mut self, obs: &Observations) -> Option<String> {
+        let time_s = mission_clock(obs);
         if self.landing || self.end_reason.is_some() {
             return None;
         }
@@ -186,6 +193,12 @@ impl MissionState {
         self.end_reason = Some(reason.clone());
         Some(reason)
     }
+}
+
+/// The autopilot's clock (`vehicle_time_s`, from SYSTEM_TIME.time_boot_ms) when known, so a
+/// SITL running faster than real time flies the same mission; else the shell's clock.
+pub fn mission_clock(obs: &Observations) -> f64 {
+    obs.get("vehicle_time_s").unwrap_or(obs.time_s)
 }
 
 fn is_tracking(s: &str) -> bool {
@@ -255,15 +268,22 @@ mod tests {
         assert_eq!(m.update(&obs(7.0, &fly(5.0, 0.2, 1.0)), &auto), "target");
         m.after_plan(&["detect_obstacles_lidar".into(), "track_v3".into()]);
         assert_eq!(m.update(&obs(8.0, &fly(5.0, 0.2, 1.0)), &auto), "v3");
-        assert_eq!(m.mission_end(8.0), None);
+        assert_eq!(m.mission_end(&obs(8.0, &[])), None);
         m.after_plan(&["track_v2".into()]);
         assert_eq!(m.update(&obs(9.0, &fly(5.0, 0.2, 1.0)), &auto), "v2");
         // lost target: back to searching at wpf
         assert_eq!(m.update(&obs(10.0, &fly(5.0, 0.2, 0.0)), &auto), "wpf");
         assert!(m.route_on_vehicle());
         let limit = m.tracking_time_limit_s.unwrap();
-        assert!(m.mission_end(7.0 + limit).is_some());
-        assert_eq!(m.mission_end(7.0 + limit + 1.0), None, "reported once");
+        // the autopilot's clock wins over the shell's
+        let at = |shell: f64, vehicle: f64| obs(shell, &[("vehicle_time_s", vehicle)]);
+        assert_eq!(m.mission_end(&at(7.0 + limit, 0.0)), None);
+        assert!(m.mission_end(&at(0.0, 7.0 + limit)).is_some());
+        assert_eq!(
+            m.mission_end(&at(7.0 + limit + 1.0, 0.0)),
+            None,
+            "reported once"
+        );
         m.after_plan(&["land".into()]);
         assert_eq!(m.update(&obs(30.0, &fly(5.0, 0.0, 1.0)), &auto), "landing");
         assert!(!m.finished());
