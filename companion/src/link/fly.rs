@@ -295,7 +295,7 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
                         out.extend(vehicle.on_frame(t, &f));
                     }
                     ingest.set_our_system(vehicle.our_system());
-                    shell.ingest = ingest.stats.clone();
+                    shell.ingest = ingest.stats;
                     trigger = Some(t);
                 }
                 Some(Inbound::Connected(name)) => {
@@ -409,7 +409,7 @@ impl Shell {
         if !grew {
             return None;
         }
-        self.ingest_reported = now.clone();
+        self.ingest_reported = *now;
         Some(format!(
             "ingest: {} bytes outside valid frames (garbage or corrupt), {} malformed frames, {} bad signatures, {} unsigned commands refused (since start)",
             now.bytes_unframed(),
