@@ -437,19 +437,23 @@ impl<'m> Core<'m> {
 /// The decision table in the shape of the BFM paper's Tables 4 to 7: consecutive cycles with the
 /// same state and action set are grouped; a row starts on any change or event.
 pub fn table(records: &[DecisionRecord], model: &Model) -> String {
+    // Consecutive cycles with the same action set and no event are one row; its state column
+    // lists the states they passed through (a tracked target lost and re-acquired: `v1/target`).
     let mut rows: Vec<[String; 5]> = Vec::new();
-    let mut last: Option<(String, Vec<String>)> = None;
+    let mut last: Option<&Vec<String>> = None;
     for r in records {
-        let key = (r.state.clone(), r.actions.clone());
         let events = r.events.join("; ");
-        if last.as_ref() == Some(&key) && events.is_empty() {
+        if last == Some(&r.actions) && events.is_empty() {
             if let Some(row) = rows.last_mut() {
                 let start = row[0].split('-').next().unwrap_or("").to_string();
                 row[0] = format!("{start}-{}", r.cycle);
+                if !row[1].split('/').any(|s| s == r.state) {
+                    row[1] = format!("{}/{}", row[1], r.state);
+                }
             }
             continue;
         }
-        last = Some(key);
+        last = Some(&r.actions);
         let labels: Vec<&str> = r.actions.iter().map(|a| model.actions.label(a)).collect();
         rows.push([
             r.cycle.to_string(),

@@ -207,6 +207,42 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
     }
     let (first_kind, first) = first_records.expect("at least one run");
 
+    // The first run goes to a run folder (decision log with its header), for `companion review`.
+    if !args.no_log {
+        let now = std::time::SystemTime::now();
+        let command: Vec<String> = std::env::args().collect();
+        let mut header = companion::decision_log::Header::new(command.join(" "), now)
+            .with_params_dir(params)
+            .with_context(|| format!("reading {} for the log header", params.display()))?;
+        header.policy = Some(policy.name().to_string());
+        header.scenario = Some(scenario.name.clone());
+        header.seed = Some(args.seed);
+        header.step_s = Some(world.step_s);
+        let log = companion::decision_log::start_run(
+            &args.runs_dir,
+            now,
+            header,
+            companion::decision_log::WriterOptions::default(),
+        )
+        .with_context(|| format!("starting a run folder in {}", args.runs_dir.display()))?;
+        let dir = log.dir().to_path_buf();
+        if args.json {
+            eprintln!("run folder: {}", dir.display());
+        } else {
+            println!("run folder: {}", dir.display());
+        }
+        for r in &first.records {
+            log.record(r.clone());
+        }
+        let stats = log.close();
+        if stats.dropped > 0 {
+            eprintln!(
+                "warning: the decision log dropped {} records (writer behind)",
+                stats.dropped
+            );
+        }
+    }
+
     if args.json {
         let tracking: serde_json::Map<String, serde_json::Value> = per_model
             .iter()
