@@ -208,9 +208,9 @@ def storm_model(mdl, path):
         if not mdl.nonterm[s]:
             lines += ["\taction 0 [0]", f"\t\t{s} : 1"]
         for c in range(mdl.ss[s], mdl.ss[s + 1]):
-            lines.append(f"\taction {mdl.ca[c]} [{mdl.cr[c]!r}]")
+            lines.append(f"\taction {mdl.ca[c]} [{float(mdl.cr[c])!r}]")
             for t in range(mdl.cs[c], mdl.cs[c + 1]):
-                lines.append(f"\t\t{mdl.nx[t]} : {mdl.p[t]!r}")
+                lines.append(f"\t\t{mdl.nx[t]} : {float(mdl.p[t])!r}")
     with open(path, "w") as f:
         f.write("\n".join(lines) + "\n")
     opts = stormpy.DirectEncodingParserOptions() if hasattr(stormpy, "DirectEncodingParserOptions") else None
@@ -311,7 +311,13 @@ def main():
         versions["stormpy"] = stormpy.__version__
     except Exception as e:  # noqa: BLE001
         stormpy = None
-        notes.append(f"stormpy unavailable: {e}")
+        why = ""
+        try:
+            with open(os.path.join(OUT, "stormpy_pip.log")) as f:
+                why = " ".join(f.read().split()[-40:])
+        except OSError:
+            pass
+        notes.append(f"stormpy unavailable: {e}; pip: {why}")
 
     for name, p in models.items():
         with open(p) as f:
@@ -370,6 +376,8 @@ def main():
                 elif solver == "vi":
                     def mk():
                         s = tb.ValueIteration(P, R, GAMMA, epsilon=1e-12, max_iter=100000)
+                        # its own iteration bound (_boundIter) stops early on the random models
+                        s.max_iter = 100000
                         s.run()
                         return np.array(s.V), np.array(s.policy)
                 else:
@@ -393,7 +401,7 @@ def main():
                         return stormpy.model_checking(sm, prop, only_initial_states=False)
 
                     res = mk()
-                    v = np.array([res.at(s) for s in range(mdl.n)])
+                    v = np.array([res.get_value(s) for s in range(mdl.n)])
                     # Storm's value query gives no scheduler for step-bounded rewards: values only
                     add("stormpy", v, rp, timeit(mk, 3 if big else reps, B),
                         {"note": "values only (no stage-0 scheduler)"})
