@@ -88,6 +88,7 @@ class NumpySolver:
         nt = np.nonzero(mdl.nonterm)[0]
         self.nt = nt
         self.starts = mdl.ss[nt]
+        self.tchoice = np.repeat(np.arange(len(mdl.ca)), np.diff(mdl.cs))
 
     def greedy(self, q):
         M = self.M
@@ -136,13 +137,13 @@ class NumpySolver:
         choice = np.full(n, -1)
         choice[self.nt] = ch
         while True:
+            chosen = np.zeros(len(M.ca), dtype=bool)
+            chosen[choice[self.nt]] = True
+            t = chosen[self.tchoice]
             A = np.eye(n)
+            np.add.at(A, (M.cstate[self.tchoice[t]], M.nx[t]), -gamma * M.p[t])
             b = np.zeros(n)
-            for s in self.nt:
-                c = choice[s]
-                lo, hi = M.cs[c], M.cs[c + 1]
-                np.add.at(A[s], M.nx[lo:hi], -gamma * M.p[lo:hi])
-                b[s] = M.cr[c]
+            b[self.nt] = M.cr[choice[self.nt]]
             v = np.linalg.solve(A, b)
             q = M.q(v, gamma)
             cur = np.zeros(n)
@@ -153,7 +154,6 @@ class NumpySolver:
             if not improve.any():
                 break
             _, _, ch = self.greedy(q)
-            choice[improve] = np.zeros(n, dtype=np.int64)[improve] + 0
             full = np.full(n, -1)
             full[self.nt] = ch
             choice[improve] = full[improve]
@@ -505,9 +505,8 @@ def main():
                 pot = g.cpt(n["name"])
                 inst = gum.Instantiation(pot)
                 inst.setFirst()
-                names = [inst.variable(i).name() for i in range(inst.nbrDim())]
                 while not inst.end():
-                    idx = tuple(inst.val(inst.pos(g.variable(x))) for x in n["parents"] + [n["name"]])
+                    idx = tuple(inst.val(g.variable(x)) for x in n["parents"] + [n["name"]])
                     pot.set(inst, float(cpt[idx]))
                     inst.inc()
             ie = gum.LazyPropagation(g)
