@@ -16,7 +16,9 @@ use std::path::Path;
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let params = args.get(1).map_or("params", |s| s.as_str());
-    let out = args.get(2).map_or("bench/out/health_bn.json", |s| s.as_str());
+    let out = args
+        .get(2)
+        .map_or("bench/out/health_bn.json", |s| s.as_str());
     let sets: usize = args.get(3).map_or(Ok(20), |s| s.parse())?;
     let model = HealthModel::load(Path::new(params))?;
     let mut seed: u64 = 0x5eed_b00c;
@@ -49,7 +51,11 @@ fn main() -> anyhow::Result<()> {
             .collect();
         if observable.is_empty() {
             observable = (0..net.len())
-                .filter(|&i| !net.nodes().iter().any(|n| n.parents.iter().any(|p| p.0 == i)))
+                .filter(|&i| {
+                    !net.nodes()
+                        .iter()
+                        .any(|n| n.parents.iter().any(|p| p.0 == i))
+                })
                 .collect();
         }
         let mut query: Vec<String> = m.publish.iter().map(|p| p.node.clone()).collect();
@@ -67,10 +73,7 @@ fn main() -> anyhow::Result<()> {
                     let k = net.nodes()[i].states.len();
                     let s = ((rnd() * k as f64) as usize).min(k - 1);
                     ev.set_state(bayes_net::NodeId(i), s);
-                    named.insert(
-                        net.nodes()[i].name.clone(),
-                        json!(net.nodes()[i].states[s]),
-                    );
+                    named.insert(net.nodes()[i].name.clone(), json!(net.nodes()[i].states[s]));
                 }
             }
             // Query nodes carry no evidence, so every peer returns a posterior for each.
@@ -92,7 +95,10 @@ fn main() -> anyhow::Result<()> {
     if let Some(dir) = Path::new(out).parent() {
         std::fs::create_dir_all(dir)?;
     }
-    std::fs::write(out, serde_json::to_string(&json!({ "managers": managers }))?)?;
+    std::fs::write(
+        out,
+        serde_json::to_string(&json!({ "managers": managers }))?,
+    )?;
     eprintln!("wrote {out}");
     Ok(())
 }

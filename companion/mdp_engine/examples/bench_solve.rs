@@ -16,7 +16,9 @@ use std::hint::black_box;
 use std::time::Instant;
 
 fn main() {
-    let path = std::env::args().nth(1).expect("usage: bench_solve plan.json");
+    let path = std::env::args()
+        .nth(1)
+        .expect("usage: bench_solve plan.json");
     let plan: Value = serde_json::from_str(&std::fs::read_to_string(&path).expect("read plan"))
         .expect("plan json");
     let mut out = Vec::new();
@@ -46,7 +48,9 @@ fn main() {
                 let s = ws.finite_horizon(mdp, horizon);
                 (
                     s.values_at(0).to_vec(),
-                    (0..n).map(|i| s.decision(i).map_or(-1, |a| a as i64)).collect(),
+                    (0..n)
+                        .map(|i| s.decision(i).map_or(-1, |a| a as i64))
+                        .collect(),
                     s.stats().iterations,
                 )
             }
@@ -59,7 +63,9 @@ fn main() {
                 .expect("solve");
                 (
                     s.values().to_vec(),
-                    (0..n).map(|i| s.action(i).map_or(-1, |a| a as i64)).collect(),
+                    (0..n)
+                        .map(|i| s.action(i).map_or(-1, |a| a as i64))
+                        .collect(),
                     s.stats.iterations,
                 )
             }
@@ -74,12 +80,18 @@ fn main() {
                     black_box(ws.finite_horizon(black_box(mdp), horizon).decision(0));
                 }
                 "vi" => {
-                    black_box(ws.value_iteration(black_box(mdp), &cfg).map(|s| s.action(0)))
-                        .ok();
+                    black_box(
+                        ws.value_iteration(black_box(mdp), &cfg)
+                            .map(|s| s.action(0)),
+                    )
+                    .ok();
                 }
                 _ => {
-                    black_box(ws.policy_iteration(black_box(mdp), &cfg).map(|s| s.action(0)))
-                        .ok();
+                    black_box(
+                        ws.policy_iteration(black_box(mdp), &cfg)
+                            .map(|s| s.action(0)),
+                    )
+                    .ok();
                 }
             }
             let dt = t0.elapsed();
