@@ -32,7 +32,7 @@ export COMPANION_BIN="${CARGO_TARGET_DIR:-$PWD/target}/debug/companion"
 
 echo "== python: pytest sitl_tests"
 set +e
-.venv/bin/python -m pytest -q sitl_tests
+.venv/bin/python -m pytest -q -n 4 sitl_tests
 rc=$?
 set -e
 # pytest exits 5 when it collected nothing; that is a failure of the suite, not a pass.

@@ -7,8 +7,7 @@
 * `fly`: starts the real companion (`$COMPANION_BIN fly ...`, command line built by helpers.companion_fly_cmd)
   with its own log dir, and collects its decision log.
 
-Tests marked `companion_fly` are skipped only when `$COMPANION_BIN fly --help` fails (the subcommand is still
-being written); the skip reason carries its output.
+Tests marked `companion_fly` always run (CI included): `$COMPANION_BIN` must be a companion binary with `fly`.
 """
 from __future__ import annotations
 
@@ -34,43 +33,14 @@ FLY_TIMEOUT_S = float(os.environ.get("SITL_FLY_TIMEOUT", "240"))
 
 
 def pytest_configure(config: Any) -> None:
-    config.addinivalue_line("markers", "companion_fly: needs `companion fly` (skipped while `fly --help` fails)")
+    config.addinivalue_line("markers", "companion_fly: flies `$COMPANION_BIN fly` end to end")
     config.addinivalue_line("markers", "standin_only: needs the stand-in's hazard injection or recording (skipped with SITL_URL)")
-
-
-_fly_probe: Optional[str] = None
-
-
-def _companion_fly_unavailable() -> Optional[str]:
-    """None when `$COMPANION_BIN fly --help` succeeds, else the reason."""
-    global _fly_probe
-    if _fly_probe is not None:
-        return _fly_probe or None
-    exe = os.environ.get("COMPANION_BIN")
-    if not exe:
-        _fly_probe = "COMPANION_BIN is not set (scripts/test.sh sets it)"
-        return _fly_probe
-    try:
-        out = subprocess.run([exe, "fly", "--help"], capture_output=True, text=True, timeout=60)
-    except (OSError, subprocess.TimeoutExpired) as e:
-        _fly_probe = f"`{exe} fly --help` could not run: {e}"
-        return _fly_probe
-    if out.returncode != 0:
-        said = " ".join((out.stderr or out.stdout).split())[:200]
-        _fly_probe = f"`companion fly --help` failed (exit {out.returncode}): {said}"
-        return _fly_probe
-    _fly_probe = ""
-    return None
 
 
 def pytest_collection_modifyitems(config: Any, items: List[Any]) -> None:
     for item in items:
         if SITL_URL and item.get_closest_marker("standin_only"):
             item.add_marker(pytest.mark.skip(reason=f"SITL_URL={SITL_URL}: this test needs the stand-in's hazard injection/recording"))
-        if item.get_closest_marker("companion_fly"):
-            reason = _companion_fly_unavailable()
-            if reason:
-                item.add_marker(pytest.mark.skip(reason=reason))
 
 
 # ------------------------------------------------------------------------------------------------

@@ -34,6 +34,9 @@ def airborne(sa, c, alt=10.0):
     assert c.arm().result == mavlink.MAV_RESULT_ACCEPTED
     assert c.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, alt).result == mavlink.MAV_RESULT_ACCEPTED
     sa.wait_for(lambda: sa.v.alt >= alt - 0.2, timeout=30, what="take-off altitude")
+    # The altitude is visible a tick before the stand-in records the take-off as complete; on a
+    # loaded machine that tick can be late, so wait for the record itself.
+    sa.wait_for(lambda: sa.rec.of("takeoff_complete"), timeout=10, what="take-off complete")
 
 
 # ------------------------------------------------------------------------------------------------

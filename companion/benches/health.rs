@@ -33,7 +33,7 @@ fn bench(c: &mut Criterion) {
         b.iter(|| HealthModel::load(black_box(&params)).unwrap())
     });
     let mut model = HealthModel::load(&params).unwrap();
-    let ev = model.evidence(&snapshot(6.0));
+    let ev = model.evidence(&snapshot(25.0));
     let mut out = std::collections::BTreeMap::new();
     c.bench_function("health_evaluate_all_managers", |b| {
         b.iter(|| {
@@ -42,7 +42,7 @@ fn bench(c: &mut Criterion) {
         })
     });
     c.bench_function("health_observations_to_evidence", |b| {
-        let o = snapshot(6.0);
+        let o = snapshot(25.0);
         b.iter(|| model.evidence(black_box(&o)))
     });
     let apps = model.manager("applications").unwrap();

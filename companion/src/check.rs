@@ -21,6 +21,10 @@ pub struct CheckArgs {
     /// The params directory (default: $COMPANION_PARAMS or the workspace's params/).
     #[arg(long)]
     pub params: Option<PathBuf>,
+    /// PANORAMA mission for the pre-flight allocation: a name in params/missions/ (`tracking`,
+    /// `patrolling`) or a path.
+    #[arg(long)]
+    pub mission: Option<String>,
 }
 
 /// What a section builder gets.
@@ -33,7 +37,75 @@ pub struct CheckContext<'a> {
 pub type SectionFn = fn(&CheckContext) -> anyhow::Result<(Value, String)>;
 
 /// The report sections, in order.
-pub const SECTIONS: &[(&str, SectionFn)] = &[("health", health_section)];
+pub const SECTIONS: &[(&str, SectionFn)] = &[
+    ("health", health_section),
+    ("mdps", mdp_section),
+    ("platform", platform_section),
+    ("variants", variants_section),
+    ("resource_policies", resource_policies_section),
+    ("guarantee", guarantee_section),
+];
+
+/// The MDPs the decision layer loads (states, actions, probabilities named), validated against
+/// the health managers' published names.
+pub fn mdp_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
+    use std::fmt::Write;
+    let health = HealthModel::load(cx.params)?;
+    let names = health.publishes();
+    let refs: Vec<&str> = names.iter().map(String::as_str).collect();
+    let mdps = crate::mission_mdp::MissionMdps::load(cx.params, &refs)?;
+    let mut text = String::from("\nMDPs (params/mdp/):\n");
+    let mut arr = Vec::new();
+    for m in mdps.all() {
+        let _ = writeln!(
+            text,
+            "  {:<11} {:>2} states x {:>2} actions; probabilities: {}",
+            m.name(),
+            m.n_states(),
+            m.n_actions(),
+            m.probability_names().join(", ")
+        );
+        arr.push(json!({
+            "name": m.name(),
+            "states": m.states(),
+            "actions": m.action_names(),
+            "probabilities": m.probability_names(),
+        }));
+    }
+    let _ = writeln!(text, "  concurrent: {}", mdps.concurrent().join(", "));
+    Ok((Value::Array(arr), text))
+}
+
+fn resources_json(cx: &CheckContext) -> anyhow::Result<Value> {
+    Ok(crate::resources::check_json(cx.params)?)
+}
+
+/// The SoC platform (tiles, CPU) from params/platform.toml.
+pub fn platform_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
+    let spec = crate::resources::ResourceSpec::load(cx.params)?;
+    let text = format!("\n{}", crate::resources::check_text(&spec));
+    Ok((resources_json(cx)?["platform"].clone(), text))
+}
+
+/// The variant catalogue (the BFM paper's Table 2); printed with the platform.
+pub fn variants_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
+    Ok((resources_json(cx)?["variants"].clone(), String::new()))
+}
+
+pub fn resource_policies_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
+    Ok((
+        resources_json(cx)?["resource_policies"].clone(),
+        String::new(),
+    ))
+}
+
+/// PANORAMA: activities, RAS0 (Table 6 shape), NGA and initial margins of `--mission`.
+pub fn guarantee_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
+    let mission = cx.args.mission.as_deref().unwrap_or("tracking");
+    let v = crate::guarantee::check_json(cx.params, mission)?;
+    let text = format!("\n{}", crate::guarantee::check_text(cx.params, mission)?);
+    Ok((v["guarantee"].clone(), text))
+}
 
 /// Parse `a=b,c=d`.
 pub fn parse_pairs(s: &str) -> anyhow::Result<Vec<(String, String)>> {

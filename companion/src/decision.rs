@@ -142,6 +142,10 @@ pub struct Core<'m> {
     /// Set when the guarantee stage found no allocation meeting the goals.
     guarantee_infeasible: bool,
     failed_resources: Vec<String>,
+    /// The activity being flown and when (observation time, s) it started.
+    activity_started: Option<(usize, f64)>,
+    /// Degradations and drops in force after the last cycle.
+    last_degraded: Vec<String>,
 }
 
 impl<'m> Core<'m> {
@@ -159,7 +163,23 @@ impl<'m> Core<'m> {
             guarantee: Guarantee::start(model.guarantee.clone()).ok(),
             guarantee_infeasible: false,
             failed_resources: Vec::new(),
+            activity_started: None,
+            last_degraded: Vec::new(),
         }
+    }
+
+    /// The PANORAMA allocations in force so far (RAS0 then each re-allocation), in the shape of
+    /// PANORAMA's Table 7; `None` when the guarantee stage is off (pre-flight infeasible).
+    pub fn allocation_table(&self) -> Option<String> {
+        let g = self.guarantee.as_ref()?;
+        Some(crate::guarantee::render_ras_table(&g.spec, g.ras_rows()))
+    }
+
+    /// Number of re-allocations so far (RAS0 not counted).
+    pub fn reallocations(&self) -> usize {
+        self.guarantee
+            .as_ref()
+            .map_or(0, |g| g.ras_rows().len().saturating_sub(1))
     }
 
     /// One decision cycle.
@@ -343,9 +363,19 @@ impl<'m> Core<'m> {
                 }
             }
         }
-        for d in record.degraded.iter().chain(&record.dropped) {
-            rec.events.push(d.clone());
+        // Degradations are events when they start, not on every cycle they last.
+        let now: Vec<String> = record
+            .degraded
+            .iter()
+            .chain(&record.dropped)
+            .cloned()
+            .collect();
+        for d in &now {
+            if !self.last_degraded.contains(d) {
+                rec.events.push(d.clone());
+            }
         }
+        self.last_degraded = now;
         rec.resources = Some(record);
         actions
     }
@@ -371,9 +401,22 @@ impl<'m> Core<'m> {
             .collect();
         let mut failed = self.failed_resources.clone();
         failed.extend(tile_names);
+        // How far into the activity: time spent in it over its estimated duration (capped below
+        // 1 so an overrunning activity still counts its remainder as not yet flown).
+        let started = match self.activity_started {
+            Some((a, t)) if a == activity_index => t,
+            _ => {
+                self.activity_started = Some((activity_index, obs.time_s));
+                obs.time_s
+            }
+        };
+        let fraction = g
+            .estimated(activity_index, "duration_s")
+            .filter(|d| *d > 0.0)
+            .map_or(0.0, |d| ((obs.time_s - started) / d).min(0.95));
         let record = g.watch(Progress {
             activity_index,
-            activity_fraction: 0.0,
+            activity_fraction: fraction,
             energy_used_j: obs.get("energy_consumed_j"),
             battery_remaining_pct: obs.get("battery_pct"),
             elapsed_s: obs.time_s,
@@ -394,19 +437,23 @@ impl<'m> Core<'m> {
 /// The decision table in the shape of the BFM paper's Tables 4 to 7: consecutive cycles with the
 /// same state and action set are grouped; a row starts on any change or event.
 pub fn table(records: &[DecisionRecord], model: &Model) -> String {
+    // Consecutive cycles with the same action set and no event are one row; its state column
+    // lists the states they passed through (a tracked target lost and re-acquired: `v1/target`).
     let mut rows: Vec<[String; 5]> = Vec::new();
-    let mut last: Option<(String, Vec<String>)> = None;
+    let mut last: Option<&Vec<String>> = None;
     for r in records {
-        let key = (r.state.clone(), r.actions.clone());
         let events = r.events.join("; ");
-        if last.as_ref() == Some(&key) && events.is_empty() {
+        if last == Some(&r.actions) && events.is_empty() {
             if let Some(row) = rows.last_mut() {
                 let start = row[0].split('-').next().unwrap_or("").to_string();
                 row[0] = format!("{start}-{}", r.cycle);
+                if !row[1].split('/').any(|s| s == r.state) {
+                    row[1] = format!("{}/{}", row[1], r.state);
+                }
             }
             continue;
         }
-        last = Some(key);
+        last = Some(&r.actions);
         let labels: Vec<&str> = r.actions.iter().map(|a| model.actions.label(a)).collect();
         rows.push([
             r.cycle.to_string(),

@@ -800,6 +800,19 @@ impl Guarantee {
     }
 
     /// Every RAS computed so far, RAS0 first: the rows of a PANORAMA Table 7.
+    /// Estimated cost of activity `activity` on goal `goal` under the allocation in force (e.g. its
+    /// duration in seconds), so a caller can tell how far into the activity it is.
+    pub fn estimated(&self, activity: usize, goal: &str) -> Option<f64> {
+        let p = &self.spec.problem;
+        let g = p.goals.iter().position(|x| x.name == goal)?;
+        let ia = p
+            .activities
+            .get(activity)?
+            .ias
+            .get(*self.choice.get(activity)?)?;
+        ia.cost.get(g).copied()
+    }
+
     pub fn ras_rows(&self) -> &[RasRow] {
         &self.rows
     }

@@ -182,12 +182,16 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
 
     let mut per_model = Vec::new();
     let mut first_records = None;
+    let mut first_allocations: Option<(usize, Option<String>)> = None;
     for kind in &kinds {
         let mut steps = Vec::with_capacity(runs as usize);
         for r in 0..runs {
             let seed = args.seed + r as u64;
             let mut core = Core::new(&model, *kind, policy);
             let result = sim::run(&world, &scenario, seed, |obs| core.step(obs));
+            if first_allocations.is_none() {
+                first_allocations = Some((core.reallocations(), core.allocation_table()));
+            }
             steps.push(result.tracking_steps as f64);
             if first_records.is_none() {
                 first_records = Some((kind.name(), result));
@@ -202,6 +206,42 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         pb.finish_and_clear();
     }
     let (first_kind, first) = first_records.expect("at least one run");
+
+    // The first run goes to a run folder (decision log with its header), for `companion review`.
+    if !args.no_log {
+        let now = std::time::SystemTime::now();
+        let command: Vec<String> = std::env::args().collect();
+        let mut header = companion::decision_log::Header::new(command.join(" "), now)
+            .with_params_dir(params)
+            .with_context(|| format!("reading {} for the log header", params.display()))?;
+        header.policy = Some(policy.name().to_string());
+        header.scenario = Some(scenario.name.clone());
+        header.seed = Some(args.seed);
+        header.step_s = Some(world.step_s);
+        let log = companion::decision_log::start_run(
+            &args.runs_dir,
+            now,
+            header,
+            companion::decision_log::WriterOptions::default(),
+        )
+        .with_context(|| format!("starting a run folder in {}", args.runs_dir.display()))?;
+        let dir = log.dir().to_path_buf();
+        if args.json {
+            eprintln!("run folder: {}", dir.display());
+        } else {
+            println!("run folder: {}", dir.display());
+        }
+        for r in &first.records {
+            log.record(r.clone());
+        }
+        let stats = log.close();
+        if stats.dropped > 0 {
+            eprintln!(
+                "warning: the decision log dropped {} records (writer behind)",
+                stats.dropped
+            );
+        }
+    }
 
     if args.json {
         let tracking: serde_json::Map<String, serde_json::Value> = per_model
@@ -241,6 +281,13 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
     println!();
     print!("{}", companion::decision::table(&first.records, &model));
     println!();
+    if let Some((n, Some(table))) = &first_allocations {
+        if *n > 0 {
+            println!();
+            println!("PANORAMA allocations ({n} re-allocation(s)):");
+            print!("{table}");
+        }
+    }
     println!(
         "outcome: {:?} after {} steps, battery {:.0}% left; tracking time {} steps",
         first.outcome, first.steps_flown, first.battery_pct_end, first.tracking_steps

@@ -415,8 +415,10 @@ impl<'a> World<'a> {
 
         // Battery: propulsion (hover, climb, wind) plus the platform's compute power.
         let wind = values.get("wind_mps").copied().unwrap_or(0.0);
+        // `extra_power_w`: a hazard's unplanned draw (heavier payload, a worn motor, icing).
+        let extra = values.get("extra_power_w").copied().unwrap_or(0.0);
         let mut prop_w =
-            self.spec.vehicle.hover_w + self.spec.vehicle.wind_w_per_mps2 * wind * wind;
+            self.spec.vehicle.hover_w + self.spec.vehicle.wind_w_per_mps2 * wind * wind + extra;
         if self.phase == "base" && has("take_off") {
             prop_w *= self.spec.vehicle.climb_factor;
         }
@@ -662,9 +664,13 @@ mod tests {
             "{} vs {in_tracking}",
             r.tracking_steps
         );
-        // The drain model, computed by hand: 380 W hover + 2.2 W/(m/s)^2 x (2 m/s)^2 wind + 10 W
-        // compute, for 10 s per step, out of an 80 Wh pack.
-        let per_step_pct = (380.0 + 2.2 * 4.0 + 10.0) * 10.0 / 3600.0 / 80.0 * 100.0;
+        // The drain model, computed by hand from world.toml: hover + k * wind^2 (baseline wind)
+        // + 10 W compute (the scripted core's), for one step, out of the pack.
+        let v = &w.vehicle;
+        let wind = w.baseline["wind_mps"];
+        let per_step_pct =
+            (v.hover_w + v.wind_w_per_mps2 * wind * wind + 10.0) * w.step_s / 3600.0 / v.battery_wh
+                * 100.0;
         let batt: Vec<f64> = r
             .records
             .iter()

@@ -121,7 +121,7 @@ fn figure_4_through_user_typed_evidence() {
 fn reference() -> Observations {
     let mut o = Observations::default();
     for (k, v) in [
-        ("vibration_mps2", 6.0),
+        ("vibration_mps2", 25.0),
         ("wind_mps", 3.0),
         ("battery_pct", 45.0),
         ("gps_fix", 3.0),
@@ -190,7 +190,7 @@ fn versions_respond_to_hazards() {
     assert_eq!(best(&p)[0], "V3", "vibrations: {p:?}");
 
     let mut fast = nominal.clone();
-    fast.set("target_speed_rel", 1.8);
+    fast.set("target_speed_rel", 6.0);
     let p = eval(&mut m, &fast);
     assert_eq!(&best(&p)[..2], &["V2", "V5"], "high-speed target: {p:?}");
 

@@ -180,6 +180,9 @@ struct RawRoute {
     /// Give up searching after this long (s); the decision core reads it.
     #[serde(default)]
     search_time_limit_s: Option<f64>,
+    /// Land after tracking the target this long (s); the fly shell's mission end.
+    #[serde(default)]
+    tracking_time_limit_s: Option<f64>,
     /// Put a NAV_TAKEOFF first so AUTO works from the ground too.
     #[serde(default = "yes")]
     takeoff_first: bool,
@@ -225,6 +228,8 @@ pub struct Route {
     pub waypoints: Vec<Waypoint>,
     pub altitude_m: f64,
     pub search_time_limit_s: Option<f64>,
+    /// Land after tracking this long (s): the mission's end, which the fly shell enforces.
+    pub tracking_time_limit_s: Option<f64>,
     pub takeoff_first: bool,
 }
 
@@ -256,6 +261,15 @@ impl Route {
             return Err(SpecError::new(
                 path,
                 "search_time_limit_s",
+                "must be positive",
+            ));
+        }
+        if let Some(t) = raw.tracking_time_limit_s
+            && !(t.is_finite() && t > 0.0)
+        {
+            return Err(SpecError::new(
+                path,
+                "tracking_time_limit_s",
                 "must be positive",
             ));
         }
@@ -330,6 +344,7 @@ impl Route {
             waypoints,
             altitude_m: raw.altitude_m,
             search_time_limit_s: raw.search_time_limit_s,
+            tracking_time_limit_s: raw.tracking_time_limit_s,
             takeoff_first: raw.takeoff_first,
         })
     }
@@ -382,6 +397,10 @@ pub struct LinkParams {
     pub arm_wait_s: f64,
     /// Arm attempts, each only after a fresh ready report.
     pub max_arm_attempts: u32,
+    /// The autopilot flies one vehicle action at a time: when a plan holds several, the first
+    /// listed here is commanded (see link::mission_state::select_vehicle_action).
+    #[serde(default)]
+    pub vehicle_action_precedence: Vec<String>,
 }
 
 impl LinkParams {

@@ -11,6 +11,7 @@ use super::Msg;
 use super::actions::{ActionTable, LinkParams, Route};
 use super::ingest::{self, Encoder, Ingest};
 use super::liveness::parse_duration;
+use super::mission_state::{self, Extra, MissionState};
 use super::transport::{self, Inbound};
 use super::url::{self, ConnectUrl};
 use super::vehicle::{Vehicle, VehicleConfig};
@@ -83,9 +84,46 @@ pub struct FlyArgs {
     /// Params directory (default: $COMPANION_PARAMS or the workspace params/).
     #[arg(long)]
     pub params: Option<PathBuf>,
-    /// Stop after this long (e.g. 60s); default: until Ctrl-C.
+    /// Stop after this long (e.g. 60s); default: until the vehicle has flown and is back on the
+    /// ground disarmed, or Ctrl-C.
     #[arg(long, value_parser = parse_duration)]
     pub duration: Option<Duration>,
+    /// Where run folders go (a new `<UTC time>/` inside with decisions.jsonl and flight.tlog,
+    /// printed at the start).
+    #[arg(long, default_value = crate::decision_log::DEFAULT_RUNS_DIR)]
+    pub log_dir: PathBuf,
+}
+
+/// The decision log as a record sink: records go to its writer thread (never blocking the loop).
+pub struct LogSink(pub crate::decision_log::DecisionLog);
+
+impl RecordSink for LogSink {
+    fn write(&mut self, rec: &DecisionRecord) -> std::io::Result<()> {
+        // A full queue drops the record; the log itself says so with a `loss` line.
+        self.0.record(rec.clone());
+        Ok(())
+    }
+}
+
+/// Raw MAVLink traffic to `flight.tlog`: frames sent as encoded, frames received re-encoded from
+/// their decoded header and message (a received signature is not kept).
+pub struct Tlog(pub crate::decision_log::TlogWriter);
+
+impl Tlog {
+    fn stamp() -> u64 {
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_micros() as u64)
+    }
+    fn sent(&mut self, bytes: &[u8]) {
+        let _ = self.0.write(Self::stamp(), bytes);
+    }
+    fn received(&mut self, f: &ingest::Frame) {
+        let mut buf = Vec::with_capacity(280);
+        if mavlink::write_versioned_msg(&mut buf, f.version, f.header, &f.msg).is_ok() {
+            let _ = self.0.write(Self::stamp(), &buf);
+        }
+    }
 }
 
 /// What the run saw, for tests and the exit message.
@@ -103,6 +141,8 @@ pub struct FlySetup {
     pub actions: ActionTable,
     pub route: Route,
     pub key: Option<[u8; 32]>,
+    /// Altitude the take_off action climbs to (m): MAV_CMD_NAV_TAKEOFF param 7, else the route's.
+    pub takeoff_alt_m: f64,
 }
 
 impl FlySetup {
@@ -122,27 +162,65 @@ impl FlySetup {
             Some(p) => Some(ingest::load_signing_key(p)?),
             None => None,
         };
+        let takeoff_alt_m = actions
+            .actions
+            .get("take_off")
+            .and_then(|steps| {
+                steps.iter().find_map(|st| match st {
+                    super::actions::Step::Command { command, params }
+                        if *command == super::dialect::MavCmd::MAV_CMD_NAV_TAKEOFF
+                            && params[6] > 0.0 =>
+                    {
+                        Some(params[6] as f64)
+                    }
+                    _ => None,
+                })
+            })
+            .unwrap_or(route.altitude_m);
         Ok(Self {
             link,
             actions,
             route,
             key,
+            takeoff_alt_m,
         })
     }
 }
 
-/// Blocking entry point for the CLI: records as JSON lines on stdout.
+/// Blocking entry point for the CLI: a run folder under `--log-dir` with the decision log and
+/// `flight.tlog`; the folder is printed first.
 pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
+    use crate::decision_log::{self as dlog, Header, TlogWriter, WriterOptions};
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()
         .context("starting the tokio runtime")?;
-    let mut sink = JsonLines(std::io::stdout());
-    let report = rt.block_on(run_with(args, decider, &mut sink))?;
+    let params = args
+        .params
+        .clone()
+        .unwrap_or_else(crate::spec::default_params_dir);
+    let now = std::time::SystemTime::now();
+    let command: Vec<String> = std::env::args().collect();
+    let mut header = Header::new(command.join(" "), now)
+        .with_params_dir(&params)
+        .with_context(|| format!("reading {} for the log header", params.display()))?;
+    header.policy = Some(args.policy.clone());
+    let log = dlog::start_run(&args.log_dir, now, header, WriterOptions::default())
+        .with_context(|| format!("starting a run folder in {}", args.log_dir.display()))?;
+    let dir = log.dir().to_path_buf();
+    println!("run folder: {}", dir.display());
+    let tlog = TlogWriter::create(&dir.join("flight.tlog"))
+        .with_context(|| format!("creating {}", dir.join("flight.tlog").display()))?;
+    let mut sink = LogSink(log);
+    let result = rt.block_on(run_with_tlog(args, decider, &mut sink, Some(Tlog(tlog))));
+    let stats = sink.0.close();
+    let report = result?;
     eprintln!(
-        "companion fly: {}",
-        serde_json::to_string(&report).unwrap_or_default()
+        "companion fly: {} records {} dropped {}",
+        serde_json::to_string(&report).unwrap_or_default(),
+        stats.records,
+        stats.dropped
     );
     Ok(())
 }
@@ -150,10 +228,27 @@ pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
 /// The fly loop; returns when `duration` elapses, on Ctrl-C, or when the transport task dies.
 pub async fn run_with<D: Decider, S: RecordSink>(
     args: FlyArgs,
-    mut decider: D,
+    decider: D,
     sink: &mut S,
 ) -> anyhow::Result<FlyReport> {
+    run_with_tlog(args, decider, sink, None).await
+}
+
+/// [`run_with`], also writing every frame sent and received to `tlog`.
+pub async fn run_with_tlog<D: Decider, S: RecordSink>(
+    args: FlyArgs,
+    mut decider: D,
+    sink: &mut S,
+    mut tlog: Option<Tlog>,
+) -> anyhow::Result<FlyReport> {
     let setup = FlySetup::load(&args)?;
+    let mut shell = Shell {
+        mission: MissionState::new(&setup.route, setup.takeoff_alt_m),
+        precedence: setup.link.vehicle_action_precedence.clone(),
+        pending_events: Vec::new(),
+        ingest: Default::default(),
+        ingest_reported: Default::default(),
+    };
     let cfg = VehicleConfig {
         link_timeout: args.link_timeout,
         streams: setup.link.stream_ids(),
@@ -194,9 +289,13 @@ pub async fn run_with<D: Decider, S: RecordSink>(
                 Some(Inbound::Bytes(b)) => {
                     let t = now();
                     for f in ingest.push(&b) {
+                        if let Some(w) = tlog.as_mut() {
+                            w.received(&f);
+                        }
                         out.extend(vehicle.on_frame(t, &f));
                     }
                     ingest.set_our_system(vehicle.our_system());
+                    shell.ingest = ingest.stats;
                     trigger = Some(t);
                 }
                 Some(Inbound::Connected(name)) => {
@@ -211,6 +310,9 @@ pub async fn run_with<D: Decider, S: RecordSink>(
                 Some(Inbound::Bytes(b)) => {
                     let t = now();
                     for f in onboard_ingest.push(&b) {
+                        if let Some(w) = tlog.as_mut() {
+                            w.received(&f);
+                        }
                         vehicle.on_monitor_frame(t, &f);
                     }
                     trigger = Some(t);
@@ -226,13 +328,13 @@ pub async fn run_with<D: Decider, S: RecordSink>(
             _ = tick.tick() => out.extend(vehicle.tick(now())),
             _ = periodic.tick() => {
                 if vehicle.target.is_some() {
-                    run_cycle_at(&mut decider, &mut vehicle, &mut encoder, &link.outbound, sink, now(), now, &mut report, &mut transport_events).await?;
+                    run_cycle_at(&mut decider, &mut shell, &mut vehicle, &mut encoder, &link.outbound, &mut tlog, sink, now(), now, &mut report, &mut transport_events).await?;
                 }
             },
             _ = &mut ctrl_c => break,
             _ = async { match stop_at { Some(t) => tokio::time::sleep_until(t).await, None => std::future::pending().await } } => break,
         }
-        send(&mut encoder, &vehicle, &link.outbound, &out).await;
+        send(&mut encoder, &vehicle, &link.outbound, &mut tlog, &out).await;
         vehicle.stamp_latency(trigger.unwrap_or_else(now), now());
         // Significant telemetry (a new obstacle, a found target, a crossed battery threshold, a
         // mode change, a command result, link loss) triggers a cycle now.
@@ -241,9 +343,11 @@ pub async fn run_with<D: Decider, S: RecordSink>(
             let t = trigger.unwrap_or_else(now);
             run_cycle_at(
                 &mut decider,
+                &mut shell,
                 &mut vehicle,
                 &mut encoder,
                 &link.outbound,
+                &mut tlog,
                 sink,
                 t,
                 now,
@@ -251,6 +355,10 @@ pub async fn run_with<D: Decider, S: RecordSink>(
                 &mut transport_events,
             )
             .await?;
+        }
+        // Flew, landed and disarmed: the mission is over (one last cycle recorded it).
+        if shell.mission.finished() {
+            break;
         }
     }
     report.ingest = ingest.stats;
@@ -263,32 +371,98 @@ async fn send(
     encoder: &mut Encoder,
     vehicle: &Vehicle,
     tx: &tokio::sync::mpsc::Sender<Vec<u8>>,
+    tlog: &mut Option<Tlog>,
     msgs: &[Msg],
 ) {
     encoder.system_id = vehicle.our_system();
     for m in msgs {
+        let bytes = encoder.encode(m);
         // A full queue means the transport is stuck or reconnecting: drop rather than block.
-        let _ = tx.try_send(encoder.encode(m));
+        if tx.try_send(bytes.clone()).is_ok()
+            && let Some(w) = tlog.as_mut()
+        {
+            w.sent(&bytes);
+        }
     }
 }
+
+/// What the shell keeps between cycles besides the protocol state.
+struct Shell {
+    mission: MissionState,
+    precedence: Vec<String>,
+    /// Events of the shell itself (the mission's end) for the next record.
+    pending_events: Vec<String>,
+    /// Ingest counters now, and as last reported in a record's link_events.
+    ingest: ingest::IngestStats,
+    ingest_reported: ingest::IngestStats,
+}
+
+impl Shell {
+    /// A link event when bad input arrived since the last report: malformed frames or bad
+    /// signatures, or more unframed bytes than one frame still arriving could explain.
+    fn ingest_note(&mut self) -> Option<String> {
+        let (now, was) = (&self.ingest, &self.ingest_reported);
+        let grew = now.frames_malformed > was.frames_malformed
+            || now.bad_signatures > was.bad_signatures
+            || now.unsigned_commands_refused > was.unsigned_commands_refused
+            || now.bytes_unframed() > was.bytes_unframed() + MAX_FRAME_BYTES;
+        if !grew {
+            return None;
+        }
+        self.ingest_reported = *now;
+        Some(format!(
+            "ingest: {} bytes outside valid frames (garbage or corrupt), {} malformed frames, {} bad signatures, {} unsigned commands refused (since start)",
+            now.bytes_unframed(),
+            now.frames_malformed,
+            now.bad_signatures,
+            now.unsigned_commands_refused
+        ))
+    }
+}
+
+/// Longest MAVLink 2 frame (signed): a frame still arriving is at most this many bytes.
+const MAX_FRAME_BYTES: u64 = 280;
 
 #[allow(clippy::too_many_arguments)]
 async fn run_cycle_at<D: Decider, S: RecordSink>(
     decider: &mut D,
+    shell: &mut Shell,
     vehicle: &mut Vehicle,
     encoder: &mut Encoder,
     tx: &tokio::sync::mpsc::Sender<Vec<u8>>,
+    tlog: &mut Option<Tlog>,
     sink: &mut S,
     trigger_at: Duration,
     now: impl Fn() -> Duration,
     report: &mut FlyReport,
     transport_events: &mut Vec<String>,
 ) -> anyhow::Result<()> {
-    let events = vehicle.take_events();
-    let obs = vehicle.observations(now(), events.clone());
+    let mut events = vehicle.take_events();
+    events.append(&mut shell.pending_events);
+    let mut obs = vehicle.observations(now(), events.clone());
+    let extra = Extra {
+        mode: vehicle.telemetry.mode.as_deref(),
+    };
+    obs.state = shell.mission.update(&obs, &extra).to_string();
+    complete_observations(&mut obs, &shell.mission);
     let (plan, mut rec) = decider.step(&obs);
-    let msgs = vehicle.request_actions(now(), &plan.vehicle_actions);
-    send(encoder, vehicle, tx, &msgs).await;
+    shell.mission.after_plan(&rec.actions);
+    let mut chosen = mission_state::select_vehicle_action(&plan.vehicle_actions, &shell.precedence);
+    if let Some(why) = shell.mission.mission_end(&obs) {
+        // The mission's end, not the core's decision: recorded as an event with the action.
+        rec.events.push(format!("{why}: land"));
+        rec.actions.push("land".into());
+        shell.mission.after_plan(&["land".to_string()]);
+        chosen = Some("land".into());
+    }
+    if chosen.as_deref() == Some("follow_trajectory")
+        && shell.mission.route_on_vehicle()
+        && vehicle.actions.actions.contains_key(RESUME)
+    {
+        chosen = Some(RESUME.into());
+    }
+    let msgs = vehicle.request_actions(now(), chosen.as_slice());
+    send(encoder, vehicle, tx, tlog, &msgs).await;
     vehicle.stamp_latency(trigger_at, now());
     report.cycles += 1;
     rec.cycle = report.cycles;
@@ -301,6 +475,7 @@ async fn run_cycle_at<D: Decider, S: RecordSink>(
     }
     rec.commands.extend(vehicle.take_records());
     rec.link_events.append(transport_events);
+    rec.link_events.extend(shell.ingest_note());
     rec.link_events.extend(vehicle.take_link_events());
     rec.vehicle.extend(vehicle.telemetry.vehicle());
     rec.vehicle.insert(
@@ -309,6 +484,18 @@ async fn run_cycle_at<D: Decider, S: RecordSink>(
     );
     sink.write(&rec).context("writing the decision record")?;
     Ok(())
+}
+
+/// params/commands.toml entry flown for `follow_trajectory` once the route is on the vehicle.
+const RESUME: &str = "follow_trajectory_resume";
+
+/// Observations the health BNs read under names the telemetry does not produce directly.
+fn complete_observations(obs: &mut Observations, mission: &MissionState) {
+    if let Some(v) = obs.get("groundspeed_mps") {
+        obs.values.entry("drone_speed_mps".into()).or_insert(v);
+    }
+    let remaining = mission.waypoints_remaining(obs);
+    obs.set("waypoints_remaining", remaining);
 }
 
 /// A tiny rule-based stand-in for the decision core, for link tests and for flying before the

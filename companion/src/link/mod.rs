@@ -11,6 +11,7 @@ pub mod fly;
 pub mod ingest;
 pub mod liveness;
 pub mod mission;
+pub mod mission_state;
 pub mod modes;
 pub mod readiness;
 pub mod telemetry;

@@ -254,6 +254,11 @@ impl Telemetry {
                     self.set(&obs, n.value as f64);
                 }
             }
+            Msg::SYSTEM_TIME(t) => {
+                // The autopilot's clock: mission timings follow it (a SITL may run faster than
+                // real time).
+                self.set("vehicle_time_s", t.time_boot_ms as f64 / 1000.0);
+            }
             Msg::STATUSTEXT(t) => {
                 self.last_text = Some(t.text.to_str().unwrap_or("").to_string());
             }

@@ -1234,6 +1234,7 @@ mod tests {
             }],
             altitude_m: 20.0,
             search_time_limit_s: None,
+            tracking_time_limit_s: None,
             takeoff_first: false,
         };
         let cfg = VehicleConfig {

@@ -1,0 +1,660 @@
+"""Side-by-side comparison of the companion's MDP and BN engines with Python peers (issue 8).
+
+Run through `bench/compare` (sets up bench/.venv, builds and exports). Both sides are timed the
+same way: in-process, around the solve/query call only, after one warm-up call, on the same
+exported models. Agreement is checked before speed: MDP values to 1e-6 and actions (ties, where
+the two actions' Q-values differ by <= 1e-6, count as agreeing), BN posteriors to 1e-9.
+"""
+
+import argparse
+import contextlib
+import io
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+OUT = os.path.join(ROOT, "bench", "out")
+MODELS = os.path.join(ROOT, "companion", "mdp_engine", "benches", "models")
+PAPER = ["reference", "navigation", "landing", "tracking", "monolithic"]
+GAMMA, HORIZON, TOL = 0.95, 100, 1e-10
+TARGETS = {"pymdptoolbox": 300, "numpy": 100, "stormpy": 10, "pgmpy-VE": 1000, "pyAgrum": 300}
+
+
+def log(*a):
+    print(*a, file=sys.stderr, flush=True)
+
+
+# ---------------------------------------------------------------- models
+class Model:
+    """The companion's sparse MDP layout (benches/models/*.json) plus derived arrays."""
+
+    def __init__(self, d):
+        self.d = d
+        self.ss = np.array(d["state_start"], dtype=np.int64)
+        self.n = len(self.ss) - 1
+        self.m = d["n_actions"]
+        self.ca = np.array(d["choice_action"], dtype=np.int64)
+        self.cr = np.array(d["choice_reward"], dtype=float)
+        self.cs = np.array(d["choice_start"], dtype=np.int64)
+        self.nx = np.array(d["next"], dtype=np.int64)
+        self.p = np.array(d["prob"], dtype=float)
+        self.cstate = np.repeat(np.arange(self.n), np.diff(self.ss))
+        self.nonterm = np.diff(self.ss) > 0
+
+    def q(self, v, gamma):
+        """Q-value per choice (vectorised, sparse)."""
+        return self.cr + gamma * np.add.reduceat(self.p * v[self.nx], self.cs[:-1])
+
+    def q_sa(self, s, a, v, gamma):
+        for c in range(self.ss[s], self.ss[s + 1]):
+            if self.ca[c] == a:
+                lo, hi = self.cs[c], self.cs[c + 1]
+                return self.cr[c] + gamma * float(np.dot(self.p[lo:hi], v[self.nx[lo:hi]]))
+        return -np.inf
+
+
+def random_mdp(n, m=10, k=5, seed=8):
+    """Random sparse MDP: every action admissible everywhere, k successors, rewards in [-5, 5]."""
+    rng = np.random.default_rng(seed + n)
+    k = min(k, n)
+    nxt = np.empty((n * m, k), dtype=np.int64)
+    for i in range(n * m):
+        nxt[i] = np.sort(rng.choice(n, size=k, replace=False))
+    w = rng.random((n * m, k)) + 0.01
+    w /= w.sum(axis=1, keepdims=True)
+    return {
+        "n_actions": m,
+        "state_start": list(range(0, n * m + 1, m)),
+        "choice_action": [a for _ in range(n) for a in range(m)],
+        "choice_reward": (rng.random(n * m) * 10 - 5).tolist(),
+        "choice_start": list(range(0, n * m * k + 1, k)),
+        "next": nxt.ravel().tolist(),
+        "prob": w.ravel().tolist(),
+    }
+
+
+# ---------------------------------------------------------------- numpy baseline
+class NumpySolver:
+    """Plain vectorised numpy: the same algorithms as the companion, sparse choice arrays."""
+
+    def __init__(self, mdl):
+        self.M = mdl
+        nt = np.nonzero(mdl.nonterm)[0]
+        self.nt = nt
+        self.starts = mdl.ss[nt]
+        self.tchoice = np.repeat(np.arange(len(mdl.ca)), np.diff(mdl.cs))
+
+    def greedy(self, q):
+        M = self.M
+        best = np.maximum.reduceat(q, self.starts)
+        v = np.zeros(M.n)
+        v[self.nt] = best
+        # lowest action index among the maxima (choices are sorted by action)
+        is_best = q >= v[M.cstate] - 1e-12 * np.maximum(1.0, np.abs(v[M.cstate]))
+        first = np.full(M.n, -1)
+        idx = np.nonzero(is_best)[0]
+        s_of = M.cstate[idx]
+        uniq, pos = np.unique(s_of, return_index=True)
+        first[uniq] = M.ca[idx[pos]]
+        return v, first, idx[pos]
+
+    def fh(self, horizon):
+        M = self.M
+        v = np.zeros(M.n)
+        for _ in range(horizon):
+            q = M.q(v, 1.0)
+            v1 = v
+            v = np.zeros(M.n)
+            v[self.nt] = np.maximum.reduceat(q, self.starts)
+        v0, pol, _ = self.greedy(q)
+        self.v1 = v1
+        return v0, pol
+
+    def vi(self, gamma, tol):
+        M = self.M
+        v = np.zeros(M.n)
+        while True:
+            q = M.q(v, gamma)
+            w = np.zeros(M.n)
+            w[self.nt] = np.maximum.reduceat(q, self.starts)
+            d = np.max(np.abs(w - v))
+            v = w
+            if d < tol:
+                break
+        v, pol, _ = self.greedy(M.q(v, gamma))
+        return v, pol
+
+    def pi(self, gamma):
+        M = self.M
+        n = M.n
+        _, _, ch = self.greedy(M.q(np.zeros(n), gamma))
+        choice = np.full(n, -1)
+        choice[self.nt] = ch
+        while True:
+            chosen = np.zeros(len(M.ca), dtype=bool)
+            chosen[choice[self.nt]] = True
+            t = chosen[self.tchoice]
+            A = np.eye(n)
+            np.add.at(A, (M.cstate[self.tchoice[t]], M.nx[t]), -gamma * M.p[t])
+            b = np.zeros(n)
+            b[self.nt] = M.cr[choice[self.nt]]
+            v = np.linalg.solve(A, b)
+            q = M.q(v, gamma)
+            cur = np.zeros(n)
+            cur[self.nt] = q[choice[self.nt]]
+            best = np.zeros(n)
+            best[self.nt] = np.maximum.reduceat(q, self.starts)
+            improve = best > cur + 1e-12 * np.maximum(1.0, np.abs(cur))
+            if not improve.any():
+                break
+            _, _, ch = self.greedy(q)
+            full = np.full(n, -1)
+            full[self.nt] = ch
+            choice[improve] = full[improve]
+        v, pol, _ = self.greedy(M.q(v, gamma))
+        return v, pol
+
+
+# ---------------------------------------------------------------- pymdptoolbox
+def toolbox_arrays(mdl, sparse):
+    """Inadmissible actions become a self-loop with a large penalty (never optimal); terminal
+    states a zero-reward self-loop for every action (value 0, as in the companion)."""
+    import scipy.sparse as sp
+
+    PEN = -1e7
+    n, m = mdl.n, mdl.m
+    R = np.full((n, m), PEN)
+    R[~mdl.nonterm, :] = 0.0
+    rows = [[] for _ in range(m)]
+    cols = [[] for _ in range(m)]
+    vals = [[] for _ in range(m)]
+    have = np.zeros((n, m), dtype=bool)
+    for c in range(len(mdl.ca)):
+        s, a = mdl.cstate[c], mdl.ca[c]
+        have[s, a] = True
+        R[s, a] = mdl.cr[c]
+        lo, hi = mdl.cs[c], mdl.cs[c + 1]
+        pr = mdl.p[lo:hi].copy()
+        j = int(np.argmax(pr))
+        pr[j] = 1.0 - (pr.sum() - pr[j])  # row sums exact to the toolbox's 10 eps check
+        rows[a] += [s] * (hi - lo)
+        cols[a] += mdl.nx[lo:hi].tolist()
+        vals[a] += pr.tolist()
+    for a in range(m):
+        miss = np.nonzero(~have[:, a])[0]
+        rows[a] += miss.tolist()
+        cols[a] += miss.tolist()
+        vals[a] += [1.0] * len(miss)
+    P = [sp.csr_matrix((vals[a], (rows[a], cols[a])), shape=(n, n)) for a in range(m)]
+    if not sparse:
+        P = np.array([x.toarray() for x in P])
+    return P, R
+
+
+# ---------------------------------------------------------------- stormpy
+def storm_model(mdl, path):
+    import stormpy
+
+    lines = ["@type: MDP", "@parameters", "", "@reward_models", "r", "@nr_states", str(mdl.n),
+             "@nr_choices", str(len(mdl.ca) + int((~mdl.nonterm).sum())), "@model"]
+    for s in range(mdl.n):
+        lines.append(f"state {s}" + (" init" if s == 0 else ""))
+        if not mdl.nonterm[s]:
+            lines += ["\taction 0 [0]", f"\t\t{s} : 1"]
+        for c in range(mdl.ss[s], mdl.ss[s + 1]):
+            lines.append(f"\taction {mdl.ca[c]} [{float(mdl.cr[c])!r}]")
+            for t in range(mdl.cs[c], mdl.cs[c + 1]):
+                lines.append(f"\t\t{mdl.nx[t]} : {float(mdl.p[t])!r}")
+    with open(path, "w") as f:
+        f.write("\n".join(lines) + "\n")
+    opts = stormpy.DirectEncodingParserOptions() if hasattr(stormpy, "DirectEncodingParserOptions") else None
+    return stormpy.build_model_from_drn(path, opts) if opts else stormpy.build_model_from_drn(path)
+
+
+# ---------------------------------------------------------------- timing helpers
+def timeit(fn, reps, budget):
+    fn()  # warm
+    ts = []
+    spent = 0.0
+    while len(ts) < reps and (len(ts) < 3 or spent < budget):
+        t0 = time.perf_counter_ns()
+        fn()
+        dt = time.perf_counter_ns() - t0
+        ts.append(dt)
+        spent += dt / 1e9
+    return ts
+
+
+def stats(ts):
+    a = np.array(ts, dtype=float)
+    return float(np.median(a)), float(np.percentile(a, 99)), len(a)
+
+
+def agree_mdp(mdl, solver, ref_v, ref_pol, v, pol, vref_next, gamma):
+    v = np.asarray(v, dtype=float)
+    pol = np.asarray(pol)
+    err = float(np.max(np.abs(v - ref_v))) if len(v) else 0.0
+    bad = 0
+    for s in np.nonzero(pol != ref_pol)[0]:
+        if not mdl.nonterm[s]:
+            continue
+        qa = mdl.q_sa(s, int(ref_pol[s]), vref_next, gamma)
+        qb = mdl.q_sa(s, int(pol[s]), vref_next, gamma)
+        if abs(qa - qb) > 1e-6:
+            bad += 1
+    return err <= 1e-6 and bad == 0, err, bad
+
+
+# ---------------------------------------------------------------- main
+def run_cargo(args):
+    env = dict(os.environ)
+    r = subprocess.run(args, cwd=ROOT, env=env, capture_output=True, text=True)
+    if r.returncode != 0:
+        log(r.stderr[-3000:])
+        raise SystemExit(f"failed: {' '.join(args)}")
+    return r.stdout
+
+
+LOAD0 = ""
+
+
+def main():
+    global LOAD0
+    try:
+        with open("/proc/loadavg") as f:
+            LOAD0 = " ".join(f.read().split()[:3])
+    except OSError:
+        pass
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--budget", type=float, default=0.3, help="seconds of timed calls per case and side")
+    ap.add_argument("--no-doc", action="store_true", help="do not rewrite docs/performance.md")
+    args = ap.parse_args()
+    os.makedirs(OUT, exist_ok=True)
+    B = args.budget
+    versions = {"python": platform.python_version(), "numpy": np.__version__}
+    cases = []
+    notes = []
+
+    # ---- MDP models: the paper's (exported by the companion's tests) and the random series
+    models = {}
+    for name in PAPER:
+        models[name] = os.path.join(MODELS, f"{name}.json")
+    for n in [10, 100, 1000, 10000]:
+        p = os.path.join(OUT, f"random_{n}.json")
+        if not os.path.exists(p):
+            with open(p, "w") as f:
+                json.dump(random_mdp(n), f)
+        models[f"random_{n}"] = p
+    plan = []
+    for name, p in models.items():
+        big = name == "random_10000"
+        for solver in ["fh", "vi", "pi"]:
+            if solver == "pi" and big:
+                continue  # dense O(n^3) evaluation: 800 MB matrix, minutes per solve
+            plan.append({"name": f"{name}/{solver}", "path": p, "solver": solver, "horizon": HORIZON,
+                         "gamma": GAMMA, "tolerance": TOL, "reps": 3 if big else 10000,
+                         "budget_s": B})
+    with open(os.path.join(OUT, "plan.json"), "w") as f:
+        json.dump({"cases": plan}, f)
+    log("running companion MDP solves ...")
+    rust = {c["name"]: c for c in json.loads(run_cargo(
+        [os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "examples", "bench_solve"),
+         os.path.join(OUT, "plan.json")]))["cases"]}
+
+    try:
+        import mdptoolbox
+        import mdptoolbox.mdp as tb
+        versions["pymdptoolbox"] = "4.0b3"
+    except Exception as e:  # noqa: BLE001
+        tb = None
+        notes.append(f"pymdptoolbox unavailable: {e}")
+    try:
+        import stormpy
+        versions["stormpy"] = stormpy.__version__
+    except Exception as e:  # noqa: BLE001
+        stormpy = None
+        why = ""
+        try:
+            with open(os.path.join(OUT, "stormpy_pip.log")) as f:
+                why = " ".join(f.read().split()[-40:])
+        except OSError:
+            pass
+        notes.append(f"stormpy unavailable: {e}; pip: {why}")
+
+    for name, p in models.items():
+        with open(p) as f:
+            mdl = Model(json.load(f))
+        big = name == "random_10000"
+        reps = 3 if big else 1000
+        npy = NumpySolver(mdl)
+        # the numpy reference values for tie checks
+        ref = {}
+        ref["fh"] = npy.fh(HORIZON) + (npy.v1, 1.0)
+        vv, pp = npy.vi(GAMMA, TOL)
+        ref["vi"] = (vv, pp, vv, GAMMA)
+        ref["pi"] = ref["vi"]
+        P = R = None
+        if tb is not None:
+            P, R = toolbox_arrays(mdl, sparse=mdl.n > 1000)
+        for solver in ["fh", "vi", "pi"]:
+            key = f"{name}/{solver}"
+            if key not in rust:
+                notes.append(f"{key}: companion policy iteration skipped (dense 10000x10000 evaluation)")
+                continue
+            rc = rust[key]
+            rv, rp = np.array(rc["values"]), np.array(rc["policy"])
+            rmed, rp99, rn = stats(rc["times_ns"])
+            _, _, vnext, g = ref[solver]
+
+            def add(peer, v, pol, ts, extra=None):
+                ok, err, bad = agree_mdp(mdl, solver, rv, rp, v, pol, vnext, g)
+                med, p99, n = stats(ts)
+                c = {"name": key, "kind": "mdp", "states": mdl.n, "peer": peer, "agree": bool(ok),
+                     "max_value_diff": err, "action_mismatches": bad,
+                     "companion_median_ns": rmed, "companion_p99_ns": rp99, "companion_reps": rn,
+                     "peer_median_ns": med, "peer_p99_ns": p99, "peer_reps": n,
+                     "speedup": med / rmed, "target": TARGETS.get(peer),
+                     "policy_agree": bad == 0}
+                if extra:
+                    c.update(extra)
+                cases.append(c)
+                log(f"{key:28s} {peer:13s} agree={ok} speedup={med / rmed:9.1f}")
+
+            # numpy
+            f_np = {"fh": lambda: npy.fh(HORIZON), "vi": lambda: npy.vi(GAMMA, TOL),
+                    "pi": lambda: npy.pi(GAMMA)}[solver]
+            if solver == "pi" and mdl.n > 1000:
+                pass
+            else:
+                v, pol = f_np()[:2]
+                add("numpy", v, pol, timeit(f_np, reps, B))
+            # pymdptoolbox
+            if tb is not None:
+                if solver == "fh":
+                    def mk():
+                        with contextlib.redirect_stdout(io.StringIO()):
+                            s = tb.FiniteHorizon(P, R, 1, HORIZON)
+                            s.run()
+                        return s.V[:, 0], s.policy[:, 0]
+                elif solver == "vi":
+                    def mk():
+                        s = tb.ValueIteration(P, R, GAMMA, epsilon=1e-9, max_iter=100000)
+                        # its own iteration bound (_boundIter) stops early on the random models
+                        s.max_iter = 100000
+                        s.run()
+                        return np.array(s.V), np.array(s.policy)
+                else:
+                    def mk():
+                        s = tb.PolicyIteration(P, R, GAMMA, max_iter=100000)
+                        s.run()
+                        return np.array(s.V), np.array(s.policy)
+                if big and solver == "pi":
+                    notes.append(f"{key}: pymdptoolbox skipped (companion has no result to compare)")
+                elif big and solver == "vi":
+                    notes.append(f"{key}: pymdptoolbox skipped (one solve took over 2 minutes here)")
+                else:
+                    if big:
+                        # minutes per solve at this size: one timed call, no warm-up
+                        t0 = time.perf_counter_ns()
+                        v, pol = mk()
+                        ts = [time.perf_counter_ns() - t0]
+                        notes.append(f"{key}: pymdptoolbox timed once, no warm-up (slow at this size)")
+                    else:
+                        v, pol = mk()
+                        ts = timeit(mk, reps, B)
+                    pol = np.where(mdl.nonterm, pol, -1)
+                    add("pymdptoolbox", v, pol, ts,
+                        {"note": "ValueIteration stops on span(V_k+1 - V_k): epsilon-optimal policy, "
+                                 "values not converged (by design)"} if solver == "vi" else None)
+            # Storm: finite horizon as the cumulative reward within 100 steps
+            if stormpy is not None and solver == "fh":
+                try:
+                    sm = storm_model(mdl, os.path.join(OUT, f"{name}.drn"))
+                    prop = stormpy.parse_properties(f"Rmax=? [C<={HORIZON}]")[0]
+
+                    def mk():
+                        return stormpy.model_checking(sm, prop, only_initial_states=False)
+
+                    res = mk()
+                    v = np.array([res.get_value(s) for s in range(mdl.n)])
+                    # Storm's value query gives no scheduler for step-bounded rewards: values only
+                    add("stormpy", v, rp, timeit(mk, 3 if big else reps, B),
+                        {"note": "values only (no stage-0 scheduler)"})
+                except Exception as e:  # noqa: BLE001
+                    notes.append(f"{key}: stormpy failed: {type(e).__name__}: {e}")
+
+    # ---- BN
+    bn_path = os.path.join(OUT, "health_bn.json")
+    log("running companion BN queries ...")
+    rbn = {m["name"]: m for m in json.loads(run_cargo(
+        [os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "examples", "bench_bn"), bn_path,
+         "100000", str(B)]))["managers"]}
+    with open(bn_path) as f:
+        bn = json.load(f)
+    peers = {}
+    try:
+        import pgmpy
+        from pgmpy.inference import BeliefPropagation, VariableElimination
+        from pgmpy.models import DiscreteBayesianNetwork
+        from pgmpy.factors.discrete import TabularCPD
+        versions["pgmpy"] = pgmpy.__version__
+        peers["pgmpy"] = True
+    except Exception as e:  # noqa: BLE001
+        notes.append(f"pgmpy unavailable: {e}")
+    try:
+        import pyagrum as gum
+    except Exception:  # noqa: BLE001
+        try:
+            import pyAgrum as gum
+        except Exception as e:  # noqa: BLE001
+            gum = None
+            notes.append(f"pyAgrum unavailable: {e}")
+    if gum is not None:
+        versions["pyAgrum"] = gum.__version__
+    for m in bn["managers"]:
+        name = m["name"]
+        rc = rbn[name]
+        rmed, rp99, rn = stats(rc["times_ns"])
+        nodes = {n["name"]: n for n in m["nodes"]}
+        query = m["query"]
+        sets = m["evidence"]
+        ref = rc["posteriors"]
+
+        def add(peer, post, ts):
+            err = 0.0
+            for e in range(len(sets)):
+                for j in range(len(query)):
+                    err = max(err, float(np.max(np.abs(np.array(post[e][j]) - np.array(ref[e][j])))))
+            med, p99, n = stats(ts)
+            cases.append({"name": f"bn/{name}", "kind": "bn", "nodes": len(nodes), "peer": peer,
+                          "agree": bool(err <= 1e-9), "max_posterior_diff": err,
+                          "companion_median_ns": rmed, "companion_p99_ns": rp99, "companion_reps": rn,
+                          "peer_median_ns": med, "peer_p99_ns": p99, "peer_reps": n,
+                          "speedup": med / rmed, "target": TARGETS.get(peer)})
+            log(f"bn/{name:25s} {peer:13s} agree={err <= 1e-9} speedup={med / rmed:9.1f}")
+
+        if "pgmpy" in peers:
+            bnm = DiscreteBayesianNetwork()
+            bnm.add_nodes_from(nodes)
+            for n in m["nodes"]:
+                for par in n["parents"]:
+                    bnm.add_edge(par, n["name"])
+            for n in m["nodes"]:
+                k = len(n["states"])
+                cpt = np.array(n["cpt"]).reshape(-1, k).T  # pgmpy: rows = states, cols = parent combos
+                bnm.add_cpds(TabularCPD(
+                    n["name"], k, cpt, evidence=n["parents"] or None,
+                    evidence_card=[len(nodes[p]["states"]) for p in n["parents"]] or None,
+                    state_names={x: nodes[x]["states"] for x in [n["name"]] + n["parents"]}))
+            bnm.check_model()
+            for peer, cls in [("pgmpy-VE", VariableElimination), ("pgmpy-BP", BeliefPropagation)]:
+                try:
+                    inf = cls(bnm)
+                except Exception as e:  # noqa: BLE001
+                    notes.append(f"bn/{name}: {peer} failed: {type(e).__name__}: {e}")
+                    continue
+                it = iter(range(10**9))
+
+                def q(e):
+                    r = inf.query(variables=query, evidence=e, joint=False, show_progress=False)
+                    return [[float(x) for x in r[v].values] for v in query]
+
+                def one():
+                    i = next(it) % len(sets)
+                    q(sets[i])
+
+                post = []
+                for e in sets:
+                    r = inf.query(variables=query, evidence=e, joint=False, show_progress=False)
+                    # pgmpy may reorder state names: map back to the exported order
+                    post.append([[float(r[v].get_value(**{v: s})) for s in nodes[v]["states"]]
+                                 for v in query])
+                add(peer, post, timeit(one, 2000, B))
+        if gum is not None:
+            g = gum.BayesNet(name)
+            for n in m["nodes"]:
+                g.add(gum.LabelizedVariable(n["name"], n["name"], n["states"]))
+            for n in m["nodes"]:
+                for par in n["parents"]:
+                    g.addArc(par, n["name"])
+            for n in m["nodes"]:
+                k = len(n["states"])
+                cpt = np.array(n["cpt"]).reshape([len(nodes[p]["states"]) for p in n["parents"]] + [k])
+                # pyAgrum's CPT tensor: fill through named instantiations
+                pot = g.cpt(n["name"])
+                inst = gum.Instantiation(pot)
+                inst.setFirst()
+                while not inst.end():
+                    idx = tuple(inst.val(g.variable(x)) for x in n["parents"] + [n["name"]])
+                    pot.set(inst, float(cpt[idx]))
+                    inst.inc()
+            ie = gum.LazyPropagation(g)
+            it = iter(range(10**9))
+
+            def one():
+                i = next(it) % len(sets)
+                ie.eraseAllEvidence()
+                ie.setEvidence(sets[i])
+                ie.makeInference()
+                return [ie.posterior(v) for v in query]
+
+            post = []
+            for e in sets:
+                ie.eraseAllEvidence()
+                ie.setEvidence(e)
+                ie.makeInference()
+                post.append([[float(x) for x in ie.posterior(v).toarray()] for v in query])
+            add("pyAgrum", post, timeit(one, 5000, B))
+
+    machine = {"loadavg": LOAD0, "nproc": os.cpu_count(), "cpu": cpu_model(), "platform": platform.platform()}
+    result = {"budget": B, "machine": machine, "versions": versions, "notes": notes, "cases": cases}
+    with open(os.path.join(OUT, "result.json"), "w") as f:
+        json.dump(result, f, indent=1)
+    table = render(result)
+    if not args.no_doc:
+        write_doc(result, table)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(table)
+
+
+def cpu_model():
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor()
+
+
+def fmt_ns(x):
+    if x >= 1e9:
+        return f"{x / 1e9:.2f} s"
+    if x >= 1e6:
+        return f"{x / 1e6:.2f} ms"
+    if x >= 1e3:
+        return f"{x / 1e3:.1f} µs"
+    return f"{x:.0f} ns"
+
+
+def render(r):
+    rows = ["| case | peer | agree | max diff | companion median / p99 (reps) | peer median / p99 (reps) | speedup | target |",
+            "|---|---|---|---|---|---|---|---|"]
+    for c in r["cases"]:
+        t = c.get("target")
+        met = "" if t is None else (f"≥{t}x {'met' if c['speedup'] >= t else 'NOT met'}")
+        if not c["agree"]:
+            met = "case fails (no agreement)"
+        if c.get("note"):
+            met += f" ({c['note']})"
+        d = c.get("max_value_diff", c.get("max_posterior_diff", 0.0))
+        rows.append(f"| {c['name']} | {c['peer']} | {c['agree']} | {d:.1e} | "
+                    f"{fmt_ns(c['companion_median_ns'])} / {fmt_ns(c['companion_p99_ns'])} ({c['companion_reps']}) | "
+                    f"{fmt_ns(c['peer_median_ns'])} / {fmt_ns(c['peer_p99_ns'])} ({c['peer_reps']}) | "
+                    f"{c['speedup']:.1f}x | {met} |")
+    s = "\n".join(rows)
+    summ = ["| peer | target | agreeing cases meeting it | min speedup | median speedup | disagreeing cases |",
+            "|---|---|---|---|---|---|"]
+    for peer in ["pymdptoolbox", "numpy", "stormpy", "pgmpy-VE", "pgmpy-BP", "pyAgrum"]:
+        cs = [c for c in r["cases"] if c["peer"] == peer]
+        if not cs:
+            continue
+        ok = [c for c in cs if c["agree"]]
+        sp = np.array([c["speedup"] for c in ok]) if ok else np.array([np.nan])
+        t = TARGETS.get(peer)
+        met = sum(1 for c in ok if t is not None and c["speedup"] >= t)
+        summ.append(f"| {peer} | {'≥%dx' % t if t else '-'} | {met}/{len(ok) if t else '-'} | "
+                    f"{np.min(sp):.1f}x | {np.median(sp):.1f}x | {len(cs) - len(ok)} |")
+    s = "Summary (a target counts as met only where the case agrees):\n\n" + "\n".join(summ) + "\n\n" + s
+    if r["notes"]:
+        s += "\n\nNotes:\n" + "\n".join(f"- {n}" for n in r["notes"])
+    return s
+
+
+def write_doc(r, table):
+    m, v = r["machine"], r["versions"]
+    text = f"""# Performance: companion engines vs Python peers
+
+Generated by `bench/compare` (issue 8). Do not edit by hand: re-run `bench/compare`.
+
+Machine: {m['nproc']} cores, {m['cpu']}, {m['platform']}; load average at start {m['loadavg']}
+(the machine was shared with other jobs while measured, so absolute times and p99s are noisy; both
+sides ran in the same run, interleaved per model).
+Versions: {', '.join(f'{k} {x}' for k, x in v.items())}.
+
+Method: both sides read the same exported models (MDPs: `companion/mdp_engine/benches/models/*.json`
+from the companion's tests, and random sparse MDPs with |A| = 10, 5 successors, seed fixed in
+`bench/compare.py`, written once to `bench/out/`; BNs: the health managers exported from `params/`
+by `companion --example export_health_bn`, with 20 random hard-evidence sets on observable nodes).
+Timing is in-process around the solve/query call only, after one warm-up call (Rust: `Instant`
+in `mdp_engine --example bench_solve` / `bayes_net --example bench_bn`; Python: `perf_counter_ns`),
+repeated until the repetition count or ~{r['budget']:g} s per case and side. `fh` = finite horizon 100
+undiscounted (stage-0 values and actions), `vi`/`pi` = value/policy iteration with gamma 0.95
+(tolerance 1e-10). BN query = posteriors of the manager's published nodes under one evidence set,
+the evidence changing between queries. pymdptoolbox timing includes its constructor (input checks
+and conversion: the toolbox computes there) since its `run()` cannot be called without it;
+inadmissible actions are given to it as self-loops with reward -1e7 and terminal states as
+zero-reward self-loops, which leaves the optimum unchanged.
+
+Agreement first: values to 1e-6 and actions (ties, where the two actions' Q-values differ by at
+most 1e-6, count as agreeing), posteriors to 1e-9; a case without agreement fails whatever its speed.
+Speedup = peer median / companion median.
+
+{table}
+"""
+    with open(os.path.join(ROOT, "docs", "performance.md"), "w") as f:
+        f.write(text)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,110 @@
+//! Solve exported MDPs and time the solve in-process, for the side-by-side comparison with
+//! Python peers (`bench/compare`).
+//!
+//! Reads a plan (JSON file given as the first argument):
+//! `{"cases":[{"name","path","solver":"fh"|"vi"|"pi","horizon","gamma","tolerance","reps","budget_s"}]}`
+//! and prints one JSON object `{"cases":[{"name","values","policy","iterations","times_ns":[..]}]}`
+//! where `values`/`policy` are stage 0 for the finite horizon, `policy` uses -1 for terminal states,
+//! and `times_ns` holds one `Instant` measurement around the solve call only per repetition, with a
+//! warm workspace (one untimed solve first). Repetitions stop at `reps` or once `budget_s` seconds
+//! of timed solving have passed (at least 3).
+//!
+//! Run: `cargo run --release -p mdp_engine --example bench_solve -- plan.json`.
+use mdp_engine::{Config, Mdp, Workspace};
+use serde_json::{Value, json};
+use std::hint::black_box;
+use std::time::Instant;
+
+fn main() {
+    let path = std::env::args()
+        .nth(1)
+        .expect("usage: bench_solve plan.json");
+    let plan: Value = serde_json::from_str(&std::fs::read_to_string(&path).expect("read plan"))
+        .expect("plan json");
+    let mut out = Vec::new();
+    let mut models: std::collections::HashMap<String, Mdp> = Default::default();
+    let mut ws = Workspace::new();
+    for case in plan["cases"].as_array().expect("cases") {
+        let name = case["name"].as_str().expect("name").to_string();
+        let mpath = case["path"].as_str().expect("path").to_string();
+        let mdp = models.entry(mpath.clone()).or_insert_with(|| {
+            serde_json::from_str(&std::fs::read_to_string(&mpath).expect("read model"))
+                .expect("model json")
+        });
+        let solver = case["solver"].as_str().expect("solver");
+        let horizon = case["horizon"].as_u64().unwrap_or(100) as usize;
+        let cfg = Config {
+            gamma: case["gamma"].as_f64().unwrap_or(0.95),
+            tolerance: case["tolerance"].as_f64().unwrap_or(1e-10),
+            ..Config::default()
+        };
+        let reps = case["reps"].as_u64().unwrap_or(100) as usize;
+        let budget = case["budget_s"].as_f64().unwrap_or(1.0);
+        let n = mdp.n_states();
+        // One solve untimed: sizes the workspace (the warm state the companion runs in) and
+        // gives the answer for the agreement check.
+        let (values, policy, iterations): (Vec<f64>, Vec<i64>, u32) = match solver {
+            "fh" => {
+                let s = ws.finite_horizon(mdp, horizon);
+                (
+                    s.values_at(0).to_vec(),
+                    (0..n)
+                        .map(|i| s.decision(i).map_or(-1, |a| a as i64))
+                        .collect(),
+                    s.stats().iterations,
+                )
+            }
+            "vi" | "pi" => {
+                let s = if solver == "vi" {
+                    ws.value_iteration(mdp, &cfg)
+                } else {
+                    ws.policy_iteration(mdp, &cfg)
+                }
+                .expect("solve");
+                (
+                    s.values().to_vec(),
+                    (0..n)
+                        .map(|i| s.action(i).map_or(-1, |a| a as i64))
+                        .collect(),
+                    s.stats.iterations,
+                )
+            }
+            other => panic!("unknown solver {other}"),
+        };
+        let mut times = Vec::with_capacity(reps);
+        let mut spent = 0.0;
+        while times.len() < reps && (times.len() < 3 || spent < budget) {
+            let t0 = Instant::now();
+            match solver {
+                "fh" => {
+                    black_box(ws.finite_horizon(black_box(mdp), horizon).decision(0));
+                }
+                "vi" => {
+                    black_box(
+                        ws.value_iteration(black_box(mdp), &cfg)
+                            .map(|s| s.action(0)),
+                    )
+                    .ok();
+                }
+                _ => {
+                    black_box(
+                        ws.policy_iteration(black_box(mdp), &cfg)
+                            .map(|s| s.action(0)),
+                    )
+                    .ok();
+                }
+            }
+            let dt = t0.elapsed();
+            spent += dt.as_secs_f64();
+            times.push(dt.as_nanos() as u64);
+        }
+        out.push(json!({
+            "name": name,
+            "values": values,
+            "policy": policy,
+            "iterations": iterations,
+            "times_ns": times,
+        }));
+    }
+    println!("{}", json!({ "cases": out }));
+}

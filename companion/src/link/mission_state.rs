@@ -1,0 +1,327 @@
+//! The shared mission state (`base`, `wp1`, `wpi`, `wpf`, `target`, `v0`..`v5`, `landing`) as
+//! the fly shell observes it, for `Observations.state`.
+//!
+//! Why in the shell: the decision core is pure and learns where the mission is only from its
+//! observations; the simulation world computes the state from its own bookkeeping
+//! (companion/src/sim.rs), the real vehicle from telemetry and route progress. The rules follow
+//! the simulation's phase transitions (docs/simulation.md) so the same core flies both:
+//! `base` until airborne; `wp1` while flying to the route's first waypoint; `wpi` through the
+//! intermediate ones; `wpf` once the last one is reached (the tracking area); `target` when the
+//! onboard tracker reports the target there, `vN` while the last plan ran `track_vN` on it;
+//! `landing` (sticky) once a landing action was commanded, the autopilot flies LAND/RTL, or the
+//! vehicle is back on the ground disarmed after a flight.
+
+use super::actions::Route;
+use crate::observations::Observations;
+
+/// Vehicle actions that end the flight.
+pub const LANDING_ACTIONS: [&str; 3] = ["land", "replan_and_land", "return_to_base"];
+
+/// Inputs that are not observations (telemetry the estimator needs besides `Observations`).
+#[derive(Debug, Clone, Default)]
+pub struct Extra<'a> {
+    /// Flight mode name (`AUTO`, `LAND`, `RTL`, ...).
+    pub mode: Option<&'a str>,
+}
+
+/// Mission-state estimator; one per flight.
+#[derive(Debug, Clone)]
+pub struct MissionState {
+    /// Mission sequence number of the route's first waypoint (`wp1`).
+    pub wp1_seq: u16,
+    /// Mission sequence number of the last waypoint (`wpf`).
+    pub last_seq: u16,
+    /// Altitude above home from which the take-off counts as done (m).
+    pub airborne_m: f64,
+    /// `target_detected` above this is a detection.
+    pub detection_threshold: f64,
+    /// Below this ground speed at the last waypoint the route is finished (m/s).
+    pub arrived_speed_mps: f64,
+    /// Mission end: land after tracking this long (s); see the route file.
+    pub tracking_time_limit_s: Option<f64>,
+    /// Mission end: land when the target is not found this long after reaching wpf (s).
+    pub search_time_limit_s: Option<f64>,
+    state: String,
+    flown: bool,
+    landing: bool,
+    finished: bool,
+    /// AUTO was seen after take-off: the route is on the vehicle (resume instead of re-upload).
+    auto_seen: bool,
+    /// Tracking version the last plan ran (`v3` for `track_v3`).
+    tracking: Option<String>,
+    wpf_at: Option<f64>,
+    tracking_since: Option<f64>,
+    /// Why the shell ended the mission, once.
+    end_reason: Option<String>,
+}
+
+impl MissionState {
+    pub fn new(route: &Route, takeoff_alt_m: f64) -> Self {
+        let first = if route.takeoff_first { 2 } else { 1 };
+        let last = route.waypoints.len() as u16 + first - 1;
+        Self {
+            wp1_seq: first,
+            last_seq: last.max(first),
+            airborne_m: 0.8 * takeoff_alt_m,
+            detection_threshold: 0.5,
+            arrived_speed_mps: 1.0,
+            tracking_time_limit_s: route.tracking_time_limit_s,
+            search_time_limit_s: route.search_time_limit_s,
+            state: "base".into(),
+            flown: false,
+            landing: false,
+            finished: false,
+            auto_seen: false,
+            tracking: None,
+            wpf_at: None,
+            tracking_since: None,
+            end_reason: None,
+        }
+    }
+
+    pub fn state(&self) -> &str {
+        &self.state
+    }
+
+    /// Flew, then landed and disarmed: the run is over.
+    pub fn finished(&self) -> bool {
+        self.finished
+    }
+
+    /// The route was uploaded and flown in AUTO once.
+    pub fn route_on_vehicle(&self) -> bool {
+        self.auto_seen
+    }
+
+    /// Update from one snapshot; returns the state for `obs.state`.
+    pub fn update(&mut self, obs: &Observations, extra: &Extra) -> &str {
+        let clock = mission_clock(obs);
+        let armed = obs.get("armed").unwrap_or(0.0) > 0.5;
+        let alt = obs.get("altitude_m").unwrap_or(0.0);
+        let seq = obs.get("mission_seq").map(|s| s as u16);
+        let speed = obs.get("groundspeed_mps").unwrap_or(f64::INFINITY);
+        let detected = obs.get("target_detected").unwrap_or(0.0) > self.detection_threshold;
+        let mode = extra.mode.unwrap_or("");
+        if armed && alt >= self.airborne_m {
+            self.flown = true;
+        }
+        if self.flown && mode == "AUTO" {
+            self.auto_seen = true;
+        }
+        if self.flown && (matches!(mode, "LAND" | "RTL") || !armed) {
+            self.landing = true;
+        }
+        if self.landing {
+            self.finished = self.flown && !armed;
+            self.state = "landing".into();
+            return &self.state;
+        }
+        let past = |s: &str| matches!(s, "wpf" | "target") || is_tracking(s);
+        self.state = if !self.flown {
+            "base".into()
+        } else if past(&self.state)
+            || (seq.is_some_and(|s| s >= self.last_seq) && speed < self.arrived_speed_mps)
+        {
+            self.wpf_at.get_or_insert(clock);
+            if detected {
+                self.tracking_since.get_or_insert(clock);
+                self.tracking.clone().unwrap_or_else(|| "target".into())
+            } else {
+                self.tracking = None;
+                "wpf".into()
+            }
+        } else if seq.is_some_and(|s| s > self.wp1_seq) {
+            "wpi".into()
+        } else {
+            "wp1".into()
+        };
+        &self.state
+    }
+
+    /// Waypoints not yet reached (the `waypoints_remaining` observation).
+    pub fn waypoints_remaining(&self, obs: &Observations) -> f64 {
+        match self.state.as_str() {
+            "base" | "wp1" => (self.last_seq - self.wp1_seq + 1) as f64,
+            "wpi" => {
+                let seq = obs.get("mission_seq").unwrap_or(0.0) as u16;
+                (self.last_seq + 1).saturating_sub(seq.max(self.wp1_seq)) as f64
+            }
+            _ => 0.0,
+        }
+    }
+
+    /// After the core's decision: remember the tracking version it runs and whether it chose to
+    /// land. `time_s` is the cycle's observation time.
+    pub fn after_plan(&mut self, actions: &[String]) {
+        self.tracking = actions
+            .iter()
+            .find_map(|a| a.strip_prefix("track_v"))
+            .map(|v| format!("v{v}"));
+        if self.flown
+            && actions
+                .iter()
+                .any(|a| LANDING_ACTIONS.contains(&a.as_str()))
+        {
+            self.landing = true;
+        }
+    }
+
+    /// The mission's own end (not a decision of the core, which tracks for as long as it can):
+    /// after tracking for `tracking_time_limit_s`, or searching at wpf for `search_time_limit_s`
+    /// without a target, the mission script lands. Returns the reason once. Times are on the
+    /// mission clock (see [`mission_clock`]).
+    pub fn mission_end(&mut self, obs: &Observations) -> Option<String> {
+        let time_s = mission_clock(obs);
+        if self.landing || self.end_reason.is_some() {
+            return None;
+        }
+        let reason = match (self.tracking_since, self.wpf_at) {
+            (Some(t0), _) if self.tracking_time_limit_s.is_some_and(|l| time_s - t0 >= l) => {
+                format!(
+                    "mission: tracking time limit {:.0} s reached",
+                    self.tracking_time_limit_s.unwrap_or(0.0)
+                )
+            }
+            (None, Some(t0)) if self.search_time_limit_s.is_some_and(|l| time_s - t0 >= l) => {
+                format!(
+                    "mission: search time limit {:.0} s reached without a target",
+                    self.search_time_limit_s.unwrap_or(0.0)
+                )
+            }
+            _ => return None,
+        };
+        self.end_reason = Some(reason.clone());
+        Some(reason)
+    }
+}
+
+/// The autopilot's clock (`vehicle_time_s`, from SYSTEM_TIME.time_boot_ms) when known, so a
+/// SITL running faster than real time flies the same mission; else the shell's clock.
+pub fn mission_clock(obs: &Observations) -> f64 {
+    obs.get("vehicle_time_s").unwrap_or(obs.time_s)
+}
+
+fn is_tracking(s: &str) -> bool {
+    s.len() == 2 && s.starts_with('v') && s.as_bytes()[1].is_ascii_digit()
+}
+
+/// One motion at a time: the autopilot flies one vehicle action, so when the core's plan holds
+/// several (its behaviour arbitration leaves e.g. `return_to_base` with `follow_trajectory`), the
+/// first in `precedence` (params/link.toml `vehicle_action_precedence`) wins; actions not listed
+/// come after, in plan order.
+pub fn select_vehicle_action(actions: &[String], precedence: &[String]) -> Option<String> {
+    precedence
+        .iter()
+        .find(|p| actions.contains(p))
+        .or_else(|| actions.first())
+        .cloned()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn route() -> Route {
+        Route::load(&crate::spec::default_params_dir().join("missions/tracking_route.toml"))
+            .unwrap()
+    }
+
+    fn obs(t: f64, vals: &[(&str, f64)]) -> Observations {
+        let mut o = Observations {
+            time_s: t,
+            ..Default::default()
+        };
+        for (k, v) in vals {
+            o.set(k, *v);
+        }
+        o
+    }
+
+    #[test]
+    fn follows_the_simulation_phases_on_the_default_route() {
+        // Default route: seq 0 home, 1 take-off, 2 wp1, 3 and 4 intermediate, 5 wpf.
+        let mut m = MissionState::new(&route(), 10.0);
+        let none = Extra::default();
+        let auto = Extra { mode: Some("AUTO") };
+        assert_eq!((m.wp1_seq, m.last_seq), (2, 5));
+        assert_eq!(m.update(&obs(0.0, &[("armed", 0.0)]), &none), "base");
+        assert_eq!(
+            m.update(&obs(1.0, &[("armed", 1.0), ("altitude_m", 5.0)]), &none),
+            "base"
+        );
+        let fly = |seq: f64, spd: f64, det: f64| {
+            [
+                ("armed", 1.0),
+                ("altitude_m", 20.0),
+                ("mission_seq", seq),
+                ("groundspeed_mps", spd),
+                ("target_detected", det),
+            ]
+        };
+        assert_eq!(m.update(&obs(2.0, &fly(1.0, 0.0, 0.0)), &auto), "wp1");
+        assert_eq!(m.update(&obs(3.0, &fly(2.0, 5.0, 1.0)), &auto), "wp1");
+        assert_eq!(m.update(&obs(4.0, &fly(3.0, 5.0, 1.0)), &auto), "wpi");
+        assert_eq!(m.waypoints_remaining(&obs(4.0, &fly(3.0, 5.0, 1.0))), 3.0);
+        // flying the last leg is not arriving
+        assert_eq!(m.update(&obs(5.0, &fly(5.0, 5.0, 1.0)), &auto), "wpi");
+        assert_eq!(m.update(&obs(6.0, &fly(5.0, 0.2, 0.0)), &auto), "wpf");
+        assert_eq!(m.update(&obs(7.0, &fly(5.0, 0.2, 1.0)), &auto), "target");
+        m.after_plan(&["detect_obstacles_lidar".into(), "track_v3".into()]);
+        assert_eq!(m.update(&obs(8.0, &fly(5.0, 0.2, 1.0)), &auto), "v3");
+        assert_eq!(m.mission_end(&obs(8.0, &[])), None);
+        m.after_plan(&["track_v2".into()]);
+        assert_eq!(m.update(&obs(9.0, &fly(5.0, 0.2, 1.0)), &auto), "v2");
+        // lost target: back to searching at wpf
+        assert_eq!(m.update(&obs(10.0, &fly(5.0, 0.2, 0.0)), &auto), "wpf");
+        assert!(m.route_on_vehicle());
+        let limit = m.tracking_time_limit_s.unwrap();
+        // the autopilot's clock wins over the shell's
+        let at = |shell: f64, vehicle: f64| obs(shell, &[("vehicle_time_s", vehicle)]);
+        assert_eq!(m.mission_end(&at(7.0 + limit, 0.0)), None);
+        assert!(m.mission_end(&at(0.0, 7.0 + limit)).is_some());
+        assert_eq!(
+            m.mission_end(&at(7.0 + limit + 1.0, 0.0)),
+            None,
+            "reported once"
+        );
+        m.after_plan(&["land".into()]);
+        assert_eq!(m.update(&obs(30.0, &fly(5.0, 0.0, 1.0)), &auto), "landing");
+        assert!(!m.finished());
+        assert_eq!(m.update(&obs(40.0, &[("armed", 0.0)]), &none), "landing");
+        assert!(m.finished());
+    }
+
+    #[test]
+    fn autopilot_landing_modes_and_disarm_mean_landing() {
+        let mut m = MissionState::new(&route(), 10.0);
+        let flying = [("armed", 1.0), ("altitude_m", 15.0), ("mission_seq", 2.0)];
+        assert_eq!(m.update(&obs(1.0, &flying), &Extra::default()), "wp1");
+        let rtl = Extra { mode: Some("RTL") };
+        assert_eq!(m.update(&obs(2.0, &flying), &rtl), "landing");
+        // a disarmed vehicle that never flew is at base, not landing
+        let mut m = MissionState::new(&route(), 10.0);
+        assert_eq!(m.update(&obs(1.0, &[("armed", 0.0)]), &rtl), "base");
+        assert!(!m.finished());
+    }
+
+    #[test]
+    fn precedence_picks_one_motion() {
+        let p: Vec<String> = ["avoid_obstacle", "return_to_base", "follow_trajectory"]
+            .map(String::from)
+            .to_vec();
+        let a = |xs: &[&str]| xs.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        assert_eq!(
+            select_vehicle_action(&a(&["follow_trajectory", "return_to_base"]), &p).as_deref(),
+            Some("return_to_base")
+        );
+        assert_eq!(
+            select_vehicle_action(&a(&["follow_trajectory", "avoid_obstacle"]), &p).as_deref(),
+            Some("avoid_obstacle")
+        );
+        assert_eq!(
+            select_vehicle_action(&a(&["take_off"]), &p).as_deref(),
+            Some("take_off")
+        );
+        assert_eq!(select_vehicle_action(&[], &p), None);
+    }
+}

@@ -1,0 +1,295 @@
+//! The BFM paper's experiments, reproduced as orderings over many seeds (the paper reports single
+//! Matlab runs; we assert what its Tables 3, 4-7 and 8 say, not its exact step counts).
+
+use companion::decision::{Core, Model, ModelKind, Policy};
+use companion::record::DecisionRecord;
+use companion::sim::{self, RunResult, Scenario, WorldSpec};
+use companion::spec::default_params_dir;
+use std::sync::OnceLock;
+
+const SEEDS: u64 = 30;
+
+fn model() -> &'static Model {
+    static M: OnceLock<Model> = OnceLock::new();
+    M.get_or_init(|| Model::load(&default_params_dir()).expect("params load"))
+}
+
+fn world() -> WorldSpec {
+    WorldSpec::load(&default_params_dir()).unwrap()
+}
+
+fn run(scenario: &str, kind: ModelKind, policy: Policy, seed: u64) -> RunResult {
+    let scenario = Scenario::load(&default_params_dir(), scenario).unwrap();
+    let mut core = Core::new(model(), kind, policy);
+    sim::run(&world(), &scenario, seed, |obs| core.step(obs))
+}
+
+fn mean_tracking(scenario: &str, kind: ModelKind, policy: Policy) -> (f64, f64) {
+    let xs: Vec<f64> = (0..SEEDS)
+        .map(|s| run(scenario, kind, policy, s).tracking_steps as f64)
+        .collect();
+    sim::mean_ci95(&xs)
+}
+
+/// Table 3: nominal, BFM about equal to the reference; every hazard, BFM clearly longer.
+#[test]
+fn table3_bfm_tracks_longer_than_reference_under_hazards_and_equal_in_nominal() {
+    let (bfm, bfm_ci) = mean_tracking("nominal", ModelKind::Bfm, Policy::Safety);
+    let (reference, ref_ci) = mean_tracking("nominal", ModelKind::Reference, Policy::Safety);
+    assert!(
+        (bfm - reference).abs() <= bfm_ci + ref_ci + 2.0,
+        "nominal: bfm {bfm:.1}±{bfm_ci:.1} vs reference {reference:.1}±{ref_ci:.1}"
+    );
+    for scenario in ["vibrations", "high-speed", "wind"] {
+        let (bfm, bfm_ci) = mean_tracking(scenario, ModelKind::Bfm, Policy::Safety);
+        let (reference, ref_ci) = mean_tracking(scenario, ModelKind::Reference, Policy::Safety);
+        // "Clearly longer": the confidence intervals are disjoint with a margin of 5 steps.
+        assert!(
+            bfm - bfm_ci > reference + ref_ci + 5.0,
+            "{scenario}: bfm {bfm:.1}±{bfm_ci:.1} not clearly above reference {reference:.1}±{ref_ci:.1}"
+        );
+    }
+}
+
+/// Table 8: the mission policy tracks at least as long as the safety policy in both
+/// complete-mission scenarios.
+#[test]
+fn table8_mission_policy_tracks_at_least_as_long_as_safety() {
+    for scenario in ["complete-1", "complete-2"] {
+        let (safety, s_ci) = mean_tracking(scenario, ModelKind::Bfm, Policy::Safety);
+        let (mission, m_ci) = mean_tracking(scenario, ModelKind::Bfm, Policy::Mission);
+        assert!(
+            mission + m_ci >= safety - s_ci,
+            "{scenario}: mission {mission:.1}±{m_ci:.1} below safety {safety:.1}±{s_ci:.1}"
+        );
+    }
+}
+
+fn first_with<'a>(
+    records: &'a [DecisionRecord],
+    f: impl Fn(&DecisionRecord) -> bool,
+) -> Option<&'a DecisionRecord> {
+    records.iter().find(|r| f(r))
+}
+
+fn has(r: &DecisionRecord, a: &str) -> bool {
+    r.actions.iter().any(|x| x == a)
+}
+
+/// Tables 4 and 6 (safety policy) row by row: take-off at base; obstacle detection from WP1;
+/// 'T' zone search from the intermediate waypoints; target detection at the final waypoint; the
+/// context's tracking version (V3 vibrations, V2 high speed); avoidance replacing tracking on an
+/// obstacle; on insufficient resources tracking degrades (V3 -> V1, V2 -> V5) while obstacle
+/// detection and landing-zone search stay.
+#[test]
+fn tables_4_and_6_safety_policy_decisions() {
+    for (scenario, version, degraded) in [
+        ("complete-1", "track_v3", "track_v1"),
+        ("complete-2", "track_v2", "track_v5"),
+    ] {
+        let r = run(scenario, ModelKind::Bfm, Policy::Safety, 1).records;
+        assert_eq!(r[0].state, "base");
+        assert!(has(&r[0], "take_off"), "{scenario}: {:?}", r[0].actions);
+        let wp1 = first_with(&r, |x| x.state == "wp1").unwrap();
+        assert!(
+            has(wp1, "follow_trajectory") && has(wp1, "detect_obstacles_lidar"),
+            "{:?}",
+            wp1.actions
+        );
+        let wpi = first_with(&r, |x| x.state == "wpi").unwrap();
+        assert!(
+            has(wpi, "search_zone_t"),
+            "{scenario} wpi: {:?}",
+            wpi.actions
+        );
+        let wpf = first_with(&r, |x| x.state == "wpf").unwrap();
+        assert!(
+            has(wpf, "detect_target") && has(wpf, "search_zone_t"),
+            "{scenario} wpf: {:?}",
+            wpf.actions
+        );
+        let tracking = first_with(&r, |x| has(x, version))
+            .unwrap_or_else(|| panic!("{scenario}: never ran {version}"));
+        assert!(
+            has(tracking, "detect_obstacles_lidar"),
+            "{:?}",
+            tracking.actions
+        );
+        let obstacle =
+            first_with(&r, |x| x.events.iter().any(|e| e == "obstacle detected")).unwrap();
+        assert!(
+            has(obstacle, "avoid_obstacle"),
+            "{scenario}: {:?}",
+            obstacle.actions
+        );
+        assert!(
+            !obstacle.actions.iter().any(|a| a.starts_with("track_")),
+            "{scenario}: tracking during avoidance"
+        );
+        let insufficient = first_with(&r, |x| {
+            x.events.iter().any(|e| e == "insufficient resources")
+        })
+        .unwrap();
+        assert!(
+            has(insufficient, degraded),
+            "{scenario}: {:?}",
+            insufficient.actions
+        );
+        assert!(
+            has(insufficient, "detect_obstacles_lidar"),
+            "{:?}",
+            insufficient.actions
+        );
+        assert!(
+            insufficient
+                .actions
+                .iter()
+                .any(|a| a.starts_with("search_")),
+            "{scenario}: landing search dropped under safety: {:?}",
+            insufficient.actions
+        );
+        let res = insufficient.resources.as_ref().unwrap();
+        assert!(
+            !res.degraded.is_empty(),
+            "{scenario}: no degradation recorded"
+        );
+    }
+}
+
+/// Table 5 (vibrations, mission policy): on insufficient resources tracking keeps V3 and the
+/// landing-zone search is dropped, obstacle detection kept for minimum safety.
+#[test]
+fn table5_mission_policy_keeps_v3_and_drops_landing_search() {
+    let r = run("complete-1", ModelKind::Bfm, Policy::Mission, 1).records;
+    let insufficient = first_with(&r, |x| {
+        x.events.iter().any(|e| e == "insufficient resources")
+    })
+    .unwrap();
+    assert!(has(insufficient, "track_v3"), "{:?}", insufficient.actions);
+    assert!(
+        has(insufficient, "detect_obstacles_lidar"),
+        "{:?}",
+        insufficient.actions
+    );
+    assert!(
+        !insufficient
+            .actions
+            .iter()
+            .any(|a| a.starts_with("search_")),
+        "{:?}",
+        insufficient.actions
+    );
+    assert!(!insufficient.resources.as_ref().unwrap().dropped.is_empty());
+}
+
+/// Section 7.3.2: the monolithic and the concurrent models reach the same decisions on the
+/// paper's scenarios (same seed, so the same world, as long as the decisions agree).
+#[test]
+fn monolithic_and_concurrent_reach_the_same_decisions() {
+    for scenario in ["vibrations", "high-speed", "complete-1", "complete-2"] {
+        for policy in [Policy::Safety, Policy::Mission] {
+            let a = run(scenario, ModelKind::Bfm, policy, 3).records;
+            let b = run(scenario, ModelKind::Monolithic, policy, 3).records;
+            // Ending the mission: the concurrent landing MDP may land on the zone it found where
+            // the monolithic MDP (whose tracking states have no landing arc, docs/params/mdp.md)
+            // flies home; both end the flight on the same cycle, so they compare as "end".
+            let norm = |acts: &[String]| {
+                let mut v: Vec<String> = acts
+                    .iter()
+                    .map(|a| match a.as_str() {
+                        "land" | "replan_and_land" | "return_to_base" => "end".to_string(),
+                        o => o.to_string(),
+                    })
+                    .collect();
+                v.sort();
+                v
+            };
+            // The paper claims equality over the phases its Tables 4-7 show: up to the cycle
+            // after "insufficient resources". Later, with a degraded tracker losing the target,
+            // our reconstructed monolithic MDP can prefer re-detection where the concurrent ones
+            // keep tracking (documented in docs/params/mdp.md).
+            let horizon = a
+                .iter()
+                .position(|r| r.events.iter().any(|e| e == "insufficient resources"))
+                .map_or(a.len(), |i| i + 2);
+            for (x, y) in a.iter().zip(&b).take(horizon) {
+                let ax = norm(&x.actions);
+                let bx = norm(&y.actions);
+                assert_eq!(
+                    ax, bx,
+                    "{scenario} {policy:?} cycle {} state {}",
+                    x.cycle, x.state
+                );
+            }
+        }
+    }
+}
+
+/// The same seed gives the same run; the decision record carries every stage.
+#[test]
+fn runs_are_reproducible_and_records_carry_every_stage() {
+    let a = run("complete-1", ModelKind::Bfm, Policy::Safety, 9);
+    let b = run("complete-1", ModelKind::Bfm, Policy::Safety, 9);
+    assert_eq!(a.records, b.records);
+    let r = &a.records[8];
+    assert!(!r.evidence.is_empty() && !r.probabilities.is_empty());
+    assert_eq!(r.proposals.len(), 3, "navigation, landing, tracking");
+    assert!(r.resources.is_some() && r.guarantee.is_some());
+}
+
+/// PANORAMA P3 in the decision cycle: an energy drift and a lidar failure each trigger a
+/// re-allocation of the remaining activities that restores every margin to non-negative.
+#[test]
+fn drift_and_failure_reallocate_and_restore_margins() {
+    for scenario in ["energy-drift", "lidar-failure"] {
+        let r = run(scenario, ModelKind::Bfm, Policy::Safety, 1).records;
+        let realloc = r
+            .iter()
+            .filter_map(|x| x.guarantee.as_ref()?.reallocation.as_ref())
+            .next()
+            .unwrap_or_else(|| panic!("{scenario}: no re-allocation"));
+        assert!(
+            realloc.margins_after.values().all(|m| *m >= 0.0),
+            "{scenario}: margins after re-allocation {:?}",
+            realloc.margins_after
+        );
+    }
+    // Without a hazard, no re-allocation before the tracking phase ends.
+    let r = run("nominal", ModelKind::Bfm, Policy::Safety, 1).records;
+    let first = r.iter().position(|x| {
+        x.guarantee
+            .as_ref()
+            .is_some_and(|g| g.reallocation.is_some())
+    });
+    let tracking_start = r.iter().position(|x| x.state == "target").unwrap();
+    assert!(
+        first.is_none_or(|i| i > tracking_start + 30),
+        "nominal re-allocated at {first:?}"
+    );
+}
+
+/// An infeasible guarantee is never silent: the decision layer sees P_battery capped and ends
+/// the mission (land or return) on the next cycles.
+#[test]
+fn infeasible_guarantee_ends_the_mission() {
+    let r = run("energy-drift", ModelKind::Bfm, Policy::Safety, 1).records;
+    let i = r
+        .iter()
+        .position(|x| x.guarantee.as_ref().is_some_and(|g| g.infeasible))
+        .expect("the drift makes the goals infeasible at some point");
+    assert!(
+        r[i].events.iter().any(|e| e.contains("no allocation")),
+        "{:?}",
+        r[i].events
+    );
+    let after = &r[i + 1];
+    assert!(after.probabilities["P_battery"] <= 0.05 + 1e-12);
+    assert!(
+        after
+            .actions
+            .iter()
+            .any(|a| a == "land" || a == "return_to_base" || a == "replan_and_land"),
+        "{:?}",
+        after.actions
+    );
+}
