@@ -101,8 +101,7 @@ run_target() {
   cargo build --quiet "${sel[@]}" --bins
   stage "$t: cargo test (release profile) under $qemu: engines + companion (unit and integration tests)"
   # Every suite runs (--no-fail-fast); a failure does not stop the smoke run and the size report
-  # below either; the script still
-  # exits non-zero at the end.
+  # below either; the script still exits non-zero at the end.
   if ! cargo test --quiet --no-fail-fast "${sel[@]}" 2>&1; then
     echo "arm.sh: $t: tests FAILED (the binary checks below still run)" >&2
     failed+=("$t tests")
