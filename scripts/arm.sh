@@ -95,7 +95,8 @@ run_target() {
 
   # One package set and one target selection for both commands: cargo then resolves features
   # once (dev-dependencies switch on extra features of shared crates such as serde, which would
-  # otherwise rebuild mavlink and tokio a second time), and `cargo test` rebuilds nothing.
+  # otherwise rebuild mavlink and tokio a second time); `cargo test` then compiles only the
+  # unit-test harnesses (cfg(test) builds of the libraries) on top.
   local sel=(--release --target "$t" -p companion -p bayes_net -p mdp_engine -p fpga_model -p panorama)
   # Integration tests that start the companion binary as a child process (CARGO_BIN_EXE_*) need
   # the kernel to exec an ARM ELF, i.e. qemu registered with binfmt_misc; without it they cannot
