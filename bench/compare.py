@@ -616,6 +616,22 @@ def render(r):
         summ.append(f"| {peer} | {'≥%dx' % t if t else '-'} | {met}/{len(ok) if t else '-'} | "
                     f"{np.min(sp):.1f}x | {np.median(sp):.1f}x | {len(cs) - len(ok)} |")
     s = "Summary (a target counts as met only where the case agrees):\n\n" + "\n".join(summ) + "\n\n" + s
+    # The BFM paper's Table 9 point: the three concurrent MDPs against the monolithic one, same
+    # solver, companion medians of this run (any peer row carries the companion's time).
+    med = {}
+    for c in r["cases"]:
+        med.setdefault(c["name"], c["companion_median_ns"])
+    ratio_rows = []
+    for algo in ["fh", "pi", "vi"]:
+        parts = [med.get(f"{m}/{algo}") for m in ("navigation", "landing", "tracking")]
+        mono = med.get(f"monolithic/{algo}")
+        if mono and all(parts):
+            ratio_rows.append(f"| {algo} | {' + '.join(fmt_ns(x) for x in parts)} = {fmt_ns(sum(parts))} | "
+                              f"{fmt_ns(mono)} | {sum(parts) / mono:.2f} |")
+    if ratio_rows:
+        s = ("Concurrent vs monolithic (BFM Table 9: the concurrent MDPs took 19-34 % each of the "
+             "monolithic's time in Matlab):\n\n| solver | navigation + landing + tracking | monolithic | "
+             "concurrent / monolithic |\n|---|---|---|---|\n" + "\n".join(ratio_rows) + "\n\n" + s)
     if r["notes"]:
         s += "\n\nNotes:\n" + "\n".join(f"- {n}" for n in r["notes"])
     return s

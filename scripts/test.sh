@@ -36,4 +36,13 @@ set +e
 rc=$?
 set -e
 # pytest exits 5 when it collected nothing; that is a failure of the suite, not a pass.
-exit $rc
+[ "$rc" -eq 0 ] || exit "$rc"
+
+# The board: armv7 (the SoCKit's Cortex-A9) release binary, engine and companion tests under
+# qemu-user (docs/deploy-arm.md). SKIP_ARM=1 skips it on a developer's quick run.
+if [ "${SKIP_ARM:-0}" = 1 ]; then
+  echo "== arm: skipped (SKIP_ARM=1)"
+else
+  echo "== arm: scripts/arm.sh"
+  ./scripts/arm.sh
+fi

@@ -31,7 +31,7 @@ fn raw_lines(path: &Path) -> Vec<String> {
 
 /// Wait (bounded) until `cond` holds; a correctness wait, not a speed assertion.
 fn wait_until(what: &str, mut cond: impl FnMut() -> bool) {
-    let deadline = Instant::now() + Duration::from_secs(30);
+    let deadline = Instant::now() + Duration::from_secs(120); // generous: a loaded CI machine
     while !cond() {
         assert!(Instant::now() < deadline, "gave up waiting for {what}");
         std::thread::sleep(Duration::from_millis(5));
@@ -106,8 +106,9 @@ fn stalled_writer_drops_are_counted_and_logged() {
     // Let the writer drain, then send fewer than `capacity` more: these must all get through,
     // and the loss line must sit between the two groups.
     let path = part_path(dir.path(), 0);
+    // `>=`: once drained, the writer may already have written the loss line after them.
     wait_until("the accepted records on disk", || {
-        raw_lines(&path).len() as u64 == 1 + accepted
+        raw_lines(&path).len() as u64 >= 1 + accepted
     });
     for i in 100..103 {
         assert!(log.record(rec(i)));

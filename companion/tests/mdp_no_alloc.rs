@@ -65,7 +65,7 @@ fn warm_decision_cycle_does_not_allocate() {
     let mut probs: BTreeMap<String, f64> = all.check_point().clone();
     let names: Vec<String> = all.concurrent().to_vec();
     let mut ws = Workspace::with_capacity(12, 100, false);
-    let mut cycle = |all: &mut MissionMdps, probs: &BTreeMap<String, f64>, ws: &mut Workspace| {
+    let cycle = |all: &mut MissionMdps, probs: &BTreeMap<String, f64>, ws: &mut Workspace| {
         let mut total = 0.0;
         for n in &names {
             let m = all.get_mut(n).unwrap();
