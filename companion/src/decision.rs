@@ -204,7 +204,10 @@ impl<'m> Core<'m> {
         }
         if self.guarantee_infeasible {
             let cap = model.mission.guarantee.infeasible_p_battery;
-            if let Some(p) = rec.probabilities.get_mut("P_battery") {
+            if let Some(p) = rec
+                .probabilities
+                .get_mut(&model.mission.guarantee.capped_probability)
+            {
                 *p = p.min(cap);
             }
         }
@@ -397,7 +400,13 @@ impl<'m> Core<'m> {
         }
         let failed_tiles = obs.get("failed_tiles").unwrap_or(0.0).max(0.0) as usize;
         let tile_names: Vec<String> = (0..failed_tiles.min(self.platform.tiles.len()))
-            .map(|k| format!("tile{}", self.platform.tiles.len() - 1 - k))
+            .map(|k| {
+                g.spec
+                    .tile_names
+                    .get(self.platform.tiles.len() - 1 - k)
+                    .cloned()
+                    .unwrap_or_default()
+            })
             .collect();
         let mut failed = self.failed_resources.clone();
         failed.extend(tile_names);
@@ -411,7 +420,7 @@ impl<'m> Core<'m> {
             }
         };
         let fraction = g
-            .estimated(activity_index, "duration_s")
+            .estimated(activity_index, &coupling.progress_goal)
             .filter(|d| *d > 0.0)
             .map_or(0.0, |d| ((obs.time_s - started) / d).min(0.95));
         let record = g.watch(Progress {

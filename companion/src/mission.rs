@@ -147,7 +147,12 @@ impl ProjectionRule {
 pub struct GuaranteeCoupling {
     /// The PANORAMA mission (params/missions/NAME.toml) whose margins are watched.
     pub mission: String,
+    /// The named probability capped when no allocation meets the goals, and the cap.
+    pub capped_probability: String,
     pub infeasible_p_battery: f64,
+    /// The end-oriented goal measuring time (its per-activity estimate tells how far into an
+    /// activity the drone is).
+    pub progress_goal: String,
     /// Shared mission state -> index of the activity being flown.
     pub activity_of_state: BTreeMap<String, usize>,
     /// Resource name (as in the mission file) -> observation that reports it failed (> 0.5).

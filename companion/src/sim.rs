@@ -55,6 +55,8 @@ pub struct Truth {
     pub p_zone_t: f64,
     pub p_zone: f64,
     pub obstacle_grace_steps: u32,
+    /// An obstacle closer than this (m) must be avoided.
+    pub obstacle_near_m: f64,
     /// context -> version -> probability that one tracking step keeps the target.
     pub qos: BTreeMap<String, BTreeMap<String, f64>>,
     pub contexts: BTreeMap<String, ContextRule>,
@@ -343,7 +345,9 @@ impl<'a> World<'a> {
     }
 
     fn obstacle_present(&self, values: &BTreeMap<String, f64>) -> bool {
-        values.get("obstacle_m").is_some_and(|&d| d < 10.0)
+        values
+            .get("obstacle_m")
+            .is_some_and(|&d| d < self.spec.truth.obstacle_near_m)
     }
 
     /// The observation snapshot for this step.
