@@ -185,6 +185,7 @@ class StandinConfig:
     mission_request_int: bool = False   # False: request items with legacy MISSION_REQUEST as MissionItemProtocol::queued_request_send does
     physics_hz: float = 50.0
     garbage_period_wall: float = 0.0    # >0: inject a burst of garbage + malformed frames this often (wall s)
+    capture_wire: bool = False          # keep every byte sent and received per link (Link.wire_out / wire_in)
     seed: int = 1
 
     def __post_init__(self) -> None:
@@ -262,6 +263,11 @@ class Link:
         self.closed = False
         self.bytes_in = 0
         self.bytes_out = 0
+        # The raw byte streams, when cfg.capture_wire: lets a test compare a peer's .tlog with the wire.
+        self.wire_out: Optional[bytearray] = bytearray() if owner.cfg.capture_wire else None
+        self.wire_in: Optional[bytearray] = bytearray() if owner.cfg.capture_wire else None
+        if owner.cfg.capture_wire:
+            owner.wire_links.append(self)
 
     def send_raw(self, buf: bytes) -> None:
         if self.closed or self.owner.in_outage():
@@ -273,6 +279,8 @@ class Link:
             else:
                 self.sock.sendall(buf)
             self.bytes_out += len(buf)
+            if self.wire_out is not None:
+                self.wire_out += buf
         except OSError:
             self.closed = True
 
@@ -335,6 +343,7 @@ class StandinAutopilot:
         self.lock = threading.RLock()
         self.rng = random.Random(cfg.seed)
         self.links: List[Link] = []
+        self.wire_links: List[Link] = []    # every link ever made, closed ones too (cfg.capture_wire only)
         self._next_link = 1
         self._sel = selectors.DefaultSelector()
         self._server: Optional[socket.socket] = None
@@ -617,6 +626,8 @@ class StandinAutopilot:
                     pass
             return
         link.bytes_in += len(data)
+        if link.wire_in is not None:
+            link.wire_in += data
         msgs = link.mav.parse_buffer(data) or []
         with self.lock:
             for m in msgs:

@@ -105,8 +105,9 @@ impl RecordSink for LogSink {
     }
 }
 
-/// Raw MAVLink traffic to `flight.tlog`: frames sent as encoded, frames received re-encoded from
-/// their decoded header and message (a received signature is not kept).
+/// Raw MAVLink traffic to `flight.tlog`: frames sent exactly as encoded, frames received exactly
+/// as they arrived (signature included), so the tlog is the wire. Only frames the ingest accepted
+/// are logged: garbage, bad signatures and refused unsigned commands are counted, not kept.
 pub struct Tlog(pub crate::decision_log::TlogWriter);
 
 impl Tlog {
@@ -119,10 +120,7 @@ impl Tlog {
         let _ = self.0.write(Self::stamp(), bytes);
     }
     fn received(&mut self, f: &ingest::Frame) {
-        let mut buf = Vec::with_capacity(280);
-        if mavlink::write_versioned_msg(&mut buf, f.version, f.header, &f.msg).is_ok() {
-            let _ = self.0.write(Self::stamp(), &buf);
-        }
+        let _ = self.0.write(Self::stamp(), &f.raw);
     }
 }
 

@@ -895,6 +895,7 @@ mod tests {
             msg,
             signed: false,
             version: MavlinkVersion::V2,
+            raw: Vec::new(),
         }
     }
 
