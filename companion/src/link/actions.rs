@@ -110,8 +110,7 @@ impl ActionTable {
                     return Err(SpecError::new(path, entry, "params only go with command"));
                 }
                 let step = if let Some(m) = &s.mode {
-                    if super::modes::set_mode_command(super::modes::Flavor::ArduPilot, m).is_none()
-                    {
+                    if !super::modes::is_known_mode(m) {
                         return Err(SpecError::new(path, entry, format!("unknown mode {m:?}")));
                     }
                     Step::Mode(m.clone())

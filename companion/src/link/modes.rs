@@ -1,12 +1,24 @@
 //! Flight modes by name, per autopilot (chosen from HEARTBEAT.autopilot).
 //!
-//! ArduPilot Copter: `custom_mode` is the mode number (ArduCopter/mode.h `Mode::Number`, also the
-//! ardupilotmega `COPTER_MODE` enum): AUTO 3, GUIDED 4, LOITER 5, RTL 6, LAND 9, BRAKE 17. Set with
-//! MAV_CMD_DO_SET_MODE(param1 = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, param2 = number).
+//! ArduPilot Copter: `custom_mode` is the mode number, `Mode::Number` in ArduPilot's
+//! `ArduCopter/mode.h` (also the ardupilotmega `COPTER_MODE` enum). Set with
+//! MAV_CMD_DO_SET_MODE(param1 = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, param2 = number)
+//! (`GCS_MAVLINK::handle_command_do_set_mode` in `libraries/GCS_MAVLink/GCS_Common.cpp`).
 //!
-//! PX4: `custom_mode` packs main mode in bits 16..24 and sub mode in bits 24..32
-//! (px4_custom_mode.h); set with DO_SET_MODE(param1 = 1, param2 = main, param3 = sub). PX4 has no
-//! GUIDED or BRAKE: both map to AUTO.LOITER (Hold), which accepts MAV_CMD_DO_REPOSITION.
+//! PX4: `src/modules/commander/px4_custom_mode.h` in PX4-Autopilot. `union px4_custom_mode` is
+//! `{ uint16_t reserved; uint8_t main_mode; uint8_t sub_mode; }` over a little-endian `uint32_t`,
+//! so HEARTBEAT.custom_mode carries the main mode in bits 16..24 and the sub mode in bits 24..32
+//! (`get_px4_custom_mode(nav_state)` fills it for the heartbeat). Sub modes are meaningful for
+//! main mode AUTO (`PX4_CUSTOM_SUB_MODE_AUTO`) and POSCTL (`PX4_CUSTOM_SUB_MODE_POSCTL`). Set with
+//! DO_SET_MODE(param1 with MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, param2 = main, param3 = sub):
+//! `Commander::handle_command`, case `VEHICLE_CMD_DO_SET_MODE` (`src/modules/commander/
+//! Commander.cpp`) ignores param2/3 unless param1 has the custom-mode flag, treats AUTO with
+//! sub 0 as AUTO.MISSION, answers an unknown AUTO sub mode "Unsupported auto mode" and a refused
+//! transition TEMPORARILY_REJECTED.
+//!
+//! PX4 has no GUIDED or BRAKE: both map to AUTO.LOITER (Hold), which accepts
+//! MAV_CMD_DO_REPOSITION. ArduPilot Copter has no TAKEOFF mode (take-off is NAV_TAKEOFF in
+//! GUIDED), so `TAKEOFF` exists only for PX4.
 
 use super::command::CommandSpec;
 use super::dialect::{MavAutopilot, MavCmd};
@@ -28,61 +40,164 @@ impl Flavor {
     }
 }
 
-/// (name, ArduPilot Copter number, PX4 main, PX4 sub)
-const MODES: &[(&str, u32, u8, u8)] = &[
-    ("STABILIZE", 0, 7, 0),
-    ("ALT_HOLD", 2, 2, 0),
-    ("AUTO", 3, 4, 4),
-    ("GUIDED", 4, 4, 3),
-    ("LOITER", 5, 4, 3),
-    ("RTL", 6, 4, 5),
-    ("LAND", 9, 4, 6),
-    ("POSHOLD", 16, 3, 0),
-    ("BRAKE", 17, 4, 3),
-    ("SMART_RTL", 21, 4, 5),
+/// `enum PX4_CUSTOM_MAIN_MODE` (px4_custom_mode.h): MANUAL = 1, then in order.
+pub mod px4_main {
+    pub const MANUAL: u8 = 1;
+    pub const ALTCTL: u8 = 2;
+    pub const POSCTL: u8 = 3;
+    pub const AUTO: u8 = 4;
+    pub const ACRO: u8 = 5;
+    pub const OFFBOARD: u8 = 6;
+    pub const STABILIZED: u8 = 7;
+    pub const RATTITUDE_LEGACY: u8 = 8;
+    pub const SIMPLE: u8 = 9;
+    pub const TERMINATION: u8 = 10;
+}
+
+/// `enum PX4_CUSTOM_SUB_MODE_AUTO` (px4_custom_mode.h): READY = 1, then in order; 7 was RTGS,
+/// now RESERVED_DO_NOT_USE.
+pub mod px4_auto {
+    pub const READY: u8 = 1;
+    pub const TAKEOFF: u8 = 2;
+    pub const LOITER: u8 = 3;
+    pub const MISSION: u8 = 4;
+    pub const RTL: u8 = 5;
+    pub const LAND: u8 = 6;
+    pub const FOLLOW_TARGET: u8 = 8;
+    pub const PRECLAND: u8 = 9;
+    pub const VTOL_TAKEOFF: u8 = 10;
+}
+
+/// `enum PX4_CUSTOM_SUB_MODE_POSCTL` (px4_custom_mode.h): POSCTL = 0, ORBIT, SLOW.
+pub mod px4_posctl {
+    pub const POSCTL: u8 = 0;
+    pub const ORBIT: u8 = 1;
+    pub const SLOW: u8 = 2;
+}
+
+/// PX4 `custom_mode` from main and sub mode (the `px4_custom_mode` union's `data`).
+pub fn px4_custom_mode(main: u8, sub: u8) -> u32 {
+    (u32::from(main) << 16) | (u32::from(sub) << 24)
+}
+
+/// (main, sub) from a PX4 `custom_mode`.
+pub fn px4_main_sub(custom_mode: u32) -> (u8, u8) {
+    ((custom_mode >> 16) as u8, (custom_mode >> 24) as u8)
+}
+
+/// Our mode names (ArduPilot's where one exists), with the ArduPilot Copter number
+/// (ArduCopter/mode.h `Mode::Number`) and the PX4 (main, sub) that serves the same purpose.
+const MODES: &[(&str, Option<u32>, Option<(u8, u8)>)] = &[
+    ("STABILIZE", Some(0), Some((px4_main::STABILIZED, 0))),
+    ("ACRO", Some(1), Some((px4_main::ACRO, 0))),
+    ("ALT_HOLD", Some(2), Some((px4_main::ALTCTL, 0))),
+    ("AUTO", Some(3), Some((px4_main::AUTO, px4_auto::MISSION))),
+    ("GUIDED", Some(4), Some((px4_main::AUTO, px4_auto::LOITER))),
+    ("LOITER", Some(5), Some((px4_main::AUTO, px4_auto::LOITER))),
+    ("RTL", Some(6), Some((px4_main::AUTO, px4_auto::RTL))),
+    (
+        "CIRCLE",
+        Some(7),
+        Some((px4_main::POSCTL, px4_posctl::ORBIT)),
+    ),
+    ("LAND", Some(9), Some((px4_main::AUTO, px4_auto::LAND))),
+    ("DRIFT", Some(11), None),
+    ("SPORT", Some(13), None),
+    ("FLIP", Some(14), None),
+    ("AUTOTUNE", Some(15), None),
+    (
+        "POSHOLD",
+        Some(16),
+        Some((px4_main::POSCTL, px4_posctl::POSCTL)),
+    ),
+    ("BRAKE", Some(17), Some((px4_main::AUTO, px4_auto::LOITER))),
+    ("THROW", Some(18), None),
+    ("AVOID_ADSB", Some(19), None),
+    ("GUIDED_NOGPS", Some(20), None),
+    ("SMART_RTL", Some(21), Some((px4_main::AUTO, px4_auto::RTL))),
+    ("FLOWHOLD", Some(22), None),
+    (
+        "FOLLOW",
+        Some(23),
+        Some((px4_main::AUTO, px4_auto::FOLLOW_TARGET)),
+    ),
+    ("ZIGZAG", Some(24), None),
+    ("SYSTEMID", Some(25), None),
+    ("AUTOROTATE", Some(26), None),
+    ("AUTO_RTL", Some(27), None),
+    ("TURTLE", Some(28), None),
+    // PX4 only.
+    ("MANUAL", None, Some((px4_main::MANUAL, 0))),
+    ("TAKEOFF", None, Some((px4_main::AUTO, px4_auto::TAKEOFF))),
+    ("PRECLAND", None, Some((px4_main::AUTO, px4_auto::PRECLAND))),
+    ("OFFBOARD", None, Some((px4_main::OFFBOARD, 0))),
 ];
 
-/// PX4 names for decoding its heartbeat (main, sub) -> name.
+/// PX4 (main, sub) -> the name its heartbeat is reported as. For main modes other than AUTO and
+/// POSCTL the sub mode is not looked at.
 const PX4_NAMES: &[(u8, u8, &str)] = &[
-    (1, 0, "MANUAL"),
-    (2, 0, "ALT_HOLD"),
-    (3, 0, "POSHOLD"),
-    (4, 1, "AUTO_READY"),
-    (4, 2, "TAKEOFF"),
-    (4, 3, "LOITER"),
-    (4, 4, "AUTO"),
-    (4, 5, "RTL"),
-    (4, 6, "LAND"),
-    (4, 8, "FOLLOW"),
-    (4, 9, "PRECLAND"),
-    (5, 0, "ACRO"),
-    (6, 0, "OFFBOARD"),
-    (7, 0, "STABILIZE"),
+    (px4_main::MANUAL, 0, "MANUAL"),
+    (px4_main::ALTCTL, 0, "ALT_HOLD"),
+    (px4_main::POSCTL, px4_posctl::POSCTL, "POSHOLD"),
+    (px4_main::POSCTL, px4_posctl::ORBIT, "CIRCLE"),
+    (px4_main::POSCTL, px4_posctl::SLOW, "POSHOLD_SLOW"),
+    (px4_main::AUTO, px4_auto::READY, "AUTO_READY"),
+    (px4_main::AUTO, px4_auto::TAKEOFF, "TAKEOFF"),
+    (px4_main::AUTO, px4_auto::LOITER, "LOITER"),
+    (px4_main::AUTO, px4_auto::MISSION, "AUTO"),
+    (px4_main::AUTO, px4_auto::RTL, "RTL"),
+    (px4_main::AUTO, px4_auto::LAND, "LAND"),
+    (px4_main::AUTO, px4_auto::FOLLOW_TARGET, "FOLLOW"),
+    (px4_main::AUTO, px4_auto::PRECLAND, "PRECLAND"),
+    (px4_main::AUTO, px4_auto::VTOL_TAKEOFF, "VTOL_TAKEOFF"),
+    (px4_main::ACRO, 0, "ACRO"),
+    (px4_main::OFFBOARD, 0, "OFFBOARD"),
+    (px4_main::STABILIZED, 0, "STABILIZE"),
+    (px4_main::RATTITUDE_LEGACY, 0, "RATTITUDE"),
+    (px4_main::TERMINATION, 0, "TERMINATION"),
 ];
+
+/// Whether any autopilot we know has a mode of this name (for validating params).
+pub fn is_known_mode(name: &str) -> bool {
+    MODES.iter().any(|m| m.0 == name)
+}
 
 /// The DO_SET_MODE command for a mode name, or None when this autopilot has no such mode.
 pub fn set_mode_command(flavor: Flavor, name: &str) -> Option<CommandSpec> {
-    let &(_, ap, main, sub) = MODES.iter().find(|m| m.0 == name)?;
+    let &(_, ap, px4) = MODES.iter().find(|m| m.0 == name)?;
+    // param1: MAV_MODE_FLAG_CUSTOM_MODE_ENABLED (1); both autopilots read param2 (and PX4 param3)
+    // only with it set.
     let params = match flavor {
-        Flavor::ArduPilot => [1.0, ap as f32, 0.0, 0.0, 0.0, 0.0, 0.0],
-        Flavor::Px4 => [1.0, main as f32, sub as f32, 0.0, 0.0, 0.0, 0.0],
+        Flavor::ArduPilot => [1.0, ap? as f32, 0.0, 0.0, 0.0, 0.0, 0.0],
+        Flavor::Px4 => {
+            let (main, sub) = px4?;
+            [1.0, f32::from(main), f32::from(sub), 0.0, 0.0, 0.0, 0.0]
+        }
         Flavor::Other => return None,
     };
     Some(CommandSpec::long(MavCmd::MAV_CMD_DO_SET_MODE, params))
 }
 
-/// The mode name a heartbeat's `custom_mode` stands for (`MODE_<n>` when unknown).
+/// PX4's (main, sub) with the sub mode cleared where PX4 does not use it.
+fn px4_significant(custom_mode: u32) -> (u8, u8) {
+    let (main, sub) = px4_main_sub(custom_mode);
+    match main {
+        px4_main::AUTO | px4_main::POSCTL => (main, sub),
+        _ => (main, 0),
+    }
+}
+
+/// The mode name a heartbeat's `custom_mode` stands for (`MODE_<n>` / `PX4_<main>_<sub>` when
+/// unknown).
 pub fn mode_name(flavor: Flavor, custom_mode: u32) -> String {
     match flavor {
         Flavor::ArduPilot => MODES
             .iter()
-            .find(|m| m.1 == custom_mode)
+            .find(|m| m.1 == Some(custom_mode))
             .map(|m| m.0.to_string())
             .unwrap_or_else(|| format!("MODE_{custom_mode}")),
         Flavor::Px4 => {
-            let main = ((custom_mode >> 16) & 0xff) as u8;
-            let sub = ((custom_mode >> 24) & 0xff) as u8;
-            let sub = if main == 4 { sub } else { 0 };
+            let (main, sub) = px4_significant(custom_mode);
             PX4_NAMES
                 .iter()
                 .find(|n| n.0 == main && n.1 == sub)
@@ -95,15 +210,12 @@ pub fn mode_name(flavor: Flavor, custom_mode: u32) -> String {
 
 /// Whether the vehicle's reported mode already is `name` (so a mode step can be skipped).
 pub fn is_in_mode(flavor: Flavor, custom_mode: u32, name: &str) -> bool {
-    let Some(&(_, ap, main, sub)) = MODES.iter().find(|m| m.0 == name) else {
+    let Some(&(_, ap, px4)) = MODES.iter().find(|m| m.0 == name) else {
         return false;
     };
     match flavor {
-        Flavor::ArduPilot => custom_mode == ap,
-        Flavor::Px4 => {
-            ((custom_mode >> 16) & 0xff) as u8 == main
-                && (main != 4 || ((custom_mode >> 24) & 0xff) as u8 == sub)
-        }
+        Flavor::ArduPilot => ap == Some(custom_mode),
+        Flavor::Px4 => px4 == Some(px4_significant(custom_mode)),
         Flavor::Other => false,
     }
 }
@@ -119,39 +231,104 @@ mod tests {
         }
     }
 
+    /// Every number of `enum class Number` in ArduPilot's ArduCopter/mode.h (copied by hand):
+    /// the command carries it in param2 with the custom-mode flag in param1, and a heartbeat
+    /// with it decodes back to the name.
     #[test]
-    fn ardupilot_copter_numbers() {
-        // ArduCopter/mode.h: AUTO 3, GUIDED 4, LOITER 5, RTL 6, LAND 9, BRAKE 17.
-        for (name, n) in [
-            ("AUTO", 3.0),
-            ("GUIDED", 4.0),
-            ("LOITER", 5.0),
-            ("RTL", 6.0),
-            ("LAND", 9.0),
-            ("BRAKE", 17.0),
-        ] {
+    fn ardupilot_copter_numbers_round_trip() {
+        let copied = [
+            ("STABILIZE", 0),
+            ("ACRO", 1),
+            ("ALT_HOLD", 2),
+            ("AUTO", 3),
+            ("GUIDED", 4),
+            ("LOITER", 5),
+            ("RTL", 6),
+            ("CIRCLE", 7),
+            ("LAND", 9),
+            ("DRIFT", 11),
+            ("SPORT", 13),
+            ("FLIP", 14),
+            ("AUTOTUNE", 15),
+            ("POSHOLD", 16),
+            ("BRAKE", 17),
+            ("THROW", 18),
+            ("AVOID_ADSB", 19),
+            ("GUIDED_NOGPS", 20),
+            ("SMART_RTL", 21),
+            ("FLOWHOLD", 22),
+            ("FOLLOW", 23),
+            ("ZIGZAG", 24),
+            ("SYSTEMID", 25),
+            ("AUTOROTATE", 26),
+            ("AUTO_RTL", 27),
+            ("TURTLE", 28),
+        ];
+        for (name, n) in copied {
             let c = set_mode_command(Flavor::ArduPilot, name).unwrap();
             assert_eq!(c.command, MavCmd::MAV_CMD_DO_SET_MODE);
-            assert_eq!(params(&c)[..2], [1.0, n], "{name}");
-            assert_eq!(mode_name(Flavor::ArduPilot, n as u32), name);
+            assert_eq!(
+                params(&c),
+                [1.0, n as f32, 0.0, 0.0, 0.0, 0.0, 0.0],
+                "{name}"
+            );
+            assert_eq!(mode_name(Flavor::ArduPilot, n), name);
+            assert!(is_in_mode(Flavor::ArduPilot, n, name));
         }
+        // 8, 10 and 12 are unused in mode.h.
         assert_eq!(mode_name(Flavor::ArduPilot, 8), "MODE_8");
         assert!(set_mode_command(Flavor::ArduPilot, "WARP").is_none());
+        // No TAKEOFF mode on Copter (NAV_TAKEOFF in GUIDED is how it takes off).
+        assert!(set_mode_command(Flavor::ArduPilot, "TAKEOFF").is_none());
+        assert!(is_known_mode("TAKEOFF") && !is_known_mode("WARP"));
     }
 
+    /// PX4 `custom_mode` values as a ground station sees them in HEARTBEAT, computed by hand
+    /// from px4_custom_mode.h (main = PX4_CUSTOM_MAIN_MODE, sub = PX4_CUSTOM_SUB_MODE_AUTO,
+    /// value = main * 65536 + sub * 16777216): e.g. AUTO.LOITER = 4 * 65536 + 3 * 16777216.
     #[test]
-    fn px4_main_and_sub_modes() {
-        let c = set_mode_command(Flavor::Px4, "AUTO").unwrap();
-        assert_eq!(params(&c)[..3], [1.0, 4.0, 4.0]);
-        let rtl = set_mode_command(Flavor::Px4, "RTL").unwrap();
-        assert_eq!(params(&rtl)[..3], [1.0, 4.0, 5.0]);
-        // AUTO.MISSION: main 4 at bits 16..24, sub 4 at bits 24..32.
-        let cm = (4u32 << 16) | (4u32 << 24);
-        assert_eq!(cm, 67_371_008);
-        assert_eq!(mode_name(Flavor::Px4, cm), "AUTO");
-        assert_eq!(mode_name(Flavor::Px4, 6 << 16), "OFFBOARD");
-        assert!(is_in_mode(Flavor::Px4, (4 << 16) | (6 << 24), "LAND"));
-        assert!(!is_in_mode(Flavor::Px4, (4 << 16) | (6 << 24), "RTL"));
+    fn px4_main_and_sub_modes_round_trip() {
+        let copied: [(&str, u8, u8, u32); 12] = [
+            ("MANUAL", 1, 0, 65_536),
+            ("ALT_HOLD", 2, 0, 131_072),
+            ("POSHOLD", 3, 0, 196_608),
+            ("CIRCLE", 3, 1, 16_973_824),
+            ("TAKEOFF", 4, 2, 33_816_576),
+            ("LOITER", 4, 3, 50_593_792),
+            ("AUTO", 4, 4, 67_371_008),
+            ("RTL", 4, 5, 84_148_224),
+            ("LAND", 4, 6, 100_925_440),
+            ("PRECLAND", 4, 9, 151_257_088),
+            ("OFFBOARD", 6, 0, 393_216),
+            ("STABILIZE", 7, 0, 458_752),
+        ];
+        for (name, main, sub, value) in copied {
+            assert_eq!(px4_custom_mode(main, sub), value, "{name}");
+            assert_eq!(px4_main_sub(value), (main, sub), "{name}");
+            // The union's memory layout: reserved u16, then main, then sub (little-endian).
+            assert_eq!(value.to_le_bytes(), [0, 0, main, sub], "{name}");
+            assert_eq!(mode_name(Flavor::Px4, value), name);
+            assert!(is_in_mode(Flavor::Px4, value, name), "{name}");
+            let c = set_mode_command(Flavor::Px4, name).unwrap();
+            assert_eq!(
+                params(&c),
+                [1.0, f32::from(main), f32::from(sub), 0.0, 0.0, 0.0, 0.0],
+                "{name}"
+            );
+        }
+        // GUIDED and BRAKE fly as AUTO.LOITER (Hold) on PX4; a Hold heartbeat satisfies both.
+        for name in ["GUIDED", "BRAKE"] {
+            let c = set_mode_command(Flavor::Px4, name).unwrap();
+            assert_eq!(params(&c)[..3], [1.0, 4.0, 3.0]);
+            assert!(is_in_mode(Flavor::Px4, 50_593_792, name));
+        }
+        // Sub mode ignored outside AUTO and POSCTL; significant inside.
+        assert_eq!(mode_name(Flavor::Px4, px4_custom_mode(2, 7)), "ALT_HOLD");
+        assert!(!is_in_mode(Flavor::Px4, px4_custom_mode(3, 1), "POSHOLD"));
+        assert!(!is_in_mode(Flavor::Px4, px4_custom_mode(4, 6), "RTL"));
+        // Copter-only modes have no PX4 command; unknown PX4 numbers decode to a readable name.
+        assert!(set_mode_command(Flavor::Px4, "DRIFT").is_none());
+        assert_eq!(mode_name(Flavor::Px4, px4_custom_mode(4, 7)), "PX4_4_7");
     }
 
     #[test]
