@@ -61,6 +61,9 @@ NOT_ARMABLE = {MODES["AUTO"], MODES["RTL"], MODES["LAND"]}
 # ArduCopter/GCS_Mavlink.cpp).
 GUIDED_FLAG_MODES = {MODES[m] for m in ("AUTO", "GUIDED", "LOITER", "RTL", "BRAKE")}
 
+# AP_Arming.cpp: PREARM_DISPLAY_PERIOD 30 (s between repeats of a failing pre-arm check while disarmed).
+PREARM_DISPLAY_PERIOD_S = 30.0
+
 # Default home: SITL's CMAC location (Tools/autotest/locations.txt "CMAC").
 HOME_LAT, HOME_LON, HOME_ALT_AMSL = -35.363261, 149.165230, 584.0
 EARTH_R = 6378137.0
@@ -338,6 +341,7 @@ class StandinAutopilot:
         self.params["SYSID_THISMAV"] = cfg.sysid
         self.params["DISARM_DELAY"] = cfg.disarm_delay_s
         self.params["SIM_SPEEDUP"] = cfg.speedup
+        self._prearm_next_display = PREARM_DISPLAY_PERIOD_S / 2
         self.v = Vehicle()
         self.home = cfg.home
         self.lock = threading.RLock()
@@ -583,6 +587,7 @@ class StandinAutopilot:
                     for _ in range(steps):
                         self._sim += dt / steps
                         self._physics(dt / steps)
+                self._prearm_display()
                 self._telemetry()
                 self._mission_protocol_update()
                 self._garbage_update()
@@ -881,8 +886,14 @@ class StandinAutopilot:
         if cmd == R.MAV_CMD_DO_SET_MODE:
             return R.MAV_RESULT_ACCEPTED if self._change_mode(int(p[1]), reason="DO_SET_MODE") else R.MAV_RESULT_FAILED
         if cmd == R.MAV_CMD_NAV_TAKEOFF:
-            # Mode::do_user_takeoff (ArduCopter/mode.cpp): armed, on the ground, in a mode with user takeoff
-            if not v.armed or not v.landed or v.mode not in (MODES["GUIDED"], MODES["LOITER"], MODES["ALT_HOLD"]):
+            # GCS_MAVLINK_Copter::handle_MAV_CMD_NAV_TAKEOFF (ArduCopter/GCS_Mavlink.cpp): COMMAND_INT must use
+            # MAV_FRAME_GLOBAL_RELATIVE_ALT (else DENIED; COMMAND_LONG is given that frame); then
+            # Mode::do_user_takeoff (ArduCopter/takeoff.cpp) fails unless armed, landed, and the mode has a user
+            # takeoff: GUIDED and LOITER always, ALT_HOLD only when param3 (pilot may navigate) is non-zero.
+            if is_int and frame != R.MAV_FRAME_GLOBAL_RELATIVE_ALT:
+                return R.MAV_RESULT_DENIED
+            user_takeoff = v.mode in (MODES["GUIDED"], MODES["LOITER"]) or (v.mode == MODES["ALT_HOLD"] and p[2] != 0)
+            if not v.armed or not v.landed or not user_takeoff:
                 return R.MAV_RESULT_FAILED
             alt = p[6]
             if alt <= 0:
@@ -1004,27 +1015,46 @@ class StandinAutopilot:
             return False
         return True
 
+    def _prearm_failure(self) -> Optional[str]:
+        """The first failing pre-arm check as ArduPilot words it, or None when they pass. Pre-arm checks
+        depend on the current mode (AP_Arming_Copter::mandatory_gps_checks asks Mode::requires_GPS)."""
+        v = self.v
+        # AP_Arming_Copter::mandatory_gps_checks: a position mode needs a position estimate;
+        # reported as "PreArm: Need Position Estimate" (ArduCopter/AP_Arming_Copter.cpp)
+        if v.mode in POSITION_MODES and not self._position_ok():
+            return "PreArm: Need Position Estimate"
+        if self.params.get("SIM_GPS_DISABLE", 0) >= 1 and v.mode in POSITION_MODES:
+            return "PreArm: GPS 1: Bad fix"
+        if self._sim < self.cfg.ekf_ready_s:
+            # stand-in simplification: before the EKF has aligned, non-position modes fail the AHRS
+            # pre-arm check (AP_Arming::ins_checks/ahrs "AHRS: waiting for home") rather than passing
+            return "PreArm: AHRS: waiting for home"
+        return None
+
+    def _prearm_display(self) -> None:
+        """AP_Arming_Copter::update runs the pre-arm checks at 1 Hz and, while disarmed, displays the failure
+        every PREARM_DISPLAY_PERIOD (30 s; the counter starts at half, so the first one comes after 15 s)."""
+        if self._sim < self._prearm_next_display:
+            return
+        self._prearm_next_display += PREARM_DISPLAY_PERIOD_S
+        if self.v.armed or not self.params.get("ARMING_CHECK", 1):
+            return
+        why = self._prearm_failure()
+        if why is not None:
+            self._statustext(why, mavlink.MAV_SEVERITY_CRITICAL)
+
     def _arm(self, force: bool) -> bool:
         v = self.v
         if v.armed:
             return True
         if not force:
-            # AP_Arming_Copter::arm_checks: "Arm: Mode not armable"
+            # AP_Arming_Copter::arm_checks: check_failed(true, "%s mode not armable", flightmode->name())
             if v.mode in NOT_ARMABLE:
-                self._statustext("Arm: Mode not armable", mavlink.MAV_SEVERITY_CRITICAL)
+                self._statustext(f"Arm: {MODE_NAMES[v.mode]} mode not armable", mavlink.MAV_SEVERITY_CRITICAL)
                 return False
-            # AP_Arming_Copter::mandatory_gps_checks: a position mode needs a position estimate;
-            # reported as "PreArm: Need Position Estimate" (ArduCopter/AP_Arming_Copter.cpp)
-            if v.mode in POSITION_MODES and not self._position_ok():
-                self._statustext("PreArm: Need Position Estimate", mavlink.MAV_SEVERITY_CRITICAL)
-                return False
-            if self.params.get("SIM_GPS_DISABLE", 0) >= 1 and v.mode in POSITION_MODES:
-                self._statustext("PreArm: GPS 1: Bad fix", mavlink.MAV_SEVERITY_CRITICAL)
-                return False
-            if self._sim < self.cfg.ekf_ready_s:
-                # stand-in simplification: before the EKF has aligned, non-position modes fail the AHRS
-                # pre-arm check (AP_Arming::ins_checks/ahrs "AHRS: waiting for home") rather than passing
-                self._statustext("PreArm: AHRS: waiting for home", mavlink.MAV_SEVERITY_CRITICAL)
+            why = self._prearm_failure()
+            if why is not None:
+                self._statustext(why, mavlink.MAV_SEVERITY_CRITICAL)
                 return False
         v.armed = True
         v.landed = True
@@ -1616,7 +1646,14 @@ class StandinAutopilot:
                 health &= ~M.MAV_SYS_STATUS_AHRS
             if self._battery_pct() < 20:
                 health &= ~M.MAV_SYS_STATUS_SENSOR_BATTERY
-            return M.MAVLink_sys_status_message(sensors, sensors, health, 350, int(self._battery_voltage() * 1000),
+            # GCS::update_sensor_status_flags (libraries/GCS_MAVLink/GCS.cpp): the pre-arm bit is always present,
+            # enabled when any arming check is (ARMING_CHECK != 0), healthy when armed or the checks pass.
+            present, enabled = sensors | M.MAV_SYS_STATUS_PREARM_CHECK, sensors
+            if self.params.get("ARMING_CHECK", 1):
+                enabled |= M.MAV_SYS_STATUS_PREARM_CHECK
+                if v.armed or self._prearm_failure() is None:
+                    health |= M.MAV_SYS_STATUS_PREARM_CHECK
+            return M.MAVLink_sys_status_message(present, enabled, health, 350, int(self._battery_voltage() * 1000),
                                                 int(getattr(self, "_current_a", 0.0) * 100), self._battery_pct(), 0, 0, 0, 0, 0, 0, 0, 0, 0)
         if mid == M.MAVLINK_MSG_ID_GPS_RAW_INT:
             if gps_ok:

@@ -82,7 +82,72 @@ def test_arming_refused_in_auto(standin, client):
     ready(sa, c, "AUTO")
     t0 = time.monotonic()
     assert c.arm().result == 4
-    assert c.wait("STATUSTEXT", since=t0 - 0.5).text == "Arm: Mode not armable"   # ModeAuto::allows_arming
+    # AP_Arming_Copter::arm_checks: check_failed(true, "%s mode not armable", flightmode->name()); the
+    # "Arm: " prefix is AP_Arming::check_failed's while running arming (not pre-arm) checks
+    assert c.wait("STATUSTEXT", since=t0 - 0.5).text == "Arm: AUTO mode not armable"   # ModeAuto::allows_arming
+
+
+PREARM = mavlink.MAV_SYS_STATUS_PREARM_CHECK   # 0x10000000 in common.xml MAV_SYS_STATUS_SENSOR
+
+
+def test_sys_status_prearm_bit_follows_the_checks(standin, client):
+    """GCS::update_sensor_status_flags (libraries/GCS_MAVLink/GCS.cpp): PREARM_CHECK always present, enabled
+    while ARMING_CHECK != 0, healthy when armed or AP_Notify::flags.pre_arm_check (the checks pass)."""
+    assert PREARM == 0x10000000
+    sa = standin(speedup=8.0, ekf_ready_s=40.0)
+    c = client(sa.url)
+    assert c.set_mode("GUIDED").result == mavlink.MAV_RESULT_ACCEPTED
+    t0 = time.monotonic()
+    s = c.wait("SYS_STATUS", since=t0)
+    assert s.onboard_control_sensors_present & PREARM and s.onboard_control_sensors_enabled & PREARM
+    assert not s.onboard_control_sensors_health & PREARM          # no position estimate yet in GUIDED
+    s = c.wait("SYS_STATUS", lambda m: m.onboard_control_sensors_health & PREARM, timeout=20)
+    ekf = c.wait("EKF_STATUS_REPORT", since=time.monotonic())
+    assert ekf.flags & mavlink.EKF_POS_HORIZ_ABS
+    assert c.arm().result == mavlink.MAV_RESULT_ACCEPTED
+    t1 = time.monotonic()
+    assert c.wait("SYS_STATUS", since=t1).onboard_control_sensors_health & PREARM
+    # ARMING_CHECK 0: the bit stays present but is no longer enabled (no verdict to read)
+    assert c.param_set("ARMING_CHECK", 0) is not None
+    t2 = time.monotonic()
+    s = c.wait("SYS_STATUS", since=t2 + 0.1)
+    assert s.onboard_control_sensors_present & PREARM and not s.onboard_control_sensors_enabled & PREARM
+
+
+def test_failing_prearm_check_is_repeated_every_30_s_while_disarmed(standin, client):
+    """AP_Arming_Copter::update: checks at 1 Hz, failures displayed every PREARM_DISPLAY_PERIOD = 30 s with the
+    counter starting at 15, so unprompted "PreArm:" texts come at about 15 s and 45 s of vehicle time."""
+    sa = standin(speedup=10.0, ekf_ready_s=1000.0)
+    c = client(sa.url)
+    c.wait("HEARTBEAT", timeout=5)
+    texts = []
+    deadline = time.monotonic() + 20
+    while len(texts) < 2 and time.monotonic() < deadline:
+        texts = [e for e in sa.rec.of("statustext") if e.data["text"].startswith("PreArm:")]
+        time.sleep(0.05)
+    assert len(texts) >= 2, texts
+    assert texts[0].sim == pytest.approx(15.0, abs=0.5)
+    assert texts[1].sim - texts[0].sim == pytest.approx(30.0, abs=0.5)
+    assert texts[0].data["text"] == "PreArm: AHRS: waiting for home"    # STABILIZE at boot, EKF not aligned
+    assert not sa.commands(mavlink.MAV_CMD_COMPONENT_ARM_DISARM)          # nobody asked to arm
+
+
+def test_takeoff_command_rules(standin, client):
+    """GCS_MAVLINK_Copter::handle_MAV_CMD_NAV_TAKEOFF (ArduCopter/GCS_Mavlink.cpp) and Mode::do_user_takeoff
+    (ArduCopter/takeoff.cpp): disarmed -> FAILED; COMMAND_INT in another frame than GLOBAL_RELATIVE_ALT ->
+    DENIED; ALT_HOLD only with param3 (pilot may navigate) set; GUIDED armed on the ground -> ACCEPTED."""
+    sa = standin(**FAST)
+    c = client(sa.url)
+    ready(sa, c)
+    R = mavlink
+    assert c.command_long(R.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 10).result == R.MAV_RESULT_FAILED   # disarmed
+    assert c.arm().result == R.MAV_RESULT_ACCEPTED
+    assert c.command_int(R.MAV_CMD_NAV_TAKEOFF, R.MAV_FRAME_GLOBAL, z=10).result == R.MAV_RESULT_DENIED
+    assert c.set_mode("ALT_HOLD").result == R.MAV_RESULT_ACCEPTED
+    assert c.command_long(R.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 10).result == R.MAV_RESULT_FAILED
+    assert c.set_mode("GUIDED").result == R.MAV_RESULT_ACCEPTED
+    assert c.command_int(R.MAV_CMD_NAV_TAKEOFF, R.MAV_FRAME_GLOBAL_RELATIVE_ALT, z=10).result == R.MAV_RESULT_ACCEPTED
+    sa.wait_for(lambda: sa.v.alt > 1.0, timeout=10, what="climbing")
 
 
 def test_armed_on_ground_disarms_after_disarm_delay(standin, client):
