@@ -34,7 +34,10 @@ FLY_TIMEOUT_S = float(os.environ.get("SITL_FLY_TIMEOUT", "240"))
 
 def pytest_configure(config: Any) -> None:
     config.addinivalue_line("markers", "companion_fly: flies `$COMPANION_BIN fly` end to end")
-    config.addinivalue_line("markers", "standin_only: needs the stand-in's hazard injection or recording (skipped with SITL_URL)")
+    config.addinivalue_line("markers", "standin_only: needs the stand-in's own controls (link cut, garbage/unsigned "
+                            "injection, obstacle placement) or its recording (skipped with SITL_URL)")
+    config.addinivalue_line("markers", "sitl_hazard: injects a hazard with PARAM_SET (SIM_*/BATT_*), which a real "
+                            "ArduPilot SITL accepts too; runs against SITL_URL")
 
 
 def pytest_collection_modifyitems(config: Any, items: List[Any]) -> None:
@@ -167,6 +170,7 @@ def monitors_factory():
     made: List[OnboardMonitors] = []
 
     def make(ap: Autopilot, **kw: Any) -> OnboardMonitors:
+        kw.setdefault("request_streams", ap.standin is None)
         m = OnboardMonitors(ap.monitor_url, signing_key=ap.signing_key, **kw).start()
         made.append(m)
         return m

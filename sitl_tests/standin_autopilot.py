@@ -1796,7 +1796,7 @@ class OnboardMonitors:
     scripts work the same against the stand-in and a real SITL."""
 
     def __init__(self, url: str, sysid: int = 1, compid: int = mavlink.MAV_COMP_ID_CAMERA,
-                 signing_key: Optional[bytes] = None, rate_hz: float = 2.0) -> None:
+                 signing_key: Optional[bytes] = None, rate_hz: float = 2.0, request_streams: bool = False) -> None:
         from pymavlink import mavutil
         self.conn = mavutil.mavlink_connection(url, source_system=sysid, source_component=compid, dialect="ardupilotmega",
                                                autoreconnect=True)
@@ -1805,7 +1805,14 @@ class OnboardMonitors:
             self.conn.setup_signing(signing_key, sign_outgoing=True, allow_unsigned_callback=_accept_unsigned)
         self.values: Dict[str, float] = {"tgt_det": 0.0, "tgt_spd": 0.0, "trk_conf": 0.0, "lum": 600.0, "cpu_load": 0.3}
         self.view: Dict[str, Any] = {"armed": False, "mode": None, "alt": 0.0, "mission_seq": 0, "landed_state": 0,
-                                     "heartbeats": 0, "airborne_since": None}
+                                     "heartbeats": 0, "airborne_since": None, "battery_consumed_mah": None,
+                                     "battery_pct": None, "modes": []}
+        # On a real SITL the monitors' port (SERIAL2) streams at its SR2_* rates, which may be 0: ask for what the
+        # view needs with SET_MESSAGE_INTERVAL. Off for the stand-in, whose intervals are vehicle-wide.
+        self.request_streams = request_streams
+        self._streams_requested = False
+        self.sysid = sysid
+        self._param_values: Dict[str, Tuple[float, float]] = {}    # name -> (value, time received)
         self.sent = 0
         self.rate_hz = rate_hz
         self._lock = threading.Lock()
@@ -1834,7 +1841,33 @@ class OnboardMonitors:
 
     def snapshot(self) -> Dict[str, Any]:
         with self._lock:
-            return dict(self.view)
+            v = dict(self.view)
+            v["modes"] = list(self.view["modes"])
+            return v
+
+    def param_set(self, name: str, value: float) -> None:
+        """PARAM_SET to the autopilot over this link: how a test sets SITL's SIM_* (or vehicle) parameters on a
+        real SITL. ArduPilot takes PARAM_SET from any component (GCS_MAVLINK::handle_param_set, GCS_Param.cpp)."""
+        self.conn.mav.param_set_send(self.sysid, mavlink.MAV_COMP_ID_AUTOPILOT1, name.encode(), float(value),
+                                     mavlink.MAV_PARAM_TYPE_REAL32)
+
+    def param_get(self, name: str, timeout: float = 5.0) -> Optional[float]:
+        """PARAM_REQUEST_READ, then the PARAM_VALUE answer (None on timeout)."""
+        t0 = time.monotonic()
+        self.conn.mav.param_request_read_send(self.sysid, mavlink.MAV_COMP_ID_AUTOPILOT1, name.encode(), -1)
+        while time.monotonic() < t0 + timeout:
+            with self._lock:
+                got = self._param_values.get(name)
+            if got is not None and got[1] >= t0:
+                return got[0]
+            time.sleep(0.02)
+        return None
+
+    def _request_streams(self) -> None:
+        for mid in (mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
+                    mavlink.MAVLINK_MSG_ID_MISSION_CURRENT, mavlink.MAVLINK_MSG_ID_BATTERY_STATUS):
+            self.conn.mav.command_long_send(self.sysid, mavlink.MAV_COMP_ID_AUTOPILOT1,
+                                            mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0, mid, 500_000, 0, 0, 0, 0, 0)
 
     def _run(self) -> None:
         next_send = 0.0
@@ -1865,7 +1898,22 @@ class OnboardMonitors:
                 if t == "HEARTBEAT" and m.get_srcComponent() == mavlink.MAV_COMP_ID_AUTOPILOT1:
                     v["heartbeats"] += 1
                     v["armed"] = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
-                    v["mode"] = MODE_NAMES.get(m.custom_mode, str(m.custom_mode))
+                    mode = MODE_NAMES.get(m.custom_mode, str(m.custom_mode))
+                    if mode != v["mode"]:
+                        v["modes"].append((time.monotonic(), mode))
+                    v["mode"] = mode
+                    if self.request_streams and not self._streams_requested:
+                        self._streams_requested = True
+                        try:
+                            self._request_streams()
+                        except Exception:
+                            self._streams_requested = False
+                elif t == "PARAM_VALUE":
+                    pid = m.param_id if isinstance(m.param_id, str) else m.param_id.decode(errors="replace")
+                    self._param_values[pid.rstrip("\x00")] = (m.param_value, time.monotonic())
+                elif t == "BATTERY_STATUS":
+                    v["battery_consumed_mah"] = m.current_consumed if m.current_consumed >= 0 else None
+                    v["battery_pct"] = m.battery_remaining if m.battery_remaining >= 0 else None
                 elif t == "GLOBAL_POSITION_INT":
                     v["alt"] = m.relative_alt / 1000.0
                     if v["alt"] > 2.0 and v["airborne_since"] is None:

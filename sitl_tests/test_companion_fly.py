@@ -30,6 +30,15 @@ NOMINAL_TARGET = dict(tgt_det=1, tgt_spd=1.5, trk_conf=0.9, lum=600, cpu_load=0.
 LANDING_ACTIONS = {"land", "return_to_base", "replan_and_land"}
 FLY_TIMEOUT_S = float(os.environ.get("SITL_FLY_TIMEOUT", "240"))
 
+# Hazards on a real ArduPilot SITL, set with PARAM_SET (names from libraries/SITL/SITL.cpp and AP_BattMonitor;
+# the same as MAVProxy's `param set`). Not exercised here (no ArduPilot on this machine): see docs/sitl.md.
+#  - vibration: SIM_VIB_MOT_MAX (Hz) adds motor-frequency noise scaled by SIM_VIB_MOT_MULT relative to the
+#    accelerometer noise SIM_ACC1_RND/SIM_ACC2_RND (m/s/s), so the noise must be non-zero for it to show.
+REAL_SITL_VIBRATION = {"SIM_ACC1_RND": 20.0, "SIM_ACC2_RND": 20.0, "SIM_VIB_MOT_MAX": 400.0, "SIM_VIB_MOT_MULT": 2.0}
+#  - low battery: AP_BattMonitor's remaining % is 100 * (BATT_CAPACITY - consumed mAh) / BATT_CAPACITY, so a
+#    capacity of consumed / 0.88 reads 12 % at once (SITL's SIM_BATT_VOLTAGE moves the voltage, not the %).
+BATTERY_TARGET_PCT = 12.0
+
 
 @dataclass
 class Ctx:
@@ -39,9 +48,27 @@ class Ctx:
     t0: float
     airborne_at: Optional[float] = None
     marks: Dict[str, float] = field(default_factory=dict)
+    # real SITL: the values hazard parameters had before the test, restored after the flight (the SITL is shared)
+    saved_params: Dict[str, float] = field(default_factory=dict)
 
     def airborne_for(self) -> float:
         return 0.0 if self.airborne_at is None else time.monotonic() - self.airborne_at
+
+    def set_param(self, name: str, value: float) -> None:
+        """A hazard parameter: the stand-in's set_param, or PARAM_SET over the monitors' link on a real SITL."""
+        if self.ap.standin is not None:
+            self.ap.standin.set_param(name, value)
+            return
+        if name not in self.saved_params:
+            old = self.mon.param_get(name)
+            if old is None:
+                raise AssertionError(f"SITL did not answer PARAM_REQUEST_READ {name}")
+            self.saved_params[name] = old
+        self.mon.param_set(name, value)
+
+    def restore_params(self) -> None:
+        for name, value in self.saved_params.items():
+            self.mon.param_set(name, value)
 
     def once(self, name: str) -> bool:
         if name in self.marks:
@@ -99,6 +126,7 @@ def fly_mission(ap: Any, fly: Any, monitors_factory: Any, scenario: Callable[[Ct
             break
         time.sleep(0.1)
     rc = run.wait_exit(30)
+    ctx.restore_params()
     v = view(ap, mon)
     return Flight(run, rc, run.records(), ctx, flew, ended_disarmed=not v["armed"] and v["landed"])
 
@@ -141,14 +169,18 @@ def test_nominal_tracking_mission_end_to_end(autopilot_factory, fly, monitors_fa
         assert any(c["result"] == "ACCEPTED" for c in logged)
 
 
-@pytest.mark.standin_only
+@pytest.mark.sitl_hazard
 def test_vibrations_switch_tracking_to_stabilised_v3(autopilot_factory, fly, monitors_factory):
     ap = autopilot_factory()
 
     def scenario(ctx: Ctx) -> None:
         # the paper's section 7.1 context: vibrating airframe while the target is tracked
         if ctx.airborne_for() > 2.0 and ctx.once("vibration"):
-            ctx.ap.standin.set_param("SIM_VIB_MOT_MAX", 400)       # VIBRATION ~ 45 m/s/s in flight
+            if ctx.ap.standin is not None:
+                ctx.set_param("SIM_VIB_MOT_MAX", 400)       # stand-in: VIBRATION ~ 45 m/s/s in flight
+            else:
+                for name, value in REAL_SITL_VIBRATION.items():
+                    ctx.set_param(name, value)
         nominal_target(ctx)
 
     f = fly_mission(ap, fly, monitors_factory, scenario)
@@ -159,7 +191,6 @@ def test_vibrations_switch_tracking_to_stabilised_v3(autopilot_factory, fly, mon
     assert "V3" in tracking_versions(f.records), tracking_versions(f.records)
 
 
-@pytest.mark.standin_only
 def test_high_speed_target_switches_tracking_to_roi_resize_v2(autopilot_factory, fly, monitors_factory):
     ap = autopilot_factory()
 
@@ -174,23 +205,34 @@ def test_high_speed_target_switches_tracking_to_roi_resize_v2(autopilot_factory,
     assert "V2" in tracking_versions(f.records), tracking_versions(f.records)
 
 
-@pytest.mark.standin_only
+@pytest.mark.sitl_hazard
 def test_low_battery_lands_or_returns(autopilot_factory, fly, monitors_factory):
     ap = autopilot_factory()
 
     def scenario(ctx: Ctx) -> None:
         nominal_target(ctx)
-        if ctx.airborne_for() > 3.0 and ctx.once("battery"):
-            ctx.ap.standin.set_param("SIM_BATT_PCT", 12)
+        if ctx.airborne_for() > 3.0 and "battery" not in ctx.marks:
+            if ctx.ap.standin is not None:
+                ctx.once("battery")
+                ctx.set_param("SIM_BATT_PCT", BATTERY_TARGET_PCT)
+            else:
+                used = ctx.mon.snapshot()["battery_consumed_mah"]
+                if used is not None and used > 0 and ctx.once("battery"):
+                    ctx.set_param("BATT_CAPACITY", max(1.0, used / (1.0 - BATTERY_TARGET_PCT / 100.0)))
 
     f = fly_mission(ap, fly, monitors_factory, scenario)
     assert "battery" in f.ctx.marks
     assert f.flew and f.ended_disarmed, f.why()
-    sa = ap.standin
-    t_bat = f.ctx.marks["battery@wall"]
-    to_land = [e for e in sa.mode_changes() if e.wall >= t_bat and e.data["new"] in ("LAND", "RTL")
-               and e.data["reason"] != "ekf_failsafe"]
-    assert to_land, f"no LAND/RTL after the battery dropped: {[e.data for e in sa.mode_changes()]}"
+    if ap.standin is not None:
+        sa = ap.standin
+        t_bat = f.ctx.marks["battery@wall"]
+        changes = [e.data for e in sa.mode_changes()]
+        to_land = [e for e in sa.mode_changes() if e.wall >= t_bat and e.data["new"] in ("LAND", "RTL")
+                   and e.data["reason"] != "ekf_failsafe"]
+    else:
+        changes = f.ctx.mon.snapshot()["modes"]
+        to_land = [m for t, m in changes if t >= f.ctx.marks["battery"] and m in ("LAND", "RTL")]
+    assert to_land, f"no LAND/RTL after the battery dropped: {changes}"
     assert set(all_actions(f.records)) & LANDING_ACTIONS
     assert min(r.get("observations", {}).get("battery_pct", 100.0) for r in f.records) <= 15.0
     assert f.rc == 0, f.why()

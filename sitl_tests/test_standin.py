@@ -669,3 +669,23 @@ def test_local_position_ned_is_off_until_requested(standin, client):
     assert c.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, lpn, 200000).result == mavlink.MAV_RESULT_ACCEPTED
     m = c.wait("LOCAL_POSITION_NED", timeout=3)
     assert (m.x, m.y, m.z) == (0.0, 0.0, 0.0)               # on the ground at home, NED
+
+
+def test_monitors_set_and_read_parameters_and_request_their_streams(standin):
+    """What the hazard tests use on a real SITL: PARAM_SET / PARAM_REQUEST_READ over the monitors' link, and
+    SET_MESSAGE_INTERVAL for the telemetry their vehicle view needs (a SITL's SERIAL2 may stream nothing)."""
+    sa = standin(**FAST)
+    mon = sap.OnboardMonitors(sa.url, request_streams=True).start()
+    try:
+        sa.wait_for(lambda: mon.snapshot()["heartbeats"] > 0, timeout=10, what="a heartbeat at the monitors")
+        assert mon.param_get("SIM_WIND_SPD") == 0.0
+        mon.param_set("SIM_WIND_SPD", 7.0)
+        sa.wait_for(lambda: sa.params["SIM_WIND_SPD"] == 7.0, timeout=5, what="PARAM_SET applied")
+        assert mon.param_get("SIM_WIND_SPD") == 7.0
+        sa.wait_for(lambda: len(sa.commands(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL)) >= 4, timeout=5, what="intervals")
+        asked = {int(e.data["params"][0]) for e in sa.commands(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL)}
+        assert asked == {mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
+                         mavlink.MAVLINK_MSG_ID_MISSION_CURRENT, mavlink.MAVLINK_MSG_ID_BATTERY_STATUS}
+        sa.wait_for(lambda: mon.snapshot()["battery_pct"] is not None, timeout=5, what="BATTERY_STATUS in the view")
+    finally:
+        mon.stop()

@@ -1,0 +1,113 @@
+#!/usr/bin/env bash
+# Fly the companion against a real ArduCopter SITL, headless and without MAVProxy, then run the
+# sitl_tests that a real SITL can serve (everything not marked standin_only).
+#
+#   ARDUPILOT_DIR=~/ardupilot scripts/sitl_ardupilot.sh      # a built tree: ./waf configure --board sitl && ./waf copter
+#   ARDUCOPTER_BIN=/path/to/arducopter SITL_DEFAULTS=/path/to/copter.parm scripts/sitl_ardupilot.sh
+#
+# The arducopter flags are the SITL binary's own (libraries/AP_HAL_SITL/SITL_cmdline.cpp: --model,
+# --speedup, --defaults, -I/--instance, --home lat,lng,alt,yaw, -w/--wipe), the ones
+# Tools/autotest/sim_vehicle.py passes for `-v ArduCopter -f quad` with --no-mavproxy. Ports (instance 0):
+# SERIAL0 tcp 5760 (SITL waits for a client there before it runs), SERIAL1 tcp 5762 (the companion),
+# SERIAL2 tcp 5763 (the onboard-monitor test client, and PARAM_SET for the hazard tests).
+#
+# Environment:
+#   ARDUPILOT_DIR / ARDUCOPTER_BIN   where ArduCopter SITL is (one of them is required)
+#   SITL_DEFAULTS     defaults file     (default $ARDUPILOT_DIR/Tools/autotest/default_params/copter.parm)
+#   SITL_SPEEDUP      SIM speedup       (default 1: the companion's link timers are wall-clock)
+#   SITL_HOME         lat,lng,alt,yaw   (default CMAC, -35.363261,149.165230,584,353)
+#   SITL_FLY_TIMEOUT  seconds for the default-mission flight (default 600)
+#   SITL_PYTEST_ARGS  extra pytest arguments (default none); the tests run one at a time on one SITL
+#   COMPANION_BIN     the companion binary (default: built with cargo)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+
+fail() { echo "sitl_ardupilot.sh: $*" >&2; exit 2; }
+
+# ---- find ArduCopter SITL (fail fast, before building or starting anything) ----------------------
+BIN=${ARDUCOPTER_BIN:-}
+if [ -z "$BIN" ]; then
+  [ -n "${ARDUPILOT_DIR:-}" ] || fail "no ArduPilot: set ARDUPILOT_DIR to a built ArduPilot tree (./waf configure --board sitl && ./waf copter) or ARDUCOPTER_BIN to an arducopter SITL binary. See docs/sitl.md."
+  [ -d "$ARDUPILOT_DIR" ] || fail "ARDUPILOT_DIR=$ARDUPILOT_DIR is not a directory"
+  BIN=$ARDUPILOT_DIR/build/sitl/bin/arducopter
+fi
+[ -f "$BIN" ] || fail "no arducopter SITL binary at $BIN (build it: cd \$ARDUPILOT_DIR && ./waf configure --board sitl && ./waf copter)"
+[ -x "$BIN" ] || fail "$BIN is not executable"
+DEFAULTS=${SITL_DEFAULTS:-}
+if [ -z "$DEFAULTS" ]; then
+  [ -n "${ARDUPILOT_DIR:-}" ] || fail "set SITL_DEFAULTS to ArduPilot's Tools/autotest/default_params/copter.parm (or ARDUPILOT_DIR)"
+  DEFAULTS=$ARDUPILOT_DIR/Tools/autotest/default_params/copter.parm
+fi
+[ -f "$DEFAULTS" ] || fail "no defaults file at $DEFAULTS"
+for port in 5760 5762 5763; do
+  if ss -ltn "sport = :$port" 2>/dev/null | grep -q LISTEN; then
+    fail "tcp port $port is already in use (another SITL or MAVProxy?); stop it first"
+  fi
+done
+
+# ---- what the run needs: python venv, companion binary --------------------------------------------
+if [ ! -x .venv/bin/python ]; then
+  python3 -m venv .venv
+  .venv/bin/pip install --quiet --disable-pip-version-check -r sitl_tests/requirements.txt
+fi
+if [ -z "${COMPANION_BIN:-}" ]; then
+  cargo build --quiet --bin companion
+  COMPANION_BIN="${CARGO_TARGET_DIR:-$ROOT/target}/debug/companion"
+fi
+export COMPANION_BIN
+
+WORK=$(mktemp -d "${TMPDIR:-/tmp}/sitl-ardupilot.XXXXXX")
+SITL_PID=""
+KEEPER_PID=""
+cleanup() {
+  [ -n "$KEEPER_PID" ] && kill "$KEEPER_PID" 2>/dev/null || true
+  [ -n "$SITL_PID" ] && kill "$SITL_PID" 2>/dev/null || true
+  wait 2>/dev/null || true
+  echo "SITL log and runs: $WORK"
+}
+trap cleanup EXIT
+
+wait_listen() { # port seconds
+  local i
+  for ((i = 0; i < $2 * 10; i++)); do
+    ss -ltn "sport = :$1" 2>/dev/null | grep -q LISTEN && return 0
+    kill -0 "$SITL_PID" 2>/dev/null || fail "arducopter exited; see $WORK/arducopter.log"
+    sleep 0.1
+  done
+  fail "nothing listens on tcp $1 after $2 s; see $WORK/arducopter.log"
+}
+
+# ---- start SITL (its eeprom.bin and logs go to the work dir; -w starts from the defaults) -----------
+echo "== arducopter SITL: $BIN"
+(cd "$WORK" && exec "$BIN" --model + --speedup "${SITL_SPEEDUP:-1}" --defaults "$DEFAULTS" -I0 \
+  --home "${SITL_HOME:--35.363261,149.165230,584,353}" -w >"$WORK/arducopter.log" 2>&1) &
+SITL_PID=$!
+wait_listen 5760 60
+# SERIAL0 holds the start-up until a client connects: a quiet ground station keeps it (1 Hz heartbeat).
+.venv/bin/python - <<'EOF' >"$WORK/keeper.log" 2>&1 &
+import time
+from pymavlink import mavutil
+m = mavutil.mavlink_connection("tcp:127.0.0.1:5760", source_system=254, source_component=190)
+while True:
+    m.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_GCS, mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+    m.recv_match(blocking=True, timeout=1.0)
+    time.sleep(0.5)
+EOF
+KEEPER_PID=$!
+wait_listen 5762 60
+wait_listen 5763 60
+
+# ---- the default mission (no onboard monitors: the target search ends at its time limit) -----------
+echo "== companion fly --connect tcp:127.0.0.1:5762 (default mission)"
+set +e
+timeout "${SITL_FLY_TIMEOUT:-600}" "$COMPANION_BIN" fly --connect tcp:127.0.0.1:5762 --log-dir "$WORK/runs"
+fly_rc=$?
+set -e
+[ "$fly_rc" -eq 0 ] || fail "companion fly exited $fly_rc (run folder under $WORK/runs)"
+
+# ---- the sitl_tests a real SITL can serve ----------------------------------------------------------
+echo "== pytest sitl_tests against SITL (not standin_only)"
+export SITL_URL=tcp:127.0.0.1:5762 SITL_MONITOR_URL=tcp:127.0.0.1:5763
+# shellcheck disable=SC2086
+.venv/bin/python -m pytest -q -p no:xdist sitl_tests -m "not standin_only" ${SITL_PYTEST_ARGS:-}
