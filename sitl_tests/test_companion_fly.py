@@ -127,7 +127,12 @@ def fly_mission(ap: Any, fly: Any, monitors_factory: Any, scenario: Callable[[Ct
         time.sleep(0.1)
     rc = run.wait_exit(30)
     ctx.restore_params()
+    # On a real SITL the view comes from telemetry (1 Hz heartbeat): the companion may see the disarm first.
+    settle = time.monotonic() + 5.0
     v = view(ap, mon)
+    while flew and (v["armed"] or not v["landed"]) and time.monotonic() < settle:
+        time.sleep(0.1)
+        v = view(ap, mon)
     return Flight(run, rc, run.records(), ctx, flew, ended_disarmed=not v["armed"] and v["landed"])
 
 
