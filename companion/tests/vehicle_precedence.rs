@@ -1,0 +1,66 @@
+//! The shell's one-motion-at-a-time choice (params/link.toml `vehicle_action_precedence`) must never
+//! contradict the behaviour arbitration of params/policies.toml: for every pair of vehicle actions the
+//! shell orders, whichever policy is in force, the policy must not drop the action the shell prefers
+//! while keeping the other. The shell only orders what the policies leave standing together.
+
+use companion::link::actions::LinkParams;
+use companion::link::mission_state::select_vehicle_action;
+use companion::mission_mdp::BehaviourConflicts;
+use companion::spec::default_params_dir;
+
+/// The primitive actions of the BFM paper, section 5 (A1..A17): the names policies.toml patterns match.
+const PRIMITIVES: &[&str] = &[
+    "take_off",
+    "follow_trajectory",
+    "avoid_obstacle",
+    "detect_obstacles_fusion",
+    "search_zone_t",
+    "search_emergency_zone",
+    "land",
+    "replan_and_land",
+    "detect_target",
+    "return_to_base",
+    "detect_obstacles_lidar",
+    "track_v0",
+    "track_v1",
+    "track_v2",
+    "track_v3",
+    "track_v4",
+    "track_v5",
+];
+
+#[test]
+fn precedence_never_overrules_a_policy() {
+    let dir = default_params_dir();
+    let link = LinkParams::load(&dir.join("link.toml")).unwrap();
+    let conflicts = BehaviourConflicts::load(&dir.join("policies.toml"), PRIMITIVES).unwrap();
+    let order = &link.vehicle_action_precedence;
+    assert!(order.len() >= 2, "{order:?}");
+    for policy in ["safety", "mission"] {
+        for (i, first) in order.iter().enumerate() {
+            for second in &order[i + 1..] {
+                let (kept, _) = conflicts.resolve(&[second, first], policy).unwrap();
+                assert!(
+                    kept.contains(first),
+                    "{policy}: the shell prefers {first} over {second}, but the policy keeps {kept:?}"
+                );
+                // And the shell does pick it from what the policy left.
+                assert_eq!(
+                    select_vehicle_action(&kept, order).as_deref(),
+                    Some(first.as_str())
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn a_precedence_that_contradicts_the_policy_is_caught() {
+    // return_to_base before land contradicts both policies' return_vs_landing rule (land wins).
+    let dir = default_params_dir();
+    let conflicts = BehaviourConflicts::load(&dir.join("policies.toml"), PRIMITIVES).unwrap();
+    let (kept, _) = conflicts
+        .resolve(&["land", "return_to_base"], "safety")
+        .unwrap();
+    assert_eq!(kept, vec!["land".to_string()]);
+}
