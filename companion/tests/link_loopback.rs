@@ -348,8 +348,16 @@ async fn fly_over_udp_signs_frames_and_refuses_unsigned_commands() {
             if let Some(addr) = from {
                 let mut bytes = Vec::new();
                 for m in telemetry(v) {
-                    bytes.extend(frame(&mut seq, &m));
+                    // The autopilot holds the key too and signs what it sends.
+                    let h = MavHeader {
+                        system_id: 1,
+                        component_id: 1,
+                        sequence: seq,
+                    };
+                    seq = seq.wrapping_add(1);
+                    mavlink::write_v2_msg_signed(&mut bytes, h, &m, Some(&signer)).unwrap();
                 }
+                bytes.extend(frame(&mut seq, &telemetry(v)[1])); // unsigned telemetry: refused
                 bytes.extend(frame(&mut seq, &cmd)); // unsigned command to us: refused
                 let h = MavHeader {
                     system_id: 255,
@@ -382,7 +390,11 @@ async fn fly_over_udp_signs_frames_and_refuses_unsigned_commands() {
     assert!(signed_ok >= 2, "our heartbeats arrive signed and verify");
     assert_eq!(unsigned, 0, "nothing we send is unsigned or badly signed");
     assert!(report.ingest.unsigned_commands_refused >= 1);
+    assert_eq!(
+        report.ingest.unsigned_refused, report.ingest.unsigned_commands_refused,
+        "one unsigned SYS_STATUS refused per burst, as many as unsigned commands"
+    );
     assert_eq!(report.ingest.bad_signatures, 0);
-    // Every unsigned command was refused; each signed one was accepted alongside the telemetry.
+    // Every unsigned frame was refused; each signed one was accepted alongside the signed telemetry.
     assert!(report.ingest.frames_ok >= 6 * report.ingest.unsigned_commands_refused);
 }

@@ -403,17 +403,19 @@ impl Shell {
         let grew = now.frames_malformed > was.frames_malformed
             || now.bad_signatures > was.bad_signatures
             || now.unsigned_commands_refused > was.unsigned_commands_refused
+            || now.unsigned_refused > was.unsigned_refused
             || now.bytes_unframed() > was.bytes_unframed() + MAX_FRAME_BYTES;
         if !grew {
             return None;
         }
         self.ingest_reported = *now;
         Some(format!(
-            "ingest: {} bytes outside valid frames (garbage or corrupt), {} malformed frames, {} bad signatures, {} unsigned commands refused (since start)",
+            "ingest: {} bytes outside valid frames (garbage or corrupt), {} malformed frames, {} bad signatures, {} unsigned commands refused, {} other unsigned frames refused (since start)",
             now.bytes_unframed(),
             now.frames_malformed,
             now.bad_signatures,
-            now.unsigned_commands_refused
+            now.unsigned_commands_refused,
+            now.unsigned_refused
         ))
     }
 }

@@ -1,10 +1,13 @@
 //! Is the autopilot ready to arm? Only the autopilot knows; we track what it says and never arm
 //! (or command) a vehicle it reports as not ready.
 //!
-//! Evidence (ArduPilot): SYS_STATUS `MAV_SYS_STATUS_PREARM_CHECK` — present/enabled when arming
-//! checks are on, healthy while they pass; EKF_STATUS_REPORT flags (attitude, horizontal velocity,
-//! absolute horizontal and vertical position, not initialising, not in constant-position mode);
-//! `PreArm: ...` STATUSTEXT; a failed arm COMMAND_ACK. After a failed arm, readiness needs a
+//! Evidence (ArduPilot): SYS_STATUS `MAV_SYS_STATUS_PREARM_CHECK` — always present, enabled when
+//! arming checks are on (ARMING_CHECK != 0), healthy while armed or while they pass
+//! (`GCS::update_sensor_status_flags`, libraries/GCS_MAVLink/GCS.cpp). The bit is the only signal
+//! of the fail -> pass edge: `PreArm:` texts repeat every 30 s while failing and stop silently.
+//! Also: EKF_STATUS_REPORT flags (attitude, horizontal velocity, absolute horizontal and vertical
+//! position, not initialising, not in constant-position mode); `PreArm: ...` STATUSTEXT; a failed
+//! arm COMMAND_ACK. After a failed arm, readiness needs a
 //! fresh healthy report received after the failure: that is what makes an arm retry not blind.
 
 use super::dialect::{EKF_STATUS_REPORT_DATA, EkfStatusFlags, MavSysStatusSensor, SYS_STATUS_DATA};
@@ -20,7 +23,8 @@ pub struct Readiness {
     prearm_text: Option<(String, Duration)>,
     /// Reports older than this do not count (set by a failed arm).
     fresh_after: Duration,
-    /// Any SYS_STATUS seen (PX4 does not report the prearm bit).
+    /// Any SYS_STATUS seen (PX4 sets at most the prearm health bit, never present/enabled, so
+    /// its EKF flags decide).
     sys_status_at: Option<Duration>,
     pub armed: bool,
 }
