@@ -54,7 +54,9 @@ type Res<T> = Result<T, Box<dyn std::error::Error>>;
 
 fn main() -> Res<()> {
     let args: Vec<String> = std::env::args().collect();
-    let path = args.get(1).ok_or("usage: bench_bn EXPORT.json [reps] [budget_s]")?;
+    let path = args
+        .get(1)
+        .ok_or("usage: bench_bn EXPORT.json [reps] [budget_s]")?;
     let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
     let reps: usize = args.get(2).map_or(Ok(10_000), |s| s.parse())?;
     let budget: f64 = args.get(3).map_or(Ok(1.0), |s| s.parse())?;
@@ -84,7 +86,9 @@ fn time_manager(m: &Manager, reps: usize, budget: f64) -> Res<Timed> {
     for e in &m.evidence {
         let mut ev = Evidence::new();
         for (k, v) in e {
-            let id = net.id(k).ok_or(format!("{}: no evidence node {k}", m.name))?;
+            let id = net
+                .id(k)
+                .ok_or(format!("{}: no evidence node {k}", m.name))?;
             let s = net
                 .state(id, v)
                 .map_err(|e| format!("{}: node {k}: {e}", m.name))?;
