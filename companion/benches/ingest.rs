@@ -46,6 +46,7 @@ fn capture(seconds: u64) -> (Vec<u8>, Vec<usize>, usize, usize) {
             mission_seq: 2 + (t / 20.0) as u16,
             custom_mode: 3,
             groundspeed_mps: 5.0,
+            energy_consumed_j: t * 200.0,
         };
         let ((sys, comp), msg) = tel.frame(&obs, &v);
         let mut frame =

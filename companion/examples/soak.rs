@@ -125,6 +125,7 @@ fn view(phase: &str, wp1_seq: u16, last_seq: u16, landed: bool) -> VehicleView {
         mission_seq: seq,
         custom_mode: mode,
         groundspeed_mps: spd,
+        energy_consumed_j: 0.0,
     };
     match phase {
         _ if landed => VehicleView {
@@ -133,6 +134,7 @@ fn view(phase: &str, wp1_seq: u16, last_seq: u16, landed: bool) -> VehicleView {
             mission_seq: last_seq,
             custom_mode: 9,
             groundspeed_mps: 0.0,
+            energy_consumed_j: 0.0,
         },
         "base" => VehicleView {
             armed: false,
@@ -140,11 +142,91 @@ fn view(phase: &str, wp1_seq: u16, last_seq: u16, landed: bool) -> VehicleView {
             mission_seq: 0,
             custom_mode: 4,
             groundspeed_mps: 0.0,
+            energy_consumed_j: 0.0,
         },
         "wp1" => air(wp1_seq, 3, 5.0),
         "wpi" => air((wp1_seq + 1).min(last_seq), 3, 5.0),
         "landing" => air(last_seq, 9, 0.5),
         _ => air(last_seq, 4, 0.3), // wpf, target, v0..v5: at the tracking area
+    }
+}
+
+/// Everything one `companion fly` run owns: a new one per mission (the clock restarts at zero,
+/// the autopilot's battery is swapped), while the loaded params model and the process live on.
+struct Session<'m> {
+    start: Duration,
+    decider: CoreDecider<'m>,
+    vehicle: Vehicle,
+    shell: Shell,
+    ingest: Ingest,
+    out_enc: Encoder,
+    ap_in: Ingest,
+    enc_ap: Encoder,
+    enc_mon: Encoder,
+    responder: Responder,
+    telem: Telemetry50,
+    world: World<'m>,
+    world_obs: Observations,
+    next_step: Duration,
+    landed_until: Option<Duration>,
+    last: Option<(Plan, DecisionRecord)>,
+    landing_cmd: Option<String>,
+    period: Duration,
+    next_tick: Duration,
+    next_hb: Duration,
+    next_cycle: Duration,
+    replies: Vec<Msg>,
+    chunk: Vec<u8>,
+}
+
+impl<'m> Session<'m> {
+    fn new(
+        model: &'m Model,
+        setup: &FlySetup,
+        spec: &'m WorldSpec,
+        scenario: &'m Scenario,
+        seed: u64,
+        start: Duration,
+    ) -> Self {
+        let mut world = World::new(spec, scenario, seed);
+        let world_obs = world.observe();
+        let period = Duration::from_secs_f64(setup.link.decision_period_s);
+        Self {
+            start,
+            decider: CoreDecider(Core::new(model, ModelKind::Bfm, Policy::Safety)),
+            vehicle: setup.vehicle(Duration::from_secs(3)),
+            shell: Shell::new(setup),
+            ingest: Ingest::new(None),
+            out_enc: Encoder::new(None),
+            ap_in: Ingest::new(None),
+            enc_ap: Encoder::new(None),
+            enc_mon: Encoder::new(None),
+            responder: Responder::default(),
+            telem: Telemetry50::new(),
+            world,
+            world_obs,
+            next_step: Duration::from_secs_f64(spec.step_s),
+            landed_until: None,
+            last: None,
+            landing_cmd: None,
+            period,
+            next_tick: Duration::ZERO,
+            next_hb: Duration::ZERO,
+            next_cycle: period,
+            replies: Vec::new(),
+            chunk: Vec::with_capacity(2048),
+        }
+    }
+
+    /// The companion's sends: encoded, decoded by the autopilot, answered on the next read.
+    fn send(&mut self, msgs: &[Msg]) {
+        self.out_enc.system_id = self.vehicle.our_system();
+        for m in msgs {
+            let bytes = self.out_enc.encode(m);
+            for f in self.ap_in.push(&bytes) {
+                self.replies.extend(self.responder.respond(&f.msg));
+            }
+        }
     }
 }
 
@@ -163,7 +245,6 @@ fn main() -> anyhow::Result<()> {
     let o = opts()?;
     let wall0 = Instant::now();
     let model = Model::load(&o.params)?;
-    let mut decider = CoreDecider(Core::new(&model, ModelKind::Bfm, Policy::Safety));
     let args = FlyArgs {
         connect: url::parse("udpin:0.0.0.0:14550").map_err(anyhow::Error::msg)?,
         mission: None,
@@ -180,128 +261,143 @@ fn main() -> anyhow::Result<()> {
     let scenario = Scenario::load(&o.params, &o.scenario)?;
     let first = if setup.route.takeoff_first { 2 } else { 1 };
     let (wp1_seq, last_seq) = (first, setup.route.waypoints.len() as u16 + first - 1);
-
-    let period = Duration::from_secs_f64(setup.link.decision_period_s);
     let step = Duration::from_secs_f64(spec.step_s);
     let frame_dt = Duration::from_millis(20);
     let total_frames = o.minutes * 60 * 50;
 
-    let mut vehicle: Vehicle = setup.vehicle(args.link_timeout);
-    let mut shell = Shell::new(&setup);
-    let mut ingest = Ingest::new(None);
-    let mut out_enc = Encoder::new(None);
-    let mut ap_in = Ingest::new(None);
-    let (mut enc_ap, mut enc_mon) = (Encoder::new(None), Encoder::new(None));
-    let mut responder = Responder::default();
     let mut sink = JsonLines(std::io::sink());
-    let mut telem = Telemetry50::new();
-
     let mut seed = o.seed;
-    let mut world = World::new(&spec, &scenario, seed);
-    let mut world_obs = world.observe();
-    let mut next_step = step;
-    let mut landed_until: Option<Duration> = None;
-    let mut last: Option<(Plan, DecisionRecord)> = None;
-    let (mut next_tick, mut next_hb, mut next_cycle) = (Duration::ZERO, Duration::ZERO, period);
-    let mut replies: Vec<Msg> = Vec::new();
-    let mut chunk: Vec<u8> = Vec::with_capacity(2048);
+    let mut session = Session::new(&model, &setup, &spec, &scenario, seed, Duration::ZERO);
     let (mut cycles, mut missions, mut frames_ok) = (0u64, 1u32, 0u64);
+    let (mut acked, mut accepted, mut unframed) = (0u64, 0u64, 0u64);
     let mut samples: Vec<Sample> = Vec::new();
     let sample_every = 5 * 60 * 50;
-
-    // The companion's sends: encoded, decoded by the autopilot, answered on the next delivery.
-    let mut send = |msgs: &[Msg], vehicle: &Vehicle, replies: &mut Vec<Msg>| {
-        out_enc.system_id = vehicle.our_system();
-        for m in msgs {
-            let bytes = out_enc.encode(m);
-            for f in ap_in.push(&bytes) {
-                replies.extend(responder.respond(&f.msg));
-            }
-        }
-    };
+    let trace = std::env::var_os("SOAK_TRACE").is_some();
+    // Which mission states the fly shell saw and which vehicle actions the core chose (shows
+    // the run went through the mission, not just sat at base).
+    let mut states: std::collections::BTreeMap<String, u64> = Default::default();
+    let mut actions: std::collections::BTreeMap<String, u64> = Default::default();
 
     for i in 0..total_frames {
-        let t = frame_dt * i as u32;
-        // The world: one step per step_s under the latest plan; a landing after its mission.
-        if t >= next_step {
-            next_step += step;
-            match landed_until {
-                Some(end) if t >= end => {
-                    seed += 1;
-                    missions += 1;
-                    world = World::new(&spec, &scenario, seed);
-                    world_obs = world.observe();
-                    shell = Shell::new(&setup);
-                    landed_until = None;
-                }
-                Some(_) => {}
-                None if world.finished() => landed_until = Some(t + step),
-                None => {
-                    if let Some((plan, rec)) = &last {
-                        world.advance(plan, rec);
+        let tg = frame_dt * i as u32;
+        // Mission over (landed, disarmed, one step on the ground): the next `fly` session.
+        if session.landed_until.is_some_and(|end| tg >= end) {
+            frames_ok += session.ingest.stats.frames_ok;
+            unframed += session.ingest.stats.bytes_unframed();
+            acked += session.responder.commands_acked;
+            accepted += session.responder.missions_accepted;
+            seed += 1;
+            missions += 1;
+            session = Session::new(&model, &setup, &spec, &scenario, seed, tg);
+        }
+        let s = &mut session;
+        // Session clock: each `fly` run starts at zero, as the real one does.
+        let t = tg - s.start;
+        if t >= s.next_step {
+            s.next_step += step;
+            if s.landed_until.is_none() {
+                if s.world.finished() {
+                    s.landed_until = Some(tg + step);
+                } else {
+                    // The latest plan, plus a landing any cycle of this step commanded (the
+                    // records after it propose nothing: the vehicle is already landing).
+                    if let Some((plan, rec)) = &mut s.last {
+                        if let Some(l) = s.landing_cmd.take()
+                            && !rec.actions.contains(&l)
+                        {
+                            rec.actions.push(l);
+                        }
+                        s.world.advance(plan, rec);
                     }
-                    if !world.finished() {
-                        world_obs = world.observe();
+                    if !s.world.finished() {
+                        s.world_obs = s.world.observe();
                     }
                 }
             }
         }
-        let v = view(&world_obs.state, wp1_seq, last_seq, landed_until.is_some());
-        let ((sys, comp), msg) = telem.frame(&world_obs, &v);
+        let mut v = view(
+            &s.world_obs.state,
+            wp1_seq,
+            last_seq,
+            s.landed_until.is_some(),
+        );
+        let battery = s.world_obs.get("battery_pct").unwrap_or(100.0);
+        v.energy_consumed_j = (100.0 - battery) / 100.0 * spec.vehicle.battery_wh * 3600.0;
+        if trace && i % 500 == 0 {
+            eprintln!(
+                "t={:.0}s mission={missions} world={} finished={} landed={} last_actions={:?}",
+                tg.as_secs_f64(),
+                s.world_obs.state,
+                s.world.finished(),
+                s.landed_until.is_some(),
+                s.last.as_ref().map(|l| &l.1.actions)
+            );
+        }
+        let ((sys, comp), msg) = s.telem.frame(&s.world_obs, &v);
         let enc = if (sys, comp) == AUTOPILOT {
-            &mut enc_ap
+            &mut s.enc_ap
         } else {
-            &mut enc_mon
+            &mut s.enc_mon
         };
         enc.system_id = sys;
         enc.component_id = comp;
-        chunk.extend_from_slice(&enc.encode(&msg));
-        for r in replies.drain(..) {
-            enc_ap.system_id = AUTOPILOT.0;
-            enc_ap.component_id = AUTOPILOT.1;
-            chunk.extend_from_slice(&enc_ap.encode(&r));
+        s.chunk.extend_from_slice(&enc.encode(&msg));
+        for r in s.replies.drain(..) {
+            s.enc_ap.system_id = AUTOPILOT.0;
+            s.enc_ap.component_id = AUTOPILOT.1;
+            s.chunk.extend_from_slice(&s.enc_ap.encode(&r));
         }
 
         let mut out: Vec<Msg> = Vec::new();
         if i % 5 == 4 {
             // One read every 100 ms.
-            for f in ingest.push(&chunk) {
-                frames_ok += 1;
-                out.extend(vehicle.on_frame(t, &f));
+            for f in s.ingest.push(&s.chunk) {
+                out.extend(s.vehicle.on_frame(t, &f));
             }
-            chunk.clear();
-            ingest.set_our_system(vehicle.our_system());
-            shell.set_ingest(ingest.stats);
+            s.chunk.clear();
+            s.ingest.set_our_system(s.vehicle.our_system());
+            s.shell.set_ingest(s.ingest.stats);
         }
-        if t >= next_hb {
-            next_hb += Duration::from_secs(1);
+        if t >= s.next_hb {
+            s.next_hb += Duration::from_secs(1);
             out.push(Vehicle::heartbeat());
         }
-        if t >= next_tick {
-            next_tick += Duration::from_millis(100);
-            out.extend(vehicle.tick(t));
+        if t >= s.next_tick {
+            s.next_tick += Duration::from_millis(100);
+            out.extend(s.vehicle.tick(t));
         }
-        let periodic = t >= next_cycle;
+        let periodic = t >= s.next_cycle;
         if periodic {
-            next_cycle += period;
+            s.next_cycle += s.period;
         }
-        send(&out, &vehicle, &mut replies);
-        vehicle.stamp_latency(t, t);
-        let mut run_cycle = |vehicle: &mut Vehicle, shell: &mut Shell, replies: &mut Vec<Msg>| {
-            let d = fly::decide(&mut decider, shell, vehicle, || t);
-            send(&d.msgs, vehicle, replies);
-            vehicle.stamp_latency(t, t);
-            cycles += 1;
-            let plan = d.plan.clone();
-            let rec = fly::finish_record(d, shell, vehicle, cycles, &mut Vec::new());
-            let _ = sink.write(&rec);
-            last = Some((plan, rec));
-        };
-        if periodic && vehicle.target.is_some() {
-            run_cycle(&mut vehicle, &mut shell, &mut replies);
-        }
-        if vehicle.has_events() && vehicle.target.is_some() {
-            run_cycle(&mut vehicle, &mut shell, &mut replies);
+        s.send(&out);
+        s.vehicle.stamp_latency(t, t);
+        let mut run = periodic && s.vehicle.target.is_some();
+        for _ in 0..2 {
+            if run {
+                let d = fly::decide(&mut s.decider, &mut s.shell, &mut s.vehicle, || t);
+                s.send(&d.msgs);
+                s.vehicle.stamp_latency(t, t);
+                cycles += 1;
+                let plan = d.plan.clone();
+                let rec =
+                    fly::finish_record(d, &mut s.shell, &mut s.vehicle, cycles, &mut Vec::new());
+                let _ = sink.write(&rec);
+                *states.entry(rec.state.clone()).or_default() += 1;
+                for a in &plan.vehicle_actions {
+                    *actions.entry(a.clone()).or_default() += 1;
+                }
+                if let Some(a) = rec
+                    .actions
+                    .iter()
+                    .find(|a| companion::link::mission_state::LANDING_ACTIONS.contains(&a.as_str()))
+                {
+                    s.landing_cmd = Some(a.clone());
+                }
+                s.last = Some((plan, rec));
+            }
+            // Then one for significant events, as fly does after every message.
+            run = s.vehicle.has_events() && s.vehicle.target.is_some();
         }
 
         let done = i + 1;
@@ -309,7 +405,7 @@ fn main() -> anyhow::Result<()> {
             samples.push(Sample {
                 minute: done as f64 / 3000.0,
                 wall_s: wall0.elapsed().as_secs_f64(),
-                frames: frames_ok,
+                frames: frames_ok + s.ingest.stats.frames_ok,
                 cycles,
                 missions,
                 live: LIVE.load(Relaxed),
@@ -318,18 +414,16 @@ fn main() -> anyhow::Result<()> {
             });
         }
     }
-
+    frames_ok += session.ingest.stats.frames_ok;
+    unframed += session.ingest.stats.bytes_unframed();
+    acked += session.responder.commands_acked;
+    accepted += session.responder.missions_accepted;
     println!(
-        "soak: {} simulated min of 50 Hz telemetry, scenario {}, seeds {}..{}; {} frames in, {} unframed bytes, {} commands acked, {} missions accepted",
-        o.minutes,
-        o.scenario,
-        o.seed,
-        seed,
-        ingest.stats.frames_ok,
-        ingest.stats.bytes_unframed(),
-        responder.commands_acked,
-        responder.missions_accepted
+        "soak: {} simulated min of 50 Hz telemetry, scenario {}, {missions} missions (seeds {}..{seed}); {frames_ok} frames in, {unframed} unframed bytes, {acked} commands acked, {accepted} mission uploads accepted",
+        o.minutes, o.scenario, o.seed,
     );
+    println!("cycles by mission state: {states:?}");
+    println!("vehicle actions proposed: {actions:?}");
     println!(
         "| sim min | wall s | frames | cycles | missions | live heap (bytes) | vs 5 min | allocations | VmRSS (KiB) |"
     );

@@ -20,6 +20,8 @@ pub struct VehicleView {
     /// ArduCopter custom mode (0 STABILIZE, 3 AUTO, 4 GUIDED, 6 RTL, 9 LAND).
     pub custom_mode: u32,
     pub groundspeed_mps: f64,
+    /// Energy drawn from the battery since it was fitted (J): BATTERY_STATUS energy_consumed.
+    pub energy_consumed_j: f64,
 }
 
 /// Which message goes in each of the 50 slots of one second (20 ms apart). Counts per second:
@@ -272,8 +274,9 @@ impl Telemetry50 {
                     id: 0,
                     voltages,
                     current_battery: 1250,
-                    current_consumed: (t * 1.4) as i32,
-                    energy_consumed: (t * 6.5) as i32,
+                    // mAh at the 14.8 V nominal of a 4S pack; hJ
+                    current_consumed: (v.energy_consumed_j / 3.6 / 14.8) as i32,
+                    energy_consumed: (v.energy_consumed_j / 100.0) as i32,
                     battery_remaining: battery as i8,
                     temperature: 3200,
                     ..BATTERY_STATUS_DATA::DEFAULT
@@ -502,6 +505,7 @@ mod tests {
             mission_seq: 3,
             custom_mode: 3,
             groundspeed_mps: 5.0,
+            energy_consumed_j: 12_300.0,
         };
         let mut telem = Telemetry50::new();
         let mut enc = Encoder::new(None);
@@ -528,6 +532,7 @@ mod tests {
         assert_eq!(tel.get("cpu_load"), Some(0.25));
         assert_eq!(tel.get("altitude_m"), Some(20.0));
         assert_eq!(tel.get("mission_seq"), Some(3.0));
+        assert_eq!(tel.get("energy_consumed_j"), Some(12_300.0));
         assert!(tel.armed);
         assert_eq!(tel.mode.as_deref(), Some("3"));
     }
