@@ -10,9 +10,11 @@
 //! significant event, each through `fly::decide` / `fly::finish_record` (the real `Core::step`),
 //! the record serialised to JSON as the decision log would. What the companion sends is encoded,
 //! decoded by a second `Ingest` and answered by a minimal autopilot (commands acked, missions
-//! accepted). The world advances every `step_s` under the latest plan; when its mission ends the
-//! vehicle lands and disarms, and the next mission (next seed) starts with a fresh mission state
-//! (the core, vehicle and ingest live on, as in one long `fly` session).
+//! accepted). The world advances every `step_s` under the latest plan (plus any landing commanded
+//! during the step). Each mission is one fresh `fly` session (core, vehicle, ingest, mission
+//! state new; clock from zero; battery swapped): the PANORAMA guarantee rightly refuses one
+//! hour-long mission on the 74 Wh pack. After landing and one step on the ground, the next
+//! mission starts on the next seed; the loaded params model and the process live on.
 //!
 //! Memory: live heap bytes from a counting global allocator (all threads) and VmRSS from
 //! /proc/self/status. Exits 1 when live heap at the end exceeds the post-warm-up sample by more
