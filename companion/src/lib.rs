@@ -19,4 +19,5 @@ pub mod record;
 pub mod resources;
 pub mod review;
 pub mod sim;
+pub mod sim_link;
 pub mod spec;

@@ -183,6 +183,20 @@ impl FlySetup {
             takeoff_alt_m,
         })
     }
+
+    /// The protocol state `fly` drives, configured from these params (clones the action table
+    /// and route, so a soak run can build a fresh one per mission).
+    pub fn vehicle(&self, link_timeout: Duration) -> Vehicle {
+        let cfg = VehicleConfig {
+            link_timeout,
+            streams: self.link.stream_ids(),
+            telemetry: self.link.telemetry.clone(),
+            arm_wait: Duration::from_secs_f64(self.link.arm_wait_s),
+            max_arm_attempts: self.link.max_arm_attempts,
+            ..VehicleConfig::default()
+        };
+        Vehicle::new(cfg, self.actions.clone(), Some(self.route.clone()))
+    }
 }
 
 /// Blocking entry point for the CLI: a run folder under `--log-dir` with the decision log and
@@ -240,22 +254,8 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
     mut tlog: Option<Tlog>,
 ) -> anyhow::Result<FlyReport> {
     let setup = FlySetup::load(&args)?;
-    let mut shell = Shell {
-        mission: MissionState::new(&setup.route, setup.takeoff_alt_m),
-        precedence: setup.link.vehicle_action_precedence.clone(),
-        pending_events: Vec::new(),
-        ingest: Default::default(),
-        ingest_reported: Default::default(),
-    };
-    let cfg = VehicleConfig {
-        link_timeout: args.link_timeout,
-        streams: setup.link.stream_ids(),
-        telemetry: setup.link.telemetry.clone(),
-        arm_wait: Duration::from_secs_f64(setup.link.arm_wait_s),
-        max_arm_attempts: setup.link.max_arm_attempts,
-        ..VehicleConfig::default()
-    };
-    let mut vehicle = Vehicle::new(cfg, setup.actions, Some(setup.route));
+    let mut shell = Shell::new(&setup);
+    let mut vehicle = setup.vehicle(args.link_timeout);
     let signing = || setup.key.map(ingest::signing_data);
     let mut ingest = Ingest::new(signing());
     let mut encoder = Encoder::new(signing());
@@ -293,7 +293,7 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
                         out.extend(vehicle.on_frame(t, &f));
                     }
                     ingest.set_our_system(vehicle.our_system());
-                    shell.ingest = ingest.stats;
+                    shell.set_ingest(ingest.stats);
                     trigger = Some(t);
                 }
                 Some(Inbound::Connected(name)) => {
@@ -355,7 +355,7 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
             .await?;
         }
         // Flew, landed and disarmed: the mission is over (one last cycle recorded it).
-        if shell.mission.finished() {
+        if shell.finished() {
             break;
         }
     }
@@ -384,8 +384,8 @@ async fn send(
     }
 }
 
-/// What the shell keeps between cycles besides the protocol state.
-struct Shell {
+/// What the shell keeps between cycles besides the protocol state (one per flight).
+pub struct Shell {
     mission: MissionState,
     precedence: Vec<String>,
     /// Events of the shell itself (the mission's end) for the next record.
@@ -396,6 +396,26 @@ struct Shell {
 }
 
 impl Shell {
+    pub fn new(setup: &FlySetup) -> Self {
+        Self {
+            mission: MissionState::new(&setup.route, setup.takeoff_alt_m),
+            precedence: setup.link.vehicle_action_precedence.clone(),
+            pending_events: Vec::new(),
+            ingest: Default::default(),
+            ingest_reported: Default::default(),
+        }
+    }
+
+    /// The ingest counters now (reported in a record's link_events when bad input grew).
+    pub fn set_ingest(&mut self, stats: ingest::IngestStats) {
+        self.ingest = stats;
+    }
+
+    /// Flew, landed and disarmed: the mission is over.
+    pub fn finished(&self) -> bool {
+        self.mission.finished()
+    }
+
     /// A link event when bad input arrived since the last report: malformed frames or bad
     /// signatures, or more unframed bytes than one frame still arriving could explain.
     fn ingest_note(&mut self) -> Option<String> {
@@ -437,6 +457,25 @@ async fn run_cycle_at<D: Decider, S: RecordSink>(
     report: &mut FlyReport,
     transport_events: &mut Vec<String>,
 ) -> anyhow::Result<()> {
+    let decided = decide(decider, shell, vehicle, &now);
+    send(encoder, vehicle, tx, tlog, &decided.msgs).await;
+    vehicle.stamp_latency(trigger_at, now());
+    report.cycles += 1;
+    let rec = finish_record(decided, shell, vehicle, report.cycles, transport_events);
+    sink.write(&rec).context("writing the decision record")?;
+    Ok(())
+}
+
+/// The first half of one decision cycle, without I/O: the observation snapshot from the
+/// vehicle's telemetry and events, the mission state, the core's step, and the commands for
+/// the chosen vehicle action. The shell sends `msgs`, stamps latency, then calls
+/// [`finish_record`]. Public so that a soak run drives exactly the cycle `fly` runs.
+pub fn decide<D: Decider>(
+    decider: &mut D,
+    shell: &mut Shell,
+    vehicle: &mut Vehicle,
+    now: impl Fn() -> Duration,
+) -> Decided {
     let mut events = vehicle.take_events();
     events.append(&mut shell.pending_events);
     let mut obs = vehicle.observations(now(), events.clone());
@@ -462,16 +501,54 @@ async fn run_cycle_at<D: Decider, S: RecordSink>(
         chosen = Some(RESUME.into());
     }
     let msgs = vehicle.request_actions(now(), chosen.as_slice());
-    send(encoder, vehicle, tx, tlog, &msgs).await;
-    vehicle.stamp_latency(trigger_at, now());
-    report.cycles += 1;
-    rec.cycle = report.cycles;
+    Decided {
+        msgs,
+        plan,
+        rec,
+        obs,
+        events,
+    }
+}
+
+/// One cycle between [`decide`] and [`finish_record`].
+pub struct Decided {
+    /// Commands for the chosen vehicle action, to send now.
+    pub msgs: Vec<Msg>,
+    pub plan: Plan,
+    rec: DecisionRecord,
+    obs: Observations,
+    events: Vec<String>,
+}
+
+impl Decided {
+    /// The core's record so far (its actions, state, ...).
+    pub fn record(&self) -> &DecisionRecord {
+        &self.rec
+    }
+}
+
+/// The second half of one decision cycle: the record with the cycle number, the command
+/// results, link events and vehicle telemetry, ready for the decision log.
+pub fn finish_record(
+    d: Decided,
+    shell: &mut Shell,
+    vehicle: &mut Vehicle,
+    cycle: u64,
+    transport_events: &mut Vec<String>,
+) -> DecisionRecord {
+    let Decided {
+        mut rec,
+        obs,
+        events,
+        ..
+    } = d;
+    rec.cycle = cycle;
     rec.time_s = obs.time_s;
     if rec.events.is_empty() {
         rec.events = events;
     }
     if rec.observations.is_empty() {
-        rec.observations = obs.values.clone();
+        rec.observations = obs.values;
     }
     rec.commands.extend(vehicle.take_records());
     rec.link_events.append(transport_events);
@@ -482,8 +559,7 @@ async fn run_cycle_at<D: Decider, S: RecordSink>(
         "link_alive".into(),
         serde_json::Value::from(vehicle.liveness.alive()),
     );
-    sink.write(&rec).context("writing the decision record")?;
-    Ok(())
+    rec
 }
 
 /// params/commands.toml entry flown for `follow_trajectory` once the route is on the vehicle.
