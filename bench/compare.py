@@ -553,6 +553,25 @@ def main():
                 post.append([[float(x) for x in ie.posterior(v).toarray()] for v in query])
             add("pyAgrum", post, timeit(one, 5000, B))
 
+    # ---- the full decision cycle (no Python peer: the target is 50 us median; agree = met)
+    log("running the companion decision cycle ...")
+    cyc = {c["name"]: c for c in json.loads(run_cargo(
+        [os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "examples", "bench_cycle"),
+         "2000"]))["cases"]}
+    for key, label in [("steady", "decision cycle"), ("changing", "decision cycle, evidence changing"),
+                       ("worst", "decision cycle, worst case (memos off)")]:
+        c = cyc[key]
+        med = c["median_us"]
+        cases.append({"name": label, "kind": "cycle", "peer": "target-50us", "agree": bool(med <= 50.0),
+                      "speedup": 50.0 / med, "target": 1,
+                      "companion_median_ns": med * 1e3, "companion_p99_ns": c["p99_us"] * 1e3,
+                      "companion_reps": c["cycles"], "peer_median_ns": 50e3, "peer_p99_ns": 50e3,
+                      "peer_reps": 0, "allocations_per_cycle": c["allocations_per_cycle"],
+                      "mdp_solves_per_cycle": c["mdp_solves_per_cycle"],
+                      "note": f"{c['allocations_per_cycle']:g} allocations/cycle, "
+                              f"{c['mdp_solves_per_cycle']:g} MDP solves/cycle"})
+        log(f"{label:40s} median {med:.1f} us p99 {c['p99_us']:.1f} us met={med <= 50.0}")
+
     machine = {"loadavg": LOAD0, "nproc": os.cpu_count(), "cpu": cpu_model(), "platform": platform.platform()}
     result = {"budget": B, "machine": machine, "versions": versions, "notes": notes, "cases": cases}
     with open(os.path.join(OUT, "result.json"), "w") as f:

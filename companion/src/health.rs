@@ -67,6 +67,16 @@ impl Manager {
 pub struct HealthModel {
     pub managers: Vec<Manager>,
     pub observations: ObservationMap,
+    /// Buffers reused by [`HealthModel::evaluate_into`] so a warm evaluation allocates nothing.
+    scratch: Scratch,
+}
+
+#[derive(Debug, Clone, Default)]
+struct Scratch {
+    /// Evidence per manager, cleared (capacity kept) each evaluation.
+    per: Vec<Evidence>,
+    /// A carried belief being normalised.
+    belief: Vec<f64>,
 }
 
 impl HealthModel {
@@ -264,6 +274,7 @@ impl HealthModel {
         Ok(HealthModel {
             managers,
             observations,
+            scratch: Scratch::default(),
         })
     }
 
@@ -287,6 +298,11 @@ impl HealthModel {
         self.observations.evidence(obs)
     }
 
+    /// As [`HealthModel::evidence`], rewriting the caller's map in place.
+    pub fn evidence_into(&self, obs: &Observations, out: &mut BTreeMap<String, String>) {
+        self.observations.evidence_into(obs, out)
+    }
+
     /// Evaluate every manager under `evidence` (applied to each manager holding the node) and
     /// return all published probabilities; then advance the dynamic managers by one slice.
     pub fn evaluate(
@@ -298,14 +314,17 @@ impl HealthModel {
         Ok(out)
     }
 
-    /// As [`HealthModel::evaluate`], filling the caller's map.
+    /// As [`HealthModel::evaluate`], filling the caller's map (existing entries are updated in
+    /// place: no allocation once the map holds every published name).
     pub fn evaluate_into(
         &mut self,
         evidence: &BTreeMap<String, String>,
         out: &mut BTreeMap<String, f64>,
     ) -> Result<(), HealthError> {
         // Resolve everything first so a bad entry changes no state.
-        let mut per: Vec<Evidence> = vec![Evidence::new(); self.managers.len()];
+        let per = &mut self.scratch.per;
+        per.resize_with(self.managers.len(), Evidence::new);
+        per.iter_mut().for_each(Evidence::clear);
         for (node, state) in evidence {
             let mut found = false;
             for (m, ev) in self.managers.iter().zip(per.iter_mut()) {
@@ -353,19 +372,24 @@ impl HealthModel {
                 })?;
             for &(k, id, s, complement) in &m.published {
                 let p = m.engine.marginal(id)[s];
-                out.insert(
-                    m.publish[k].name.clone(),
-                    if complement { 1.0 - p } else { p },
-                );
+                let p = if complement { 1.0 - p } else { p };
+                match out.get_mut(m.publish[k].name.as_str()) {
+                    Some(x) => *x = p,
+                    None => {
+                        out.insert(m.publish[k].name.clone(), p);
+                    }
+                }
             }
         }
         for m in &mut self.managers {
             for &(from, to) in &m.carry {
-                let b = m.engine.marginal(from).to_vec();
+                let b = &mut self.scratch.belief;
+                b.clear();
+                b.extend_from_slice(m.engine.marginal(from));
                 let s: f64 = b.iter().sum();
-                let b: Vec<f64> = b.iter().map(|x| x / s).collect();
+                b.iter_mut().for_each(|x| *x /= s);
                 m.engine
-                    .set_cpt(to, &b)
+                    .set_cpt(to, b)
                     .map_err(|error| HealthError::Inference {
                         manager: m.name.clone(),
                         error,

@@ -20,3 +20,4 @@ pub mod resources;
 pub mod review;
 pub mod sim;
 pub mod spec;
+pub mod streams;
