@@ -22,9 +22,24 @@ fn cycle(c: &mut Criterion) {
     let base = tracking_snapshot(&model, &params, "complete-1");
     for (name, kind, stream, caches) in [
         ("cycle_concurrent", ModelKind::Bfm, Stream::Steady, true),
-        ("cycle_concurrent_changing", ModelKind::Bfm, Stream::Changing, true),
-        ("cycle_concurrent_worst", ModelKind::Bfm, Stream::Changing, false),
-        ("cycle_monolithic", ModelKind::Monolithic, Stream::Changing, false),
+        (
+            "cycle_concurrent_changing",
+            ModelKind::Bfm,
+            Stream::Changing,
+            true,
+        ),
+        (
+            "cycle_concurrent_worst",
+            ModelKind::Bfm,
+            Stream::Changing,
+            false,
+        ),
+        (
+            "cycle_monolithic",
+            ModelKind::Monolithic,
+            Stream::Changing,
+            false,
+        ),
     ] {
         let stream_gen = StreamGen::new(&model, base.clone(), stream);
         let mut core = Core::new(&model, kind, Policy::Safety);

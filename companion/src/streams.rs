@@ -64,7 +64,8 @@ impl StreamGen {
     /// Move `obs` (a clone of the base) to cycle `k` in place: no allocation.
     pub fn advance(&self, obs: &mut Observations, k: u64) {
         let base = &self.base;
-        obs.time_s = base.time_s + k as f64;
+        // 0.1 s per cycle: thousands of cycles stay well inside the mission's duration goal.
+        obs.time_s = base.time_s + 0.1 * k as f64;
         if let (Some(b), Some(x)) = (base.get("battery_pct"), obs.values.get_mut("battery_pct")) {
             // 1e-4 % per cycle: ten thousand cycles stay inside one battery band.
             *x = b - 1e-4 * (k % 10_000) as f64;

@@ -88,7 +88,10 @@ fn run(kind: ModelKind, policy: Policy, stream: Stream) -> (usize, usize, u64) {
 fn steady_stream_allocates_nothing() {
     for policy in [Policy::Safety, Policy::Mission] {
         let (allocs, _, _) = run(ModelKind::Bfm, policy, Stream::Steady);
-        assert_eq!(allocs, 0, "{policy:?}: {allocs} allocations in {COUNTED_CYCLES} cycles");
+        assert_eq!(
+            allocs, 0,
+            "{policy:?}: {allocs} allocations in {COUNTED_CYCLES} cycles"
+        );
     }
 }
 
@@ -96,10 +99,16 @@ fn steady_stream_allocates_nothing() {
 fn evidence_flipping_every_cycle_allocates_nothing_and_resolves_every_cycle() {
     for policy in [Policy::Safety, Policy::Mission] {
         let (allocs, changes, solves) = run(ModelKind::Bfm, policy, Stream::Changing);
-        assert_eq!(changes as u64, COUNTED_CYCLES, "{policy:?}: evidence must flip every cycle");
+        assert_eq!(
+            changes as u64, COUNTED_CYCLES,
+            "{policy:?}: evidence must flip every cycle"
+        );
         // Three concurrent MDPs, each re-solved whenever its probabilities moved.
         assert!(solves >= COUNTED_CYCLES, "{policy:?}: only {solves} solves");
-        assert_eq!(allocs, 0, "{policy:?}: {allocs} allocations in {COUNTED_CYCLES} cycles");
+        assert_eq!(
+            allocs, 0,
+            "{policy:?}: {allocs} allocations in {COUNTED_CYCLES} cycles"
+        );
     }
 }
 
