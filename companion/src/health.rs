@@ -77,6 +77,18 @@ struct Scratch {
     per: Vec<Evidence>,
     /// A carried belief being normalised.
     belief: Vec<f64>,
+    /// Per manager: the evidence of its last propagation, and whether its marginals are still
+    /// those of that evidence under its current CPTs. Propagation is a pure function of the two,
+    /// so a manager whose evidence and CPTs (imported priors, carried beliefs) are bit-identical
+    /// to last time keeps its marginals instead of propagating again.
+    last: Vec<Evidence>,
+    fresh: Vec<bool>,
+}
+
+/// True when `cpt` is bit-for-bit node `id`'s current CPT (setting it would change nothing).
+fn same_cpt(engine: &Engine, id: NodeId, cpt: &[f64]) -> bool {
+    let cur = &engine.network().node(id).cpt;
+    cur.len() == cpt.len() && cur.iter().zip(cpt).all(|(a, b)| a.to_bits() == b.to_bits())
 }
 
 impl HealthModel {
@@ -345,12 +357,20 @@ impl HealthModel {
                 return Err(HealthError::UnknownNode(node.clone()));
             }
         }
+        let n = self.managers.len();
+        let (last, fresh) = (&mut self.scratch.last, &mut self.scratch.fresh);
+        last.resize_with(n, Evidence::new);
+        fresh.resize(n, false);
         #[allow(clippy::needless_range_loop)] // split_at_mut needs the index
-        for i in 0..self.managers.len() {
+        for i in 0..n {
             let (done, rest) = self.managers.split_at_mut(i);
             let m = &mut rest[0];
             for &(local, src_m, src) in &m.imports {
                 let prior = done[src_m].engine.marginal(src);
+                if same_cpt(&m.engine, local, prior) {
+                    continue;
+                }
+                fresh[i] = false;
                 m.engine
                     .set_cpt(local, prior)
                     .or_else(|_| {
@@ -364,12 +384,17 @@ impl HealthModel {
                         error,
                     })?;
             }
-            m.engine
-                .propagate(&per[i])
-                .map_err(|error| HealthError::Inference {
-                    manager: m.name.clone(),
-                    error,
-                })?;
+            if !fresh[i] || per[i] != last[i] {
+                fresh[i] = false;
+                m.engine
+                    .propagate(&per[i])
+                    .map_err(|error| HealthError::Inference {
+                        manager: m.name.clone(),
+                        error,
+                    })?;
+                last[i].clone_from(&per[i]);
+                fresh[i] = true;
+            }
             for &(k, id, s, complement) in &m.published {
                 let p = m.engine.marginal(id)[s];
                 let p = if complement { 1.0 - p } else { p };
@@ -381,13 +406,17 @@ impl HealthModel {
                 }
             }
         }
-        for m in &mut self.managers {
+        for (i, m) in self.managers.iter_mut().enumerate() {
             for &(from, to) in &m.carry {
                 let b = &mut self.scratch.belief;
                 b.clear();
                 b.extend_from_slice(m.engine.marginal(from));
                 let s: f64 = b.iter().sum();
                 b.iter_mut().for_each(|x| *x /= s);
+                if same_cpt(&m.engine, to, b) {
+                    continue;
+                }
+                self.scratch.fresh[i] = false;
                 m.engine
                     .set_cpt(to, b)
                     .map_err(|error| HealthError::Inference {
@@ -419,6 +448,7 @@ impl HealthModel {
         &mut self,
         belief: &BTreeMap<(String, String), Vec<f64>>,
     ) -> Result<(), HealthError> {
+        self.scratch.fresh.clear();
         for ((mn, node), b) in belief {
             let m = self
                 .managers
@@ -442,6 +472,7 @@ impl HealthModel {
 
     /// Forget carried beliefs: back to the priors in the params files.
     pub fn reset(&mut self) {
+        self.scratch.fresh.clear();
         for m in &mut self.managers {
             for (id, cpt) in m.initial.clone() {
                 m.engine.set_cpt(id, &cpt).expect("loaded CPT is valid");
