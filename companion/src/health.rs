@@ -392,7 +392,7 @@ impl HealthModel {
                         manager: m.name.clone(),
                         error,
                     })?;
-                last[i].clone_from(&per[i]);
+                last[i].findings.clone_from(&per[i].findings);
                 fresh[i] = true;
             }
             for &(k, id, s, complement) in &m.published {
