@@ -995,7 +995,7 @@ impl Guarantee {
         let any_failed = (at..n)
             .flat_map(|j| p.activities[j].ias[self.choice[j]].resources.iter())
             .any(|r| failed.contains(r));
-        if !any_failed && report.margin.iter().all(|x| !(*x < 0.0)) {
+        if !any_failed && !report.margin.iter().any(|x| *x < 0.0) {
             return;
         }
         let uses_failed: Vec<String> = (at..n)
@@ -1036,8 +1036,8 @@ impl Guarantee {
         let found = panorama::reallocate_or_exact(
             p,
             &self.choice,
-            &m,
-            &failed,
+            m,
+            failed,
             self.spec.selection,
             EXACT_FALLBACK_NODES,
         )
@@ -1050,7 +1050,7 @@ impl Guarantee {
         });
         match found {
             Ok(c) => {
-                let after = panorama::margins(p, &c, &m);
+                let after = panorama::margins(p, &c, m);
                 self.choice = c;
                 let label = format!("RAS{}", self.rows.len());
                 self.rows.push(RasRow {

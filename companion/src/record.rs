@@ -238,7 +238,7 @@ mod tests {
                     ..Default::default()
                 })
                 .collect(),
-            resources: (n_props % 2 == 0).then(|| ResourcesRecord {
+            resources: n_props.is_multiple_of(2).then(|| ResourcesRecord {
                 placements: vec![PlacementRecord {
                     app: format!("app{x}"),
                     tiles: vec![1, 2],
