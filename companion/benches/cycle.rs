@@ -1,40 +1,60 @@
 //! One full decision cycle (observations to plan: all health managers, the three concurrent MDPs
 //! at horizon 100, behaviour and resource arbitration, the PANORAMA guarantee), and the monolithic
 //! model's cycle for the concurrent/monolithic ratio (BFM paper Table 9's point).
+//!
+//! `cycle_concurrent`: a steady tracking-phase stream (time and battery move, evidence does not).
+//! `cycle_concurrent_changing`: the vibration evidence flips every cycle, so the health
+//! probabilities and every MDP's inputs change and the solve memos miss.
+//! `cycle_concurrent_worst`: the changing stream with the memos off (every MDP re-solved, the
+//! scheduler re-run, every cycle). `cycle_monolithic`: section 5's single MDP, memos off, so the
+//! ratio to `cycle_concurrent_worst` compares solve work like for like.
 
 use companion::decision::{Core, Model, ModelKind, Policy};
-use companion::observations::Observations;
-use companion::sim::{Scenario, World, WorldSpec};
+use companion::record::{DecisionRecord, Plan};
 use companion::spec::default_params_dir;
+use companion::streams::{Stream, StreamGen, tracking_snapshot};
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 
-/// An observation snapshot in the tracking phase under vibrations, taken from the simulated world.
-fn tracking_snapshot(model: &Model) -> Observations {
-    let params = default_params_dir();
-    let spec = WorldSpec::load(&params).unwrap();
-    let scenario = Scenario::load(&params, "complete-1").unwrap();
-    let mut world = World::new(&spec, &scenario, 1);
-    let mut core = Core::new(model, ModelKind::Bfm, Policy::Safety);
-    loop {
-        let obs = world.observe();
-        if obs.state.starts_with('v') {
-            return obs;
-        }
-        let (plan, rec) = core.step(&obs);
-        world.advance(&plan, &rec);
-    }
-}
-
 fn cycle(c: &mut Criterion) {
-    let model = Model::load(&default_params_dir()).unwrap();
-    let obs = tracking_snapshot(&model);
-    for (name, kind) in [
-        ("cycle_concurrent", ModelKind::Bfm),
-        ("cycle_monolithic", ModelKind::Monolithic),
+    let params = default_params_dir();
+    let model = Model::load(&params).unwrap();
+    let base = tracking_snapshot(&model, &params, "complete-1");
+    for (name, kind, stream, caches) in [
+        ("cycle_concurrent", ModelKind::Bfm, Stream::Steady, true),
+        (
+            "cycle_concurrent_changing",
+            ModelKind::Bfm,
+            Stream::Changing,
+            true,
+        ),
+        (
+            "cycle_concurrent_worst",
+            ModelKind::Bfm,
+            Stream::Changing,
+            false,
+        ),
+        (
+            "cycle_monolithic",
+            ModelKind::Monolithic,
+            Stream::Changing,
+            false,
+        ),
     ] {
+        let stream_gen = StreamGen::new(&model, base.clone(), stream);
         let mut core = Core::new(&model, kind, Policy::Safety);
-        c.bench_function(name, |b| b.iter(|| black_box(core.step(black_box(&obs)))));
+        core.set_caches(caches);
+        let mut obs = base.clone();
+        let (mut plan, mut rec) = (Plan::default(), DecisionRecord::default());
+        let mut k = 0;
+        c.bench_function(name, |b| {
+            b.iter(|| {
+                stream_gen.advance(&mut obs, k);
+                k += 1;
+                core.step_into(black_box(&obs), &mut plan, &mut rec);
+                black_box(&rec);
+            })
+        });
     }
 }
 

@@ -11,7 +11,7 @@ pub use crate::mission::Policy;
 use crate::mission::{ActionCatalogue, ActionKind, MissionFile};
 use crate::mission_mdp::{BehaviourConflicts, MissionMdps};
 use crate::observations::Observations;
-use crate::record::{DecisionRecord, Plan};
+use crate::record::{DecisionRecord, Plan, ResourcesRecord};
 use crate::resources::ResourceSpec;
 use crate::spec::SpecError;
 use fpga_model::{PlatformState, Request};
@@ -146,6 +146,86 @@ pub struct Core<'m> {
     activity_started: Option<(usize, f64)>,
     /// Degradations and drops in force after the last cycle.
     last_degraded: Vec<String>,
+    /// Number of names the health managers publish (a reused probability map holds exactly these).
+    n_published: usize,
+    scratch: Scratch<'m>,
+    /// Recent resource schedules keyed on their exact inputs (see [`Core::arbitrate_resources`]).
+    schedules: Vec<ScheduleMemo<'m>>,
+    schedules_next: usize,
+    schedule_cache: bool,
+    scheduler_runs: u64,
+}
+
+/// How much work the cycles so far really did (the rest came from the memos).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct WorkDone {
+    pub cycles: u64,
+    pub mdp_solves: u64,
+    pub scheduler_runs: u64,
+}
+
+/// Per-cycle working lists, kept between cycles for their capacity. Action names borrow the
+/// model (`'m`), so filling them allocates nothing.
+#[derive(Default)]
+struct Scratch<'m> {
+    merged: Vec<&'m str>,
+    kept: Vec<&'m str>,
+    owners: Vec<&'m str>,
+    actions: Vec<&'m str>,
+    key: Vec<(&'m str, &'m str, u64)>,
+    failed: Vec<String>,
+}
+
+/// One memoised scheduling decision: `fpga_model::schedule` is a pure function of the policy
+/// (fixed per core), the platform state before it and the requests, so the same inputs give
+/// the same record and the same platform state after.
+struct ScheduleMemo<'m> {
+    before: PlatformState,
+    /// (app, version, required fps bits) per request, in request order.
+    key: Vec<(&'m str, &'m str, u64)>,
+    after: PlatformState,
+    record: ResourcesRecord,
+}
+
+/// How many distinct recent schedules are remembered: alternating between two action sets
+/// (a vibration on/off stream) cycles through a few (state before, requests) pairs.
+const SCHEDULE_MEMO: usize = 8;
+
+/// `dst = src.clone()` for a platform state, keeping the tiles' bitstream strings.
+fn copy_platform(dst: &mut PlatformState, src: &PlatformState) {
+    dst.tiles.truncate(src.tiles.len());
+    for (i, t) in src.tiles.iter().enumerate() {
+        match dst.tiles.get_mut(i) {
+            Some(d) => {
+                d.bitstream.clone_from(&t.bitstream);
+                d.failed = t.failed;
+            }
+            None => dst.tiles.push(t.clone()),
+        }
+    }
+    dst.cores_online = src.cores_online;
+    dst.external_cpu_load = src.external_cpu_load;
+}
+
+/// Bit-exact equality (a `-0.0` load is not the `0.0` one: the record would print it).
+fn same_platform(a: &PlatformState, b: &PlatformState) -> bool {
+    a.tiles == b.tiles
+        && a.cores_online == b.cores_online
+        && a.external_cpu_load.to_bits() == b.external_cpu_load.to_bits()
+}
+
+/// `dst = src` element by element, reusing `dst`'s strings.
+fn fill_strings<S: AsRef<str>>(dst: &mut Vec<String>, src: &[S]) {
+    dst.truncate(src.len());
+    for (i, a) in src.iter().enumerate() {
+        match dst.get_mut(i) {
+            Some(d) => {
+                d.clear();
+                d.push_str(a.as_ref());
+            }
+            None => dst.push(a.as_ref().to_string()),
+        }
+    }
 }
 
 impl<'m> Core<'m> {
@@ -165,7 +245,30 @@ impl<'m> Core<'m> {
             failed_resources: Vec::new(),
             activity_started: None,
             last_degraded: Vec::new(),
+            n_published: model.health.publishes().len(),
+            scratch: Scratch::default(),
+            schedules: Vec::new(),
+            schedules_next: 0,
+            schedule_cache: true,
+            scheduler_runs: 0,
         }
+    }
+
+    pub fn work_done(&self) -> WorkDone {
+        WorkDone {
+            cycles: self.cycle,
+            mdp_solves: self.mdps.solves(),
+            scheduler_runs: self.scheduler_runs,
+        }
+    }
+
+    /// Turn the memos (MDP solves, resource schedules) on or off. Off, every cycle re-solves
+    /// every MDP and re-runs the scheduler: the worst case, and the reference the memos are
+    /// tested against. Outputs are identical either way.
+    pub fn set_caches(&mut self, on: bool) {
+        self.mdps.set_solve_cache(on);
+        self.schedule_cache = on;
+        self.schedules.clear();
     }
 
     /// The PANORAMA allocations in force so far (RAS0 then each re-allocation), in the shape of
@@ -184,23 +287,45 @@ impl<'m> Core<'m> {
 
     /// One decision cycle.
     pub fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
+        let mut plan = Plan::default();
+        let mut rec = DecisionRecord::default();
+        self.step_into(obs, &mut plan, &mut rec);
+        (plan, rec)
+    }
+
+    /// One decision cycle into the caller's buffers: `plan` and `rec` are overwritten (the result
+    /// equals [`Core::step`]'s whatever they held) and keep their capacity, so a steady stream of
+    /// observations of the same shape allocates nothing once warm (tests/cycle_no_alloc.rs).
+    pub fn step_into(&mut self, obs: &Observations, plan: &mut Plan, rec: &mut DecisionRecord) {
         let model = self.model;
         let policy = self.policy.name();
-        let mut rec = DecisionRecord {
-            cycle: self.cycle,
-            time_s: obs.time_s,
-            state: obs.state.clone(),
-            events: obs.events.clone(),
-            observations: obs.values.clone(),
-            ..Default::default()
-        };
+        rec.cycle = self.cycle;
+        rec.time_s = obs.time_s;
+        rec.state.clone_from(&obs.state);
+        rec.events.clone_from(&obs.events);
+        crate::record::map_clone_from(&mut rec.observations, &obs.values);
+        rec.commands.clear();
+        rec.link_events.clear();
+        rec.vehicle.clear();
         self.cycle += 1;
 
         // evidence -> health
-        rec.evidence = self.health.evidence(obs);
-        match self.health.evaluate(&rec.evidence) {
-            Ok(p) => rec.probabilities = p,
-            Err(e) => rec.events.push(format!("health: {e}")),
+        self.health.evidence_into(obs, &mut rec.evidence);
+        match self
+            .health
+            .evaluate_into(&rec.evidence, &mut rec.probabilities)
+        {
+            Ok(()) => {
+                if rec.probabilities.len() != self.n_published {
+                    // A reused map held other names: keep exactly what was published.
+                    let names = self.health.publishes();
+                    rec.probabilities.retain(|k, _| names.contains(k));
+                }
+            }
+            Err(e) => {
+                rec.probabilities.clear();
+                rec.events.push(format!("health: {e}"));
+            }
         }
         if self.guarantee_infeasible {
             let cap = model.mission.guarantee.infeasible_p_battery;
@@ -213,10 +338,12 @@ impl<'m> Core<'m> {
         }
 
         // decision: every MDP of the model, solved at its projected state
-        let mut merged: Vec<String> = Vec::new();
+        let mut sc = std::mem::take(&mut self.scratch);
+        sc.merged.clear();
+        let mut n_proposals = 0;
         for name in &self.mdp_names {
             let local = model.mission.project(name, obs);
-            let Some(mdp) = self.mdps.get_mut(name) else {
+            let (Some(mdp), Some(shared)) = (self.mdps.get_mut(name), model.mdps.get(name)) else {
                 continue;
             };
             let Some(s) = mdp.state_index(local) else {
@@ -232,62 +359,77 @@ impl<'m> Core<'m> {
                 model.mission.horizon,
             ) {
                 Ok(Some(d)) => {
-                    let p = mdp.proposal(s, &d, model.mission.horizon);
-                    for a in &p.actions {
-                        if !merged.contains(a) {
-                            merged.push(a.clone());
+                    for a in shared.primitives(d.action) {
+                        if !sc.merged.contains(&a.as_str()) {
+                            sc.merged.push(a);
                         }
                     }
-                    rec.proposals.push(p);
+                    if n_proposals == rec.proposals.len() {
+                        rec.proposals.push(Default::default());
+                    }
+                    mdp.proposal_into(
+                        s,
+                        &d,
+                        model.mission.horizon,
+                        &mut rec.proposals[n_proposals],
+                    );
+                    n_proposals += 1;
                 }
                 Ok(None) => {}
                 Err(e) => rec.events.push(format!("{name}: {e}")),
             }
         }
+        rec.proposals.truncate(n_proposals);
 
         // behaviour arbitration
-        let kept = match model.conflicts.resolve(&merged, policy) {
-            Ok((kept, conflicts)) => {
-                rec.conflicts = conflicts;
-                kept
-            }
-            Err(e) => {
-                rec.events.push(format!("arbitration: {e}"));
-                merged
-            }
-        };
+        if let Err(e) =
+            model
+                .conflicts
+                .resolve_into(&sc.merged, policy, &mut sc.kept, &mut rec.conflicts)
+        {
+            rec.conflicts.clear();
+            rec.events.push(format!("arbitration: {e}"));
+            sc.kept.clone_from(&sc.merged);
+        }
 
         // resource arbitration: application actions become variant requests on the platform
-        rec.actions = self.arbitrate_resources(&kept, obs, &mut rec);
+        self.arbitrate_resources(&mut sc, obs, rec);
+        fill_strings(&mut rec.actions, &sc.actions);
 
         // guarantee: PANORAMA margins on the activity being flown
-        self.watch_guarantee(obs, &mut rec);
+        self.watch_guarantee(&mut sc, obs, rec);
+        self.scratch = sc;
 
         // plan
-        let mut plan = Plan::default();
+        let mut n = 0;
         for a in &rec.actions {
             if model
                 .actions
                 .get(a)
                 .is_some_and(|x| x.kind == ActionKind::Vehicle)
             {
-                plan.vehicle_actions.push(a.clone());
+                if n == plan.vehicle_actions.len() {
+                    plan.vehicle_actions.push(String::new());
+                }
+                plan.vehicle_actions[n].clone_from(a);
+                n += 1;
             }
         }
-        if let Some(r) = &rec.resources {
-            plan.applications = r.placements.clone();
+        plan.vehicle_actions.truncate(n);
+        match &rec.resources {
+            Some(r) => plan.applications.clone_from(&r.placements),
+            None => plan.applications.clear(),
         }
-        (plan, rec)
     }
 
     /// Request every application action's variant at the rate the situation needs, schedule them
-    /// under the policy, and rewrite the action set with what actually runs.
+    /// under the policy, and rewrite the action set (`sc.actions`) with what actually runs.
     fn arbitrate_resources(
         &mut self,
-        kept: &[String],
+        sc: &mut Scratch<'m>,
         obs: &Observations,
         rec: &mut DecisionRecord,
-    ) -> Vec<String> {
+    ) {
         let model = self.model;
         // Faults and monitor readings the shell reports.
         let failed = obs.get("failed_tiles").unwrap_or(0.0).max(0.0) as usize;
@@ -298,16 +440,16 @@ impl<'m> Core<'m> {
         }
         self.platform.external_cpu_load = obs.get("external_cpu_load").unwrap_or(0.0).max(0.0);
 
-        let mut requests: Vec<Request> = Vec::new();
-        let mut owners: Vec<&str> = Vec::new();
-        for a in kept {
+        sc.key.clear();
+        sc.owners.clear();
+        for &a in &sc.kept {
             let Some(act) = model.actions.get(a) else {
                 continue;
             };
             let (Some(app), Some(version)) = (&act.app, &act.version) else {
                 continue;
             };
-            if requests.iter().any(|r| &r.app == app) {
+            if sc.key.iter().any(|r| r.0 == app) {
                 continue; // one variant per application (target detection shares the tracker)
             }
             let speed = model
@@ -320,75 +462,118 @@ impl<'m> Core<'m> {
                 .resources
                 .required_fps(app, [0.0, 0.0], [speed, 0.0])
                 .unwrap_or(1.0);
-            requests.push(Request::new(app, version, fps));
-            owners.push(a);
+            sc.key.push((app, version, fps.to_bits()));
+            sc.owners.push(a);
         }
-        let (schedule, next) =
-            match model
-                .resources
-                .schedule(self.policy.name(), &self.platform, &requests)
-            {
-                Ok(x) => x,
-                Err(e) => {
-                    rec.events.push(format!("resources: {e}"));
-                    return kept.to_vec();
+        let hit = self.schedule_cache.then(|| {
+            self.schedules
+                .iter()
+                .position(|m| m.key == sc.key && same_platform(&m.before, &self.platform))
+        });
+        let memo = match hit.flatten() {
+            Some(i) => i,
+            None => {
+                self.scheduler_runs += 1;
+                let requests: Vec<Request> = sc
+                    .key
+                    .iter()
+                    .map(|&(app, version, fps)| Request::new(app, version, f64::from_bits(fps)))
+                    .collect();
+                let (schedule, next) =
+                    match model
+                        .resources
+                        .schedule(self.policy.name(), &self.platform, &requests)
+                    {
+                        Ok(x) => x,
+                        Err(e) => {
+                            rec.events.push(format!("resources: {e}"));
+                            rec.resources = None;
+                            sc.actions.clone_from(&sc.kept);
+                            return;
+                        }
+                    };
+                let m = ScheduleMemo {
+                    before: self.platform.clone(),
+                    key: sc.key.clone(),
+                    after: next,
+                    record: crate::resources::to_record(&schedule),
+                };
+                if !self.schedule_cache {
+                    self.schedules.clear();
                 }
-            };
-        self.platform = next;
-        let record = crate::resources::to_record(&schedule);
+                if self.schedules.len() < SCHEDULE_MEMO {
+                    self.schedules.push(m);
+                    self.schedules.len() - 1
+                } else {
+                    let i = self.schedules_next;
+                    self.schedules_next = (i + 1) % SCHEDULE_MEMO;
+                    self.schedules[i] = m;
+                    i
+                }
+            }
+        };
+        let m = &self.schedules[memo];
+        copy_platform(&mut self.platform, &m.after);
+        match &mut rec.resources {
+            Some(r) => r.clone_from(&m.record),
+            None => rec.resources = Some(m.record.clone()),
+        }
+        let record = &m.record;
 
         // Rewrite: an application action stays only if its app is placed, under the placed version.
-        let mut actions = Vec::with_capacity(kept.len());
-        for a in kept {
+        sc.actions.clear();
+        for &a in &sc.kept {
             let act = model.actions.get(a);
             match act.and_then(|x| x.app.as_deref()) {
-                None => actions.push(a.clone()),
+                None => sc.actions.push(a),
                 Some(app) => {
                     let placed = record.placements.iter().find(|p| p.app == app);
                     if let Some(p) = placed {
                         // A degraded variant is named by the action that runs it (track_v3 -> track_v1).
                         let same =
                             act.and_then(|x| x.version.as_deref()) == Some(p.version.as_str());
-                        let id = if same || !owners.contains(&a.as_str()) {
-                            a.clone()
+                        let id = if same || !sc.owners.contains(&a) {
+                            a
                         } else {
                             model
                                 .actions
                                 .for_variant(app, &p.version)
-                                .map_or(a.clone(), |x| x.id.clone())
+                                .map_or(a, |x| x.id.as_str())
                         };
-                        if !actions.contains(&id) {
-                            actions.push(id);
+                        if !sc.actions.contains(&id) {
+                            sc.actions.push(id);
                         }
                     } else if act.is_some_and(|x| x.kind == ActionKind::Vehicle) {
-                        actions.push(a.clone());
+                        sc.actions.push(a);
                     }
                 }
             }
         }
         // Degradations are events when they start, not on every cycle they last.
-        let now: Vec<String> = record
-            .degraded
-            .iter()
-            .chain(&record.dropped)
-            .cloned()
-            .collect();
-        for d in &now {
-            if !self.last_degraded.contains(d) {
-                rec.events.push(d.clone());
+        let now = || record.degraded.iter().chain(&record.dropped);
+        if !now().eq(self.last_degraded.iter()) {
+            for d in now() {
+                if !self.last_degraded.contains(d) {
+                    rec.events.push(d.clone());
+                }
             }
+            self.last_degraded = now().cloned().collect();
         }
-        self.last_degraded = now;
-        rec.resources = Some(record);
-        actions
     }
 
-    fn watch_guarantee(&mut self, obs: &Observations, rec: &mut DecisionRecord) {
+    fn watch_guarantee(
+        &mut self,
+        sc: &mut Scratch<'m>,
+        obs: &Observations,
+        rec: &mut DecisionRecord,
+    ) {
         let Some(g) = self.guarantee.as_mut() else {
+            rec.guarantee = None;
             return;
         };
         let coupling = &self.model.mission.guarantee;
         let Some(&activity_index) = coupling.activity_of_state.get(&obs.state) else {
+            rec.guarantee = None;
             return;
         };
         for (resource, observation) in &coupling.failures {
@@ -399,17 +584,29 @@ impl<'m> Core<'m> {
             }
         }
         let failed_tiles = obs.get("failed_tiles").unwrap_or(0.0).max(0.0) as usize;
-        let tile_names: Vec<String> = (0..failed_tiles.min(self.platform.tiles.len()))
-            .map(|k| {
-                g.spec
-                    .tile_names
-                    .get(self.platform.tiles.len() - 1 - k)
-                    .cloned()
-                    .unwrap_or_default()
-            })
-            .collect();
-        let mut failed = self.failed_resources.clone();
-        failed.extend(tile_names);
+        let n_tiles = self.platform.tiles.len();
+        let tile_names = (0..failed_tiles.min(n_tiles)).map(|k| {
+            g.spec
+                .tile_names
+                .get(n_tiles - 1 - k)
+                .map_or("", String::as_str)
+        });
+        let failed = &mut sc.failed;
+        let mut len = 0;
+        for name in self
+            .failed_resources
+            .iter()
+            .map(String::as_str)
+            .chain(tile_names)
+        {
+            if len == failed.len() {
+                failed.push(String::new());
+            }
+            failed[len].clear();
+            failed[len].push_str(name);
+            len += 1;
+        }
+        failed.truncate(len);
         // How far into the activity: time spent in it over its estimated duration (capped below
         // 1 so an overrunning activity still counts its remainder as not yet flown).
         let started = match self.activity_started {
@@ -423,14 +620,18 @@ impl<'m> Core<'m> {
             .estimated(activity_index, &coupling.progress_goal)
             .filter(|d| *d > 0.0)
             .map_or(0.0, |d| ((obs.time_s - started) / d).min(0.95));
-        let record = g.watch(Progress {
-            activity_index,
-            activity_fraction: fraction,
-            energy_used_j: obs.get("energy_consumed_j"),
-            battery_remaining_pct: obs.get("battery_pct"),
-            elapsed_s: obs.time_s,
-            failed_resources: &failed,
-        });
+        let record = rec.guarantee.get_or_insert_with(Default::default);
+        g.watch_into(
+            Progress {
+                activity_index,
+                activity_fraction: fraction,
+                energy_used_j: obs.get("energy_consumed_j"),
+                battery_remaining_pct: obs.get("battery_pct"),
+                elapsed_s: obs.time_s,
+                failed_resources: failed,
+            },
+            record,
+        );
         if let Some(r) = &record.reallocation {
             rec.events.push(format!("re-allocation: {}", r.reason));
         }
@@ -439,7 +640,6 @@ impl<'m> Core<'m> {
                 .push("guarantee: no allocation meets the goals".into());
         }
         self.guarantee_infeasible = record.infeasible;
-        rec.guarantee = Some(record);
     }
 }
 

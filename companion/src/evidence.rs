@@ -119,11 +119,39 @@ impl ObservationMap {
     /// Evidence (node -> state) for every observation present in the snapshot.
     pub fn evidence(&self, obs: &Observations) -> BTreeMap<String, String> {
         let mut out = BTreeMap::new();
+        self.evidence_into(obs, &mut out);
+        out
+    }
+
+    /// As [`ObservationMap::evidence`], into the caller's map. When the same nodes get evidence
+    /// as last time (the steady state) the entries are rewritten in place and nothing is
+    /// allocated once every state name has fitted in its entry.
+    pub fn evidence_into(&self, obs: &Observations, out: &mut BTreeMap<String, String>) {
+        let mut n = 0;
+        let mut same = true;
+        for o in &self.observations {
+            if let Some(s) = obs.get(&o.name).and_then(|v| o.state(v)) {
+                n += 1;
+                match out.get_mut(o.node.as_str()) {
+                    Some(v) => {
+                        v.clear();
+                        v.push_str(s);
+                    }
+                    None => {
+                        same = false;
+                        break;
+                    }
+                }
+            }
+        }
+        if same && n == out.len() {
+            return;
+        }
+        out.clear();
         for o in &self.observations {
             if let Some(s) = obs.get(&o.name).and_then(|v| o.state(v)) {
                 out.insert(o.node.clone(), s.to_string());
             }
         }
-        out
     }
 }

@@ -12,7 +12,8 @@
 use crate::record::{GuaranteeRecord, Reallocation};
 use crate::spec::{SpecError, read_toml};
 use panorama::{
-    Activity, CoreConstraint, Goal, Ia, Infeasible, Measured, Problem, Selection, Task, Tio,
+    Activity, CoreConstraint, Goal, Ia, Infeasible, MarginReport, Measured, Problem, Selection,
+    Task, Tio,
 };
 use serde::Deserialize;
 use std::collections::{BTreeMap, BTreeSet};
@@ -743,6 +744,58 @@ pub struct Guarantee {
     failed: Vec<String>,
     first_pct: Option<f64>,
     rows: Vec<RasRow>,
+    /// Buffers reused by [`Guarantee::watch_into`] (no allocation on a cycle that keeps the RAS).
+    scratch: WatchScratch,
+}
+
+#[derive(Debug, Clone)]
+struct WatchScratch {
+    failed: Vec<String>,
+    zero: Measured,
+    m: Measured,
+    report: MarginReport,
+}
+
+impl Default for WatchScratch {
+    fn default() -> Self {
+        let measured = Measured {
+            activity: 0,
+            fraction: 0.0,
+            so_far: Vec::new(),
+        };
+        Self {
+            failed: Vec::new(),
+            zero: measured.clone(),
+            m: measured,
+            report: MarginReport {
+                estimated_so_far: Vec::new(),
+                remainder: Vec::new(),
+                margin: Vec::new(),
+                drift: Vec::new(),
+            },
+        }
+    }
+}
+
+/// `named(goals, v)` into a reused map: values overwritten in place when it already holds
+/// exactly the goal names.
+fn named_into(goals: &[Goal], v: &[f64], out: &mut BTreeMap<String, f64>) {
+    if out.len() == goals.len() {
+        let mut all = true;
+        for (g, x) in goals.iter().zip(v) {
+            match out.get_mut(g.name.as_str()) {
+                Some(y) => *y = *x,
+                None => {
+                    all = false;
+                    break;
+                }
+            }
+        }
+        if all {
+            return;
+        }
+    }
+    *out = named(goals, v);
 }
 
 fn named(goals: &[Goal], v: &[f64]) -> BTreeMap<String, f64> {
@@ -791,6 +844,7 @@ impl Guarantee {
             failed: Vec::new(),
             first_pct: None,
             rows,
+            scratch: WatchScratch::default(),
         })
     }
 
@@ -832,6 +886,15 @@ impl Guarantee {
     /// mission when a margin is negative or a failed resource is used from now on; `infeasible`
     /// set (with the goal and excess in `infeasible_reason`) when no RAS remains.
     pub fn watch(&mut self, progress: Progress) -> GuaranteeRecord {
+        let mut rec = GuaranteeRecord::default();
+        self.watch_into(progress, &mut rec);
+        rec
+    }
+
+    /// As [`Guarantee::watch`], overwriting a reused record. A cycle that keeps the RAS in force
+    /// (no negative margin, no failed resource in the plan) allocates nothing once the record
+    /// and the internal buffers have their shape; a re-allocation builds its strings as before.
+    pub fn watch_into(&mut self, progress: Progress, rec: &mut GuaranteeRecord) {
         let energy = self.energy_used(&progress);
         let p = &self.spec.problem;
         let n = p.activities.len();
@@ -853,46 +916,87 @@ impl Guarantee {
             .filter(|r| self.spec.tile_names.contains(r))
             .count();
         let total_tiles = self.spec.tile_names.len();
-        let mut failed: Vec<String> = self.failed.clone();
-        failed
-            .extend((total_tiles - failed_tiles.min(total_tiles) + 1..=total_tiles).map(tile_slot));
-
-        let zero = Measured {
-            activity: at,
-            fraction,
-            so_far: vec![0.0; p.goals.len()],
-        };
-        let est = panorama::margins(p, &self.choice, &zero).estimated_so_far;
-        let so_far: Vec<f64> = p
-            .goals
+        let sc = &mut self.scratch;
+        // failed = self.failed + the lost tile slots, written over the reused strings.
+        let slots = total_tiles - failed_tiles.min(total_tiles) + 1..=total_tiles;
+        let names = self
+            .failed
             .iter()
-            .enumerate()
-            .map(|(g, goal)| match goal.name.as_str() {
-                ENERGY => energy.unwrap_or(est[g]),
-                DURATION => progress.elapsed_s,
-                _ => est[g],
-            })
-            .collect();
-        let m = Measured {
-            activity: at,
-            fraction,
-            so_far,
-        };
-        let report = panorama::margins(p, &self.choice, &m);
+            .map(|r| (Some(r), 0))
+            .chain(slots.map(|k| (None, k)));
+        let mut len = 0;
+        for (name, k) in names {
+            if len == sc.failed.len() {
+                sc.failed.push(String::new());
+            }
+            let out = &mut sc.failed[len];
+            match name {
+                Some(r) => out.clone_from(r),
+                None => {
+                    use std::fmt::Write;
+                    out.clear();
+                    let _ = write!(out, "tile_slot:{k}");
+                }
+            }
+            len += 1;
+        }
+        sc.failed.truncate(len);
+        let failed = &sc.failed;
 
-        let mut rec = GuaranteeRecord {
-            activity: at,
-            activity_name: p.activities[at].name.clone(),
-            margins: named(&p.goals, &report.margin),
-            goals: p.goals.iter().map(|g| (g.name.clone(), g.bound)).collect(),
-            drift: named(&p.goals, &report.drift),
-            reallocation: None,
-            infeasible: false,
-            infeasible_reason: None,
-            failed_resources: self.failed.clone(),
-        };
+        sc.zero.activity = at;
+        sc.zero.fraction = fraction;
+        sc.zero.so_far.clear();
+        sc.zero.so_far.resize(p.goals.len(), 0.0);
+        panorama::margins_into(p, &self.choice, &sc.zero, &mut sc.report);
+        let est = &sc.report.estimated_so_far;
+        sc.m.activity = at;
+        sc.m.fraction = fraction;
+        sc.m.so_far.clear();
+        sc.m.so_far.extend(
+            p.goals
+                .iter()
+                .enumerate()
+                .map(|(g, goal)| match goal.name.as_str() {
+                    ENERGY => energy.unwrap_or(est[g]),
+                    DURATION => progress.elapsed_s,
+                    _ => est[g],
+                }),
+        );
+        let m = &sc.m;
+        panorama::margins_into(p, &self.choice, m, &mut sc.report);
+        let report = &sc.report;
+
+        rec.activity = at;
+        rec.activity_name.clone_from(&p.activities[at].name);
+        named_into(&p.goals, &report.margin, &mut rec.margins);
+        if rec.goals.len() != p.goals.len()
+            || !p
+                .goals
+                .iter()
+                .all(|g| match rec.goals.get_mut(g.name.as_str()) {
+                    Some(b) => {
+                        *b = g.bound;
+                        true
+                    }
+                    None => false,
+                })
+        {
+            rec.goals = p.goals.iter().map(|g| (g.name.clone(), g.bound)).collect();
+        }
+        named_into(&p.goals, &report.drift, &mut rec.drift);
+        rec.reallocation = None;
+        rec.infeasible = false;
+        rec.infeasible_reason = None;
+        rec.failed_resources.clone_from(&self.failed);
         if progress.activity_index >= n {
-            return rec; // mission over: margins are final, nothing left to re-allocate
+            return; // mission over: margins are final, nothing left to re-allocate
+        }
+        // The common case, decided without building any string.
+        let any_failed = (at..n)
+            .flat_map(|j| p.activities[j].ias[self.choice[j]].resources.iter())
+            .any(|r| failed.contains(r));
+        if !any_failed && !report.margin.iter().any(|x| *x < 0.0) {
+            return;
         }
         let uses_failed: Vec<String> = (at..n)
             .flat_map(|j| p.activities[j].ias[self.choice[j]].resources.iter())
@@ -908,9 +1012,6 @@ impl Guarantee {
             .filter(|(_, x)| **x < 0.0)
             .map(|(g, x)| format!("{} margin {x:.1}", g.name))
             .collect();
-        if negative.is_empty() && uses_failed.is_empty() {
-            return rec;
-        }
         let mut why = Vec::new();
         if !negative.is_empty() {
             why.push(format!("negative {}", negative.join(", ")));
@@ -935,8 +1036,8 @@ impl Guarantee {
         let found = panorama::reallocate_or_exact(
             p,
             &self.choice,
-            &m,
-            &failed,
+            m,
+            failed,
             self.spec.selection,
             EXACT_FALLBACK_NODES,
         )
@@ -949,7 +1050,7 @@ impl Guarantee {
         });
         match found {
             Ok(c) => {
-                let after = panorama::margins(p, &c, &m);
+                let after = panorama::margins(p, &c, m);
                 self.choice = c;
                 let label = format!("RAS{}", self.rows.len());
                 self.rows.push(RasRow {
@@ -982,7 +1083,6 @@ impl Guarantee {
                 ));
             }
         }
-        rec
     }
 }
 

@@ -67,6 +67,28 @@ impl Manager {
 pub struct HealthModel {
     pub managers: Vec<Manager>,
     pub observations: ObservationMap,
+    /// Buffers reused by [`HealthModel::evaluate_into`] so a warm evaluation allocates nothing.
+    scratch: Scratch,
+}
+
+#[derive(Debug, Clone, Default)]
+struct Scratch {
+    /// Evidence per manager, cleared (capacity kept) each evaluation.
+    per: Vec<Evidence>,
+    /// A carried belief being normalised.
+    belief: Vec<f64>,
+    /// Per manager: the evidence of its last propagation, and whether its marginals are still
+    /// those of that evidence under its current CPTs. Propagation is a pure function of the two,
+    /// so a manager whose evidence and CPTs (imported priors, carried beliefs) are bit-identical
+    /// to last time keeps its marginals instead of propagating again.
+    last: Vec<Evidence>,
+    fresh: Vec<bool>,
+}
+
+/// True when `cpt` is bit-for-bit node `id`'s current CPT (setting it would change nothing).
+fn same_cpt(engine: &Engine, id: NodeId, cpt: &[f64]) -> bool {
+    let cur = &engine.network().node(id).cpt;
+    cur.len() == cpt.len() && cur.iter().zip(cpt).all(|(a, b)| a.to_bits() == b.to_bits())
 }
 
 impl HealthModel {
@@ -264,6 +286,7 @@ impl HealthModel {
         Ok(HealthModel {
             managers,
             observations,
+            scratch: Scratch::default(),
         })
     }
 
@@ -287,6 +310,11 @@ impl HealthModel {
         self.observations.evidence(obs)
     }
 
+    /// As [`HealthModel::evidence`], rewriting the caller's map in place.
+    pub fn evidence_into(&self, obs: &Observations, out: &mut BTreeMap<String, String>) {
+        self.observations.evidence_into(obs, out)
+    }
+
     /// Evaluate every manager under `evidence` (applied to each manager holding the node) and
     /// return all published probabilities; then advance the dynamic managers by one slice.
     pub fn evaluate(
@@ -298,14 +326,17 @@ impl HealthModel {
         Ok(out)
     }
 
-    /// As [`HealthModel::evaluate`], filling the caller's map.
+    /// As [`HealthModel::evaluate`], filling the caller's map (existing entries are updated in
+    /// place: no allocation once the map holds every published name).
     pub fn evaluate_into(
         &mut self,
         evidence: &BTreeMap<String, String>,
         out: &mut BTreeMap<String, f64>,
     ) -> Result<(), HealthError> {
         // Resolve everything first so a bad entry changes no state.
-        let mut per: Vec<Evidence> = vec![Evidence::new(); self.managers.len()];
+        let per = &mut self.scratch.per;
+        per.resize_with(self.managers.len(), Evidence::new);
+        per.iter_mut().for_each(Evidence::clear);
         for (node, state) in evidence {
             let mut found = false;
             for (m, ev) in self.managers.iter().zip(per.iter_mut()) {
@@ -326,12 +357,20 @@ impl HealthModel {
                 return Err(HealthError::UnknownNode(node.clone()));
             }
         }
+        let n = self.managers.len();
+        let (last, fresh) = (&mut self.scratch.last, &mut self.scratch.fresh);
+        last.resize_with(n, Evidence::new);
+        fresh.resize(n, false);
         #[allow(clippy::needless_range_loop)] // split_at_mut needs the index
-        for i in 0..self.managers.len() {
+        for i in 0..n {
             let (done, rest) = self.managers.split_at_mut(i);
             let m = &mut rest[0];
             for &(local, src_m, src) in &m.imports {
                 let prior = done[src_m].engine.marginal(src);
+                if same_cpt(&m.engine, local, prior) {
+                    continue;
+                }
+                fresh[i] = false;
                 m.engine
                     .set_cpt(local, prior)
                     .or_else(|_| {
@@ -345,27 +384,41 @@ impl HealthModel {
                         error,
                     })?;
             }
-            m.engine
-                .propagate(&per[i])
-                .map_err(|error| HealthError::Inference {
-                    manager: m.name.clone(),
-                    error,
-                })?;
+            if !fresh[i] || per[i] != last[i] {
+                fresh[i] = false;
+                m.engine
+                    .propagate(&per[i])
+                    .map_err(|error| HealthError::Inference {
+                        manager: m.name.clone(),
+                        error,
+                    })?;
+                last[i].findings.clone_from(&per[i].findings);
+                fresh[i] = true;
+            }
             for &(k, id, s, complement) in &m.published {
                 let p = m.engine.marginal(id)[s];
-                out.insert(
-                    m.publish[k].name.clone(),
-                    if complement { 1.0 - p } else { p },
-                );
+                let p = if complement { 1.0 - p } else { p };
+                match out.get_mut(m.publish[k].name.as_str()) {
+                    Some(x) => *x = p,
+                    None => {
+                        out.insert(m.publish[k].name.clone(), p);
+                    }
+                }
             }
         }
-        for m in &mut self.managers {
+        for (i, m) in self.managers.iter_mut().enumerate() {
             for &(from, to) in &m.carry {
-                let b = m.engine.marginal(from).to_vec();
+                let b = &mut self.scratch.belief;
+                b.clear();
+                b.extend_from_slice(m.engine.marginal(from));
                 let s: f64 = b.iter().sum();
-                let b: Vec<f64> = b.iter().map(|x| x / s).collect();
+                b.iter_mut().for_each(|x| *x /= s);
+                if same_cpt(&m.engine, to, b) {
+                    continue;
+                }
+                self.scratch.fresh[i] = false;
                 m.engine
-                    .set_cpt(to, &b)
+                    .set_cpt(to, b)
                     .map_err(|error| HealthError::Inference {
                         manager: m.name.clone(),
                         error,
@@ -395,6 +448,7 @@ impl HealthModel {
         &mut self,
         belief: &BTreeMap<(String, String), Vec<f64>>,
     ) -> Result<(), HealthError> {
+        self.scratch.fresh.clear();
         for ((mn, node), b) in belief {
             let m = self
                 .managers
@@ -418,6 +472,7 @@ impl HealthModel {
 
     /// Forget carried beliefs: back to the priors in the params files.
     pub fn reset(&mut self) {
+        self.scratch.fresh.clear();
         for m in &mut self.managers {
             for (id, cpt) in m.initial.clone() {
                 m.engine.set_cpt(id, &cpt).expect("loaded CPT is valid");

@@ -21,3 +21,4 @@ pub mod review;
 pub mod sim;
 pub mod sim_link;
 pub mod spec;
+pub mod streams;

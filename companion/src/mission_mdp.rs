@@ -130,6 +130,41 @@ pub struct MissionMdp {
     /// Per policy: enter reward per state (`None` = 0).
     enter_reward: Vec<Vec<Option<Expr>>>,
     mdp: Mdp,
+    /// The last solve's stage-0 answer for every state, keyed on its exact inputs.
+    solved: Solved,
+}
+
+/// Memo of the last finite-horizon solve. The solve is a pure function of the probability
+/// values (which fix every transition probability and reward), the policy and the horizon, so
+/// when all three are bit-identical the stored stage-0 decisions and values are exactly what a
+/// new solve would give. `decide` then skips instantiate + solve.
+#[derive(Debug, Clone, Default)]
+struct Solved {
+    enabled: bool,
+    valid: bool,
+    values: Vec<f64>,
+    policy: usize,
+    horizon: usize,
+    /// Stage-0 action per state (`u32::MAX`: terminal / none) and stage-0 value per state.
+    decision: Vec<u32>,
+    value: Vec<f64>,
+    /// Solves actually run (memo misses), for benchmarks and tests.
+    solves: u64,
+}
+
+impl Solved {
+    fn hit(&self, values: &[f64], policy: usize, horizon: usize) -> bool {
+        self.enabled
+            && self.valid
+            && self.policy == policy
+            && self.horizon == horizon
+            && self.values.len() == values.len()
+            && self
+                .values
+                .iter()
+                .zip(values)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+    }
 }
 
 impl MissionMdp {
@@ -183,6 +218,44 @@ impl MissionMdp {
         &self.mdp
     }
 
+    /// Turn the decision memo on or off (on by default; off re-solves every cycle, for tests
+    /// and the worst-case benchmark).
+    pub fn set_solve_cache(&mut self, on: bool) {
+        self.solved.enabled = on;
+        self.solved.valid = false;
+    }
+
+    /// Finite-horizon solves `decide` has actually run (the rest came from the memo).
+    pub fn solves(&self) -> u64 {
+        self.solved.solves
+    }
+
+    fn policy_index(&self, policy: &str) -> Result<usize, InstantiateError> {
+        self.policies
+            .iter()
+            .position(|p| p == policy)
+            .ok_or_else(|| InstantiateError::UnknownPolicy(policy.to_string()))
+    }
+
+    /// Read every probability this MDP uses into `self.values`, checking range.
+    fn load_values(
+        &mut self,
+        lookup: impl Fn(&str) -> Option<f64>,
+    ) -> Result<(), InstantiateError> {
+        for (k, name) in self.vars.iter().enumerate() {
+            let v =
+                lookup(name).ok_or_else(|| InstantiateError::MissingProbability(name.clone()))?;
+            if !(0.0..=1.0).contains(&v) {
+                return Err(InstantiateError::BadProbability {
+                    name: name.clone(),
+                    value: v,
+                });
+            }
+            self.values[k] = v;
+        }
+        Ok(())
+    }
+
     /// Fill transition probabilities and rewards in place from named probabilities for `policy`.
     /// Allocation-free. Fails when a probability is missing or outside `[0, 1]`, or the result
     /// is not a stochastic model.
@@ -200,22 +273,8 @@ impl MissionMdp {
         lookup: impl Fn(&str) -> Option<f64>,
         policy: &str,
     ) -> Result<&Mdp, InstantiateError> {
-        let pi = self
-            .policies
-            .iter()
-            .position(|p| p == policy)
-            .ok_or_else(|| InstantiateError::UnknownPolicy(policy.to_string()))?;
-        for (k, name) in self.vars.iter().enumerate() {
-            let v =
-                lookup(name).ok_or_else(|| InstantiateError::MissingProbability(name.clone()))?;
-            if !(0.0..=1.0).contains(&v) {
-                return Err(InstantiateError::BadProbability {
-                    name: name.clone(),
-                    value: v,
-                });
-            }
-            self.values[k] = v;
-        }
+        let pi = self.policy_index(policy)?;
+        self.load_values(lookup)?;
         self.fill(pi);
         self.mdp
             .validate()
@@ -229,7 +288,9 @@ impl MissionMdp {
     /// One decision cycle for this MDP: instantiate with `probs` under `policy`, solve the
     /// finite horizon (`horizon` steps, the paper uses 100) in `ws`, and return the stage-0
     /// action at `state` with its value. `Ok(None)` when `state` is terminal. Allocation-free
-    /// once `ws` has seen this model size and horizon.
+    /// once `ws` has seen this model size and horizon. When the probabilities, policy and
+    /// horizon are bit-identical to the last solve's, the memoised answer is returned instead
+    /// (see [`MissionMdp::set_solve_cache`]).
     pub fn decide(
         &mut self,
         ws: &mut Workspace,
@@ -238,11 +299,38 @@ impl MissionMdp {
         policy: &str,
         horizon: usize,
     ) -> Result<Option<Decision>, InstantiateError> {
-        let mdp = self.instantiate(probs, policy)?;
-        let fh = ws.finite_horizon(mdp, horizon);
-        Ok(fh.decision(state).map(|action| Decision {
-            action,
-            value: fh.value(0, state),
+        let pi = self.policy_index(policy)?;
+        self.load_values(|n| probs.get(n).copied())?;
+        if !self.solved.hit(&self.values, pi, horizon) {
+            self.solved.valid = false;
+            self.fill(pi);
+            self.mdp
+                .validate()
+                .map_err(|err| InstantiateError::Invalid {
+                    mdp: self.name.clone(),
+                    err,
+                })?;
+            let fh = ws.finite_horizon(&self.mdp, horizon);
+            let n = self.states.len();
+            let memo = &mut self.solved;
+            memo.decision.clear();
+            memo.value.clear();
+            for s in 0..n {
+                memo.decision
+                    .push(fh.decision(s).map_or(u32::MAX, |a| a as u32));
+                memo.value.push(fh.value(0, s));
+            }
+            memo.values.clear();
+            memo.values.extend_from_slice(&self.values);
+            memo.policy = pi;
+            memo.horizon = horizon;
+            memo.valid = true;
+            memo.solves += 1;
+        }
+        let a = self.solved.decision[state];
+        Ok((a != u32::MAX).then(|| Decision {
+            action: a as usize,
+            value: self.solved.value[state],
         }))
     }
 
@@ -256,6 +344,16 @@ impl MissionMdp {
             value: d.value,
             iterations: horizon as u32,
         }
+    }
+
+    /// As [`MissionMdp::proposal`], into a reused entry (its strings keep their capacity).
+    pub fn proposal_into(&self, state: usize, d: &Decision, horizon: usize, out: &mut MdpProposal) {
+        out.mdp.clone_from(&self.name);
+        out.state.clone_from(&self.states[state]);
+        out.action.clone_from(&self.actions[d.action]);
+        out.actions.clone_from(&self.does[d.action]);
+        out.value = d.value;
+        out.iterations = horizon as u32;
     }
 
     /// Evaluate every expression at `self.values` into the engine model.
@@ -367,6 +465,14 @@ impl MissionMdps {
     }
     pub fn all(&self) -> &[MissionMdp] {
         &self.mdps
+    }
+    /// Solves run by every MDP's `decide` so far.
+    pub fn solves(&self) -> u64 {
+        self.mdps.iter().map(MissionMdp::solves).sum()
+    }
+    /// Turn every MDP's decision memo on or off ([`MissionMdp::set_solve_cache`]).
+    pub fn set_solve_cache(&mut self, on: bool) {
+        self.mdps.iter_mut().for_each(|m| m.set_solve_cache(on));
     }
     /// Names of the concurrent MDPs, in index order.
     pub fn concurrent(&self) -> &[String] {
@@ -588,6 +694,10 @@ pub fn load_mdp(
         choice_reward,
         enter_reward,
         mdp,
+        solved: Solved {
+            enabled: true,
+            ..Solved::default()
+        },
     };
     // Row sums at: all 0, all 1, the check point (missing names at 0.5), pseudo-random points.
     let k = m.vars.len();
@@ -805,6 +915,79 @@ impl BehaviourConflicts {
     /// other group's actions are dropped. Returns the kept actions (input order) and one
     /// [`Conflict`] per rule that fired.
     pub fn resolve<S: AsRef<str>>(
+        &self,
+        actions: &[S],
+        policy: &str,
+    ) -> Result<(Vec<String>, Vec<Conflict>), InstantiateError> {
+        let actions: Vec<&str> = actions.iter().map(AsRef::as_ref).collect();
+        let mut kept = Vec::new();
+        let mut conflicts = Vec::new();
+        self.resolve_into(&actions, policy, &mut kept, &mut conflicts)?;
+        Ok((kept.into_iter().map(str::to_string).collect(), conflicts))
+    }
+
+    /// As [`BehaviourConflicts::resolve`] into reused buffers: `kept` is overwritten, and
+    /// `conflicts` is rewritten entry by entry (no allocation once its strings have grown).
+    pub fn resolve_into<'a>(
+        &self,
+        actions: &[&'a str],
+        policy: &str,
+        kept: &mut Vec<&'a str>,
+        conflicts: &mut Vec<Conflict>,
+    ) -> Result<(), InstantiateError> {
+        let order = self
+            .priority
+            .get(policy)
+            .ok_or_else(|| InstantiateError::UnknownPolicy(policy.to_string()))?;
+        kept.clear();
+        kept.extend_from_slice(actions);
+        let rank = |group: &[String]| {
+            group
+                .iter()
+                .filter_map(|p| order.iter().position(|q| q == p))
+                .min()
+        };
+        let mut fired = 0;
+        for rule in &self.rules {
+            let in_group = |g: usize, a: &str| rule.groups[g].iter().any(|p| pattern_matches(p, a));
+            let present = |g: usize| kept.iter().any(|a| in_group(g, a));
+            if !present(0) || !present(1) {
+                continue;
+            }
+            let a_wins = rank(&rule.groups[0]) <= rank(&rule.groups[1]);
+            let (win, lose) = if a_wins { (0, 1) } else { (1, 0) };
+            if fired == conflicts.len() {
+                conflicts.push(Conflict::default());
+            }
+            let c = &mut conflicts[fired];
+            fired += 1;
+            c.kept.clear();
+            for (i, a) in kept.iter().filter(|a| in_group(win, a)).enumerate() {
+                if i > 0 {
+                    c.kept.push('+');
+                }
+                c.kept.push_str(a);
+            }
+            let mut n = 0;
+            for a in kept.iter().filter(|a| in_group(lose, a)) {
+                if n == c.dropped.len() {
+                    c.dropped.push(String::new());
+                }
+                c.dropped[n].clear();
+                c.dropped[n].push_str(a);
+                n += 1;
+            }
+            c.dropped.truncate(n);
+            c.rule.clone_from(&rule.name);
+            kept.retain(|a| !in_group(lose, a));
+        }
+        conflicts.truncate(fired);
+        Ok(())
+    }
+
+    /// The original list-building form, kept as the reference `resolve_into` is tested against.
+    #[cfg(test)]
+    pub(crate) fn resolve_reference<S: AsRef<str>>(
         &self,
         actions: &[S],
         policy: &str,

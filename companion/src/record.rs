@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 pub const SCHEMA_VERSION: u32 = 1;
 
 /// One MDP's view of the cycle.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct MdpProposal {
     /// MDP name from params (`navigation`, `landing`, `tracking`, `monolithic`, `reference`).
@@ -24,7 +24,7 @@ pub struct MdpProposal {
 }
 
 /// A behaviour conflict between primitive actions and how the policy resolved it.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct Conflict {
     pub kept: String,
@@ -34,7 +34,7 @@ pub struct Conflict {
 }
 
 /// One application variant placed on the platform.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct PlacementRecord {
     pub app: String,
@@ -49,7 +49,7 @@ pub struct PlacementRecord {
 }
 
 /// What the resource arbitration did this cycle.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct ResourcesRecord {
     pub placements: Vec<PlacementRecord>,
@@ -79,7 +79,7 @@ pub struct ResourcesRecord {
 }
 
 /// PANORAMA margins and re-allocation this cycle.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct GuaranteeRecord {
     /// Activity being flown (index and name).
@@ -126,7 +126,7 @@ pub struct CommandRecord {
 }
 
 /// Everything one decision cycle saw and decided, in stage order.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct DecisionRecord {
     pub cycle: u64,
@@ -155,7 +155,7 @@ pub struct DecisionRecord {
 }
 
 /// What the core asks the shell to do this cycle.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct Plan {
     /// Primitive vehicle actions (`take_off`, `follow_trajectory`, `avoid_obstacle`, `land`,
@@ -163,4 +163,121 @@ pub struct Plan {
     pub vehicle_actions: Vec<String>,
     /// Application variants to run on the modeled platform.
     pub applications: Vec<PlacementRecord>,
+}
+
+// ---------------------------------------------------------------- buffer reuse
+//
+// `Clone` is written out so that `clone_from` goes field by field: a record reused cycle after
+// cycle (`Core::step_into`) then keeps the capacity of its strings, vectors and maps, and copying
+// one of the same shape allocates nothing. `clone()` is the plain field-wise clone.
+
+/// `dst = src.clone()`, reusing `dst`'s nodes and values when both have the same keys (the
+/// steady state: same observation names, same published probabilities); rebuilt otherwise.
+pub fn map_clone_from<K: Ord + Clone, V: Clone>(dst: &mut BTreeMap<K, V>, src: &BTreeMap<K, V>) {
+    if dst.len() == src.len() && dst.keys().zip(src.keys()).all(|(a, b)| a == b) {
+        for (d, s) in dst.values_mut().zip(src.values()) {
+            d.clone_from(s);
+        }
+    } else {
+        *dst = src.clone();
+    }
+}
+
+macro_rules! reuse_clone {
+    ($t:ident { $($f:ident),* } maps { $($m:ident),* }) => {
+        impl Clone for $t {
+            fn clone(&self) -> Self {
+                Self { $($f: self.$f.clone(),)* $($m: self.$m.clone(),)* }
+            }
+            fn clone_from(&mut self, src: &Self) {
+                $(self.$f.clone_from(&src.$f);)*
+                $(map_clone_from(&mut self.$m, &src.$m);)*
+            }
+        }
+    };
+}
+
+reuse_clone!(MdpProposal { mdp, state, action, actions, value, iterations } maps {});
+reuse_clone!(Conflict { kept, dropped, rule } maps {});
+reuse_clone!(PlacementRecord {
+    app, version, implementation, support, tiles, cpu_share, ms_per_frame
+} maps {});
+reuse_clone!(ResourcesRecord {
+    placements, cpu_load, tiles_used, reconfigurations, degraded, dropped, summary, policy,
+    free_tiles, failed_tiles, reconfiguration_ms, power_w
+} maps {});
+reuse_clone!(GuaranteeRecord {
+    activity, activity_name, reallocation, infeasible, infeasible_reason, failed_resources
+} maps { margins, goals, drift });
+reuse_clone!(DecisionRecord {
+    cycle, time_s, state, events, proposals, conflicts, actions, resources, guarantee, commands,
+    link_events
+} maps { observations, evidence, probabilities, vehicle });
+reuse_clone!(Plan { vehicle_actions, applications } maps {});
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rec(keys: &[&str], x: f64, n_props: usize) -> DecisionRecord {
+        DecisionRecord {
+            cycle: x as u64,
+            state: format!("s{x}"),
+            events: keys.iter().map(|k| k.to_string()).collect(),
+            observations: keys.iter().map(|k| (k.to_string(), x)).collect(),
+            evidence: keys
+                .iter()
+                .map(|k| (k.to_string(), format!("st{x}")))
+                .collect(),
+            probabilities: keys.iter().map(|k| (format!("P_{k}"), x / 10.0)).collect(),
+            proposals: (0..n_props)
+                .map(|i| MdpProposal {
+                    mdp: format!("m{i}"),
+                    actions: vec![format!("a{x}"); i],
+                    value: x + i as f64,
+                    ..Default::default()
+                })
+                .collect(),
+            resources: n_props.is_multiple_of(2).then(|| ResourcesRecord {
+                placements: vec![PlacementRecord {
+                    app: format!("app{x}"),
+                    tiles: vec![1, 2],
+                    ..Default::default()
+                }],
+                degraded: vec![format!("d{x}")],
+                ..Default::default()
+            }),
+            guarantee: Some(GuaranteeRecord {
+                margins: keys.iter().map(|k| (k.to_string(), -x)).collect(),
+                failed_resources: vec!["lidar".into()],
+                ..Default::default()
+            }),
+            ..Default::default()
+        }
+    }
+
+    /// `clone_from` gives exactly `clone()` whatever the destination held: same keys (in-place
+    /// path), different keys, more or fewer entries, `Some` over `None` and back.
+    #[test]
+    fn clone_from_equals_clone_for_any_previous_content() {
+        let shapes = [
+            rec(&["a", "b"], 1.0, 2),
+            rec(&["a", "b"], 2.0, 3),
+            rec(&["a", "c"], 3.0, 1),
+            rec(&["a", "b", "c"], 4.0, 0),
+            rec(&[], 5.0, 4),
+            DecisionRecord::default(),
+        ];
+        for dst0 in &shapes {
+            for src in &shapes {
+                let mut dst = dst0.clone();
+                dst.clone_from(src);
+                assert_eq!(&dst, src);
+                assert_eq!(
+                    serde_json::to_string(&dst).unwrap(),
+                    serde_json::to_string(src).unwrap()
+                );
+            }
+        }
+    }
 }

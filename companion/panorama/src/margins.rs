@@ -52,6 +52,16 @@ pub fn margins(p: &Problem, choice: &[usize], m: &Measured) -> MarginReport {
         margin: vec![],
         drift: vec![],
     };
+    margins_into(p, choice, m, &mut r);
+    r
+}
+
+/// As [`margins`], overwriting a reused report (no allocation once it has held this many goals).
+pub fn margins_into(p: &Problem, choice: &[usize], m: &Measured, r: &mut MarginReport) {
+    r.estimated_so_far.clear();
+    r.remainder.clear();
+    r.margin.clear();
+    r.drift.clear();
     for (g, goal) in p.goals.iter().enumerate() {
         let (before, after) = split(p, choice, m, g);
         let measured = m.so_far.get(g).copied().unwrap_or(0.0);
@@ -60,7 +70,6 @@ pub fn margins(p: &Problem, choice: &[usize], m: &Measured) -> MarginReport {
         r.margin.push(goal.bound - (measured + after));
         r.drift.push(measured - before);
     }
-    r
 }
 
 /// The reduced mission scenario from the current activity: goals lowered by what was measured,

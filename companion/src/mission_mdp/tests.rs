@@ -818,3 +818,104 @@ fn bench_models_are_current() {
         );
     }
 }
+
+// ---------------------------------------------------------------- fast-cycle equivalences
+
+mod fast_cycle {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+
+        /// `resolve_into` into buffers left over from an earlier call gives exactly what the
+        /// original list-building resolution gives, for any subset of the primitive actions.
+        #[test]
+        fn resolve_into_equals_reference(
+            picks in proptest::collection::vec(proptest::collection::vec(any::<bool>(), 32), 1..6),
+        ) {
+            let c = conflicts();
+            let all = load_all().primitive_actions();
+            let (mut kept, mut why) = (Vec::new(), Vec::new());
+            for pick in &picks {
+                let acts: Vec<&str> = all
+                    .iter()
+                    .zip(pick)
+                    .filter(|(_, p)| **p)
+                    .map(|(a, _)| a.as_str())
+                    .collect();
+                for pol in ["safety", "mission"] {
+                    let (want_kept, want_why) = c.resolve_reference(&acts, pol).unwrap();
+                    c.resolve_into(&acts, pol, &mut kept, &mut why).unwrap();
+                    prop_assert_eq!(&kept, &want_kept);
+                    prop_assert_eq!(&why, &want_why);
+                }
+            }
+        }
+
+        /// The decision memo returns exactly what a fresh instantiate + solve returns, for a
+        /// sequence of probability points with repeats (hits) and changes (misses), every MDP,
+        /// both policies, every state.
+        #[test]
+        fn memoised_decide_equals_fresh_solve(
+            points in proptest::collection::vec((0usize..3, proptest::collection::vec(0.0f64..=1.0, 16)), 1..6),
+        ) {
+            let mut memo = load_all();
+            let mut fresh = load_all();
+            let (mut ws, mut ws2) = (Workspace::new(), Workspace::new());
+            let pts: Vec<BTreeMap<String, f64>> = points
+                .iter()
+                .map(|(_, v)| KNOWN.iter().zip(v).map(|(k, x)| (k.to_string(), *x)).collect())
+                .collect();
+            let names: Vec<String> = memo.all().iter().map(|m| m.name().to_string()).collect();
+            for (i, (repeat, _)) in points.iter().enumerate() {
+                // Revisit an earlier point now and then: the memo must only hit on exact inputs.
+                let p = &pts[i.saturating_sub(*repeat)];
+                for n in &names {
+                    for pol in ["safety", "mission"] {
+                        let b = fresh.get_mut(n).unwrap();
+                        let fh = ws2.finite_horizon(b.instantiate(p, pol).unwrap(), 100);
+                        let a = memo.get_mut(n).unwrap();
+                        for s in 0..a.n_states() {
+                            let got = a.decide(&mut ws, s, p, pol, 100).unwrap();
+                            let want = fh.decision(s).map(|action| Decision {
+                                action,
+                                value: fh.value(0, s),
+                            });
+                            prop_assert_eq!(got.map(|d| d.action), want.map(|d| d.action));
+                            prop_assert_eq!(
+                                got.map(|d| d.value.to_bits()),
+                                want.map(|d| d.value.to_bits())
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// A repeated input is served by the memo (no new solve); any change re-solves.
+    #[test]
+    fn memo_hits_only_on_identical_inputs() {
+        let mut all = load_all();
+        let mut ws = Workspace::new();
+        let mut p = paper_point();
+        let m = all.get_mut("tracking").unwrap();
+        let s = m.state_index("v3").unwrap();
+        let first = m.decide(&mut ws, s, &p, "safety", 100).unwrap();
+        assert_eq!(m.solves(), 1);
+        // Another state of the same model, same inputs: still the same solve.
+        m.decide(&mut ws, 0, &p, "safety", 100).unwrap();
+        assert_eq!(m.solves(), 1);
+        assert_eq!(m.decide(&mut ws, s, &p, "safety", 100).unwrap(), first);
+        assert_eq!(m.solves(), 1);
+        m.decide(&mut ws, s, &p, "mission", 100).unwrap();
+        assert_eq!(m.solves(), 2, "policy change re-solves");
+        m.decide(&mut ws, s, &p, "mission", 99).unwrap();
+        assert_eq!(m.solves(), 3, "horizon change re-solves");
+        let v3 = p.get_mut("P_V3").unwrap();
+        *v3 = f64::from_bits(v3.to_bits() + 1); // one ulp
+        m.decide(&mut ws, s, &p, "mission", 99).unwrap();
+        assert_eq!(m.solves(), 4, "a one-ulp change re-solves");
+    }
+}

@@ -1,0 +1,103 @@
+//! Time the full decision cycle (observations to plan: evidence, every health BN, the MDPs,
+//! behaviour and resource arbitration, the PANORAMA guarantee) in-process and count its heap
+//! allocations, for bench/compare's "decision cycle" case (target: 50 us median).
+//!
+//! Prints one JSON object `{"cases":[{"name","median_us","p99_us","max_us","cycles",
+//! "allocations_per_cycle","mdp_solves_per_cycle","scheduler_runs_per_cycle"}]}`. Each case warms
+//! a core up for 100 cycles on its stream, then times `Core::step_into` alone, once per cycle
+//! (`Instant` around the call), over `cycles` cycles (first argument, default 2000).
+//!
+//! Cases: `steady` (time and battery move, evidence does not), `changing` (vibration evidence
+//! flips every cycle: health probabilities and every MDP's inputs change), `worst` (the changing
+//! stream with the memos off: every MDP re-solved and the scheduler re-run every cycle), and
+//! `monolithic` (section 5's single MDP on the changing stream).
+//!
+//! Run: `cargo run --release -p companion --example bench_cycle -- 2000`.
+use companion::decision::{Core, Model, ModelKind, Policy};
+use companion::record::{DecisionRecord, Plan};
+use companion::spec::default_params_dir;
+use companion::streams::{Stream, StreamGen, tracking_snapshot};
+use serde_json::json;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::hint::black_box;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+struct Counting;
+static ALLOCS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        unsafe { System.dealloc(p, l) }
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.realloc(p, l, n) }
+    }
+}
+
+#[global_allocator]
+static A: Counting = Counting;
+
+fn percentile(sorted: &[f64], q: f64) -> f64 {
+    let i = ((sorted.len() - 1) as f64 * q).round() as usize;
+    sorted[i]
+}
+
+fn main() {
+    let cycles: u64 = std::env::args()
+        .nth(1)
+        .map(|a| a.parse().expect("cycles: a number"))
+        .unwrap_or(2000);
+    let params = default_params_dir();
+    let model = Model::load(&params).expect("params load");
+    let base = tracking_snapshot(&model, &params, "complete-1");
+    let mut out = Vec::new();
+    for (name, kind, stream, caches) in [
+        ("steady", ModelKind::Bfm, Stream::Steady, true),
+        ("changing", ModelKind::Bfm, Stream::Changing, true),
+        ("worst", ModelKind::Bfm, Stream::Changing, false),
+        ("monolithic", ModelKind::Monolithic, Stream::Changing, true),
+    ] {
+        let stream_gen = StreamGen::new(&model, base.clone(), stream);
+        let mut core = Core::new(&model, kind, Policy::Safety);
+        core.set_caches(caches);
+        let mut obs = base.clone();
+        let (mut plan, mut rec) = (Plan::default(), DecisionRecord::default());
+        for k in 0..100 {
+            stream_gen.advance(&mut obs, k);
+            core.step_into(&obs, &mut plan, &mut rec);
+        }
+        let work0 = core.work_done();
+        let mut times = Vec::with_capacity(cycles as usize);
+        let mut allocs = 0;
+        for k in 100..100 + cycles {
+            stream_gen.advance(&mut obs, k);
+            let a0 = ALLOCS.load(Ordering::Relaxed);
+            let t0 = Instant::now();
+            core.step_into(black_box(&obs), &mut plan, &mut rec);
+            let dt = t0.elapsed();
+            allocs += ALLOCS.load(Ordering::Relaxed) - a0;
+            black_box(&rec);
+            times.push(dt.as_secs_f64() * 1e6);
+        }
+        let work = core.work_done();
+        times.sort_by(f64::total_cmp);
+        let per = |x: u64| x as f64 / cycles as f64;
+        out.push(json!({
+            "name": name,
+            "median_us": percentile(&times, 0.5),
+            "p99_us": percentile(&times, 0.99),
+            "max_us": times[times.len() - 1],
+            "cycles": cycles,
+            "allocations_per_cycle": allocs as f64 / cycles as f64,
+            "mdp_solves_per_cycle": per(work.mdp_solves - work0.mdp_solves),
+            "scheduler_runs_per_cycle": per(work.scheduler_runs - work0.scheduler_runs),
+        }));
+    }
+    println!("{}", json!({ "cases": out }));
+}
