@@ -111,3 +111,34 @@ pub fn default_params_dir() -> PathBuf {
     }
     PathBuf::from("params")
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(serde::Deserialize, Debug, PartialEq)]
+    struct T {
+        x: i32,
+    }
+
+    #[test]
+    fn overlay_replaces_one_file_and_is_removed_after_a_panic() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (dir.path().join("a.toml"), dir.path().join("b.toml"));
+        std::fs::write(&a, "x = 1").unwrap();
+        std::fs::write(&b, "x = 2").unwrap();
+        with_overlay(&a, b"x = 7", || {
+            assert_eq!(read_toml::<T>(&a).unwrap(), T { x: 7 });
+            assert_eq!(read_toml::<T>(&b).unwrap(), T { x: 2 }, "other files are real");
+            // Joined differently, same components: still the overlaid file.
+            let again = dir.path().join(".").join("a.toml");
+            assert_eq!(read_toml::<T>(&again).map(|t| t.x).ok(), Some(7));
+        });
+        let err = with_overlay(&a, b"\xff", || read_toml::<T>(&a).unwrap_err());
+        assert_eq!((err.entry.as_str(), err.file.as_path()), ("-", a.as_path()));
+        assert!(err.reason.starts_with("cannot read"), "{err}");
+        let r = std::panic::catch_unwind(|| with_overlay(&a, b"x = 9", || panic!("inside")));
+        assert!(r.is_err());
+        assert_eq!(read_toml::<T>(&a).unwrap(), T { x: 1 }, "overlay gone");
+    }
+}
