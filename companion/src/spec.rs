@@ -129,7 +129,11 @@ mod tests {
         std::fs::write(&b, "x = 2").unwrap();
         with_overlay(&a, b"x = 7", || {
             assert_eq!(read_toml::<T>(&a).unwrap(), T { x: 7 });
-            assert_eq!(read_toml::<T>(&b).unwrap(), T { x: 2 }, "other files are real");
+            assert_eq!(
+                read_toml::<T>(&b).unwrap(),
+                T { x: 2 },
+                "other files are real"
+            );
             // Joined differently, same components: still the overlaid file.
             let again = dir.path().join(".").join("a.toml");
             assert_eq!(read_toml::<T>(&again).map(|t| t.x).ok(), Some(7));
