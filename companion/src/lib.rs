@@ -9,6 +9,7 @@ pub mod decision;
 pub mod decision_log;
 pub mod evidence;
 pub mod fmea;
+pub mod fuzzing;
 pub mod guarantee;
 pub mod health;
 pub mod link;
