@@ -16,13 +16,12 @@
 
 use crate::decision::{Core, Model, ModelKind};
 use crate::link::Msg;
-use crate::link::actions::{ActionTable, LinkParams, Route};
-use crate::link::fly::{FlyArgs, FlySetup};
+use crate::link::actions::LinkParams;
+use crate::link::fly::{self, FlyArgs, FlySetup, Shell};
 use crate::link::ingest::{self, Encoder, Ingest, IngestStats};
-use crate::link::mission_state::{self, Extra, MissionState};
+use crate::link::mission_state::MissionState;
 use crate::link::vehicle::{Vehicle, VehicleConfig};
 use crate::mission::Policy;
-use crate::observations::Observations;
 use crate::spec::SpecError;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -40,28 +39,22 @@ pub const MAX_CYCLES: usize = 8;
 /// What `companion fly` loads before any socket opens, loaded once per fuzzing process.
 pub struct IngestFixture {
     pub model: Model,
-    pub link: LinkParams,
-    pub actions: ActionTable,
-    pub route: Route,
-    pub takeoff_alt_m: f64,
+    /// What `companion fly` loads besides the model (link, actions, route, take-off altitude).
+    pub setup: FlySetup,
 }
 
 impl IngestFixture {
     /// Load from a params directory the way `companion fly --params DIR` does.
     pub fn load(params: &Path) -> anyhow::Result<Self> {
-        let setup = FlySetup::load(&fly_args(params))?;
         Ok(Self {
             model: Model::load(params)?,
-            link: setup.link,
-            actions: setup.actions,
-            route: setup.route,
-            takeoff_alt_m: setup.takeoff_alt_m,
+            setup: FlySetup::load(&fly_args(params))?,
         })
     }
 
     /// The vehicle configuration `link::fly::run_with_tlog` builds from params.
     fn vehicle_config(&self) -> VehicleConfig {
-        vehicle_config(&self.link, Duration::from_secs(3))
+        vehicle_config(&self.setup.link, Duration::from_secs(3))
     }
 }
 
@@ -224,55 +217,20 @@ fn send(encoder: &mut Encoder, vehicle: &Vehicle, signing: bool, msgs: &[Msg]) -
     msgs.len() as u64
 }
 
-/// Observations the health BNs read under names the telemetry does not produce directly.
-/// A copy of `link::fly::complete_observations` (private there); keep the two in step.
-fn complete_observations(obs: &mut Observations, mission: &MissionState) {
-    if let Some(v) = obs.get("groundspeed_mps") {
-        obs.values.entry("drone_speed_mps".into()).or_insert(v);
-    }
-    let remaining = mission.waypoints_remaining(obs);
-    obs.set("waypoints_remaining", remaining);
-}
-
-/// One decision cycle as `link::fly::run_cycle_at` runs it, without the sink and the socket.
+/// One decision cycle exactly as `companion fly` runs it (`link::fly::decide` then
+/// `finish_record`), without the sink and the socket; the record must serialise to JSON.
 fn cycle(
     core: &mut Core,
-    fx: &IngestFixture,
-    mission: &mut MissionState,
+    shell: &mut Shell,
     vehicle: &mut Vehicle,
     now: Duration,
+    n: u64,
 ) -> (Option<String>, Vec<Msg>) {
-    let events = vehicle.take_events();
-    let mut obs = vehicle.observations(now, events);
-    let extra = Extra {
-        mode: vehicle.telemetry.mode.as_deref(),
-    };
-    obs.state = mission.update(&obs, &extra).to_string();
-    complete_observations(&mut obs, mission);
-    let (plan, rec) = core.step(&obs);
-    mission.after_plan(&rec.actions);
-    let mut chosen = mission_state::select_vehicle_action(
-        &plan.vehicle_actions,
-        &fx.link.vehicle_action_precedence,
-    );
-    if mission.mission_end(&obs).is_some() {
-        mission.after_plan(&["land".to_string()]);
-        chosen = Some("land".into());
-    }
-    if chosen.as_deref() == Some("follow_trajectory")
-        && mission.route_on_vehicle()
-        && vehicle
-            .actions
-            .actions
-            .contains_key("follow_trajectory_resume")
-    {
-        chosen = Some("follow_trajectory_resume".into());
-    }
-    // The record goes to the decision log as JSON: it must serialise whatever came in.
+    let decided = fly::decide(core, shell, vehicle, || now);
+    let chosen = decided.chosen.clone();
+    let msgs = decided.msgs.clone();
+    let rec = fly::finish_record(decided, shell, vehicle, n, &mut Vec::new());
     serde_json::to_string(&rec).expect("a decision record serialises");
-    let msgs = vehicle.request_actions(now, chosen.as_slice());
-    let _ = vehicle.take_records();
-    let _ = vehicle.take_link_events();
     (chosen, msgs)
 }
 
@@ -289,10 +247,10 @@ pub fn ingest_one(fx: &IngestFixture, data: &[u8]) -> IngestOutcome {
     let mut encoder = Encoder::new(signing());
     let mut vehicle = Vehicle::new(
         fx.vehicle_config(),
-        fx.actions.clone(),
-        Some(fx.route.clone()),
+        fx.setup.actions.clone(),
+        Some(fx.setup.route.clone()),
     );
-    let mut mission = MissionState::new(&fx.route, fx.takeoff_alt_m);
+    let mut shell = Shell::new(&fx.setup);
     let mut core = Core::new(&fx.model, ModelKind::Bfm, input.policy);
     let mut out = IngestOutcome::default();
     let (mut pushed, mut returned) = (0u64, 0u64);
@@ -342,8 +300,10 @@ pub fn ingest_one(fx: &IngestFixture, data: &[u8]) -> IngestOutcome {
         msgs.extend(vehicle.tick(now));
         out.messages_out += send(&mut encoder, &vehicle, input.signing, &msgs);
         if vehicle.has_events() && vehicle.target.is_some() && out.cycles < MAX_CYCLES {
-            let (chosen, msgs) = cycle(&mut core, fx, &mut mission, &mut vehicle, now);
-            out.cycles += 1;
+            let (chosen, msgs) = {
+                out.cycles += 1;
+                cycle(&mut core, &mut shell, &mut vehicle, now, out.cycles as u64)
+            };
             out.chosen.extend(chosen);
             out.messages_out += send(&mut encoder, &vehicle, input.signing, &msgs);
         }
@@ -351,8 +311,8 @@ pub fn ingest_one(fx: &IngestFixture, data: &[u8]) -> IngestOutcome {
     // One last cycle on whatever the telemetry holds, autopilot seen or not: the core must take
     // any observation snapshot the link can produce.
     now += input.step;
-    let (chosen, msgs) = cycle(&mut core, fx, &mut mission, &mut vehicle, now);
     out.cycles += 1;
+    let (chosen, msgs) = cycle(&mut core, &mut shell, &mut vehicle, now, out.cycles as u64);
     out.chosen.extend(chosen);
     out.messages_out += send(&mut encoder, &vehicle, input.signing, &msgs);
     assert_eq!(encoder.frames_out, out.messages_out);

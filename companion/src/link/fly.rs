@@ -28,6 +28,13 @@ pub trait Decider {
     fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord);
 }
 
+/// The real core is a decider as it is (fuzzing and the soak drive it without a wrapper).
+impl Decider for crate::decision::Core<'_> {
+    fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
+        crate::decision::Core::step(self, obs)
+    }
+}
+
 /// Where decision records go (the log helper provides the file writer).
 pub trait RecordSink {
     fn write(&mut self, rec: &DecisionRecord) -> std::io::Result<()>;
@@ -503,6 +510,7 @@ pub fn decide<D: Decider>(
     let msgs = vehicle.request_actions(now(), chosen.as_slice());
     Decided {
         msgs,
+        chosen,
         plan,
         rec,
         obs,
@@ -514,6 +522,8 @@ pub fn decide<D: Decider>(
 pub struct Decided {
     /// Commands for the chosen vehicle action, to send now.
     pub msgs: Vec<Msg>,
+    /// The vehicle action chosen this cycle (after the mission's end and the route's resume).
+    pub chosen: Option<String>,
     pub plan: Plan,
     rec: DecisionRecord,
     obs: Observations,
