@@ -3,41 +3,11 @@
 
 use companion::mission_mdp::MissionMdps;
 use mdp_engine::Workspace;
-use std::alloc::{GlobalAlloc, Layout, System};
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
-struct Counting;
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
-
-// Only the test's own thread is counted: the harness's threads (output capture, the main thread
-// waiting on the test) may allocate at any time.
-std::thread_local! {
-    static COUNTED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
-}
-
-fn count() {
-    if COUNTED.with(|c| c.get()) {
-        ALLOCS.fetch_add(1, Ordering::SeqCst);
-    }
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        count();
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        unsafe { System.dealloc(p, l) }
-    }
-    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
-        count();
-        unsafe { System.realloc(p, l, n) }
-    }
-}
-
-#[global_allocator]
-static A: Counting = Counting;
+#[path = "support/counting_alloc.rs"]
+mod counting_alloc;
+use counting_alloc::allocations;
 
 const KNOWN: &[&str] = &[
     "P_sys",
@@ -60,7 +30,6 @@ const KNOWN: &[&str] = &[
 
 #[test]
 fn warm_decision_cycle_does_not_allocate() {
-    COUNTED.with(|c| c.set(true));
     let mut all = MissionMdps::load(&companion::spec::default_params_dir(), KNOWN).unwrap();
     let mut probs: BTreeMap<String, f64> = all.check_point().clone();
     let names: Vec<String> = all.concurrent().to_vec();
@@ -80,8 +49,9 @@ fn warm_decision_cycle_does_not_allocate() {
     cycle(&mut all, &probs, &mut ws);
     for k in 0..5 {
         *probs.get_mut("P_battery").unwrap() = 0.5 + 0.1 * k as f64;
-        let before = ALLOCS.load(Ordering::SeqCst);
-        std::hint::black_box(cycle(&mut all, &probs, &mut ws));
-        assert_eq!(ALLOCS.load(Ordering::SeqCst), before, "cycle {k} allocated");
+        let n = allocations(|| {
+            std::hint::black_box(cycle(&mut all, &probs, &mut ws));
+        });
+        assert_eq!(n, 0, "cycle {k} allocated");
     }
 }
