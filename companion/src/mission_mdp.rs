@@ -275,14 +275,19 @@ impl MissionMdp {
     ) -> Result<&Mdp, InstantiateError> {
         let pi = self.policy_index(policy)?;
         self.load_values(lookup)?;
+        self.fill_checked(pi)?;
+        Ok(&self.mdp)
+    }
+
+    /// Fill the engine model from `self.values` for policy `pi` and check it is stochastic.
+    fn fill_checked(&mut self, pi: usize) -> Result<(), InstantiateError> {
         self.fill(pi);
         self.mdp
             .validate()
             .map_err(|err| InstantiateError::Invalid {
                 mdp: self.name.clone(),
                 err,
-            })?;
-        Ok(&self.mdp)
+            })
     }
 
     /// One decision cycle for this MDP: instantiate with `probs` under `policy`, solve the
@@ -303,13 +308,7 @@ impl MissionMdp {
         self.load_values(|n| probs.get(n).copied())?;
         if !self.solved.hit(&self.values, pi, horizon) {
             self.solved.valid = false;
-            self.fill(pi);
-            self.mdp
-                .validate()
-                .map_err(|err| InstantiateError::Invalid {
-                    mdp: self.name.clone(),
-                    err,
-                })?;
+            self.fill_checked(pi)?;
             let fh = ws.finite_horizon(&self.mdp, horizon);
             let n = self.states.len();
             let memo = &mut self.solved;
