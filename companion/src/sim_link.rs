@@ -76,15 +76,8 @@ const MIX: [(Kind, u32); 18] = [
 /// Frames per simulated second.
 pub const FRAMES_PER_S: u32 = 50;
 
-/// Onboard monitor names (params/link.toml [telemetry.onboard]) and the observation each reports.
-const MONITORS: [(&str, &str); 6] = [
-    ("tgt_det", "target_detected"),
-    ("tgt_spd", "target_speed_rel"),
-    ("trk_conf", "track_confidence"),
-    ("lum", "luminosity_lux"),
-    ("cpu_load", "cpu_load"),
-    ("free_tiles", "free_tiles"),
-];
+/// Onboard monitor names and the observation each reports: the link's default list.
+use crate::link::telemetry::DEFAULT_ONBOARD as MONITORS;
 
 /// Source of a frame: the autopilot (sys 1, comp 1) or the onboard camera monitor (comp 100).
 pub const AUTOPILOT: (u8, u8) = (1, 1);

@@ -33,19 +33,23 @@ fn half() -> f64 {
     0.5
 }
 
+/// Onboard monitor NAMED_VALUE_FLOAT names and the observation each reports, when
+/// params/link.toml gives no `[onboard]` table (the same list it ships with).
+pub const DEFAULT_ONBOARD: [(&str, &str); 6] = [
+    ("tgt_det", "target_detected"),
+    ("tgt_spd", "target_speed_rel"),
+    ("trk_conf", "track_confidence"),
+    ("lum", "luminosity_lux"),
+    ("cpu_load", "cpu_load"),
+    ("free_tiles", "free_tiles"),
+];
+
 impl Default for TelemetryConfig {
     fn default() -> Self {
-        let onboard = [
-            ("tgt_det", "target_detected"),
-            ("tgt_spd", "target_speed_rel"),
-            ("trk_conf", "track_confidence"),
-            ("lum", "luminosity_lux"),
-            ("cpu_load", "cpu_load"),
-            ("free_tiles", "free_tiles"),
-        ]
-        .into_iter()
-        .map(|(a, b)| (a.to_string(), b.to_string()))
-        .collect();
+        let onboard = DEFAULT_ONBOARD
+            .into_iter()
+            .map(|(a, b)| (a.to_string(), b.to_string()))
+            .collect();
         Self {
             onboard,
             obstacle_near_m: 15.0,
