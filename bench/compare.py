@@ -277,304 +277,323 @@ def main():
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--budget", type=float, default=0.3, help="seconds of timed calls per case and side")
     ap.add_argument("--no-doc", action="store_true", help="do not rewrite docs/performance.md")
+    ap.add_argument("--only", default="", help="comma list of groups to run (mdp, bn, ingest, cycle); "
+                    "a partial run never rewrites docs/performance.md")
+    ap.add_argument("--max-states", type=int, default=10000,
+                    help="skip random MDPs larger than this (a partial run: no doc rewrite)")
     args = ap.parse_args()
+    if args.max_states < 10000:
+        args.no_doc = True
+    only = {g for g in args.only.split(",") if g}
+    bad = only - {"mdp", "bn", "ingest", "cycle"}
+    if bad:
+        raise SystemExit(f"--only: unknown group(s) {sorted(bad)} (mdp, bn, ingest, cycle)")
+    if only:
+        args.no_doc = True
+
+    def want(group):
+        return not only or group in only
     os.makedirs(OUT, exist_ok=True)
     B = args.budget
     versions = {"python": platform.python_version(), "numpy": np.__version__}
     cases = []
     notes = []
 
-    # ---- MDP models: the paper's (exported by the companion's tests) and the random series
-    models = {}
-    for name in PAPER:
-        models[name] = os.path.join(MODELS, f"{name}.json")
-    for n in [10, 100, 1000, 10000]:
-        p = os.path.join(OUT, f"random_{n}.json")
-        if not os.path.exists(p):
-            with open(p, "w") as f:
-                json.dump(random_mdp(n), f)
-        models[f"random_{n}"] = p
-    plan = []
-    for name, p in models.items():
-        big = name == "random_10000"
-        for solver in ["fh", "vi", "pi"]:
-            if solver == "pi" and big:
-                continue  # dense O(n^3) evaluation: 800 MB matrix, minutes per solve
-            plan.append({"name": f"{name}/{solver}", "path": p, "solver": solver, "horizon": HORIZON,
-                         "gamma": GAMMA, "tolerance": TOL, "reps": 3 if big else 10000,
-                         "budget_s": B})
-    with open(os.path.join(OUT, "plan.json"), "w") as f:
-        json.dump({"cases": plan}, f)
-    log("running companion MDP solves ...")
-    rust = {c["name"]: c for c in json.loads(run_cargo(
-        [os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "examples", "bench_solve"),
-         os.path.join(OUT, "plan.json")]))["cases"]}
+    if want("mdp"):
+        # ---- MDP models: the paper's (exported by the companion's tests) and the random series
+        models = {}
+        for name in PAPER:
+            models[name] = os.path.join(MODELS, f"{name}.json")
+        for n in [n for n in [10, 100, 1000, 10000] if n <= args.max_states]:
+            p = os.path.join(OUT, f"random_{n}.json")
+            if not os.path.exists(p):
+                with open(p, "w") as f:
+                    json.dump(random_mdp(n), f)
+            models[f"random_{n}"] = p
+        plan = []
+        for name, p in models.items():
+            big = name == "random_10000"
+            for solver in ["fh", "vi", "pi"]:
+                if solver == "pi" and big:
+                    continue  # dense O(n^3) evaluation: 800 MB matrix, minutes per solve
+                plan.append({"name": f"{name}/{solver}", "path": p, "solver": solver, "horizon": HORIZON,
+                             "gamma": GAMMA, "tolerance": TOL, "reps": 3 if big else 10000,
+                             "budget_s": B})
+        with open(os.path.join(OUT, "plan.json"), "w") as f:
+            json.dump({"cases": plan}, f)
+        log("running companion MDP solves ...")
+        rust = {c["name"]: c for c in json.loads(run_cargo(
+            [os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "examples", "bench_solve"),
+             os.path.join(OUT, "plan.json")]))["cases"]}
 
-    try:
-        import mdptoolbox
-        import mdptoolbox.mdp as tb
-        versions["pymdptoolbox"] = "4.0b3"
-    except Exception as e:  # noqa: BLE001
-        tb = None
-        notes.append(f"pymdptoolbox unavailable: {e}")
-    try:
-        import stormpy
-        versions["stormpy"] = stormpy.__version__
-    except Exception as e:  # noqa: BLE001
-        stormpy = None
-        why = ""
         try:
-            with open(os.path.join(OUT, "stormpy_pip.log")) as f:
-                why = " ".join(f.read().split()[-40:])
-        except OSError:
-            pass
-        notes.append(f"stormpy unavailable: {e}; pip: {why}")
-
-    for name, p in models.items():
-        with open(p) as f:
-            mdl = Model(json.load(f))
-        big = name == "random_10000"
-        reps = 3 if big else 1000
-        npy = NumpySolver(mdl)
-        # the numpy reference values for tie checks
-        ref = {}
-        ref["fh"] = npy.fh(HORIZON) + (npy.v1, 1.0)
-        vv, pp = npy.vi(GAMMA, TOL)
-        ref["vi"] = (vv, pp, vv, GAMMA)
-        ref["pi"] = ref["vi"]
-        P = R = None
-        if tb is not None:
-            P, R = toolbox_arrays(mdl, sparse=mdl.n > 1000)
-        for solver in ["fh", "vi", "pi"]:
-            key = f"{name}/{solver}"
-            if key not in rust:
-                notes.append(f"{key}: companion policy iteration skipped (dense 10000x10000 evaluation)")
-                continue
-            rc = rust[key]
-            rv, rp = np.array(rc["values"]), np.array(rc["policy"])
-            rmed, rp99, rn = stats(rc["times_ns"])
-            _, _, vnext, g = ref[solver]
-
-            def add(peer, v, pol, ts, extra=None):
-                ok, err, bad = agree_mdp(mdl, solver, rv, rp, v, pol, vnext, g)
-                med, p99, n = stats(ts)
-                c = {"name": key, "kind": "mdp", "states": mdl.n, "peer": peer, "agree": bool(ok),
-                     "max_value_diff": err, "action_mismatches": bad,
-                     "companion_median_ns": rmed, "companion_p99_ns": rp99, "companion_reps": rn,
-                     "peer_median_ns": med, "peer_p99_ns": p99, "peer_reps": n,
-                     "speedup": med / rmed, "target": TARGETS.get(peer),
-                     "policy_agree": bad == 0}
-                if extra:
-                    c.update(extra)
-                cases.append(c)
-                log(f"{key:28s} {peer:13s} agree={ok} speedup={med / rmed:9.1f}")
-
-            # numpy
-            f_np = {"fh": lambda: npy.fh(HORIZON), "vi": lambda: npy.vi(GAMMA, TOL),
-                    "pi": lambda: npy.pi(GAMMA)}[solver]
-            if solver == "pi" and mdl.n > 1000:
-                pass
-            else:
-                v, pol = f_np()[:2]
-                add("numpy", v, pol, timeit(f_np, reps, B))
-            # pymdptoolbox
-            if tb is not None:
-                if solver == "fh":
-                    def mk():
-                        with contextlib.redirect_stdout(io.StringIO()):
-                            s = tb.FiniteHorizon(P, R, 1, HORIZON)
-                            s.run()
-                        return s.V[:, 0], s.policy[:, 0]
-                elif solver == "vi":
-                    def mk():
-                        s = tb.ValueIteration(P, R, GAMMA, epsilon=1e-9, max_iter=100000)
-                        # its own iteration bound (_boundIter) stops early on the random models
-                        s.max_iter = 100000
-                        s.run()
-                        return np.array(s.V), np.array(s.policy)
-                else:
-                    def mk():
-                        s = tb.PolicyIteration(P, R, GAMMA, max_iter=100000)
-                        s.run()
-                        return np.array(s.V), np.array(s.policy)
-                if big and solver == "pi":
-                    notes.append(f"{key}: pymdptoolbox skipped (companion has no result to compare)")
-                elif big and solver == "vi":
-                    notes.append(f"{key}: pymdptoolbox skipped (one solve took over 2 minutes here)")
-                else:
-                    if big:
-                        # minutes per solve at this size: one timed call, no warm-up
-                        t0 = time.perf_counter_ns()
-                        v, pol = mk()
-                        ts = [time.perf_counter_ns() - t0]
-                        notes.append(f"{key}: pymdptoolbox timed once, no warm-up (slow at this size)")
-                    else:
-                        v, pol = mk()
-                        ts = timeit(mk, reps, B)
-                    pol = np.where(mdl.nonterm, pol, -1)
-                    add("pymdptoolbox", v, pol, ts,
-                        {"note": "ValueIteration stops on span(V_k+1 - V_k): epsilon-optimal policy, "
-                                 "values not converged (by design)"} if solver == "vi" else None)
-            # Storm: finite horizon as the cumulative reward within 100 steps
-            if stormpy is not None and solver == "fh":
-                try:
-                    sm = storm_model(mdl, os.path.join(OUT, f"{name}.drn"))
-                    prop = stormpy.parse_properties(f"Rmax=? [C<={HORIZON}]")[0]
-
-                    def mk():
-                        return stormpy.model_checking(sm, prop, only_initial_states=False)
-
-                    res = mk()
-                    v = np.array([res.get_value(s) for s in range(mdl.n)])
-                    # Storm's value query gives no scheduler for step-bounded rewards: values only
-                    add("stormpy", v, rp, timeit(mk, 3 if big else reps, B),
-                        {"note": "values only (no stage-0 scheduler)"})
-                except Exception as e:  # noqa: BLE001
-                    notes.append(f"{key}: stormpy failed: {type(e).__name__}: {e}")
-
-    # ---- BN
-    bn_path = os.path.join(OUT, "health_bn.json")
-    log("running companion BN queries ...")
-    rbn = {m["name"]: m for m in json.loads(run_cargo(
-        [os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "examples", "bench_bn"), bn_path,
-         "100000", str(B)]))["managers"]}
-    with open(bn_path) as f:
-        bn = json.load(f)
-    peers = {}
-    try:
-        import pgmpy
-        from pgmpy.inference import BeliefPropagation, VariableElimination
-        from pgmpy.models import DiscreteBayesianNetwork
-        from pgmpy.factors.discrete import TabularCPD
-        versions["pgmpy"] = pgmpy.__version__
-        peers["pgmpy"] = True
-    except Exception as e:  # noqa: BLE001
-        notes.append(f"pgmpy unavailable: {e}")
-    try:
-        import pyagrum as gum
-    except Exception:  # noqa: BLE001
-        try:
-            import pyAgrum as gum
+            import mdptoolbox
+            import mdptoolbox.mdp as tb
+            versions["pymdptoolbox"] = "4.0b3"
         except Exception as e:  # noqa: BLE001
-            gum = None
-            notes.append(f"pyAgrum unavailable: {e}")
-    if gum is not None:
-        versions["pyAgrum"] = gum.__version__
-    for m in bn["managers"]:
-        name = m["name"]
-        rc = rbn[name]
-        rmed, rp99, rn = stats(rc["times_ns"])
-        nodes = {n["name"]: n for n in m["nodes"]}
-        query = m["query"]
-        sets = m["evidence"]
-        ref = rc["posteriors"]
+            tb = None
+            notes.append(f"pymdptoolbox unavailable: {e}")
+        try:
+            import stormpy
+            versions["stormpy"] = stormpy.__version__
+        except Exception as e:  # noqa: BLE001
+            stormpy = None
+            why = ""
+            try:
+                with open(os.path.join(OUT, "stormpy_pip.log")) as f:
+                    why = " ".join(f.read().split()[-40:])
+            except OSError:
+                pass
+            notes.append(f"stormpy unavailable: {e}; pip: {why}")
 
-        def add(peer, post, ts):
-            err = 0.0
-            for e in range(len(sets)):
-                for j in range(len(query)):
-                    err = max(err, float(np.max(np.abs(np.array(post[e][j]) - np.array(ref[e][j])))))
-            med, p99, n = stats(ts)
-            cases.append({"name": f"bn/{name}", "kind": "bn", "nodes": len(nodes), "peer": peer,
-                          "agree": bool(err <= 1e-9), "max_posterior_diff": err,
-                          "companion_median_ns": rmed, "companion_p99_ns": rp99, "companion_reps": rn,
-                          "peer_median_ns": med, "peer_p99_ns": p99, "peer_reps": n,
-                          "speedup": med / rmed, "target": TARGETS.get(peer)})
-            log(f"bn/{name:25s} {peer:13s} agree={err <= 1e-9} speedup={med / rmed:9.1f}")
-
-        if "pgmpy" in peers:
-            bnm = DiscreteBayesianNetwork()
-            bnm.add_nodes_from(nodes)
-            for n in m["nodes"]:
-                for par in n["parents"]:
-                    bnm.add_edge(par, n["name"])
-            for n in m["nodes"]:
-                k = len(n["states"])
-                cpt = np.array(n["cpt"]).reshape(-1, k).T  # pgmpy: rows = states, cols = parent combos
-                bnm.add_cpds(TabularCPD(
-                    n["name"], k, cpt, evidence=n["parents"] or None,
-                    evidence_card=[len(nodes[p]["states"]) for p in n["parents"]] or None,
-                    state_names={x: nodes[x]["states"] for x in [n["name"]] + n["parents"]}))
-            bnm.check_model()
-            for peer, cls in [("pgmpy-VE", VariableElimination), ("pgmpy-BP", BeliefPropagation)]:
-                try:
-                    inf = cls(bnm)
-                except Exception as e:  # noqa: BLE001
-                    notes.append(f"bn/{name}: {peer} failed: {type(e).__name__}: {e}")
+        for name, p in models.items():
+            with open(p) as f:
+                mdl = Model(json.load(f))
+            big = name == "random_10000"
+            reps = 3 if big else 1000
+            npy = NumpySolver(mdl)
+            # the numpy reference values for tie checks
+            ref = {}
+            ref["fh"] = npy.fh(HORIZON) + (npy.v1, 1.0)
+            vv, pp = npy.vi(GAMMA, TOL)
+            ref["vi"] = (vv, pp, vv, GAMMA)
+            ref["pi"] = ref["vi"]
+            P = R = None
+            if tb is not None:
+                P, R = toolbox_arrays(mdl, sparse=mdl.n > 1000)
+            for solver in ["fh", "vi", "pi"]:
+                key = f"{name}/{solver}"
+                if key not in rust:
+                    notes.append(f"{key}: companion policy iteration skipped (dense 10000x10000 evaluation)")
                     continue
-                it = iter(range(10**9))
+                rc = rust[key]
+                rv, rp = np.array(rc["values"]), np.array(rc["policy"])
+                rmed, rp99, rn = stats(rc["times_ns"])
+                _, _, vnext, g = ref[solver]
 
-                def q(e):
-                    r = inf.query(variables=query, evidence=e, joint=False, show_progress=False)
-                    return [[float(x) for x in r[v].values] for v in query]
+                def add(peer, v, pol, ts, extra=None):
+                    ok, err, bad = agree_mdp(mdl, solver, rv, rp, v, pol, vnext, g)
+                    med, p99, n = stats(ts)
+                    c = {"name": key, "kind": "mdp", "states": mdl.n, "peer": peer, "agree": bool(ok),
+                         "max_value_diff": err, "action_mismatches": bad,
+                         "companion_median_ns": rmed, "companion_p99_ns": rp99, "companion_reps": rn,
+                         "peer_median_ns": med, "peer_p99_ns": p99, "peer_reps": n,
+                         "speedup": med / rmed, "target": TARGETS.get(peer),
+                         "policy_agree": bad == 0}
+                    if extra:
+                        c.update(extra)
+                    cases.append(c)
+                    log(f"{key:28s} {peer:13s} agree={ok} speedup={med / rmed:9.1f}")
+
+                # numpy
+                f_np = {"fh": lambda: npy.fh(HORIZON), "vi": lambda: npy.vi(GAMMA, TOL),
+                        "pi": lambda: npy.pi(GAMMA)}[solver]
+                if solver == "pi" and mdl.n > 1000:
+                    pass
+                else:
+                    v, pol = f_np()[:2]
+                    add("numpy", v, pol, timeit(f_np, reps, B))
+                # pymdptoolbox
+                if tb is not None:
+                    if solver == "fh":
+                        def mk():
+                            with contextlib.redirect_stdout(io.StringIO()):
+                                s = tb.FiniteHorizon(P, R, 1, HORIZON)
+                                s.run()
+                            return s.V[:, 0], s.policy[:, 0]
+                    elif solver == "vi":
+                        def mk():
+                            s = tb.ValueIteration(P, R, GAMMA, epsilon=1e-9, max_iter=100000)
+                            # its own iteration bound (_boundIter) stops early on the random models
+                            s.max_iter = 100000
+                            s.run()
+                            return np.array(s.V), np.array(s.policy)
+                    else:
+                        def mk():
+                            s = tb.PolicyIteration(P, R, GAMMA, max_iter=100000)
+                            s.run()
+                            return np.array(s.V), np.array(s.policy)
+                    if big and solver == "pi":
+                        notes.append(f"{key}: pymdptoolbox skipped (companion has no result to compare)")
+                    elif big and solver == "vi":
+                        notes.append(f"{key}: pymdptoolbox skipped (one solve took over 2 minutes here)")
+                    else:
+                        if big:
+                            # minutes per solve at this size: one timed call, no warm-up
+                            t0 = time.perf_counter_ns()
+                            v, pol = mk()
+                            ts = [time.perf_counter_ns() - t0]
+                            notes.append(f"{key}: pymdptoolbox timed once, no warm-up (slow at this size)")
+                        else:
+                            v, pol = mk()
+                            ts = timeit(mk, reps, B)
+                        pol = np.where(mdl.nonterm, pol, -1)
+                        add("pymdptoolbox", v, pol, ts,
+                            {"note": "ValueIteration stops on span(V_k+1 - V_k): epsilon-optimal policy, "
+                                     "values not converged (by design)"} if solver == "vi" else None)
+                # Storm: finite horizon as the cumulative reward within 100 steps
+                if stormpy is not None and solver == "fh":
+                    try:
+                        sm = storm_model(mdl, os.path.join(OUT, f"{name}.drn"))
+                        prop = stormpy.parse_properties(f"Rmax=? [C<={HORIZON}]")[0]
+
+                        def mk():
+                            return stormpy.model_checking(sm, prop, only_initial_states=False)
+
+                        res = mk()
+                        v = np.array([res.get_value(s) for s in range(mdl.n)])
+                        # Storm's value query gives no scheduler for step-bounded rewards: values only
+                        add("stormpy", v, rp, timeit(mk, 3 if big else reps, B),
+                            {"note": "values only (no stage-0 scheduler)"})
+                    except Exception as e:  # noqa: BLE001
+                        notes.append(f"{key}: stormpy failed: {type(e).__name__}: {e}")
+
+    if want("bn"):
+        # ---- BN
+        bn_path = os.path.join(OUT, "health_bn.json")
+        log("running companion BN queries ...")
+        rbn = {m["name"]: m for m in json.loads(run_cargo(
+            [os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "examples", "bench_bn"), bn_path,
+             "100000", str(B)]))["managers"]}
+        with open(bn_path) as f:
+            bn = json.load(f)
+        peers = {}
+        try:
+            import pgmpy
+            from pgmpy.inference import BeliefPropagation, VariableElimination
+            from pgmpy.models import DiscreteBayesianNetwork
+            from pgmpy.factors.discrete import TabularCPD
+            versions["pgmpy"] = pgmpy.__version__
+            peers["pgmpy"] = True
+        except Exception as e:  # noqa: BLE001
+            notes.append(f"pgmpy unavailable: {e}")
+        try:
+            import pyagrum as gum
+        except Exception:  # noqa: BLE001
+            try:
+                import pyAgrum as gum
+            except Exception as e:  # noqa: BLE001
+                gum = None
+                notes.append(f"pyAgrum unavailable: {e}")
+        if gum is not None:
+            versions["pyAgrum"] = gum.__version__
+        for m in bn["managers"]:
+            name = m["name"]
+            rc = rbn[name]
+            rmed, rp99, rn = stats(rc["times_ns"])
+            nodes = {n["name"]: n for n in m["nodes"]}
+            query = m["query"]
+            sets = m["evidence"]
+            ref = rc["posteriors"]
+
+            def add(peer, post, ts):
+                err = 0.0
+                for e in range(len(sets)):
+                    for j in range(len(query)):
+                        err = max(err, float(np.max(np.abs(np.array(post[e][j]) - np.array(ref[e][j])))))
+                med, p99, n = stats(ts)
+                cases.append({"name": f"bn/{name}", "kind": "bn", "nodes": len(nodes), "peer": peer,
+                              "agree": bool(err <= 1e-9), "max_posterior_diff": err,
+                              "companion_median_ns": rmed, "companion_p99_ns": rp99, "companion_reps": rn,
+                              "peer_median_ns": med, "peer_p99_ns": p99, "peer_reps": n,
+                              "speedup": med / rmed, "target": TARGETS.get(peer)})
+                log(f"bn/{name:25s} {peer:13s} agree={err <= 1e-9} speedup={med / rmed:9.1f}")
+
+            if "pgmpy" in peers:
+                bnm = DiscreteBayesianNetwork()
+                bnm.add_nodes_from(nodes)
+                for n in m["nodes"]:
+                    for par in n["parents"]:
+                        bnm.add_edge(par, n["name"])
+                for n in m["nodes"]:
+                    k = len(n["states"])
+                    cpt = np.array(n["cpt"]).reshape(-1, k).T  # pgmpy: rows = states, cols = parent combos
+                    bnm.add_cpds(TabularCPD(
+                        n["name"], k, cpt, evidence=n["parents"] or None,
+                        evidence_card=[len(nodes[p]["states"]) for p in n["parents"]] or None,
+                        state_names={x: nodes[x]["states"] for x in [n["name"]] + n["parents"]}))
+                bnm.check_model()
+                for peer, cls in [("pgmpy-VE", VariableElimination), ("pgmpy-BP", BeliefPropagation)]:
+                    try:
+                        inf = cls(bnm)
+                    except Exception as e:  # noqa: BLE001
+                        notes.append(f"bn/{name}: {peer} failed: {type(e).__name__}: {e}")
+                        continue
+                    it = iter(range(10**9))
+
+                    def q(e):
+                        r = inf.query(variables=query, evidence=e, joint=False, show_progress=False)
+                        return [[float(x) for x in r[v].values] for v in query]
+
+                    def one():
+                        i = next(it) % len(sets)
+                        q(sets[i])
+
+                    post = []
+                    for e in sets:
+                        r = inf.query(variables=query, evidence=e, joint=False, show_progress=False)
+                        # pgmpy may reorder state names: map back to the exported order
+                        post.append([[float(r[v].get_value(**{v: s})) for s in nodes[v]["states"]]
+                                     for v in query])
+                    add(peer, post, timeit(one, 2000, B))
+            if gum is not None:
+                g = gum.BayesNet(name)
+                for n in m["nodes"]:
+                    g.add(gum.LabelizedVariable(n["name"], n["name"], n["states"]))
+                for n in m["nodes"]:
+                    for par in n["parents"]:
+                        g.addArc(par, n["name"])
+                for n in m["nodes"]:
+                    k = len(n["states"])
+                    cpt = np.array(n["cpt"]).reshape([len(nodes[p]["states"]) for p in n["parents"]] + [k])
+                    # pyAgrum's CPT tensor: fill through named instantiations
+                    pot = g.cpt(n["name"])
+                    inst = gum.Instantiation(pot)
+                    inst.setFirst()
+                    while not inst.end():
+                        idx = tuple(inst.val(g.variable(x)) for x in n["parents"] + [n["name"]])
+                        pot.set(inst, float(cpt[idx]))
+                        inst.inc()
+                ie = gum.LazyPropagation(g)
+                it = iter(range(10**9))
 
                 def one():
                     i = next(it) % len(sets)
-                    q(sets[i])
+                    ie.eraseAllEvidence()
+                    ie.setEvidence(sets[i])
+                    ie.makeInference()
+                    return [ie.posterior(v) for v in query]
 
                 post = []
                 for e in sets:
-                    r = inf.query(variables=query, evidence=e, joint=False, show_progress=False)
-                    # pgmpy may reorder state names: map back to the exported order
-                    post.append([[float(r[v].get_value(**{v: s})) for s in nodes[v]["states"]]
-                                 for v in query])
-                add(peer, post, timeit(one, 2000, B))
-        if gum is not None:
-            g = gum.BayesNet(name)
-            for n in m["nodes"]:
-                g.add(gum.LabelizedVariable(n["name"], n["name"], n["states"]))
-            for n in m["nodes"]:
-                for par in n["parents"]:
-                    g.addArc(par, n["name"])
-            for n in m["nodes"]:
-                k = len(n["states"])
-                cpt = np.array(n["cpt"]).reshape([len(nodes[p]["states"]) for p in n["parents"]] + [k])
-                # pyAgrum's CPT tensor: fill through named instantiations
-                pot = g.cpt(n["name"])
-                inst = gum.Instantiation(pot)
-                inst.setFirst()
-                while not inst.end():
-                    idx = tuple(inst.val(g.variable(x)) for x in n["parents"] + [n["name"]])
-                    pot.set(inst, float(cpt[idx]))
-                    inst.inc()
-            ie = gum.LazyPropagation(g)
-            it = iter(range(10**9))
+                    ie.eraseAllEvidence()
+                    ie.setEvidence(e)
+                    ie.makeInference()
+                    post.append([[float(x) for x in ie.posterior(v).toarray()] for v in query])
+                add("pyAgrum", post, timeit(one, 5000, B))
 
-            def one():
-                i = next(it) % len(sets)
-                ie.eraseAllEvidence()
-                ie.setEvidence(sets[i])
-                ie.makeInference()
-                return [ie.posterior(v) for v in query]
-
-            post = []
-            for e in sets:
-                ie.eraseAllEvidence()
-                ie.setEvidence(e)
-                ie.makeInference()
-                post.append([[float(x) for x in ie.posterior(v).toarray()] for v in query])
-            add("pyAgrum", post, timeit(one, 5000, B))
-
-    # ---- MAVLink ingest
-    ingest_case(B, cases, notes, versions)
-    # ---- the full decision cycle (no Python peer: the target is 50 us median; agree = met)
-    log("running the companion decision cycle ...")
-    cyc = {c["name"]: c for c in json.loads(run_cargo(
-        [os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "examples", "bench_cycle"),
-         "2000"]))["cases"]}
-    for key, label in [("steady", "decision cycle"), ("changing", "decision cycle, evidence changing"),
-                       ("worst", "decision cycle, worst case (memos off)")]:
-        c = cyc[key]
-        med = c["median_us"]
-        cases.append({"name": label, "kind": "cycle", "peer": "target-50us", "agree": bool(med <= 50.0),
-                      "speedup": 50.0 / med, "target": 1,
-                      "companion_median_ns": med * 1e3, "companion_p99_ns": c["p99_us"] * 1e3,
-                      "companion_reps": c["cycles"], "peer_median_ns": 50e3, "peer_p99_ns": 50e3,
-                      "peer_reps": 0, "allocations_per_cycle": c["allocations_per_cycle"],
-                      "mdp_solves_per_cycle": c["mdp_solves_per_cycle"],
-                      "note": f"{c['allocations_per_cycle']:g} allocations/cycle, "
-                              f"{c['mdp_solves_per_cycle']:g} MDP solves/cycle"})
-        log(f"{label:40s} median {med:.1f} us p99 {c['p99_us']:.1f} us met={med <= 50.0}")
+    if want("ingest"):
+        # ---- MAVLink ingest
+        ingest_case(B, cases, notes, versions)
+    if want("cycle"):
+        # ---- the full decision cycle (no Python peer: the target is 50 us median; agree = met)
+        log("running the companion decision cycle ...")
+        cyc = {c["name"]: c for c in json.loads(run_cargo(
+            [os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "examples", "bench_cycle"),
+             "2000"]))["cases"]}
+        for key, label in [("steady", "decision cycle"), ("changing", "decision cycle, evidence changing"),
+                           ("worst", "decision cycle, worst case (memos off)")]:
+            c = cyc[key]
+            med = c["median_us"]
+            cases.append({"name": label, "kind": "cycle", "peer": "target-50us", "agree": bool(med <= 50.0),
+                          "speedup": 50.0 / med, "target": 1,
+                          "companion_median_ns": med * 1e3, "companion_p99_ns": c["p99_us"] * 1e3,
+                          "companion_reps": c["cycles"], "peer_median_ns": 50e3, "peer_p99_ns": 50e3,
+                          "peer_reps": 0, "allocations_per_cycle": c["allocations_per_cycle"],
+                          "mdp_solves_per_cycle": c["mdp_solves_per_cycle"],
+                          "note": f"{c['allocations_per_cycle']:g} allocations/cycle, "
+                                  f"{c['mdp_solves_per_cycle']:g} MDP solves/cycle"})
+            log(f"{label:40s} median {med:.1f} us p99 {c['p99_us']:.1f} us met={med <= 50.0}")
 
     machine = {"loadavg": LOAD0, "nproc": os.cpu_count(), "cpu": cpu_model(), "platform": platform.platform()}
     result = {"budget": B, "machine": machine, "versions": versions, "notes": notes, "cases": cases}
