@@ -12,7 +12,8 @@
 //! stream with the memos off: every MDP re-solved and the scheduler re-run every cycle), and
 //! `monolithic` (section 5's single MDP on the changing stream).
 //!
-//! Run: `cargo run --release -p companion --example bench_cycle -- 2000`.
+//! Run: `cargo run --release -p companion --example bench_cycle -- 2000 [CASE,CASE...]` (the
+//! optional second argument keeps only the named cases, e.g. `changing` for a profile).
 use companion::decision::{Core, Model, ModelKind, Policy};
 use companion::record::{DecisionRecord, Plan};
 use companion::spec::default_params_dir;
@@ -53,6 +54,10 @@ fn main() {
         .nth(1)
         .map(|a| a.parse().expect("cycles: a number"))
         .unwrap_or(2000);
+    let only: Vec<String> = std::env::args()
+        .nth(2)
+        .map(|a| a.split(',').map(str::to_string).collect())
+        .unwrap_or_default();
     let params = default_params_dir();
     let model = Model::load(&params).expect("params load");
     let base = tracking_snapshot(&model, &params, "complete-1");
@@ -63,6 +68,9 @@ fn main() {
         ("worst", ModelKind::Bfm, Stream::Changing, false),
         ("monolithic", ModelKind::Monolithic, Stream::Changing, true),
     ] {
+        if !only.is_empty() && !only.iter().any(|o| o == name) {
+            continue;
+        }
         let stream_gen = StreamGen::new(&model, base.clone(), stream);
         let mut core = Core::new(&model, kind, Policy::Safety);
         core.set_caches(caches);

@@ -129,6 +129,9 @@ pub struct MissionMdp {
     choice_reward: Vec<Vec<Expr>>,
     /// Per policy: enter reward per state (`None` = 0).
     enter_reward: Vec<Vec<Option<Expr>>>,
+    /// Scratch for `fill`: each state's enter reward at the current values, evaluated once per
+    /// fill instead of once per incoming transition.
+    enter_value: Vec<f64>,
     mdp: Mdp,
     /// The last solve's stage-0 answer for every state, keyed on its exact inputs.
     solved: Solved,
@@ -361,13 +364,18 @@ impl MissionMdp {
         for (p, e) in self.mdp.probs_mut().iter_mut().zip(&self.trans_expr) {
             *p = e.eval(vals);
         }
+        for (x, e) in self.enter_value.iter_mut().zip(&self.enter_reward[policy]) {
+            *x = e.as_ref().map_or(0.0, |e| e.eval(vals));
+        }
         for c in 0..self.mdp.n_choices() {
             let mut r = self.choice_reward[policy][c].eval(vals);
             let range = self.mdp.transition_range(c);
             for t in range {
                 let next = self.mdp.next_states()[t] as usize;
-                if let Some(e) = &self.enter_reward[policy][next] {
-                    r += self.mdp.probs()[t] * e.eval(vals);
+                // `None` adds nothing (not `+ p * 0.0`): keeps the sum bit-identical to the
+                // per-transition evaluation this replaces.
+                if self.enter_reward[policy][next].is_some() {
+                    r += self.mdp.probs()[t] * self.enter_value[next];
                 }
             }
             self.mdp.rewards_mut()[c] = r;
@@ -692,6 +700,7 @@ pub fn load_mdp(
         policies,
         choice_reward,
         enter_reward,
+        enter_value: vec![0.0; f.states.len()],
         mdp,
         solved: Solved {
             enabled: true,

@@ -51,8 +51,44 @@ impl Expr {
         }
     }
 
+    /// Value at `vars`. Children always precede their parent in `nodes` (the parser pushes
+    /// them first) and the root is last, so one forward pass over the arena evaluates the tree
+    /// without recursion; this is the hot path of filling an MDP in every decision cycle.
     pub fn eval(&self, vars: &[f64]) -> f64 {
+        const STACK: usize = 32;
+        let n = self.nodes.len();
+        if n > STACK {
+            return self.eval_node(n - 1, vars);
+        }
+        let mut val = [0.0f64; STACK];
+        for (i, node) in self.nodes.iter().enumerate() {
+            val[i] = match *node {
+                Node::Const(x) => x,
+                Node::Var(k) => vars[k],
+                Node::Neg(a) => -val[a],
+                Node::Add(a, b) => val[a] + val[b],
+                Node::Sub(a, b) => val[a] - val[b],
+                Node::Mul(a, b) => val[a] * val[b],
+                Node::Div(a, b) => val[a] / val[b],
+            };
+        }
+        val[n - 1]
+    }
+
+    /// The same value by recursion from the root (the path for arenas over 32 nodes, and the
+    /// reference the forward pass is tested against).
+    pub fn eval_recursive(&self, vars: &[f64]) -> f64 {
         self.eval_node(self.nodes.len() - 1, vars)
+    }
+
+    /// Number of nodes in the arena (after constant folding).
+    pub fn len(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// Never true: an expression has at least one node.
+    pub fn is_empty(&self) -> bool {
+        self.nodes.is_empty()
     }
 
     fn eval_node(&self, i: usize, v: &[f64]) -> f64 {
@@ -90,8 +126,40 @@ impl Parser<'_, '_> {
             self.i += 1;
         }
     }
+    /// Push `n`, folding an operation on constants into one constant (an operand that is a
+    /// constant is a single node, pushed just before, so it is popped). The folded value is the
+    /// same IEEE operation evaluation would do, so results are bit-identical.
     fn push(&mut self, n: Node) -> usize {
-        self.nodes.push(n);
+        let c = |p: &Self, i: usize| match p.nodes[i] {
+            Node::Const(x) => Some(x),
+            _ => None,
+        };
+        let folded = match n {
+            Node::Neg(a) => c(self, a).map(|x| (1, -x)),
+            Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) | Node::Div(a, b) => {
+                match (c(self, a), c(self, b)) {
+                    (Some(x), Some(y)) => Some((
+                        2,
+                        match n {
+                            Node::Add(..) => x + y,
+                            Node::Sub(..) => x - y,
+                            Node::Mul(..) => x * y,
+                            _ => x / y,
+                        },
+                    )),
+                    _ => None,
+                }
+            }
+            _ => None,
+        };
+        match folded {
+            Some((k, x)) => {
+                let len = self.nodes.len() - k;
+                self.nodes.truncate(len);
+                self.nodes.push(Node::Const(x));
+            }
+            None => self.nodes.push(n),
+        }
         self.nodes.len() - 1
     }
     fn peek(&mut self) -> Option<u8> {
@@ -225,5 +293,85 @@ mod tests {
         }
         let deep = format!("{}1{}", "(".repeat(200), ")".repeat(200));
         assert!(Expr::parse(&deep, &mut names).is_err());
+    }
+
+    #[test]
+    fn constants_fold_at_parse() {
+        let p = |t: &str| Expr::parse(t, &mut names).unwrap();
+        assert_eq!(p("1 - 0.5 - 0.25").len(), 1);
+        assert_eq!(p("-(2 * 3)").len(), 1);
+        // P_sys, the folded 0.95, the product: 3 nodes.
+        assert_eq!(p("P_sys * (1 - 0.1 * 0.5)").len(), 3);
+        assert_eq!(
+            p("P_sys * (1 - 0.1 * 0.5)").eval(&[0.9, 0.0, 0.0]),
+            0.9 * 0.95
+        );
+    }
+
+    /// A random expression tree, evaluated by the test itself (independent of the parser).
+    #[derive(Debug, Clone)]
+    enum T {
+        C(f64),
+        V(usize),
+        Neg(Box<T>),
+        Bin(u8, Box<T>, Box<T>),
+    }
+
+    impl T {
+        fn text(&self) -> String {
+            match self {
+                T::C(x) => format!("{x:?}"),
+                T::V(k) => ["P_sys", "P_obs", "P_V3"][*k].to_string(),
+                T::Neg(a) => format!("-({})", a.text()),
+                T::Bin(op, a, b) => format!("({} {} {})", a.text(), *op as char, b.text()),
+            }
+        }
+        fn value(&self, v: &[f64]) -> f64 {
+            match self {
+                T::C(x) => *x,
+                T::V(k) => v[*k],
+                T::Neg(a) => -a.value(v),
+                T::Bin(op, a, b) => {
+                    let (x, y) = (a.value(v), b.value(v));
+                    match op {
+                        b'+' => x + y,
+                        b'-' => x - y,
+                        b'*' => x * y,
+                        _ => x / y,
+                    }
+                }
+            }
+        }
+    }
+
+    fn tree() -> impl proptest::strategy::Strategy<Value = T> {
+        use proptest::prelude::*;
+        let leaf = prop_oneof![(0.0f64..10.0).prop_map(T::C), (0usize..3).prop_map(T::V)];
+        leaf.prop_recursive(6, 64, 2, |inner| {
+            prop_oneof![
+                inner.clone().prop_map(|a| T::Neg(Box::new(a))),
+                (
+                    prop_oneof![Just(b'+'), Just(b'-'), Just(b'*'), Just(b'/')],
+                    inner.clone(),
+                    inner
+                )
+                    .prop_map(|(o, a, b)| T::Bin(o, Box::new(a), Box::new(b))),
+            ]
+        })
+    }
+
+    proptest::proptest! {
+        /// Forward-pass and recursive evaluation of the parsed (constant-folded) arena give
+        /// bit-for-bit the value of the tree it was printed from, small and large arenas alike.
+        #[test]
+        fn parsed_expressions_evaluate_like_their_tree(
+            t in tree(),
+            v in proptest::array::uniform3(0.0f64..1.0),
+        ) {
+            let e = Expr::parse(&t.text(), &mut names).unwrap();
+            let want = t.value(&v);
+            proptest::prop_assert_eq!(e.eval(&v).to_bits(), want.to_bits(), "{}", t.text());
+            proptest::prop_assert_eq!(e.eval_recursive(&v).to_bits(), want.to_bits());
+        }
     }
 }
