@@ -9,8 +9,11 @@
 //! * [`Workspace`]: preallocated solver buffers, reused across solves. After the first solve of a
 //!   given size (and horizon), re-solving allocates nothing.
 //! * Solvers (methods on [`Workspace`]): finite-horizon undiscounted backward induction (the BFM
-//!   paper's eq. 1–3), value iteration, policy iteration (eq. 4–5, policy evaluation by a dense
-//!   in-place linear solve on a nalgebra matrix) and modified policy iteration.
+//!   paper's eq. 1–3; stops early once a certified bound shows the remaining stages are the
+//!   computed ones plus a constant gain per stage, to within [`FH_STOP_TOLERANCE`]), value
+//!   iteration (stopped on the MacQueen–Porteus bracket), policy iteration (eq. 4–5, policy
+//!   evaluation by a dense in-place linear solve on a nalgebra matrix) and modified policy
+//!   iteration.
 //!
 //! **Tie-breaking** is deterministic everywhere: a later action (higher action index) replaces the
 //! current best only if its Q-value is larger by more than [`TIE_TOLERANCE`] relative to the best
