@@ -9,8 +9,11 @@
 //! * [`Workspace`]: preallocated solver buffers, reused across solves. After the first solve of a
 //!   given size (and horizon), re-solving allocates nothing.
 //! * Solvers (methods on [`Workspace`]): finite-horizon undiscounted backward induction (the BFM
-//!   paper's eq. 1–3), value iteration, policy iteration (eq. 4–5, policy evaluation by a dense
-//!   in-place linear solve on a nalgebra matrix) and modified policy iteration.
+//!   paper's eq. 1–3; stops early once a certified bound shows the remaining stages are the
+//!   computed ones plus a constant gain per stage, to within [`FH_STOP_TOLERANCE`]), value
+//!   iteration (stopped on the MacQueen–Porteus bracket), policy iteration (eq. 4–5, policy
+//!   evaluation by a dense in-place linear solve on a nalgebra matrix) and modified policy
+//!   iteration.
 //!
 //! **Tie-breaking** is deterministic everywhere: a later action (higher action index) replaces the
 //! current best only if its Q-value is larger by more than [`TIE_TOLERANCE`] relative to the best
@@ -416,6 +419,18 @@ impl Mdp {
         Ok(())
     }
 
+    /// `sum p(s'|s,a) v(s')` for choice `c`.
+    #[inline(always)]
+    fn dot(&self, c: usize, v: &[f64]) -> f64 {
+        let lo = self.choice_start[c] as usize;
+        let hi = self.choice_start[c + 1] as usize;
+        let mut acc = 0.0;
+        for (n, p) in self.next[lo..hi].iter().zip(&self.prob[lo..hi]) {
+            acc += p * v[*n as usize];
+        }
+        acc
+    }
+
     /// `R(s,a) + gamma * sum p(s'|s,a) v(s')` for choice `c`.
     #[inline]
     fn q(&self, c: usize, gamma: f64, v: &[f64]) -> f64 {
@@ -452,13 +467,194 @@ fn beats(q: f64, best: f64) -> bool {
     q > best + TIE_TOLERANCE * best.abs().max(1.0)
 }
 
+/// Relative bound for the finite-horizon early stop: the extrapolated stages may differ from full
+/// backward induction by at most this times `max(1, |V_0|)` in value, and a kept action may be
+/// worse than the best by at most as much beyond the [`TIE_TOLERANCE`] (see
+/// [`Workspace::finite_horizon`]). Full backward induction's own rounding is of order
+/// `H * 1e-16 * |V_0|`, a hundred times smaller at the paper's horizon.
+pub const FH_STOP_TOLERANCE: f64 = 1e-12;
+
+/// What one certified backup (stage `b - 1` from `V_b`, `V_{b+1}`) measures about `g = V_b -
+/// V_{b+1}`, to bound the remaining stages without computing them.
+///
+/// With `T` the Bellman operator (monotone; `T(V + c) = TV + c` at non-terminal states for a
+/// constant `c`, terminal states fixed at 0), for every `k >= 1`:
+/// * span bound: `min g <= d <= max g` propagates to every earlier difference, so
+///   `|V_{b-k} - (V_b + k g)| <= k * span(g)`;
+/// * componentwise bound (multichain models, where terminal states keep `g = 0` and the others
+///   earn a positive gain, so the span never shrinks): with `eps_up = max_{s,a} (P_a g)(s) -
+///   g(s)` and `eps_lo = max_s g(s) - (P_{pi_b} g)(s)`, induction on `T(V + w) <= TV + max_a P_a
+///   w` and `T(V + w) >= T_{pi_b}(V + w)` gives `V_b + k g - k(k+1)/2 eps_lo <= V_{b-k} <= V_b +
+///   k g + k(k+1)/2 eps_up`.
+///
+/// Actions: at an earlier stage, `Q(s,a) = qb(s,a) + k (P_a g)(s) + (P_a err)(s)` with `qb` the
+/// Q-values of stage `b - 1`, so the stage `b - 1` choice `a*` loses to another action at most
+/// `2 E + k ((P_a g)(s) - (P_a* g)(s))`, and that gain difference is at most `eps_up + eps_star`
+/// (`eps_star = max_s g(s) - (P_{a*} g)(s)`) or `span(g)`.
+#[derive(Debug, Clone, Copy)]
+struct FhCertificate {
+    eps_up: f64,
+    eps_lo: f64,
+    eps_star: f64,
+    span: f64,
+    vmax: f64,
+    gmax: f64,
+}
+
+/// The bounds of [`FhCertificate`] over `k` remaining stages.
+#[derive(Debug, Clone, Copy)]
+struct FhBound {
+    /// On every extrapolated value.
+    value: f64,
+    /// On how much a kept action's Q-value may fall below the best (beyond the tie tolerance).
+    action: f64,
+}
+
+impl FhCertificate {
+    fn stop_bound(&self, k: usize) -> Option<FhBound> {
+        let k = k as f64;
+        let value = (k * self.span).min(k * (k + 1.0) * 0.5 * self.eps_up.max(self.eps_lo));
+        let eta = (self.eps_up + self.eps_star).min(self.span);
+        let action = 2.0 * value + k * eta;
+        action.is_finite().then_some(FhBound { value, action })
+    }
+
+    /// An upper bound on `max(1, |V_0|)` when `V_0 ~ V_b + k g`.
+    fn scale(&self, k: usize) -> f64 {
+        (self.vmax + k as f64 * self.gmax).max(1.0)
+    }
+}
+
+/// One plain Bellman backup with gamma = 1: `cur = T next`, `pol` the greedy actions.
+fn backup_stage(mdp: &Mdp, next: &[f64], cur: &mut [f64], pol: &mut [u32]) {
+    let ss = &mdp.state_start;
+    for (s, (cur_s, pol_s)) in cur.iter_mut().zip(pol.iter_mut()).enumerate() {
+        let lo = ss[s] as usize;
+        let hi = ss[s + 1] as usize;
+        if lo == hi {
+            *cur_s = 0.0;
+            *pol_s = NONE;
+            continue;
+        }
+        let mut best_c = lo;
+        let mut best = mdp.choice_reward[lo] + mdp.dot(lo, next);
+        let mut bar = beat_bar(best);
+        for c in lo + 1..hi {
+            let q = mdp.choice_reward[c] + mdp.dot(c, next);
+            if q > bar {
+                best = q;
+                best_c = c;
+                bar = beat_bar(best);
+            }
+        }
+        *cur_s = best;
+        *pol_s = mdp.choice_action[best_c];
+    }
+}
+
+/// [`backup_stage`] from `vb` (`V_b`) that also measures the [`FhCertificate`] of `g = vb -
+/// vb1`, with `pol_b` the decision rule of stage `b`.
+fn backup_certified(
+    mdp: &Mdp,
+    vb: &[f64],
+    vb1: &[f64],
+    pol_b: &[u32],
+    cur: &mut [f64],
+    pol: &mut [u32],
+) -> FhCertificate {
+    let ss = &mdp.state_start;
+    let mut cert = FhCertificate {
+        eps_up: 0.0,
+        eps_lo: 0.0,
+        eps_star: 0.0,
+        span: 0.0,
+        vmax: 0.0,
+        gmax: 0.0,
+    };
+    let (mut gmin, mut gmaxs) = (f64::INFINITY, f64::NEG_INFINITY);
+    for s in 0..cur.len() {
+        let gs = vb[s] - vb1[s];
+        gmin = gmin.min(gs);
+        gmaxs = gmaxs.max(gs);
+        cert.gmax = cert.gmax.max(gs.abs());
+        cert.vmax = cert.vmax.max(vb[s].abs());
+        let lo = ss[s] as usize;
+        let hi = ss[s + 1] as usize;
+        if lo == hi {
+            cur[s] = 0.0;
+            pol[s] = NONE;
+            continue;
+        }
+        let mut best_c = lo;
+        let mut best = f64::NEG_INFINITY;
+        let mut bar = f64::NEG_INFINITY;
+        let mut best_pg = 0.0;
+        for c in lo..hi {
+            let t = mdp.transition_range(c);
+            let (mut q, mut pg) = (0.0, 0.0);
+            for (n, p) in mdp.next[t.clone()].iter().zip(&mdp.prob[t]) {
+                let n = *n as usize;
+                q += p * vb[n];
+                pg += p * (vb[n] - vb1[n]);
+            }
+            let q = mdp.choice_reward[c] + q;
+            cert.eps_up = cert.eps_up.max(pg - gs);
+            if mdp.choice_action[c] == pol_b[s] {
+                cert.eps_lo = cert.eps_lo.max(gs - pg);
+            }
+            if c == lo || q > bar {
+                best = q;
+                best_c = c;
+                bar = beat_bar(best);
+                best_pg = pg;
+            }
+        }
+        cert.eps_star = cert.eps_star.max(gs - best_pg);
+        cur[s] = best;
+        pol[s] = mdp.choice_action[best_c];
+    }
+    cert.span = if gmaxs >= gmin { gmaxs - gmin } else { 0.0 };
+    cert
+}
+
+/// Fill stages `0..t` by the certified extrapolation from base `b = t + 1`: `V_{t'} = V_b + (b -
+/// t') g` and the decision rule of stage `t`.
+fn fill_extrapolated(vals: &mut [f64], pol: &mut [u32], n: usize, t: usize, b: usize) {
+    let (lo, hi) = vals.split_at_mut(b * n);
+    let (vb, vb1) = hi[..2 * n].split_at(n);
+    for tp in 0..t {
+        let k = (b - tp) as f64;
+        for (((out, v), v1), _) in lo[tp * n..(tp + 1) * n]
+            .iter_mut()
+            .zip(vb)
+            .zip(vb1)
+            .zip(0..n)
+        {
+            *out = v + k * (v - v1);
+        }
+    }
+    let (head, row) = pol.split_at_mut(t * n);
+    let row = &row[..n];
+    for tp in 0..t {
+        head[tp * n..(tp + 1) * n].copy_from_slice(row);
+    }
+}
+
+/// The value a later Q must exceed to replace `best` (see [`beats`]).
+#[inline(always)]
+fn beat_bar(best: f64) -> f64 {
+    best + TIE_TOLERANCE * best.abs().max(1.0)
+}
+
 /// Settings for the infinite-horizon solvers.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Config {
     /// Discount factor in `(0, 1]`.
     pub gamma: f64,
-    /// Stop when the sup-norm change between successive value estimates (value iteration) or the
-    /// Bellman residual (modified policy iteration) is below this.
+    /// Value iteration: stop once the returned values are within `gamma / (1 - gamma) *
+    /// tolerance` of `V*` (MacQueen–Porteus bracket, see [`Workspace::value_iteration`]; with
+    /// `gamma = 1`, once the sup-norm change is below this). Modified policy iteration: stop when
+    /// the Bellman residual is below this.
     pub tolerance: f64,
     /// Upper bound on iterations (sweeps for VI, improvements for PI/MPI).
     pub max_iterations: u32,
@@ -480,10 +676,12 @@ impl Default for Config {
 /// How a solve went.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Stats {
-    /// Finite horizon: the horizon. VI: sweeps. PI: policy evaluations (the paper's Table 9 count).
-    /// MPI: improvement steps.
+    /// Finite horizon: stages computed (at most the horizon, see the early stop of
+    /// [`Workspace::finite_horizon`]). VI: sweeps. PI: policy evaluations (the paper's Table 9
+    /// count). MPI: improvement steps.
     pub iterations: u32,
-    /// `max_s |max_a Q(s,a) - v(s)|` at the returned values (finite horizon: 0).
+    /// `max_s |max_a Q(s,a) - v(s)|` at the returned values (finite horizon: the certified bound
+    /// on the extrapolated stages, 0 when every stage was computed).
     pub residual: f64,
     pub converged: bool,
 }
@@ -560,54 +758,135 @@ impl Workspace {
     /// Finite-horizon undiscounted backward induction (paper eq. 1–3): `V_H = 0` and
     /// `V_t(s) = max_a R(s,a) + sum_s' p(s'|s,a) V_{t+1}(s')` for `t = H-1 .. 0`. Stage `t` is the
     /// decision taken with `H - t` steps to go; `t = 0` is the decision to execute now.
+    ///
+    /// **Early stop with a certified bound.** Once the stage differences `g = V_b - V_{b+1}` have
+    /// settled, the remaining stages are `V_{b-k} = V_b + k g` up to a bound proved from the
+    /// monotonicity of the Bellman operator (see [`FhCertificate`]); when that bound, propagated
+    /// over the remaining stages, is below [`FH_STOP_TOLERANCE`] relative to the values, the
+    /// earlier stages are filled by that extrapolation (values) and by the last computed decision
+    /// rule (actions), and [`FiniteHorizonSolution::stats`] reports the stages actually computed
+    /// and the bound (`residual`). Models whose stage differences never settle (periodic ones) are
+    /// solved in full.
     pub fn finite_horizon(&mut self, mdp: &Mdp, horizon: usize) -> FiniteHorizonSolution<'_> {
         let n = mdp.n_states();
         self.reserve(n, horizon, false);
         self.horizon = horizon;
         let (vals, pol) = (&mut self.fh_values, &mut self.fh_policy);
         vals[horizon * n..(horizon + 1) * n].fill(0.0);
-        for t in (0..horizon).rev() {
-            let (cur, next) = vals[t * n..(t + 2) * n].split_at_mut(n);
-            for s in 0..n {
-                match mdp.greedy(s, 1.0, next) {
-                    Some((c, q)) => {
-                        cur[s] = q;
-                        pol[t * n + s] = mdp.choice_action[c];
+        let mut computed = 0u32;
+        let mut bound = 0.0;
+        // The second difference at which the last certificate attempt failed: retry only once it
+        // has at least halved, so a model that never settles costs no more than a few attempts.
+        let mut retry_below = f64::INFINITY;
+        let mut t = horizon;
+        while t > 0 {
+            t -= 1;
+            computed += 1;
+            // Candidate for a certificate at base b = t + 1: needs V_{b+1} (so b + 1 <= H) and
+            // the decision rule pi_b (b <= H - 1), and a cheap sign that g has settled:
+            // delta = max |d_b - d_{b+1}| (needs V_{b+2}).
+            let b = t + 1;
+            if b + 2 <= horizon {
+                let (vb, rest) = vals[b * n..(b + 3) * n].split_at(n);
+                let (vb1, vb2) = rest.split_at(n);
+                let mut delta: f64 = 0.0;
+                let mut scale: f64 = 1.0;
+                for s in 0..n {
+                    delta = delta.max((vb[s] - 2.0 * vb1[s] + vb2[s]).abs());
+                    scale = scale.max(vb[s].abs());
+                }
+                let kk = b as f64;
+                let tol = FH_STOP_TOLERANCE * scale;
+                if delta < retry_below && kk * (kk + 1.0) * 0.5 * delta <= 16.0 * tol {
+                    let (cur, rest) = vals[t * n..(t + 3) * n].split_at_mut(n);
+                    let (vb, vb1) = rest.split_at(n);
+                    let (pol_t, pol_b) = pol[t * n..(t + 2) * n].split_at_mut(n);
+                    let cert = backup_certified(mdp, vb, vb1, pol_b, cur, pol_t);
+                    match cert.stop_bound(b) {
+                        Some(e) if e.action <= FH_STOP_TOLERANCE * cert.scale(b) => {
+                            bound = e.value;
+                            fill_extrapolated(vals, pol, n, t, b);
+                            break;
+                        }
+                        _ => retry_below = delta * 0.5,
                     }
-                    None => {
-                        cur[s] = 0.0;
-                        pol[t * n + s] = NONE;
-                    }
+                    continue;
                 }
             }
+            let (cur, next) = vals[t * n..(t + 2) * n].split_at_mut(n);
+            backup_stage(mdp, next, cur, &mut pol[t * n..(t + 1) * n]);
         }
         FiniteHorizonSolution {
             ws: self,
             n,
             horizon,
+            computed,
+            bound,
         }
     }
 
-    /// Value iteration from `v = 0`: `v <- T v` until the sup-norm change is below
-    /// `cfg.tolerance` or `cfg.max_iterations` sweeps.
+    /// Value iteration from `v = 0`: `v <- T v`, `d = T v - v`.
+    ///
+    /// With `gamma < 1` it stops on the MacQueen–Porteus bounds: `V*` lies in `[Tv + gamma/(1 -
+    /// gamma) min d, Tv + gamma/(1 - gamma) max d]` (min/max over all states; terminal states, fixed
+    /// at 0, count with `d = 0`), so once `span(d) <= 2 * tolerance` the bracket's midpoint is
+    /// returned for the non-terminal states: `|v - V*| <= gamma/(1 - gamma) * tolerance`, the
+    /// guarantee today's sup-norm rule (`max |d| < tolerance`, which implies this one) gave, in
+    /// far fewer sweeps where the differences settle to a common gain (unichain models; with
+    /// terminal states, `span(d) >= max |d|` and the two rules coincide). With `gamma = 1` it stops
+    /// when `max |d| < tolerance` (no bracket). At most `cfg.max_iterations` sweeps.
     pub fn value_iteration(&mut self, mdp: &Mdp, cfg: &Config) -> Result<Solution<'_>, SolveError> {
         check_gamma(cfg.gamma)?;
         let n = mdp.n_states();
+        let gamma = cfg.gamma;
         self.reserve(n, 0, false);
         self.v[..n].fill(0.0);
         let mut iterations = 0;
         let mut converged = false;
         while iterations < cfg.max_iterations {
-            let mut diff: f64 = 0.0;
+            // Terminal states take part with d = 0 (their value stays 0).
+            let (mut dmin, mut dmax) = if n == 0 {
+                (0.0f64, 0.0f64)
+            } else {
+                (f64::INFINITY, f64::NEG_INFINITY)
+            };
+            let (cur, nxt) = (&self.v[..n], &mut self.v2[..n]);
+            let ss = &mdp.state_start;
             for s in 0..n {
-                let q = mdp.greedy(s, cfg.gamma, &self.v[..n]).map_or(0.0, |b| b.1);
-                diff = diff.max((q - self.v[s]).abs());
-                self.v2[s] = q;
+                let lo = ss[s] as usize;
+                let hi = ss[s + 1] as usize;
+                let q = if lo == hi {
+                    0.0
+                } else {
+                    let mut best = mdp.choice_reward[lo] + gamma * mdp.dot(lo, cur);
+                    for c in lo + 1..hi {
+                        best = best.max(mdp.choice_reward[c] + gamma * mdp.dot(c, cur));
+                    }
+                    best
+                };
+                let d = q - cur[s];
+                dmin = dmin.min(d);
+                dmax = dmax.max(d);
+                nxt[s] = q;
             }
             std::mem::swap(&mut self.v, &mut self.v2);
             iterations += 1;
-            if diff < cfg.tolerance || !diff.is_finite() {
-                converged = diff.is_finite();
+            let (span, sup) = (dmax - dmin, dmax.max(-dmin));
+            if !span.is_finite() {
+                break;
+            }
+            if gamma < 1.0 && span <= 2.0 * cfg.tolerance {
+                let shift = gamma / (1.0 - gamma) * 0.5 * (dmin + dmax);
+                for s in 0..n {
+                    if !mdp.is_terminal(s) {
+                        self.v[s] += shift;
+                    }
+                }
+                converged = true;
+                break;
+            }
+            if sup < cfg.tolerance {
+                converged = true;
                 break;
             }
         }
@@ -885,6 +1164,10 @@ pub struct FiniteHorizonSolution<'a> {
     ws: &'a Workspace,
     n: usize,
     horizon: usize,
+    /// Stages computed by backward induction (the rest were extrapolated).
+    computed: u32,
+    /// Certified bound on the extrapolated values (0 when every stage was computed).
+    bound: f64,
 }
 
 impl FiniteHorizonSolution<'_> {
@@ -912,10 +1195,13 @@ impl FiniteHorizonSolution<'_> {
             self.action(0, s)
         }
     }
+    /// `iterations`: stages computed by backward induction (the horizon unless the early stop
+    /// certified the rest); `residual`: the certified bound on the extrapolated values (0 when
+    /// every stage was computed).
     pub fn stats(&self) -> Stats {
         Stats {
-            iterations: self.horizon as u32,
-            residual: 0.0,
+            iterations: self.computed,
+            residual: self.bound,
             converged: true,
         }
     }
