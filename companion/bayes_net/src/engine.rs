@@ -51,6 +51,8 @@ pub struct Engine {
     marginals: Vec<Vec<f64>>,
     /// Targets of [`Engine::query`] and its plans, one per evidence pattern.
     targeted: Targeted,
+    /// Bumped by every [`Engine::set_cpt`]: plans recompute their evidence-independent parts.
+    cpt_version: u64,
 }
 
 /// Map each entry of a table over `vars` to its index in a table over `sub` (a subset, any order).
@@ -277,6 +279,7 @@ impl Engine {
         let marginals = card.iter().map(|&k| vec![0.0; k]).collect();
         let mut e = Engine {
             targeted: Targeted::new(Vec::new(), &card),
+            cpt_version: 0,
             card,
             order,
             cliques: Vec::new(),
@@ -330,6 +333,7 @@ impl Engine {
     pub fn set_cpt(&mut self, id: NodeId, cpt: &[f64]) -> Result<(), BnError> {
         self.net.check_cpt(id, cpt)?;
         self.net.nodes[id.0].cpt.copy_from_slice(cpt);
+        self.cpt_version += 1;
         let c = self.cpt_home[id.0];
         let mut clique = std::mem::replace(
             &mut self.cliques[c],
@@ -501,6 +505,7 @@ impl Engine {
         self.targeted.run(
             &self.net,
             &self.card,
+            self.cpt_version,
             &evidence.findings,
             &mut self.marginals,
         )

@@ -43,59 +43,6 @@ impl Span {
     }
 }
 
-/// One factor multiplied into a clique's potential: a CPT read at the observed slice, or a
-/// soft-evidence likelihood.
-#[derive(Debug, Clone)]
-struct FactorOp {
-    clique: usize,
-    node: usize,
-    soft: bool,
-    /// First factor of its clique: assign instead of multiply.
-    first: bool,
-    /// Clique entry -> CPT index (observed parents at state 0) or state index; length = clique.
-    map: usize,
-    /// Observed family members and their CPT strides: offset = sum(state * stride).
-    observed: Vec<(usize, usize)>,
-}
-
-/// A message from a clique to a neighbour: the clique potential times every other incoming
-/// message, summed onto the separator.
-#[derive(Debug, Clone)]
-struct MsgOp {
-    clique: usize,
-    out: Span,
-    /// Clique entry -> separator entry.
-    out_map: usize,
-    /// Incoming messages (spans of `msgs`, earlier in the order) and their clique -> separator maps.
-    ins: Vec<(Span, usize)>,
-}
-
-/// A clique holding targets: its belief (potential times all incoming messages) marginalised onto
-/// each target.
-#[derive(Debug, Clone)]
-struct BeliefOp {
-    clique: usize,
-    ins: Vec<(Span, usize)>,
-    /// (target node, clique entry -> state map).
-    outs: Vec<(usize, usize)>,
-}
-
-/// The compiled answer to one evidence pattern.
-#[derive(Debug, Clone)]
-pub(crate) struct Plan {
-    key: Vec<u8>,
-    maps: Vec<u32>,
-    pots: Vec<f64>,
-    cliques: Vec<Span>,
-    msgs: Vec<f64>,
-    bel: Vec<f64>,
-    factors: Vec<FactorOp>,
-    messages: Vec<MsgOp>,
-    beliefs: Vec<BeliefOp>,
-    /// Targets that are themselves observed: their posterior is the observed state.
-    observed_targets: Vec<usize>,
-}
-
 /// Targets, cached plans and per-query scratch, owned by an [`crate::Engine`].
 #[derive(Debug, Clone)]
 pub(crate) struct Targeted {
@@ -129,6 +76,7 @@ impl Targeted {
         &mut self,
         net: &Network,
         card: &[usize],
+        version: u64,
         findings: &[(crate::NodeId, Finding)],
         marginals: &mut [Vec<f64>],
     ) -> Result<(), BnError> {
@@ -179,7 +127,208 @@ impl Targeted {
                 }
             }
         };
-        self.plans[p].run(net, &self.hard, &self.lik, marginals)
+        self.plans[p].run(net, version, &self.hard, &self.lik, marginals)
+    }
+}
+/// Where a factor's numbers come from.
+#[derive(Debug, Clone, Copy)]
+enum Src {
+    /// A node's CPT, read at the observed slice.
+    Cpt(usize),
+    /// A node's combined soft-evidence likelihood.
+    Soft(usize),
+    /// A table of the plan computed from CPTs alone (a variable eliminated in advance).
+    Derived(Span),
+}
+
+/// One factor multiplied into a clique's potential.
+#[derive(Debug, Clone)]
+struct FactorOp {
+    clique: usize,
+    src: Src,
+    /// Clique entry -> source index (observed parents at state 0); length = clique.
+    map: usize,
+    /// Observed family members and their CPT strides: offset = sum(state * stride).
+    observed: Vec<(usize, usize)>,
+    /// Depends on evidence values; else computed only when a CPT changes.
+    dynamic: bool,
+    /// First factor of its clique in its stage: assign instead of multiply.
+    first: bool,
+    /// A constant factor of a clique that also has evidence-dependent ones: it goes into the
+    /// clique's constant base, which the first evidence-dependent factor starts from.
+    base: bool,
+}
+
+/// A variable summed out in advance: the product of its (constant) factors over their joint
+/// scope, summed onto the scope without it.
+#[derive(Debug, Clone)]
+struct DeriveOp {
+    /// (source, union entry -> source index).
+    ins: Vec<(Src, usize)>,
+    len: usize,
+    out: Span,
+    out_map: usize,
+}
+
+/// A message from a clique to a neighbour: the clique potential times every other incoming
+/// message, summed onto the separator.
+#[derive(Debug, Clone)]
+struct MsgOp {
+    clique: usize,
+    /// Depends on evidence values (else recomputed only when a CPT changes).
+    dynamic: bool,
+    out: Span,
+    /// Clique entry -> separator entry.
+    out_map: usize,
+    /// Incoming messages (spans of `msgs`, earlier in the order) and their clique -> separator maps.
+    ins: Vec<(Span, usize)>,
+}
+
+/// A clique holding targets: its belief (potential times all incoming messages) marginalised onto
+/// each target.
+#[derive(Debug, Clone)]
+struct BeliefOp {
+    clique: usize,
+    ins: Vec<(Span, usize)>,
+    /// (target node, clique entry -> state map).
+    outs: Vec<(usize, usize)>,
+}
+
+/// The compiled answer to one evidence pattern.
+#[derive(Debug, Clone)]
+pub(crate) struct Plan {
+    key: Vec<u8>,
+    maps: Vec<u32>,
+    derived: Vec<f64>,
+    pots: Vec<f64>,
+    base: Vec<f64>,
+    cliques: Vec<Span>,
+    msgs: Vec<f64>,
+    bel: Vec<f64>,
+    derives: Vec<DeriveOp>,
+    /// Constant factors first, then the evidence-dependent ones.
+    factors: Vec<FactorOp>,
+    messages: Vec<MsgOp>,
+    beliefs: Vec<BeliefOp>,
+    /// Targets that are themselves observed: their posterior is the observed state.
+    observed_targets: Vec<usize>,
+    /// The engine's CPT version the constant parts were computed for.
+    version: Option<u64>,
+}
+
+/// A factor while planning.
+struct Factor {
+    scope: Vec<usize>,
+    /// Stride of each scope var in the source table.
+    strides: Vec<(usize, usize)>,
+    observed: Vec<(usize, usize)>,
+    src: Src,
+    /// The factor is a conditional distribution of these vars (sums to one over them whatever
+    /// the others); empty when it is not (soft evidence, an observed node's CPT).
+    heads: Vec<usize>,
+    dynamic: bool,
+}
+
+impl Factor {
+    fn size(&self, card: &[usize]) -> usize {
+        self.scope.iter().map(|&v| card[v]).product()
+    }
+    fn stride_in(&self, vars: &[usize]) -> Vec<usize> {
+        vars.iter()
+            .map(|v| {
+                self.strides
+                    .iter()
+                    .find(|(u, _)| u == v)
+                    .map_or(0, |&(_, s)| s)
+            })
+            .collect()
+    }
+}
+
+fn push(maps: &mut Vec<u32>, m: Vec<u32>) -> usize {
+    let off = maps.len();
+    maps.extend(m);
+    off
+}
+
+/// Plan compilation state: which messages exist, which are constant.
+struct Builder<'a> {
+    card: &'a [usize],
+    cl_vars: &'a [Vec<usize>],
+    tree: &'a [Vec<usize>],
+    in_clique: &'a [Vec<usize>],
+    factors: &'a [Factor],
+    dynamic: &'a [bool],
+    /// Directed message -> its span and whether it depends on evidence values; `None` for a
+    /// constant message.
+    done: BTreeMap<(usize, usize), Option<(Span, bool)>>,
+    used: Vec<bool>,
+    plan: Plan,
+}
+
+impl Builder<'_> {
+    fn sep(&self, i: usize, j: usize) -> Vec<usize> {
+        self.cl_vars[i]
+            .iter()
+            .copied()
+            .filter(|x| self.cl_vars[j].contains(x))
+            .collect()
+    }
+
+    /// Map from clique `i`'s entries to its separator with `j`.
+    fn sep_map(&mut self, i: usize, j: usize) -> usize {
+        let sep = self.sep(i, j);
+        push(
+            &mut self.plan.maps,
+            index_map(&self.cl_vars[i], &sep, self.card),
+        )
+    }
+
+    /// The message from clique `i` to neighbour `j`, planned after the ones it needs; `None`
+    /// when it is a constant.
+    fn need(&mut self, i: usize, j: usize) -> Option<(Span, bool)> {
+        if let Some(s) = self.done.get(&(i, j)) {
+            return *s;
+        }
+        let mut ins = Vec::new();
+        let mut dynamic = self.dynamic[i];
+        let tree = self.tree;
+        for &k in tree[i].iter().filter(|&&k| k != j) {
+            if let Some((s, d)) = self.need(k, i) {
+                dynamic |= d;
+                let map = self.sep_map(i, k);
+                ins.push((s, map));
+            }
+        }
+        let sep = self.sep(i, j);
+        // Conditional distributions of vars all summed out here (and constant messages in):
+        // the sum is one, whatever the separator's values.
+        let constant = ins.is_empty()
+            && self.in_clique[i].iter().all(|&f| {
+                let h = &self.factors[f].heads;
+                !h.is_empty() && h.iter().all(|x| !sep.contains(x))
+            });
+        if constant {
+            self.done.insert((i, j), None);
+            return None;
+        }
+        let len: usize = sep.iter().map(|&v| self.card[v]).product();
+        let out = Span {
+            off: self.plan.msgs.len(),
+            len,
+        };
+        self.plan.msgs.extend(std::iter::repeat_n(0.0, len));
+        let out_map = self.sep_map(i, j);
+        self.plan.messages.push(MsgOp {
+            clique: i,
+            dynamic,
+            out,
+            out_map,
+            ins,
+        });
+        self.used[i] = true;
+        self.done.insert((i, j), Some((out, dynamic)));
+        Some((out, dynamic))
     }
 }
 
@@ -193,6 +342,38 @@ fn normalise(v: &mut [f64]) -> Result<(), BnError> {
     let r = 1.0 / z;
     v.iter_mut().for_each(|x| *x *= r);
     Ok(())
+}
+
+/// The numbers of `src` from `off` on.
+#[inline]
+fn source<'a>(
+    src: Src,
+    net: &'a Network,
+    lik: &'a [Vec<f64>],
+    derived: &'a [f64],
+    off: usize,
+) -> &'a [f64] {
+    match src {
+        Src::Cpt(i) => &net.nodes()[i].cpt[off..],
+        Src::Soft(i) => &lik[i],
+        Src::Derived(s) => s.of(derived),
+    }
+}
+
+/// Row-major strides of `scope` (last var fastest).
+fn row_major(scope: &[usize], card: &[usize]) -> Vec<(usize, usize)> {
+    let mut s = 1;
+    let mut out: Vec<(usize, usize)> = scope
+        .iter()
+        .rev()
+        .map(|&v| {
+            let r = (v, s);
+            s *= card[v];
+            r
+        })
+        .collect();
+    out.reverse();
+    out
 }
 
 impl Plan {
@@ -212,14 +393,6 @@ impl Plan {
             }
         }
         let free = |i: usize| keep[i] && key[i] != HARD;
-        // Factors over the unobserved vars: (node, soft, scope, observed (node, stride)).
-        struct Factor {
-            node: usize,
-            soft: bool,
-            scope: Vec<usize>,
-            strides: Vec<(usize, usize)>,
-            observed: Vec<(usize, usize)>,
-        }
         let mut factors = Vec::new();
         for i in (0..n).filter(|&i| keep[i]) {
             let fam: Vec<usize> = net.nodes()[i]
@@ -242,20 +415,22 @@ impl Plan {
             // All-observed families are constants (they only scale P(evidence)).
             if !strides.is_empty() {
                 factors.push(Factor {
-                    node: i,
-                    soft: false,
                     scope: strides.iter().map(|&(v, _)| v).collect(),
+                    dynamic: !observed.is_empty(),
+                    heads: if free(i) { vec![i] } else { Vec::new() },
                     strides,
                     observed,
+                    src: Src::Cpt(i),
                 });
             }
             if key[i] == SOFT {
                 factors.push(Factor {
-                    node: i,
-                    soft: true,
                     scope: vec![i],
                     strides: vec![(i, 1)],
                     observed: Vec::new(),
+                    src: Src::Soft(i),
+                    heads: Vec::new(),
+                    dynamic: true,
                 });
             }
         }
@@ -293,7 +468,81 @@ impl Plan {
                 }
             })
             .collect();
-        vars.sort_unstable();
+        let mut plan = Plan {
+            key: key.to_vec(),
+            maps: Vec::new(),
+            derived: Vec::new(),
+            pots: Vec::new(),
+            base: Vec::new(),
+            cliques: Vec::new(),
+            msgs: Vec::new(),
+            bel: Vec::new(),
+            derives: Vec::new(),
+            factors: Vec::new(),
+            messages: Vec::new(),
+            beliefs: Vec::new(),
+            observed_targets: targets.iter().copied().filter(|&t| !free(t)).collect(),
+            version: None,
+        };
+        // Sum out in advance the non-target vars all of whose factors are constant, while that
+        // makes no table larger than the ones it replaces (the evidence cannot change them).
+        let mut scratch = 0;
+        loop {
+            let mut best: Option<(usize, usize, Vec<usize>)> = None;
+            for &v in vars.iter().filter(|v| !targets.contains(v)) {
+                let inv: Vec<&Factor> = factors.iter().filter(|f| f.scope.contains(&v)).collect();
+                if inv.iter().any(|f| f.dynamic) {
+                    continue;
+                }
+                let mut union: Vec<usize> = inv.iter().flat_map(|f| f.scope.clone()).collect();
+                union.sort_unstable();
+                union.dedup();
+                let size: usize = union.iter().map(|&u| card[u]).product();
+                let largest = inv.iter().map(|f| f.size(card)).max().unwrap_or(0);
+                if size <= largest && best.as_ref().is_none_or(|b| size < b.0) {
+                    best = Some((size, v, union));
+                }
+            }
+            let Some((size, v, union)) = best else { break };
+            scratch = scratch.max(size);
+            let (inv, rest): (Vec<Factor>, Vec<Factor>) =
+                factors.into_iter().partition(|f| f.scope.contains(&v));
+            factors = rest;
+            let scope: Vec<usize> = union.iter().copied().filter(|&u| u != v).collect();
+            let len: usize = scope.iter().map(|&u| card[u]).product();
+            let out = Span {
+                off: plan.derived.len(),
+                len,
+            };
+            plan.derived.extend(std::iter::repeat_n(0.0, len));
+            let ins = inv
+                .iter()
+                .map(|f| {
+                    let m = strided_map(&union, card, &f.stride_in(&union));
+                    (f.src, push(&mut plan.maps, m))
+                })
+                .collect();
+            let out_map = push(&mut plan.maps, index_map(&union, &scope, card));
+            plan.derives.push(DeriveOp {
+                ins,
+                len: size,
+                out,
+                out_map,
+            });
+            let mut heads: Vec<usize> = inv.iter().flat_map(|f| f.heads.clone()).collect();
+            heads.retain(|&h| h != v);
+            vars.retain(|&u| u != v);
+            if !scope.is_empty() {
+                factors.push(Factor {
+                    strides: row_major(&scope, card),
+                    scope,
+                    observed: Vec::new(),
+                    src: Src::Derived(out),
+                    heads,
+                    dynamic: false,
+                });
+            }
+        }
         let scopes: Vec<Vec<usize>> = factors.iter().map(|f| f.scope.clone()).collect();
         let (_, cl_vars, tree) = junction_tree(card, &vars, &scopes, false);
         let size = |c: usize| -> usize { cl_vars[c].iter().map(|&v| card[v]).product() };
@@ -303,19 +552,16 @@ impl Plan {
                 .min_by_key(|&c| size(c))
                 .expect("running intersection: every scope is in some clique")
         };
-        let mut plan = Plan {
-            key: key.to_vec(),
-            maps: Vec::new(),
-            pots: Vec::new(),
-            cliques: Vec::new(),
-            msgs: Vec::new(),
-            bel: Vec::new(),
-            factors: Vec::new(),
-            messages: Vec::new(),
-            beliefs: Vec::new(),
-            observed_targets: targets.iter().copied().filter(|&t| !free(t)).collect(),
-        };
-        for c in 0..cl_vars.len() {
+        let m = cl_vars.len();
+        let home: Vec<usize> = factors.iter().map(|f| smallest(&f.scope)).collect();
+        let mut in_clique: Vec<Vec<usize>> = vec![Vec::new(); m];
+        let mut dynamic = vec![false; m];
+        for (k, f) in factors.iter().enumerate() {
+            in_clique[home[k]].push(k);
+            dynamic[home[k]] |= f.dynamic;
+        }
+        plan.bel = vec![0.0; (0..m).map(size).max().unwrap_or(0).max(scratch)];
+        for c in 0..m {
             plan.cliques.push(Span {
                 off: plan.pots.len(),
                 len: size(c),
@@ -323,87 +569,20 @@ impl Plan {
             // Cliques no factor reaches stay at one.
             plan.pots.extend(std::iter::repeat_n(1.0, size(c)));
         }
-        plan.bel = vec![0.0; (0..cl_vars.len()).map(size).max().unwrap_or(0)];
-        fn push(maps: &mut Vec<u32>, m: Vec<u32>) -> usize {
-            let off = maps.len();
-            maps.extend(m);
-            off
-        }
-        let mut ops: Vec<FactorOp> = factors
-            .iter()
-            .map(|f| {
-                let c = smallest(&f.scope);
-                let vars = &cl_vars[c];
-                let stride: Vec<usize> = vars
-                    .iter()
-                    .map(|v| {
-                        f.strides
-                            .iter()
-                            .find(|(u, _)| u == v)
-                            .map_or(0, |&(_, s)| s)
-                    })
-                    .collect();
-                FactorOp {
-                    clique: c,
-                    node: f.node,
-                    soft: f.soft,
-                    first: false,
-                    map: push(&mut plan.maps, strided_map(vars, card, &stride)),
-                    observed: f.observed.clone(),
-                }
-            })
-            .collect();
-        ops.sort_by_key(|f| f.clique);
-        for k in 0..ops.len() {
-            ops[k].first = k == 0 || ops[k - 1].clique != ops[k].clique;
-        }
-        plan.factors = ops;
-        // Messages towards every clique holding a target, each computed once.
-        let mut done: BTreeMap<(usize, usize), Span> = BTreeMap::new();
-        #[allow(clippy::too_many_arguments)]
-        fn need(
-            i: usize,
-            j: usize,
-            tree: &[Vec<usize>],
-            cl_vars: &[Vec<usize>],
-            card: &[usize],
-            done: &mut BTreeMap<(usize, usize), Span>,
-            plan: &mut Plan,
-        ) -> Span {
-            if let Some(s) = done.get(&(i, j)) {
-                return *s;
-            }
-            let mut ins = Vec::new();
-            for &k in tree[i].iter().filter(|&&k| k != j) {
-                let s = need(k, i, tree, cl_vars, card, done, plan);
-                let sep: Vec<usize> = cl_vars[i]
-                    .iter()
-                    .copied()
-                    .filter(|x| cl_vars[k].contains(x))
-                    .collect();
-                ins.push((s, push(&mut plan.maps, index_map(&cl_vars[i], &sep, card))));
-            }
-            let sep: Vec<usize> = cl_vars[i]
-                .iter()
-                .copied()
-                .filter(|x| cl_vars[j].contains(x))
-                .collect();
-            let len: usize = sep.iter().map(|&v| card[v]).product();
-            let out = Span {
-                off: plan.msgs.len(),
-                len,
-            };
-            plan.msgs.extend(std::iter::repeat_n(0.0, len));
-            let out_map = push(&mut plan.maps, index_map(&cl_vars[i], &sep, card));
-            plan.messages.push(MsgOp {
-                clique: i,
-                out,
-                out_map,
-                ins,
-            });
-            done.insert((i, j), out);
-            out
-        }
+        // The constant part of an evidence-dependent clique (one where it has none).
+        plan.base = plan.pots.clone();
+        let mut b = Builder {
+            card,
+            cl_vars: &cl_vars,
+            tree: &tree,
+            in_clique: &in_clique,
+            factors: &factors,
+            dynamic: &dynamic,
+            done: BTreeMap::new(),
+            used: vec![false; m],
+            plan,
+        };
+        // Beliefs of the cliques holding targets, from the messages towards them.
         let mut homes: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
         for &t in targets.iter().filter(|&&t| free(t)) {
             homes.entry(smallest(&[t])).or_default().push(t);
@@ -411,62 +590,128 @@ impl Plan {
         for (&h, ts) in &homes {
             let mut ins = Vec::new();
             for &k in &tree[h] {
-                let s = need(k, h, &tree, &cl_vars, card, &mut done, &mut plan);
-                let sep: Vec<usize> = cl_vars[h]
-                    .iter()
-                    .copied()
-                    .filter(|x| cl_vars[k].contains(x))
-                    .collect();
-                ins.push((s, push(&mut plan.maps, index_map(&cl_vars[h], &sep, card))));
+                if let Some((s, _)) = b.need(k, h) {
+                    let map = b.sep_map(h, k);
+                    ins.push((s, map));
+                }
             }
+            b.used[h] = true;
             let outs = ts
                 .iter()
-                .map(|&t| (t, push(&mut plan.maps, index_map(&cl_vars[h], &[t], card))))
+                .map(|&t| {
+                    (
+                        t,
+                        push(&mut b.plan.maps, index_map(&cl_vars[h], &[t], card)),
+                    )
+                })
                 .collect();
-            plan.beliefs.push(BeliefOp {
+            b.plan.beliefs.push(BeliefOp {
                 clique: h,
                 ins,
                 outs,
             });
         }
-        plan
+        // Factors of the cliques whose potential is read: constant ones first.
+        let mut ops = Vec::new();
+        for stage in [false, true] {
+            for c in (0..m).filter(|&c| b.used[c]) {
+                let mut first = true;
+                for &k in in_clique[c]
+                    .iter()
+                    .filter(|&&k| factors[k].dynamic == stage)
+                {
+                    let f = &factors[k];
+                    let map = strided_map(&cl_vars[c], card, &f.stride_in(&cl_vars[c]));
+                    ops.push(FactorOp {
+                        clique: c,
+                        src: f.src,
+                        map: push(&mut b.plan.maps, map),
+                        observed: f.observed.clone(),
+                        dynamic: stage,
+                        first,
+                        base: !stage && dynamic[c],
+                    });
+                    first = false;
+                }
+            }
+        }
+        b.plan.factors = ops;
+        b.plan
     }
 
+    /// Recompute what depends on the evidence values (everything when the CPTs changed since
+    /// the last run), then the targets' posteriors.
     fn run(
         &mut self,
         net: &Network,
+        version: u64,
         hard: &[usize],
         lik: &[Vec<f64>],
         marginals: &mut [Vec<f64>],
     ) -> Result<(), BnError> {
+        let all = self.version != Some(version);
+        self.version = None;
         let maps = &self.maps[..];
-        for f in &self.factors {
-            let span = self.cliques[f.clique];
-            let pot = &mut self.pots[span.off..span.off + span.len];
-            let map = &maps[f.map..f.map + span.len];
-            let src: &[f64] = if f.soft {
-                &lik[f.node]
-            } else {
-                let off: usize = f.observed.iter().map(|&(v, s)| hard[v] * s).sum();
-                &net.nodes()[f.node].cpt[off..]
-            };
-            if f.first {
-                for (x, &j) in pot.iter_mut().zip(map) {
-                    *x = src[j as usize];
+        if all {
+            for d in &self.derives {
+                let (before, rest) = self.derived.split_at_mut(d.out.off);
+                let out = &mut rest[..d.out.len];
+                out.fill(0.0);
+                let tmp = &mut self.bel[..d.len];
+                tmp.fill(1.0);
+                for &(src, mi) in &d.ins {
+                    let s = source(src, net, lik, before, 0);
+                    for (x, &j) in tmp.iter_mut().zip(&maps[mi..mi + d.len]) {
+                        *x *= s[j as usize];
+                    }
                 }
-            } else {
-                for (x, &j) in pot.iter_mut().zip(map) {
-                    *x *= src[j as usize];
+                for (&x, &j) in tmp.iter().zip(&maps[d.out_map..d.out_map + d.len]) {
+                    out[j as usize] += x;
                 }
             }
         }
-        for m in &self.messages {
+        for f in self.factors.iter().filter(|f| all || f.dynamic) {
+            let span = self.cliques[f.clique];
+            let map = &maps[f.map..f.map + span.len];
+            let off: usize = f.observed.iter().map(|&(v, s)| hard[v] * s).sum();
+            let src = source(f.src, net, lik, &self.derived, off);
+            if f.base {
+                let pot = &mut self.base[span.off..span.off + span.len];
+                if f.first {
+                    for (x, &j) in pot.iter_mut().zip(map) {
+                        *x = src[j as usize];
+                    }
+                } else {
+                    for (x, &j) in pot.iter_mut().zip(map) {
+                        *x *= src[j as usize];
+                    }
+                }
+            } else if f.first && f.dynamic {
+                let base = &self.base[span.off..span.off + span.len];
+                let pot = &mut self.pots[span.off..span.off + span.len];
+                for ((x, &b), &j) in pot.iter_mut().zip(base).zip(map) {
+                    *x = b * src[j as usize];
+                }
+            } else {
+                let pot = &mut self.pots[span.off..span.off + span.len];
+                if f.first {
+                    for (x, &j) in pot.iter_mut().zip(map) {
+                        *x = src[j as usize];
+                    }
+                } else {
+                    for (x, &j) in pot.iter_mut().zip(map) {
+                        *x *= src[j as usize];
+                    }
+                }
+            }
+        }
+        for m in self.messages.iter().filter(|m| all || m.dynamic) {
             let span = self.cliques[m.clique];
             let pot = span.of(&self.pots);
             let out_map = &maps[m.out_map..m.out_map + span.len];
             let (before, rest) = self.msgs.split_at_mut(m.out.off);
             let out = &mut rest[..m.out.len];
-            out.iter_mut().for_each(|x| *x = 0.0);
+            out.fill(0.0);
             match &m.ins[..] {
                 [] => {
                     for (&x, &j) in pot.iter().zip(out_map) {
@@ -508,7 +753,7 @@ impl Plan {
             }
             for &(t, mi) in &b.outs {
                 let m = &mut marginals[t];
-                m.iter_mut().for_each(|x| *x = 0.0);
+                m.fill(0.0);
                 for (&x, &j) in bel.iter().zip(&maps[mi..mi + span.len]) {
                     m[j as usize] += x;
                 }
@@ -517,9 +762,10 @@ impl Plan {
         }
         for &t in &self.observed_targets {
             let m = &mut marginals[t];
-            m.iter_mut().for_each(|x| *x = 0.0);
+            m.fill(0.0);
             m[hard[t]] = 1.0;
         }
+        self.version = Some(version);
         Ok(())
     }
 }
