@@ -50,7 +50,8 @@ pub struct Manager {
 }
 
 impl Manager {
-    /// Posterior marginal of a node from the last evaluation.
+    /// Posterior marginal of a node from the last evaluation (for a node that is not published,
+    /// carried or imported: the last [`HealthModel::evaluate`]).
     pub fn marginal(&self, node: &str) -> Option<&[f64]> {
         self.engine
             .network()
@@ -83,6 +84,8 @@ struct Scratch {
     /// to last time keeps its marginals instead of propagating again.
     last: Vec<Evidence>,
     fresh: Vec<bool>,
+    /// Per manager: every node's marginal is current (not only the query targets').
+    full: Vec<bool>,
 }
 
 /// True when `cpt` is bit-for-bit node `id`'s current CPT (setting it would change nothing).
@@ -283,6 +286,28 @@ impl HealthModel {
                 published,
             });
         }
+        // Targeted queries answer what the cycle reads: published nodes, carried beliefs, and the
+        // nodes later managers import as priors.
+        let mut targets: Vec<Vec<NodeId>> = managers
+            .iter()
+            .map(|m| {
+                m.published
+                    .iter()
+                    .map(|&(_, id, _, _)| id)
+                    .chain(m.carry.iter().map(|&(from, _)| from))
+                    .collect()
+            })
+            .collect();
+        for m in &managers {
+            for &(_, j, src) in &m.imports {
+                targets[j].push(src);
+            }
+        }
+        for (m, t) in managers.iter_mut().zip(&targets) {
+            m.engine
+                .set_targets(t)
+                .expect("targets are nodes of the network");
+        }
         Ok(HealthModel {
             managers,
             observations,
@@ -316,22 +341,37 @@ impl HealthModel {
     }
 
     /// Evaluate every manager under `evidence` (applied to each manager holding the node) and
-    /// return all published probabilities; then advance the dynamic managers by one slice.
+    /// return all published probabilities; then advance the dynamic managers by one slice. Every
+    /// node's [`Manager::marginal`] is computed (for reports; the cycle uses
+    /// [`HealthModel::evaluate_into`]).
     pub fn evaluate(
         &mut self,
         evidence: &BTreeMap<String, String>,
     ) -> Result<BTreeMap<String, f64>, HealthError> {
         let mut out = BTreeMap::new();
-        self.evaluate_into(evidence, &mut out)?;
+        self.evaluate_impl(evidence, &mut out, true)?;
         Ok(out)
     }
 
     /// As [`HealthModel::evaluate`], filling the caller's map (existing entries are updated in
-    /// place: no allocation once the map holds every published name).
+    /// place: no allocation once the map holds every published name). Only what the cycle reads
+    /// is computed (published nodes, carried beliefs, imported priors: [`bayes_net::Engine::query`]);
+    /// the other nodes' [`Manager::marginal`]s are those of the last [`HealthModel::evaluate`].
+    /// The published probabilities are the same, bit for bit, as [`HealthModel::evaluate`]'s.
     pub fn evaluate_into(
         &mut self,
         evidence: &BTreeMap<String, String>,
         out: &mut BTreeMap<String, f64>,
+    ) -> Result<(), HealthError> {
+        self.evaluate_impl(evidence, out, false)
+    }
+
+    /// `all`: every node's marginal (for reports), else the targets only.
+    fn evaluate_impl(
+        &mut self,
+        evidence: &BTreeMap<String, String>,
+        out: &mut BTreeMap<String, f64>,
+        all: bool,
     ) -> Result<(), HealthError> {
         // Resolve everything first so a bad entry changes no state.
         let per = &mut self.scratch.per;
@@ -358,9 +398,14 @@ impl HealthModel {
             }
         }
         let n = self.managers.len();
-        let (last, fresh) = (&mut self.scratch.last, &mut self.scratch.fresh);
+        let (last, fresh, full) = (
+            &mut self.scratch.last,
+            &mut self.scratch.fresh,
+            &mut self.scratch.full,
+        );
         last.resize_with(n, Evidence::new);
         fresh.resize(n, false);
+        full.resize(n, false);
         #[allow(clippy::needless_range_loop)] // split_at_mut needs the index
         for i in 0..n {
             let (done, rest) = self.managers.split_at_mut(i);
@@ -384,16 +429,20 @@ impl HealthModel {
                         error,
                     })?;
             }
-            if !fresh[i] || per[i] != last[i] {
+            if !fresh[i] || per[i] != last[i] || (all && !full[i]) {
                 fresh[i] = false;
-                m.engine
-                    .propagate(&per[i])
-                    .map_err(|error| HealthError::Inference {
-                        manager: m.name.clone(),
-                        error,
-                    })?;
+                let err = |error| HealthError::Inference {
+                    manager: m.name.clone(),
+                    error,
+                };
+                // Every marginal, then the targets by the cycle's own path (same numbers).
+                if all {
+                    m.engine.propagate(&per[i]).map_err(err)?;
+                }
+                m.engine.query(&per[i]).map_err(err)?;
                 last[i].findings.clone_from(&per[i].findings);
                 fresh[i] = true;
+                full[i] = all;
             }
             for &(k, id, s, complement) in &m.published {
                 let p = m.engine.marginal(id)[s];
@@ -531,5 +580,109 @@ impl HealthModel {
             .find(|n| n.name == key)
             .or_else(|| all().find(|n| n.name.eq_ignore_ascii_case(key)))
             .or_else(|| all().find(|n| strip(&n.name) == key.to_ascii_lowercase()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Evidence maps over every observable node's states, varied so that values and patterns
+    /// both change between evaluations.
+    fn evidence_sequence(m: &HealthModel) -> Vec<BTreeMap<String, String>> {
+        let obs: Vec<(String, Vec<String>)> = m
+            .observations
+            .evidence(&Observations::default())
+            .keys()
+            .chain(m.managers.iter().flat_map(|mg| {
+                mg.nodes
+                    .iter()
+                    .filter(|n| n.name.starts_with("A_") || n.name.starts_with("S_"))
+                    .map(|n| &n.name)
+            }))
+            .filter_map(|name| {
+                let mg = m
+                    .managers
+                    .iter()
+                    .find(|mg| mg.engine.network().id(name).is_some())?;
+                let net = mg.engine.network();
+                Some((name.clone(), net.node(net.id(name)?).states.clone()))
+            })
+            .collect();
+        (0..40)
+            .map(|k: usize| {
+                obs.iter()
+                    .enumerate()
+                    .filter(|(i, _)| (k * 7 + i * 3) % 5 != 0)
+                    .map(|(i, (n, st))| (n.clone(), st[(k + i) % st.len()].clone()))
+                    .collect()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn targeted_cycle_matches_full_propagation() {
+        let params = crate::spec::default_params_dir();
+        let mut fast = HealthModel::load(&params).unwrap();
+        let mut full = HealthModel::load(&params).unwrap();
+        let seq = evidence_sequence(&fast);
+        let mut out = BTreeMap::new();
+        for ev in &seq {
+            // Independent answer: every manager propagated in full on a copy of its engine,
+            // before the evaluation advances the carried beliefs.
+            let mut want = BTreeMap::new();
+            for m in &full.managers {
+                let mut e = m.engine.clone();
+                let net = e.network().clone();
+                let mut evd = Evidence::new();
+                for (k, v) in ev {
+                    if let Some(id) = net.id(k) {
+                        evd.set_state(id, net.state(id, v).unwrap());
+                    }
+                }
+                // Imported priors come from the managers evaluated before (same order).
+                for &(local, src_m, src) in &m.imports {
+                    let p: Vec<f64> = want_marginal(&full, src_m, src, ev);
+                    let s: f64 = p.iter().sum();
+                    let p: Vec<f64> = p.iter().map(|x| x / s).collect();
+                    e.set_cpt(local, &p).unwrap();
+                }
+                e.propagate(&evd).unwrap();
+                for &(k, id, s, c) in &m.published {
+                    let p = e.marginal(id)[s];
+                    want.insert(m.publish[k].name.clone(), if c { 1.0 - p } else { p });
+                }
+            }
+            fast.evaluate_into(ev, &mut out).unwrap();
+            let slow = full.evaluate(ev).unwrap();
+            // The cycle's numbers and the report's are the same, bit for bit.
+            assert_eq!(out, slow);
+            for (name, w) in &want {
+                assert!(
+                    (out[name] - w).abs() < 1e-12,
+                    "{name}: {} vs {w}",
+                    out[name]
+                );
+            }
+        }
+    }
+
+    /// Marginal of `src` in manager `j` under `ev` by a full propagation on a copy.
+    fn want_marginal(
+        m: &HealthModel,
+        j: usize,
+        src: NodeId,
+        ev: &BTreeMap<String, String>,
+    ) -> Vec<f64> {
+        let mut e = m.managers[j].engine.clone();
+        let net = e.network().clone();
+        let mut evd = Evidence::new();
+        for (k, v) in ev {
+            if let Some(id) = net.id(k) {
+                evd.set_state(id, net.state(id, v).unwrap());
+            }
+        }
+        e.propagate(&evd).unwrap();
+        e.marginal(src).to_vec()
     }
 }

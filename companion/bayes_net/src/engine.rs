@@ -1,5 +1,6 @@
 //! The compiled junction tree and Hugin propagation.
 
+use crate::query::Targeted;
 use crate::{BnError, Evidence, Finding, Network, NodeId};
 use std::collections::BTreeSet;
 
@@ -48,11 +49,14 @@ pub struct Engine {
     home: Vec<usize>,
     home_map: Vec<Vec<u32>>,
     marginals: Vec<Vec<f64>>,
+    /// Targets of [`Engine::query`] and its plans, one per evidence pattern.
+    targeted: Targeted,
+    /// Bumped by every [`Engine::set_cpt`]: plans recompute their evidence-independent parts.
+    cpt_version: u64,
 }
 
 /// Map each entry of a table over `vars` to its index in a table over `sub` (a subset, any order).
-fn index_map(vars: &[usize], sub: &[usize], card: &[usize]) -> Vec<u32> {
-    let size: usize = vars.iter().map(|&v| card[v]).product();
+pub(crate) fn index_map(vars: &[usize], sub: &[usize], card: &[usize]) -> Vec<u32> {
     // Stride in the sub-table of each position in `vars` (0 when the var is not in `sub`).
     let mut sub_stride = vec![0usize; vars.len()];
     let mut s = 1;
@@ -62,6 +66,13 @@ fn index_map(vars: &[usize], sub: &[usize], card: &[usize]) -> Vec<u32> {
         }
         s *= card[u];
     }
+    strided_map(vars, card, &sub_stride)
+}
+
+/// Map each entry of a table over `vars` (row-major, last var fastest) to
+/// `sum(digit[pos] * stride[pos])`: an index into any table that holds some of `vars`.
+pub(crate) fn strided_map(vars: &[usize], card: &[usize], stride: &[usize]) -> Vec<u32> {
+    let size: usize = vars.iter().map(|&v| card[v]).product();
     let mut out = Vec::with_capacity(size);
     let mut digits = vec![0usize; vars.len()];
     let mut idx = 0usize;
@@ -70,112 +81,140 @@ fn index_map(vars: &[usize], sub: &[usize], card: &[usize]) -> Vec<u32> {
         // Increment the mixed-radix counter (last var fastest), updating idx incrementally.
         for pos in (0..vars.len()).rev() {
             digits[pos] += 1;
-            idx += sub_stride[pos];
+            idx += stride[pos];
             if digits[pos] < card[vars[pos]] {
                 break;
             }
-            idx -= sub_stride[pos] * digits[pos];
+            idx -= stride[pos] * digits[pos];
             digits[pos] = 0;
         }
     }
     out
 }
 
+/// Triangulate the interaction graph of `scopes` over `vars` (each scope a set of vars that must
+/// share a clique: a CPT family, an evidence factor) by min-fill (ties: smallest table, then lowest
+/// index), keep the maximal cliques (vars sorted) and join them by a maximum-weight spanning tree
+/// on separator sizes. With `join_empty`, zero-size separators join disconnected parts into one
+/// tree; without, the result is a forest. Returns (elimination order, cliques, tree adjacency).
+pub(crate) fn junction_tree(
+    card: &[usize],
+    vars: &[usize],
+    scopes: &[Vec<usize>],
+    join_empty: bool,
+) -> (Vec<usize>, Vec<Vec<usize>>, Vec<Vec<usize>>) {
+    let n = card.len();
+    // Interaction (moral) graph.
+    let mut adj: Vec<BTreeSet<usize>> = vec![BTreeSet::new(); n];
+    for fam in scopes {
+        for &a in fam {
+            for &b in fam {
+                if a != b {
+                    adj[a].insert(b);
+                }
+            }
+        }
+    }
+    // Min-fill elimination.
+    let mut alive = vec![false; n];
+    for &v in vars {
+        alive[v] = true;
+    }
+    let mut order = Vec::with_capacity(vars.len());
+    let mut candidates: Vec<Vec<usize>> = Vec::new();
+    for _ in 0..vars.len() {
+        let mut best: Option<(usize, usize, usize)> = None; // (fill, weight, v)
+        for v in (0..n).filter(|&v| alive[v]) {
+            let nb: Vec<usize> = adj[v].iter().copied().collect();
+            let mut fill = 0;
+            for (i, &a) in nb.iter().enumerate() {
+                for &b in &nb[i + 1..] {
+                    if !adj[a].contains(&b) {
+                        fill += 1;
+                    }
+                }
+            }
+            let weight = nb.iter().fold(card[v], |w, &u| w.saturating_mul(card[u]));
+            if best.is_none_or(|(f, w, _)| (fill, weight) < (f, w)) {
+                best = Some((fill, weight, v));
+            }
+        }
+        let (_, _, v) = best.expect("a live node remains");
+        let nb: Vec<usize> = adj[v].iter().copied().collect();
+        for (i, &a) in nb.iter().enumerate() {
+            for &b in &nb[i + 1..] {
+                adj[a].insert(b);
+                adj[b].insert(a);
+            }
+        }
+        for &a in &nb {
+            adj[a].remove(&v);
+        }
+        alive[v] = false;
+        order.push(v);
+        let mut c: Vec<usize> = nb;
+        c.push(v);
+        c.sort_unstable();
+        candidates.push(c);
+    }
+    // Maximal cliques only.
+    let mut cl_vars: Vec<Vec<usize>> = Vec::new();
+    for (i, c) in candidates.iter().enumerate() {
+        let contained = candidates.iter().enumerate().any(|(j, d)| {
+            j != i
+                && c.len() <= d.len()
+                && c.iter().all(|x| d.contains(x))
+                && (c.len() < d.len() || j < i)
+        });
+        if !contained {
+            cl_vars.push(c.clone());
+        }
+    }
+    // Maximum-weight spanning tree on separator size (Kruskal).
+    let m = cl_vars.len();
+    let mut edges = Vec::new();
+    for a in 0..m {
+        for b in a + 1..m {
+            let w = cl_vars[a].iter().filter(|x| cl_vars[b].contains(x)).count();
+            if w > 0 || join_empty {
+                edges.push((w, a, b));
+            }
+        }
+    }
+    edges.sort_by(|x, y| y.0.cmp(&x.0).then((x.1, x.2).cmp(&(y.1, y.2))));
+    let mut uf: Vec<usize> = (0..m).collect();
+    fn find(uf: &mut [usize], mut x: usize) -> usize {
+        while uf[x] != x {
+            uf[x] = uf[uf[x]];
+            x = uf[x];
+        }
+        x
+    }
+    let mut tree: Vec<Vec<usize>> = vec![Vec::new(); m];
+    for &(_, a, b) in &edges {
+        let (ra, rb) = (find(&mut uf, a), find(&mut uf, b));
+        if ra != rb {
+            uf[ra] = rb;
+            tree[a].push(b);
+            tree[b].push(a);
+        }
+    }
+    (order, cl_vars, tree)
+}
+
 impl Engine {
     pub(crate) fn new(net: Network) -> Engine {
         let n = net.len();
         let card: Vec<usize> = net.nodes().iter().map(|x| x.states.len()).collect();
-        // Moral graph.
-        let mut adj: Vec<BTreeSet<usize>> = vec![BTreeSet::new(); n];
-        for (i, x) in net.nodes().iter().enumerate() {
-            let fam: Vec<usize> = x.parents.iter().map(|p| p.0).chain([i]).collect();
-            for &a in &fam {
-                for &b in &fam {
-                    if a != b {
-                        adj[a].insert(b);
-                    }
-                }
-            }
-        }
-        // Min-fill elimination.
-        let mut alive = vec![true; n];
-        let mut order = Vec::with_capacity(n);
-        let mut candidates: Vec<Vec<usize>> = Vec::new();
-        for _ in 0..n {
-            let mut best: Option<(usize, usize, usize)> = None; // (fill, weight, v)
-            for v in (0..n).filter(|&v| alive[v]) {
-                let nb: Vec<usize> = adj[v].iter().copied().collect();
-                let mut fill = 0;
-                for (i, &a) in nb.iter().enumerate() {
-                    for &b in &nb[i + 1..] {
-                        if !adj[a].contains(&b) {
-                            fill += 1;
-                        }
-                    }
-                }
-                let weight = nb.iter().fold(card[v], |w, &u| w.saturating_mul(card[u]));
-                if best.is_none_or(|(f, w, _)| (fill, weight) < (f, w)) {
-                    best = Some((fill, weight, v));
-                }
-            }
-            let (_, _, v) = best.expect("a live node remains");
-            let nb: Vec<usize> = adj[v].iter().copied().collect();
-            for (i, &a) in nb.iter().enumerate() {
-                for &b in &nb[i + 1..] {
-                    adj[a].insert(b);
-                    adj[b].insert(a);
-                }
-            }
-            for &a in &nb {
-                adj[a].remove(&v);
-            }
-            alive[v] = false;
-            order.push(v);
-            let mut c: Vec<usize> = nb;
-            c.push(v);
-            c.sort_unstable();
-            candidates.push(c);
-        }
-        // Maximal cliques only.
-        let mut cl_vars: Vec<Vec<usize>> = Vec::new();
-        for (i, c) in candidates.iter().enumerate() {
-            let contained = candidates.iter().enumerate().any(|(j, d)| {
-                j != i
-                    && c.len() <= d.len()
-                    && c.iter().all(|x| d.contains(x))
-                    && (c.len() < d.len() || j < i)
-            });
-            if !contained {
-                cl_vars.push(c.clone());
-            }
-        }
-        // Maximum-weight spanning tree on separator size (Kruskal; zero-size edges join components).
+        let families: Vec<Vec<usize>> = net
+            .nodes()
+            .iter()
+            .enumerate()
+            .map(|(i, x)| x.parents.iter().map(|p| p.0).chain([i]).collect())
+            .collect();
+        let all: Vec<usize> = (0..n).collect();
+        let (order, cl_vars, tree) = junction_tree(&card, &all, &families, true);
         let m = cl_vars.len();
-        let mut edges = Vec::new();
-        for a in 0..m {
-            for b in a + 1..m {
-                let w = cl_vars[a].iter().filter(|x| cl_vars[b].contains(x)).count();
-                edges.push((w, a, b));
-            }
-        }
-        edges.sort_by(|x, y| y.0.cmp(&x.0).then((x.1, x.2).cmp(&(y.1, y.2))));
-        let mut uf: Vec<usize> = (0..m).collect();
-        fn find(uf: &mut [usize], mut x: usize) -> usize {
-            while uf[x] != x {
-                uf[x] = uf[uf[x]];
-                x = uf[x];
-            }
-            x
-        }
-        let mut tree: Vec<Vec<usize>> = vec![Vec::new(); m];
-        for &(_, a, b) in &edges {
-            let (ra, rb) = (find(&mut uf, a), find(&mut uf, b));
-            if ra != rb {
-                uf[ra] = rb;
-                tree[a].push(b);
-                tree[b].push(a);
-            }
-        }
         // Breadth-first from clique 0: separators in BFS order.
         let mut seps = Vec::new();
         let mut seen = vec![false; m];
@@ -239,6 +278,8 @@ impl Engine {
         }
         let marginals = card.iter().map(|&k| vec![0.0; k]).collect();
         let mut e = Engine {
+            targeted: Targeted::new(Vec::new(), &card),
+            cpt_version: 0,
             card,
             order,
             cliques: Vec::new(),
@@ -292,6 +333,7 @@ impl Engine {
     pub fn set_cpt(&mut self, id: NodeId, cpt: &[f64]) -> Result<(), BnError> {
         self.net.check_cpt(id, cpt)?;
         self.net.nodes[id.0].cpt.copy_from_slice(cpt);
+        self.cpt_version += 1;
         let c = self.cpt_home[id.0];
         let mut clique = std::mem::replace(
             &mut self.cliques[c],
@@ -418,6 +460,55 @@ impl Engine {
     /// marginal before any query has run is not computed: call `propagate(&Evidence::new())`).
     pub fn marginal(&self, node: NodeId) -> &[f64] {
         &self.marginals[node.0]
+    }
+
+    /// Choose the nodes [`Engine::query`] computes posteriors for (the plans cached for the
+    /// previous targets are dropped). Duplicates are ignored.
+    pub fn set_targets(&mut self, targets: &[NodeId]) -> Result<(), BnError> {
+        let mut t = Vec::with_capacity(targets.len());
+        for id in targets {
+            if id.0 >= self.card.len() {
+                return Err(BnError::UnknownNode(id.to_string()));
+            }
+            if !t.contains(&id.0) {
+                t.push(id.0);
+            }
+        }
+        self.targeted = Targeted::new(t, &self.card);
+        Ok(())
+    }
+
+    /// The nodes [`Engine::query`] answers for.
+    pub fn targets(&self) -> Vec<NodeId> {
+        self.targeted.targets.iter().map(|&i| NodeId(i)).collect()
+    }
+
+    /// Number of evidence patterns compiled so far for the current targets (at most 64 are kept).
+    pub fn cached_plans(&self) -> usize {
+        self.targeted.plans()
+    }
+
+    /// Compute the posterior marginal of each target (see [`Engine::set_targets`]) given
+    /// `evidence`, and nothing else: read them with [`Engine::marginal`]; the other nodes keep
+    /// the marginals of the last [`Engine::propagate`]. The work is planned once per evidence
+    /// pattern (which nodes carry hard or soft evidence, not their values): barren nodes pruned,
+    /// hard evidence absorbed, parts d-separated from the targets skipped, and only the messages
+    /// towards the targets' cliques computed (see the `query` module). A pattern seen before
+    /// does not allocate. Evidence of probability zero is reported as
+    /// [`BnError::ImpossibleEvidence`] when the zero lies where the targets depend on it; an
+    /// impossibility confined to a part d-separated from every target is not detected (use
+    /// [`Engine::propagate`] for that check).
+    pub fn query(&mut self, evidence: &Evidence) -> Result<(), BnError> {
+        for (node, f) in &evidence.findings {
+            self.check_finding(*node, f)?;
+        }
+        self.targeted.run(
+            &self.net,
+            &self.card,
+            self.cpt_version,
+            &evidence.findings,
+            &mut self.marginals,
+        )
     }
 
     /// Propagate and return one node's posterior.

@@ -13,6 +13,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
 
 mod engine;
+mod query;
 pub use engine::Engine;
 
 /// Tolerance on a CPT row sum.
