@@ -525,31 +525,115 @@ impl FhCertificate {
     }
 }
 
-/// One plain Bellman backup with gamma = 1: `cur = T next`, `pol` the greedy actions.
-fn backup_stage(mdp: &Mdp, next: &[f64], cur: &mut [f64], pol: &mut [u32]) {
-    let ss = &mdp.state_start;
-    for (s, (cur_s, pol_s)) in cur.iter_mut().zip(pol.iter_mut()).enumerate() {
-        let lo = ss[s] as usize;
-        let hi = ss[s + 1] as usize;
-        if lo == hi {
-            *cur_s = 0.0;
-            *pol_s = NONE;
-            continue;
-        }
-        let mut best_c = lo;
-        let mut best = mdp.choice_reward[lo] + mdp.dot(lo, next);
-        let mut bar = beat_bar(best);
-        for c in lo + 1..hi {
-            let q = mdp.choice_reward[c] + mdp.dot(c, next);
-            if q > bar {
-                best = q;
-                best_c = c;
-                bar = beat_bar(best);
+/// One plain Bellman backup with gamma = 1: `cur = T next`, `pol` the greedy actions. When
+/// `next2` (`V_{t+2}`, one stage after `next`) is given, also returns the early-stop screen of
+/// [`Workspace::finite_horizon`] for the next stage, `(max_s |cur - 2 next + next2|, max(1, max_s
+/// |cur|))`, fused here so the screen costs two loads per state instead of a separate pass.
+///
+/// The hot loop of the finite-horizon solve: it walks the CSR arrays with running choice and
+/// transition cursors (choices of consecutive states and transitions of consecutive choices are
+/// contiguous, `state_start[0] = choice_start[0] = 0`) and reads them unchecked. Every index is in
+/// range by the layout invariants that [`MdpBuilder::build_unchecked`] and deserialization check
+/// before an [`Mdp`] exists (offsets start at 0, are monotone and end at the array lengths; every
+/// `next` is `< n_states`) and that nothing can change afterwards ([`Mdp::probs_mut`] and
+/// [`Mdp::rewards_mut`] only change values); the debug assertions recheck them. Summation order
+/// is the plain one (`acc += p * v` in transition order, then `reward + acc`), so values are
+/// bit-identical to the straightforward loop.
+#[inline(always)]
+fn backup_stage_impl<const SCREEN: bool>(
+    mdp: &Mdp,
+    next: &[f64],
+    next2: &[f64],
+    cur: &mut [f64],
+    pol: &mut [u32],
+) -> (f64, f64) {
+    let n = cur.len();
+    assert!(next.len() == n && pol.len() == n && mdp.state_start.len() == n + 1);
+    if SCREEN {
+        assert!(next2.len() == n);
+    }
+    let (ss, cs, nx, pr) = (&mdp.state_start, &mdp.choice_start, &mdp.next, &mdp.prob);
+    let (rw, ca) = (&mdp.choice_reward, &mdp.choice_action);
+    debug_assert!(ss[0] == 0 && cs[0] == 0 && ss[n] as usize == rw.len());
+    debug_assert!(cs.len() == rw.len() + 1 && ca.len() == rw.len());
+    debug_assert!(cs[rw.len()] as usize == nx.len() && pr.len() == nx.len());
+    debug_assert!(nx.iter().all(|&j| (j as usize) < n));
+    let (mut delta, mut scale) = (0.0f64, 1.0f64);
+    let mut c = 0usize;
+    let mut t = 0usize;
+    for s in 0..n {
+        // SAFETY: see the function docs; s < n, c < hi <= n_choices, t < choice_start[c + 1]
+        // <= n_transitions, next[t] < n.
+        unsafe {
+            let hi = *ss.get_unchecked(s + 1) as usize;
+            let (best, act) = if c == hi {
+                (0.0, NONE)
+            } else {
+                let end = *cs.get_unchecked(c + 1) as usize;
+                let mut acc = 0.0;
+                while t < end {
+                    acc +=
+                        *pr.get_unchecked(t) * *next.get_unchecked(*nx.get_unchecked(t) as usize);
+                    t += 1;
+                }
+                let mut best = *rw.get_unchecked(c) + acc;
+                let mut best_c = c;
+                let mut bar = beat_bar(best);
+                c += 1;
+                while c < hi {
+                    let end = *cs.get_unchecked(c + 1) as usize;
+                    let mut acc = 0.0;
+                    while t < end {
+                        acc += *pr.get_unchecked(t)
+                            * *next.get_unchecked(*nx.get_unchecked(t) as usize);
+                        t += 1;
+                    }
+                    let q = *rw.get_unchecked(c) + acc;
+                    if q > bar {
+                        best = q;
+                        best_c = c;
+                        bar = beat_bar(best);
+                    }
+                    c += 1;
+                }
+                (best, *ca.get_unchecked(best_c))
+            };
+            *cur.get_unchecked_mut(s) = best;
+            *pol.get_unchecked_mut(s) = act;
+            if SCREEN {
+                let d = best - 2.0 * *next.get_unchecked(s) + *next2.get_unchecked(s);
+                delta = delta.max(d.abs());
+                scale = scale.max(best.abs());
             }
         }
-        *cur_s = best;
-        *pol_s = mdp.choice_action[best_c];
     }
+    (delta, scale)
+}
+
+/// [`backup_stage_impl`] without the screen.
+fn backup_stage(mdp: &Mdp, next: &[f64], cur: &mut [f64], pol: &mut [u32]) {
+    backup_stage_impl::<false>(mdp, next, &[], cur, pol);
+}
+
+/// [`backup_stage_impl`] with the screen from `next2`.
+fn backup_stage_screened(
+    mdp: &Mdp,
+    next: &[f64],
+    next2: &[f64],
+    cur: &mut [f64],
+    pol: &mut [u32],
+) -> (f64, f64) {
+    backup_stage_impl::<true>(mdp, next, next2, cur, pol)
+}
+
+/// The early-stop screen `(max_s |vb - 2 vb1 + vb2|, max(1, max_s |vb|))` as a separate pass.
+fn screen(vb: &[f64], vb1: &[f64], vb2: &[f64]) -> (f64, f64) {
+    let (mut delta, mut scale) = (0.0f64, 1.0f64);
+    for ((a, b), c) in vb.iter().zip(vb1).zip(vb2) {
+        delta = delta.max((a - 2.0 * b + c).abs());
+        scale = scale.max(a.abs());
+    }
+    (delta, scale)
 }
 
 /// [`backup_stage`] from `vb` (`V_b`) that also measures the [`FhCertificate`] of `g = vb -
@@ -778,6 +862,9 @@ impl Workspace {
         // The second difference at which the last certificate attempt failed: retry only once it
         // has at least halved, so a model that never settles costs no more than a few attempts.
         let mut retry_below = f64::INFINITY;
+        // Screen for the stage about to be computed (from the three stages after it), filled
+        // by the previous backup.
+        let mut screen_next: Option<(f64, f64)> = None;
         let mut t = horizon;
         while t > 0 {
             t -= 1;
@@ -786,15 +873,7 @@ impl Workspace {
             // the decision rule pi_b (b <= H - 1), and a cheap sign that g has settled:
             // delta = max |d_b - d_{b+1}| (needs V_{b+2}).
             let b = t + 1;
-            if b + 2 <= horizon {
-                let (vb, rest) = vals[b * n..(b + 3) * n].split_at(n);
-                let (vb1, vb2) = rest.split_at(n);
-                let mut delta: f64 = 0.0;
-                let mut scale: f64 = 1.0;
-                for s in 0..n {
-                    delta = delta.max((vb[s] - 2.0 * vb1[s] + vb2[s]).abs());
-                    scale = scale.max(vb[s].abs());
-                }
+            if let Some((delta, scale)) = screen_next.take() {
                 let kk = b as f64;
                 let tol = FH_STOP_TOLERANCE * scale;
                 if delta < retry_below && kk * (kk + 1.0) * 0.5 * delta <= 16.0 * tol {
@@ -810,11 +889,29 @@ impl Workspace {
                         }
                         _ => retry_below = delta * 0.5,
                     }
+                    if t > 0 {
+                        let (cur, rest) = vals[t * n..(t + 3) * n].split_at(n);
+                        let (vb, vb1) = rest.split_at(n);
+                        screen_next = Some(screen(cur, vb, vb1));
+                    }
                     continue;
                 }
             }
-            let (cur, next) = vals[t * n..(t + 2) * n].split_at_mut(n);
-            backup_stage(mdp, next, cur, &mut pol[t * n..(t + 1) * n]);
+            // The stage after this one (t - 1, base t) is a certificate candidate when t + 2 <= H.
+            if t > 0 && t + 2 <= horizon {
+                let (cur, rest) = vals[t * n..(t + 3) * n].split_at_mut(n);
+                let (next, next2) = rest.split_at(n);
+                screen_next = Some(backup_stage_screened(
+                    mdp,
+                    next,
+                    next2,
+                    cur,
+                    &mut pol[t * n..(t + 1) * n],
+                ));
+            } else {
+                let (cur, next) = vals[t * n..(t + 2) * n].split_at_mut(n);
+                backup_stage(mdp, next, cur, &mut pol[t * n..(t + 1) * n]);
+            }
         }
         FiniteHorizonSolution {
             ws: self,
