@@ -719,23 +719,21 @@ fn backup_certified(
 /// Fill stages `0..t` by the certified extrapolation from base `b = t + 1`: `V_{t'} = V_b + (b -
 /// t') g` and the decision rule of stage `t`.
 fn fill_extrapolated(vals: &mut [f64], pol: &mut [u32], n: usize, t: usize, b: usize) {
+    if n == 0 {
+        return;
+    }
     let (lo, hi) = vals.split_at_mut(b * n);
     let (vb, vb1) = hi[..2 * n].split_at(n);
-    for tp in 0..t {
+    for (tp, out) in lo[..t * n].chunks_exact_mut(n).enumerate() {
         let k = (b - tp) as f64;
-        for (((out, v), v1), _) in lo[tp * n..(tp + 1) * n]
-            .iter_mut()
-            .zip(vb)
-            .zip(vb1)
-            .zip(0..n)
-        {
-            *out = v + k * (v - v1);
+        for ((o, v), v1) in out.iter_mut().zip(vb).zip(vb1) {
+            *o = v + k * (v - v1);
         }
     }
     let (head, row) = pol.split_at_mut(t * n);
     let row = &row[..n];
-    for tp in 0..t {
-        head[tp * n..(tp + 1) * n].copy_from_slice(row);
+    for out in head.chunks_exact_mut(n) {
+        out.copy_from_slice(row);
     }
 }
 
@@ -1325,14 +1323,14 @@ impl Workspace {
                 }
             }
         }
-        // Now rev_start[j]..rev_start[j + 1] are the predecessors of j. Mark reached states by
-        // setting their pchoice-independent flag in `policy` (scratch here; `finish` rewrites it).
+        // Now rev_start[j]..rev_start[j + 1] are the predecessors of j. Reached states are marked
+        // in `policy` (scratch here; `finish` rewrites it).
         let seen = &mut self.policy[..n];
         resize(&mut self.queue, n, 0);
         let mut tail = 0;
-        for s in 0..n {
-            let terminal = self.pchoice[s] == NONE;
-            seen[s] = terminal as u32;
+        for (s, (seen_s, c)) in seen.iter_mut().zip(&self.pchoice[..n]).enumerate() {
+            let terminal = *c == NONE;
+            *seen_s = terminal as u32;
             if terminal {
                 self.queue[tail] = s as u32;
                 tail += 1;
