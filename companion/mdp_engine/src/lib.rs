@@ -641,6 +641,50 @@ fn backup_stage_screened(
     backup_stage_impl::<true>(mdp, next, next2, cur, pol)
 }
 
+/// One value-iteration sweep `nxt = T cur` (terminal states 0), returning `(min d, max d)` of `d =
+/// nxt - cur` (infinities when there is no state). The same cursor walk and unchecked reads as
+/// [`backup_stage_impl`] (same invariants), with `q = R + gamma * (sum p v)` in transition order.
+fn vi_sweep(mdp: &Mdp, gamma: f64, cur: &[f64], nxt: &mut [f64]) -> (f64, f64) {
+    let n = cur.len();
+    assert!(nxt.len() == n && mdp.state_start.len() == n + 1);
+    let (ss, cs, nx, pr, rw) = (
+        &mdp.state_start,
+        &mdp.choice_start,
+        &mdp.next,
+        &mdp.prob,
+        &mdp.choice_reward,
+    );
+    debug_assert!(ss[0] == 0 && cs[0] == 0 && ss[n] as usize == rw.len());
+    debug_assert!(cs.len() == rw.len() + 1 && cs[rw.len()] as usize == nx.len());
+    debug_assert!(pr.len() == nx.len() && nx.iter().all(|&j| (j as usize) < n));
+    let (mut dmin, mut dmax) = (f64::INFINITY, f64::NEG_INFINITY);
+    let (mut c, mut t) = (0usize, 0usize);
+    for s in 0..n {
+        // SAFETY: as in backup_stage_impl.
+        unsafe {
+            let hi = *ss.get_unchecked(s + 1) as usize;
+            let mut best = f64::NEG_INFINITY;
+            let terminal = c == hi;
+            while c < hi {
+                let end = *cs.get_unchecked(c + 1) as usize;
+                let mut acc = 0.0;
+                while t < end {
+                    acc += *pr.get_unchecked(t) * *cur.get_unchecked(*nx.get_unchecked(t) as usize);
+                    t += 1;
+                }
+                best = best.max(*rw.get_unchecked(c) + gamma * acc);
+                c += 1;
+            }
+            let q = if terminal { 0.0 } else { best };
+            let d = q - *cur.get_unchecked(s);
+            dmin = dmin.min(d);
+            dmax = dmax.max(d);
+            *nxt.get_unchecked_mut(s) = q;
+        }
+    }
+    (dmin, dmax)
+}
+
 /// The early-stop screen `(max_s |vb - 2 vb1 + vb2|, max(1, max_s |vb|))` as a separate pass.
 fn screen(vb: &[f64], vb1: &[f64], vb2: &[f64]) -> (f64, f64) {
     let (mut delta, mut scale) = (0.0f64, 1.0f64);
@@ -973,25 +1017,9 @@ impl Workspace {
             } else {
                 (f64::INFINITY, f64::NEG_INFINITY)
             };
-            let (cur, nxt) = (&self.v[..n], &mut self.v2[..n]);
-            let ss = &mdp.state_start;
-            for s in 0..n {
-                let lo = ss[s] as usize;
-                let hi = ss[s + 1] as usize;
-                let q = if lo == hi {
-                    0.0
-                } else {
-                    let mut best = mdp.choice_reward[lo] + gamma * mdp.dot(lo, cur);
-                    for c in lo + 1..hi {
-                        best = best.max(mdp.choice_reward[c] + gamma * mdp.dot(c, cur));
-                    }
-                    best
-                };
-                let d = q - cur[s];
-                dmin = dmin.min(d);
-                dmax = dmax.max(d);
-                nxt[s] = q;
-            }
+            let (lo_d, hi_d) = vi_sweep(mdp, gamma, &self.v[..n], &mut self.v2[..n]);
+            dmin = dmin.min(lo_d);
+            dmax = dmax.max(hi_d);
             std::mem::swap(&mut self.v, &mut self.v2);
             iterations += 1;
             let (span, sup) = (dmax - dmin, dmax.max(-dmin));
