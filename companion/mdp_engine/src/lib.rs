@@ -419,18 +419,6 @@ impl Mdp {
         Ok(())
     }
 
-    /// `sum p(s'|s,a) v(s')` for choice `c`.
-    #[inline(always)]
-    fn dot(&self, c: usize, v: &[f64]) -> f64 {
-        let lo = self.choice_start[c] as usize;
-        let hi = self.choice_start[c + 1] as usize;
-        let mut acc = 0.0;
-        for (n, p) in self.next[lo..hi].iter().zip(&self.prob[lo..hi]) {
-            acc += p * v[*n as usize];
-        }
-        acc
-    }
-
     /// `R(s,a) + gamma * sum p(s'|s,a) v(s')` for choice `c`.
     #[inline]
     fn q(&self, c: usize, gamma: f64, v: &[f64]) -> f64 {
