@@ -12,8 +12,9 @@
 //!   paper's eq. 1–3; stops early once a certified bound shows the remaining stages are the
 //!   computed ones plus a constant gain per stage, to within [`FH_STOP_TOLERANCE`]), value
 //!   iteration (stopped on the MacQueen–Porteus bracket), policy iteration (eq. 4–5, policy
-//!   evaluation by a dense in-place linear solve on a nalgebra matrix) and modified policy
-//!   iteration.
+//!   evaluation by a dense in-place linear solve on a nalgebra matrix up to
+//!   [`Config::dense_eval_max_states`] states, above by warm-started sparse sweeps with a
+//!   certified stop) and modified policy iteration.
 //!
 //! **Tie-breaking** is deterministic everywhere: a later action (higher action index) replaces the
 //! current best only if its Q-value is larger by more than [`TIE_TOLERANCE`] relative to the best
