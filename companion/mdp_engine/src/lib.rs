@@ -1040,7 +1040,7 @@ impl Workspace {
     /// cannot cycle); stops when the policy is stable. `Stats::iterations` counts evaluations.
     ///
     /// Evaluation is dense up to `cfg.dense_eval_max_states` states (O(|S|^2) memory, O(|S|^3)
-    /// time). Above, it is sparse ([`Workspace::evaluate_sparse`]): O(transitions) per sweep,
+    /// time). Above, it is sparse (sweeps of the policy's operator): O(transitions) per sweep,
     /// warm-started from the previous policy's values, stopped once the certified error is below
     /// [`SPARSE_EVAL_TOLERANCE`] relative to the values (`gamma < 1`).
     pub fn policy_iteration(
