@@ -1041,8 +1041,12 @@ impl Workspace {
     ///
     /// Evaluation is dense up to `cfg.dense_eval_max_states` states (O(|S|^2) memory, O(|S|^3)
     /// time). Above, it is sparse (sweeps of the policy's operator): O(transitions) per sweep,
-    /// warm-started from the previous policy's values, stopped once the certified error is below
-    /// [`SPARSE_EVAL_TOLERANCE`] relative to the values (`gamma < 1`).
+    /// warm-started from the previous policy's values. With `gamma < 1` it stops on the
+    /// MacQueen–Porteus bracket once the certified error is below `max(`[`SPARSE_EVAL_TOLERANCE`]`,
+    /// 8 eps gamma/(1-gamma))` relative to the values. With `gamma = 1` an improper policy (some
+    /// non-terminal state cannot reach a terminal one along positive transitions) is reported as
+    /// [`SolveError::Singular`] from the policy's graph, and a proper one is solved by
+    /// Gauss–Seidel to a relative change below [`SPARSE_EVAL_TOLERANCE`] (not a certified bound).
     pub fn policy_iteration(
         &mut self,
         mdp: &Mdp,
