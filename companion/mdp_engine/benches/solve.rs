@@ -109,7 +109,7 @@ fn scaling(c: &mut Criterion) {
     g.sample_size(10);
     for n in [10usize, 100, 1000, 10000] {
         let mdp = random_mdp(n, 10, 5, n as u64);
-        let mut ws = Workspace::with_capacity(n, 100, n <= 1000);
+        let mut ws = Workspace::with_capacity(n, 100, n <= mdp_engine::DENSE_EVAL_MAX_STATES);
         g.bench_function(BenchmarkId::new("finite_horizon_100", n), |b| {
             b.iter(|| black_box(ws.finite_horizon(&mdp, 100).decision(0)))
         });
@@ -123,12 +123,10 @@ fn scaling(c: &mut Criterion) {
                 )
             })
         });
-        // Dense O(n^3) evaluation: only up to 1000 states (10000 would need 800 MB).
-        if n <= 1000 {
-            g.bench_function(BenchmarkId::new("policy_iteration", n), |b| {
-                b.iter(|| black_box(ws.policy_iteration(&mdp, &cfg).unwrap().stats.iterations))
-            });
-        }
+        // Above Config::dense_eval_max_states the evaluation is sparse, so 10000 states is fine.
+        g.bench_function(BenchmarkId::new("policy_iteration", n), |b| {
+            b.iter(|| black_box(ws.policy_iteration(&mdp, &cfg).unwrap().stats.iterations))
+        });
     }
     g.finish();
 }

@@ -12,8 +12,9 @@
 //!   paper's eq. 1–3; stops early once a certified bound shows the remaining stages are the
 //!   computed ones plus a constant gain per stage, to within [`FH_STOP_TOLERANCE`]), value
 //!   iteration (stopped on the MacQueen–Porteus bracket), policy iteration (eq. 4–5, policy
-//!   evaluation by a dense in-place linear solve on a nalgebra matrix) and modified policy
-//!   iteration.
+//!   evaluation by a dense in-place linear solve on a nalgebra matrix up to
+//!   [`Config::dense_eval_max_states`] states, above by warm-started sparse sweeps with a
+//!   certified stop) and modified policy iteration.
 //!
 //! **Tie-breaking** is deterministic everywhere: a later action (higher action index) replaces the
 //! current best only if its Q-value is larger by more than [`TIE_TOLERANCE`] relative to the best
@@ -419,18 +420,6 @@ impl Mdp {
         Ok(())
     }
 
-    /// `sum p(s'|s,a) v(s')` for choice `c`.
-    #[inline(always)]
-    fn dot(&self, c: usize, v: &[f64]) -> f64 {
-        let lo = self.choice_start[c] as usize;
-        let hi = self.choice_start[c + 1] as usize;
-        let mut acc = 0.0;
-        for (n, p) in self.next[lo..hi].iter().zip(&self.prob[lo..hi]) {
-            acc += p * v[*n as usize];
-        }
-        acc
-    }
-
     /// `R(s,a) + gamma * sum p(s'|s,a) v(s')` for choice `c`.
     #[inline]
     fn q(&self, c: usize, gamma: f64, v: &[f64]) -> f64 {
@@ -466,6 +455,21 @@ impl Mdp {
 fn beats(q: f64, best: f64) -> bool {
     q > best + TIE_TOLERANCE * best.abs().max(1.0)
 }
+
+/// Default [`Config::dense_eval_max_states`]. Measured on the benches' random models (|A| = 10,
+/// 5 successors, gamma 0.95): at 100 states sparse PI took 258 us against 451 us dense, at 1000
+/// states 6.7 ms against 560 ms. Small models stay dense: on the paper's models (<= 20 states,
+/// absorbing terminal states, where the bracket converges only at rate gamma) one dense solve is
+/// a few thousand flops.
+pub const DENSE_EVAL_MAX_STATES: usize = 50;
+/// Sparse policy evaluation stops when its certified error (`gamma < 1`) or its last change
+/// (`gamma = 1`) is at most this relative to `max(1, |v|_inf)`.
+pub const SPARSE_EVAL_TOLERANCE: f64 = 1e-13;
+/// Sparse policy evaluation (`gamma < 1`) also stops when its bracket has not halved in this many
+/// sweeps (rounding floor), returning the midpoint.
+pub const SPARSE_EVAL_STALL_SWEEPS: u32 = 2000;
+/// Cap on the sweeps of one sparse policy evaluation.
+pub const SPARSE_EVAL_MAX_SWEEPS: u32 = 1_000_000;
 
 /// Relative bound for the finite-horizon early stop: the extrapolated stages may differ from full
 /// backward induction by at most this times `max(1, |V_0|)` in value, and a kept action may be
@@ -525,31 +529,159 @@ impl FhCertificate {
     }
 }
 
-/// One plain Bellman backup with gamma = 1: `cur = T next`, `pol` the greedy actions.
-fn backup_stage(mdp: &Mdp, next: &[f64], cur: &mut [f64], pol: &mut [u32]) {
-    let ss = &mdp.state_start;
-    for (s, (cur_s, pol_s)) in cur.iter_mut().zip(pol.iter_mut()).enumerate() {
-        let lo = ss[s] as usize;
-        let hi = ss[s + 1] as usize;
-        if lo == hi {
-            *cur_s = 0.0;
-            *pol_s = NONE;
-            continue;
-        }
-        let mut best_c = lo;
-        let mut best = mdp.choice_reward[lo] + mdp.dot(lo, next);
-        let mut bar = beat_bar(best);
-        for c in lo + 1..hi {
-            let q = mdp.choice_reward[c] + mdp.dot(c, next);
-            if q > bar {
-                best = q;
-                best_c = c;
-                bar = beat_bar(best);
+/// One plain Bellman backup with gamma = 1: `cur = T next`, `pol` the greedy actions. When
+/// `next2` (`V_{t+2}`, one stage after `next`) is given, also returns the early-stop screen of
+/// [`Workspace::finite_horizon`] for the next stage, `(max_s |cur - 2 next + next2|, max(1, max_s
+/// |cur|))`, fused here so the screen costs two loads per state instead of a separate pass.
+///
+/// The hot loop of the finite-horizon solve: it walks the CSR arrays with running choice and
+/// transition cursors (choices of consecutive states and transitions of consecutive choices are
+/// contiguous, `state_start[0] = choice_start[0] = 0`) and reads them unchecked. Every index is in
+/// range by the layout invariants that [`MdpBuilder::build_unchecked`] and deserialization check
+/// before an [`Mdp`] exists (offsets start at 0, are monotone and end at the array lengths; every
+/// `next` is `< n_states`) and that nothing can change afterwards ([`Mdp::probs_mut`] and
+/// [`Mdp::rewards_mut`] only change values); the debug assertions recheck them. Summation order
+/// is the plain one (`acc += p * v` in transition order, then `reward + acc`), so values are
+/// bit-identical to the straightforward loop.
+#[inline(always)]
+fn backup_stage_impl<const SCREEN: bool>(
+    mdp: &Mdp,
+    next: &[f64],
+    next2: &[f64],
+    cur: &mut [f64],
+    pol: &mut [u32],
+) -> (f64, f64) {
+    let n = cur.len();
+    assert!(next.len() == n && pol.len() == n && mdp.state_start.len() == n + 1);
+    if SCREEN {
+        assert!(next2.len() == n);
+    }
+    let (ss, cs, nx, pr) = (&mdp.state_start, &mdp.choice_start, &mdp.next, &mdp.prob);
+    let (rw, ca) = (&mdp.choice_reward, &mdp.choice_action);
+    debug_assert!(ss[0] == 0 && cs[0] == 0 && ss[n] as usize == rw.len());
+    debug_assert!(cs.len() == rw.len() + 1 && ca.len() == rw.len());
+    debug_assert!(cs[rw.len()] as usize == nx.len() && pr.len() == nx.len());
+    debug_assert!(nx.iter().all(|&j| (j as usize) < n));
+    let (mut delta, mut scale) = (0.0f64, 1.0f64);
+    let mut c = 0usize;
+    let mut t = 0usize;
+    for s in 0..n {
+        // SAFETY: see the function docs; s < n, c < hi <= n_choices, t < choice_start[c + 1]
+        // <= n_transitions, next[t] < n.
+        unsafe {
+            let hi = *ss.get_unchecked(s + 1) as usize;
+            let (best, act) = if c == hi {
+                (0.0, NONE)
+            } else {
+                let end = *cs.get_unchecked(c + 1) as usize;
+                let mut acc = 0.0;
+                while t < end {
+                    acc +=
+                        *pr.get_unchecked(t) * *next.get_unchecked(*nx.get_unchecked(t) as usize);
+                    t += 1;
+                }
+                let mut best = *rw.get_unchecked(c) + acc;
+                let mut best_c = c;
+                let mut bar = beat_bar(best);
+                c += 1;
+                while c < hi {
+                    let end = *cs.get_unchecked(c + 1) as usize;
+                    let mut acc = 0.0;
+                    while t < end {
+                        acc += *pr.get_unchecked(t)
+                            * *next.get_unchecked(*nx.get_unchecked(t) as usize);
+                        t += 1;
+                    }
+                    let q = *rw.get_unchecked(c) + acc;
+                    if q > bar {
+                        best = q;
+                        best_c = c;
+                        bar = beat_bar(best);
+                    }
+                    c += 1;
+                }
+                (best, *ca.get_unchecked(best_c))
+            };
+            *cur.get_unchecked_mut(s) = best;
+            *pol.get_unchecked_mut(s) = act;
+            if SCREEN {
+                let d = best - 2.0 * *next.get_unchecked(s) + *next2.get_unchecked(s);
+                delta = delta.max(d.abs());
+                scale = scale.max(best.abs());
             }
         }
-        *cur_s = best;
-        *pol_s = mdp.choice_action[best_c];
     }
+    (delta, scale)
+}
+
+/// [`backup_stage_impl`] without the screen.
+fn backup_stage(mdp: &Mdp, next: &[f64], cur: &mut [f64], pol: &mut [u32]) {
+    backup_stage_impl::<false>(mdp, next, &[], cur, pol);
+}
+
+/// [`backup_stage_impl`] with the screen from `next2`.
+fn backup_stage_screened(
+    mdp: &Mdp,
+    next: &[f64],
+    next2: &[f64],
+    cur: &mut [f64],
+    pol: &mut [u32],
+) -> (f64, f64) {
+    backup_stage_impl::<true>(mdp, next, next2, cur, pol)
+}
+
+/// One value-iteration sweep `nxt = T cur` (terminal states 0), returning `(min d, max d)` of `d =
+/// nxt - cur` (infinities when there is no state). The same cursor walk and unchecked reads as
+/// [`backup_stage_impl`] (same invariants), with `q = R + gamma * (sum p v)` in transition order.
+fn vi_sweep(mdp: &Mdp, gamma: f64, cur: &[f64], nxt: &mut [f64]) -> (f64, f64) {
+    let n = cur.len();
+    assert!(nxt.len() == n && mdp.state_start.len() == n + 1);
+    let (ss, cs, nx, pr, rw) = (
+        &mdp.state_start,
+        &mdp.choice_start,
+        &mdp.next,
+        &mdp.prob,
+        &mdp.choice_reward,
+    );
+    debug_assert!(ss[0] == 0 && cs[0] == 0 && ss[n] as usize == rw.len());
+    debug_assert!(cs.len() == rw.len() + 1 && cs[rw.len()] as usize == nx.len());
+    debug_assert!(pr.len() == nx.len() && nx.iter().all(|&j| (j as usize) < n));
+    let (mut dmin, mut dmax) = (f64::INFINITY, f64::NEG_INFINITY);
+    let (mut c, mut t) = (0usize, 0usize);
+    for s in 0..n {
+        // SAFETY: as in backup_stage_impl.
+        unsafe {
+            let hi = *ss.get_unchecked(s + 1) as usize;
+            let mut best = f64::NEG_INFINITY;
+            let terminal = c == hi;
+            while c < hi {
+                let end = *cs.get_unchecked(c + 1) as usize;
+                let mut acc = 0.0;
+                while t < end {
+                    acc += *pr.get_unchecked(t) * *cur.get_unchecked(*nx.get_unchecked(t) as usize);
+                    t += 1;
+                }
+                best = best.max(*rw.get_unchecked(c) + gamma * acc);
+                c += 1;
+            }
+            let q = if terminal { 0.0 } else { best };
+            let d = q - *cur.get_unchecked(s);
+            dmin = dmin.min(d);
+            dmax = dmax.max(d);
+            *nxt.get_unchecked_mut(s) = q;
+        }
+    }
+    (dmin, dmax)
+}
+
+/// The early-stop screen `(max_s |vb - 2 vb1 + vb2|, max(1, max_s |vb|))` as a separate pass.
+fn screen(vb: &[f64], vb1: &[f64], vb2: &[f64]) -> (f64, f64) {
+    let (mut delta, mut scale) = (0.0f64, 1.0f64);
+    for ((a, b), c) in vb.iter().zip(vb1).zip(vb2) {
+        delta = delta.max((a - 2.0 * b + c).abs());
+        scale = scale.max(a.abs());
+    }
+    (delta, scale)
 }
 
 /// [`backup_stage`] from `vb` (`V_b`) that also measures the [`FhCertificate`] of `g = vb -
@@ -620,23 +752,21 @@ fn backup_certified(
 /// Fill stages `0..t` by the certified extrapolation from base `b = t + 1`: `V_{t'} = V_b + (b -
 /// t') g` and the decision rule of stage `t`.
 fn fill_extrapolated(vals: &mut [f64], pol: &mut [u32], n: usize, t: usize, b: usize) {
+    if n == 0 {
+        return;
+    }
     let (lo, hi) = vals.split_at_mut(b * n);
     let (vb, vb1) = hi[..2 * n].split_at(n);
-    for tp in 0..t {
+    for (tp, out) in lo[..t * n].chunks_exact_mut(n).enumerate() {
         let k = (b - tp) as f64;
-        for (((out, v), v1), _) in lo[tp * n..(tp + 1) * n]
-            .iter_mut()
-            .zip(vb)
-            .zip(vb1)
-            .zip(0..n)
-        {
-            *out = v + k * (v - v1);
+        for ((o, v), v1) in out.iter_mut().zip(vb).zip(vb1) {
+            *o = v + k * (v - v1);
         }
     }
     let (head, row) = pol.split_at_mut(t * n);
     let row = &row[..n];
-    for tp in 0..t {
-        head[tp * n..(tp + 1) * n].copy_from_slice(row);
+    for out in head.chunks_exact_mut(n) {
+        out.copy_from_slice(row);
     }
 }
 
@@ -660,6 +790,10 @@ pub struct Config {
     pub max_iterations: u32,
     /// Modified policy iteration: partial evaluation sweeps per improvement.
     pub eval_sweeps: u32,
+    /// Policy iteration: models with at most this many states evaluate each policy by the dense
+    /// exact solve; larger ones by the sparse iterative one (see
+    /// [`Workspace::policy_iteration`]).
+    pub dense_eval_max_states: usize,
 }
 
 impl Default for Config {
@@ -669,6 +803,7 @@ impl Default for Config {
             tolerance: 1e-9,
             max_iterations: 100_000,
             eval_sweeps: 20,
+            dense_eval_max_states: DENSE_EVAL_MAX_STATES,
         }
     }
 }
@@ -703,6 +838,11 @@ pub struct Workspace {
     fh_policy: Vec<u32>,
     mat: DMatrix<f64>,
     rhs: DVector<f64>,
+    /// Sparse policy evaluation: the policy's reverse graph (CSR) and a BFS queue, for the
+    /// structural properness check with `gamma = 1`.
+    rev_start: Vec<u32>,
+    rev: Vec<u32>,
+    queue: Vec<u32>,
 }
 
 impl Default for Workspace {
@@ -724,6 +864,9 @@ impl Workspace {
             fh_policy: Vec::new(),
             mat: DMatrix::zeros(0, 0),
             rhs: DVector::zeros(0),
+            rev_start: Vec::new(),
+            rev: Vec::new(),
+            queue: Vec::new(),
         }
     }
 
@@ -778,6 +921,9 @@ impl Workspace {
         // The second difference at which the last certificate attempt failed: retry only once it
         // has at least halved, so a model that never settles costs no more than a few attempts.
         let mut retry_below = f64::INFINITY;
+        // Screen for the stage about to be computed (from the three stages after it), filled
+        // by the previous backup.
+        let mut screen_next: Option<(f64, f64)> = None;
         let mut t = horizon;
         while t > 0 {
             t -= 1;
@@ -786,15 +932,7 @@ impl Workspace {
             // the decision rule pi_b (b <= H - 1), and a cheap sign that g has settled:
             // delta = max |d_b - d_{b+1}| (needs V_{b+2}).
             let b = t + 1;
-            if b + 2 <= horizon {
-                let (vb, rest) = vals[b * n..(b + 3) * n].split_at(n);
-                let (vb1, vb2) = rest.split_at(n);
-                let mut delta: f64 = 0.0;
-                let mut scale: f64 = 1.0;
-                for s in 0..n {
-                    delta = delta.max((vb[s] - 2.0 * vb1[s] + vb2[s]).abs());
-                    scale = scale.max(vb[s].abs());
-                }
+            if let Some((delta, scale)) = screen_next.take() {
                 let kk = b as f64;
                 let tol = FH_STOP_TOLERANCE * scale;
                 if delta < retry_below && kk * (kk + 1.0) * 0.5 * delta <= 16.0 * tol {
@@ -810,11 +948,29 @@ impl Workspace {
                         }
                         _ => retry_below = delta * 0.5,
                     }
+                    if t > 0 {
+                        let (cur, rest) = vals[t * n..(t + 3) * n].split_at(n);
+                        let (vb, vb1) = rest.split_at(n);
+                        screen_next = Some(screen(cur, vb, vb1));
+                    }
                     continue;
                 }
             }
-            let (cur, next) = vals[t * n..(t + 2) * n].split_at_mut(n);
-            backup_stage(mdp, next, cur, &mut pol[t * n..(t + 1) * n]);
+            // The stage after this one (t - 1, base t) is a certificate candidate when t + 2 <= H.
+            if t > 0 && t + 2 <= horizon {
+                let (cur, rest) = vals[t * n..(t + 3) * n].split_at_mut(n);
+                let (next, next2) = rest.split_at(n);
+                screen_next = Some(backup_stage_screened(
+                    mdp,
+                    next,
+                    next2,
+                    cur,
+                    &mut pol[t * n..(t + 1) * n],
+                ));
+            } else {
+                let (cur, next) = vals[t * n..(t + 2) * n].split_at_mut(n);
+                backup_stage(mdp, next, cur, &mut pol[t * n..(t + 1) * n]);
+            }
         }
         FiniteHorizonSolution {
             ws: self,
@@ -850,25 +1006,9 @@ impl Workspace {
             } else {
                 (f64::INFINITY, f64::NEG_INFINITY)
             };
-            let (cur, nxt) = (&self.v[..n], &mut self.v2[..n]);
-            let ss = &mdp.state_start;
-            for s in 0..n {
-                let lo = ss[s] as usize;
-                let hi = ss[s + 1] as usize;
-                let q = if lo == hi {
-                    0.0
-                } else {
-                    let mut best = mdp.choice_reward[lo] + gamma * mdp.dot(lo, cur);
-                    for c in lo + 1..hi {
-                        best = best.max(mdp.choice_reward[c] + gamma * mdp.dot(c, cur));
-                    }
-                    best
-                };
-                let d = q - cur[s];
-                dmin = dmin.min(d);
-                dmax = dmax.max(d);
-                nxt[s] = q;
-            }
+            let (lo_d, hi_d) = vi_sweep(mdp, gamma, &self.v[..n], &mut self.v2[..n]);
+            dmin = dmin.min(lo_d);
+            dmax = dmax.max(hi_d);
             std::mem::swap(&mut self.v, &mut self.v2);
             iterations += 1;
             let (span, sup) = (dmax - dmin, dmax.max(-dmin));
@@ -898,7 +1038,15 @@ impl Workspace {
     /// `v = 0`) with Gaussian elimination with partial pivoting in the preallocated nalgebra
     /// matrix; improves by switching a state's action only when another is strictly better (so it
     /// cannot cycle); stops when the policy is stable. `Stats::iterations` counts evaluations.
-    /// Dense: O(|S|^2) memory and O(|S|^3) time per evaluation.
+    ///
+    /// Evaluation is dense up to `cfg.dense_eval_max_states` states (O(|S|^2) memory, O(|S|^3)
+    /// time). Above, it is sparse (sweeps of the policy's operator): O(transitions) per sweep,
+    /// warm-started from the previous policy's values. With `gamma < 1` it stops on the
+    /// MacQueen–Porteus bracket once the certified error is below `max(`[`SPARSE_EVAL_TOLERANCE`]`,
+    /// 8 eps gamma/(1-gamma))` relative to the values. With `gamma = 1` an improper policy (some
+    /// non-terminal state cannot reach a terminal one along positive transitions) is reported as
+    /// [`SolveError::Singular`] from the policy's graph, and a proper one is solved by
+    /// Gauss–Seidel to a relative change below [`SPARSE_EVAL_TOLERANCE`] (not a certified bound).
     pub fn policy_iteration(
         &mut self,
         mdp: &Mdp,
@@ -906,7 +1054,8 @@ impl Workspace {
     ) -> Result<Solution<'_>, SolveError> {
         check_gamma(cfg.gamma)?;
         let n = mdp.n_states();
-        self.reserve(n, 0, true);
+        let dense = n <= cfg.dense_eval_max_states;
+        self.reserve(n, 0, dense);
         self.v[..n].fill(0.0);
         for s in 0..n {
             self.pchoice[s] = mdp
@@ -917,7 +1066,12 @@ impl Workspace {
         let mut converged = false;
         while iterations < cfg.max_iterations {
             iterations += 1;
-            if !self.evaluate_exact(mdp, cfg.gamma) {
+            let ok = if dense {
+                self.evaluate_exact(mdp, cfg.gamma)
+            } else {
+                self.evaluate_sparse(mdp, cfg.gamma)
+            };
+            if !ok {
                 return Err(SolveError::Singular {
                     iteration: iterations,
                 });
@@ -1037,6 +1191,186 @@ impl Workspace {
         }
         self.v[..n].copy_from_slice(&b.as_slice()[..n]);
         true
+    }
+
+    /// Sparse iterative evaluation of the policy in `pchoice`, warm-started from `v` (the previous
+    /// policy's values). False if singular.
+    ///
+    /// `gamma < 1`: sweeps `v <- r_pi + gamma P_pi v` (the policy's own value-iteration operator)
+    /// and, with `d` its change, stops on the MacQueen–Porteus bracket (`v_pi` lies within
+    /// `gamma/(1-gamma) * [min d, max d]` of the swept values; terminal states count with `d = 0`)
+    /// once its half-width is at most `max(`[`SPARSE_EVAL_TOLERANCE`]`, 8 eps gamma/(1-gamma)) *
+    /// max(1, |v|_inf)` (the second term: one sweep's rounding, amplified as the bracket amplifies
+    /// it), returning the midpoint. The constant shift is taken out by the bracket, so the error left shrinks by
+    /// `gamma` times the policy chain's second eigenvalue per sweep, not by `gamma`: a few dozen
+    /// sweeps on the random models of the benches. It also stops, returning the midpoint, if the
+    /// bracket has not halved in [`SPARSE_EVAL_STALL_SWEEPS`] sweeps (a rounding floor) or after
+    /// [`SPARSE_EVAL_MAX_SWEEPS`].
+    ///
+    /// `gamma = 1`: `(I - P_pi) v = r_pi` is singular exactly when some non-terminal state cannot
+    /// reach a terminal one along `P_pi`'s positive entries (then `P_pi` restricted to the
+    /// non-terminal states has a closed class and spectral radius 1); checked on the graph. If
+    /// proper, Gauss–Seidel sweeps (they converge for this M-matrix) until the largest change is
+    /// at most [`SPARSE_EVAL_TOLERANCE`] `* max(1, |v|_inf)` (a residual, not a certified error:
+    /// the error may be larger by the expected time to absorption).
+    fn evaluate_sparse(&mut self, mdp: &Mdp, gamma: f64) -> bool {
+        let n = mdp.n_states();
+        if gamma >= 1.0 {
+            if !self.policy_is_proper(mdp) {
+                return false;
+            }
+            let v = &mut self.v[..n];
+            for _ in 0..SPARSE_EVAL_MAX_SWEEPS {
+                let (mut change, mut scale) = (0.0f64, 1.0f64);
+                for s in 0..n {
+                    let c = self.pchoice[s];
+                    let x = if c == NONE {
+                        0.0
+                    } else {
+                        mdp.q(c as usize, 1.0, v)
+                    };
+                    change = change.max((x - v[s]).abs());
+                    scale = scale.max(x.abs());
+                    v[s] = x;
+                }
+                if !change.is_finite() {
+                    return false;
+                }
+                if change <= SPARSE_EVAL_TOLERANCE * scale {
+                    break;
+                }
+            }
+            return true;
+        }
+        let k = gamma / (1.0 - gamma);
+        // Rounding of one sweep (~eps * |v|) is amplified by k in the bracket: ask no less.
+        let tol = SPARSE_EVAL_TOLERANCE.max(8.0 * k * f64::EPSILON);
+        let has_terminal = self.n_nonterminal(mdp) < n;
+        let mut sweeps = 0u32;
+        // Stagnation guard: the best half-width and when it last halved.
+        let (mut best_half, mut best_at) = (f64::INFINITY, 0u32);
+        loop {
+            let (cur, nxt) = (&self.v[..n], &mut self.v2[..n]);
+            let (mut dmin, mut dmax, mut scale) = (0.0f64, 0.0f64, 1.0f64);
+            let mut any = false;
+            for s in 0..n {
+                let c = self.pchoice[s];
+                if c == NONE {
+                    nxt[s] = 0.0;
+                    continue;
+                }
+                let x = mdp.q(c as usize, gamma, cur);
+                let d = x - cur[s];
+                if any {
+                    dmin = dmin.min(d);
+                    dmax = dmax.max(d);
+                } else {
+                    (dmin, dmax, any) = (d, d, true);
+                }
+                scale = scale.max(x.abs());
+                nxt[s] = x;
+            }
+            if any && has_terminal {
+                // Terminal states take part with d = 0.
+                dmin = dmin.min(0.0);
+                dmax = dmax.max(0.0);
+            }
+            std::mem::swap(&mut self.v, &mut self.v2);
+            sweeps += 1;
+            let half = 0.5 * k * (dmax - dmin);
+            if !half.is_finite() {
+                return false;
+            }
+            if half < 0.5 * best_half {
+                (best_half, best_at) = (half, sweeps);
+            }
+            if half <= tol * scale
+                || sweeps >= SPARSE_EVAL_MAX_SWEEPS
+                || sweeps - best_at > SPARSE_EVAL_STALL_SWEEPS
+            {
+                let shift = 0.5 * k * (dmin + dmax);
+                for s in 0..n {
+                    if self.pchoice[s] != NONE {
+                        self.v[s] += shift;
+                    }
+                }
+                return true;
+            }
+        }
+    }
+
+    /// Number of non-terminal states (those with a choice in `pchoice`).
+    fn n_nonterminal(&self, mdp: &Mdp) -> usize {
+        self.pchoice[..mdp.n_states()]
+            .iter()
+            .filter(|c| **c != NONE)
+            .count()
+    }
+
+    /// True when every non-terminal state reaches a terminal state along positive-probability
+    /// transitions of the policy in `pchoice` (breadth-first search back from the terminal states
+    /// on the policy's reverse graph, built in workspace buffers).
+    fn policy_is_proper(&mut self, mdp: &Mdp) -> bool {
+        let n = mdp.n_states();
+        resize(&mut self.rev_start, n + 2, 0);
+        self.rev_start[..n + 2].fill(0);
+        let mut m = 0usize;
+        for s in 0..n {
+            let c = self.pchoice[s];
+            if c == NONE {
+                continue;
+            }
+            for t in mdp.transition_range(c as usize) {
+                if mdp.prob[t] > 0.0 {
+                    self.rev_start[mdp.next[t] as usize + 2] += 1;
+                    m += 1;
+                }
+            }
+        }
+        for j in 2..n + 2 {
+            self.rev_start[j] += self.rev_start[j - 1];
+        }
+        resize(&mut self.rev, m, 0);
+        for s in 0..n {
+            let c = self.pchoice[s];
+            if c == NONE {
+                continue;
+            }
+            for t in mdp.transition_range(c as usize) {
+                if mdp.prob[t] > 0.0 {
+                    let j = mdp.next[t] as usize + 1;
+                    self.rev[self.rev_start[j] as usize] = s as u32;
+                    self.rev_start[j] += 1;
+                }
+            }
+        }
+        // Now rev_start[j]..rev_start[j + 1] are the predecessors of j. Reached states are marked
+        // in `policy` (scratch here; `finish` rewrites it).
+        let seen = &mut self.policy[..n];
+        resize(&mut self.queue, n, 0);
+        let mut tail = 0;
+        for (s, (seen_s, c)) in seen.iter_mut().zip(&self.pchoice[..n]).enumerate() {
+            let terminal = *c == NONE;
+            *seen_s = terminal as u32;
+            if terminal {
+                self.queue[tail] = s as u32;
+                tail += 1;
+            }
+        }
+        let mut head = 0;
+        while head < tail {
+            let j = self.queue[head] as usize;
+            head += 1;
+            for i in self.rev_start[j]..self.rev_start[j + 1] {
+                let p = self.rev[i as usize] as usize;
+                if seen[p] == 0 {
+                    seen[p] = 1;
+                    self.queue[tail] = p as u32;
+                    tail += 1;
+                }
+            }
+        }
+        tail == n
     }
 
     /// Policy improvement on `pchoice` given `v`. Returns true if any state changed.

@@ -123,7 +123,7 @@ proptest! {
     fn discounted_solvers_match_exhaustive_policy_search(r in raw(4, 3), gamma in 0.1..0.95f64) {
         let m = build(&r, false);
         let best = brute_optimal(&m, gamma);
-        let cfg = Config { gamma, tolerance: 1e-11, max_iterations: 100_000, eval_sweeps: 5 };
+        let cfg = Config { gamma, tolerance: 1e-11, max_iterations: 100_000, eval_sweeps: 5, ..Config::default() };
         // Oversized workspace: the dense evaluation runs on the top-left block of a 10x10 matrix.
         let mut ws = Workspace::with_capacity(10, 0, true);
         let mut policies = vec![];
@@ -151,7 +151,7 @@ proptest! {
     fn undiscounted_proper_models_match_exhaustive_search(r in raw(5, 3)) {
         let m = build(&r, true);
         let best = brute_optimal(&m, 1.0);
-        let cfg = Config { gamma: 1.0, tolerance: 1e-12, max_iterations: 10_000, eval_sweeps: 3 };
+        let cfg = Config { gamma: 1.0, tolerance: 1e-12, max_iterations: 10_000, eval_sweeps: 3, ..Config::default() };
         let mut ws = Workspace::new();
         let pi = ws.policy_iteration(&m, &cfg).unwrap();
         prop_assert!(close(pi.values(), &best, 1e-9));
@@ -240,7 +240,7 @@ proptest! {
     #[test]
     fn solvers_agree_on_larger_models(r in raw(25, 4), gamma in 0.5..0.97f64) {
         let m = build(&r, false);
-        let cfg = Config { gamma, tolerance: 1e-10, max_iterations: 100_000, eval_sweeps: 10 };
+        let cfg = Config { gamma, tolerance: 1e-10, max_iterations: 100_000, eval_sweeps: 10, ..Config::default() };
         let mut ws = Workspace::new();
         let pi = ws.policy_iteration(&m, &cfg).unwrap().values().to_vec();
         let vi = ws.value_iteration(&m, &cfg).unwrap();
