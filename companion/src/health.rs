@@ -86,6 +86,19 @@ struct Scratch {
     fresh: Vec<bool>,
     /// Per manager: every node's marginal is current (not only the query targets').
     full: Vec<bool>,
+    /// The last evaluation's evidence entries resolved to (manager, node, state) indices, in
+    /// the evidence map's order: an entry whose node and state names are unchanged reuses its
+    /// resolution instead of name lookups in every manager's network (a cycle-time hot spot).
+    resolved: Vec<Resolved>,
+}
+
+/// One evidence entry (`node = state`) resolved in every manager that has the node.
+#[derive(Debug, Clone, Default)]
+struct Resolved {
+    /// Empty while being (re)resolved, so an entry that failed never matches.
+    node: String,
+    state: String,
+    hits: Vec<(usize, NodeId, usize)>,
 }
 
 /// True when `cpt` is bit-for-bit node `id`'s current CPT (setting it would change nothing).
@@ -377,24 +390,36 @@ impl HealthModel {
         let per = &mut self.scratch.per;
         per.resize_with(self.managers.len(), Evidence::new);
         per.iter_mut().for_each(Evidence::clear);
-        for (node, state) in evidence {
-            let mut found = false;
-            for (m, ev) in self.managers.iter().zip(per.iter_mut()) {
-                let net = m.engine.network();
-                if let Some(id) = net.id(node) {
-                    found = true;
-                    let s = net
-                        .state(id, state)
-                        .map_err(|_| HealthError::UnknownState {
-                            node: node.clone(),
-                            state: state.clone(),
-                            states: net.node(id).states.join(", "),
-                        })?;
-                    ev.set_state(id, s);
-                }
+        let resolved = &mut self.scratch.resolved;
+        for (k, (node, state)) in evidence.iter().enumerate() {
+            if k == resolved.len() {
+                resolved.push(Resolved::default());
             }
-            if !found {
-                return Err(HealthError::UnknownNode(node.clone()));
+            let r = &mut resolved[k];
+            if r.node.is_empty() || r.node != *node || r.state != *state {
+                r.node.clear();
+                r.hits.clear();
+                for (mi, m) in self.managers.iter().enumerate() {
+                    let net = m.engine.network();
+                    if let Some(id) = net.id(node) {
+                        let s = net
+                            .state(id, state)
+                            .map_err(|_| HealthError::UnknownState {
+                                node: node.clone(),
+                                state: state.clone(),
+                                states: net.node(id).states.join(", "),
+                            })?;
+                        r.hits.push((mi, id, s));
+                    }
+                }
+                if r.hits.is_empty() {
+                    return Err(HealthError::UnknownNode(node.clone()));
+                }
+                r.node.clone_from(node);
+                r.state.clone_from(state);
+            }
+            for &(mi, id, s) in &r.hits {
+                per[mi].set_state(id, s);
             }
         }
         let n = self.managers.len();
@@ -664,6 +689,39 @@ mod tests {
                     out[name]
                 );
             }
+        }
+    }
+
+    /// A rejected evidence map (unknown state, unknown node) leaves nothing behind: the cached
+    /// name resolution of an entry that failed is not reused, and the results afterwards are
+    /// those of a model that never saw the bad maps.
+    #[test]
+    fn rejected_evidence_changes_nothing() {
+        let params = crate::spec::default_params_dir();
+        let mut a = HealthModel::load(&params).unwrap();
+        let mut b = HealthModel::load(&params).unwrap();
+        let seq = evidence_sequence(&a);
+        let (ev0, ev1) = (&seq[0], &seq[1]);
+        let (first, _) = ev0.iter().next().unwrap();
+        let mut bad_state = ev0.clone();
+        bad_state.insert(first.clone(), "no_such_state".into());
+        let mut bad_node = ev0.clone();
+        bad_node.insert("no_such_node".into(), "x".into());
+        let (mut oa, mut ob) = (BTreeMap::new(), BTreeMap::new());
+        a.evaluate_into(ev0, &mut oa).unwrap();
+        b.evaluate_into(ev0, &mut ob).unwrap();
+        assert!(matches!(
+            a.evaluate_into(&bad_state, &mut oa),
+            Err(HealthError::UnknownState { .. })
+        ));
+        assert!(matches!(
+            a.evaluate_into(&bad_node, &mut oa),
+            Err(HealthError::UnknownNode(_))
+        ));
+        for ev in [ev0, ev1, ev0] {
+            a.evaluate_into(ev, &mut oa).unwrap();
+            b.evaluate_into(ev, &mut ob).unwrap();
+            assert_eq!(oa, ob);
         }
     }
 

@@ -55,12 +55,21 @@ impl Expr {
     /// them first) and the root is last, so one forward pass over the arena evaluates the tree
     /// without recursion; this is the hot path of filling an MDP in every decision cycle.
     pub fn eval(&self, vars: &[f64]) -> f64 {
-        const STACK: usize = 32;
-        let n = self.nodes.len();
-        if n > STACK {
-            return self.eval_node(n - 1, vars);
+        // Most expressions are a constant, a name or `1 - P_x`: the scratch array is sized to
+        // the arena (zeroing a 32-slot array for a 1-node expression cost more than evaluating).
+        match self.nodes.len() {
+            1 => self.forward::<1>(vars),
+            2..=4 => self.forward::<4>(vars),
+            5..=8 => self.forward::<8>(vars),
+            9..=32 => self.forward::<32>(vars),
+            n => self.eval_node(n - 1, vars),
         }
-        let mut val = [0.0f64; STACK];
+    }
+
+    #[inline(always)]
+    fn forward<const N: usize>(&self, vars: &[f64]) -> f64 {
+        let mut val = [0.0f64; N];
+        let n = self.nodes.len();
         for (i, node) in self.nodes.iter().enumerate() {
             val[i] = match *node {
                 Node::Const(x) => x,
