@@ -146,32 +146,34 @@ impl Ingest {
         self.stats.bytes_in += bytes.len() as u64;
         self.reader.get_mut().extend(bytes);
         // An error is the reader running out of bytes: the rest waits for the next chunk.
-        while let Ok(raw) = self.reader.read_any_raw_message::<Msg>() {
-            let (bytes, signed) = match &raw {
+        // The raw frame (~280 bytes) and the decoded message are borrowed where they were
+        // returned, not moved out: moving them cost a copy each per frame.
+        loop {
+            let next = self.reader.read_any_raw_message::<Msg>();
+            let Ok(raw) = &next else { break };
+            let (bytes, signed) = match raw {
                 MAVLinkMessageRaw::V1(r) => (r.raw_bytes(), false),
                 MAVLinkMessageRaw::V2(r) => (r.raw_bytes(), r.incompatibility_flags() & 0x01 != 0),
             };
             self.stats.frame_bytes += bytes.len() as u64;
-            if let (Some(sd), MAVLinkMessageRaw::V2(r)) = (&self.signing, &raw)
+            if let (Some(sd), MAVLinkMessageRaw::V2(r)) = (&self.signing, raw)
                 && signed
                 && !sd.verify_signature(r)
             {
                 self.stats.bad_signatures += 1;
                 continue;
             }
-            let msg = match Msg::parse(raw.version(), raw.message_id(), raw.payload()) {
-                Ok(m) => m,
-                Err(_) => {
-                    self.stats.frames_malformed += 1;
-                    continue;
-                }
+            let parsed = Msg::parse(raw.version(), raw.message_id(), raw.payload());
+            let Ok(msg) = &parsed else {
+                self.stats.frames_malformed += 1;
+                continue;
             };
             // With a key, unsigned frames are refused like ArduPilot does (GCS_Signing.cpp,
             // `accept_unsigned_callback`: only RADIO_STATUS, "as the radio doesn't know the key"):
             // an injected battery level or target report must not reach the decisions any more
             // than an injected command.
             if self.signing.is_some() && !signed && !matches!(msg, Msg::RADIO_STATUS(_)) {
-                if self.is_command_to_us(&msg) {
+                if self.is_command_to_us(msg) {
                     self.stats.unsigned_commands_refused += 1;
                 } else {
                     self.stats.unsigned_refused += 1;
@@ -186,7 +188,7 @@ impl Ingest {
             };
             each(FrameRef {
                 header,
-                msg: &msg,
+                msg,
                 signed,
                 version: raw.version(),
                 raw: bytes,
