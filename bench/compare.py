@@ -610,7 +610,7 @@ def main():
 
 # ---------------------------------------------------------------- MAVLink ingest
 def ingest_case(B, cases, notes, versions):
-    """Bytes -> decoded messages: the companion's `Ingest::push` against pymavlink's
+    """Bytes -> decoded messages: the companion's `Ingest::push_each` against pymavlink's
     `MAVLink.parse_buffer`, same capture (bench/make_capture.py), same chunk boundaries."""
     cap = os.path.join(OUT, "ingest_capture.bin")
     chunks_path = os.path.join(OUT, "ingest_capture.chunks")
@@ -875,8 +875,10 @@ MAVLink ingest: `bench/make_capture.py` (pymavlink, seeded) writes ~300 s of the
 companion hears (~50 frames/s: the streams `params/link.toml` requests, ATTITUDE, VFR_HUD, onboard
 monitors, a SiK radio's RADIO_STATUS in MAVLink 1, the autopilot's first 10 s in MAVLink 1, line
 noise without frame markers every ~300 frames, one corrupted frame every ~500) and the chunk sizes
-(64..1024 bytes) it is read in. Companion: `Ingest::push` per chunk (`companion --example
-bench_ingest`); pymavlink: `MAVLink(None).parse_buffer` per chunk with `robust_parsing` (BAD_DATA
+(64..1024 bytes) it is read in. Companion: `Ingest::push_each` per chunk (`companion --example
+bench_ingest`: each decoded message handed over borrowed, with its wire bytes, and passed to
+`black_box`; `Ingest::push`, which returns owned frames, is the same path plus one copy per
+frame, in the criterion bench); pymavlink: `MAVLink(None).parse_buffer` per chunk with `robust_parsing` (BAD_DATA
 results not counted), a fresh parser per pass on both sides. Agreement: the same number of
 messages, the same (sysid, compid, msgid) sequence and every field equal (floats as float32, enums
 by name, bitmasks as flag sets).
@@ -927,10 +929,11 @@ monolithic model: zero.
 The worst case, not hidden. When the inputs move every cycle the memos miss: the three MDPs'
 backward induction (about half the time) and the health BN propagations (about a quarter) are
 done in full, and the cycle's median is the `worst`/`changing` rows above, above the 50 µs
-target on this machine. The resource scheduler (`fpga_model::schedule`) still allocates (about
-70 allocations) whenever it runs, that is when the requested variants, their required frame
-rates (a continuously varying target speed) or the platform state change; a re-allocation by the
-guarantee stage allocates too. Both are events, not the steady state.
+target on this machine. The resource scheduler runs in a reused workspace
+(`fpga_model::schedule_into`), so even with the memos off a warm cycle allocates nothing
+(`companion/tests/scheduler_no_alloc.rs`); what still allocates are events: a re-allocation by
+the guarantee stage (PANORAMA's search and the RAS history row) and the event strings of a
+degradation that starts.
 """
     path = os.path.join(ROOT, "docs", "performance.md")
     # Hand-written sections (from "## Soak" on: measured by scripts/soak.sh, not by this script)

@@ -2,7 +2,8 @@
 //! `bench/compare`'s ingest case, generated here in Rust so `cargo bench` needs no Python:
 //! 60 s of the simulated autopilot's ~50 Hz telemetry (`companion::sim_link`), the first 10 s in
 //! MAVLink 1, a few bytes of line noise every 300 frames and one corrupted frame every 500, fed to
-//! `Ingest::push` in chunks of 64..1024 bytes.
+//! `Ingest::push` (owned frames) and `Ingest::push_each` (borrowed wire bytes) in chunks of
+//! 64..1024 bytes.
 
 use companion::link::ingest::{Encoder, Ingest};
 use companion::observations::Observations;
@@ -121,6 +122,23 @@ fn bench(c: &mut Criterion) {
                 let mut n = 0;
                 for c in &chunks {
                     n += ing.push(black_box(c)).len();
+                }
+                n
+            },
+            BatchSize::SmallInput,
+        )
+    });
+    // The allocation-free path (wire bytes borrowed): what bench/compare times.
+    g.bench_function(format!("capture_60s_{written}_frames_push_each"), |b| {
+        b.iter_batched_ref(
+            || Ingest::new(None),
+            |ing| {
+                let mut n = 0;
+                for c in &chunks {
+                    ing.push_each(black_box(c), |f| {
+                        n += 1;
+                        black_box(f.msg);
+                    });
                 }
                 n
             },

@@ -56,8 +56,9 @@ fn main() -> Res<()> {
             std::fs::File::create(p).map_err(|e| format!("{p}: {e}"))?,
         )),
     };
+    let mut failed: Option<Box<dyn std::error::Error>> = None;
     for c in &chunks {
-        for f in ing.push(c) {
+        ing.push_each(c, |f| {
             frames += 1;
             if let Some(w) = dump.as_mut() {
                 let line = serde_json::json!({
@@ -67,10 +68,17 @@ fn main() -> Res<()> {
                     "v": if f.version == MavlinkVersion::V1 { 1 } else { 2 },
                     "m": f.msg,
                 });
-                serde_json::to_writer(&mut *w, &line)?;
-                w.write_all(b"\n")?;
+                let r = serde_json::to_writer(&mut *w, &line)
+                    .map_err(Into::into)
+                    .and_then(|()| w.write_all(b"\n").map_err(Into::into));
+                if let Err(e) = r {
+                    failed.get_or_insert(e);
+                }
             }
-        }
+        });
+    }
+    if let Some(e) = failed {
+        return Err(e);
     }
     if let Some(mut w) = dump {
         w.flush()?;
@@ -84,7 +92,10 @@ fn main() -> Res<()> {
         let t0 = Instant::now();
         let mut n = 0;
         for c in &chunks {
-            n += ing.push(black_box(c)).len();
+            ing.push_each(black_box(c), |f| {
+                n += 1;
+                black_box(f.msg);
+            });
         }
         let dt = t0.elapsed();
         black_box(n);

@@ -154,6 +154,10 @@ pub struct Core<'m> {
     schedules_next: usize,
     schedule_cache: bool,
     scheduler_runs: u64,
+    /// The scheduler's reusable inputs, output and working memory (no allocation once warm).
+    requests: Vec<Request>,
+    schedule_ws: fpga_model::ScheduleWorkspace,
+    schedule_out: fpga_model::Schedule,
 }
 
 /// How much work the cycles so far really did (the rest came from the memos).
@@ -179,6 +183,7 @@ struct Scratch<'m> {
 /// One memoised scheduling decision: `fpga_model::schedule` is a pure function of the policy
 /// (fixed per core), the platform state before it and the requests, so the same inputs give
 /// the same record and the same platform state after.
+#[derive(Default)]
 struct ScheduleMemo<'m> {
     before: PlatformState,
     /// (app, version, required fps bits) per request, in request order.
@@ -205,6 +210,25 @@ fn copy_platform(dst: &mut PlatformState, src: &PlatformState) {
     }
     dst.cores_online = src.cores_online;
     dst.external_cpu_load = src.external_cpu_load;
+}
+
+/// The scheduler's requests for `key` ((app, version, fps bits) per request), reusing the
+/// strings of the previous cycle's requests.
+fn fill_requests(dst: &mut Vec<Request>, key: &[(&str, &str, u64)]) {
+    dst.truncate(key.len());
+    for (i, &(app, version, fps)) in key.iter().enumerate() {
+        if i == dst.len() {
+            dst.push(Request::new(app, version, f64::from_bits(fps)));
+            continue;
+        }
+        let r = &mut dst[i];
+        r.app.clear();
+        r.app.push_str(app);
+        r.version.clear();
+        r.version.push_str(version);
+        r.required_fps = f64::from_bits(fps);
+        r.priority = None;
+    }
 }
 
 /// Bit-exact equality (a `-0.0` load is not the `0.0` one: the record would print it).
@@ -251,6 +275,9 @@ impl<'m> Core<'m> {
             schedules_next: 0,
             schedule_cache: true,
             scheduler_runs: 0,
+            requests: Vec::new(),
+            schedule_ws: fpga_model::ScheduleWorkspace::new(),
+            schedule_out: fpga_model::Schedule::default(),
         }
     }
 
@@ -474,42 +501,47 @@ impl<'m> Core<'m> {
             Some(i) => i,
             None => {
                 self.scheduler_runs += 1;
-                let requests: Vec<Request> = sc
-                    .key
-                    .iter()
-                    .map(|&(app, version, fps)| Request::new(app, version, f64::from_bits(fps)))
-                    .collect();
-                let (schedule, next) =
-                    match model
-                        .resources
-                        .schedule(self.policy.name(), &self.platform, &requests)
-                    {
-                        Ok(x) => x,
-                        Err(e) => {
-                            rec.events.push(format!("resources: {e}"));
-                            rec.resources = None;
-                            sc.actions.clone_from(&sc.kept);
-                            return;
-                        }
-                    };
-                let m = ScheduleMemo {
-                    before: self.platform.clone(),
-                    key: sc.key.clone(),
-                    after: next,
-                    record: crate::resources::to_record(&schedule),
-                };
-                if !self.schedule_cache {
-                    self.schedules.clear();
+                if let Err(e) = model.resources.policy(self.policy.name()) {
+                    rec.events.push(format!("resources: {e}"));
+                    rec.resources = None;
+                    sc.actions.clone_from(&sc.kept);
+                    return;
                 }
-                if self.schedules.len() < SCHEDULE_MEMO {
-                    self.schedules.push(m);
-                    self.schedules.len() - 1
+                fill_requests(&mut self.requests, &sc.key);
+                // The memo slot is rewritten in place (its buffers kept): with the memos off,
+                // the one slot every cycle, so a scheduler run allocates nothing once warm.
+                if !self.schedule_cache {
+                    self.schedules.truncate(1);
+                }
+                let slots = if self.schedule_cache {
+                    SCHEDULE_MEMO
                 } else {
+                    1
+                };
+                let slot = if self.schedules.len() < slots {
+                    self.schedules.push(ScheduleMemo::default());
+                    self.schedules.len() - 1
+                } else if self.schedule_cache {
                     let i = self.schedules_next;
                     self.schedules_next = (i + 1) % SCHEDULE_MEMO;
-                    self.schedules[i] = m;
                     i
-                }
+                } else {
+                    0
+                };
+                let m = &mut self.schedules[slot];
+                let ok = model.resources.schedule_into(
+                    self.policy.name(),
+                    &self.platform,
+                    &self.requests,
+                    &mut self.schedule_ws,
+                    &mut self.schedule_out,
+                    &mut m.after,
+                );
+                debug_assert!(ok.is_ok(), "the policy was looked up above");
+                copy_platform(&mut m.before, &self.platform);
+                m.key.clone_from(&sc.key);
+                crate::resources::to_record_into(&self.schedule_out, &mut m.record);
+                slot
             }
         };
         let m = &self.schedules[memo];

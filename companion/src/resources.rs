@@ -8,7 +8,7 @@ use crate::record::{PlacementRecord, ResourcesRecord};
 use crate::spec::{SpecError, read_toml};
 use fpga_model::{
     Catalogue, Platform, PlatformState, PoliciesFile, Request, ResourcePolicy, Schedule,
-    VariantsFile,
+    ScheduleWorkspace, VariantsFile,
 };
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
@@ -71,6 +71,31 @@ impl ResourceSpec {
             state,
             requests,
         ))
+    }
+
+    /// [`ResourceSpec::schedule`] into reused outputs and working memory
+    /// ([`fpga_model::schedule_into`]): same result, no allocation once warm.
+    pub fn schedule_into(
+        &self,
+        policy: &str,
+        state: &PlatformState,
+        requests: &[Request],
+        ws: &mut ScheduleWorkspace,
+        out: &mut Schedule,
+        next: &mut PlatformState,
+    ) -> Result<(), SpecError> {
+        let policy = self.policy(policy)?;
+        fpga_model::schedule_into(
+            &self.platform,
+            &self.catalogue,
+            policy,
+            state,
+            requests,
+            ws,
+            out,
+            next,
+        );
+        Ok(())
     }
 
     /// Required frame rate of `app` from the drone's and the watched thing's velocities (m/s),
@@ -156,6 +181,72 @@ pub fn to_record(schedule: &Schedule) -> ResourcesRecord {
         failed_tiles: schedule.failed_tiles.clone(),
         reconfiguration_ms: schedule.reconfiguration_ms,
         power_w: schedule.power_w,
+    }
+}
+
+/// [`to_record`] into an existing record, reusing its strings and lists (no allocation once
+/// `rec` has held a record as large).
+pub fn to_record_into(schedule: &Schedule, rec: &mut ResourcesRecord) {
+    use std::fmt::Write;
+    fn set(dst: &mut String, src: &str) {
+        dst.clear();
+        dst.push_str(src);
+    }
+    let n = schedule.placements.len();
+    rec.placements.truncate(n);
+    for (i, p) in schedule.placements.iter().enumerate() {
+        if i == rec.placements.len() {
+            rec.placements.push(PlacementRecord {
+                app: String::new(),
+                version: String::new(),
+                implementation: String::new(),
+                support: String::new(),
+                tiles: Vec::new(),
+                cpu_share: 0.0,
+                ms_per_frame: 0.0,
+            });
+        }
+        let r = &mut rec.placements[i];
+        set(&mut r.app, &p.app);
+        set(&mut r.version, &p.version);
+        r.implementation.clear();
+        let _ = write!(r.implementation, "{}", p.implementation);
+        r.support.clear();
+        let _ = write!(r.support, "{}", p.support);
+        r.tiles.clone_from(&p.tiles);
+        r.cpu_share = p.cpu_share;
+        r.ms_per_frame = p.ms_per_frame;
+    }
+    rec.cpu_load = schedule.cpu_load;
+    rec.tiles_used = schedule.tiles_used;
+    rec.reconfigurations = schedule.reconfigurations;
+    fill_lines(&mut rec.degraded, &schedule.degraded, |s, d| {
+        write!(s, "{} {} -> {}: {}", d.app, d.from, d.to, d.reason)
+    });
+    fill_lines(&mut rec.dropped, &schedule.dropped, |s, d| {
+        write!(s, "{} {}: {}", d.app, d.version, d.reason)
+    });
+    set(&mut rec.summary, &schedule.summary);
+    set(&mut rec.policy, &schedule.policy);
+    rec.free_tiles = schedule.free_tiles;
+    rec.failed_tiles.clone_from(&schedule.failed_tiles);
+    rec.reconfiguration_ms = schedule.reconfiguration_ms;
+    rec.power_w = schedule.power_w;
+}
+
+/// `lines = items.map(write)`, reusing the strings already in `lines`.
+fn fill_lines<T>(
+    lines: &mut Vec<String>,
+    items: &[T],
+    write: impl Fn(&mut String, &T) -> std::fmt::Result,
+) {
+    lines.truncate(items.len());
+    for (i, x) in items.iter().enumerate() {
+        if i == lines.len() {
+            lines.push(String::new());
+        }
+        lines[i].clear();
+        let _ = write(&mut lines[i], x);
     }
 }
 
@@ -578,6 +669,52 @@ mod tests {
         let back: ResourcesRecord =
             serde_json::from_value(serde_json::to_value(&rec).unwrap()).unwrap();
         assert_eq!(back, rec);
+    }
+
+    /// The reusing paths (`schedule_into` with one workspace, `to_record_into` over the previous
+    /// record) give what the allocating ones give, whatever was in the buffers before: a
+    /// sequence with more, fewer and different placements, degradations and drops.
+    #[test]
+    fn reused_schedule_and_record_equal_fresh_ones() {
+        let spec = real();
+        let full = vec![
+            Request::new("tracking", "V3", 25.0),
+            Request::new("landing_search", "emergency", 5.0),
+            Request::new("obstacle_detection", "lidar", 10.0),
+            Request::new("obstacle_avoidance", "right_turn", 1.0),
+            Request::new("path_planning", "ga", 0.5),
+        ];
+        let mut ws = fpga_model::ScheduleWorkspace::new();
+        let mut out = Schedule::default();
+        let mut next = PlatformState::default();
+        let mut rec = ResourcesRecord::default();
+        let mut state = PlatformState::new(&spec.platform);
+        let cases: [(usize, u8, &str); 6] = [
+            (5, 0, "safety"),
+            (5, 3, "mission"),
+            (1, 0, "safety"),
+            (5, 2, "safety"),
+            (0, 1, "mission"),
+            (3, 4, "safety"),
+        ];
+        for (n, failed, policy) in cases {
+            let mut st = state.clone();
+            for t in 0..failed {
+                st.fail_tile(t);
+            }
+            let (want, want_next) = spec.schedule(policy, &st, &full[..n]).unwrap();
+            spec.schedule_into(policy, &st, &full[..n], &mut ws, &mut out, &mut next)
+                .unwrap();
+            assert_eq!(out, want, "{n} requests, {failed} failed, {policy}");
+            assert_eq!(next, want_next);
+            to_record_into(&out, &mut rec);
+            assert_eq!(rec, to_record(&want));
+            state = next.clone();
+        }
+        assert!(
+            spec.schedule_into("reckless", &state, &full, &mut ws, &mut out, &mut next)
+                .is_err()
+        );
     }
 
     #[test]

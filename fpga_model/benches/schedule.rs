@@ -1,6 +1,7 @@
 //! One scheduling decision for the full application set (tracking, landing search, obstacle
 //! detection, obstacle avoidance, path planning), with and without a failed tile (the failure
-//! forces the policy's degrade/drop resolution).
+//! forces the policy's degrade/drop resolution); `schedule` (fresh outputs) and `schedule_into`
+//! (reused workspace, as the decision cycle calls it).
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use fpga_model::*;
@@ -42,6 +43,25 @@ fn bench(c: &mut Criterion) {
                         black_box(state),
                         black_box(&requests),
                     )
+                })
+            });
+            // The decision cycle's path: reused workspace and outputs (no allocation).
+            let mut ws = ScheduleWorkspace::new();
+            let mut out = Schedule::default();
+            let mut next = PlatformState::default();
+            c.bench_function(&format!("schedule_into/full_set/{label}/{policy}"), |b| {
+                b.iter(|| {
+                    schedule_into(
+                        &platform,
+                        &catalogue,
+                        pol,
+                        black_box(state),
+                        black_box(&requests),
+                        &mut ws,
+                        &mut out,
+                        &mut next,
+                    );
+                    black_box(out.free_tiles)
                 })
             });
         }

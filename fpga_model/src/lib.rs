@@ -15,7 +15,8 @@ pub use catalogue::{Catalogue, Implementation, Support, Variant, VariantsFile};
 pub use platform::{Performance, Platform, PowerModel};
 pub use policy::{PoliciesFile, ResourcePolicy};
 pub use schedule::{
-    Degradation, Dropped, Placement, PlatformState, Request, Schedule, Tile, schedule,
+    Degradation, Dropped, Placement, PlatformState, Request, Schedule, ScheduleWorkspace, Tile,
+    schedule, schedule_into,
 };
 
 /// A model input that is inconsistent. `entry` is a dotted path inside the params file it came
@@ -38,10 +39,21 @@ impl ModelError {
 
 /// Milliseconds as the paper writes them: `10`, `0.5`, `1000`.
 pub fn fmt_ms(ms: f64) -> String {
-    if ms.fract() == 0.0 && ms.abs() < 1e15 {
-        format!("{ms:.0}")
-    } else {
-        format!("{ms}")
+    FmtMs(ms).to_string()
+}
+
+/// [`fmt_ms`] as a `Display`, for writing into a reused string without allocating.
+#[derive(Debug, Clone, Copy)]
+pub struct FmtMs(pub f64);
+
+impl std::fmt::Display for FmtMs {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let ms = self.0;
+        if ms.fract() == 0.0 && ms.abs() < 1e15 {
+            write!(f, "{ms:.0}")
+        } else {
+            write!(f, "{ms}")
+        }
     }
 }
 

@@ -3,9 +3,9 @@
 //! tiles that already hold the bitstream); the CPU budget checked; and, when the set does not
 //! fit, the policy's degradation paths and priority order applied, least important first.
 
-use crate::{Catalogue, EPS, Implementation, Platform, ResourcePolicy, Support, Variant, fmt_ms};
+use crate::{Catalogue, EPS, FmtMs, Implementation, Platform, ResourcePolicy, Support, Variant};
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeSet;
+use std::fmt::{self, Write as _};
 
 /// What the decision layer asks to run this cycle.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -47,7 +47,7 @@ pub struct Tile {
 }
 
 /// The platform as the scheduler sees it between cycles: passed in, returned updated.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct PlatformState {
     pub tiles: Vec<Tile>,
     pub cores_online: u8,
@@ -133,7 +133,7 @@ pub struct Dropped {
 }
 
 /// Result of one scheduling decision.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Schedule {
     pub policy: String,
     /// In request order.
@@ -158,12 +158,14 @@ pub struct Schedule {
     pub summary: String,
 }
 
-/// A request the scheduler still tries to place.
-#[derive(Debug, Clone)]
+/// A request the scheduler still tries to place. The app is `requests[req].app`; the version
+/// is named by the index of a catalogue variant of it, so the working lists borrow nothing and
+/// can live in the reusable [`ScheduleWorkspace`].
+#[derive(Debug, Clone, Copy)]
 struct Item {
     req: usize,
-    app: String,
-    version: String,
+    /// Index (in `catalogue.variants()`) of the first variant of the item's version.
+    version: usize,
     fps: f64,
     rank: usize,
 }
@@ -176,55 +178,182 @@ struct Room {
     cores: u8,
 }
 
-fn candidates<'c>(
-    catalogue: &'c Catalogue,
-    app: &str,
-    version: &str,
-    fps: f64,
-) -> Vec<&'c Variant> {
+/// Reusable working memory of [`schedule_into`]: every list the scheduler needs, plus spare
+/// records and strings from earlier outputs, so that a warm run (inputs of a size seen before)
+/// allocates nothing. It holds no result: any workspace gives the same schedule.
+#[derive(Debug, Default)]
+pub struct ScheduleWorkspace {
+    items: Vec<Item>,
+    given_way: Vec<Item>,
+    still_out: Vec<Item>,
+    /// Candidate variant indices of all items, item `i`'s at `cand_start[i]..cand_start[i + 1]`.
+    cand: Vec<usize>,
+    cand_start: Vec<usize>,
+    chosen: Vec<usize>,
+    choice: Vec<usize>,
+    /// Scratch list of one version's implementations.
+    impls: Vec<usize>,
+    healthy: Vec<u8>,
+    taken: Vec<bool>,
+    /// (item, variant, part) still needing a tile.
+    pending: Vec<(usize, usize, u8)>,
+    /// (item, tile, reconfigured).
+    assigned: Vec<(usize, u8, bool)>,
+    order: Vec<usize>,
+    spare_placements: Vec<Placement>,
+    spare_degraded: Vec<Degradation>,
+    spare_dropped: Vec<Dropped>,
+    spare_strings: Vec<String>,
+}
+
+impl ScheduleWorkspace {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    fn string(&mut self) -> String {
+        let mut s = self.spare_strings.pop().unwrap_or_default();
+        s.clear();
+        s
+    }
+
+    fn degradation(&mut self) -> Degradation {
+        let mut d = self.spare_degraded.pop().unwrap_or(Degradation {
+            app: String::new(),
+            from: String::new(),
+            to: String::new(),
+            reason: String::new(),
+        });
+        d.app.clear();
+        d.from.clear();
+        d.to.clear();
+        d.reason.clear();
+        d
+    }
+
+    fn dropped(&mut self, app: &str, version: &str) -> Dropped {
+        let mut d = self.spare_dropped.pop().unwrap_or(Dropped {
+            app: String::new(),
+            version: String::new(),
+            reason: String::new(),
+        });
+        set(&mut d.app, app);
+        set(&mut d.version, version);
+        d.reason.clear();
+        d
+    }
+}
+
+/// `dst = src` keeping `dst`'s capacity.
+fn set(dst: &mut String, src: &str) {
+    dst.clear();
+    dst.push_str(src);
+}
+
+/// Implementations of `app version` as catalogue indices, slowest first (largest time per frame;
+/// ties S before F): [`Catalogue::implementations`] without the allocation. Keys are unique
+/// (the catalogue rejects a duplicate implementation), so the unstable sort gives its order.
+fn implementations_into(catalogue: &Catalogue, app: &str, version: &str, out: &mut Vec<usize>) {
+    let vs = catalogue.variants();
+    out.clear();
+    out.extend(
+        vs.iter()
+            .enumerate()
+            .filter(|(_, v)| v.app == app && v.version == version)
+            .map(|(i, _)| i),
+    );
+    out.sort_unstable_by(|&a, &b| {
+        vs[b]
+            .ms_per_frame()
+            .total_cmp(&vs[a].ms_per_frame())
+            .then(vs[a].implementation.cmp(&vs[b].implementation))
+    });
+}
+
+/// Whether some implementation of `app version` reaches `fps`.
+fn has_candidate(catalogue: &Catalogue, app: &str, version: &str, fps: f64) -> bool {
     catalogue
-        .implementations(app, version)
-        .into_iter()
-        .filter(|v| v.meets(fps))
-        .collect()
+        .variants()
+        .iter()
+        .any(|v| v.app == app && v.version == version && v.meets(fps))
+}
+
+/// Index of the first catalogue variant of `app version`.
+fn version_index(catalogue: &Catalogue, app: &str, version: &str) -> Option<usize> {
+    catalogue
+        .variants()
+        .iter()
+        .position(|v| v.app == app && v.version == version)
 }
 
 /// First feasible assignment in lexicographic order (items by rank, implementations slowest
-/// first). Being first means: no item could take a slower implementation with the others fixed.
-fn search<'c>(catalogue: &'c Catalogue, items: &[Item], room: Room) -> Option<Vec<&'c Variant>> {
-    let cands: Vec<Vec<&Variant>> = items
-        .iter()
-        .map(|it| candidates(catalogue, &it.app, &it.version, it.fps))
-        .collect();
-    let mut chosen = Vec::with_capacity(items.len());
-    fn dfs<'c>(
+/// first), left in `ws.chosen`. Being first means: no item could take a slower implementation
+/// with the others fixed.
+fn search(
+    catalogue: &Catalogue,
+    requests: &[Request],
+    items: &[Item],
+    room: Room,
+    ws: &mut ScheduleWorkspace,
+) -> bool {
+    let vs = catalogue.variants();
+    ws.cand.clear();
+    ws.cand_start.clear();
+    for it in items {
+        ws.cand_start.push(ws.cand.len());
+        implementations_into(
+            catalogue,
+            &requests[it.req].app,
+            &vs[it.version].version,
+            &mut ws.impls,
+        );
+        ws.cand
+            .extend(ws.impls.iter().copied().filter(|&i| vs[i].meets(it.fps)));
+    }
+    ws.cand_start.push(ws.cand.len());
+    ws.chosen.clear();
+    #[allow(clippy::too_many_arguments)]
+    fn dfs(
         i: usize,
-        cands: &[Vec<&'c Variant>],
+        vs: &[Variant],
+        cand: &[usize],
+        start: &[usize],
         items: &[Item],
         room: Room,
         tiles: u32,
         cpu: f64,
-        chosen: &mut Vec<&'c Variant>,
+        chosen: &mut Vec<usize>,
     ) -> bool {
-        if i == cands.len() {
+        if i == items.len() {
             return true;
         }
-        for &v in &cands[i] {
+        for &k in &cand[start[i]..start[i + 1]] {
+            let v = &vs[k];
             let t = tiles + u32::from(v.tiles);
             let share = v.cpu_share_at(items[i].fps, room.cores);
             let c = cpu + share;
             if t > room.tiles || (share > 0.0 && c > room.cpu + EPS) {
                 continue;
             }
-            chosen.push(v);
-            if dfs(i + 1, cands, items, room, t, c, chosen) {
+            chosen.push(k);
+            if dfs(i + 1, vs, cand, start, items, room, t, c, chosen) {
                 return true;
             }
             chosen.pop();
         }
         false
     }
-    dfs(0, &cands, items, room, 0, 0.0, &mut chosen).then_some(chosen)
+    dfs(
+        0,
+        vs,
+        &ws.cand,
+        &ws.cand_start,
+        items,
+        room,
+        0,
+        0.0,
+        &mut ws.chosen,
+    )
 }
 
 /// Insert keeping rank order (ties by request order).
@@ -237,8 +366,31 @@ fn insert_ranked(items: &mut Vec<Item>, item: Item) -> usize {
     pos
 }
 
+/// "policy safety ranks tracking 3 of 5", written where it is needed.
+struct RankText<'a> {
+    policy: &'a str,
+    app: &'a str,
+    rank: usize,
+    of: usize,
+}
+
+impl fmt::Display for RankText<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "policy {} ranks {} {} of {}",
+            self.policy,
+            self.app,
+            self.rank + 1,
+            self.of
+        )
+    }
+}
+
 /// Why no implementation of `app version` fits in what the other placements leave.
+#[allow(clippy::too_many_arguments)]
 fn why_not(
+    out: &mut String,
     catalogue: &Catalogue,
     app: &str,
     version: &str,
@@ -246,25 +398,91 @@ fn why_not(
     tiles_left: u32,
     cpu_left: f64,
     cores: u8,
-) -> String {
-    let mut out = Vec::new();
-    for v in catalogue.implementations(app, version) {
+    impls: &mut Vec<usize>,
+) {
+    implementations_into(catalogue, app, version, impls);
+    let mut first = true;
+    let mut sep = |out: &mut String| {
+        if !first {
+            out.push_str("; ");
+        }
+        first = false;
+    };
+    for &k in impls.iter() {
+        let v = &catalogue.variants()[k];
         let i = v.implementation;
         if !v.meets(fps) {
-            out.push(format!("{i} reaches only {:.1} fps", v.max_fps()));
+            sep(out);
+            let _ = write!(out, "{i} reaches only {:.1} fps", v.max_fps());
             continue;
         }
         let share = v.cpu_share_at(fps, cores);
         if u32::from(v.tiles) > tiles_left {
-            out.push(format!("{i} needs {} tiles ({tiles_left} free)", v.tiles));
+            sep(out);
+            let _ = write!(out, "{i} needs {} tiles ({tiles_left} free)", v.tiles);
         } else if share > 0.0 && share > cpu_left + EPS {
-            out.push(format!(
+            sep(out);
+            let _ = write!(
+                out,
                 "{i} needs cpu {share:.3} ({:.3} left)",
                 cpu_left.max(0.0)
-            ));
+            );
         }
     }
-    out.join("; ")
+}
+
+/// An `fmt::Write` that compares what is written with a string: whether a bitstream tag equals
+/// a variant's `key#part` without building that string.
+struct SameAs<'a>(Option<&'a str>);
+
+impl fmt::Write for SameAs<'_> {
+    fn write_str(&mut self, s: &str) -> fmt::Result {
+        self.0 = self.0.and_then(|rest| rest.strip_prefix(s));
+        Ok(())
+    }
+}
+
+/// True when `tag` is the bitstream tag of part `part` of `v` (`app/version/impl#part`, as
+/// [`Variant::key`] writes it).
+fn is_tag(tag: &str, v: &Variant, part: u8) -> bool {
+    let mut w = SameAs(Some(tag));
+    let _ = write!(w, "{}/{}/{}#{part}", v.app, v.version, v.implementation);
+    w.0 == Some("")
+}
+
+/// `dst = src` for a platform state, keeping `dst`'s strings; bitstream strings no longer
+/// needed go to the workspace's spares.
+fn copy_state(dst: &mut PlatformState, src: &PlatformState, ws: &mut ScheduleWorkspace) {
+    while dst.tiles.len() > src.tiles.len() {
+        if let Some(Tile {
+            bitstream: Some(s), ..
+        }) = dst.tiles.pop()
+        {
+            ws.spare_strings.push(s);
+        }
+    }
+    for (i, t) in src.tiles.iter().enumerate() {
+        if i == dst.tiles.len() {
+            dst.tiles.push(Tile::default());
+        }
+        let d = &mut dst.tiles[i];
+        d.failed = t.failed;
+        match (&mut d.bitstream, &t.bitstream) {
+            (Some(a), Some(b)) => set(a, b),
+            (slot @ None, Some(b)) => {
+                let mut s = ws.string();
+                s.push_str(b);
+                *slot = Some(s);
+            }
+            (slot, None) => {
+                if let Some(s) = slot.take() {
+                    ws.spare_strings.push(s);
+                }
+            }
+        }
+    }
+    dst.cores_online = src.cores_online;
+    dst.external_cpu_load = src.external_cpu_load;
 }
 
 /// Decide placements for `requests` on `state` under `policy`. Returns the schedule and the
@@ -276,7 +494,52 @@ pub fn schedule(
     state: &PlatformState,
     requests: &[Request],
 ) -> (Schedule, PlatformState) {
-    let mut st = state.clone();
+    let mut out = Schedule::default();
+    let mut next = PlatformState::default();
+    schedule_into(
+        platform,
+        catalogue,
+        policy,
+        state,
+        requests,
+        &mut ScheduleWorkspace::new(),
+        &mut out,
+        &mut next,
+    );
+    (out, next)
+}
+
+/// [`schedule`] writing into `out` and `next` (the platform state after it) and working in
+/// `ws`: the same result, without heap allocation once `ws`, `out` and `next` have been through
+/// inputs as large as these (the decision cycle runs the scheduler whenever requests, rates or
+/// the platform change, and must not allocate in flight).
+#[allow(clippy::too_many_arguments)]
+pub fn schedule_into(
+    platform: &Platform,
+    catalogue: &Catalogue,
+    policy: &ResourcePolicy,
+    state: &PlatformState,
+    requests: &[Request],
+    ws: &mut ScheduleWorkspace,
+    out: &mut Schedule,
+    next: &mut PlatformState,
+) {
+    let vs = catalogue.variants();
+    // Earlier results become spares.
+    ws.spare_placements.append(&mut out.placements);
+    ws.spare_degraded.append(&mut out.degraded);
+    ws.spare_dropped.append(&mut out.dropped);
+
+    copy_state(next, state, ws);
+    let st = next;
+    while st.tiles.len() > usize::from(platform.tiles) {
+        if let Some(Tile {
+            bitstream: Some(s), ..
+        }) = st.tiles.pop()
+        {
+            ws.spare_strings.push(s);
+        }
+    }
     st.tiles
         .resize(usize::from(platform.tiles), Tile::default());
     let cores = platform.cpu_cores;
@@ -286,77 +549,90 @@ pub fn schedule(
     } else {
         st.external_cpu_load.max(0.0)
     };
-    let healthy: Vec<u8> = (0..platform.tiles)
-        .filter(|&i| !st.tiles[usize::from(i)].failed)
-        .collect();
+    ws.healthy.clear();
+    ws.healthy
+        .extend((0..platform.tiles).filter(|&i| !st.tiles[usize::from(i)].failed));
     let room = Room {
-        tiles: healthy.len() as u32,
+        tiles: ws.healthy.len() as u32,
         cpu: platform.cpu_budget * f64::from(online) / f64::from(cores) - external,
         cores,
     };
     let n_ranked = policy.priority.len().max(1);
+    let rank_text = |it: &Item| RankText {
+        policy: &policy.name,
+        app: &requests[it.req].app,
+        rank: it.rank,
+        of: n_ranked,
+    };
 
-    let mut degraded = Vec::new();
-    let mut dropped = Vec::new();
-    let mut items = Vec::new();
-    let mut seen = BTreeSet::new();
+    ws.items.clear();
     for (req, r) in requests.iter().enumerate() {
-        let drop = |reason: String| Dropped {
-            app: r.app.clone(),
-            version: r.version.clone(),
-            reason,
-        };
         if !catalogue.has_version(&r.app, &r.version) {
-            dropped.push(drop(format!(
+            let mut d = ws.dropped(&r.app, &r.version);
+            let _ = write!(
+                d.reason,
                 "unknown variant {} {} (not in the catalogue)",
                 r.app, r.version
-            )));
+            );
+            out.dropped.push(d);
             continue;
         }
-        if !seen.insert(r.app.clone()) {
-            dropped.push(drop(format!(
+        // Seen: an earlier request of the same app that named a catalogue variant.
+        let seen = requests[..req]
+            .iter()
+            .any(|p| p.app == r.app && catalogue.has_version(&p.app, &p.version));
+        if seen {
+            let mut d = ws.dropped(&r.app, &r.version);
+            let _ = write!(
+                d.reason,
                 "duplicate request: {} already requested this cycle",
                 r.app
-            )));
+            );
+            out.dropped.push(d);
             continue;
         }
         if !(r.required_fps.is_finite() && r.required_fps > 0.0) {
-            dropped.push(drop(format!(
-                "invalid required rate {} fps",
-                r.required_fps
-            )));
+            let mut d = ws.dropped(&r.app, &r.version);
+            let _ = write!(d.reason, "invalid required rate {} fps", r.required_fps);
+            out.dropped.push(d);
             continue;
         }
-        let mut version = r.version.clone();
-        if candidates(catalogue, &r.app, &version, r.required_fps).is_empty() {
-            let fastest = catalogue
-                .implementations(&r.app, &r.version)
+        let mut version = version_index(catalogue, &r.app, &r.version).unwrap_or(0);
+        if !has_candidate(catalogue, &r.app, &r.version, r.required_fps) {
+            implementations_into(catalogue, &r.app, &r.version, &mut ws.impls);
+            let fastest = ws
+                .impls
                 .last()
-                .map(|v| v.ms_per_frame())
+                .map(|&k| vs[k].ms_per_frame())
                 .unwrap_or(f64::INFINITY);
-            let why = format!(
-                "no implementation of {} {} reaches {:.1} fps (fastest {} ms per frame)",
-                r.app,
-                r.version,
-                r.required_fps,
-                fmt_ms(fastest)
-            );
-            match policy
-                .degradation_path(&r.app, &r.version)
+            let path = policy.degradation_path(&r.app, &r.version);
+            let to = path
                 .iter()
-                .find(|v| !candidates(catalogue, &r.app, v, r.required_fps).is_empty())
-            {
-                Some(v) => {
-                    degraded.push(Degradation {
-                        app: r.app.clone(),
-                        from: r.version.clone(),
-                        to: v.clone(),
-                        reason: why,
-                    });
-                    version = v.clone();
+                .find(|v| has_candidate(catalogue, &r.app, v, r.required_fps));
+            let why = |s: &mut String| {
+                let _ = write!(
+                    s,
+                    "no implementation of {} {} reaches {:.1} fps (fastest {} ms per frame)",
+                    r.app,
+                    r.version,
+                    r.required_fps,
+                    FmtMs(fastest)
+                );
+            };
+            match to.and_then(|v| Some((v, version_index(catalogue, &r.app, v)?))) {
+                Some((v, vi)) => {
+                    let mut d = ws.degradation();
+                    set(&mut d.app, &r.app);
+                    set(&mut d.from, &r.version);
+                    set(&mut d.to, v);
+                    why(&mut d.reason);
+                    out.degraded.push(d);
+                    version = vi;
                 }
                 None => {
-                    dropped.push(drop(why));
+                    let mut d = ws.dropped(&r.app, &r.version);
+                    why(&mut d.reason);
+                    out.dropped.push(d);
                     continue;
                 }
             }
@@ -366,10 +642,9 @@ pub fn schedule(
             .map(|p| p as usize)
             .unwrap_or_else(|| policy.rank(&r.app));
         insert_ranked(
-            &mut items,
+            &mut ws.items,
             Item {
                 req,
-                app: r.app.clone(),
                 version,
                 fps: r.required_fps,
                 rank,
@@ -379,227 +654,268 @@ pub fn schedule(
 
     // Resolve: while the set does not fit, the least important application first tries its
     // degradation path, then gives way.
-    let mut active = items;
-    let mut given_way: Vec<(Item, String)> = Vec::new();
-    let mut choice = loop {
-        if let Some(c) = search(catalogue, &active, room) {
-            break c;
+    let mut active = std::mem::take(&mut ws.items);
+    ws.given_way.clear();
+    loop {
+        if search(catalogue, requests, &active, room, ws) {
+            break;
         }
         let last = active.pop().expect("the empty set always fits");
-        let from = last.version.clone();
+        let app = &requests[last.req].app;
+        let from = &vs[last.version].version;
         let mut fixed = None;
-        for v in policy.degradation_path(&last.app, &from) {
-            if candidates(catalogue, &last.app, v, last.fps).is_empty() {
+        for v in policy.degradation_path(app, from) {
+            let Some(vi) = version_index(catalogue, app, v) else {
+                continue;
+            };
+            if !has_candidate(catalogue, app, v, last.fps) {
                 continue;
             }
             active.push(Item {
-                version: v.clone(),
-                ..last.clone()
+                version: vi,
+                ..last
             });
-            if let Some(c) = search(catalogue, &active, room) {
-                fixed = Some((c, v.clone()));
+            if search(catalogue, requests, &active, room, ws) {
+                fixed = Some(v);
                 break;
             }
             active.pop();
         }
-        let rank_text = format!(
-            "policy {} ranks {} {} of {}",
-            policy.name,
-            last.app,
-            last.rank + 1,
-            n_ranked
-        );
-        if let Some((c, v)) = fixed {
-            degraded.push(Degradation {
-                app: last.app.clone(),
-                from: from.clone(),
-                to: v,
-                reason: format!(
-                    "insufficient resources to execute {} {} at {:.1} fps ({} healthy tiles, cpu headroom {:.3}); {}",
-                    last.app,
-                    from,
-                    last.fps,
-                    room.tiles,
-                    room.cpu.max(0.0),
-                    rank_text
-                ),
-            });
-            break c;
+        if let Some(v) = fixed {
+            let mut d = ws.degradation();
+            set(&mut d.app, app);
+            set(&mut d.from, from);
+            set(&mut d.to, v);
+            let _ = write!(
+                d.reason,
+                "insufficient resources to execute {} {} at {:.1} fps ({} healthy tiles, cpu headroom {:.3}); {}",
+                app,
+                from,
+                last.fps,
+                room.tiles,
+                room.cpu.max(0.0),
+                rank_text(&last)
+            );
+            out.degraded.push(d);
+            break;
         }
-        given_way.push((last, rank_text));
-    };
+        ws.given_way.push(last);
+    }
+    ws.choice.clone_from(&ws.chosen);
 
     // Re-place what now fits among those that gave way, most important first: dropping a more
     // important application may have freed room for a less important one.
-    let mut still_out = Vec::new();
-    for (item, rank_text) in given_way.into_iter().rev() {
-        let mut versions = vec![item.version.clone()];
-        versions.extend(
-            policy
-                .degradation_path(&item.app, &item.version)
-                .iter()
-                .cloned(),
-        );
+    ws.still_out.clear();
+    while let Some(item) = ws.given_way.pop() {
+        let app = &requests[item.req].app;
+        let requested = &vs[item.version].version;
+        let path = policy.degradation_path(app, requested);
         let mut placed = false;
-        for v in versions {
-            if candidates(catalogue, &item.app, &v, item.fps).is_empty() {
+        for v in std::iter::once(requested).chain(path) {
+            let Some(vi) = version_index(catalogue, app, v) else {
+                continue;
+            };
+            if !has_candidate(catalogue, app, v, item.fps) {
                 continue;
             }
             let pos = insert_ranked(
                 &mut active,
                 Item {
-                    version: v.clone(),
-                    ..item.clone()
+                    version: vi,
+                    ..item
                 },
             );
-            if let Some(c) = search(catalogue, &active, room) {
-                if v != item.version {
-                    degraded.push(Degradation {
-                        app: item.app.clone(),
-                        from: item.version.clone(),
-                        to: v.clone(),
-                        reason: format!(
-                            "insufficient resources to execute {} {}; {rank_text}",
-                            item.app, item.version
-                        ),
-                    });
+            if search(catalogue, requests, &active, room, ws) {
+                if v != requested {
+                    let mut d = ws.degradation();
+                    set(&mut d.app, app);
+                    set(&mut d.from, requested);
+                    set(&mut d.to, v);
+                    let _ = write!(
+                        d.reason,
+                        "insufficient resources to execute {} {}; {}",
+                        app,
+                        requested,
+                        rank_text(&item)
+                    );
+                    out.degraded.push(d);
                 }
-                choice = c;
+                ws.choice.clone_from(&ws.chosen);
                 placed = true;
                 break;
             }
             active.remove(pos);
         }
         if !placed {
-            still_out.push((item, rank_text));
+            ws.still_out.push(item);
         }
     }
 
     // Tiles: keep every part on a healthy tile that already holds it, then configure blank
     // tiles, then overwrite others (lowest index first).
-    let mut assigned: Vec<Vec<u8>> = vec![Vec::new(); active.len()];
-    let mut reconf: Vec<Vec<u8>> = vec![Vec::new(); active.len()];
-    let mut taken = BTreeSet::new();
-    let mut pending = Vec::new();
-    for (k, v) in choice.iter().enumerate() {
+    ws.taken.clear();
+    ws.taken.resize(usize::from(platform.tiles), false);
+    ws.pending.clear();
+    ws.assigned.clear();
+    for (k, &vi) in ws.choice.iter().enumerate() {
+        let v = &vs[vi];
         for part in 0..v.tiles {
-            let tag = format!("{}#{part}", v.key());
-            match healthy.iter().find(|&&t| {
-                !taken.contains(&t) && st.tiles[usize::from(t)].bitstream.as_deref() == Some(&tag)
-            }) {
-                Some(&t) => {
-                    taken.insert(t);
-                    assigned[k].push(t);
+            let found = ws.healthy.iter().copied().find(|&t| {
+                !ws.taken[usize::from(t)]
+                    && st.tiles[usize::from(t)]
+                        .bitstream
+                        .as_deref()
+                        .is_some_and(|b| is_tag(b, v, part))
+            });
+            match found {
+                Some(t) => {
+                    ws.taken[usize::from(t)] = true;
+                    ws.assigned.push((k, t, false));
                 }
-                None => pending.push((k, tag)),
+                None => ws.pending.push((k, vi, part)),
             }
         }
     }
-    for (k, tag) in pending {
+    for i in 0..ws.pending.len() {
+        let (k, vi, part) = ws.pending[i];
         let free = |blank: bool| {
-            healthy.iter().copied().find(|t| {
-                !taken.contains(t) && st.tiles[usize::from(*t)].bitstream.is_none() == blank
+            ws.healthy.iter().copied().find(|&t| {
+                !ws.taken[usize::from(t)] && st.tiles[usize::from(t)].bitstream.is_none() == blank
             })
         };
         let t = free(true)
             .or_else(|| free(false))
             .expect("search checked the tile count");
-        taken.insert(t);
-        st.tiles[usize::from(t)].bitstream = Some(tag);
-        assigned[k].push(t);
-        reconf[k].push(t);
+        ws.taken[usize::from(t)] = true;
+        let v = &vs[vi];
+        let slot = &mut st.tiles[usize::from(t)].bitstream;
+        let mut s = match slot.take() {
+            Some(mut s) => {
+                s.clear();
+                s
+            }
+            None => ws.string(),
+        };
+        let _ = write!(s, "{}/{}/{}#{part}", v.app, v.version, v.implementation);
+        *slot = Some(s);
+        ws.assigned.push((k, t, true));
     }
 
-    let mut placements: Vec<(usize, Placement)> = active
-        .iter()
-        .zip(&choice)
-        .enumerate()
-        .map(|(k, (it, v))| {
-            let mut tiles = assigned[k].clone();
-            tiles.sort_unstable();
-            let mut reconfigured = reconf[k].clone();
-            reconfigured.sort_unstable();
-            let cpu_share = v.cpu_share_at(it.fps, cores);
-            (
-                it.req,
-                Placement {
-                    app: it.app.clone(),
-                    version: it.version.clone(),
-                    implementation: v.implementation,
-                    support: v.support,
-                    tiles,
-                    cpu_share,
-                    ms_per_frame: v.ms_per_frame(),
-                    ms: v.ms.clone(),
-                    required_fps: it.fps,
-                    u_app: f64::from(v.tiles) + cpu_share,
-                    reconfigured,
-                },
-            )
-        })
-        .collect();
-    placements.sort_by_key(|(req, _)| *req);
-    let placements: Vec<Placement> = placements.into_iter().map(|(_, p)| p).collect();
+    // Placements in request order.
+    ws.order.clear();
+    ws.order.extend(0..active.len());
+    ws.order.sort_unstable_by_key(|&k| active[k].req);
+    for &k in &ws.order {
+        let it = &active[k];
+        let v = &vs[ws.choice[k]];
+        let mut p = ws.spare_placements.pop().unwrap_or(Placement {
+            app: String::new(),
+            version: String::new(),
+            implementation: v.implementation,
+            support: v.support,
+            tiles: Vec::new(),
+            cpu_share: 0.0,
+            ms_per_frame: 0.0,
+            ms: Vec::new(),
+            required_fps: 0.0,
+            u_app: 0.0,
+            reconfigured: Vec::new(),
+        });
+        set(&mut p.app, &requests[it.req].app);
+        set(&mut p.version, &v.version);
+        p.implementation = v.implementation;
+        p.support = v.support;
+        p.tiles.clear();
+        p.reconfigured.clear();
+        for &(kk, t, reconf) in &ws.assigned {
+            if kk == k {
+                p.tiles.push(t);
+                if reconf {
+                    p.reconfigured.push(t);
+                }
+            }
+        }
+        p.tiles.sort_unstable();
+        p.reconfigured.sort_unstable();
+        p.cpu_share = v.cpu_share_at(it.fps, cores);
+        p.ms_per_frame = v.ms_per_frame();
+        p.ms.clone_from(&v.ms);
+        p.required_fps = it.fps;
+        p.u_app = f64::from(v.tiles) + p.cpu_share;
+        out.placements.push(p);
+    }
 
+    let placements = &out.placements;
     let tiles_used: u8 = placements.iter().map(|p| p.tiles.len() as u8).sum();
     let app_cpu_share: f64 = placements.iter().map(|p| p.cpu_share).sum();
     let reconfigurations: u32 = placements.iter().map(|p| p.reconfigured.len() as u32).sum();
-    for (item, rank_text) in still_out {
+    for i in 0..ws.still_out.len() {
+        let item = ws.still_out[i];
+        let app = &requests[item.req].app;
+        let version = &vs[item.version].version;
         let others_tiles: u32 = placements
             .iter()
-            .filter(|p| p.app != item.app)
+            .filter(|p| p.app != *app)
             .map(|p| p.tiles.len() as u32)
             .sum();
         let others_cpu: f64 = placements
             .iter()
-            .filter(|p| p.app != item.app)
+            .filter(|p| p.app != *app)
             .map(|p| p.cpu_share)
             .sum();
-        let detail = why_not(
+        let mut d = ws.dropped(app, version);
+        d.reason.push_str("insufficient resources (");
+        why_not(
+            &mut d.reason,
             catalogue,
-            &item.app,
-            &item.version,
+            app,
+            version,
             item.fps,
             room.tiles.saturating_sub(others_tiles),
             room.cpu - others_cpu,
             cores,
+            &mut ws.impls,
         );
-        dropped.push(Dropped {
-            app: item.app.clone(),
-            version: item.version.clone(),
-            reason: format!("insufficient resources ({detail}); {rank_text}"),
-        });
+        let _ = write!(d.reason, "); {}", rank_text(&item));
+        out.dropped.push(d);
     }
+    ws.items = active;
+
     let cpu_load = if online == 0 {
         1.0
     } else {
         (app_cpu_share + external) * f64::from(cores) / f64::from(online)
     };
-    let summary = if placements.is_empty() {
-        "-".to_string()
+    out.summary.clear();
+    if out.placements.is_empty() {
+        out.summary.push('-');
     } else {
-        let parts: Vec<String> = placements
+        let mut first = true;
+        for m in out.placements.iter().flat_map(|p| p.ms.iter()) {
+            if !first {
+                out.summary.push_str(" + ");
+            }
+            first = false;
+            let _ = write!(out.summary, "{}", FmtMs(*m));
+        }
+        out.summary.push_str(" ms");
+    }
+    set(&mut out.policy, &policy.name);
+    out.cpu_load = cpu_load;
+    out.app_cpu_share = app_cpu_share;
+    out.external_cpu_load = external;
+    out.cpu_cores_online = online;
+    out.tiles_used = tiles_used;
+    out.free_tiles = (ws.healthy.len() as u8).saturating_sub(tiles_used);
+    out.failed_tiles.clear();
+    out.failed_tiles.extend(
+        st.tiles
             .iter()
-            .flat_map(|p| p.ms.iter().map(|&m| fmt_ms(m)))
-            .collect();
-        format!("{} ms", parts.join(" + "))
-    };
-    let sched = Schedule {
-        policy: policy.name.clone(),
-        cpu_load,
-        app_cpu_share,
-        external_cpu_load: external,
-        cpu_cores_online: online,
-        tiles_used,
-        free_tiles: (healthy.len() as u8).saturating_sub(tiles_used),
-        failed_tiles: st.failed_tiles(),
-        reconfigurations,
-        reconfiguration_ms: f64::from(reconfigurations) * platform.reconfiguration_ms_per_tile,
-        power_w: platform.power_w(tiles_used, app_cpu_share + external),
-        degraded,
-        dropped,
-        summary,
-        placements,
-    };
-    (sched, st)
+            .enumerate()
+            .filter(|(_, t)| t.failed)
+            .map(|(i, _)| i as u8),
+    );
+    out.reconfigurations = reconfigurations;
+    out.reconfiguration_ms = f64::from(reconfigurations) * platform.reconfiguration_ms_per_tile;
+    out.power_w = platform.power_w(tiles_used, app_cpu_share + external);
 }

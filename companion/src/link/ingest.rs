@@ -9,7 +9,6 @@ use mavlink::{
     MAVLinkMessageRaw, MavHeader, MavlinkReader, MavlinkVersion, Message, SigningConfig,
     SigningData,
 };
-use std::collections::VecDeque;
 use std::io::Read;
 use std::path::Path;
 
@@ -50,20 +49,56 @@ pub struct Frame {
     pub raw: Vec<u8>,
 }
 
-/// The chunk queue the crate's reader pulls from; empty means "wait for more bytes".
+/// One accepted message, borrowed: the decoded message and the wire bytes stay where the
+/// reader put them (see [`Ingest::push_each`]); nothing is copied unless kept.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameRef<'a> {
+    pub header: MavHeader,
+    pub msg: &'a Msg,
+    pub signed: bool,
+    pub version: MavlinkVersion,
+    /// The frame exactly as it arrived (start byte through checksum and signature).
+    pub raw: &'a [u8],
+}
+
+impl FrameRef<'_> {
+    /// The owned [`Frame`] (copies the wire bytes).
+    pub fn into_owned(self) -> Frame {
+        Frame {
+            header: self.header,
+            msg: self.msg.clone(),
+            signed: self.signed,
+            version: self.version,
+            raw: self.raw.to_vec(),
+        }
+    }
+}
+
+/// The chunk queue the crate's reader pulls from; empty means "wait for more bytes". A flat
+/// buffer and a read position: the reader drains everything it is given before asking again,
+/// so the buffer is empty (and reset) at the start of almost every `push`.
 #[derive(Default)]
-struct Chunks(VecDeque<u8>);
+struct Chunks {
+    buf: Vec<u8>,
+    at: usize,
+}
+
+impl Chunks {
+    fn extend(&mut self, bytes: &[u8]) {
+        if self.at == self.buf.len() {
+            self.buf.clear();
+            self.at = 0;
+        }
+        self.buf.extend_from_slice(bytes);
+    }
+}
 
 impl Read for Chunks {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        // Two slice copies (the ring buffer's halves), not a byte-by-byte drain: the reader asks
-        // for a few bytes at a time, millions of times per flight.
-        let (a, b) = self.0.as_slices();
-        let n = buf.len().min(a.len() + b.len());
-        let from_a = n.min(a.len());
-        buf[..from_a].copy_from_slice(&a[..from_a]);
-        buf[from_a..n].copy_from_slice(&b[..n - from_a]);
-        self.0.drain(..n);
+        let rest = &self.buf[self.at..];
+        let n = buf.len().min(rest.len());
+        buf[..n].copy_from_slice(&rest[..n]);
+        self.at += n;
         Ok(n)
     }
 }
@@ -99,36 +134,46 @@ impl Ingest {
 
     /// Feed one chunk of bytes; returns every complete, valid, accepted message in it.
     pub fn push(&mut self, bytes: &[u8]) -> Vec<Frame> {
-        self.stats.bytes_in += bytes.len() as u64;
-        self.reader.get_mut().0.extend(bytes);
         let mut out = Vec::new();
+        self.push_each(bytes, |f| out.push(f.into_owned()));
+        out
+    }
+
+    /// Feed one chunk of bytes and hand every complete, valid, accepted message to `each`, in
+    /// order, with its wire bytes borrowed: the same frames as [`Ingest::push`] without a
+    /// per-frame allocation (the tlog copies the bytes only when it is on).
+    pub fn push_each(&mut self, bytes: &[u8], mut each: impl FnMut(FrameRef<'_>)) {
+        self.stats.bytes_in += bytes.len() as u64;
+        self.reader.get_mut().extend(bytes);
         // An error is the reader running out of bytes: the rest waits for the next chunk.
-        while let Ok(raw) = self.reader.read_any_raw_message::<Msg>() {
-            let (bytes, signed) = match &raw {
+        // The raw frame (~280 bytes) and the decoded message are borrowed where they were
+        // returned, not moved out: moving them cost a copy each per frame.
+        loop {
+            let next = self.reader.read_any_raw_message::<Msg>();
+            let Ok(raw) = &next else { break };
+            let (bytes, signed) = match raw {
                 MAVLinkMessageRaw::V1(r) => (r.raw_bytes(), false),
                 MAVLinkMessageRaw::V2(r) => (r.raw_bytes(), r.incompatibility_flags() & 0x01 != 0),
             };
             self.stats.frame_bytes += bytes.len() as u64;
-            if let (Some(sd), MAVLinkMessageRaw::V2(r)) = (&self.signing, &raw)
+            if let (Some(sd), MAVLinkMessageRaw::V2(r)) = (&self.signing, raw)
                 && signed
                 && !sd.verify_signature(r)
             {
                 self.stats.bad_signatures += 1;
                 continue;
             }
-            let msg = match Msg::parse(raw.version(), raw.message_id(), raw.payload()) {
-                Ok(m) => m,
-                Err(_) => {
-                    self.stats.frames_malformed += 1;
-                    continue;
-                }
+            let parsed = Msg::parse(raw.version(), raw.message_id(), raw.payload());
+            let Ok(msg) = &parsed else {
+                self.stats.frames_malformed += 1;
+                continue;
             };
             // With a key, unsigned frames are refused like ArduPilot does (GCS_Signing.cpp,
             // `accept_unsigned_callback`: only RADIO_STATUS, "as the radio doesn't know the key"):
             // an injected battery level or target report must not reach the decisions any more
             // than an injected command.
             if self.signing.is_some() && !signed && !matches!(msg, Msg::RADIO_STATUS(_)) {
-                if self.is_command_to_us(&msg) {
+                if self.is_command_to_us(msg) {
                     self.stats.unsigned_commands_refused += 1;
                 } else {
                     self.stats.unsigned_refused += 1;
@@ -141,15 +186,14 @@ impl Ingest {
                 component_id: raw.component_id(),
                 sequence: raw.sequence(),
             };
-            out.push(Frame {
+            each(FrameRef {
                 header,
                 msg,
                 signed,
                 version: raw.version(),
-                raw: bytes.to_vec(),
+                raw: bytes,
             });
         }
-        out
     }
 
     fn is_command_to_us(&self, msg: &Msg) -> bool {
@@ -423,7 +467,7 @@ mod tests {
 
     /// The mavlink crate's own reader over the whole stream at once: the independent answer
     /// the chunked ingest must match (same frames, same order, same headers and messages).
-    fn crate_reader_frames(stream: &[u8]) -> Vec<(MavHeader, Msg, MavlinkVersion)> {
+    fn crate_reader_frames(stream: &[u8]) -> Vec<(MavHeader, Msg, MavlinkVersion, Vec<u8>)> {
         let mut r = MavlinkReader::new(stream);
         let mut out = Vec::new();
         while let Ok(raw) = r.read_any_raw_message::<Msg>() {
@@ -433,7 +477,11 @@ mod tests {
                     component_id: raw.component_id(),
                     sequence: raw.sequence(),
                 };
-                out.push((h, m, raw.version()));
+                let bytes = match &raw {
+                    MAVLinkMessageRaw::V1(r) => r.raw_bytes().to_vec(),
+                    MAVLinkMessageRaw::V2(r) => r.raw_bytes().to_vec(),
+                };
+                out.push((h, m, raw.version(), bytes));
             }
         }
         out
@@ -490,8 +538,9 @@ mod tests {
     }
 
     proptest! {
-        /// Same frames as the mavlink crate's reader on any mix of v1, v2, signed, corrupted
-        /// frames and garbage with frame markers, whatever the chunking.
+        /// Same frames (and the same wire bytes, for the tlog) as the mavlink crate's reader on
+        /// any mix of v1, v2, signed, corrupted frames and garbage with frame markers, whatever
+        /// the chunking, whether chunks go through `push` or `push_each`.
         #[test]
         fn chunked_ingest_matches_the_crate_reader(
             pieces in proptest::collection::vec(piece(), 0..30),
@@ -506,7 +555,12 @@ mod tests {
             while at < stream.len() {
                 let n = cuts[k % cuts.len()].min(stream.len() - at);
                 k += 1;
-                got.extend(ing.push(&stream[at..at + n]).into_iter().map(|f| (f.header, f.msg, f.version)));
+                let chunk = &stream[at..at + n];
+                if k % 2 == 0 {
+                    got.extend(ing.push(chunk).into_iter().map(|f| (f.header, f.msg, f.version, f.raw)));
+                } else {
+                    ing.push_each(chunk, |f| got.push((f.header, f.msg.clone(), f.version, f.raw.to_vec())));
+                }
                 at += n;
             }
             prop_assert_eq!(got, want);

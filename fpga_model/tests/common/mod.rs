@@ -39,3 +39,4 @@ fn load() -> Params {
 pub fn placed<'a>(s: &'a Schedule, app: &str) -> Option<&'a Placement> {
     s.placements.iter().find(|p| p.app == app)
 }
+pub mod reference;
