@@ -5,7 +5,7 @@ use bayes_net::{BnError, Evidence, Network, NetworkBuilder, NodeId};
 use proptest::prelude::*;
 
 mod support;
-use support::{build, case, enumerate};
+use support::{asia, build, case, enumerate};
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(300))]
@@ -125,28 +125,7 @@ fn sprinkler_published_posteriors() {
 fn asia_prior_marginals() {
     // Lauritzen & Spiegelhalter (1988) chest clinic; prior marginals as printed by Hugin and
     // hand-checked: tub 0.0104, lung 0.055, bronc 0.45, either 0.064828, xray 0.11029, dysp 0.43597.
-    let yn = ["yes", "no"];
-    let none: [&str; 0] = [];
-    let mut b = NetworkBuilder::new();
-    b.add_node("asia", &yn, &none, vec![0.01, 0.99]);
-    b.add_node("smoke", &yn, &none, vec![0.5, 0.5]);
-    b.add_node("tub", &yn, &["asia"], vec![0.05, 0.95, 0.01, 0.99]);
-    b.add_node("lung", &yn, &["smoke"], vec![0.1, 0.9, 0.01, 0.99]);
-    b.add_node("bronc", &yn, &["smoke"], vec![0.6, 0.4, 0.3, 0.7]);
-    b.add_node(
-        "either",
-        &yn,
-        &["lung", "tub"],
-        vec![1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 1.0],
-    );
-    b.add_node("xray", &yn, &["either"], vec![0.98, 0.02, 0.05, 0.95]);
-    b.add_node(
-        "dysp",
-        &yn,
-        &["bronc", "either"],
-        vec![0.9, 0.1, 0.8, 0.2, 0.7, 0.3, 0.1, 0.9],
-    );
-    let net = b.build().unwrap();
+    let net = asia();
     let mut e = net.compile();
     e.propagate(&Evidence::new()).unwrap();
     for (n, p) in [

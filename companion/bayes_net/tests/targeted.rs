@@ -7,7 +7,7 @@ use bayes_net::{BnError, Engine, Evidence, Network, NetworkBuilder, NodeId};
 use proptest::prelude::*;
 
 mod support;
-use support::{build, case, enumerate};
+use support::{asia, build, case, enumerate};
 
 /// One step of an evidence sequence: (node, hard state or soft, likelihood) findings, or `None`
 /// to keep the previous step's pattern (same nodes, same kinds) with this step's values.
@@ -188,31 +188,6 @@ fn more_patterns_than_the_cache_holds() {
         }
     }
     assert_eq!(e.cached_plans(), 64);
-}
-
-fn asia() -> Network {
-    let yn = ["yes", "no"];
-    let none: [&str; 0] = [];
-    let mut b = NetworkBuilder::new();
-    b.add_node("asia", &yn, &none, vec![0.01, 0.99]);
-    b.add_node("smoke", &yn, &none, vec![0.5, 0.5]);
-    b.add_node("tub", &yn, &["asia"], vec![0.05, 0.95, 0.01, 0.99]);
-    b.add_node("lung", &yn, &["smoke"], vec![0.1, 0.9, 0.01, 0.99]);
-    b.add_node("bronc", &yn, &["smoke"], vec![0.6, 0.4, 0.3, 0.7]);
-    b.add_node(
-        "either",
-        &yn,
-        &["lung", "tub"],
-        vec![1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 1.0],
-    );
-    b.add_node("xray", &yn, &["either"], vec![0.98, 0.02, 0.05, 0.95]);
-    b.add_node(
-        "dysp",
-        &yn,
-        &["bronc", "either"],
-        vec![0.9, 0.1, 0.8, 0.2, 0.7, 0.3, 0.1, 0.9],
-    );
-    b.build().unwrap()
 }
 
 fn target(net: &Network, names: &[&str]) -> Engine {

@@ -135,3 +135,29 @@ pub fn build(c: &Case) -> (Network, Vec<NodeId>) {
     }
     (b.build().expect("valid random network"), ids)
 }
+
+/// Lauritzen & Spiegelhalter (1988) chest clinic ("Asia"), the textbook network.
+pub fn asia() -> Network {
+    let yn = ["yes", "no"];
+    let none: [&str; 0] = [];
+    let mut b = NetworkBuilder::new();
+    b.add_node("asia", &yn, &none, vec![0.01, 0.99]);
+    b.add_node("smoke", &yn, &none, vec![0.5, 0.5]);
+    b.add_node("tub", &yn, &["asia"], vec![0.05, 0.95, 0.01, 0.99]);
+    b.add_node("lung", &yn, &["smoke"], vec![0.1, 0.9, 0.01, 0.99]);
+    b.add_node("bronc", &yn, &["smoke"], vec![0.6, 0.4, 0.3, 0.7]);
+    b.add_node(
+        "either",
+        &yn,
+        &["lung", "tub"],
+        vec![1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 1.0],
+    );
+    b.add_node("xray", &yn, &["either"], vec![0.98, 0.02, 0.05, 0.95]);
+    b.add_node(
+        "dysp",
+        &yn,
+        &["bronc", "either"],
+        vec![0.9, 0.1, 0.8, 0.2, 0.7, 0.3, 0.1, 0.9],
+    );
+    b.build().unwrap()
+}
