@@ -638,7 +638,7 @@ mod tests {
             .map(|k: usize| {
                 obs.iter()
                     .enumerate()
-                    .filter(|(i, _)| (k * 7 + i * 3) % 5 != 0)
+                    .filter(|(i, _)| !(k * 7 + i * 3).is_multiple_of(5))
                     .map(|(i, (n, st))| (n.clone(), st[(k + i) % st.len()].clone()))
                     .collect()
             })
