@@ -8,6 +8,8 @@
 
 use mdp_engine::{FH_STOP_TOLERANCE, Mdp, MdpBuilder, TIE_TOLERANCE, Workspace};
 use proptest::prelude::*;
+mod support;
+use support::Lcg;
 
 /// Full backward induction: values[t][s] and Q-values q[t][s] = [(action, Q)].
 #[allow(clippy::type_complexity)]
@@ -101,13 +103,8 @@ enum Kind {
 }
 
 fn model(kind: Kind, n: usize, m: usize, seed: u64) -> Mdp {
-    let mut x = seed.wrapping_mul(2654435761).wrapping_add(12345);
-    let mut rnd = move || {
-        x = x
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (x >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut lcg = Lcg(seed.wrapping_mul(2654435761).wrapping_add(12345));
+    let mut rnd = move || lcg.f();
     let mut b = MdpBuilder::new(n, m);
     let n_term = match kind {
         Kind::Unichain => 0,

@@ -7,19 +7,8 @@
 use mdp_engine::{Config, DENSE_EVAL_MAX_STATES, Mdp, MdpBuilder, SolveError, Workspace};
 use nalgebra::{DMatrix, DVector};
 
-struct Lcg(u64);
-impl Lcg {
-    fn f(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn below(&mut self, n: usize) -> usize {
-        ((self.f() * n as f64) as usize).min(n - 1)
-    }
-}
+mod support;
+use support::Lcg;
 
 /// `n` states, `m` actions (each admissible w.p. ~0.7, action 0 always), up to `k` successors.
 /// The last `terminals` states have no action. With `ring`, successors are near neighbours on a

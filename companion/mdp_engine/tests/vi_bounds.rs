@@ -6,6 +6,8 @@
 
 use mdp_engine::{Config, Mdp, MdpBuilder, Workspace};
 use proptest::prelude::*;
+mod support;
+use support::Lcg;
 
 fn model(n: usize, m: usize, terminals: usize, seed: u64) -> Mdp {
     model_with(n, m, terminals, seed, false)
@@ -13,13 +15,8 @@ fn model(n: usize, m: usize, terminals: usize, seed: u64) -> Mdp {
 
 /// With `recurrent_0`, every choice also goes to state 0 (so one recurrent class: unichain).
 fn model_with(n: usize, m: usize, terminals: usize, seed: u64, recurrent_0: bool) -> Mdp {
-    let mut x = seed.wrapping_mul(0x9E3779B97F4A7C15).wrapping_add(7);
-    let mut rnd = move || {
-        x = x
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (x >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut lcg = Lcg(seed.wrapping_mul(0x9E3779B97F4A7C15).wrapping_add(7));
+    let mut rnd = move || lcg.f();
     let mut b = MdpBuilder::new(n, m);
     for s in 0..n - terminals.min(n - 1) {
         for a in 0..m {
