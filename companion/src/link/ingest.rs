@@ -85,10 +85,11 @@ struct Chunks {
 
 impl Chunks {
     fn extend(&mut self, bytes: &[u8]) {
-        if self.at == self.buf.len() {
-            self.buf.clear();
-            self.at = 0;
-        }
+        // Drop what the reader has taken before appending (usually all of it, so nothing
+        // moves): the buffer stays bounded by the unread bytes even if a push ever ends with
+        // bytes left over, instead of growing by every chunk of a flight.
+        self.buf.drain(..self.at);
+        self.at = 0;
         self.buf.extend_from_slice(bytes);
     }
 }
