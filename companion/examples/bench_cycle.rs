@@ -19,30 +19,13 @@ use companion::record::{DecisionRecord, Plan};
 use companion::spec::default_params_dir;
 use companion::streams::{Stream, StreamGen, tracking_snapshot};
 use serde_json::json;
-use std::alloc::{GlobalAlloc, Layout, System};
 use std::hint::black_box;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
-struct Counting;
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        unsafe { System.dealloc(p, l) }
-    }
-    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.realloc(p, l, n) }
-    }
-}
-
-#[global_allocator]
-static A: Counting = Counting;
+// The same counting allocator as the no-allocation tests (counts this thread's allocations).
+#[path = "../tests/support/counting_alloc.rs"]
+mod counting_alloc;
+use counting_alloc::allocations;
 
 fn percentile(sorted: &[f64], q: f64) -> f64 {
     let i = ((sorted.len() - 1) as f64 * q).round() as usize;
@@ -85,11 +68,12 @@ fn main() {
         let mut allocs = 0;
         for k in 100..100 + cycles {
             stream_gen.advance(&mut obs, k);
-            let a0 = ALLOCS.load(Ordering::Relaxed);
-            let t0 = Instant::now();
-            core.step_into(black_box(&obs), &mut plan, &mut rec);
-            let dt = t0.elapsed();
-            allocs += ALLOCS.load(Ordering::Relaxed) - a0;
+            let mut dt = Duration::ZERO;
+            allocs += allocations(|| {
+                let t0 = Instant::now();
+                core.step_into(black_box(&obs), &mut plan, &mut rec);
+                dt = t0.elapsed();
+            });
             black_box(&rec);
             times.push(dt.as_secs_f64() * 1e6);
         }
