@@ -110,6 +110,24 @@ pub struct Mdp {
     choice_start: Vec<u32>,
     next: Vec<u32>,
     prob: Vec<f64>,
+    /// `k` when every choice has exactly `k` transitions (1..=[`MAX_UNIFORM_SUCCESSORS`]), else 0:
+    /// the solvers then use a kernel with the count fixed at compile time (derived from
+    /// `choice_start`, which never changes after build).
+    #[serde(skip_serializing)]
+    uniform_successors: u32,
+}
+
+/// Largest per-choice successor count with its own solver kernel (see `Mdp::uniform_successors`).
+const MAX_UNIFORM_SUCCESSORS: u32 = 5;
+
+/// `k` if every choice `choice_start[c]..choice_start[c + 1]` has exactly `k` transitions and `k`
+/// is at most [`MAX_UNIFORM_SUCCESSORS`], else 0.
+fn uniform_successors(choice_start: &[u32]) -> u32 {
+    let mut it = choice_start.windows(2).map(|w| w[1] - w[0]);
+    match it.next() {
+        Some(k) if k <= MAX_UNIFORM_SUCCESSORS && it.all(|x| x == k) => k,
+        _ => 0,
+    }
 }
 
 /// Serialized form of [`Mdp`]; deserialization checks the layout before trusting it, so a
@@ -161,6 +179,7 @@ impl TryFrom<MdpRaw> for Mdp {
             return Err("a choice has no transition".into());
         }
         let m = Mdp {
+            uniform_successors: uniform_successors(&r.choice_start),
             n_actions: r.n_actions,
             state_start: r.state_start,
             choice_action: r.choice_action,
@@ -291,6 +310,7 @@ impl MdpBuilder {
             choice_start: Vec::with_capacity(self.choices.len() + 1),
             next: Vec::with_capacity(total),
             prob: Vec::with_capacity(total),
+            uniform_successors: 0,
         };
         let mut c = 0;
         for s in 0..n_states {
@@ -309,6 +329,7 @@ impl MdpBuilder {
         }
         mdp.state_start.push(mdp.choice_action.len() as u32);
         mdp.choice_start.push(mdp.next.len() as u32);
+        mdp.uniform_successors = uniform_successors(&mdp.choice_start);
         Ok(mdp)
     }
 }
@@ -529,6 +550,44 @@ impl FhCertificate {
     }
 }
 
+/// `sum_t p[t] * v[next[t]]` over the transitions `t..end` of one choice, in transition order
+/// (the same rounding as the plain loop), two terms per round: choices have one to a few
+/// successors, so loop control, not arithmetic, is what this saves.
+///
+/// With `K > 0` the choice has exactly `K` transitions (`end = t + K`, unrolled, no loop).
+///
+/// # Safety
+/// `t <= end <= pr.len() == nx.len()` and every `nx[t..end]` is `< v.len()`.
+#[inline(always)]
+unsafe fn dot_choice<const K: usize>(
+    pr: &[f64],
+    nx: &[u32],
+    v: &[f64],
+    mut t: usize,
+    end: usize,
+) -> f64 {
+    // SAFETY: by the caller's contract.
+    unsafe {
+        let mut acc = 0.0;
+        if K > 0 {
+            for i in 0..K {
+                acc +=
+                    *pr.get_unchecked(t + i) * *v.get_unchecked(*nx.get_unchecked(t + i) as usize);
+            }
+            return acc;
+        }
+        while t + 2 <= end {
+            acc += *pr.get_unchecked(t) * *v.get_unchecked(*nx.get_unchecked(t) as usize);
+            acc += *pr.get_unchecked(t + 1) * *v.get_unchecked(*nx.get_unchecked(t + 1) as usize);
+            t += 2;
+        }
+        if t < end {
+            acc += *pr.get_unchecked(t) * *v.get_unchecked(*nx.get_unchecked(t) as usize);
+        }
+        acc
+    }
+}
+
 /// One plain Bellman backup with gamma = 1: `cur = T next`, `pol` the greedy actions. When
 /// `next2` (`V_{t+2}`, one stage after `next`) is given, also returns the early-stop screen of
 /// [`Workspace::finite_horizon`] for the next stage, `(max_s |cur - 2 next + next2|, max(1, max_s
@@ -544,7 +603,7 @@ impl FhCertificate {
 /// is the plain one (`acc += p * v` in transition order, then `reward + acc`), so values are
 /// bit-identical to the straightforward loop.
 #[inline(always)]
-fn backup_stage_impl<const SCREEN: bool>(
+fn backup_stage_impl<const SCREEN: bool, const K: usize>(
     mdp: &Mdp,
     next: &[f64],
     next2: &[f64],
@@ -573,25 +632,17 @@ fn backup_stage_impl<const SCREEN: bool>(
             let (best, act) = if c == hi {
                 (0.0, NONE)
             } else {
-                let end = *cs.get_unchecked(c + 1) as usize;
-                let mut acc = 0.0;
-                while t < end {
-                    acc +=
-                        *pr.get_unchecked(t) * *next.get_unchecked(*nx.get_unchecked(t) as usize);
-                    t += 1;
-                }
+                let end = choice_end::<K>(cs, c, t);
+                let acc = dot_choice::<K>(pr, nx, next, t, end);
+                t = end;
                 let mut best = *rw.get_unchecked(c) + acc;
                 let mut best_c = c;
                 let mut bar = beat_bar(best);
                 c += 1;
                 while c < hi {
-                    let end = *cs.get_unchecked(c + 1) as usize;
-                    let mut acc = 0.0;
-                    while t < end {
-                        acc += *pr.get_unchecked(t)
-                            * *next.get_unchecked(*nx.get_unchecked(t) as usize);
-                        t += 1;
-                    }
+                    let end = choice_end::<K>(cs, c, t);
+                    let acc = dot_choice::<K>(pr, nx, next, t, end);
+                    t = end;
                     let q = *rw.get_unchecked(c) + acc;
                     if q > bar {
                         best = q;
@@ -614,9 +665,39 @@ fn backup_stage_impl<const SCREEN: bool>(
     (delta, scale)
 }
 
+/// The end of choice `c`'s transitions, which start at `t`: `t + K` for a uniform model (no
+/// load), else from `choice_start`.
+///
+/// # Safety
+/// `c + 1 < cs.len()`.
+#[inline(always)]
+unsafe fn choice_end<const K: usize>(cs: &[u32], c: usize, t: usize) -> usize {
+    if K > 0 {
+        debug_assert!(cs[c + 1] as usize == t + K);
+        t + K
+    } else {
+        // SAFETY: by the caller's contract.
+        unsafe { *cs.get_unchecked(c + 1) as usize }
+    }
+}
+
+/// Calls `$f::<.., K>` with `K` the model's uniform successor count (0: mixed counts).
+macro_rules! by_successors {
+    ($mdp:expr, $f:ident $(::<$($g:tt),*>)?, ($($arg:expr),*)) => {
+        match $mdp.uniform_successors {
+            1 => $f::<$($($g,)*)? 1>($($arg),*),
+            2 => $f::<$($($g,)*)? 2>($($arg),*),
+            3 => $f::<$($($g,)*)? 3>($($arg),*),
+            4 => $f::<$($($g,)*)? 4>($($arg),*),
+            5 => $f::<$($($g,)*)? 5>($($arg),*),
+            _ => $f::<$($($g,)*)? 0>($($arg),*),
+        }
+    };
+}
+
 /// [`backup_stage_impl`] without the screen.
 fn backup_stage(mdp: &Mdp, next: &[f64], cur: &mut [f64], pol: &mut [u32]) {
-    backup_stage_impl::<false>(mdp, next, &[], cur, pol);
+    by_successors!(mdp, backup_stage_impl::<false>, (mdp, next, &[], cur, pol));
 }
 
 /// [`backup_stage_impl`] with the screen from `next2`.
@@ -627,13 +708,24 @@ fn backup_stage_screened(
     cur: &mut [f64],
     pol: &mut [u32],
 ) -> (f64, f64) {
-    backup_stage_impl::<true>(mdp, next, next2, cur, pol)
+    by_successors!(mdp, backup_stage_impl::<true>, (mdp, next, next2, cur, pol))
 }
 
 /// One value-iteration sweep `nxt = T cur` (terminal states 0), returning `(min d, max d)` of `d =
 /// nxt - cur` (infinities when there is no state). The same cursor walk and unchecked reads as
 /// [`backup_stage_impl`] (same invariants), with `q = R + gamma * (sum p v)` in transition order.
 fn vi_sweep(mdp: &Mdp, gamma: f64, cur: &[f64], nxt: &mut [f64]) -> (f64, f64) {
+    by_successors!(mdp, vi_sweep_impl, (mdp, gamma, cur, nxt))
+}
+
+/// [`vi_sweep`] for models whose choices all have `K` transitions (`K = 0`: any count).
+#[inline(always)]
+fn vi_sweep_impl<const K: usize>(
+    mdp: &Mdp,
+    gamma: f64,
+    cur: &[f64],
+    nxt: &mut [f64],
+) -> (f64, f64) {
     let n = cur.len();
     assert!(nxt.len() == n && mdp.state_start.len() == n + 1);
     let (ss, cs, nx, pr, rw) = (
@@ -655,13 +747,12 @@ fn vi_sweep(mdp: &Mdp, gamma: f64, cur: &[f64], nxt: &mut [f64]) -> (f64, f64) {
             let mut best = f64::NEG_INFINITY;
             let terminal = c == hi;
             while c < hi {
-                let end = *cs.get_unchecked(c + 1) as usize;
-                let mut acc = 0.0;
-                while t < end {
-                    acc += *pr.get_unchecked(t) * *cur.get_unchecked(*nx.get_unchecked(t) as usize);
-                    t += 1;
-                }
-                best = best.max(*rw.get_unchecked(c) + gamma * acc);
+                let end = choice_end::<K>(cs, c, t);
+                let acc = dot_choice::<K>(pr, nx, cur, t, end);
+                t = end;
+                let q = *rw.get_unchecked(c) + gamma * acc;
+                // A plain select (one maxsd), not f64::max's NaN handling: values are finite.
+                best = if q > best { q } else { best };
                 c += 1;
             }
             let q = if terminal { 0.0 } else { best };
@@ -1595,6 +1686,78 @@ mod tests {
     /// reward 5, to a terminal state). With h steps to go V_h = max(1 + V_{h-1}, 5): V_1 = 5
     /// (cash), then V_h = h + 4 (wait). With a wait reward of 0 instead, V_h = 5 for all h and
     /// from h = 2 on both actions tie, so the lowest index (wait) must be chosen.
+    #[test]
+    fn fixed_successor_kernels_match_the_general_one_bit_for_bit() {
+        // Models where every choice has k successors take the kernels with k fixed at compile
+        // time; clearing the marker sends the same model through the general kernel, which must
+        // give identical bits (same summation order) for every k with a kernel, and more.
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for k in 1..=MAX_UNIFORM_SUCCESSORS as usize + 1 {
+            let (n, m) = (12, 4);
+            let mut b = MdpBuilder::new(n, m);
+            for s in 1..n {
+                for a in 0..m {
+                    if a > 0 && rnd() < 0.3 {
+                        continue; // not every action admissible
+                    }
+                    let mut next: Vec<usize> = Vec::new();
+                    while next.len() < k {
+                        let j = (rnd() * n as f64) as usize % n;
+                        if !next.contains(&j) {
+                            next.push(j);
+                        }
+                    }
+                    let w: Vec<f64> = (0..k).map(|_| 0.1 + rnd()).collect();
+                    let sum: f64 = w.iter().sum();
+                    let tr: Vec<(usize, f64)> =
+                        next.iter().zip(&w).map(|(&j, &x)| (j, x / sum)).collect();
+                    b.choice(s, a, rnd() * 10.0 - 3.0, &tr);
+                }
+            }
+            // state 0 is terminal: the choices' counts stay uniform
+            let uniform = b.build().unwrap();
+            let expected = if k <= MAX_UNIFORM_SUCCESSORS as usize {
+                k as u32
+            } else {
+                0
+            };
+            assert_eq!(uniform.uniform_successors, expected, "k={k}");
+            let mut general = uniform.clone();
+            general.uniform_successors = 0;
+            let (mut w1, mut w2) = (Workspace::new(), Workspace::new());
+            let (f1, f2) = (
+                w1.finite_horizon(&uniform, 60),
+                w2.finite_horizon(&general, 60),
+            );
+            assert_eq!(f1.stats().iterations, f2.stats().iterations, "k={k}");
+            for t in 0..60 {
+                for s in 0..n {
+                    assert_eq!(
+                        f1.value(t, s).to_bits(),
+                        f2.value(t, s).to_bits(),
+                        "k={k} t={t}"
+                    );
+                    assert_eq!(f1.action(t, s), f2.action(t, s), "k={k} t={t} s={s}");
+                }
+            }
+            let cfg = Config::default();
+            let v1 = w1.value_iteration(&uniform, &cfg).unwrap();
+            let (vals1, pol1, it1) = (v1.values().to_vec(), v1.policy(), v1.stats.iterations);
+            let v2 = w2.value_iteration(&general, &cfg).unwrap();
+            assert_eq!(it1, v2.stats.iterations, "k={k}");
+            assert_eq!(pol1, v2.policy(), "k={k}");
+            for (a, b) in vals1.iter().zip(v2.values()) {
+                assert_eq!(a.to_bits(), b.to_bits(), "k={k}");
+            }
+        }
+    }
+
     #[test]
     fn finite_horizon_by_hand() {
         for wait_reward in [1.0, 0.0] {
