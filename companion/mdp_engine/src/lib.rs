@@ -12,7 +12,7 @@
 //!   paper's eq. 1–3; stops early once a certified bound shows the remaining stages are the
 //!   computed ones plus a constant gain per stage, to within [`FH_STOP_TOLERANCE`]), value
 //!   iteration (stopped on the MacQueen–Porteus bracket), policy iteration (eq. 4–5, policy
-//!   evaluation by a dense in-place linear solve on a nalgebra matrix up to
+//!   evaluation by a dense in-place linear solve over the non-terminal states up to
 //!   [`Config::dense_eval_max_states`] states, above by warm-started sparse sweeps with a
 //!   certified stop) and modified policy iteration.
 //!
@@ -927,8 +927,11 @@ pub struct Workspace {
     fh_values: Vec<f64>,
     /// `horizon * n` actions, stage-major.
     fh_policy: Vec<u32>,
-    mat: DMatrix<f64>,
-    rhs: DVector<f64>,
+    /// Dense policy evaluation: the system over the non-terminal states, row-major `m x m`
+    /// (`mat`), its right-hand side (`rhs`) and each state's row (`dense_row`, `NONE` if terminal).
+    mat: Vec<f64>,
+    rhs: Vec<f64>,
+    dense_row: Vec<u32>,
     /// Sparse policy evaluation: the policy's reverse graph (CSR) and a BFS queue, for the
     /// structural properness check with `gamma = 1`.
     rev_start: Vec<u32>,
@@ -953,8 +956,9 @@ impl Workspace {
             horizon: 0,
             fh_values: Vec::new(),
             fh_policy: Vec::new(),
-            mat: DMatrix::zeros(0, 0),
-            rhs: DVector::zeros(0),
+            mat: Vec::new(),
+            rhs: Vec::new(),
+            dense_row: Vec::new(),
             rev_start: Vec::new(),
             rev: Vec::new(),
             queue: Vec::new(),
@@ -981,11 +985,12 @@ impl Workspace {
             resize(&mut self.fh_values, (horizon + 1) * n, 0.0);
             resize(&mut self.fh_policy, horizon * n, NONE);
         }
-        // The dense matrix only grows; smaller models use its top-left block, so alternating
-        // between models of different sizes does not reallocate.
-        if dense_solve && self.mat.nrows() < n {
-            self.mat = DMatrix::zeros(n, n);
-            self.rhs = DVector::zeros(n);
+        // The dense buffers only grow; smaller systems use a prefix, so alternating between
+        // models of different sizes does not reallocate.
+        if dense_solve {
+            resize(&mut self.mat, n * n, 0.0);
+            resize(&mut self.rhs, n, 0.0);
+            resize(&mut self.dense_row, n, NONE);
         }
     }
 
@@ -1125,9 +1130,9 @@ impl Workspace {
     }
 
     /// Policy iteration (paper eq. 4–5). Starts from the greedy policy for immediate rewards;
-    /// evaluates each policy exactly by solving `(I - gamma P_pi) v = r_pi` (terminal rows fixed to
-    /// `v = 0`) with Gaussian elimination with partial pivoting in the preallocated nalgebra
-    /// matrix; improves by switching a state's action only when another is strictly better (so it
+    /// evaluates each policy exactly by solving `(I - gamma P_pi) v = r_pi` over the non-terminal
+    /// states (terminal states fixed at `v = 0`) with Gaussian elimination with partial pivoting
+    /// in a preallocated row-major buffer; improves by switching a state's action only when another is strictly better (so it
     /// cannot cycle); stops when the policy is stable. `Stats::iterations` counts evaluations.
     ///
     /// Evaluation is dense up to `cfg.dense_eval_max_states` states (O(|S|^2) memory, O(|S|^3)
@@ -1256,31 +1261,43 @@ impl Workspace {
 
     /// Solve `(I - gamma P_pi) v = r_pi` for the policy in `pchoice` into `v`. False if singular.
     fn evaluate_exact(&mut self, mdp: &Mdp, gamma: f64) -> bool {
+        // Terminal states are fixed at 0: their rows (identity, right-hand side 0) and columns
+        // drop out, so the system is over the m non-terminal states only.
         let n = mdp.n_states();
-        let a = &mut self.mat;
-        let b = &mut self.rhs;
-        for j in 0..n {
-            for i in 0..n {
-                a[(i, j)] = 0.0;
-            }
-        }
+        let mut m = 0usize;
         for s in 0..n {
-            a[(s, s)] = 1.0;
-            let c = self.pchoice[s];
-            if c == NONE {
-                b[s] = 0.0;
+            self.dense_row[s] = if self.pchoice[s] == NONE {
+                NONE
+            } else {
+                m += 1;
+                (m - 1) as u32
+            };
+        }
+        let a = &mut self.mat[..m * m];
+        let b = &mut self.rhs[..m];
+        a.fill(0.0);
+        for s in 0..n {
+            let (i, c) = (self.dense_row[s], self.pchoice[s]);
+            if i == NONE {
                 continue;
             }
-            let c = c as usize;
-            b[s] = mdp.choice_reward[c];
+            let (i, c) = (i as usize, c as usize);
+            a[i * m + i] = 1.0;
+            b[i] = mdp.choice_reward[c];
             for t in mdp.transition_range(c) {
-                a[(s, mdp.next[t] as usize)] -= gamma * mdp.prob[t];
+                let j = self.dense_row[mdp.next[t] as usize];
+                if j != NONE {
+                    a[i * m + j as usize] -= gamma * mdp.prob[t];
+                }
             }
         }
-        if !solve_block_in_place(a, b, n) {
+        if !lu_solve(a, b, m) {
             return false;
         }
-        self.v[..n].copy_from_slice(&b.as_slice()[..n]);
+        for s in 0..n {
+            let i = self.dense_row[s];
+            self.v[s] = if i == NONE { 0.0 } else { b[i as usize] };
+        }
         true
     }
 
@@ -1522,27 +1539,27 @@ fn check_gamma(g: f64) -> Result<(), SolveError> {
     }
 }
 
-/// Solve `a x = b` in place (x overwrites b) by Gaussian elimination with partial pivoting,
-/// column-oriented for nalgebra's column-major storage. Allocation-free. False if singular.
-pub fn solve_in_place(a: &mut DMatrix<f64>, b: &mut DVector<f64>) -> bool {
-    let n = a.nrows();
-    solve_block_in_place(a, b, n)
+/// Solves `a x = b` for a square `a` (a copy; `a` is left as given), `x` written into `b`, by
+/// [`lu_solve`]. Returns `false` if the matrix is singular.
+pub fn solve_in_place(a: &DMatrix<f64>, b: &mut DVector<f64>) -> bool {
+    let m = a.nrows();
+    assert!(a.ncols() == m && b.len() == m);
+    let mut rows: Vec<f64> = a.transpose().as_slice().to_vec();
+    lu_solve(&mut rows, b.as_mut_slice(), m)
 }
 
-/// [`solve_in_place`] on the top-left `n x n` block of `a` and the first `n` entries of `b`
-/// (entries outside the block are ignored, and may be changed).
-fn solve_block_in_place(a: &mut DMatrix<f64>, b: &mut DVector<f64>, n: usize) -> bool {
-    let mut scale: f64 = 1.0;
-    for j in 0..n {
-        for i in 0..n {
-            scale = scale.max(a[(i, j)].abs());
-        }
-    }
-    for k in 0..n {
+/// Gaussian elimination with partial pivoting on a row-major `m x m` matrix `a` (overwritten by
+/// its factors), `x` written into `b`. `false` if a pivot is NaN or at most
+/// [`SINGULAR_TOLERANCE`] times `max(1, max |a|)`. Row-major so row swaps and the elimination's
+/// row updates are contiguous; tested against nalgebra's LU.
+fn lu_solve(a: &mut [f64], b: &mut [f64], m: usize) -> bool {
+    assert!(a.len() == m * m && b.len() == m);
+    let scale = a.iter().fold(1.0f64, |s, x| s.max(x.abs()));
+    for k in 0..m {
         let mut p = k;
-        let mut best = a[(k, k)].abs();
-        for i in k + 1..n {
-            let x = a[(i, k)].abs();
+        let mut best = a[k * m + k].abs();
+        for i in k + 1..m {
+            let x = a[i * m + k].abs();
             if x > best {
                 best = x;
                 p = i;
@@ -1552,33 +1569,32 @@ fn solve_block_in_place(a: &mut DMatrix<f64>, b: &mut DVector<f64>, n: usize) ->
             return false;
         }
         if p != k {
-            a.swap_rows(k, p);
-            b.swap_rows(k, p);
+            let (top, bottom) = a.split_at_mut(p * m);
+            top[k * m..k * m + m].swap_with_slice(&mut bottom[..m]);
+            b.swap(k, p);
         }
-        let pivot = a[(k, k)];
-        for i in k + 1..n {
-            a[(i, k)] /= pivot;
-        }
+        let (top, bottom) = a.split_at_mut((k + 1) * m);
+        let pivot_row = &top[k * m..k * m + m];
+        let pivot = pivot_row[k];
         let bk = b[k];
-        for i in k + 1..n {
-            b[i] -= a[(i, k)] * bk;
-        }
-        for j in k + 1..n {
-            let akj = a[(k, j)];
-            if akj != 0.0 {
-                for i in k + 1..n {
-                    let l = a[(i, k)];
-                    a[(i, j)] -= l * akj;
+        for (r, row) in bottom.chunks_exact_mut(m).enumerate() {
+            let l = row[k] / pivot;
+            row[k] = l;
+            b[k + 1 + r] -= l * bk;
+            if l != 0.0 {
+                for (x, u) in row[k + 1..].iter_mut().zip(&pivot_row[k + 1..]) {
+                    *x -= l * u;
                 }
             }
         }
     }
-    for k in (0..n).rev() {
+    for k in (0..m).rev() {
+        let row = &a[k * m..k * m + m];
         let mut x = b[k];
-        for j in k + 1..n {
-            x -= a[(k, j)] * b[j];
+        for (u, bj) in row[k + 1..].iter().zip(&b[k + 1..]) {
+            x -= u * bj;
         }
-        b[k] = x / a[(k, k)];
+        b[k] = x / row[k];
     }
     true
 }
@@ -1759,6 +1775,43 @@ mod tests {
     }
 
     #[test]
+    fn lu_solve_matches_nalgebra_on_random_systems_and_detects_singular_ones() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        for m in 1..=12 {
+            for _ in 0..20 {
+                let a0 = DMatrix::from_fn(m, m, |_, _| if rnd() > 0.0 { rnd() } else { 0.0 });
+                let b0 = DVector::from_fn(m, |_, _| rnd());
+                let Some(expect) = a0.clone().lu().solve(&b0) else {
+                    continue;
+                };
+                if a0.clone().lu().determinant().abs() < 1e-6 {
+                    continue; // ill-conditioned: the two eliminations may differ a lot
+                }
+                let mut b = b0.clone();
+                assert!(solve_in_place(&a0, &mut b), "m={m}");
+                let err = (&b - &expect).amax() / expect.amax().max(1.0);
+                assert!(err < 1e-9, "m={m}: {err}");
+                // residual of our own answer
+                assert!((&a0 * &b - &b0).amax() < 1e-9, "m={m}");
+            }
+            if m >= 2 {
+                // two equal rows: singular, reported, never a division by ~0
+                let mut a = DMatrix::from_fn(m, m, |_, _| rnd());
+                let r0 = a.row(0).clone_owned();
+                a.set_row(m - 1, &r0);
+                let mut b = DVector::from_fn(m, |_, _| rnd());
+                assert!(!solve_in_place(&a, &mut b), "m={m}");
+            }
+        }
+    }
+
+    #[test]
     fn finite_horizon_by_hand() {
         for wait_reward in [1.0, 0.0] {
             let mut b = MdpBuilder::new(2, 2);
@@ -1889,8 +1942,8 @@ mod tests {
         let a0 = DMatrix::from_row_slice(3, 3, &[0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 4.0]);
         let b0 = DVector::from_row_slice(&[1.0, 2.0, 3.0]);
         let expect = a0.clone().lu().solve(&b0).unwrap();
-        let (mut a, mut b) = (a0, b0);
-        assert!(solve_in_place(&mut a, &mut b));
+        let mut b = b0;
+        assert!(solve_in_place(&a0, &mut b));
         assert!((b - expect).amax() < 1e-12);
     }
 
