@@ -951,7 +951,7 @@ table above and moves between runs.) Every case agrees with every peer; what is 
   250-300x pymdptoolbox; the fixed-count kernel does not apply, and the plain kernel is at ~1 ns
   per transition.
 - pgmpy's BeliefPropagation fails on the sensors network ("No sepset found": the network has four
-  disconnected parts, one per sensor group, and pgmpy's junction tree does not join them); VE and
+  disconnected parts, one per sensor: GPS, camera, lidar, fusion; pgmpy's junction tree does not join them); VE and
   pyAgrum cover it, and BP has no target.
 
 ## Decision cycle
