@@ -86,14 +86,14 @@ impl Model {
             }
         }
         for (i, a) in actions.actions.iter().enumerate() {
-            if let (Some(app), Some(v)) = (&a.app, &a.version) {
-                if !resources.catalogue.has_version(app, v) {
-                    return Err(SpecError::new(
-                        &file,
-                        format!("action[{i}]"),
-                        format!("variant {app}/{v} is not in params/variants.toml"),
-                    ));
-                }
+            if let (Some(app), Some(v)) = (&a.app, &a.version)
+                && !resources.catalogue.has_version(app, v)
+            {
+                return Err(SpecError::new(
+                    &file,
+                    format!("action[{i}]"),
+                    format!("variant {app}/{v} is not in params/variants.toml"),
+                ));
             }
         }
         Ok(Model {

@@ -281,12 +281,12 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
     println!();
     print!("{}", companion::decision::table(&first.records, &model));
     println!();
-    if let Some((n, Some(table))) = &first_allocations {
-        if *n > 0 {
-            println!();
-            println!("PANORAMA allocations ({n} re-allocation(s)):");
-            print!("{table}");
-        }
+    if let Some((n, Some(table))) = &first_allocations
+        && *n > 0
+    {
+        println!();
+        println!("PANORAMA allocations ({n} re-allocation(s)):");
+        print!("{table}");
     }
     println!(
         "outcome: {:?} after {} steps, battery {:.0}% left; tracking time {} steps",

@@ -129,7 +129,7 @@ pub struct ProjectionRule {
 
 impl ProjectionRule {
     fn matches(&self, obs: &Observations) -> bool {
-        if !self.states.is_empty() && !self.states.iter().any(|s| *s == obs.state) {
+        if !self.states.is_empty() && !self.states.contains(&obs.state) {
             return false;
         }
         match &self.observation {

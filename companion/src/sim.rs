@@ -523,11 +523,11 @@ impl<'a> World<'a> {
                     _ => None,
                 }
             };
-        if let Some(n) = next {
-            if n != self.phase {
-                self.phase = n;
-                self.enter_phase();
-            }
+        if let Some(n) = next
+            && n != self.phase
+        {
+            self.phase = n;
+            self.enter_phase();
         }
         if self.phase == "landing" {
             self.outcome.get_or_insert(Outcome::Landed);

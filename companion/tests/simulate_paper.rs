@@ -65,10 +65,10 @@ fn table8_mission_policy_tracks_at_least_as_long_as_safety() {
     }
 }
 
-fn first_with<'a>(
-    records: &'a [DecisionRecord],
+fn first_with(
+    records: &[DecisionRecord],
     f: impl Fn(&DecisionRecord) -> bool,
-) -> Option<&'a DecisionRecord> {
+) -> Option<&DecisionRecord> {
     records.iter().find(|r| f(r))
 }
 

@@ -87,7 +87,10 @@ pub fn px4_main_sub(custom_mode: u32) -> (u8, u8) {
 
 /// Our mode names (ArduPilot's where one exists), with the ArduPilot Copter number
 /// (ArduCopter/mode.h `Mode::Number`) and the PX4 (main, sub) that serves the same purpose.
-const MODES: &[(&str, Option<u32>, Option<(u8, u8)>)] = &[
+/// `(name, ArduPilot Copter mode number, PX4 (main, sub) mode)`.
+type ModeRow = (&'static str, Option<u32>, Option<(u8, u8)>);
+
+const MODES: &[ModeRow] = &[
     ("STABILIZE", Some(0), Some((px4_main::STABILIZED, 0))),
     ("ACRO", Some(1), Some((px4_main::ACRO, 0))),
     ("ALT_HOLD", Some(2), Some((px4_main::ALTCTL, 0))),
