@@ -729,8 +729,20 @@ pub fn load_mdp(
     }
     for (label, pt) in &points {
         m.values.copy_from_slice(pt);
-        for (s, a, tr, entry) in &rows {
-            let sum: f64 = tr.iter().map(|(_, e)| e.eval(pt)).sum();
+        for (_, _, tr, entry) in &rows {
+            // Each probability evaluated once per point (this check is most of a params load):
+            // the row sum, and the first entry outside [0, 1], reported after the sum as before.
+            let mut sum = 0.0;
+            let mut outside: Option<(usize, f64)> = None;
+            for (n, e) in tr {
+                let p = e.eval(pt);
+                sum += p;
+                if outside.is_none()
+                    && !(-LOAD_SUM_TOLERANCE..=1.0 + LOAD_SUM_TOLERANCE).contains(&p)
+                {
+                    outside = Some((*n, p));
+                }
+            }
             if (sum - 1.0).abs() > LOAD_SUM_TOLERANCE || !sum.is_finite() {
                 return Err(err(
                     path,
@@ -741,19 +753,15 @@ pub fn load_mdp(
                     ),
                 ));
             }
-            let _ = (s, a);
-            for (n, e) in tr {
-                let p = e.eval(pt);
-                if !(-LOAD_SUM_TOLERANCE..=1.0 + LOAD_SUM_TOLERANCE).contains(&p) {
-                    return Err(err(
-                        path,
-                        format!("{entry}.{}", f.states[*n]),
-                        format!(
-                            "probability {p} outside [0, 1] at {label} ({})",
-                            fmt_point(&m.vars, pt)
-                        ),
-                    ));
-                }
+            if let Some((n, p)) = outside {
+                return Err(err(
+                    path,
+                    format!("{entry}.{}", f.states[n]),
+                    format!(
+                        "probability {p} outside [0, 1] at {label} ({})",
+                        fmt_point(&m.vars, pt)
+                    ),
+                ));
             }
         }
         for pi in 0..m.policies.len() {
