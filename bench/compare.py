@@ -955,10 +955,12 @@ Speedup = peer median / companion median.
 table above and moves between runs.) Every case agrees with every peer; what is missed is speed.
 - Ratios on the paper-sized models swing by up to 2x from run to run on this shared 2-core
   machine (it alternates between a fast and a slow state for minutes at a time, for either side).
-  Three full runs in session 4, same code except the last kernel tweak: pymdptoolbox >= 300x met on
-  18, 15 and 20 of 25 cases, numpy >= 100x on 14, 14 and 17 of 26, Storm >= 10x on 1, 0 and 1 of 9.
-  The companion's own medians are the steadier figure: tracking fh 17.7 -> 8.6 us, vi 98 -> 41 us,
-  navigation/landing pi 2.1 -> 0.94 us between session 3's run and session 4's.
+  Four full runs in session 4 (the last with the companion timed in two blocks per model, the code
+  the same up to one kernel tweak): pymdptoolbox >= 300x met on 18, 15, 20 and 18 of 25 cases,
+  numpy >= 100x on 14, 14, 17 and 13 of 26, Storm >= 10x on 1, 0, 1 and 1 of 9. The companion's
+  own medians in the machine's fast state are the steadier figure: tracking fh 17.7 -> 8.6 us, vi
+  98 -> 41 us, navigation/landing pi 2.1 -> 0.94 us from session 3's run to session 4's third;
+  in a slow stretch both sides take up to twice as long.
 - Storm >= 10x (finite horizon only): one stormpy model-checking call costs ~17-20 us even on the
   6-state reference model (its fixed cost from Python into C++), and the companion solves the paper
   models in 2.6-24 us, so 10x needs 1.7-2.7 us solves: below what computing 48-84 stages of
