@@ -971,13 +971,13 @@ table above and moves between runs.) Every case agrees with every peer; what is 
   the bound only to win a benchmark would change what the solver guarantees.
 - numpy >= 100x on the larger and random models: from ~100 states on, numpy's per-stage cost is
   no longer interpreter overhead but vectorised arithmetic on the same transitions, so the ratio
-  tends to numpy's cost per transition over ours times the stages saved: 8-40x here. Policy
+  tends to numpy's cost per transition over ours times the stages saved: 8-45x here. Policy
   iteration at 100-1000 states: numpy evaluates with LAPACK's dense solve (fast at these sizes)
   where the companion uses sparse certified sweeps (which also scale to 10,000 states, where the
   dense matrix would need 800 MB). 100x there needs a different algorithm, not a faster loop.
-- monolithic (20 states, 95 choices with mixed successor counts): fh/vi/pi at 40-65x numpy and
-  250-300x pymdptoolbox; the fixed-count kernel does not apply, and the plain kernel is at ~1 ns
-  per transition.
+- monolithic (20 states, 95 choices with mixed successor counts): fh/vi/pi at 24-65x numpy and
+  180-300x pymdptoolbox over the session's runs; the fixed-count kernel does not apply, and the
+  plain kernel is at ~1 ns per transition. Small random models (10 states): fh/pi at 41-97x numpy.
 - pgmpy's BeliefPropagation fails on the sensors network ("No sepset found": the network has four
   disconnected parts, one per sensor: GPS, camera, lidar, fusion; pgmpy's junction tree does not join them); VE and
   pyAgrum cover it, and BP has no target.
