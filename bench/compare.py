@@ -927,7 +927,7 @@ inadmissible actions are given to it as self-loops with reward -1e7 and terminal
 zero-reward self-loops, which leaves the optimum unchanged. pymdptoolbox's `ValueIteration` stops
 on span(V_k+1 - V_k), which gives an epsilon-optimal policy but values that are not converged by
 design (off by 13-22 on the random models); since agreement needs converged values it is run
-with that stop disabled (`thresh = 0`, both public attributes) for exactly the sweeps the
+with that stop disabled (`thresh = 0`; `max_iter` set; both public attributes) for exactly the sweeps the
 sup-norm rule takes on the same model (numpy's count: the same Jacobi iteration from V = 0).
 Its default run is still measured and reported in the notes (sweeps, time, whether values agree).
 
