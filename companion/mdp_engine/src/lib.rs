@@ -1694,22 +1694,22 @@ mod tests {
         assert_eq!(s.value(1), 0.0);
     }
 
-    /// Finite horizon by hand: "wait" (action 0, reward 1, self loop) versus "cash" (action 1,
-    /// reward 5, to a terminal state). With h steps to go V_h = max(1 + V_{h-1}, 5): V_1 = 5
-    /// (cash), then V_h = h + 4 (wait). With a wait reward of 0 instead, V_h = 5 for all h and
-    /// from h = 2 on both actions tie, so the lowest index (wait) must be chosen.
+    /// Seeded xorshift64 uniform in [0, 1): the random models and systems of the tests below.
+    fn xorshift_unit(mut seed: u64) -> impl FnMut() -> f64 {
+        move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
     #[test]
     fn fixed_successor_kernels_match_the_general_one_bit_for_bit() {
         // Models where every choice has k successors take the kernels with k fixed at compile
         // time; clearing the marker sends the same model through the general kernel, which must
         // give identical bits (same summation order) for every k with a kernel, and more.
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut rnd = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = xorshift_unit(0x9e37_79b9_7f4a_7c15);
         for k in 1..=MAX_UNIFORM_SUCCESSORS as usize + 1 {
             let (n, m) = (12, 4);
             let mut b = MdpBuilder::new(n, m);
@@ -1772,13 +1772,9 @@ mod tests {
 
     #[test]
     fn lu_solve_matches_nalgebra_on_random_systems_and_detects_singular_ones() {
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut rnd = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        // uniform in [-1, 1)
+        let mut unit = xorshift_unit(0x2545_f491_4f6c_dd1d);
+        let mut rnd = move || unit() * 2.0 - 1.0;
         for m in 1..=12 {
             for _ in 0..20 {
                 let a0 = DMatrix::from_fn(m, m, |_, _| if rnd() > 0.0 { rnd() } else { 0.0 });
@@ -1807,6 +1803,10 @@ mod tests {
         }
     }
 
+    /// Finite horizon by hand: "wait" (action 0, reward 1, self loop) versus "cash" (action 1,
+    /// reward 5, to a terminal state). With h steps to go V_h = max(1 + V_{h-1}, 5): V_1 = 5
+    /// (cash), then V_h = h + 4 (wait). With a wait reward of 0 instead, V_h = 5 for all h and
+    /// from h = 2 on both actions tie, so the lowest index (wait) must be chosen.
     #[test]
     fn finite_horizon_by_hand() {
         for wait_reward in [1.0, 0.0] {
