@@ -996,7 +996,7 @@ impl Workspace {
     ///
     /// **Early stop with a certified bound.** Once the stage differences `g = V_b - V_{b+1}` have
     /// settled, the remaining stages are `V_{b-k} = V_b + k g` up to a bound proved from the
-    /// monotonicity of the Bellman operator (see [`FhCertificate`]); when that bound, propagated
+    /// monotonicity of the Bellman operator (see the private `FhCertificate`); when that bound, propagated
     /// over the remaining stages, is below [`FH_STOP_TOLERANCE`] relative to the values, the
     /// earlier stages are filled by that extrapolation (values) and by the last computed decision
     /// rule (actions), and [`FiniteHorizonSolution::stats`] reports the stages actually computed
@@ -1128,8 +1128,9 @@ impl Workspace {
     /// Policy iteration (paper eq. 4–5). Starts from the greedy policy for immediate rewards;
     /// evaluates each policy exactly by solving `(I - gamma P_pi) v = r_pi` over the non-terminal
     /// states (terminal states fixed at `v = 0`) with Gaussian elimination with partial pivoting
-    /// in a preallocated row-major buffer; improves by switching a state's action only when another is strictly better (so it
-    /// cannot cycle); stops when the policy is stable. `Stats::iterations` counts evaluations.
+    /// in a preallocated row-major buffer; improves by switching a state's action only when
+    /// another is strictly better (so it cannot cycle); stops when the policy is stable.
+    /// `Stats::iterations` counts evaluations.
     ///
     /// Evaluation is dense up to `cfg.dense_eval_max_states` states (O(|S|^2) memory, O(|S|^3)
     /// time). Above, it is sparse (sweeps of the policy's operator): O(transitions) per sweep,
@@ -1535,9 +1536,9 @@ fn check_gamma(g: f64) -> Result<(), SolveError> {
     }
 }
 
-/// Solves `a x = b` for a square `a` (a copy; `a` is left as given), `x` written into `b`, by
-/// [`lu_solve`]. Returns `false` if the matrix is singular.
-pub fn solve_in_place(a: &DMatrix<f64>, b: &mut DVector<f64>) -> bool {
+/// Solves `a x = b` for a square `a` (left as given: a row-major copy is factored), `x` written
+/// into `b`, by `lu_solve`. Returns `false` if the matrix is singular.
+pub fn solve_dense(a: &DMatrix<f64>, b: &mut DVector<f64>) -> bool {
     let m = a.nrows();
     assert!(a.ncols() == m && b.len() == m);
     let mut rows: Vec<f64> = a.transpose().as_slice().to_vec();
@@ -1786,7 +1787,7 @@ mod tests {
                     continue; // ill-conditioned: the two eliminations may differ a lot
                 }
                 let mut b = b0.clone();
-                assert!(solve_in_place(&a0, &mut b), "m={m}");
+                assert!(solve_dense(&a0, &mut b), "m={m}");
                 let err = (&b - &expect).amax() / expect.amax().max(1.0);
                 assert!(err < 1e-9, "m={m}: {err}");
                 // residual of our own answer
@@ -1798,7 +1799,7 @@ mod tests {
                 let r0 = a.row(0).clone_owned();
                 a.set_row(m - 1, &r0);
                 let mut b = DVector::from_fn(m, |_, _| rnd());
-                assert!(!solve_in_place(&a, &mut b), "m={m}");
+                assert!(!solve_dense(&a, &mut b), "m={m}");
             }
         }
     }
@@ -1934,12 +1935,12 @@ mod tests {
     }
 
     #[test]
-    fn solve_in_place_matches_nalgebra_lu() {
+    fn solve_dense_matches_nalgebra_lu() {
         let a0 = DMatrix::from_row_slice(3, 3, &[0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 4.0]);
         let b0 = DVector::from_row_slice(&[1.0, 2.0, 3.0]);
         let expect = a0.clone().lu().solve(&b0).unwrap();
         let mut b = b0;
-        assert!(solve_in_place(&a0, &mut b));
+        assert!(solve_dense(&a0, &mut b));
         assert!((b - expect).amax() < 1e-12);
     }
 
