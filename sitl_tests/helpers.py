@@ -20,7 +20,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 def companion_fly_cmd(exe: str, connect_url: str, log_dir: Path, mission: Optional[Path] = None,
                       signing_key_file: Optional[Path] = None, extra: Iterable[str] = ()) -> List[str]:
-    cmd = [exe, "fly", "--connect", connect_url, "--log-dir", str(log_dir)]
+    # --auto-start: the tests fly without an operator (the operator-start tests drop it from `extra`).
+    cmd = [exe, "fly", "--connect", connect_url, "--log-dir", str(log_dir), "--auto-start"]
     if mission is not None:
         cmd += ["--mission", str(mission)]
     if signing_key_file is not None:

@@ -257,6 +257,7 @@ fn main() -> anyhow::Result<()> {
         params: Some(o.params.clone()),
         duration: None,
         log_dir: "runs".into(),
+        auto_start: true,
     };
     let setup = FlySetup::load(&args)?;
     let spec = WorldSpec::load(&o.params)?;

@@ -70,6 +70,7 @@ fn fly_args(params: &Path) -> FlyArgs {
         params: Some(params.to_path_buf()),
         duration: None,
         log_dir: PathBuf::from("runs"),
+        auto_start: true,
     }
 }
 

@@ -99,6 +99,10 @@ pub struct FlyArgs {
     /// printed at the start).
     #[arg(long, default_value = crate::decision_log::DEFAULT_RUNS_DIR)]
     pub log_dir: PathBuf,
+    /// For SITL and tests only: start the mission (mode, arm, take-off) as soon as the autopilot
+    /// is ready, without waiting for the operator.
+    #[arg(long)]
+    pub auto_start: bool,
 }
 
 /// The decision log as a record sink: records go to its writer thread (never blocking the loop).
