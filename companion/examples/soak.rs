@@ -258,6 +258,8 @@ fn main() -> anyhow::Result<()> {
         duration: None,
         log_dir: "runs".into(),
         auto_start: true,
+        autopilot_sysid: None,
+        connect_timeout: None,
     };
     let setup = FlySetup::load(&args)?;
     let spec = WorldSpec::load(&o.params)?;

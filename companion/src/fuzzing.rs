@@ -71,6 +71,8 @@ fn fly_args(params: &Path) -> FlyArgs {
         duration: None,
         log_dir: PathBuf::from("runs"),
         auto_start: true,
+        autopilot_sysid: None,
+        connect_timeout: None,
     }
 }
 

@@ -103,6 +103,14 @@ pub struct FlyArgs {
     /// is ready, without waiting for the operator.
     #[arg(long)]
     pub auto_start: bool,
+    /// Command only the autopilot with this MAVLink system id (when several speak on the link);
+    /// default: the first autopilot heard. Others are reported, never obeyed.
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
+    pub autopilot_sysid: Option<u8>,
+    /// Exit with an error when no autopilot HEARTBEAT arrives within this time (e.g. 30s);
+    /// default: wait (and retry the connection) for ever.
+    #[arg(long, value_parser = parse_duration)]
+    pub connect_timeout: Option<Duration>,
 }
 
 /// The decision log as a record sink: records go to its writer thread (never blocking the loop).
@@ -267,10 +275,16 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
     let setup = FlySetup::load(&args)?;
     let mut shell = Shell::new(&setup);
     let mut vehicle = setup.vehicle(args.link_timeout);
+    vehicle.cfg.autopilot_sysid = args.autopilot_sysid;
     let signing = || setup.key.map(ingest::signing_data);
     let mut ingest = Ingest::new(signing());
     let mut encoder = Encoder::new(signing());
-    let mut link = transport::spawn(args.connect.clone(), Duration::from_secs(1));
+    let retry = Duration::from_secs(1);
+    let mut link = transport::spawn(args.connect.clone(), retry);
+    let mut udp_peer = transport::UdpPeer::default();
+    let mut link_failures = transport::FailureLines::new(Duration::from_secs(10));
+    let mut onboard_failures = transport::FailureLines::new(Duration::from_secs(10));
+    tracing::info!(url = %args.connect, "connecting to the autopilot");
     // Receive-only, but the handle (and its outbound sender) must live as long as the loop.
     let mut onboard = args
         .onboard
@@ -285,6 +299,7 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
     let mut periodic = tokio::time::interval(Duration::from_secs_f64(setup.link.decision_period_s));
     periodic.tick().await; // the first tick is immediate; the first cycle waits for telemetry
     let stop_at = args.duration.map(|d| start + d);
+    let connect_by = args.connect_timeout.map(|d| start + d);
     let mut report = FlyReport::default();
     let mut transport_events: Vec<String> = Vec::new();
     let ctrl_c = tokio::signal::ctrl_c();
@@ -307,16 +322,47 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
                     shell.set_ingest(ingest.stats);
                     trigger = Some(t);
                 }
+                Some(Inbound::Datagram(b, from)) => {
+                    let t = now();
+                    for f in ingest.push(&b) {
+                        if let Some(w) = tlog.as_mut() {
+                            w.received(&f);
+                        }
+                        out.extend(vehicle.on_frame(t, &f));
+                        // Replies go to the autopilot's address, learned from its own frames only.
+                        let src = (f.header.system_id.min(255) as u8, f.header.component_id);
+                        let autopilot = (vehicle.target == Some(src)).then_some(src);
+                        if let Some(ev) = udp_peer.on_frame(from, autopilot) {
+                            tracing::info!("{ev}");
+                            let _ = link.peer.send(udp_peer.addr);
+                            transport_events.push(ev);
+                        }
+                    }
+                    ingest.set_our_system(vehicle.our_system());
+                    shell.set_ingest(ingest.stats);
+                    trigger = Some(t);
+                }
                 Some(Inbound::Connected(name)) => {
                     ingest.reset();
                     vehicle.on_reconnect(now());
+                    if let Some(line) = link_failures.connected(&name) {
+                        eprintln!("companion fly: {line}");
+                    }
+                    tracing::info!("connected {name}");
                     transport_events.push(format!("connected {name}"));
                 }
-                Some(Inbound::Disconnected(why)) => transport_events.push(format!("disconnected: {why}")),
+                Some(Inbound::Disconnected(why)) => {
+                    if let Some(line) = link_failures.failed(now(), &why, retry) {
+                        tracing::warn!("autopilot link: {line}");
+                        eprintln!("companion fly: autopilot link {}: {line}", args.connect);
+                    }
+                    transport_events.push(format!("disconnected: {why}"));
+                }
                 None => anyhow::bail!("the transport task stopped"),
             },
             m = async { match &mut onboard { Some(h) => h.inbound.recv().await, None => std::future::pending().await } } => match m {
-                Some(Inbound::Bytes(b)) => {
+                // Receive-only: a udpin onboard link never learns a reply address.
+                Some(Inbound::Bytes(b) | Inbound::Datagram(b, _)) => {
                     let t = now();
                     for f in onboard_ingest.push(&b) {
                         if let Some(w) = tlog.as_mut() {
@@ -328,9 +374,18 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
                 }
                 Some(Inbound::Connected(name)) => {
                     onboard_ingest.reset();
+                    if let Some(line) = onboard_failures.connected(&name) {
+                        eprintln!("companion fly: onboard {line}");
+                    }
                     transport_events.push(format!("onboard connected {name}"));
                 }
-                Some(Inbound::Disconnected(why)) => transport_events.push(format!("onboard disconnected: {why}")),
+                Some(Inbound::Disconnected(why)) => {
+                    if let Some(line) = onboard_failures.failed(now(), &why, retry) {
+                        tracing::warn!("onboard link: {line}");
+                        eprintln!("companion fly: onboard link: {line}");
+                    }
+                    transport_events.push(format!("onboard disconnected: {why}"));
+                }
                 None => anyhow::bail!("the onboard transport task stopped"),
             },
             _ = heartbeat.tick() => out.push(Vehicle::heartbeat()),
@@ -339,6 +394,17 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
                 if vehicle.target.is_some() {
                     run_cycle_at(&mut decider, &mut shell, &mut vehicle, &mut encoder, &link.outbound, &mut tlog, sink, now(), now, &mut report, &mut transport_events).await?;
                 }
+            },
+            _ = async { match connect_by { Some(t) if vehicle.target.is_none() => tokio::time::sleep_until(t).await, _ => std::future::pending().await } } => {
+                let waited = args.connect_timeout.unwrap_or_default();
+                let msg = format!(
+                    "no autopilot HEARTBEAT on {} within {:?} (--connect-timeout){}",
+                    args.connect,
+                    waited,
+                    if vehicle.other_autopilot_heartbeats > 0 { "; other autopilots were heard, see --autopilot-sysid" } else { "" }
+                );
+                tracing::error!("{msg}");
+                anyhow::bail!(msg);
             },
             _ = &mut ctrl_c => break,
             _ = async { match stop_at { Some(t) => tokio::time::sleep_until(t).await, None => std::future::pending().await } } => break,

@@ -27,10 +27,76 @@ pub struct TelemetryConfig {
     /// `target_detected` above this counts as a detection.
     #[serde(default = "half")]
     pub detection_threshold: f64,
+    /// Who may report onboard-monitor values besides the autopilot itself.
+    #[serde(default)]
+    pub monitors: MonitorSources,
+    /// At most this many distinct unmapped NAMED_VALUE_FLOAT names (`onboard.<name>`) are kept;
+    /// more are counted and dropped, so a flood of names cannot grow every record.
+    #[serde(default = "default_max_onboard_names")]
+    pub max_onboard_names: usize,
+    /// Observation name -> [min, max]: a monitor value outside is counted and dropped (the last
+    /// good value stays). Names not listed need only be finite.
+    #[serde(default)]
+    pub ranges: BTreeMap<String, [f64; 2]>,
 }
 
 fn half() -> f64 {
     0.5
+}
+
+fn default_max_onboard_names() -> usize {
+    32
+}
+
+/// Onboard-monitor sources (NAMED_VALUE_FLOAT, DISTANCE_SENSOR, OBSTACLE_DISTANCE,
+/// CAMERA_TRACKING_IMAGE_STATUS) accepted besides the chosen autopilot, which always is.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MonitorSources {
+    /// Component ids on the autopilot's own system (its system id, once chosen).
+    #[serde(default)]
+    pub autopilot_system_components: Vec<u8>,
+    /// Further [system id, component id] pairs.
+    #[serde(default)]
+    pub sources: Vec<[u8; 2]>,
+}
+
+/// MAV_COMP_ID_CAMERA: the tracker and landing-zone finder in the tests and the stand-in.
+pub const DEFAULT_MONITOR_COMPONENTS: [u8; 1] = [100];
+
+impl Default for MonitorSources {
+    fn default() -> Self {
+        Self {
+            autopilot_system_components: DEFAULT_MONITOR_COMPONENTS.to_vec(),
+            sources: Vec::new(),
+        }
+    }
+}
+
+impl MonitorSources {
+    /// May `(sys, comp)` report monitor values, given the chosen autopilot (None: not yet)?
+    pub fn allows(&self, sys: u8, comp: u8, autopilot: Option<(u8, u8)>) -> bool {
+        match autopilot {
+            Some(ap) if ap == (sys, comp) => true,
+            Some((ap_sys, _))
+                if ap_sys == sys && self.autopilot_system_components.contains(&comp) =>
+            {
+                true
+            }
+            _ => self.sources.contains(&[sys, comp]),
+        }
+    }
+}
+
+/// Telemetry refused for being implausible, counted since start.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Rejected {
+    /// Values outside `[telemetry.ranges]`, non-finite, or positions off the globe.
+    pub out_of_range: u64,
+    /// Unmapped names beyond `max_onboard_names`.
+    pub names_dropped: u64,
+    /// The latest value refused, for the link event (`zone_north_m = 1e9`).
+    pub last: Option<String>,
 }
 
 /// Onboard monitor NAMED_VALUE_FLOAT names and the observation each reports, when
@@ -56,6 +122,9 @@ impl Default for TelemetryConfig {
             battery_thresholds_pct: vec![50.0, 30.0, 20.0, 10.0],
             distance_max_age_s: 2.0,
             detection_threshold: 0.5,
+            monitors: MonitorSources::default(),
+            max_onboard_names: default_max_onboard_names(),
+            ranges: BTreeMap::new(),
         }
     }
 }
@@ -86,6 +155,9 @@ pub struct Telemetry {
     distances: BTreeMap<u8, (f64, Duration)>,
     obstacle_scan: Option<(f64, Duration)>,
     pub last_text: Option<String>,
+    /// Unmapped onboard names kept so far (bounded by `max_onboard_names`).
+    onboard_names: usize,
+    pub rejected: Rejected,
 }
 
 impl Telemetry {
@@ -151,6 +223,13 @@ impl Telemetry {
                     self.set("consumed_mah", b.current_consumed as f64);
                 }
             }
+            Msg::GLOBAL_POSITION_INT(p) if !on_globe(p.lat, p.lon) => {
+                self.reject(format!("GLOBAL_POSITION_INT lat {} lon {}", p.lat, p.lon))
+            }
+            Msg::HOME_POSITION(h) if !on_globe(h.latitude, h.longitude) => self.reject(format!(
+                "HOME_POSITION lat {} lon {}",
+                h.latitude, h.longitude
+            )),
             Msg::GLOBAL_POSITION_INT(p) => {
                 let heading_deg = (p.hdg != u16::MAX).then(|| p.hdg as f64 / 100.0);
                 let pos = Position {
@@ -247,15 +326,9 @@ impl Telemetry {
                 }
             }
             Msg::NAMED_VALUE_FLOAT(n) => {
-                let name = n.name.to_str().unwrap_or("").trim().to_string();
-                if !name.is_empty() && n.value.is_finite() {
-                    let obs = self
-                        .cfg
-                        .onboard
-                        .get(&name)
-                        .cloned()
-                        .unwrap_or_else(|| format!("onboard.{name}"));
-                    self.set(&obs, n.value as f64);
+                let name = n.name.to_str().unwrap_or("").trim();
+                if !name.is_empty() {
+                    self.on_named_value(name, n.value);
                 }
             }
             Msg::SYSTEM_TIME(t) => {
@@ -300,6 +373,39 @@ impl Telemetry {
 
     fn set(&mut self, name: &str, v: f64) {
         self.values.insert(name.to_string(), v);
+    }
+
+    fn reject(&mut self, what: String) {
+        self.rejected.out_of_range += 1;
+        self.rejected.last = Some(what);
+    }
+
+    /// One NAMED_VALUE_FLOAT: mapped to its observation, checked against its declared range,
+    /// and, when unmapped, kept only while the number of such names is under the cap.
+    fn on_named_value(&mut self, name: &str, value: f32) {
+        let (obs, mapped) = match self.cfg.onboard.get(name) {
+            Some(o) => (o.clone(), true),
+            None => (format!("onboard.{name}"), false),
+        };
+        let v = value as f64;
+        let in_range = v.is_finite()
+            && self
+                .cfg
+                .ranges
+                .get(&obs)
+                .is_none_or(|[lo, hi]| (*lo..=*hi).contains(&v));
+        if !in_range {
+            self.reject(format!("{obs} = {value}"));
+            return;
+        }
+        if !mapped && !self.values.contains_key(&obs) {
+            if self.onboard_names >= self.cfg.max_onboard_names {
+                self.rejected.names_dropped += 1;
+                return;
+            }
+            self.onboard_names += 1;
+        }
+        self.set(&obs, v);
     }
 
     /// Nearest horizontal obstacle from fresh distance sensors and the proximity scan.
@@ -359,6 +465,12 @@ impl Telemetry {
     }
 }
 
+/// A position (degrees * 1e7) on the globe: latitude within ±90°, longitude within ±180°.
+pub fn on_globe(lat_e7: i32, lon_e7: i32) -> bool {
+    (-900_000_000..=900_000_000).contains(&lat_e7)
+        && (-1_800_000_000..=1_800_000_000).contains(&lon_e7)
+}
+
 /// Metres north and east from `a` to `b` (equirectangular; fine over a mission's few km).
 pub fn offset_m(a: (i32, i32), b: (i32, i32)) -> (f64, f64) {
     const M_PER_DEG: f64 = 111_319.49;
@@ -374,10 +486,11 @@ pub fn displace(a: (i32, i32), north_m: f64, east_m: f64) -> (i32, i32) {
     let lat = a.0 as f64 * 1e-7;
     let dlat = north_m / M_PER_DEG;
     let dlon = east_m / (M_PER_DEG * lat.to_radians().cos().max(1e-6));
-    (
-        (a.0 as f64 + dlat * 1e7).round() as i32,
-        (a.1 as f64 + dlon * 1e7).round() as i32,
-    )
+    // Stays on the globe: latitude clamped to the poles, longitude wrapped across ±180°.
+    let lat_e7 = (a.0 as f64 + dlat * 1e7).clamp(-900_000_000.0, 900_000_000.0);
+    let lon_e7 =
+        (a.1 as f64 + dlon * 1e7 + 1_800_000_000.0).rem_euclid(3_600_000_000.0) - 1_800_000_000.0;
+    (lat_e7.round() as i32, lon_e7.round() as i32)
 }
 
 #[cfg(test)]
@@ -641,6 +754,99 @@ mod tests {
             (Some(3.0), Some(11.0))
         );
         assert_eq!(t.position.unwrap().heading_deg, Some(90.0));
+    }
+
+    #[test]
+    fn monitor_values_outside_their_range_are_refused_and_counted() {
+        let mut cfg = TelemetryConfig::default();
+        cfg.onboard.insert("zone_n".into(), "zone_north_m".into());
+        cfg.ranges.insert("zone_north_m".into(), [-1000.0, 1000.0]);
+        let mut t = Telemetry::new(cfg);
+        t.on_message(s(0.0), &nvf("zone_n", 40.0), name);
+        t.on_message(s(0.1), &nvf("zone_n", -2.0e7), name);
+        t.on_message(s(0.2), &nvf("zone_n", f32::NAN), name);
+        t.on_message(s(0.3), &nvf("other", f32::INFINITY), name);
+        assert_eq!(
+            t.get("zone_north_m"),
+            Some(40.0),
+            "the last good value stays"
+        );
+        assert_eq!(t.get("onboard.other"), None);
+        assert_eq!(t.rejected.out_of_range, 3);
+        assert_eq!(t.rejected.last.as_deref(), Some("onboard.other = inf"));
+    }
+
+    #[test]
+    fn unmapped_names_are_capped_and_the_rest_counted() {
+        let cfg = TelemetryConfig {
+            max_onboard_names: 4,
+            ..TelemetryConfig::default()
+        };
+        let mut t = Telemetry::new(cfg);
+        for i in 0..1000 {
+            t.on_message(s(0.0), &nvf(&format!("n{i}"), 1.0), name);
+        }
+        // Names already kept still update; mapped names always pass.
+        t.on_message(s(1.0), &nvf("n0", 7.0), name);
+        t.on_message(s(1.0), &nvf("lum", 300.0), name);
+        let o = t.observations(s(1.0), vec![]);
+        let onboard = o
+            .values
+            .keys()
+            .filter(|k| k.starts_with("onboard."))
+            .count();
+        assert_eq!(onboard, 4);
+        assert_eq!(o.get("onboard.n0"), Some(7.0));
+        assert_eq!(o.get("luminosity_lux"), Some(300.0));
+        assert_eq!(t.rejected.names_dropped, 996);
+    }
+
+    #[test]
+    fn positions_off_the_globe_are_refused() {
+        let mut t = Telemetry::new(TelemetryConfig::default());
+        let pos = |lat, lon| {
+            Msg::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
+                lat,
+                lon,
+                ..GLOBAL_POSITION_INT_DATA::DEFAULT
+            })
+        };
+        t.on_message(s(0.0), &pos(473_977_420, 85_455_940), name);
+        t.on_message(s(0.1), &pos(950_000_000, 85_455_940), name);
+        t.on_message(s(0.2), &pos(473_977_420, -1_813_000_000), name);
+        assert_eq!(t.position.unwrap().lat_e7, 473_977_420);
+        assert_eq!(t.get("lon_deg"), Some(85_455_940.0 * 1e-7));
+        assert_eq!(t.rejected.out_of_range, 2);
+    }
+
+    #[test]
+    fn displace_stays_on_the_globe() {
+        let (lat, lon) = displace((0, 1_799_999_000), 0.0, 500.0);
+        assert!(
+            on_globe(lat, lon) && lon < -1_799_000_000,
+            "wrapped east: {lon}"
+        );
+        let (lat, _) = displace((899_999_000, 0), 5_000.0, 0.0);
+        assert_eq!(lat, 900_000_000);
+    }
+
+    #[test]
+    fn monitor_sources_follow_the_allow_list() {
+        let m = MonitorSources {
+            autopilot_system_components: vec![100],
+            sources: vec![[42, 7]],
+        };
+        let ap = Some((1, 1));
+        assert!(m.allows(1, 1, ap), "the autopilot itself");
+        assert!(m.allows(1, 100, ap), "camera of the autopilot's system");
+        assert!(!m.allows(1, 101, ap));
+        assert!(!m.allows(99, 100, ap), "same component id, another system");
+        assert!(m.allows(42, 7, ap), "named pair");
+        assert!(
+            !m.allows(1, 100, None),
+            "no autopilot chosen yet: its system is unknown"
+        );
+        assert!(m.allows(42, 7, None));
     }
 
     #[test]

@@ -1,19 +1,29 @@
 //! Byte transports on tokio: TCP (client, reconnecting), TCP server (accepts again after the
 //! client leaves), UDP in/out, serial (tokio-serial, reopened after an error). A supervisor task
 //! owns the connection and reports bytes and (re)connections; framing is the ingest's job.
+//!
+//! A `udpin` socket never answers whoever sent the last datagram: it replies only to the peer
+//! the fly loop sets ([`TransportHandle::peer`]), which it learns from valid MAVLink frames of the
+//! chosen autopilot ([`UdpPeer`]). Junk datagrams get nothing back.
 
 use super::url::ConnectUrl;
 use std::net::SocketAddr;
 use std::time::Duration;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream, UdpSocket};
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, watch};
+
+/// A TCP connect that hears nothing (a black-holed address) fails after this long instead of
+/// the kernel's two minutes of SYN retries, so the operator hears about it within seconds.
+const TCP_CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// What the transport reports.
 #[derive(Debug)]
 pub enum Inbound {
     Connected(String),
     Bytes(Vec<u8>),
+    /// `udpin` only: one datagram and who sent it (replies go to [`TransportHandle::peer`]).
+    Datagram(Vec<u8>, SocketAddr),
     Disconnected(String),
 }
 
@@ -21,6 +31,8 @@ pub enum Inbound {
 pub struct TransportHandle {
     pub inbound: mpsc::Receiver<Inbound>,
     pub outbound: mpsc::Sender<Vec<u8>>,
+    /// `udpin` reply address; `None` (the start) sends nothing. Ignored by other transports.
+    pub peer: watch::Sender<Option<SocketAddr>>,
     pub task: tokio::task::JoinHandle<()>,
 }
 
@@ -28,10 +40,12 @@ pub struct TransportHandle {
 pub fn spawn(url: ConnectUrl, retry: Duration) -> TransportHandle {
     let (in_tx, in_rx) = mpsc::channel(256);
     let (out_tx, out_rx) = mpsc::channel(256);
-    let task = tokio::spawn(supervise(url, retry, in_tx, out_rx));
+    let (peer_tx, peer_rx) = watch::channel(None);
+    let task = tokio::spawn(supervise(url, retry, in_tx, out_rx, peer_rx));
     TransportHandle {
         inbound: in_rx,
         outbound: out_tx,
+        peer: peer_tx,
         task,
     }
 }
@@ -41,17 +55,26 @@ async fn supervise(
     retry: Duration,
     tx: mpsc::Sender<Inbound>,
     mut rx: mpsc::Receiver<Vec<u8>>,
+    peer: watch::Receiver<Option<SocketAddr>>,
 ) {
     let mut listener: Option<TcpListener> = None;
     loop {
         let result = match &url {
-            ConnectUrl::TcpOut { peer } => match TcpStream::connect(peer.as_str()).await {
-                Ok(s) => {
-                    let _ = s.set_nodelay(true);
-                    run_stream(s, &format!("tcp:{peer}"), &tx, &mut rx).await
+            ConnectUrl::TcpOut { peer } => {
+                match tokio::time::timeout(TCP_CONNECT_TIMEOUT, TcpStream::connect(peer.as_str()))
+                    .await
+                {
+                    Ok(Ok(s)) => {
+                        let _ = s.set_nodelay(true);
+                        run_stream(s, &format!("tcp:{peer}"), &tx, &mut rx).await
+                    }
+                    Ok(Err(e)) => Err(format!("tcp connect {peer}: {e}")),
+                    Err(_) => Err(format!(
+                        "tcp connect {peer}: no answer within {}s (host unreachable?)",
+                        TCP_CONNECT_TIMEOUT.as_secs()
+                    )),
                 }
-                Err(e) => Err(format!("tcp connect {peer}: {e}")),
-            },
+            }
             ConnectUrl::TcpIn { bind } => {
                 if listener.is_none() {
                     match TcpListener::bind(bind.as_str()).await {
@@ -74,7 +97,10 @@ async fn supervise(
                 }
             }
             ConnectUrl::UdpIn { bind } => match UdpSocket::bind(bind.as_str()).await {
-                Ok(s) => run_udp(s, None, &format!("udpin:{bind}"), &tx, &mut rx).await,
+                Ok(s) => {
+                    let p = UdpReply::Learned(peer.clone());
+                    run_udp(s, p, &format!("udpin:{bind}"), &tx, &mut rx).await
+                }
                 Err(e) => Err(format!("udpin bind {bind}: {e}")),
             },
             ConnectUrl::UdpOut { peer } => match resolve(peer).await {
@@ -86,7 +112,8 @@ async fn supervise(
                     };
                     match UdpSocket::bind(local).await {
                         Ok(s) => {
-                            run_udp(s, Some(addr), &format!("udpout:{peer}"), &tx, &mut rx).await
+                            let p = UdpReply::Fixed(addr);
+                            run_udp(s, p, &format!("udpout:{peer}"), &tx, &mut rx).await
                         }
                         Err(e) => Err(format!("udpout bind: {e}")),
                     }
@@ -160,10 +187,18 @@ where
     }
 }
 
-/// UDP: `peer` fixed (udpout) or learned from the last sender (udpin).
+/// Where UDP replies go.
+enum UdpReply {
+    /// udpout: the configured peer; datagrams arrive as plain bytes.
+    Fixed(SocketAddr),
+    /// udpin: the address the fly loop learned from the autopilot's frames (none yet: drop).
+    Learned(watch::Receiver<Option<SocketAddr>>),
+}
+
+/// UDP both ways until the socket fails. Ok(()) means our side shut down.
 async fn run_udp(
     s: UdpSocket,
-    mut peer: Option<SocketAddr>,
+    reply: UdpReply,
     name: &str,
     tx: &mpsc::Sender<Inbound>,
     rx: &mut mpsc::Receiver<Vec<u8>>,
@@ -171,24 +206,166 @@ async fn run_udp(
     if tx.send(Inbound::Connected(name.to_string())).await.is_err() {
         return Ok(());
     }
-    let learn = peer.is_none();
     let mut buf = vec![0u8; 65536];
     loop {
         tokio::select! {
             r = s.recv_from(&mut buf) => match r {
                 Ok((n, from)) => {
-                    if learn { peer = Some(from); }
-                    if tx.send(Inbound::Bytes(buf[..n].to_vec())).await.is_err() { return Ok(()) }
+                    let bytes = buf[..n].to_vec();
+                    let m = match reply {
+                        UdpReply::Fixed(_) => Inbound::Bytes(bytes),
+                        UdpReply::Learned(_) => Inbound::Datagram(bytes, from),
+                    };
+                    if tx.send(m).await.is_err() { return Ok(()) }
                 }
                 // ICMP "port unreachable" from an absent udpout peer surfaces here; keep going.
                 Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => {}
                 Err(e) => return Err(format!("{name}: recv: {e}")),
             },
             m = rx.recv() => match m {
-                // udpin with no sender yet: nobody to send to, drop.
-                Some(bytes) => if let Some(p) = peer { let _ = s.send_to(&bytes, p).await; },
+                Some(bytes) => {
+                    let to = match &reply {
+                        UdpReply::Fixed(a) => Some(*a),
+                        UdpReply::Learned(w) => *w.borrow(),
+                    };
+                    // udpin before the autopilot is known: nobody to send to, drop.
+                    if let Some(p) = to { let _ = s.send_to(&bytes, p).await; }
+                }
                 None => return Ok(()),
             },
         }
+    }
+}
+
+/// The `udpin` reply address, sans IO: taken from the first valid frame of the chosen
+/// autopilot, then changed only by another valid frame of that same autopilot (it moved, e.g.
+/// a new port after its restart). Datagrams from anyone else never move it.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct UdpPeer {
+    pub addr: Option<SocketAddr>,
+}
+
+impl UdpPeer {
+    /// A valid frame arrived from `from`; `autopilot` is its (system, component) when that is
+    /// the chosen autopilot's, else None. Returns the link event when the reply address changed.
+    pub fn on_frame(&mut self, from: SocketAddr, autopilot: Option<(u8, u8)>) -> Option<String> {
+        let (sys, comp) = autopilot?;
+        match self.addr.replace(from) {
+            None => Some(format!(
+                "udpin peer {from} learned from autopilot {sys}/{comp}"
+            )),
+            Some(old) if old != from => Some(format!(
+                "udpin peer changed {old} -> {from} (autopilot {sys}/{comp})"
+            )),
+            Some(_) => None,
+        }
+    }
+}
+
+/// Connection failures said aloud without flooding: the first at once, then at most one line
+/// per `every` with how many failed in between; the next connection says how many it took.
+#[derive(Debug, Clone)]
+pub struct FailureLines {
+    every: Duration,
+    last_line: Option<Duration>,
+    failures: u32,
+    unsaid: u32,
+}
+
+impl FailureLines {
+    pub fn new(every: Duration) -> Self {
+        Self {
+            every,
+            last_line: None,
+            failures: 0,
+            unsaid: 0,
+        }
+    }
+
+    /// A failed attempt (`why` names the endpoint and the reason); the line to print, if due.
+    pub fn failed(&mut self, now: Duration, why: &str, retry: Duration) -> Option<String> {
+        self.failures += 1;
+        let due = self
+            .last_line
+            .is_none_or(|t| now.saturating_sub(t) >= self.every);
+        if !due {
+            self.unsaid += 1;
+            return None;
+        }
+        let more = match self.unsaid {
+            0 => String::new(),
+            n => format!(" ({n} more failed attempts since the last line)"),
+        };
+        self.last_line = Some(now);
+        self.unsaid = 0;
+        Some(format!(
+            "{why}; retrying every {}s{more}",
+            retry.as_secs_f64()
+        ))
+    }
+
+    /// Connected: the line to print when failures came before, and a fresh count.
+    pub fn connected(&mut self, name: &str) -> Option<String> {
+        let n = std::mem::take(&mut self.failures);
+        self.unsaid = 0;
+        self.last_line = None;
+        (n > 0).then(|| format!("connected {name} after {n} failed attempts"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn addr(s: &str) -> SocketAddr {
+        s.parse().unwrap()
+    }
+
+    #[test]
+    fn udp_peer_is_learned_only_from_the_autopilot() {
+        let mut p = UdpPeer::default();
+        assert_eq!(p.on_frame(addr("10.0.0.9:1234"), None), None);
+        assert_eq!(p.addr, None, "a frame from anyone else teaches nothing");
+        let ev = p.on_frame(addr("127.0.0.1:14555"), Some((1, 1))).unwrap();
+        assert!(
+            ev.contains("learned") && ev.contains("127.0.0.1:14555"),
+            "{ev}"
+        );
+        assert_eq!(p.on_frame(addr("127.0.0.1:14555"), Some((1, 1))), None);
+        assert_eq!(p.on_frame(addr("10.0.0.9:1234"), None), None);
+        assert_eq!(p.addr, Some(addr("127.0.0.1:14555")));
+        let ev = p.on_frame(addr("127.0.0.1:14600"), Some((1, 1))).unwrap();
+        assert!(
+            ev.contains("changed 127.0.0.1:14555 -> 127.0.0.1:14600"),
+            "{ev}"
+        );
+    }
+
+    #[test]
+    fn failure_lines_are_rate_limited_and_counted() {
+        let s = |v: f64| Duration::from_secs_f64(v);
+        let mut f = FailureLines::new(s(10.0));
+        let retry = s(1.0);
+        let first = f
+            .failed(s(0.0), "tcp connect 127.0.0.1:1: refused", retry)
+            .unwrap();
+        assert!(
+            first.contains("127.0.0.1:1") && first.contains("retrying"),
+            "{first}"
+        );
+        for t in 1..10 {
+            assert_eq!(f.failed(s(t as f64), "again", retry), None);
+        }
+        let later = f.failed(s(10.0), "again", retry).unwrap();
+        assert!(later.contains("9 more failed attempts"), "{later}");
+        assert_eq!(
+            f.connected("tcp:127.0.0.1:1").as_deref(),
+            Some("connected tcp:127.0.0.1:1 after 11 failed attempts")
+        );
+        assert_eq!(f.connected("tcp:127.0.0.1:1"), None);
+        assert!(
+            f.failed(s(11.0), "lost", retry).is_some(),
+            "a new outage is said at once"
+        );
     }
 }

@@ -1,6 +1,8 @@
 //! Connection URLs: `serial:/dev/ttyAMA0:921600`, `udpin:0.0.0.0:14550`, `udpout:HOST:PORT`,
 //! `tcp:HOST:PORT` (alias `tcpout:`), `tcpin:ADDR:PORT`. Same spellings as MAVProxy and the
-//! mavlink crate, parsed here so that a typo is rejected with a reason before anything opens.
+//! mavlink crate, and MAVSDK's (`udpin://HOST:PORT`, `udpout://`, `tcpin://`, `tcpout://`,
+//! `serial:///dev/ttyUSB0:57600`), parsed here so that a typo is rejected with a reason before
+//! anything opens.
 
 use std::fmt;
 
@@ -55,6 +57,8 @@ pub fn parse(url: &str) -> Result<ConnectUrl, UrlError> {
     let (scheme, rest) = url.split_once(':').ok_or_else(|| {
         err("expected SCHEME:..., one of serial, udpin, udpout, tcp, tcpout, tcpin")
     })?;
+    // MAVSDK writes `scheme://rest` (`serial:///dev/ttyUSB0:57600` keeps the device's own slash).
+    let rest = rest.strip_prefix("//").unwrap_or(rest);
     match scheme {
         "serial" => {
             let (path, baud) = rest.rsplit_once(':').ok_or_else(|| {
@@ -96,6 +100,9 @@ fn host_port(s: &str) -> Result<String, String> {
         .ok_or_else(|| format!("expected HOST:PORT, got {s:?}"))?;
     if host.is_empty() || host == "[]" {
         return Err("empty host".into());
+    }
+    if host.contains('/') {
+        return Err(format!("host {host:?} contains '/'"));
     }
     if host.contains(':') && !(host.starts_with('[') && host.ends_with(']')) {
         return Err(format!(
@@ -171,6 +178,25 @@ mod tests {
     }
 
     #[test]
+    fn parses_mavsdk_url_forms() {
+        let cases = [
+            ("udpin://0.0.0.0:14550", "udpin:0.0.0.0:14550"),
+            ("udpin://127.0.0.1:14599", "udpin:127.0.0.1:14599"),
+            ("udpout://10.0.0.2:14550", "udpout:10.0.0.2:14550"),
+            ("tcpin://0.0.0.0:5760", "tcpin:0.0.0.0:5760"),
+            ("tcpout://127.0.0.1:5760", "tcp:127.0.0.1:5760"),
+            ("tcp://127.0.0.1:5760", "tcp:127.0.0.1:5760"),
+            ("udpout://[::1]:14550", "udpout:[::1]:14550"),
+            ("serial:///dev/ttyUSB0:57600", "serial:/dev/ttyUSB0:57600"),
+            ("serial://COM3:57600", "serial:COM3:57600"),
+        ];
+        for (mavsdk, canonical) in cases {
+            let u = parse(mavsdk).unwrap_or_else(|e| panic!("{mavsdk}: {e}"));
+            assert_eq!(u.to_string(), canonical, "{mavsdk}");
+        }
+    }
+
+    #[test]
     fn display_round_trips() {
         for u in [
             "serial:/dev/ttyUSB0:115200",
@@ -201,6 +227,11 @@ mod tests {
             ("serial:/dev/ttyAMA0:0", "must be positive"),
             ("serial::921600", "empty serial device"),
             ("serial:921600", "expected serial:DEVICE:BAUD"),
+            ("serial:///dev/ttyUSB0", "expected serial:DEVICE:BAUD"),
+            ("udp://0.0.0.0:14550", "unknown scheme"),
+            ("http://127.0.0.1:80", "unknown scheme"),
+            ("udpin:///0.0.0.0:14550", "contains '/'"),
+            ("udpin://:14550", "empty host"),
         ];
         for (url, why) in cases {
             let e = parse(url).expect_err(url);

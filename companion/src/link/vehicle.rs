@@ -29,7 +29,15 @@ pub struct VehicleConfig {
     pub telemetry: TelemetryConfig,
     pub arm_wait: Duration,
     pub max_arm_attempts: u32,
+    /// Only an autopilot with this system id is chosen (`fly --autopilot-sysid`).
+    pub autopilot_sysid: Option<u8>,
+    /// Streams are re-requested (connect, reconnect, regain, reboot) no more often than this:
+    /// spoofed or flapping triggers cannot multiply the requests.
+    pub stream_request_min_interval: Duration,
 }
+
+/// Distinct other autopilots reported by name; more are only counted.
+const MAX_OTHER_AUTOPILOTS: usize = 16;
 
 impl Default for VehicleConfig {
     fn default() -> Self {
@@ -41,6 +49,8 @@ impl Default for VehicleConfig {
             telemetry: TelemetryConfig::default(),
             arm_wait: Duration::from_secs(60),
             max_arm_attempts: 3,
+            autopilot_sysid: None,
+            stream_request_min_interval: Duration::from_secs(5),
         }
     }
 }
@@ -106,6 +116,17 @@ pub struct Vehicle {
     link_events: Vec<String>,
     /// Retry a failed action asked for again no sooner than this.
     pub retry_failed_after: Duration,
+    /// When the stream requests were last queued, and whether another set is waiting for the
+    /// minimum interval.
+    streams_queued_at: Option<Duration>,
+    streams_deferred: bool,
+    /// Other autopilots heard (reported once each, never obeyed).
+    other_autopilots: std::collections::BTreeSet<(u8, u8)>,
+    /// Refused for trust reasons since start: monitor frames from components not allowed, and
+    /// the totals as last reported in a link event.
+    pub foreign_monitor_frames: u64,
+    pub other_autopilot_heartbeats: u64,
+    trust_reported: (u64, u64, u64, u64),
 }
 
 impl Vehicle {
@@ -129,6 +150,12 @@ impl Vehicle {
             records: Vec::new(),
             link_events: Vec::new(),
             retry_failed_after: Duration::from_secs(5),
+            streams_queued_at: None,
+            streams_deferred: false,
+            other_autopilots: Default::default(),
+            foreign_monitor_frames: 0,
+            other_autopilot_heartbeats: 0,
+            trust_reported: (0, 0, 0, 0),
         }
     }
 
@@ -159,7 +186,84 @@ impl Vehicle {
         std::mem::take(&mut self.records)
     }
     pub fn take_link_events(&mut self) -> Vec<String> {
+        if let Some(note) = self.trust_note() {
+            self.link_events.push(note);
+        }
         std::mem::take(&mut self.link_events)
+    }
+
+    /// One link event when frames or values were refused for trust since the last report.
+    fn trust_note(&mut self) -> Option<String> {
+        let r = &self.telemetry.rejected;
+        let now = (
+            self.foreign_monitor_frames,
+            r.out_of_range,
+            r.names_dropped,
+            self.other_autopilot_heartbeats,
+        );
+        if now == self.trust_reported {
+            return None;
+        }
+        self.trust_reported = now;
+        let last = r
+            .last
+            .as_deref()
+            .map(|l| format!(" (last: {l})"))
+            .unwrap_or_default();
+        Some(format!(
+            "trust: {} monitor frames from components not allowed, {} values out of range{last}, {} onboard names over the cap of {}, {} heartbeats from other autopilots refused (since start)",
+            now.0, now.1, now.2, self.cfg.telemetry.max_onboard_names, now.3
+        ))
+    }
+
+    /// The autopilot's identity: a HEARTBEAT from a flight controller (an autopilot type, not
+    /// INVALID) of a vehicle (not a GCS, companion, gimbal, camera or other peripheral), of the
+    /// system `--autopilot-sysid` names when given.
+    fn is_autopilot_heartbeat(h: &HEARTBEAT_DATA) -> bool {
+        h.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID && is_vehicle_type(h.mavtype)
+    }
+
+    /// An autopilot other than the chosen one (or than the one `--autopilot-sysid` asks for)
+    /// speaks: reported once per identity, never obeyed.
+    fn other_autopilot(&mut self, sys: u8, comp: u8) {
+        self.other_autopilot_heartbeats += 1;
+        if self.other_autopilots.len() >= MAX_OTHER_AUTOPILOTS
+            || !self.other_autopilots.insert((sys, comp))
+        {
+            return;
+        }
+        let why = match (self.target, self.cfg.autopilot_sysid) {
+            (Some((ts, tc)), _) => format!("autopilot {ts}/{tc} already chosen"),
+            (None, Some(want)) => format!("--autopilot-sysid {want}"),
+            (None, None) => "not chosen".to_string(),
+        };
+        tracing::warn!(
+            sys,
+            comp,
+            "another autopilot {sys}/{comp} heard and ignored ({why})"
+        );
+        self.link_event(
+            format!("another autopilot {sys}/{comp} heard, ignored ({why})"),
+            false,
+        );
+    }
+
+    /// Queue every stream request, unless a set was queued less than the minimum interval ago:
+    /// then once that interval has passed.
+    fn request_streams(&mut self, now: Duration) {
+        let due = self
+            .streams_queued_at
+            .is_none_or(|t| now.saturating_sub(t) >= self.cfg.stream_request_min_interval);
+        if due {
+            self.stream_queue = self.cfg.streams.iter().copied().collect();
+            self.streams_queued_at = Some(now);
+            self.streams_deferred = false;
+            if !self.cfg.streams.is_empty() {
+                tracing::debug!(count = self.cfg.streams.len(), "requesting streams");
+            }
+        } else {
+            self.streams_deferred = true;
+        }
     }
 
     pub fn observations(&self, now: Duration, events: Vec<String>) -> Observations {
@@ -177,22 +281,21 @@ impl Vehicle {
     pub fn on_frame(&mut self, now: Duration, f: &Frame) -> Vec<Msg> {
         let sys = f.header.system_id.min(255) as u8;
         let comp = f.header.component_id;
-        if self.target.is_none()
-            && let Msg::HEARTBEAT(h) = &f.msg
-            && h.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID
-            && !matches!(
-                h.mavtype,
-                MavType::MAV_TYPE_GCS
-                    | MavType::MAV_TYPE_ONBOARD_CONTROLLER
-                    | MavType::MAV_TYPE_GIMBAL
-                    | MavType::MAV_TYPE_CAMERA
-            )
+        if let Msg::HEARTBEAT(h) = &f.msg
+            && Self::is_autopilot_heartbeat(h)
+            && self.target != Some((sys, comp))
         {
-            self.target = Some((sys, comp));
-            self.flavor = Flavor::from_autopilot(h.autopilot);
-            self.commands.set_target(sys, comp);
-            self.mission.set_target(sys, comp);
-            self.link_event(format!("autopilot {sys}/{comp} ({:?})", self.flavor), false);
+            let wanted = self.cfg.autopilot_sysid.is_none_or(|want| want == sys);
+            if self.target.is_none() && wanted {
+                self.target = Some((sys, comp));
+                self.flavor = Flavor::from_autopilot(h.autopilot);
+                self.commands.set_target(sys, comp);
+                self.mission.set_target(sys, comp);
+                tracing::info!(sys, comp, flavor = ?self.flavor, "autopilot chosen");
+                self.link_event(format!("autopilot {sys}/{comp} ({:?})", self.flavor), false);
+            } else {
+                self.other_autopilot(sys, comp);
+            }
         }
         let from_autopilot = self.target == Some((sys, comp));
         if !from_autopilot {
@@ -244,6 +347,8 @@ impl Vehicle {
 
     /// A frame from an onboard monitor (on the autopilot link from another component, or on
     /// the `--onboard` link): telemetry only.
+    /// Only the chosen autopilot and the components `[telemetry.monitors]` names are heard;
+    /// frames from anyone else are counted and dropped.
     pub fn on_monitor_frame(&mut self, now: Duration, f: &Frame) -> Vec<Msg> {
         if matches!(
             f.msg,
@@ -252,6 +357,19 @@ impl Vehicle {
                 | Msg::OBSTACLE_DISTANCE(_)
                 | Msg::DISTANCE_SENSOR(_)
         ) {
+            let sys = f.header.system_id.min(255) as u8;
+            let comp = f.header.component_id;
+            if !self.cfg.telemetry.monitors.allows(sys, comp, self.target) {
+                if self.foreign_monitor_frames == 0 {
+                    tracing::warn!(
+                        sys,
+                        comp,
+                        "onboard-monitor values from a component not in [telemetry.monitors] ignored"
+                    );
+                }
+                self.foreign_monitor_frames += 1;
+                return Vec::new();
+            }
             let flavor = self.flavor;
             let ev = self
                 .telemetry
@@ -273,11 +391,16 @@ impl Vehicle {
                     LivenessEvent::Regained => "link regained",
                     _ => "autopilot rebooted",
                 };
+                tracing::info!("{name}");
                 self.link_event(name.into(), true);
-                self.stream_queue = self.cfg.streams.iter().copied().collect();
+                self.request_streams(now);
                 Vec::new()
             }
             LivenessEvent::Lost => {
+                tracing::warn!(
+                    "link lost: no message from the autopilot for {:?}",
+                    self.cfg.link_timeout
+                );
                 self.drop_everything(now, "link lost");
                 self.link_event("link lost".into(), true);
                 Vec::new()
@@ -306,18 +429,16 @@ impl Vehicle {
             self.last = Some((job.key, JobStatus::Failed(now)));
         }
         self.stream_queue.clear();
+        self.streams_deferred = false;
         self.purposes.clear();
     }
 
-    /// Transport reconnected: the new stream is a new session (re-request streams on first message).
+    /// Transport reconnected: the new stream is a new session (streams re-requested, sent once
+    /// the autopilot speaks). A reconnect is not a message from the autopilot: liveness counts
+    /// only its frames, so a link that reconnects over and over is still declared lost.
     pub fn on_reconnect(&mut self, now: Duration) {
         if self.liveness.alive() {
-            // Force a regain on the next message so streams are re-requested.
-            let losses = self.liveness.losses;
-            self.liveness = Liveness::new(self.cfg.link_timeout);
-            self.liveness.losses = losses;
-            self.liveness.on_message(now);
-            self.stream_queue = self.cfg.streams.iter().copied().collect();
+            self.request_streams(now);
             self.link_event("transport reconnected".into(), true);
         }
     }
@@ -346,6 +467,9 @@ impl Vehicle {
         let mut out = Vec::new();
         if !self.liveness.alive() || self.target.is_none() {
             return out;
+        }
+        if self.streams_deferred {
+            self.request_streams(now);
         }
         if !self
             .commands
@@ -865,6 +989,33 @@ impl Vehicle {
     }
 }
 
+/// A vehicle's MAV_TYPE, not a ground station, companion computer or peripheral.
+fn is_vehicle_type(t: MavType) -> bool {
+    !matches!(
+        t,
+        MavType::MAV_TYPE_GCS
+            | MavType::MAV_TYPE_ONBOARD_CONTROLLER
+            | MavType::MAV_TYPE_GIMBAL
+            | MavType::MAV_TYPE_CAMERA
+            | MavType::MAV_TYPE_ADSB
+            | MavType::MAV_TYPE_ANTENNA_TRACKER
+            | MavType::MAV_TYPE_CHARGING_STATION
+            | MavType::MAV_TYPE_FLARM
+            | MavType::MAV_TYPE_SERVO
+            | MavType::MAV_TYPE_ODID
+            | MavType::MAV_TYPE_BATTERY
+            | MavType::MAV_TYPE_PARACHUTE
+            | MavType::MAV_TYPE_LOG
+            | MavType::MAV_TYPE_OSD
+            | MavType::MAV_TYPE_IMU
+            | MavType::MAV_TYPE_GPS
+            | MavType::MAV_TYPE_WINCH
+            | MavType::MAV_TYPE_GRIPPER
+            | MavType::MAV_TYPE_ILLUMINATOR
+            | MavType::MAV_TYPE_RADIO
+    )
+}
+
 fn step_name(s: &Step) -> String {
     match s {
         Step::Mode(m) => format!("SET_MODE {m}"),
@@ -1172,15 +1323,16 @@ mod tests {
             v.on_frame(s(0.1), &f);
         }
         assert!(v.readiness.check().is_ok());
+        // Past the minimum interval since the connect's stream requests.
         v.on_frame(
-            s(1.0),
+            s(5.5),
             &frame(Msg::SYSTEM_TIME(SYSTEM_TIME_DATA {
                 time_unix_usec: 0,
                 time_boot_ms: 90_000,
             })),
         );
         let out = v.on_frame(
-            s(2.0),
+            s(6.0),
             &frame(Msg::SYSTEM_TIME(SYSTEM_TIME_DATA {
                 time_unix_usec: 0,
                 time_boot_ms: 500,
@@ -1189,6 +1341,274 @@ mod tests {
         assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL]);
         assert!(v.take_events().contains(&"autopilot rebooted".to_string()));
         assert!(v.readiness.check().is_err());
+    }
+
+    fn system_time(ms: u32) -> Frame {
+        frame(Msg::SYSTEM_TIME(SYSTEM_TIME_DATA {
+            time_unix_usec: 0,
+            time_boot_ms: ms,
+        }))
+    }
+
+    /// Acknowledge every stream request in `out` and those the acks release; how many went out.
+    fn ack_streams(v: &mut Vehicle, t: f64, out: &[Msg]) -> usize {
+        let mut out = out.to_vec();
+        let mut n = 0;
+        while commands(&out).contains(&MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL) {
+            n += 1;
+            out = v.on_frame(
+                s(t),
+                &ack(
+                    MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                    MavResult::MAV_RESULT_ACCEPTED,
+                ),
+            );
+        }
+        n
+    }
+
+    /// 35 spoofed "reboots" (the boot clock jumping back and forth) in 3.5 s cannot multiply the
+    /// stream requests: at most one set per minimum interval, and the last one still goes out.
+    #[test]
+    fn spoofed_system_time_cannot_multiply_stream_requests() {
+        let cfg = VehicleConfig {
+            streams: vec![(1, 2.0), (33, 5.0), (168, 1.0)],
+            ..VehicleConfig::default()
+        };
+        let mut v = Vehicle::new(cfg, table(), None);
+        let mut sent = 0;
+        let out = v.on_frame(s(0.0), &hb(0, false));
+        sent += ack_streams(&mut v, 0.0, &out);
+        for i in 0..35u32 {
+            let t = 0.1 + i as f64 * 0.1;
+            let ms = if i % 2 == 0 { 500_000 } else { 1_000 };
+            let out = v.on_frame(s(t), &system_time(ms));
+            sent += ack_streams(&mut v, t, &out);
+            let out = v.tick(s(t + 0.05));
+            sent += ack_streams(&mut v, t + 0.05, &out);
+        }
+        assert_eq!(sent, 3, "only the connect's set within the first 5 s");
+        for k in 0..40 {
+            let t = 4.0 + k as f64 * 0.1;
+            if k % 10 == 0 {
+                v.on_frame(s(t), &hb(0, false));
+            }
+            let out = v.tick(s(t));
+            sent += ack_streams(&mut v, t, &out);
+        }
+        assert_eq!(sent, 6, "one deferred set once the interval passed, not 35");
+    }
+
+    /// A TCP link that keeps reconnecting without the autopilot saying anything is lost: a
+    /// reconnect is not a message from the autopilot.
+    #[test]
+    fn reconnects_alone_do_not_keep_the_link_alive() {
+        let mut v = vehicle();
+        connected(&mut v, 0);
+        for k in 1..=10 {
+            let t = k as f64 * 0.5;
+            v.on_reconnect(s(t));
+            v.tick(s(t));
+        }
+        assert!(!v.liveness.alive());
+        assert!(v.take_events().contains(&"link lost".to_string()));
+    }
+
+    fn from(sys: u8, comp: u8, mut f: Frame) -> Frame {
+        f.header.system_id = sys as u32;
+        f.header.component_id = comp;
+        f
+    }
+
+    /// A fake autopilot heard first is not obeyed when `--autopilot-sysid` names the real one,
+    /// and a second autopilot after the choice is reported, never followed.
+    #[test]
+    fn autopilot_sysid_chooses_and_others_are_reported_not_obeyed() {
+        let cfg = VehicleConfig {
+            autopilot_sysid: Some(1),
+            ..VehicleConfig::default()
+        };
+        let mut v = Vehicle::new(cfg, table(), None);
+        v.on_frame(s(0.0), &from(7, 1, hb(4, true)));
+        assert_eq!(v.target, None, "sysid 7 is not the one asked for");
+        assert!(!v.liveness.alive());
+        v.on_frame(s(0.5), &hb(0, false));
+        assert_eq!(v.target, Some((1, 1)));
+        // The impostor keeps talking: reported once, counted, never drives the state.
+        for t in 1..5 {
+            v.on_frame(s(t as f64), &from(7, 1, hb(4, true)));
+        }
+        assert!(!v.telemetry.armed, "armed came only from the impostor");
+        assert_eq!(v.telemetry.mode.as_deref(), Some("STABILIZE"));
+        let evs = v.take_link_events();
+        let reports: Vec<_> = evs
+            .iter()
+            .filter(|e| e.contains("another autopilot 7/1"))
+            .collect();
+        assert_eq!(reports.len(), 1, "{evs:?}");
+        assert!(
+            evs.iter()
+                .any(|e| e.contains("5 heartbeats from other autopilots")),
+            "{evs:?}"
+        );
+        // Its acks do not finish our commands either.
+        let out = v.request_actions(s(5.0), &["return_to_base".into()]);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        v.on_frame(
+            s(5.1),
+            &from(
+                7,
+                1,
+                ack(MavCmd::MAV_CMD_DO_SET_MODE, MavResult::MAV_RESULT_ACCEPTED),
+            ),
+        );
+        assert!(
+            v.busy(),
+            "an ack from another system is not our autopilot's"
+        );
+    }
+
+    #[test]
+    fn only_vehicles_with_an_autopilot_are_chosen() {
+        let mut v = vehicle();
+        for (mavtype, autopilot) in [
+            (MavType::MAV_TYPE_GCS, MavAutopilot::MAV_AUTOPILOT_INVALID),
+            (
+                MavType::MAV_TYPE_QUADROTOR,
+                MavAutopilot::MAV_AUTOPILOT_INVALID,
+            ),
+            (
+                MavType::MAV_TYPE_ONBOARD_CONTROLLER,
+                MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+            ),
+            (
+                MavType::MAV_TYPE_ADSB,
+                MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+            ),
+            (MavType::MAV_TYPE_GIMBAL, MavAutopilot::MAV_AUTOPILOT_PX4),
+        ] {
+            let f = from(
+                3,
+                50,
+                frame(Msg::HEARTBEAT(HEARTBEAT_DATA {
+                    mavtype,
+                    autopilot,
+                    ..HEARTBEAT_DATA::DEFAULT
+                })),
+            );
+            v.on_frame(s(0.0), &f);
+            assert_eq!(v.target, None, "{mavtype:?} {autopilot:?}");
+        }
+        v.on_frame(s(0.1), &hb(0, false));
+        assert_eq!(v.target, Some((1, 1)));
+    }
+
+    fn nvf(name: &str, value: f32) -> Msg {
+        Msg::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA {
+            time_boot_ms: 0,
+            value,
+            name: name.into(),
+        })
+    }
+
+    fn zone_vehicle() -> Vehicle {
+        let mut t = table();
+        t.actions.insert(
+            "replan_and_land".into(),
+            vec![Step::GotoZone, Step::Mode("LAND".into())],
+        );
+        let mut cfg = VehicleConfig::default();
+        cfg.telemetry.onboard.extend([
+            ("zone_n".into(), "zone_north_m".into()),
+            ("zone_e".into(), "zone_east_m".into()),
+        ]);
+        cfg.telemetry
+            .ranges
+            .insert("zone_north_m".into(), [-1000.0, 1000.0]);
+        cfg.telemetry
+            .ranges
+            .insert("zone_east_m".into(), [-1000.0, 1000.0]);
+        let mut v = Vehicle::new(cfg, t, None);
+        v.on_frame(s(0.0), &hb(4, true));
+        v.on_frame(
+            s(0.0),
+            &frame(Msg::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
+                lat: 473_977_420,
+                lon: 1_799_900_000,
+                relative_alt: 20_000,
+                hdg: 0,
+                ..GLOBAL_POSITION_INT_DATA::DEFAULT
+            })),
+        );
+        v
+    }
+
+    fn repositions(out: &[Msg]) -> usize {
+        out.iter()
+            .filter(
+                |m| matches!(m, Msg::COMMAND_INT(c) if c.command == MavCmd::MAV_CMD_DO_REPOSITION),
+            )
+            .count()
+    }
+
+    /// A landing zone from an unknown system is never flown to; one from the allowed camera is.
+    #[test]
+    fn landing_zone_from_an_unknown_sysid_produces_no_reposition() {
+        let mut v = zone_vehicle();
+        v.on_frame(s(0.1), &from(99, 100, frame(nvf("zone_n", 30.0))));
+        v.on_frame(s(0.1), &from(99, 100, frame(nvf("zone_e", -5_000_000.0))));
+        v.on_frame(s(0.1), &from(1, 77, frame(nvf("zone_e", 40.0))));
+        assert_eq!(v.telemetry.get("zone_north_m"), None);
+        assert_eq!(v.telemetry.get("zone_east_m"), None);
+        let out = v.request_actions(s(0.2), &["replan_and_land".into()]);
+        assert_eq!(repositions(&out), 0, "{out:?}");
+        assert!(
+            v.take_link_events()
+                .iter()
+                .any(|e| e.contains("3 monitor frames from components not allowed"))
+        );
+
+        let mut v = zone_vehicle();
+        v.on_frame(s(0.1), &from(1, 100, frame(nvf("zone_n", 30.0))));
+        v.on_frame(s(0.1), &from(1, 100, frame(nvf("zone_e", -5_000_000.0))));
+        assert_eq!(v.telemetry.get("zone_east_m"), None, "out of range");
+        v.on_frame(s(0.1), &from(1, 100, frame(nvf("zone_e", 40.0))));
+        let out = v.request_actions(s(0.2), &["replan_and_land".into()]);
+        assert_eq!(repositions(&out), 1);
+        match &out[0] {
+            Msg::COMMAND_INT(c) => {
+                assert!(
+                    crate::link::telemetry::on_globe(c.x, c.y),
+                    "{} {}",
+                    c.x,
+                    c.y
+                );
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// A DISTANCE_SENSOR from a foreign system raises no obstacle event (so no mode toggling).
+    #[test]
+    fn foreign_distance_sensor_raises_no_obstacle() {
+        let mut v = vehicle();
+        connected(&mut v, 4);
+        let near = frame(Msg::DISTANCE_SENSOR(DISTANCE_SENSOR_DATA {
+            min_distance: 20,
+            max_distance: 4000,
+            current_distance: 300,
+            orientation: MavSensorOrientation::MAV_SENSOR_ROTATION_NONE,
+            ..DISTANCE_SENSOR_DATA::DEFAULT
+        }));
+        for k in 0..30 {
+            v.on_frame(s(1.0 + k as f64 * 0.1), &from(77, 158, near.clone()));
+        }
+        assert!(!v.take_events().iter().any(|e| e.contains("obstacle")));
+        assert_eq!(v.telemetry.obstacle_m(s(3.0)), None);
+        assert_eq!(v.foreign_monitor_frames, 30);
+        // The autopilot's own rangefinder still counts.
+        v.on_frame(s(4.0), &near);
+        assert!(v.take_events().contains(&"obstacle detected".to_string()));
     }
 
     #[test]
