@@ -119,7 +119,8 @@ async fn talk(
     got
 }
 
-/// Junk datagrams at ~200/s (one byte, and random-length noise) and an impostor autopilot
+/// Junk datagrams at ~200/s (one byte, frame headers that never complete, noise) and an
+/// impostor autopilot
 /// (sysid 7) heard before the real one: neither gets a single byte back; the real autopilot,
 /// named with `--autopilot-sysid 1`, gets the companion's heartbeats and stream requests, and
 /// every command is addressed to it.
@@ -133,14 +134,15 @@ async fn udpin_junk_senders_get_nothing_and_the_autopilot_keeps_the_traffic() {
         to,
         Duration::from_millis(5),
         until,
-        |n| {
-            if n % 2 == 0 {
-                vec![0x42]
-            } else {
-                (0..(n % 97) as u8 + 1)
-                    .map(|b| b.wrapping_mul(31))
-                    .collect()
-            }
+        |n| match n % 3 {
+            0 => vec![0x42],
+            // A MAVLink 2 start byte claiming a long payload: a parser shared across datagrams
+            // would complete it with the autopilot's next datagram, then, after the CRC
+            // failure, find the autopilot's frames while handling a later junk datagram.
+            1 => vec![0xFD, 250, 0, 0, 0x99],
+            _ => (0..(n % 97) as u8 + 1)
+                .map(|b| b.wrapping_mul(31))
+                .collect(),
         },
     ));
     let impostor = tokio::spawn(talk(

@@ -324,6 +324,10 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
                 }
                 Some(Inbound::Datagram(b, from)) => {
                     let t = now();
+                    // Each datagram is parsed on its own (MAVLink over UDP sends whole frames per
+                    // datagram): a frame is then surely the sender's, and a junk datagram's
+                    // half header cannot swallow or re-attribute the autopilot's next frames.
+                    ingest.reset();
                     for f in ingest.push(&b) {
                         if let Some(w) = tlog.as_mut() {
                             w.received(&f);
