@@ -291,6 +291,7 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
         .clone()
         .map(|u| transport::spawn(u, Duration::from_secs(1)));
     let mut onboard_ingest = Ingest::new(signing());
+    let onboard_udpin = matches!(args.onboard, Some(ConnectUrl::UdpIn { .. }));
 
     let start = Instant::now();
     let now = || start.elapsed();
@@ -368,6 +369,10 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
                 // Receive-only: a udpin onboard link never learns a reply address.
                 Some(Inbound::Bytes(b) | Inbound::Datagram(b, _)) => {
                     let t = now();
+                    if onboard_udpin {
+                        // One datagram, whole frames: parsed on its own (as on the autopilot link).
+                        onboard_ingest.reset();
+                    }
                     for f in onboard_ingest.push(&b) {
                         if let Some(w) = tlog.as_mut() {
                             w.received(&f);
