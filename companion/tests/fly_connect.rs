@@ -210,3 +210,30 @@ fn udpin_mavsdk_url_hears_a_heartbeat() {
         "no decision cycle: the heartbeat was not heard\n{log}"
     );
 }
+
+#[test]
+fn autopilot_sysid_zero_and_bad_connect_timeout_are_cli_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    for (flag, value) in [
+        ("--autopilot-sysid", "0"),
+        ("--autopilot-sysid", "256"),
+        ("--connect-timeout", "0s"),
+        ("--connect-timeout", "soon"),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_companion"))
+            .args([
+                "fly",
+                "--connect",
+                "tcp:127.0.0.1:1",
+                flag,
+                value,
+                "--log-dir",
+            ])
+            .arg(dir.path())
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{flag} {value}: exit 0");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(flag), "{flag} {value}: {err}");
+    }
+}

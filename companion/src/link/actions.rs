@@ -439,6 +439,9 @@ impl LinkParams {
             ));
         }
         let t = &p.telemetry;
+        if let Err((entry, reason)) = t.check_trust() {
+            return Err(SpecError::new(path, entry, reason));
+        }
         if !(t.obstacle_near_m.is_finite() && t.obstacle_near_m > 0.0) {
             return Err(SpecError::new(
                 path,

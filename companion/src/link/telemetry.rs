@@ -110,6 +110,43 @@ pub const DEFAULT_ONBOARD: [(&str, &str); 6] = [
     ("free_tiles", "free_tiles"),
 ];
 
+/// Most unlisted onboard names a params file may allow (each is one observation per record).
+pub const MAX_ONBOARD_NAMES_LIMIT: usize = 1024;
+
+impl TelemetryConfig {
+    /// The trust settings a params file must get right: `(entry, reason)` of the first error.
+    pub fn check_trust(&self) -> Result<(), (String, String)> {
+        if self.max_onboard_names > MAX_ONBOARD_NAMES_LIMIT {
+            return Err((
+                "telemetry.max_onboard_names".into(),
+                format!("at most {MAX_ONBOARD_NAMES_LIMIT}"),
+            ));
+        }
+        for (name, [lo, hi]) in &self.ranges {
+            if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+                return Err((
+                    format!("telemetry.ranges.{name}"),
+                    "expected [min, max], finite, min <= max".into(),
+                ));
+            }
+        }
+        let m = &self.monitors;
+        if m.autopilot_system_components.contains(&0) {
+            return Err((
+                "telemetry.monitors.autopilot_system_components".into(),
+                "component 0 is the broadcast id, not a component".into(),
+            ));
+        }
+        if m.sources.iter().any(|[s, c]| *s == 0 || *c == 0) {
+            return Err((
+                "telemetry.monitors.sources".into(),
+                "system and component ids are 1..255 (0 is broadcast)".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
 impl Default for TelemetryConfig {
     fn default() -> Self {
         let onboard = DEFAULT_ONBOARD
@@ -828,6 +865,66 @@ mod tests {
         );
         let (lat, _) = displace((899_999_000, 0), 5_000.0, 0.0);
         assert_eq!(lat, 900_000_000);
+    }
+
+    #[test]
+    fn trust_settings_are_checked() {
+        assert_eq!(TelemetryConfig::default().check_trust(), Ok(()));
+        let bad = |f: &dyn Fn(&mut TelemetryConfig)| {
+            let mut c = TelemetryConfig::default();
+            f(&mut c);
+            c.check_trust().unwrap_err().0
+        };
+        assert_eq!(
+            bad(&|c| {
+                c.ranges.insert("zone_north_m".into(), [5.0, -5.0]);
+            }),
+            "telemetry.ranges.zone_north_m"
+        );
+        assert_eq!(
+            bad(&|c| {
+                c.ranges.insert("lum".into(), [0.0, f64::NAN]);
+            }),
+            "telemetry.ranges.lum"
+        );
+        assert_eq!(
+            bad(&|c| c.max_onboard_names = 1_000_000),
+            "telemetry.max_onboard_names"
+        );
+        assert_eq!(
+            bad(&|c| c.monitors.sources.push([0, 100])),
+            "telemetry.monitors.sources"
+        );
+        assert_eq!(
+            bad(&|c| c.monitors.autopilot_system_components.push(0)),
+            "telemetry.monitors.autopilot_system_components"
+        );
+    }
+
+    /// The shipped link.toml names the camera component and the landing-zone ranges; a broken
+    /// range stops loading with file, entry and reason.
+    #[test]
+    fn link_params_carry_and_check_the_trust_settings() {
+        use crate::link::actions::LinkParams;
+        let shipped = crate::spec::default_params_dir().join("link.toml");
+        let lp = LinkParams::load(&shipped).unwrap();
+        let t = &lp.telemetry;
+        assert_eq!(t.monitors.autopilot_system_components, vec![100]);
+        assert_eq!(t.ranges.get("zone_east_m"), Some(&[-2000.0, 2000.0]));
+        assert!(t.max_onboard_names > 0);
+        let text = std::fs::read_to_string(&shipped).unwrap().replace(
+            "zone_north_m = [-2000.0, 2000.0]",
+            "zone_north_m = [2000.0, -2000.0]",
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let bad = dir.path().join("link.toml");
+        std::fs::write(&bad, text).unwrap();
+        let e = LinkParams::load(&bad).unwrap_err();
+        assert_eq!(e.entry, "telemetry.ranges.zone_north_m", "{e}");
+        assert!(
+            e.file.ends_with("link.toml") && e.reason.contains("min <= max"),
+            "{e}"
+        );
     }
 
     #[test]
