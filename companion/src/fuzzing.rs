@@ -486,7 +486,8 @@ pub fn ingest_seeds() -> Vec<(String, Vec<u8>)> {
     use crate::link::dialect::*;
     use mavlink::{MavHeader, SigningData};
     let ap = (1u8, 1u8);
-    let monitor = (1u8, 191u8);
+    // MAV_COMP_ID_CAMERA: a monitor params/link.toml [telemetry.monitors] allows.
+    let monitor = (1u8, 100u8);
     let gcs = (255u8, 190u8);
     let heartbeat = |armed: bool, mode: u32| {
         Msg::HEARTBEAT(HEARTBEAT_DATA {
