@@ -93,7 +93,8 @@ impl MonitorSources {
 pub struct Rejected {
     /// Values outside `[telemetry.ranges]`, non-finite, or positions off the globe.
     pub out_of_range: u64,
-    /// Unmapped names beyond `max_onboard_names`.
+    /// Unmapped names beyond `max_onboard_names`, or not printable ASCII (a name becomes an
+    /// observation key and reaches logs and terminals).
     pub names_dropped: u64,
     /// The latest value refused, for the link event (`zone_north_m = 1e9`).
     pub last: Option<String>,
@@ -422,7 +423,13 @@ impl Telemetry {
     fn on_named_value(&mut self, name: &str, value: f32) {
         let (obs, mapped) = match self.cfg.onboard.get(name) {
             Some(o) => (o.clone(), true),
-            None => (format!("onboard.{name}"), false),
+            None if name.bytes().all(|b| b.is_ascii_graphic()) => {
+                (format!("onboard.{name}"), false)
+            }
+            None => {
+                self.rejected.names_dropped += 1;
+                return;
+            }
         };
         let v = value as f64;
         let in_range = v.is_finite()
@@ -823,6 +830,8 @@ mod tests {
         for i in 0..1000 {
             t.on_message(s(0.0), &nvf(&format!("n{i}"), 1.0), name);
         }
+        // Control characters never become an observation name.
+        t.on_message(s(0.5), &nvf("a\x1b[2J", 1.0), name);
         // Names already kept still update; mapped names always pass.
         t.on_message(s(1.0), &nvf("n0", 7.0), name);
         t.on_message(s(1.0), &nvf("lum", 300.0), name);
@@ -835,7 +844,7 @@ mod tests {
         assert_eq!(onboard, 4);
         assert_eq!(o.get("onboard.n0"), Some(7.0));
         assert_eq!(o.get("luminosity_lux"), Some(300.0));
-        assert_eq!(t.rejected.names_dropped, 996);
+        assert_eq!(t.rejected.names_dropped, 997);
     }
 
     #[test]

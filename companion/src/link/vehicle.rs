@@ -211,7 +211,7 @@ impl Vehicle {
             .map(|l| format!(" (last: {l})"))
             .unwrap_or_default();
         Some(format!(
-            "trust: {} monitor frames from components not allowed, {} values out of range{last}, {} onboard names over the cap of {}, {} heartbeats from other autopilots refused (since start)",
+            "trust: {} monitor frames from components not allowed, {} values out of range{last}, {} onboard names dropped (over the cap of {} or not printable), {} heartbeats from other autopilots refused (since start)",
             now.0, now.1, now.2, self.cfg.telemetry.max_onboard_names, now.3
         ))
     }
