@@ -216,9 +216,9 @@ impl Vehicle {
         ))
     }
 
-    /// The autopilot's identity: a HEARTBEAT from a flight controller (an autopilot type, not
-    /// INVALID) of a vehicle (not a GCS, companion, gimbal, camera or other peripheral), of the
-    /// system `--autopilot-sysid` names when given.
+    /// A HEARTBEAT that can choose the autopilot: from a flight controller (an autopilot type,
+    /// not INVALID) of a vehicle (not a GCS, companion, gimbal, camera or other peripheral).
+    /// `--autopilot-sysid` narrows the choice further in `on_frame`.
     fn is_autopilot_heartbeat(h: &HEARTBEAT_DATA) -> bool {
         h.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID && is_vehicle_type(h.mavtype)
     }
@@ -346,8 +346,7 @@ impl Vehicle {
     }
 
     /// A frame from an onboard monitor (on the autopilot link from another component, or on
-    /// the `--onboard` link): telemetry only.
-    /// Only the chosen autopilot and the components `[telemetry.monitors]` names are heard;
+    /// the `--onboard` link): telemetry only. Only the chosen autopilot and the components `[telemetry.monitors]` names are heard;
     /// frames from anyone else are counted and dropped.
     pub fn on_monitor_frame(&mut self, now: Duration, f: &Frame) -> Vec<Msg> {
         if matches!(
