@@ -258,6 +258,7 @@ fn main() -> anyhow::Result<()> {
         duration: None,
         log_dir: "runs".into(),
         auto_start: true,
+        once: false,
     };
     let setup = FlySetup::load(&args)?;
     let spec = WorldSpec::load(&o.params)?;

@@ -71,6 +71,7 @@ fn fly_args(params: &Path) -> FlyArgs {
         duration: None,
         log_dir: PathBuf::from("runs"),
         auto_start: true,
+        once: false,
     }
 }
 

@@ -219,6 +219,7 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
         duration: Some(parse_duration("6s").unwrap()),
         log_dir: std::path::PathBuf::from("runs"),
         auto_start: true,
+        once: false,
     };
     let decider = ScriptedDecider::new(20.0, 6, "safety");
     let mut records: Vec<DecisionRecord> = Vec::new();
@@ -383,6 +384,7 @@ async fn fly_over_udp_signs_frames_and_refuses_unsigned_commands() {
         duration: Some(parse_duration("3s").unwrap()),
         log_dir: std::path::PathBuf::from("runs"),
         auto_start: true,
+        once: false,
     };
     let mut records: Vec<DecisionRecord> = Vec::new();
     let report = run_with(args, ScriptedDecider::new(20.0, 6, "mission"), &mut records)

@@ -29,6 +29,10 @@ pub struct VehicleConfig {
     pub telemetry: TelemetryConfig,
     pub arm_wait: Duration,
     pub max_arm_attempts: u32,
+    /// "Land at the zone": the vehicle must be this close to the zone (m) before LAND.
+    pub zone_radius_m: f64,
+    /// ... and gets this long to get there; then it lands where it is (said in the record).
+    pub zone_arrive_timeout: Duration,
 }
 
 impl Default for VehicleConfig {
@@ -41,6 +45,8 @@ impl Default for VehicleConfig {
             telemetry: TelemetryConfig::default(),
             arm_wait: Duration::from_secs(60),
             max_arm_attempts: 3,
+            zone_radius_m: 3.0,
+            zone_arrive_timeout: Duration::from_secs(60),
         }
     }
 }
@@ -63,6 +69,11 @@ enum Running {
     Command(u64),
     Mission,
     WaitReady {
+        since: Duration,
+    },
+    /// The zone reposition was accepted: flying there (lat, lon in degrees * 1e7).
+    Arrive {
+        target: (i32, i32),
         since: Duration,
     },
 }
@@ -106,6 +117,17 @@ pub struct Vehicle {
     link_events: Vec<String>,
     /// Retry a failed action asked for again no sooner than this.
     pub retry_failed_after: Duration,
+    /// Consecutive autopilot heartbeats reporting the vehicle armed (0 once one says disarmed).
+    pub armed_heartbeats: u32,
+    /// Modes this companion commanded (or made the autopilot enter, as a reposition enters
+    /// GUIDED), with when; the newest last, a few kept. The operator gate tells its own mode
+    /// changes from a pilot's with them.
+    pub commanded_modes: Vec<(String, Duration)>,
+    /// Commands addressed to this companion (component 191) since the last
+    /// [`Vehicle::take_commands_to_us`]: (command, sender system, sender component).
+    commands_to_us: Vec<(MavCmd, u8, u8)>,
+    /// Where the running zone reposition goes.
+    zone_target: Option<(i32, i32)>,
 }
 
 impl Vehicle {
@@ -129,6 +151,10 @@ impl Vehicle {
             records: Vec::new(),
             link_events: Vec::new(),
             retry_failed_after: Duration::from_secs(5),
+            armed_heartbeats: 0,
+            commanded_modes: Vec::new(),
+            commands_to_us: Vec::new(),
+            zone_target: None,
         }
     }
 
@@ -175,6 +201,9 @@ impl Vehicle {
 
     /// A frame from the autopilot link.
     pub fn on_frame(&mut self, now: Duration, f: &Frame) -> Vec<Msg> {
+        if self.command_to_us(f) {
+            return Vec::new();
+        }
         let sys = f.header.system_id.min(255) as u8;
         let comp = f.header.component_id;
         if self.target.is_none()
@@ -217,7 +246,12 @@ impl Vehicle {
             Msg::HEARTBEAT(h) => {
                 self.readiness.armed = h
                     .base_mode
-                    .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED)
+                    .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+                self.armed_heartbeats = if self.readiness.armed {
+                    self.armed_heartbeats.saturating_add(1)
+                } else {
+                    0
+                };
             }
             Msg::SYS_STATUS(s) => self.readiness.on_sys_status(now, s),
             Msg::EKF_STATUS_REPORT(e) => self.readiness.on_ekf(now, e),
@@ -495,7 +529,37 @@ impl Vehicle {
             };
             match (&job.running, &step) {
                 (Running::Command(_) | Running::Mission, _) => return out,
+                (Running::Arrive { target, since }, _) => {
+                    let (target, since) = (*target, *since);
+                    let off = self.telemetry.position.map(|p| {
+                        let (n, e) = super::telemetry::offset_m(target, (p.lat_e7, p.lon_e7));
+                        n.hypot(e)
+                    });
+                    let result = match off {
+                        Some(d) if d <= self.cfg.zone_radius_m => {
+                            format!("ARRIVED ({d:.1} m from the zone)")
+                        }
+                        _ if now.saturating_sub(since) >= self.cfg.zone_arrive_timeout => format!(
+                            "TIMEOUT (not within {:.1} m of the zone after {:.0} s{}; landing here)",
+                            self.cfg.zone_radius_m,
+                            self.cfg.zone_arrive_timeout.as_secs_f64(),
+                            off.map(|d| format!(", {d:.1} m away")).unwrap_or_default()
+                        ),
+                        _ => return out,
+                    };
+                    self.records.push(CommandRecord {
+                        action,
+                        command: "ARRIVE (zone)".into(),
+                        result,
+                        attempts: 0,
+                        latency_ms: None,
+                    });
+                    self.zone_target = None;
+                    self.step_done();
+                    continue;
+                }
                 (Running::Idle, Step::Mode(name)) => {
+                    self.note_mode(now, name);
                     if modes::is_in_mode(self.flavor, self.telemetry.custom_mode, name)
                         && self.telemetry.mode.is_some()
                     {
@@ -584,6 +648,10 @@ impl Vehicle {
                     }
                 }
                 (Running::Idle, Step::Command { command, params }) => {
+                    if *command == MavCmd::MAV_CMD_NAV_TAKEOFF && self.flavor == Flavor::Px4 {
+                        // PX4 flies a take-off command in its TAKEOFF mode.
+                        self.note_mode(now, "TAKEOFF");
+                    }
                     let spec = CommandSpec::long(*command, *params);
                     if !self.issue(now, &action, format!("{command:?}"), spec, &mut out) {
                         return out;
@@ -631,6 +699,7 @@ impl Vehicle {
                 }
                 (Running::Idle, Step::Reposition(o)) => match self.reposition_spec(*o) {
                     Some(spec) => {
+                        self.note_reposition(now);
                         if !self.issue(now, &action, "MAV_CMD_DO_REPOSITION".into(), spec, &mut out)
                         {
                             return out;
@@ -664,6 +733,8 @@ impl Vehicle {
                                 y,
                                 p.alt_rel_m as f32,
                             );
+                            self.note_reposition(now);
+                            self.zone_target = Some((x, y));
                             if !self.issue(
                                 now,
                                 &action,
@@ -786,7 +857,15 @@ impl Vehicle {
                         continue;
                     }
                     match outcome {
-                        Outcome::Acked => self.step_done(),
+                        Outcome::Acked => match (&mut self.job, self.zone_target) {
+                            (Some(j), Some(target))
+                                if matches!(j.steps.front(), Some((_, Step::GotoZone))) =>
+                            {
+                                // Accepted is not arrived: LAND only once there.
+                                j.running = Running::Arrive { target, since: now };
+                            }
+                            _ => self.step_done(),
+                        },
                         Outcome::Failed(reason)
                             if command == MavCmd::MAV_CMD_COMPONENT_ARM_DISARM =>
                         {
@@ -862,6 +941,83 @@ impl Vehicle {
     /// Whether an action is being executed (for tests and the log).
     pub fn busy(&self) -> bool {
         self.job.is_some()
+    }
+
+    /// `action` is being flown or was flown to the end (asking for it again does nothing).
+    pub fn settled(&self, action: &str) -> bool {
+        matches!(&self.job, Some(j) if j.key == action)
+            || matches!(&self.last, Some((k, JobStatus::Done | JobStatus::Running)) if k == action)
+    }
+
+    fn note_mode(&mut self, now: Duration, name: &str) {
+        self.commanded_modes.push((name.to_string(), now));
+        if self.commanded_modes.len() > 8 {
+            self.commanded_modes.remove(0);
+        }
+    }
+
+    /// MAV_CMD_DO_REPOSITION with the change-mode flag: ArduPilot enters GUIDED, PX4 holds in
+    /// LOITER (our GUIDED on PX4).
+    fn note_reposition(&mut self, now: Duration) {
+        self.note_mode(now, "GUIDED");
+    }
+
+    /// A COMMAND_LONG / COMMAND_INT addressed to this companion (our system, component 191)
+    /// from anyone on the link: kept for the shell, which answers it. True when it was one.
+    fn command_to_us(&mut self, f: &Frame) -> bool {
+        let (command, sys, comp) = match &f.msg {
+            Msg::COMMAND_LONG(c) => (c.command, c.target_system, c.target_component),
+            Msg::COMMAND_INT(c) => (c.command, c.target_system, c.target_component),
+            _ => return false,
+        };
+        if comp != super::OUR_COMPONENT_ID || sys != self.our_system() {
+            return false;
+        }
+        if self.commands_to_us.len() < 16 {
+            self.commands_to_us
+                .push((command, f.header.system_id.min(255) as u8, f.header.component_id));
+        }
+        true
+    }
+
+    /// Commands addressed to us since the last call: (command, sender system, component).
+    pub fn take_commands_to_us(&mut self) -> Vec<(MavCmd, u8, u8)> {
+        std::mem::take(&mut self.commands_to_us)
+    }
+
+    /// Stop commanding motion (the pilot took over, or the flight is over): the running action
+    /// and its commands in flight end now (recorded CANCELLED), nothing of them is resent, and
+    /// any action may be asked for afresh later. Stream requests go on.
+    pub fn stop_actions(&mut self, now: Duration, why: &str) {
+        let step_tickets: Vec<u64> = self
+            .purposes
+            .iter()
+            .filter(|(_, p)| matches!(p, Purpose::Step { .. }))
+            .map(|(t, _)| *t)
+            .collect();
+        let evs = self
+            .commands
+            .cancel_tickets(now, why, |t| step_tickets.contains(&t));
+        let job = self.job.take();
+        // With the job gone, the cancelled commands are only recorded.
+        let _ = self.on_command_events(now, evs);
+        if let Some(job) = job {
+            let running = matches!(job.running, Running::Command(_));
+            for (action, step) in job.steps.into_iter().skip(usize::from(running)) {
+                self.records.push(CommandRecord {
+                    action,
+                    command: step_name(&step),
+                    result: format!("CANCELLED ({why})"),
+                    attempts: 0,
+                    latency_ms: None,
+                });
+            }
+        }
+        if self.mission.cancel(why).is_some() {
+            self.link_event(format!("mission transfer cancelled ({why})"), false);
+        }
+        self.zone_target = None;
+        self.last = None;
     }
 }
 
