@@ -748,14 +748,29 @@ mod tests {
         let d = tempfile::tempdir().unwrap();
         let base = "decision_period_s = 1.0\narm_wait_s = 30\nmax_arm_attempts = 3\n[streams]\nWIND = 1\n[telemetry]\nobstacle_near_m = 15\nbattery_thresholds_pct = [30]\ndistance_max_age_s = 2\n";
         let p = write(&d, "l.toml", base);
-        assert_eq!(LinkParams::load(&p).unwrap().flight, FlightParams::default());
+        assert_eq!(
+            LinkParams::load(&p).unwrap().flight,
+            FlightParams::default()
+        );
         for (line, entry) in [
-            ("min_event_cycle_interval_s = 0", "flight.min_event_cycle_interval_s"),
-            ("min_event_cycle_interval_s = 2.0", "flight.min_event_cycle_interval_s"),
-            ("min_event_cycle_interval_s = nan", "flight.min_event_cycle_interval_s"),
+            (
+                "min_event_cycle_interval_s = 0",
+                "flight.min_event_cycle_interval_s",
+            ),
+            (
+                "min_event_cycle_interval_s = 2.0",
+                "flight.min_event_cycle_interval_s",
+            ),
+            (
+                "min_event_cycle_interval_s = nan",
+                "flight.min_event_cycle_interval_s",
+            ),
             ("landed_confirm_s = -1", "flight.landed_confirm_s"),
             ("zone_radius_m = inf", "flight.zone_radius_m"),
-            ("zone_arrive_timeout_s = 1e30", "flight.zone_arrive_timeout_s"),
+            (
+                "zone_arrive_timeout_s = 1e30",
+                "flight.zone_arrive_timeout_s",
+            ),
             ("statustext_max_per_s = 0", "flight.statustext_max_per_s"),
         ] {
             let p = write(&d, "l.toml", &format!("{base}[flight]\n{line}\n"));

@@ -1178,6 +1178,25 @@ mod tests {
     }
 
     #[test]
+    fn an_event_flood_is_coalesced_into_one_bounded_list() {
+        let mut ev: Vec<String> = (0..10_000)
+            .map(|i| format!("mode {}", if i % 2 == 0 { "AUTO" } else { "GUIDED" }))
+            .collect();
+        ev.push("obstacle detected".into());
+        coalesce_events(&mut ev);
+        assert_eq!(ev[..3], ["mode AUTO", "mode GUIDED", "obstacle detected"]);
+        assert_eq!(ev.len(), 4);
+        assert!(ev[3].contains("9998 repeats"), "{}", ev[3]);
+        let mut many: Vec<String> = (0..500).map(|i| format!("waypoint {i}")).collect();
+        coalesce_events(&mut many);
+        assert_eq!(many.len(), MAX_EVENTS + 1);
+        assert!(many[MAX_EVENTS].contains("436 not listed"), "{}", many[MAX_EVENTS]);
+        let mut few = vec!["a".to_string(), "b".to_string()];
+        coalesce_events(&mut few);
+        assert_eq!(few, ["a", "b"]);
+    }
+
+    #[test]
     fn policy_values() {
         assert!(parse_policy("safety").is_ok() && parse_policy("mission").is_ok());
         assert!(parse_policy("yolo").is_err());

@@ -974,8 +974,11 @@ impl Vehicle {
             return false;
         }
         if self.commands_to_us.len() < 16 {
-            self.commands_to_us
-                .push((command, f.header.system_id.min(255) as u8, f.header.component_id));
+            self.commands_to_us.push((
+                command,
+                f.header.system_id.min(255) as u8,
+                f.header.component_id,
+            ));
         }
         true
     }
@@ -1521,6 +1524,163 @@ mod tests {
             recs.iter()
                 .any(|r| r.command == "SET_MODE AUTO" && r.result.starts_with("SKIPPED"))
         );
+    }
+
+    fn zone_vehicle() -> Vehicle {
+        let mut v = route_vehicle();
+        v.actions.actions.insert(
+            "land".into(),
+            vec![Step::GotoZone, Step::Mode("LAND".into())],
+        );
+        v.cfg.zone_radius_m = 3.0;
+        v.cfg.zone_arrive_timeout = Duration::from_secs(60);
+        let onboard = &mut v.telemetry.cfg.onboard;
+        onboard.insert("zone_n".into(), "zone_north_m".into());
+        onboard.insert("zone_e".into(), "zone_east_m".into());
+        // The landing-zone monitor: the zone 40 m north of the vehicle.
+        for (name, value) in [("zone_n", 40.0), ("zone_e", 0.0)] {
+            let mut f = frame(Msg::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA {
+                time_boot_ms: 0,
+                value,
+                name: name.into(),
+            }));
+            f.header.component_id = 100;
+            v.on_frame(s(0.5), &f);
+        }
+        v
+    }
+
+    fn at(v: &mut Vehicle, t: f64, north_m: f64) -> Vec<Msg> {
+        let (lat, lon) = displace((473_977_420, 85_455_940), north_m, 0.0);
+        v.on_frame(
+            s(t),
+            &frame(Msg::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
+                lat,
+                lon,
+                relative_alt: 20_000,
+                hdg: 9000,
+                ..GLOBAL_POSITION_INT_DATA::DEFAULT
+            })),
+        )
+    }
+
+    #[test]
+    fn land_at_the_zone_flies_within_the_radius_before_land() {
+        let mut v = zone_vehicle();
+        let out = v.request_actions(s(1.0), &["land".into()]);
+        let target = match &out[..] {
+            [Msg::COMMAND_INT(c)] if c.command == MavCmd::MAV_CMD_DO_REPOSITION => (c.x, c.y),
+            other => panic!("{other:?}"),
+        };
+        let (n, _) = crate::link::telemetry::offset_m((473_977_420, 85_455_940), target);
+        assert!((n - 40.0).abs() < 0.1, "zone 40 m north: {n}");
+        let out = v.on_frame(
+            s(1.1),
+            &ack(
+                MavCmd::MAV_CMD_DO_REPOSITION,
+                MavResult::MAV_RESULT_ACCEPTED,
+            ),
+        );
+        assert!(
+            commands(&out).is_empty(),
+            "accepted is not arrived: {out:?}"
+        );
+        for (t, north) in [(2.0, 5.0), (5.0, 20.0), (8.0, 36.0)] {
+            assert!(commands(&at(&mut v, t, north)).is_empty(), "{north} m");
+            assert!(commands(&v.tick(s(t + 0.05))).is_empty());
+        }
+        assert!(v.busy());
+        let out = at(&mut v, 10.0, 38.5);
+        assert_eq!(
+            commands(&out),
+            vec![MavCmd::MAV_CMD_DO_SET_MODE],
+            "LAND once within 3 m"
+        );
+        let recs = v.take_records();
+        assert!(
+            recs.iter()
+                .any(|r| r.command == "ARRIVE (zone)" && r.result.starts_with("ARRIVED")),
+            "{recs:?}"
+        );
+    }
+
+    #[test]
+    fn land_at_the_zone_lands_where_it_is_after_the_arrive_timeout() {
+        let mut v = zone_vehicle();
+        v.request_actions(s(1.0), &["land".into()]);
+        v.on_frame(
+            s(1.1),
+            &ack(
+                MavCmd::MAV_CMD_DO_REPOSITION,
+                MavResult::MAV_RESULT_ACCEPTED,
+            ),
+        );
+        assert!(commands(&at(&mut v, 30.0, 2.0)).is_empty());
+        let out = at(&mut v, 61.5, 2.0);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        assert!(
+            v.take_records()
+                .iter()
+                .any(|r| r.result.starts_with("TIMEOUT") && r.result.contains("landing here"))
+        );
+    }
+
+    #[test]
+    fn stop_actions_cancels_the_running_action_and_nothing_is_resent() {
+        let mut v = vehicle();
+        connected(&mut v, 0);
+        let out = v.request_actions(s(1.0), &["return_to_base".into()]);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        v.stop_actions(s(1.2), "pilot took control");
+        assert!(!v.busy());
+        assert!(
+            v.take_records()
+                .iter()
+                .any(|r| r.command == "SET_MODE RTL" && r.result.contains("pilot took control"))
+        );
+        for t in [2.0, 3.0, 5.0] {
+            v.on_frame(s(t), &hb(0, false));
+            assert!(commands(&v.tick(s(t + 0.5))).is_empty(), "no resend at {t}");
+        }
+        // Asked again later (control handed back), the same action runs afresh.
+        let out = v.request_actions(s(6.0), &["return_to_base".into()]);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        assert_eq!(v.commanded_modes.last().map(|m| m.0.as_str()), Some("RTL"));
+    }
+
+    #[test]
+    fn commands_addressed_to_the_companion_are_kept_for_the_shell() {
+        let mut v = vehicle();
+        connected(&mut v, 0);
+        let start = |comp: u8| {
+            let mut f = frame(Msg::COMMAND_LONG(COMMAND_LONG_DATA {
+                command: MavCmd::MAV_CMD_MISSION_START,
+                target_system: 1,
+                target_component: comp,
+                ..COMMAND_LONG_DATA::DEFAULT
+            }));
+            f.header.system_id = 255;
+            f.header.component_id = 190;
+            f
+        };
+        v.on_frame(s(1.0), &start(191));
+        v.on_frame(s(1.1), &start(1)); // for the autopilot: not ours
+        assert_eq!(
+            v.take_commands_to_us(),
+            vec![(MavCmd::MAV_CMD_MISSION_START, 255, 190)]
+        );
+        assert!(v.take_commands_to_us().is_empty());
+    }
+
+    #[test]
+    fn armed_heartbeats_count_consecutive_reports() {
+        let mut v = vehicle();
+        connected(&mut v, 0);
+        v.on_frame(s(1.0), &hb(0, true));
+        v.on_frame(s(2.0), &hb(0, true));
+        assert_eq!(v.armed_heartbeats, 2);
+        v.on_frame(s(3.0), &hb(0, false));
+        assert_eq!(v.armed_heartbeats, 0);
     }
 
     #[test]
