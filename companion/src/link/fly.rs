@@ -1190,7 +1190,11 @@ mod tests {
         let mut many: Vec<String> = (0..500).map(|i| format!("waypoint {i}")).collect();
         coalesce_events(&mut many);
         assert_eq!(many.len(), MAX_EVENTS + 1);
-        assert!(many[MAX_EVENTS].contains("436 not listed"), "{}", many[MAX_EVENTS]);
+        assert!(
+            many[MAX_EVENTS].contains("436 not listed"),
+            "{}",
+            many[MAX_EVENTS]
+        );
         let mut few = vec!["a".to_string(), "b".to_string()];
         coalesce_events(&mut few);
         assert_eq!(few, ["a", "b"]);

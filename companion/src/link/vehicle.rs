@@ -128,6 +128,8 @@ pub struct Vehicle {
     commands_to_us: Vec<(MavCmd, u8, u8)>,
     /// Where the running zone reposition goes.
     zone_target: Option<(i32, i32)>,
+    /// When the autopilot last reported its mode (its heartbeat).
+    mode_heard_at: Option<Duration>,
 }
 
 impl Vehicle {
@@ -155,6 +157,7 @@ impl Vehicle {
             commanded_modes: Vec::new(),
             commands_to_us: Vec::new(),
             zone_target: None,
+            mode_heard_at: None,
         }
     }
 
@@ -247,6 +250,7 @@ impl Vehicle {
                 self.readiness.armed = h
                     .base_mode
                     .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+                self.mode_heard_at = Some(now);
                 self.armed_heartbeats = if self.readiness.armed {
                     self.armed_heartbeats.saturating_add(1)
                 } else {
@@ -559,9 +563,18 @@ impl Vehicle {
                     continue;
                 }
                 (Running::Idle, Step::Mode(name)) => {
+                    // A different mode commanded since the last heartbeat: the reported mode is
+                    // stale (LAND reported, GUIDED just accepted for a sidestep).
+                    let stale = self
+                        .commanded_modes
+                        .iter()
+                        .rev()
+                        .find(|(_, at)| self.mode_heard_at.is_none_or(|h| *at >= h))
+                        .is_some_and(|(m, _)| m != name);
                     self.note_mode(now, name);
                     if modes::is_in_mode(self.flavor, self.telemetry.custom_mode, name)
                         && self.telemetry.mode.is_some()
+                        && !stale
                     {
                         self.records.push(CommandRecord {
                             action,
@@ -1670,6 +1683,45 @@ mod tests {
             vec![(MavCmd::MAV_CMD_MISSION_START, 255, 190)]
         );
         assert!(v.take_commands_to_us().is_empty());
+    }
+
+    #[test]
+    fn a_mode_reported_before_our_last_mode_command_is_not_already_set() {
+        let mut v = route_vehicle();
+        v.actions
+            .actions
+            .insert("land".into(), vec![Step::Mode("LAND".into())]);
+        v.on_frame(s(1.0), &hb(9, true)); // LAND
+        // A sidestep: GUIDED accepted, the heartbeat still says LAND.
+        v.request_actions(s(1.1), &["avoid_obstacle".into()]);
+        v.on_frame(
+            s(1.2),
+            &ack(
+                MavCmd::MAV_CMD_DO_REPOSITION,
+                MavResult::MAV_RESULT_ACCEPTED,
+            ),
+        );
+        let out = v.request_actions(s(1.3), &["land".into()]);
+        assert_eq!(
+            commands(&out),
+            vec![MavCmd::MAV_CMD_DO_SET_MODE],
+            "LAND sent again, not taken as already set"
+        );
+        // With a fresh heartbeat in LAND and nothing commanded since, LAND is already set.
+        v.on_frame(
+            s(1.4),
+            &ack(MavCmd::MAV_CMD_DO_SET_MODE, MavResult::MAV_RESULT_ACCEPTED),
+        );
+        v.on_frame(s(2.5), &hb(9, true));
+        v.take_records();
+        v.request_actions(s(2.6), &["return_to_base".into()]);
+        v.on_frame(
+            s(2.7),
+            &ack(MavCmd::MAV_CMD_DO_SET_MODE, MavResult::MAV_RESULT_ACCEPTED),
+        );
+        v.on_frame(s(3.5), &hb(6, true)); // RTL
+        let out = v.request_actions(s(3.6), &["land".into()]);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
     }
 
     #[test]
