@@ -647,6 +647,8 @@ pub struct Shell {
     pub texts: GcsText,
     /// The last cycle's action set, to tell a change of behaviour.
     last_actions: Vec<String>,
+    /// The last behaviour told to the ground station (motion and tracking version).
+    last_told: String,
     /// Ingest counters now, and as last reported in a record's link_events.
     ingest: ingest::IngestStats,
     ingest_reported: ingest::IngestStats,
@@ -669,6 +671,7 @@ impl Shell {
                 f.statustext_max_per_s,
             ),
             last_actions: Vec::new(),
+            last_told: String::new(),
             ingest: Default::default(),
             ingest_reported: Default::default(),
         }
@@ -690,6 +693,7 @@ impl Shell {
         self.mission = self.fresh_mission.clone();
         self.operator.new_flight();
         self.last_actions.clear();
+        self.last_told.clear();
         self.pending_events
             .push("flight over: landed and disarmed; waiting for the operator".into());
     }
@@ -716,6 +720,33 @@ impl Shell {
             }
         };
         Some(format!("{} -> {} ({why})", show(&was), show(&rec.actions)))
+    }
+
+    /// What a pilot needs of a behaviour change, in a STATUSTEXT's 50 characters: the motion
+    /// flown and the tracking version, and why ("companion: land (mission: search time ...").
+    /// None when that part did not change.
+    fn behaviour_text(&mut self, rec: &DecisionRecord) -> Option<String> {
+        let motions: Vec<String> = rec
+            .actions
+            .iter()
+            .filter(|a| self.precedence.contains(a))
+            .cloned()
+            .collect();
+        let mut told = mission_state::select_vehicle_action(&motions, &self.precedence)
+            .unwrap_or_else(|| "hold".into());
+        if let Some(v) = rec.actions.iter().find_map(|a| a.strip_prefix("track_")) {
+            told.push_str(&format!(", track {v}"));
+        }
+        if told == self.last_told {
+            return None;
+        }
+        self.last_told = told.clone();
+        let why = rec
+            .events
+            .iter()
+            .find(|e| !e.starts_with("command "))
+            .map_or(String::new(), |e| format!(" ({e})"));
+        Some(format!("companion: {told}{why}"))
     }
 
     /// A link event when bad input arrived since the last report: malformed frames or bad
@@ -773,13 +804,11 @@ async fn run_cycle_at<D: Decider, S: RecordSink>(
     let mut texts = Vec::new();
     if let Some(change) = shell.action_change(&rec) {
         tracing::info!("actions: {change}");
-        if shell.operator.commanding() {
-            texts.extend(
-                shell
-                    .texts
-                    .say(now(), NOTICE, &format!("companion: {change}")),
-            );
-        }
+    }
+    if let Some(text) = shell.behaviour_text(&rec)
+        && shell.operator.commanding()
+    {
+        texts.extend(shell.texts.say(now(), NOTICE, &text));
     }
     if let Some(g) = &rec.guarantee
         && g.infeasible
@@ -967,7 +996,6 @@ pub fn finish_record(
             "NOT_",
             "CANCELLED",
             "UNMAPPED",
-            "SKIPPED",
         ]
         .iter()
         .any(|p| c.result.starts_with(p));
