@@ -110,6 +110,23 @@ def test_without_auto_start_the_vehicle_stays_disarmed_and_the_companion_waits(a
     records = run.records()
     assert records and all(r.get("vehicle", {}).get("operator") == "waiting" for r in records[-3:])
     assert all(isinstance(r.get("utc_us"), int) and r["utc_us"] > 1.6e15 for r in records)
+    # The journal view: plain lines (stderr is a file here, not a terminal), the wait said there too.
+    err = run.stderr_path.read_text()
+    assert "\x1b[" not in err, err[:500]
+    assert "waiting for the operator" in err, err[:2000]
+
+
+def test_bad_params_stop_fly_before_any_run_folder(tmp_path):
+    params = tmp_path / "params"
+    shutil.copytree(Path(__file__).parent.parent / "params", params)
+    link = params / "link.toml"
+    link.write_text(link.read_text().replace("min_event_cycle_interval_s = 0.2", "min_event_cycle_interval_s = -1"))
+    runs = tmp_path / "runs"
+    out = subprocess.run([os.environ["COMPANION_BIN"], "fly", "--connect", "tcp:127.0.0.1:1", "--params", str(params),
+                          "--log-dir", str(runs)], capture_output=True, text=True, timeout=60)
+    assert out.returncode != 0
+    assert "link.toml" in out.stderr and "min_event_cycle_interval_s" in out.stderr, out.stderr
+    assert not runs.exists() or not any(runs.iterdir()), list(runs.iterdir())
 
 
 def test_pilot_arming_from_the_gcs_starts_the_mission(autopilot_factory, fly, client):
