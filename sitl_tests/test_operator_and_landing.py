@@ -116,6 +116,34 @@ def test_without_auto_start_the_vehicle_stays_disarmed_and_the_companion_waits(a
     assert "waiting for the operator" in err, err[:2000]
 
 
+def test_a_heartbeat_flood_alternating_modes_is_coalesced_into_rate_limited_cycles(autopilot_factory, fly):
+    ap = autopilot_factory()
+    sa = ap.standin
+    run = fly(ap, auto_start=False)
+    wait(lambda: any(e.data["src"][1] == COMPANION for e in sa.received("HEARTBEAT")), 20, "the companion", run)
+    time.sleep(2.0)
+    hb = [mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                            mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, MODES[m],
+                                            mavlink.MAV_STATE_STANDBY, 3) for m in ("AUTO", "GUIDED")]
+    sent = 0
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < 4.0:
+        for m in hb:
+            sa.inject_unsigned(m)
+            sent += 1
+        time.sleep(0.002)
+    flood_s = time.monotonic() - t0
+    time.sleep(1.0)
+    stop(run)
+    records = run.records()
+    mode_events = [r for r in records if any(e.startswith("mode ") for e in r.get("events", []))]
+    # params/link.toml: min_event_cycle_interval_s 0.2 and decision_period_s 1: at most 5 + 1 cycles a second.
+    bound = (flood_s + 1.0) * (1 / 0.2 + 1) + 2
+    assert sent > 500, sent
+    assert len(mode_events) <= bound, f"{len(mode_events)} cycles with mode events for {sent} heartbeats in {flood_s:.1f} s"
+    assert all(len(r.get("events", [])) <= 65 for r in records)
+
+
 def test_bad_params_stop_fly_before_any_run_folder(tmp_path):
     params = tmp_path / "params"
     shutil.copytree(Path(__file__).parent.parent / "params", params)
