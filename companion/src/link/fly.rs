@@ -863,7 +863,9 @@ pub fn decide<D: Decider>(
     // The landing phase: the MDPs see `landing` as terminal and plan nothing there, so the shell
     // keeps flying the landing chosen until the vehicle is down, resuming it after an avoidance
     // sidestep and sending it again after a refusal or a timeout.
-    if let Some(landing) = shell.mission.landing_action().map(str::to_string) {
+    if shell.operator.commanding()
+        && let Some(landing) = shell.mission.landing_action().map(str::to_string)
+    {
         let keep = chosen
             .as_deref()
             .is_some_and(|a| a == "avoid_obstacle" || LANDING_ACTIONS.contains(&a));
