@@ -106,6 +106,8 @@ def test_without_auto_start_the_vehicle_stays_disarmed_and_the_companion_waits(a
     assert any("waiting for the operator" in t for t in texts), texts
     # Rate-limited: one reminder per statustext_repeat_s (15 s), not one per cycle.
     assert sum("waiting for the operator" in t for t in texts) <= 2, texts
+    # The one GCS heartbeat sent at the start went silent: the companion says so (to whoever still hears).
+    assert any("link to the ground station lost" in t for t in texts), texts
     stop(run)
     records = run.records()
     assert records and all(r.get("vehicle", {}).get("operator") == "waiting" for r in records[-3:])
@@ -379,6 +381,7 @@ kill -0 $FLY && echo "fly still running" > fly.alive
     assert result.exists(), out.stdout[-2000:] + out.stderr[-2000:]
     import json
     r = json.loads(result.read_text())
+    print("real ArduCopter SITL, 60 s without --auto-start:", r)
     assert r["heartbeats"] > 10, r
     assert not r["armed_seen"], "the vehicle was armed without the operator"
     assert any("waiting for the operator" in t for t in r["texts"]), r
