@@ -92,11 +92,15 @@ def test_without_auto_start_the_vehicle_stays_disarmed_and_the_companion_waits(a
     ap = autopilot_factory()
     sa = ap.standin
     gcs = client(sa.url)
-    gcs.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, mavlink.MAV_STATE_ACTIVE)
     run = fly(ap, auto_start=False)
     # The position estimate is ready after 8 s simulated (2 s wall): give the companion three times as long as it
     # needed with --auto-start to arm.
     wait(lambda: sa.state()["position_ok"], 30, "the stand-in's position estimate", run)
+    wait(lambda: any(e.data["src"][1] == COMPANION for e in sa.received("HEARTBEAT")), 20, "the companion", run)
+    # A ground station heard for a moment, then silent (more than 5 s).
+    for _ in range(3):
+        gcs.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, mavlink.MAV_STATE_ACTIVE)
+        time.sleep(0.5)
     time.sleep(8.0)
     assert run.proc.poll() is None, "fly exited while waiting for the operator\n" + run.output()
     assert not sa.rec.of("arm"), "armed without the operator"
@@ -141,6 +145,8 @@ def test_a_heartbeat_flood_alternating_modes_is_coalesced_into_rate_limited_cycl
     mode_events = [r for r in records if any(e.startswith("mode ") for e in r.get("events", []))]
     # params/link.toml: min_event_cycle_interval_s 0.2 and decision_period_s 1: at most 5 + 1 cycles a second.
     bound = (flood_s + 1.0) * (1 / 0.2 + 1) + 2
+    print(f"heartbeat flood: {sent} heartbeats in {flood_s:.1f} s -> {len(mode_events)} cycles with mode events, "
+          f"{len(records)} records in all")
     assert sent > 500, sent
     assert len(mode_events) <= bound, f"{len(mode_events)} cycles with mode events for {sent} heartbeats in {flood_s:.1f} s"
     assert all(len(r.get("events", [])) <= 65 for r in records)
