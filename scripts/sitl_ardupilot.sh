@@ -101,7 +101,7 @@ wait_listen 5763 60
 # ---- the default mission (no onboard monitors: the target search ends at its time limit) -----------
 echo "== companion fly --connect tcp:127.0.0.1:5762 (default mission)"
 set +e
-timeout "${SITL_FLY_TIMEOUT:-600}" "$COMPANION_BIN" fly --connect tcp:127.0.0.1:5762 --auto-start --log-dir "$WORK/runs"
+timeout "${SITL_FLY_TIMEOUT:-600}" "$COMPANION_BIN" fly --connect tcp:127.0.0.1:5762 --auto-start --once --log-dir "$WORK/runs"
 fly_rc=$?
 set -e
 [ "$fly_rc" -eq 0 ] || fail "companion fly exited $fly_rc (run folder under $WORK/runs)"

@@ -134,10 +134,12 @@ class FlightRun:
 
 @pytest.fixture
 def fly(tmp_path):
-    """Factory: fly(autopilot, mission=None, extra=()) -> FlightRun of `companion fly` (killed at teardown)."""
+    """Factory: fly(autopilot, mission=None, extra=(), auto_start=True, once=True) -> FlightRun of `companion fly`
+    (killed at teardown)."""
     runs: List[FlightRun] = []
 
-    def start(ap: Autopilot, mission: Optional[Path] = None, extra: tuple = ()) -> FlightRun:
+    def start(ap: Autopilot, mission: Optional[Path] = None, extra: tuple = (), auto_start: bool = True,
+              once: bool = True) -> FlightRun:
         exe = os.environ["COMPANION_BIN"]
         n = len(runs)
         log_dir = tmp_path / f"companion-log-{n}"
@@ -146,7 +148,8 @@ def fly(tmp_path):
         if ap.signing_key is not None:
             key_file = tmp_path / f"signing-{n}.key"
             key_file.write_text(ap.signing_key.hex())
-        cmd = companion_fly_cmd(exe, ap.url, log_dir, mission=mission, signing_key_file=key_file, extra=extra)
+        cmd = companion_fly_cmd(exe, ap.url, log_dir, mission=mission, signing_key_file=key_file, extra=extra,
+                                auto_start=auto_start, once=once)
         out, err = tmp_path / f"companion-{n}.out", tmp_path / f"companion-{n}.err"
         proc = subprocess.Popen(cmd, stdout=open(out, "w"), stderr=open(err, "w"), stdin=subprocess.DEVNULL,
                                 env={**os.environ, "RUST_BACKTRACE": "1"})

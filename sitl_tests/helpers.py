@@ -19,9 +19,15 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 # ------------------------------------------------------------------------------------------------
 
 def companion_fly_cmd(exe: str, connect_url: str, log_dir: Path, mission: Optional[Path] = None,
-                      signing_key_file: Optional[Path] = None, extra: Iterable[str] = ()) -> List[str]:
-    # --auto-start: the tests fly without an operator (the operator-start tests drop it from `extra`).
-    cmd = [exe, "fly", "--connect", connect_url, "--log-dir", str(log_dir), "--auto-start"]
+                      signing_key_file: Optional[Path] = None, extra: Iterable[str] = (),
+                      auto_start: bool = True, once: bool = True) -> List[str]:
+    # --auto-start: the tests fly without an operator (the operator-start tests pass auto_start=False).
+    # --once: exit after one flight (landed and disarmed) instead of waiting for the operator again.
+    cmd = [exe, "fly", "--connect", connect_url, "--log-dir", str(log_dir)]
+    if auto_start:
+        cmd.append("--auto-start")
+    if once:
+        cmd.append("--once")
     if mission is not None:
         cmd += ["--mission", str(mission)]
     if signing_key_file is not None:

@@ -260,6 +260,7 @@ fn main() -> anyhow::Result<()> {
         auto_start: true,
         autopilot_sysid: None,
         connect_timeout: None,
+        once: false,
     };
     let setup = FlySetup::load(&args)?;
     let spec = WorldSpec::load(&o.params)?;

@@ -73,6 +73,7 @@ fn fly_args(params: &Path) -> FlyArgs {
         auto_start: true,
         autopilot_sysid: None,
         connect_timeout: None,
+        once: false,
     }
 }
 

@@ -18,6 +18,34 @@ use std::path::PathBuf;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Log level on stderr: error, warn, info, debug, trace, or a filter like
+    /// `companion=debug` (default: $RUST_LOG, else info). Colour on a terminal, plain lines
+    /// otherwise (systemd's journal).
+    #[arg(long, global = true)]
+    log_level: Option<String>,
+}
+
+/// The `tracing` subscriber for every subcommand: `--log-level`, else `RUST_LOG`, else info;
+/// to stderr, with colour only when stderr is a terminal.
+fn init_logging(level: Option<&str>) -> Result<()> {
+    use tracing_subscriber::EnvFilter;
+    let filter = match level {
+        Some(l) => EnvFilter::try_new(l).with_context(|| format!("--log-level {l:?}"))?,
+        None => EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")),
+    };
+    let terminal = std::io::stderr().is_terminal();
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(terminal)
+        .with_target(false);
+    // The journal stamps each line itself: no second timestamp there.
+    if terminal {
+        builder.init();
+    } else {
+        builder.without_time().init();
+    }
+    Ok(())
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -105,6 +133,7 @@ enum Command {
 
 fn main() -> Result<()> {
     let cli = Cli::parse();
+    init_logging(cli.log_level.as_deref())?;
     match cli.command {
         Command::Simulate(args) => {
             let params = args.params.clone().unwrap_or_else(default_params_dir);
@@ -132,6 +161,8 @@ fn main() -> Result<()> {
 /// The real decision core behind the fly loop.
 struct CoreDecider {
     core: Core<'static>,
+    model: &'static Model,
+    policy: Policy,
 }
 
 impl Decider for CoreDecider {
@@ -140,6 +171,10 @@ impl Decider for CoreDecider {
         obs: &companion::observations::Observations,
     ) -> (companion::record::Plan, companion::record::DecisionRecord) {
         self.core.step(obs)
+    }
+
+    fn new_flight(&mut self) {
+        self.core = Core::new(self.model, ModelKind::Bfm, self.policy);
     }
 }
 
@@ -153,6 +188,8 @@ fn fly(args: FlyArgs) -> Result<()> {
         .map_err(|e: String| anyhow::anyhow!(e))?;
     let decider = CoreDecider {
         core: Core::new(model, ModelKind::Bfm, policy),
+        model,
+        policy,
     };
     companion::link::fly::run(args, decider)
 }

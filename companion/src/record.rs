@@ -152,6 +152,11 @@ pub struct DecisionRecord {
     pub link_events: Vec<String>,
     /// Telemetry worth plotting that is not an observation (altitude_m, battery_pct, mode).
     pub vehicle: BTreeMap<String, serde_json::Value>,
+    /// Wall-clock time of the record, microseconds since the Unix epoch (UTC), the unit and
+    /// clock of the tlog's timestamps, so records and telemetry line up. `fly` only (the
+    /// simulated world has no wall clock): absent in `simulate` records.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub utc_us: Option<u64>,
 }
 
 /// What the core asks the shell to do this cycle.
@@ -211,7 +216,7 @@ reuse_clone!(GuaranteeRecord {
 } maps { margins, goals, drift });
 reuse_clone!(DecisionRecord {
     cycle, time_s, state, events, proposals, conflicts, actions, resources, guarantee, commands,
-    link_events
+    link_events, utc_us
 } maps { observations, evidence, probabilities, vehicle });
 reuse_clone!(Plan { vehicle_actions, applications } maps {});
 

@@ -221,6 +221,7 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
         auto_start: true,
         autopilot_sysid: None,
         connect_timeout: None,
+        once: false,
     };
     let decider = ScriptedDecider::new(20.0, 6, "safety");
     let mut records: Vec<DecisionRecord> = Vec::new();
@@ -387,6 +388,7 @@ async fn fly_over_udp_signs_frames_and_refuses_unsigned_commands() {
         auto_start: true,
         autopilot_sysid: None,
         connect_timeout: None,
+        once: false,
     };
     let mut records: Vec<DecisionRecord> = Vec::new();
     let report = run_with(args, ScriptedDecider::new(20.0, 6, "mission"), &mut records)

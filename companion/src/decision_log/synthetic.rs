@@ -380,6 +380,7 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
         commands,
         link_events,
         vehicle,
+        utc_us: None,
     }
 }
 

@@ -400,6 +400,98 @@ pub struct LinkParams {
     /// listed here is commanded (see link::mission_state::select_vehicle_action).
     #[serde(default)]
     pub vehicle_action_precedence: Vec<String>,
+    /// The flight as the shell runs it: cycle rate limit, end-of-flight rule, landing at a
+    /// zone, STATUSTEXT limits (`[flight]`, defaults when absent).
+    #[serde(default)]
+    pub flight: FlightParams,
+}
+
+/// `params/link.toml` `[flight]`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FlightParams {
+    /// Least time between two decision cycles that events trigger (s); events in between are
+    /// coalesced into the next allowed cycle.
+    pub min_event_cycle_interval_s: f64,
+    /// The vehicle must report itself on the ground and disarmed this long (s), over at least
+    /// two cycles, before the flight counts as over.
+    pub landed_confirm_s: f64,
+    /// Without EXTENDED_SYS_STATE: disarmed and below this altitude above home (m) is on the
+    /// ground.
+    pub ground_altitude_m: f64,
+    /// "Land at the zone": within this distance (m) of the zone before LAND.
+    pub zone_radius_m: f64,
+    /// Time allowed to reach the zone (s); then the vehicle lands where it is.
+    pub zone_arrive_timeout_s: f64,
+    /// The same STATUSTEXT is not sent again within this long (s); "ready, waiting for the
+    /// operator" repeats at this interval.
+    pub statustext_repeat_s: f64,
+    /// At most this many STATUSTEXTs per second.
+    pub statustext_max_per_s: u32,
+}
+
+impl Default for FlightParams {
+    fn default() -> Self {
+        Self {
+            min_event_cycle_interval_s: 0.2,
+            landed_confirm_s: 3.0,
+            ground_altitude_m: 1.0,
+            zone_radius_m: 3.0,
+            zone_arrive_timeout_s: 60.0,
+            statustext_repeat_s: 15.0,
+            statustext_max_per_s: 2,
+        }
+    }
+}
+
+impl FlightParams {
+    /// Every number finite and in range, against `decision_period_s`.
+    fn check(&self, path: &Path, decision_period_s: f64) -> Result<(), SpecError> {
+        let within = |v: f64, lo: f64, hi: f64| v.is_finite() && v > lo && v <= hi;
+        let checks: [(&str, bool, String); 7] = [
+            (
+                "flight.min_event_cycle_interval_s",
+                within(self.min_event_cycle_interval_s, 0.0, decision_period_s),
+                format!("must be in (0, decision_period_s = {decision_period_s}] s"),
+            ),
+            (
+                "flight.landed_confirm_s",
+                within(self.landed_confirm_s, 0.0, 600.0),
+                "must be in (0, 600] s".into(),
+            ),
+            (
+                "flight.ground_altitude_m",
+                within(self.ground_altitude_m, 0.0, 50.0),
+                "must be in (0, 50] m".into(),
+            ),
+            (
+                "flight.zone_radius_m",
+                within(self.zone_radius_m, 0.0, 1000.0),
+                "must be in (0, 1000] m".into(),
+            ),
+            (
+                "flight.zone_arrive_timeout_s",
+                within(self.zone_arrive_timeout_s, 0.0, 3600.0),
+                "must be in (0, 3600] s".into(),
+            ),
+            (
+                "flight.statustext_repeat_s",
+                within(self.statustext_repeat_s, 0.0, 3600.0),
+                "must be in (0, 3600] s".into(),
+            ),
+            (
+                "flight.statustext_max_per_s",
+                (1..=20).contains(&self.statustext_max_per_s),
+                "must be 1..20".into(),
+            ),
+        ];
+        for (entry, ok, why) in checks {
+            if !ok {
+                return Err(SpecError::new(path, entry, why));
+            }
+        }
+        Ok(())
+    }
 }
 
 impl LinkParams {
@@ -438,6 +530,7 @@ impl LinkParams {
                 "must be at least 1",
             ));
         }
+        p.flight.check(path, p.decision_period_s)?;
         let t = &p.telemetry;
         if let Err((entry, reason)) = t.check_trust() {
             return Err(SpecError::new(path, entry, reason));
@@ -651,5 +744,42 @@ mod tests {
         assert!(LinkParams::load(&p).unwrap_err().reason.contains("rate"));
         let p = write(&d, "l.toml", &format!("{base}[streams]\nWIND = 1\n"));
         assert_eq!(LinkParams::load(&p).unwrap().stream_ids(), vec![(168, 1.0)]);
+    }
+
+    #[test]
+    fn flight_params_are_checked_with_entry() {
+        let d = tempfile::tempdir().unwrap();
+        let base = "decision_period_s = 1.0\narm_wait_s = 30\nmax_arm_attempts = 3\n[streams]\nWIND = 1\n[telemetry]\nobstacle_near_m = 15\nbattery_thresholds_pct = [30]\ndistance_max_age_s = 2\n";
+        let p = write(&d, "l.toml", base);
+        assert_eq!(
+            LinkParams::load(&p).unwrap().flight,
+            FlightParams::default()
+        );
+        for (line, entry) in [
+            (
+                "min_event_cycle_interval_s = 0",
+                "flight.min_event_cycle_interval_s",
+            ),
+            (
+                "min_event_cycle_interval_s = 2.0",
+                "flight.min_event_cycle_interval_s",
+            ),
+            (
+                "min_event_cycle_interval_s = nan",
+                "flight.min_event_cycle_interval_s",
+            ),
+            ("landed_confirm_s = -1", "flight.landed_confirm_s"),
+            ("zone_radius_m = inf", "flight.zone_radius_m"),
+            (
+                "zone_arrive_timeout_s = 1e30",
+                "flight.zone_arrive_timeout_s",
+            ),
+            ("statustext_max_per_s = 0", "flight.statustext_max_per_s"),
+        ] {
+            let p = write(&d, "l.toml", &format!("{base}[flight]\n{line}\n"));
+            assert_eq!(LinkParams::load(&p).unwrap_err().entry, entry, "{line}");
+        }
+        let p = write(&d, "l.toml", &format!("{base}[flight]\nzone_radius = 3\n"));
+        assert!(LinkParams::load(&p).is_err(), "unknown keys are refused");
     }
 }

@@ -372,6 +372,31 @@ impl CommandClient {
         (out, events)
     }
 
+    /// Drop the commands whose ticket `pred` selects: each ends Failed(Cancelled); nothing of
+    /// them is resent later.
+    pub fn cancel_tickets(
+        &mut self,
+        now: Duration,
+        why: &str,
+        pred: impl Fn(u64) -> bool,
+    ) -> Vec<CommandEvent> {
+        let keys: Vec<u32> = self
+            .pending
+            .iter()
+            .filter(|(_, p)| pred(p.ticket))
+            .map(|(k, _)| *k)
+            .collect();
+        keys.into_iter()
+            .map(|k| {
+                self.finish(
+                    k,
+                    now,
+                    Outcome::Failed(FailReason::Cancelled(why.to_string())),
+                )
+            })
+            .collect()
+    }
+
     /// Drop everything in flight (link lost): each ends Failed(Cancelled); nothing is resent later.
     pub fn cancel_all(&mut self, now: Duration, why: &str) -> Vec<CommandEvent> {
         let keys: Vec<u32> = self.pending.keys().copied().collect();

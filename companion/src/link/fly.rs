@@ -6,12 +6,18 @@
 //! Each cycle's record goes to a [`RecordSink`] with the commands it sent (latency measured from
 //! the message that triggered the cycle to the command handed to the transport) and the results
 //! of earlier commands that finished since.
+//!
+//! The operator decides when to fly ([`super::operator`]): until the pilot arms or a ground
+//! station sends the start command, cycles decide and log but command no motion; a pilot's mode
+//! change stops the commanding until control is handed back. After a flight ends landed and
+//! disarmed, `fly` waits for the operator again (`--once` exits instead).
 
 use super::Msg;
 use super::actions::{ActionTable, LinkParams, Route};
 use super::ingest::{self, Encoder, Ingest};
 use super::liveness::parse_duration;
-use super::mission_state::{self, Extra, MissionState};
+use super::mission_state::{self, Extra, LANDING_ACTIONS, MissionState};
+use super::operator::{self, Control, GateEvent, GcsText, OperatorGate, VehicleView};
 use super::transport::{self, Inbound};
 use super::url::{self, ConnectUrl};
 use super::vehicle::{Vehicle, VehicleConfig};
@@ -26,6 +32,8 @@ use tokio::time::Instant;
 /// The decision core as the shell sees it: one observation snapshot in, one plan and its record out.
 pub trait Decider {
     fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord);
+    /// A new flight begins (the last one ended landed and disarmed): forget the last one.
+    fn new_flight(&mut self) {}
 }
 
 /// The real core is a decider as it is (fuzzing and the soak drive it without a wrapper).
@@ -91,16 +99,18 @@ pub struct FlyArgs {
     /// Params directory (default: $COMPANION_PARAMS or the workspace params/).
     #[arg(long)]
     pub params: Option<PathBuf>,
-    /// Stop after this long (e.g. 60s); default: until the vehicle has flown and is back on the
-    /// ground disarmed, or Ctrl-C.
+    /// Stop after this long (e.g. 60s); default: run until Ctrl-C or SIGTERM, flight after
+    /// flight (see --once).
     #[arg(long, value_parser = parse_duration)]
     pub duration: Option<Duration>,
     /// Where run folders go (a new `<UTC time>/` inside with decisions.jsonl and flight.tlog,
     /// printed at the start).
     #[arg(long, default_value = crate::decision_log::DEFAULT_RUNS_DIR)]
     pub log_dir: PathBuf,
-    /// For SITL and tests only: start the mission (mode, arm, take-off) as soon as the autopilot
-    /// is ready, without waiting for the operator.
+    /// For SITL and tests only: start the first mission (mode, ARM, take-off) as soon as the
+    /// autopilot is ready, without waiting for the operator. This ARMS THE VEHICLE by itself.
+    /// Without it, the companion commands no motion until the pilot arms the vehicle or a
+    /// ground station sends MAV_CMD_MISSION_START to component 191.
     #[arg(long)]
     pub auto_start: bool,
     /// Command only the autopilot with this MAVLink system id (when several speak on the link);
@@ -111,6 +121,10 @@ pub struct FlyArgs {
     /// default: wait (and retry the connection) for ever.
     #[arg(long, value_parser = parse_duration)]
     pub connect_timeout: Option<Duration>,
+    /// Exit after one flight (flown, then landed and disarmed) instead of waiting for the
+    /// operator's next start.
+    #[arg(long)]
+    pub once: bool,
 }
 
 /// The decision log as a record sink: records go to its writer thread (never blocking the loop).
@@ -212,6 +226,8 @@ impl FlySetup {
             telemetry: self.link.telemetry.clone(),
             arm_wait: Duration::from_secs_f64(self.link.arm_wait_s),
             max_arm_attempts: self.link.max_arm_attempts,
+            zone_radius_m: self.link.flight.zone_radius_m,
+            zone_arrive_timeout: Duration::from_secs_f64(self.link.flight.zone_arrive_timeout_s),
             ..VehicleConfig::default()
         };
         Vehicle::new(cfg, self.actions.clone(), Some(self.route.clone()))
@@ -222,6 +238,8 @@ impl FlySetup {
 /// `flight.tlog`; the folder is printed first.
 pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
     use crate::decision_log::{self as dlog, Header, TlogWriter, WriterOptions};
+    // Params first: a start that fails on them leaves no run folder behind.
+    let setup = FlySetup::load(&args)?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -241,10 +259,11 @@ pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
         .with_context(|| format!("starting a run folder in {}", args.log_dir.display()))?;
     let dir = log.dir().to_path_buf();
     println!("run folder: {}", dir.display());
+    tracing::info!("run folder {}", dir.display());
     let tlog = TlogWriter::create(&dir.join("flight.tlog"))
         .with_context(|| format!("creating {}", dir.join("flight.tlog").display()))?;
     let mut sink = LogSink(log);
-    let result = rt.block_on(run_with_tlog(args, decider, &mut sink, Some(Tlog(tlog))));
+    let result = rt.block_on(run_loop(args, setup, decider, &mut sink, Some(Tlog(tlog))));
     let stats = sink.0.close();
     let report = result?;
     eprintln!(
@@ -268,12 +287,34 @@ pub async fn run_with<D: Decider, S: RecordSink>(
 /// [`run_with`], also writing every frame sent and received to `tlog`.
 pub async fn run_with_tlog<D: Decider, S: RecordSink>(
     args: FlyArgs,
+    decider: D,
+    sink: &mut S,
+    tlog: Option<Tlog>,
+) -> anyhow::Result<FlyReport> {
+    let setup = FlySetup::load(&args)?;
+    run_loop(args, setup, decider, sink, tlog).await
+}
+
+async fn run_loop<D: Decider, S: RecordSink>(
+    args: FlyArgs,
+    setup: FlySetup,
     mut decider: D,
     sink: &mut S,
     mut tlog: Option<Tlog>,
 ) -> anyhow::Result<FlyReport> {
-    let setup = FlySetup::load(&args)?;
     let mut shell = Shell::new(&setup);
+    shell.operator = OperatorGate::new(args.auto_start);
+    if args.auto_start {
+        eprintln!(
+            "companion fly: WARNING --auto-start: the companion will set the mode, ARM and take off by itself as soon as the autopilot is ready (SITL and tests only)"
+        );
+        tracing::warn!("--auto-start: no operator start; the companion arms the vehicle itself");
+    } else {
+        tracing::info!(
+            "waiting for the operator: the pilot arms the vehicle, or a ground station sends MAV_CMD_MISSION_START to component {}",
+            super::OUR_COMPONENT_ID
+        );
+    }
     let mut vehicle = setup.vehicle(args.link_timeout);
     vehicle.cfg.autopilot_sysid = args.autopilot_sysid;
     let signing = || setup.key.map(ingest::signing_data);
@@ -305,10 +346,22 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
     let mut transport_events: Vec<String> = Vec::new();
     let ctrl_c = tokio::signal::ctrl_c();
     tokio::pin!(ctrl_c);
+    let terminate = terminate_signal();
+    tokio::pin!(terminate);
+    let min_gap = Duration::from_secs_f64(setup.link.flight.min_event_cycle_interval_s);
+    let mut last_cycle_at: Option<Duration> = None;
+    // Events held back by the cycle rate limit: the earliest one's time, and when the next
+    // cycle may run.
+    let mut held_trigger: Option<Duration> = None;
+    let mut cycle_due: Option<Duration> = None;
+    let mut was_alive = false;
+    let mut announced_auto_start = false;
+    let mut gcs = GcsWatch::default();
 
     loop {
         let mut out: Vec<Msg> = Vec::new();
         let mut trigger: Option<Duration> = None;
+        let mut wake = false;
         tokio::select! {
             m = link.inbound.recv() => match m {
                 Some(Inbound::Bytes(b)) => {
@@ -317,6 +370,7 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
                         if let Some(w) = tlog.as_mut() {
                             w.received(&f);
                         }
+                        gcs.on_frame(t, &f);
                         out.extend(vehicle.on_frame(t, &f));
                     }
                     ingest.set_our_system(vehicle.our_system());
@@ -401,7 +455,10 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
             _ = tick.tick() => out.extend(vehicle.tick(now())),
             _ = periodic.tick() => {
                 if vehicle.target.is_some() {
-                    run_cycle_at(&mut decider, &mut shell, &mut vehicle, &mut encoder, &link.outbound, &mut tlog, sink, now(), now, &mut report, &mut transport_events).await?;
+                    let t = held_trigger.take().unwrap_or_else(now);
+                    cycle_due = None;
+                    run_cycle_at(&mut decider, &mut shell, &mut vehicle, &mut encoder, &link.outbound, &mut tlog, sink, t, now, &mut report, &mut transport_events).await?;
+                    last_cycle_at = Some(now());
                 }
             },
             _ = async { match connect_by { Some(t) if vehicle.target.is_none() => tokio::time::sleep_until(t).await, _ => std::future::pending().await } } => {
@@ -414,17 +471,99 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
                 );
                 tracing::error!("{msg}");
                 anyhow::bail!(msg);
+            _ = async { match cycle_due { Some(t) => tokio::time::sleep_until(start + t).await, None => std::future::pending().await } } => {
+                cycle_due = None;
+                wake = true;
             },
             _ = &mut ctrl_c => break,
+            _ = &mut terminate => break,
             _ = async { match stop_at { Some(t) => tokio::time::sleep_until(t).await, None => std::future::pending().await } } => break,
+        }
+        if vehicle.target.is_some() {
+            let t = now();
+            // The operator: commands addressed to us, a pilot's arming or mode change.
+            for (command, sys, comp) in vehicle.take_commands_to_us() {
+                let result = if command == operator::START_COMMAND {
+                    if let Some(ev) = shell.operator.on_start_command() {
+                        on_gate_event(&mut shell, &mut vehicle, t, &ev, &mut out);
+                        wake = true;
+                    }
+                    super::dialect::MavResult::MAV_RESULT_ACCEPTED
+                } else {
+                    super::dialect::MavResult::MAV_RESULT_UNSUPPORTED
+                };
+                tracing::info!("command {command:?} from {sys}/{comp} addressed to us: {result:?}");
+                out.push(operator::ack(command, result, (sys, comp)));
+            }
+            let view = VehicleView {
+                flavor: vehicle.flavor,
+                custom_mode: vehicle.telemetry.custom_mode,
+                mode: vehicle.telemetry.mode.as_deref(),
+                armed_heartbeats: vehicle.armed_heartbeats,
+                commanded_modes: &vehicle.commanded_modes,
+            };
+            if let Some(ev) = shell.operator.observe(t, &view) {
+                on_gate_event(&mut shell, &mut vehicle, t, &ev, &mut out);
+                wake = true;
+            }
+            let alive = vehicle.liveness.alive();
+            if alive != was_alive {
+                if alive {
+                    tracing::info!("autopilot link up");
+                } else {
+                    tracing::warn!("autopilot link lost: no commands until it is back");
+                }
+                was_alive = alive;
+            }
+            if alive {
+                if args.auto_start && !announced_auto_start {
+                    announced_auto_start = true;
+                    out.extend(shell.texts.say(
+                        t,
+                        WARNING,
+                        "companion: AUTO-START, arms without operator",
+                    ));
+                }
+                if shell.operator.control == Control::Waiting {
+                    out.extend(shell.texts.say(
+                        t,
+                        INFO,
+                        "companion ready, waiting for the operator",
+                    ));
+                }
+            }
+            if let Some((text, lost)) = gcs.check(t) {
+                if lost {
+                    tracing::warn!("{text}");
+                } else {
+                    tracing::info!("{text}");
+                }
+                shell.pending_events.push(text.to_string());
+                out.extend(shell.texts.say(
+                    t,
+                    if lost { WARNING } else { INFO },
+                    &format!("companion: {text}"),
+                ));
+            }
         }
         send(&mut encoder, &vehicle, &link.outbound, &mut tlog, &out).await;
         vehicle.stamp_latency(trigger.unwrap_or_else(now), now());
         // Significant telemetry (a new obstacle, a found target, a crossed battery threshold, a
-        // mode change, a command result, link loss) triggers a cycle now.
+        // mode change, a command result, link loss) triggers a cycle now, but no sooner than
+        // `min_event_cycle_interval_s` after the last one: events in between wait for it.
         // Link loss found by the protocol tick counts too (its trigger is the tick itself).
-        if vehicle.has_events() && vehicle.target.is_some() {
-            let t = trigger.unwrap_or_else(now);
+        if (vehicle.has_events() || wake || held_trigger.is_some()) && vehicle.target.is_some() {
+            let t_now = now();
+            let first = *held_trigger.get_or_insert(trigger.unwrap_or(t_now));
+            let due = last_cycle_at.map_or(Duration::ZERO, |l| l + min_gap);
+            if t_now < due {
+                cycle_due = Some(due);
+                continue;
+            }
+            held_trigger = None;
+            cycle_due = None;
+            let t = first;
+            last_cycle_at = Some(t_now);
             run_cycle_at(
                 &mut decider,
                 &mut shell,
@@ -440,9 +579,23 @@ pub async fn run_with_tlog<D: Decider, S: RecordSink>(
             )
             .await?;
         }
-        // Flew, landed and disarmed: the mission is over (one last cycle recorded it).
+        // Flew, landed and disarmed: the flight is over (one last cycle recorded it). Wait for
+        // the operator's next start, or exit with --once.
         if shell.finished() {
-            break;
+            if args.once {
+                tracing::info!("flight over: landed and disarmed; exiting (--once)");
+                break;
+            }
+            tracing::info!("flight over: landed and disarmed; waiting for the operator");
+            vehicle.stop_actions(now(), "flight over");
+            shell.new_flight();
+            decider.new_flight();
+            let msgs: Vec<Msg> = shell
+                .texts
+                .say(now(), NOTICE, "companion: landed; waiting for the operator")
+                .into_iter()
+                .collect();
+            send(&mut encoder, &vehicle, &link.outbound, &mut tlog, &msgs).await;
         }
     }
     report.ingest = ingest.stats;
@@ -470,12 +623,106 @@ async fn send(
     }
 }
 
+const INFO: super::dialect::MavSeverity = super::dialect::MavSeverity::MAV_SEVERITY_INFO;
+const NOTICE: super::dialect::MavSeverity = super::dialect::MavSeverity::MAV_SEVERITY_NOTICE;
+const WARNING: super::dialect::MavSeverity = super::dialect::MavSeverity::MAV_SEVERITY_WARNING;
+
+/// SIGTERM (systemd's stop): ends the loop like Ctrl-C, so the logs close whole.
+async fn terminate_signal() {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{SignalKind, signal};
+        if let Ok(mut s) = signal(SignalKind::terminate()) {
+            s.recv().await;
+            return;
+        }
+    }
+    std::future::pending::<()>().await
+}
+
+/// A gate decision: said in the record, the journal and to the ground station; a takeover
+/// stops the running action at once.
+fn on_gate_event(
+    shell: &mut Shell,
+    vehicle: &mut Vehicle,
+    now: Duration,
+    ev: &GateEvent,
+    out: &mut Vec<Msg>,
+) {
+    let text = ev.describe();
+    shell.pending_events.push(text.clone());
+    let (severity, gcs) = match ev {
+        GateEvent::Started(_) => (NOTICE, "companion: mission started".to_string()),
+        GateEvent::TakenOver(mode) => {
+            vehicle.stop_actions(now, "pilot took control");
+            (
+                WARNING,
+                format!("companion: pilot has control ({mode}), standing by"),
+            )
+        }
+        GateEvent::HandedBack(_) => (NOTICE, "companion: control handed back".to_string()),
+    };
+    if severity == WARNING {
+        tracing::warn!("{text}");
+    } else {
+        tracing::info!("{text}");
+    }
+    out.extend(shell.texts.say(now, severity, &gcs));
+}
+
+/// The ground station's heartbeats, to tell when it goes silent and when it is back.
+#[derive(Debug, Default)]
+struct GcsWatch {
+    last: Option<Duration>,
+    lost: bool,
+}
+
+impl GcsWatch {
+    /// A ground station silent this long counts as lost.
+    const TIMEOUT: Duration = Duration::from_secs(5);
+
+    fn on_frame(&mut self, now: Duration, f: &ingest::Frame) {
+        if let Msg::HEARTBEAT(h) = &f.msg
+            && h.mavtype == super::dialect::MavType::MAV_TYPE_GCS
+        {
+            self.last = Some(now);
+        }
+    }
+
+    /// ("link to the ground station lost" or "... back", lost) when that changed.
+    fn check(&mut self, now: Duration) -> Option<(&'static str, bool)> {
+        let silent = self
+            .last
+            .is_some_and(|t| now.saturating_sub(t) > Self::TIMEOUT);
+        if silent && !self.lost {
+            self.lost = true;
+            return Some(("link to the ground station lost", true));
+        }
+        if !silent && self.lost {
+            self.lost = false;
+            return Some(("link to the ground station back", false));
+        }
+        None
+    }
+}
+
 /// What the shell keeps between cycles besides the protocol state (one per flight).
 pub struct Shell {
     mission: MissionState,
+    /// The mission state a new flight starts from.
+    fresh_mission: MissionState,
     precedence: Vec<String>,
-    /// Events of the shell itself (the mission's end) for the next record.
+    /// Events of the shell itself (the mission's end, the operator) for the next record.
     pending_events: Vec<String>,
+    /// Who commands: the companion only once the operator started the mission. `Shell::new`
+    /// starts it at once (the soak and fuzz runs); `fly` waits unless `--auto-start`.
+    pub operator: OperatorGate,
+    /// STATUSTEXT to the ground station, rate-limited.
+    pub texts: GcsText,
+    /// The last cycle's action set, to tell a change of behaviour.
+    last_actions: Vec<String>,
+    /// The last behaviour told to the ground station (motion and tracking version).
+    last_told: String,
     /// Ingest counters now, and as last reported in a record's link_events.
     ingest: ingest::IngestStats,
     ingest_reported: ingest::IngestStats,
@@ -483,10 +730,22 @@ pub struct Shell {
 
 impl Shell {
     pub fn new(setup: &FlySetup) -> Self {
+        let mut mission = MissionState::new(&setup.route, setup.takeoff_alt_m);
+        let f = &setup.link.flight;
+        mission.landed_confirm_s = f.landed_confirm_s;
+        mission.ground_altitude_m = f.ground_altitude_m;
         Self {
-            mission: MissionState::new(&setup.route, setup.takeoff_alt_m),
+            fresh_mission: mission.clone(),
+            mission,
             precedence: setup.link.vehicle_action_precedence.clone(),
             pending_events: Vec::new(),
+            operator: OperatorGate::new(true),
+            texts: GcsText::new(
+                Duration::from_secs_f64(f.statustext_repeat_s),
+                f.statustext_max_per_s,
+            ),
+            last_actions: Vec::new(),
+            last_told: String::new(),
             ingest: Default::default(),
             ingest_reported: Default::default(),
         }
@@ -500,6 +759,68 @@ impl Shell {
     /// Flew, landed and disarmed: the mission is over.
     pub fn finished(&self) -> bool {
         self.mission.finished()
+    }
+
+    /// After a flight ended landed and disarmed: a fresh mission, and the operator must start
+    /// the next one.
+    pub fn new_flight(&mut self) {
+        self.mission = self.fresh_mission.clone();
+        self.operator.new_flight();
+        self.last_actions.clear();
+        self.last_told.clear();
+        self.pending_events
+            .push("flight over: landed and disarmed; waiting for the operator".into());
+    }
+
+    /// A change of the cycle's action set, described for the journal and the ground station
+    /// ("take_off -> follow_trajectory (waypoint 2)"), or None when it is the same as the
+    /// last cycle's.
+    fn action_change(&mut self, rec: &DecisionRecord) -> Option<String> {
+        if rec.actions == self.last_actions {
+            return None;
+        }
+        let was = std::mem::replace(&mut self.last_actions, rec.actions.clone());
+        let why = rec
+            .events
+            .iter()
+            .find(|e| !e.starts_with("command "))
+            .cloned()
+            .unwrap_or_else(|| format!("state {}", rec.state));
+        let show = |a: &[String]| {
+            if a.is_empty() {
+                "-".to_string()
+            } else {
+                a.join("+")
+            }
+        };
+        Some(format!("{} -> {} ({why})", show(&was), show(&rec.actions)))
+    }
+
+    /// What a pilot needs of a behaviour change, in a STATUSTEXT's 50 characters: the motion
+    /// flown and the tracking version, and why ("companion: land (mission: search time ...").
+    /// None when that part did not change.
+    fn behaviour_text(&mut self, rec: &DecisionRecord) -> Option<String> {
+        let motions: Vec<String> = rec
+            .actions
+            .iter()
+            .filter(|a| self.precedence.contains(a))
+            .cloned()
+            .collect();
+        let mut told = mission_state::select_vehicle_action(&motions, &self.precedence)
+            .unwrap_or_else(|| "hold".into());
+        if let Some(v) = rec.actions.iter().find_map(|a| a.strip_prefix("track_")) {
+            told.push_str(&format!(", track {v}"));
+        }
+        if told == self.last_told {
+            return None;
+        }
+        self.last_told = told.clone();
+        let why = rec
+            .events
+            .iter()
+            .find(|e| !e.starts_with("command "))
+            .map_or(String::new(), |e| format!(" ({e})"));
+        Some(format!("companion: {told}{why}"))
     }
 
     /// A link event when bad input arrived since the last report: malformed frames or bad
@@ -548,6 +869,36 @@ async fn run_cycle_at<D: Decider, S: RecordSink>(
     vehicle.stamp_latency(trigger_at, now());
     report.cycles += 1;
     let rec = finish_record(decided, shell, vehicle, report.cycles, transport_events);
+    tracing::debug!(
+        cycle = rec.cycle,
+        state = %rec.state,
+        actions = %rec.actions.join(","),
+        "decision cycle"
+    );
+    let mut texts = Vec::new();
+    if let Some(change) = shell.action_change(&rec) {
+        tracing::info!("actions: {change}");
+    }
+    if let Some(text) = shell.behaviour_text(&rec)
+        && shell.operator.commanding()
+    {
+        texts.extend(shell.texts.say(now(), NOTICE, &text));
+    }
+    if let Some(g) = &rec.guarantee
+        && g.infeasible
+    {
+        let why = g
+            .infeasible_reason
+            .as_deref()
+            .unwrap_or("no allocation meets the goals");
+        tracing::warn!("guarantee: cannot meet the goals: {why}");
+        texts.extend(shell.texts.say(
+            now(),
+            WARNING,
+            &format!("companion: guarantee cannot: {why}"),
+        ));
+    }
+    send(encoder, vehicle, tx, tlog, &texts).await;
     sink.write(&rec).context("writing the decision record")?;
     Ok(())
 }
@@ -564,21 +915,45 @@ pub fn decide<D: Decider>(
 ) -> Decided {
     let mut events = vehicle.take_events();
     events.append(&mut shell.pending_events);
+    coalesce_events(&mut events);
     let mut obs = vehicle.observations(now(), events.clone());
     let extra = Extra {
         mode: vehicle.telemetry.mode.as_deref(),
+        landed_state: vehicle.telemetry.landed_state.as_deref(),
     };
     obs.state = shell.mission.update(&obs, &extra).to_string();
     complete_observations(&mut obs, &shell.mission);
     let (plan, mut rec) = decider.step(&obs);
     shell.mission.after_plan(&rec.actions);
     let mut chosen = mission_state::select_vehicle_action(&plan.vehicle_actions, &shell.precedence);
+    let mut shell_events = Vec::new();
     if let Some(why) = shell.mission.mission_end(&obs) {
         // The mission's end, not the core's decision: recorded as an event with the action.
-        rec.events.push(format!("{why}: land"));
+        shell_events.push(format!("{why}: land"));
         rec.actions.push("land".into());
         shell.mission.after_plan(&["land".to_string()]);
         chosen = Some("land".into());
+    }
+    // The landing phase: the MDPs see `landing` as terminal and plan nothing there, so the shell
+    // keeps flying the landing chosen until the vehicle is down, resuming it after an avoidance
+    // sidestep and sending it again after a refusal or a timeout.
+    if shell.operator.commanding()
+        && let Some(landing) = shell.mission.landing_action().map(str::to_string)
+    {
+        let keep = chosen
+            .as_deref()
+            .is_some_and(|a| a == "avoid_obstacle" || LANDING_ACTIONS.contains(&a));
+        if !keep {
+            if !vehicle.settled(&landing) {
+                shell_events.push(format!(
+                    "landing: {landing} again (the landing was interrupted or not done)"
+                ));
+            }
+            if !rec.actions.contains(&landing) {
+                rec.actions.push(landing.clone());
+            }
+            chosen = Some(landing);
+        }
     }
     if chosen.as_deref() == Some("follow_trajectory")
         && shell.mission.route_on_vehicle()
@@ -586,7 +961,12 @@ pub fn decide<D: Decider>(
     {
         chosen = Some(RESUME.into());
     }
-    let msgs = vehicle.request_actions(now(), chosen.as_slice());
+    // No motion until the operator starts the mission, none while the pilot has control.
+    let msgs = if shell.operator.commanding() {
+        vehicle.request_actions(now(), chosen.as_slice())
+    } else {
+        Vec::new()
+    };
     Decided {
         msgs,
         chosen,
@@ -594,6 +974,30 @@ pub fn decide<D: Decider>(
         rec,
         obs,
         events,
+        shell_events,
+    }
+}
+
+/// At most this many events in one record: a flood is summarised, not copied.
+const MAX_EVENTS: usize = 64;
+
+/// Repeated events once each (in first-seen order), at most [`MAX_EVENTS`] with a count of the
+/// rest.
+fn coalesce_events(events: &mut Vec<String>) {
+    let mut seen = std::collections::BTreeSet::new();
+    let total = events.len();
+    events.retain(|e| seen.insert(e.clone()));
+    let unique = events.len();
+    if unique > MAX_EVENTS {
+        events.truncate(MAX_EVENTS);
+    }
+    if events.len() < total {
+        events.push(format!(
+            "({} more events since the last cycle: {} repeats, {} not listed)",
+            total - events.len(),
+            total - unique,
+            unique - events.len()
+        ));
     }
 }
 
@@ -607,6 +1011,8 @@ pub struct Decided {
     rec: DecisionRecord,
     obs: Observations,
     events: Vec<String>,
+    /// Events of the shell's own decisions this cycle (mission end, landing resumed).
+    shell_events: Vec<String>,
 }
 
 impl Decided {
@@ -629,13 +1035,19 @@ pub fn finish_record(
         mut rec,
         obs,
         events,
+        shell_events,
         ..
     } = d;
     rec.cycle = cycle;
     rec.time_s = obs.time_s;
+    rec.utc_us = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .ok()
+        .map(|d| d.as_micros() as u64);
     if rec.events.is_empty() {
         rec.events = events;
     }
+    rec.events.extend(shell_events);
     if rec.observations.is_empty() {
         rec.observations = obs.values;
     }
@@ -648,6 +1060,33 @@ pub fn finish_record(
         "link_alive".into(),
         serde_json::Value::from(vehicle.liveness.alive()),
     );
+    rec.vehicle.insert(
+        "operator".into(),
+        serde_json::Value::from(shell.operator.control.label()),
+    );
+    for c in &rec.commands {
+        let failed = [
+            "FAILED",
+            "DENIED",
+            "TIMEOUT",
+            "NOT_",
+            "CANCELLED",
+            "UNMAPPED",
+        ]
+        .iter()
+        .any(|p| c.result.starts_with(p));
+        if failed {
+            tracing::warn!("command {} {}: {}", c.action, c.command, c.result);
+        } else {
+            tracing::info!("command {} {}: {}", c.action, c.command, c.result);
+        }
+    }
+    for e in &rec.link_events {
+        tracing::info!("link: {e}");
+    }
+    for e in rec.events.iter().filter(|e| e.starts_with("mode ")) {
+        tracing::info!("vehicle {e}");
+    }
     rec
 }
 
@@ -697,6 +1136,11 @@ impl ScriptedDecider {
 }
 
 impl Decider for ScriptedDecider {
+    fn new_flight(&mut self) {
+        self.phase = "base";
+        self.avoid_until = 0.0;
+    }
+
     fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
         let alt = obs.get("altitude_m").unwrap_or(0.0);
         let battery = obs.get("battery_pct").unwrap_or(100.0);
@@ -835,6 +1279,29 @@ mod tests {
         assert_eq!(lines.len(), 2);
         let back: DecisionRecord = serde_json::from_str(lines[1]).unwrap();
         assert_eq!(back.cycle, 2);
+    }
+
+    #[test]
+    fn an_event_flood_is_coalesced_into_one_bounded_list() {
+        let mut ev: Vec<String> = (0..10_000)
+            .map(|i| format!("mode {}", if i % 2 == 0 { "AUTO" } else { "GUIDED" }))
+            .collect();
+        ev.push("obstacle detected".into());
+        coalesce_events(&mut ev);
+        assert_eq!(ev[..3], ["mode AUTO", "mode GUIDED", "obstacle detected"]);
+        assert_eq!(ev.len(), 4);
+        assert!(ev[3].contains("9998 repeats"), "{}", ev[3]);
+        let mut many: Vec<String> = (0..500).map(|i| format!("waypoint {i}")).collect();
+        coalesce_events(&mut many);
+        assert_eq!(many.len(), MAX_EVENTS + 1);
+        assert!(
+            many[MAX_EVENTS].contains("436 not listed"),
+            "{}",
+            many[MAX_EVENTS]
+        );
+        let mut few = vec!["a".to_string(), "b".to_string()];
+        coalesce_events(&mut few);
+        assert_eq!(few, ["a", "b"]);
     }
 
     #[test]

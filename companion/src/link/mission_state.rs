@@ -10,6 +10,13 @@
 //! onboard tracker reports the target there, `vN` while the last plan ran `track_vN` on it;
 //! `landing` (sticky) once a landing action was commanded, the autopilot flies LAND/RTL, or the
 //! vehicle is back on the ground disarmed after a flight.
+//!
+//! Landing is a phase with its own action, not a dead end: the MDPs see `landing` as terminal,
+//! so while the vehicle is still in the air the shell keeps flying the landing action chosen
+//! (after an avoidance sidestep, a refused or timed-out LAND, ...), see
+//! [`MissionState::landing_action`]. The flight is over only when the vehicle reports itself on
+//! the ground and disarmed for `landed_confirm_s` over at least two cycles: a disarmed heartbeat
+//! at altitude (spoofed or corrupt) neither starts the landing nor ends the flight.
 
 use super::actions::Route;
 use crate::observations::Observations;
@@ -22,6 +29,9 @@ pub const LANDING_ACTIONS: [&str; 3] = ["land", "replan_and_land", "return_to_ba
 pub struct Extra<'a> {
     /// Flight mode name (`AUTO`, `LAND`, `RTL`, ...).
     pub mode: Option<&'a str>,
+    /// EXTENDED_SYS_STATE landed state (`ON_GROUND`, `IN_AIR`, `TAKEOFF`, `LANDING`), once
+    /// reported.
+    pub landed_state: Option<&'a str>,
 }
 
 /// Mission-state estimator; one per flight.
@@ -53,6 +63,14 @@ pub struct MissionState {
     tracking_since: Option<f64>,
     /// Why the shell ended the mission, once.
     end_reason: Option<String>,
+    /// On the ground and disarmed this long (s, shell clock) ends the flight.
+    pub landed_confirm_s: f64,
+    /// Without a landed state: disarmed below this altitude (m) is on the ground.
+    pub ground_altitude_m: f64,
+    /// Since when (shell clock) and in how many cycles the vehicle has reported itself on the
+    /// ground and disarmed without a break.
+    ground_since: Option<(f64, u32)>,
+    landing_action: Option<String>,
 }
 
 impl MissionState {
@@ -76,7 +94,35 @@ impl MissionState {
             wpf_at: None,
             tracking_since: None,
             end_reason: None,
+            landed_confirm_s: 3.0,
+            ground_altitude_m: 1.0,
+            ground_since: None,
+            landing_action: None,
         }
+    }
+
+    /// The landing action the shell keeps flying in the landing phase (`land`,
+    /// `replan_and_land`, `return_to_base`): the last one chosen, or the one matching the
+    /// landing mode the vehicle entered. None before the landing phase.
+    pub fn landing_action(&self) -> Option<&str> {
+        if self.landing && !self.finished {
+            self.landing_action.as_deref()
+        } else {
+            None
+        }
+    }
+
+    /// On the ground and disarmed now: EXTENDED_SYS_STATE says ON_GROUND (when the autopilot
+    /// reports it), else the altitude is below `ground_altitude_m`.
+    fn on_ground(&self, obs: &Observations, extra: &Extra) -> bool {
+        let armed = obs.get("armed").unwrap_or(0.0) > 0.5;
+        let low = match extra.landed_state {
+            Some(s) => s == "ON_GROUND",
+            None => obs
+                .get("altitude_m")
+                .is_some_and(|a| a <= self.ground_altitude_m),
+        };
+        !armed && low
     }
 
     pub fn state(&self) -> &str {
@@ -108,11 +154,35 @@ impl MissionState {
         if self.flown && mode == "AUTO" {
             self.auto_seen = true;
         }
-        if self.flown && (matches!(mode, "LAND" | "RTL") || !armed) {
+        if self.flown && matches!(mode, "LAND" | "RTL") {
             self.landing = true;
+            if self.landing_action.is_none() {
+                self.landing_action = Some(
+                    if mode == "RTL" {
+                        "return_to_base"
+                    } else {
+                        "land"
+                    }
+                    .into(),
+                );
+            }
+        }
+        let t = obs.time_s;
+        self.ground_since = if self.on_ground(obs, extra) {
+            let (since, n) = self.ground_since.unwrap_or((t, 0));
+            Some((since, n + 1))
+        } else {
+            None
+        };
+        if self.flown
+            && let Some((since, n)) = self.ground_since
+            && n >= 2
+            && t - since >= self.landed_confirm_s
+        {
+            self.landing = true;
+            self.finished = true;
         }
         if self.landing {
-            self.finished = self.flown && !armed;
             self.state = "landing".into();
             return &self.state;
         }
@@ -158,11 +228,12 @@ impl MissionState {
             .find_map(|a| a.strip_prefix("track_v"))
             .map(|v| format!("v{v}"));
         if self.flown
-            && actions
+            && let Some(a) = actions
                 .iter()
-                .any(|a| LANDING_ACTIONS.contains(&a.as_str()))
+                .find(|a| LANDING_ACTIONS.contains(&a.as_str()))
         {
             self.landing = true;
+            self.landing_action = Some(a.clone());
         }
     }
 
@@ -242,7 +313,10 @@ mod tests {
         // Default route: seq 0 home, 1 take-off, 2 wp1, 3 and 4 intermediate, 5 wpf.
         let mut m = MissionState::new(&route(), 10.0);
         let none = Extra::default();
-        let auto = Extra { mode: Some("AUTO") };
+        let auto = Extra {
+            mode: Some("AUTO"),
+            ..Extra::default()
+        };
         assert_eq!((m.wp1_seq, m.last_seq), (2, 5));
         assert_eq!(m.update(&obs(0.0, &[("armed", 0.0)]), &none), "base");
         assert_eq!(
@@ -286,8 +360,80 @@ mod tests {
         );
         m.after_plan(&["land".into()]);
         assert_eq!(m.update(&obs(30.0, &fly(5.0, 0.0, 1.0)), &auto), "landing");
+        assert_eq!(m.landing_action(), Some("land"));
         assert!(!m.finished());
-        assert_eq!(m.update(&obs(40.0, &[("armed", 0.0)]), &none), "landing");
+        let down = [("armed", 0.0), ("altitude_m", 0.1)];
+        assert_eq!(m.update(&obs(40.0, &down), &none), "landing");
+        assert!(!m.finished(), "on the ground for one cycle only");
+        assert_eq!(m.update(&obs(43.0, &down), &none), "landing");
+        assert!(m.finished());
+        assert_eq!(m.landing_action(), None);
+    }
+
+    fn flying() -> [(&'static str, f64); 3] {
+        [("armed", 1.0), ("altitude_m", 20.0), ("mission_seq", 3.0)]
+    }
+
+    #[test]
+    fn one_disarmed_heartbeat_at_altitude_neither_lands_nor_ends_the_flight() {
+        let mut m = MissionState::new(&route(), 10.0);
+        let auto = Extra {
+            mode: Some("AUTO"),
+            landed_state: Some("IN_AIR"),
+        };
+        assert_eq!(m.update(&obs(1.0, &flying()), &auto), "wpi");
+        // One heartbeat says disarmed; altitude and landed state say flying.
+        let spoofed = [("armed", 0.0), ("altitude_m", 20.0), ("mission_seq", 3.0)];
+        for t in [2.0, 2.5, 6.0] {
+            assert_eq!(m.update(&obs(t, &spoofed), &auto), "wpi");
+            assert!(!m.finished());
+        }
+        assert_eq!(m.landing_action(), None);
+        assert_eq!(m.update(&obs(7.0, &flying()), &auto), "wpi");
+    }
+
+    #[test]
+    fn the_flight_ends_only_after_ground_and_disarm_hold_for_the_confirm_time() {
+        let mut m = MissionState::new(&route(), 10.0);
+        let in_air = Extra {
+            mode: Some("LAND"),
+            landed_state: Some("IN_AIR"),
+        };
+        let on_ground = Extra {
+            mode: Some("LAND"),
+            landed_state: Some("ON_GROUND"),
+        };
+        m.update(&obs(1.0, &flying()), &in_air);
+        assert_eq!(
+            m.landing_action(),
+            Some("land"),
+            "LAND mode is the landing phase"
+        );
+        let down = [("armed", 0.0), ("altitude_m", 0.0)];
+        // Disarmed but the autopilot says in the air: not over.
+        m.update(&obs(2.0, &down), &in_air);
+        m.update(&obs(9.0, &down), &in_air);
+        assert!(!m.finished());
+        // ON_GROUND and disarmed, then a break (armed again), then held long enough.
+        m.update(&obs(10.0, &down), &on_ground);
+        m.update(
+            &obs(11.0, &[("armed", 1.0), ("altitude_m", 0.0)]),
+            &on_ground,
+        );
+        m.update(&obs(12.0, &down), &on_ground);
+        m.update(&obs(14.0, &down), &on_ground);
+        assert!(!m.finished(), "the confirm time restarts after a break");
+        m.update(&obs(15.0, &down), &on_ground);
+        assert!(m.finished());
+        // Without a landed state, the altitude decides.
+        let mut m = MissionState::new(&route(), 10.0);
+        m.update(&obs(1.0, &flying()), &Extra::default());
+        let high = [("armed", 0.0), ("altitude_m", 15.0)];
+        m.update(&obs(2.0, &high), &Extra::default());
+        m.update(&obs(9.0, &high), &Extra::default());
+        assert!(!m.finished());
+        m.update(&obs(10.0, &down), &Extra::default());
+        m.update(&obs(13.0, &down), &Extra::default());
         assert!(m.finished());
     }
 
@@ -296,8 +442,12 @@ mod tests {
         let mut m = MissionState::new(&route(), 10.0);
         let flying = [("armed", 1.0), ("altitude_m", 15.0), ("mission_seq", 2.0)];
         assert_eq!(m.update(&obs(1.0, &flying), &Extra::default()), "wp1");
-        let rtl = Extra { mode: Some("RTL") };
+        let rtl = Extra {
+            mode: Some("RTL"),
+            ..Extra::default()
+        };
         assert_eq!(m.update(&obs(2.0, &flying), &rtl), "landing");
+        assert_eq!(m.landing_action(), Some("return_to_base"));
         // a disarmed vehicle that never flew is at base, not landing
         let mut m = MissionState::new(&route(), 10.0);
         assert_eq!(m.update(&obs(1.0, &[("armed", 0.0)]), &rtl), "base");

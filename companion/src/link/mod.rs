@@ -12,6 +12,7 @@ pub mod ingest;
 pub mod liveness;
 pub mod mission;
 pub mod mission_state;
+pub mod operator;
 pub mod modes;
 pub mod readiness;
 pub mod telemetry;

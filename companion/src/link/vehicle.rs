@@ -34,6 +34,10 @@ pub struct VehicleConfig {
     /// Streams are re-requested (connect, reconnect, regain, reboot) no more often than this:
     /// spoofed or flapping triggers cannot multiply the requests.
     pub stream_request_min_interval: Duration,
+    /// "Land at the zone": the vehicle must be this close to the zone (m) before LAND.
+    pub zone_radius_m: f64,
+    /// ... and gets this long to get there; then it lands where it is (said in the record).
+    pub zone_arrive_timeout: Duration,
 }
 
 /// Distinct other autopilots reported by name; more are only counted.
@@ -51,6 +55,8 @@ impl Default for VehicleConfig {
             max_arm_attempts: 3,
             autopilot_sysid: None,
             stream_request_min_interval: Duration::from_secs(5),
+            zone_radius_m: 3.0,
+            zone_arrive_timeout: Duration::from_secs(60),
         }
     }
 }
@@ -73,6 +79,11 @@ enum Running {
     Command(u64),
     Mission,
     WaitReady {
+        since: Duration,
+    },
+    /// The zone reposition was accepted: flying there (lat, lon in degrees * 1e7).
+    Arrive {
+        target: (i32, i32),
         since: Duration,
     },
 }
@@ -127,6 +138,19 @@ pub struct Vehicle {
     pub foreign_monitor_frames: u64,
     pub other_autopilot_heartbeats: u64,
     trust_reported: (u64, u64, u64, u64),
+    /// Consecutive autopilot heartbeats reporting the vehicle armed (0 once one says disarmed).
+    pub armed_heartbeats: u32,
+    /// Modes this companion commanded (or made the autopilot enter, as a reposition enters
+    /// GUIDED), with when; the newest last, a few kept. The operator gate tells its own mode
+    /// changes from a pilot's with them.
+    pub commanded_modes: Vec<(String, Duration)>,
+    /// Commands addressed to this companion (component 191) since the last
+    /// [`Vehicle::take_commands_to_us`]: (command, sender system, sender component).
+    commands_to_us: Vec<(MavCmd, u8, u8)>,
+    /// Where the running zone reposition goes.
+    zone_target: Option<(i32, i32)>,
+    /// When the autopilot last reported its mode (its heartbeat).
+    mode_heard_at: Option<Duration>,
 }
 
 impl Vehicle {
@@ -156,6 +180,11 @@ impl Vehicle {
             foreign_monitor_frames: 0,
             other_autopilot_heartbeats: 0,
             trust_reported: (0, 0, 0, 0),
+            armed_heartbeats: 0,
+            commanded_modes: Vec::new(),
+            commands_to_us: Vec::new(),
+            zone_target: None,
+            mode_heard_at: None,
         }
     }
 
@@ -279,6 +308,9 @@ impl Vehicle {
 
     /// A frame from the autopilot link.
     pub fn on_frame(&mut self, now: Duration, f: &Frame) -> Vec<Msg> {
+        if self.command_to_us(f) {
+            return Vec::new();
+        }
         let sys = f.header.system_id.min(255) as u8;
         let comp = f.header.component_id;
         if let Msg::HEARTBEAT(h) = &f.msg
@@ -320,7 +352,13 @@ impl Vehicle {
             Msg::HEARTBEAT(h) => {
                 self.readiness.armed = h
                     .base_mode
-                    .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED)
+                    .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+                self.mode_heard_at = Some(now);
+                self.armed_heartbeats = if self.readiness.armed {
+                    self.armed_heartbeats.saturating_add(1)
+                } else {
+                    0
+                };
             }
             Msg::SYS_STATUS(s) => self.readiness.on_sys_status(now, s),
             Msg::EKF_STATUS_REPORT(e) => self.readiness.on_ekf(now, e),
@@ -618,9 +656,48 @@ impl Vehicle {
             };
             match (&job.running, &step) {
                 (Running::Command(_) | Running::Mission, _) => return out,
+                (Running::Arrive { target, since }, _) => {
+                    let (target, since) = (*target, *since);
+                    let off = self.telemetry.position.map(|p| {
+                        let (n, e) = super::telemetry::offset_m(target, (p.lat_e7, p.lon_e7));
+                        n.hypot(e)
+                    });
+                    let result = match off {
+                        Some(d) if d <= self.cfg.zone_radius_m => {
+                            format!("ARRIVED ({d:.1} m from the zone)")
+                        }
+                        _ if now.saturating_sub(since) >= self.cfg.zone_arrive_timeout => format!(
+                            "TIMEOUT (not within {:.1} m of the zone after {:.0} s{}; landing here)",
+                            self.cfg.zone_radius_m,
+                            self.cfg.zone_arrive_timeout.as_secs_f64(),
+                            off.map(|d| format!(", {d:.1} m away")).unwrap_or_default()
+                        ),
+                        _ => return out,
+                    };
+                    self.records.push(CommandRecord {
+                        action,
+                        command: "ARRIVE (zone)".into(),
+                        result,
+                        attempts: 0,
+                        latency_ms: None,
+                    });
+                    self.zone_target = None;
+                    self.step_done();
+                    continue;
+                }
                 (Running::Idle, Step::Mode(name)) => {
+                    // A different mode commanded since the last heartbeat: the reported mode is
+                    // stale (LAND reported, GUIDED just accepted for a sidestep).
+                    let stale = self
+                        .commanded_modes
+                        .iter()
+                        .rev()
+                        .find(|(_, at)| self.mode_heard_at.is_none_or(|h| *at >= h))
+                        .is_some_and(|(m, _)| m != name);
+                    self.note_mode(now, name);
                     if modes::is_in_mode(self.flavor, self.telemetry.custom_mode, name)
                         && self.telemetry.mode.is_some()
+                        && !stale
                     {
                         self.records.push(CommandRecord {
                             action,
@@ -707,6 +784,10 @@ impl Vehicle {
                     }
                 }
                 (Running::Idle, Step::Command { command, params }) => {
+                    if *command == MavCmd::MAV_CMD_NAV_TAKEOFF && self.flavor == Flavor::Px4 {
+                        // PX4 flies a take-off command in its TAKEOFF mode.
+                        self.note_mode(now, "TAKEOFF");
+                    }
                     let spec = CommandSpec::long(*command, *params);
                     if !self.issue(now, &action, format!("{command:?}"), spec, &mut out) {
                         return out;
@@ -754,6 +835,7 @@ impl Vehicle {
                 }
                 (Running::Idle, Step::Reposition(o)) => match self.reposition_spec(*o) {
                     Some(spec) => {
+                        self.note_reposition(now);
                         if !self.issue(now, &action, "MAV_CMD_DO_REPOSITION".into(), spec, &mut out)
                         {
                             return out;
@@ -787,6 +869,8 @@ impl Vehicle {
                                 y,
                                 p.alt_rel_m as f32,
                             );
+                            self.note_reposition(now);
+                            self.zone_target = Some((x, y));
                             if !self.issue(
                                 now,
                                 &action,
@@ -909,7 +993,15 @@ impl Vehicle {
                         continue;
                     }
                     match outcome {
-                        Outcome::Acked => self.step_done(),
+                        Outcome::Acked => match (&mut self.job, self.zone_target) {
+                            (Some(j), Some(target))
+                                if matches!(j.steps.front(), Some((_, Step::GotoZone))) =>
+                            {
+                                // Accepted is not arrived: LAND only once there.
+                                j.running = Running::Arrive { target, since: now };
+                            }
+                            _ => self.step_done(),
+                        },
                         Outcome::Failed(reason)
                             if command == MavCmd::MAV_CMD_COMPONENT_ARM_DISARM =>
                         {
@@ -985,6 +1077,86 @@ impl Vehicle {
     /// Whether an action is being executed (for tests and the log).
     pub fn busy(&self) -> bool {
         self.job.is_some()
+    }
+
+    /// `action` is being flown or was flown to the end (asking for it again does nothing).
+    pub fn settled(&self, action: &str) -> bool {
+        matches!(&self.job, Some(j) if j.key == action)
+            || matches!(&self.last, Some((k, JobStatus::Done | JobStatus::Running)) if k == action)
+    }
+
+    fn note_mode(&mut self, now: Duration, name: &str) {
+        self.commanded_modes.push((name.to_string(), now));
+        if self.commanded_modes.len() > 8 {
+            self.commanded_modes.remove(0);
+        }
+    }
+
+    /// MAV_CMD_DO_REPOSITION with the change-mode flag: ArduPilot enters GUIDED, PX4 holds in
+    /// LOITER (our GUIDED on PX4).
+    fn note_reposition(&mut self, now: Duration) {
+        self.note_mode(now, "GUIDED");
+    }
+
+    /// A COMMAND_LONG / COMMAND_INT addressed to this companion (our system, component 191)
+    /// from anyone on the link: kept for the shell, which answers it. True when it was one.
+    fn command_to_us(&mut self, f: &Frame) -> bool {
+        let (command, sys, comp) = match &f.msg {
+            Msg::COMMAND_LONG(c) => (c.command, c.target_system, c.target_component),
+            Msg::COMMAND_INT(c) => (c.command, c.target_system, c.target_component),
+            _ => return false,
+        };
+        if comp != super::OUR_COMPONENT_ID || sys != self.our_system() {
+            return false;
+        }
+        if self.commands_to_us.len() < 16 {
+            self.commands_to_us.push((
+                command,
+                f.header.system_id.min(255) as u8,
+                f.header.component_id,
+            ));
+        }
+        true
+    }
+
+    /// Commands addressed to us since the last call: (command, sender system, component).
+    pub fn take_commands_to_us(&mut self) -> Vec<(MavCmd, u8, u8)> {
+        std::mem::take(&mut self.commands_to_us)
+    }
+
+    /// Stop commanding motion (the pilot took over, or the flight is over): the running action
+    /// and its commands in flight end now (recorded CANCELLED), nothing of them is resent, and
+    /// any action may be asked for afresh later. Stream requests go on.
+    pub fn stop_actions(&mut self, now: Duration, why: &str) {
+        let step_tickets: Vec<u64> = self
+            .purposes
+            .iter()
+            .filter(|(_, p)| matches!(p, Purpose::Step { .. }))
+            .map(|(t, _)| *t)
+            .collect();
+        let evs = self
+            .commands
+            .cancel_tickets(now, why, |t| step_tickets.contains(&t));
+        let job = self.job.take();
+        // With the job gone, the cancelled commands are only recorded.
+        let _ = self.on_command_events(now, evs);
+        if let Some(job) = job {
+            let running = matches!(job.running, Running::Command(_));
+            for (action, step) in job.steps.into_iter().skip(usize::from(running)) {
+                self.records.push(CommandRecord {
+                    action,
+                    command: step_name(&step),
+                    result: format!("CANCELLED ({why})"),
+                    attempts: 0,
+                    latency_ms: None,
+                });
+            }
+        }
+        if self.mission.cancel(why).is_some() {
+            self.link_event(format!("mission transfer cancelled ({why})"), false);
+        }
+        self.zone_target = None;
+        self.last = None;
     }
 }
 
@@ -1784,6 +1956,202 @@ mod tests {
             recs.iter()
                 .any(|r| r.command == "SET_MODE AUTO" && r.result.starts_with("SKIPPED"))
         );
+    }
+
+    fn zone_vehicle() -> Vehicle {
+        let mut v = route_vehicle();
+        v.actions.actions.insert(
+            "land".into(),
+            vec![Step::GotoZone, Step::Mode("LAND".into())],
+        );
+        v.cfg.zone_radius_m = 3.0;
+        v.cfg.zone_arrive_timeout = Duration::from_secs(60);
+        let onboard = &mut v.telemetry.cfg.onboard;
+        onboard.insert("zone_n".into(), "zone_north_m".into());
+        onboard.insert("zone_e".into(), "zone_east_m".into());
+        // The landing-zone monitor: the zone 40 m north of the vehicle.
+        for (name, value) in [("zone_n", 40.0), ("zone_e", 0.0)] {
+            let mut f = frame(Msg::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA {
+                time_boot_ms: 0,
+                value,
+                name: name.into(),
+            }));
+            f.header.component_id = 100;
+            v.on_frame(s(0.5), &f);
+        }
+        v
+    }
+
+    fn at(v: &mut Vehicle, t: f64, north_m: f64) -> Vec<Msg> {
+        let (lat, lon) = displace((473_977_420, 85_455_940), north_m, 0.0);
+        v.on_frame(
+            s(t),
+            &frame(Msg::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
+                lat,
+                lon,
+                relative_alt: 20_000,
+                hdg: 9000,
+                ..GLOBAL_POSITION_INT_DATA::DEFAULT
+            })),
+        )
+    }
+
+    #[test]
+    fn land_at_the_zone_flies_within_the_radius_before_land() {
+        let mut v = zone_vehicle();
+        let out = v.request_actions(s(1.0), &["land".into()]);
+        let target = match &out[..] {
+            [Msg::COMMAND_INT(c)] if c.command == MavCmd::MAV_CMD_DO_REPOSITION => (c.x, c.y),
+            other => panic!("{other:?}"),
+        };
+        let (n, _) = crate::link::telemetry::offset_m((473_977_420, 85_455_940), target);
+        assert!((n - 40.0).abs() < 0.1, "zone 40 m north: {n}");
+        let out = v.on_frame(
+            s(1.1),
+            &ack(
+                MavCmd::MAV_CMD_DO_REPOSITION,
+                MavResult::MAV_RESULT_ACCEPTED,
+            ),
+        );
+        assert!(
+            commands(&out).is_empty(),
+            "accepted is not arrived: {out:?}"
+        );
+        for (t, north) in [(2.0, 5.0), (5.0, 20.0), (8.0, 36.0)] {
+            assert!(commands(&at(&mut v, t, north)).is_empty(), "{north} m");
+            assert!(commands(&v.tick(s(t + 0.05))).is_empty());
+        }
+        assert!(v.busy());
+        let out = at(&mut v, 10.0, 38.5);
+        assert_eq!(
+            commands(&out),
+            vec![MavCmd::MAV_CMD_DO_SET_MODE],
+            "LAND once within 3 m"
+        );
+        let recs = v.take_records();
+        assert!(
+            recs.iter()
+                .any(|r| r.command == "ARRIVE (zone)" && r.result.starts_with("ARRIVED")),
+            "{recs:?}"
+        );
+    }
+
+    #[test]
+    fn land_at_the_zone_lands_where_it_is_after_the_arrive_timeout() {
+        let mut v = zone_vehicle();
+        v.request_actions(s(1.0), &["land".into()]);
+        v.on_frame(
+            s(1.1),
+            &ack(
+                MavCmd::MAV_CMD_DO_REPOSITION,
+                MavResult::MAV_RESULT_ACCEPTED,
+            ),
+        );
+        assert!(commands(&at(&mut v, 30.0, 2.0)).is_empty());
+        let out = at(&mut v, 61.5, 2.0);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        assert!(
+            v.take_records()
+                .iter()
+                .any(|r| r.result.starts_with("TIMEOUT") && r.result.contains("landing here"))
+        );
+    }
+
+    #[test]
+    fn stop_actions_cancels_the_running_action_and_nothing_is_resent() {
+        let mut v = vehicle();
+        connected(&mut v, 0);
+        let out = v.request_actions(s(1.0), &["return_to_base".into()]);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        v.stop_actions(s(1.2), "pilot took control");
+        assert!(!v.busy());
+        assert!(
+            v.take_records()
+                .iter()
+                .any(|r| r.command == "SET_MODE RTL" && r.result.contains("pilot took control"))
+        );
+        for t in [2.0, 3.0, 5.0] {
+            v.on_frame(s(t), &hb(0, false));
+            assert!(commands(&v.tick(s(t + 0.5))).is_empty(), "no resend at {t}");
+        }
+        // Asked again later (control handed back), the same action runs afresh.
+        let out = v.request_actions(s(6.0), &["return_to_base".into()]);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        assert_eq!(v.commanded_modes.last().map(|m| m.0.as_str()), Some("RTL"));
+    }
+
+    #[test]
+    fn commands_addressed_to_the_companion_are_kept_for_the_shell() {
+        let mut v = vehicle();
+        connected(&mut v, 0);
+        let start = |comp: u8| {
+            let mut f = frame(Msg::COMMAND_LONG(COMMAND_LONG_DATA {
+                command: MavCmd::MAV_CMD_MISSION_START,
+                target_system: 1,
+                target_component: comp,
+                ..COMMAND_LONG_DATA::DEFAULT
+            }));
+            f.header.system_id = 255;
+            f.header.component_id = 190;
+            f
+        };
+        v.on_frame(s(1.0), &start(191));
+        v.on_frame(s(1.1), &start(1)); // for the autopilot: not ours
+        assert_eq!(
+            v.take_commands_to_us(),
+            vec![(MavCmd::MAV_CMD_MISSION_START, 255, 190)]
+        );
+        assert!(v.take_commands_to_us().is_empty());
+    }
+
+    #[test]
+    fn a_mode_reported_before_our_last_mode_command_is_not_already_set() {
+        let mut v = route_vehicle();
+        v.actions
+            .actions
+            .insert("land".into(), vec![Step::Mode("LAND".into())]);
+        v.on_frame(s(1.0), &hb(9, true)); // LAND
+        // A sidestep: GUIDED accepted, the heartbeat still says LAND.
+        v.request_actions(s(1.1), &["avoid_obstacle".into()]);
+        v.on_frame(
+            s(1.2),
+            &ack(
+                MavCmd::MAV_CMD_DO_REPOSITION,
+                MavResult::MAV_RESULT_ACCEPTED,
+            ),
+        );
+        let out = v.request_actions(s(1.3), &["land".into()]);
+        assert_eq!(
+            commands(&out),
+            vec![MavCmd::MAV_CMD_DO_SET_MODE],
+            "LAND sent again, not taken as already set"
+        );
+        // With a fresh heartbeat in LAND and nothing commanded since, LAND is already set.
+        v.on_frame(
+            s(1.4),
+            &ack(MavCmd::MAV_CMD_DO_SET_MODE, MavResult::MAV_RESULT_ACCEPTED),
+        );
+        v.on_frame(s(2.5), &hb(9, true));
+        v.take_records();
+        v.request_actions(s(2.6), &["return_to_base".into()]);
+        v.on_frame(
+            s(2.7),
+            &ack(MavCmd::MAV_CMD_DO_SET_MODE, MavResult::MAV_RESULT_ACCEPTED),
+        );
+        v.on_frame(s(3.5), &hb(6, true)); // RTL
+        let out = v.request_actions(s(3.6), &["land".into()]);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+    }
+
+    #[test]
+    fn armed_heartbeats_count_consecutive_reports() {
+        let mut v = vehicle();
+        connected(&mut v, 0);
+        v.on_frame(s(1.0), &hb(0, true));
+        v.on_frame(s(2.0), &hb(0, true));
+        assert_eq!(v.armed_heartbeats, 2);
+        v.on_frame(s(3.0), &hb(0, false));
+        assert_eq!(v.armed_heartbeats, 0);
     }
 
     #[test]

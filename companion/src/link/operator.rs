@@ -1,0 +1,453 @@
+//! The operator in command, sans IO: who may start the mission, when a pilot has taken over, and
+//! what the companion tells the ground station.
+//!
+//! `fly` connects, streams, decides and logs from the start, but commands no motion until the
+//! operator starts the mission: the pilot arms the vehicle (RC or GCS), or a ground station sends
+//! MAV_CMD_MISSION_START addressed to this companion (component 191). A mode change the companion
+//! did not command (the pilot switches to LOITER, POSHOLD, RTL, LAND, ..., or an autopilot
+//! failsafe does) stops its commanding until the operator hands control back: the start command
+//! again, or (ArduPilot) a switch to GUIDED. docs/mavlink.md, "Operator in command".
+//!
+//! [`GcsText`] is the STATUSTEXT outbox: MAVLink severities, no repeat of the same text within
+//! `repeat`, and at most `max_per_s` texts in any second.
+
+use super::Msg;
+use super::dialect::*;
+use super::modes::{self, Flavor};
+use std::collections::{BTreeMap, VecDeque};
+use std::time::Duration;
+
+/// Who commands the vehicle now.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Control {
+    /// Deciding and logging; no motion commanded until the operator starts the mission.
+    Waiting,
+    /// The operator started the mission (or `--auto-start`): the companion commands.
+    Started,
+    /// A mode the companion did not command (`mode`): the pilot or the autopilot flies.
+    TakenOver { mode: String },
+}
+
+impl Control {
+    pub fn label(&self) -> &'static str {
+        match self {
+            Control::Waiting => "waiting",
+            Control::Started => "started",
+            Control::TakenOver { .. } => "taken_over",
+        }
+    }
+}
+
+/// How a mission start or a hand-back came about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StartBy {
+    AutoStart,
+    PilotArmed,
+    StartCommand,
+    GuidedSwitch,
+}
+
+/// What the gate decided on one observation.
+#[derive(Debug, Clone, PartialEq)]
+pub enum GateEvent {
+    Started(StartBy),
+    TakenOver(String),
+    HandedBack(StartBy),
+}
+
+impl GateEvent {
+    /// The decision record's event text.
+    pub fn describe(&self) -> String {
+        match self {
+            GateEvent::Started(StartBy::AutoStart) => {
+                "operator: mission started by --auto-start (no operator)".into()
+            }
+            GateEvent::Started(StartBy::PilotArmed) => {
+                "operator: mission started (the pilot armed the vehicle)".into()
+            }
+            GateEvent::Started(_) => {
+                "operator: mission started (MAV_CMD_MISSION_START from the ground station)".into()
+            }
+            GateEvent::TakenOver(m) => format!(
+                "operator: mode {m} was not commanded by the companion: the pilot or the autopilot has control; the companion stops commanding"
+            ),
+            GateEvent::HandedBack(StartBy::GuidedSwitch) => {
+                "operator: control handed back (switch to GUIDED)".into()
+            }
+            GateEvent::HandedBack(_) => {
+                "operator: control handed back (MAV_CMD_MISSION_START from the ground station)"
+                    .into()
+            }
+        }
+    }
+}
+
+/// What the gate reads from the vehicle each loop turn.
+#[derive(Debug, Clone, Copy)]
+pub struct VehicleView<'a> {
+    pub flavor: Flavor,
+    /// The heartbeat's custom mode and its name, once known.
+    pub custom_mode: u32,
+    pub mode: Option<&'a str>,
+    /// Consecutive autopilot heartbeats that reported the vehicle armed (0 when disarmed).
+    pub armed_heartbeats: u32,
+    /// Modes the companion commanded, with the time it sent each (newest last).
+    pub commanded_modes: &'a [(String, Duration)],
+}
+
+/// The operator gate: one per `fly` run; [`OperatorGate::new_flight`] after each landing.
+#[derive(Debug, Clone)]
+pub struct OperatorGate {
+    pub control: Control,
+    /// A mode change to a mode commanded less than this long ago is the companion's own.
+    pub grace: Duration,
+    /// Armed reported by this many consecutive heartbeats starts the mission (one spoofed or
+    /// corrupt heartbeat cannot).
+    pub armed_heartbeats_to_start: u32,
+    last_custom_mode: Option<u32>,
+    /// The vehicle was seen disarmed since the gate began waiting: only then is arming the
+    /// pilot's start (a companion started next to a vehicle already flying does not take it).
+    seen_disarmed: bool,
+}
+
+impl OperatorGate {
+    /// `auto_start`: start at once (SITL and tests), as the first [`GateEvent`] of the run.
+    pub fn new(auto_start: bool) -> Self {
+        Self {
+            control: if auto_start {
+                Control::Started
+            } else {
+                Control::Waiting
+            },
+            grace: Duration::from_secs(5),
+            armed_heartbeats_to_start: 2,
+            last_custom_mode: None,
+            seen_disarmed: false,
+        }
+    }
+
+    /// The companion may command motion now.
+    pub fn commanding(&self) -> bool {
+        self.control == Control::Started
+    }
+
+    /// Back to waiting for the operator (after a flight ended landed and disarmed).
+    pub fn new_flight(&mut self) {
+        self.control = Control::Waiting;
+        self.seen_disarmed = false;
+    }
+
+    /// A MAV_CMD_MISSION_START addressed to us. Returns the event (a start or a hand-back).
+    pub fn on_start_command(&mut self) -> Option<GateEvent> {
+        match self.control {
+            Control::Waiting => {
+                self.control = Control::Started;
+                Some(GateEvent::Started(StartBy::StartCommand))
+            }
+            Control::TakenOver { .. } => {
+                self.control = Control::Started;
+                Some(GateEvent::HandedBack(StartBy::StartCommand))
+            }
+            Control::Started => None,
+        }
+    }
+
+    /// One look at the vehicle: a pilot's arming starts the mission; a mode change the companion
+    /// did not command is a takeover; GUIDED (ArduPilot) hands control back.
+    pub fn observe(&mut self, now: Duration, v: &VehicleView) -> Option<GateEvent> {
+        if v.armed_heartbeats == 0 && v.mode.is_some() {
+            self.seen_disarmed = true;
+        }
+        let changed = v.mode.is_some() && self.last_custom_mode != Some(v.custom_mode);
+        let first_mode = self.last_custom_mode.is_none();
+        if v.mode.is_some() {
+            self.last_custom_mode = Some(v.custom_mode);
+        }
+        match &self.control {
+            Control::Waiting => {
+                if v.armed_heartbeats >= self.armed_heartbeats_to_start && self.seen_disarmed {
+                    self.control = Control::Started;
+                    return Some(GateEvent::Started(StartBy::PilotArmed));
+                }
+                None
+            }
+            Control::Started => {
+                if !changed || first_mode {
+                    return None;
+                }
+                if self.is_own_mode(now, v) {
+                    return None;
+                }
+                let name = v.mode.unwrap_or("?").to_string();
+                self.control = Control::TakenOver { mode: name.clone() };
+                Some(GateEvent::TakenOver(name))
+            }
+            Control::TakenOver { .. } => {
+                if changed
+                    && v.flavor == Flavor::ArduPilot
+                    && modes::is_in_mode(v.flavor, v.custom_mode, "GUIDED")
+                    && !self.is_own_mode(now, v)
+                {
+                    self.control = Control::Started;
+                    return Some(GateEvent::HandedBack(StartBy::GuidedSwitch));
+                }
+                if changed && let Control::TakenOver { mode } = &mut self.control {
+                    *mode = v.mode.unwrap_or("?").to_string();
+                }
+                None
+            }
+        }
+    }
+
+    /// The mode the vehicle reports is one the companion commanded recently, or one the
+    /// autopilot enters by itself after such a command (PX4 holds in LOITER after a take-off,
+    /// a mission's end or a reposition).
+    fn is_own_mode(&self, now: Duration, v: &VehicleView) -> bool {
+        let recent = v
+            .commanded_modes
+            .iter()
+            .filter(|(_, at)| now.saturating_sub(*at) <= self.grace);
+        let latest = v.commanded_modes.last();
+        let candidates = recent.chain(latest);
+        for (name, _) in candidates {
+            if modes::is_in_mode(v.flavor, v.custom_mode, name) {
+                return true;
+            }
+        }
+        v.flavor == Flavor::Px4
+            && !v.commanded_modes.is_empty()
+            && modes::is_in_mode(v.flavor, v.custom_mode, "LOITER")
+    }
+}
+
+/// MAV_CMD_MISSION_START is the operator's start command when addressed to component 191.
+pub const START_COMMAND: MavCmd = MavCmd::MAV_CMD_MISSION_START;
+
+/// The COMMAND_ACK for a command addressed to us, to the sender.
+pub fn ack(command: MavCmd, result: MavResult, to: (u8, u8)) -> Msg {
+    Msg::COMMAND_ACK(COMMAND_ACK_DATA {
+        command,
+        result,
+        progress: 0,
+        result_param2: 0,
+        target_system: to.0,
+        target_component: to.1,
+    })
+}
+
+/// STATUSTEXT outbox with rate limits.
+#[derive(Debug, Clone)]
+pub struct GcsText {
+    /// The same text is not sent again within this long.
+    pub repeat: Duration,
+    /// At most this many texts in any one second; more are dropped (and counted).
+    pub max_per_s: u32,
+    last: BTreeMap<String, Duration>,
+    window: VecDeque<Duration>,
+    pub dropped: u64,
+}
+
+/// STATUSTEXT carries 50 characters.
+const TEXT_LEN: usize = 50;
+
+impl GcsText {
+    pub fn new(repeat: Duration, max_per_s: u32) -> Self {
+        Self {
+            repeat,
+            max_per_s,
+            last: BTreeMap::new(),
+            window: VecDeque::new(),
+            dropped: 0,
+        }
+    }
+
+    /// The STATUSTEXT to send now, or None when the same text went out less than `repeat` ago
+    /// or the per-second cap is reached. Texts are cut to 50 characters.
+    pub fn say(&mut self, now: Duration, severity: MavSeverity, text: &str) -> Option<Msg> {
+        let text: String = text
+            .chars()
+            .filter(|c| !c.is_control())
+            .take(TEXT_LEN)
+            .collect();
+        if let Some(at) = self.last.get(&text)
+            && now.saturating_sub(*at) < self.repeat
+        {
+            return None;
+        }
+        while self
+            .window
+            .front()
+            .is_some_and(|t| now.saturating_sub(*t) >= Duration::from_secs(1))
+        {
+            self.window.pop_front();
+        }
+        if self.window.len() as u32 >= self.max_per_s {
+            self.dropped += 1;
+            return None;
+        }
+        self.window.push_back(now);
+        self.last.insert(text.clone(), now);
+        // Old texts no longer hold anything back: keep the map small.
+        let repeat = self.repeat;
+        self.last.retain(|_, at| now.saturating_sub(*at) < repeat);
+        self.last.insert(text.clone(), now);
+        match severity {
+            MavSeverity::MAV_SEVERITY_EMERGENCY
+            | MavSeverity::MAV_SEVERITY_ALERT
+            | MavSeverity::MAV_SEVERITY_CRITICAL
+            | MavSeverity::MAV_SEVERITY_ERROR
+            | MavSeverity::MAV_SEVERITY_WARNING => {
+                tracing::warn!(target: "companion::gcs", "STATUSTEXT {text}")
+            }
+            _ => tracing::info!(target: "companion::gcs", "STATUSTEXT {text}"),
+        }
+        Some(Msg::STATUSTEXT(STATUSTEXT_DATA {
+            severity,
+            text: text.as_str().into(),
+            id: 0,
+            chunk_seq: 0,
+        }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn s(v: f64) -> Duration {
+        Duration::from_secs_f64(v)
+    }
+
+    const GUIDED: u32 = 4;
+    const LOITER: u32 = 5;
+    const AUTO: u32 = 3;
+    const LAND: u32 = 9;
+
+    fn view<'a>(
+        mode: u32,
+        name: &'a str,
+        armed_hb: u32,
+        cmds: &'a [(String, Duration)],
+    ) -> VehicleView<'a> {
+        VehicleView {
+            flavor: Flavor::ArduPilot,
+            custom_mode: mode,
+            mode: Some(name),
+            armed_heartbeats: armed_hb,
+            commanded_modes: cmds,
+        }
+    }
+
+    #[test]
+    fn waits_until_the_pilot_arms_in_two_heartbeats() {
+        let mut g = OperatorGate::new(false);
+        assert!(!g.commanding());
+        assert_eq!(g.observe(s(1.0), &view(0, "STABILIZE", 0, &[])), None);
+        // One heartbeat saying armed (spoofed or a glitch) is not a start.
+        assert_eq!(g.observe(s(2.0), &view(0, "STABILIZE", 1, &[])), None);
+        assert!(!g.commanding());
+        assert_eq!(
+            g.observe(s(3.0), &view(0, "STABILIZE", 2, &[])),
+            Some(GateEvent::Started(StartBy::PilotArmed))
+        );
+        assert!(g.commanding());
+    }
+
+    #[test]
+    fn start_command_starts_and_hands_back() {
+        let mut g = OperatorGate::new(false);
+        assert_eq!(
+            g.on_start_command(),
+            Some(GateEvent::Started(StartBy::StartCommand))
+        );
+        assert_eq!(g.on_start_command(), None, "already started");
+        g.control = Control::TakenOver {
+            mode: "LOITER".into(),
+        };
+        assert_eq!(
+            g.on_start_command(),
+            Some(GateEvent::HandedBack(StartBy::StartCommand))
+        );
+    }
+
+    #[test]
+    fn a_mode_the_companion_did_not_command_is_a_takeover() {
+        let mut g = OperatorGate::new(true);
+        let cmds = vec![("GUIDED".to_string(), s(1.0))];
+        assert_eq!(g.observe(s(1.0), &view(0, "STABILIZE", 2, &cmds)), None);
+        assert_eq!(g.observe(s(1.5), &view(GUIDED, "GUIDED", 2, &cmds)), None);
+        let cmds = vec![
+            ("GUIDED".to_string(), s(1.0)),
+            ("AUTO".to_string(), s(10.0)),
+        ];
+        assert_eq!(g.observe(s(10.5), &view(AUTO, "AUTO", 2, &cmds)), None);
+        assert!(g.commanding());
+        assert_eq!(
+            g.observe(s(30.0), &view(LOITER, "LOITER", 2, &cmds)),
+            Some(GateEvent::TakenOver("LOITER".into()))
+        );
+        assert!(!g.commanding());
+        // The pilot moves on to LAND: still theirs.
+        assert_eq!(g.observe(s(31.0), &view(LAND, "LAND", 2, &cmds)), None);
+        assert_eq!(
+            g.control,
+            Control::TakenOver {
+                mode: "LAND".into()
+            }
+        );
+        // Switching to GUIDED hands control back.
+        assert_eq!(
+            g.observe(s(40.0), &view(GUIDED, "GUIDED", 2, &cmds)),
+            Some(GateEvent::HandedBack(StartBy::GuidedSwitch))
+        );
+        assert!(g.commanding());
+    }
+
+    #[test]
+    fn a_late_heartbeat_of_an_earlier_command_is_not_a_takeover() {
+        let mut g = OperatorGate::new(true);
+        // AUTO commanded at 5 s, GUIDED at 6 s; the heartbeat showing AUTO arrives at 6.5 s.
+        let cmds = vec![("AUTO".to_string(), s(5.0)), ("GUIDED".to_string(), s(6.0))];
+        g.observe(s(4.0), &view(GUIDED, "GUIDED", 2, &cmds));
+        assert_eq!(g.observe(s(6.5), &view(AUTO, "AUTO", 2, &cmds)), None);
+        assert_eq!(g.observe(s(7.0), &view(GUIDED, "GUIDED", 2, &cmds)), None);
+        assert!(g.commanding());
+    }
+
+    #[test]
+    fn armed_before_waiting_is_not_a_start_until_seen_disarmed() {
+        let mut g = OperatorGate::new(false);
+        g.new_flight();
+        assert_eq!(g.observe(s(1.0), &view(LAND, "LAND", 5, &[])), None);
+        assert_eq!(g.observe(s(2.0), &view(LAND, "LAND", 0, &[])), None);
+        assert_eq!(
+            g.observe(s(3.0), &view(LAND, "LAND", 2, &[])),
+            Some(GateEvent::Started(StartBy::PilotArmed))
+        );
+    }
+
+    #[test]
+    fn statustext_is_rate_limited_per_text_and_per_second() {
+        let mut t = GcsText::new(Duration::from_secs(10), 2);
+        let sev = MavSeverity::MAV_SEVERITY_INFO;
+        assert!(t.say(s(0.0), sev, "a").is_some());
+        assert!(t.say(s(1.0), sev, "a").is_none(), "same text within 10 s");
+        assert!(t.say(s(1.1), sev, "b").is_some());
+        assert!(t.say(s(1.2), sev, "c").is_some());
+        assert!(
+            t.say(s(1.3), sev, "d").is_none(),
+            "third text in one second"
+        );
+        assert_eq!(t.dropped, 1);
+        assert!(t.say(s(2.5), sev, "d").is_some());
+        assert!(
+            t.say(s(10.5), sev, "a").is_some(),
+            "after the repeat interval"
+        );
+        let long = "x".repeat(80);
+        match t.say(s(20.0), sev, &long) {
+            Some(Msg::STATUSTEXT(st)) => assert_eq!(st.text.to_str().unwrap().len(), 50),
+            other => panic!("{other:?}"),
+        }
+    }
+}
