@@ -471,6 +471,7 @@ async fn run_loop<D: Decider, S: RecordSink>(
                 );
                 tracing::error!("{msg}");
                 anyhow::bail!(msg);
+            },
             _ = async { match cycle_due { Some(t) => tokio::time::sleep_until(start + t).await, None => std::future::pending().await } } => {
                 cycle_due = None;
                 wake = true;
