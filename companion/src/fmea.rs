@@ -146,6 +146,13 @@ pub struct NodeSpec {
 type RowRule = Box<dyn FnMut(&[usize]) -> Result<Vec<f64>, SpecError>>;
 
 /// Node roles, named as in the paper.
+/// Most parents of one BN node. The shipped health managers use at most 6.
+pub const MAX_PARENTS: usize = 16;
+/// Most probabilities in one node's table (states times the product of its parents' state
+/// counts): 2^16 values, 512 KiB, far above the shipped nodes and far below an allocation that
+/// could fail.
+pub const MAX_CPT_ENTRIES: usize = 1 << 16;
+
 pub const ROLES: &[&str] = &[
     "qos",
     "error",
@@ -515,8 +522,34 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
             known(p, format!("node.{n}.parents"))?;
         }
         let pstates: Vec<&Vec<String>> = parents.iter().map(|p| &states[p]).collect();
-        let rows: usize = pstates.iter().map(|s| s.len()).product();
         let entry = |key: &str| format!("node.{n}.{key}");
+        if parents.len() > MAX_PARENTS {
+            return Err(err(
+                file,
+                entry("parents"),
+                format!(
+                    "{} parents: a node has at most {MAX_PARENTS} (its table grows with the \
+                     product of the parents' state counts)",
+                    parents.len()
+                ),
+            ));
+        }
+        // Checked: 70 binary parents would wrap a plain product to a small, accepted size.
+        let rows = pstates
+            .iter()
+            .try_fold(1usize, |acc, s| acc.checked_mul(s.len()))
+            .filter(|&r| r.checked_mul(k).is_some_and(|e| e <= MAX_CPT_ENTRIES));
+        let Some(rows) = rows else {
+            return Err(err(
+                file,
+                entry("parents"),
+                format!(
+                    "the table would hold more than {MAX_CPT_ENTRIES} probabilities \
+                     ({k} states times the product of {} parents' state counts)",
+                    parents.len()
+                ),
+            ));
+        };
 
         // Row generator: parent state indices -> distribution.
         let mut cpt: Vec<f64> = if let Some(c) = &spec_n.cpt {

@@ -400,6 +400,13 @@ impl MissionMdps {
         let dir = params_dir.join("mdp");
         let index_path = dir.join("index.toml");
         let index: IndexFile = read_toml(&index_path)?;
+        if index.concurrent.is_empty() {
+            return Err(SpecError::new(
+                &index_path,
+                "concurrent",
+                "no MDPs: the decision layer needs at least one concurrent MDP",
+            ));
+        }
         for (k, v) in &index.check_point {
             if !known_probability_names.contains(&k.as_str()) {
                 return Err(SpecError::new(

@@ -15,9 +15,12 @@ pub mod synthetic;
 mod tlog;
 mod writer;
 
-pub use reader::{LogEvent, LogRead, LossMark, ReadError, ReadIssue, read_log};
+pub use reader::{LogEnd, LogEvent, LogRead, LossMark, ReadError, ReadIssue, read_log};
 pub use tlog::{TlogFrame, TlogWriter, read_tlog};
-pub use writer::{DecisionLog, WriterOptions, WriterStats};
+pub use writer::{
+    DEFAULT_MAX_BYTES, DEFAULT_MAX_LINE_BYTES, DecisionLog, RESERVE_BYTES, RESERVE_FILE,
+    WriterOptions, WriterStats,
+};
 
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -110,7 +113,8 @@ fn collect_toml(dir: &Path, out: &mut Vec<PathBuf>) -> io::Result<()> {
         let path = entry?.path();
         if path.is_dir() {
             collect_toml(&path, out)?;
-        } else if path.extension().is_some_and(|e| e == "toml") {
+        } else if path.extension().is_some_and(|e| e == "toml") && path.is_file() {
+            // Only regular files: reading a FIFO named *.toml would block the start.
             out.push(path);
         }
     }
