@@ -3,21 +3,29 @@
 //! one raw MAVLink frame (v1 or v2, as received or sent). There is no file header.
 
 use std::fs::File;
-use std::io::{self, BufWriter, Write};
+use std::io::{self, Seek, SeekFrom, Write};
 use std::path::Path;
 
-/// Writes a `.tlog`. Each frame is flushed, so a killed process leaves whole frames behind.
+/// Writes a `.tlog`. Each entry goes out in one write, so a killed process leaves whole frames
+/// behind; a failed write (disk full) is cut back to the last whole entry and counted.
 pub struct TlogWriter {
-    out: BufWriter<File>,
+    out: File,
+    /// Bytes of whole entries in the file.
+    bytes: u64,
     frames: u64,
+    failed: u64,
+    buf: Vec<u8>,
 }
 
 impl TlogWriter {
     /// Create (or truncate) the file at `path`.
     pub fn create(path: &Path) -> io::Result<Self> {
         Ok(TlogWriter {
-            out: BufWriter::new(File::create(path)?),
+            out: File::create(path)?,
+            bytes: 0,
             frames: 0,
+            failed: 0,
+            buf: Vec::with_capacity(8 + 280),
         })
     }
 
@@ -25,16 +33,32 @@ impl TlogWriter {
     /// `frame` must be one complete MAVLink frame, from its start byte (0xFD / 0xFE) through its
     /// checksum (and signature, if signed).
     pub fn write(&mut self, t_us: u64, frame: &[u8]) -> io::Result<()> {
-        self.out.write_all(&t_us.to_be_bytes())?;
-        self.out.write_all(frame)?;
-        self.out.flush()?;
-        self.frames += 1;
-        Ok(())
+        self.buf.clear();
+        self.buf.extend_from_slice(&t_us.to_be_bytes());
+        self.buf.extend_from_slice(frame);
+        match self.out.write_all(&self.buf).and_then(|_| self.out.flush()) {
+            Ok(()) => {
+                self.bytes += self.buf.len() as u64;
+                self.frames += 1;
+                Ok(())
+            }
+            Err(e) => {
+                self.failed += 1;
+                let _ = self.out.set_len(self.bytes);
+                let _ = self.out.seek(SeekFrom::Start(self.bytes));
+                Err(e)
+            }
+        }
     }
 
     /// Frames written so far.
     pub fn frames(&self) -> u64 {
         self.frames
+    }
+
+    /// Frames that could not be written (disk full, I/O error).
+    pub fn failed(&self) -> u64 {
+        self.failed
     }
 }
 
