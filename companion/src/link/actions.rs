@@ -261,7 +261,13 @@ impl Route {
                 ));
             }
         };
-        check_positive(path, "altitude_m", raw.altitude_m, MAX_ALTITUDE_M, " m above home")?;
+        check_positive(
+            path,
+            "altitude_m",
+            raw.altitude_m,
+            MAX_ALTITUDE_M,
+            " m above home",
+        )?;
         if let Some(t) = raw.search_time_limit_s {
             check_positive(path, "search_time_limit_s", t, 86_400.0, " s")?;
         }
@@ -429,7 +435,14 @@ impl LinkParams {
             }
         }
         // Durations become `Duration`s and timers: bounded so none can overflow or spin.
-        check_range(path, "decision_period_s", p.decision_period_s, 0.01, 3600.0, " s")?;
+        check_range(
+            path,
+            "decision_period_s",
+            p.decision_period_s,
+            0.01,
+            3600.0,
+            " s",
+        )?;
         check_positive(path, "arm_wait_s", p.arm_wait_s, 3600.0, " s")?;
         if !(1..=100).contains(&p.max_arm_attempts) {
             return Err(SpecError::new(
@@ -439,7 +452,13 @@ impl LinkParams {
             ));
         }
         let t = &p.telemetry;
-        check_positive(path, "telemetry.obstacle_near_m", t.obstacle_near_m, 1000.0, " m")?;
+        check_positive(
+            path,
+            "telemetry.obstacle_near_m",
+            t.obstacle_near_m,
+            1000.0,
+            " m",
+        )?;
         check_positive(
             path,
             "telemetry.distance_max_age_s",
@@ -621,8 +640,7 @@ mod tests {
             ),
         ];
         let many = |n: usize| {
-            "altitude_m = 20\n".to_string()
-                + &"[[waypoint]]\nnorth_m = 1\neast_m = 1\n".repeat(n)
+            "altitude_m = 20\n".to_string() + &"[[waypoint]]\nnorth_m = 1\neast_m = 1\n".repeat(n)
         };
         let (w1001, w70000) = (many(1001), many(70_000));
         let cases = cases.into_iter().chain([

@@ -165,9 +165,8 @@ impl FlySetup {
             crate::params::load_fly_files(&dir, args.mission.as_deref())?;
         let key = match &args.signing_key {
             Some(p) => {
-                crate::spec::regular_file(p).map_err(|reason| {
-                    anyhow::anyhow!("--signing-key {}: {reason}", p.display())
-                })?;
+                crate::spec::regular_file(p)
+                    .map_err(|reason| anyhow::anyhow!("--signing-key {}: {reason}", p.display()))?;
                 Some(ingest::load_signing_key(p)?)
             }
             None => None,
