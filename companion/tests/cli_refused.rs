@@ -242,3 +242,26 @@ fn check_refuses_a_broken_route_file_given_with_route() {
         &["route.toml", "altitude_m", "out of range"],
     );
 }
+
+#[test]
+fn a_scenario_of_a_billion_steps_is_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let real = Path::new(env!("CARGO_MANIFEST_DIR")).join("../params/scenarios/complete-1.toml");
+    let text = std::fs::read_to_string(real).unwrap();
+    let scenario = d.path().join("long.toml");
+    std::fs::write(
+        &scenario,
+        text.replacen("steps = 100", "steps = 1000000000", 1),
+    )
+    .unwrap();
+    refused(
+        &[
+            "simulate",
+            "--no-log",
+            "--scenario",
+            scenario.to_str().unwrap(),
+        ],
+        d.path(),
+        &["long.toml", "steps", "out of range"],
+    );
+}
