@@ -152,6 +152,9 @@ pub const MAX_PARENTS: usize = 16;
 /// counts): 2^16 values, 512 KiB, far above the shipped nodes and far below an allocation that
 /// could fail.
 pub const MAX_CPT_ENTRIES: usize = 1 << 16;
+/// Most probabilities in one junction-tree clique table of a health manager (2^20, 8 MiB; the
+/// shipped managers' largest is far smaller).
+pub const MAX_CLIQUE_ENTRIES: usize = 1 << 20;
 
 pub const ROLES: &[&str] = &[
     "qos",
@@ -926,6 +929,21 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
         });
     }
     let network = builder.build().map_err(|e| bn_to_spec(file, e))?;
+    // Small tables per node can still join into a huge clique table: refuse before compiling.
+    match network.largest_clique_entries() {
+        Some(n) if n <= MAX_CLIQUE_ENTRIES => {}
+        n => {
+            return Err(err(
+                file,
+                "node",
+                format!(
+                    "inference would need a table of {} probabilities (at most {MAX_CLIQUE_ENTRIES}): \
+                     fewer or less connected nodes",
+                    n.map_or_else(|| "more than 2^64".to_string(), |n| n.to_string())
+                ),
+            ));
+        }
+    }
 
     let mut publish = Vec::new();
     for (name, expr) in &spec.publish {

@@ -405,3 +405,29 @@ fn a_fifo_as_a_params_file_is_refused_not_read() {
     }
     refused_everywhere(d.path(), "link.toml", "-", "not a regular file");
 }
+
+#[test]
+fn health_manager_whose_small_tables_join_into_a_huge_clique_is_refused() {
+    // 24 binary contexts and a two-parent monitor for every pair of them: each table has 8
+    // probabilities, but inference would join all 24 contexts into one table of 2^24.
+    let d = params_copy();
+    edit(d.path(), "health/system.toml", |mut t| {
+        let n = 24;
+        for i in 0..n {
+            t += &format!(
+                "\n[node.C_extra{i}]\nrole = \"context\"\nstates = [\"a\", \"b\"]\nprior = [0.5, 0.5]\n"
+            );
+        }
+        for i in 0..n {
+            for j in i + 1..n {
+                t += &format!(
+                    "\n[node.S_pair{i}_{j}]\nrole = \"monitor\"\nstates = [\"ok\", \"bad\"]\n\
+                     parents = [\"C_extra{i}\", \"C_extra{j}\"]\n\
+                     cpt = [[0.5, 0.5], [0.5, 0.5], [0.5, 0.5], [0.5, 0.5]]\n"
+                );
+            }
+        }
+        t
+    });
+    refused_everywhere(d.path(), "health/system.toml", "node", "at most 1048576");
+}
