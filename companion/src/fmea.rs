@@ -146,6 +146,8 @@ pub struct NodeSpec {
 type RowRule = Box<dyn FnMut(&[usize]) -> Result<Vec<f64>, SpecError>>;
 
 /// Node roles, named as in the paper.
+/// Most nodes (and most FMEA rows) in one health manager. The shipped managers have under 40.
+pub const MAX_NODES: usize = 500;
 /// Most parents of one BN node. The shipped health managers use at most 6.
 pub const MAX_PARENTS: usize = 16;
 /// Most probabilities in one node's table (states times the product of its parents' state
@@ -268,6 +270,18 @@ pub fn load_hm(path: &Path) -> Result<CompiledHm, SpecError> {
 
 /// Compile a parsed FMEA file; `file` names it in errors.
 pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
+    // Compiling is quadratic and more in the node count: refuse absurd files before it starts.
+    if spec.node.len() > MAX_NODES || spec.fmea.len() > MAX_NODES {
+        return Err(err(
+            file,
+            "node",
+            format!(
+                "{} nodes and {} FMEA rows: a health manager has at most {MAX_NODES} of each",
+                spec.node.len(),
+                spec.fmea.len()
+            ),
+        ));
+    }
     // 1. Roles: from the FMEA rows, then explicit `role` keys (which must agree).
     let mut role: BTreeMap<String, String> = BTreeMap::new();
     let mut order: Vec<String> = Vec::new();

@@ -431,3 +431,17 @@ fn health_manager_whose_small_tables_join_into_a_huge_clique_is_refused() {
     });
     refused_everywhere(d.path(), "health/system.toml", "node", "at most 1048576");
 }
+
+#[test]
+fn health_manager_of_600_nodes_is_refused_before_compiling() {
+    let d = params_copy();
+    edit(d.path(), "health/system.toml", |mut t| {
+        for i in 0..600 {
+            t += &format!(
+                "\n[node.C_extra{i}]\nrole = \"context\"\nstates = [\"a\", \"b\"]\nprior = [0.5, 0.5]\n"
+            );
+        }
+        t
+    });
+    refused_everywhere(d.path(), "health/system.toml", "node", "at most 500");
+}
