@@ -445,3 +445,17 @@ fn health_manager_of_600_nodes_is_refused_before_compiling() {
     });
     refused_everywhere(d.path(), "health/system.toml", "node", "at most 500");
 }
+
+#[test]
+fn mdp_of_5000_states_is_refused_before_its_tables_are_allocated() {
+    let d = params_copy();
+    let many: Vec<String> = (0..5000).map(|i| format!("\"s{i}\"")).collect();
+    edit(d.path(), "mdp/navigation.toml", |t| {
+        let at = t.find("\nstates = [").unwrap() + 1;
+        let end = at + t[at..].find(']').unwrap() + 1;
+        let states = &t[at..end];
+        let grown = states.replacen('[', &format!("[{}, ", many.join(", ")), 1);
+        t.replacen(states, &grown, 1)
+    });
+    refused_everywhere(d.path(), "mdp/navigation.toml", "states", "at most 256");
+}
