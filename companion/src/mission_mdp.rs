@@ -555,7 +555,10 @@ pub fn load_mdp(
         return Err(err(
             path,
             "action",
-            format!("{} actions: an MDP has at most {MAX_ACTIONS}", f.action.len()),
+            format!(
+                "{} actions: an MDP has at most {MAX_ACTIONS}",
+                f.action.len()
+            ),
         ));
     }
     for (i, s) in f.states.iter().enumerate() {
