@@ -230,3 +230,22 @@ fn a_log_without_end_or_loss_reason_is_judged_killed() {
     std::fs::write(&path, &text).unwrap();
     assert_eq!(read_log(&path).unwrap().end(), LogEnd::Clean);
 }
+
+#[test]
+fn the_tlog_stops_at_its_cap_with_whole_entries_and_counts_the_rest() {
+    use companion::decision_log::{TlogWriter, read_tlog};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("flight.tlog");
+    // A 17-byte MAVLink 1 frame (header 6, payload 9, CRC 2) plus its 8-byte time: 25 bytes.
+    let mut frame = vec![0xFE, 9, 0, 1, 1, 0];
+    frame.extend([0u8; 9]);
+    frame.extend([0, 0]);
+    let mut w = TlogWriter::create(&path)
+        .unwrap()
+        .with_max_bytes(25 * 4 + 10);
+    let ok = (0..10).filter(|&i| w.write(i, &frame).is_ok()).count();
+    assert_eq!((ok, w.frames(), w.capped()), (4, 4, 6));
+    let (frames, cut) = read_tlog(&path).unwrap();
+    assert_eq!(frames.len(), 4);
+    assert_eq!(cut, None, "whole entries only");
+}

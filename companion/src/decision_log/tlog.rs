@@ -14,19 +14,30 @@ pub struct TlogWriter {
     bytes: u64,
     frames: u64,
     failed: u64,
+    capped: u64,
+    max_bytes: u64,
     buf: Vec<u8>,
 }
 
 impl TlogWriter {
-    /// Create (or truncate) the file at `path`.
+    /// Create (or truncate) the file at `path`, capped like the decision log
+    /// (`$COMPANION_LOG_MAX_BYTES`, default 1 GiB).
     pub fn create(path: &Path) -> io::Result<Self> {
         Ok(TlogWriter {
             out: File::create(path)?,
             bytes: 0,
             frames: 0,
             failed: 0,
+            capped: 0,
+            max_bytes: super::WriterOptions::default().max_bytes,
             buf: Vec::with_capacity(8 + 280),
         })
+    }
+
+    /// Stop writing (count instead) once the file would pass `max_bytes`.
+    pub fn with_max_bytes(mut self, max_bytes: u64) -> Self {
+        self.max_bytes = max_bytes;
+        self
     }
 
     /// Append one frame received or sent at `t_us` (microseconds since the Unix epoch).
@@ -36,6 +47,13 @@ impl TlogWriter {
         self.buf.clear();
         self.buf.extend_from_slice(&t_us.to_be_bytes());
         self.buf.extend_from_slice(frame);
+        if self.bytes + self.buf.len() as u64 > self.max_bytes {
+            self.capped += 1;
+            return Err(io::Error::other(format!(
+                "tlog cap of {} bytes reached: frame counted, not written",
+                self.max_bytes
+            )));
+        }
         match self.out.write_all(&self.buf).and_then(|_| self.out.flush()) {
             Ok(()) => {
                 self.bytes += self.buf.len() as u64;
@@ -59,6 +77,11 @@ impl TlogWriter {
     /// Frames that could not be written (disk full, I/O error).
     pub fn failed(&self) -> u64 {
         self.failed
+    }
+
+    /// Frames not written because the file reached its cap.
+    pub fn capped(&self) -> u64 {
+        self.capped
     }
 }
 
