@@ -459,3 +459,14 @@ fn mdp_of_5000_states_is_refused_before_its_tables_are_allocated() {
     });
     refused_everywhere(d.path(), "mdp/navigation.toml", "states", "at most 256");
 }
+
+#[test]
+fn mdp_horizon_of_a_billion_steps_is_refused() {
+    case(
+        "mission.toml",
+        "horizon",
+        "1000000000",
+        "horizon",
+        "1..=10000",
+    );
+}
