@@ -1,4 +1,5 @@
-//! `companion check`: load every params file and show what it compiles to.
+//! `companion check`: load every params file exactly as `fly` and `simulate` do
+//! ([`crate::params::Params::load`]) and show what it compiles to.
 //!
 //! The report is a list of sections, each a JSON value under its key plus a human rendering.
 //! Adding a section (platform, variants, guarantee) is one line in [`SECTIONS`].
@@ -25,6 +26,9 @@ pub struct CheckArgs {
     /// `patrolling`) or a path.
     #[arg(long)]
     pub mission: Option<String>,
+    /// The route file `fly --mission FILE` would fly (default params/missions/tracking_route.toml).
+    #[arg(long)]
+    pub route: Option<PathBuf>,
 }
 
 /// What a section builder gets.
@@ -44,7 +48,40 @@ pub const SECTIONS: &[(&str, SectionFn)] = &[
     ("variants", variants_section),
     ("resource_policies", resource_policies_section),
     ("guarantee", guarantee_section),
+    ("fly", fly_section),
 ];
+
+/// What `fly` loads besides the model: the link settings, the vehicle actions' MAVLink steps and
+/// the route.
+pub fn fly_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
+    let (link, commands, route, route_file) =
+        crate::params::load_fly_files(cx.params, cx.args.route.as_deref())?;
+    let actions: Vec<&String> = commands.actions.keys().collect();
+    let text = format!(
+        "\nfly: decision period {} s, {} streams; vehicle actions: {}\n  route {}: {} waypoints at {} m\n",
+        link.decision_period_s,
+        link.streams.len(),
+        actions
+            .iter()
+            .map(|a| a.as_str())
+            .collect::<Vec<_>>()
+            .join(", "),
+        route_file.display(),
+        route.waypoints.len(),
+        route.altitude_m
+    );
+    let v = json!({
+        "decision_period_s": link.decision_period_s,
+        "streams": link.streams,
+        "vehicle_actions": actions,
+        "route": {
+            "file": route_file.display().to_string(),
+            "waypoints": route.waypoints.len(),
+            "altitude_m": route.altitude_m,
+        },
+    });
+    Ok((v, text))
+}
 
 /// The MDPs the decision layer loads (states, actions, probabilities named), validated against
 /// the health managers' published names.
@@ -126,6 +163,9 @@ pub fn report(args: &CheckArgs) -> anyhow::Result<(Value, String)> {
         .params
         .clone()
         .unwrap_or_else(crate::spec::default_params_dir);
+    // Everything `fly` and `simulate` load, cross-checks included, before any section: a file
+    // either of them would refuse fails here with its file, entry and reason.
+    crate::params::Params::load(&params, args.route.as_deref())?;
     let cx = CheckContext {
         params: &params,
         args,

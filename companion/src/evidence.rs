@@ -53,6 +53,13 @@ pub struct ObservationMap {
 impl ObservationMap {
     pub fn load(path: &Path) -> Result<Self, SpecError> {
         let f: ObservationsFile = read_toml(path)?;
+        if f.observation.is_empty() {
+            return Err(SpecError::new(
+                path,
+                "observation",
+                "no observations: the health managers would never receive evidence",
+            ));
+        }
         Self::new(path, f.observation)
     }
 

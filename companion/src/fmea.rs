@@ -146,6 +146,18 @@ pub struct NodeSpec {
 type RowRule = Box<dyn FnMut(&[usize]) -> Result<Vec<f64>, SpecError>>;
 
 /// Node roles, named as in the paper.
+/// Most nodes (and most FMEA rows) in one health manager. The shipped managers have under 40.
+pub const MAX_NODES: usize = 500;
+/// Most parents of one BN node. The shipped health managers use at most 6.
+pub const MAX_PARENTS: usize = 16;
+/// Most probabilities in one node's table (states times the product of its parents' state
+/// counts): 2^16 values, 512 KiB, far above the shipped nodes and far below an allocation that
+/// could fail.
+pub const MAX_CPT_ENTRIES: usize = 1 << 16;
+/// Most probabilities in one junction-tree clique table of a health manager (2^20, 8 MiB; the
+/// shipped managers' largest is far smaller).
+pub const MAX_CLIQUE_ENTRIES: usize = 1 << 20;
+
 pub const ROLES: &[&str] = &[
     "qos",
     "error",
@@ -258,6 +270,18 @@ pub fn load_hm(path: &Path) -> Result<CompiledHm, SpecError> {
 
 /// Compile a parsed FMEA file; `file` names it in errors.
 pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
+    // Compiling is quadratic and more in the node count: refuse absurd files before it starts.
+    if spec.node.len() > MAX_NODES || spec.fmea.len() > MAX_NODES {
+        return Err(err(
+            file,
+            "node",
+            format!(
+                "{} nodes and {} FMEA rows: a health manager has at most {MAX_NODES} of each",
+                spec.node.len(),
+                spec.fmea.len()
+            ),
+        ));
+    }
     // 1. Roles: from the FMEA rows, then explicit `role` keys (which must agree).
     let mut role: BTreeMap<String, String> = BTreeMap::new();
     let mut order: Vec<String> = Vec::new();
@@ -515,8 +539,34 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
             known(p, format!("node.{n}.parents"))?;
         }
         let pstates: Vec<&Vec<String>> = parents.iter().map(|p| &states[p]).collect();
-        let rows: usize = pstates.iter().map(|s| s.len()).product();
         let entry = |key: &str| format!("node.{n}.{key}");
+        if parents.len() > MAX_PARENTS {
+            return Err(err(
+                file,
+                entry("parents"),
+                format!(
+                    "{} parents: a node has at most {MAX_PARENTS} (its table grows with the \
+                     product of the parents' state counts)",
+                    parents.len()
+                ),
+            ));
+        }
+        // Checked: 70 binary parents would wrap a plain product to a small, accepted size.
+        let rows = pstates
+            .iter()
+            .try_fold(1usize, |acc, s| acc.checked_mul(s.len()))
+            .filter(|&r| r.checked_mul(k).is_some_and(|e| e <= MAX_CPT_ENTRIES));
+        let Some(rows) = rows else {
+            return Err(err(
+                file,
+                entry("parents"),
+                format!(
+                    "the table would hold more than {MAX_CPT_ENTRIES} probabilities \
+                     ({k} states times the product of {} parents' state counts)",
+                    parents.len()
+                ),
+            ));
+        };
 
         // Row generator: parent state indices -> distribution.
         let mut cpt: Vec<f64> = if let Some(c) = &spec_n.cpt {
@@ -893,6 +943,21 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
         });
     }
     let network = builder.build().map_err(|e| bn_to_spec(file, e))?;
+    // Small tables per node can still join into a huge clique table: refuse before compiling.
+    match network.largest_clique_entries() {
+        Some(n) if n <= MAX_CLIQUE_ENTRIES => {}
+        n => {
+            return Err(err(
+                file,
+                "node",
+                format!(
+                    "inference would need a table of {} probabilities (at most {MAX_CLIQUE_ENTRIES}): \
+                     fewer or less connected nodes",
+                    n.map_or_else(|| "more than 2^64".to_string(), |n| n.to_string())
+                ),
+            ));
+        }
+    }
 
     let mut publish = Vec::new();
     for (name, expr) in &spec.publish {

@@ -16,6 +16,7 @@ pub mod link;
 pub mod mission;
 pub mod mission_mdp;
 pub mod observations;
+pub mod params;
 pub mod record;
 pub mod resources;
 pub mod review;

@@ -4,7 +4,7 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use companion::decision::{Core, Model, ModelKind, Policy};
 use companion::link::fly::{Decider, FlyArgs};
-use companion::sim::{self, Scenario, WorldSpec};
+use companion::sim::{self, Scenario};
 use companion::spec::default_params_dir;
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -63,6 +63,11 @@ impl From<PolicyArg> for Policy {
     }
 }
 
+/// Most `simulate --runs` (each run is a full simulation; the per-run results are kept).
+const MAX_RUNS: i64 = 10_000;
+/// Most `simulate --steps` (the first run's records are all held and logged).
+const MAX_STEPS: i64 = 10_000;
+
 #[derive(clap::Args)]
 struct SimulateArgs {
     /// Scenario name in params/scenarios/ or a path to a scenario file.
@@ -77,10 +82,10 @@ struct SimulateArgs {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Runs on seeds seed, seed+1, ...: tracking time reported as mean and 95% CI.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=MAX_RUNS))]
     runs: u32,
-    /// Steps per run (the paper's 100).
-    #[arg(long)]
+    /// Steps per run (the paper's 100; at most 10000).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=MAX_STEPS))]
     steps: Option<u32>,
     /// One JSON object on stdout (schema in docs/simulation.md).
     #[arg(long)]
@@ -180,8 +185,10 @@ impl Decider for CoreDecider {
 
 fn fly(args: FlyArgs) -> Result<()> {
     let params = args.params.clone().unwrap_or_else(default_params_dir);
-    let model: &'static Model =
-        Box::leak(Box::new(Model::load(&params).context("loading params")?));
+    // Every params file, as `check` loads it, before any run folder or socket.
+    let loaded = companion::params::Params::load(&params, args.mission.as_deref())
+        .context("loading params")?;
+    let model: &'static Model = Box::leak(Box::new(loaded.model));
     let policy: Policy = args
         .policy
         .parse()
@@ -195,7 +202,8 @@ fn fly(args: FlyArgs) -> Result<()> {
 }
 
 fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
-    let world = WorldSpec::load(params)?;
+    let loaded = companion::params::Params::load(params, None).context("loading params")?;
+    let world = loaded.world;
     let mut scenario = Scenario::load(params, &args.scenario)?;
     if let Some(s) = args.steps {
         scenario.steps = s;
@@ -207,7 +215,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         .collect::<Result<_, _>>()
         .map_err(|e| anyhow::anyhow!("--model: {e}"))?;
     let policy: Policy = args.policy.into();
-    let model = Model::load(params).context("loading params")?;
+    let model = loaded.model;
     let runs = args.runs.max(1);
     let progress = (!args.json && runs > 1 && std::io::stderr().is_terminal()).then(|| {
         let pb = indicatif::ProgressBar::new(runs as u64 * kinds.len() as u64);
@@ -274,8 +282,9 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         let stats = log.close();
         if stats.dropped > 0 {
             eprintln!(
-                "warning: the decision log dropped {} records (writer behind)",
-                stats.dropped
+                "warning: the decision log lost {} records (writer behind {}, write failed {}, \
+                 size cap {}, too large {})",
+                stats.dropped, stats.queue_full, stats.write_failed, stats.capped, stats.too_large
             );
         }
     }

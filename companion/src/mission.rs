@@ -160,6 +160,9 @@ pub struct GuaranteeCoupling {
     pub failures: BTreeMap<String, String>,
 }
 
+/// Longest MDP horizon (steps) `mission.toml` may ask for (the BFM paper uses 100).
+pub const MAX_HORIZON: usize = 10_000;
+
 /// params/mission.toml.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -177,8 +180,16 @@ impl MissionFile {
     pub fn load(params: &Path) -> Result<Self, SpecError> {
         let file = params.join("mission.toml");
         let m: MissionFile = read_toml(&file)?;
-        if m.horizon == 0 {
-            return Err(SpecError::new(&file, "horizon", "must be at least 1"));
+        // Each decision cycle solves this many stages: bounded so a typo cannot stall it.
+        if !(1..=MAX_HORIZON).contains(&m.horizon) {
+            return Err(SpecError::new(
+                &file,
+                "horizon",
+                format!(
+                    "{} is out of range: must be in 1..={MAX_HORIZON}",
+                    m.horizon
+                ),
+            ));
         }
         for (name, rules) in &m.projection {
             for (i, r) in rules.iter().enumerate() {

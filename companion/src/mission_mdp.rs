@@ -400,6 +400,13 @@ impl MissionMdps {
         let dir = params_dir.join("mdp");
         let index_path = dir.join("index.toml");
         let index: IndexFile = read_toml(&index_path)?;
+        if index.concurrent.is_empty() {
+            return Err(SpecError::new(
+                &index_path,
+                "concurrent",
+                "no MDPs: the decision layer needs at least one concurrent MDP",
+            ));
+        }
         for (k, v) in &index.check_point {
             if !known_probability_names.contains(&k.as_str()) {
                 return Err(SpecError::new(
@@ -520,6 +527,11 @@ fn err(path: &Path, entry: impl Into<String>, reason: impl Into<String>) -> Spec
 /// One parsed transition row: state, action, (next state, probability), entry path for errors.
 type Row = (usize, usize, Vec<(usize, Expr)>, String);
 
+/// Most states of one MDP (the shipped monolithic MDP has 20).
+pub const MAX_STATES: usize = 256;
+/// Most actions of one MDP (the shipped monolithic MDP has under 30).
+pub const MAX_ACTIONS: usize = 128;
+
 /// Load, validate and compile one MDP file.
 pub fn load_mdp(
     path: &Path,
@@ -530,6 +542,24 @@ pub fn load_mdp(
     // States.
     if f.states.is_empty() {
         return Err(err(path, "states", "no state"));
+    }
+    // The solver's tables grow with states^2 x actions: bounded before anything is allocated.
+    if f.states.len() > MAX_STATES {
+        return Err(err(
+            path,
+            "states",
+            format!("{} states: an MDP has at most {MAX_STATES}", f.states.len()),
+        ));
+    }
+    if f.action.len() > MAX_ACTIONS {
+        return Err(err(
+            path,
+            "action",
+            format!(
+                "{} actions: an MDP has at most {MAX_ACTIONS}",
+                f.action.len()
+            ),
+        ));
     }
     for (i, s) in f.states.iter().enumerate() {
         if f.states[..i].contains(s) {

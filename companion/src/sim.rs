@@ -175,6 +175,14 @@ impl Scenario {
     pub fn load(params: &Path, name_or_path: &str) -> Result<Self, SpecError> {
         let file = resolve(params, "scenarios", name_or_path);
         let s: Scenario = read_toml(&file)?;
+        // Every step's record is kept for the run's log: bounded as `simulate --steps` is.
+        if !(1..=10_000).contains(&s.steps) {
+            return Err(SpecError::new(
+                &file,
+                "steps",
+                format!("{} is out of range: must be in 1..=10000", s.steps),
+            ));
+        }
         for (i, h) in s.hazards.iter().enumerate() {
             if h.trigger.step.is_none() == h.trigger.phase.is_none() {
                 return Err(SpecError::new(

@@ -44,10 +44,23 @@ impl SpecError {
 pub fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, SpecError> {
     let text = match overlay_text(path) {
         Some(t) => t?,
-        None => std::fs::read_to_string(path)
-            .map_err(|e| SpecError::new(path, "-", format!("cannot read: {e}")))?,
+        None => {
+            regular_file(path).map_err(|reason| SpecError::new(path, "-", reason))?;
+            std::fs::read_to_string(path)
+                .map_err(|e| SpecError::new(path, "-", format!("cannot read: {e}")))?
+        }
     };
-    toml::from_str(&text).map_err(|e| {
+    if text.len() > MAX_FILE_BYTES {
+        return Err(SpecError::new(
+            path,
+            "-",
+            format!(
+                "{} bytes: a params file is at most {MAX_FILE_BYTES} bytes",
+                text.len()
+            ),
+        ));
+    }
+    let syntax = |e: toml::de::Error| {
         let entry = e
             .span()
             .map(|s| {
@@ -57,7 +70,141 @@ pub fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, SpecE
             })
             .unwrap_or_else(|| "-".into());
         SpecError::new(path, entry, e.message().to_string())
-    })
+    };
+    if text.trim().is_empty() {
+        return Err(SpecError::new(path, "-", "the file is empty"));
+    }
+    let value: T = toml::from_str(&text).map_err(syntax)?;
+    // Typed parsing succeeded, so the text is a valid TOML document: read it again untyped to
+    // check every number once, whatever the loader does with it.
+    let table: toml::Table = toml::from_str(&text).map_err(syntax)?;
+    check_leaves(path, "", &toml::Value::Table(table))?;
+    Ok(value)
+}
+
+/// Largest params file read (bytes). The shipped files are all under 20 KB.
+pub const MAX_FILE_BYTES: usize = 1024 * 1024;
+/// Largest magnitude of any number in a params file. The shipped files stay under 10^4; nothing
+/// the companion models (metres, seconds, joules, hertz, tiles) needs more than 10^9, and a
+/// bigger value is a typo or an attack that would overflow a duration or a cast downstream.
+pub const MAX_NUMBER_MAGNITUDE: f64 = 1e9;
+/// Most entries in any one array of a params file (the largest shipped array has under 100).
+pub const MAX_ARRAY_LEN: usize = 10_000;
+
+/// Every number finite and within [`MAX_NUMBER_MAGNITUDE`], every array within [`MAX_ARRAY_LEN`].
+fn check_leaves(path: &Path, entry: &str, v: &toml::Value) -> Result<(), SpecError> {
+    let name = |e: &str| {
+        if e.is_empty() {
+            "-".to_string()
+        } else {
+            e.to_string()
+        }
+    };
+    match v {
+        toml::Value::Float(x) => {
+            if !x.is_finite() {
+                return Err(SpecError::new(
+                    path,
+                    name(entry),
+                    format!("{x} is not a finite number"),
+                ));
+            }
+            if x.abs() > MAX_NUMBER_MAGNITUDE {
+                return Err(SpecError::new(
+                    path,
+                    name(entry),
+                    format!("{x} is out of range (magnitude at most {MAX_NUMBER_MAGNITUDE:e})"),
+                ));
+            }
+        }
+        toml::Value::Integer(i) => {
+            if i.unsigned_abs() as f64 > MAX_NUMBER_MAGNITUDE {
+                return Err(SpecError::new(
+                    path,
+                    name(entry),
+                    format!("{i} is out of range (magnitude at most {MAX_NUMBER_MAGNITUDE:e})"),
+                ));
+            }
+        }
+        toml::Value::Array(a) => {
+            if a.len() > MAX_ARRAY_LEN {
+                return Err(SpecError::new(
+                    path,
+                    name(entry),
+                    format!(
+                        "{} entries: an array holds at most {MAX_ARRAY_LEN}",
+                        a.len()
+                    ),
+                ));
+            }
+            for (i, x) in a.iter().enumerate() {
+                check_leaves(path, &format!("{entry}[{i}]"), x)?;
+            }
+        }
+        toml::Value::Table(t) => {
+            for (k, x) in t {
+                let e = if entry.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{entry}.{k}")
+                };
+                check_leaves(path, &e, x)?;
+            }
+        }
+        toml::Value::String(_) | toml::Value::Boolean(_) | toml::Value::Datetime(_) => {}
+    }
+    Ok(())
+}
+
+/// `value` finite and in `min..=max`, else a [`SpecError`] naming `file` and `entry`; the
+/// loaders call it for each number with a physical range (durations, altitudes, probabilities).
+pub fn check_range(
+    file: &Path,
+    entry: impl Into<String>,
+    value: f64,
+    min: f64,
+    max: f64,
+    unit: &str,
+) -> Result<f64, SpecError> {
+    if value.is_finite() && (min..=max).contains(&value) {
+        Ok(value)
+    } else {
+        Err(SpecError::new(
+            file,
+            entry,
+            format!("{value} is out of range: must be in {min}..={max}{unit}"),
+        ))
+    }
+}
+
+/// As [`check_range`] with `min` excluded (a duration or period that must be positive).
+pub fn check_positive(
+    file: &Path,
+    entry: impl Into<String>,
+    value: f64,
+    max: f64,
+    unit: &str,
+) -> Result<f64, SpecError> {
+    if value.is_finite() && value > 0.0 && value <= max {
+        Ok(value)
+    } else {
+        Err(SpecError::new(
+            file,
+            entry,
+            format!("{value} is out of range: must be positive and at most {max}{unit}"),
+        ))
+    }
+}
+
+/// Ok when `path` is a regular file (following symlinks), else why not. Opening a FIFO or a
+/// device where a file is expected would block or read forever.
+pub fn regular_file(path: &Path) -> Result<(), String> {
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_file() => Ok(()),
+        Ok(m) if m.is_dir() => Err("is a directory, not a file".into()),
+        Ok(_) => Err("is not a regular file (a FIFO, socket or device?)".into()),
+        Err(e) => Err(format!("cannot read: {e}")),
+    }
 }
 
 thread_local! {

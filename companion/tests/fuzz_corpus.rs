@@ -161,6 +161,44 @@ fn params_bad_inputs_name_file_entry_reason() {
             .position(|f| f == Path::new(rel))
             .unwrap_or_else(|| panic!("{rel} in params"))
     };
+    let real = |rel: &str| std::fs::read_to_string(default_params_dir().join(rel)).unwrap();
+    // The real file with the line `key = ...` replaced by `key = value`.
+    let set = |rel: &str, key: &str, value: &str| -> Vec<u8> {
+        let text = real(rel);
+        let at = text
+            .find(&format!("\n{key} ="))
+            .unwrap_or_else(|| panic!("{key} in {rel}"))
+            + 1;
+        let end = text[at..].find('\n').map_or(text.len(), |e| at + e);
+        format!("{}{key} = {value}{}", &text[..at], &text[end..]).into_bytes()
+    };
+    let half = |rel: &str| -> Vec<u8> {
+        let text = real(rel);
+        let lines: Vec<&str> = text.lines().collect();
+        lines[..lines.len() / 2].join("\n").into_bytes()
+    };
+    let many_parents = {
+        let mut t = real("health/system.toml");
+        let names: Vec<String> = (0..70).map(|i| format!("C_extra{i}")).collect();
+        for n in &names {
+            t += &format!(
+                "\n[node.{n}]\nrole = \"context\"\nstates = [\"a\", \"b\"]\nprior = [0.5, 0.5]\n"
+            );
+        }
+        let quoted: Vec<String> = names.iter().map(|n| format!("\"{n}\"")).collect();
+        t += &format!(
+            "\n[node.S_extra]\nrole = \"monitor\"\nstates = [\"ok\", \"bad\"]\nparents = [{}]\n",
+            quoted.join(", ")
+        );
+        t.into_bytes()
+    };
+    let long_expression = real("mdp/navigation.toml")
+        .replacen(
+            "A1 = { wp1 = \"P_sys\"",
+            &format!("A1 = {{ wp1 = \"P_sys{}\"", "+P_sys".repeat(100_000)),
+            1,
+        )
+        .into_bytes();
     let cases: Vec<(&str, Vec<u8>, &str, &str)> = vec![
         // (file, text, loader that must fail, a piece of the reason)
         ("world.toml", b"\xff\xfe".to_vec(), "world", "cannot read"),
@@ -172,6 +210,79 @@ fn params_bad_inputs_name_file_entry_reason() {
             b"[[activity]]\nname = 1".to_vec(),
             "mission",
             "",
+        ),
+        // Numbers that used to pass and panic later in a Duration or a timer.
+        (
+            "link.toml",
+            set("link.toml", "distance_max_age_s", "-2.0"),
+            "fly",
+            "out of range",
+        ),
+        (
+            "link.toml",
+            set("link.toml", "distance_max_age_s", "nan"),
+            "fly",
+            "not a finite number",
+        ),
+        (
+            "link.toml",
+            set("link.toml", "distance_max_age_s", "1e30"),
+            "fly",
+            "out of range",
+        ),
+        (
+            "link.toml",
+            set("link.toml", "decision_period_s", "1e-12"),
+            "fly",
+            "out of range",
+        ),
+        (
+            "link.toml",
+            set("link.toml", "decision_period_s", "1e30"),
+            "fly",
+            "out of range",
+        ),
+        (
+            "link.toml",
+            set("link.toml", "arm_wait_s", "1e30"),
+            "fly",
+            "out of range",
+        ),
+        (
+            "link.toml",
+            set("link.toml", "detection_threshold", "nan"),
+            "fly",
+            "not a finite number",
+        ),
+        // Sizes that overflowed the stack or the allocator.
+        (
+            "mdp/navigation.toml",
+            long_expression,
+            "model",
+            "at most 2000",
+        ),
+        ("health/system.toml", many_parents, "model", "at most 16"),
+        // Empty, cut or inconsistent files that were accepted.
+        (
+            "observations.toml",
+            b"# nothing\n".to_vec(),
+            "model",
+            "no observations",
+        ),
+        ("commands.toml", Vec::new(), "fly", "empty"),
+        (
+            "mdp/index.toml",
+            set("mdp/index.toml", "concurrent", "[]"),
+            "model",
+            "at least one",
+        ),
+        ("mission.toml", half("mission.toml"), "check", ""),
+        ("platform.toml", half("platform.toml"), "model", ""),
+        (
+            "missions/tracking_route.toml",
+            set("missions/tracking_route.toml", "altitude_m", "1e300"),
+            "fly",
+            "out of range",
         ),
     ];
     for (rel, text, loader, reason) in cases {

@@ -324,6 +324,25 @@ impl Network {
     pub fn compile(&self) -> Engine {
         Engine::new(self.clone())
     }
+
+    /// Entries of the largest clique table [`Network::compile`] would allocate, by the same
+    /// elimination, without allocating any table; `None` when the count overflows `usize`.
+    /// Lets a loader refuse a network whose tables would not fit in memory.
+    pub fn largest_clique_entries(&self) -> Option<usize> {
+        let card: Vec<usize> = self.nodes.iter().map(|x| x.states.len()).collect();
+        let families: Vec<Vec<usize>> = self
+            .nodes
+            .iter()
+            .enumerate()
+            .map(|(i, x)| x.parents.iter().map(|p| p.0).chain([i]).collect())
+            .collect();
+        let all: Vec<usize> = (0..card.len()).collect();
+        let (_, cliques, _) = engine::junction_tree(&card, &all, &families, true);
+        cliques.iter().try_fold(0usize, |most, c| {
+            let size = c.iter().try_fold(1usize, |a, &v| a.checked_mul(card[v]))?;
+            Some(most.max(size))
+        })
+    }
 }
 
 /// What is known about one node.

@@ -15,9 +15,12 @@ pub mod synthetic;
 mod tlog;
 mod writer;
 
-pub use reader::{LogEvent, LogRead, LossMark, ReadError, ReadIssue, read_log};
+pub use reader::{LogEnd, LogEvent, LogRead, LossMark, ReadError, ReadIssue, read_log};
 pub use tlog::{TlogFrame, TlogWriter, read_tlog};
-pub use writer::{DecisionLog, WriterOptions, WriterStats};
+pub use writer::{
+    DEFAULT_MAX_BYTES, DEFAULT_MAX_LINE_BYTES, DecisionLog, RESERVE_BYTES, RESERVE_FILE,
+    WriterOptions, WriterStats,
+};
 
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -99,7 +102,7 @@ impl Header {
                 .unwrap_or(&f)
                 .to_string_lossy()
                 .replace('\\', "/");
-            self.params.insert(name, params_entry(&std::fs::read(&f)?));
+            self.params.insert(name, params_entry_of_file(&f)?);
         }
         Ok(self)
     }
@@ -110,11 +113,36 @@ fn collect_toml(dir: &Path, out: &mut Vec<PathBuf>) -> io::Result<()> {
         let path = entry?.path();
         if path.is_dir() {
             collect_toml(&path, out)?;
-        } else if path.extension().is_some_and(|e| e == "toml") {
+        } else if path.extension().is_some_and(|e| e == "toml") && path.is_file() {
+            // Only regular files: reading a FIFO named *.toml would block the start.
             out.push(path);
         }
     }
     Ok(())
+}
+
+/// [`params_entry`] of the file at `path`, hashing a large file in chunks rather than holding it.
+fn params_entry_of_file(path: &Path) -> io::Result<String> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path)?;
+    let len = file.metadata()?.len();
+    if len <= PARAMS_INLINE_MAX_BYTES {
+        let mut bytes = Vec::with_capacity(len as usize);
+        file.read_to_end(&mut bytes)?;
+        return Ok(params_entry(&bytes));
+    }
+    let mut h = FNV_OFFSET;
+    let mut n = 0u64;
+    let mut buf = vec![0u8; 64 * 1024];
+    loop {
+        let k = file.read(&mut buf)?;
+        if k == 0 {
+            break;
+        }
+        h = fnv1a64_update(h, &buf[..k]);
+        n += k as u64;
+    }
+    Ok(format!("fnv1a64:{h:016x} ({n} bytes)"))
 }
 
 /// Contents as text when small and UTF-8, else a content hash (FNV-1a 64: no crypto needed, it
@@ -127,7 +155,12 @@ fn params_entry(bytes: &[u8]) -> String {
 }
 
 pub(crate) fn fnv1a64(bytes: &[u8]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    fnv1a64_update(FNV_OFFSET, bytes)
+}
+
+const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+
+fn fnv1a64_update(mut h: u64, bytes: &[u8]) -> u64 {
     for b in bytes {
         h ^= u64::from(*b);
         h = h.wrapping_mul(0x0000_0100_0000_01b3);

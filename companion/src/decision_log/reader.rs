@@ -20,6 +20,24 @@ pub enum ReadError {
     NoLog { path: PathBuf },
     #[error("{path}: the log is empty (no header, no records): the run wrote nothing")]
     Empty { path: PathBuf },
+    #[error("{path}: {reason}")]
+    NotAFile { path: PathBuf, reason: String },
+}
+
+/// How a log ended, judged from its last lines: the end line (written at close) and the loss
+/// lines' reasons.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LogEnd {
+    /// The writer closed the log (end line present) and nothing was lost to the disk or a cap.
+    Clean,
+    /// No end line and no write-failure or cap loss line: the process stopped without closing
+    /// its log (killed, crashed, power lost).
+    Killed,
+    /// A write failed (disk full, I/O error); `lost` records and events are not in the log.
+    /// With `closed` false the end line could not be written either, and `lost` is a lower bound.
+    WriteFailed { lost: u64, closed: bool },
+    /// The log reached its size cap; `lost` records and events were counted, not written.
+    Capped { lost: u64, closed: bool },
 }
 
 /// A line that could not be used, with where it is.
@@ -67,12 +85,41 @@ pub struct LogRead {
     pub ended_cleanly: bool,
     /// Human-readable remarks for the report (newer schema, missing header, unknown kinds).
     pub notes: Vec<String>,
+    /// Lost because the writer fell behind (loss lines with reason `queue_full`, or none).
+    pub lost_queue_full: u64,
+    /// Lost to failed writes (loss lines with reason `write_failed`).
+    pub lost_write_failed: u64,
+    /// Not written because the log reached its size cap (reason `cap`).
+    pub lost_capped: u64,
+    /// Not written because the record was over the line-size limit (reason `too_large`).
+    pub lost_too_large: u64,
 }
 
 impl LogRead {
-    /// Total records and events reported lost by loss lines.
+    /// Total records and events reported lost by loss lines, whatever the reason.
     pub fn dropped(&self) -> u64 {
         self.losses.iter().map(|l| l.dropped).sum()
+    }
+
+    /// How the log ended: a full disk or a cap is told from a killed process by the loss
+    /// lines the writer leaves (docs/decision-log.md, "How a log ends").
+    pub fn end(&self) -> LogEnd {
+        let closed = self.ended_cleanly;
+        if self.lost_write_failed > 0 {
+            LogEnd::WriteFailed {
+                lost: self.lost_write_failed,
+                closed,
+            }
+        } else if self.lost_capped > 0 {
+            LogEnd::Capped {
+                lost: self.lost_capped,
+                closed,
+            }
+        } else if closed {
+            LogEnd::Clean
+        } else {
+            LogEnd::Killed
+        }
     }
 }
 
@@ -116,8 +163,15 @@ fn log_files(path: &Path) -> Result<Vec<PathBuf>, ReadError> {
             path: path.to_path_buf(),
         });
     }
+    let not_a_file = |p: &Path, reason: String| ReadError::NotAFile {
+        path: p.to_path_buf(),
+        reason,
+    };
     if path.is_dir() {
         let first = part_path(path, 0);
+        if first.exists() {
+            crate::spec::regular_file(&first).map_err(|r| not_a_file(&first, r))?;
+        }
         if !first.exists() {
             return Err(ReadError::NoLog {
                 path: path.to_path_buf(),
@@ -125,6 +179,8 @@ fn log_files(path: &Path) -> Result<Vec<PathBuf>, ReadError> {
         }
         return Ok(parts_from(path, &first, LOG_STEM));
     }
+    // Reading a FIFO or a device would block or never end.
+    crate::spec::regular_file(path).map_err(|r| not_a_file(path, r))?;
     // A file: if it is part 0 of a rotation set (`stem.jsonl`), its parts follow it.
     let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
     if let Some(stem) = name.strip_suffix(".jsonl")
@@ -141,7 +197,7 @@ fn parts_from(dir: &Path, first: &Path, stem: &str) -> Vec<PathBuf> {
     let mut files = vec![first.to_path_buf()];
     for k in 1.. {
         let p = dir.join(format!("{stem}.{k}.jsonl"));
-        if !p.exists() {
+        if !p.is_file() {
             break;
         }
         files.push(p);
@@ -208,10 +264,20 @@ fn read_part(out: &mut LogRead, file: &Path, bytes: &[u8], first_part: bool, las
                     }
                 }
             }
-            Some("loss") => out.losses.push(LossMark {
-                before_record: out.records.len(),
-                dropped: value.get("dropped").and_then(|d| d.as_u64()).unwrap_or(0),
-            }),
+            Some("loss") => {
+                let dropped = value.get("dropped").and_then(|d| d.as_u64()).unwrap_or(0);
+                // Loss lines from before reasons were written are all queue drops.
+                match value.get("reason").and_then(|r| r.as_str()) {
+                    Some("write_failed") => out.lost_write_failed += dropped,
+                    Some("cap") => out.lost_capped += dropped,
+                    Some("too_large") => out.lost_too_large += dropped,
+                    _ => out.lost_queue_full += dropped,
+                }
+                out.losses.push(LossMark {
+                    before_record: out.records.len(),
+                    dropped,
+                });
+            }
             Some("event") => match serde_json::from_value::<LogEvent>(value) {
                 Ok(e) => out.events.push(e),
                 Err(e) => out.corrupted.push(issue(format!("unreadable event: {e}"))),

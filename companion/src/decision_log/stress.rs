@@ -18,7 +18,7 @@ pub fn log_stress(dir: &Path, rotate_bytes: u64) -> io::Result<()> {
         WriterOptions {
             capacity: 64,
             rotate_bytes,
-            stall: None,
+            ..WriterOptions::default()
         },
     )?;
     println!("writing to {}", dir.display());

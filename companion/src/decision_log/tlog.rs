@@ -3,38 +3,85 @@
 //! one raw MAVLink frame (v1 or v2, as received or sent). There is no file header.
 
 use std::fs::File;
-use std::io::{self, BufWriter, Write};
+use std::io::{self, Seek, SeekFrom, Write};
 use std::path::Path;
 
-/// Writes a `.tlog`. Each frame is flushed, so a killed process leaves whole frames behind.
+/// Writes a `.tlog`. Each entry goes out in one write, so a killed process leaves whole frames
+/// behind; a failed write (disk full) is cut back to the last whole entry and counted.
 pub struct TlogWriter {
-    out: BufWriter<File>,
+    out: File,
+    /// Bytes of whole entries in the file.
+    bytes: u64,
     frames: u64,
+    failed: u64,
+    capped: u64,
+    max_bytes: u64,
+    buf: Vec<u8>,
 }
 
 impl TlogWriter {
-    /// Create (or truncate) the file at `path`.
+    /// Create (or truncate) the file at `path`, capped like the decision log
+    /// (`$COMPANION_LOG_MAX_BYTES`, default 1 GiB).
     pub fn create(path: &Path) -> io::Result<Self> {
         Ok(TlogWriter {
-            out: BufWriter::new(File::create(path)?),
+            out: File::create(path)?,
+            bytes: 0,
             frames: 0,
+            failed: 0,
+            capped: 0,
+            max_bytes: super::WriterOptions::default().max_bytes,
+            buf: Vec::with_capacity(8 + 280),
         })
+    }
+
+    /// Stop writing (count instead) once the file would pass `max_bytes`.
+    pub fn with_max_bytes(mut self, max_bytes: u64) -> Self {
+        self.max_bytes = max_bytes;
+        self
     }
 
     /// Append one frame received or sent at `t_us` (microseconds since the Unix epoch).
     /// `frame` must be one complete MAVLink frame, from its start byte (0xFD / 0xFE) through its
     /// checksum (and signature, if signed).
     pub fn write(&mut self, t_us: u64, frame: &[u8]) -> io::Result<()> {
-        self.out.write_all(&t_us.to_be_bytes())?;
-        self.out.write_all(frame)?;
-        self.out.flush()?;
-        self.frames += 1;
-        Ok(())
+        self.buf.clear();
+        self.buf.extend_from_slice(&t_us.to_be_bytes());
+        self.buf.extend_from_slice(frame);
+        if self.bytes + self.buf.len() as u64 > self.max_bytes {
+            self.capped += 1;
+            return Err(io::Error::other(format!(
+                "tlog cap of {} bytes reached: frame counted, not written",
+                self.max_bytes
+            )));
+        }
+        match self.out.write_all(&self.buf).and_then(|_| self.out.flush()) {
+            Ok(()) => {
+                self.bytes += self.buf.len() as u64;
+                self.frames += 1;
+                Ok(())
+            }
+            Err(e) => {
+                self.failed += 1;
+                let _ = self.out.set_len(self.bytes);
+                let _ = self.out.seek(SeekFrom::Start(self.bytes));
+                Err(e)
+            }
+        }
     }
 
     /// Frames written so far.
     pub fn frames(&self) -> u64 {
         self.frames
+    }
+
+    /// Frames that could not be written (disk full, I/O error).
+    pub fn failed(&self) -> u64 {
+        self.failed
+    }
+
+    /// Frames not written because the file reached its cap.
+    pub fn capped(&self) -> u64 {
+        self.capped
     }
 }
 

@@ -4,7 +4,7 @@ use super::{Header, part_path};
 use crate::record::DecisionRecord;
 use serde::Serialize;
 use std::fs::{File, OpenOptions};
-use std::io::{self, Write};
+use std::io::{self, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
@@ -19,17 +19,45 @@ pub struct WriterOptions {
     /// Start a new part when the current one would grow past this many bytes (a part always
     /// holds at least its header and one line, so a single huge record is never split).
     pub rotate_bytes: u64,
+    /// Most bytes the run's log may take, all parts together. Past it records and events are
+    /// counted, not written, and a loss line with reason `cap` says so. Default
+    /// [`DEFAULT_MAX_BYTES`], or `$COMPANION_LOG_MAX_BYTES`.
+    pub max_bytes: u64,
+    /// Longest line a record or event may take; a longer one is counted, not written (loss
+    /// reason `too_large`).
+    pub max_line_bytes: u64,
     /// Test hook: the writer takes this lock before writing each line, so a test can stall it.
     #[doc(hidden)]
     pub stall: Option<Arc<Mutex<()>>>,
+    /// Test hook: a simulated filesystem of this many bytes under the log parts and the reserve
+    /// (writes past it fail as on a full disk, after writing what fits).
+    #[doc(hidden)]
+    pub disk_bytes: Option<u64>,
 }
+
+/// Default cap on one run's decision log (all parts): 1 GiB.
+pub const DEFAULT_MAX_BYTES: u64 = 1 << 30;
+/// Default longest record line: 1 MiB (a normal record is a few KiB).
+pub const DEFAULT_MAX_LINE_BYTES: u64 = 1 << 20;
+/// Bytes kept free in the run folder (`.log-reserve`) and given back when a write fails, so the
+/// loss and end lines can still be written on a full disk.
+pub const RESERVE_BYTES: u64 = 16 * 1024;
+/// The reserve file's name in the run folder (removed at close).
+pub const RESERVE_FILE: &str = ".log-reserve";
 
 impl Default for WriterOptions {
     fn default() -> Self {
+        let max_bytes = std::env::var("COMPANION_LOG_MAX_BYTES")
+            .ok()
+            .and_then(|v| v.trim().parse::<u64>().ok())
+            .unwrap_or(DEFAULT_MAX_BYTES);
         WriterOptions {
             capacity: 1024,
             rotate_bytes: 64 * 1024 * 1024,
+            max_bytes,
+            max_line_bytes: DEFAULT_MAX_LINE_BYTES,
             stall: None,
+            disk_bytes: None,
         }
     }
 }
@@ -39,11 +67,19 @@ impl Default for WriterOptions {
 pub struct WriterStats {
     pub records: u64,
     pub events: u64,
-    /// Records and events dropped because the channel was full (all reported in loss lines).
+    /// Records and events not in the log, for any reason: the sum of the four counts below.
     pub dropped: u64,
+    /// Dropped because the channel was full (the writer fell behind).
+    pub queue_full: u64,
+    /// Lost to a failed write (disk full, I/O error): the one that failed and every later one.
+    pub write_failed: u64,
+    /// Not written because the log reached [`WriterOptions::max_bytes`].
+    pub capped: u64,
+    /// Not written because the line exceeded [`WriterOptions::max_line_bytes`].
+    pub too_large: u64,
     /// Parts written (1 = only `decisions.jsonl`).
     pub parts: u32,
-    /// Lines that failed to reach the file (disk full, ...) and the last such error.
+    /// Writes that failed (lines of any kind) and the last such error.
     pub write_errors: u64,
     pub last_error: Option<String>,
 }
@@ -64,10 +100,31 @@ struct Msg {
     payload: Payload,
 }
 
+/// Why records were lost, as written in a loss line's `reason`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Loss {
+    QueueFull,
+    WriteFailed,
+    Cap,
+    TooLarge,
+}
+
+impl Loss {
+    fn reason(self) -> &'static str {
+        match self {
+            Loss::QueueFull => "queue_full",
+            Loss::WriteFailed => "write_failed",
+            Loss::Cap => "cap",
+            Loss::TooLarge => "too_large",
+        }
+    }
+}
+
 #[derive(Serialize)]
 struct LossLine {
     kind: &'static str,
     dropped: u64,
+    reason: &'static str,
 }
 
 #[derive(Serialize)]
@@ -84,6 +141,10 @@ struct EndLine {
     records: u64,
     events: u64,
     dropped: u64,
+    queue_full: u64,
+    write_failed: u64,
+    capped: u64,
+    too_large: u64,
 }
 
 /// Handle to a running decision log. Cheap to call from the decision loop: [`Self::record`]
@@ -100,14 +161,17 @@ impl DecisionLog {
     /// Write the header of `decisions.jsonl` in `dir` now (so a bad folder fails here, not
     /// silently later) and start the writer thread.
     pub fn start(dir: &Path, header: Header, opts: WriterOptions) -> io::Result<Self> {
-        let mut part = Part::open(dir, &header, 0)?;
+        let disk = opts.disk_bytes.map(|b| Arc::new(Mutex::new(b)));
+        let mut part = Part::open(dir, &header, 0, disk.clone())?;
         part.sync()?;
+        let reserve = Reserve::create(dir, disk.clone());
         let (tx, rx) = sync_channel::<Msg>(opts.capacity.max(1));
         let pending_lost = Arc::new(AtomicU64::new(0));
         let dropped_total = Arc::new(AtomicU64::new(0));
         let thread = WriterThread {
             dir: dir.to_path_buf(),
             header,
+            total_bytes: part.bytes,
             opts,
             part,
             stats: WriterStats {
@@ -115,6 +179,9 @@ impl DecisionLog {
                 ..Default::default()
             },
             pending_lost: pending_lost.clone(),
+            disk,
+            reserve,
+            unreported: Vec::new(),
         };
         let handle = std::thread::Builder::new()
             .name("decision-log".into())
@@ -198,37 +265,141 @@ impl Drop for DecisionLog {
     }
 }
 
+/// The simulated disk of [`WriterOptions::disk_bytes`]: bytes left.
+type Disk = Option<Arc<Mutex<u64>>>;
+
 /// One open part file.
 struct Part {
     file: File,
+    /// Bytes of whole lines in the file (the length a failed write is cut back to).
     bytes: u64,
     lines_after_header: u64,
     index: u32,
+    disk: Disk,
 }
 
 impl Part {
-    fn open(dir: &Path, header: &Header, index: u32) -> io::Result<Part> {
+    fn open(dir: &Path, header: &Header, index: u32, disk: Disk) -> io::Result<Part> {
         let path = part_path(dir, index);
-        let mut file = OpenOptions::new()
+        let file = OpenOptions::new()
             .create_new(true)
             .write(true)
             .open(&path)?;
+        let mut part = Part {
+            file,
+            bytes: 0,
+            lines_after_header: 0,
+            index,
+            disk,
+        };
         let mut h = header.clone();
         h.part = index;
         let mut line = serde_json::to_string(&h).map_err(io::Error::other)?;
         line.push('\n');
-        file.write_all(line.as_bytes())?;
-        file.flush()?;
-        Ok(Part {
-            file,
-            bytes: line.len() as u64,
-            lines_after_header: 0,
-            index,
-        })
+        part.append(line.as_bytes())?;
+        Ok(part)
+    }
+
+    /// Write one whole line, or nothing: on failure the file is cut back to its last whole line.
+    fn append(&mut self, line: &[u8]) -> io::Result<()> {
+        let (written, r) = self.write_through_disk(line);
+        match r.and_then(|_| self.file.flush()) {
+            Ok(()) => {
+                self.bytes += line.len() as u64;
+                Ok(())
+            }
+            Err(e) => {
+                let cut = self
+                    .file
+                    .set_len(self.bytes)
+                    .and_then(|_| self.file.seek(SeekFrom::Start(self.bytes)));
+                if let Some(d) = &self.disk {
+                    *d.lock().unwrap_or_else(|p| p.into_inner()) += written;
+                }
+                match cut {
+                    Ok(_) => Err(e),
+                    Err(c) => Err(io::Error::new(
+                        e.kind(),
+                        format!("{e}; cutting the partial line failed too: {c}"),
+                    )),
+                }
+            }
+        }
+    }
+
+    /// One `write_all` of the whole line (through the simulated disk when a test set one):
+    /// the bytes that reached the file, and the result.
+    fn write_through_disk(&mut self, line: &[u8]) -> (u64, io::Result<()>) {
+        let Some(d) = self.disk.clone() else {
+            // Unknown how much of a failed write_all landed: the cut to `bytes` covers it.
+            return (0, self.file.write_all(line));
+        };
+        let mut left = d.lock().unwrap_or_else(|p| p.into_inner());
+        let n = (*left).min(line.len() as u64) as usize;
+        if let Err(e) = self.file.write_all(&line[..n]) {
+            return (0, Err(e));
+        }
+        *left -= n as u64;
+        if n < line.len() {
+            return (
+                n as u64,
+                Err(io::Error::new(
+                    io::ErrorKind::StorageFull,
+                    "No space left on device (simulated)",
+                )),
+            );
+        }
+        (n as u64, Ok(()))
     }
 
     fn sync(&mut self) -> io::Result<()> {
         self.file.sync_data()
+    }
+}
+
+/// [`RESERVE_BYTES`] held in the run folder until a write fails.
+struct Reserve {
+    path: PathBuf,
+    disk: Disk,
+    held: bool,
+}
+
+impl Reserve {
+    /// Best effort: a folder without room for the reserve still gets a log.
+    fn create(dir: &Path, disk: Disk) -> Reserve {
+        let path = dir.join(RESERVE_FILE);
+        let mut held = false;
+        let room = disk.as_ref().is_none_or(|d| {
+            let mut left = d.lock().unwrap_or_else(|p| p.into_inner());
+            let ok = *left >= RESERVE_BYTES;
+            if ok {
+                *left -= RESERVE_BYTES;
+            }
+            ok
+        });
+        if room {
+            let zeros = vec![0u8; RESERVE_BYTES as usize];
+            held = File::create(&path)
+                .and_then(|mut f| f.write_all(&zeros).and_then(|_| f.sync_data()))
+                .is_ok();
+            if !held {
+                let _ = std::fs::remove_file(&path);
+                if let Some(d) = &disk {
+                    *d.lock().unwrap_or_else(|p| p.into_inner()) += RESERVE_BYTES;
+                }
+            }
+        }
+        Reserve { path, disk, held }
+    }
+
+    /// Give the space back (at the first failed write, and at close).
+    fn release(&mut self) {
+        if self.held && std::fs::remove_file(&self.path).is_ok() {
+            self.held = false;
+            if let Some(d) = &self.disk {
+                *d.lock().unwrap_or_else(|p| p.into_inner()) += RESERVE_BYTES;
+            }
+        }
     }
 }
 
@@ -239,17 +410,31 @@ struct WriterThread {
     part: Part,
     stats: WriterStats,
     pending_lost: Arc<AtomicU64>,
+    /// Bytes in all parts so far (against [`WriterOptions::max_bytes`]).
+    total_bytes: u64,
+    disk: Disk,
+    reserve: Reserve,
+    /// Losses counted but not yet in a loss line (written at close).
+    unreported: Vec<(Loss, u64)>,
+}
+
+/// What a line is, for the cap and the failure rules: records and events are what a cap or a
+/// failed disk stops; loss and end lines are always attempted.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum LineKind {
+    Payload,
+    Meta,
 }
 
 impl WriterThread {
     fn run(mut self, rx: Receiver<Msg>) -> WriterStats {
         while let Ok(msg) = rx.recv() {
             if msg.lost_before > 0 {
-                self.write_loss(msg.lost_before);
+                self.write_loss(Loss::QueueFull, msg.lost_before);
             }
             match msg.payload {
                 Payload::Record(r) => {
-                    if self.write_json(&*r) {
+                    if self.write_json(&*r, LineKind::Payload) {
                         self.stats.records += 1;
                     }
                 }
@@ -264,7 +449,7 @@ impl WriterThread {
                         time_s,
                         event: &text,
                     };
-                    if self.write_json(&line) {
+                    if self.write_json(&line, LineKind::Payload) {
                         self.stats.events += 1;
                     }
                 }
@@ -273,70 +458,167 @@ impl WriterThread {
         // Channel closed: drops after the last accepted message are still owed a loss line.
         let rest = self.pending_lost.swap(0, Ordering::AcqRel);
         if rest > 0 {
-            self.write_loss(rest);
+            self.write_loss(Loss::QueueFull, rest);
         }
+        // The reserve's space is for these last lines.
+        self.reserve.release();
+        for (why, n) in std::mem::take(&mut self.unreported) {
+            self.write_loss_line(why, n);
+        }
+        let st = &self.stats;
         let end = EndLine {
             kind: "end",
-            records: self.stats.records,
-            events: self.stats.events,
-            dropped: self.stats.dropped,
+            records: st.records,
+            events: st.events,
+            dropped: st.dropped,
+            queue_full: st.queue_full,
+            write_failed: st.write_failed,
+            capped: st.capped,
+            too_large: st.too_large,
         };
-        self.write_json(&end);
+        self.write_json(&end, LineKind::Meta);
         if let Err(e) = self.part.sync() {
             self.stats.last_error = Some(e.to_string());
         }
         self.stats
     }
 
-    fn write_loss(&mut self, n: u64) {
+    /// Count `n` lost for `why`.
+    fn count(&mut self, why: Loss, n: u64) {
         self.stats.dropped += n;
-        self.write_json(&LossLine {
+        match why {
+            Loss::QueueFull => self.stats.queue_full += n,
+            Loss::WriteFailed => self.stats.write_failed += n,
+            Loss::Cap => self.stats.capped += n,
+            Loss::TooLarge => self.stats.too_large += n,
+        }
+    }
+
+    /// Count and say a loss now.
+    fn write_loss(&mut self, why: Loss, n: u64) {
+        self.count(why, n);
+        self.write_loss_line(why, n);
+    }
+
+    fn write_loss_line(&mut self, why: Loss, n: u64) {
+        let line = LossLine {
             kind: "loss",
             dropped: n,
-        });
+            reason: why.reason(),
+        };
+        if !self.write_json(&line, LineKind::Meta) {
+            self.defer(why, n);
+        }
+    }
+
+    /// Remember a counted loss for a loss line at close.
+    fn defer(&mut self, why: Loss, n: u64) {
+        match self.unreported.iter_mut().find(|(w, _)| *w == why) {
+            Some((_, k)) => *k += n,
+            None => self.unreported.push((why, n)),
+        }
+    }
+
+    /// A record or event that will not be written: counted, said at once the first time for
+    /// its reason (so a killed process still leaves the reason), later ones said at close.
+    fn lose_payload(&mut self, why: Loss) {
+        let first = match why {
+            Loss::WriteFailed => self.stats.write_failed == 0,
+            Loss::Cap => self.stats.capped == 0,
+            _ => true,
+        };
+        self.count(why, 1);
+        if first {
+            self.write_loss_line(why, 1);
+        } else {
+            self.defer(why, 1);
+        }
     }
 
     /// Serialise, rotate if needed, write the whole line in one call and flush. True on success.
-    fn write_json<T: Serialize>(&mut self, value: &T) -> bool {
+    fn write_json<T: Serialize>(&mut self, value: &T, kind: LineKind) -> bool {
         let stall = self.opts.stall.clone();
         let _stalled = stall.as_ref().map(|m| m.lock());
         let mut line = match serde_json::to_string(value) {
             Ok(l) => l,
-            Err(e) => return self.fail(e.to_string()),
+            Err(e) => {
+                self.stats.last_error = Some(e.to_string());
+                if kind == LineKind::Payload {
+                    self.lose_payload(Loss::TooLarge);
+                }
+                return false;
+            }
         };
         line.push('\n');
         let n = line.len() as u64;
-        if self.part.lines_after_header > 0 && self.part.bytes + n > self.opts.rotate_bytes {
+        if kind == LineKind::Payload {
+            if self.stats.write_failed > 0 {
+                // The disk already failed once: keep what is left of it for the loss and end
+                // lines rather than retry each record.
+                self.lose_payload(Loss::WriteFailed);
+                return false;
+            }
+            if n > self.opts.max_line_bytes {
+                self.lose_payload(Loss::TooLarge);
+                return false;
+            }
+            if self.total_bytes + n > self.opts.max_bytes {
+                if self.stats.capped == 0 {
+                    eprintln!(
+                        "warning: decision log {} reached its cap of {} bytes: further \
+                         records are counted, not written",
+                        self.dir.display(),
+                        self.opts.max_bytes
+                    );
+                }
+                self.lose_payload(Loss::Cap);
+                return false;
+            }
+        }
+        if kind == LineKind::Payload
+            && self.part.lines_after_header > 0
+            && self.part.bytes + n > self.opts.rotate_bytes
+        {
             let _ = self.part.sync();
-            match Part::open(&self.dir, &self.header, self.part.index + 1) {
+            match Part::open(
+                &self.dir,
+                &self.header,
+                self.part.index + 1,
+                self.disk.clone(),
+            ) {
                 Ok(p) => {
+                    self.total_bytes += p.bytes;
                     self.part = p;
                     self.stats.parts += 1;
                 }
                 Err(e) => {
-                    // Keep writing into the oversized part rather than losing records.
+                    // Keep writing into the oversized part rather than losing records. A part
+                    // file left without its whole header reads as a damaged part.
                     self.stats.last_error = Some(format!("rotation failed: {e}"));
                 }
             }
         }
-        match self
-            .part
-            .file
-            .write_all(line.as_bytes())
-            .and_then(|_| self.part.file.flush())
-        {
+        match self.part.append(line.as_bytes()) {
             Ok(()) => {
-                self.part.bytes += n;
+                self.total_bytes += n;
                 self.part.lines_after_header += 1;
                 true
             }
-            Err(e) => self.fail(e.to_string()),
+            Err(e) => {
+                self.stats.write_errors += 1;
+                self.stats.last_error = Some(e.to_string());
+                if kind == LineKind::Payload {
+                    eprintln!(
+                        "warning: decision log {}: write failed ({e}): this and every later \
+                         record are counted as lost",
+                        self.dir.display()
+                    );
+                    // Space for the loss line that says so.
+                    self.reserve.release();
+                    self.lose_payload(Loss::WriteFailed);
+                }
+                false
+            }
         }
-    }
-
-    fn fail(&mut self, e: String) -> bool {
-        self.stats.write_errors += 1;
-        self.stats.last_error = Some(e);
-        false
     }
 }

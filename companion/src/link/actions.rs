@@ -6,7 +6,7 @@
 use super::dialect::MavCmd;
 use super::mission::MissionItem;
 use super::telemetry::{TelemetryConfig, displace};
-use crate::spec::{SpecError, read_toml};
+use crate::spec::{SpecError, check_positive, check_range, read_toml};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -75,6 +75,13 @@ fn parse_cmd(name: &str) -> Option<MavCmd> {
 impl ActionTable {
     pub fn load(path: &Path) -> Result<Self, SpecError> {
         let raw: BTreeMap<String, RawAction> = read_toml(path)?;
+        if raw.is_empty() {
+            return Err(SpecError::new(
+                path,
+                "-",
+                "no vehicle actions: the file must map each vehicle action to its steps",
+            ));
+        }
         let mut actions = BTreeMap::new();
         for (name, a) in raw {
             let _ = a.description;
@@ -222,6 +229,13 @@ pub enum Waypoint {
     },
 }
 
+/// Highest altitude a route may name (m above home): far above any multirotor's ceiling, low
+/// enough that no cast to the autopilot's `f32` or `i32` fields can overflow.
+pub const MAX_ALTITUDE_M: f64 = 10_000.0;
+/// Most waypoints in a route: MAVLink counts mission items in a `u16`, and autopilots store a
+/// few hundred (ArduPilot's default storage holds 724 on most boards).
+pub const MAX_WAYPOINTS: usize = 1000;
+
 #[derive(Debug, Clone, PartialEq)]
 pub struct Route {
     pub waypoints: Vec<Waypoint>,
@@ -247,29 +261,27 @@ impl Route {
                 ));
             }
         };
-        if !(raw.altitude_m.is_finite() && raw.altitude_m > 0.0) {
-            return Err(SpecError::new(
-                path,
-                "altitude_m",
-                "must be a positive number of metres above home",
-            ));
+        check_positive(
+            path,
+            "altitude_m",
+            raw.altitude_m,
+            MAX_ALTITUDE_M,
+            " m above home",
+        )?;
+        if let Some(t) = raw.search_time_limit_s {
+            check_positive(path, "search_time_limit_s", t, 86_400.0, " s")?;
         }
-        if let Some(t) = raw.search_time_limit_s
-            && !(t.is_finite() && t > 0.0)
-        {
-            return Err(SpecError::new(
-                path,
-                "search_time_limit_s",
-                "must be positive",
-            ));
+        if let Some(t) = raw.tracking_time_limit_s {
+            check_positive(path, "tracking_time_limit_s", t, 86_400.0, " s")?;
         }
-        if let Some(t) = raw.tracking_time_limit_s
-            && !(t.is_finite() && t > 0.0)
-        {
+        if raw.waypoint.len() > MAX_WAYPOINTS {
             return Err(SpecError::new(
                 path,
-                "tracking_time_limit_s",
-                "must be positive",
+                "waypoint",
+                format!(
+                    "{} waypoints: a route holds at most {MAX_WAYPOINTS}",
+                    raw.waypoint.len()
+                ),
             ));
         }
         if raw.waypoint.is_empty() {
@@ -283,13 +295,14 @@ impl Route {
         for (i, w) in raw.waypoint.iter().enumerate() {
             let entry = format!("waypoint[{i}]");
             let alt_m = w.alt_m.unwrap_or(raw.altitude_m);
-            if !alt_m.is_finite() || alt_m < 0.0 {
-                return Err(SpecError::new(
-                    path,
-                    format!("{entry}.alt_m"),
-                    "must be a non-negative number of metres above home",
-                ));
-            }
+            check_range(
+                path,
+                format!("{entry}.alt_m"),
+                alt_m,
+                0.0,
+                MAX_ALTITUDE_M,
+                " m above home",
+            )?;
             let wp = if rel {
                 if w.lat_deg.is_some() || w.lon_deg.is_some() {
                     return Err(SpecError::new(
@@ -513,21 +526,21 @@ impl LinkParams {
                 ));
             }
         }
-        if !(p.decision_period_s.is_finite() && p.decision_period_s > 0.0) {
-            return Err(SpecError::new(
-                path,
-                "decision_period_s",
-                "must be positive",
-            ));
-        }
-        if !(p.arm_wait_s.is_finite() && p.arm_wait_s > 0.0) {
-            return Err(SpecError::new(path, "arm_wait_s", "must be positive"));
-        }
-        if p.max_arm_attempts == 0 {
+        // Durations become `Duration`s and timers: bounded so none can overflow or spin.
+        check_range(
+            path,
+            "decision_period_s",
+            p.decision_period_s,
+            0.01,
+            3600.0,
+            " s",
+        )?;
+        check_positive(path, "arm_wait_s", p.arm_wait_s, 3600.0, " s")?;
+        if !(1..=100).contains(&p.max_arm_attempts) {
             return Err(SpecError::new(
                 path,
                 "max_arm_attempts",
-                "must be at least 1",
+                format!("{} is out of range: must be in 1..=100", p.max_arm_attempts),
             ));
         }
         p.flight.check(path, p.decision_period_s)?;
@@ -535,13 +548,28 @@ impl LinkParams {
         if let Err((entry, reason)) = t.check_trust() {
             return Err(SpecError::new(path, entry, reason));
         }
-        if !(t.obstacle_near_m.is_finite() && t.obstacle_near_m > 0.0) {
-            return Err(SpecError::new(
-                path,
-                "telemetry.obstacle_near_m",
-                "must be positive",
-            ));
-        }
+        check_positive(
+            path,
+            "telemetry.obstacle_near_m",
+            t.obstacle_near_m,
+            1000.0,
+            " m",
+        )?;
+        check_positive(
+            path,
+            "telemetry.distance_max_age_s",
+            t.distance_max_age_s,
+            3600.0,
+            " s",
+        )?;
+        check_range(
+            path,
+            "telemetry.detection_threshold",
+            t.detection_threshold,
+            0.0,
+            1.0,
+            "",
+        )?;
         if t.battery_thresholds_pct
             .iter()
             .any(|v| !(0.0..=100.0).contains(v))
@@ -689,7 +717,17 @@ mod tests {
             (
                 "altitude_m = 20\n[[waypoint]]\nnorth_m = 1\neast_m = 1\nalt_m = -5\n",
                 "waypoint[0].alt_m",
-                "non-negative",
+                "0..=10000",
+            ),
+            (
+                "altitude_m = 1e300\n[[waypoint]]\nnorth_m = 1\neast_m = 1\n",
+                "altitude_m",
+                "out of range",
+            ),
+            (
+                "altitude_m = 20000\n[[waypoint]]\nnorth_m = 1\neast_m = 1\n",
+                "altitude_m",
+                "at most 10000",
             ),
             (
                 "altitude_m = 20\n[[waypoint]]\nnorth_m = 1e9\neast_m = 1\n",
@@ -697,6 +735,14 @@ mod tests {
                 "50 km",
             ),
         ];
+        let many = |n: usize| {
+            "altitude_m = 20\n".to_string() + &"[[waypoint]]\nnorth_m = 1\neast_m = 1\n".repeat(n)
+        };
+        let (w1001, w70000) = (many(1001), many(70_000));
+        let cases = cases.into_iter().chain([
+            (w1001.as_str(), "waypoint", "at most 1000"),
+            (w70000.as_str(), "-", "a params file is at most"),
+        ]);
         for (text, entry, why) in cases {
             let p = write(&d, "r.toml", text);
             let e = Route::load(&p).expect_err(text);

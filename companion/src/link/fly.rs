@@ -182,15 +182,15 @@ impl FlySetup {
             .params
             .clone()
             .unwrap_or_else(crate::spec::default_params_dir);
-        let link = LinkParams::load(&dir.join("link.toml"))?;
-        let actions = ActionTable::load(&dir.join("commands.toml"))?;
-        let route_path = args
-            .mission
-            .clone()
-            .unwrap_or_else(|| dir.join("missions/tracking_route.toml"));
-        let route = Route::load(&route_path)?;
+        // The same loader `check` and `simulate` use (crate::params), so they cannot drift.
+        let (link, actions, route, _) =
+            crate::params::load_fly_files(&dir, args.mission.as_deref())?;
         let key = match &args.signing_key {
-            Some(p) => Some(ingest::load_signing_key(p)?),
+            Some(p) => {
+                crate::spec::regular_file(p)
+                    .map_err(|reason| anyhow::anyhow!("--signing-key {}: {reason}", p.display()))?;
+                Some(ingest::load_signing_key(p)?)
+            }
             None => None,
         };
         let takeoff_alt_m = actions

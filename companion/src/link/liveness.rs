@@ -78,7 +78,12 @@ impl Liveness {
     }
 }
 
-/// Parse `3s`, `500ms`, `2.5s` or a bare number of seconds.
+/// Longest duration [`parse_duration`] accepts: 24 h. Longer timeouts and run lengths are typos,
+/// and unbounded ones overflow the clock arithmetic they feed.
+pub const MAX_DURATION: Duration = Duration::from_secs(24 * 3600);
+
+/// Parse `3s`, `500ms`, `2.5s` or a bare number of seconds: finite, positive and at most
+/// [`MAX_DURATION`].
 pub fn parse_duration(s: &str) -> Result<Duration, String> {
     let t = s.trim();
     let (num, scale) = if let Some(v) = t.strip_suffix("ms") {
@@ -95,7 +100,14 @@ pub fn parse_duration(s: &str) -> Result<Duration, String> {
     if !v.is_finite() || v <= 0.0 {
         return Err(format!("{s:?}: duration must be positive"));
     }
-    Ok(Duration::from_secs_f64(v * scale))
+    let secs = v * scale;
+    if secs > MAX_DURATION.as_secs_f64() {
+        return Err(format!(
+            "{s:?}: duration must be at most {} s (24 h)",
+            MAX_DURATION.as_secs()
+        ));
+    }
+    Duration::try_from_secs_f64(secs).map_err(|e| format!("{s:?}: {e}"))
 }
 
 #[cfg(test)]
@@ -138,5 +150,22 @@ mod tests {
         assert!(parse_duration("soon").is_err());
         assert!(parse_duration("0s").is_err());
         assert!(parse_duration("-1s").is_err());
+    }
+
+    #[test]
+    fn durations_beyond_a_day_or_not_finite_are_refused() {
+        assert_eq!(parse_duration("86400s").unwrap(), MAX_DURATION);
+        for bad in [
+            "86401s",
+            "1e30s",
+            "1e30",
+            "18446744073709551616",
+            "inf",
+            "nan",
+            "1e400ms",
+        ] {
+            let e = parse_duration(bad).unwrap_err();
+            assert!(e.contains(bad), "{bad}: {e}");
+        }
     }
 }

@@ -22,6 +22,12 @@ enum Node {
 impl Expr {
     /// Parse `text`; `slot` maps a name to its variable slot (or `None` if the name is unknown).
     pub fn parse(text: &str, slot: &mut dyn FnMut(&str) -> Option<usize>) -> Result<Self, String> {
+        if text.len() > MAX_CHARS {
+            return Err(format!(
+                "expression of {} characters: at most {MAX_CHARS}",
+                text.len()
+            ));
+        }
         let mut p = Parser {
             s: text.as_bytes(),
             i: 0,
@@ -38,6 +44,20 @@ impl Expr {
             ));
         }
         let mut nodes = p.nodes;
+        if nodes.len() > MAX_NODES {
+            return Err(format!(
+                "expression of {} terms and operations: at most {MAX_NODES}",
+                nodes.len()
+            ));
+        }
+        if let Some(x) = nodes.iter().find_map(|n| match n {
+            Node::Const(x) if !x.is_finite() => Some(*x),
+            _ => None,
+        }) {
+            return Err(format!(
+                "a constant is {x}, not a finite number, in \"{text}\""
+            ));
+        }
         // The root is the last node pushed by construction.
         debug_assert_eq!(root, nodes.len() - 1);
         nodes.shrink_to_fit();
@@ -128,6 +148,11 @@ struct Parser<'a, 'f> {
 }
 
 const MAX_DEPTH: usize = 64;
+/// Longest expression text (bytes). The shipped MDPs use under 60; the limit keeps parsing and
+/// the recursive evaluation of large arenas far from any stack limit.
+pub const MAX_CHARS: usize = 2000;
+/// Most nodes (numbers, names, operations) in one compiled expression.
+pub const MAX_NODES: usize = 256;
 
 impl Parser<'_, '_> {
     fn ws(&mut self) {

@@ -1,0 +1,180 @@
+//! Everything `companion` loads from a params directory, in one call: `check`, `simulate` and
+//! `fly` all start with [`Params::load`], so what one accepts the others accept, and a file that
+//! stops `fly` also fails `check` with the same file, entry and reason (docs/params.md).
+
+use crate::decision::Model;
+use crate::link::actions::{ActionTable, LinkParams, Route};
+use crate::mission::ActionKind;
+use crate::sim::WorldSpec;
+use crate::spec::SpecError;
+use std::path::{Path, PathBuf};
+
+/// The route `fly` follows when `--mission` names none, relative to the params directory.
+pub const DEFAULT_ROUTE: &str = "missions/tracking_route.toml";
+
+/// Every params file, loaded and cross-checked.
+pub struct Params {
+    pub dir: PathBuf,
+    /// The decision core's model (mission, actions, health, MDPs, policies, resources, guarantee).
+    pub model: Model,
+    /// The simulated world (`world.toml`).
+    pub world: WorldSpec,
+    /// The MAVLink link settings (`link.toml`).
+    pub link: LinkParams,
+    /// Vehicle actions as MAVLink steps (`commands.toml`).
+    pub commands: ActionTable,
+    /// The route (`--mission FILE`, else [`DEFAULT_ROUTE`]).
+    pub route: Route,
+    pub route_file: PathBuf,
+}
+
+impl Params {
+    /// Load and cross-check every file of `dir`; `route` overrides the default route file.
+    pub fn load(dir: &Path, route: Option<&Path>) -> Result<Self, SpecError> {
+        let model = Model::load(dir)?;
+        let world = WorldSpec::load(dir)?;
+        let (link, commands, route, route_file) = load_fly_files(dir, route)?;
+        let p = Params {
+            dir: dir.to_path_buf(),
+            model,
+            world,
+            link,
+            commands,
+            route,
+            route_file,
+        };
+        p.cross_check()?;
+        Ok(p)
+    }
+
+    /// Checks between the link files and the model: every vehicle action the MDPs can choose
+    /// has MAVLink steps, and the precedence list names only vehicle actions.
+    fn cross_check(&self) -> Result<(), SpecError> {
+        let commands = self.dir.join("commands.toml");
+        let link = self.dir.join("link.toml");
+        let vehicle: Vec<&str> = self
+            .model
+            .actions
+            .actions
+            .iter()
+            .filter(|a| a.kind == ActionKind::Vehicle)
+            .map(|a| a.id.as_str())
+            .collect();
+        for a in &vehicle {
+            if !self.commands.actions.contains_key(*a) {
+                return Err(SpecError::new(
+                    &commands,
+                    *a,
+                    format!("vehicle action `{a}` (params/actions.toml) has no MAVLink steps"),
+                ));
+            }
+        }
+        for (i, a) in self.link.vehicle_action_precedence.iter().enumerate() {
+            if !vehicle.contains(&a.as_str()) {
+                return Err(SpecError::new(
+                    &link,
+                    format!("vehicle_action_precedence[{i}]"),
+                    format!(
+                        "`{a}` is not a vehicle action in params/actions.toml ({})",
+                        vehicle.join(", ")
+                    ),
+                ));
+            }
+        }
+        self.check_mission_projections()?;
+        self.check_performance_models()
+    }
+
+    /// `mission.toml`'s projections against the MDPs: each names a loaded MDP and one of its
+    /// states, and every shared mission state (`guarantee.activity_of_state`) reaches a state of
+    /// every MDP, as itself or through an unconditional rule. A file cut short fails here.
+    fn check_mission_projections(&self) -> Result<(), SpecError> {
+        let file = self.dir.join("mission.toml");
+        let mission = &self.model.mission;
+        for (name, rules) in &mission.projection {
+            let Some(mdp) = self.model.mdps.get(name) else {
+                return Err(SpecError::new(
+                    &file,
+                    format!("projection.{name}"),
+                    "no MDP of this name in params/mdp/index.toml",
+                ));
+            };
+            for (i, r) in rules.iter().enumerate() {
+                if !mdp.states().contains(&r.state) {
+                    return Err(SpecError::new(
+                        &file,
+                        format!("projection.{name}[{i}].state"),
+                        format!("`{}` is not a state of MDP `{name}`", r.state),
+                    ));
+                }
+            }
+        }
+        for mdp in self.model.mdps.all() {
+            let rules = mission.projection.get(mdp.name());
+            for shared in mission.guarantee.activity_of_state.keys() {
+                let covered = mdp.states().contains(shared)
+                    || rules.is_some_and(|rs| {
+                        rs.iter().any(|r| {
+                            r.observation.is_none()
+                                && (r.states.is_empty() || r.states.contains(shared))
+                        })
+                    });
+                if !covered {
+                    return Err(SpecError::new(
+                        &file,
+                        format!("projection.{}", mdp.name()),
+                        format!(
+                            "mission state `{shared}` (guarantee.activity_of_state) is not a \
+                             state of MDP `{}` and no unconditional rule projects it",
+                            mdp.name()
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Every application in `variants.toml` and in `mission.toml`'s `rates` has a frame-rate
+    /// model in `platform.toml` (without one its required rate would silently be unknown).
+    fn check_performance_models(&self) -> Result<(), SpecError> {
+        let platform = &self.model.resources.platform;
+        let file = self.dir.join(crate::resources::PLATFORM_FILE);
+        for app in self.model.resources.catalogue.apps() {
+            if !platform.performance.contains_key(app) {
+                return Err(SpecError::new(
+                    &file,
+                    format!("performance.{app}"),
+                    format!("application `{app}` (params/variants.toml) has no frame-rate model"),
+                ));
+            }
+        }
+        for app in self.model.mission.rates.keys() {
+            if !platform.performance.contains_key(app) {
+                return Err(SpecError::new(
+                    &file,
+                    format!("performance.{app}"),
+                    format!(
+                        "application `{app}` (params/mission.toml rates) has no frame-rate model"
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The files `fly` reads besides the model: `link.toml`, `commands.toml` and the route
+/// (`route`, else [`DEFAULT_ROUTE`]).
+pub fn load_fly_files(
+    dir: &Path,
+    route: Option<&Path>,
+) -> Result<(LinkParams, ActionTable, Route, PathBuf), SpecError> {
+    let link = LinkParams::load(&dir.join("link.toml"))?;
+    let commands = ActionTable::load(&dir.join("commands.toml"))?;
+    let route_file = route.map_or_else(|| dir.join(DEFAULT_ROUTE), Path::to_path_buf);
+    let route = Route::load(&route_file)?;
+    Ok((link, commands, route, route_file))
+}
+
+pub use crate::spec::regular_file;
