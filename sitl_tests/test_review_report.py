@@ -196,6 +196,8 @@ def test_review_report_renders_in_chromium(tmp_path):
     assert report.exists()
     html = report.read_text()
     assert "<script" not in html and "<link" not in html, "report must be self-contained"
+    # The event line written after the last record lands on its cycle (12).
+    assert 'data-cycle="12" data-state="target" data-actions="3" data-events="1"' in html
 
     ARTIFACTS.mkdir(exist_ok=True)
     shot = ARTIFACTS / "review_report.png"

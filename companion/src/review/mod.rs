@@ -322,6 +322,7 @@ impl Review {
             }
             LogItem::Event(e) => match &mut self.pending {
                 Some((r, _)) if r.cycle == e.cycle => r.events.push(e.event),
+                Some((r, _)) if e.cycle < r.cycle => self.attach_late_event(e.cycle, e.event),
                 _ => {
                     if self.pending_events.len() < MAX_PENDING_EVENT_CYCLES
                         || self.pending_events.contains_key(&e.cycle)
@@ -361,6 +362,43 @@ impl Review {
             }
             LogItem::NewerSchema(v) => {
                 self.newer_schema = Some(self.newer_schema.unwrap_or(0).max(v));
+            }
+        }
+    }
+
+    /// An event line for a cycle already reviewed (written after later records): onto its row
+    /// and phase as a span of its own.
+    fn attach_late_event(&mut self, cycle: u64, text: String) {
+        let at = self.rows.partition_point(|r| r.cycle < cycle);
+        let Some(row) = self.rows.get_mut(at).filter(|r| r.cycle == cycle) else {
+            return;
+        };
+        if self.spans.len() >= MAX_SPANS {
+            self.spans_omitted += 1;
+            return;
+        }
+        let id = self.spans.len();
+        self.spans.push(Span {
+            text: text.clone(),
+            first_cycle: cycle,
+            last_cycle: cycle,
+            count: 1,
+        });
+        row.events.push(id);
+        row.event_count += 1;
+        let mark = is_failsafe(&text).then(|| Mark::Failsafe(text));
+        if let Some(m) = &mark {
+            row.marks.push(m.clone());
+        }
+        if let Some(p) = self
+            .phases
+            .iter_mut()
+            .rev()
+            .find(|p| p.first_cycle <= cycle && cycle <= p.last_cycle)
+        {
+            p.events.push(id);
+            if let Some(m) = mark {
+                p.marks.push(m);
             }
         }
     }

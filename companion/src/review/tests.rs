@@ -161,6 +161,13 @@ fn repeated_event_folds_into_one_span() {
     assert!(term.contains("cycles 12-23: battery low (x12)") || term.contains("battery low (×12)"));
 }
 
+fn r_has(rev: &Review, row: usize, text: &str) -> bool {
+    rev.rows[row]
+        .events
+        .iter()
+        .any(|i| rev.spans[*i].text == text)
+}
+
 #[test]
 fn failsafe_events_and_losses_are_marked() {
     let mut recs = synthetic::mission(30);
@@ -176,7 +183,23 @@ fn failsafe_events_and_losses_are_marked() {
         }),
     );
     it.insert(22, LogItem::Loss(7));
+    // An event line for cycle 5 written after later records.
+    it.insert(
+        25,
+        LogItem::Event(LogEvent {
+            cycle: 5,
+            time_s: 5.0,
+            event: "late failsafe".into(),
+        }),
+    );
     let rev = Review::from_items(it, None);
+    assert!(r_has(&rev, 5, "late failsafe"));
+    assert!(
+        rev.rows[5]
+            .marks
+            .iter()
+            .any(|m| matches!(m, Mark::Failsafe(_)))
+    );
     let r = &rev.rows;
     assert!(
         r[10]
