@@ -352,19 +352,21 @@ pub(crate) fn svg_map(track: &[(f64, f64)]) -> String {
         px(ex) - 5.0,
         py(ey) - 5.0
     );
-    // Scale bar: a round length near a quarter of the span.
-    let bar = ticks(0.0, span / 4.0, 1)
-        .last()
-        .copied()
-        .filter(|b| *b > 0.0)
-        .unwrap_or(span / 4.0);
+    // Scale bar, bottom right: the largest 1, 2 or 5 times a power of ten within a quarter of
+    // the span.
+    let quarter = span / 4.0;
+    let mag = 10f64.powf(quarter.log10().floor());
+    let bar = [5.0, 2.0, 1.0]
+        .into_iter()
+        .map(|m| m * mag)
+        .find(|b| *b <= quarter)
+        .unwrap_or(mag);
+    let (bx1, by) = (size - pad, size - 8.0);
+    let bx0 = bx1 - bar * scale;
     let _ = write!(
         o,
-        r##"<line x1="{pad}" x2="{:.1}" y1="{:.1}" y2="{:.1}" stroke="#333" stroke-width="2"/><text class="tick" x="{pad}" y="{:.1}">{} m</text><text class="tick" x="{:.1}" y="16" text-anchor="end">N ↑</text></svg>"##,
-        pad + bar * scale,
-        size - 8.0,
-        size - 8.0,
-        size - 12.0,
+        r##"<line class="scale" x1="{bx0:.1}" x2="{bx1:.1}" y1="{by:.1}" y2="{by:.1}" stroke="#333" stroke-width="2"/><text class="tick" x="{bx1:.1}" y="{:.1}" text-anchor="end">{} m</text><text class="tick" x="{:.1}" y="16" text-anchor="end">N ↑</text></svg>"##,
+        by - 5.0,
         num(bar),
         size - 8.0
     );
