@@ -327,3 +327,19 @@ def test_export_csv_parses_back_one_row_per_record(tmp_path):
     mc = subprocess.run([exe, "export", str(run), "--format", "mcap"], capture_output=True, text=True, timeout=60)
     assert mc.returncode == 0, mc.stderr
     assert (run / "export.mcap").read_bytes()[:8] == b"\x89MCAP0\r\n"
+
+
+def test_review_summary_strips_escape_sequences_from_the_log(tmp_path):
+    exe = os.environ["COMPANION_BIN"]
+    recs = make_records()
+    recs[3]["link_events"] = ["STATUSTEXT: \x1b]0;owned\x07\x1b[2J\x1b[31mPreArm: Compass\x1b[0m not calibrated\r"]
+    recs[4]["state"] = "wp1\x1b[1A"
+    run = tmp_path / "run"
+    write_run(run, recs)
+    with open(run / "decisions.jsonl", "a") as f:
+        f.write("not json \x1b[5m\n")
+    out = subprocess.run([exe, "review", str(run), "--summary"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    for stream in (out.stdout, out.stderr):
+        assert not any(ord(c) < 32 and c != "\n" or 0x7f <= ord(c) < 0xa0 for c in stream), repr(stream)
+    assert "PreArm: Compass" in out.stdout  # the text itself is kept
