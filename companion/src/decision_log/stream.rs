@@ -59,6 +59,22 @@ struct Part {
 /// them; an empty log yields `Err(ReadError::Empty)` as its last item.
 pub fn stream_log(path: &Path) -> Result<LogStream, ReadError> {
     let files = log_files(path)?;
+    // Opening a FIFO would wait for a writer forever: regular files only.
+    for f in &files {
+        let meta = std::fs::metadata(f).map_err(|source| ReadError::Io {
+            path: f.clone(),
+            source,
+        })?;
+        if !meta.is_file() {
+            return Err(ReadError::Io {
+                path: f.clone(),
+                source: std::io::Error::new(
+                    std::io::ErrorKind::InvalidInput,
+                    "not a regular file (a FIFO, device or socket): a decision log is a file",
+                ),
+            });
+        }
+    }
     Ok(LogStream {
         files,
         next_file: 0,
@@ -318,6 +334,22 @@ mod tests {
         assert_eq!(bad, whole.corrupted.len());
         assert_eq!(cut, usize::from(whole.truncated.is_some()));
         assert_eq!(inputs, 5);
+    }
+
+    #[test]
+    fn fifo_is_refused_without_waiting_for_a_writer() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("decisions.jsonl");
+        let ok = std::process::Command::new("mkfifo").arg(&p).status();
+        if !ok.is_ok_and(|s| s.success()) {
+            return; // no mkfifo on this system
+        }
+        let err = stream_log(&p).err().expect("a FIFO is refused");
+        assert!(err.to_string().contains("not a regular file"), "{err}");
+        let err = stream_log(dir.path())
+            .err()
+            .expect("a run folder whose log is a FIFO");
+        assert!(err.to_string().contains("not a regular file"), "{err}");
     }
 
     #[test]
