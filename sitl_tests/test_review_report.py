@@ -50,7 +50,7 @@ def make_records():
                 "time_s": cycle * 0.5,
                 "state": state,
                 "events": events,
-                "observations": {"vibration_mps2": 3.5},
+                "observations": {"vibration_mps2": 3.5, "lat_deg": 47.3977 + 0.0001 * cycle, "lon_deg": 8.5456 + 0.00005 * (cycle % 9)},
                 "evidence": {},
                 "probabilities": {p: round(0.5 + 0.4 * ((i + cycle) % 7) / 7, 3) for i, p in enumerate(PROBS)},
                 "proposals": [],
@@ -196,6 +196,8 @@ def test_review_report_renders_in_chromium(tmp_path):
     assert report.exists()
     html = report.read_text()
     assert "<script" not in html and "<link" not in html, "report must be self-contained"
+    # The map of the flown track: one point per record position, drawn inline.
+    assert f'id="map" data-points="{len(recs)}"' in html
     # The event line written after the last record lands on its cycle (12).
     assert 'data-cycle="12" data-state="target" data-actions="3" data-events="1"' in html
 
