@@ -64,7 +64,7 @@ figure.plot svg{width:100%;height:auto;display:block}
 .vmark{stroke-width:1;stroke-dasharray:2 3} .vmark.mode-change{stroke:#0b8aa8} .vmark.failsafe{stroke:#d62728;stroke-dasharray:none}
 .vmark.link-event{stroke:#ff7f0e} .vmark.degraded{stroke:#9467bd} .vmark.reallocated{stroke:#2ca02c} .vmark.loss{stroke:#d62728}
 .legend{font-size:12px;display:flex;flex-wrap:wrap;gap:4px 12px}
-.legend .swatch{vertical-align:middle;margin-right:4px}
+figure.plot .legend svg.swatch{width:26px;height:8px;display:inline-block;vertical-align:middle;margin-right:4px}
 .why{border-top:1px solid #eceef1;padding:2px 0} .why ul{margin:2px 0 4px 18px;padding:0} .why .inputs{color:#5b6570;font-size:12px}
 .map svg{max-width:520px;height:auto;border:1px solid #e6e8eb} .map-note{font-size:12px;color:#5b6570}
 td.accepted,td.already{color:#1e7b34} td.in-progress,td.skipped{color:#5b6570} td.denied,td.failed,td.timed-out{color:#b3261e;font-weight:600}
@@ -596,17 +596,6 @@ pub fn render_html(rev: &Review) -> String {
     }
     o.push_str("</section>");
 
-    // Why, per cycle.
-    let _ = write!(
-        o,
-        r#"<section id="why" data-cycles="{}"><h2>Why, cycle by cycle</h2><p class="note">What each MDP proposed and the probabilities it read, the conflicts and what gave way, the resources, the guarantee margins.</p>"#,
-        rev.rows.len()
-    );
-    for r in &rev.rows {
-        o.push_str(&why_html(&r.why));
-    }
-    o.push_str("</section>");
-
     // Plots.
     let marks: Vec<VMark> = rev
         .plots
@@ -783,6 +772,17 @@ pub fn render_html(rev: &Review) -> String {
                 rev.commands_omitted
             );
         }
+    }
+    o.push_str("</section>");
+
+    // Why, per cycle.
+    let _ = write!(
+        o,
+        r#"<section id="why" data-cycles="{}"><h2>Why, cycle by cycle</h2><p class="note">What each MDP proposed and the probabilities it read, the conflicts and what gave way, the resources, the guarantee margins.</p>"#,
+        rev.rows.len()
+    );
+    for r in &rev.rows {
+        o.push_str(&why_html(&r.why));
     }
     o.push_str("</section>");
 
