@@ -9,6 +9,10 @@
 #   scripts/arm.sh --aarch64           aarch64-unknown-linux-gnu only
 #   scripts/arm.sh --armv7 --aarch64   both
 #   scripts/arm.sh --install           install only (for the selected targets)
+#   scripts/arm.sh --musl              static release binaries for older boards (armv7 and
+#                                      aarch64 musl, linked by the toolchain's rust-lld; no C
+#                                      cross toolchain needed): checked with `file` and run under
+#                                      qemu-user; no tests. With --armv7 or --aarch64: that one only.
 #
 # Tests run in the release profile on purpose: the test builds then reuse the dependencies
 # (tokio, mavlink's generated dialects) already compiled for the release binary, which halves a
@@ -20,20 +24,69 @@ cd "$(dirname "$0")/.."
 want_armv7=0
 want_aarch64=0
 install_only=0
+want_musl=0
 for a in "$@"; do
   case "$a" in
+    --musl) want_musl=1 ;;
     --armv7) want_armv7=1 ;;
     --aarch64) want_aarch64=1 ;;
     --install) install_only=1 ;;
-    -h | --help) sed -n '2,16p' "$0"; exit 0 ;;
+    -h | --help) sed -n '2,20p' "$0"; exit 0 ;;
     *) echo "arm.sh: unknown argument '$a' (try --help)" >&2; exit 2 ;;
   esac
 done
 
-[ "$want_aarch64" = 1 ] || want_armv7=1
 t0=$SECONDS
 stage() { echo "== arm: $* (t=$((SECONDS - t0))s)"; }
 die() { echo "arm.sh: $*" >&2; exit 1; }
+
+# ---------------------------------------------------------------- --musl: static binaries
+# Fully static (musl libc inside, crt-static), so they run on any ARM Linux whatever its glibc:
+# Raspberry Pi OS bullseye (glibc 2.31), Ubuntu 20.04 / JetPack 5 (2.31), older. Linked with the
+# rust-lld that ships with the toolchain against rustup's self-contained musl objects.
+if [ "$want_musl" = 1 ]; then
+  musl_targets=()
+  if [ "$want_armv7" = 0 ] && [ "$want_aarch64" = 0 ]; then want_armv7=1; want_aarch64=1; fi
+  [ "$want_armv7" = 1 ] && musl_targets+=(armv7-unknown-linux-musleabihf)
+  [ "$want_aarch64" = 1 ] && musl_targets+=(aarch64-unknown-linux-musl)
+  command -v rustup >/dev/null || die "--musl needs rustup (for the musl standard library of each target)"
+  if ! command -v qemu-arm >/dev/null || ! command -v qemu-aarch64 >/dev/null; then
+    stage "installing qemu-user (to run the binaries here)"
+    sudo=""; [ "$(id -u)" = 0 ] || sudo="sudo"
+    $sudo apt-get install -y -q --no-install-recommends qemu-user >/dev/null || die "apt-get install qemu-user failed"
+  fi
+  target_dir="${CARGO_TARGET_DIR:-$(cargo metadata --no-deps --format-version 1 |
+    sed -n 's/.*"target_directory":"\([^"]*\)".*/\1/p')}"
+  objcopy="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p')/bin/rust-objcopy"
+  for t in "${musl_targets[@]}"; do
+    if ! rustup target list --installed | grep -qx "$t"; then
+      stage "rustup target add $t"
+      rustup target add "$t" || die "rustup target add $t failed (rustup's dist server unreachable, or no rust-std for $t in this toolchain)"
+    fi
+    [ "$install_only" = 1 ] && continue
+    env_t="$(tr 'a-z-' 'A-Z_' <<<"$t")"
+    stage "$t: cargo build --release (static, rust-lld)"
+    env "CARGO_TARGET_${env_t}_LINKER=rust-lld" \
+      "CARGO_TARGET_${env_t}_RUSTFLAGS=-C linker-flavor=ld.lld -C link-self-contained=yes -C target-feature=+crt-static" \
+      cargo build --quiet --release --target "$t" -p companion --bin companion
+    bin="$target_dir/$t/release/companion"
+    info="$(file -b "$bin")"
+    echo "   file: $info"
+    grep -q "statically linked" <<<"$info" || die "$t: $bin is not statically linked"
+    case "$t" in armv7-*) qemu=qemu-arm ;; aarch64-*) qemu=qemu-aarch64 ;; esac
+    "$qemu" "$bin" --help >/dev/null || die "$t: companion --help failed under $qemu"
+    "$qemu" "$bin" simulate --json --no-log --steps 20 >/dev/null || die "$t: companion simulate failed under $qemu"
+    echo "   $qemu companion --help and simulate: ok"
+    if [ -x "$objcopy" ]; then
+      "$objcopy" --strip-all "$bin" "$bin.stripped"
+      echo "   size: $(stat -c %s "$bin") bytes as built, $(stat -c %s "$bin.stripped") bytes stripped ($bin.stripped)"
+    fi
+  done
+  stage "done"
+  exit 0
+fi
+
+[ "$want_aarch64" = 1 ] || want_armv7=1
 
 # ---------------------------------------------------------------- install what is missing
 # Debian package -> a file it provides that we use (checked instead of asking dpkg, so a tool

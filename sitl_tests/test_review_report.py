@@ -50,7 +50,7 @@ def make_records():
                 "time_s": cycle * 0.5,
                 "state": state,
                 "events": events,
-                "observations": {"vibration_mps2": 3.5},
+                "observations": {"vibration_mps2": 3.5, "lat_deg": 47.3977 + 0.0001 * cycle, "lon_deg": 8.5456 + 0.00005 * (cycle % 9)},
                 "evidence": {},
                 "probabilities": {p: round(0.5 + 0.4 * ((i + cycle) % 7) / 7, 3) for i, p in enumerate(PROBS)},
                 "proposals": [],
@@ -116,6 +116,8 @@ class DomCounter(HTMLParser):
         self.summary = {}
         self.command_rows = 0
         self.failed_command_rows = 0
+        self.command_categories = []
+        self.why_cycles = []
 
     def handle_starttag(self, tag, attrs):
         a = dict(attrs)
@@ -127,6 +129,9 @@ class DomCounter(HTMLParser):
         if tag == "tr" and "command-row" in cls:
             self.command_rows += 1
             self.failed_command_rows += "failed" in cls
+            self.command_categories.append(a.get("data-category"))
+        if tag == "details" and "why" in cls:
+            self.why_cycles.append(int(a["data-cycle"]))
         if tag == "figure" and "plot" in cls:
             self.current_figure = a.get("id")
             self.figures[self.current_figure] = {"attrs": a, "polylines": []}
@@ -156,6 +161,20 @@ def run_chromium(args, url):
         return subprocess.run(cmd, capture_output=True, text=True, timeout=180)
 
 
+def tracking_steps(recs):
+    """The shared definition (companion/src/tracking.rs), written here again: a cycle at the
+    target or in a tracking phase that chooses track_vN and is in phase vN at the next record."""
+    n = 0
+    for r, nxt in zip(recs, recs[1:]):
+        tracking_phase = len(r["state"]) == 2 and r["state"][0] == "v" and r["state"][1].isdigit()
+        if r["state"] != "target" and not tracking_phase:
+            continue
+        v = next((a[len("track_v"):] for a in r["actions"] if a.startswith("track_v")), None)
+        if v is not None and nxt["state"] == "v" + v:
+            n += 1
+    return n
+
+
 def expected_phases(recs):
     phases = []
     for r in recs:
@@ -177,6 +196,10 @@ def test_review_report_renders_in_chromium(tmp_path):
     assert report.exists()
     html = report.read_text()
     assert "<script" not in html and "<link" not in html, "report must be self-contained"
+    # The map of the flown track: one point per record position, drawn inline.
+    assert f'id="map" data-points="{len(recs)}"' in html
+    # The event line written after the last record lands on its cycle (12).
+    assert 'data-cycle="12" data-state="target" data-actions="3" data-events="1"' in html
 
     ARTIFACTS.mkdir(exist_ok=True)
     shot = ARTIFACTS / "review_report.png"
@@ -221,12 +244,16 @@ def test_review_report_renders_in_chromium(tmp_path):
     assert alt[0] > alt[5]  # 0 m at base, 20 m at wp1
 
     # Summary numbers, counted here from the records.
-    tracking = sum(any(a.startswith("track_") for a in r["actions"]) for r in recs)
-    assert int(dom.summary["data-tracking-steps"]) == tracking
+    assert int(dom.summary["data-tracking-steps"]) == tracking_steps(recs) == 11
     assert int(dom.summary["data-conflicts"]) == sum(len(r["conflicts"]) for r in recs)
     assert int(dom.summary["data-degradations"]) == 1
-    assert int(dom.summary["data-failed-commands"]) == 1
-    assert dom.command_rows == 3 and dom.failed_command_rows == 1
+    # The one DENIED command is denied, not failed; nothing failed.
+    assert int(dom.summary["data-failed-commands"]) == 0
+    assert int(dom.summary["data-commands-denied"]) == 1
+    assert dom.command_rows == 3 and dom.failed_command_rows == 0
+    assert sorted(dom.command_categories) == ["accepted", "accepted", "denied"]
+    # A why for every cycle.
+    assert dom.why_cycles == [r["cycle"] for r in recs]
 
 
 def test_review_summary_in_terminal_has_no_colour_when_piped(tmp_path):
@@ -237,7 +264,7 @@ def test_review_summary_in_terminal_has_no_colour_when_piped(tmp_path):
     out = subprocess.run([exe, "review", str(run), "--summary"], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "\x1b[" not in out.stdout
-    tracking = sum(any(a.startswith("track_") for a in r["actions"]) for r in recs)
+    tracking = tracking_steps(recs)
     assert f"{tracking} steps / {tracking * 0.5:.2f} s" in out.stdout
     for state, *_ in PLAN:
         assert state in out.stdout
@@ -251,3 +278,70 @@ def test_review_of_empty_log_fails_with_a_clear_message(tmp_path):
     out = subprocess.run([exe, "review", str(log)], capture_output=True, text=True, timeout=60)
     assert out.returncode != 0
     assert "empty" in out.stderr
+
+
+@pytest.mark.parametrize("scenario,seed", [("complete-1", 1), ("vibrations", 4), ("wind", 2)])
+def test_tracking_time_equal_in_simulate_and_review(tmp_path, scenario, seed):
+    exe = os.environ["COMPANION_BIN"]
+    sim = subprocess.run([exe, "simulate", "--json", "--scenario", scenario, "--seed", str(seed),
+                          "--runs-dir", str(tmp_path)], capture_output=True, text=True, timeout=300)
+    assert sim.returncode == 0, sim.stderr
+    steps = json.loads(sim.stdout)["first_run"]["tracking_steps"]
+    run = next(line.split(": ", 1)[1] for line in sim.stderr.splitlines() if line.startswith("run folder: "))
+    rev = subprocess.run([exe, "review", run, "--summary"], capture_output=True, text=True, timeout=120)
+    assert rev.returncode == 0, rev.stderr
+    line = next(l for l in rev.stdout.splitlines() if "tracking time" in l)
+    assert int(line.split()[2]) == steps, (line, steps)
+
+
+def test_review_cycle_prints_the_why(tmp_path):
+    exe = os.environ["COMPANION_BIN"]
+    recs = make_records()
+    recs[7]["proposals"] = [{"mdp": "navigation", "state": "wp1", "action": "go_on", "actions": ["follow_trajectory"],
+                             "value": 4.25, "iterations": 2, "inputs": {"P_nav": 0.875}}]
+    run = tmp_path / "run"
+    write_run(run, recs)
+    out = subprocess.run([exe, "review", str(run), "--cycle", "7"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert "go_on" in out.stdout and "value 4.250" in out.stdout and "P_nav = 0.875" in out.stdout
+    assert not (run / "report.html").exists()
+    bad = subprocess.run([exe, "review", str(run), "--cycle", "100000"], capture_output=True, text=True, timeout=60)
+    assert bad.returncode != 0 and "cycle 100000 is not in this log" in bad.stderr
+
+
+def test_export_csv_parses_back_one_row_per_record(tmp_path):
+    import csv
+    exe = os.environ["COMPANION_BIN"]
+    recs = make_records()
+    run = tmp_path / "run"
+    write_run(run, recs)
+    out = subprocess.run([exe, "export", str(run), "--format", "csv"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    with open(run / "export.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == len(recs)
+    for row, rec in zip(rows, recs):
+        assert int(row["cycle"]) == rec["cycle"]
+        assert row["state"] == rec["state"]
+        assert row["actions"] == ";".join(rec["actions"])
+        assert float(row["probabilities.P_sys"]) == rec["probabilities"]["P_sys"]
+        assert float(row["guarantee.margins.energy_j"]) == rec["guarantee"]["margins"]["energy_j"]
+    mc = subprocess.run([exe, "export", str(run), "--format", "mcap"], capture_output=True, text=True, timeout=60)
+    assert mc.returncode == 0, mc.stderr
+    assert (run / "export.mcap").read_bytes()[:8] == b"\x89MCAP0\r\n"
+
+
+def test_review_summary_strips_escape_sequences_from_the_log(tmp_path):
+    exe = os.environ["COMPANION_BIN"]
+    recs = make_records()
+    recs[3]["link_events"] = ["STATUSTEXT: \x1b]0;owned\x07\x1b[2J\x1b[31mPreArm: Compass\x1b[0m not calibrated\r"]
+    recs[4]["state"] = "wp1\x1b[1A"
+    run = tmp_path / "run"
+    write_run(run, recs)
+    with open(run / "decisions.jsonl", "a") as f:
+        f.write("not json \x1b[5m\n")
+    out = subprocess.run([exe, "review", str(run), "--summary"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    for stream in (out.stdout, out.stderr):
+        assert not any(ord(c) < 32 and c != "\n" or 0x7f <= ord(c) < 0xa0 for c in stream), repr(stream)
+    assert "PreArm: Compass" in out.stdout  # the text itself is kept

@@ -119,6 +119,21 @@ enum Command {
         /// Print the summary and timeline in the terminal (no HTML unless --out is given).
         #[arg(long)]
         summary: bool,
+        /// Print why cycle N decided what it did (proposals and the probabilities they read,
+        /// conflicts, resources, guarantee margins); no HTML unless --out is given.
+        #[arg(long, value_name = "N")]
+        cycle: Option<u64>,
+    },
+    /// Export a run's decision records (and its flight.tlog telemetry) for Foxglove or
+    /// PlotJuggler: MCAP with JSON-schema channels, or CSV with one row per record.
+    Export {
+        /// Run folder (runs/<UTC time>/) or a decisions*.jsonl file.
+        run_or_log: PathBuf,
+        #[arg(long, value_enum)]
+        format: companion::export::Format,
+        /// Output file (default: export.mcap / export.csv in the run folder).
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
     /// Test helper: write decision records into DIR until killed.
     #[command(name = "__log-stress", hide = true)]
@@ -150,8 +165,30 @@ fn main() -> Result<()> {
             run_or_log,
             out,
             summary,
+            cycle,
         } => {
-            companion::review::run(&run_or_log, out.as_deref(), summary)?;
+            companion::review::run_with_cycle(&run_or_log, out.as_deref(), summary, cycle)?;
+            Ok(())
+        }
+        Command::Export {
+            run_or_log,
+            format,
+            out,
+        } => {
+            let (path, stats) = companion::export::run(&run_or_log, format, out.as_deref())?;
+            if stats.columns_dropped > 0 {
+                eprintln!(
+                    "warning: {} columns beyond the first {} left out",
+                    stats.columns_dropped,
+                    companion::export::MAX_CSV_COLUMNS
+                );
+            }
+            println!(
+                "export: {} ({} records, {} telemetry messages)",
+                path.display(),
+                stats.records,
+                stats.tlog_frames
+            );
             Ok(())
         }
         Command::LogStress { dir, rotate_bytes } => Ok(

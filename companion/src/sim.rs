@@ -271,7 +271,7 @@ pub struct World<'a> {
 }
 
 fn is_tracking(phase: &str) -> bool {
-    phase.len() == 2 && phase.starts_with('v') && phase.as_bytes()[1].is_ascii_digit()
+    crate::tracking::is_tracking_phase(phase)
 }
 
 impl<'a> World<'a> {
@@ -486,6 +486,7 @@ impl<'a> World<'a> {
 
         // Mission phase.
         let airborne = self.phase != "base" && self.phase != "landing";
+        let before = self.phase.clone();
         let next: Option<String> =
             if airborne && (has("land") || has("replan_and_land") || has("return_to_base")) {
                 events.push("landing".into());
@@ -517,7 +518,6 @@ impl<'a> World<'a> {
                             Some(v) => {
                                 let q = self.qos(&format!("V{v}"), &values);
                                 if self.rng.random::<f64>() < q {
-                                    self.tracking_steps += 1;
                                     Some(format!("v{v}"))
                                 } else {
                                     events.push("target lost".into());
@@ -536,6 +536,10 @@ impl<'a> World<'a> {
         {
             self.phase = n;
             self.enter_phase();
+        }
+        // The one definition of a tracking step, shared with `review`.
+        if crate::tracking::is_tracking_step(&before, &record.actions, &self.phase) {
+            self.tracking_steps += 1;
         }
         if self.phase == "landing" {
             self.outcome.get_or_insert(Outcome::Landed);
@@ -574,6 +578,10 @@ pub fn run(
         record
             .vehicle
             .insert("world_events_after".into(), serde_json::json!(after));
+        record.vehicle.insert(
+            crate::tracking::STATE_AFTER_KEY.into(),
+            serde_json::json!(world.phase),
+        );
         records.push(record);
     }
     RunResult {

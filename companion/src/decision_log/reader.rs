@@ -157,7 +157,7 @@ pub fn read_log(path: &Path) -> Result<LogRead, ReadError> {
     Ok(out)
 }
 
-fn log_files(path: &Path) -> Result<Vec<PathBuf>, ReadError> {
+pub(super) fn log_files(path: &Path) -> Result<Vec<PathBuf>, ReadError> {
     if !path.exists() {
         return Err(ReadError::NotFound {
             path: path.to_path_buf(),

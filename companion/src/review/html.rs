@@ -1,25 +1,14 @@
-//! The self-contained HTML report: inline CSS, inline SVG plots drawn here, no script, no
-//! network. Elements carry stable ids/classes and data attributes (counts) for tests.
+//! The self-contained HTML report: inline CSS, inline SVG plots and map drawn here, no script,
+//! no network. Every value from the log goes through [`esc`], in text and in attributes alike.
+//! Elements carry stable ids/classes and data attributes (counts) for tests.
 
-use super::{Mark, Phase, Row, Summary};
-use crate::decision_log::LogRead;
+use super::outcomes::Category;
+use super::plot::{Series, VMark, svg_map, svg_plot};
+use super::text::esc;
+use super::why::Why;
+use super::{Mark, Review, Span};
 use std::collections::BTreeSet;
 use std::fmt::Write;
-
-pub(crate) fn esc(s: &str) -> String {
-    let mut o = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => o.push_str("&amp;"),
-            '<' => o.push_str("&lt;"),
-            '>' => o.push_str("&gt;"),
-            '"' => o.push_str("&quot;"),
-            '\'' => o.push_str("&#39;"),
-            _ => o.push(c),
-        }
-    }
-    o
-}
 
 fn num(v: f64) -> String {
     if !v.is_finite() {
@@ -38,204 +27,6 @@ fn num(v: f64) -> String {
 fn t(v: f64) -> String {
     let s = format!("{v:.2}");
     s.trim_end_matches('0').trim_end_matches('.').to_string()
-}
-
-const PALETTE: [&str; 10] = [
-    "#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf",
-    "#7f7f7f", "#bcbd22",
-];
-
-/// A line on a plot.
-pub(crate) struct Series {
-    pub name: String,
-    pub points: Vec<(f64, f64)>,
-    pub dashed: bool,
-}
-
-/// A vertical marker at a time.
-pub(crate) struct VMark {
-    pub t: f64,
-    pub class: &'static str,
-    pub text: String,
-}
-
-/// "Nice" tick values covering [lo, hi] (steps of 1, 2 or 5 times a power of ten).
-pub(crate) fn ticks(lo: f64, hi: f64, target: usize) -> Vec<f64> {
-    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater)
-        || !lo.is_finite()
-        || !hi.is_finite()
-    {
-        return vec![lo];
-    }
-    let raw = (hi - lo) / target.max(1) as f64;
-    let mag = 10f64.powf(raw.log10().floor());
-    let m = [1.0, 2.0, 5.0, 10.0]
-        .into_iter()
-        .find(|m| m * mag >= raw)
-        .unwrap_or(10.0);
-    let step = m * mag;
-    // Tick k is k*m*mag; for mag < 1 divide by 1/mag (an integer) so 3 * 0.2 prints as 0.6.
-    let at = |k: f64| {
-        if mag < 1.0 {
-            k * m / (1.0 / mag).round()
-        } else {
-            k * m * mag
-        }
-    };
-    let mut out = Vec::new();
-    let mut k = (lo / step).ceil();
-    while at(k) <= hi + step * 1e-9 {
-        let v = at(k);
-        out.push(if v == 0.0 { 0.0 } else { v });
-        k += 1.0;
-    }
-    out
-}
-
-/// An inline SVG line plot inside a `<figure class="plot" id=...>`, with data attributes
-/// giving the number of series and points drawn.
-pub(crate) fn svg_plot(
-    id: &str,
-    title: &str,
-    unit: &str,
-    series: &[Series],
-    y_fixed: Option<(f64, f64)>,
-    marks: &[VMark],
-) -> String {
-    let series: Vec<&Series> = series.iter().filter(|s| !s.points.is_empty()).collect();
-    let total: usize = series.iter().map(|s| s.points.len()).sum();
-    let mut o = String::new();
-    let _ = write!(
-        o,
-        r#"<figure class="plot" id="{}" data-series="{}" data-points="{}"><figcaption>{}</figcaption>"#,
-        esc(id),
-        series.len(),
-        total,
-        esc(title)
-    );
-    if total == 0 {
-        o.push_str(r#"<p class="no-data">no data in this log</p></figure>"#);
-        return o;
-    }
-    let (w, h) = (900.0, 240.0);
-    let (ml, mr, mt, mb) = (56.0, 12.0, 10.0, 28.0);
-    let all = series.iter().flat_map(|s| s.points.iter());
-    let (mut x0, mut x1) = (f64::INFINITY, f64::NEG_INFINITY);
-    let (mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY);
-    for &(x, y) in all {
-        if x.is_finite() {
-            x0 = x0.min(x);
-            x1 = x1.max(x);
-        }
-        if y.is_finite() {
-            y0 = y0.min(y);
-            y1 = y1.max(y);
-        }
-    }
-    if let Some((a, b)) = y_fixed {
-        y0 = y0.min(a);
-        y1 = y1.max(b);
-    } else {
-        let pad = if y1 > y0 {
-            (y1 - y0) * 0.08
-        } else {
-            y0.abs().max(1.0) * 0.1
-        };
-        y0 -= pad;
-        y1 += pad;
-    }
-    if x1 <= x0 {
-        x1 = x0 + 1.0;
-    }
-    let sx = |x: f64| ml + (x - x0) / (x1 - x0) * (w - ml - mr);
-    let sy = |y: f64| mt + (1.0 - (y - y0) / (y1 - y0)) * (h - mt - mb);
-    let _ = write!(
-        o,
-        r#"<svg viewBox="0 0 {w} {h}" xmlns="http://www.w3.org/2000/svg" role="img" aria-label="{}">"#,
-        esc(title)
-    );
-    // Grid and axes.
-    for t in ticks(y0, y1, 5) {
-        let y = sy(t);
-        let _ = write!(
-            o,
-            r##"<line class="grid" x1="{ml}" x2="{}" y1="{y:.1}" y2="{y:.1}"/><text class="tick" x="{}" y="{:.1}" text-anchor="end">{}</text>"##,
-            w - mr,
-            ml - 6.0,
-            y + 4.0,
-            num(t)
-        );
-    }
-    for t in ticks(x0, x1, 10) {
-        let x = sx(t);
-        let _ = write!(
-            o,
-            r##"<line class="grid" x1="{x:.1}" x2="{x:.1}" y1="{mt}" y2="{}"/><text class="tick" x="{x:.1}" y="{}" text-anchor="middle">{}</text>"##,
-            h - mb,
-            h - mb + 16.0,
-            num(t)
-        );
-    }
-    let _ = write!(
-        o,
-        r#"<text class="axis-label" x="{}" y="{}" text-anchor="end">time (s)</text><text class="axis-label" x="4" y="{}">{}</text>"#,
-        w - mr,
-        h - 2.0,
-        mt + 8.0,
-        esc(unit)
-    );
-    for m in marks {
-        if m.t < x0 || m.t > x1 {
-            continue;
-        }
-        let x = sx(m.t);
-        let _ = write!(
-            o,
-            r#"<line class="vmark {}" x1="{x:.1}" x2="{x:.1}" y1="{mt}" y2="{}"><title>{}</title></line>"#,
-            m.class,
-            h - mb,
-            esc(&format!("t = {} s: {}", num(m.t), m.text))
-        );
-    }
-    for (k, s) in series.iter().enumerate() {
-        let color = PALETTE[k % PALETTE.len()];
-        let pts: Vec<String> = s
-            .points
-            .iter()
-            .filter(|(x, y)| x.is_finite() && y.is_finite())
-            .map(|&(x, y)| format!("{:.1},{:.1}", sx(x), sy(y)))
-            .collect();
-        let last = s.points.last().map(|p| p.1).unwrap_or(f64::NAN);
-        let _ = write!(
-            o,
-            r#"<polyline class="series{}" data-series="{}" data-points="{}" fill="none" stroke="{color}" stroke-width="1.8"{} points="{}"><title>{} (last {})</title></polyline>"#,
-            if s.dashed { " dashed" } else { "" },
-            esc(&s.name),
-            pts.len(),
-            if s.dashed {
-                r#" stroke-dasharray="6 4""#
-            } else {
-                ""
-            },
-            pts.join(" "),
-            esc(&s.name),
-            num(last)
-        );
-    }
-    o.push_str("</svg><div class=\"legend\">");
-    for (k, s) in series.iter().enumerate() {
-        let last = s.points.last().map(|p| p.1).unwrap_or(f64::NAN);
-        let _ = write!(
-            o,
-            r#"<span class="key{}"><i style="background:{}"></i>{} <b>{}</b></span>"#,
-            if s.dashed { " dashed" } else { "" },
-            PALETTE[k % PALETTE.len()],
-            esc(&s.name),
-            num(last)
-        );
-    }
-    o.push_str("</div></figure>");
-    o
 }
 
 const CSS: &str = r#"
@@ -273,8 +64,10 @@ figure.plot svg{width:100%;height:auto;display:block}
 .vmark{stroke-width:1;stroke-dasharray:2 3} .vmark.mode-change{stroke:#0b8aa8} .vmark.failsafe{stroke:#d62728;stroke-dasharray:none}
 .vmark.link-event{stroke:#ff7f0e} .vmark.degraded{stroke:#9467bd} .vmark.reallocated{stroke:#2ca02c} .vmark.loss{stroke:#d62728}
 .legend{font-size:12px;display:flex;flex-wrap:wrap;gap:4px 12px}
-.legend i{display:inline-block;width:14px;height:3px;margin-right:4px;vertical-align:middle}
-.legend .dashed i{background-image:linear-gradient(90deg,#fff 50%,transparent 50%)!important}
+figure.plot .legend svg.swatch{width:26px;height:8px;display:inline-block;vertical-align:middle;margin-right:4px}
+.why{border-top:1px solid #eceef1;padding:2px 0} .why ul{margin:2px 0 4px 18px;padding:0} .why .inputs{color:#5b6570;font-size:12px}
+.map svg{max-width:520px;height:auto;border:1px solid #e6e8eb} .map-note{font-size:12px;color:#5b6570}
+td.accepted,td.already{color:#1e7b34} td.in-progress,td.skipped{color:#5b6570} td.denied,td.failed,td.timed-out{color:#b3261e;font-weight:600}
 .no-data{color:#8a939c;font-style:italic}
 .ok{color:#1e7b34} .failed{color:#b3261e;font-weight:600}
 .issues li{margin:2px 0} .issues .bad{color:#b3261e}
@@ -285,7 +78,9 @@ pre{white-space:pre-wrap;font-size:12px;background:#f6f8fa;padding:6px;border-ra
 fn card(o: &mut String, key: &str, id: &str, value: &str, class: &str) {
     let _ = write!(
         o,
-        r#"<div class="card {class}" id="{id}"><div class="k">{}</div><div class="v">{}</div></div>"#,
+        r#"<div class="card {}" id="{}"><div class="k">{}</div><div class="v">{}</div></div>"#,
+        esc(class),
+        esc(id),
         esc(key),
         esc(value)
     );
@@ -297,7 +92,7 @@ fn marks_html(marks: &[Mark]) -> String {
         .map(|m| {
             format!(
                 r#"<span class="mark {}">{}</span>"#,
-                m.class(),
+                esc(m.class()),
                 esc(&m.text())
             )
         })
@@ -314,26 +109,155 @@ fn actions_html(actions: &[String]) -> String {
         .collect()
 }
 
-fn events_html(events: &[String]) -> String {
-    if events.is_empty() {
+fn events_html(spans: &[Span], ids: &[usize]) -> String {
+    if ids.is_empty() {
         return r#"<span class="ev none">No event</span>"#.into();
     }
-    events
-        .iter()
-        .map(|e| format!(r#"<span class="ev">{}</span>"#, esc(e)))
+    ids.iter()
+        .filter_map(|i| spans.get(*i))
+        .map(|s| {
+            format!(
+                r#"<span class="ev" data-count="{}">{}</span>"#,
+                s.count,
+                esc(&s.label())
+            )
+        })
         .collect::<Vec<_>>()
         .join("; ")
 }
 
 fn row_classes(marks: &[Mark]) -> String {
     let set: BTreeSet<&str> = marks.iter().map(|m| m.class()).collect();
-    set.into_iter().collect::<Vec<_>>().join(" ")
+    esc(&set.into_iter().collect::<Vec<_>>().join(" "))
+}
+
+fn why_html(w: &Why) -> String {
+    let mut o = String::new();
+    let _ = write!(
+        o,
+        r#"<details class="why" id="why-cycle-{}" data-cycle="{}" data-proposals="{}" data-conflicts="{}"><summary>cycle {} · t {} s · {} · {}</summary><ul>"#,
+        w.cycle,
+        w.cycle,
+        w.proposals.len(),
+        w.conflicts.len(),
+        w.cycle,
+        t(w.time_s),
+        esc(&w.state),
+        esc(&w.actions.join(", "))
+    );
+    if w.proposals.is_empty() {
+        o.push_str("<li class=\"no-data\">no proposals recorded</li>");
+    }
+    for p in &w.proposals {
+        let _ = write!(
+            o,
+            r#"<li class="proposal" data-mdp="{}" data-action="{}" data-value="{}">MDP <b>{}</b> in state {}: <code>{}</code> → {} (value {})"#,
+            esc(&p.mdp),
+            esc(&p.action),
+            p.value,
+            esc(&p.mdp),
+            esc(&p.state),
+            esc(&p.action),
+            actions_html(&p.actions),
+            esc(&num(p.value))
+        );
+        if !p.inputs.is_empty() {
+            let read: Vec<String> = p
+                .inputs
+                .iter()
+                .map(|(k, v)| format!("{} = {}", esc(k), esc(v)))
+                .collect();
+            let _ = write!(o, r#"<div class="inputs">read: {}</div>"#, read.join(", "));
+        }
+        o.push_str("</li>");
+    }
+    if !w.probabilities.is_empty() && w.proposals.iter().all(|p| p.inputs.is_empty()) {
+        let ps: Vec<String> = w
+            .probabilities
+            .iter()
+            .map(|(k, v)| format!("{} = {}", esc(k), esc(&num(*v))))
+            .collect();
+        let _ = write!(
+            o,
+            r#"<li class="inputs">probabilities this cycle: {}</li>"#,
+            ps.join(", ")
+        );
+    }
+    for c in &w.conflicts {
+        let _ = write!(
+            o,
+            r#"<li class="conflict">conflict: kept <code>{}</code>, gave way: {} (rule {})</li>"#,
+            esc(&c.kept),
+            actions_html(&c.dropped),
+            esc(&c.rule)
+        );
+    }
+    for d in &w.degraded {
+        let _ = write!(o, r#"<li class="degraded">degraded: {}</li>"#, esc(d));
+    }
+    for d in &w.dropped {
+        let _ = write!(
+            o,
+            r#"<li class="degraded">dropped for resources: {}</li>"#,
+            esc(d)
+        );
+    }
+    if let Some(g) = &w.guarantee {
+        let ms: Vec<String> = g
+            .margins
+            .iter()
+            .map(|m| match m.target {
+                Some(tg) => format!(
+                    "{} {} of goal {}",
+                    esc(&m.goal),
+                    esc(&num(m.margin)),
+                    esc(&num(tg))
+                ),
+                None => format!("{} {}", esc(&m.goal), esc(&num(m.margin))),
+            })
+            .collect();
+        let _ = write!(
+            o,
+            r#"<li class="guarantee" data-infeasible="{}">guarantee ({}): margins {}"#,
+            g.infeasible,
+            esc(&g.activity),
+            if ms.is_empty() {
+                "none".into()
+            } else {
+                ms.join("; ")
+            }
+        );
+        if g.infeasible {
+            let _ = write!(
+                o,
+                " · <span class=\"failed\">cannot: {}</span>",
+                esc(g
+                    .infeasible_reason
+                    .as_deref()
+                    .unwrap_or("no allocation meets every goal"))
+            );
+        }
+        if let Some(re) = &g.reallocation {
+            let _ = write!(o, " · re-allocated: {}", esc(re));
+        }
+        o.push_str("</li>");
+    }
+    if w.omitted > 0 {
+        let _ = write!(
+            o,
+            "<li class=\"note\">{} more entries not shown</li>",
+            w.omitted
+        );
+    }
+    o.push_str("</ul></details>");
+    o
 }
 
 /// The whole report.
-pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -> String {
+pub fn render_html(rev: &Review) -> String {
+    let s = &rev.summary;
     let mut o = String::new();
-    let title = match &log.header {
+    let title = match &rev.header {
         Some(h) => format!("companion review — run started {}", h.started_utc),
         None => "companion review".to_string(),
     };
@@ -343,7 +267,7 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
         esc(&title)
     );
     let _ = write!(o, "<header><h1>{}</h1><p>", esc(&title));
-    if let Some(h) = &log.header {
+    if let Some(h) = &rev.header {
         let _ = write!(
             o,
             "command: <code>{}</code> · git {} · schema {}",
@@ -352,12 +276,12 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
             h.schema
         );
     }
-    let files = match log.files.as_slice() {
+    let files = match rev.files.as_slice() {
         [] => String::new(),
         [one] => one.display().to_string(),
         [first, .., last] => format!(
             "{} parts: {} … {}",
-            log.files.len(),
+            rev.files.len(),
             first.display(),
             last.file_name().unwrap_or_default().to_string_lossy()
         ),
@@ -367,16 +291,22 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
     // Summary.
     let _ = write!(
         o,
-        r#"<section id="summary" data-records="{}" data-tracking-steps="{}" data-conflicts="{}" data-degradations="{}" data-reallocations="{}" data-failed-commands="{}" data-dropped="{}" data-corrupted="{}" data-truncated="{}"><h2>Summary</h2><div class="cards">"#,
+        r#"<section id="summary" data-records="{}" data-tracking-steps="{}" data-conflicts="{}" data-degradations="{}" data-reallocations="{}" data-commands="{}" data-failed-commands="{}""#,
         s.records,
         s.tracking_steps,
         s.conflicts,
         s.degradations,
         s.reallocations,
+        s.commands,
         s.failed_commands,
-        s.dropped,
-        s.corrupted_lines,
-        s.truncated
+    );
+    for c in Category::ALL {
+        let _ = write!(o, r#" data-commands-{}="{}""#, c.class(), s.outcomes.get(c));
+    }
+    let _ = write!(
+        o,
+        r#" data-dropped="{}" data-corrupted="{}" data-truncated="{}"><h2>Summary</h2><div class="cards">"#,
+        s.dropped, s.corrupted_lines, s.truncated
     );
     let bad_outcome = s.outcome.contains("crash") || s.truncated;
     card(
@@ -451,11 +381,30 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
     );
     card(
         &mut o,
+        "commands",
+        "sum-commands",
+        &format!("{}: {}", s.commands, s.outcomes.describe()),
+        "",
+    );
+    card(
+        &mut o,
         "failed commands",
         "sum-failed-commands",
         &format!("{} of {}", s.failed_commands, s.commands),
         if s.failed_commands > 0 { "bad" } else { "" },
     );
+    for c in [Category::Denied, Category::TimedOut] {
+        let n = s.outcomes.get(c);
+        if n > 0 {
+            card(
+                &mut o,
+                &format!("{} commands", c.label()),
+                &format!("sum-{}-commands", c.class()),
+                &n.to_string(),
+                "bad",
+            );
+        }
+    }
     card(
         &mut o,
         "mode changes",
@@ -480,78 +429,68 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
     o.push_str("</div></section>");
 
     // Read issues.
-    let n_issues = log.corrupted.len()
-        + usize::from(log.truncated.is_some())
-        + log.notes.len()
-        + log.losses.len()
-        + usize::from(!log.ended_cleanly);
+    let n_issues = s.corrupted_lines
+        + usize::from(rev.truncated.is_some())
+        + rev.notes.len()
+        + rev.losses.len()
+        + usize::from(!s.ended_cleanly);
     let _ = write!(
         o,
         r#"<section id="read-issues" data-corrupted="{}" data-truncated="{}" data-newer-schema="{}"><h2>Reading the log</h2><ul class="issues">"#,
-        log.corrupted.len(),
-        log.truncated.is_some(),
-        log.newer_schema.map(|v| v.to_string()).unwrap_or_default()
+        s.corrupted_lines,
+        rev.truncated.is_some(),
+        rev.newer_schema.map(|v| v.to_string()).unwrap_or_default()
     );
     if n_issues == 0 {
         o.push_str(
             "<li class=\"ok\">read whole: every line valid, closed normally, nothing lost</li>",
         );
     }
-    for n in &log.notes {
+    for n in &rev.notes {
         let _ = write!(o, "<li class=\"note\">{}</li>", esc(n));
     }
-    let corrupted_li = |c: &crate::decision_log::ReadIssue| {
-        format!(
+    for c in &rev.corrupted {
+        let _ = write!(
+            o,
             r#"<li class="bad corrupted" data-line="{}">skipped {}:{}: {}</li>"#,
             c.line,
             esc(&c.file.display().to_string()),
             c.line,
             esc(&c.reason)
-        )
-    };
-    for c in log.corrupted.iter().take(20) {
-        o.push_str(&corrupted_li(c));
+        );
     }
-    if log.corrupted.len() > 20 {
+    if s.corrupted_lines > rev.corrupted.len() {
         let _ = write!(
             o,
-            "<li><details><summary>{} more skipped lines</summary><ul>",
-            log.corrupted.len() - 20
+            "<li class=\"bad\">{} more skipped lines not listed</li>",
+            s.corrupted_lines - rev.corrupted.len()
         );
-        for c in &log.corrupted[20..] {
-            o.push_str(&corrupted_li(c));
-        }
-        o.push_str("</ul></details></li>");
     }
-    if let Some(t) = &log.truncated {
+    if let Some(tr) = &rev.truncated {
         let _ = write!(
             o,
             r#"<li class="bad truncated" data-line="{}">truncated at {}:{}: {}</li>"#,
-            t.line,
-            esc(&t.file.display().to_string()),
-            t.line,
-            esc(&t.reason)
+            tr.line,
+            esc(&tr.file.display().to_string()),
+            tr.line,
+            esc(&tr.reason)
         );
     }
-    if !log.losses.is_empty() {
+    if !rev.losses.is_empty() {
         let _ = write!(
             o,
             r#"<li class="bad loss" data-losses="{}" data-dropped="{}">{} records/events lost in {} place(s): the log writer fell behind<details><summary>where</summary><ul>"#,
-            log.losses.len(),
-            log.dropped(),
-            log.dropped(),
-            log.losses.len()
+            rev.losses.len(),
+            s.dropped,
+            s.dropped,
+            rev.losses.len()
         );
-        for l in &log.losses {
-            let _ = write!(
-                o,
-                "<li>{} lost before record {}</li>",
-                l.dropped, l.before_record
-            );
+        for (before, n) in &rev.losses {
+            let _ = write!(o, "<li>{n} lost before record {before}</li>");
         }
         o.push_str("</ul></details></li>");
     }
-    if !log.ended_cleanly && log.truncated.is_none() {
+    if !s.ended_cleanly && rev.truncated.is_none() {
         o.push_str("<li class=\"note\">no end line: the run did not close its log (killed or still running)</li>");
     }
     o.push_str("</ul></section>");
@@ -560,10 +499,10 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
     let _ = write!(
         o,
         r#"<section id="timeline" data-phases="{}" data-rows="{}"><h2>Timeline (as the BFM paper's Tables 4–7)</h2><table id="phase-table"><thead><tr><th>cycles</th><th>t (s)</th><th>State</th><th>Set of actions</th><th>Events</th><th>Resources</th><th>marks</th></tr></thead><tbody>"#,
-        phases.len(),
-        rows.len()
+        rev.phases.len(),
+        rev.rows.len()
     );
-    for p in phases {
+    for p in &rev.phases {
         let cycles = if p.first_cycle == p.last_cycle {
             p.first_cycle.to_string()
         } else {
@@ -571,16 +510,17 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
         };
         let _ = write!(
             o,
-            r#"<tr class="phase-row {}" data-first-cycle="{}" data-last-cycle="{}" data-records="{}"><td class="num">{}</td><td class="num">{}</td><td class="state">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>"#,
+            r##"<tr class="phase-row {}" data-first-cycle="{}" data-last-cycle="{}" data-records="{}"><td class="num"><a href="#why-cycle-{}">{}</a></td><td class="num">{}</td><td class="state">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>"##,
             row_classes(&p.marks),
             p.first_cycle,
             p.last_cycle,
             p.records,
+            p.first_cycle,
             cycles,
             t(p.start_s),
             esc(&p.state),
             actions_html(&p.actions),
-            events_html(&p.events),
+            events_html(&rev.spans, &p.events),
             esc(&if p.resources.is_empty() {
                 "–".to_string()
             } else {
@@ -590,79 +530,110 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
         );
     }
     o.push_str("</tbody></table>");
+    if rev.phases_omitted > 0 {
+        let _ = write!(
+            o,
+            "<p class=\"note\">{} more phases not listed</p>",
+            rev.phases_omitted
+        );
+    }
     let _ = write!(
         o,
         r#"<details id="cycles"><summary>every cycle ({} records)</summary><table id="timeline-table"><thead><tr><th>cycle</th><th>t (s)</th><th>State</th><th>Set of actions</th><th>Events</th><th>Resources</th><th>marks</th></tr></thead><tbody>"#,
-        rows.len()
+        rev.rows.len()
     );
-    for row in rows {
-        let r = &log.records[row.index];
-        let res = r
-            .resources
-            .as_ref()
-            .map(|x| x.summary.as_str())
-            .unwrap_or("–");
+    for r in &rev.rows {
         let _ = write!(
             o,
-            r#"<tr class="timeline-row {}" data-cycle="{}" data-state="{}" data-actions="{}" data-events="{}"><td class="num">{}</td><td class="num">{}</td><td class="state">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>"#,
-            row_classes(&row.marks),
+            r##"<tr class="timeline-row {}" data-cycle="{}" data-state="{}" data-actions="{}" data-events="{}"><td class="num"><a href="#why-cycle-{}">{}</a></td><td class="num">{}</td><td class="state">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>"##,
+            row_classes(&r.marks),
             r.cycle,
             esc(&r.state),
             r.actions.len(),
-            row.events.len(),
+            r.event_count,
+            r.cycle,
             r.cycle,
             t(r.time_s),
             esc(&r.state),
             actions_html(&r.actions),
-            events_html(&row.events),
-            esc(res),
-            marks_html(&row.marks)
+            events_html(&rev.spans, &r.events),
+            esc(r.resources.as_deref().unwrap_or("–")),
+            marks_html(&r.marks)
         );
     }
-    o.push_str("</tbody></table></details></section>");
+    o.push_str("</tbody></table></details>");
+    if rev.rows_omitted > 0 {
+        let _ = write!(
+            o,
+            "<p class=\"note\" id=\"rows-omitted\">{} later cycles not listed (the report keeps the first {}); <code>companion review RUN --cycle N</code> prints any cycle's why</p>",
+            rev.rows_omitted,
+            super::MAX_ROWS
+        );
+    }
+    o.push_str("</section>");
+
+    // Events folded into spans.
+    let _ = write!(
+        o,
+        r#"<section id="events" data-spans="{}"><h2>Events</h2>"#,
+        rev.spans.len()
+    );
+    if rev.spans.is_empty() {
+        o.push_str("<p class=\"no-data\">no events in this log</p>");
+    } else {
+        o.push_str("<ul>");
+        for sp in &rev.spans {
+            let _ = write!(
+                o,
+                r#"<li class="span" data-first-cycle="{}" data-last-cycle="{}" data-count="{}">{}</li>"#,
+                sp.first_cycle,
+                sp.last_cycle,
+                sp.count,
+                esc(&sp.label())
+            );
+        }
+        o.push_str("</ul>");
+    }
+    o.push_str("</section>");
 
     // Plots.
-    let marks: Vec<VMark> = rows
+    let marks: Vec<VMark> = rev
+        .plots
+        .marks
         .iter()
-        .flat_map(|row| {
-            let t = log.records[row.index].time_s;
-            row.marks.iter().map(move |m| VMark {
-                t,
-                class: m.class(),
-                text: m.text(),
-            })
+        .map(|(tm, m)| VMark {
+            t: *tm,
+            class: m.class(),
+            text: m.text(),
         })
         .collect();
     o.push_str(r#"<section id="plots"><h2>Over time</h2><div class="plots">"#);
-    let recs = &log.records;
-    // Probabilities, in name order.
-    let names: BTreeSet<&String> = recs.iter().flat_map(|r| r.probabilities.keys()).collect();
-    let prob: Vec<Series> = names
+    let plots = &rev.plots;
+    let prob: Vec<Series> = plots
+        .probabilities
         .iter()
-        .map(|n| Series {
-            name: (*n).clone(),
-            points: recs
-                .iter()
-                .filter_map(|r| r.probabilities.get(*n).map(|p| (r.time_s, *p)))
-                .collect(),
+        .map(|(n, d)| Series {
+            name: n.clone(),
+            points: d.points(),
             dashed: false,
         })
         .collect();
+    let mut prob_title = "Named probabilities (health BNs)".to_string();
+    if plots.probability_names_not_drawn > 0 {
+        prob_title.push_str(&format!(
+            "; {} values of further names not drawn",
+            plots.probability_names_not_drawn
+        ));
+    }
     o.push_str(&svg_plot(
         "plot-probabilities",
-        "Named probabilities (health BNs)",
+        &prob_title,
         "P",
         &prob,
         Some((0.0, 1.0)),
         &marks,
     ));
-    // PANORAMA: predicted total (goal - margin) against the goal, per goal.
-    let goals: BTreeSet<&String> = recs
-        .iter()
-        .filter_map(|r| r.guarantee.as_ref())
-        .flat_map(|g| g.margins.keys())
-        .collect();
-    if goals.is_empty() {
+    if plots.margins.is_empty() {
         o.push_str(&svg_plot(
             "plot-margins",
             "PANORAMA margins",
@@ -672,26 +643,12 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
             &[],
         ));
     }
-    for goal in goals {
-        let mut predicted = Vec::new();
-        let mut goal_line = Vec::new();
-        let mut margin = Vec::new();
-        for r in recs {
-            let Some(g) = &r.guarantee else { continue };
-            let Some(m) = g.margins.get(goal) else {
-                continue;
-            };
-            margin.push((r.time_s, *m));
-            if let Some(gv) = g.goals.get(goal) {
-                predicted.push((r.time_s, gv - m));
-                goal_line.push((r.time_s, *gv));
-            }
-        }
+    for (goal, (predicted, goal_line, margin)) in &plots.margins {
         let (series, label) = if goal_line.is_empty() {
             (
                 vec![Series {
                     name: format!("{goal} margin"),
-                    points: margin,
+                    points: margin.points(),
                     dashed: false,
                 }],
                 "margin",
@@ -701,12 +658,12 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
                 vec![
                     Series {
                         name: "predicted total (measured + estimated remainder)".into(),
-                        points: predicted,
+                        points: predicted.points(),
                         dashed: false,
                     },
                     Series {
                         name: "goal".into(),
-                        points: goal_line,
+                        points: goal_line.points(),
                         dashed: true,
                     },
                 ],
@@ -727,19 +684,18 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
             &marks,
         ));
     }
-    let res_series = |name: &str, f: &dyn Fn(&crate::record::ResourcesRecord) -> f64| Series {
-        name: name.into(),
-        points: recs
-            .iter()
-            .filter_map(|r| r.resources.as_ref().map(|x| (r.time_s, f(x))))
-            .collect(),
-        dashed: false,
+    let one = |name: &str, d: &super::plot::Decimator| {
+        vec![Series {
+            name: name.into(),
+            points: d.points(),
+            dashed: false,
+        }]
     };
     o.push_str(&svg_plot(
         "plot-cpu-load",
         "CPU load (share of the CPU budget)",
         "load",
-        &[res_series("cpu_load", &|x| x.cpu_load)],
+        &one("cpu_load", &plots.cpu_load),
         Some((0.0, 1.0)),
         &marks,
     ));
@@ -747,28 +703,15 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
         "plot-fpga-tiles",
         "FPGA tiles used",
         "tiles",
-        &[res_series("tiles_used", &|x| f64::from(x.tiles_used))],
+        &one("tiles_used", &plots.tiles_used),
         Some((0.0, 1.0)),
         &marks,
     ));
-    let veh = |key: &str| Series {
-        name: key.into(),
-        points: recs
-            .iter()
-            .filter_map(|r| {
-                r.vehicle
-                    .get(key)
-                    .and_then(|v| v.as_f64())
-                    .map(|v| (r.time_s, v))
-            })
-            .collect(),
-        dashed: false,
-    };
     o.push_str(&svg_plot(
         "plot-altitude",
         "Altitude",
         "m",
-        &[veh("altitude_m")],
+        &one("altitude_m", &plots.altitude),
         Some((0.0, 1.0)),
         &marks,
     ));
@@ -776,47 +719,75 @@ pub fn render_html(log: &LogRead, s: &Summary, rows: &[Row], phases: &[Phase]) -
         "plot-battery",
         "Battery",
         "%",
-        &[veh("battery_pct")],
+        &one("battery_pct", &plots.battery),
         Some((0.0, 100.0)),
         &marks,
     ));
     o.push_str("</div></section>");
 
+    // Map.
+    o.push_str(r#"<section id="map-section"><h2>Map</h2>"#);
+    o.push_str(&svg_map(&plots.track.points()));
+    o.push_str("</section>");
+
     // Commands.
-    let n_cmd: usize = recs.iter().map(|r| r.commands.len()).sum();
     let _ = write!(
         o,
-        r#"<section id="commands" data-commands="{n_cmd}" data-failed="{}"><h2>Commands</h2>"#,
-        s.failed_commands
+        r#"<section id="commands" data-commands="{}" data-failed="{}"><h2>Commands</h2>"#,
+        s.commands, s.failed_commands
     );
-    if n_cmd == 0 {
+    if s.commands == 0 {
         o.push_str("<p class=\"no-data\">no vehicle commands in this log</p>");
     } else {
-        o.push_str("<table><thead><tr><th>cycle</th><th>t (s)</th><th>action</th><th>command</th><th>result</th><th>attempts</th><th>latency (ms)</th></tr></thead><tbody>");
-        for r in recs {
-            for c in &r.commands {
-                let ok = super::OK_RESULTS.contains(&c.result.as_str());
-                let _ = write!(
-                    o,
-                    r#"<tr class="command-row {}"><td class="num">{}</td><td class="num">{}</td><td>{}</td><td><code>{}</code></td><td class="{}">{}</td><td class="num">{}</td><td class="num">{}</td></tr>"#,
-                    if ok { "ok" } else { "failed" },
-                    r.cycle,
-                    t(r.time_s),
-                    esc(&c.action),
-                    esc(&c.command),
-                    if ok { "ok" } else { "failed" },
-                    esc(&c.result),
-                    c.attempts,
-                    c.latency_ms.map(num).unwrap_or_else(|| "–".into())
-                );
-            }
+        let _ = write!(
+            o,
+            "<p>{} commands: {}</p>",
+            s.commands,
+            esc(&s.outcomes.describe())
+        );
+        o.push_str("<table><thead><tr><th>cycle</th><th>t (s)</th><th>action</th><th>command</th><th>outcome</th><th>result</th><th>attempts</th><th>latency (ms)</th></tr></thead><tbody>");
+        for c in &rev.commands {
+            let class = c.category.class();
+            let _ = write!(
+                o,
+                r#"<tr class="command-row {}" data-category="{}"><td class="num">{}</td><td class="num">{}</td><td>{}</td><td><code>{}</code></td><td class="{}">{}</td><td>{}</td><td class="num">{}</td><td class="num">{}</td></tr>"#,
+                class,
+                class,
+                c.cycle,
+                t(c.time_s),
+                esc(&c.command.action),
+                esc(&c.command.command),
+                class,
+                esc(c.category.label()),
+                esc(&c.command.result),
+                c.command.attempts,
+                c.command.latency_ms.map(num).unwrap_or_else(|| "–".into())
+            );
         }
         o.push_str("</tbody></table>");
+        if rev.commands_omitted > 0 {
+            let _ = write!(
+                o,
+                "<p class=\"note\">{} more commands not listed</p>",
+                rev.commands_omitted
+            );
+        }
+    }
+    o.push_str("</section>");
+
+    // Why, per cycle.
+    let _ = write!(
+        o,
+        r#"<section id="why" data-cycles="{}"><h2>Why, cycle by cycle</h2><p class="note">What each MDP proposed and the probabilities it read, the conflicts and what gave way, the resources, the guarantee margins.</p>"#,
+        rev.rows.len()
+    );
+    for r in &rev.rows {
+        o.push_str(&why_html(&r.why));
     }
     o.push_str("</section>");
 
     // Params from the header.
-    if let Some(h) = &log.header
+    if let Some(h) = &rev.header
         && !h.params.is_empty()
     {
         let _ = write!(

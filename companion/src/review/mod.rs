@@ -1,18 +1,43 @@
 //! Post-flight review of a decision log: a summary, a timeline shaped like the BFM paper's
-//! Tables 4–7 (state, set of actions, events, resources), plots over time, the commands.
-//! `companion review RUN_OR_LOG [--out report.html] [--summary]`; see docs/decision-log.md.
+//! Tables 4–7 (state, set of actions, events, resources), the why of every cycle, plots over
+//! time, a map of the flown track, the commands by outcome.
+//! `companion review RUN_OR_LOG [--out report.html] [--summary] [--cycle N]`; see
+//! docs/decision-log.md.
+//!
+//! The log is streamed: records are read one at a time into bounded aggregates ([`Review`]), so
+//! the memory a review needs does not grow with the log (plots are decimated, per-cycle rows
+//! and lists capped with the omission said in the report).
 
 mod html;
+pub mod outcomes;
+mod plot;
 mod terminal;
+pub mod text;
+pub mod why;
 
 pub use html::render_html;
-pub use terminal::render_terminal;
+pub use terminal::{render_terminal, render_why};
 
-use crate::decision_log::{LogRead, ReadError, read_log};
-use crate::record::DecisionRecord;
-use std::collections::BTreeMap;
+use crate::decision_log::{Header, LogItem, ReadError, ReadIssue, stream_log};
+use crate::record::{CommandRecord, DecisionRecord};
+use crate::tracking::TrackingCounter;
+use outcomes::{Category, OutcomeCounts, categorize};
+use plot::Decimator;
+use std::collections::{BTreeMap, HashMap};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
+use why::Why;
+
+/// Per-cycle rows (timeline table and why) kept in the report; later cycles are summarised.
+pub const MAX_ROWS: usize = 3000;
+pub const MAX_PHASES: usize = 2000;
+pub const MAX_SPANS: usize = 5000;
+pub const MAX_COMMANDS: usize = 5000;
+pub const MAX_ISSUES: usize = 200;
+/// Probability lines drawn (the first names in order); more are counted, not drawn.
+pub const MAX_SERIES: usize = 48;
+const MAX_MARKS: usize = 2000;
+const MAX_PENDING_EVENT_CYCLES: usize = 1000;
 
 #[derive(Debug, thiserror::Error)]
 pub enum ReviewError {
@@ -24,6 +49,8 @@ pub enum ReviewError {
         #[source]
         source: std::io::Error,
     },
+    #[error("cycle {cycle} is not in this log (cycles {first}..={last})")]
+    NoSuchCycle { cycle: u64, first: u64, last: u64 },
 }
 
 /// Final margin of one PANORAMA goal.
@@ -44,8 +71,8 @@ pub struct Summary {
     pub last_cycle: Option<u64>,
     /// time_s of the last record minus that of the first.
     pub duration_s: f64,
-    /// Cycles whose final action set holds a tracking action (`track_v0`..`track_v5`): the
-    /// paper's Table 8 "tracking time (nbr steps)".
+    /// The paper's Table 8 "tracking time (nbr steps)", by [`crate::tracking`]: the same
+    /// definition `simulate` counts with.
     pub tracking_steps: usize,
     pub tracking_s: f64,
     /// Goal name (`energy_j`, `duration_s`) -> margin in the last record that had a guarantee.
@@ -54,7 +81,9 @@ pub struct Summary {
     pub degradations: usize,
     pub reallocations: usize,
     pub commands: usize,
+    /// Commands whose result is a failure (category `failed` only).
     pub failed_commands: usize,
+    pub outcomes: OutcomeCounts,
     pub mode_changes: usize,
     pub link_events: usize,
     pub dropped: u64,
@@ -63,181 +92,7 @@ pub struct Summary {
     pub ended_cleanly: bool,
 }
 
-/// Command results that are not failures; anything else (DENIED, FAILED, TIMEOUT, ...) is.
-pub const OK_RESULTS: [&str; 4] = ["ACCEPTED", "SIMULATED", "PENDING", "IN_PROGRESS"];
-
-pub fn is_tracking(r: &DecisionRecord) -> bool {
-    r.actions.iter().any(|a| a.starts_with("track_"))
-}
-
-/// Seconds each record stands for: the gap to the next record; the last one gets the header's
-/// step length or the median gap.
-pub fn record_durations(log: &LogRead) -> Vec<f64> {
-    let t: Vec<f64> = log.records.iter().map(|r| r.time_s).collect();
-    let mut gaps: Vec<f64> = t.windows(2).map(|w| (w[1] - w[0]).max(0.0)).collect();
-    let last = log
-        .header
-        .as_ref()
-        .and_then(|h| h.step_s)
-        .unwrap_or_else(|| {
-            let mut g = gaps.clone();
-            g.sort_by(f64::total_cmp);
-            g.get(g.len() / 2).copied().unwrap_or(0.0)
-        });
-    if !t.is_empty() {
-        gaps.push(last);
-    }
-    gaps
-}
-
-fn mode(r: &DecisionRecord) -> Option<String> {
-    r.vehicle.get("mode").map(|m| match m.as_str() {
-        Some(s) => s.to_string(),
-        None => m.to_string(),
-    })
-}
-
-fn vehicle_f64(r: &DecisionRecord, key: &str) -> Option<f64> {
-    r.vehicle.get(key).and_then(|v| v.as_f64())
-}
-
-fn policy_from_command(cmd: &str) -> Option<String> {
-    let mut it = cmd.split_whitespace();
-    while let Some(w) = it.next() {
-        if w == "--policy" {
-            return it.next().map(str::to_string);
-        }
-        if let Some(p) = w.strip_prefix("--policy=") {
-            return Some(p.to_string());
-        }
-    }
-    None
-}
-
-pub fn summarize(log: &LogRead) -> Summary {
-    let recs = &log.records;
-    let durations = record_durations(log);
-    let mut s = Summary {
-        records: recs.len(),
-        first_cycle: recs.first().map(|r| r.cycle),
-        last_cycle: recs.last().map(|r| r.cycle),
-        duration_s: match (recs.first(), recs.last()) {
-            (Some(a), Some(b)) => b.time_s - a.time_s,
-            _ => 0.0,
-        },
-        policy: log
-            .header
-            .as_ref()
-            .and_then(|h| h.policy.clone().or_else(|| policy_from_command(&h.command))),
-        scenario: log.header.as_ref().and_then(|h| h.scenario.clone()),
-        dropped: log.dropped(),
-        corrupted_lines: log.corrupted.len(),
-        truncated: log.truncated.is_some(),
-        ended_cleanly: log.ended_cleanly,
-        ..Default::default()
-    };
-    let mut prev_mode: Option<String> = None;
-    for (r, d) in recs.iter().zip(&durations) {
-        if is_tracking(r) {
-            s.tracking_steps += 1;
-            s.tracking_s += d;
-        }
-        s.conflicts += r.conflicts.len();
-        if let Some(res) = &r.resources {
-            s.degradations += res.degraded.len();
-        }
-        if let Some(g) = &r.guarantee {
-            if g.reallocation.is_some() {
-                s.reallocations += 1;
-            }
-            s.final_margins = g
-                .margins
-                .iter()
-                .map(|(k, m)| {
-                    (
-                        k.clone(),
-                        FinalMargin {
-                            margin: *m,
-                            goal: g.goals.get(k).copied(),
-                        },
-                    )
-                })
-                .collect();
-        }
-        s.commands += r.commands.len();
-        s.failed_commands += r
-            .commands
-            .iter()
-            .filter(|c| !OK_RESULTS.contains(&c.result.as_str()))
-            .count();
-        s.link_events += r.link_events.len();
-        let m = mode(r);
-        if m.is_some() && prev_mode.is_some() && m != prev_mode {
-            s.mode_changes += 1;
-        }
-        if m.is_some() {
-            prev_mode = m;
-        }
-    }
-    s.outcome = outcome(log);
-    s
-}
-
-/// Mission outcome in words, from the states and actions of the log (shared mission vocabulary).
-fn outcome(log: &LogRead) -> String {
-    let recs = &log.records;
-    let Some(last) = recs.last() else {
-        return "no decision records".into();
-    };
-    let mut out = if let Some(r) = recs
-        .iter()
-        .find(|r| r.state == "crash" || r.state == "collision")
-    {
-        format!("crashed ({} at cycle {})", r.state, r.cycle)
-    } else {
-        let landing = last.state == "landing"
-            || last.state == "zone_ok"
-            || last
-                .actions
-                .iter()
-                .any(|a| a == "land" || a == "replan_and_land");
-        let alt = vehicle_f64(last, "altitude_m");
-        if landing {
-            match alt {
-                Some(a) if a > 0.5 => format!("landing (log ends at {a:.1} m)"),
-                _ => "landed".into(),
-            }
-        } else if last.actions.iter().any(|a| a == "return_to_base") {
-            "returning to base".into()
-        } else {
-            format!("log ends in state {} at cycle {}", last.state, last.cycle)
-        }
-    };
-    if log.truncated.is_some() {
-        out.push_str("; log truncated");
-    } else if !log.ended_cleanly {
-        out.push_str("; no end line (process stopped?)");
-    }
-    out
-}
-
-/// One row of the Tables 4–7 shaped timeline: consecutive records with the same state and
-/// action set.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Phase {
-    pub state: String,
-    pub actions: Vec<String>,
-    pub events: Vec<String>,
-    /// Distinct resource summaries in order ("5 + 394 ms").
-    pub resources: Vec<String>,
-    pub first_cycle: u64,
-    pub last_cycle: u64,
-    pub start_s: f64,
-    pub records: usize,
-    /// Something to flag: mode change, failsafe or link event, degradation.
-    pub marks: Vec<Mark>,
-}
-
+/// Something to flag on a cycle.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Mark {
     Mode(String),
@@ -268,45 +123,355 @@ impl Mark {
     }
 }
 
-/// One row per record: everything the timeline shows about that cycle.
+/// An event sentence over consecutive cycles: "cycles 12–23: <sentence> (×12)".
+#[derive(Debug, Clone, PartialEq)]
+pub struct Span {
+    pub text: String,
+    pub first_cycle: u64,
+    pub last_cycle: u64,
+    pub count: usize,
+}
+
+impl Span {
+    pub fn label(&self) -> String {
+        if self.count > 1 {
+            format!(
+                "cycles {}–{}: {} (×{})",
+                self.first_cycle, self.last_cycle, self.text, self.count
+            )
+        } else {
+            self.text.clone()
+        }
+    }
+}
+
+/// One row of the Tables 4–7 shaped timeline: consecutive records with the same state and
+/// action set.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Phase {
+    pub state: String,
+    pub actions: Vec<String>,
+    /// Event spans starting in this phase (indices into [`Review::spans`]).
+    pub events: Vec<usize>,
+    /// Distinct resource summaries in order ("5 + 394 ms").
+    pub resources: Vec<String>,
+    pub first_cycle: u64,
+    pub last_cycle: u64,
+    pub start_s: f64,
+    pub records: usize,
+    pub marks: Vec<Mark>,
+}
+
+/// One decision cycle as the per-cycle table and the why section show it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Row {
-    pub index: usize,
-    pub events: Vec<String>,
+    pub cycle: u64,
+    pub time_s: f64,
+    pub state: String,
+    pub actions: Vec<String>,
+    /// Event spans starting at this cycle (indices into [`Review::spans`]).
+    pub events: Vec<usize>,
+    /// Distinct event sentences of this cycle, folded or not.
+    pub event_count: usize,
+    pub resources: Option<String>,
     pub marks: Vec<Mark>,
+    pub why: Why,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct CommandRow {
+    pub cycle: u64,
+    pub time_s: f64,
+    pub command: CommandRecord,
+    pub category: Category,
+}
+
+/// Plot data, decimated to a bounded number of points per line.
+#[derive(Debug, Default)]
+pub struct Plots {
+    pub probabilities: BTreeMap<String, Decimator>,
+    pub probability_names_not_drawn: usize,
+    /// goal -> (predicted total, goal, margin).
+    pub margins: BTreeMap<String, (Decimator, Decimator, Decimator)>,
+    pub cpu_load: Decimator,
+    pub tiles_used: Decimator,
+    pub altitude: Decimator,
+    pub battery: Decimator,
+    /// (longitude, latitude) in degrees.
+    pub track: Decimator,
+    pub marks: Vec<(f64, Mark)>,
+}
+
+/// Everything a report shows, built from the log one item at a time.
+#[derive(Debug, Default)]
+pub struct Review {
+    pub files: Vec<PathBuf>,
+    pub header: Option<Header>,
+    pub summary: Summary,
+    pub phases: Vec<Phase>,
+    pub phases_omitted: usize,
+    pub rows: Vec<Row>,
+    pub rows_omitted: usize,
+    pub spans: Vec<Span>,
+    pub spans_omitted: usize,
+    pub commands: Vec<CommandRow>,
+    pub commands_omitted: usize,
+    pub plots: Plots,
+    pub corrupted: Vec<ReadIssue>,
+    pub truncated: Option<ReadIssue>,
+    pub notes: Vec<String>,
+    /// (record index the loss precedes, records lost).
+    pub losses: Vec<(usize, u64)>,
+    pub newer_schema: Option<u32>,
+    /// The why of the cycle asked for with `--cycle`.
+    pub asked_why: Option<Why>,
+
+    // Streaming state.
+    asked_cycle: Option<u64>,
+    pending: Option<(Box<DecisionRecord>, Vec<Option<serde_json::Value>>)>,
+    pending_events: BTreeMap<u64, Vec<String>>,
+    pending_loss: u64,
+    open_spans: HashMap<String, usize>,
+    prev_cycle: Option<u64>,
+    prev_mode: Option<String>,
+    tracking: TrackingCounter,
+    last_gap: Option<f64>,
+    first_time: Option<f64>,
+    last_time: f64,
+    crash: Option<(String, u64)>,
+    last: Option<LastRecord>,
+}
+
+#[derive(Debug, Default)]
+struct LastRecord {
+    state: String,
+    cycle: u64,
+    landing: bool,
+    returning: bool,
+    altitude: Option<f64>,
 }
 
 fn is_failsafe(text: &str) -> bool {
     text.to_ascii_lowercase().contains("failsafe")
 }
 
-/// Per-record rows: the record's events, event lines of that cycle, and marks.
-pub fn rows(log: &LogRead) -> Vec<Row> {
-    let mut by_cycle: BTreeMap<u64, Vec<&str>> = BTreeMap::new();
-    for e in &log.events {
-        by_cycle.entry(e.cycle).or_default().push(&e.event);
+fn mode(r: &DecisionRecord) -> Option<String> {
+    r.vehicle.get("mode").map(|m| match m.as_str() {
+        Some(s) => s.to_string(),
+        None => m.to_string(),
+    })
+}
+
+fn vehicle_f64(r: &DecisionRecord, key: &str) -> Option<f64> {
+    r.vehicle.get(key).and_then(|v| v.as_f64())
+}
+
+/// A position value from the vehicle telemetry or, as fly records them, the observations.
+fn position(r: &DecisionRecord) -> Option<(f64, f64)> {
+    let get = |k: &str| vehicle_f64(r, k).or_else(|| r.observations.get(k).copied());
+    let (lat, lon) = (get("lat_deg")?, get("lon_deg")?);
+    let valid = lat.is_finite()
+        && lon.is_finite()
+        && (-90.0..=90.0).contains(&lat)
+        && (-180.0..=180.0).contains(&lon)
+        && !(lat == 0.0 && lon == 0.0);
+    valid.then_some((lon, lat))
+}
+
+pub(crate) fn policy_from_command(cmd: &str) -> Option<String> {
+    let mut it = cmd.split_whitespace();
+    while let Some(w) = it.next() {
+        if w == "--policy" {
+            return it.next().map(str::to_string);
+        }
+        if let Some(p) = w.strip_prefix("--policy=") {
+            return Some(p.to_string());
+        }
     }
-    let mut prev_mode: Option<String> = None;
-    let mut out = Vec::with_capacity(log.records.len());
-    for (i, r) in log.records.iter().enumerate() {
-        let mut events: Vec<String> = r.events.clone();
-        if let Some(extra) = by_cycle.remove(&r.cycle) {
-            events.extend(extra.into_iter().map(str::to_string));
+    None
+}
+
+impl Review {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Also keep the why of `cycle` (`review --cycle N`), wherever it is in the log.
+    pub fn with_cycle(mut self, cycle: Option<u64>) -> Self {
+        self.asked_cycle = cycle;
+        self
+    }
+
+    /// Feed one item of the log.
+    pub fn push(&mut self, item: LogItem) {
+        match item {
+            LogItem::Header(h) => {
+                if self.header.is_none() {
+                    self.header = Some(*h);
+                }
+            }
+            LogItem::Record(r, inputs) => {
+                if let Some((prev, prev_inputs)) = self.pending.take() {
+                    self.finalize(*prev, &prev_inputs);
+                }
+                let mut r = r;
+                if let Some(extra) = self.pending_events.remove(&r.cycle) {
+                    r.events.extend(extra);
+                }
+                self.pending = Some((r, inputs));
+            }
+            LogItem::Event(e) => match &mut self.pending {
+                Some((r, _)) if r.cycle == e.cycle => r.events.push(e.event),
+                Some((r, _)) if e.cycle < r.cycle => self.attach_late_event(e.cycle, e.event),
+                _ => {
+                    if self.pending_events.len() < MAX_PENDING_EVENT_CYCLES
+                        || self.pending_events.contains_key(&e.cycle)
+                    {
+                        let v = self.pending_events.entry(e.cycle).or_default();
+                        if v.len() < MAX_ISSUES {
+                            v.push(e.event);
+                        }
+                    }
+                }
+            },
+            LogItem::Loss(n) => {
+                if let Some((prev, prev_inputs)) = self.pending.take() {
+                    self.finalize(*prev, &prev_inputs);
+                }
+                self.pending_loss += n;
+                self.summary.dropped += n;
+                if self.losses.len() < MAX_ISSUES {
+                    self.losses.push((self.summary.records, n));
+                }
+            }
+            LogItem::End => self.summary.ended_cleanly = true,
+            LogItem::Corrupted(i) => {
+                self.summary.corrupted_lines += 1;
+                if self.corrupted.len() < MAX_ISSUES {
+                    self.corrupted.push(i);
+                }
+            }
+            LogItem::Truncated(i) => {
+                self.summary.truncated = true;
+                self.truncated = Some(i);
+            }
+            LogItem::Note(n) => {
+                if self.notes.len() < MAX_ISSUES {
+                    self.notes.push(n);
+                }
+            }
+            LogItem::NewerSchema(v) => {
+                self.newer_schema = Some(self.newer_schema.unwrap_or(0).max(v));
+            }
         }
+    }
+
+    /// An event line for a cycle already reviewed (written after later records): onto its row
+    /// and phase as a span of its own.
+    fn attach_late_event(&mut self, cycle: u64, text: String) {
+        let at = self.rows.partition_point(|r| r.cycle < cycle);
+        let Some(row) = self.rows.get_mut(at).filter(|r| r.cycle == cycle) else {
+            return;
+        };
+        if self.spans.len() >= MAX_SPANS {
+            self.spans_omitted += 1;
+            return;
+        }
+        let id = self.spans.len();
+        self.spans.push(Span {
+            text: text.clone(),
+            first_cycle: cycle,
+            last_cycle: cycle,
+            count: 1,
+        });
+        row.events.push(id);
+        row.event_count += 1;
+        let mark = is_failsafe(&text).then(|| Mark::Failsafe(text));
+        if let Some(m) = &mark {
+            row.marks.push(m.clone());
+        }
+        if let Some(p) = self
+            .phases
+            .iter_mut()
+            .rev()
+            .find(|p| p.first_cycle <= cycle && cycle <= p.last_cycle)
+        {
+            p.events.push(id);
+            if let Some(m) = mark {
+                p.marks.push(m);
+            }
+        }
+    }
+
+    fn finalize(&mut self, r: DecisionRecord, inputs: &[Option<serde_json::Value>]) {
+        let s = &mut self.summary;
+        let index = s.records;
+        s.records += 1;
+        s.first_cycle.get_or_insert(r.cycle);
+        s.last_cycle = Some(r.cycle);
+        if let Some(t0) = self.first_time {
+            self.last_gap = Some((r.time_s - self.last_time).max(0.0));
+            s.duration_s = r.time_s - t0;
+        } else {
+            self.first_time = Some(r.time_s);
+        }
+        self.last_time = r.time_s;
+        self.tracking.push(&r);
+        s.conflicts += r.conflicts.len();
+        if let Some(res) = &r.resources {
+            s.degradations += res.degraded.len();
+        }
+        if let Some(g) = &r.guarantee {
+            if g.reallocation.is_some() {
+                s.reallocations += 1;
+            }
+            s.final_margins = g
+                .margins
+                .iter()
+                .take(MAX_SERIES)
+                .map(|(k, m)| {
+                    let goal = g.goals.get(k).copied();
+                    (k.clone(), FinalMargin { margin: *m, goal })
+                })
+                .collect();
+        }
+        for c in &r.commands {
+            let cat = categorize(&c.result);
+            s.outcomes.add(cat);
+            s.commands += 1;
+            if cat == Category::Failed {
+                s.failed_commands += 1;
+            }
+            if self.commands.len() < MAX_COMMANDS {
+                self.commands.push(CommandRow {
+                    cycle: r.cycle,
+                    time_s: r.time_s,
+                    command: c.clone(),
+                    category: cat,
+                });
+            } else {
+                self.commands_omitted += 1;
+            }
+        }
+        s.link_events += r.link_events.len();
+
+        // Marks.
         let mut marks = Vec::new();
-        for l in log.losses.iter().filter(|l| l.before_record == i) {
-            marks.push(Mark::Loss(l.dropped));
+        if self.pending_loss > 0 {
+            marks.push(Mark::Loss(self.pending_loss));
+            self.pending_loss = 0;
         }
-        let m = mode(r);
-        if let (Some(now), Some(before)) = (&m, &prev_mode)
+        let m = mode(&r);
+        if let (Some(now), Some(before)) = (&m, &self.prev_mode)
             && now != before
         {
+            s.mode_changes += 1;
             marks.push(Mark::Mode(format!("mode {before} → {now}")));
         }
         if m.is_some() {
-            prev_mode = m;
+            self.prev_mode = m;
         }
-        for e in events.iter().chain(&r.link_events) {
+        for e in r.events.iter().chain(&r.link_events) {
             if is_failsafe(e) {
                 marks.push(Mark::Failsafe(e.clone()));
             }
@@ -322,55 +487,236 @@ pub fn rows(log: &LogRead) -> Vec<Row> {
         if let Some(re) = r.guarantee.as_ref().and_then(|g| g.reallocation.as_ref()) {
             marks.push(Mark::Reallocated(re.reason.clone()));
         }
-        out.push(Row {
-            index: i,
-            events,
-            marks,
-        });
-    }
-    out
-}
 
-/// Group rows into Tables 4–7 shaped phases.
-pub fn phases(log: &LogRead, rows: &[Row]) -> Vec<Phase> {
-    let mut out: Vec<Phase> = Vec::new();
-    for row in rows {
-        let r = &log.records[row.index];
-        let res = r
-            .resources
-            .as_ref()
-            .map(|x| x.summary.clone())
-            .unwrap_or_default();
-        let same = out
-            .last()
-            .is_some_and(|p| p.state == r.state && p.actions == r.actions);
-        if !same {
-            out.push(Phase {
-                state: r.state.clone(),
-                actions: r.actions.clone(),
-                events: Vec::new(),
-                resources: Vec::new(),
-                first_cycle: r.cycle,
-                last_cycle: r.cycle,
-                start_s: r.time_s,
-                records: 0,
-                marks: Vec::new(),
-            });
-        }
-        let p = out.last_mut().expect("pushed above");
-        p.last_cycle = r.cycle;
-        p.records += 1;
-        for e in &row.events {
-            if !p.events.contains(e) {
-                p.events.push(e.clone());
+        // Event spans: a sentence also present in the previous cycle extends its span.
+        let consecutive = self
+            .prev_cycle
+            .is_some_and(|p| r.cycle == p + 1 || r.cycle == p);
+        let mut texts: Vec<&String> = Vec::new();
+        for e in &r.events {
+            if !texts.contains(&e) {
+                texts.push(e);
             }
         }
-        if !res.is_empty() && !p.resources.contains(&res) {
-            p.resources.push(res);
+        let mut started = Vec::new();
+        let mut still_open = HashMap::new();
+        for t in &texts {
+            match self.open_spans.get(*t) {
+                Some(&id) if consecutive => {
+                    let sp = &mut self.spans[id];
+                    sp.last_cycle = r.cycle;
+                    sp.count += 1;
+                    still_open.insert((*t).clone(), id);
+                }
+                _ => {
+                    if self.spans.len() < MAX_SPANS {
+                        let id = self.spans.len();
+                        self.spans.push(Span {
+                            text: (*t).clone(),
+                            first_cycle: r.cycle,
+                            last_cycle: r.cycle,
+                            count: 1,
+                        });
+                        started.push(id);
+                        still_open.insert((*t).clone(), id);
+                    } else {
+                        self.spans_omitted += 1;
+                    }
+                }
+            }
         }
-        p.marks.extend(row.marks.iter().cloned());
+        self.open_spans = still_open;
+        self.prev_cycle = Some(r.cycle);
+
+        // Phases.
+        let res = r.resources.as_ref().map(|x| x.summary.clone());
+        let same = self
+            .phases
+            .last()
+            .is_some_and(|p| p.state == r.state && p.actions == r.actions)
+            && self.phases_omitted == 0;
+        if !same {
+            if self.phases.len() < MAX_PHASES {
+                self.phases.push(Phase {
+                    state: r.state.clone(),
+                    actions: r.actions.clone(),
+                    events: Vec::new(),
+                    resources: Vec::new(),
+                    first_cycle: r.cycle,
+                    last_cycle: r.cycle,
+                    start_s: r.time_s,
+                    records: 0,
+                    marks: Vec::new(),
+                });
+            } else {
+                self.phases_omitted += 1;
+            }
+        }
+        if self.phases_omitted == 0
+            && let Some(p) = self.phases.last_mut()
+        {
+            p.last_cycle = r.cycle;
+            p.records += 1;
+            p.events.extend(started.iter().copied());
+            if let Some(x) = &res
+                && !x.is_empty()
+                && !p.resources.contains(x)
+                && p.resources.len() < 16
+            {
+                p.resources.push(x.clone());
+            }
+            for m in &marks {
+                if p.marks.len() < 64 && !p.marks.contains(m) {
+                    p.marks.push(m.clone());
+                }
+            }
+        }
+
+        // Plots.
+        let t = r.time_s;
+        for (name, p) in &r.probabilities {
+            let room = self.plots.probabilities.len() < MAX_SERIES;
+            match self.plots.probabilities.get_mut(name) {
+                Some(d) => d.push(t, *p),
+                None if room => {
+                    let mut d = Decimator::default();
+                    d.push(t, *p);
+                    self.plots.probabilities.insert(name.clone(), d);
+                }
+                None => self.plots.probability_names_not_drawn += 1,
+            }
+        }
+        if let Some(g) = &r.guarantee {
+            for (goal, m) in g.margins.iter().take(8) {
+                let e = self.plots.margins.entry(goal.clone()).or_default();
+                e.2.push(t, *m);
+                if let Some(gv) = g.goals.get(goal) {
+                    e.0.push(t, gv - m);
+                    e.1.push(t, *gv);
+                }
+            }
+        }
+        if let Some(x) = &r.resources {
+            self.plots.cpu_load.push(t, x.cpu_load);
+            self.plots.tiles_used.push(t, f64::from(x.tiles_used));
+        }
+        if let Some(a) = vehicle_f64(&r, "altitude_m") {
+            self.plots.altitude.push(t, a);
+        }
+        if let Some(b) = vehicle_f64(&r, "battery_pct") {
+            self.plots.battery.push(t, b);
+        }
+        if let Some((lon, lat)) = position(&r) {
+            self.plots.track.push(lon, lat);
+        }
+        for m in &marks {
+            if self.plots.marks.len() < MAX_MARKS {
+                self.plots.marks.push((t, m.clone()));
+            }
+        }
+
+        // Outcome inputs.
+        if self.crash.is_none() && (r.state == "crash" || r.state == "collision") {
+            self.crash = Some((r.state.clone(), r.cycle));
+        }
+        self.last = Some(LastRecord {
+            state: r.state.clone(),
+            cycle: r.cycle,
+            landing: r.state == "landing"
+                || r.state == "zone_ok"
+                || r.actions
+                    .iter()
+                    .any(|a| a == "land" || a == "replan_and_land"),
+            returning: r.actions.iter().any(|a| a == "return_to_base"),
+            altitude: vehicle_f64(&r, "altitude_m"),
+        });
+
+        // Rows and why.
+        if self.asked_cycle == Some(r.cycle) && self.asked_why.is_none() {
+            self.asked_why = Some(Why::of(&r, inputs));
+        }
+        if self.rows.len() < MAX_ROWS {
+            self.rows.push(Row {
+                cycle: r.cycle,
+                time_s: r.time_s,
+                state: r.state.clone(),
+                actions: r.actions.clone(),
+                events: started,
+                event_count: texts.len(),
+                resources: res,
+                marks,
+                why: Why::of(&r, inputs),
+            });
+        } else {
+            self.rows_omitted += 1;
+        }
+        let _ = index;
     }
-    out
+
+    /// Close the stream: judge the last record and word the outcome.
+    pub fn finish(&mut self) {
+        if let Some((prev, prev_inputs)) = self.pending.take() {
+            self.finalize(*prev, &prev_inputs);
+        }
+        let h = self.header.as_ref();
+        let last_step = h.and_then(|h| h.step_s).or(self.last_gap).unwrap_or(0.0);
+        let (steps, secs) = self.tracking.finish(last_step);
+        let s = &mut self.summary;
+        s.tracking_steps = steps;
+        s.tracking_s = secs;
+        s.policy = h.and_then(|h| h.policy.clone().or_else(|| policy_from_command(&h.command)));
+        s.scenario = h.and_then(|h| h.scenario.clone());
+        let mut out = match (&self.crash, &self.last) {
+            (_, None) => "no decision records".to_string(),
+            (Some((state, cycle)), _) => format!("crashed ({state} at cycle {cycle})"),
+            (None, Some(l)) if l.landing => match l.altitude {
+                Some(a) if a > 0.5 => format!("landing (log ends at {a:.1} m)"),
+                _ => "landed".into(),
+            },
+            (None, Some(l)) if l.returning => "returning to base".into(),
+            (None, Some(l)) => format!("log ends in state {} at cycle {}", l.state, l.cycle),
+        };
+        if self.last.is_some() {
+            if s.truncated {
+                out.push_str("; log truncated");
+            } else if !s.ended_cleanly {
+                out.push_str("; no end line (process stopped?)");
+            }
+        }
+        s.outcome = out;
+        if let Some(v) = self.newer_schema {
+            self.notes.insert(
+                0,
+                format!(
+                    "this log has schema {v}, newer than this companion reads ({}): fields it \
+                     does not know are ignored; upgrade companion for a full review",
+                    crate::record::SCHEMA_VERSION
+                ),
+            );
+        }
+    }
+
+    /// Review a whole stream of items (tests and callers with records in hand).
+    pub fn from_items(items: impl IntoIterator<Item = LogItem>, cycle: Option<u64>) -> Review {
+        let mut r = Review::new().with_cycle(cycle);
+        for i in items {
+            r.push(i);
+        }
+        r.finish();
+        r
+    }
+}
+
+/// Read and review a run folder or log file, one line at a time.
+pub fn review_path(input: &Path, cycle: Option<u64>) -> Result<Review, ReviewError> {
+    let stream = stream_log(input)?;
+    let mut rev = Review::new().with_cycle(cycle);
+    rev.files = stream.files().to_vec();
+    for item in stream {
+        rev.push(item?);
+    }
+    rev.finish();
+    Ok(rev)
 }
 
 /// Where the HTML goes when `--out` is not given: `report.html` in a run folder, or the log's
@@ -389,35 +735,65 @@ pub fn run(
     out: Option<&Path>,
     summary: bool,
 ) -> Result<Option<PathBuf>, ReviewError> {
-    let log = read_log(input)?;
-    let sum = summarize(&log);
-    let rows = rows(&log);
-    let phases = phases(&log, &rows);
-    for note in &log.notes {
-        eprintln!("note: {note}");
+    run_with_cycle(input, out, summary, None)
+}
+
+/// `companion review` with `--cycle N`: the why of cycle N in the terminal (and the report
+/// only when `--out` is given).
+pub fn run_with_cycle(
+    input: &Path,
+    out: Option<&Path>,
+    summary: bool,
+    cycle: Option<u64>,
+) -> Result<Option<PathBuf>, ReviewError> {
+    let rev = review_path(input, cycle)?;
+    for note in &rev.notes {
+        eprintln!("note: {}", text::clean(note));
     }
-    for c in &log.corrupted {
-        eprintln!("skipped {}:{}: {}", c.file.display(), c.line, c.reason);
+    for c in &rev.corrupted {
+        eprintln!(
+            "skipped {}:{}: {}",
+            text::clean(&c.file.display().to_string()),
+            c.line,
+            text::clean(&c.reason)
+        );
     }
-    if let Some(t) = &log.truncated {
-        eprintln!("truncated {}:{}: {}", t.file.display(), t.line, t.reason);
+    if let Some(t) = &rev.truncated {
+        eprintln!(
+            "truncated {}:{}: {}",
+            text::clean(&t.file.display().to_string()),
+            t.line,
+            text::clean(&t.reason)
+        );
     }
+    let color = std::io::stdout().is_terminal() && std::env::var_os("NO_COLOR").is_none();
     if summary {
-        let color = std::io::stdout().is_terminal() && std::env::var_os("NO_COLOR").is_none();
-        print!("{}", render_terminal(&log, &sum, &phases, color));
-        if out.is_none() {
-            return Ok(None);
+        print!("{}", render_terminal(&rev, color));
+    }
+    if let Some(c) = cycle {
+        match &rev.asked_why {
+            Some(w) => print!("{}", render_why(w, color)),
+            None => {
+                return Err(ReviewError::NoSuchCycle {
+                    cycle: c,
+                    first: rev.summary.first_cycle.unwrap_or(0),
+                    last: rev.summary.last_cycle.unwrap_or(0),
+                });
+            }
         }
+    }
+    if (summary || cycle.is_some()) && out.is_none() {
+        return Ok(None);
     }
     let path = out
         .map(Path::to_path_buf)
         .unwrap_or_else(|| default_report_path(input));
-    let html = render_html(&log, &sum, &rows, &phases);
+    let html = render_html(&rev);
     std::fs::write(&path, html).map_err(|source| ReviewError::Write {
         path: path.clone(),
         source,
     })?;
-    println!("report: {}", path.display());
+    println!("report: {}", text::clean(&path.display().to_string()));
     Ok(Some(path))
 }
 

@@ -1,8 +1,11 @@
 //! `companion review --summary`: the summary and the Tables 4–7 timeline as a terminal table.
 //! Colour only when asked (the caller passes `color` = stdout is a TTY and NO_COLOR unset).
+//! Every value from the log goes through [`clean`]: no control character or escape sequence
+//! from a log reaches the terminal.
 
-use super::{Mark, Phase, Summary};
-use crate::decision_log::LogRead;
+use super::text::clean;
+use super::why::Why;
+use super::{Mark, Review};
 use std::fmt::Write;
 
 struct Style {
@@ -45,12 +48,13 @@ fn fmt(v: f64) -> String {
     }
 }
 
-pub fn render_terminal(log: &LogRead, s: &Summary, phases: &[Phase], color: bool) -> String {
+pub fn render_terminal(rev: &Review, color: bool) -> String {
+    let s = &rev.summary;
     let st = Style { on: color };
     let mut o = String::new();
     let _ = writeln!(o, "{}", st.paint("1", "Summary"));
     let mut kv = |k: &str, v: String| {
-        let _ = writeln!(o, "  {k:<24} {v}");
+        let _ = writeln!(o, "  {:<24} {}", clean(k), clean(&v));
     };
     kv("outcome", s.outcome.clone());
     kv(
@@ -79,6 +83,10 @@ pub fn render_terminal(log: &LogRead, s: &Summary, phases: &[Phase], color: bool
     kv("degradations", s.degradations.to_string());
     kv("re-allocations", s.reallocations.to_string());
     kv(
+        "commands",
+        format!("{}: {}", s.commands, s.outcomes.describe()),
+    );
+    kv(
         "failed commands",
         format!("{} of {}", s.failed_commands, s.commands),
     );
@@ -88,7 +96,7 @@ pub fn render_terminal(log: &LogRead, s: &Summary, phases: &[Phase], color: bool
     if s.corrupted_lines > 0 {
         kv("corrupted lines", s.corrupted_lines.to_string());
     }
-    if let Some(t) = &log.truncated {
+    if let Some(t) = &rev.truncated {
         kv("truncated", format!("{}:{}", t.file.display(), t.line));
     }
     let _ = writeln!(o);
@@ -97,13 +105,18 @@ pub fn render_terminal(log: &LogRead, s: &Summary, phases: &[Phase], color: bool
     let headers = ["cycles", "State", "Set of actions", "Events", "Resources"];
     let widths = [9usize, 10, 44, 34, 18];
     let mut table: Vec<[Vec<String>; 5]> = Vec::new();
-    for p in phases {
+    for p in &rev.phases {
         let cycles = if p.first_cycle == p.last_cycle {
             p.first_cycle.to_string()
         } else {
             format!("{}-{}", p.first_cycle, p.last_cycle)
         };
-        let mut events: Vec<String> = p.events.clone();
+        let mut events: Vec<String> = p
+            .events
+            .iter()
+            .filter_map(|i| rev.spans.get(*i))
+            .map(|sp| sp.label().replace('–', "-"))
+            .collect();
         events.extend(p.marks.iter().map(Mark::text));
         let events = if events.is_empty() {
             "No event".to_string()
@@ -116,11 +129,11 @@ pub fn render_terminal(log: &LogRead, s: &Summary, phases: &[Phase], color: bool
             p.resources.join(" -> ")
         };
         table.push([
-            wrap(&cycles, widths[0]),
-            wrap(&p.state, widths[1]),
-            wrap(&p.actions.join(", "), widths[2]),
-            wrap(&events, widths[3]),
-            wrap(&res, widths[4]),
+            wrap(&clean(&cycles), widths[0]),
+            wrap(&clean(&p.state), widths[1]),
+            wrap(&clean(&p.actions.join(", ")), widths[2]),
+            wrap(&clean(&events), widths[3]),
+            wrap(&clean(&res), widths[4]),
         ]);
     }
     let line: String = widths
@@ -134,7 +147,7 @@ pub fn render_terminal(log: &LogRead, s: &Summary, phases: &[Phase], color: bool
     }
     let _ = writeln!(o, "{}", st.paint("1", head.trim_end_matches('|')));
     let _ = writeln!(o, "{line}");
-    for (row, p) in table.iter().zip(phases) {
+    for (row, p) in table.iter().zip(&rev.phases) {
         let height = row.iter().map(Vec::len).max().unwrap_or(1);
         let alert = p
             .marks
@@ -155,6 +168,20 @@ pub fn render_terminal(log: &LogRead, s: &Summary, phases: &[Phase], color: bool
             }
             let _ = writeln!(o, "{}", l.trim_end_matches('|').trim_end());
         }
+    }
+    if rev.phases_omitted > 0 {
+        let _ = writeln!(o, "  ({} more phases not listed)", rev.phases_omitted);
+    }
+    o
+}
+
+/// `review --cycle N`: the why of one cycle.
+pub fn render_why(w: &Why, color: bool) -> String {
+    let st = Style { on: color };
+    let mut o = String::new();
+    let _ = writeln!(o, "{}", st.paint("1", &format!("Why, cycle {}", w.cycle)));
+    for l in w.lines() {
+        let _ = writeln!(o, "{}", clean(&l));
     }
     o
 }

@@ -1,0 +1,503 @@
+//! `companion export RUN_OR_LOG --format mcap|csv [--out FILE]`: the decision records (and, for
+//! fly runs, the MAVLink telemetry of `flight.tlog`) in formats the field's viewers open.
+//!
+//! - MCAP (Foxglove, PlotJuggler): JSON messages with a JSON schema, one channel per record
+//!   field group (`/decisions/summary`, `/decisions/observations`, `/decisions/probabilities`,
+//!   `/decisions/proposals`, ...; one message per record on each) and one per MAVLink message
+//!   name (`/mavlink/HEARTBEAT`, ...). Log time: the run's start (header) plus `time_s`; tlog
+//!   frames keep their own receive time.
+//! - CSV (PlotJuggler, spreadsheets): one row per record, nested fields flattened into dotted
+//!   columns (`probabilities.P_sys`, `proposals.0.value`); lists of plain values joined by `;`.
+//!
+//! Both stream the log (CSV reads it twice: once for the columns, once for the rows).
+
+use crate::decision_log::{LogItem, ReadError, read_tlog, stream_log};
+use crate::record::DecisionRecord;
+use std::collections::{BTreeMap, BTreeSet};
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+/// Columns a CSV export holds at most (a hostile log with endless names is cut here, said on
+/// stderr).
+pub const MAX_CSV_COLUMNS: usize = 10_000;
+const MAX_DEPTH: usize = 6;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    Mcap,
+    Csv,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    #[error(transparent)]
+    Read(#[from] ReadError),
+    #[error("{path}: cannot write: {source}")]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: MCAP writer: {source}")]
+    Mcap {
+        path: PathBuf,
+        #[source]
+        source: mcap::McapError,
+    },
+}
+
+/// Record field groups, each an MCAP channel.
+pub const GROUPS: [&str; 10] = [
+    "summary",
+    "observations",
+    "evidence",
+    "probabilities",
+    "proposals",
+    "conflicts",
+    "resources",
+    "guarantee",
+    "commands",
+    "vehicle",
+];
+
+fn group_value(r: &serde_json::Value, group: &str) -> serde_json::Value {
+    let get = |k: &str| r.get(k).cloned().unwrap_or(serde_json::Value::Null);
+    let mut o = serde_json::Map::new();
+    o.insert("cycle".into(), get("cycle"));
+    o.insert("time_s".into(), get("time_s"));
+    match group {
+        "summary" => {
+            for k in ["state", "actions", "events", "link_events"] {
+                o.insert(k.into(), get(k));
+            }
+        }
+        "proposals" | "conflicts" | "commands" => {
+            o.insert(group.into(), get(group));
+        }
+        _ => {
+            // Maps and optional objects: their fields at top level, where plotting tools look.
+            if let Some(m) = r.get(group).and_then(|v| v.as_object()) {
+                for (k, v) in m {
+                    o.insert(k.clone(), v.clone());
+                }
+            }
+        }
+    }
+    serde_json::Value::Object(o)
+}
+
+fn schema_for(group: &str) -> String {
+    serde_json::json!({
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "title": format!("companion.decisions.{group}"),
+        "type": "object",
+        "properties": {
+            "cycle": {"type": "integer"},
+            "time_s": {"type": "number"}
+        },
+        "additionalProperties": true
+    })
+    .to_string()
+}
+
+/// `2025-06-01T12:00:00Z` -> nanoseconds since the Unix epoch (None when not in that form).
+pub fn rfc3339_ns(s: &str) -> Option<u64> {
+    let b = s.as_bytes();
+    if b.len() < 20 || b[4] != b'-' || b[7] != b'-' || b[10] != b'T' || b[13] != b':' {
+        return None;
+    }
+    let n = |a: usize, e: usize| s.get(a..e)?.parse::<i64>().ok();
+    let (y, mo, d, h, mi, se) = (
+        n(0, 4)?,
+        n(5, 7)?,
+        n(8, 10)?,
+        n(11, 13)?,
+        n(14, 16)?,
+        n(17, 19)?,
+    );
+    // Days from civil (H. Hinnant).
+    let y2 = if mo <= 2 { y - 1 } else { y };
+    let era = y2.div_euclid(400);
+    let yoe = y2 - era * 400;
+    let mp = (mo + 9) % 12;
+    let doy = (153 * mp + 2) / 5 + d - 1;
+    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+    let days = era * 146_097 + doe - 719_468;
+    let secs = days * 86_400 + h * 3600 + mi * 60 + se;
+    u64::try_from(secs).ok()?.checked_mul(1_000_000_000)
+}
+
+/// Where the export goes without `--out`: `export.mcap`/`export.csv` in a run folder, or beside
+/// a log file with the format's extension.
+pub fn default_out(input: &Path, format: Format) -> PathBuf {
+    let ext = match format {
+        Format::Mcap => "mcap",
+        Format::Csv => "csv",
+    };
+    if input.is_dir() {
+        input.join(format!("export.{ext}"))
+    } else {
+        input.with_extension(ext)
+    }
+}
+
+/// Counts of what an export wrote.
+#[derive(Debug, Default, Clone, PartialEq)]
+pub struct ExportStats {
+    pub records: usize,
+    /// MCAP channel topic -> messages written.
+    pub messages: BTreeMap<String, usize>,
+    pub columns: usize,
+    pub columns_dropped: usize,
+    pub tlog_frames: usize,
+}
+
+/// The `companion export` command.
+pub fn run(
+    input: &Path,
+    format: Format,
+    out: Option<&Path>,
+) -> Result<(PathBuf, ExportStats), ExportError> {
+    let path = out
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| default_out(input, format));
+    let stats = match format {
+        Format::Mcap => export_mcap(input, &path)?,
+        Format::Csv => export_csv(input, &path)?,
+    };
+    Ok((path, stats))
+}
+
+fn record_value(r: &DecisionRecord) -> serde_json::Value {
+    serde_json::to_value(r).unwrap_or(serde_json::Value::Null)
+}
+
+pub fn export_mcap(input: &Path, path: &Path) -> Result<ExportStats, ExportError> {
+    let werr = |source| ExportError::Write {
+        path: path.to_path_buf(),
+        source,
+    };
+    let merr = |source| ExportError::Mcap {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file = std::fs::File::create(path).map_err(werr)?;
+    let mut w = mcap::Writer::new(BufWriter::new(file)).map_err(merr)?;
+    let mut stats = ExportStats::default();
+    let mut channels: BTreeMap<String, u16> = BTreeMap::new();
+    let no_meta = BTreeMap::new();
+    let mut start_ns = 0u64;
+    let mut seq = 0u32;
+    for item in stream_log(input)? {
+        match item? {
+            LogItem::Header(h) => start_ns = rfc3339_ns(&h.started_utc).unwrap_or(0),
+            LogItem::Record(r, _) => {
+                stats.records += 1;
+                let v = record_value(&r);
+                let t = start_ns.saturating_add((r.time_s.max(0.0) * 1e9) as u64);
+                for g in GROUPS {
+                    let topic = format!("/decisions/{g}");
+                    let id = match channels.get(&topic) {
+                        Some(id) => *id,
+                        None => {
+                            let schema = w
+                                .add_schema(
+                                    &format!("companion.decisions.{g}"),
+                                    "jsonschema",
+                                    schema_for(g).as_bytes(),
+                                )
+                                .map_err(merr)?;
+                            let id = w
+                                .add_channel(schema, &topic, "json", &no_meta)
+                                .map_err(merr)?;
+                            channels.insert(topic.clone(), id);
+                            id
+                        }
+                    };
+                    let data = serde_json::to_vec(&group_value(&v, g)).unwrap_or_default();
+                    seq = seq.wrapping_add(1);
+                    w.write_to_known_channel(
+                        &mcap::records::MessageHeader {
+                            channel_id: id,
+                            sequence: seq,
+                            log_time: t,
+                            publish_time: t,
+                        },
+                        &data,
+                    )
+                    .map_err(merr)?;
+                    *stats.messages.entry(topic).or_default() += 1;
+                }
+            }
+            _ => {}
+        }
+    }
+    // Telemetry from the run folder's tlog, when there is one.
+    let tlog = if input.is_dir() {
+        input.join("flight.tlog")
+    } else {
+        input.with_file_name("flight.tlog")
+    };
+    if tlog.is_file() {
+        if let Ok((frames, _)) = read_tlog(&tlog) {
+            let mut ingest = crate::link::ingest::Ingest::new(None);
+            for f in frames {
+                let t = f.t_us.saturating_mul(1000);
+                let mut msgs = Vec::new();
+                ingest.push_each(&f.frame, |fr| {
+                    let name = mavlink::Message::message_name(fr.msg).to_string();
+                    let mut v = serde_json::to_value(fr.msg).unwrap_or(serde_json::Value::Null);
+                    if let Some(o) = v.as_object_mut() {
+                        o.insert("sysid".into(), fr.header.system_id.into());
+                        o.insert("compid".into(), fr.header.component_id.into());
+                    }
+                    msgs.push((name, v));
+                });
+                for (name, v) in msgs {
+                    stats.tlog_frames += 1;
+                    let topic = format!("/mavlink/{name}");
+                    let id = match channels.get(&topic) {
+                        Some(id) => *id,
+                        None => {
+                            let schema = serde_json::json!({"title": format!("mavlink.{name}"), "type": "object", "additionalProperties": true}).to_string();
+                            let sid = w
+                                .add_schema(
+                                    &format!("mavlink.{name}"),
+                                    "jsonschema",
+                                    schema.as_bytes(),
+                                )
+                                .map_err(merr)?;
+                            let id = w.add_channel(sid, &topic, "json", &no_meta).map_err(merr)?;
+                            channels.insert(topic.clone(), id);
+                            id
+                        }
+                    };
+                    seq = seq.wrapping_add(1);
+                    let data = serde_json::to_vec(&v).unwrap_or_default();
+                    w.write_to_known_channel(
+                        &mcap::records::MessageHeader {
+                            channel_id: id,
+                            sequence: seq,
+                            log_time: t,
+                            publish_time: t,
+                        },
+                        &data,
+                    )
+                    .map_err(merr)?;
+                    *stats.messages.entry(topic).or_default() += 1;
+                }
+            }
+        }
+    }
+    w.finish().map_err(merr)?;
+    Ok(stats)
+}
+
+/// Flatten a JSON value into dotted columns.
+fn flatten(prefix: &str, v: &serde_json::Value, depth: usize, out: &mut Vec<(String, String)>) {
+    use serde_json::Value as V;
+    let key = |k: &str| {
+        if prefix.is_empty() {
+            k.to_string()
+        } else {
+            format!("{prefix}.{k}")
+        }
+    };
+    match v {
+        V::Object(m) if depth < MAX_DEPTH => {
+            for (k, x) in m {
+                flatten(&key(k), x, depth + 1, out);
+            }
+        }
+        V::Array(a) if depth < MAX_DEPTH && a.iter().any(|x| x.is_object() || x.is_array()) => {
+            for (i, x) in a.iter().enumerate() {
+                flatten(&key(&i.to_string()), x, depth + 1, out);
+            }
+        }
+        V::Array(a) => {
+            let parts: Vec<String> = a.iter().map(scalar).collect();
+            out.push((prefix.to_string(), parts.join(";")));
+        }
+        other => out.push((prefix.to_string(), scalar(other))),
+    }
+}
+
+fn scalar(v: &serde_json::Value) -> String {
+    match v {
+        serde_json::Value::Null => String::new(),
+        serde_json::Value::String(s) => s.clone(),
+        other => other.to_string(),
+    }
+}
+
+/// One CSV field: quoted when needed; text that a spreadsheet would run as a formula gets a
+/// leading `'` (numbers are left alone).
+pub fn csv_field(s: &str) -> String {
+    let formula =
+        matches!(s.chars().next(), Some('=' | '+' | '-' | '@')) && s.parse::<f64>().is_err();
+    let s = if formula {
+        format!("'{s}")
+    } else {
+        s.to_string()
+    };
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s
+    }
+}
+
+fn record_columns(r: &DecisionRecord) -> Vec<(String, String)> {
+    let mut cols = Vec::new();
+    flatten("", &record_value(r), 0, &mut cols);
+    cols
+}
+
+pub fn export_csv(input: &Path, path: &Path) -> Result<ExportStats, ExportError> {
+    let werr = |source| ExportError::Write {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut stats = ExportStats::default();
+    // Pass 1: the columns, in first-seen order with cycle and time_s first.
+    let mut order: Vec<String> = vec!["cycle".into(), "time_s".into()];
+    let mut seen: BTreeSet<String> = order.iter().cloned().collect();
+    for item in stream_log(input)? {
+        if let LogItem::Record(r, _) = item? {
+            for (k, _) in record_columns(&r) {
+                if !seen.contains(&k) {
+                    if order.len() < MAX_CSV_COLUMNS {
+                        seen.insert(k.clone());
+                        order.push(k);
+                    } else {
+                        stats.columns_dropped += 1;
+                    }
+                }
+            }
+        }
+    }
+    let index: BTreeMap<&str, usize> = order
+        .iter()
+        .enumerate()
+        .map(|(i, k)| (k.as_str(), i))
+        .collect();
+    let file = std::fs::File::create(path).map_err(werr)?;
+    let mut w = BufWriter::new(file);
+    let head: Vec<String> = order.iter().map(|c| csv_field(c)).collect();
+    writeln!(w, "{}", head.join(",")).map_err(werr)?;
+    // Pass 2: the rows.
+    let mut row = vec![String::new(); order.len()];
+    for item in stream_log(input)? {
+        if let LogItem::Record(r, _) = item? {
+            row.iter_mut().for_each(String::clear);
+            for (k, v) in record_columns(&r) {
+                if let Some(i) = index.get(k.as_str()) {
+                    row[*i] = csv_field(&v);
+                }
+            }
+            writeln!(w, "{}", row.join(",")).map_err(werr)?;
+            stats.records += 1;
+        }
+    }
+    w.flush().map_err(werr)?;
+    stats.columns = order.len();
+    Ok(stats)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::decision_log::synthetic;
+
+    fn write_log(dir: &Path, n: u64) -> (PathBuf, Vec<DecisionRecord>) {
+        let recs = synthetic::mission(n);
+        let p = dir.join("decisions.jsonl");
+        let mut text = String::from(
+            "{\"kind\":\"header\",\"schema\":1,\"started_utc\":\"2025-06-01T12:00:00Z\",\"command\":\"companion simulate\"}\n",
+        );
+        for r in &recs {
+            text.push_str(&serde_json::to_string(r).unwrap());
+            text.push('\n');
+        }
+        text.push_str("{\"kind\":\"end\"}\n");
+        std::fs::write(&p, text).unwrap();
+        (p, recs)
+    }
+
+    #[test]
+    fn mcap_export_reads_back_one_message_per_record_on_every_channel() {
+        let dir = tempfile::tempdir().unwrap();
+        let (log, recs) = write_log(dir.path(), 60);
+        let out = dir.path().join("x.mcap");
+        let stats = export_mcap(&log, &out).unwrap();
+        assert_eq!(stats.records, 60);
+        let bytes = std::fs::read(&out).unwrap();
+        let mut per_topic: BTreeMap<String, usize> = BTreeMap::new();
+        let mut first_probs = None;
+        for m in mcap::MessageStream::new(&bytes).unwrap() {
+            let m = m.unwrap();
+            assert_eq!(m.channel.message_encoding, "json");
+            assert_eq!(m.channel.schema.as_ref().unwrap().encoding, "jsonschema");
+            if m.channel.topic == "/decisions/probabilities" && first_probs.is_none() {
+                first_probs = Some((
+                    m.log_time,
+                    serde_json::from_slice::<serde_json::Value>(&m.data).unwrap(),
+                ));
+            }
+            *per_topic.entry(m.channel.topic.clone()).or_default() += 1;
+        }
+        assert_eq!(per_topic.len(), GROUPS.len());
+        for g in GROUPS {
+            assert_eq!(per_topic[&format!("/decisions/{g}")], recs.len(), "{g}");
+        }
+        let (t, v) = first_probs.unwrap();
+        assert_eq!(t, rfc3339_ns("2025-06-01T12:00:00Z").unwrap());
+        for (k, p) in &recs[0].probabilities {
+            assert_eq!(v[k].as_f64(), Some(*p), "{k}");
+        }
+    }
+
+    #[test]
+    fn csv_export_has_one_row_per_record_with_flattened_columns() {
+        let dir = tempfile::tempdir().unwrap();
+        let (log, recs) = write_log(dir.path(), 30);
+        let out = dir.path().join("x.csv");
+        let stats = export_csv(&log, &out).unwrap();
+        assert_eq!(stats.records, 30);
+        let text = std::fs::read_to_string(&out).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 31);
+        let head: Vec<&str> = lines[0].split(',').collect();
+        assert_eq!(&head[..2], &["cycle", "time_s"]);
+        let name = recs[5].probabilities.keys().next().unwrap();
+        let col = head
+            .iter()
+            .position(|h| *h == format!("probabilities.{name}"))
+            .unwrap();
+        // Synthetic values hold no commas or quotes in these columns.
+        let row5: Vec<&str> = lines[6].split(',').collect();
+        assert_eq!(row5[0], "5");
+        assert_eq!(
+            row5[col].parse::<f64>().unwrap(),
+            recs[5].probabilities[name]
+        );
+    }
+
+    #[test]
+    fn csv_fields_are_quoted_and_formulas_defused() {
+        assert_eq!(csv_field("a,b"), "\"a,b\"");
+        assert_eq!(csv_field("say \"hi\""), "\"say \"\"hi\"\"\"");
+        assert_eq!(csv_field("=HYPERLINK(1)"), "'=HYPERLINK(1)");
+        assert_eq!(csv_field("-3.5"), "-3.5");
+    }
+
+    #[test]
+    fn rfc3339_parses_utc_times() {
+        assert_eq!(rfc3339_ns("1970-01-01T00:00:00Z"), Some(0));
+        assert_eq!(
+            rfc3339_ns("2000-03-01T00:00:01Z"),
+            Some(951_868_801_000_000_000)
+        );
+        assert_eq!(rfc3339_ns("junk"), None);
+    }
+}

@@ -1,0 +1,153 @@
+//! What became of each vehicle command, in categories an operator reads at a glance. The result
+//! strings are those of `CommandRecord.result` (link/command.rs `Outcome::label`, link/vehicle.rs,
+//! simulate's `SIMULATED`). Only real failures count as failed: a step sent and still awaiting
+//! its answer, a mode already set, a step skipped because an earlier one failed or the operator
+//! took over are each their own category.
+
+/// The category of one command result.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Category {
+    Accepted,
+    InProgress,
+    Already,
+    Skipped,
+    Denied,
+    Failed,
+    TimedOut,
+}
+
+impl Category {
+    pub const ALL: [Category; 7] = [
+        Category::Accepted,
+        Category::InProgress,
+        Category::Already,
+        Category::Skipped,
+        Category::Denied,
+        Category::Failed,
+        Category::TimedOut,
+    ];
+
+    pub fn label(self) -> &'static str {
+        match self {
+            Category::Accepted => "accepted",
+            Category::InProgress => "in progress",
+            Category::Already => "already",
+            Category::Skipped => "skipped",
+            Category::Denied => "denied",
+            Category::Failed => "failed",
+            Category::TimedOut => "timed out",
+        }
+    }
+
+    /// CSS class / data-attribute spelling.
+    pub fn class(self) -> &'static str {
+        match self {
+            Category::Accepted => "accepted",
+            Category::InProgress => "in-progress",
+            Category::Already => "already",
+            Category::Skipped => "skipped",
+            Category::Denied => "denied",
+            Category::Failed => "failed",
+            Category::TimedOut => "timed-out",
+        }
+    }
+
+    /// Worth a red mark: the vehicle refused, or the command failed or went unanswered.
+    pub fn is_bad(self) -> bool {
+        matches!(
+            self,
+            Category::Denied | Category::Failed | Category::TimedOut
+        )
+    }
+}
+
+/// Category of a `CommandRecord.result`. Unknown spellings count as failed, so nothing new hides.
+pub fn categorize(result: &str) -> Category {
+    let word = result
+        .split(|c: char| c == ' ' || c == '(')
+        .next()
+        .unwrap_or("")
+        .trim();
+    match word {
+        "ACCEPTED" | "SIMULATED" => Category::Accepted,
+        "SENT" | "PENDING" | "IN_PROGRESS" | "WAITING_READY" => Category::InProgress,
+        "ALREADY" => Category::Already,
+        // Not sent on purpose: an earlier step failed, a newer action set replaced it, the link
+        // was down, or commanding stopped (link loss, pilot takeover).
+        "SKIPPED" | "SUPERSEDED" | "NOT_SENT" | "CANCELLED" => Category::Skipped,
+        "DENIED" | "UNSUPPORTED" | "TEMPORARILY_REJECTED" | "NOT_READY" => Category::Denied,
+        "TIMEOUT" => Category::TimedOut,
+        // A mission transfer stopped by a cancel is a stop, not a failure.
+        "FAILED" if result.starts_with("FAILED (Cancelled") => Category::Skipped,
+        _ => Category::Failed,
+    }
+}
+
+/// Commands counted per category.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct OutcomeCounts {
+    counts: [usize; 7],
+}
+
+impl OutcomeCounts {
+    pub fn add(&mut self, c: Category) {
+        self.counts[c as usize] += 1;
+    }
+    pub fn get(&self, c: Category) -> usize {
+        self.counts[c as usize]
+    }
+    pub fn total(&self) -> usize {
+        self.counts.iter().sum()
+    }
+    /// "9 accepted, 3 in progress, 1 already" (categories with none left out).
+    pub fn describe(&self) -> String {
+        let parts: Vec<String> = Category::ALL
+            .iter()
+            .filter(|c| self.get(**c) > 0)
+            .map(|c| format!("{} {}", self.get(*c), c.label()))
+            .collect();
+        if parts.is_empty() {
+            "none".into()
+        } else {
+            parts.join(", ")
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn result_strings_fall_in_their_categories() {
+        for (r, c) in [
+            ("ACCEPTED", Category::Accepted),
+            ("ACCEPTED (verified 4 items)", Category::Accepted),
+            ("SIMULATED", Category::Accepted),
+            ("SENT", Category::InProgress),
+            ("IN_PROGRESS", Category::InProgress),
+            ("WAITING_READY (gps)", Category::InProgress),
+            ("ALREADY", Category::Already),
+            ("SKIPPED (earlier step failed)", Category::Skipped),
+            (
+                "SKIPPED (no zone reported; landing here)",
+                Category::Skipped,
+            ),
+            ("SUPERSEDED", Category::Skipped),
+            ("NOT_SENT (no link)", Category::Skipped),
+            ("CANCELLED (pilot took over)", Category::Skipped),
+            ("FAILED (Cancelled(\"link lost\"))", Category::Skipped),
+            ("DENIED", Category::Denied),
+            ("TEMPORARILY_REJECTED", Category::Denied),
+            ("NOT_READY (prearm)", Category::Denied),
+            ("UNSUPPORTED", Category::Denied),
+            ("FAILED", Category::Failed),
+            ("FAILED (no position/heading yet)", Category::Failed),
+            ("UNMAPPED (not in commands.toml)", Category::Failed),
+            ("something new", Category::Failed),
+            ("TIMEOUT", Category::TimedOut),
+        ] {
+            assert_eq!(categorize(r), c, "{r}");
+        }
+    }
+}
