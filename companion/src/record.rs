@@ -21,6 +21,13 @@ pub struct MdpProposal {
     pub value: f64,
     /// Solver iterations (horizon for finite-horizon solves).
     pub iterations: u32,
+    /// The named probabilities the solve read, with their values (`P_V3`: 0.91).
+    #[serde(default)]
+    pub inputs: BTreeMap<String, f64>,
+    /// Empty for the cycle's first solve; for a re-solve within the cycle, why (the resource
+    /// conflict that made the MDP's earlier choice impossible).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub reason: String,
 }
 
 /// A behaviour conflict between primitive actions and how the policy resolved it.
@@ -197,7 +204,7 @@ macro_rules! reuse_clone {
     };
 }
 
-reuse_clone!(MdpProposal { mdp, state, action, actions, value, iterations } maps {});
+reuse_clone!(MdpProposal { mdp, state, action, actions, value, iterations, reason } maps { inputs });
 reuse_clone!(Conflict { kept, dropped, rule } maps {});
 reuse_clone!(PlacementRecord {
     app, version, implementation, support, tiles, cpu_share, ms_per_frame
