@@ -351,7 +351,8 @@ impl<'m> Core<'m> {
         // evidence -> health (the platform's room comes from the core's own platform model)
         self.update_platform(obs);
         let room = self.platform_room(obs);
-        self.health.evidence_with_into(obs, &room, &mut rec.evidence);
+        self.health
+            .evidence_with_into(obs, &room, &mut rec.evidence);
         match self
             .health
             .evaluate_into(&rec.evidence, &mut rec.probabilities)
@@ -478,7 +479,11 @@ impl<'m> Core<'m> {
 
     /// The application the resource manager's activation nodes assess (tracking).
     fn assessed_app(&self) -> Option<&'m str> {
-        self.model.health.activations.first().map(|a| a.app.as_str())
+        self.model
+            .health
+            .activations
+            .first()
+            .map(|a| a.app.as_str())
     }
 
     /// Required rate of `app` now (section 4.3.2 model, relative speed from the observation
@@ -608,7 +613,11 @@ impl<'m> Core<'m> {
             .unwrap_or_default();
         let app_of = |a: &str| model.actions.get(a).and_then(|x| x.app.as_deref());
         let Some(k) = (0..rec.proposals.len()).rev().find(|&k| {
-            !sc.superseded.contains(&k) && rec.proposals[k].actions.iter().any(|a| app_of(a) == Some(app))
+            !sc.superseded.contains(&k)
+                && rec.proposals[k]
+                    .actions
+                    .iter()
+                    .any(|a| app_of(a) == Some(app))
         }) else {
             return false;
         };

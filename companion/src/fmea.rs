@@ -844,7 +844,10 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
                                 format!("states of `{tiles_node}` must be tile counts"),
                             )
                         })?;
-                    let numeric = spec_n.implementations.iter().any(|im| im.cpu_per_fps.is_some());
+                    let numeric = spec_n
+                        .implementations
+                        .iter()
+                        .any(|im| im.cpu_per_fps.is_some());
                     let has_perf = spec_n.performance.is_some();
                     let fits_rule: Box<dyn Fn(u32, usize, usize) -> bool> = if numeric {
                         // Catalogue-compiled: an implementation fits when its tiles are free, it

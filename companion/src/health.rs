@@ -132,7 +132,8 @@ impl HealthModel {
         files.sort();
         // Activation nodes naming a `variant` take its implementations from the one Table 2
         // (params/variants.toml with params/platform.toml).
-        let platform = crate::resources::load_platform(&params_dir.join(crate::resources::PLATFORM_FILE))?;
+        let platform =
+            crate::resources::load_platform(&params_dir.join(crate::resources::PLATFORM_FILE))?;
         let catalogue = crate::resources::load_variants(
             &params_dir.join(crate::resources::VARIANTS_FILE),
             &platform,
@@ -144,7 +145,9 @@ impl HealthModel {
                 let mut spec: crate::fmea::HmFile = crate::spec::read_toml(f)?;
                 crate::fmea::fill_from_catalogue(f, &mut spec, &catalogue, platform.cpu_cores)?;
                 for (node, n) in &spec.node {
-                    if let Some((app, version)) = n.variant.as_deref().and_then(|v| v.split_once('/')) {
+                    if let Some((app, version)) =
+                        n.variant.as_deref().and_then(|v| v.split_once('/'))
+                    {
                         let published = spec
                             .publish
                             .iter()
@@ -492,10 +495,12 @@ impl HealthModel {
                 ev.set_state(id, s);
             }
         }
-        m.engine.query(&ev).map_err(|error| HealthError::Inference {
-            manager: m.name.clone(),
-            error,
-        })?;
+        m.engine
+            .query(&ev)
+            .map_err(|error| HealthError::Inference {
+                manager: m.name.clone(),
+                error,
+            })?;
         // Its marginals no longer match the evidence the next cycle compares against.
         if let Some(f) = self.scratch.fresh.get_mut(i) {
             *f = false;
