@@ -311,3 +311,21 @@ fn table4_safety_leaves_v3_and_keeps_the_landing_search() {
     assert!(r.probabilities[&p] > 0.3, "{p} = {}", r.probabilities[&p]);
     assert!(r.probabilities["P_V3"] < 0.1);
 }
+
+/// Landing MDP's replan-and-land (Figure 12, A8), scenario emergency-landing: after the avoidance
+/// the 'T' zone is out of reach and, with P_battery capped by the failed energy guarantee, the
+/// landing MDP replans and lands from `zone_t_nok`, and that action runs.
+#[test]
+fn emergency_landing_replans_and_lands_from_zone_t_nok() {
+    for seed in 1..=3 {
+        let recs = run("emergency-landing", Policy::Safety, seed);
+        let r = recs
+            .iter()
+            .find(|r| r.actions.iter().any(|a| a == "replan_and_land"))
+            .unwrap_or_else(|| panic!("seed {seed}: replan_and_land never runs"));
+        let landing = r.proposals.iter().find(|p| p.mdp == "landing").unwrap();
+        assert_eq!(landing.state, "zone_t_nok");
+        assert_eq!(landing.action, "A8");
+        assert!(r.probabilities["P_battery"] < 0.1, "{}", r.probabilities["P_battery"]);
+    }
+}
