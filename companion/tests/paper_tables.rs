@@ -405,3 +405,25 @@ fn table6_safety_v2_gives_way_and_the_tracking_mdp_is_solved_again() {
         r.conflicts
     );
 }
+
+/// PANORAMA's mission file holds no second Table 2: a TIO whose tiles differ from its variant in
+/// params/variants.toml (V2 F on 2 tiles instead of 4) stops loading, naming the entry.
+#[test]
+fn table2_panorama_tios_must_match_variants_toml() {
+    let src = default_params_dir();
+    let dir = tempfile::tempdir().unwrap();
+    copy_dir(&src, dir.path());
+    let path = dir.path().join("missions/tracking.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let row = "variant = \"tracking/V2/F\", capability = 2.5, tiles = 4";
+    assert!(text.contains(row), "V2 F row as shipped");
+    std::fs::write(
+        &path,
+        text.replacen(row, &row.replace("tiles = 4", "tiles = 2"), 1),
+    )
+    .unwrap();
+    let e = companion::guarantee::load_mission(dir.path(), "tracking").expect_err("rejected");
+    assert!(e.entry.ends_with(".tiles"), "{e}");
+    assert!(e.entry.starts_with("tasks.tracking.tios["), "{e}");
+    assert!(e.reason.contains("params/variants.toml"), "{e}");
+}
