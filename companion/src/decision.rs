@@ -911,6 +911,43 @@ impl<'m> Core<'m> {
             },
             record,
         );
+        // The allocation's application alternatives (`V4.F`, `zone_t.F`) against what was placed.
+        let mut n_differs = 0;
+        if let (Some(cell), Some(res)) = (g.allocated(activity_index), &rec.resources) {
+            let cat = &self.model.resources.catalogue;
+            for token in cell.split_whitespace() {
+                let Some((version, imp)) = token.split_once('.') else {
+                    continue;
+                };
+                let Some(app) = cat
+                    .variants()
+                    .iter()
+                    .find(|v| v.version == version)
+                    .map(|v| v.app.as_str())
+                else {
+                    continue;
+                };
+                let Some(p) = res.placements.iter().find(|p| p.app == app) else {
+                    continue;
+                };
+                if p.version != version || p.implementation != imp {
+                    use std::fmt::Write;
+                    // Strings reused between cycles (the cycle allocates nothing once warm).
+                    if n_differs == record.plan_differs.len() {
+                        record.plan_differs.push(String::new());
+                    }
+                    let line = &mut record.plan_differs[n_differs];
+                    line.clear();
+                    let _ = write!(
+                        line,
+                        "{app}: allocation plans {token}, {} {} runs (chosen by the health models and MDPs; the allocation's alternative is its energy and duration estimate)",
+                        p.version, p.implementation
+                    );
+                    n_differs += 1;
+                }
+            }
+        }
+        record.plan_differs.truncate(n_differs);
         if let Some(r) = &record.reallocation {
             rec.events.push(format!("re-allocation: {}", r.reason));
         }

@@ -936,6 +936,18 @@ impl Guarantee {
         ia.cost.get(g).copied()
     }
 
+    /// Name of the implementation alternative in force for `activity` (a RAS cell, e.g.
+    /// `gps_vision lidar V4.F`).
+    pub fn allocated(&self, activity: usize) -> Option<&str> {
+        let p = &self.spec.problem;
+        let ia = p
+            .activities
+            .get(activity)?
+            .ias
+            .get(*self.choice.get(activity)?)?;
+        Some(ia.name.as_str())
+    }
+
     pub fn ras_rows(&self) -> &[RasRow] {
         &self.rows
     }

@@ -107,6 +107,10 @@ pub struct GuaranteeRecord {
     /// Resources reported failed so far (their IAs are excluded from re-allocations).
     #[serde(default)]
     pub failed_resources: Vec<String>,
+    /// Where the allocation in force plans another variant than the one placed this cycle, and
+    /// why (PANORAMA's alternative is its cost estimate; the BFM chooses what runs).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub plan_differs: Vec<String>,
 }
 
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -214,7 +218,8 @@ reuse_clone!(ResourcesRecord {
     free_tiles, failed_tiles, reconfiguration_ms, power_w
 } maps {});
 reuse_clone!(GuaranteeRecord {
-    activity, activity_name, reallocation, infeasible, infeasible_reason, failed_resources
+    activity, activity_name, reallocation, infeasible, infeasible_reason, failed_resources,
+    plan_differs
 } maps { margins, goals, drift });
 reuse_clone!(DecisionRecord {
     cycle, time_s, state, events, proposals, conflicts, actions, resources, guarantee, commands,

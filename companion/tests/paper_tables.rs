@@ -427,3 +427,37 @@ fn table2_panorama_tios_must_match_variants_toml() {
     assert!(e.entry.starts_with("tasks.tracking.tios["), "{e}");
     assert!(e.reason.contains("params/variants.toml"), "{e}");
 }
+
+/// PANORAMA's RAS and what runs: where the allocation in force plans another tracking variant
+/// than the one placed (RAS0 plans V4.F, the models run V3 under vibrations), the record says so
+/// and why; where they agree it says nothing.
+#[test]
+fn guarantee_record_says_where_the_allocation_and_the_placement_differ() {
+    let recs = run("complete-1", Policy::Safety, 1);
+    let r = recs
+        .iter()
+        .find(|r| r.actions.iter().any(|a| a == "track_v3"))
+        .unwrap();
+    let g = r.guarantee.as_ref().unwrap();
+    let planned = g
+        .plan_differs
+        .iter()
+        .find(|l| l.starts_with("tracking:"))
+        .unwrap_or_else(|| panic!("{:?}", g.plan_differs));
+    assert!(planned.contains("V3"), "{planned}");
+    for r in &recs {
+        let (Some(g), Some(res)) = (&r.guarantee, &r.resources) else {
+            continue;
+        };
+        for line in &g.plan_differs {
+            let placed = line.split(", ").nth(1).unwrap_or("");
+            assert!(
+                res.placements.iter().any(
+                    |p| placed.starts_with(&format!("{} {} runs", p.version, p.implementation))
+                ),
+                "cycle {}: {line}",
+                r.cycle
+            );
+        }
+    }
+}
