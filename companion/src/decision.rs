@@ -16,6 +16,7 @@ use crate::resources::ResourceSpec;
 use crate::spec::SpecError;
 use fpga_model::{PlatformState, Request};
 use mdp_engine::Workspace;
+use std::collections::BTreeMap;
 use std::path::Path;
 
 /// Which decision model drives a run.
@@ -146,6 +147,10 @@ pub struct Core<'m> {
     activity_started: Option<(usize, f64)>,
     /// Degradations and drops in force after the last cycle.
     last_degraded: Vec<String>,
+    /// What the applications other than the one the resource manager assesses occupied after
+    /// the last schedule (tiles, CPU share): the room the resource manager sees before solving.
+    others_tiles: u32,
+    others_cpu: f64,
     /// Number of names the health managers publish (a reused probability map holds exactly these).
     n_published: usize,
     scratch: Scratch<'m>,
@@ -176,6 +181,8 @@ struct Scratch<'m> {
     kept: Vec<&'m str>,
     owners: Vec<&'m str>,
     actions: Vec<&'m str>,
+    /// Proposals replaced by a re-solve of the same MDP within the cycle.
+    superseded: Vec<usize>,
     key: Vec<(&'m str, &'m str, u64)>,
     failed: Vec<String>,
 }
@@ -191,6 +198,9 @@ struct ScheduleMemo<'m> {
     after: PlatformState,
     record: ResourcesRecord,
 }
+
+/// At most this many re-solves per cycle (one per version the MDP may turn to is plenty).
+const MAX_RESOLVES: usize = 3;
 
 /// How many distinct recent schedules are remembered: alternating between two action sets
 /// (a vibration on/off stream) cycles through a few (state before, requests) pairs.
@@ -269,6 +279,8 @@ impl<'m> Core<'m> {
             failed_resources: Vec::new(),
             activity_started: None,
             last_degraded: Vec::new(),
+            others_tiles: 0,
+            others_cpu: 0.0,
             n_published: model.health.publishes().len(),
             scratch: Scratch::default(),
             schedules: Vec::new(),
@@ -336,8 +348,11 @@ impl<'m> Core<'m> {
         rec.vehicle.clear();
         self.cycle += 1;
 
-        // evidence -> health
-        self.health.evidence_into(obs, &mut rec.evidence);
+        // evidence -> health (the platform's room comes from the core's own platform model)
+        self.update_platform(obs);
+        let room = self.platform_room(obs);
+        self.health
+            .evidence_with_into(obs, &room, &mut rec.evidence);
         match self
             .health
             .evaluate_into(&rec.evidence, &mut rec.probabilities)
@@ -408,19 +423,21 @@ impl<'m> Core<'m> {
         }
         rec.proposals.truncate(n_proposals);
 
-        // behaviour arbitration
-        if let Err(e) =
-            model
-                .conflicts
-                .resolve_into(&sc.merged, policy, &mut sc.kept, &mut rec.conflicts)
-        {
-            rec.conflicts.clear();
-            rec.events.push(format!("arbitration: {e}"));
-            sc.kept.clone_from(&sc.merged);
+        // behaviour arbitration, then resource arbitration: application actions become variant
+        // requests on the platform
+        sc.superseded.clear();
+        self.arbitrate(&mut sc, obs, rec);
+        // A resource conflict the policy resolved against the assessed application (tracking):
+        // the resource manager sees the room this cycle's placements leave, the MDP that chose
+        // the application is solved again, and its new proposal is what runs.
+        for _ in 0..MAX_RESOLVES {
+            if !self.resolve_conflict(&mut sc, obs, rec) {
+                break;
+            }
+            self.arbitrate(&mut sc, obs, rec);
         }
-
-        // resource arbitration: application actions become variant requests on the platform
-        self.arbitrate_resources(&mut sc, obs, rec);
+        self.record_resource_conflicts(&sc, rec);
+        self.note_others(rec);
         fill_strings(&mut rec.actions, &sc.actions);
 
         // guarantee: PANORAMA margins on the activity being flown
@@ -449,6 +466,245 @@ impl<'m> Core<'m> {
         }
     }
 
+    /// Faults and monitor readings the shell reports, applied to the platform model.
+    fn update_platform(&mut self, obs: &Observations) {
+        let failed = obs.get("failed_tiles").unwrap_or(0.0).max(0.0) as usize;
+        // The last `failed` tiles are out of service (which ones fail does not matter to the model).
+        let n = self.platform.tiles.len();
+        for (i, t) in self.platform.tiles.iter_mut().enumerate() {
+            t.failed = i >= n.saturating_sub(failed);
+        }
+        self.platform.external_cpu_load = obs.get("external_cpu_load").unwrap_or(0.0).max(0.0);
+    }
+
+    /// The application the resource manager's activation nodes assess (tracking).
+    fn assessed_app(&self) -> Option<&'m str> {
+        self.model
+            .health
+            .activations
+            .first()
+            .map(|a| a.app.as_str())
+    }
+
+    /// Required rate of `app` now (section 4.3.2 model, relative speed from the observation
+    /// params/mission.toml's `rates` names).
+    fn required_fps(&self, app: &str, obs: &Observations) -> f64 {
+        let model = self.model;
+        let speed = model
+            .mission
+            .rates
+            .get(app)
+            .and_then(|obs_name| obs.get(obs_name))
+            .unwrap_or(0.0);
+        model
+            .resources
+            .required_fps(app, [0.0, 0.0], [speed, 0.0])
+            .unwrap_or(1.0)
+    }
+
+    /// Observations of the resource manager from the platform model: healthy tiles and CPU
+    /// headroom left beside the applications it must run beside (`others_*`), and the rate the
+    /// assessed application needs now. Empty when no activation node assesses an application.
+    fn platform_room(&self, obs: &Observations) -> [(&'static str, f64); 3] {
+        let Some(app) = self.assessed_app() else {
+            return [("", f64::NAN); 3];
+        };
+        let p = &self.model.resources.platform;
+        let healthy = self.platform.tiles.iter().filter(|t| !t.failed).count() as u32;
+        let free = healthy.saturating_sub(self.others_tiles);
+        let online = self.platform.cores_online.min(p.cpu_cores);
+        let headroom = p.cpu_budget * f64::from(online) / f64::from(p.cpu_cores)
+            - self.platform.external_cpu_load
+            - self.others_cpu;
+        [
+            ("free_tiles", f64::from(free)),
+            ("cpu_headroom", headroom.max(0.0)),
+            ("tracking_fps", self.required_fps(app, obs)),
+        ]
+    }
+
+    /// [`Core::platform_room`] written into the evidence.
+    fn platform_evidence(&self, obs: &Observations, evidence: &mut BTreeMap<String, String>) {
+        for (name, v) in self.platform_room(obs) {
+            if !name.is_empty() {
+                self.health.observe_into(name, v, evidence);
+            }
+        }
+    }
+
+    /// Remember what the applications the resource policy ranks above the assessed one occupy
+    /// after this cycle's schedule: those it must run beside. The ones ranked below give way to
+    /// it (BFM 7.3.2, mission policy: landing search gives way to tracking), so their room
+    /// counts as the assessed application's.
+    fn note_others(&mut self, rec: &DecisionRecord) {
+        let app = self.assessed_app();
+        let policy = self.model.resources.policy(self.policy.name()).ok();
+        let rank = |a: &str| policy.map_or(0, |p| p.rank(a));
+        let limit = app.map_or(usize::MAX, rank);
+        let (tiles, cpu) = rec.resources.as_ref().map_or((0, 0.0), |r| {
+            r.placements
+                .iter()
+                .filter(|p| Some(p.app.as_str()) != app && rank(&p.app) < limit)
+                .fold((0u32, 0.0), |(t, c), p| {
+                    (t + p.tiles.len() as u32, c + p.cpu_share)
+                })
+        });
+        self.others_tiles = tiles;
+        self.others_cpu = cpu;
+    }
+
+    /// Behaviour arbitration over the live proposals, then resource arbitration.
+    fn arbitrate(&mut self, sc: &mut Scratch<'m>, obs: &Observations, rec: &mut DecisionRecord) {
+        let model = self.model;
+        let policy = self.policy.name();
+        sc.merged.clear();
+        for (k, pr) in rec.proposals.iter().enumerate() {
+            if sc.superseded.contains(&k) {
+                continue;
+            }
+            for a in &pr.actions {
+                // Names borrowed from the model (the catalogue holds every MDP action).
+                let Some(x) = model.actions.get(a) else {
+                    continue;
+                };
+                if !sc.merged.contains(&x.id.as_str()) {
+                    sc.merged.push(x.id.as_str());
+                }
+            }
+        }
+        if let Err(e) =
+            model
+                .conflicts
+                .resolve_into(&sc.merged, policy, &mut sc.kept, &mut rec.conflicts)
+        {
+            rec.conflicts.clear();
+            rec.events.push(format!("arbitration: {e}"));
+            sc.kept.clone_from(&sc.merged);
+        }
+        self.arbitrate_resources(sc, obs, rec);
+    }
+
+    /// When the assessed application was requested but not placed: re-evaluate the resource
+    /// manager on the room this cycle's placements leave, solve the MDP that chose the
+    /// application again and record its new proposal. False when there is nothing to do or the
+    /// MDP's choice does not change.
+    fn resolve_conflict(
+        &mut self,
+        sc: &mut Scratch<'m>,
+        obs: &Observations,
+        rec: &mut DecisionRecord,
+    ) -> bool {
+        let model = self.model;
+        let Some(app) = self.assessed_app() else {
+            return false;
+        };
+        let Some(res) = &rec.resources else {
+            return false;
+        };
+        let requested = sc.key.iter().any(|k| k.0 == app);
+        if !requested || res.placements.iter().any(|p| p.app == app) {
+            return false;
+        }
+        let why = res
+            .dropped
+            .iter()
+            .find(|d| d.starts_with(app))
+            .cloned()
+            .unwrap_or_default();
+        let app_of = |a: &str| model.actions.get(a).and_then(|x| x.app.as_deref());
+        let Some(k) = (0..rec.proposals.len()).rev().find(|&k| {
+            !sc.superseded.contains(&k)
+                && rec.proposals[k]
+                    .actions
+                    .iter()
+                    .any(|a| app_of(a) == Some(app))
+        }) else {
+            return false;
+        };
+        // The room beside what was placed this cycle.
+        self.note_others(rec);
+        self.platform_evidence(obs, &mut rec.evidence);
+        let manager = &model.health.activations[0].manager;
+        if let Err(e) =
+            self.health
+                .reevaluate_manager_into(manager, &rec.evidence, &mut rec.probabilities)
+        {
+            rec.events.push(format!("health: {e}"));
+            return false;
+        }
+        let name = rec.proposals[k].mdp.clone();
+        let (Some(mdp), Some(shared)) = (self.mdps.get_mut(&name), model.mdps.get(&name)) else {
+            return false;
+        };
+        let _ = shared;
+        let Some(s) = mdp.state_index(&rec.proposals[k].state) else {
+            return false;
+        };
+        let d = match mdp.decide(
+            &mut self.workspace,
+            s,
+            &rec.probabilities,
+            self.policy.name(),
+            model.mission.horizon,
+        ) {
+            Ok(Some(d)) => d,
+            Ok(None) => return false,
+            Err(e) => {
+                rec.events.push(format!("{name}: {e}"));
+                return false;
+            }
+        };
+        let mut p = crate::record::MdpProposal::default();
+        mdp.proposal_into(s, &d, model.mission.horizon, &mut p);
+        if p.action == rec.proposals[k].action {
+            return false;
+        }
+        p.reason = format!("re-solved: {why}");
+        rec.proposals.push(p);
+        sc.superseded.push(k);
+        true
+    }
+
+    /// Each application the resource policy left out becomes a conflict entry: the rule (policy
+    /// rank and reason) and the action that gave way. A re-solve is one too: the earlier
+    /// proposal's action gave way to the new one.
+    fn record_resource_conflicts(&self, sc: &Scratch<'m>, rec: &mut DecisionRecord) {
+        let model = self.model;
+        let policy = self.policy.name();
+        for &k in &sc.superseded {
+            let old = &rec.proposals[k];
+            let new = rec.proposals[k + 1..]
+                .iter()
+                .rfind(|p| p.mdp == old.mdp)
+                .map_or(String::new(), |p| p.actions.join("+"));
+            rec.conflicts.push(crate::record::Conflict {
+                kept: new,
+                dropped: old.actions.clone(),
+                rule: format!("resource policy {policy}: {} re-solved", old.mdp),
+            });
+        }
+        let Some(res) = &rec.resources else {
+            return;
+        };
+        for d in &res.dropped {
+            let app = d.split(' ').next().unwrap_or("");
+            let gave_way: Vec<String> = sc
+                .kept
+                .iter()
+                .filter(|a| model.actions.get(a).and_then(|x| x.app.as_deref()) == Some(app))
+                .map(|a| a.to_string())
+                .collect();
+            if gave_way.is_empty() {
+                continue;
+            }
+            rec.conflicts.push(crate::record::Conflict {
+                kept: String::new(),
+                dropped: gave_way,
+                rule: format!("resource policy {policy}: {d}"),
+            });
+        }
+    }
+
     /// Request every application action's variant at the rate the situation needs, schedule them
     /// under the policy, and rewrite the action set (`sc.actions`) with what actually runs.
     fn arbitrate_resources(
@@ -458,15 +714,6 @@ impl<'m> Core<'m> {
         rec: &mut DecisionRecord,
     ) {
         let model = self.model;
-        // Faults and monitor readings the shell reports.
-        let failed = obs.get("failed_tiles").unwrap_or(0.0).max(0.0) as usize;
-        // The last `failed` tiles are out of service (which ones fail does not matter to the model).
-        let n = self.platform.tiles.len();
-        for (i, t) in self.platform.tiles.iter_mut().enumerate() {
-            t.failed = i >= n.saturating_sub(failed);
-        }
-        self.platform.external_cpu_load = obs.get("external_cpu_load").unwrap_or(0.0).max(0.0);
-
         sc.key.clear();
         sc.owners.clear();
         for &a in &sc.kept {
@@ -664,6 +911,43 @@ impl<'m> Core<'m> {
             },
             record,
         );
+        // The allocation's application alternatives (`V4.F`, `zone_t.F`) against what was placed.
+        let mut n_differs = 0;
+        if let (Some(cell), Some(res)) = (g.allocated(activity_index), &rec.resources) {
+            let cat = &self.model.resources.catalogue;
+            for token in cell.split_whitespace() {
+                let Some((version, imp)) = token.split_once('.') else {
+                    continue;
+                };
+                let Some(app) = cat
+                    .variants()
+                    .iter()
+                    .find(|v| v.version == version)
+                    .map(|v| v.app.as_str())
+                else {
+                    continue;
+                };
+                let Some(p) = res.placements.iter().find(|p| p.app == app) else {
+                    continue;
+                };
+                if p.version != version || p.implementation != imp {
+                    use std::fmt::Write;
+                    // Strings reused between cycles (the cycle allocates nothing once warm).
+                    if n_differs == record.plan_differs.len() {
+                        record.plan_differs.push(String::new());
+                    }
+                    let line = &mut record.plan_differs[n_differs];
+                    line.clear();
+                    let _ = write!(
+                        line,
+                        "{app}: allocation plans {token}, {} {} runs (chosen by the health models and MDPs; the allocation's alternative is its energy and duration estimate)",
+                        p.version, p.implementation
+                    );
+                    n_differs += 1;
+                }
+            }
+        }
+        record.plan_differs.truncate(n_differs);
         if let Some(r) = &record.reallocation {
             rec.events.push(format!("re-allocation: {}", r.reason));
         }

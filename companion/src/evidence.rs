@@ -134,10 +134,28 @@ impl ObservationMap {
     /// as last time (the steady state) the entries are rewritten in place and nothing is
     /// allocated once every state name has fitted in its entry.
     pub fn evidence_into(&self, obs: &Observations, out: &mut BTreeMap<String, String>) {
+        self.evidence_with_into(obs, &[], out)
+    }
+
+    /// As [`ObservationMap::evidence_into`], with `extra` (name, value) pairs taking the place
+    /// of the snapshot's values of those names (values the caller computes itself).
+    pub fn evidence_with_into(
+        &self,
+        obs: &Observations,
+        extra: &[(&str, f64)],
+        out: &mut BTreeMap<String, String>,
+    ) {
+        let value = |name: &str| {
+            extra
+                .iter()
+                .find(|(n, _)| *n == name)
+                .map(|&(_, v)| v)
+                .or_else(|| obs.get(name))
+        };
         let mut n = 0;
         let mut same = true;
         for o in &self.observations {
-            if let Some(s) = obs.get(&o.name).and_then(|v| o.state(v)) {
+            if let Some(s) = value(&o.name).and_then(|v| o.state(v)) {
                 n += 1;
                 match out.get_mut(o.node.as_str()) {
                     Some(v) => {
@@ -156,7 +174,7 @@ impl ObservationMap {
         }
         out.clear();
         for o in &self.observations {
-            if let Some(s) = obs.get(&o.name).and_then(|v| o.state(v)) {
+            if let Some(s) = value(&o.name).and_then(|v| o.state(v)) {
                 out.insert(o.node.clone(), s.to_string());
             }
         }

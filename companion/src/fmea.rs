@@ -87,11 +87,21 @@ pub struct Implementation {
     /// Free FPGA tiles it needs.
     #[serde(default)]
     pub tiles: u32,
-    /// Highest CPU-load state in which it still fits.
+    /// Highest CPU-load state in which it still fits (hand-written nodes).
+    #[serde(default)]
     pub cpu: String,
-    /// Fast enough when the performance node demands high speed.
+    /// Fast enough when the performance node demands high speed (hand-written nodes).
     #[serde(default)]
     pub fast: bool,
+    /// Compiled from the variant catalogue (`variant` key of the node): CPU share per frame per
+    /// second (SW ms / 1000 / cores). With it the node's `cpu` parent is a headroom node whose
+    /// states name their lower edges and its `performance` parent a required-rate node whose
+    /// states name their upper edges (fps).
+    #[serde(default)]
+    pub cpu_per_fps: Option<f64>,
+    /// Compiled from the catalogue: highest frame rate the implementation reaches.
+    #[serde(default)]
+    pub max_fps: Option<f64>,
 }
 
 #[derive(Debug, Clone, Default, Deserialize)]
@@ -125,6 +135,8 @@ pub struct NodeSpec {
     pub miss: Option<f64>,
     pub extra: Option<f64>,
     // activation.
+    /// `app/version` in params/variants.toml: the implementations are compiled from it.
+    pub variant: Option<String>,
     pub version: Option<String>,
     pub tiles: Option<String>,
     pub cpu: Option<String>,
@@ -235,7 +247,7 @@ fn default_states(role: &str) -> Option<Vec<String>> {
 }
 
 /// Parse `P(NODE = STATE)` or `1 - P(NODE = STATE)`.
-fn parse_publish(expr: &str) -> Option<(String, String, bool)> {
+pub fn parse_publish(expr: &str) -> Option<(String, String, bool)> {
     let e = expr.trim();
     let (complement, rest) = match e.strip_prefix("1") {
         Some(r) if r.trim_start().starts_with('-') => (true, r.trim_start()[1..].trim()),
@@ -266,6 +278,51 @@ fn check_prob(file: &Path, entry: &str, v: f64) -> Result<f64, SpecError> {
 pub fn load_hm(path: &Path) -> Result<CompiledHm, SpecError> {
     let spec: HmFile = read_toml(path)?;
     compile_hm(path, &spec)
+}
+
+/// Fill the implementations of every activation node that names a `variant` (`app/version`)
+/// from the variant catalogue (params/variants.toml): tiles, CPU share per fps on `cpu_cores`
+/// cores, highest rate. A node naming a variant must not list implementations of its own.
+pub fn fill_from_catalogue(
+    file: &Path,
+    spec: &mut HmFile,
+    catalogue: &fpga_model::Catalogue,
+    cpu_cores: u8,
+) -> Result<(), SpecError> {
+    for (n, node) in spec.node.iter_mut() {
+        let Some(v) = &node.variant else { continue };
+        let entry = format!("node.{n}.variant");
+        if !node.implementations.is_empty() {
+            return Err(err(
+                file,
+                format!("node.{n}.implementations"),
+                "a node naming a `variant` takes its implementations from params/variants.toml",
+            ));
+        }
+        let Some((app, version)) = v.split_once('/') else {
+            return Err(err(file, entry, format!("`{v}` is not `app/version`")));
+        };
+        let impls = catalogue.implementations(app, version);
+        if impls.is_empty() {
+            return Err(err(
+                file,
+                entry,
+                format!("no variant {app} {version} in params/variants.toml"),
+            ));
+        }
+        node.implementations = impls
+            .iter()
+            .map(|x| Implementation {
+                name: x.implementation.to_string(),
+                tiles: u32::from(x.tiles),
+                cpu: String::new(),
+                fast: false,
+                cpu_per_fps: Some(x.cpu_share_at(1.0, cpu_cores)),
+                max_fps: Some(x.max_fps()),
+            })
+            .collect();
+    }
+    Ok(())
 }
 
 /// Compile a parsed FMEA file; `file` names it in errors.
@@ -820,7 +877,7 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
                         return Err(err(
                             file,
                             entry("implementations"),
-                            "an activation node needs implementations",
+                            "an activation node needs implementations (or a `variant` of params/variants.toml)",
                         ));
                     }
                     let version_on = 1usize; // `activate` is the second state of a version node.
@@ -837,25 +894,80 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
                                 format!("states of `{tiles_node}` must be tile counts"),
                             )
                         })?;
-                    let mut impls = Vec::new();
-                    for (i, im) in spec_n.implementations.iter().enumerate() {
-                        let c = state_idx(
-                            &cpu_node,
-                            &im.cpu,
-                            format!("node.{n}.implementations[{i}].cpu"),
-                        )?;
-                        impls.push((im.tiles, c, im.fast));
-                    }
+                    let numeric = spec_n
+                        .implementations
+                        .iter()
+                        .any(|im| im.cpu_per_fps.is_some());
                     let has_perf = spec_n.performance.is_some();
+                    let fits_rule: Box<dyn Fn(u32, usize, usize) -> bool> = if numeric {
+                        // Catalogue-compiled: an implementation fits when its tiles are free, it
+                        // reaches the highest rate of the required-rate state, and its CPU share
+                        // at that rate is within the lowest headroom of the headroom state.
+                        let parse = |node: &str, key: &str| -> Result<Vec<f64>, SpecError> {
+                            states[node]
+                                .iter()
+                                .map(|s| s.parse::<f64>().ok().filter(|x| x.is_finite()))
+                                .collect::<Option<Vec<f64>>>()
+                                .ok_or_else(|| {
+                                    err(
+                                        file,
+                                        entry(key),
+                                        format!("states of `{node}` must be numbers"),
+                                    )
+                                })
+                        };
+                        let headroom = parse(&cpu_node, "cpu")?;
+                        let perf_node = spec_n.performance.clone().ok_or_else(|| {
+                            err(
+                                file,
+                                entry("performance"),
+                                "a catalogue-compiled activation node needs a required-rate `performance` node",
+                            )
+                        })?;
+                        let rate = parse(&perf_node, "performance")?;
+                        let impls: Vec<(u32, f64, f64)> = spec_n
+                            .implementations
+                            .iter()
+                            .map(|im| {
+                                (
+                                    im.tiles,
+                                    im.cpu_per_fps.unwrap_or(0.0),
+                                    im.max_fps.unwrap_or(f64::INFINITY),
+                                )
+                            })
+                            .collect();
+                        Box::new(move |free, cpu, perf| {
+                            let fps = rate[perf];
+                            impls.iter().any(|&(t, per_fps, max_fps)| {
+                                let share = per_fps * fps;
+                                free >= t
+                                    && max_fps * (1.0 + 1e-9) >= fps
+                                    && (share <= 0.0 || share <= headroom[cpu] + 1e-9)
+                            })
+                        })
+                    } else {
+                        let mut impls = Vec::new();
+                        for (i, im) in spec_n.implementations.iter().enumerate() {
+                            let c = state_idx(
+                                &cpu_node,
+                                &im.cpu,
+                                format!("node.{n}.implementations[{i}].cpu"),
+                            )?;
+                            impls.push((im.tiles, c, im.fast));
+                        }
+                        Box::new(move |free, cpu, perf| {
+                            let need_fast = has_perf && perf != 0;
+                            impls
+                                .iter()
+                                .any(|&(t, c, fast)| free >= t && cpu <= c && (fast || !need_fast))
+                        })
+                    };
                     Box::new(move |a| {
                         if a[0] != version_on {
                             return Ok(vec![1.0, 0.0]);
                         }
-                        let (free, cpu) = (tile_counts[a[1]], a[2]);
-                        let need_fast = has_perf && a[3] != 0;
-                        let fits = impls
-                            .iter()
-                            .any(|&(t, c, fast)| free >= t && cpu <= c && (fast || !need_fast));
+                        let perf = if has_perf { a[3] } else { 0 };
+                        let fits = fits_rule(tile_counts[a[1]], a[2], perf);
                         let p = if fits { p_fit } else { p_nofit };
                         Ok(vec![1.0 - p, p])
                     })

@@ -185,7 +185,8 @@ struct TioFile {
     /// FPGA tiles occupied while active.
     #[serde(default)]
     tiles: u32,
-    /// Variant catalogue reference (app/version/implementation), informative.
+    /// Variant catalogue reference (app/version/implementation): loaded from a params directory,
+    /// `tiles` and `cpu_load` must be that variant's (params/variants.toml is the one Table 2).
     #[serde(default)]
     variant: Option<String>,
     #[serde(default)]
@@ -278,7 +279,75 @@ pub fn mission_path(params_dir: &Path, mission: &str) -> PathBuf {
 pub fn load_mission(params_dir: &Path, mission: &str) -> Result<MissionSpec, SpecError> {
     let path = mission_path(params_dir, mission);
     let file: MissionFile = read_toml(&path)?;
+    let platform =
+        crate::resources::load_platform(&params_dir.join(crate::resources::PLATFORM_FILE))?;
+    let catalogue = crate::resources::load_variants(
+        &params_dir.join(crate::resources::VARIANTS_FILE),
+        &platform,
+    )?;
+    check_against_catalogue(&path, &file, &catalogue)?;
     compile(&path, file)
+}
+
+/// Every TIO naming a `variant` (`app/version/implementation`) must occupy what
+/// params/variants.toml says: its tiles, and as `cpu_load` its SW milliseconds per frame / 1000
+/// (cores' worth at one frame per second).
+fn check_against_catalogue(
+    path: &Path,
+    f: &MissionFile,
+    catalogue: &fpga_model::Catalogue,
+) -> Result<(), SpecError> {
+    for (task, t) in &f.tasks {
+        for (i, tio) in t.tios.iter().enumerate() {
+            let Some(v) = &tio.variant else { continue };
+            let entry = format!("tasks.{task}.tios[{i}]");
+            // `app/version/implementation`, or `app/version` for a version with one implementation.
+            let mut parts = v.splitn(3, '/');
+            let (Some(app), Some(version), imp) = (parts.next(), parts.next(), parts.next()) else {
+                return Err(SpecError::new(
+                    path,
+                    format!("{entry}.variant"),
+                    format!("`{v}` is not app/version[/implementation]"),
+                ));
+            };
+            let impls = catalogue.implementations(app, version);
+            let found = match imp {
+                Some(imp) => impls.into_iter().find(|x| x.implementation.to_string() == imp),
+                None if impls.len() == 1 => impls.into_iter().next(),
+                None => None,
+            };
+            let Some(x) = found else {
+                return Err(SpecError::new(
+                    path,
+                    format!("{entry}.variant"),
+                    format!("no single variant `{v}` in params/variants.toml"),
+                ));
+            };
+            if tio.tiles != u32::from(x.tiles) {
+                return Err(SpecError::new(
+                    path,
+                    format!("{entry}.tiles"),
+                    format!(
+                        "{} tiles, params/variants.toml gives {v} {} tiles",
+                        tio.tiles, x.tiles
+                    ),
+                ));
+            }
+            let cpu = x.sw_ms() / 1000.0;
+            if (tio.cpu_load - cpu).abs() > 1e-9 {
+                return Err(SpecError::new(
+                    path,
+                    format!("{entry}.cpu_load"),
+                    format!(
+                        "{}, params/variants.toml gives {v} {} ms of SW per frame ({cpu})",
+                        tio.cpu_load,
+                        x.sw_ms()
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Parse a mission from TOML text (`path` only names it in errors).
@@ -865,6 +934,18 @@ impl Guarantee {
             .ias
             .get(*self.choice.get(activity)?)?;
         ia.cost.get(g).copied()
+    }
+
+    /// Name of the implementation alternative in force for `activity` (a RAS cell, e.g.
+    /// `gps_vision lidar V4.F`).
+    pub fn allocated(&self, activity: usize) -> Option<&str> {
+        let p = &self.spec.problem;
+        let ia = p
+            .activities
+            .get(activity)?
+            .ias
+            .get(*self.choice.get(activity)?)?;
+        Some(ia.name.as_str())
     }
 
     pub fn ras_rows(&self) -> &[RasRow] {

@@ -9,7 +9,7 @@
 //! mutable state, exposed by [`HealthModel::belief`] / [`HealthModel::set_belief`].
 
 use crate::evidence::ObservationMap;
-use crate::fmea::{CompiledHm, NodeInfo, Publish, load_hm};
+use crate::fmea::{CompiledHm, NodeInfo, Publish};
 use crate::observations::Observations;
 use crate::spec::SpecError;
 use bayes_net::{BnError, Engine, Evidence, NodeId};
@@ -68,8 +68,21 @@ impl Manager {
 pub struct HealthModel {
     pub managers: Vec<Manager>,
     pub observations: ObservationMap,
+    /// Activation nodes compiled from the variant catalogue, with what they publish.
+    pub activations: Vec<CatalogueActivation>,
     /// Buffers reused by [`HealthModel::evaluate_into`] so a warm evaluation allocates nothing.
     scratch: Scratch,
+}
+
+/// An activation node compiled from params/variants.toml (`variant = "app/version"`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CatalogueActivation {
+    pub manager: String,
+    pub node: String,
+    pub app: String,
+    pub version: String,
+    /// The probability names published from the node (`P_V3`).
+    pub published: Vec<String>,
 }
 
 #[derive(Debug, Clone, Default)]
@@ -117,12 +130,48 @@ impl HealthModel {
             .filter(|p| p.extension().is_some_and(|x| x == "toml"))
             .collect();
         files.sort();
+        // Activation nodes naming a `variant` take its implementations from the one Table 2
+        // (params/variants.toml with params/platform.toml).
+        let platform =
+            crate::resources::load_platform(&params_dir.join(crate::resources::PLATFORM_FILE))?;
+        let catalogue = crate::resources::load_variants(
+            &params_dir.join(crate::resources::VARIANTS_FILE),
+            &platform,
+        )?;
+        let mut activations = Vec::new();
         let hms = files
             .iter()
-            .map(|f| load_hm(f))
+            .map(|f| {
+                let mut spec: crate::fmea::HmFile = crate::spec::read_toml(f)?;
+                crate::fmea::fill_from_catalogue(f, &mut spec, &catalogue, platform.cpu_cores)?;
+                for (node, n) in &spec.node {
+                    if let Some((app, version)) =
+                        n.variant.as_deref().and_then(|v| v.split_once('/'))
+                    {
+                        let published = spec
+                            .publish
+                            .iter()
+                            .filter(|(_, e)| {
+                                crate::fmea::parse_publish(e).is_some_and(|(pn, _, _)| pn == *node)
+                            })
+                            .map(|(k, _)| k.clone())
+                            .collect();
+                        activations.push(CatalogueActivation {
+                            manager: spec.name.clone(),
+                            node: node.clone(),
+                            app: app.to_string(),
+                            version: version.to_string(),
+                            published,
+                        });
+                    }
+                }
+                crate::fmea::compile_hm(f, &spec)
+            })
             .collect::<Result<Vec<_>, _>>()?;
         let obs = ObservationMap::load(&params_dir.join("observations.toml"))?;
-        Self::from_parts(hms, obs)
+        let mut model = Self::from_parts(hms, obs)?;
+        model.activations = activations;
+        Ok(model)
     }
 
     /// Wire compiled managers together: resolve imports, order by them, check that publish
@@ -324,6 +373,7 @@ impl HealthModel {
         Ok(HealthModel {
             managers,
             observations,
+            activations: Vec::new(),
             scratch: Scratch::default(),
         })
     }
@@ -353,6 +403,44 @@ impl HealthModel {
         self.observations.evidence_into(obs, out)
     }
 
+    /// As [`HealthModel::evidence_into`], with `extra` values replacing the snapshot's.
+    pub fn evidence_with_into(
+        &self,
+        obs: &Observations,
+        extra: &[(&str, f64)],
+        out: &mut BTreeMap<String, String>,
+    ) {
+        self.observations.evidence_with_into(obs, extra, out)
+    }
+
+    /// Set the evidence of the observation `name` at `value` (its node, discretised by
+    /// params/observations.toml), replacing what the snapshot gave; false when params have no
+    /// such observation or the value is not finite. The decision core uses it for what it
+    /// computes itself (the room its platform model leaves, the rate tracking needs).
+    pub fn observe_into(
+        &self,
+        name: &str,
+        value: f64,
+        evidence: &mut BTreeMap<String, String>,
+    ) -> bool {
+        let Some(o) = self.observations.get(name) else {
+            return false;
+        };
+        let Some(s) = o.state(value) else {
+            return false;
+        };
+        match evidence.get_mut(o.node.as_str()) {
+            Some(v) => {
+                v.clear();
+                v.push_str(s);
+            }
+            None => {
+                evidence.insert(o.node.clone(), s.to_string());
+            }
+        }
+        true
+    }
+
     /// Evaluate every manager under `evidence` (applied to each manager holding the node) and
     /// return all published probabilities; then advance the dynamic managers by one slice. Every
     /// node's [`Manager::marginal`] is computed (for reports; the cycle uses
@@ -377,6 +465,58 @@ impl HealthModel {
         out: &mut BTreeMap<String, f64>,
     ) -> Result<(), HealthError> {
         self.evaluate_impl(evidence, out, false)
+    }
+
+    /// Evaluate one manager again under `evidence` (its imported priors as the last evaluation
+    /// left them) and update its published probabilities in `out`. The dynamic managers do not
+    /// advance: the decision core uses it within a cycle, when a placement changed what the
+    /// resource manager observes. Unknown manager: nothing changes.
+    pub fn reevaluate_manager_into(
+        &mut self,
+        name: &str,
+        evidence: &BTreeMap<String, String>,
+        out: &mut BTreeMap<String, f64>,
+    ) -> Result<(), HealthError> {
+        let Some(i) = self.managers.iter().position(|m| m.name == name) else {
+            return Ok(());
+        };
+        let m = &mut self.managers[i];
+        let mut ev = Evidence::new();
+        for (node, state) in evidence {
+            let net = m.engine.network();
+            if let Some(id) = net.id(node) {
+                let s = net
+                    .state(id, state)
+                    .map_err(|_| HealthError::UnknownState {
+                        node: node.clone(),
+                        state: state.clone(),
+                        states: net.node(id).states.join(", "),
+                    })?;
+                ev.set_state(id, s);
+            }
+        }
+        m.engine
+            .query(&ev)
+            .map_err(|error| HealthError::Inference {
+                manager: m.name.clone(),
+                error,
+            })?;
+        // Its marginals no longer match the evidence the next cycle compares against.
+        if let Some(f) = self.scratch.fresh.get_mut(i) {
+            *f = false;
+        }
+        let m = &self.managers[i];
+        for &(k, id, s, complement) in &m.published {
+            let p = m.engine.marginal(id)[s];
+            let p = if complement { 1.0 - p } else { p };
+            match out.get_mut(m.publish[k].name.as_str()) {
+                Some(x) => *x = p,
+                None => {
+                    out.insert(m.publish[k].name.clone(), p);
+                }
+            }
+        }
+        Ok(())
     }
 
     /// `all`: every node's marginal (for reports), else the targets only.

@@ -345,6 +345,8 @@ impl MissionMdp {
             actions: self.does[d.action].clone(),
             value: d.value,
             iterations: horizon as u32,
+            inputs: self.vars.iter().cloned().zip(self.values.iter().copied()).collect(),
+            reason: String::new(),
         }
     }
 
@@ -356,6 +358,17 @@ impl MissionMdp {
         out.actions.clone_from(&self.does[d.action]);
         out.value = d.value;
         out.iterations = horizon as u32;
+        // Provenance: the named probabilities this solve read, at the values it read.
+        out.inputs.retain(|k, _| self.vars.contains(k));
+        for (name, &v) in self.vars.iter().zip(&self.values) {
+            match out.inputs.get_mut(name.as_str()) {
+                Some(x) => *x = v,
+                None => {
+                    out.inputs.insert(name.clone(), v);
+                }
+            }
+        }
+        out.reason.clear();
     }
 
     /// Evaluate every expression at `self.values` into the engine model.

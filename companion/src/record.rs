@@ -21,6 +21,13 @@ pub struct MdpProposal {
     pub value: f64,
     /// Solver iterations (horizon for finite-horizon solves).
     pub iterations: u32,
+    /// The named probabilities the solve read, with their values (`P_V3`: 0.91).
+    #[serde(default)]
+    pub inputs: BTreeMap<String, f64>,
+    /// Empty for the cycle's first solve; for a re-solve within the cycle, why (the resource
+    /// conflict that made the MDP's earlier choice impossible).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub reason: String,
 }
 
 /// A behaviour conflict between primitive actions and how the policy resolved it.
@@ -100,6 +107,10 @@ pub struct GuaranteeRecord {
     /// Resources reported failed so far (their IAs are excluded from re-allocations).
     #[serde(default)]
     pub failed_resources: Vec<String>,
+    /// Where the allocation in force plans another variant than the one placed this cycle, and
+    /// why (PANORAMA's alternative is its cost estimate; the BFM chooses what runs).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub plan_differs: Vec<String>,
 }
 
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -202,7 +213,7 @@ macro_rules! reuse_clone {
     };
 }
 
-reuse_clone!(MdpProposal { mdp, state, action, actions, value, iterations } maps {});
+reuse_clone!(MdpProposal { mdp, state, action, actions, value, iterations, reason } maps { inputs });
 reuse_clone!(Conflict { kept, dropped, rule } maps {});
 reuse_clone!(PlacementRecord {
     app, version, implementation, support, tiles, cpu_share, ms_per_frame
@@ -212,7 +223,8 @@ reuse_clone!(ResourcesRecord {
     free_tiles, failed_tiles, reconfiguration_ms, power_w
 } maps {});
 reuse_clone!(GuaranteeRecord {
-    activity, activity_name, reallocation, infeasible, infeasible_reason, failed_resources
+    activity, activity_name, reallocation, infeasible, infeasible_reason, failed_resources,
+    plan_differs
 } maps { margins, goals, drift });
 reuse_clone!(DecisionRecord {
     cycle, time_s, state, events, proposals, conflicts, actions, resources, guarantee, commands,

@@ -258,6 +258,9 @@ pub struct World<'a> {
     battery_wh: f64,
     zone_t_found: bool,
     zone_found: bool,
+    /// Step at which the last obstacle was avoided: the drone then flies the avoidance waypoint
+    /// and has left the route along which the 'T' zone is searched.
+    avoided_at: Option<u32>,
     /// Step at which each phase family was first entered (`tracking` for v0..v5).
     entered: BTreeMap<String, u32>,
     /// Per hazard: (start step, end step exclusive or u32::MAX) once triggered.
@@ -286,6 +289,7 @@ impl<'a> World<'a> {
             battery_wh: spec.vehicle.battery_wh,
             zone_t_found: false,
             zone_found: false,
+            avoided_at: None,
             entered: BTreeMap::new(),
             active: vec![None; scenario.hazards.len()],
             obstacle_unavoided_steps: 0,
@@ -382,6 +386,13 @@ impl<'a> World<'a> {
             if self.zone_t_found { 1.0 } else { 0.0 },
         );
         values.insert("zone_found".into(), if self.zone_found { 1.0 } else { 0.0 });
+        // The step after an avoidance the drone is at the waypoint it resulted in; from then on
+        // the 'T' zone, searched and kept in sight along the planned route, is out of reach
+        // (assumption: the paper's Tables 4-7 turn to the emergency area search after an obstacle).
+        let avoided = self.avoided_at.is_some_and(|s| self.step == s + 1);
+        values.insert("avoidance_wp".into(), if avoided { 1.0 } else { 0.0 });
+        let lost = self.avoided_at.is_some();
+        values.insert("zone_t_lost".into(), if lost { 1.0 } else { 0.0 });
         let remaining = match self.phase.as_str() {
             "base" | "wp1" => self.spec.route.waypoints as f64,
             "wpi" => {
@@ -462,6 +473,8 @@ impl<'a> World<'a> {
                 }
                 self.obstacle_unavoided_steps = 0;
                 events.push("obstacle avoided".into());
+                self.avoided_at = Some(self.step);
+                self.zone_t_found = false;
             } else {
                 self.obstacle_unavoided_steps += 1;
                 if self.obstacle_unavoided_steps > truth.obstacle_grace_steps {
@@ -472,7 +485,11 @@ impl<'a> World<'a> {
         }
 
         // Landing-zone search.
-        if has("search_zone_t") && !self.zone_t_found && self.rng.random::<f64>() < truth.p_zone_t {
+        if has("search_zone_t")
+            && !self.zone_t_found
+            && self.avoided_at.is_none()
+            && self.rng.random::<f64>() < truth.p_zone_t
+        {
             self.zone_t_found = true;
             events.push("'T' zone found".into());
         }

@@ -5,7 +5,8 @@ use companion::health::HealthModel;
 use companion::spec::{SpecError, default_params_dir};
 use std::path::{Path, PathBuf};
 
-/// Copy params/health and params/observations.toml into a temp dir, apply `edit` to one file.
+/// Copy params/health, params/observations.toml and the variant catalogue the activation nodes
+/// compile from (variants.toml, platform.toml) into a temp dir, apply `edit` to one file.
 fn load_edited(
     file: &str,
     edit: impl Fn(String) -> String,
@@ -17,11 +18,9 @@ fn load_edited(
         let p = f.unwrap().path();
         std::fs::copy(&p, dir.path().join("health").join(p.file_name().unwrap())).unwrap();
     }
-    std::fs::copy(
-        src.join("observations.toml"),
-        dir.path().join("observations.toml"),
-    )
-    .unwrap();
+    for f in ["observations.toml", "variants.toml", "platform.toml"] {
+        std::fs::copy(src.join(f), dir.path().join(f)).unwrap();
+    }
     let target: PathBuf = dir.path().join(file);
     let text = std::fs::read_to_string(&target).unwrap();
     let edited = edit(text.clone());
@@ -112,18 +111,12 @@ fn unknown_state_names() {
         "observation[1](wind_mps).states",
         "no state `gale`",
     );
-    // In an implementation's CPU state.
+    // An activation node naming a variant params/variants.toml does not have.
     expect_err(
         "health/resources.toml",
-        |t| {
-            t.replacen(
-                "{ name = \"S\", tiles = 0, cpu = \"low\" }",
-                "{ name = \"S\", tiles = 0, cpu = \"idle\" }",
-                1,
-            )
-        },
-        "node.R_V0.implementations[0].cpu",
-        "no state `idle`",
+        |t| t.replacen("variant = \"tracking/V0\"", "variant = \"tracking/V9\"", 1),
+        "node.R_V0.variant",
+        "no variant tracking V9",
     );
 }
 

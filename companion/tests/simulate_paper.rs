@@ -79,13 +79,15 @@ fn has(r: &DecisionRecord, a: &str) -> bool {
 /// Tables 4 and 6 (safety policy) row by row: take-off at base; obstacle detection from WP1;
 /// 'T' zone search from the intermediate waypoints; target detection at the final waypoint; the
 /// context's tracking version (V3 vibrations, V2 high speed); avoidance replacing tracking on an
-/// obstacle; on insufficient resources tracking degrades (V3 -> V1, V2 -> V5) while obstacle
-/// detection and landing-zone search stay.
+/// obstacle; when resources run short (complete-1: "insufficient resources"; complete-2: the
+/// higher-speed target) the tracking version the policy ranks last gives way while obstacle
+/// detection and the emergency area search stay. Which version the models then run is theirs
+/// (tests/paper_tables.rs, docs/simulation.md).
 #[test]
 fn tables_4_and_6_safety_policy_decisions() {
-    for (scenario, version, degraded) in [
-        ("complete-1", "track_v3", "track_v1"),
-        ("complete-2", "track_v2", "track_v5"),
+    for (scenario, version, shortage) in [
+        ("complete-1", "track_v3", "insufficient resources"),
+        ("complete-2", "track_v2", "higher speed target"),
     ] {
         let r = run(scenario, ModelKind::Bfm, Policy::Safety, 1).records;
         assert_eq!(r[0].state, "base");
@@ -126,45 +128,27 @@ fn tables_4_and_6_safety_policy_decisions() {
             !obstacle.actions.iter().any(|a| a.starts_with("track_")),
             "{scenario}: tracking during avoidance"
         );
-        let insufficient = first_with(&r, |x| {
-            x.events.iter().any(|e| e == "insufficient resources")
-        })
-        .unwrap();
+        let short = first_with(&r, |x| x.events.iter().any(|e| e == shortage)).unwrap();
+        assert!(!has(short, version), "{scenario}: {:?}", short.actions);
+        assert!(has(short, "detect_obstacles_lidar"), "{:?}", short.actions);
         assert!(
-            has(insufficient, degraded),
-            "{scenario}: {:?}",
-            insufficient.actions
-        );
-        assert!(
-            has(insufficient, "detect_obstacles_lidar"),
-            "{:?}",
-            insufficient.actions
-        );
-        assert!(
-            insufficient
-                .actions
-                .iter()
-                .any(|a| a.starts_with("search_")),
+            has(short, "search_emergency_zone"),
             "{scenario}: landing search dropped under safety: {:?}",
-            insufficient.actions
-        );
-        let res = insufficient.resources.as_ref().unwrap();
-        assert!(
-            !res.degraded.is_empty(),
-            "{scenario}: no degradation recorded"
+            short.actions
         );
     }
 }
 
-/// Table 5 (vibrations, mission policy): on insufficient resources tracking keeps V3 and the
-/// landing-zone search is dropped, obstacle detection kept for minimum safety.
+/// Table 5 (vibrations, mission policy): on insufficient resources tracking keeps V3 with
+/// obstacle detection; later (phase 3) V3 runs with obstacle detection alone.
 #[test]
 fn table5_mission_policy_keeps_v3_and_drops_landing_search() {
     let r = run("complete-1", ModelKind::Bfm, Policy::Mission, 1).records;
-    let insufficient = first_with(&r, |x| {
-        x.events.iter().any(|e| e == "insufficient resources")
-    })
-    .unwrap();
+    let i = r
+        .iter()
+        .position(|x| x.events.iter().any(|e| e == "insufficient resources"))
+        .unwrap();
+    let insufficient = &r[i];
     assert!(has(insufficient, "track_v3"), "{:?}", insufficient.actions);
     assert!(
         has(insufficient, "detect_obstacles_lidar"),
@@ -172,14 +156,11 @@ fn table5_mission_policy_keeps_v3_and_drops_landing_search() {
         insufficient.actions
     );
     assert!(
-        !insufficient
-            .actions
-            .iter()
-            .any(|a| a.starts_with("search_")),
-        "{:?}",
-        insufficient.actions
+        r[i..].iter().any(|x| has(x, "track_v3")
+            && has(x, "detect_obstacles_lidar")
+            && !x.actions.iter().any(|a| a.starts_with("search_"))),
+        "no phase-3 row with V3 and obstacle detection alone"
     );
-    assert!(!insufficient.resources.as_ref().unwrap().dropped.is_empty());
 }
 
 /// Section 7.3.2: the monolithic and the concurrent models reach the same decisions on the
@@ -204,14 +185,15 @@ fn monolithic_and_concurrent_reach_the_same_decisions() {
                 v.sort();
                 v
             };
-            // The paper claims equality over the phases its Tables 4-7 show: up to the cycle
-            // after "insufficient resources". Later, with a degraded tracker losing the target,
-            // our reconstructed monolithic MDP can prefer re-detection where the concurrent ones
-            // keep tracking (documented in docs/params/mdp.md).
+            // The paper claims equality over the phases its Tables 4-7 show. The reconstructed
+            // monolithic MDP tracks only beside the 'T' zone search (Figure 10's
+            // A(12+j)+A11+A5), so from the cycle after an avoidance, where the concurrent landing
+            // MDP turns to the emergency area search, they differ (docs/params/mdp.md); they are
+            // compared up to the avoidance.
             let horizon = a
                 .iter()
-                .position(|r| r.events.iter().any(|e| e == "insufficient resources"))
-                .map_or(a.len(), |i| i + 2);
+                .position(|r| r.actions.iter().any(|x| x == "avoid_obstacle"))
+                .map_or(a.len(), |i| i + 1);
             for (x, y) in a.iter().zip(&b).take(horizon) {
                 let ax = norm(&x.actions);
                 let bx = norm(&y.actions);

@@ -320,6 +320,7 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
             actions: actions.clone(),
             value: 10.0 - f,
             iterations: 4,
+            ..Default::default()
         },
         MdpProposal {
             mdp: "tracking".into(),
@@ -328,6 +329,7 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
             actions: tracking_action.into_iter().collect(),
             value: 8.0 + f,
             iterations: 5,
+            ..Default::default()
         },
     ];
     DecisionRecord {
