@@ -7,6 +7,7 @@ garbage, and which keeps a timestamped list of every MAVLink message the compani
   (what a companion sees when a telemetry radio fades: nothing arrives, what it sends is lost).
 * `cut()`: both TCP connections closed; the companion must reconnect (the relay accepts again).
 * `inject_garbage(n)` / `garbage_every(period)`: random bytes, and a frame with a broken CRC, to the companion.
+* `inject_unsigned(msg)`: a well-formed unsigned frame to the companion, impersonating the autopilot.
 * `sent`: (monotonic time, message, delivered) of everything the companion sent, parsed with pymavlink.
 """
 from __future__ import annotations
@@ -93,6 +94,18 @@ class Relay:
             self.malformed_frames += 1
         except OSError:
             pass
+
+    def inject_unsigned(self, msg: Any, srcsys: int = 1, srccomp: int = 1) -> bool:
+        """An unsigned frame towards the companion, as if from (srcsys, srccomp): an attacker on the link."""
+        pair = self._pair
+        if pair is None:
+            return False
+        frame = msg.pack(mavlink.MAVLink(None, srcSystem=srcsys, srcComponent=srccomp))
+        try:
+            pair[0].sendall(bytes(frame))
+            return True
+        except OSError:
+            return False
 
     # ---- queries ----
     def sent_between(self, t0: float, t1: float, types: Optional[set] = None) -> List[Any]:
