@@ -53,8 +53,10 @@ def pytest_configure(config: Any) -> None:
 def pytest_collection_modifyitems(config: Any, items: List[Any]) -> None:
     _, _, why_no_sitl = find_arducopter()
     for item in items:
-        if SITL_URL and item.get_closest_marker("standin_only"):
-            item.add_marker(pytest.mark.skip(reason=f"SITL_URL={SITL_URL}: this test needs the stand-in's hazard injection/recording"))
+        only = item.get_closest_marker("standin_only")
+        if SITL_URL and only:
+            why = only.kwargs.get("reason", "this test needs the stand-in's hazard injection/recording")
+            item.add_marker(pytest.mark.skip(reason=f"SITL_URL={SITL_URL}: {why}"))
         if why_no_sitl and item.get_closest_marker("real_autopilot"):
             item.add_marker(pytest.mark.skip(reason=why_no_sitl))
 
