@@ -369,9 +369,10 @@ class GcsObserver:
         with self._lock:
             return any(a for _, a in self.armed_times)
 
-    def arm_count(self) -> int:
+    def arm_count(self, since: float = 0.0) -> int:
+        """How many times the vehicle went from disarmed to armed (after `since`)."""
         with self._lock:
-            return sum(1 for _, a in self.armed_times if a)
+            return sum(1 for t, a in self.armed_times if a and t >= since)
 
     def reached_seqs(self) -> List[int]:
         with self._lock:
