@@ -95,11 +95,11 @@ else
     SITL_SPEEDUP=${SITL_SPEEDUP:-3} ./scripts/sitl_ardupilot.sh 2>&1 | tee "$log"
     rc=${PIPESTATUS[0]}
     set -e
-    counts=$(grep -E '^[0-9]+ (passed|failed|skipped|errors?|deselected)' "$log" | tail -1 | sed 's/=//g; s/^ *//; s/ *$//')
+    counts=$(grep -E '^[0-9]+ (passed|failed|skipped|errors?|deselected)' "$log" | tail -1 | sed 's/=//g; s/^ *//; s/ in [0-9.]*s.*$//')
     ardu_summary="ArduCopter SITL: ${counts:-no pytest summary}"
     rm -f "$log"
     [ "$rc" -eq 0 ] || { echo "$ardu_summary" >&2; exit "$rc"; }
-    done_ "$ardu_summary"
+    done_ "ok ($ardu_summary)"
   else
     ardu_summary="ArduCopter: no SITL binary (ARDUCOPTER_BIN or ../shared/sitl/ardupilot/; docs/sitl.md), not run"
     echo "$ardu_summary"
@@ -121,11 +121,11 @@ elif [ -d "$PX4_SITL_DIR" ] && [ -x scripts/sitl_px4.sh ]; then
   ./scripts/sitl_px4.sh 2>&1 | tee "$log"
   rc=${PIPESTATUS[0]}
   set -e
-  counts=$(grep -E '^[0-9]+ (passed|failed|skipped|errors?|deselected)' "$log" | tail -1 | sed 's/=//g; s/^ *//; s/ *$//')
+  counts=$(grep -E '^[0-9]+ (passed|failed|skipped|errors?|deselected)' "$log" | tail -1 | sed 's/=//g; s/^ *//; s/ in [0-9.]*s.*$//')
   px4_summary="PX4 SITL: ${counts:-no pytest summary}"
   rm -f "$log"
   [ "$rc" -eq 0 ] || { echo "$px4_summary" >&2; exit "$rc"; }
-  done_ "$px4_summary"
+  done_ "ok ($px4_summary)"
 else
   [ -d "$PX4_SITL_DIR" ] || px4_summary="PX4: no SITL (PX4_SITL_DIR or ../shared/sitl/px4; docs/sitl.md), not run"
   [ -x scripts/sitl_px4.sh ] || px4_summary="PX4: scripts/sitl_px4.sh not present, not run"
