@@ -1,25 +1,31 @@
 #!/usr/bin/env bash
-# Fly the companion against a real ArduCopter SITL, headless and without MAVProxy, then run the
-# sitl_tests that a real SITL can serve (everything not marked standin_only).
+# Fly the companion against a real ArduCopter SITL, headless and without MAVProxy: first the default
+# mission on one vehicle, then the real-autopilot tests (sitl_tests/test_real_*.py), each on a fresh
+# vehicle of its own (own working directory, own -I instance, -w), several side by side.
 #
 #   ARDUPILOT_DIR=~/ardupilot scripts/sitl_ardupilot.sh      # a built tree: ./waf configure --board sitl && ./waf copter
 #   ARDUCOPTER_BIN=/path/to/arducopter SITL_DEFAULTS=/path/to/copter.parm scripts/sitl_ardupilot.sh
 #
 # The arducopter flags are the SITL binary's own (libraries/AP_HAL_SITL/SITL_cmdline.cpp: --model,
 # --speedup, --defaults, -I/--instance, --home lat,lng,alt,yaw, -w/--wipe), the ones
-# Tools/autotest/sim_vehicle.py passes for `-v ArduCopter -f quad` with --no-mavproxy. Ports (instance 0):
-# SERIAL0 tcp 5760 (SITL waits for a client there before it runs), SERIAL1 tcp 5762 (the companion),
-# SERIAL2 tcp 5763 (the onboard-monitor test client, and PARAM_SET for the hazard tests).
+# Tools/autotest/sim_vehicle.py passes for `-v ArduCopter -f quad` with --no-mavproxy. Ports (instance N):
+# SERIAL0 tcp 5760+10N (SITL waits for a client there before it runs), SERIAL1 tcp 5762+10N (the
+# companion), SERIAL2 tcp 5763+10N (the onboard-monitor test client).
+#
+# Everything runs in its own network namespace (unshare -n, loopback only) when that is possible (root),
+# so no SITL port is reachable from outside and nothing collides with other SITLs on the machine.
 #
 # Environment:
 #   ARDUPILOT_DIR / ARDUCOPTER_BIN   where ArduCopter SITL is (one of them is required)
 #   SITL_DEFAULTS     defaults file     (default $ARDUPILOT_DIR/Tools/autotest/default_params/copter.parm)
-#   SITL_SPEEDUP      SIM speedup       (default 1: the companion's link timers are wall-clock)
+#   SITL_SPEEDUP      SIM speedup of the default-mission flight (default 1)
 #   SITL_HOME         lat,lng,alt,yaw   (default CMAC, -35.363261,149.165230,584,353)
 #   SITL_FLY_TIMEOUT  seconds for the default-mission flight (default 600)
-#   SITL_PYTEST_ARGS  extra pytest arguments (default none); the tests run one at a time on one SITL
+#   SITL_WORKERS      vehicles flown side by side by the tests (pytest-xdist workers, default 4)
+#   SITL_PYTEST_ARGS  extra pytest arguments (default none)
 #   COMPANION_BIN     the companion binary (default: built with cargo)
 set -euo pipefail
+SELF=$(realpath "$0")
 cd "$(dirname "$0")/.."
 ROOT=$PWD
 
@@ -40,6 +46,18 @@ if [ -z "$DEFAULTS" ]; then
   DEFAULTS=$ARDUPILOT_DIR/Tools/autotest/default_params/copter.parm
 fi
 [ -f "$DEFAULTS" ] || fail "no defaults file at $DEFAULTS"
+BIN=$(realpath "$BIN")
+DEFAULTS=$(realpath "$DEFAULTS")
+
+# ---- its own network namespace (loopback only) ----------------------------------------------------
+if [ -z "${SITL_NETNS:-}" ]; then
+  if [ "$(id -u)" = 0 ] && command -v unshare >/dev/null && unshare -n true 2>/dev/null; then
+    export SITL_NETNS=1 ARDUCOPTER_BIN=$BIN SITL_DEFAULTS=$DEFAULTS
+    exec unshare -n bash -c 'ip link set lo up && exec "$0" "$@"' "$SELF" "$@"
+  fi
+  echo "sitl_ardupilot.sh: note: no network namespace (needs root and unshare): SITL ports listen on all addresses of this machine" >&2
+fi
+
 for port in 5760 5762 5763; do
   if ss -ltn "sport = :$port" 2>/dev/null | grep -q LISTEN; then
     fail "tcp port $port is already in use (another SITL or MAVProxy?); stop it first"
@@ -64,6 +82,7 @@ cleanup() {
   [ -n "$KEEPER_PID" ] && kill "$KEEPER_PID" 2>/dev/null || true
   [ -n "$SITL_PID" ] && kill "$SITL_PID" 2>/dev/null || true
   wait 2>/dev/null || true
+  KEEPER_PID="" SITL_PID=""
   echo "SITL log and runs: $WORK"
 }
 trap cleanup EXIT
@@ -106,8 +125,13 @@ fly_rc=$?
 set -e
 [ "$fly_rc" -eq 0 ] || fail "companion fly exited $fly_rc (run folder under $WORK/runs)"
 
-# ---- the sitl_tests a real SITL can serve ----------------------------------------------------------
-echo "== pytest sitl_tests against SITL (not standin_only)"
-export SITL_URL=tcp:127.0.0.1:5762 SITL_MONITOR_URL=tcp:127.0.0.1:5763
+# this vehicle has flown: the tests each start their own
+kill "$KEEPER_PID" "$SITL_PID" 2>/dev/null || true
+wait "$KEEPER_PID" "$SITL_PID" 2>/dev/null || true
+KEEPER_PID="" SITL_PID=""
+
+# ---- the real-autopilot tests: a fresh vehicle each ------------------------------------------------
+echo "== pytest sitl_tests/test_real_*.py: a fresh ArduCopter SITL per test, ${SITL_WORKERS:-4} side by side"
+export ARDUCOPTER_BIN=$BIN SITL_DEFAULTS=$DEFAULTS
 # shellcheck disable=SC2086
-.venv/bin/python -m pytest -q -p no:xdist sitl_tests -m "not standin_only" ${SITL_PYTEST_ARGS:-}
+.venv/bin/python -m pytest -q -n "${SITL_WORKERS:-4}" -p no:cacheprovider sitl_tests/test_real_*.py ${SITL_PYTEST_ARGS:-}

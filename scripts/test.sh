@@ -1,48 +1,148 @@
 #!/usr/bin/env bash
-# The full test suite, from a fresh machine: installs what it needs (a Python venv with pytest and
-# pymavlink, Debian's chromium for the review report test), then runs the Rust tests and the SITL tests.
+# The full test suite, from a fresh machine. It only adds to the machine: what is missing is installed
+# (Debian's chromium for the review report test with --no-upgrade --no-install-recommends; pytest and
+# pymavlink into the project's own .venv), nothing already there is upgraded. Then the Rust tests, the
+# SITL tests against the stand-in, the real-autopilot tests (when an ArduCopter SITL or PX4 SITL is found:
+# ARDUCOPTER_BIN/SITL_DEFAULTS and PX4_SITL_DIR, or ../shared/sitl/ beside the checkout), and the armv7 build.
+# One progress line per stage with its elapsed time.
+#
+#   SKIP_ARM=1        skip the armv7 cross-build and qemu run
+#   SKIP_REAL_SITL=1  skip the real-autopilot stage
 set -euo pipefail
 cd "$(dirname "$0")/.."
+ROOT=$PWD
+STAGES=8
+T_ALL=$SECONDS
 
-echo "== rust: cargo test (workspace)"
-cargo test --workspace --quiet 2>&1
+fmt() { printf '%dm%02ds' $(($1 / 60)) $(($1 % 60)); }
+stage_n=0
+stage_name=""
+stage_t=0
+begin() { stage_n=$((stage_n + 1)); stage_name=$1; stage_t=$SECONDS; echo "== [$stage_n/$STAGES] $stage_name ..."; }
+done_() { echo "== [$stage_n/$STAGES] $stage_name ... ${1:-ok} in $(fmt $((SECONDS - stage_t)))"; }
+trap 'rc=$?; [ $rc -ne 0 ] && echo "== [$stage_n/$STAGES] $stage_name ... FAILED (exit $rc) after $(fmt $((SECONDS - stage_t)))"; exit $rc' EXIT
 
-echo "== python: sitl_tests venv"
-if [ ! -x .venv/bin/python ]; then
-  python3 -m venv .venv
-fi
-.venv/bin/pip install --quiet --disable-pip-version-check -r sitl_tests/requirements.txt
+SUDO=""
+[ "$(id -u)" = 0 ] || SUDO="sudo"
 
-echo "== system: chromium for the review report test"
+# ---- 1: system packages, only those missing -------------------------------------------------------
+begin "system: packages the tests need (only missing ones, nothing upgraded)"
 if ! command -v chromium >/dev/null 2>&1; then
   if command -v apt-get >/dev/null 2>&1; then
-    SUDO=""
-    if [ "$(id -u)" != "0" ]; then SUDO="sudo"; fi
-    $SUDO apt-get update
-    $SUDO apt-get install -y chromium
+    $SUDO apt-get update -q >/dev/null
+    $SUDO apt-get install -y -q --no-upgrade --no-install-recommends chromium >/dev/null
   else
     echo "chromium is missing and apt-get is unavailable: install Debian's chromium (or put a chromium on PATH) to run sitl_tests/test_review_report.py" >&2
     exit 1
   fi
+  done_ "installed chromium"
+else
+  done_ "nothing missing"
 fi
 
-echo "== build: companion binary for sitl_tests"
-cargo build --quiet --bin companion
-export COMPANION_BIN="${CARGO_TARGET_DIR:-$PWD/target}/debug/companion"
+# ---- 2: python venv (pip installs into .venv only) ------------------------------------------------
+begin "python: sitl_tests venv"
+[ -x .venv/bin/python ] || python3 -m venv .venv
+if .venv/bin/python - <<'EOF' 2>/dev/null
+import importlib.metadata as md, re, sys
+for line in open("sitl_tests/requirements.txt"):
+    name = re.split(r"[<>=!~ \[]", line.strip())[0]
+    if name:
+        md.version(name)          # raises when missing
+EOF
+then
+  done_ "nothing missing"
+else
+  .venv/bin/pip install --quiet --disable-pip-version-check -r sitl_tests/requirements.txt
+  done_ "installed sitl_tests/requirements.txt into .venv"
+fi
 
-echo "== python: pytest sitl_tests"
+# ---- 3: rust ----------------------------------------------------------------------------------------
+begin "rust: cargo test (workspace)"
+cargo test --workspace --quiet 2>&1
+done_
+
+# ---- 4: the companion binary the python tests fly ---------------------------------------------------
+begin "build: companion binary for sitl_tests"
+cargo build --quiet --bin companion
+export COMPANION_BIN="${CARGO_TARGET_DIR:-$ROOT/target}/debug/companion"
+done_
+
+# ---- 5: sitl_tests against the stand-in ------------------------------------------------------------
+begin "python: pytest sitl_tests (stand-in)"
 set +e
-.venv/bin/python -m pytest -q -n 4 sitl_tests
+.venv/bin/python -m pytest -q -n 4 sitl_tests -m "not real_autopilot" --ignore-glob='sitl_tests/test_px4_*.py'
 rc=$?
 set -e
 # pytest exits 5 when it collected nothing; that is a failure of the suite, not a pass.
 [ "$rc" -eq 0 ] || exit "$rc"
+done_
 
-# The board: armv7 (the SoCKit's Cortex-A9) release binary, engine and companion tests under
-# qemu-user (docs/deploy-arm.md). SKIP_ARM=1 skips it on a developer's quick run.
-if [ "${SKIP_ARM:-0}" = 1 ]; then
-  echo "== arm: skipped (SKIP_ARM=1)"
+# ---- 6: real ArduCopter SITL, a fresh vehicle per test ---------------------------------------------
+begin "real autopilot: ArduCopter SITL tests"
+ardu_summary="ArduCopter: not run"
+if [ "${SKIP_REAL_SITL:-0}" = 1 ]; then
+  ardu_summary="ArduCopter: skipped (SKIP_REAL_SITL=1)"
+  done_ "skipped (SKIP_REAL_SITL=1)"
 else
-  echo "== arm: scripts/arm.sh"
-  ./scripts/arm.sh
+  ARDUCOPTER_BIN=${ARDUCOPTER_BIN:-$ROOT/../shared/sitl/ardupilot/arducopter}
+  SITL_DEFAULTS=${SITL_DEFAULTS:-$(dirname "$ARDUCOPTER_BIN")/copter.parm}
+  if [ -x "$ARDUCOPTER_BIN" ] && [ -f "$SITL_DEFAULTS" ]; then
+    export ARDUCOPTER_BIN SITL_DEFAULTS
+    log=$(mktemp "${TMPDIR:-/tmp}/sitl-ardupilot-log.XXXXXX")
+    set +e
+    # the default-mission flight judges only "exit 0, landed, disarmed": 3x physics is enough for it
+    SITL_SPEEDUP=${SITL_SPEEDUP:-3} ./scripts/sitl_ardupilot.sh 2>&1 | tee "$log"
+    rc=${PIPESTATUS[0]}
+    set -e
+    counts=$(grep -E '^[0-9]+ (passed|failed|skipped|errors?|deselected)' "$log" | tail -1 | sed 's/=//g; s/^ *//; s/ in [0-9.]*s.*$//')
+    ardu_summary="ArduCopter SITL: ${counts:-no pytest summary}"
+    rm -f "$log"
+    [ "$rc" -eq 0 ] || { echo "$ardu_summary" >&2; exit "$rc"; }
+    done_ "ok ($ardu_summary)"
+  else
+    ardu_summary="ArduCopter: no SITL binary (ARDUCOPTER_BIN or ../shared/sitl/ardupilot/; docs/sitl.md), not run"
+    echo "$ardu_summary"
+    done_ "not run: no ArduCopter SITL"
+  fi
 fi
+
+# ---- 7: real PX4 SITL --------------------------------------------------------------------------------
+begin "real autopilot: PX4 SITL tests"
+px4_summary="PX4: not run"
+PX4_SITL_DIR=${PX4_SITL_DIR:-$ROOT/../shared/sitl/px4}
+if [ "${SKIP_REAL_SITL:-0}" = 1 ]; then
+  px4_summary="PX4: skipped (SKIP_REAL_SITL=1)"
+  done_ "skipped (SKIP_REAL_SITL=1)"
+elif [ -d "$PX4_SITL_DIR" ] && [ -x scripts/sitl_px4.sh ]; then
+  export PX4_SITL_DIR
+  log=$(mktemp "${TMPDIR:-/tmp}/sitl-px4-log.XXXXXX")
+  set +e
+  ./scripts/sitl_px4.sh 2>&1 | tee "$log"
+  rc=${PIPESTATUS[0]}
+  set -e
+  counts=$(grep -E '^[0-9]+ (passed|failed|skipped|errors?|deselected)' "$log" | tail -1 | sed 's/=//g; s/^ *//; s/ in [0-9.]*s.*$//')
+  px4_summary="PX4 SITL: ${counts:-no pytest summary}"
+  rm -f "$log"
+  [ "$rc" -eq 0 ] || { echo "$px4_summary" >&2; exit "$rc"; }
+  done_ "ok ($px4_summary)"
+else
+  [ -d "$PX4_SITL_DIR" ] || px4_summary="PX4: no SITL (PX4_SITL_DIR or ../shared/sitl/px4; docs/sitl.md), not run"
+  [ -x scripts/sitl_px4.sh ] || px4_summary="PX4: scripts/sitl_px4.sh not present, not run"
+  echo "$px4_summary"
+  done_ "not run"
+fi
+
+# ---- 8: the board ------------------------------------------------------------------------------------
+# armv7 (the SoCKit's Cortex-A9) release binary, engine and companion tests under qemu-user
+# (docs/deploy-arm.md).
+begin "arm: scripts/arm.sh (armv7 cross-build, tests under qemu)"
+if [ "${SKIP_ARM:-0}" = 1 ]; then
+  done_ "skipped (SKIP_ARM=1)"
+else
+  ./scripts/arm.sh
+  done_
+fi
+
+echo "== real autopilots: $ardu_summary; $px4_summary"
+echo "== all $STAGES stages passed in $(fmt $((SECONDS - T_ALL)))"

@@ -7,11 +7,17 @@
 * `fly`: starts the real companion (`$COMPANION_BIN fly ...`, command line built by helpers.companion_fly_cmd)
   with its own log dir, and collects its decision log.
 
+* `arducopter`: a factory that starts a fresh real ArduCopter SITL for the test (real_autopilot.py: own working
+  directory, own instance number, `-w`), with `gcs_observer` on its SERIAL0; tests using it are marked
+  `real_autopilot` and are skipped, saying how to get one, when no ArduCopter SITL binary is found.
+* `relay`: a factory for a TCP relay (relay.py) between the companion and an autopilot port.
+
 Tests marked `companion_fly` always run (CI included): `$COMPANION_BIN` must be a companion binary with `fly`.
 """
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -25,6 +31,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 from helpers import GcsClient, companion_fly_cmd, read_decision_log  # noqa: E402
 from standin_autopilot import OnboardMonitors, StandinAutopilot, StandinConfig  # noqa: E402
+from real_autopilot import ARTIFACTS, ArduCopterSitl, GcsObserver, find_arducopter, next_instance  # noqa: E402
+from relay import Relay  # noqa: E402
 
 SITL_URL = os.environ.get("SITL_URL")                                   # e.g. tcp:127.0.0.1:5762 (ArduPilot SERIAL1)
 SITL_MONITOR_URL = os.environ.get("SITL_MONITOR_URL", "tcp:127.0.0.1:5763")   # a second SITL port for the monitors
@@ -36,14 +44,29 @@ def pytest_configure(config: Any) -> None:
     config.addinivalue_line("markers", "companion_fly: flies `$COMPANION_BIN fly` end to end")
     config.addinivalue_line("markers", "standin_only: needs the stand-in's own controls (link cut, garbage/unsigned "
                             "injection, obstacle placement) or its recording (skipped with SITL_URL)")
+    config.addinivalue_line("markers", "real_autopilot: flies a fresh real ArduCopter SITL per test (skipped, saying "
+                            "how to get one, without an arducopter binary)")
     config.addinivalue_line("markers", "sitl_hazard: injects a hazard with PARAM_SET (SIM_*/BATT_*), which a real "
                             "ArduPilot SITL accepts too; runs against SITL_URL")
 
 
 def pytest_collection_modifyitems(config: Any, items: List[Any]) -> None:
+    _, _, why_no_sitl = find_arducopter()
     for item in items:
-        if SITL_URL and item.get_closest_marker("standin_only"):
-            item.add_marker(pytest.mark.skip(reason=f"SITL_URL={SITL_URL}: this test needs the stand-in's hazard injection/recording"))
+        only = item.get_closest_marker("standin_only")
+        if SITL_URL and only:
+            why = only.kwargs.get("reason", "this test needs the stand-in's hazard injection/recording")
+            item.add_marker(pytest.mark.skip(reason=f"SITL_URL={SITL_URL}: {why}"))
+        if why_no_sitl and item.get_closest_marker("real_autopilot"):
+            item.add_marker(pytest.mark.skip(reason=why_no_sitl))
+
+
+@pytest.hookimpl(tryfirst=True, hookwrapper=True)
+def pytest_runtest_makereport(item: Any, call: Any):
+    # fixtures read item.rep_call at teardown to keep a failed test's logs
+    outcome = yield
+    rep = outcome.get_result()
+    setattr(item, "rep_" + rep.when, rep)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -181,3 +204,86 @@ def monitors_factory():
     yield make
     for m in made:
         m.stop()
+
+
+# ------------------------------------------------------------------------------------------------
+# a real ArduCopter SITL per test
+# ------------------------------------------------------------------------------------------------
+
+@dataclass
+class RealVehicle:
+    sitl: ArduCopterSitl
+    gcs: GcsObserver
+    autopilot: Autopilot          # url: SERIAL1 (the companion's port), monitor_url: SERIAL2
+
+
+def _failed(request: Any) -> bool:
+    rep = getattr(request.node, "rep_call", None)
+    return rep is None or rep.failed
+
+
+@pytest.fixture
+def arducopter(request, tmp_path):
+    """Factory: arducopter(speedup=1.0, extra_defaults=None) -> RealVehicle: a fresh ArduCopter SITL in its own
+    working directory and instance, up and streaming to its ground-station observer on SERIAL0. Stopped at
+    teardown (process group killed); its log, command line and logs/ kept under sitl_tests/artifacts/<test>/
+    when the test failed, with the companion's output."""
+    binary, defaults, why = find_arducopter()
+    if binary is None:
+        pytest.skip(why)
+    vehicles: List[RealVehicle] = []
+
+    def make(speedup: float = 1.0, extra_defaults: Optional[Dict[str, float]] = None) -> RealVehicle:
+        n = len(vehicles)
+        sitl = ArduCopterSitl(binary, defaults, next_instance(), tmp_path / f"arducopter-{n}", speedup=speedup,
+                              extra_defaults=extra_defaults)
+        vehicles.append(RealVehicle(sitl, None, None))  # type: ignore[arg-type]
+        sitl.start()
+        gcs = GcsObserver(f"tcp:127.0.0.1:{sitl.ports.serial0}", alive=sitl.alive).start()
+        vehicles[-1].gcs = gcs
+        sitl.wait_listening(sitl.ports.serial1, 30.0)
+        sitl.wait_listening(sitl.ports.serial2, 30.0)
+        ap = Autopilot(url=f"tcp:127.0.0.1:{sitl.ports.serial1}", monitor_url=f"tcp:127.0.0.1:{sitl.ports.serial2}")
+        vehicles[-1].autopilot = ap
+        return vehicles[-1]
+
+    yield make
+    failed = _failed(request)
+    for v in vehicles:
+        if v.gcs is not None:
+            v.gcs.stop()
+        v.sitl.stop()
+        if failed:
+            dest = ARTIFACTS / request.node.name / v.sitl.workdir.name
+            v.sitl.keep_artifacts(dest)
+            if v.gcs is not None:
+                (dest / "gcs_observer.txt").write_text(v.gcs.summary() + "\n" + "\n".join(v.gcs.texts()) + "\n")
+    if failed:
+        dest = ARTIFACTS / request.node.name
+        dest.mkdir(parents=True, exist_ok=True)
+        for f in tmp_path.glob("companion-*"):
+            if f.is_file():
+                shutil.copy2(f, dest / f.name)
+            else:
+                shutil.copytree(f, dest / f.name, dirs_exist_ok=True)
+
+
+@pytest.fixture
+def gcs_observer(arducopter):
+    """A fresh vehicle's ground-station observer (for tests that need only the one vehicle)."""
+    return arducopter().gcs
+
+
+@pytest.fixture
+def relay():
+    """Factory: relay(upstream_port) -> started Relay on 127.0.0.1:<free port>; stopped at teardown."""
+    made: List[Relay] = []
+
+    def make(upstream_port: int, **kw: Any) -> Relay:
+        r = Relay(upstream_port, **kw).start()
+        made.append(r)
+        return r
+
+    yield make
+    for r in made:
+        r.stop()

@@ -243,7 +243,7 @@ def test_low_battery_lands_or_returns(autopilot_factory, fly, monitors_factory):
     assert f.rc == 0, f.why()
 
 
-@pytest.mark.standin_only
+@pytest.mark.standin_only(reason="judges collisions from the stand-in's own obstacle placement and recording; on a real autopilot: test_real_ardupilot.py::test_real_obstacle_ahead_triggers_avoidance")
 def test_obstacle_triggers_avoidance_command(autopilot_factory, fly, monitors_factory):
     ap = autopilot_factory(speedup=2.0)              # slower so a ~1 Hz decision loop has time to react
 
@@ -269,7 +269,7 @@ def test_obstacle_triggers_avoidance_command(autopilot_factory, fly, monitors_fa
     assert_mission_completed(f)
 
 
-@pytest.mark.standin_only
+@pytest.mark.standin_only(reason="uses the stand-in's link outage and its record of what arrived; on a real autopilot (relay blackout): test_real_ardupilot.py::test_real_five_second_link_cut")
 def test_five_second_link_cut(autopilot_factory, fly, monitors_factory):
     ap = autopilot_factory()
     grace = COMPANION_LINK_TIMEOUT_S + 0.5    # wall seconds the companion may take to notice the silence
@@ -295,7 +295,7 @@ def test_five_second_link_cut(autopilot_factory, fly, monitors_factory):
     assert_mission_completed(f)
 
 
-@pytest.mark.standin_only
+@pytest.mark.standin_only(reason="uses the stand-in's byte injection; on a real autopilot (relay injection): test_real_ardupilot.py::test_real_garbage_bytes_on_the_link")
 def test_garbage_and_malformed_frames_on_the_link(autopilot_factory, fly, monitors_factory):
     ap = autopilot_factory(garbage_period_wall=0.5)
     f = fly_mission(ap, fly, monitors_factory)
@@ -307,7 +307,7 @@ def test_garbage_and_malformed_frames_on_the_link(autopilot_factory, fly, monito
         "the companion did not count the bad bytes/frames in its link_events"
 
 
-@pytest.mark.standin_only
+@pytest.mark.standin_only(reason="uses the stand-in's unsigned injection and its signature counters; on a real autopilot (SETUP_SIGNING, relay injection): test_real_ardupilot.py::test_real_signed_flight_with_the_key_on_the_autopilot")
 def test_signing_on_unsigned_injection_is_ignored(autopilot_factory, fly, monitors_factory):
     key = os.urandom(32)
     ap = autopilot_factory(signing_key=key)
