@@ -58,6 +58,7 @@ fn args(connect: &str, duration_s: f64) -> FlyArgs {
         auto_start: true,
         autopilot_sysid: None,
         connect_timeout: None,
+        once: false,
     }
 }
 

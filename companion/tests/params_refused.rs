@@ -68,6 +68,9 @@ fn fly_args(dir: &Path) -> FlyArgs {
         duration: None,
         log_dir: PathBuf::from("runs"),
         auto_start: true,
+        autopilot_sysid: None,
+        connect_timeout: None,
+        once: false,
     }
 }
 

@@ -1958,7 +1958,7 @@ mod tests {
         );
     }
 
-    fn zone_vehicle() -> Vehicle {
+    fn zone_route_vehicle() -> Vehicle {
         let mut v = route_vehicle();
         v.actions.actions.insert(
             "land".into(),
@@ -1998,7 +1998,7 @@ mod tests {
 
     #[test]
     fn land_at_the_zone_flies_within_the_radius_before_land() {
-        let mut v = zone_vehicle();
+        let mut v = zone_route_vehicle();
         let out = v.request_actions(s(1.0), &["land".into()]);
         let target = match &out[..] {
             [Msg::COMMAND_INT(c)] if c.command == MavCmd::MAV_CMD_DO_REPOSITION => (c.x, c.y),
@@ -2038,7 +2038,7 @@ mod tests {
 
     #[test]
     fn land_at_the_zone_lands_where_it_is_after_the_arrive_timeout() {
-        let mut v = zone_vehicle();
+        let mut v = zone_route_vehicle();
         v.request_actions(s(1.0), &["land".into()]);
         v.on_frame(
             s(1.1),

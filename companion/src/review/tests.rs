@@ -296,6 +296,7 @@ fn why_of_a_cycle_has_the_proposals_action_and_value() {
             actions: vec!["follow_trajectory".into()],
             value: 12.345,
             iterations: 3,
+            ..Default::default()
         },
         MdpProposal {
             mdp: "tracking".into(),
