@@ -286,6 +286,26 @@ def test_obstacle_during_land_ends_landed_and_disarmed(autopilot_factory, fly, t
     assert any(e.startswith("landing: ") and "again" in e for e in events(records)), events(records)[-30:]
 
 
+def test_after_landing_fly_waits_for_the_operator_and_flies_again(autopilot_factory, fly, client, tmp_path):
+    ap = autopilot_factory(speedup=2.0, ekf_ready_s=4.0)
+    sa = ap.standin
+    gcs = client(sa.url)
+    run = fly(ap, mission=short_route(tmp_path), once=False)
+    wait(lambda: sa.rec.of("arm") and not sa.state()["armed"] and sa.state()["landed"], 240, "the first landing", run)
+    t_down = sa.wall()
+    time.sleep(6.0)
+    assert run.proc.poll() is None, "fly exited after the landing without --once\n" + run.output()
+    assert len(sa.rec.of("arm")) == 1, "--auto-start armed again: it starts the first flight only"
+    assert not motion_from_companion(sa, t_down + 4.0), "commanded after the landing without an operator start"
+    gcs.target = (1, COMPANION)
+    ack = gcs.command_long(mavlink.MAV_CMD_MISSION_START)
+    assert ack.result == mavlink.MAV_RESULT_ACCEPTED
+    wait(lambda: len(sa.rec.of("arm")) == 2 and sa.state()["alt"] > 5.0, 90, "the second take-off", run)
+    stop(run)
+    evs = events(run.records())
+    assert any(e.startswith("flight over: landed and disarmed; waiting for the operator") for e in evs), evs[-30:]
+
+
 def test_land_at_the_found_zone_flies_there_before_land(autopilot_factory, fly, tmp_path):
     from pymavlink import mavutil
     ap = autopilot_factory(speedup=2.0, ekf_ready_s=4.0)
