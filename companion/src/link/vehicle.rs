@@ -190,6 +190,8 @@ impl Vehicle {
         {
             self.target = Some((sys, comp));
             self.flavor = Flavor::from_autopilot(h.autopilot);
+            self.readiness.flavor = self.flavor;
+            self.mission.home_at_seq0 = self.flavor != Flavor::Px4;
             self.commands.set_target(sys, comp);
             self.mission.set_target(sys, comp);
             self.link_event(format!("autopilot {sys}/{comp} ({:?})", self.flavor), false);
@@ -217,10 +219,12 @@ impl Vehicle {
             Msg::HEARTBEAT(h) => {
                 self.readiness.armed = h
                     .base_mode
-                    .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED)
+                    .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+                self.readiness.on_heartbeat_status(h.system_status);
             }
             Msg::SYS_STATUS(s) => self.readiness.on_sys_status(now, s),
             Msg::EKF_STATUS_REPORT(e) => self.readiness.on_ekf(now, e),
+            Msg::ESTIMATOR_STATUS(e) => self.readiness.on_estimator(now, e),
             Msg::STATUSTEXT(t) => {
                 let text = t.text.to_str().unwrap_or("").to_string();
                 self.readiness.on_text(now, &text);
@@ -584,7 +588,24 @@ impl Vehicle {
                     }
                 }
                 (Running::Idle, Step::Command { command, params }) => {
-                    let spec = CommandSpec::long(*command, *params);
+                    // Before take-off the vehicle stands at home: its AMSL altitude serves
+                    // until HOME_POSITION arrives.
+                    let home_amsl_m = self.telemetry.home.map(|h| h.2).or_else(|| {
+                        self.telemetry.position.filter(|_| !self.telemetry.armed).map(|p| p.alt_amsl_m)
+                    });
+                    let Some(params) = modes::command_params(self.flavor, *command, *params, home_amsl_m)
+                    else {
+                        self.records.push(CommandRecord {
+                            action,
+                            command: format!("{command:?}"),
+                            result: "FAILED (no home position yet)".into(),
+                            attempts: 0,
+                            latency_ms: None,
+                        });
+                        self.job_failed(now);
+                        continue;
+                    };
+                    let spec = CommandSpec::long(*command, params);
                     if !self.issue(now, &action, format!("{command:?}"), spec, &mut out) {
                         return out;
                     }
@@ -611,7 +632,7 @@ impl Vehicle {
                         self.job_failed(now);
                         continue;
                     };
-                    let items = route.items(home);
+                    let items = modes::mission_items(self.flavor, route, home);
                     match self.mission.upload(now, items) {
                         Ok(msgs) => {
                             out.extend(msgs);
