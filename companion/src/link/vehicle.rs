@@ -591,9 +591,13 @@ impl Vehicle {
                     // Before take-off the vehicle stands at home: its AMSL altitude serves
                     // until HOME_POSITION arrives.
                     let home_amsl_m = self.telemetry.home.map(|h| h.2).or_else(|| {
-                        self.telemetry.position.filter(|_| !self.telemetry.armed).map(|p| p.alt_amsl_m)
+                        self.telemetry
+                            .position
+                            .filter(|_| !self.telemetry.armed)
+                            .map(|p| p.alt_amsl_m)
                     });
-                    let Some(params) = modes::command_params(self.flavor, *command, *params, home_amsl_m)
+                    let Some(params) =
+                        modes::command_params(self.flavor, *command, *params, home_amsl_m)
                     else {
                         self.records.push(CommandRecord {
                             action,
