@@ -129,6 +129,21 @@ class InstanceLock:
             time.sleep(1.0)
         raise RuntimeError("no free PX4 instance in 0-9")
 
+    def _free(self) -> int:
+        """The first instance neither reserved by a test nor used by a running PX4 (not held)."""
+        for n in range(10):
+            fd = os.open(f"/tmp/companion-px4-instance-{n}.lock", os.O_CREAT | os.O_RDWR, 0o666)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                fcntl.flock(fd, fcntl.LOCK_UN)
+            except OSError:
+                continue
+            finally:
+                os.close(fd)
+            if not self._px4_running(n):
+                return n
+        raise RuntimeError("no free PX4 instance in 0-9")
+
     @staticmethod
     def _px4_running(n: int) -> bool:
         # PX4's server socket for instance n; a stale file without a listener does not count.
@@ -338,6 +353,14 @@ def pytest_runtest_makereport(item, call):
 
 def pytest_configure(config: Any) -> None:
     config.addinivalue_line("markers", "px4: flies the companion against a real PX4 SITL (SIH)")
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config: Any, items: List[Any]) -> None:
+    # Before `-m` selects: every test using a PX4 vehicle carries the `px4` marker.
+    for item in items:
+        if "px4_vehicle" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.px4)
 
 
 class UdpRelay:

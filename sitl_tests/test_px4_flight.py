@@ -15,13 +15,13 @@ from pathlib import Path
 
 import pytest
 
-from helpers import companion_fly_cmd, read_decision_log
-from px4_sitl import UdpRelay, companion_help
+pytest.register_assert_rewrite("px4_sitl")
+from helpers import companion_fly_cmd, read_decision_log  # noqa: E402
+from px4_sitl import UdpRelay, companion_help  # noqa: E402
 
-# The px4_vehicle fixture, the `px4` marker and the report hook live in px4_sitl.py.
+# The px4_vehicle fixture, the report hook and the `px4` marker (registered there and put on every
+# test of this module, so `-m px4` selects them) live in px4_sitl.py.
 pytest_plugins = ["px4_sitl"]
-
-pytestmark = pytest.mark.px4
 
 ROOT = Path(__file__).resolve().parent.parent
 # A nominal battery: SIH drains to SIM_BAT_MIN_PCT in SIM_BAT_DRAIN seconds once armed (default

@@ -106,6 +106,11 @@ pub struct Vehicle {
     link_events: Vec<String>,
     /// Retry a failed action asked for again no sooner than this.
     pub retry_failed_after: Duration,
+    /// PX4 only: after an upload, (item count, give-up time) until MISSION_CURRENT reports the
+    /// new mission's total. PX4's navigator loads an uploaded mission asynchronously; AUTO
+    /// requested before that flies the old (empty) one, "finishes" it at once and falls back to
+    /// Hold (seen on PX4 SITL with the mode switch 10 ms after the upload).
+    px4_mission_pending: Option<(u16, Duration)>,
 }
 
 impl Vehicle {
@@ -129,6 +134,7 @@ impl Vehicle {
             records: Vec::new(),
             link_events: Vec::new(),
             retry_failed_after: Duration::from_secs(5),
+            px4_mission_pending: None,
         }
     }
 
@@ -225,6 +231,11 @@ impl Vehicle {
             Msg::SYS_STATUS(s) => self.readiness.on_sys_status(now, s),
             Msg::EKF_STATUS_REPORT(e) => self.readiness.on_ekf(now, e),
             Msg::ESTIMATOR_STATUS(e) => self.readiness.on_estimator(now, e),
+            Msg::MISSION_CURRENT(m) => {
+                if matches!(self.px4_mission_pending, Some((n, _)) if n == m.total) {
+                    self.px4_mission_pending = None;
+                }
+            }
             Msg::STATUSTEXT(t) => {
                 let text = t.text.to_str().unwrap_or("").to_string();
                 self.readiness.on_text(now, &text);
@@ -500,6 +511,14 @@ impl Vehicle {
             match (&job.running, &step) {
                 (Running::Command(_) | Running::Mission, _) => return out,
                 (Running::Idle, Step::Mode(name)) => {
+                    if name == "AUTO"
+                        && let Some((_, until)) = self.px4_mission_pending
+                    {
+                        if now < until {
+                            return out; // the next MISSION_CURRENT or tick moves on
+                        }
+                        self.px4_mission_pending = None;
+                    }
                     if modes::is_in_mode(self.flavor, self.telemetry.custom_mode, name)
                         && self.telemetry.mode.is_some()
                     {
@@ -861,6 +880,10 @@ impl Vehicle {
                         attempts: 1,
                         latency_ms: None,
                     });
+                    if self.flavor == Flavor::Px4 {
+                        self.px4_mission_pending =
+                            Some((items.len() as u16, now + Duration::from_secs(5)));
+                    }
                     if in_job {
                         self.step_done();
                     }
