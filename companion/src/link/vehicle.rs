@@ -1434,4 +1434,181 @@ mod tests {
             other => panic!("{other:?}"),
         }
     }
+
+    fn px4_frame(msg: Msg) -> Frame {
+        let mut f = frame(msg);
+        f.header.system_id = 2; // PX4 instance 1: MAV_SYS_ID 2
+        f
+    }
+
+    /// PX4 SITL's own evidence (no EKF_STATUS_REPORT): STANDBY heartbeat in Hold, the prearm bit
+    /// in SYS_STATUS health only, ESTIMATOR_STATUS 1023, home at 488 m AMSL.
+    fn px4_ready(v: &mut Vehicle, t: f64) -> Vec<Msg> {
+        let mut out = Vec::new();
+        for msg in [
+            Msg::HEARTBEAT(HEARTBEAT_DATA {
+                custom_mode: modes::px4_custom_mode(4, 3),
+                mavtype: MavType::MAV_TYPE_QUADROTOR,
+                autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+                base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                system_status: MavState::MAV_STATE_STANDBY,
+                mavlink_version: 3,
+            }),
+            Msg::SYS_STATUS(SYS_STATUS_DATA {
+                onboard_control_sensors_present: MavSysStatusSensor::from_bits_truncate(
+                    0x0300_402f,
+                ),
+                onboard_control_sensors_enabled: MavSysStatusSensor::from_bits_truncate(
+                    0x0301_402f,
+                ),
+                onboard_control_sensors_health: MavSysStatusSensor::from_bits_truncate(0x1320_c83f),
+                ..SYS_STATUS_DATA::DEFAULT
+            }),
+            Msg::ESTIMATOR_STATUS(ESTIMATOR_STATUS_DATA {
+                flags: EstimatorStatusFlags::from_bits_truncate(1023),
+                ..ESTIMATOR_STATUS_DATA::DEFAULT
+            }),
+            Msg::HOME_POSITION(HOME_POSITION_DATA {
+                latitude: 473_977_420,
+                longitude: 85_455_940,
+                altitude: 488_000,
+                ..HOME_POSITION_DATA::DEFAULT
+            }),
+        ] {
+            out.extend(v.on_frame(s(t), &px4_frame(msg)));
+        }
+        out
+    }
+
+    #[test]
+    fn px4_arms_on_its_own_evidence_and_takes_off_to_amsl_altitude() {
+        let mut v = Vehicle::new(VehicleConfig::default(), table(), None);
+        px4_ready(&mut v, 0.0);
+        assert_eq!((v.flavor, v.target), (Flavor::Px4, Some((2, 1))));
+        let out = v.request_actions(s(0.5), &["take_off".into()]);
+        // Hold already stands for GUIDED on PX4; ready without any EKF_STATUS_REPORT.
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_COMPONENT_ARM_DISARM]);
+        let mut ack_arm = px4_frame(Msg::COMMAND_ACK(COMMAND_ACK_DATA {
+            command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            result: MavResult::MAV_RESULT_ACCEPTED,
+            ..COMMAND_ACK_DATA::DEFAULT
+        }));
+        ack_arm.header.component_id = 1;
+        let out = v.on_frame(s(0.6), &ack_arm);
+        match &out[..] {
+            [Msg::COMMAND_LONG(c)] => {
+                assert_eq!(c.command, MavCmd::MAV_CMD_NAV_TAKEOFF);
+                assert_eq!(c.param7, 498.0, "home 488 m AMSL + 10 m");
+                assert!(c.param4.is_nan() && c.param5.is_nan() && c.param6.is_nan());
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn px4_not_ready_while_prearm_health_bit_is_clear() {
+        let mut v = Vehicle::new(VehicleConfig::default(), table(), None);
+        px4_ready(&mut v, 0.0);
+        v.on_frame(
+            s(0.1),
+            &px4_frame(Msg::SYS_STATUS(SYS_STATUS_DATA {
+                onboard_control_sensors_health: MavSysStatusSensor::from_bits_truncate(0x0320_c83f),
+                ..SYS_STATUS_DATA::DEFAULT
+            })),
+        );
+        let out = v.request_actions(s(0.5), &["take_off".into()]);
+        assert!(commands(&out).is_empty(), "{out:?}");
+    }
+
+    #[test]
+    fn px4_auto_waits_until_px4_reports_the_uploaded_mission() {
+        use crate::link::actions::{Route, Waypoint};
+        let mut t = table();
+        t.actions.insert(
+            "follow_trajectory".into(),
+            vec![Step::UploadMission, Step::Mode("AUTO".into())],
+        );
+        let route = Route {
+            waypoints: vec![Waypoint::Relative {
+                north_m: 30.0,
+                east_m: 0.0,
+                alt_m: 15.0,
+            }],
+            altitude_m: 15.0,
+            search_time_limit_s: None,
+            tracking_time_limit_s: None,
+            takeoff_first: true,
+        };
+        let mut v = Vehicle::new(VehicleConfig::default(), t, Some(route));
+        px4_ready(&mut v, 0.0);
+        let out = v.request_actions(s(1.0), &["follow_trajectory".into()]);
+        assert!(
+            matches!(&out[0], Msg::MISSION_COUNT(c) if c.count == 3),
+            "{out:?}"
+        );
+        let mut sent = Vec::new();
+        for seq in 0..3 {
+            let out = v.on_frame(
+                s(1.0),
+                &px4_frame(Msg::MISSION_REQUEST_INT(MISSION_REQUEST_INT_DATA {
+                    seq,
+                    ..MISSION_REQUEST_INT_DATA::DEFAULT
+                })),
+            );
+            match &out[0] {
+                Msg::MISSION_ITEM_INT(i) => sent.push(i.clone()),
+                other => panic!("{other:?}"),
+            }
+        }
+        assert_eq!(
+            sent[0].command,
+            MavCmd::MAV_CMD_NAV_TAKEOFF,
+            "PX4: take-off first"
+        );
+        assert_eq!((sent[0].x, sent[0].y), (473_977_420, 85_455_940));
+        v.on_frame(
+            s(1.1),
+            &px4_frame(Msg::MISSION_ACK(MISSION_ACK_DATA {
+                mavtype: MavMissionResult::MAV_MISSION_ACCEPTED,
+                ..MISSION_ACK_DATA::DEFAULT
+            })),
+        );
+        let mut out = v.on_frame(
+            s(1.2),
+            &px4_frame(Msg::MISSION_COUNT(MISSION_COUNT_DATA {
+                count: 3,
+                ..MISSION_COUNT_DATA::DEFAULT
+            })),
+        );
+        for it in sent {
+            out = v.on_frame(s(1.3), &px4_frame(Msg::MISSION_ITEM_INT(it)));
+        }
+        assert!(matches!(out[0], Msg::MISSION_ACK(_)), "verified: {out:?}");
+        assert!(
+            commands(&out).is_empty(),
+            "no AUTO before PX4 reports the mission"
+        );
+        assert!(commands(&v.tick(s(2.0))).is_empty());
+        let stale = Msg::MISSION_CURRENT(MISSION_CURRENT_DATA {
+            total: 0,
+            ..MISSION_CURRENT_DATA::DEFAULT
+        });
+        assert!(commands(&v.on_frame(s(2.1), &px4_frame(stale))).is_empty());
+        let loaded = Msg::MISSION_CURRENT(MISSION_CURRENT_DATA {
+            total: 3,
+            ..MISSION_CURRENT_DATA::DEFAULT
+        });
+        let out = v.on_frame(s(2.5), &px4_frame(loaded));
+        match &out[..] {
+            [Msg::COMMAND_LONG(c)] => {
+                assert_eq!(c.command, MavCmd::MAV_CMD_DO_SET_MODE);
+                assert_eq!(
+                    (c.param1, c.param2, c.param3),
+                    (1.0, 4.0, 4.0),
+                    "AUTO.MISSION"
+                );
+            }
+            other => panic!("{other:?}"),
+        }
+    }
 }
