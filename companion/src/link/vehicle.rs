@@ -111,6 +111,11 @@ pub struct Vehicle {
     /// requested before that flies the old (empty) one, "finishes" it at once and falls back to
     /// Hold (seen on PX4 SITL with the mode switch 10 ms after the upload).
     px4_mission_pending: Option<(u16, Duration)>,
+    /// PX4 only: give-up time for waiting out AUTO.TAKEOFF before another mode. PX4 ends a
+    /// take-off by switching itself to Hold; a mode requested in the take-off's last moments is
+    /// acknowledged and then overridden by that switch (seen on PX4 SITL: AUTO accepted at 8-9 m
+    /// of a 10 m take-off, then Hold, the mission never flown).
+    px4_takeoff_wait: Option<Duration>,
 }
 
 impl Vehicle {
@@ -135,6 +140,7 @@ impl Vehicle {
             link_events: Vec::new(),
             retry_failed_after: Duration::from_secs(5),
             px4_mission_pending: None,
+            px4_takeoff_wait: None,
         }
     }
 
@@ -511,6 +517,19 @@ impl Vehicle {
             match (&job.running, &step) {
                 (Running::Command(_) | Running::Mission, _) => return out,
                 (Running::Idle, Step::Mode(name)) => {
+                    // Landing and return never wait.
+                    if self.flavor == Flavor::Px4
+                        && !matches!(name.as_str(), "LAND" | "RTL" | "SMART_RTL" | "TAKEOFF")
+                        && self.telemetry.mode.as_deref() == Some("TAKEOFF")
+                    {
+                        let until = *self
+                            .px4_takeoff_wait
+                            .get_or_insert(now + Duration::from_secs(30));
+                        if now < until {
+                            return out; // the heartbeat that shows Hold moves on
+                        }
+                    }
+                    self.px4_takeoff_wait = None;
                     if name == "AUTO"
                         && let Some((_, until)) = self.px4_mission_pending
                     {
