@@ -1630,4 +1630,42 @@ mod tests {
             other => panic!("{other:?}"),
         }
     }
+
+    fn px4_heartbeat(main: u8, sub: u8) -> Frame {
+        px4_frame(Msg::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: modes::px4_custom_mode(main, sub),
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+            base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+                | MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED,
+            system_status: MavState::MAV_STATE_ACTIVE,
+            mavlink_version: 3,
+        }))
+    }
+
+    #[test]
+    fn px4_mode_change_waits_out_the_takeoff_but_return_does_not() {
+        let mut t = table();
+        t.actions
+            .insert("hold".into(), vec![Step::Mode("LOITER".into())]);
+        let mut v = Vehicle::new(VehicleConfig::default(), t, None);
+        px4_ready(&mut v, 0.0);
+        v.on_frame(s(1.0), &px4_heartbeat(4, 2)); // AUTO.TAKEOFF
+        assert!(commands(&v.request_actions(s(1.1), &["hold".into()])).is_empty());
+        assert!(commands(&v.on_frame(s(2.0), &px4_heartbeat(4, 2))).is_empty());
+        assert!(commands(&v.tick(s(2.5))).is_empty(), "still taking off");
+        // Returning home is never held back.
+        let out = v.request_actions(s(2.6), &["return_to_base".into()]);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        // Hold again, once PX4 has ended the take-off: sent at once.
+        let mut v = Vehicle::new(VehicleConfig::default(), table(), None);
+        v.actions
+            .actions
+            .insert("hold".into(), vec![Step::Mode("AUTO".into())]);
+        px4_ready(&mut v, 0.0);
+        v.on_frame(s(1.0), &px4_heartbeat(4, 2));
+        assert!(commands(&v.request_actions(s(1.1), &["hold".into()])).is_empty());
+        let out = v.on_frame(s(3.0), &px4_heartbeat(4, 3)); // PX4 switched itself to Hold
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+    }
 }
