@@ -22,7 +22,7 @@
 
 use super::actions::Route;
 use super::command::CommandSpec;
-use super::dialect::{MavAutopilot, MavCmd};
+use super::dialect::{MavAutopilot, MavCmd, MavFrame};
 use super::mission::MissionItem;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -211,6 +211,26 @@ pub fn command_params(
     ])
 }
 
+/// Frame and altitude of a COMMAND_INT DO_REPOSITION to `target_rel_m` above home, from the
+/// vehicle's current AMSL and above-home altitudes. ArduPilot honours
+/// MAV_FRAME_GLOBAL_RELATIVE_ALT. PX4's `MavlinkReceiver::handle_message_command_int` copies `z`
+/// into param7 without reading the frame and the navigator takes it as AMSL, so for PX4 the
+/// altitude goes as AMSL (home = current AMSL - current above-home) in MAV_FRAME_GLOBAL.
+pub fn reposition_frame_alt(
+    flavor: Flavor,
+    target_rel_m: f64,
+    vehicle_amsl_m: f64,
+    vehicle_rel_m: f64,
+) -> (MavFrame, f32) {
+    match flavor {
+        Flavor::Px4 => (
+            MavFrame::MAV_FRAME_GLOBAL,
+            (vehicle_amsl_m - vehicle_rel_m + target_rel_m) as f32,
+        ),
+        _ => (MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT, target_rel_m as f32),
+    }
+}
+
 /// The route as mission items for this autopilot. ArduPilot: `Route::items` (seq 0 is home,
 /// which ArduPilot overwrites). PX4 flies seq 0 and rejects a mission whose take-off is not the
 /// first item, and reads a take-off item's lat/lon; so for PX4 the take-off (at home) comes first
@@ -275,7 +295,6 @@ pub fn is_in_mode(flavor: Flavor, custom_mode: u32, name: &str) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::link::dialect::MavFrame;
 
     fn params(c: &CommandSpec) -> [f32; 7] {
         match c.body {
@@ -481,5 +500,19 @@ mod tests {
                 assert_eq!(px4[0], MissionItem::waypoint(home.0, home.1, 20.0));
             }
         }
+    }
+
+    /// PX4 reads a DO_REPOSITION COMMAND_INT altitude as AMSL whatever the frame: 20 m above a
+    /// home at 488 m goes as 508 m in MAV_FRAME_GLOBAL; ArduPilot keeps the relative frame.
+    #[test]
+    fn px4_reposition_altitude_is_amsl() {
+        assert_eq!(
+            reposition_frame_alt(Flavor::Px4, 20.0, 500.0, 12.0),
+            (MavFrame::MAV_FRAME_GLOBAL, 508.0)
+        );
+        assert_eq!(
+            reposition_frame_alt(Flavor::ArduPilot, 20.0, 500.0, 12.0),
+            (MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT, 20.0)
+        );
     }
 }

@@ -719,13 +719,19 @@ impl Vehicle {
                     match zone {
                         (Some(n), Some(e), Some(p)) => {
                             let (x, y) = displace((p.lat_e7, p.lon_e7), n, e);
+                            let (frame, z) = modes::reposition_frame_alt(
+                                self.flavor,
+                                p.alt_rel_m,
+                                p.alt_amsl_m,
+                                p.alt_rel_m,
+                            );
                             let spec = CommandSpec::int(
                                 MavCmd::MAV_CMD_DO_REPOSITION,
-                                MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                                frame,
                                 [-1.0, 1.0, 0.0, f32::NAN],
                                 x,
                                 y,
-                                p.alt_rel_m as f32,
+                                z,
                             );
                             if !self.issue(
                                 now,
@@ -798,14 +804,20 @@ impl Vehicle {
         let north = o.forward_m * h.cos() - o.right_m * h.sin();
         let east = o.forward_m * h.sin() + o.right_m * h.cos();
         let (x, y) = displace((p.lat_e7, p.lon_e7), north, east);
+        let (frame, z) = modes::reposition_frame_alt(
+            self.flavor,
+            p.alt_rel_m + o.up_m,
+            p.alt_amsl_m,
+            p.alt_rel_m,
+        );
         // param1 -1: default speed; param2 1: MAV_DO_REPOSITION_FLAGS_CHANGE_MODE; param4 NaN: keep yaw.
         Some(CommandSpec::int(
             MavCmd::MAV_CMD_DO_REPOSITION,
-            MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT,
+            frame,
             [-1.0, 1.0, 0.0, f32::NAN],
             x,
             y,
-            (p.alt_rel_m + o.up_m) as f32,
+            z,
         ))
     }
 
