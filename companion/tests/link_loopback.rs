@@ -255,7 +255,7 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
         "{:?}",
         log.commands
     );
-    // Streams requested in both sessions: all 14 of params/link.toml after connect, again after
+    // Streams requested in both sessions: all 15 of params/link.toml after connect, again after
     // the reconnect.
     let streams = |s| {
         log.commands
@@ -263,7 +263,7 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
             .filter(|c| c.0 == s && c.1 == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL)
             .count()
     };
-    assert_eq!(streams(1), 14);
+    assert_eq!(streams(1), 15);
     assert!(
         streams(2) >= 1,
         "streams re-requested after reconnect: {:?}",

@@ -631,7 +631,7 @@ mod tests {
         let r = Route::load(&dir.join("missions/tracking_route.toml")).unwrap();
         assert!(r.waypoints.len() >= 3);
         let lp = LinkParams::load(&dir.join("link.toml")).unwrap();
-        assert_eq!(lp.stream_ids().len(), 14);
+        assert_eq!(lp.stream_ids().len(), 15);
     }
 
     #[test]

@@ -11,6 +11,11 @@
 //!   GLOBAL_RELATIVE_ALT_INT) and altitudes rounded to centimetres, so the comparison normalises
 //!   frames and allows 2 cm.
 //!
+//! PX4 (src/modules/mavlink/mavlink_mission.cpp): no home item; seq 0 is the first item flown,
+//! and every item comes back on download as it was sent, so verification compares seq 0 too
+//! (`MissionClient::home_at_seq0`). It asks with MISSION_REQUEST_INT and acknowledges the last
+//! item with MISSION_ACK ACCEPTED like ArduPilot.
+//!
 //! Every upload here is verified by downloading it back and comparing item by item.
 
 // MISSION_REQUEST, MISSION_ITEM, MISSION_SET_CURRENT and the `_INT` frames are deprecated in
@@ -101,6 +106,11 @@ fn normalise_frame(f: MavFrame) -> MavFrame {
 
 /// First difference between what we uploaded and what came back, seq 0 (home) excluded.
 pub fn compare(sent: &[MissionItem], got: &[MissionItem]) -> Result<(), String> {
+    compare_from(sent, got, 1)
+}
+
+/// First difference from seq `first` on (0 for PX4, which keeps no home item at seq 0).
+pub fn compare_from(sent: &[MissionItem], got: &[MissionItem], first: usize) -> Result<(), String> {
     if sent.len() != got.len() {
         return Err(format!(
             "count: sent {} items, autopilot has {}",
@@ -108,7 +118,7 @@ pub fn compare(sent: &[MissionItem], got: &[MissionItem]) -> Result<(), String> 
             got.len()
         ));
     }
-    for (seq, (a, b)) in sent.iter().zip(got).enumerate().skip(1) {
+    for (seq, (a, b)) in sent.iter().zip(got).enumerate().skip(first) {
         if a.command != b.command {
             return Err(format!(
                 "item {seq}: command {:?} came back as {:?}",
@@ -218,6 +228,9 @@ pub struct MissionClient {
     last: Option<Msg>,
     /// Count of MISSION_ACK INVALID_SEQUENCE and stray messages, for the log.
     pub ignored: u32,
+    /// ArduPilot answers its own home at seq 0, so verification skips it; PX4 stores seq 0
+    /// like any other item, so it is compared too.
+    pub home_at_seq0: bool,
 }
 
 impl MissionClient {
@@ -230,6 +243,7 @@ impl MissionClient {
             attempts: 0,
             last: None,
             ignored: 0,
+            home_at_seq0: true,
         }
     }
 
@@ -468,7 +482,7 @@ impl MissionClient {
                 op: MissionOp::Download,
                 items: got,
             },
-            Some(sent) => match compare(&sent, &got) {
+            Some(sent) => match compare_from(&sent, &got, usize::from(self.home_at_seq0)) {
                 Ok(()) => MissionEvent::Done {
                     op: MissionOp::UploadVerified,
                     items: got,

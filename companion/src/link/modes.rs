@@ -20,8 +20,10 @@
 //! MAV_CMD_DO_REPOSITION. ArduPilot Copter has no TAKEOFF mode (take-off is NAV_TAKEOFF in
 //! GUIDED), so `TAKEOFF` exists only for PX4.
 
+use super::actions::Route;
 use super::command::CommandSpec;
-use super::dialect::{MavAutopilot, MavCmd};
+use super::dialect::{MavAutopilot, MavCmd, MavFrame};
+use super::mission::MissionItem;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Flavor {
@@ -179,6 +181,73 @@ pub fn set_mode_command(flavor: Flavor, name: &str) -> Option<CommandSpec> {
         Flavor::Other => return None,
     };
     Some(CommandSpec::long(MavCmd::MAV_CMD_DO_SET_MODE, params))
+}
+
+/// The seven params a `command` step sends to this autopilot. commands.toml writes them as
+/// ArduPilot reads them; PX4 reads MAV_CMD_NAV_TAKEOFF differently
+/// (`Navigator::run`, src/modules/navigator/navigator_main.cpp, and `FlightTaskTakeoff`):
+/// param7 is AMSL, not above home, and finite param5/param6 are the lat/lon to take off
+/// towards (0, 0 would be the Gulf of Guinea), finite param4 a yaw. So for PX4 param7 becomes
+/// home AMSL + param7 and params 4-6 NaN (current position and heading). None when PX4 needs
+/// home and none is known yet.
+pub fn command_params(
+    flavor: Flavor,
+    command: MavCmd,
+    params: [f32; 7],
+    home_amsl_m: Option<f64>,
+) -> Option<[f32; 7]> {
+    if flavor != Flavor::Px4 || command != MavCmd::MAV_CMD_NAV_TAKEOFF {
+        return Some(params);
+    }
+    let home = home_amsl_m?;
+    Some([
+        params[0],
+        0.0,
+        0.0,
+        f32::NAN,
+        f32::NAN,
+        f32::NAN,
+        (home + f64::from(params[6])) as f32,
+    ])
+}
+
+/// Frame and altitude of a COMMAND_INT DO_REPOSITION to `target_rel_m` above home, from the
+/// vehicle's current AMSL and above-home altitudes. ArduPilot honours
+/// MAV_FRAME_GLOBAL_RELATIVE_ALT. PX4's `MavlinkReceiver::handle_message_command_int` copies `z`
+/// into param7 without reading the frame and the navigator takes it as AMSL, so for PX4 the
+/// altitude goes as AMSL (home = current AMSL - current above-home) in MAV_FRAME_GLOBAL.
+pub fn reposition_frame_alt(
+    flavor: Flavor,
+    target_rel_m: f64,
+    vehicle_amsl_m: f64,
+    vehicle_rel_m: f64,
+) -> (MavFrame, f32) {
+    match flavor {
+        Flavor::Px4 => (
+            MavFrame::MAV_FRAME_GLOBAL,
+            (vehicle_amsl_m - vehicle_rel_m + target_rel_m) as f32,
+        ),
+        _ => (MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT, target_rel_m as f32),
+    }
+}
+
+/// The route as mission items for this autopilot. ArduPilot: `Route::items` (seq 0 is home,
+/// which ArduPilot overwrites). PX4 flies seq 0 and rejects a mission whose take-off is not the
+/// first item, and reads a take-off item's lat/lon; so for PX4 the take-off (at home) comes first
+/// and a waypoint over home at the route altitude takes the other slot, which keeps every
+/// waypoint at the same seq on both autopilots (the mission state counts on it).
+pub fn mission_items(flavor: Flavor, route: &Route, home: (i32, i32)) -> Vec<MissionItem> {
+    let mut items = route.items(home);
+    if flavor != Flavor::Px4 {
+        return items;
+    }
+    items[0] = MissionItem::waypoint(home.0, home.1, route.altitude_m as f32);
+    if route.takeoff_first && items.len() > 1 {
+        items[1].x = home.0;
+        items[1].y = home.1;
+        items.swap(0, 1);
+    }
+    items
 }
 
 /// PX4's (main, sub) with the sub mode cleared where PX4 does not use it.
@@ -349,5 +418,101 @@ mod tests {
             Flavor::Other
         );
         assert!(set_mode_command(Flavor::Other, "AUTO").is_none());
+    }
+
+    /// PX4 reads NAV_TAKEOFF param7 as AMSL and finite param5/6 as where to go: the take-off
+    /// from commands.toml (10 m above home) becomes home AMSL + 10 with NaN position and yaw.
+    #[test]
+    fn px4_takeoff_altitude_is_amsl_and_position_is_left_to_px4() {
+        let p = [0., 0., 0., 0., 0., 0., 10.];
+        let got = command_params(Flavor::Px4, MavCmd::MAV_CMD_NAV_TAKEOFF, p, Some(488.0)).unwrap();
+        assert_eq!(got[6], 498.0);
+        assert!(
+            got[3].is_nan() && got[4].is_nan() && got[5].is_nan(),
+            "{got:?}"
+        );
+        assert!(command_params(Flavor::Px4, MavCmd::MAV_CMD_NAV_TAKEOFF, p, None).is_none());
+        // ArduPilot reads param7 above home: unchanged; other commands unchanged on PX4.
+        assert_eq!(
+            command_params(
+                Flavor::ArduPilot,
+                MavCmd::MAV_CMD_NAV_TAKEOFF,
+                p,
+                Some(488.0)
+            ),
+            Some(p)
+        );
+        assert_eq!(
+            command_params(Flavor::Px4, MavCmd::MAV_CMD_DO_CHANGE_SPEED, p, Some(488.0)),
+            Some(p)
+        );
+    }
+
+    fn route(takeoff_first: bool) -> Route {
+        use crate::link::actions::Waypoint;
+        Route {
+            waypoints: vec![
+                Waypoint::Relative {
+                    north_m: 50.0,
+                    east_m: 0.0,
+                    alt_m: 20.0,
+                },
+                Waypoint::Relative {
+                    north_m: 50.0,
+                    east_m: 50.0,
+                    alt_m: 20.0,
+                },
+            ],
+            altitude_m: 20.0,
+            search_time_limit_s: None,
+            tracking_time_limit_s: None,
+            takeoff_first,
+        }
+    }
+
+    /// PX4 has no home item and wants the take-off first; waypoints keep ArduPilot's seq numbers.
+    #[test]
+    fn px4_mission_has_takeoff_first_no_home_item_and_same_waypoint_seqs() {
+        let home = (473_977_420, 85_455_940);
+        for takeoff_first in [true, false] {
+            let r = route(takeoff_first);
+            let ap = mission_items(Flavor::ArduPilot, &r, home);
+            let px4 = mission_items(Flavor::Px4, &r, home);
+            assert_eq!(ap, r.items(home));
+            assert_eq!(ap.len(), px4.len());
+            let first_wp = if takeoff_first { 2 } else { 1 };
+            assert_eq!(ap[first_wp..], px4[first_wp..], "waypoints at the same seq");
+            // No item at 0 m AMSL (ArduPilot's home placeholder) and none at lat/lon 0.
+            assert!(px4.iter().all(|i| i.x == home.0 || i.x != 0), "{px4:?}");
+            assert!(
+                px4.iter()
+                    .all(|i| i.frame == MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT)
+            );
+            assert!(
+                px4.iter().all(|i| i.x != 0 && i.y != 0 && i.z > 0.0),
+                "{px4:?}"
+            );
+            if takeoff_first {
+                assert_eq!(px4[0].command, MavCmd::MAV_CMD_NAV_TAKEOFF);
+                assert_eq!((px4[0].x, px4[0].y, px4[0].z), (home.0, home.1, 20.0));
+                assert_eq!(px4[1].command, MavCmd::MAV_CMD_NAV_WAYPOINT);
+            } else {
+                assert_eq!(px4[0], MissionItem::waypoint(home.0, home.1, 20.0));
+            }
+        }
+    }
+
+    /// PX4 reads a DO_REPOSITION COMMAND_INT altitude as AMSL whatever the frame: 20 m above a
+    /// home at 488 m goes as 508 m in MAV_FRAME_GLOBAL; ArduPilot keeps the relative frame.
+    #[test]
+    fn px4_reposition_altitude_is_amsl() {
+        assert_eq!(
+            reposition_frame_alt(Flavor::Px4, 20.0, 500.0, 12.0),
+            (MavFrame::MAV_FRAME_GLOBAL, 508.0)
+        );
+        assert_eq!(
+            reposition_frame_alt(Flavor::ArduPilot, 20.0, 500.0, 12.0),
+            (MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT, 20.0)
+        );
     }
 }

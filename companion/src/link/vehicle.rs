@@ -151,6 +151,16 @@ pub struct Vehicle {
     zone_target: Option<(i32, i32)>,
     /// When the autopilot last reported its mode (its heartbeat).
     mode_heard_at: Option<Duration>,
+    /// PX4 only: after an upload, (item count, give-up time) until MISSION_CURRENT reports the
+    /// new mission's total. PX4's navigator loads an uploaded mission asynchronously; AUTO
+    /// requested before that flies the old (empty) one, "finishes" it at once and falls back to
+    /// Hold (seen on PX4 SITL with the mode switch 10 ms after the upload).
+    px4_mission_pending: Option<(u16, Duration)>,
+    /// PX4 only: give-up time for waiting out AUTO.TAKEOFF before another mode. PX4 ends a
+    /// take-off by switching itself to Hold; a mode requested in the take-off's last moments is
+    /// acknowledged and then overridden by that switch (seen on PX4 SITL: AUTO accepted at 8-9 m
+    /// of a 10 m take-off, then Hold, the mission never flown).
+    px4_takeoff_wait: Option<Duration>,
 }
 
 impl Vehicle {
@@ -185,6 +195,8 @@ impl Vehicle {
             commands_to_us: Vec::new(),
             zone_target: None,
             mode_heard_at: None,
+            px4_mission_pending: None,
+            px4_takeoff_wait: None,
         }
     }
 
@@ -321,6 +333,8 @@ impl Vehicle {
             if self.target.is_none() && wanted {
                 self.target = Some((sys, comp));
                 self.flavor = Flavor::from_autopilot(h.autopilot);
+                self.readiness.flavor = self.flavor;
+                self.mission.home_at_seq0 = self.flavor != Flavor::Px4;
                 self.commands.set_target(sys, comp);
                 self.mission.set_target(sys, comp);
                 tracing::info!(sys, comp, flavor = ?self.flavor, "autopilot chosen");
@@ -359,9 +373,16 @@ impl Vehicle {
                 } else {
                     0
                 };
+                self.readiness.on_heartbeat_status(h.system_status);
             }
             Msg::SYS_STATUS(s) => self.readiness.on_sys_status(now, s),
             Msg::EKF_STATUS_REPORT(e) => self.readiness.on_ekf(now, e),
+            Msg::ESTIMATOR_STATUS(e) => self.readiness.on_estimator(now, e),
+            Msg::MISSION_CURRENT(m) => {
+                if matches!(self.px4_mission_pending, Some((n, _)) if n == m.total) {
+                    self.px4_mission_pending = None;
+                }
+            }
             Msg::STATUSTEXT(t) => {
                 let text = t.text.to_str().unwrap_or("").to_string();
                 self.readiness.on_text(now, &text);
@@ -686,6 +707,27 @@ impl Vehicle {
                     continue;
                 }
                 (Running::Idle, Step::Mode(name)) => {
+                    // Landing and return never wait.
+                    if self.flavor == Flavor::Px4
+                        && !matches!(name.as_str(), "LAND" | "RTL" | "SMART_RTL" | "TAKEOFF")
+                        && self.telemetry.mode.as_deref() == Some("TAKEOFF")
+                    {
+                        let until = *self
+                            .px4_takeoff_wait
+                            .get_or_insert(now + Duration::from_secs(30));
+                        if now < until {
+                            return out; // the heartbeat that shows Hold moves on
+                        }
+                    }
+                    self.px4_takeoff_wait = None;
+                    if name == "AUTO"
+                        && let Some((_, until)) = self.px4_mission_pending
+                    {
+                        if now < until {
+                            return out; // the next MISSION_CURRENT or tick moves on
+                        }
+                        self.px4_mission_pending = None;
+                    }
                     // A different mode commanded since the last heartbeat: the reported mode is
                     // stale (LAND reported, GUIDED just accepted for a sidestep).
                     let stale = self
@@ -784,11 +826,32 @@ impl Vehicle {
                     }
                 }
                 (Running::Idle, Step::Command { command, params }) => {
+                    // Before take-off the vehicle stands at home: its AMSL altitude serves
+                    // until HOME_POSITION arrives.
+                    let home_amsl_m = self.telemetry.home.map(|h| h.2).or_else(|| {
+                        self.telemetry
+                            .position
+                            .filter(|_| !self.telemetry.armed)
+                            .map(|p| p.alt_amsl_m)
+                    });
+                    let Some(params) =
+                        modes::command_params(self.flavor, *command, *params, home_amsl_m)
+                    else {
+                        self.records.push(CommandRecord {
+                            action,
+                            command: format!("{command:?}"),
+                            result: "FAILED (no home position yet)".into(),
+                            attempts: 0,
+                            latency_ms: None,
+                        });
+                        self.job_failed(now);
+                        continue;
+                    };
                     if *command == MavCmd::MAV_CMD_NAV_TAKEOFF && self.flavor == Flavor::Px4 {
                         // PX4 flies a take-off command in its TAKEOFF mode.
                         self.note_mode(now, "TAKEOFF");
                     }
-                    let spec = CommandSpec::long(*command, *params);
+                    let spec = CommandSpec::long(*command, params);
                     if !self.issue(now, &action, format!("{command:?}"), spec, &mut out) {
                         return out;
                     }
@@ -815,7 +878,7 @@ impl Vehicle {
                         self.job_failed(now);
                         continue;
                     };
-                    let items = route.items(home);
+                    let items = modes::mission_items(self.flavor, route, home);
                     match self.mission.upload(now, items) {
                         Ok(msgs) => {
                             out.extend(msgs);
@@ -861,13 +924,19 @@ impl Vehicle {
                     match zone {
                         (Some(n), Some(e), Some(p)) => {
                             let (x, y) = displace((p.lat_e7, p.lon_e7), n, e);
+                            let (frame, z) = modes::reposition_frame_alt(
+                                self.flavor,
+                                p.alt_rel_m,
+                                p.alt_amsl_m,
+                                p.alt_rel_m,
+                            );
                             let spec = CommandSpec::int(
                                 MavCmd::MAV_CMD_DO_REPOSITION,
-                                MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                                frame,
                                 [-1.0, 1.0, 0.0, f32::NAN],
                                 x,
                                 y,
-                                p.alt_rel_m as f32,
+                                z,
                             );
                             self.note_reposition(now);
                             self.zone_target = Some((x, y));
@@ -942,14 +1011,20 @@ impl Vehicle {
         let north = o.forward_m * h.cos() - o.right_m * h.sin();
         let east = o.forward_m * h.sin() + o.right_m * h.cos();
         let (x, y) = displace((p.lat_e7, p.lon_e7), north, east);
+        let (frame, z) = modes::reposition_frame_alt(
+            self.flavor,
+            p.alt_rel_m + o.up_m,
+            p.alt_amsl_m,
+            p.alt_rel_m,
+        );
         // param1 -1: default speed; param2 1: MAV_DO_REPOSITION_FLAGS_CHANGE_MODE; param4 NaN: keep yaw.
         Some(CommandSpec::int(
             MavCmd::MAV_CMD_DO_REPOSITION,
-            MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT,
+            frame,
             [-1.0, 1.0, 0.0, f32::NAN],
             x,
             y,
-            (p.alt_rel_m + o.up_m) as f32,
+            z,
         ))
     }
 
@@ -1051,6 +1126,10 @@ impl Vehicle {
                         attempts: 1,
                         latency_ms: None,
                     });
+                    if self.flavor == Flavor::Px4 {
+                        self.px4_mission_pending =
+                            Some((items.len() as u16, now + Duration::from_secs(5)));
+                    }
                     if in_job {
                         self.step_done();
                     }
@@ -2172,5 +2251,220 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
+    }
+
+    fn px4_frame(msg: Msg) -> Frame {
+        let mut f = frame(msg);
+        f.header.system_id = 2; // PX4 instance 1: MAV_SYS_ID 2
+        f
+    }
+
+    /// PX4 SITL's own evidence (no EKF_STATUS_REPORT): STANDBY heartbeat in Hold, the prearm bit
+    /// in SYS_STATUS health only, ESTIMATOR_STATUS 1023, home at 488 m AMSL.
+    fn px4_ready(v: &mut Vehicle, t: f64) -> Vec<Msg> {
+        let mut out = Vec::new();
+        for msg in [
+            Msg::HEARTBEAT(HEARTBEAT_DATA {
+                custom_mode: modes::px4_custom_mode(4, 3),
+                mavtype: MavType::MAV_TYPE_QUADROTOR,
+                autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+                base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                system_status: MavState::MAV_STATE_STANDBY,
+                mavlink_version: 3,
+            }),
+            Msg::SYS_STATUS(SYS_STATUS_DATA {
+                onboard_control_sensors_present: MavSysStatusSensor::from_bits_truncate(
+                    0x0300_402f,
+                ),
+                onboard_control_sensors_enabled: MavSysStatusSensor::from_bits_truncate(
+                    0x0301_402f,
+                ),
+                onboard_control_sensors_health: MavSysStatusSensor::from_bits_truncate(0x1320_c83f),
+                ..SYS_STATUS_DATA::DEFAULT
+            }),
+            Msg::ESTIMATOR_STATUS(ESTIMATOR_STATUS_DATA {
+                flags: EstimatorStatusFlags::from_bits_truncate(1023),
+                ..ESTIMATOR_STATUS_DATA::DEFAULT
+            }),
+            Msg::HOME_POSITION(HOME_POSITION_DATA {
+                latitude: 473_977_420,
+                longitude: 85_455_940,
+                altitude: 488_000,
+                ..HOME_POSITION_DATA::DEFAULT
+            }),
+        ] {
+            out.extend(v.on_frame(s(t), &px4_frame(msg)));
+        }
+        out
+    }
+
+    #[test]
+    fn px4_arms_on_its_own_evidence_and_takes_off_to_amsl_altitude() {
+        let mut v = Vehicle::new(VehicleConfig::default(), table(), None);
+        px4_ready(&mut v, 0.0);
+        assert_eq!((v.flavor, v.target), (Flavor::Px4, Some((2, 1))));
+        let out = v.request_actions(s(0.5), &["take_off".into()]);
+        // Hold already stands for GUIDED on PX4; ready without any EKF_STATUS_REPORT.
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_COMPONENT_ARM_DISARM]);
+        let mut ack_arm = px4_frame(Msg::COMMAND_ACK(COMMAND_ACK_DATA {
+            command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            result: MavResult::MAV_RESULT_ACCEPTED,
+            ..COMMAND_ACK_DATA::DEFAULT
+        }));
+        ack_arm.header.component_id = 1;
+        let out = v.on_frame(s(0.6), &ack_arm);
+        match &out[..] {
+            [Msg::COMMAND_LONG(c)] => {
+                assert_eq!(c.command, MavCmd::MAV_CMD_NAV_TAKEOFF);
+                assert_eq!(c.param7, 498.0, "home 488 m AMSL + 10 m");
+                assert!(c.param4.is_nan() && c.param5.is_nan() && c.param6.is_nan());
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn px4_not_ready_while_prearm_health_bit_is_clear() {
+        let mut v = Vehicle::new(VehicleConfig::default(), table(), None);
+        px4_ready(&mut v, 0.0);
+        v.on_frame(
+            s(0.1),
+            &px4_frame(Msg::SYS_STATUS(SYS_STATUS_DATA {
+                onboard_control_sensors_health: MavSysStatusSensor::from_bits_truncate(0x0320_c83f),
+                ..SYS_STATUS_DATA::DEFAULT
+            })),
+        );
+        let out = v.request_actions(s(0.5), &["take_off".into()]);
+        assert!(commands(&out).is_empty(), "{out:?}");
+    }
+
+    #[test]
+    fn px4_auto_waits_until_px4_reports_the_uploaded_mission() {
+        use crate::link::actions::{Route, Waypoint};
+        let mut t = table();
+        t.actions.insert(
+            "follow_trajectory".into(),
+            vec![Step::UploadMission, Step::Mode("AUTO".into())],
+        );
+        let route = Route {
+            waypoints: vec![Waypoint::Relative {
+                north_m: 30.0,
+                east_m: 0.0,
+                alt_m: 15.0,
+            }],
+            altitude_m: 15.0,
+            search_time_limit_s: None,
+            tracking_time_limit_s: None,
+            takeoff_first: true,
+        };
+        let mut v = Vehicle::new(VehicleConfig::default(), t, Some(route));
+        px4_ready(&mut v, 0.0);
+        let out = v.request_actions(s(1.0), &["follow_trajectory".into()]);
+        assert!(
+            matches!(&out[0], Msg::MISSION_COUNT(c) if c.count == 3),
+            "{out:?}"
+        );
+        let mut sent = Vec::new();
+        for seq in 0..3 {
+            let out = v.on_frame(
+                s(1.0),
+                &px4_frame(Msg::MISSION_REQUEST_INT(MISSION_REQUEST_INT_DATA {
+                    seq,
+                    ..MISSION_REQUEST_INT_DATA::DEFAULT
+                })),
+            );
+            match &out[0] {
+                Msg::MISSION_ITEM_INT(i) => sent.push(i.clone()),
+                other => panic!("{other:?}"),
+            }
+        }
+        assert_eq!(
+            sent[0].command,
+            MavCmd::MAV_CMD_NAV_TAKEOFF,
+            "PX4: take-off first"
+        );
+        assert_eq!((sent[0].x, sent[0].y), (473_977_420, 85_455_940));
+        v.on_frame(
+            s(1.1),
+            &px4_frame(Msg::MISSION_ACK(MISSION_ACK_DATA {
+                mavtype: MavMissionResult::MAV_MISSION_ACCEPTED,
+                ..MISSION_ACK_DATA::DEFAULT
+            })),
+        );
+        let mut out = v.on_frame(
+            s(1.2),
+            &px4_frame(Msg::MISSION_COUNT(MISSION_COUNT_DATA {
+                count: 3,
+                ..MISSION_COUNT_DATA::DEFAULT
+            })),
+        );
+        for it in sent {
+            out = v.on_frame(s(1.3), &px4_frame(Msg::MISSION_ITEM_INT(it)));
+        }
+        assert!(matches!(out[0], Msg::MISSION_ACK(_)), "verified: {out:?}");
+        assert!(
+            commands(&out).is_empty(),
+            "no AUTO before PX4 reports the mission"
+        );
+        assert!(commands(&v.tick(s(2.0))).is_empty());
+        let stale = Msg::MISSION_CURRENT(MISSION_CURRENT_DATA {
+            total: 0,
+            ..MISSION_CURRENT_DATA::DEFAULT
+        });
+        assert!(commands(&v.on_frame(s(2.1), &px4_frame(stale))).is_empty());
+        let loaded = Msg::MISSION_CURRENT(MISSION_CURRENT_DATA {
+            total: 3,
+            ..MISSION_CURRENT_DATA::DEFAULT
+        });
+        let out = v.on_frame(s(2.5), &px4_frame(loaded));
+        match &out[..] {
+            [Msg::COMMAND_LONG(c)] => {
+                assert_eq!(c.command, MavCmd::MAV_CMD_DO_SET_MODE);
+                assert_eq!(
+                    (c.param1, c.param2, c.param3),
+                    (1.0, 4.0, 4.0),
+                    "AUTO.MISSION"
+                );
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    fn px4_heartbeat(main: u8, sub: u8) -> Frame {
+        px4_frame(Msg::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: modes::px4_custom_mode(main, sub),
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+            base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+                | MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED,
+            system_status: MavState::MAV_STATE_ACTIVE,
+            mavlink_version: 3,
+        }))
+    }
+
+    #[test]
+    fn px4_mode_change_waits_out_the_takeoff_but_return_does_not() {
+        let mut t = table();
+        t.actions
+            .insert("hold".into(), vec![Step::Mode("LOITER".into())]);
+        let mut v = Vehicle::new(VehicleConfig::default(), t, None);
+        px4_ready(&mut v, 0.0);
+        v.on_frame(s(1.0), &px4_heartbeat(4, 2)); // AUTO.TAKEOFF
+        assert!(commands(&v.request_actions(s(1.1), &["hold".into()])).is_empty());
+        assert!(commands(&v.on_frame(s(2.0), &px4_heartbeat(4, 2))).is_empty());
+        assert!(commands(&v.tick(s(2.5))).is_empty(), "still taking off");
+        // Returning home is never held back.
+        let out = v.request_actions(s(2.6), &["return_to_base".into()]);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        // Hold again, once PX4 has ended the take-off: sent at once.
+        let mut v = Vehicle::new(VehicleConfig::default(), table(), None);
+        v.actions
+            .actions
+            .insert("hold".into(), vec![Step::Mode("AUTO".into())]);
+        px4_ready(&mut v, 0.0);
+        v.on_frame(s(1.0), &px4_heartbeat(4, 2));
+        assert!(commands(&v.request_actions(s(1.1), &["hold".into()])).is_empty());
+        let out = v.on_frame(s(3.0), &px4_heartbeat(4, 3)); // PX4 switched itself to Hold
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
     }
 }

@@ -1,0 +1,162 @@
+"""The companion flying a real PX4 SITL (SIH quadrotor), a fresh vehicle per test, judged from PX4's
+GCS port as a ground station sees it (and from the companion's decision log where the question is
+what the companion did). Skipped with how to get PX4 when none is found (px4_sitl.find_px4_dir).
+
+Each test flies a short route of its own (a temp file) so the three fit in a few minutes side by
+side; the default mission is flown by scripts/sitl_px4.sh. No SITL speed-up: the companion's link
+timers are wall-clock.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.register_assert_rewrite("px4_sitl")
+from helpers import companion_fly_cmd, read_decision_log  # noqa: E402
+from px4_sitl import UdpRelay, companion_help  # noqa: E402
+
+# The px4_vehicle fixture, the report hook and the `px4` marker (registered there and put on every
+# test of this module, so `-m px4` selects them) live in px4_sitl.py.
+pytest_plugins = ["px4_sitl"]
+
+ROOT = Path(__file__).resolve().parent.parent
+# A nominal battery: SIH drains to SIM_BAT_MIN_PCT in SIM_BAT_DRAIN seconds once armed (default
+# 60 s, which the companion's energy guarantee rightly answers with a return home).
+NOMINAL = {"SIM_BAT_DRAIN": 3600}
+ROUTE_ALT_M = 15.0
+
+
+def companion_bin() -> str:
+    exe = os.environ.get("COMPANION_BIN", str(ROOT / "target" / "debug" / "companion"))
+    if not Path(exe).exists():
+        pytest.skip(f"no companion binary at {exe} (cargo build --bin companion, or set COMPANION_BIN)")
+    return exe
+
+
+def write_route(path: Path, waypoints, search_s: float = 5.0) -> Path:
+    lines = ['description = "PX4 SITL test route"', 'frame = "relative"', f"altitude_m = {ROUTE_ALT_M}",
+             f"search_time_limit_s = {search_s}", "tracking_time_limit_s = 5.0", "takeoff_first = true"]
+    for n, e in waypoints:
+        lines += ["[[waypoint]]", f"north_m = {n}", f"east_m = {e}"]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def fly(exe: str, port: int, route: Path, log_dir: Path):
+    extra = ["--once"] if "--once" in companion_help(exe) else []
+    cmd = companion_fly_cmd(exe, f"udpin:127.0.0.1:{port}", log_dir, mission=route, extra=extra)
+    out = open(log_dir.parent / f"fly-{port}.out", "w")
+    return subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL), out
+
+
+def finish(proc, out, timeout: float) -> int:
+    try:
+        return proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.terminate()
+        proc.wait(timeout=10)
+        return -1
+    finally:
+        out.close()
+
+
+def commanded(records, actions) -> list:
+    """(action, command, result) of every command record for these actions."""
+    found = []
+    for r in records:
+        for c in r.get("commands", []) or []:
+            if c.get("action") in actions:
+                found.append((c.get("action"), c.get("command"), c.get("result")))
+    return found
+
+
+def landed_and_disarmed(o) -> bool:
+    # MAV_LANDED_STATE_ON_GROUND = 1
+    return o.armed_seen and not o.armed and o.landed_state == 1
+
+
+def test_px4_nominal_mission_flown_landed_disarmed(px4_vehicle, tmp_path):
+    exe = companion_bin()
+    v = px4_vehicle(NOMINAL)
+    route = write_route(tmp_path / "route.toml", [(30, 0), (30, 30)])
+    proc, out = fly(exe, v.onboard_port, route, tmp_path / "runs")
+    o = v.observer
+    try:
+        o.wait("armed", lambda o: o.armed_seen, 90)
+        o.wait("route altitude", lambda o: o.max_alt_m >= 0.8 * ROUTE_ALT_M, 90)
+        # Seq numbers: 0 take-off, 1 over home, 2 and 3 the two waypoints (modes.rs mission_items).
+        o.wait("the last waypoint reached (MISSION_ITEM_REACHED 3)", lambda o: 3 in o.reached, 120)
+        o.wait("landed and disarmed", landed_and_disarmed, 150)
+    finally:
+        rc = finish(proc, out, 30)
+    assert "MISSION" in o.modes, o.summary()
+    ends = [i for i, m in enumerate(o.modes) if m in ("LAND", "RTL")]
+    assert ends and o.modes.index("MISSION") < ends[-1], o.summary()
+    assert rc == 0, f"companion fly exited {rc}; {o.summary()}"
+    records = read_decision_log(tmp_path / "runs")
+    assert any(c[1] == "ARM" and c[2] == "ACCEPTED" for c in commanded(records, {"take_off"})), "arm not acked"
+    uploads = [c for c in commanded(records, {"follow_trajectory"}) if c[1] == "MISSION_UPLOAD"
+               and c[2].startswith("ACCEPTED")]
+    assert len(uploads) == 1, uploads
+
+
+def test_px4_low_battery_lands_or_returns(px4_vehicle, tmp_path):
+    exe = companion_bin()
+    # Drain fast to 5 % and keep PX4's own low-battery failsafe to a warning, so what ends the
+    # flight is the companion's decision.
+    v = px4_vehicle({"SIM_BAT_DRAIN": 100, "SIM_BAT_MIN_PCT": 5, "COM_LOW_BAT_ACT": 0})
+    route = write_route(tmp_path / "route.toml", [(60, 0), (60, 60), (0, 60)], search_s=60.0)
+    proc, out = fly(exe, v.onboard_port, route, tmp_path / "runs")
+    o = v.observer
+    try:
+        o.wait("armed", lambda o: o.armed_seen, 90)
+        o.wait("RTL or LAND", lambda o: "RTL" in o.modes or "LAND" in o.modes, 150)
+        o.wait("landed and disarmed", landed_and_disarmed, 150)
+    finally:
+        rc = finish(proc, out, 30)
+    records = read_decision_log(tmp_path / "runs")
+    ended = [c for c in commanded(records, {"return_to_base", "land", "replan_and_land"})
+             if c[2] in ("ACCEPTED", "ALREADY")]
+    assert ended, f"the companion commanded no landing/return; {o.summary()}"
+    assert rc == 0, f"companion fly exited {rc}; {o.summary()}"
+
+
+COMMANDS = ("COMMAND_LONG", "COMMAND_INT", "MISSION_COUNT", "MISSION_ITEM_INT", "SET_MODE",
+            "MISSION_SET_CURRENT", "MISSION_CLEAR_ALL")
+
+
+def test_px4_link_cut_no_commands_while_lost_no_second_upload(px4_vehicle, tmp_path):
+    exe = companion_bin()
+    v = px4_vehicle(NOMINAL)
+    companion_port = 24540 + v.instance
+    relay = UdpRelay(v.instance, companion_port)
+    route = write_route(tmp_path / "route.toml", [(40, 0), (40, 40), (0, 40)])
+    proc, out = fly(exe, companion_port, route, tmp_path / "runs")
+    o = v.observer
+    cut_s = 6.0
+    link_timeout_s = 3.0
+    try:
+        o.wait("MISSION mode", lambda o: o.mode == "MISSION", 150)
+        o.wait("the first waypoint reached", lambda o: 2 in o.reached, 60)
+        t_cut = time.time()
+        relay.paused = True
+        time.sleep(cut_s)
+        relay.paused = False
+        t_back = time.time()
+        o.wait("landed and disarmed", landed_and_disarmed, 200)
+    finally:
+        rc = finish(proc, out, 30)
+        relay.close()
+    lost = relay.sent_between(t_cut + link_timeout_s + 0.5, t_back, COMMANDS)
+    assert not lost, f"commands while the link was lost: {[m.get_type() for m in lost]}"
+    uploads = relay.sent_between(0, time.time() + 1, ("MISSION_COUNT",))
+    assert len(uploads) == 1, f"{len(uploads)} mission uploads (MISSION_COUNT) for one route"
+    records = read_decision_log(tmp_path / "runs")
+    events = [e for r in records for e in (r.get("events") or [])]
+    assert "link lost" in events and "link regained" in events, events[-20:]
+    assert "MISSION" in o.modes and (3 in o.reached or 4 in o.reached), o.summary()
+    assert rc == 0, f"companion fly exited {rc}; {o.summary()}"
