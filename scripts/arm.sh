@@ -57,7 +57,15 @@ if [ "$want_musl" = 1 ]; then
   fi
   target_dir="${CARGO_TARGET_DIR:-$(cargo metadata --no-deps --format-version 1 |
     sed -n 's/.*"target_directory":"\([^"]*\)".*/\1/p')}"
-  objcopy="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p')/bin/rust-objcopy"
+  # A strip that reads ARM ELF: llvm-strip (any LLVM), else the toolchain's rust-objcopy (needs
+  # the llvm-tools component's libLLVM); without one, the sizes are reported unstripped.
+  strip_cmd=()
+  if command -v llvm-strip >/dev/null; then
+    strip_cmd=(llvm-strip -o)
+  else
+    objcopy="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p')/bin/rust-objcopy"
+    "$objcopy" --version >/dev/null 2>&1 && strip_cmd=("$objcopy" --strip-all)
+  fi
   for t in "${musl_targets[@]}"; do
     if ! rustup target list --installed | grep -qx "$t"; then
       stage "rustup target add $t"
@@ -77,9 +85,11 @@ if [ "$want_musl" = 1 ]; then
     "$qemu" "$bin" --help >/dev/null || die "$t: companion --help failed under $qemu"
     "$qemu" "$bin" simulate --json --no-log --steps 20 >/dev/null || die "$t: companion simulate failed under $qemu"
     echo "   $qemu companion --help and simulate: ok"
-    if [ -x "$objcopy" ]; then
-      "$objcopy" --strip-all "$bin" "$bin.stripped"
+    if [ "${#strip_cmd[@]}" -gt 0 ]; then
+      if [ "${strip_cmd[0]}" = llvm-strip ]; then "${strip_cmd[@]}" "$bin.stripped" "$bin"; else "${strip_cmd[@]}" "$bin" "$bin.stripped"; fi
       echo "   size: $(stat -c %s "$bin") bytes as built, $(stat -c %s "$bin.stripped") bytes stripped ($bin.stripped)"
+    else
+      echo "   size: $(stat -c %s "$bin") bytes as built (no llvm-strip here to strip a copy)"
     fi
   done
   stage "done"

@@ -633,10 +633,9 @@ impl<'m> Core<'m> {
             return false;
         }
         let name = rec.proposals[k].mdp.clone();
-        let (Some(mdp), Some(shared)) = (self.mdps.get_mut(&name), model.mdps.get(&name)) else {
+        let Some(mdp) = self.mdps.get_mut(&name) else {
             return false;
         };
-        let _ = shared;
         let Some(s) = mdp.state_index(&rec.proposals[k].state) else {
             return false;
         };

@@ -26,6 +26,19 @@ fn load() -> Params {
         toml::from_str(include_str!("../../../params/resource_policies.toml")).unwrap();
     for (name, p) in policies.iter_mut() {
         p.name = name.clone();
+        // The shipped policies carry no degradation paths (the companion's decision core lets
+        // the tracking MDP choose again). The scheduler still supports them; these tests exercise
+        // that mechanism with the paths the paper's Tables 4 and 6 show.
+        assert!(p.degrade.is_empty(), "params/resource_policies.toml has degrade paths");
+        p.degrade.insert(
+            "tracking".into(),
+            [
+                ("V3".to_string(), vec!["V1".to_string()]),
+                ("V2".to_string(), vec!["V5".to_string()]),
+            ]
+            .into_iter()
+            .collect(),
+        );
         p.validate(name, &catalogue).unwrap();
     }
     Params {
