@@ -69,7 +69,8 @@ def read_decision_log(log_dir: Path, fallback: Optional[Path] = None) -> List[Di
 
 
 def all_actions(records: List[Dict[str, Any]]) -> List[str]:
-    return [a for r in records for a in r.get("actions", [])]
+    # what ran: the MDPs' actions and the shell's own safety actions (the flight's end, a landing kept up)
+    return [a for r in records for a in r.get("actions", []) + r.get("shell_actions", [])]
 
 
 def tracking_versions(records: List[Dict[str, Any]]) -> set:

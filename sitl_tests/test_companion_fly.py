@@ -163,6 +163,12 @@ def test_nominal_tracking_mission_end_to_end(autopilot_factory, fly, monitors_fa
     assert states & {"target", "v0", "v1", "v2", "v3", "v4", "v5"} or any(a.startswith("track_v") for a in actions), \
         f"no tracking after the target was detected: states {sorted(states)}, actions {sorted(actions)}"
     assert actions & LANDING_ACTIONS, sorted(actions)
+    # every action the core says runs was proposed by an MDP in the same record; what the shell
+    # flew on its own safety rules (the flight's end) is apart, in shell_actions, with its reason
+    for r in f.records:
+        proposed = {a for p in r.get("proposals", []) for a in p.get("actions", [])}
+        unproposed = [a for a in r.get("actions", []) if a not in proposed]
+        assert not unproposed, (r.get("cycle"), unproposed, r.get("proposals"))
     if ap.standin is not None:
         sa = ap.standin
         assert sa.rec.of("arm"), "never armed"

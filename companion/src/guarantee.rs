@@ -312,7 +312,9 @@ fn check_against_catalogue(
             };
             let impls = catalogue.implementations(app, version);
             let found = match imp {
-                Some(imp) => impls.into_iter().find(|x| x.implementation.to_string() == imp),
+                Some(imp) => impls
+                    .into_iter()
+                    .find(|x| x.implementation.to_string() == imp),
                 None if impls.len() == 1 => impls.into_iter().next(),
                 None => None,
             };

@@ -345,7 +345,12 @@ impl MissionMdp {
             actions: self.does[d.action].clone(),
             value: d.value,
             iterations: horizon as u32,
-            inputs: self.vars.iter().cloned().zip(self.values.iter().copied()).collect(),
+            inputs: self
+                .vars
+                .iter()
+                .cloned()
+                .zip(self.values.iter().copied())
+                .collect(),
             reason: String::new(),
         }
     }

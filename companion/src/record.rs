@@ -157,6 +157,12 @@ pub struct DecisionRecord {
     pub conflicts: Vec<Conflict>,
     /// Final primitive action set after behaviour and resource arbitration.
     pub actions: Vec<String>,
+    /// Vehicle actions the fly shell flew this cycle on its own safety rules, not on a model's
+    /// proposal: the flight's end ("land" once the mission is over) and a landing kept up until
+    /// the vehicle is down. Kept apart from `actions`, which hold only what the MDPs chose; the
+    /// record's events say why. Empty in `simulate`.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub shell_actions: Vec<String>,
     pub resources: Option<ResourcesRecord>,
     pub guarantee: Option<GuaranteeRecord>,
     pub commands: Vec<CommandRecord>,
@@ -228,7 +234,7 @@ reuse_clone!(GuaranteeRecord {
 } maps { margins, goals, drift });
 reuse_clone!(DecisionRecord {
     cycle, time_s, state, events, proposals, conflicts, actions, resources, guarantee, commands,
-    link_events, utc_us
+    link_events, utc_us, shell_actions
 } maps { observations, evidence, probabilities, vehicle });
 reuse_clone!(Plan { vehicle_actions, applications } maps {});
 

@@ -17,7 +17,7 @@ mod tlog;
 mod writer;
 
 pub use reader::{LogEnd, LogEvent, LogRead, LossMark, ReadError, ReadIssue, read_log};
-pub use stream::{LogItem, LogStream, MAX_LINE_BYTES, stream_log};
+pub use stream::{LogItem, LogStream, LossReason, MAX_LINE_BYTES, stream_log};
 pub use tlog::{TlogFrame, TlogWriter, read_tlog};
 pub use writer::{
     DEFAULT_MAX_BYTES, DEFAULT_MAX_LINE_BYTES, DecisionLog, RESERVE_BYTES, RESERVE_FILE,

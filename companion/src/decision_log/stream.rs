@@ -21,8 +21,8 @@ pub enum LogItem {
     /// it read, when the writer recorded them; `None` per proposal otherwise).
     Record(Box<DecisionRecord>, Vec<Option<serde_json::Value>>),
     Event(LogEvent),
-    /// `dropped` records/events lost just before the next record.
-    Loss(u64),
+    /// `dropped` records/events lost just before the next record, and why.
+    Loss(u64, LossReason),
     /// The writer's end line.
     End,
     Corrupted(ReadIssue),
@@ -32,6 +32,41 @@ pub enum LogItem {
     Note(String),
     /// A header of a schema newer than this build reads.
     NewerSchema(u32),
+}
+
+/// Why a loss line's records are missing (its `reason`, as the writer wrote it).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum LossReason {
+    /// The writer thread fell behind (also loss lines written before reasons were).
+    #[default]
+    QueueFull,
+    /// A write failed: disk full or an I/O error.
+    WriteFailed,
+    /// The log reached its size cap.
+    Cap,
+    /// One record was over the line-size limit.
+    TooLarge,
+}
+
+impl LossReason {
+    fn from_line(reason: Option<&str>) -> Self {
+        match reason {
+            Some("write_failed") => Self::WriteFailed,
+            Some("cap") => Self::Cap,
+            Some("too_large") => Self::TooLarge,
+            _ => Self::QueueFull,
+        }
+    }
+
+    /// Why, in a few words, for the report.
+    pub fn text(self) -> &'static str {
+        match self {
+            Self::QueueFull => "log writer behind",
+            Self::WriteFailed => "write failed: disk full or I/O error",
+            Self::Cap => "log size cap reached",
+            Self::TooLarge => "record over the line-size limit",
+        }
+    }
 }
 
 /// Iterator over a run folder's or a log file's items; see [`stream_log`].
@@ -258,9 +293,10 @@ impl Iterator for LogStream {
                         Err(e) => LogItem::Corrupted(issue(format!("unreadable header: {e}"))),
                     }
                 }
-                Some("loss") => {
-                    LogItem::Loss(value.get("dropped").and_then(|d| d.as_u64()).unwrap_or(0))
-                }
+                Some("loss") => LogItem::Loss(
+                    value.get("dropped").and_then(|d| d.as_u64()).unwrap_or(0),
+                    LossReason::from_line(value.get("reason").and_then(|r| r.as_str())),
+                ),
                 Some("event") => match serde_json::from_value::<LogEvent>(value) {
                     Ok(e) => LogItem::Event(e),
                     Err(e) => LogItem::Corrupted(issue(format!("unreadable event: {e}"))),
@@ -322,7 +358,7 @@ mod tests {
                     inputs += i.iter().flatten().count();
                 }
                 LogItem::Event(_) => events += 1,
-                LogItem::Loss(n) => lost += n,
+                LogItem::Loss(n, _) => lost += n,
                 LogItem::Corrupted(_) => bad += 1,
                 LogItem::Truncated(_) => cut += 1,
                 _ => {}

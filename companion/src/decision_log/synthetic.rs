@@ -343,6 +343,7 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
         proposals,
         conflicts,
         actions,
+        shell_actions: Vec::new(),
         resources: Some(ResourcesRecord {
             placements,
             cpu_load,

@@ -931,7 +931,7 @@ pub fn decide<D: Decider>(
     if let Some(why) = shell.mission.mission_end(&obs) {
         // The mission's end, not the core's decision: recorded as an event with the action.
         shell_events.push(format!("{why}: land"));
-        rec.actions.push("land".into());
+        rec.shell_actions.push("land".into());
         shell.mission.after_plan(&["land".to_string()]);
         chosen = Some("land".into());
     }
@@ -950,8 +950,8 @@ pub fn decide<D: Decider>(
                     "landing: {landing} again (the landing was interrupted or not done)"
                 ));
             }
-            if !rec.actions.contains(&landing) {
-                rec.actions.push(landing.clone());
+            if !rec.actions.contains(&landing) && !rec.shell_actions.contains(&landing) {
+                rec.shell_actions.push(landing.clone());
             }
             chosen = Some(landing);
         }

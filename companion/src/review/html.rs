@@ -145,6 +145,13 @@ fn why_html(w: &Why) -> String {
         esc(&w.state),
         esc(&w.actions.join(", "))
     );
+    if !w.shell_actions.is_empty() {
+        let _ = write!(
+            o,
+            "<li>shell (safety rule, not a model): {}</li>",
+            esc(&w.shell_actions.join(", "))
+        );
+    }
     if w.proposals.is_empty() {
         o.push_str("<li class=\"no-data\">no proposals recorded</li>");
     }
@@ -490,7 +497,19 @@ pub fn render_html(rev: &Review) -> String {
         }
         o.push_str("</ul></details></li>");
     }
-    if !s.ended_cleanly && rev.truncated.is_none() {
+    if s.lost_write_failed > 0 {
+        let _ = write!(
+            o,
+            "<li class=\"note\">{} records lost to failed writes: the disk filled or failed (not a killed process)</li>",
+            s.lost_write_failed
+        );
+    } else if s.lost_capped > 0 {
+        let _ = write!(
+            o,
+            "<li class=\"note\">{} records not written: the log reached its size cap</li>",
+            s.lost_capped
+        );
+    } else if !s.ended_cleanly && rev.truncated.is_none() {
         o.push_str("<li class=\"note\">no end line: the run did not close its log (killed or still running)</li>");
     }
     o.push_str("</ul></section>");

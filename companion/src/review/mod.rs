@@ -18,7 +18,7 @@ pub mod why;
 pub use html::render_html;
 pub use terminal::{render_terminal, render_why};
 
-use crate::decision_log::{Header, LogItem, ReadError, ReadIssue, stream_log};
+use crate::decision_log::{Header, LogItem, LossReason, ReadError, ReadIssue, stream_log};
 use crate::record::{CommandRecord, DecisionRecord};
 use crate::tracking::TrackingCounter;
 use outcomes::{Category, OutcomeCounts, categorize};
@@ -90,6 +90,10 @@ pub struct Summary {
     pub corrupted_lines: usize,
     pub truncated: bool,
     pub ended_cleanly: bool,
+    /// Records lost to failed writes (a full disk) and to the log's size cap: with either, a
+    /// log without its end line ran out of room rather than being killed.
+    pub lost_write_failed: u64,
+    pub lost_capped: u64,
 }
 
 /// Something to flag on a cycle.
@@ -100,7 +104,7 @@ pub enum Mark {
     Link(String),
     Degraded(String),
     Reallocated(String),
-    Loss(u64),
+    Loss(u64, LossReason),
 }
 
 impl Mark {
@@ -111,14 +115,14 @@ impl Mark {
             Mark::Link(_) => "link-event",
             Mark::Degraded(_) => "degraded",
             Mark::Reallocated(_) => "reallocated",
-            Mark::Loss(_) => "loss",
+            Mark::Loss(..) => "loss",
         }
     }
     pub fn text(&self) -> String {
         match self {
             Mark::Mode(t) | Mark::Failsafe(t) | Mark::Link(t) | Mark::Degraded(t) => t.clone(),
             Mark::Reallocated(t) => format!("re-allocated: {t}"),
-            Mark::Loss(n) => format!("{n} records lost (log writer behind)"),
+            Mark::Loss(n, why) => format!("{n} records lost ({})", why.text()),
         }
     }
 }
@@ -230,7 +234,7 @@ pub struct Review {
     asked_cycle: Option<u64>,
     pending: Option<(Box<DecisionRecord>, Vec<Option<serde_json::Value>>)>,
     pending_events: BTreeMap<u64, Vec<String>>,
-    pending_loss: u64,
+    pending_loss: (u64, LossReason),
     open_spans: HashMap<String, usize>,
     prev_cycle: Option<u64>,
     prev_mode: Option<String>,
@@ -334,11 +338,16 @@ impl Review {
                     }
                 }
             },
-            LogItem::Loss(n) => {
+            LogItem::Loss(n, why) => {
                 if let Some((prev, prev_inputs)) = self.pending.take() {
                     self.finalize(*prev, &prev_inputs);
                 }
-                self.pending_loss += n;
+                match why {
+                    LossReason::WriteFailed => self.summary.lost_write_failed += n,
+                    LossReason::Cap => self.summary.lost_capped += n,
+                    LossReason::QueueFull | LossReason::TooLarge => {}
+                }
+                self.pending_loss = (self.pending_loss.0 + n, why);
                 self.summary.dropped += n;
                 if self.losses.len() < MAX_ISSUES {
                     self.losses.push((self.summary.records, n));
@@ -457,9 +466,9 @@ impl Review {
 
         // Marks.
         let mut marks = Vec::new();
-        if self.pending_loss > 0 {
-            marks.push(Mark::Loss(self.pending_loss));
-            self.pending_loss = 0;
+        if self.pending_loss.0 > 0 {
+            marks.push(Mark::Loss(self.pending_loss.0, self.pending_loss.1));
+            self.pending_loss.0 = 0;
         }
         let m = mode(&r);
         if let (Some(now), Some(before)) = (&m, &self.prev_mode)
@@ -679,6 +688,16 @@ impl Review {
         if self.last.is_some() {
             if s.truncated {
                 out.push_str("; log truncated");
+            } else if s.lost_write_failed > 0 {
+                out.push_str(&format!(
+                    "; {} records lost to failed writes (disk full?)",
+                    s.lost_write_failed
+                ));
+            } else if s.lost_capped > 0 {
+                out.push_str(&format!(
+                    "; {} records over the log's size cap",
+                    s.lost_capped
+                ));
             } else if !s.ended_cleanly {
                 out.push_str("; no end line (process stopped?)");
             }

@@ -93,6 +93,15 @@ pub fn render_terminal(rev: &Review, color: bool) -> String {
     kv("mode changes", s.mode_changes.to_string());
     kv("link events", s.link_events.to_string());
     kv("records lost", s.dropped.to_string());
+    if s.lost_write_failed > 0 {
+        kv(
+            "lost to failed writes",
+            format!("{} (disk full or I/O error)", s.lost_write_failed),
+        );
+    }
+    if s.lost_capped > 0 {
+        kv("lost to the size cap", s.lost_capped.to_string());
+    }
     if s.corrupted_lines > 0 {
         kv("corrupted lines", s.corrupted_lines.to_string());
     }
@@ -152,7 +161,7 @@ pub fn render_terminal(rev: &Review, color: bool) -> String {
         let alert = p
             .marks
             .iter()
-            .any(|m| matches!(m, Mark::Failsafe(_) | Mark::Loss(_)));
+            .any(|m| matches!(m, Mark::Failsafe(_) | Mark::Loss(..)));
         for k in 0..height {
             let mut l = String::new();
             for (c, (cell, w)) in row.iter().zip(widths).enumerate() {

@@ -182,7 +182,7 @@ fn failsafe_events_and_losses_are_marked() {
             event: "battery failsafe".into(),
         }),
     );
-    it.insert(22, LogItem::Loss(7));
+    it.insert(22, LogItem::Loss(7, LossReason::QueueFull));
     // An event line for cycle 5 written after later records.
     it.insert(
         25,
@@ -219,7 +219,7 @@ fn failsafe_events_and_losses_are_marked() {
         r[20]
             .marks
             .iter()
-            .filter(|m| matches!(m, Mark::Loss(7)))
+            .filter(|m| matches!(m, Mark::Loss(7, _)))
             .count(),
         1
     );
@@ -457,4 +457,34 @@ fn review_of_a_long_log_keeps_bounded_state() {
     }
     let html = render_html(&rev);
     assert!(html.contains(r#"id="rows-omitted""#));
+}
+
+#[test]
+fn full_disk_is_told_from_a_killed_process() {
+    // The writer's loss line after a failed write, and no end line: the disk filled.
+    let mut full = items(synthetic::mission(20));
+    full.pop(); // no end line
+    full.push(LogItem::Loss(35, LossReason::WriteFailed));
+    let rev = Review::from_items(full, None);
+    assert_eq!(rev.summary.lost_write_failed, 35);
+    assert!(
+        rev.summary.outcome.contains("failed writes"),
+        "{}",
+        rev.summary.outcome
+    );
+    assert!(!rev.summary.outcome.contains("process stopped"));
+    let html = html::render_html(&rev);
+    assert!(html.contains("records lost to failed writes"));
+    assert!(!html.contains("killed or still running"));
+
+    // Same records, no loss line, no end line: killed.
+    let mut killed = items(synthetic::mission(20));
+    killed.pop();
+    let rev = Review::from_items(killed, None);
+    assert_eq!(rev.summary.lost_write_failed, 0);
+    assert!(
+        rev.summary.outcome.contains("process stopped"),
+        "{}",
+        rev.summary.outcome
+    );
 }

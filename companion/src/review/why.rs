@@ -48,6 +48,8 @@ pub struct Why {
     pub time_s: f64,
     pub state: String,
     pub actions: Vec<String>,
+    /// What the fly shell flew on its own safety rules (the flight's end, a landing kept up).
+    pub shell_actions: Vec<String>,
     pub proposals: Vec<ProposalWhy>,
     /// The cycle's named probabilities (what every proposal could read).
     pub probabilities: Vec<(String, f64)>,
@@ -170,6 +172,7 @@ impl Why {
             time_s: r.time_s,
             state: r.state.clone(),
             actions: capped(&r.actions, MAX_LIST, &mut omitted),
+            shell_actions: capped(&r.shell_actions, MAX_LIST, &mut omitted),
             proposals,
             probabilities: r
                 .probabilities
@@ -194,6 +197,12 @@ impl Why {
             self.state,
             list(&self.actions)
         )];
+        if !self.shell_actions.is_empty() {
+            o.push(format!(
+                "  shell (safety rule, not a model): {}",
+                list(&self.shell_actions)
+            ));
+        }
         if self.proposals.is_empty() {
             o.push("  proposals: none recorded".into());
         }

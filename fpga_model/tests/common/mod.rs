@@ -29,7 +29,10 @@ fn load() -> Params {
         // The shipped policies carry no degradation paths (the companion's decision core lets
         // the tracking MDP choose again). The scheduler still supports them; these tests exercise
         // that mechanism with the paths the paper's Tables 4 and 6 show.
-        assert!(p.degrade.is_empty(), "params/resource_policies.toml has degrade paths");
+        assert!(
+            p.degrade.is_empty(),
+            "params/resource_policies.toml has degrade paths"
+        );
         p.degrade.insert(
             "tracking".into(),
             [
