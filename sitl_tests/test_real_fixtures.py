@@ -143,6 +143,7 @@ def test_relay_injects_garbage_and_unsigned_frames_towards_the_companion(upstrea
 
 def test_without_an_arducopter_the_skip_says_how_to_get_one(monkeypatch, tmp_path):
     monkeypatch.setenv("ARDUCOPTER_BIN", str(tmp_path / "arducopter"))
+    monkeypatch.delenv("SITL_DEFAULTS", raising=False)
     binary, defaults, why = find_arducopter()
     assert binary is None and "ARDUCOPTER_BIN" in why and "docs/sitl.md" in why and str(tmp_path) in why
     fake = tmp_path / "arducopter"
