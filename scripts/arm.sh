@@ -53,7 +53,7 @@ if [ "$want_musl" = 1 ]; then
   if ! command -v qemu-arm >/dev/null || ! command -v qemu-aarch64 >/dev/null; then
     stage "installing qemu-user (to run the binaries here)"
     sudo=""; [ "$(id -u)" = 0 ] || sudo="sudo"
-    $sudo apt-get install -y -q --no-install-recommends qemu-user >/dev/null || die "apt-get install qemu-user failed"
+    $sudo apt-get install -y -q --no-upgrade --no-install-recommends qemu-user >/dev/null || die "apt-get install qemu-user failed"
   fi
   target_dir="${CARGO_TARGET_DIR:-$(cargo metadata --no-deps --format-version 1 |
     sed -n 's/.*"target_directory":"\([^"]*\)".*/\1/p')}"
@@ -124,7 +124,7 @@ if [ "${#missing[@]}" -gt 0 ]; then
   fi
   export DEBIAN_FRONTEND=noninteractive
   $sudo apt-get update -q >/dev/null || die "apt-get update failed (no network to Debian's mirror?)"
-  $sudo apt-get install -y -q --no-install-recommends "${missing[@]}" >/dev/null ||
+  $sudo apt-get install -y -q --no-upgrade --no-install-recommends "${missing[@]}" >/dev/null ||
     die "apt-get install ${missing[*]} failed"
   for pkg in "${missing[@]}"; do
     [ -e "${provides[$pkg]}" ] || die "installed $pkg but ${provides[$pkg]} is still missing"

@@ -11,7 +11,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
-STAGES=8
+STAGES=7
 T_ALL=$SECONDS
 
 fmt() { printf '%dm%02ds' $(($1 / 60)) $(($1 % 60)); }
@@ -78,62 +78,72 @@ set -e
 [ "$rc" -eq 0 ] || exit "$rc"
 done_
 
-# ---- 6: real ArduCopter SITL, a fresh vehicle per test ---------------------------------------------
-begin "real autopilot: ArduCopter SITL tests"
+# ---- 6: real autopilots, ArduCopter and PX4 side by side -------------------------------------------
+# Each script runs its vehicles in its own network namespace (ports cannot collide) and each vehicle
+# uses a few % of a core, so the two run at once; their output goes to a log each, printed after.
+begin "real autopilots: ArduCopter and PX4 SITL tests (side by side)"
 ardu_summary="ArduCopter: not run"
+px4_summary="PX4: not run"
+ARDUCOPTER_BIN=${ARDUCOPTER_BIN:-$ROOT/../shared/sitl/ardupilot/arducopter}
+SITL_DEFAULTS=${SITL_DEFAULTS:-$(dirname "$ARDUCOPTER_BIN")/copter.parm}
+PX4_SITL_DIR=${PX4_SITL_DIR:-$ROOT/../shared/sitl/px4}
+ardu_pid=""
+px4_pid=""
+ardu_log=$(mktemp "${TMPDIR:-/tmp}/sitl-ardupilot-log.XXXXXX")
+px4_log=$(mktemp "${TMPDIR:-/tmp}/sitl-px4-log.XXXXXX")
 if [ "${SKIP_REAL_SITL:-0}" = 1 ]; then
   ardu_summary="ArduCopter: skipped (SKIP_REAL_SITL=1)"
-  done_ "skipped (SKIP_REAL_SITL=1)"
+  px4_summary="PX4: skipped (SKIP_REAL_SITL=1)"
 else
-  ARDUCOPTER_BIN=${ARDUCOPTER_BIN:-$ROOT/../shared/sitl/ardupilot/arducopter}
-  SITL_DEFAULTS=${SITL_DEFAULTS:-$(dirname "$ARDUCOPTER_BIN")/copter.parm}
   if [ -x "$ARDUCOPTER_BIN" ] && [ -f "$SITL_DEFAULTS" ]; then
-    export ARDUCOPTER_BIN SITL_DEFAULTS
-    log=$(mktemp "${TMPDIR:-/tmp}/sitl-ardupilot-log.XXXXXX")
-    set +e
     # the default-mission flight judges only "exit 0, landed, disarmed": 3x physics is enough for it
-    SITL_SPEEDUP=${SITL_SPEEDUP:-3} ./scripts/sitl_ardupilot.sh 2>&1 | tee "$log"
-    rc=${PIPESTATUS[0]}
-    set -e
-    counts=$(grep -E '^[0-9]+ (passed|failed|skipped|errors?|deselected)' "$log" | tail -1 | sed 's/=//g; s/^ *//; s/ in [0-9.]*s.*$//')
-    ardu_summary="ArduCopter SITL: ${counts:-no pytest summary}"
-    rm -f "$log"
-    [ "$rc" -eq 0 ] || { echo "$ardu_summary" >&2; exit "$rc"; }
-    done_ "ok ($ardu_summary)"
+    ( export ARDUCOPTER_BIN SITL_DEFAULTS; SITL_SPEEDUP=${SITL_SPEEDUP:-3} exec ./scripts/sitl_ardupilot.sh ) >"$ardu_log" 2>&1 &
+    ardu_pid=$!
+    echo "   ArduCopter SITL: scripts/sitl_ardupilot.sh started (log $ardu_log)"
   else
     ardu_summary="ArduCopter: no SITL binary (ARDUCOPTER_BIN or ../shared/sitl/ardupilot/; docs/sitl.md), not run"
-    echo "$ardu_summary"
-    done_ "not run: no ArduCopter SITL"
+    echo "   $ardu_summary"
+  fi
+  if [ -d "$PX4_SITL_DIR" ] && [ -x scripts/sitl_px4.sh ]; then
+    ( export PX4_SITL_DIR; exec ./scripts/sitl_px4.sh ) >"$px4_log" 2>&1 &
+    px4_pid=$!
+    echo "   PX4 SITL: scripts/sitl_px4.sh started (log $px4_log)"
+  else
+    px4_summary="PX4: no SITL (PX4_SITL_DIR or ../shared/sitl/px4; docs/sitl.md), not run"
+    echo "   $px4_summary"
   fi
 fi
-
-# ---- 7: real PX4 SITL --------------------------------------------------------------------------------
-begin "real autopilot: PX4 SITL tests"
-px4_summary="PX4: not run"
-PX4_SITL_DIR=${PX4_SITL_DIR:-$ROOT/../shared/sitl/px4}
-if [ "${SKIP_REAL_SITL:-0}" = 1 ]; then
-  px4_summary="PX4: skipped (SKIP_REAL_SITL=1)"
-  done_ "skipped (SKIP_REAL_SITL=1)"
-elif [ -d "$PX4_SITL_DIR" ] && [ -x scripts/sitl_px4.sh ]; then
-  export PX4_SITL_DIR
-  log=$(mktemp "${TMPDIR:-/tmp}/sitl-px4-log.XXXXXX")
-  set +e
-  ./scripts/sitl_px4.sh 2>&1 | tee "$log"
-  rc=${PIPESTATUS[0]}
-  set -e
-  counts=$(grep -E '^[0-9]+ (passed|failed|skipped|errors?|deselected)' "$log" | tail -1 | sed 's/=//g; s/^ *//; s/ in [0-9.]*s.*$//')
-  px4_summary="PX4 SITL: ${counts:-no pytest summary}"
-  rm -f "$log"
-  [ "$rc" -eq 0 ] || { echo "$px4_summary" >&2; exit "$rc"; }
-  done_ "ok ($px4_summary)"
-else
-  [ -d "$PX4_SITL_DIR" ] || px4_summary="PX4: no SITL (PX4_SITL_DIR or ../shared/sitl/px4; docs/sitl.md), not run"
-  [ -x scripts/sitl_px4.sh ] || px4_summary="PX4: scripts/sitl_px4.sh not present, not run"
-  echo "$px4_summary"
-  done_ "not run"
+# a line a minute while they fly, so the stage is never silent for long
+while { [ -n "$ardu_pid" ] && kill -0 "$ardu_pid" 2>/dev/null; } || { [ -n "$px4_pid" ] && kill -0 "$px4_pid" 2>/dev/null; }; do
+  sleep 5
+  if [ $(((SECONDS - stage_t) % 60)) -lt 5 ]; then
+    running=""
+    [ -n "$ardu_pid" ] && kill -0 "$ardu_pid" 2>/dev/null && running="$running ArduCopter($(tail -c 300 "$ardu_log" | tr '\n' ' ' | grep -oE '\[ *[0-9]+%\]' | tail -1))"
+    [ -n "$px4_pid" ] && kill -0 "$px4_pid" 2>/dev/null && running="$running PX4"
+    echo "   ... $(fmt $((SECONDS - stage_t))): still flying:$running"
+  fi
+done
+counts() { grep -E '^[0-9]+ (passed|failed|skipped|errors?|deselected|xfailed)' "$1" | tail -1 | sed 's/=//g; s/^ *//; s/ in [0-9.]*s.*$//'; }
+real_rc=0
+if [ -n "$ardu_pid" ]; then
+  set +e; wait "$ardu_pid"; rc=$?; set -e
+  echo "---- scripts/sitl_ardupilot.sh (exit $rc)"; cat "$ardu_log"
+  c=$(counts "$ardu_log")
+  ardu_summary="ArduCopter SITL: ${c:-no pytest summary}"
+  [ "$rc" -eq 0 ] || real_rc=$rc
 fi
+if [ -n "$px4_pid" ]; then
+  set +e; wait "$px4_pid"; rc=$?; set -e
+  echo "---- scripts/sitl_px4.sh (exit $rc)"; cat "$px4_log"
+  c=$(counts "$px4_log")
+  px4_summary="PX4 SITL: ${c:-no pytest summary}"
+  [ "$rc" -eq 0 ] || real_rc=$rc
+fi
+rm -f "$ardu_log" "$px4_log"
+[ "$real_rc" -eq 0 ] || { echo "$ardu_summary; $px4_summary" >&2; exit "$real_rc"; }
+done_ "ok ($ardu_summary; $px4_summary)"
 
-# ---- 8: the board ------------------------------------------------------------------------------------
+# ---- 7: the board ------------------------------------------------------------------------------------
 # armv7 (the SoCKit's Cortex-A9) release binary, engine and companion tests under qemu-user
 # (docs/deploy-arm.md).
 begin "arm: scripts/arm.sh (armv7 cross-build, tests under qemu)"
