@@ -3,25 +3,13 @@
 //! Elements carry stable ids/classes and data attributes (counts) for tests.
 
 use super::outcomes::Category;
-use super::plot::{Series, VMark, svg_map, svg_plot};
+use super::plot::{Series, VMark, num, svg_map, svg_plot};
 use super::text::esc;
 use super::why::Why;
 use super::{Mark, Review, Span};
 use std::collections::BTreeSet;
 use std::fmt::Write;
 
-fn num(v: f64) -> String {
-    if !v.is_finite() {
-        return "–".into();
-    }
-    if v.abs() >= 1000.0 || v == v.trunc() {
-        format!("{v:.0}")
-    } else if v.abs() >= 10.0 {
-        format!("{v:.1}")
-    } else {
-        format!("{v:.2}")
-    }
-}
 
 /// Times: up to two decimals, trailing zeros trimmed (`6`, `7.5`, `0.25`).
 fn t(v: f64) -> String {

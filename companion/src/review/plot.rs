@@ -69,7 +69,8 @@ pub fn style(k: usize) -> (&'static str, &'static str) {
     )
 }
 
-fn num(v: f64) -> String {
+/// A number as the report prints it: whole above 1000 or when whole, else 1 or 2 decimals.
+pub(super) fn num(v: f64) -> String {
     if !v.is_finite() {
         return "–".into();
     }
