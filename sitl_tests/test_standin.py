@@ -351,8 +351,9 @@ def test_auto_mission_flies_waypoints_lands_and_disarms(standin, client):
     reached = [e.data["seq"] for e in sa.rec.of("mission_item_reached")]
     assert reached == [1, 2, 3, 4]
     landed, = sa.rec.of("landed")
-    # landed at the last waypoint (30 m N, 30 m E), within WPNAV_RADIUS 2 m
-    assert math.hypot(landed.data["north"] - 30, landed.data["east"] - 30) < 2.0
+    # landed at the last waypoint (30 m N, 30 m E): within WPNAV_RADIUS 2 m, checked once per physics
+    # sub-step (at most 0.05 s of sim time), so plus one sub-step of travel at 5 m/s (seen: 2.0003 m under load)
+    assert math.hypot(landed.data["north"] - 30, landed.data["east"] - 30) < 2.0 + 5.0 * 0.05
     assert sa.rec.of("disarm")[-1].data["reason"] == "landed"
     assert sa.v.max_alt == pytest.approx(10.0, abs=0.3)
     # flight time is hand-computable: climb 10 m @2.5 (4 s) + 30 m and 30 m @5 m/s less the 2 m radii (~11.2 s)
