@@ -13,6 +13,12 @@
 #                                      aarch64 musl, linked by the toolchain's rust-lld; no C
 #                                      cross toolchain needed): checked with `file` and run under
 #                                      qemu-user; no tests. With --armv7 or --aarch64: that one only.
+#   scripts/arm.sh --old-glibc         release binaries linked against glibc 2.17 symbols (armv7 and
+#                                      aarch64 gnu), for boards whose glibc is older than this
+#                                      machine's (Raspberry Pi OS bullseye, Ubuntu 20.04 / JetPack 5):
+#                                      cargo-zigbuild with zig as the linker, both installed under
+#                                      target/tools on first use (PyPI's ziglang, crates.io's
+#                                      cargo-zigbuild); checked with objdump and run under qemu-user.
 #
 # Tests run in the release profile on purpose: the test builds then reuse the dependencies
 # (tokio, mavlink's generated dialects) already compiled for the release binary, which halves a
@@ -25,13 +31,15 @@ want_armv7=0
 want_aarch64=0
 install_only=0
 want_musl=0
+want_old_glibc=0
 for a in "$@"; do
   case "$a" in
     --musl) want_musl=1 ;;
+    --old-glibc) want_old_glibc=1 ;;
     --armv7) want_armv7=1 ;;
     --aarch64) want_aarch64=1 ;;
     --install) install_only=1 ;;
-    -h | --help) sed -n '2,20p' "$0"; exit 0 ;;
+    -h | --help) sed -n '2,26p' "$0"; exit 0 ;;
     *) echo "arm.sh: unknown argument '$a' (try --help)" >&2; exit 2 ;;
   esac
 done
@@ -39,6 +47,48 @@ done
 t0=$SECONDS
 stage() { echo "== arm: $* (t=$((SECONDS - t0))s)"; }
 die() { echo "arm.sh: $*" >&2; exit 1; }
+
+# ---------------------------------------------------------------- --old-glibc: glibc 2.17 floor
+# The gnu targets as usual, but linked by zig against glibc 2.17's symbol versions, so the binary
+# loads on any glibc from 2.17 on (this machine's cross gcc would tie it to 2.36). Used where the
+# musl standard library is unavailable (rustup's armv7 musl rust-std is missing on some mirrors).
+if [ "$want_old_glibc" = 1 ]; then
+  if [ "$want_armv7" = 0 ] && [ "$want_aarch64" = 0 ]; then want_armv7=1; want_aarch64=1; fi
+  glibc=2.17
+  target_dir="${CARGO_TARGET_DIR:-$(cargo metadata --no-deps --format-version 1 |
+    sed -n 's/.*"target_directory":"\([^"]*\)".*/\1/p')}"
+  tools="$target_dir/tools"
+  if [ ! -x "$tools/zig-venv/bin/python" ] || ! "$tools/zig-venv/bin/python" -m ziglang version >/dev/null 2>&1; then
+    stage "installing zig (PyPI ziglang) into $tools/zig-venv"
+    python3 -m venv "$tools/zig-venv"
+    "$tools/zig-venv/bin/pip" install --quiet --disable-pip-version-check ziglang || die "pip install ziglang failed"
+  fi
+  if [ ! -x "$tools/cargo/bin/cargo-zigbuild" ]; then
+    stage "installing cargo-zigbuild into $tools/cargo"
+    cargo install --quiet --locked --root "$tools/cargo" cargo-zigbuild || die "cargo install cargo-zigbuild failed"
+  fi
+  export PATH="$tools/cargo/bin:$tools/zig-venv/bin:$PATH"
+  for t in $([ "$want_armv7" = 1 ] && echo armv7-unknown-linux-gnueabihf) $([ "$want_aarch64" = 1 ] && echo aarch64-unknown-linux-gnu); do
+    rustup target list --installed | grep -qx "$t" || rustup target add "$t" || die "rustup target add $t failed"
+    [ "$install_only" = 1 ] && continue
+    stage "$t: cargo zigbuild --release (glibc $glibc)"
+    cargo zigbuild --quiet --release --target "$t.$glibc" -p companion --bin companion
+    bin="$target_dir/$t/release/companion"
+    newest="$(objdump -T "$bin" | grep -oE 'GLIBC_[0-9.]+' | sed 's/GLIBC_//' | sort -V | tail -1)"
+    echo "   newest glibc symbol version: $newest"
+    [ "$(printf '%s\n%s\n' "$newest" "$glibc" | sort -V | tail -1)" = "$glibc" ] || die "$t: needs glibc $newest (> $glibc)"
+    case "$t" in armv7-*) qemu=qemu-arm; sysroot=/usr/arm-linux-gnueabihf ;; aarch64-*) qemu=qemu-aarch64; sysroot=/usr/aarch64-linux-gnu ;; esac
+    if [ -e "$sysroot/lib" ]; then
+      "$qemu" -L "$sysroot" "$bin" simulate --json --no-log --steps 20 >/dev/null || die "$t: companion simulate failed under $qemu"
+      echo "   $qemu companion simulate: ok"
+    else
+      echo "   (no $sysroot here: run scripts/arm.sh --install to run it under $qemu)"
+    fi
+    echo "   size: $(stat -c %s "$bin") bytes as built ($bin)"
+  done
+  stage "done"
+  exit 0
+fi
 
 # ---------------------------------------------------------------- --musl: static binaries
 # Fully static (musl libc inside, crt-static), so they run on any ARM Linux whatever its glibc:
