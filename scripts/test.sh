@@ -20,7 +20,11 @@ stage_name=""
 stage_t=0
 begin() { stage_n=$((stage_n + 1)); stage_name=$1; stage_t=$SECONDS; echo "== [$stage_n/$STAGES] $stage_name ..."; }
 done_() { echo "== [$stage_n/$STAGES] $stage_name ... ${1:-ok} in $(fmt $((SECONDS - stage_t)))"; }
-trap 'rc=$?; [ $rc -ne 0 ] && echo "== [$stage_n/$STAGES] $stage_name ... FAILED (exit $rc) after $(fmt $((SECONDS - stage_t)))"; exit $rc' EXIT
+# The real-SITL scripts run in process groups of their own (setsid): stopped with this script.
+ardu_pid=""
+px4_pid=""
+stop_bg() { for p in $ardu_pid $px4_pid; do kill -TERM -- "-$p" 2>/dev/null || true; done; }
+trap 'rc=$?; stop_bg; [ $rc -ne 0 ] && echo "== [$stage_n/$STAGES] $stage_name ... FAILED (exit $rc) after $(fmt $((SECONDS - stage_t)))"; exit $rc' EXIT
 
 SUDO=""
 [ "$(id -u)" = 0 ] || SUDO="sudo"
@@ -97,7 +101,8 @@ if [ "${SKIP_REAL_SITL:-0}" = 1 ]; then
 else
   if [ -x "$ARDUCOPTER_BIN" ] && [ -f "$SITL_DEFAULTS" ]; then
     # the default-mission flight judges only "exit 0, landed, disarmed": 3x physics is enough for it
-    ( export ARDUCOPTER_BIN SITL_DEFAULTS; SITL_SPEEDUP=${SITL_SPEEDUP:-3} exec ./scripts/sitl_ardupilot.sh ) >"$ardu_log" 2>&1 &
+    ARDUCOPTER_BIN=$ARDUCOPTER_BIN SITL_DEFAULTS=$SITL_DEFAULTS SITL_SPEEDUP=${SITL_SPEEDUP:-3} \
+      setsid ./scripts/sitl_ardupilot.sh >"$ardu_log" 2>&1 &
     ardu_pid=$!
     echo "   ArduCopter SITL: scripts/sitl_ardupilot.sh started (log $ardu_log)"
   else
@@ -105,7 +110,7 @@ else
     echo "   $ardu_summary"
   fi
   if [ -d "$PX4_SITL_DIR" ] && [ -x scripts/sitl_px4.sh ]; then
-    ( export PX4_SITL_DIR; exec ./scripts/sitl_px4.sh ) >"$px4_log" 2>&1 &
+    PX4_SITL_DIR=$PX4_SITL_DIR setsid ./scripts/sitl_px4.sh >"$px4_log" 2>&1 &
     px4_pid=$!
     echo "   PX4 SITL: scripts/sitl_px4.sh started (log $px4_log)"
   else
@@ -114,16 +119,19 @@ else
   fi
 fi
 # a line a minute while they fly, so the stage is never silent for long
-while { [ -n "$ardu_pid" ] && kill -0 "$ardu_pid" 2>/dev/null; } || { [ -n "$px4_pid" ] && kill -0 "$px4_pid" 2>/dev/null; }; do
+alive() { [ -n "$1" ] && kill -0 "$1" 2>/dev/null; }
+next_line=60
+while alive "$ardu_pid" || alive "$px4_pid"; do
   sleep 5
-  if [ $(((SECONDS - stage_t) % 60)) -lt 5 ]; then
+  if [ $((SECONDS - stage_t)) -ge "$next_line" ]; then
+    next_line=$((next_line + 60))
     running=""
-    [ -n "$ardu_pid" ] && kill -0 "$ardu_pid" 2>/dev/null && running="$running ArduCopter($(tail -c 300 "$ardu_log" | tr '\n' ' ' | grep -oE '\[ *[0-9]+%\]' | tail -1))"
-    [ -n "$px4_pid" ] && kill -0 "$px4_pid" 2>/dev/null && running="$running PX4"
+    if alive "$ardu_pid"; then running="$running ArduCopter"; fi
+    if alive "$px4_pid"; then running="$running PX4"; fi
     echo "   ... $(fmt $((SECONDS - stage_t))): still flying:$running"
   fi
 done
-counts() { grep -E '^[0-9]+ (passed|failed|skipped|errors?|deselected|xfailed)' "$1" | tail -1 | sed 's/=//g; s/^ *//; s/ in [0-9.]*s.*$//'; }
+counts() { { grep -E '^[0-9]+ (passed|failed|skipped|errors?|deselected|xfailed)' "$1" || true; } | tail -1 | sed 's/=//g; s/^ *//; s/ in [0-9.]*s.*$//'; }
 real_rc=0
 if [ -n "$ardu_pid" ]; then
   set +e; wait "$ardu_pid"; rc=$?; set -e
