@@ -343,8 +343,12 @@ def test_land_at_the_found_zone_flies_there_before_land(autopilot_factory, fly, 
 # ------------------------------------------------------------------------------------------------------------------
 # Real ArduCopter SITL (the operator default): skipped unless the binary is there.
 
-ARDUCOPTER = os.environ.get("ARDUCOPTER_BIN", "/work/shared/sitl/ardupilot/arducopter")
-ARDUPILOT_DEFAULTS = os.environ.get("ARDUPILOT_DEFAULTS", "/work/shared/sitl/ardupilot/copter.parm")
+# Found as every real-SITL test finds it: ARDUCOPTER_BIN / SITL_DEFAULTS, else ../shared/sitl/ardupilot/.
+from real_autopilot import find_arducopter  # noqa: E402
+
+_bin, _defaults, _why_not = find_arducopter()
+ARDUCOPTER = str(_bin) if _bin else "/nonexistent/arducopter"
+ARDUPILOT_DEFAULTS = str(_defaults) if _defaults else "/nonexistent/copter.parm"
 
 
 def _listening(port: int) -> bool:
@@ -353,7 +357,8 @@ def _listening(port: int) -> bool:
         return s.connect_ex(("127.0.0.1", port)) == 0
 
 
-@pytest.mark.skipif(not (os.path.exists(ARDUCOPTER) and shutil.which("unshare")), reason="no ArduCopter SITL binary")
+@pytest.mark.skipif(not (os.path.exists(ARDUCOPTER) and shutil.which("unshare")),
+                    reason=_why_not or "no unshare here (util-linux) to give the SITL its own network namespace")
 def test_real_arducopter_without_auto_start_stays_disarmed_and_says_so(tmp_path):
     """Runs the SITL and the companion inside one fresh network namespace (the script below), then reads the GCS
     client's findings from a JSON file."""
