@@ -175,6 +175,12 @@ impl OperatorGate {
                 if !changed || first_mode {
                     return None;
                 }
+                // Disarmed, nothing moves: a mode change on the ground (ArduCopter reads the RC
+                // mode switch at start-up and leaves GUIDED for it) takes no flight from the
+                // companion. Its take-off arms only in the mode it set (the vehicle's ARM step).
+                if v.armed_heartbeats == 0 {
+                    return None;
+                }
                 if self.is_own_mode(now, v) {
                     return None;
                 }
@@ -351,6 +357,23 @@ mod tests {
             Some(GateEvent::Started(StartBy::PilotArmed))
         );
         assert!(g.commanding());
+    }
+
+    #[test]
+    fn a_mode_change_on_the_ground_disarmed_is_not_a_takeover() {
+        // ArduCopter SITL: GUIDED accepted, then STABILIZE from the RC mode switch, disarmed.
+        let mut g = OperatorGate::new(true);
+        let cmds = vec![("GUIDED".to_string(), s(1.0))];
+        assert_eq!(g.observe(s(1.0), &view(0, "STABILIZE", 0, &cmds)), None);
+        assert_eq!(g.observe(s(1.5), &view(GUIDED, "GUIDED", 0, &cmds)), None);
+        assert_eq!(g.observe(s(9.0), &view(0, "STABILIZE", 0, &cmds)), None);
+        assert!(g.commanding());
+        // Armed, the same change is the pilot's.
+        assert_eq!(g.observe(s(20.0), &view(GUIDED, "GUIDED", 2, &cmds)), None);
+        assert_eq!(
+            g.observe(s(30.0), &view(0, "STABILIZE", 2, &cmds)),
+            Some(GateEvent::TakenOver("STABILIZE".into()))
+        );
     }
 
     #[test]

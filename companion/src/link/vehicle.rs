@@ -784,6 +784,35 @@ impl Vehicle {
                     }
                     match self.readiness.check() {
                         Ok(()) => {
+                            // Arm only in the mode this companion set last (ArduCopter may leave GUIDED
+                            // for its RC mode switch right after accepting it): wait for a heartbeat
+                            // newer than the mode command; if it shows another mode, this take-off
+                            // fails and the next request sets the mode again.
+                            if self.flavor == Flavor::ArduPilot
+                                && let Some((want, at)) = self.commanded_modes.last().cloned()
+                                && !modes::is_in_mode(
+                                    self.flavor,
+                                    self.telemetry.custom_mode,
+                                    &want,
+                                )
+                            {
+                                if self.mode_heard_at.is_none_or(|h| h <= at) {
+                                    return out;
+                                }
+                                let now_mode =
+                                    self.telemetry.mode.clone().unwrap_or_else(|| "?".into());
+                                self.records.push(CommandRecord {
+                                    action,
+                                    command: "ARM".into(),
+                                    result: format!(
+                                        "FAILED (vehicle in {now_mode}, not {want} as commanded: not arming)"
+                                    ),
+                                    attempts: 0,
+                                    latency_ms: None,
+                                });
+                                self.job_failed(now);
+                                continue;
+                            }
                             let spec = CommandSpec::long(
                                 MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
                                 [1., 0., 0., 0., 0., 0., 0.],
@@ -1407,6 +1436,45 @@ mod tests {
             ),
         );
         assert!(v.take_events().contains(&"link connected".to_string()));
+    }
+
+    #[test]
+    fn arms_only_once_the_vehicle_reports_the_mode_it_was_set_to() {
+        // ArduCopter SITL: GUIDED accepted, then STABILIZE from its RC mode switch.
+        let mut v = vehicle();
+        connected(&mut v, 0);
+        for f in ready_frames() {
+            v.on_frame(s(0.1), &f);
+        }
+        let out = v.request_actions(s(0.2), &["take_off".into()]);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        // The ack comes before any heartbeat shows the new mode: no ARM yet.
+        let out = v.on_frame(
+            s(0.3),
+            &ack(MavCmd::MAV_CMD_DO_SET_MODE, MavResult::MAV_RESULT_ACCEPTED),
+        );
+        assert!(commands(&out).is_empty(), "armed before the mode was seen");
+        // The next heartbeat says STABILIZE (0): not armed, the take-off fails and says why.
+        let mut out = v.on_frame(s(1.0), &hb(0, false));
+        out.extend(v.tick(s(1.1)));
+        assert!(
+            !commands(&out).contains(&MavCmd::MAV_CMD_COMPONENT_ARM_DISARM),
+            "armed in STABILIZE"
+        );
+        assert!(v.take_records().iter().any(|r| {
+            r.command == "ARM"
+                && r.result
+                    .starts_with("FAILED (vehicle in STABILIZE, not GUIDED")
+        }));
+        // Asked again after the retry delay: GUIDED is set again, and with GUIDED reported it arms.
+        let out = v.request_actions(s(7.0), &["take_off".into()]);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        v.on_frame(
+            s(7.1),
+            &ack(MavCmd::MAV_CMD_DO_SET_MODE, MavResult::MAV_RESULT_ACCEPTED),
+        );
+        let out = v.on_frame(s(7.5), &hb(4, false));
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_COMPONENT_ARM_DISARM]);
     }
 
     #[test]
