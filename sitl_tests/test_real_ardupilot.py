@@ -181,10 +181,6 @@ def test_real_nominal_tracking_mission_end_to_end(arducopter, fly, monitors_fact
     assert len(mission_uploads(f.ctx.relay)) == 1, "the route was uploaded more than once"
 
 
-@pytest.mark.xfail(strict=False, reason="companion defect: on a fresh ArduCopter the autopilot puts the vehicle back in "
-                   "STABILIZE after the companion's first SET_MODE GUIDED was accepted; the companion still sends ARM "
-                   "(accepted, armed in STABILIZE), its NAV_TAKEOFF is refused (FAILED), ArduCopter disarms, and only "
-                   "the retry arms in GUIDED: the arm step must check the reported mode is the commanded one")
 def test_real_companion_arms_only_in_the_mode_it_commanded(arducopter, fly, monitors_factory, relay):
     """Every arming of the vehicle (as the ground station saw it) happened in GUIDED, the mode the companion
     takes off in: never arm a vehicle in a mode the companion did not command."""
