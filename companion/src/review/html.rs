@@ -10,7 +10,6 @@ use super::{Mark, Review, Span};
 use std::collections::BTreeSet;
 use std::fmt::Write;
 
-
 /// Times: up to two decimals, trailing zeros trimmed (`6`, `7.5`, `0.25`).
 fn t(v: f64) -> String {
     let s = format!("{v:.2}");
