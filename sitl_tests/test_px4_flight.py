@@ -17,7 +17,7 @@ import pytest
 
 pytest.register_assert_rewrite("px4_sitl")
 from helpers import companion_fly_cmd, read_decision_log  # noqa: E402
-from px4_sitl import UdpRelay, companion_help  # noqa: E402
+from px4_sitl import UdpRelay  # noqa: E402
 
 # The px4_vehicle fixture, the report hook and the `px4` marker (registered there and put on every
 # test of this module, so `-m px4` selects them) live in px4_sitl.py.
@@ -47,8 +47,8 @@ def write_route(path: Path, waypoints, search_s: float = 5.0) -> Path:
 
 
 def fly(exe: str, port: int, route: Path, log_dir: Path):
-    extra = ["--once"] if "--once" in companion_help(exe) else []
-    cmd = companion_fly_cmd(exe, f"udpin:127.0.0.1:{port}", log_dir, mission=route, extra=extra)
+    # companion_fly_cmd passes --auto-start and --once (exit after the one flight)
+    cmd = companion_fly_cmd(exe, f"udpin:127.0.0.1:{port}", log_dir, mission=route)
     out = open(log_dir.parent / f"fly-{port}.out", "w")
     return subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL), out
 
