@@ -485,14 +485,7 @@ impl HealthModel {
         for (node, state) in evidence {
             let net = m.engine.network();
             if let Some(id) = net.id(node) {
-                let s = net
-                    .state(id, state)
-                    .map_err(|_| HealthError::UnknownState {
-                        node: node.clone(),
-                        state: state.clone(),
-                        states: net.node(id).states.join(", "),
-                    })?;
-                ev.set_state(id, s);
+                ev.set_state(id, state_of(net, id, node, state)?);
             }
         }
         m.engine
@@ -542,14 +535,7 @@ impl HealthModel {
                 for (mi, m) in self.managers.iter().enumerate() {
                     let net = m.engine.network();
                     if let Some(id) = net.id(node) {
-                        let s = net
-                            .state(id, state)
-                            .map_err(|_| HealthError::UnknownState {
-                                node: node.clone(),
-                                state: state.clone(),
-                                states: net.node(id).states.join(", "),
-                            })?;
-                        r.hits.push((mi, id, s));
+                        r.hits.push((mi, id, state_of(net, id, node, state)?));
                     }
                 }
                 if r.hits.is_empty() {
@@ -883,4 +869,18 @@ mod tests {
         e.propagate(&evd).unwrap();
         e.marginal(src).to_vec()
     }
+}
+
+/// The index of `state` of `node` (found at `id` in `net`), or why the evidence names no state of it.
+fn state_of(
+    net: &bayes_net::Network,
+    id: bayes_net::NodeId,
+    node: &str,
+    state: &str,
+) -> Result<usize, HealthError> {
+    net.state(id, state).map_err(|_| HealthError::UnknownState {
+        node: node.to_string(),
+        state: state.to_string(),
+        states: net.node(id).states.join(", "),
+    })
 }
