@@ -909,7 +909,7 @@ Machine: {m['nproc']} cores, {m['cpu']}, {m['platform']}; load average at start 
 sides ran in the same run, interleaved per model).
 Versions: {', '.join(f'{k} {x}' for k, x in v.items())}.
 
-Method: both sides read the same exported models (MDPs: `companion/mdp_engine/benches/models/*.json`
+Method: both sides read the same exported models (MDPs: `mdp_engine/benches/models/*.json`
 from the companion's tests, and random sparse MDPs with |A| = 10, 5 successors, seed fixed in
 `bench/compare.py`, written once to `bench/out/`; BNs: the health managers exported from `params/`
 by `companion --example export_health_bn`, with 20 random hard-evidence sets on observable nodes).

@@ -784,7 +784,7 @@ fn policies_loader_rejects_bad_rules() {
 
 // ------------------------------------------------------------------ bench models
 
-/// The criterion benches in companion/mdp_engine read the paper MDPs instantiated at the check
+/// The criterion benches in mdp_engine read the paper MDPs instantiated at the check
 /// point (safety policy) from JSON; this keeps those files in step with params/.
 #[test]
 fn bench_models_are_current() {
