@@ -21,7 +21,7 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "bench", "out")
-MODELS = os.path.join(ROOT, "companion", "mdp_engine", "benches", "models")
+MODELS = os.path.join(ROOT, "mdp_engine", "benches", "models")
 PAPER = ["reference", "navigation", "landing", "tracking", "monolithic"]
 GAMMA, HORIZON, TOL = 0.95, 100, 1e-10
 TARGETS = {"pymdptoolbox": 300, "numpy": 100, "stormpy": 10, "pgmpy-VE": 1000, "pyAgrum": 300,
