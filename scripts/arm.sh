@@ -210,7 +210,7 @@ run_target() {
   # once (dev-dependencies switch on extra features of shared crates such as serde, which would
   # otherwise rebuild mavlink and tokio a second time); `cargo test` then compiles only the
   # unit-test harnesses (cfg(test) builds of the libraries) on top.
-  local sel=(--release --target "$t" -p companion -p bayes_net -p mdp_engine -p fpga_model -p panorama)
+  local sel=(--release --target "$t" -p companion -p companion-core -p companion-link -p companion-testkit -p bayes_net -p mdp_engine -p fpga_model -p panorama)
   # Integration tests that start the companion binary as a child process (CARGO_BIN_EXE_*) need
   # the kernel to exec an ARM ELF, i.e. qemu registered with binfmt_misc; without it they cannot
   # run here and are left to the host's `cargo test --workspace`. The rest run under qemu.
@@ -220,7 +220,7 @@ run_target() {
     local picked
     picked="$(cargo metadata --no-deps --format-version 1 | python3 -c '
 import json, sys
-pkgs = {"companion", "bayes_net", "mdp_engine", "fpga_model", "panorama"}
+pkgs = {"companion", "companion-core", "companion-link", "companion-testkit", "bayes_net", "mdp_engine", "fpga_model", "panorama"}
 for p in json.load(sys.stdin)["packages"]:
     for t in p["targets"] if p["name"] in pkgs else []:
         if "test" in t["kind"]:

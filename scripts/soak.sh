@@ -7,7 +7,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$PWD/target}"
-cargo build -q --release -p companion --example soak
+cargo build -q --release -p companion-testkit --example soak
 start=$(date +%s)
 "$CARGO_TARGET_DIR/release/examples/soak" "$@"
 echo "soak.sh: wall time $(( $(date +%s) - start )) s" >&2

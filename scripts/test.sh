@@ -67,8 +67,8 @@ cargo test --workspace --quiet 2>&1
 done_
 
 # ---- 4: the companion binary the python tests fly ---------------------------------------------------
-begin "build: companion binary for sitl_tests"
-cargo build --quiet --bin companion
+begin "build: companion binary (and the testkit's tlog sample writer) for sitl_tests"
+cargo build --quiet -p companion -p companion-testkit --bins
 export COMPANION_BIN="${CARGO_TARGET_DIR:-$ROOT/target}/debug/companion"
 done_
 

@@ -8,10 +8,11 @@ from pymavlink import mavutil
 
 
 def test_pymavlink_reads_companion_tlog(tmp_path):
-    exe = os.environ["COMPANION_BIN"]
+    # The testkit's sample writer, built beside the companion binary (`cargo build --bins`).
+    exe = os.path.join(os.path.dirname(os.environ["COMPANION_BIN"]), "companion-tlog-sample")
     path = tmp_path / "flight.tlog"
     n = 20
-    out = subprocess.run([exe, "__tlog-sample", str(path), "--frames", str(n)], capture_output=True, text=True, timeout=60)
+    out = subprocess.run([exe, str(path), "--frames", str(n)], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     conn = mavutil.mavlink_connection(str(path), dialect="ardupilotmega")
     msgs = []

@@ -6,7 +6,7 @@
 use super::dialect::MavCmd;
 use super::mission::MissionItem;
 use super::telemetry::{TelemetryConfig, displace};
-use crate::spec::{SpecError, check_positive, check_range, read_toml};
+use companion_core::spec::{SpecError, check_positive, check_range, read_toml};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -597,7 +597,7 @@ impl LinkParams {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::spec::default_params_dir;
+    use companion_core::spec::default_params_dir;
 
     fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> std::path::PathBuf {
         let p = dir.path().join(name);

@@ -415,7 +415,7 @@ impl CommandClient {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::link::dialect::COMMAND_ACK_DATA;
+    use crate::dialect::COMMAND_ACK_DATA;
 
     fn ms(v: u64) -> Duration {
         Duration::from_millis(v)

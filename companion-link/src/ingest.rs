@@ -284,7 +284,7 @@ pub fn signing_data(key: [u8; 32]) -> SigningData {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::link::dialect::*;
+    use crate::dialect::*;
     use proptest::prelude::*;
 
     fn heartbeat() -> Msg {

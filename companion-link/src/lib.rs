@@ -1,13 +1,27 @@
-//! MAVLink link to the autopilot: connection URLs, byte transports, frame ingest and signing, and
-//! the sans-IO protocol clients (commands, missions, liveness, readiness, modes, telemetry) that
-//! the `fly` shell drives. Every state machine here takes the clock as a value (`now: Duration`)
-//! and returns the messages to send and the events that happened, so tests need no sockets.
+//! MAVLink to the autopilot without I/O: connection URLs, frame ingest and signing, and the
+//! sans-IO protocol clients (commands, missions, liveness, readiness, modes, telemetry, the
+//! vehicle) that the `companion` binary's `fly` shell drives over its sockets and serial ports.
+//! Every state machine here takes the clock as a value (`now: Duration`) and returns the
+//! messages to send and the events that happened, so tests need no sockets.
 //!
 //! Protocol reference: docs/mavlink.md.
+//!
+//! # Layout
+//! - `url`: connection strings (MAVSDK forms and serial paths).
+//! - `ingest`: frame parsing, counting of malformed frames, MAVLink 2 signing.
+//! - `command`: COMMAND_LONG/INT with acknowledgement, retry and timeout.
+//! - `mission`: the mission upload protocol.
+//! - `liveness`: heartbeats in and out, link-loss detection.
+//! - `readiness`: whether the autopilot says it can arm (pre-arm checks, EKF, GPS).
+//! - `modes`: flight modes per autopilot (ArduPilot custom modes, PX4 main/sub modes).
+//! - `telemetry`: streams requested and telemetry turned into observations.
+//! - `actions`: the vehicle actions of `commands.toml` as MAVLink steps; `link.toml`; the route.
+//! - `mission_state`: the mission state and end of flight estimated from telemetry.
+//! - `operator`: the operator gate (who starts the mission, pilot takeover, STATUSTEXT).
+//! - `vehicle`: one autopilot, all of the above composed; what `fly` drives each tick.
 
 pub mod actions;
 pub mod command;
-pub mod fly;
 pub mod ingest;
 pub mod liveness;
 pub mod mission;
@@ -16,7 +30,6 @@ pub mod modes;
 pub mod operator;
 pub mod readiness;
 pub mod telemetry;
-pub mod transport;
 pub mod url;
 pub mod vehicle;
 

@@ -19,7 +19,7 @@
 //! at altitude (spoofed or corrupt) neither starts the landing nor ends the flight.
 
 use super::actions::Route;
-use crate::observations::Observations;
+use companion_core::observations::Observations;
 
 /// Vehicle actions that end the flight.
 pub const LANDING_ACTIONS: [&str; 3] = ["land", "replan_and_land", "return_to_base"];
@@ -293,7 +293,7 @@ mod tests {
     use super::*;
 
     fn route() -> Route {
-        Route::load(&crate::spec::default_params_dir().join("missions/tracking_route.toml"))
+        Route::load(&companion_core::spec::default_params_dir().join("missions/tracking_route.toml"))
             .unwrap()
     }
 

@@ -298,7 +298,7 @@ mod tests {
 
     fn params(c: &CommandSpec) -> [f32; 7] {
         match c.body {
-            crate::link::command::CommandBody::Long { params } => params,
+            crate::command::CommandBody::Long { params } => params,
             _ => panic!(),
         }
     }
@@ -449,7 +449,7 @@ mod tests {
     }
 
     fn route(takeoff_first: bool) -> Route {
-        use crate::link::actions::Waypoint;
+        use crate::actions::Waypoint;
         Route {
             waypoints: vec![
                 Waypoint::Relative {

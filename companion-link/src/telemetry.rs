@@ -6,7 +6,7 @@
 
 use super::Msg;
 use super::dialect::*;
-use crate::observations::Observations;
+use companion_core::observations::Observations;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -914,8 +914,8 @@ mod tests {
     /// range stops loading with file, entry and reason.
     #[test]
     fn link_params_carry_and_check_the_trust_settings() {
-        use crate::link::actions::LinkParams;
-        let shipped = crate::spec::default_params_dir().join("link.toml");
+        use crate::actions::LinkParams;
+        let shipped = companion_core::spec::default_params_dir().join("link.toml");
         let lp = LinkParams::load(&shipped).unwrap();
         let t = &lp.telemetry;
         assert_eq!(t.monitors.autopilot_system_components, vec![100]);

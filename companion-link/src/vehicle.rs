@@ -14,8 +14,8 @@ use super::mission::{MissionClient, MissionConfig, MissionEvent, MissionOp};
 use super::modes::{self, Flavor};
 use super::readiness::Readiness;
 use super::telemetry::{Telemetry, TelemetryConfig, displace};
-use crate::observations::Observations;
-use crate::record::CommandRecord;
+use companion_core::observations::Observations;
+use companion_core::record::CommandRecord;
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
@@ -1896,7 +1896,7 @@ mod tests {
         match &out[0] {
             Msg::COMMAND_INT(c) => {
                 assert!(
-                    crate::link::telemetry::on_globe(c.x, c.y),
+                    crate::telemetry::on_globe(c.x, c.y),
                     "{} {}",
                     c.x,
                     c.y
@@ -1951,7 +1951,7 @@ mod tests {
     }
 
     fn route_vehicle() -> Vehicle {
-        use crate::link::actions::{Route, Waypoint};
+        use crate::actions::{Route, Waypoint};
         let mut t = table();
         t.actions.insert(
             "follow_trajectory".into(),
@@ -2151,7 +2151,7 @@ mod tests {
             [Msg::COMMAND_INT(c)] if c.command == MavCmd::MAV_CMD_DO_REPOSITION => (c.x, c.y),
             other => panic!("{other:?}"),
         };
-        let (n, _) = crate::link::telemetry::offset_m((473_977_420, 85_455_940), target);
+        let (n, _) = crate::telemetry::offset_m((473_977_420, 85_455_940), target);
         assert!((n - 40.0).abs() < 0.1, "zone 40 m north: {n}");
         let out = v.on_frame(
             s(1.1),
@@ -2310,7 +2310,7 @@ mod tests {
             Msg::COMMAND_INT(c) => {
                 assert_eq!(c.command, MavCmd::MAV_CMD_DO_REPOSITION);
                 let (n, e) =
-                    crate::link::telemetry::offset_m((473_977_420, 85_455_940), (c.x, c.y));
+                    crate::telemetry::offset_m((473_977_420, 85_455_940), (c.x, c.y));
                 assert!(
                     (n + 8.0).abs() < 0.05 && e.abs() < 0.05,
                     "north {n} east {e}"
@@ -2408,7 +2408,7 @@ mod tests {
 
     #[test]
     fn px4_auto_waits_until_px4_reports_the_uploaded_mission() {
-        use crate::link::actions::{Route, Waypoint};
+        use crate::actions::{Route, Waypoint};
         let mut t = table();
         t.actions.insert(
             "follow_trajectory".into(),

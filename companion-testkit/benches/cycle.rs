@@ -9,10 +9,10 @@
 //! scheduler re-run, every cycle). `cycle_monolithic`: section 5's single MDP, memos off, so the
 //! ratio to `cycle_concurrent_worst` compares solve work like for like.
 
-use companion::decision::{Core, Model, ModelKind, Policy};
-use companion::record::{DecisionRecord, Plan};
-use companion::spec::default_params_dir;
-use companion::streams::{Stream, StreamGen, tracking_snapshot};
+use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion_core::record::{DecisionRecord, Plan};
+use companion_core::spec::default_params_dir;
+use companion_testkit::streams::{Stream, StreamGen, tracking_snapshot};
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 

@@ -1,13 +1,13 @@
 //! Criterion: MAVLink ingest (bytes -> decoded frames) on the same kind of capture as
 //! `bench/compare`'s ingest case, generated here in Rust so `cargo bench` needs no Python:
-//! 60 s of the simulated autopilot's ~50 Hz telemetry (`companion::sim_link`), the first 10 s in
+//! 60 s of the simulated autopilot's ~50 Hz telemetry (`companion_testkit::sim_link`), the first 10 s in
 //! MAVLink 1, a few bytes of line noise every 300 frames and one corrupted frame every 500, fed to
 //! `Ingest::push` (owned frames) and `Ingest::push_each` (borrowed wire bytes) in chunks of
 //! 64..1024 bytes.
 
-use companion::link::ingest::{Encoder, Ingest};
-use companion::observations::Observations;
-use companion::sim_link::{AUTOPILOT, Telemetry50, VehicleView};
+use companion_link::ingest::{Encoder, Ingest};
+use companion_core::observations::Observations;
+use companion_testkit::sim_link::{AUTOPILOT, Telemetry50, VehicleView};
 use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
 use mavlink::{MavHeader, MavlinkVersion};
 use std::hint::black_box;

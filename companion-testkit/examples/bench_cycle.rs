@@ -14,10 +14,10 @@
 //!
 //! Run: `cargo run --release -p companion --example bench_cycle -- 2000 [CASE,CASE...]` (the
 //! optional second argument keeps only the named cases, e.g. `changing` for a profile).
-use companion::decision::{Core, Model, ModelKind, Policy};
-use companion::record::{DecisionRecord, Plan};
-use companion::spec::default_params_dir;
-use companion::streams::{Stream, StreamGen, tracking_snapshot};
+use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion_core::record::{DecisionRecord, Plan};
+use companion_core::spec::default_params_dir;
+use companion_testkit::streams::{Stream, StreamGen, tracking_snapshot};
 use serde_json::json;
 use std::hint::black_box;
 use std::time::{Duration, Instant};

@@ -11,7 +11,7 @@
 //! Prints `{"frames":N,"stats":{..IngestStats..},"bytes":B,"times_ns":[..]}`.
 //! Run: `cargo run --release -p companion --example bench_ingest -- CAPTURE.bin CAPTURE.chunks
 //! [DUMP.jsonl|-] [reps] [budget_s]`.
-use companion::link::ingest::Ingest;
+use companion_link::ingest::Ingest;
 use mavlink::{MavlinkVersion, Message};
 use std::hint::black_box;
 use std::io::Write;

@@ -1,16 +1,16 @@
 //! How the fitted numbers in params/health were found (docs/params/health.md): solves for the
 //! paper's worked examples and prints the values, then the versions under a few hazards.
 //! Run from the workspace root: `cargo run -p companion --example fit_health`.
-use companion::evidence::ObservationMap;
-use companion::fmea::{CptSpec, HmFile, compile_hm};
-use companion::health::HealthModel;
-use companion::observations::Observations;
+use companion_core::evidence::ObservationMap;
+use companion_core::fmea::{CptSpec, HmFile, compile_hm};
+use companion_core::health::HealthModel;
+use companion_core::observations::Observations;
 use std::collections::BTreeMap;
 use std::path::Path;
 
 fn load(name: &str) -> HmFile {
     let p = Path::new("params/health").join(format!("{name}.toml"));
-    companion::spec::read_toml(&p).unwrap()
+    companion_core::spec::read_toml(&p).unwrap()
 }
 fn model(files: &BTreeMap<&str, HmFile>) -> HealthModel {
     let hms = files

@@ -2,7 +2,7 @@
 //! memory measured after warm-up, every simulated 5 minutes and at the end.
 //!
 //! The simulated world (`companion::sim`, params/world.toml, a scenario) is the truth; every
-//! 20 ms one telemetry frame of it ([`companion::sim_link::Telemetry50`]) is encoded with the
+//! 20 ms one telemetry frame of it ([`companion_testkit::sim_link::Telemetry50`]) is encoded with the
 //! link's `Encoder`, the bytes are delivered every 100 ms (5 frames, 200-600 bytes: a UDP/serial
 //! read) to `Ingest`, and the frames go through `Vehicle::on_frame` exactly as `fly` does. The
 //! fly shell's timers are replayed on the simulated clock: the 10 Hz protocol tick, the 1 Hz
@@ -24,15 +24,15 @@
 //! Run: `cargo run --release -p companion --example soak -- [--minutes 60] [--scenario NAME]
 //! [--seed N] [--tolerance-kib 16] [--params DIR]`.
 
-use companion::decision::{Core, Model, ModelKind, Policy};
-use companion::link::fly::{self, Decider, FlyArgs, FlySetup, JsonLines, RecordSink, Shell};
-use companion::link::ingest::{Encoder, Ingest};
-use companion::link::vehicle::Vehicle;
-use companion::link::{Msg, url};
-use companion::observations::Observations;
-use companion::record::{DecisionRecord, Plan};
+use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion::fly::{self, Decider, FlyArgs, FlySetup, JsonLines, RecordSink, Shell};
+use companion_link::ingest::{Encoder, Ingest};
+use companion_link::vehicle::Vehicle;
+use companion_link::{Msg, url};
+use companion_core::observations::Observations;
+use companion_core::record::{DecisionRecord, Plan};
 use companion::sim::{Scenario, World, WorldSpec};
-use companion::sim_link::{AUTOPILOT, Responder, Telemetry50, VehicleView};
+use companion_testkit::sim_link::{AUTOPILOT, Responder, Telemetry50, VehicleView};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicI64, AtomicU64, Ordering::Relaxed};
 use std::time::{Duration, Instant};
@@ -96,7 +96,7 @@ fn opts() -> anyhow::Result<Opts> {
         scenario: "complete-1".into(),
         seed: 1,
         tolerance_kib: 16,
-        params: companion::spec::default_params_dir(),
+        params: companion_core::spec::default_params_dir(),
     };
     let args: Vec<String> = std::env::args().skip(1).collect();
     let mut it = args.iter();
@@ -396,7 +396,7 @@ fn main() -> anyhow::Result<()> {
                 if let Some(a) = rec
                     .actions
                     .iter()
-                    .find(|a| companion::link::mission_state::LANDING_ACTIONS.contains(&a.as_str()))
+                    .find(|a| companion_link::mission_state::LANDING_ACTIONS.contains(&a.as_str()))
                 {
                     s.landing_cmd = Some(a.clone());
                 }

@@ -8,21 +8,21 @@
 //!   real core, exactly as `companion fly` chains them (`link::fly::run_cycle_at`), minus the
 //!   sockets and the clock (time advances by a step the input chooses).
 //! - [`params_one`]: one params file's text replaced by the input (through
-//!   [`crate::spec::with_overlay`]), then the whole start-up load: `Model::load`, the simulation
+//!   [`companion_core::spec::with_overlay`]), then the whole start-up load: `Model::load`, the simulation
 //!   world and a scenario, a PANORAMA mission, the fly setup and `companion check`'s report.
 //!
 //! Both panic when an invariant breaks (that is how a fuzzer sees it); neither panics otherwise,
 //! whatever the bytes.
 
-use crate::decision::{Core, Model, ModelKind};
-use crate::link::Msg;
-use crate::link::actions::LinkParams;
-use crate::link::fly::{self, FlyArgs, FlySetup, Shell};
-use crate::link::ingest::{self, Encoder, Ingest, IngestStats};
-use crate::link::mission_state::MissionState;
-use crate::link::vehicle::{Vehicle, VehicleConfig};
-use crate::mission::Policy;
-use crate::spec::SpecError;
+use companion_core::decision::{Core, Model, ModelKind};
+use companion_link::Msg;
+use companion_link::actions::LinkParams;
+use companion::fly::{self, FlyArgs, FlySetup, Shell};
+use companion_link::ingest::{self, Encoder, Ingest, IngestStats};
+use companion_link::mission_state::MissionState;
+use companion_link::vehicle::{Vehicle, VehicleConfig};
+use companion_core::mission::Policy;
+use companion_core::spec::SpecError;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -61,7 +61,7 @@ impl IngestFixture {
 /// Fly arguments naming only a params directory (the connect URL is never opened here).
 fn fly_args(params: &Path) -> FlyArgs {
     FlyArgs {
-        connect: crate::link::url::parse("udpin:127.0.0.1:14550").expect("a valid literal URL"),
+        connect: companion_link::url::parse("udpin:127.0.0.1:14550").expect("a valid literal URL"),
         mission: None,
         policy: "safety".into(),
         signing_key: None,
@@ -290,7 +290,7 @@ pub fn ingest_one(fx: &IngestFixture, data: &[u8]) -> IngestOutcome {
                         && matches!(
                             &f.msg,
                             Msg::COMMAND_LONG(c) if (c.target_system == vehicle.our_system() || c.target_system == 0)
-                                && (c.target_component == crate::link::OUR_COMPONENT_ID || c.target_component == 0)
+                                && (c.target_component == companion_link::OUR_COMPONENT_ID || c.target_component == 0)
                         );
                     assert!(!to_us_unsigned, "an unsigned command to us got through");
                 }
@@ -431,7 +431,7 @@ pub fn params_one(fx: &ParamsFixture, data: &[u8]) -> ParamsOutcome {
     } else {
         "tracking".into()
     };
-    crate::spec::with_overlay(&path, text, || {
+    companion_core::spec::with_overlay(&path, text, || {
         let mut out = ParamsOutcome {
             file: rel.clone(),
             ..Default::default()
@@ -444,11 +444,11 @@ pub fn params_one(fx: &ParamsFixture, data: &[u8]) -> ParamsOutcome {
         };
         let model = Model::load(dir);
         record("model", model.as_ref().err().cloned());
-        let world = crate::sim::WorldSpec::load(dir);
+        let world = companion::sim::WorldSpec::load(dir);
         record("world", world.as_ref().err().cloned());
-        let scen = crate::sim::Scenario::load(dir, &scenario);
+        let scen = companion::sim::Scenario::load(dir, &scenario);
         record("scenario", scen.as_ref().err().cloned());
-        let mission = crate::guarantee::load_mission(dir, &panorama_mission);
+        let mission = companion_core::guarantee::load_mission(dir, &panorama_mission);
         record("mission", mission.as_ref().err().cloned());
         let fly = FlySetup::load(&fly_args(dir));
         let fly_err = fly.as_ref().err().map(spec_error_of);
@@ -460,19 +460,19 @@ pub fn params_one(fx: &ParamsFixture, data: &[u8]) -> ParamsOutcome {
             let _ = MissionState::new(&setup.route, setup.takeoff_alt_m);
             let _ = setup.route.items((0, 0));
         }
-        let args = crate::check::CheckArgs {
+        let args = companion::check::CheckArgs {
             params: Some(dir.to_path_buf()),
             mission: Some(panorama_mission.clone()),
             ..Default::default()
         };
-        let check = crate::check::report(&args);
+        let check = companion::check::report(&args);
         record("check", check.as_ref().err().map(spec_error_of));
         // Whatever loaded must fly: a few simulation steps with the real core.
         if let (Ok(model), Ok(world), Ok(mut scen)) = (&model, &world, scen) {
             scen.steps = scen.steps.min(PARAMS_SIM_STEPS);
             for policy in [Policy::Safety, Policy::Mission] {
                 let mut core = Core::new(model, ModelKind::Bfm, policy);
-                let run = crate::sim::run(world, &scen, 1, |o| core.step(o));
+                let run = companion::sim::run(world, &scen, 1, |o| core.step(o));
                 out.cycles += run.records.len();
             }
         }
@@ -484,7 +484,7 @@ pub fn params_one(fx: &ParamsFixture, data: &[u8]) -> ParamsOutcome {
 /// send it, so the fuzzer starts past the framing and into the protocol and decision code.
 /// `(name, input)`; written to fuzz/corpus/mavlink_ingest/ by `fuzz/seed.sh`.
 pub fn ingest_seeds() -> Vec<(String, Vec<u8>)> {
-    use crate::link::dialect::*;
+    use companion_link::dialect::*;
     use mavlink::{MavHeader, SigningData};
     let ap = (1u8, 1u8);
     // MAV_COMP_ID_CAMERA: a monitor params/link.toml [telemetry.monitors] allows.
@@ -681,7 +681,7 @@ pub fn ingest_seeds() -> Vec<(String, Vec<u8>)> {
     let arm = Msg::COMMAND_LONG(COMMAND_LONG_DATA {
         command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
         target_system: 1,
-        target_component: crate::link::OUR_COMPONENT_ID,
+        target_component: companion_link::OUR_COMPONENT_ID,
         param1: 1.0,
         ..COMMAND_LONG_DATA::DEFAULT
     });

@@ -6,9 +6,9 @@
 //! Why: the ingest benchmark and the soak run (issue 8) need realistic byte streams and a `fly`
 //! shell that reaches its normal states, without Python or a SITL. Pure: time comes in as a value.
 
-use crate::link::Msg;
-use crate::link::dialect::*;
-use crate::observations::Observations;
+use companion_link::Msg;
+use companion_link::dialect::*;
+use companion_core::observations::Observations;
 use mavlink::types::CharArray;
 
 /// What the world's observations do not say but an autopilot reports (armed, altitude, mode).
@@ -77,7 +77,7 @@ const MIX: [(Kind, u32); 18] = [
 pub const FRAMES_PER_S: u32 = 50;
 
 /// Onboard monitor names and the observation each reports: the link's default list.
-use crate::link::telemetry::DEFAULT_ONBOARD as MONITORS;
+use companion_link::telemetry::DEFAULT_ONBOARD as MONITORS;
 
 /// Source of a frame: the autopilot (sys 1, comp 1) or the onboard camera monitor (comp 100).
 pub const AUTOPILOT: (u8, u8) = (1, 1);
@@ -432,7 +432,7 @@ impl Responder {
     }
 }
 
-const OUR_COMPONENT: u8 = crate::link::OUR_COMPONENT_ID;
+const OUR_COMPONENT: u8 = companion_link::OUR_COMPONENT_ID;
 
 fn ack(command: MavCmd) -> Msg {
     Msg::COMMAND_ACK(COMMAND_ACK_DATA {
@@ -457,8 +457,8 @@ fn mission_ack(mission_type: MavMissionType) -> Msg {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::link::ingest::{Encoder, Ingest};
-    use crate::link::telemetry::{Telemetry, TelemetryConfig};
+    use companion_link::ingest::{Encoder, Ingest};
+    use companion_link::telemetry::{Telemetry, TelemetryConfig};
     use std::time::Duration;
 
     fn obs() -> Observations {

@@ -2,9 +2,9 @@
 //! a tracking-phase snapshot from the simulated world, then advanced in place cycle by cycle the
 //! way flight telemetry moves. Not used by the decision core itself.
 
-use crate::decision::{Core, Model, ModelKind, Policy};
-use crate::observations::Observations;
-use crate::sim::{Scenario, World, WorldSpec};
+use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion_core::observations::Observations;
+use companion::sim::{Scenario, World, WorldSpec};
 use std::path::Path;
 
 /// The first tracking-phase snapshot (`v0`..`v5`) of `scenario` (seed 1) flown by a safety-first

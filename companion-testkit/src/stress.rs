@@ -1,7 +1,8 @@
-//! Helpers behind hidden CLI subcommands used by tests: a log writer that never stops (killed
+//! The bodies of the testkit binaries `companion-log-stress` and `companion-tlog-sample`: a log writer that never stops (killed
 //! with SIGKILL by the crash-safety test) and a `.tlog` sample for the pymavlink readback test.
 
-use super::{DecisionLog, Header, TlogWriter, WriterOptions, synthetic};
+use crate::synthetic;
+use companion::decision_log::{DecisionLog, Header, TlogWriter, WriterOptions};
 use std::io;
 use std::path::Path;
 use std::time::SystemTime;
@@ -11,7 +12,7 @@ use std::time::SystemTime;
 /// a loss line. `rotate_bytes` small makes the kill land across rotations too.
 pub fn log_stress(dir: &Path, rotate_bytes: u64) -> io::Result<()> {
     std::fs::create_dir_all(dir)?;
-    let header = Header::new("companion __log-stress", SystemTime::now());
+    let header = Header::new("companion-log-stress", SystemTime::now());
     let log = DecisionLog::start(
         dir,
         header,

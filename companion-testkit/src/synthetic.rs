@@ -3,7 +3,7 @@
 //! to V1 on insufficient resources) -> landing. For tests, the log stress helper and demos of the
 //! review report while the real simulation is elsewhere; it is no model of anything.
 
-use crate::record::*;
+use companion_core::record::*;
 use std::collections::BTreeMap;
 
 /// Phase of cycle `i` of an `n`-cycle mission, by fraction of the run.

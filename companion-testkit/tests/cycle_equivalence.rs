@@ -3,11 +3,11 @@
 //! bit for bit (compared as the decision log's JSON, which round-trips f64 exactly), over whole
 //! simulated missions of every scenario, model kind and policy.
 
-use companion::decision::{Core, Model, ModelKind, Policy};
-use companion::observations::Observations;
-use companion::record::{DecisionRecord, Plan};
+use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion_core::observations::Observations;
+use companion_core::record::{DecisionRecord, Plan};
 use companion::sim::{self, Scenario, WorldSpec};
-use companion::spec::default_params_dir;
+use companion_core::spec::default_params_dir;
 use std::sync::OnceLock;
 
 fn model() -> &'static Model {
@@ -107,7 +107,7 @@ fn cached_step_equals_uncached_step() {
 /// scheduler is not re-run; when the vibration evidence flips every cycle all three MDPs are.
 #[test]
 fn memos_hit_on_a_settled_stream_and_miss_when_evidence_flips() {
-    use companion::streams::{Stream, StreamGen, tracking_snapshot};
+    use companion_testkit::streams::{Stream, StreamGen, tracking_snapshot};
     let params = default_params_dir();
     let base = tracking_snapshot(model(), &params, "complete-1");
     for (stream, solves_per_cycle) in [(Stream::Steady, 0), (Stream::Changing, 3)] {

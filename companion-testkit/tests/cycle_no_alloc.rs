@@ -3,10 +3,10 @@
 //! vibration evidence flipping every cycle, so every MDP is re-instantiated and re-solved)
 //! allocates nothing in 1000 cycles. Counting global allocator, test thread only, own binary.
 
-use companion::decision::{Core, Model, ModelKind, Policy};
-use companion::record::{DecisionRecord, Plan};
-use companion::spec::default_params_dir;
-use companion::streams::{Stream, StreamGen, tracking_snapshot};
+use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion_core::record::{DecisionRecord, Plan};
+use companion_core::spec::default_params_dir;
+use companion_testkit::streams::{Stream, StreamGen, tracking_snapshot};
 #[path = "support/counting_alloc.rs"]
 mod counting_alloc;
 use counting_alloc::allocations;

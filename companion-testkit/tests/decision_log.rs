@@ -1,10 +1,11 @@
 //! Decision log writer and reader: loss accounting under a stalled writer, rotation,
 //! flush-per-record, tolerant reading, and a SIGKILL of a process in the middle of writing.
 
+use companion_testkit::synthetic;
 use companion::decision_log::{
-    DecisionLog, Header, ReadError, SCHEMA_VERSION, WriterOptions, part_path, read_log, synthetic,
+    DecisionLog, Header, ReadError, SCHEMA_VERSION, WriterOptions, part_path, read_log,
 };
-use companion::record::DecisionRecord;
+use companion_core::record::DecisionRecord;
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, UNIX_EPOCH};
@@ -416,8 +417,7 @@ fn truncated_last_line_is_reviewed_up_to_it() {
 #[test]
 fn process_killed_with_sigkill_leaves_a_readable_log() {
     let dir = tempfile::tempdir().unwrap();
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_companion"))
-        .arg("__log-stress")
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_companion-log-stress"))
         .arg(dir.path())
         .args(["--rotate-bytes", "40000"])
         .stdout(std::process::Stdio::null())

@@ -1,11 +1,11 @@
 //! Replays the fuzz corpus (fuzz/corpus/<target>/) and the saved crash reproducers
 //! (fuzz/regressions/<target>/) through the same library functions the fuzz targets call
-//! (companion::fuzzing), on stable Rust, in the normal `cargo test`. docs/fuzzing.md.
+//! (companion_testkit::fuzzing), on stable Rust, in the normal `cargo test`. docs/fuzzing.md.
 
-use companion::fuzzing::{
+use companion_testkit::fuzzing::{
     self, IngestFixture, IngestInput, ParamsFixture, ingest_one, ingest_seeds, params_one,
 };
-use companion::spec::default_params_dir;
+use companion_core::spec::default_params_dir;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 

@@ -1,7 +1,7 @@
 //! One warmed-up decision cycle of the concurrent MDPs (instantiate from named probabilities +
 //! finite-horizon solve) allocates nothing (counting global allocator, own test binary).
 
-use companion::mission_mdp::MissionMdps;
+use companion_core::mission_mdp::MissionMdps;
 use mdp_engine::Workspace;
 use std::collections::BTreeMap;
 
@@ -30,7 +30,7 @@ const KNOWN: &[&str] = &[
 
 #[test]
 fn warm_decision_cycle_does_not_allocate() {
-    let mut all = MissionMdps::load(&companion::spec::default_params_dir(), KNOWN).unwrap();
+    let mut all = MissionMdps::load(&companion_core::spec::default_params_dir(), KNOWN).unwrap();
     let mut probs: BTreeMap<String, f64> = all.check_point().clone();
     let names: Vec<String> = all.concurrent().to_vec();
     let mut ws = Workspace::with_capacity(12, 100, false);

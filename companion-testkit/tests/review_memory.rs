@@ -2,7 +2,8 @@
 //! of the log's size, where reading the whole log (`read_log`) holds more than the file.
 //! Measured with a counting global allocator (live bytes, peak), not with time.
 
-use companion::decision_log::{read_log, synthetic};
+use companion::decision_log::read_log;
+use companion_testkit::synthetic;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 

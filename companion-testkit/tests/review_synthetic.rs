@@ -2,9 +2,14 @@
 //! boundaries (synthetic.rs): base 0; wp1 1–7; wpi 8–15; wpf 16–21; target 22–25; v3 26–92
 //! with the obstacle detour at 40–45 and V3 -> V1 from 60; landing 93–99.
 
-use super::*;
-use crate::decision_log::{Header, LogEvent, ReadIssue, synthetic};
-use crate::record::{CommandRecord, Conflict, MdpProposal};
+use companion::review::*;
+use companion::review::outcomes::Category;
+use companion::decision_log::LossReason;
+use companion_core::record::DecisionRecord;
+use companion::decision_log::LogItem;
+use companion::decision_log::{Header, LogEvent, ReadIssue};
+use companion_testkit::synthetic;
+use companion_core::record::{CommandRecord, Conflict, MdpProposal};
 use std::time::UNIX_EPOCH;
 
 fn header() -> Header {
@@ -34,7 +39,7 @@ fn summary_counts_match_hand_count() {
     let s = &rev.summary;
     assert_eq!(s.records, 100);
     assert_eq!(s.policy.as_deref(), Some("safety"));
-    // Tracking steps (crate::tracking): v3 cycles 26–59 choose track_v3 and stay in v3 = 34.
+    // Tracking steps (companion_core::tracking): v3 cycles 26–59 choose track_v3 and stay in v3 = 34.
     // target 22–25 chooses track_v0 but never reaches v0; 60–92 choose track_v1 in state v3.
     assert_eq!(s.tracking_steps, 34);
     assert!((s.tracking_s - 34.0).abs() < 1e-9);
@@ -473,7 +478,7 @@ fn full_disk_is_told_from_a_killed_process() {
         rev.summary.outcome
     );
     assert!(!rev.summary.outcome.contains("process stopped"));
-    let html = html::render_html(&rev);
+    let html = render_html(&rev);
     assert!(html.contains("records lost to failed writes"));
     assert!(!html.contains("killed or still running"));
 

@@ -4,10 +4,10 @@
 //! the vibration evidence every cycle (bench_cycle's "worst" case). Counting allocator, own
 //! binary.
 
-use companion::decision::{Core, Model, ModelKind, Policy};
-use companion::record::{DecisionRecord, Plan};
-use companion::spec::default_params_dir;
-use companion::streams::{Stream, StreamGen, tracking_snapshot};
+use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion_core::record::{DecisionRecord, Plan};
+use companion_core::spec::default_params_dir;
+use companion_testkit::streams::{Stream, StreamGen, tracking_snapshot};
 #[path = "support/counting_alloc.rs"]
 mod counting_alloc;
 use counting_alloc::allocations;
@@ -26,7 +26,7 @@ fn memos_off_cycle_allocates_nothing_once_warm() {
         core.set_caches(false);
         let mut obs = base.clone();
         let (mut plan, mut rec) = (Plan::default(), DecisionRecord::default());
-        let set = |obs: &mut companion::observations::Observations, k: u64| stream.advance(obs, k);
+        let set = |obs: &mut companion_core::observations::Observations, k: u64| stream.advance(obs, k);
         for k in 0..WARM {
             set(&mut obs, k);
             core.step_into(&obs, &mut plan, &mut rec);

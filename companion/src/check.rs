@@ -4,7 +4,7 @@
 //! The report is a list of sections, each a JSON value under its key plus a human rendering.
 //! Adding a section (platform, variants, guarantee) is one line in [`SECTIONS`].
 
-use crate::health::HealthModel;
+use companion_core::health::HealthModel;
 use anyhow::Context;
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
@@ -90,7 +90,7 @@ pub fn mdp_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
     let health = HealthModel::load(cx.params)?;
     let names = health.publishes();
     let refs: Vec<&str> = names.iter().map(String::as_str).collect();
-    let mdps = crate::mission_mdp::MissionMdps::load(cx.params, &refs)?;
+    let mdps = companion_core::mission_mdp::MissionMdps::load(cx.params, &refs)?;
     let mut text = String::from("\nMDPs (params/mdp/):\n");
     let mut arr = Vec::new();
     for m in mdps.all() {
@@ -114,13 +114,13 @@ pub fn mdp_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
 }
 
 fn resources_json(cx: &CheckContext) -> anyhow::Result<Value> {
-    Ok(crate::resources::check_json(cx.params)?)
+    Ok(companion_core::resources::check_json(cx.params)?)
 }
 
 /// The SoC platform (tiles, CPU) from params/platform.toml.
 pub fn platform_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
-    let spec = crate::resources::ResourceSpec::load(cx.params)?;
-    let text = format!("\n{}", crate::resources::check_text(&spec));
+    let spec = companion_core::resources::ResourceSpec::load(cx.params)?;
+    let text = format!("\n{}", companion_core::resources::check_text(&spec));
     Ok((resources_json(cx)?["platform"].clone(), text))
 }
 
@@ -139,8 +139,8 @@ pub fn resource_policies_section(cx: &CheckContext) -> anyhow::Result<(Value, St
 /// PANORAMA: activities, RAS0 (Table 6 shape), NGA and initial margins of `--mission`.
 pub fn guarantee_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
     let mission = cx.args.mission.as_deref().unwrap_or("tracking");
-    let v = crate::guarantee::check_json(cx.params, mission)?;
-    let text = format!("\n{}", crate::guarantee::check_text(cx.params, mission)?);
+    let v = companion_core::guarantee::check_json(cx.params, mission)?;
+    let text = format!("\n{}", companion_core::guarantee::check_text(cx.params, mission)?);
     Ok((v["guarantee"].clone(), text))
 }
 
@@ -162,7 +162,7 @@ pub fn report(args: &CheckArgs) -> anyhow::Result<(Value, String)> {
     let params = args
         .params
         .clone()
-        .unwrap_or_else(crate::spec::default_params_dir);
+        .unwrap_or_else(companion_core::spec::default_params_dir);
     // Everything `fly` and `simulate` load, cross-checks included, before any section: a file
     // either of them would refuse fails here with its file, entry and reason.
     crate::params::Params::load(&params, args.route.as_deref())?;

@@ -1,28 +1,25 @@
-//! The BFM flight companion.
+//! The `companion` binary's shells: everything that touches the world around the pure core.
 //!
-//! Pure decision core: `evidence` -> `health` -> `decision` -> `arbitration` -> `guarantee`,
-//! driven by `sim` (a seeded discrete-step world) or by `link` (MAVLink). Everything
-//! mission-specific is loaded from `params/` by `spec` and the stage modules.
+//! The decision core (`companion-core`) and the MAVLink clients (`companion-link`) do no I/O;
+//! this crate owns the files, the clock, the sockets and the randomness: it reads `params/`,
+//! runs the seeded simulated world, flies a real autopilot, writes and reads decision logs, and
+//! renders the reports.
+//!
+//! # Layout
+//! - `params`: reads a params directory into [`companion_core::spec::ParamsFiles`] and loads it
+//!   whole (the model, the world, the link files), for `check`, `simulate` and `fly` alike.
+//! - `sim`: the seeded discrete-step world and its scenarios (`simulate`).
+//! - `fly`: the MAVLink flight shell (`fly`) and its byte transports (serial, UDP, TCP).
+//! - `decision_log`: run folders, the decision-log writer and reader, telemetry logs.
+//! - `check`: `companion check` (params validation and the compiled models, text or JSON).
+//! - `review`: `companion review` (HTML report, summary, why of a cycle).
+//! - `export`: `companion export` (MCAP or CSV).
+//! - `replay`: `companion replay` (a run's log fed back through a fresh core).
 
 pub mod check;
-pub mod decision;
 pub mod decision_log;
-pub mod evidence;
 pub mod export;
-pub mod fmea;
-pub mod fuzzing;
-pub mod guarantee;
-pub mod health;
-pub mod link;
-pub mod mission;
-pub mod mission_mdp;
-pub mod observations;
+pub mod fly;
 pub mod params;
-pub mod record;
-pub mod resources;
 pub mod review;
 pub mod sim;
-pub mod sim_link;
-pub mod spec;
-pub mod streams;
-pub mod tracking;

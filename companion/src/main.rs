@@ -2,10 +2,10 @@
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
-use companion::decision::{Core, Model, ModelKind, Policy};
-use companion::link::fly::{Decider, FlyArgs};
+use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion::fly::{Decider, FlyArgs};
 use companion::sim::{self, Scenario};
-use companion::spec::default_params_dir;
+use companion_core::spec::default_params_dir;
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
@@ -135,20 +135,6 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
-    /// Test helper: write decision records into DIR until killed.
-    #[command(name = "__log-stress", hide = true)]
-    LogStress {
-        dir: PathBuf,
-        #[arg(long, default_value_t = 64 * 1024 * 1024)]
-        rotate_bytes: u64,
-    },
-    /// Test helper: write a sample .tlog of N frames.
-    #[command(name = "__tlog-sample", hide = true)]
-    TlogSample {
-        path: PathBuf,
-        #[arg(long, default_value_t = 20)]
-        frames: u32,
-    },
 }
 
 fn main() -> Result<()> {
@@ -191,12 +177,6 @@ fn main() -> Result<()> {
             );
             Ok(())
         }
-        Command::LogStress { dir, rotate_bytes } => Ok(
-            companion::decision_log::stress::log_stress(&dir, rotate_bytes)?,
-        ),
-        Command::TlogSample { path, frames } => {
-            Ok(companion::decision_log::stress::tlog_sample(&path, frames)?)
-        }
     }
 }
 
@@ -210,8 +190,8 @@ struct CoreDecider {
 impl Decider for CoreDecider {
     fn step(
         &mut self,
-        obs: &companion::observations::Observations,
-    ) -> (companion::record::Plan, companion::record::DecisionRecord) {
+        obs: &companion_core::observations::Observations,
+    ) -> (companion_core::record::Plan, companion_core::record::DecisionRecord) {
         self.core.step(obs)
     }
 
@@ -235,7 +215,7 @@ fn fly(args: FlyArgs) -> Result<()> {
         model,
         policy,
     };
-    companion::link::fly::run(args, decider)
+    companion::fly::run(args, decider)
 }
 
 fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
@@ -362,7 +342,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         scenario.steps
     );
     println!();
-    print!("{}", companion::decision::table(&first.records, &model));
+    print!("{}", companion_core::decision::table(&first.records, &model));
     println!();
     if let Some((n, Some(table))) = &first_allocations
         && *n > 0

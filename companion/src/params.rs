@@ -2,11 +2,11 @@
 //! `fly` all start with [`Params::load`], so what one accepts the others accept, and a file that
 //! stops `fly` also fails `check` with the same file, entry and reason (docs/params.md).
 
-use crate::decision::Model;
-use crate::link::actions::{ActionTable, LinkParams, Route};
-use crate::mission::ActionKind;
+use companion_core::decision::Model;
+use companion_link::actions::{ActionTable, LinkParams, Route};
+use companion_core::mission::ActionKind;
 use crate::sim::WorldSpec;
-use crate::spec::SpecError;
+use companion_core::spec::SpecError;
 use std::path::{Path, PathBuf};
 
 /// The route `fly` follows when `--mission` names none, relative to the params directory.
@@ -139,7 +139,7 @@ impl Params {
     /// model in `platform.toml` (without one its required rate would silently be unknown).
     fn check_performance_models(&self) -> Result<(), SpecError> {
         let platform = &self.model.resources.platform;
-        let file = self.dir.join(crate::resources::PLATFORM_FILE);
+        let file = self.dir.join(companion_core::resources::PLATFORM_FILE);
         for app in self.model.resources.catalogue.apps() {
             if !platform.performance.contains_key(app) {
                 return Err(SpecError::new(
@@ -177,4 +177,4 @@ pub fn load_fly_files(
     Ok((link, commands, route, route_file))
 }
 
-pub use crate::spec::regular_file;
+pub use companion_core::spec::regular_file;

@@ -6,9 +6,9 @@
 //! build from MAVLink, then advances by sampling the true dynamics under the actions the core
 //! chose. The core never reads the truth.
 
-use crate::observations::Observations;
-use crate::record::{DecisionRecord, Plan};
-use crate::spec::{SpecError, read_toml};
+use companion_core::observations::Observations;
+use companion_core::record::{DecisionRecord, Plan};
+use companion_core::spec::{SpecError, read_toml};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Deserialize;
@@ -274,7 +274,7 @@ pub struct World<'a> {
 }
 
 fn is_tracking(phase: &str) -> bool {
-    crate::tracking::is_tracking_phase(phase)
+    companion_core::tracking::is_tracking_phase(phase)
 }
 
 impl<'a> World<'a> {
@@ -555,7 +555,7 @@ impl<'a> World<'a> {
             self.enter_phase();
         }
         // The one definition of a tracking step, shared with `review`.
-        if crate::tracking::is_tracking_step(&before, &record.actions, &self.phase) {
+        if companion_core::tracking::is_tracking_step(&before, &record.actions, &self.phase) {
             self.tracking_steps += 1;
         }
         if self.phase == "landing" {
@@ -596,7 +596,7 @@ pub fn run(
             .vehicle
             .insert("world_events_after".into(), serde_json::json!(after));
         record.vehicle.insert(
-            crate::tracking::STATE_AFTER_KEY.into(),
+            companion_core::tracking::STATE_AFTER_KEY.into(),
             serde_json::json!(world.phase),
         );
         records.push(record);
@@ -627,10 +627,10 @@ pub fn mean_ci95(xs: &[f64]) -> (f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::record::ResourcesRecord;
+    use companion_core::record::ResourcesRecord;
 
     fn spec() -> WorldSpec {
-        WorldSpec::load(&crate::spec::default_params_dir()).unwrap()
+        WorldSpec::load(&companion_core::spec::default_params_dir()).unwrap()
     }
 
     /// A scripted core: take off, follow the route, detect, then track with `version`; land when
@@ -799,7 +799,7 @@ mod tests {
 
     #[test]
     fn every_shipped_scenario_loads() {
-        let params = crate::spec::default_params_dir();
+        let params = companion_core::spec::default_params_dir();
         let names = Scenario::names(&params);
         for required in [
             "nominal",

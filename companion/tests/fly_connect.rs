@@ -145,7 +145,7 @@ fn connect_timeout_without_a_heartbeat_exits_non_zero_naming_the_endpoint() {
 
 #[test]
 fn udpin_mavsdk_url_hears_a_heartbeat() {
-    use companion::link::dialect::*;
+    use companion_link::dialect::*;
     let dir = tempfile::tempdir().unwrap();
     let port = free_udp_port();
     let url = format!("udpin://127.0.0.1:{port}");

@@ -1,7 +1,7 @@
 //! The PANORAMA patrolling mission (Tables 1, 3, 4, 5) against the paper's published figures, and
 //! its in-flight re-allocations in the shape of Table 7.
 
-use companion::guarantee::*;
+use companion_core::guarantee::*;
 use std::path::Path;
 
 fn params() -> &'static Path {

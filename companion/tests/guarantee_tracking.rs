@@ -1,7 +1,7 @@
 //! The BFM tracking mission under PANORAMA: pre-flight, (a) energy drift, (b) lidar and tile
 //! failures, (c) an impossible goal; and every kind of bad mission file the loader rejects.
 
-use companion::guarantee::*;
+use companion_core::guarantee::*;
 use std::path::Path;
 
 fn params() -> &'static Path {
@@ -237,7 +237,7 @@ fn impossible_goal_is_infeasible_with_numbers() {
     assert!(why.contains("energy_j") && why.contains("exceeds"), "{why}");
 }
 
-fn rejected(t: &str) -> companion::spec::SpecError {
+fn rejected(t: &str) -> companion_core::spec::SpecError {
     parse_mission(Path::new("bad.toml"), t).expect_err("must be rejected")
 }
 

@@ -1,8 +1,8 @@
 //! Every kind of bad params input is rejected with a SpecError naming the file, the entry and the
 //! reason; nothing panics.
 
-use companion::health::HealthModel;
-use companion::spec::{SpecError, default_params_dir};
+use companion_core::health::HealthModel;
+use companion_core::spec::{SpecError, default_params_dir};
 use std::path::{Path, PathBuf};
 
 /// Copy params/health, params/observations.toml and the variant catalogue the activation nodes

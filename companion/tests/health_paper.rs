@@ -1,9 +1,9 @@
 //! The shipped params reproduce the BFM paper's worked examples (to the paper's 2 decimals) and
 //! respond sensibly to the hazards the world simulation injects.
 
-use companion::health::HealthModel;
-use companion::observations::Observations;
-use companion::spec::default_params_dir;
+use companion_core::health::HealthModel;
+use companion_core::observations::Observations;
+use companion_core::spec::default_params_dir;
 use std::collections::BTreeMap;
 
 fn model() -> HealthModel {

@@ -1,14 +1,14 @@
 //! The default CPT rules, checked against hand computation on small FMEA files.
 
-use companion::fmea::{HmFile, compile_hm};
+use companion_core::fmea::{HmFile, compile_hm};
 use std::path::Path;
 
-fn compile(text: &str) -> companion::fmea::CompiledHm {
+fn compile(text: &str) -> companion_core::fmea::CompiledHm {
     let f: HmFile = toml::from_str(text).unwrap();
     compile_hm(Path::new("t.toml"), &f).unwrap()
 }
 
-fn cpt(h: &companion::fmea::CompiledHm, n: &str) -> Vec<f64> {
+fn cpt(h: &companion_core::fmea::CompiledHm, n: &str) -> Vec<f64> {
     h.network.node(h.network.id(n).unwrap()).cpt.clone()
 }
 

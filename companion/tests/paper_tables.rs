@@ -3,12 +3,12 @@
 //! outcome typed into params), and every action that runs was proposed by an MDP in the same
 //! decision record.
 
-use companion::decision::{Core, Model, ModelKind, Policy};
-use companion::health::HealthModel;
-use companion::observations::Observations;
-use companion::record::DecisionRecord;
+use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion_core::health::HealthModel;
+use companion_core::observations::Observations;
+use companion_core::record::DecisionRecord;
 use companion::sim::{self, Scenario, WorldSpec};
-use companion::spec::default_params_dir;
+use companion_core::spec::default_params_dir;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::OnceLock;
@@ -422,7 +422,7 @@ fn table2_panorama_tios_must_match_variants_toml() {
         text.replacen(row, &row.replace("tiles = 4", "tiles = 2"), 1),
     )
     .unwrap();
-    let e = companion::guarantee::load_mission(dir.path(), "tracking").expect_err("rejected");
+    let e = companion_core::guarantee::load_mission(dir.path(), "tracking").expect_err("rejected");
     assert!(e.entry.ends_with(".tiles"), "{e}");
     assert!(e.entry.starts_with("tasks.tracking.tios["), "{e}");
     assert!(e.reason.contains("params/variants.toml"), "{e}");

@@ -4,9 +4,9 @@
 //! refuse it with a message naming the file and the entry. docs/params.md, "Limits".
 
 use companion::check::{self, CheckArgs};
-use companion::link::fly::{FlyArgs, FlySetup};
+use companion::fly::{FlyArgs, FlySetup};
 use companion::params::Params;
-use companion::spec::default_params_dir;
+use companion_core::spec::default_params_dir;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -58,7 +58,7 @@ fn set(dir: &Path, rel: &str, key: &str, value: &str) {
 
 fn fly_args(dir: &Path) -> FlyArgs {
     FlyArgs {
-        connect: companion::link::url::parse("udpin:127.0.0.1:14550").unwrap(),
+        connect: companion_link::url::parse("udpin:127.0.0.1:14550").unwrap(),
         mission: None,
         policy: "safety".into(),
         signing_key: None,

@@ -1,10 +1,10 @@
 //! The BFM paper's experiments, reproduced as orderings over many seeds (the paper reports single
 //! Matlab runs; we assert what its Tables 3, 4-7 and 8 say, not its exact step counts).
 
-use companion::decision::{Core, Model, ModelKind, Policy};
-use companion::record::DecisionRecord;
+use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion_core::record::DecisionRecord;
 use companion::sim::{self, RunResult, Scenario, WorldSpec};
-use companion::spec::default_params_dir;
+use companion_core::spec::default_params_dir;
 use std::sync::OnceLock;
 
 const SEEDS: u64 = 30;

@@ -3,10 +3,10 @@
 //! shell orders, whichever policy is in force, the policy must not drop the action the shell prefers
 //! while keeping the other. The shell only orders what the policies leave standing together.
 
-use companion::link::actions::LinkParams;
-use companion::link::mission_state::select_vehicle_action;
-use companion::mission_mdp::BehaviourConflicts;
-use companion::spec::default_params_dir;
+use companion_link::actions::LinkParams;
+use companion_link::mission_state::select_vehicle_action;
+use companion_core::mission_mdp::BehaviourConflicts;
+use companion_core::spec::default_params_dir;
 
 /// The primitive actions of the BFM paper, section 5 (A1..A17): the names policies.toml patterns match.
 const PRIMITIVES: &[&str] = &[

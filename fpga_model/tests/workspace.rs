@@ -5,7 +5,7 @@
 //! reused across a sequence of calls; and a warm run allocates nothing.
 
 mod common;
-#[path = "../../companion/tests/support/counting_alloc.rs"]
+#[path = "../../companion-testkit/tests/support/counting_alloc.rs"]
 mod counting_alloc;
 
 use common::params;

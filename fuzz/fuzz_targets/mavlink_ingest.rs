@@ -1,7 +1,7 @@
-//! MAVLink bytes in, evidence and decisions out: companion::fuzzing::ingest_one.
+//! MAVLink bytes in, evidence and decisions out: companion_testkit::fuzzing::ingest_one.
 #![no_main]
 
-use companion::fuzzing::{IngestFixture, ingest_one};
+use companion_testkit::fuzzing::{IngestFixture, ingest_one};
 use libfuzzer_sys::fuzz_target;
 use std::sync::OnceLock;
 

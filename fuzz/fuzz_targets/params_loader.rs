@@ -1,8 +1,8 @@
 //! One params file replaced by the input, then the whole start-up load:
-//! companion::fuzzing::params_one.
+//! companion_testkit::fuzzing::params_one.
 #![no_main]
 
-use companion::fuzzing::{ParamsFixture, params_one};
+use companion_testkit::fuzzing::{ParamsFixture, params_one};
 use libfuzzer_sys::fuzz_target;
 use std::sync::OnceLock;
 

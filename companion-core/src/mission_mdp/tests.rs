@@ -790,7 +790,7 @@ fn policies_loader_rejects_bad_rules() {
 fn bench_models_are_current() {
     let mut all = load_all();
     let point = all.check_point().clone();
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("mdp_engine/benches/models");
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../mdp_engine/benches/models");
     let update = std::env::var_os("UPDATE_BENCH_MODELS").is_some();
     for name in [
         "reference",
@@ -813,7 +813,7 @@ fn bench_models_are_current() {
         let on_disk = fs::read_to_string(&path).unwrap_or_default();
         assert!(
             on_disk == json,
-            "{} is stale: UPDATE_BENCH_MODELS=1 cargo test -p companion --lib bench_models",
+            "{} is stale: UPDATE_BENCH_MODELS=1 cargo test -p companion-core --lib bench_models",
             path.display()
         );
     }

@@ -7,12 +7,10 @@
 //!
 //! Layout, schema, rotation and crash safety: docs/decision-log.md.
 //!
-//! [`DecisionRecord`]: crate::record::DecisionRecord
+//! [`DecisionRecord`]: companion_core::record::DecisionRecord
 
 mod reader;
 mod stream;
-pub mod stress;
-pub mod synthetic;
 mod tlog;
 mod writer;
 
@@ -30,7 +28,7 @@ use std::io;
 use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};
 
-pub use crate::record::SCHEMA_VERSION;
+pub use companion_core::record::SCHEMA_VERSION;
 
 /// File stem of the decision log parts: `decisions.jsonl`, `decisions.1.jsonl`, ...
 pub const LOG_STEM: &str = "decisions";

@@ -4,7 +4,7 @@
 
 use super::reader::{LogEvent, ReadError, ReadIssue, log_files};
 use super::{Header, SCHEMA_VERSION};
-use crate::record::DecisionRecord;
+use companion_core::record::DecisionRecord;
 use std::fs::File;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};

@@ -1,7 +1,7 @@
 //! The log writer thread: bounded channel in, one flushed line per record out, size rotation.
 
 use super::{Header, part_path};
-use crate::record::DecisionRecord;
+use companion_core::record::DecisionRecord;
 use serde::Serialize;
 use std::fs::{File, OpenOptions};
 use std::io::{self, Seek, SeekFrom, Write};

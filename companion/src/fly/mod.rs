@@ -7,22 +7,23 @@
 //! the message that triggered the cycle to the command handed to the transport) and the results
 //! of earlier commands that finished since.
 //!
-//! The operator decides when to fly ([`super::operator`]): until the pilot arms or a ground
+//! The operator decides when to fly ([`companion_link::operator`]): until the pilot arms or a ground
 //! station sends the start command, cycles decide and log but command no motion; a pilot's mode
 //! change stops the commanding until control is handed back. After a flight ends landed and
 //! disarmed, `fly` waits for the operator again (`--once` exits instead).
 
-use super::Msg;
-use super::actions::{ActionTable, LinkParams, Route};
-use super::ingest::{self, Encoder, Ingest};
-use super::liveness::parse_duration;
-use super::mission_state::{self, Extra, LANDING_ACTIONS, MissionState};
-use super::operator::{self, Control, GateEvent, GcsText, OperatorGate, VehicleView};
-use super::transport::{self, Inbound};
-use super::url::{self, ConnectUrl};
-use super::vehicle::{Vehicle, VehicleConfig};
-use crate::observations::Observations;
-use crate::record::{DecisionRecord, Plan};
+use companion_link::Msg;
+use companion_link::actions::{ActionTable, LinkParams, Route};
+use companion_link::ingest::{self, Encoder, Ingest};
+use companion_link::liveness::parse_duration;
+use companion_link::mission_state::{self, Extra, LANDING_ACTIONS, MissionState};
+use companion_link::operator::{self, Control, GateEvent, GcsText, OperatorGate, VehicleView};
+pub mod transport;
+use transport::Inbound;
+use companion_link::url::{self, ConnectUrl};
+use companion_link::vehicle::{Vehicle, VehicleConfig};
+use companion_core::observations::Observations;
+use companion_core::record::{DecisionRecord, Plan};
 use anyhow::Context;
 use std::io::Write;
 use std::path::PathBuf;
@@ -37,9 +38,9 @@ pub trait Decider {
 }
 
 /// The real core is a decider as it is (fuzzing and the soak drive it without a wrapper).
-impl Decider for crate::decision::Core<'_> {
+impl Decider for companion_core::decision::Core<'_> {
     fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
-        crate::decision::Core::step(self, obs)
+        companion_core::decision::Core::step(self, obs)
     }
 }
 
@@ -181,13 +182,13 @@ impl FlySetup {
         let dir = args
             .params
             .clone()
-            .unwrap_or_else(crate::spec::default_params_dir);
+            .unwrap_or_else(companion_core::spec::default_params_dir);
         // The same loader `check` and `simulate` use (crate::params), so they cannot drift.
         let (link, actions, route, _) =
             crate::params::load_fly_files(&dir, args.mission.as_deref())?;
         let key = match &args.signing_key {
             Some(p) => {
-                crate::spec::regular_file(p)
+                companion_core::spec::regular_file(p)
                     .map_err(|reason| anyhow::anyhow!("--signing-key {}: {reason}", p.display()))?;
                 Some(ingest::load_signing_key(p)?)
             }
@@ -198,8 +199,8 @@ impl FlySetup {
             .get("take_off")
             .and_then(|steps| {
                 steps.iter().find_map(|st| match st {
-                    super::actions::Step::Command { command, params }
-                        if *command == super::dialect::MavCmd::MAV_CMD_NAV_TAKEOFF
+                    companion_link::actions::Step::Command { command, params }
+                        if *command == companion_link::dialect::MavCmd::MAV_CMD_NAV_TAKEOFF
                             && params[6] > 0.0 =>
                     {
                         Some(params[6] as f64)
@@ -248,7 +249,7 @@ pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
     let params = args
         .params
         .clone()
-        .unwrap_or_else(crate::spec::default_params_dir);
+        .unwrap_or_else(companion_core::spec::default_params_dir);
     let now = std::time::SystemTime::now();
     let command: Vec<String> = std::env::args().collect();
     let mut header = Header::new(command.join(" "), now)
@@ -312,7 +313,7 @@ async fn run_loop<D: Decider, S: RecordSink>(
     } else {
         tracing::info!(
             "waiting for the operator: the pilot arms the vehicle, or a ground station sends MAV_CMD_MISSION_START to component {}",
-            super::OUR_COMPONENT_ID
+            companion_link::OUR_COMPONENT_ID
         );
     }
     let mut vehicle = setup.vehicle(args.link_timeout);
@@ -489,9 +490,9 @@ async fn run_loop<D: Decider, S: RecordSink>(
                         on_gate_event(&mut shell, &mut vehicle, t, &ev, &mut out);
                         wake = true;
                     }
-                    super::dialect::MavResult::MAV_RESULT_ACCEPTED
+                    companion_link::dialect::MavResult::MAV_RESULT_ACCEPTED
                 } else {
-                    super::dialect::MavResult::MAV_RESULT_UNSUPPORTED
+                    companion_link::dialect::MavResult::MAV_RESULT_UNSUPPORTED
                 };
                 tracing::info!("command {command:?} from {sys}/{comp} addressed to us: {result:?}");
                 out.push(operator::ack(command, result, (sys, comp)));
@@ -624,9 +625,9 @@ async fn send(
     }
 }
 
-const INFO: super::dialect::MavSeverity = super::dialect::MavSeverity::MAV_SEVERITY_INFO;
-const NOTICE: super::dialect::MavSeverity = super::dialect::MavSeverity::MAV_SEVERITY_NOTICE;
-const WARNING: super::dialect::MavSeverity = super::dialect::MavSeverity::MAV_SEVERITY_WARNING;
+const INFO: companion_link::dialect::MavSeverity = companion_link::dialect::MavSeverity::MAV_SEVERITY_INFO;
+const NOTICE: companion_link::dialect::MavSeverity = companion_link::dialect::MavSeverity::MAV_SEVERITY_NOTICE;
+const WARNING: companion_link::dialect::MavSeverity = companion_link::dialect::MavSeverity::MAV_SEVERITY_WARNING;
 
 /// SIGTERM (systemd's stop): ends the loop like Ctrl-C, so the logs close whole.
 async fn terminate_signal() {
@@ -684,7 +685,7 @@ impl GcsWatch {
 
     fn on_frame(&mut self, now: Duration, f: &ingest::Frame) {
         if let Msg::HEARTBEAT(h) = &f.msg
-            && h.mavtype == super::dialect::MavType::MAV_TYPE_GCS
+            && h.mavtype == companion_link::dialect::MavType::MAV_TYPE_GCS
         {
             self.last = Some(now);
         }

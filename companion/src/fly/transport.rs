@@ -6,7 +6,7 @@
 //! the fly loop sets ([`TransportHandle::peer`]), which it learns from valid MAVLink frames of the
 //! chosen autopilot ([`UdpPeer`]). Junk datagrams get nothing back.
 
-use super::url::ConnectUrl;
+use companion_link::url::ConnectUrl;
 use std::net::SocketAddr;
 use std::time::Duration;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};

@@ -10,7 +10,7 @@
 
 mod html;
 pub mod outcomes;
-mod plot;
+pub mod plot;
 mod terminal;
 pub mod text;
 pub mod why;
@@ -19,8 +19,8 @@ pub use html::render_html;
 pub use terminal::{render_terminal, render_why};
 
 use crate::decision_log::{Header, LogItem, LossReason, ReadError, ReadIssue, stream_log};
-use crate::record::{CommandRecord, DecisionRecord};
-use crate::tracking::TrackingCounter;
+use companion_core::record::{CommandRecord, DecisionRecord};
+use companion_core::tracking::TrackingCounter;
 use outcomes::{Category, OutcomeCounts, categorize};
 use plot::Decimator;
 use std::collections::{BTreeMap, HashMap};
@@ -71,7 +71,7 @@ pub struct Summary {
     pub last_cycle: Option<u64>,
     /// time_s of the last record minus that of the first.
     pub duration_s: f64,
-    /// The paper's Table 8 "tracking time (nbr steps)", by [`crate::tracking`]: the same
+    /// The paper's Table 8 "tracking time (nbr steps)", by [`companion_core::tracking`]: the same
     /// definition `simulate` counts with.
     pub tracking_steps: usize,
     pub tracking_s: f64,
@@ -282,7 +282,7 @@ fn position(r: &DecisionRecord) -> Option<(f64, f64)> {
     valid.then_some((lon, lat))
 }
 
-pub(crate) fn policy_from_command(cmd: &str) -> Option<String> {
+pub fn policy_from_command(cmd: &str) -> Option<String> {
     let mut it = cmd.split_whitespace();
     while let Some(w) = it.next() {
         if w == "--policy" {
@@ -709,7 +709,7 @@ impl Review {
                 format!(
                     "this log has schema {v}, newer than this companion reads ({}): fields it \
                      does not know are ignored; upgrade companion for a full review",
-                    crate::record::SCHEMA_VERSION
+                    companion_core::record::SCHEMA_VERSION
                 ),
             );
         }
@@ -816,5 +816,3 @@ pub fn run_with_cycle(
     Ok(Some(path))
 }
 
-#[cfg(test)]
-mod tests;

@@ -98,7 +98,7 @@ pub(crate) struct VMark {
 }
 
 /// "Nice" tick values covering [lo, hi] (steps of 1, 2 or 5 times a power of ten).
-pub(crate) fn ticks(lo: f64, hi: f64, target: usize) -> Vec<f64> {
+pub fn ticks(lo: f64, hi: f64, target: usize) -> Vec<f64> {
     if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater)
         || !lo.is_finite()
         || !hi.is_finite()

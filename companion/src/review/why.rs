@@ -2,7 +2,7 @@
 //! conflicts arose and what gave way, what the resources dropped or degraded, and the PANORAMA
 //! margins. Bounded per cycle so a hostile record cannot make the report grow without end.
 
-use crate::record::DecisionRecord;
+use companion_core::record::DecisionRecord;
 
 const MAX_PROPOSALS: usize = 32;
 const MAX_INPUTS: usize = 48;

@@ -9,7 +9,7 @@
 //!
 //! Run from the workspace root:
 //! `cargo run -p companion --example export_health_bn -- [params_dir] [out.json] [sets]`.
-use companion::health::HealthModel;
+use companion_core::health::HealthModel;
 use serde_json::{Value, json};
 use std::path::Path;
 

@@ -1,8 +1,8 @@
 //! Health evaluation cost: one cycle of every health manager (all published probabilities) under
 //! typical evidence, and one junction-tree propagation of the tracking BN alone.
 
-use companion::health::HealthModel;
-use companion::observations::Observations;
+use companion_core::health::HealthModel;
+use companion_core::observations::Observations;
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 
@@ -28,7 +28,7 @@ fn snapshot(vibration: f64) -> Observations {
 }
 
 fn bench(c: &mut Criterion) {
-    let params = companion::spec::default_params_dir();
+    let params = companion_core::spec::default_params_dir();
     c.bench_function("health_load_and_compile", |b| {
         b.iter(|| HealthModel::load(black_box(&params)).unwrap())
     });

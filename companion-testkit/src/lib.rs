@@ -1,0 +1,17 @@
+//! Support for the companion's tests, fuzz targets, benchmarks, soak and stress runs. Never
+//! shipped: the release `companion` binary does not link this crate.
+//!
+//! # Layout
+//! - `fuzzing`: the fuzz targets' bodies (MAVLink ingest, params loading), shared with the
+//!   corpus replay test.
+//! - `sim_link`: a simulated autopilot's byte stream and a minimal responder (ingest bench, soak).
+//! - `streams`: observation streams for measuring the decision cycle.
+//! - `synthetic`: a synthetic 100-cycle mission's decision records (review and export tests).
+//! - `stress`: decision-log and telemetry-log writers for the log-loss tests
+//!   (binaries `companion-log-stress`, `companion-tlog-sample`).
+
+pub mod fuzzing;
+pub mod sim_link;
+pub mod streams;
+pub mod stress;
+pub mod synthetic;
