@@ -17,7 +17,6 @@ use crate::spec::SpecError;
 use fpga_model::{PlatformState, Request};
 use mdp_engine::Workspace;
 use std::collections::BTreeMap;
-use std::path::Path;
 
 /// Which decision model drives a run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -65,17 +64,19 @@ pub struct Model {
 }
 
 impl Model {
-    pub fn load(params: &Path) -> Result<Self, SpecError> {
-        let mission = MissionFile::load(params)?;
-        let actions = ActionCatalogue::load(params)?;
-        let health = HealthModel::load(params)?;
+    /// Compile the whole model from the params files (the shell reads them).
+    pub fn load(files: &crate::spec::ParamsFiles) -> Result<Self, SpecError> {
+        let params = files.dir();
+        let mission = MissionFile::load(files)?;
+        let actions = ActionCatalogue::load(files)?;
+        let health = HealthModel::load(files)?;
         let names = health.publishes();
         let name_refs: Vec<&str> = names.iter().map(String::as_str).collect();
-        let mdps = MissionMdps::load(params, &name_refs)?;
+        let mdps = MissionMdps::load(files, &name_refs)?;
         let ids: Vec<&str> = actions.actions.iter().map(|a| a.id.as_str()).collect();
-        let conflicts = BehaviourConflicts::load(&params.join("policies.toml"), &ids)?;
-        let resources = ResourceSpec::load(params)?;
-        let guarantee = crate::guarantee::load_mission(params, &mission.guarantee.mission)?;
+        let conflicts = BehaviourConflicts::load(files, &params.join("policies.toml"), &ids)?;
+        let resources = ResourceSpec::load(files)?;
+        let guarantee = crate::guarantee::load_mission(files, &mission.guarantee.mission)?;
         let file = params.join("actions.toml");
         for a in mdps.primitive_actions() {
             if actions.get(&a).is_none() {

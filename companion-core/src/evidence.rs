@@ -51,8 +51,8 @@ pub struct ObservationMap {
 }
 
 impl ObservationMap {
-    pub fn load(path: &Path) -> Result<Self, SpecError> {
-        let f: ObservationsFile = read_toml(path)?;
+    pub fn load(params: &crate::spec::ParamsFiles, path: &Path) -> Result<Self, SpecError> {
+        let f: ObservationsFile = read_toml(params, path)?;
         if f.observation.is_empty() {
             return Err(SpecError::new(
                 path,

@@ -275,8 +275,8 @@ fn check_prob(file: &Path, entry: &str, v: f64) -> Result<f64, SpecError> {
 }
 
 /// Load and compile one FMEA file.
-pub fn load_hm(path: &Path) -> Result<CompiledHm, SpecError> {
-    let spec: HmFile = read_toml(path)?;
+pub fn load_hm(params: &crate::spec::ParamsFiles, path: &Path) -> Result<CompiledHm, SpecError> {
+    let spec: HmFile = read_toml(params, path)?;
     compile_hm(path, &spec)
 }
 

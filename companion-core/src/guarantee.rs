@@ -10,7 +10,7 @@
 //! Pure apart from [`load_mission`] (which reads the file): no clock, time comes in [`Progress`].
 
 use crate::record::{GuaranteeRecord, Reallocation};
-use crate::spec::{SpecError, read_toml};
+use crate::spec::{ParamsFiles, SpecError, read_toml};
 use panorama::{
     Activity, CoreConstraint, Goal, Ia, Infeasible, MarginReport, Measured, Problem, Selection,
     Task, Tio,
@@ -266,22 +266,28 @@ pub struct MissionSpec {
     pub tile_names: Vec<String>,
 }
 
-/// Resolve `--mission`: an existing path, else `params/missions/NAME.toml`.
-pub fn mission_path(params_dir: &Path, mission: &str) -> PathBuf {
+/// Resolve `--mission`: a path the params set holds (the shell adds a mission file given by
+/// path), else `params/missions/NAME.toml`.
+pub fn mission_path(params: &ParamsFiles, mission: &str) -> PathBuf {
     let p = Path::new(mission);
-    if p.is_file() {
+    if params.contains(p) {
         return p.to_path_buf();
     }
-    params_dir.join("missions").join(format!("{mission}.toml"))
+    params
+        .dir()
+        .join("missions")
+        .join(format!("{mission}.toml"))
 }
 
 /// Load and validate a mission by name or path.
-pub fn load_mission(params_dir: &Path, mission: &str) -> Result<MissionSpec, SpecError> {
-    let path = mission_path(params_dir, mission);
-    let file: MissionFile = read_toml(&path)?;
+pub fn load_mission(params: &ParamsFiles, mission: &str) -> Result<MissionSpec, SpecError> {
+    let params_dir = params.dir();
+    let path = mission_path(params, mission);
+    let file: MissionFile = read_toml(params, &path)?;
     let platform =
-        crate::resources::load_platform(&params_dir.join(crate::resources::PLATFORM_FILE))?;
+        crate::resources::load_platform(params, &params_dir.join(crate::resources::PLATFORM_FILE))?;
     let catalogue = crate::resources::load_variants(
+        params,
         &params_dir.join(crate::resources::VARIANTS_FILE),
         &platform,
     )?;
@@ -1258,8 +1264,8 @@ pub fn render_ras_table(spec: &MissionSpec, rows: &[RasRow]) -> String {
 /// `companion check --mission NAME` as JSON:
 /// `{"guarantee": {"mission", "activities": [...], "ras0": {...}|null, "infeasible": {...}|null,
 /// "nga": <integer>, "margins": {...}, "goals": {...}}}`.
-pub fn check_json(params_dir: &Path, mission: &str) -> Result<serde_json::Value, SpecError> {
-    let spec = load_mission(params_dir, mission)?;
+pub fn check_json(params: &ParamsFiles, mission: &str) -> Result<serde_json::Value, SpecError> {
+    let spec = load_mission(params, mission)?;
     Ok(check_json_spec(&spec))
 }
 
@@ -1344,8 +1350,8 @@ pub fn check_json_spec(spec: &MissionSpec) -> serde_json::Value {
 
 /// `companion check --mission NAME` for people: activities, RAS0 as PANORAMA Table 6, NGA and the
 /// initial margins (or the failing goal and its excess).
-pub fn check_text(params_dir: &Path, mission: &str) -> Result<String, SpecError> {
-    let spec = load_mission(params_dir, mission)?;
+pub fn check_text(params: &ParamsFiles, mission: &str) -> Result<String, SpecError> {
+    let spec = load_mission(params, mission)?;
     Ok(check_text_spec(&spec))
 }
 

@@ -14,7 +14,7 @@ use crate::observations::Observations;
 use crate::spec::SpecError;
 use bayes_net::{BnError, Engine, Evidence, NodeId};
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// A query failed at run time (only reachable with hand-written evidence).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -122,19 +122,25 @@ fn same_cpt(engine: &Engine, id: NodeId, cpt: &[f64]) -> bool {
 
 impl HealthModel {
     /// Load `params_dir/observations.toml` and every `params_dir/health/*.toml`.
-    pub fn load(params_dir: &Path) -> Result<HealthModel, SpecError> {
+    pub fn load(params: &crate::spec::ParamsFiles) -> Result<HealthModel, SpecError> {
+        let params_dir = params.dir();
         let dir = params_dir.join("health");
-        let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-            .map_err(|e| SpecError::new(&dir, "-", format!("cannot list: {e}")))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-            .collect();
-        files.sort();
+        let files: Vec<PathBuf> = params.files_in(&dir, "toml");
+        if files.is_empty() {
+            return Err(SpecError::new(
+                &dir,
+                "-",
+                "no health manager files (health/*.toml)",
+            ));
+        }
         // Activation nodes naming a `variant` take its implementations from the one Table 2
         // (params/variants.toml with params/platform.toml).
-        let platform =
-            crate::resources::load_platform(&params_dir.join(crate::resources::PLATFORM_FILE))?;
+        let platform = crate::resources::load_platform(
+            params,
+            &params_dir.join(crate::resources::PLATFORM_FILE),
+        )?;
         let catalogue = crate::resources::load_variants(
+            params,
             &params_dir.join(crate::resources::VARIANTS_FILE),
             &platform,
         )?;
@@ -142,7 +148,7 @@ impl HealthModel {
         let hms = files
             .iter()
             .map(|f| {
-                let mut spec: crate::fmea::HmFile = crate::spec::read_toml(f)?;
+                let mut spec: crate::fmea::HmFile = crate::spec::read_toml(params, f)?;
                 crate::fmea::fill_from_catalogue(f, &mut spec, &catalogue, platform.cpu_cores)?;
                 for (node, n) in &spec.node {
                     if let Some((app, version)) =
@@ -168,7 +174,7 @@ impl HealthModel {
                 crate::fmea::compile_hm(f, &spec)
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let obs = ObservationMap::load(&params_dir.join("observations.toml"))?;
+        let obs = ObservationMap::load(params, &params_dir.join("observations.toml"))?;
         let mut model = Self::from_parts(hms, obs)?;
         model.activations = activations;
         Ok(model)
@@ -773,7 +779,7 @@ mod tests {
 
     #[test]
     fn targeted_cycle_matches_full_propagation() {
-        let params = crate::spec::default_params_dir();
+        let params = crate::shipped::params();
         let mut fast = HealthModel::load(&params).unwrap();
         let mut full = HealthModel::load(&params).unwrap();
         let seq = evidence_sequence(&fast);
@@ -823,7 +829,7 @@ mod tests {
     /// those of a model that never saw the bad maps.
     #[test]
     fn rejected_evidence_changes_nothing() {
-        let params = crate::spec::default_params_dir();
+        let params = crate::shipped::params();
         let mut a = HealthModel::load(&params).unwrap();
         let mut b = HealthModel::load(&params).unwrap();
         let seq = evidence_sequence(&a);

@@ -34,3 +34,128 @@ pub mod record;
 pub mod resources;
 pub mod spec;
 pub mod tracking;
+
+/// The shipped params/ for the unit tests, compiled in (this crate reads no files). The
+/// `companion` crate's `shipped_params_are_all_compiled_into_the_core_tests` test keeps this list
+/// equal to the directory.
+#[cfg(test)]
+pub(crate) mod shipped {
+    use crate::spec::ParamsFiles;
+
+    /// Every file of params/, relative path and text.
+    pub(crate) const FILES: &[(&str, &str)] = &[
+        ("actions.toml", include_str!("../../params/actions.toml")),
+        ("commands.toml", include_str!("../../params/commands.toml")),
+        (
+            "health/applications.toml",
+            include_str!("../../params/health/applications.toml"),
+        ),
+        (
+            "health/resources.toml",
+            include_str!("../../params/health/resources.toml"),
+        ),
+        (
+            "health/sensors.toml",
+            include_str!("../../params/health/sensors.toml"),
+        ),
+        (
+            "health/system.toml",
+            include_str!("../../params/health/system.toml"),
+        ),
+        ("link.toml", include_str!("../../params/link.toml")),
+        (
+            "mdp/index.toml",
+            include_str!("../../params/mdp/index.toml"),
+        ),
+        (
+            "mdp/landing.toml",
+            include_str!("../../params/mdp/landing.toml"),
+        ),
+        (
+            "mdp/monolithic.toml",
+            include_str!("../../params/mdp/monolithic.toml"),
+        ),
+        (
+            "mdp/navigation.toml",
+            include_str!("../../params/mdp/navigation.toml"),
+        ),
+        (
+            "mdp/reference.toml",
+            include_str!("../../params/mdp/reference.toml"),
+        ),
+        (
+            "mdp/tracking.toml",
+            include_str!("../../params/mdp/tracking.toml"),
+        ),
+        ("mission.toml", include_str!("../../params/mission.toml")),
+        (
+            "missions/patrolling.toml",
+            include_str!("../../params/missions/patrolling.toml"),
+        ),
+        (
+            "missions/tracking.toml",
+            include_str!("../../params/missions/tracking.toml"),
+        ),
+        (
+            "missions/tracking_route.toml",
+            include_str!("../../params/missions/tracking_route.toml"),
+        ),
+        (
+            "observations.toml",
+            include_str!("../../params/observations.toml"),
+        ),
+        ("platform.toml", include_str!("../../params/platform.toml")),
+        ("policies.toml", include_str!("../../params/policies.toml")),
+        (
+            "resource_policies.toml",
+            include_str!("../../params/resource_policies.toml"),
+        ),
+        (
+            "scenarios/complete-1.toml",
+            include_str!("../../params/scenarios/complete-1.toml"),
+        ),
+        (
+            "scenarios/complete-2.toml",
+            include_str!("../../params/scenarios/complete-2.toml"),
+        ),
+        (
+            "scenarios/emergency-landing.toml",
+            include_str!("../../params/scenarios/emergency-landing.toml"),
+        ),
+        (
+            "scenarios/energy-drift.toml",
+            include_str!("../../params/scenarios/energy-drift.toml"),
+        ),
+        (
+            "scenarios/high-speed.toml",
+            include_str!("../../params/scenarios/high-speed.toml"),
+        ),
+        (
+            "scenarios/lidar-failure.toml",
+            include_str!("../../params/scenarios/lidar-failure.toml"),
+        ),
+        (
+            "scenarios/nominal.toml",
+            include_str!("../../params/scenarios/nominal.toml"),
+        ),
+        (
+            "scenarios/vibrations.toml",
+            include_str!("../../params/scenarios/vibrations.toml"),
+        ),
+        (
+            "scenarios/wind.toml",
+            include_str!("../../params/scenarios/wind.toml"),
+        ),
+        ("variants.toml", include_str!("../../params/variants.toml")),
+        ("world.toml", include_str!("../../params/world.toml")),
+    ];
+
+    /// The shipped params as a set rooted at `params`.
+    pub(crate) fn params() -> ParamsFiles {
+        let mut p = ParamsFiles::new("params");
+        for (name, text) in FILES {
+            p.insert(p.dir().join(name), *text);
+        }
+        p
+    }
+}

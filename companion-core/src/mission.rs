@@ -5,7 +5,6 @@ use crate::observations::Observations;
 use crate::spec::{SpecError, read_toml};
 use serde::Deserialize;
 use std::collections::BTreeMap;
-use std::path::Path;
 
 /// Safety-first or mission-first (the BFM paper's two policies).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, Deserialize)]
@@ -66,9 +65,10 @@ struct ActionsFile {
 }
 
 impl ActionCatalogue {
-    pub fn load(params: &Path) -> Result<Self, SpecError> {
+    pub fn load(files: &crate::spec::ParamsFiles) -> Result<Self, SpecError> {
+        let params = files.dir();
         let file = params.join("actions.toml");
-        let f: ActionsFile = read_toml(&file)?;
+        let f: ActionsFile = read_toml(files, &file)?;
         let mut seen = std::collections::BTreeSet::new();
         for (i, a) in f.action.iter().enumerate() {
             if !seen.insert(a.id.clone()) {
@@ -177,9 +177,10 @@ pub struct MissionFile {
 }
 
 impl MissionFile {
-    pub fn load(params: &Path) -> Result<Self, SpecError> {
+    pub fn load(files: &crate::spec::ParamsFiles) -> Result<Self, SpecError> {
+        let params = files.dir();
         let file = params.join("mission.toml");
-        let m: MissionFile = read_toml(&file)?;
+        let m: MissionFile = read_toml(files, &file)?;
         // Each decision cycle solves this many stages: bounded so a typo cannot stall it.
         if !(1..=MAX_HORIZON).contains(&m.horizon) {
             return Err(SpecError::new(
@@ -238,7 +239,7 @@ mod tests {
 
     #[test]
     fn projection_rules_first_match_wins_and_fall_back_to_shared_state() {
-        let params = crate::spec::default_params_dir();
+        let params = crate::shipped::params();
         let m = MissionFile::load(&params).unwrap();
         // An obstacle closer than 10 m puts navigation in obstacle_detected whatever the phase.
         assert_eq!(
@@ -266,20 +267,18 @@ mod tests {
 
     #[test]
     fn action_catalogue_rejects_duplicates_and_half_variants() {
-        let dir = tempfile::tempdir().unwrap();
-        std::fs::write(
-            dir.path().join("actions.toml"),
+        let mut files = crate::spec::ParamsFiles::new("p");
+        files.insert(
+            "p/actions.toml",
             "[[action]]\nid='a'\npaper='A1'\nkind='vehicle'\nlabel='a'\n[[action]]\nid='a'\npaper='A2'\nkind='vehicle'\nlabel='b'\n",
-        )
-        .unwrap();
-        let e = ActionCatalogue::load(dir.path()).unwrap_err();
+        );
+        let e = ActionCatalogue::load(&files).unwrap_err();
         assert_eq!(e.entry, "action[1].id");
-        std::fs::write(
-            dir.path().join("actions.toml"),
+        files.insert(
+            "p/actions.toml",
             "[[action]]\nid='a'\npaper='A1'\nkind='application'\nlabel='a'\napp='tracking'\n",
-        )
-        .unwrap();
-        let e = ActionCatalogue::load(dir.path()).unwrap_err();
+        );
+        let e = ActionCatalogue::load(&files).unwrap_err();
         assert_eq!(e.entry, "action[0]");
         assert!(e.reason.contains("together"), "{}", e.reason);
     }

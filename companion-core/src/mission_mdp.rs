@@ -5,7 +5,7 @@
 pub mod expr;
 
 use crate::record::{Conflict, MdpProposal};
-use crate::spec::{SpecError, read_toml};
+use crate::spec::{ParamsFiles, SpecError, read_toml};
 use expr::Expr;
 use mdp_engine::{Mdp, MdpBuilder, MdpError, Workspace};
 use serde::Deserialize;
@@ -414,10 +414,10 @@ pub struct MissionMdps {
 impl MissionMdps {
     /// Load `params_dir/mdp/index.toml` and every MDP it lists. `known_probability_names` are the
     /// names the health BNs publish; any other name in an expression is an error.
-    pub fn load(params_dir: &Path, known_probability_names: &[&str]) -> Result<Self, SpecError> {
-        let dir = params_dir.join("mdp");
+    pub fn load(params: &ParamsFiles, known_probability_names: &[&str]) -> Result<Self, SpecError> {
+        let dir = params.dir().join("mdp");
         let index_path = dir.join("index.toml");
-        let index: IndexFile = read_toml(&index_path)?;
+        let index: IndexFile = read_toml(params, &index_path)?;
         if index.concurrent.is_empty() {
             return Err(SpecError::new(
                 &index_path,
@@ -455,7 +455,7 @@ impl MissionMdps {
                 ));
             }
             let path = dir.join(format!("{n}.toml"));
-            let m = load_mdp(&path, known_probability_names, &index.check_point)?;
+            let m = load_mdp(params, &path, known_probability_names, &index.check_point)?;
             if m.name != *n {
                 return Err(SpecError::new(
                     &path,
@@ -552,11 +552,12 @@ pub const MAX_ACTIONS: usize = 128;
 
 /// Load, validate and compile one MDP file.
 pub fn load_mdp(
+    params: &ParamsFiles,
     path: &Path,
     known: &[&str],
     check_point: &BTreeMap<String, f64>,
 ) -> Result<MissionMdp, SpecError> {
-    let f: MdpFile = read_toml(path)?;
+    let f: MdpFile = read_toml(params, path)?;
     // States.
     if f.states.is_empty() {
         return Err(err(path, "states", "no state"));
@@ -898,8 +899,12 @@ fn pattern_matches(pattern: &str, action: &str) -> bool {
 impl BehaviourConflicts {
     /// Load `params/policies.toml`. `known_actions` are the primitive actions (e.g.
     /// [`MissionMdps::primitive_actions`]); every pattern must match at least one.
-    pub fn load(path: &Path, known_actions: &[&str]) -> Result<Self, SpecError> {
-        let f: PoliciesFile = read_toml(path)?;
+    pub fn load(
+        params: &ParamsFiles,
+        path: &Path,
+        known_actions: &[&str],
+    ) -> Result<Self, SpecError> {
+        let f: PoliciesFile = read_toml(params, path)?;
         if f.priority.is_empty() {
             return Err(err(path, "priority", "no policy"));
         }

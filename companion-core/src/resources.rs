@@ -5,7 +5,7 @@
 
 use crate::observations::Observations;
 use crate::record::{PlacementRecord, ResourcesRecord};
-use crate::spec::{SpecError, read_toml};
+use crate::spec::{ParamsFiles, SpecError, read_toml};
 use fpga_model::{
     Catalogue, Platform, PlatformState, PoliciesFile, Request, ResourcePolicy, Schedule,
     ScheduleWorkspace, VariantsFile,
@@ -31,11 +31,12 @@ pub struct ResourceSpec {
 
 impl ResourceSpec {
     /// Load the three files from a params directory.
-    pub fn load(params_dir: &Path) -> Result<Self, SpecError> {
-        let platform = load_platform(&params_dir.join(PLATFORM_FILE))?;
-        let catalogue = load_variants(&params_dir.join(VARIANTS_FILE), &platform)?;
+    pub fn load(params: &ParamsFiles) -> Result<Self, SpecError> {
+        let params_dir = params.dir();
+        let platform = load_platform(params, &params_dir.join(PLATFORM_FILE))?;
+        let catalogue = load_variants(params, &params_dir.join(VARIANTS_FILE), &platform)?;
         let policies_file = params_dir.join(POLICIES_FILE);
-        let policies = load_policies(&policies_file, &catalogue)?;
+        let policies = load_policies(params, &policies_file, &catalogue)?;
         Ok(Self {
             platform,
             catalogue,
@@ -111,24 +112,29 @@ impl ResourceSpec {
     }
 }
 
-pub fn load_platform(path: &Path) -> Result<Platform, SpecError> {
-    let platform: Platform = read_toml(path)?;
+pub fn load_platform(params: &ParamsFiles, path: &Path) -> Result<Platform, SpecError> {
+    let platform: Platform = read_toml(params, path)?;
     platform
         .validate()
         .map_err(|e| SpecError::new(path, e.entry, e.reason))?;
     Ok(platform)
 }
 
-pub fn load_variants(path: &Path, platform: &Platform) -> Result<Catalogue, SpecError> {
-    let file: VariantsFile = read_toml(path)?;
+pub fn load_variants(
+    params: &ParamsFiles,
+    path: &Path,
+    platform: &Platform,
+) -> Result<Catalogue, SpecError> {
+    let file: VariantsFile = read_toml(params, path)?;
     Catalogue::new(file.variant, platform).map_err(|e| SpecError::new(path, e.entry, e.reason))
 }
 
 pub fn load_policies(
+    params: &ParamsFiles,
     path: &Path,
     catalogue: &Catalogue,
 ) -> Result<BTreeMap<String, ResourcePolicy>, SpecError> {
-    let mut file: PoliciesFile = read_toml(path)?;
+    let mut file: PoliciesFile = read_toml(params, path)?;
     if file.is_empty() {
         return Err(SpecError::new(path, "-", "no resource policy defined"));
     }
@@ -341,8 +347,8 @@ pub fn check_json_of(spec: &ResourceSpec) -> Value {
 }
 
 /// Load `params_dir` and return the check JSON.
-pub fn check_json(params_dir: &Path) -> Result<Value, SpecError> {
-    Ok(check_json_of(&ResourceSpec::load(params_dir)?))
+pub fn check_json(params: &ParamsFiles) -> Result<Value, SpecError> {
+    Ok(check_json_of(&ResourceSpec::load(params)?))
 }
 
 /// `companion check` human part: the platform line and the Table 2 catalogue as a table.
@@ -402,25 +408,20 @@ pub fn check_text(spec: &ResourceSpec) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::spec::default_params_dir;
-
     fn real() -> ResourceSpec {
-        ResourceSpec::load(&default_params_dir()).expect("shipped params load")
+        ResourceSpec::load(&crate::shipped::params()).expect("shipped params load")
     }
 
-    /// A params dir with the shipped files, one of them replaced by `text`.
-    fn with_file(name: &str, text: &str) -> (tempfile::TempDir, PathBuf) {
-        let dir = tempfile::tempdir().unwrap();
-        for f in [PLATFORM_FILE, VARIANTS_FILE, POLICIES_FILE] {
-            std::fs::copy(default_params_dir().join(f), dir.path().join(f)).unwrap();
-        }
-        std::fs::write(dir.path().join(name), text).unwrap();
-        let p = dir.path().to_path_buf();
-        (dir, p)
+    /// The shipped files with one of them replaced by `text`.
+    fn with_file(name: &str, text: &str) -> ((), ParamsFiles) {
+        let mut p = crate::shipped::params();
+        p.insert(p.dir().join(name), text);
+        ((), p)
     }
 
     fn shipped(name: &str) -> String {
-        std::fs::read_to_string(default_params_dir().join(name)).unwrap()
+        let p = crate::shipped::params();
+        p.text(&p.dir().join(name)).unwrap().to_string()
     }
 
     /// Replace exactly one occurrence of `from` in the shipped file `name`, load, return the error.
@@ -433,7 +434,7 @@ mod tests {
         );
         let (_dir, path) = with_file(name, &text.replacen(from, to, 1));
         let err = ResourceSpec::load(&path).expect_err("must be rejected");
-        assert_eq!(err.file, path.join(name));
+        assert_eq!(err.file, path.dir().join(name));
         err
     }
 
@@ -447,9 +448,9 @@ mod tests {
 
     #[test]
     fn missing_file_is_named() {
-        let dir = tempfile::tempdir().unwrap();
-        let err = ResourceSpec::load(dir.path()).unwrap_err();
-        assert_eq!(err.file, dir.path().join(PLATFORM_FILE));
+        let empty = ParamsFiles::new("empty");
+        let err = ResourceSpec::load(&empty).unwrap_err();
+        assert_eq!(err.file, empty.dir().join(PLATFORM_FILE));
         assert!(err.reason.starts_with("cannot read"), "{err}");
     }
 
@@ -723,7 +724,7 @@ mod tests {
 
     #[test]
     fn check_json_lists_platform_and_every_variant() {
-        let v = check_json(&default_params_dir()).unwrap();
+        let v = check_json(&crate::shipped::params()).unwrap();
         assert_eq!(v["platform"]["tiles"], 4);
         assert_eq!(v["platform"]["cpu"]["cores"], 2);
         assert_eq!(v["platform"]["cpu"]["mhz"], 925.0);

@@ -1,6 +1,8 @@
-//! Loading `params/`: the one error type every loader returns, naming the file, the entry and the reason.
+//! The params as data: [`ParamsFiles`] (every file's text, handed over by the shell), TOML
+//! parsing with the limits every params file obeys, and the one error type every loader
+//! returns, naming the file, the entry and the reason.
 
-use std::cell::RefCell;
+use std::collections::BTreeMap;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -40,16 +42,102 @@ impl SpecError {
     }
 }
 
-/// Read and parse one TOML file into `T`, mapping I/O and syntax errors to a [`SpecError`].
-pub fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, SpecError> {
-    let text = match overlay_text(path) {
-        Some(t) => t?,
-        None => {
-            regular_file(path).map_err(|reason| SpecError::new(path, "-", reason))?;
-            std::fs::read_to_string(path)
-                .map_err(|e| SpecError::new(path, "-", format!("cannot read: {e}")))?
+/// The params files as data: each file's text by its path, read by the shell (the
+/// `companion` binary from a directory, `replay` from a log header, the fuzzer from memory).
+/// The core never opens a file; a loader asks for `dir().join("health/system.toml")` here.
+///
+/// A file the shell could not read is kept with its reason, so the error appears only if a
+/// loader needs that file, and names it the way a read failure would.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ParamsFiles {
+    dir: PathBuf,
+    files: BTreeMap<PathBuf, Result<String, String>>,
+}
+
+impl ParamsFiles {
+    /// An empty set for the params directory `dir` (a name for joins and messages only).
+    pub fn new(dir: impl Into<PathBuf>) -> Self {
+        Self {
+            dir: dir.into(),
+            files: BTreeMap::new(),
         }
-    };
+    }
+
+    /// The params directory the loaders join their file names to.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Add or replace the file at `path` (as the loaders join it: `dir().join(name)`, or any
+    /// other path a mission or route names).
+    pub fn insert(&mut self, path: impl AsRef<Path>, text: impl Into<String>) {
+        self.files
+            .insert(path.as_ref().to_path_buf(), Ok(text.into()));
+    }
+
+    /// Add or replace the file at `path` from raw bytes: text must be UTF-8, else the file
+    /// reads as unreadable.
+    pub fn insert_bytes(&mut self, path: impl Into<PathBuf>, bytes: &[u8]) {
+        let v = match std::str::from_utf8(bytes) {
+            Ok(t) => Ok(t.to_string()),
+            Err(e) => Err(format!("cannot read: {e}")),
+        };
+        self.files.insert(path.into(), v);
+    }
+
+    /// Record that the file at `path` exists but could not be read, and why (`cannot read: ...`,
+    /// `is not a regular file ...`); a loader that needs it fails with this reason.
+    pub fn insert_unreadable(&mut self, path: impl Into<PathBuf>, reason: impl Into<String>) {
+        self.files.insert(path.into(), Err(reason.into()));
+    }
+
+    /// Whether a file (readable or not) is at `path`.
+    pub fn contains(&self, path: &Path) -> bool {
+        self.files.contains_key(path)
+    }
+
+    /// The text of the file at `path`, or the error a loader reports for it.
+    pub fn text(&self, path: &Path) -> Result<&str, SpecError> {
+        match self.files.get(path) {
+            Some(Ok(t)) => Ok(t),
+            Some(Err(reason)) => Err(SpecError::new(path, "-", reason.clone())),
+            None => Err(SpecError::new(
+                path,
+                "-",
+                "cannot read: no such file in the params set",
+            )),
+        }
+    }
+
+    /// The files directly inside `dir` whose name ends in `.{ext}`, sorted.
+    pub fn files_in(&self, dir: &Path, ext: &str) -> Vec<PathBuf> {
+        self.files
+            .keys()
+            .filter(|p| p.parent() == Some(dir) && p.extension().is_some_and(|x| x == ext))
+            .cloned()
+            .collect()
+    }
+
+    /// Every file: path and text (or why it is unreadable).
+    pub fn iter(&self) -> impl Iterator<Item = (&Path, Result<&str, &str>)> {
+        self.files
+            .iter()
+            .map(|(p, v)| (p.as_path(), v.as_deref().map_err(String::as_str)))
+    }
+}
+
+/// Parse the params file at `path` from `params` into `T` (see [`parse_toml`]).
+pub fn read_toml<T: serde::de::DeserializeOwned>(
+    params: &ParamsFiles,
+    path: &Path,
+) -> Result<T, SpecError> {
+    parse_toml(path, params.text(path)?)
+}
+
+/// Parse one params file's text into `T`, mapping syntax errors to a [`SpecError`] with the
+/// line, and checking the limits every params file obeys (size, finite numbers, magnitudes,
+/// array lengths).
+pub fn parse_toml<T: serde::de::DeserializeOwned>(path: &Path, text: &str) -> Result<T, SpecError> {
     if text.len() > MAX_FILE_BYTES {
         return Err(SpecError::new(
             path,
@@ -196,69 +284,6 @@ pub fn check_positive(
     }
 }
 
-/// Ok when `path` is a regular file (following symlinks), else why not. Opening a FIFO or a
-/// device where a file is expected would block or read forever.
-pub fn regular_file(path: &Path) -> Result<(), String> {
-    match std::fs::metadata(path) {
-        Ok(m) if m.is_file() => Ok(()),
-        Ok(m) if m.is_dir() => Err("is a directory, not a file".into()),
-        Ok(_) => Err("is not a regular file (a FIFO, socket or device?)".into()),
-        Err(e) => Err(format!("cannot read: {e}")),
-    }
-}
-
-thread_local! {
-    /// See [`with_overlay`]; `None` outside it.
-    static OVERLAY: RefCell<Option<(PathBuf, Vec<u8>)>> = const { RefCell::new(None) };
-}
-
-/// Run `f` with the contents of the file at `path` replaced, for every [`read_toml`] on this
-/// thread, by `bytes` (which need not be UTF-8: invalid text fails as an unreadable file does).
-///
-/// Why: the params fuzzer (companion::fuzzing, fuzz/) mutates one file per input and runs the
-/// whole start-up load; an in-memory overlay spares a file write per input. `path` must be
-/// spelled as the loaders join it (`params.join("health/system.toml")`). Loaders that only list
-/// a directory still see the real files; the overlay changes contents, not names. Not reentrant:
-/// the inner call's overlay wins until it returns.
-pub fn with_overlay<R>(path: &Path, bytes: &[u8], f: impl FnOnce() -> R) -> R {
-    /// Restores the previous overlay even when `f` unwinds.
-    struct Restore(Option<(PathBuf, Vec<u8>)>);
-    impl Drop for Restore {
-        fn drop(&mut self) {
-            let prev = self.0.take();
-            OVERLAY.with(|o| *o.borrow_mut() = prev);
-        }
-    }
-    let prev = OVERLAY.with(|o| o.replace(Some((path.to_path_buf(), bytes.to_vec()))));
-    let _restore = Restore(prev);
-    f()
-}
-
-/// The overlay's text when `path` is the overlaid file.
-fn overlay_text(path: &Path) -> Option<Result<String, SpecError>> {
-    OVERLAY.with(|o| {
-        let o = o.borrow();
-        let (p, bytes) = o.as_ref()?;
-        (p == path).then(|| {
-            String::from_utf8(bytes.clone())
-                .map_err(|e| SpecError::new(path, "-", format!("cannot read: {e}")))
-        })
-    })
-}
-
-/// The params directory: `$COMPANION_PARAMS`, else `params/` next to the workspace root this
-/// binary was built from, else `./params`.
-pub fn default_params_dir() -> PathBuf {
-    if let Ok(p) = std::env::var("COMPANION_PARAMS") {
-        return PathBuf::from(p);
-    }
-    let built = Path::new(env!("CARGO_MANIFEST_DIR")).join("../params");
-    if built.is_dir() {
-        return built;
-    }
-    PathBuf::from("params")
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -269,27 +294,47 @@ mod tests {
     }
 
     #[test]
-    fn overlay_replaces_one_file_and_is_removed_after_a_panic() {
-        let dir = tempfile::tempdir().unwrap();
-        let (a, b) = (dir.path().join("a.toml"), dir.path().join("b.toml"));
-        std::fs::write(&a, "x = 1").unwrap();
-        std::fs::write(&b, "x = 2").unwrap();
-        with_overlay(&a, b"x = 7", || {
-            assert_eq!(read_toml::<T>(&a).unwrap(), T { x: 7 });
-            assert_eq!(
-                read_toml::<T>(&b).unwrap(),
-                T { x: 2 },
-                "other files are real"
-            );
-            // Joined differently, same components: still the overlaid file.
-            let again = dir.path().join(".").join("a.toml");
-            assert_eq!(read_toml::<T>(&again).map(|t| t.x).ok(), Some(7));
-        });
-        let err = with_overlay(&a, b"\xff", || read_toml::<T>(&a).unwrap_err());
-        assert_eq!((err.entry.as_str(), err.file.as_path()), ("-", a.as_path()));
+    fn files_are_found_by_path_however_joined_and_unreadable_ones_fail_when_read() {
+        let mut p = ParamsFiles::new("params");
+        p.insert("params/a.toml", "x = 1");
+        p.insert("params/sub/b.toml", "x = 2");
+        p.insert_bytes("params/c.toml", b"\xff");
+        p.insert_unreadable(
+            "params/d.toml",
+            "is not a regular file (a FIFO, socket or device?)",
+        );
+        let again = p.dir().join(".").join("a.toml");
+        assert_eq!(read_toml::<T>(&p, &again).unwrap(), T { x: 1 });
+        assert_eq!(
+            read_toml::<T>(&p, Path::new("params/sub/b.toml"))
+                .unwrap()
+                .x,
+            2
+        );
+        let err = read_toml::<T>(&p, Path::new("params/c.toml")).unwrap_err();
+        assert_eq!(
+            (err.entry.as_str(), err.file.as_path()),
+            ("-", Path::new("params/c.toml"))
+        );
         assert!(err.reason.starts_with("cannot read"), "{err}");
-        let r = std::panic::catch_unwind(|| with_overlay(&a, b"x = 9", || panic!("inside")));
-        assert!(r.is_err());
-        assert_eq!(read_toml::<T>(&a).unwrap(), T { x: 1 }, "overlay gone");
+        let err = read_toml::<T>(&p, Path::new("params/d.toml")).unwrap_err();
+        assert!(err.reason.contains("not a regular file"), "{err}");
+        let err = read_toml::<T>(&p, Path::new("params/none.toml")).unwrap_err();
+        assert!(err.reason.starts_with("cannot read"), "{err}");
+        assert_eq!(
+            p.files_in(Path::new("params"), "toml"),
+            vec![
+                PathBuf::from("params/a.toml"),
+                PathBuf::from("params/c.toml"),
+                PathBuf::from("params/d.toml")
+            ],
+            "direct children only, sorted"
+        );
+    }
+
+    #[test]
+    fn syntax_errors_name_the_line() {
+        let err = parse_toml::<T>(Path::new("f.toml"), "\n\nx = = 1").unwrap_err();
+        assert_eq!(err.entry, "line 3");
     }
 }

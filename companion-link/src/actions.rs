@@ -6,7 +6,7 @@
 use super::dialect::MavCmd;
 use super::mission::MissionItem;
 use super::telemetry::{TelemetryConfig, displace};
-use companion_core::spec::{SpecError, check_positive, check_range, read_toml};
+use companion_core::spec::{ParamsFiles, SpecError, check_positive, check_range, read_toml};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -73,8 +73,8 @@ fn parse_cmd(name: &str) -> Option<MavCmd> {
 }
 
 impl ActionTable {
-    pub fn load(path: &Path) -> Result<Self, SpecError> {
-        let raw: BTreeMap<String, RawAction> = read_toml(path)?;
+    pub fn load(files: &ParamsFiles, path: &Path) -> Result<Self, SpecError> {
+        let raw: BTreeMap<String, RawAction> = read_toml(files, path)?;
         if raw.is_empty() {
             return Err(SpecError::new(
                 path,
@@ -247,8 +247,8 @@ pub struct Route {
 }
 
 impl Route {
-    pub fn load(path: &Path) -> Result<Self, SpecError> {
-        let raw: RawRoute = read_toml(path)?;
+    pub fn load(files: &ParamsFiles, path: &Path) -> Result<Self, SpecError> {
+        let raw: RawRoute = read_toml(files, path)?;
         let _ = raw.description;
         let rel = match raw.frame.as_str() {
             "relative" => true,
@@ -508,8 +508,8 @@ impl FlightParams {
 }
 
 impl LinkParams {
-    pub fn load(path: &Path) -> Result<Self, SpecError> {
-        let p: LinkParams = read_toml(path)?;
+    pub fn load(files: &ParamsFiles, path: &Path) -> Result<Self, SpecError> {
+        let p: LinkParams = read_toml(files, path)?;
         for (name, hz) in &p.streams {
             if <super::Msg as mavlink::Message>::message_id_from_name(name).is_none() {
                 return Err(SpecError::new(
@@ -597,7 +597,7 @@ impl LinkParams {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use companion_core::spec::default_params_dir;
+    use crate::test_support::default_params_dir;
 
     fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> std::path::PathBuf {
         let p = dir.path().join(name);
@@ -608,7 +608,7 @@ mod tests {
     #[test]
     fn shipped_params_load() {
         let dir = default_params_dir();
-        let t = ActionTable::load(&dir.join("commands.toml")).unwrap();
+        let t = crate::test_support::disk(ActionTable::load)(&dir.join("commands.toml")).unwrap();
         for a in [
             "take_off",
             "follow_trajectory",
@@ -628,9 +628,10 @@ mod tests {
             }
         ));
         assert_eq!(t.actions["return_to_base"], vec![Step::Mode("RTL".into())]);
-        let r = Route::load(&dir.join("missions/tracking_route.toml")).unwrap();
+        let r = crate::test_support::disk(Route::load)(&dir.join("missions/tracking_route.toml"))
+            .unwrap();
         assert!(r.waypoints.len() >= 3);
-        let lp = LinkParams::load(&dir.join("link.toml")).unwrap();
+        let lp = crate::test_support::disk(LinkParams::load)(&dir.join("link.toml")).unwrap();
         assert_eq!(lp.stream_ids().len(), 15);
     }
 
@@ -672,12 +673,12 @@ mod tests {
         ];
         for (text, entry, why) in cases {
             let p = write(&d, "c.toml", text);
-            let e = ActionTable::load(&p).expect_err(text);
+            let e = crate::test_support::disk(ActionTable::load)(&p).expect_err(text);
             assert_eq!(e.entry, entry, "{text}");
             assert!(e.reason.contains(why), "{text}: {e}");
         }
         let p = write(&d, "c.toml", "[x]\nstepz = []\n");
-        assert!(ActionTable::load(&p).is_err());
+        assert!(crate::test_support::disk(ActionTable::load)(&p).is_err());
     }
 
     #[test]
@@ -745,7 +746,7 @@ mod tests {
         ]);
         for (text, entry, why) in cases {
             let p = write(&d, "r.toml", text);
-            let e = Route::load(&p).expect_err(text);
+            let e = crate::test_support::disk(Route::load)(&p).expect_err(text);
             assert_eq!(e.entry, entry, "{text}");
             assert!(e.reason.contains(why), "{text}: {e}");
         }
@@ -759,7 +760,7 @@ mod tests {
             "r.toml",
             "altitude_m = 25\n[[waypoint]]\nnorth_m = 100\neast_m = 0\n[[waypoint]]\nnorth_m = 0\neast_m = 50\nalt_m = 30\n",
         );
-        let r = Route::load(&p).unwrap();
+        let r = crate::test_support::disk(Route::load)(&p).unwrap();
         let home = (473_977_420, 85_455_940);
         let items = r.items(home);
         assert_eq!(items.len(), 4);
@@ -783,13 +784,25 @@ mod tests {
             &format!("{base}[streams]\nNOT_A_MESSAGE = 2\n"),
         );
         assert_eq!(
-            LinkParams::load(&p).unwrap_err().entry,
+            crate::test_support::disk(LinkParams::load)(&p)
+                .unwrap_err()
+                .entry,
             "streams.NOT_A_MESSAGE"
         );
         let p = write(&d, "l.toml", &format!("{base}[streams]\nWIND = 0\n"));
-        assert!(LinkParams::load(&p).unwrap_err().reason.contains("rate"));
+        assert!(
+            crate::test_support::disk(LinkParams::load)(&p)
+                .unwrap_err()
+                .reason
+                .contains("rate")
+        );
         let p = write(&d, "l.toml", &format!("{base}[streams]\nWIND = 1\n"));
-        assert_eq!(LinkParams::load(&p).unwrap().stream_ids(), vec![(168, 1.0)]);
+        assert_eq!(
+            crate::test_support::disk(LinkParams::load)(&p)
+                .unwrap()
+                .stream_ids(),
+            vec![(168, 1.0)]
+        );
     }
 
     #[test]
@@ -798,7 +811,9 @@ mod tests {
         let base = "decision_period_s = 1.0\narm_wait_s = 30\nmax_arm_attempts = 3\n[streams]\nWIND = 1\n[telemetry]\nobstacle_near_m = 15\nbattery_thresholds_pct = [30]\ndistance_max_age_s = 2\n";
         let p = write(&d, "l.toml", base);
         assert_eq!(
-            LinkParams::load(&p).unwrap().flight,
+            crate::test_support::disk(LinkParams::load)(&p)
+                .unwrap()
+                .flight,
             FlightParams::default()
         );
         for (line, entry) in [
@@ -823,9 +838,18 @@ mod tests {
             ("statustext_max_per_s = 0", "flight.statustext_max_per_s"),
         ] {
             let p = write(&d, "l.toml", &format!("{base}[flight]\n{line}\n"));
-            assert_eq!(LinkParams::load(&p).unwrap_err().entry, entry, "{line}");
+            assert_eq!(
+                crate::test_support::disk(LinkParams::load)(&p)
+                    .unwrap_err()
+                    .entry,
+                entry,
+                "{line}"
+            );
         }
         let p = write(&d, "l.toml", &format!("{base}[flight]\nzone_radius = 3\n"));
-        assert!(LinkParams::load(&p).is_err(), "unknown keys are refused");
+        assert!(
+            crate::test_support::disk(LinkParams::load)(&p).is_err(),
+            "unknown keys are refused"
+        );
     }
 }

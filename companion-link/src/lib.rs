@@ -42,3 +42,27 @@ pub type Msg = dialect::MavMessage;
 pub const OUR_COMPONENT_ID: u8 = 191;
 /// System id used before the autopilot's is learned from its HEARTBEAT (MAVLink default vehicle id).
 pub const DEFAULT_SYSTEM_ID: u8 = 1;
+
+/// The unit tests' access to params files on disk (the crate itself is handed params as data).
+#[cfg(test)]
+pub(crate) mod test_support {
+    use companion_core::spec::ParamsFiles;
+    use std::path::{Path, PathBuf};
+
+    /// The repository's params/.
+    pub(crate) fn default_params_dir() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../params")
+    }
+
+    /// A loader of one file from disk: `disk(LinkParams::load)(&path)`.
+    pub(crate) fn disk<T>(load: fn(&ParamsFiles, &Path) -> T) -> impl Fn(&Path) -> T {
+        move |path: &Path| {
+            let mut files = ParamsFiles::new(path.parent().unwrap_or(Path::new(".")));
+            match std::fs::read(path) {
+                Ok(b) => files.insert_bytes(path, &b),
+                Err(e) => files.insert_unreadable(path, format!("cannot read: {e}")),
+            }
+            load(&files, path)
+        }
+    }
+}

@@ -293,8 +293,10 @@ mod tests {
     use super::*;
 
     fn route() -> Route {
-        Route::load(&companion_core::spec::default_params_dir().join("missions/tracking_route.toml"))
-            .unwrap()
+        crate::test_support::disk(Route::load)(
+            &crate::test_support::default_params_dir().join("missions/tracking_route.toml"),
+        )
+        .unwrap()
     }
 
     fn obs(t: f64, vals: &[(&str, f64)]) -> Observations {

@@ -915,8 +915,8 @@ mod tests {
     #[test]
     fn link_params_carry_and_check_the_trust_settings() {
         use crate::actions::LinkParams;
-        let shipped = companion_core::spec::default_params_dir().join("link.toml");
-        let lp = LinkParams::load(&shipped).unwrap();
+        let shipped = crate::test_support::default_params_dir().join("link.toml");
+        let lp = crate::test_support::disk(LinkParams::load)(&shipped).unwrap();
         let t = &lp.telemetry;
         assert_eq!(t.monitors.autopilot_system_components, vec![100]);
         assert_eq!(t.ranges.get("zone_east_m"), Some(&[-2000.0, 2000.0]));
@@ -928,7 +928,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let bad = dir.path().join("link.toml");
         std::fs::write(&bad, text).unwrap();
-        let e = LinkParams::load(&bad).unwrap_err();
+        let e = crate::test_support::disk(LinkParams::load)(&bad).unwrap_err();
         assert_eq!(e.entry, "telemetry.ranges.zone_north_m", "{e}");
         assert!(
             e.file.ends_with("link.toml") && e.reason.contains("min <= max"),

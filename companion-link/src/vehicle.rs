@@ -1895,12 +1895,7 @@ mod tests {
         assert_eq!(repositions(&out), 1);
         match &out[0] {
             Msg::COMMAND_INT(c) => {
-                assert!(
-                    crate::telemetry::on_globe(c.x, c.y),
-                    "{} {}",
-                    c.x,
-                    c.y
-                );
+                assert!(crate::telemetry::on_globe(c.x, c.y), "{} {}", c.x, c.y);
             }
             other => panic!("{other:?}"),
         }
@@ -2309,8 +2304,7 @@ mod tests {
         match &out[0] {
             Msg::COMMAND_INT(c) => {
                 assert_eq!(c.command, MavCmd::MAV_CMD_DO_REPOSITION);
-                let (n, e) =
-                    crate::telemetry::offset_m((473_977_420, 85_455_940), (c.x, c.y));
+                let (n, e) = crate::telemetry::offset_m((473_977_420, 85_455_940), (c.x, c.y));
                 assert!(
                     (n + 8.0).abs() < 0.05 && e.abs() < 0.05,
                     "north {n} east {e}"

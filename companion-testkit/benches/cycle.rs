@@ -9,16 +9,16 @@
 //! scheduler re-run, every cycle). `cycle_monolithic`: section 5's single MDP, memos off, so the
 //! ratio to `cycle_concurrent_worst` compares solve work like for like.
 
-use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion::params::default_params_dir;
+use companion_core::decision::{Core, ModelKind, Policy};
 use companion_core::record::{DecisionRecord, Plan};
-use companion_core::spec::default_params_dir;
 use companion_testkit::streams::{Stream, StreamGen, tracking_snapshot};
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 
 fn cycle(c: &mut Criterion) {
     let params = default_params_dir();
-    let model = Model::load(&params).unwrap();
+    let model = companion::params::load_model(&params).unwrap();
     let base = tracking_snapshot(&model, &params, "complete-1");
     for (name, kind, stream, caches) in [
         ("cycle_concurrent", ModelKind::Bfm, Stream::Steady, true),

@@ -28,11 +28,15 @@ fn snapshot(vibration: f64) -> Observations {
 }
 
 fn bench(c: &mut Criterion) {
-    let params = companion_core::spec::default_params_dir();
+    let params = companion::params::default_params_dir();
     c.bench_function("health_load_and_compile", |b| {
-        b.iter(|| HealthModel::load(black_box(&params)).unwrap())
+        b.iter(|| {
+            let files = companion::params::read_params_dir(black_box(&params)).unwrap();
+            HealthModel::load(&files).unwrap()
+        })
     });
-    let mut model = HealthModel::load(&params).unwrap();
+    let mut model =
+        HealthModel::load(&companion::params::read_params_dir(&params).unwrap()).unwrap();
     let ev = model.evidence(&snapshot(25.0));
     let mut out = std::collections::BTreeMap::new();
     c.bench_function("health_evaluate_all_managers", |b| {

@@ -5,8 +5,8 @@
 //! `Ingest::push` (owned frames) and `Ingest::push_each` (borrowed wire bytes) in chunks of
 //! 64..1024 bytes.
 
-use companion_link::ingest::{Encoder, Ingest};
 use companion_core::observations::Observations;
+use companion_link::ingest::{Encoder, Ingest};
 use companion_testkit::sim_link::{AUTOPILOT, Telemetry50, VehicleView};
 use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
 use mavlink::{MavHeader, MavlinkVersion};

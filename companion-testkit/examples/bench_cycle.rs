@@ -14,9 +14,9 @@
 //!
 //! Run: `cargo run --release -p companion --example bench_cycle -- 2000 [CASE,CASE...]` (the
 //! optional second argument keeps only the named cases, e.g. `changing` for a profile).
-use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion::params::default_params_dir;
+use companion_core::decision::{Core, ModelKind, Policy};
 use companion_core::record::{DecisionRecord, Plan};
-use companion_core::spec::default_params_dir;
 use companion_testkit::streams::{Stream, StreamGen, tracking_snapshot};
 use serde_json::json;
 use std::hint::black_box;
@@ -42,7 +42,7 @@ fn main() {
         .map(|a| a.split(',').map(str::to_string).collect())
         .unwrap_or_default();
     let params = default_params_dir();
-    let model = Model::load(&params).expect("params load");
+    let model = companion::params::load_model(&params).expect("params load");
     let base = tracking_snapshot(&model, &params, "complete-1");
     let mut out = Vec::new();
     for (name, kind, stream, caches) in [

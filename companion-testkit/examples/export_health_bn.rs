@@ -20,7 +20,7 @@ fn main() -> anyhow::Result<()> {
         .get(2)
         .map_or("bench/out/health_bn.json", |s| s.as_str());
     let sets: usize = args.get(3).map_or(Ok(20), |s| s.parse())?;
-    let model = HealthModel::load(Path::new(params))?;
+    let model = HealthModel::load(&companion::params::read_params_dir(Path::new(params))?)?;
     let mut seed: u64 = 0x5eed_b00c;
     let mut rnd = move || {
         seed = seed

@@ -1,6 +1,6 @@
 //! How the fitted numbers in params/health were found (docs/params/health.md): solves for the
 //! paper's worked examples and prints the values, then the versions under a few hazards.
-//! Run from the workspace root: `cargo run -p companion --example fit_health`.
+//! Run from the workspace root: `cargo run -p companion-testkit --example fit_health`.
 use companion_core::evidence::ObservationMap;
 use companion_core::fmea::{CptSpec, HmFile, compile_hm};
 use companion_core::health::HealthModel;
@@ -8,9 +8,12 @@ use companion_core::observations::Observations;
 use std::collections::BTreeMap;
 use std::path::Path;
 
+fn params() -> companion_core::spec::ParamsFiles {
+    companion::params::read_params_dir(Path::new("params")).unwrap()
+}
 fn load(name: &str) -> HmFile {
     let p = Path::new("params/health").join(format!("{name}.toml"));
-    companion_core::spec::read_toml(&p).unwrap()
+    companion_core::spec::read_toml(&params(), &p).unwrap()
 }
 fn model(files: &BTreeMap<&str, HmFile>) -> HealthModel {
     let hms = files
@@ -19,7 +22,7 @@ fn model(files: &BTreeMap<&str, HmFile>) -> HealthModel {
         .collect();
     HealthModel::from_parts(
         hms,
-        ObservationMap::load(Path::new("params/observations.toml")).unwrap(),
+        ObservationMap::load(&params(), Path::new("params/observations.toml")).unwrap(),
     )
     .unwrap()
 }

@@ -24,14 +24,14 @@
 //! Run: `cargo run --release -p companion --example soak -- [--minutes 60] [--scenario NAME]
 //! [--seed N] [--tolerance-kib 16] [--params DIR]`.
 
-use companion_core::decision::{Core, Model, ModelKind, Policy};
 use companion::fly::{self, Decider, FlyArgs, FlySetup, JsonLines, RecordSink, Shell};
+use companion::sim::{Scenario, World, WorldSpec};
+use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion_core::observations::Observations;
+use companion_core::record::{DecisionRecord, Plan};
 use companion_link::ingest::{Encoder, Ingest};
 use companion_link::vehicle::Vehicle;
 use companion_link::{Msg, url};
-use companion_core::observations::Observations;
-use companion_core::record::{DecisionRecord, Plan};
-use companion::sim::{Scenario, World, WorldSpec};
 use companion_testkit::sim_link::{AUTOPILOT, Responder, Telemetry50, VehicleView};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicI64, AtomicU64, Ordering::Relaxed};
@@ -96,7 +96,7 @@ fn opts() -> anyhow::Result<Opts> {
         scenario: "complete-1".into(),
         seed: 1,
         tolerance_kib: 16,
-        params: companion_core::spec::default_params_dir(),
+        params: companion::params::default_params_dir(),
     };
     let args: Vec<String> = std::env::args().skip(1).collect();
     let mut it = args.iter();
@@ -246,7 +246,8 @@ struct Sample {
 fn main() -> anyhow::Result<()> {
     let o = opts()?;
     let wall0 = Instant::now();
-    let model = Model::load(&o.params)?;
+    let files = companion::params::read_params_dir(&o.params)?;
+    let model = Model::load(&files)?;
     let args = FlyArgs {
         connect: url::parse("udpin:0.0.0.0:14550").map_err(anyhow::Error::msg)?,
         mission: None,
@@ -263,8 +264,8 @@ fn main() -> anyhow::Result<()> {
         once: false,
     };
     let setup = FlySetup::load(&args)?;
-    let spec = WorldSpec::load(&o.params)?;
-    let scenario = Scenario::load(&o.params, &o.scenario)?;
+    let spec = WorldSpec::load(&files)?;
+    let scenario = Scenario::load(&files, &o.scenario)?;
     let first = if setup.route.takeoff_first { 2 } else { 1 };
     let (wp1_seq, last_seq) = (first, setup.route.waypoints.len() as u16 + first - 1);
     let step = Duration::from_secs_f64(spec.step_s);

@@ -8,21 +8,21 @@
 //!   real core, exactly as `companion fly` chains them (`link::fly::run_cycle_at`), minus the
 //!   sockets and the clock (time advances by a step the input chooses).
 //! - [`params_one`]: one params file's text replaced by the input (through
-//!   [`companion_core::spec::with_overlay`]), then the whole start-up load: `Model::load`, the simulation
+//!   an in-memory [`ParamsFiles`] copy with that file replaced), then the whole start-up load: `Model::load`, the simulation
 //!   world and a scenario, a PANORAMA mission, the fly setup and `companion check`'s report.
 //!
 //! Both panic when an invariant breaks (that is how a fuzzer sees it); neither panics otherwise,
 //! whatever the bytes.
 
+use companion::fly::{self, FlyArgs, FlySetup, Shell};
 use companion_core::decision::{Core, Model, ModelKind};
+use companion_core::mission::Policy;
+use companion_core::spec::{ParamsFiles, SpecError};
 use companion_link::Msg;
 use companion_link::actions::LinkParams;
-use companion::fly::{self, FlyArgs, FlySetup, Shell};
 use companion_link::ingest::{self, Encoder, Ingest, IngestStats};
 use companion_link::mission_state::MissionState;
 use companion_link::vehicle::{Vehicle, VehicleConfig};
-use companion_core::mission::Policy;
-use companion_core::spec::SpecError;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -47,7 +47,7 @@ impl IngestFixture {
     /// Load from a params directory the way `companion fly --params DIR` does.
     pub fn load(params: &Path) -> anyhow::Result<Self> {
         Ok(Self {
-            model: Model::load(params)?,
+            model: companion::params::load_model(params)?,
             setup: FlySetup::load(&fly_args(params))?,
         })
     }
@@ -330,6 +330,8 @@ pub fn ingest_one(fx: &IngestFixture, data: &[u8]) -> IngestOutcome {
 pub struct ParamsFixture {
     pub dir: PathBuf,
     pub files: Vec<PathBuf>,
+    /// Every params file as read once; an input replaces one of them in a copy.
+    pub params: ParamsFiles,
 }
 
 /// Sub-directories of params/ whose files the loaders read.
@@ -348,7 +350,9 @@ impl ParamsFixture {
             }
         }
         files.sort();
-        Ok(Self { dir, files })
+        let params = companion::params::read_params_dir(&dir)
+            .map_err(|e| std::io::Error::other(e.to_string()))?;
+        Ok(Self { dir, files, params })
     }
 
     /// The file an input's first byte picks.
@@ -431,7 +435,10 @@ pub fn params_one(fx: &ParamsFixture, data: &[u8]) -> ParamsOutcome {
     } else {
         "tracking".into()
     };
-    companion_core::spec::with_overlay(&path, text, || {
+    let mut files = fx.params.clone();
+    files.insert_bytes(&path, text);
+    let files = &files;
+    {
         let mut out = ParamsOutcome {
             file: rel.clone(),
             ..Default::default()
@@ -442,15 +449,15 @@ pub fn params_one(fx: &ParamsFixture, data: &[u8]) -> ParamsOutcome {
             }
             out.errors.push((what, e));
         };
-        let model = Model::load(dir);
+        let model = Model::load(files);
         record("model", model.as_ref().err().cloned());
-        let world = companion::sim::WorldSpec::load(dir);
+        let world = companion::sim::WorldSpec::load(files);
         record("world", world.as_ref().err().cloned());
-        let scen = companion::sim::Scenario::load(dir, &scenario);
+        let scen = companion::sim::Scenario::load(files, &scenario);
         record("scenario", scen.as_ref().err().cloned());
-        let mission = companion_core::guarantee::load_mission(dir, &panorama_mission);
+        let mission = companion_core::guarantee::load_mission(files, &panorama_mission);
         record("mission", mission.as_ref().err().cloned());
-        let fly = FlySetup::load(&fly_args(dir));
+        let fly = FlySetup::from_files(files, &fly_args(dir));
         let fly_err = fly.as_ref().err().map(spec_error_of);
         record("fly", fly_err);
         if let Ok(setup) = &fly {
@@ -465,7 +472,7 @@ pub fn params_one(fx: &ParamsFixture, data: &[u8]) -> ParamsOutcome {
             mission: Some(panorama_mission.clone()),
             ..Default::default()
         };
-        let check = companion::check::report(&args);
+        let check = companion::check::report_from(files.clone(), &args);
         record("check", check.as_ref().err().map(spec_error_of));
         // Whatever loaded must fly: a few simulation steps with the real core.
         if let (Ok(model), Ok(world), Ok(mut scen)) = (&model, &world, scen) {
@@ -477,7 +484,7 @@ pub fn params_one(fx: &ParamsFixture, data: &[u8]) -> ParamsOutcome {
             }
         }
         out
-    })
+    }
 }
 
 /// Seed inputs for the ingest target: well-formed telemetry as ArduPilot and onboard monitors

@@ -6,9 +6,9 @@
 //! Why: the ingest benchmark and the soak run (issue 8) need realistic byte streams and a `fly`
 //! shell that reaches its normal states, without Python or a SITL. Pure: time comes in as a value.
 
+use companion_core::observations::Observations;
 use companion_link::Msg;
 use companion_link::dialect::*;
-use companion_core::observations::Observations;
 use mavlink::types::CharArray;
 
 /// What the world's observations do not say but an autopilot reports (armed, altitude, mode).

@@ -2,16 +2,17 @@
 //! a tracking-phase snapshot from the simulated world, then advanced in place cycle by cycle the
 //! way flight telemetry moves. Not used by the decision core itself.
 
+use companion::sim::{Scenario, World, WorldSpec};
 use companion_core::decision::{Core, Model, ModelKind, Policy};
 use companion_core::observations::Observations;
-use companion::sim::{Scenario, World, WorldSpec};
 use std::path::Path;
 
 /// The first tracking-phase snapshot (`v0`..`v5`) of `scenario` (seed 1) flown by a safety-first
 /// BFM core from take-off.
 pub fn tracking_snapshot(model: &Model, params: &Path, scenario: &str) -> Observations {
-    let spec = WorldSpec::load(params).expect("world params");
-    let scenario = Scenario::load(params, scenario).expect("scenario");
+    let files = companion::params::read_params_dir(params).expect("params");
+    let spec = WorldSpec::load(&files).expect("world params");
+    let scenario = Scenario::load(&files, scenario).expect("scenario");
     let mut world = World::new(&spec, &scenario, 1);
     let mut core = Core::new(model, ModelKind::Bfm, Policy::Safety);
     loop {

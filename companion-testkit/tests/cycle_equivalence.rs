@@ -3,16 +3,19 @@
 //! bit for bit (compared as the decision log's JSON, which round-trips f64 exactly), over whole
 //! simulated missions of every scenario, model kind and policy.
 
+use companion::params::default_params_dir;
+use companion::sim::{self, Scenario, WorldSpec};
 use companion_core::decision::{Core, Model, ModelKind, Policy};
 use companion_core::observations::Observations;
 use companion_core::record::{DecisionRecord, Plan};
-use companion::sim::{self, Scenario, WorldSpec};
-use companion_core::spec::default_params_dir;
 use std::sync::OnceLock;
 
 fn model() -> &'static Model {
     static M: OnceLock<Model> = OnceLock::new();
-    M.get_or_init(|| Model::load(&default_params_dir()).expect("params load"))
+    M.get_or_init(|| {
+        companion::params::load_model(&companion::params::default_params_dir())
+            .expect("params load")
+    })
 }
 
 fn json(plan: &Plan, rec: &DecisionRecord) -> String {
@@ -54,8 +57,9 @@ fn compare(
     mut candidate: impl FnMut(&Observations) -> String,
 ) -> usize {
     let params = default_params_dir();
-    let world = WorldSpec::load(&params).unwrap();
-    let scenario = Scenario::load(&params, name).unwrap();
+    let files = companion::params::read_params_dir(&params).unwrap();
+    let world = WorldSpec::load(&files).unwrap();
+    let scenario = Scenario::load(&files, name).unwrap();
     let mut reference = Core::new(model(), kind, policy);
     reference.set_caches(false);
     let mut cycles = 0;

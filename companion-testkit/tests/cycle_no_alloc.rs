@@ -3,9 +3,9 @@
 //! vibration evidence flipping every cycle, so every MDP is re-instantiated and re-solved)
 //! allocates nothing in 1000 cycles. Counting global allocator, test thread only, own binary.
 
-use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion::params::default_params_dir;
+use companion_core::decision::{Core, ModelKind, Policy};
 use companion_core::record::{DecisionRecord, Plan};
-use companion_core::spec::default_params_dir;
 use companion_testkit::streams::{Stream, StreamGen, tracking_snapshot};
 #[path = "support/counting_alloc.rs"]
 mod counting_alloc;
@@ -18,7 +18,7 @@ const COUNTED_CYCLES: u64 = 1000;
 /// changes and MDP solves seen while counting (to show the stream really moved).
 fn run(kind: ModelKind, policy: Policy, stream: Stream) -> (usize, usize, u64) {
     let params = default_params_dir();
-    let model = Model::load(&params).unwrap();
+    let model = companion::params::load_model(&params).unwrap();
     let base = tracking_snapshot(&model, &params, "complete-1");
     let stream_gen = StreamGen::new(&model, base.clone(), stream);
     let mut core = Core::new(&model, kind, policy);

@@ -1,11 +1,11 @@
 //! Decision log writer and reader: loss accounting under a stalled writer, rotation,
 //! flush-per-record, tolerant reading, and a SIGKILL of a process in the middle of writing.
 
-use companion_testkit::synthetic;
 use companion::decision_log::{
     DecisionLog, Header, ReadError, SCHEMA_VERSION, WriterOptions, part_path, read_log,
 };
 use companion_core::record::DecisionRecord;
+use companion_testkit::synthetic;
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, UNIX_EPOCH};

@@ -1,11 +1,10 @@
 //! `companion export` of the synthetic mission's records: MCAP and CSV read back.
 
-
 use companion::export::*;
 use companion_core::record::DecisionRecord;
+use companion_testkit::synthetic;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use companion_testkit::synthetic;
 
 fn write_log(dir: &Path, n: u64) -> (PathBuf, Vec<DecisionRecord>) {
     let recs = synthetic::mission(n);

@@ -2,10 +2,10 @@
 //! (fuzz/regressions/<target>/) through the same library functions the fuzz targets call
 //! (companion_testkit::fuzzing), on stable Rust, in the normal `cargo test`. docs/fuzzing.md.
 
+use companion::params::default_params_dir;
 use companion_testkit::fuzzing::{
     self, IngestFixture, IngestInput, ParamsFixture, ingest_one, ingest_seeds, params_one,
 };
-use companion_core::spec::default_params_dir;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -35,7 +35,9 @@ fn inputs(target: &str) -> Vec<(PathBuf, Vec<u8>)> {
 
 fn ingest_fixture() -> &'static IngestFixture {
     static FX: OnceLock<IngestFixture> = OnceLock::new();
-    FX.get_or_init(|| IngestFixture::load(&default_params_dir()).expect("the real params load"))
+    FX.get_or_init(|| {
+        IngestFixture::load(&companion::params::default_params_dir()).expect("the real params load")
+    })
 }
 
 fn params_fixture() -> &'static ParamsFixture {

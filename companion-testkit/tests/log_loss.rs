@@ -3,12 +3,11 @@
 //! reason), the log holds only whole lines, and the reader tells a full disk or a cap from a
 //! killed process (docs/decision-log.md, "How a log ends").
 
-use companion_testkit::synthetic;
 use companion::decision_log::{
     DecisionLog, Header, LogEnd, RESERVE_BYTES, RESERVE_FILE, WriterOptions, part_path, read_log,
-
 };
 use companion_core::record::DecisionRecord;
+use companion_testkit::synthetic;
 use std::path::Path;
 use std::time::{Duration, Instant, UNIX_EPOCH};
 

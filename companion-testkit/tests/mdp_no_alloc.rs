@@ -30,7 +30,11 @@ const KNOWN: &[&str] = &[
 
 #[test]
 fn warm_decision_cycle_does_not_allocate() {
-    let mut all = MissionMdps::load(&companion_core::spec::default_params_dir(), KNOWN).unwrap();
+    let mut all = MissionMdps::load(
+        &companion::params::read_params_dir(&companion::params::default_params_dir()).unwrap(),
+        KNOWN,
+    )
+    .unwrap();
     let mut probs: BTreeMap<String, f64> = all.check_point().clone();
     let names: Vec<String> = all.concurrent().to_vec();
     let mut ws = Workspace::with_capacity(12, 100, false);

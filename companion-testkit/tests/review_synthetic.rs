@@ -2,14 +2,14 @@
 //! boundaries (synthetic.rs): base 0; wp1 1–7; wpi 8–15; wpf 16–21; target 22–25; v3 26–92
 //! with the obstacle detour at 40–45 and V3 -> V1 from 60; landing 93–99.
 
-use companion::review::*;
-use companion::review::outcomes::Category;
-use companion::decision_log::LossReason;
-use companion_core::record::DecisionRecord;
 use companion::decision_log::LogItem;
+use companion::decision_log::LossReason;
 use companion::decision_log::{Header, LogEvent, ReadIssue};
-use companion_testkit::synthetic;
+use companion::review::outcomes::Category;
+use companion::review::*;
+use companion_core::record::DecisionRecord;
 use companion_core::record::{CommandRecord, Conflict, MdpProposal};
+use companion_testkit::synthetic;
 use std::time::UNIX_EPOCH;
 
 fn header() -> Header {

@@ -4,9 +4,9 @@
 //! the vibration evidence every cycle (bench_cycle's "worst" case). Counting allocator, own
 //! binary.
 
-use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion::params::default_params_dir;
+use companion_core::decision::{Core, ModelKind, Policy};
 use companion_core::record::{DecisionRecord, Plan};
-use companion_core::spec::default_params_dir;
 use companion_testkit::streams::{Stream, StreamGen, tracking_snapshot};
 #[path = "support/counting_alloc.rs"]
 mod counting_alloc;
@@ -18,7 +18,7 @@ const COUNTED: u64 = 400;
 #[test]
 fn memos_off_cycle_allocates_nothing_once_warm() {
     let params = default_params_dir();
-    let model = Model::load(&params).unwrap();
+    let model = companion::params::load_model(&params).unwrap();
     let base = tracking_snapshot(&model, &params, "complete-1");
     for policy in [Policy::Safety, Policy::Mission] {
         let stream = StreamGen::new(&model, base.clone(), Stream::Changing);
@@ -26,7 +26,8 @@ fn memos_off_cycle_allocates_nothing_once_warm() {
         core.set_caches(false);
         let mut obs = base.clone();
         let (mut plan, mut rec) = (Plan::default(), DecisionRecord::default());
-        let set = |obs: &mut companion_core::observations::Observations, k: u64| stream.advance(obs, k);
+        let set =
+            |obs: &mut companion_core::observations::Observations, k: u64| stream.advance(obs, k);
         for k in 0..WARM {
             set(&mut obs, k);
             core.step_into(&obs, &mut plan, &mut rec);

@@ -4,8 +4,8 @@
 //! The report is a list of sections, each a JSON value under its key plus a human rendering.
 //! Adding a section (platform, variants, guarantee) is one line in [`SECTIONS`].
 
-use companion_core::health::HealthModel;
 use anyhow::Context;
+use companion_core::health::HealthModel;
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
 
@@ -33,7 +33,7 @@ pub struct CheckArgs {
 
 /// What a section builder gets.
 pub struct CheckContext<'a> {
-    pub params: &'a Path,
+    pub params: &'a companion_core::spec::ParamsFiles,
     pub args: &'a CheckArgs,
 }
 
@@ -140,7 +140,10 @@ pub fn resource_policies_section(cx: &CheckContext) -> anyhow::Result<(Value, St
 pub fn guarantee_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
     let mission = cx.args.mission.as_deref().unwrap_or("tracking");
     let v = companion_core::guarantee::check_json(cx.params, mission)?;
-    let text = format!("\n{}", companion_core::guarantee::check_text(cx.params, mission)?);
+    let text = format!(
+        "\n{}",
+        companion_core::guarantee::check_text(cx.params, mission)?
+    );
     Ok((v["guarantee"].clone(), text))
 }
 
@@ -162,12 +165,33 @@ pub fn report(args: &CheckArgs) -> anyhow::Result<(Value, String)> {
     let params = args
         .params
         .clone()
-        .unwrap_or_else(companion_core::spec::default_params_dir);
+        .unwrap_or_else(crate::params::default_params_dir);
     // Everything `fly` and `simulate` load, cross-checks included, before any section: a file
     // either of them would refuse fails here with its file, entry and reason.
-    crate::params::Params::load(&params, args.route.as_deref())?;
+    let mut files = crate::params::read_params_dir(&params)?;
+    if let Some(r) = args.route.as_deref() {
+        crate::params::add_file(&mut files, r);
+    }
+    // `--mission` may name a mission file outside the params directory.
+    if let Some(m) = args
+        .mission
+        .as_deref()
+        .map(Path::new)
+        .filter(|m| m.is_file())
+    {
+        crate::params::add_file(&mut files, m);
+    }
+    report_from(files, args)
+}
+
+/// [`report`] on params already read.
+pub fn report_from(
+    files: companion_core::spec::ParamsFiles,
+    args: &CheckArgs,
+) -> anyhow::Result<(Value, String)> {
+    let files = crate::params::Params::from_files(files, args.route.as_deref())?.files;
     let cx = CheckContext {
-        params: &params,
+        params: &files,
         args,
     };
     let mut obj = serde_json::Map::new();

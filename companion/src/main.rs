@@ -2,10 +2,10 @@
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
-use companion_core::decision::{Core, Model, ModelKind, Policy};
 use companion::fly::{Decider, FlyArgs};
+use companion::params::default_params_dir;
 use companion::sim::{self, Scenario};
-use companion_core::spec::default_params_dir;
+use companion_core::decision::{Core, Model, ModelKind, Policy};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
@@ -191,7 +191,10 @@ impl Decider for CoreDecider {
     fn step(
         &mut self,
         obs: &companion_core::observations::Observations,
-    ) -> (companion_core::record::Plan, companion_core::record::DecisionRecord) {
+    ) -> (
+        companion_core::record::Plan,
+        companion_core::record::DecisionRecord,
+    ) {
         self.core.step(obs)
     }
 
@@ -221,7 +224,7 @@ fn fly(args: FlyArgs) -> Result<()> {
 fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
     let loaded = companion::params::Params::load(params, None).context("loading params")?;
     let world = loaded.world;
-    let mut scenario = Scenario::load(params, &args.scenario)?;
+    let mut scenario = Scenario::load(&loaded.files, &args.scenario)?;
     if let Some(s) = args.steps {
         scenario.steps = s;
     }
@@ -342,7 +345,10 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         scenario.steps
     );
     println!();
-    print!("{}", companion_core::decision::table(&first.records, &model));
+    print!(
+        "{}",
+        companion_core::decision::table(&first.records, &model)
+    );
     println!();
     if let Some((n, Some(table))) = &first_allocations
         && *n > 0

@@ -2,11 +2,11 @@
 //! `fly` all start with [`Params::load`], so what one accepts the others accept, and a file that
 //! stops `fly` also fails `check` with the same file, entry and reason (docs/params.md).
 
-use companion_core::decision::Model;
-use companion_link::actions::{ActionTable, LinkParams, Route};
-use companion_core::mission::ActionKind;
 use crate::sim::WorldSpec;
-use companion_core::spec::SpecError;
+use companion_core::decision::Model;
+use companion_core::mission::ActionKind;
+use companion_core::spec::{MAX_FILE_BYTES, ParamsFiles, SpecError};
+use companion_link::actions::{ActionTable, LinkParams, Route};
 use std::path::{Path, PathBuf};
 
 /// The route `fly` follows when `--mission` names none, relative to the params directory.
@@ -15,6 +15,8 @@ pub const DEFAULT_ROUTE: &str = "missions/tracking_route.toml";
 /// Every params file, loaded and cross-checked.
 pub struct Params {
     pub dir: PathBuf,
+    /// The files as read (what the model was compiled from).
+    pub files: ParamsFiles,
     /// The decision core's model (mission, actions, health, MDPs, policies, resources, guarantee).
     pub model: Model,
     /// The simulated world (`world.toml`).
@@ -31,11 +33,22 @@ pub struct Params {
 impl Params {
     /// Load and cross-check every file of `dir`; `route` overrides the default route file.
     pub fn load(dir: &Path, route: Option<&Path>) -> Result<Self, SpecError> {
-        let model = Model::load(dir)?;
-        let world = WorldSpec::load(dir)?;
-        let (link, commands, route, route_file) = load_fly_files(dir, route)?;
+        let mut files = read_params_dir(dir)?;
+        if let Some(r) = route {
+            add_file(&mut files, r);
+        }
+        Self::from_files(files, route)
+    }
+
+    /// Load and cross-check params already read (`route`, when given, must be in `files`).
+    pub fn from_files(files: ParamsFiles, route: Option<&Path>) -> Result<Self, SpecError> {
+        let dir = files.dir().to_path_buf();
+        let model = Model::load(&files)?;
+        let world = WorldSpec::load(&files)?;
+        let (link, commands, route, route_file) = load_fly_files(&files, route)?;
         let p = Params {
-            dir: dir.to_path_buf(),
+            dir,
+            files,
             model,
             world,
             link,
@@ -167,14 +180,101 @@ impl Params {
 /// The files `fly` reads besides the model: `link.toml`, `commands.toml` and the route
 /// (`route`, else [`DEFAULT_ROUTE`]).
 pub fn load_fly_files(
-    dir: &Path,
+    files: &ParamsFiles,
     route: Option<&Path>,
 ) -> Result<(LinkParams, ActionTable, Route, PathBuf), SpecError> {
-    let link = LinkParams::load(&dir.join("link.toml"))?;
-    let commands = ActionTable::load(&dir.join("commands.toml"))?;
+    let dir = files.dir();
+    let link = LinkParams::load(files, &dir.join("link.toml"))?;
+    let commands = ActionTable::load(files, &dir.join("commands.toml"))?;
     let route_file = route.map_or_else(|| dir.join(DEFAULT_ROUTE), Path::to_path_buf);
-    let route = Route::load(&route_file)?;
+    let route = Route::load(files, &route_file)?;
     Ok((link, commands, route, route_file))
 }
 
-pub use companion_core::spec::regular_file;
+/// Deepest directory level read below the params directory (the shipped tree is two deep).
+const MAX_DEPTH: usize = 4;
+/// Most files read from a params directory (the shipped tree has about 30).
+const MAX_FILES: usize = 1000;
+
+/// Read every `.toml` file below `dir` into a [`ParamsFiles`] for the core to compile. A file
+/// that cannot be read (not a regular file, too large, not UTF-8) is kept with its reason and
+/// fails the load only if a loader needs it; an unlistable `dir` fails here.
+pub fn read_params_dir(dir: &Path) -> Result<ParamsFiles, SpecError> {
+    let mut files = ParamsFiles::new(dir);
+    let mut pending = vec![(dir.to_path_buf(), 0usize)];
+    let mut n = 0usize;
+    while let Some((d, depth)) = pending.pop() {
+        let entries = std::fs::read_dir(&d)
+            .map_err(|e| SpecError::new(&d, "-", format!("cannot list: {e}")))?;
+        let mut paths: Vec<PathBuf> = entries.filter_map(|e| e.ok().map(|e| e.path())).collect();
+        paths.sort();
+        for p in paths {
+            if p.is_dir() {
+                if depth < MAX_DEPTH {
+                    pending.push((p, depth + 1));
+                }
+            } else if p.extension().is_some_and(|x| x == "toml") {
+                n += 1;
+                if n > MAX_FILES {
+                    return Err(SpecError::new(
+                        dir,
+                        "-",
+                        format!("more than {MAX_FILES} params files"),
+                    ));
+                }
+                add_file(&mut files, &p);
+            }
+        }
+    }
+    Ok(files)
+}
+
+/// Add the file at `path` to `files` as read now (or as unreadable, with the reason).
+pub fn add_file(files: &mut ParamsFiles, path: &Path) {
+    if let Err(reason) = regular_file(path) {
+        files.insert_unreadable(path, reason);
+        return;
+    }
+    match std::fs::metadata(path) {
+        Ok(m) if m.len() > MAX_FILE_BYTES as u64 => files.insert_unreadable(
+            path,
+            format!(
+                "{} bytes: a params file is at most {MAX_FILE_BYTES} bytes",
+                m.len()
+            ),
+        ),
+        _ => match std::fs::read(path) {
+            Ok(bytes) => files.insert_bytes(path, &bytes),
+            Err(e) => files.insert_unreadable(path, format!("cannot read: {e}")),
+        },
+    }
+}
+
+/// The model alone from a params directory (tests, tools).
+pub fn load_model(dir: &Path) -> Result<Model, SpecError> {
+    Model::load(&read_params_dir(dir)?)
+}
+
+/// Ok when `path` is a regular file (following symlinks), else why not. Opening a FIFO or a
+/// device where a file is expected would block or read forever.
+pub fn regular_file(path: &Path) -> Result<(), String> {
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_file() => Ok(()),
+        Ok(m) if m.is_dir() => Err("is a directory, not a file".into()),
+        Ok(_) => Err("is not a regular file (a FIFO, socket or device?)".into()),
+        Err(e) => Err(format!("cannot read: {e}")),
+    }
+}
+
+/// The params directory: `$COMPANION_PARAMS`, else `params/` next to the workspace root this
+/// binary was built from, else `./params`.
+pub fn default_params_dir() -> PathBuf {
+    if let Ok(p) = std::env::var("COMPANION_PARAMS") {
+        return PathBuf::from(p);
+    }
+    let built = Path::new(env!("CARGO_MANIFEST_DIR")).join("../params");
+    if built.is_dir() {
+        return built;
+    }
+    PathBuf::from("params")
+}

@@ -8,7 +8,7 @@
 
 use companion_core::observations::Observations;
 use companion_core::record::{DecisionRecord, Plan};
-use companion_core::spec::{SpecError, read_toml};
+use companion_core::spec::{ParamsFiles, SpecError, read_toml};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Deserialize;
@@ -120,9 +120,9 @@ pub struct Trigger {
 }
 
 impl WorldSpec {
-    pub fn load(params: &Path) -> Result<Self, SpecError> {
-        let file = params.join("world.toml");
-        let w: WorldSpec = read_toml(&file)?;
+    pub fn load(files: &ParamsFiles) -> Result<Self, SpecError> {
+        let file = files.dir().join("world.toml");
+        let w: WorldSpec = read_toml(files, &file)?;
         let prob = |entry: &str, p: f64| {
             if (0.0..=1.0).contains(&p) {
                 Ok(())
@@ -172,9 +172,16 @@ impl WorldSpec {
 
 impl Scenario {
     /// `name_or_path`: a scenario name in params/scenarios/ or a path to a TOML file.
-    pub fn load(params: &Path, name_or_path: &str) -> Result<Self, SpecError> {
-        let file = resolve(params, "scenarios", name_or_path);
-        let s: Scenario = read_toml(&file)?;
+    /// A scenario given by path is read from disk when the params set does not hold it.
+    pub fn load(files: &ParamsFiles, name_or_path: &str) -> Result<Self, SpecError> {
+        let file = resolve(files.dir(), "scenarios", name_or_path);
+        let s: Scenario = if files.contains(&file) {
+            read_toml(files, &file)?
+        } else {
+            let mut one = ParamsFiles::new(files.dir());
+            crate::params::add_file(&mut one, &file);
+            read_toml(&one, &file)?
+        };
         // Every step's record is kept for the run's log: bounded as `simulate --steps` is.
         if !(1..=10_000).contains(&s.steps) {
             return Err(SpecError::new(
@@ -630,7 +637,10 @@ mod tests {
     use companion_core::record::ResourcesRecord;
 
     fn spec() -> WorldSpec {
-        WorldSpec::load(&companion_core::spec::default_params_dir()).unwrap()
+        WorldSpec::load(
+            &crate::params::read_params_dir(&crate::params::default_params_dir()).unwrap(),
+        )
+        .unwrap()
     }
 
     /// A scripted core: take off, follow the route, detect, then track with `version`; land when
@@ -790,16 +800,16 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("bad.toml");
         std::fs::write(&p, "name='b'\ndescription='b'\n[[hazard]]\nevent='x'\ntrigger={step=1, phase='wpf'}\nset={a=1.0}\n").unwrap();
-        let e = Scenario::load(dir.path(), p.to_str().unwrap()).unwrap_err();
+        let e = Scenario::load(&ParamsFiles::new(dir.path()), p.to_str().unwrap()).unwrap_err();
         assert_eq!(e.entry, "hazard[0].trigger");
         std::fs::write(&p, "name='b'\ndescription='b'\nstep=3\n").unwrap();
-        let e = Scenario::load(dir.path(), p.to_str().unwrap()).unwrap_err();
+        let e = Scenario::load(&ParamsFiles::new(dir.path()), p.to_str().unwrap()).unwrap_err();
         assert!(e.reason.contains("unknown field"), "{e}");
     }
 
     #[test]
     fn every_shipped_scenario_loads() {
-        let params = companion_core::spec::default_params_dir();
+        let params = crate::params::default_params_dir();
         let names = Scenario::names(&params);
         for required in [
             "nominal",
@@ -814,8 +824,9 @@ mod tests {
                 "missing scenario {required}"
             );
         }
+        let files = crate::params::read_params_dir(&params).unwrap();
         for n in names {
-            Scenario::load(&params, &n).unwrap();
+            Scenario::load(&files, &n).unwrap();
         }
     }
 }

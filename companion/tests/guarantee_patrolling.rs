@@ -8,8 +8,12 @@ fn params() -> &'static Path {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../params"))
 }
 
+fn files() -> companion_core::spec::ParamsFiles {
+    companion::params::read_params_dir(params()).unwrap()
+}
+
 fn spec() -> MissionSpec {
-    load_mission(params(), "patrolling").unwrap()
+    load_mission(&files(), "patrolling").unwrap()
 }
 
 #[test]
@@ -22,7 +26,7 @@ fn nga_matches_the_paper_exactly() {
         vec![21, 12, 4, 3, 2, 3, 12, 21, 21, 4, 3, 2, 3, 21, 21, 12, 21]
     );
     assert_eq!(panorama::nga(&s.problem), Some(768_288_795_144_192));
-    let j = check_json(params(), "patrolling").unwrap();
+    let j = check_json(&files(), "patrolling").unwrap();
     assert_eq!(j["guarantee"]["nga"].as_u64(), Some(768_288_795_144_192));
 }
 
@@ -58,7 +62,7 @@ fn ras0_is_table_6() {
     }
     // Duration does not reduce the IAs (section 7.2.3) and both margins are non-negative.
     assert!(r.margins["duration_s"] >= 0.0 && r.margins["energy_j"] >= 0.0);
-    let text = check_text(params(), "patrolling").unwrap();
+    let text = check_text(&files(), "patrolling").unwrap();
     assert!(text.contains("768288795144192"), "{text}");
 }
 

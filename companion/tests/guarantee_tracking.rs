@@ -12,8 +12,16 @@ fn text() -> String {
     std::fs::read_to_string(params().join("missions/tracking.toml")).unwrap()
 }
 
+/// The shipped params plus the mission file again under its absolute path (a mission by path).
+fn files() -> companion_core::spec::ParamsFiles {
+    let mut f = companion::params::read_params_dir(params()).unwrap();
+    let abs = params().join("missions/tracking.toml");
+    companion::params::add_file(&mut f, &abs);
+    f
+}
+
 fn spec() -> MissionSpec {
-    load_mission(params(), "tracking").unwrap()
+    load_mission(&files(), "tracking").unwrap()
 }
 
 fn ia_name(s: &MissionSpec, g: &Guarantee, j: usize) -> String {
@@ -24,7 +32,7 @@ fn ia_name(s: &MissionSpec, g: &Guarantee, j: usize) -> String {
 fn loads_by_name_and_by_path() {
     let a = spec();
     let b = load_mission(
-        params(),
+        &files(),
         params().join("missions/tracking.toml").to_str().unwrap(),
     )
     .unwrap();
@@ -36,7 +44,7 @@ fn loads_by_name_and_by_path() {
     let counts: Vec<usize> = a.problem.activities.iter().map(|x| x.ias.len()).collect();
     assert_eq!(counts, vec![4, 4, 2, 4, 72, 16]);
     assert_eq!(panorama::nga(&a.problem), Some(4 * 4 * 2 * 4 * 72 * 16));
-    let j = check_json(params(), "tracking").unwrap();
+    let j = check_json(&files(), "tracking").unwrap();
     assert_eq!(j["guarantee"]["nga"].as_u64(), Some(147_456));
     assert!(j["guarantee"]["margins"]["energy_j"].as_f64().unwrap() >= 0.0);
     assert_eq!(j["guarantee"]["activities"].as_array().unwrap().len(), 6);
@@ -326,7 +334,7 @@ fn unknown_task_and_constraint_class_and_syntax_are_rejected() {
     assert_eq!(e.entry, "activities[2].constraints[0]");
     let e = rejected("[mission\nname=");
     assert_eq!(e.file, Path::new("bad.toml"));
-    let missing = load_mission(params(), "no_such_mission").unwrap_err();
+    let missing = load_mission(&files(), "no_such_mission").unwrap_err();
     assert!(missing.file.ends_with("missions/no_such_mission.toml"));
 }
 

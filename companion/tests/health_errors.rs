@@ -1,8 +1,9 @@
 //! Every kind of bad params input is rejected with a SpecError naming the file, the entry and the
 //! reason; nothing panics.
 
+use companion::params::default_params_dir;
 use companion_core::health::HealthModel;
-use companion_core::spec::{SpecError, default_params_dir};
+use companion_core::spec::SpecError;
 use std::path::{Path, PathBuf};
 
 /// Copy params/health, params/observations.toml and the variant catalogue the activation nodes
@@ -26,7 +27,7 @@ fn load_edited(
     let edited = edit(text.clone());
     assert_ne!(edited, text, "the edit must change {file}");
     std::fs::write(&target, edited).unwrap();
-    let r = HealthModel::load(dir.path());
+    let r = companion::params::read_params_dir(dir.path()).and_then(|f| HealthModel::load(&f));
     (dir, r)
 }
 
@@ -40,7 +41,10 @@ fn expect_err(file: &str, edit: impl Fn(String) -> String, entry: &str, reason: 
 
 #[test]
 fn shipped_params_load() {
-    HealthModel::load(&default_params_dir()).unwrap();
+    HealthModel::load(
+        &companion::params::read_params_dir(&companion::params::default_params_dir()).unwrap(),
+    )
+    .unwrap();
 }
 
 #[test]

@@ -3,11 +3,13 @@
 
 use companion_core::health::HealthModel;
 use companion_core::observations::Observations;
-use companion_core::spec::default_params_dir;
 use std::collections::BTreeMap;
 
 fn model() -> HealthModel {
-    HealthModel::load(&default_params_dir()).expect("params/ load")
+    HealthModel::load(
+        &companion::params::read_params_dir(&companion::params::default_params_dir()).unwrap(),
+    )
+    .expect("params/ load")
 }
 
 fn ev(pairs: &[(&str, &str)]) -> BTreeMap<String, String> {

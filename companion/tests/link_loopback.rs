@@ -3,11 +3,11 @@
 //! commands `take_off` needs, injects garbage bytes between frames, and drops the TCP connection
 //! once the vehicle is airborne to check reconnect + stream re-request without command replay.
 
-use companion_link::dialect::*;
 use companion::fly::{FlyArgs, ScriptedDecider, run_with};
+use companion_core::record::DecisionRecord;
+use companion_link::dialect::*;
 use companion_link::liveness::parse_duration;
 use companion_link::url;
-use companion_core::record::DecisionRecord;
 use mavlink::{AsyncMavlinkReader, MavHeader};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;

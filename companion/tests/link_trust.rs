@@ -2,10 +2,10 @@
 //! answers only the chosen autopilot (junk and impostors get nothing back), the autopilot can be
 //! named with `--autopilot-sysid`, and a TCP link that only reconnects is declared lost.
 
-use companion_link::dialect::*;
 use companion::fly::{FlyArgs, ScriptedDecider, run_with};
-use companion_link::url;
 use companion_core::record::DecisionRecord;
+use companion_link::dialect::*;
+use companion_link::url;
 use mavlink::{MavHeader, MavlinkReader};
 use std::net::SocketAddr;
 use std::time::Duration;

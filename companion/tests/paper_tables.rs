@@ -3,25 +3,29 @@
 //! outcome typed into params), and every action that runs was proposed by an MDP in the same
 //! decision record.
 
+use companion::params::default_params_dir;
+use companion::sim::{self, Scenario, WorldSpec};
 use companion_core::decision::{Core, Model, ModelKind, Policy};
 use companion_core::health::HealthModel;
 use companion_core::observations::Observations;
 use companion_core::record::DecisionRecord;
-use companion::sim::{self, Scenario, WorldSpec};
-use companion_core::spec::default_params_dir;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::OnceLock;
 
 fn model() -> &'static Model {
     static M: OnceLock<Model> = OnceLock::new();
-    M.get_or_init(|| Model::load(&default_params_dir()).expect("params load"))
+    M.get_or_init(|| {
+        companion::params::load_model(&companion::params::default_params_dir())
+            .expect("params load")
+    })
 }
 
 fn run(scenario: &str, policy: Policy, seed: u64) -> Vec<DecisionRecord> {
     let params = default_params_dir();
-    let world = WorldSpec::load(&params).unwrap();
-    let scenario = Scenario::load(&params, scenario).unwrap();
+    let files = companion::params::read_params_dir(&params).unwrap();
+    let world = WorldSpec::load(&files).unwrap();
+    let scenario = Scenario::load(&files, scenario).unwrap();
     let mut core = Core::new(model(), ModelKind::Bfm, policy);
     sim::run(&world, &scenario, seed, |obs| core.step(obs)).records
 }
@@ -75,7 +79,10 @@ fn eval(m: &mut HealthModel, o: &Observations) -> BTreeMap<String, f64> {
 /// F 4 tiles) become improbable, while V1 (M: 1 tile, 1 ms SW) and V5 (M: 1 tile, 30 ms SW) stay.
 #[test]
 fn table2_one_healthy_tile_makes_p_v3_and_p_v2_drop() {
-    let mut m = HealthModel::load(&default_params_dir()).unwrap();
+    let mut m = HealthModel::load(
+        &companion::params::read_params_dir(&companion::params::default_params_dir()).unwrap(),
+    )
+    .unwrap();
     let room = eval(&mut m, &snapshot(4.0, 0.8));
     let tight = eval(&mut m, &snapshot(1.0, 0.15));
     for v in ["P_V3", "P_V2"] {
@@ -93,7 +100,8 @@ fn table2_tile_count_in_variants_toml_moves_p_v5() {
     let src = default_params_dir();
     let dir = tempfile::tempdir().unwrap();
     copy_dir(&src, dir.path());
-    let mut m = HealthModel::load(dir.path()).unwrap();
+    let mut m =
+        HealthModel::load(&companion::params::read_params_dir(dir.path()).unwrap()).unwrap();
     let before = eval(&mut m, &snapshot(1.0, 0.15))["P_V5"];
     let path = dir.path().join("variants.toml");
     let text = std::fs::read_to_string(&path).unwrap();
@@ -104,7 +112,8 @@ fn table2_tile_count_in_variants_toml_moves_p_v5() {
         text.replacen(row, &row.replace("tiles = 1", "tiles = 2"), 1),
     )
     .unwrap();
-    let mut m = HealthModel::load(dir.path()).unwrap();
+    let mut m =
+        HealthModel::load(&companion::params::read_params_dir(dir.path()).unwrap()).unwrap();
     let after = eval(&mut m, &snapshot(1.0, 0.15))["P_V5"];
     assert!(before > 0.4, "{before}");
     assert!(after < 0.1 * before, "{after} vs {before}");
@@ -422,7 +431,11 @@ fn table2_panorama_tios_must_match_variants_toml() {
         text.replacen(row, &row.replace("tiles = 4", "tiles = 2"), 1),
     )
     .unwrap();
-    let e = companion_core::guarantee::load_mission(dir.path(), "tracking").expect_err("rejected");
+    let e = companion_core::guarantee::load_mission(
+        &companion::params::read_params_dir(dir.path()).unwrap(),
+        "tracking",
+    )
+    .expect_err("rejected");
     assert!(e.entry.ends_with(".tiles"), "{e}");
     assert!(e.entry.starts_with("tasks.tracking.tios["), "{e}");
     assert!(e.reason.contains("params/variants.toml"), "{e}");

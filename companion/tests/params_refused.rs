@@ -6,7 +6,7 @@
 use companion::check::{self, CheckArgs};
 use companion::fly::{FlyArgs, FlySetup};
 use companion::params::Params;
-use companion_core::spec::default_params_dir;
+use companion::params::default_params_dir;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 

@@ -1,25 +1,34 @@
 //! The BFM paper's experiments, reproduced as orderings over many seeds (the paper reports single
 //! Matlab runs; we assert what its Tables 3, 4-7 and 8 say, not its exact step counts).
 
+use companion::sim::{self, RunResult, Scenario, WorldSpec};
 use companion_core::decision::{Core, Model, ModelKind, Policy};
 use companion_core::record::DecisionRecord;
-use companion::sim::{self, RunResult, Scenario, WorldSpec};
-use companion_core::spec::default_params_dir;
 use std::sync::OnceLock;
 
 const SEEDS: u64 = 30;
 
 fn model() -> &'static Model {
     static M: OnceLock<Model> = OnceLock::new();
-    M.get_or_init(|| Model::load(&default_params_dir()).expect("params load"))
+    M.get_or_init(|| {
+        companion::params::load_model(&companion::params::default_params_dir())
+            .expect("params load")
+    })
 }
 
 fn world() -> WorldSpec {
-    WorldSpec::load(&default_params_dir()).unwrap()
+    WorldSpec::load(
+        &companion::params::read_params_dir(&companion::params::default_params_dir()).unwrap(),
+    )
+    .unwrap()
 }
 
 fn run(scenario: &str, kind: ModelKind, policy: Policy, seed: u64) -> RunResult {
-    let scenario = Scenario::load(&default_params_dir(), scenario).unwrap();
+    let scenario = Scenario::load(
+        &companion::params::read_params_dir(&companion::params::default_params_dir()).unwrap(),
+        scenario,
+    )
+    .unwrap();
     let mut core = Core::new(model(), kind, policy);
     sim::run(&world(), &scenario, seed, |obs| core.step(obs))
 }

@@ -3,10 +3,10 @@
 //! shell orders, whichever policy is in force, the policy must not drop the action the shell prefers
 //! while keeping the other. The shell only orders what the policies leave standing together.
 
+use companion::params::default_params_dir;
+use companion_core::mission_mdp::BehaviourConflicts;
 use companion_link::actions::LinkParams;
 use companion_link::mission_state::select_vehicle_action;
-use companion_core::mission_mdp::BehaviourConflicts;
-use companion_core::spec::default_params_dir;
 
 /// The primitive actions of the BFM paper, section 5 (A1..A17): the names policies.toml patterns match.
 const PRIMITIVES: &[&str] = &[
@@ -32,8 +32,10 @@ const PRIMITIVES: &[&str] = &[
 #[test]
 fn precedence_never_overrules_a_policy() {
     let dir = default_params_dir();
-    let link = LinkParams::load(&dir.join("link.toml")).unwrap();
-    let conflicts = BehaviourConflicts::load(&dir.join("policies.toml"), PRIMITIVES).unwrap();
+    let files = companion::params::read_params_dir(&dir).unwrap();
+    let link = LinkParams::load(&files, &dir.join("link.toml")).unwrap();
+    let conflicts =
+        BehaviourConflicts::load(&files, &dir.join("policies.toml"), PRIMITIVES).unwrap();
     let order = &link.vehicle_action_precedence;
     assert!(order.len() >= 2, "{order:?}");
     for policy in ["safety", "mission"] {
@@ -58,7 +60,9 @@ fn precedence_never_overrules_a_policy() {
 fn a_precedence_that_contradicts_the_policy_is_caught() {
     // return_to_base before land contradicts both policies' return_vs_landing rule (land wins).
     let dir = default_params_dir();
-    let conflicts = BehaviourConflicts::load(&dir.join("policies.toml"), PRIMITIVES).unwrap();
+    let files = companion::params::read_params_dir(&dir).unwrap();
+    let conflicts =
+        BehaviourConflicts::load(&files, &dir.join("policies.toml"), PRIMITIVES).unwrap();
     let (kept, _) = conflicts
         .resolve(&["land", "return_to_base"], "safety")
         .unwrap();

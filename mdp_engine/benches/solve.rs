@@ -3,7 +3,7 @@
 //!
 //! The paper MDPs are instantiated at the section 7.1 point (safety policy) and exported to
 //! `benches/models/*.json` by the companion test `mission_mdp::tests::bench_models_are_current`
-//! (regenerate with `UPDATE_BENCH_MODELS=1 cargo test -p companion --lib bench_models`).
+//! (regenerate with `UPDATE_BENCH_MODELS=1 cargo test -p companion-testkit --test bench_models`).
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use mdp_engine::{Config, Mdp, MdpBuilder, Workspace};

@@ -1,6 +1,5 @@
 use super::*;
 use mdp_engine::Workspace;
-use std::fs;
 
 pub(super) const KNOWN: &[&str] = &[
     "P_sys",
@@ -21,8 +20,8 @@ pub(super) const KNOWN: &[&str] = &[
     "P_V5",
 ];
 
-fn params() -> PathBuf {
-    crate::spec::default_params_dir()
+fn params() -> ParamsFiles {
+    crate::shipped::params()
 }
 
 fn load_all() -> MissionMdps {
@@ -472,15 +471,13 @@ landing = 5
 
 /// Write an index listing `tiny` plus the given file text; load; return the error.
 fn load_text(text: &str) -> Result<MissionMdps, SpecError> {
-    let dir = tempfile::tempdir().unwrap();
-    fs::create_dir(dir.path().join("mdp")).unwrap();
-    fs::write(
-        dir.path().join("mdp/index.toml"),
+    let mut dir = ParamsFiles::new("t");
+    dir.insert(
+        dir.dir().join("mdp/index.toml"),
         "concurrent = [\"tiny\"]\n[check_point]\nP_sys = 0.9\n",
-    )
-    .unwrap();
-    fs::write(dir.path().join("mdp/tiny.toml"), text).unwrap();
-    MissionMdps::load(dir.path(), KNOWN)
+    );
+    dir.insert(dir.dir().join("mdp/tiny.toml"), text);
+    MissionMdps::load(&dir, KNOWN)
 }
 
 fn load_err(text: &str) -> SpecError {
@@ -601,47 +598,41 @@ fn rejects_bad_rewards_and_actions() {
 
 #[test]
 fn rejects_policy_sets_that_differ_between_mdps() {
-    let dir = tempfile::tempdir().unwrap();
-    fs::create_dir(dir.path().join("mdp")).unwrap();
-    fs::write(
-        dir.path().join("mdp/index.toml"),
+    let mut dir = ParamsFiles::new("t");
+    dir.insert(
+        dir.dir().join("mdp/index.toml"),
         "concurrent = [\"tiny\", \"other\"]\n",
-    )
-    .unwrap();
-    fs::write(dir.path().join("mdp/tiny.toml"), GOOD).unwrap();
-    fs::write(
-        dir.path().join("mdp/other.toml"),
+    );
+    dir.insert(dir.dir().join("mdp/tiny.toml"), GOOD);
+    dir.insert(
+        dir.dir().join("mdp/other.toml"),
         GOOD.replace(r#"name = "tiny""#, r#"name = "other""#)
             .replace("reward.safety", "reward.mission"),
-    )
-    .unwrap();
-    let e = MissionMdps::load(dir.path(), KNOWN).unwrap_err();
+    );
+    let e = MissionMdps::load(&dir, KNOWN).unwrap_err();
     assert!(e.file.ends_with("other.toml") && e.entry == "reward", "{e}");
-    let e = MissionMdps::load(Path::new("/nonexistent"), KNOWN).unwrap_err();
+    let e = MissionMdps::load(&ParamsFiles::new("/nonexistent"), KNOWN).unwrap_err();
     assert!(e.reason.contains("cannot read"), "{e}");
 }
 
 #[test]
 fn rejects_bad_check_point() {
-    let dir = tempfile::tempdir().unwrap();
-    fs::create_dir(dir.path().join("mdp")).unwrap();
-    fs::write(dir.path().join("mdp/tiny.toml"), GOOD).unwrap();
-    fs::write(
-        dir.path().join("mdp/index.toml"),
+    let mut dir = ParamsFiles::new("t");
+    dir.insert(dir.dir().join("mdp/tiny.toml"), GOOD);
+    dir.insert(
+        dir.dir().join("mdp/index.toml"),
         "concurrent = [\"tiny\"]\n[check_point]\nP_nope = 0.5\n",
-    )
-    .unwrap();
+    );
     assert_eq!(
-        MissionMdps::load(dir.path(), KNOWN).unwrap_err().entry,
+        MissionMdps::load(&dir, KNOWN).unwrap_err().entry,
         "check_point.P_nope"
     );
-    fs::write(
-        dir.path().join("mdp/index.toml"),
+    dir.insert(
+        dir.dir().join("mdp/index.toml"),
         "concurrent = [\"tiny\"]\n[check_point]\nP_sys = 1.5\n",
-    )
-    .unwrap();
+    );
     assert_eq!(
-        MissionMdps::load(dir.path(), KNOWN).unwrap_err().entry,
+        MissionMdps::load(&dir, KNOWN).unwrap_err().entry,
         "check_point.P_sys"
     );
 }
@@ -652,7 +643,9 @@ fn conflicts() -> BehaviourConflicts {
     let all = load_all();
     let prims = all.primitive_actions();
     let known: Vec<&str> = prims.iter().map(String::as_str).collect();
-    BehaviourConflicts::load(&params().join("policies.toml"), &known).expect("policies.toml loads")
+    let p = params();
+    BehaviourConflicts::load(&p, &p.dir().join("policies.toml"), &known)
+        .expect("policies.toml loads")
 }
 
 #[test]
@@ -718,9 +711,9 @@ fn section_6_2_conflicts_by_policy() {
 }
 
 fn policies_err(text: &str) -> SpecError {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("policies.toml");
-    fs::write(&path, text).unwrap();
+    let mut dir = ParamsFiles::new("t");
+    let path = dir.dir().join("policies.toml");
+    dir.insert(&path, text);
     let known = [
         "avoid_obstacle",
         "track_v0",
@@ -728,7 +721,7 @@ fn policies_err(text: &str) -> SpecError {
         "land",
         "return_to_base",
     ];
-    BehaviourConflicts::load(&path, &known).expect_err("should be rejected")
+    BehaviourConflicts::load(&dir, &path, &known).expect_err("should be rejected")
 }
 
 const GOOD_POLICIES: &str = r#"
@@ -743,10 +736,10 @@ mission = ["track_v*", "avoid_obstacle"]
 
 #[test]
 fn policies_loader_rejects_bad_rules() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("policies.toml");
-    fs::write(&path, GOOD_POLICIES).unwrap();
-    let c = BehaviourConflicts::load(&path, &["avoid_obstacle", "track_v0"]).unwrap();
+    let mut dir = ParamsFiles::new("t");
+    let path = dir.dir().join("policies.toml");
+    dir.insert(&path, GOOD_POLICIES);
+    let c = BehaviourConflicts::load(&dir, &path, &["avoid_obstacle", "track_v0"]).unwrap();
     let (kept, _) = c
         .resolve(&["track_v0", "avoid_obstacle"], "mission")
         .unwrap();
@@ -780,43 +773,6 @@ fn policies_loader_rejects_bad_rules() {
         r#"safety = ["avoid_obstacle", "track_v*", "fly"]"#,
     ));
     assert_eq!(e.entry, "priority.safety[2]");
-}
-
-// ------------------------------------------------------------------ bench models
-
-/// The criterion benches in mdp_engine read the paper MDPs instantiated at the check
-/// point (safety policy) from JSON; this keeps those files in step with params/.
-#[test]
-fn bench_models_are_current() {
-    let mut all = load_all();
-    let point = all.check_point().clone();
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../mdp_engine/benches/models");
-    let update = std::env::var_os("UPDATE_BENCH_MODELS").is_some();
-    for name in [
-        "reference",
-        "navigation",
-        "landing",
-        "tracking",
-        "monolithic",
-    ] {
-        let mdp = all
-            .get_mut(name)
-            .unwrap()
-            .instantiate(&point, "safety")
-            .unwrap();
-        let json = serde_json::to_string(mdp).unwrap();
-        let path = dir.join(format!("{name}.json"));
-        if update {
-            fs::create_dir_all(&dir).unwrap();
-            fs::write(&path, &json).unwrap();
-        }
-        let on_disk = fs::read_to_string(&path).unwrap_or_default();
-        assert!(
-            on_disk == json,
-            "{} is stale: UPDATE_BENCH_MODELS=1 cargo test -p companion-core --lib bench_models",
-            path.display()
-        );
-    }
 }
 
 // ---------------------------------------------------------------- fast-cycle equivalences

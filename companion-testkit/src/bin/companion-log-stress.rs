@@ -14,5 +14,8 @@ struct Args {
 
 fn main() -> anyhow::Result<()> {
     let a = Args::parse();
-    Ok(companion_testkit::stress::log_stress(&a.dir, a.rotate_bytes)?)
+    Ok(companion_testkit::stress::log_stress(
+        &a.dir,
+        a.rotate_bytes,
+    )?)
 }

@@ -170,7 +170,7 @@ pub(super) fn log_files(path: &Path) -> Result<Vec<PathBuf>, ReadError> {
     if path.is_dir() {
         let first = part_path(path, 0);
         if first.exists() {
-            companion_core::spec::regular_file(&first).map_err(|r| not_a_file(&first, r))?;
+            crate::params::regular_file(&first).map_err(|r| not_a_file(&first, r))?;
         }
         if !first.exists() {
             return Err(ReadError::NoLog {
@@ -180,7 +180,7 @@ pub(super) fn log_files(path: &Path) -> Result<Vec<PathBuf>, ReadError> {
         return Ok(parts_from(path, &first, LOG_STEM));
     }
     // Reading a FIFO or a device would block or never end.
-    companion_core::spec::regular_file(path).map_err(|r| not_a_file(path, r))?;
+    crate::params::regular_file(path).map_err(|r| not_a_file(path, r))?;
     // A file: if it is part 0 of a rotation set (`stem.jsonl`), its parts follow it.
     let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
     if let Some(stem) = name.strip_suffix(".jsonl")

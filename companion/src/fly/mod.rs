@@ -19,16 +19,16 @@ use companion_link::liveness::parse_duration;
 use companion_link::mission_state::{self, Extra, LANDING_ACTIONS, MissionState};
 use companion_link::operator::{self, Control, GateEvent, GcsText, OperatorGate, VehicleView};
 pub mod transport;
-use transport::Inbound;
-use companion_link::url::{self, ConnectUrl};
-use companion_link::vehicle::{Vehicle, VehicleConfig};
+use anyhow::Context;
 use companion_core::observations::Observations;
 use companion_core::record::{DecisionRecord, Plan};
-use anyhow::Context;
+use companion_link::url::{self, ConnectUrl};
+use companion_link::vehicle::{Vehicle, VehicleConfig};
 use std::io::Write;
 use std::path::PathBuf;
 use std::time::Duration;
 use tokio::time::Instant;
+use transport::Inbound;
 
 /// The decision core as the shell sees it: one observation snapshot in, one plan and its record out.
 pub trait Decider {
@@ -182,13 +182,25 @@ impl FlySetup {
         let dir = args
             .params
             .clone()
-            .unwrap_or_else(companion_core::spec::default_params_dir);
+            .unwrap_or_else(crate::params::default_params_dir);
         // The same loader `check` and `simulate` use (crate::params), so they cannot drift.
+        let mut files = crate::params::read_params_dir(&dir)?;
+        if let Some(r) = args.mission.as_deref() {
+            crate::params::add_file(&mut files, r);
+        }
+        Self::from_files(&files, args)
+    }
+
+    /// [`FlySetup::load`] on params already read (`--mission`'s file, when given, among them).
+    pub fn from_files(
+        files: &companion_core::spec::ParamsFiles,
+        args: &FlyArgs,
+    ) -> anyhow::Result<Self> {
         let (link, actions, route, _) =
-            crate::params::load_fly_files(&dir, args.mission.as_deref())?;
+            crate::params::load_fly_files(files, args.mission.as_deref())?;
         let key = match &args.signing_key {
             Some(p) => {
-                companion_core::spec::regular_file(p)
+                crate::params::regular_file(p)
                     .map_err(|reason| anyhow::anyhow!("--signing-key {}: {reason}", p.display()))?;
                 Some(ingest::load_signing_key(p)?)
             }
@@ -249,7 +261,7 @@ pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
     let params = args
         .params
         .clone()
-        .unwrap_or_else(companion_core::spec::default_params_dir);
+        .unwrap_or_else(crate::params::default_params_dir);
     let now = std::time::SystemTime::now();
     let command: Vec<String> = std::env::args().collect();
     let mut header = Header::new(command.join(" "), now)
@@ -625,9 +637,12 @@ async fn send(
     }
 }
 
-const INFO: companion_link::dialect::MavSeverity = companion_link::dialect::MavSeverity::MAV_SEVERITY_INFO;
-const NOTICE: companion_link::dialect::MavSeverity = companion_link::dialect::MavSeverity::MAV_SEVERITY_NOTICE;
-const WARNING: companion_link::dialect::MavSeverity = companion_link::dialect::MavSeverity::MAV_SEVERITY_WARNING;
+const INFO: companion_link::dialect::MavSeverity =
+    companion_link::dialect::MavSeverity::MAV_SEVERITY_INFO;
+const NOTICE: companion_link::dialect::MavSeverity =
+    companion_link::dialect::MavSeverity::MAV_SEVERITY_NOTICE;
+const WARNING: companion_link::dialect::MavSeverity =
+    companion_link::dialect::MavSeverity::MAV_SEVERITY_WARNING;
 
 /// SIGTERM (systemd's stop): ends the loop like Ctrl-C, so the logs close whole.
 async fn terminate_signal() {

@@ -815,4 +815,3 @@ pub fn run_with_cycle(
     println!("report: {}", text::clean(&path.display().to_string()));
     Ok(Some(path))
 }
-
