@@ -1,5 +1,6 @@
 //! The hot sweeps over the CSR arrays: one Bellman backup per finite-horizon stage and one
-//! value-iteration sweep, each with a kernel per fixed successor count.
+//! value-iteration sweep, each with a kernel per fixed successor count. The entry points are
+//! `#[inline]` so the solvers in other modules get them inlined, as when they shared one module.
 
 use crate::model::{Mdp, NONE, beat_bar};
 
@@ -148,11 +149,13 @@ macro_rules! by_successors {
 }
 
 /// [`backup_stage_impl`] without the screen.
+#[inline]
 pub(crate) fn backup_stage(mdp: &Mdp, next: &[f64], cur: &mut [f64], pol: &mut [u32]) {
     by_successors!(mdp, backup_stage_impl::<false>, (mdp, next, &[], cur, pol));
 }
 
 /// [`backup_stage_impl`] with the screen from `next2`.
+#[inline]
 pub(crate) fn backup_stage_screened(
     mdp: &Mdp,
     next: &[f64],
@@ -166,6 +169,7 @@ pub(crate) fn backup_stage_screened(
 /// One value-iteration sweep `nxt = T cur` (terminal states 0), returning `(min d, max d)` of `d =
 /// nxt - cur` (infinities when there is no state). The same cursor walk and unchecked reads as
 /// [`backup_stage_impl`] (same invariants), with `q = R + gamma * (sum p v)` in transition order.
+#[inline]
 pub(crate) fn vi_sweep(mdp: &Mdp, gamma: f64, cur: &[f64], nxt: &mut [f64]) -> (f64, f64) {
     by_successors!(mdp, vi_sweep_impl, (mdp, gamma, cur, nxt))
 }
