@@ -8,6 +8,15 @@
 //!
 //! CPT layout: row-major over the parents' state combinations (first parent most significant),
 //! one row of `states.len()` probabilities per combination. A root node's CPT is its prior.
+//!
+//! # Layout
+//!
+//! * `lib.rs`: the model: [`NetworkBuilder`], [`Network`], [`Node`], [`NodeId`], [`Evidence`] with
+//!   its [`Finding`]s, and [`BnError`].
+//! * `engine`: [`Engine`], the compiled junction tree (min-fill elimination order, clique and
+//!   separator tables, index maps) and Hugin propagation over it.
+//! * `query`: targeted queries ([`Engine::set_targets`], [`Engine::query`]): one plan per evidence
+//!   pattern (barren nodes pruned, hard evidence absorbed, d-separated parts dropped), cached.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;

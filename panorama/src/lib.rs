@@ -15,6 +15,16 @@
 //!   `measured - estimated so far`, and the reduced mission scenario after a drift or a failure.
 //!
 //! Pure: no I/O, no clock, no randomness.
+//!
+//! # Layout
+//!
+//! * `lib.rs`: the problem ([`Goal`], [`Ia`], [`Activity`], [`Problem`], [`Selection`]), the
+//!   allocation ([`allocate`], [`Allocation`], [`Infeasible`]) and its yardsticks ([`exact`],
+//!   [`exhaustive`], [`nga`]).
+//! * `combine`: implementation alternatives from task implementation options and core-oriented
+//!   constraints ([`combine`], [`Tio`], [`Task`], [`CoreConstraint`]).
+//! * `margins`: online performance management: [`margins`], drift, and the reduced mission
+//!   ([`reallocate`], [`reduced_problem`]).
 
 use serde::{Deserialize, Serialize};
 
