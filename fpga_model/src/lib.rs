@@ -34,11 +34,14 @@ pub use schedule::{
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{entry}: {reason}")]
 pub struct ModelError {
+    /// Dotted path of the offending entry inside its params file.
     pub entry: String,
+    /// What is wrong with it.
     pub reason: String,
 }
 
 impl ModelError {
+    /// An error at `entry` for `reason`.
     pub fn new(entry: impl Into<String>, reason: impl Into<String>) -> Self {
         Self {
             entry: entry.into(),

@@ -14,6 +14,7 @@ pub struct MdpBuilder {
 }
 
 impl MdpBuilder {
+    /// An empty builder for `n_states` states and actions `0..n_actions`.
     pub fn new(n_states: usize, n_actions: usize) -> Self {
         Self {
             n_states,

@@ -9,12 +9,17 @@ use crate::workspace::Workspace;
 /// Why a solve failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SolveError {
+    /// The discount factor is not in `(0, 1]`.
     #[error("discount factor {0} not in (0, 1]")]
     BadGamma(f64),
+    /// Policy evaluation met a singular system: with `gamma = 1`, an improper policy.
     #[error(
         "policy evaluation singular at iteration {iteration} (improper policy with gamma = 1?)"
     )]
-    Singular { iteration: u32 },
+    Singular {
+        /// The policy evaluation (1-based) that failed.
+        iteration: u32,
+    },
 }
 
 /// Default [`Config::dense_eval_max_states`]. Measured on the benches' random models (|A| = 10,

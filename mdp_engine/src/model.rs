@@ -4,7 +4,9 @@
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 
+/// Index of a state, `0..n_states`.
 pub type StateId = usize;
+/// Index of an action, `0..n_actions`; a state admits a subset of them.
 pub type ActionId = usize;
 
 /// Relative margin by which a Q-value must beat the current best to replace it (see crate docs).
@@ -17,39 +19,81 @@ pub(crate) const NONE: u32 = u32::MAX;
 /// Why an MDP could not be built or is not a valid stochastic model.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum MdpError {
+    /// A state index (of a choice or a successor) is not below the state count.
     #[error("state {state} out of range (n_states = {n_states})")]
-    StateOutOfRange { state: usize, n_states: usize },
+    StateOutOfRange {
+        /// The offending state index.
+        state: usize,
+        /// The model's state count.
+        n_states: usize,
+    },
+    /// An action index is not below the action count.
     #[error("action {action} out of range (n_actions = {n_actions})")]
-    ActionOutOfRange { action: usize, n_actions: usize },
+    ActionOutOfRange {
+        /// The offending action index.
+        action: usize,
+        /// The model's action count.
+        n_actions: usize,
+    },
+    /// The same (state, action) pair was given twice.
     #[error("action {action} given twice for state {state}")]
-    DuplicateChoice { state: usize, action: usize },
+    DuplicateChoice {
+        /// The state of the repeated choice.
+        state: usize,
+        /// The repeated action.
+        action: usize,
+    },
+    /// A choice has an empty transition list.
     #[error("state {state}, action {action}: no transition")]
-    NoTransition { state: usize, action: usize },
+    NoTransition {
+        /// The state of the empty choice.
+        state: usize,
+        /// The action of the empty choice.
+        action: usize,
+    },
+    /// A choice lists the same successor twice.
     #[error("state {state}, action {action}: next state {next} given twice")]
     DuplicateNext {
+        /// The state of the choice.
         state: usize,
+        /// The action of the choice.
         action: usize,
+        /// The repeated successor.
         next: usize,
     },
+    /// A transition probability is outside `[0, 1]` (beyond [`ROW_SUM_TOLERANCE`]) or NaN.
     #[error("state {state}, action {action}: probability {prob} to {next} not in [0, 1]")]
     BadProbability {
+        /// The state of the choice.
         state: usize,
+        /// The action of the choice.
         action: usize,
+        /// The successor the probability leads to.
         next: usize,
+        /// The rejected probability.
         prob: f64,
     },
+    /// A choice's probabilities do not sum to 1 within [`ROW_SUM_TOLERANCE`].
     #[error("state {state}, action {action}: probabilities sum to {sum}, not 1")]
     RowSum {
+        /// The state of the choice.
         state: usize,
+        /// The action of the choice.
         action: usize,
+        /// The actual sum.
         sum: f64,
     },
+    /// A reward is NaN or infinite.
     #[error("state {state}, action {action}: reward {reward} is not finite")]
     BadReward {
+        /// The state of the choice.
         state: usize,
+        /// The action of the choice.
         action: usize,
+        /// The rejected reward.
         reward: f64,
     },
+    /// A count does not fit the 32-bit indices of the compressed storage.
     #[error("too many states, actions or transitions for 32-bit indices")]
     TooLarge,
 }
@@ -156,16 +200,22 @@ impl TryFrom<MdpRaw> for Mdp {
 pub struct Choice<'a> {
     /// Global choice index (for [`Mdp::rewards_mut`] and [`Mdp::transition_range`]).
     pub index: usize,
+    /// The admissible action.
     pub action: ActionId,
+    /// Immediate reward `R(s, a)`.
     pub reward: f64,
+    /// Successor states, in the order given to the builder.
     pub next: &'a [u32],
+    /// Transition probabilities, aligned with `next`.
     pub prob: &'a [f64],
 }
 
 impl Mdp {
+    /// Number of states (terminal ones included).
     pub fn n_states(&self) -> usize {
         self.state_start.len() - 1
     }
+    /// Size of the action index space (not every action is admissible everywhere).
     pub fn n_actions(&self) -> usize {
         self.n_actions
     }
@@ -211,15 +261,20 @@ impl Mdp {
     pub fn transition_range(&self, c: usize) -> Range<usize> {
         self.choice_start[c] as usize..self.choice_start[c + 1] as usize
     }
+    /// Successor state of every transition, indexed by transition (see [`Mdp::transition_range`]).
     pub fn next_states(&self) -> &[u32] {
         &self.next
     }
+    /// Probability of every transition, indexed like [`Mdp::next_states`].
     pub fn probs(&self) -> &[f64] {
         &self.prob
     }
+    /// The probabilities for overwriting in place (the structure stays fixed); call
+    /// [`Mdp::validate`] after.
     pub fn probs_mut(&mut self) -> &mut [f64] {
         &mut self.prob
     }
+    /// Rewards indexed by choice index.
     pub fn rewards(&self) -> &[f64] {
         &self.choice_reward
     }

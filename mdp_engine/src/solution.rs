@@ -14,6 +14,8 @@ pub struct Stats {
     /// `max_s |max_a Q(s,a) - v(s)|` at the returned values (finite horizon: the certified bound
     /// on the extrapolated stages, 0 when every stage was computed).
     pub residual: f64,
+    /// False when the solver stopped before its stopping rule held (`max_iterations` reached, or
+    /// the values stopped being finite).
     pub converged: bool,
 }
 
@@ -30,6 +32,7 @@ pub struct FiniteHorizonSolution<'a> {
 }
 
 impl FiniteHorizonSolution<'_> {
+    /// The horizon solved for (number of decision stages).
     pub fn horizon(&self) -> usize {
         self.horizon
     }
@@ -71,13 +74,16 @@ impl FiniteHorizonSolution<'_> {
 pub struct Solution<'a> {
     pub(crate) values: &'a [f64],
     pub(crate) policy: &'a [u32],
+    /// How the solve went.
     pub stats: Stats,
 }
 
 impl Solution<'_> {
+    /// The values of every state (0 for terminal states).
     pub fn values(&self) -> &[f64] {
         self.values
     }
+    /// The value of state `s`.
     pub fn value(&self, s: StateId) -> f64 {
         self.values[s]
     }

@@ -36,6 +36,7 @@ impl Default for Workspace {
 }
 
 impl Workspace {
+    /// An empty workspace; the first solve allocates.
     pub fn new() -> Self {
         Self {
             n: 0,
