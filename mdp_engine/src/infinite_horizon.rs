@@ -68,7 +68,7 @@ impl Workspace {
     /// gamma) min d, Tv + gamma/(1 - gamma) max d]` (min/max over all states; terminal states, fixed
     /// at 0, count with `d = 0`), so once `span(d) <= 2 * tolerance` the bracket's midpoint is
     /// returned for the non-terminal states: `|v - V*| <= gamma/(1 - gamma) * tolerance`, the
-    /// guarantee today's sup-norm rule (`max |d| < tolerance`, which implies this one) gave, in
+    /// guarantee of the plain sup-norm rule (`max |d| < tolerance`, which implies this one), in
     /// far fewer sweeps where the differences settle to a common gain (unichain models; with
     /// terminal states, `span(d) >= max |d|` and the two rules coincide). With `gamma = 1` it stops
     /// when `max |d| < tolerance` (no bracket). At most `cfg.max_iterations` sweeps.
