@@ -309,6 +309,7 @@ impl Engine {
         }
     }
 
+    /// The network this engine was compiled from (CPTs as last set).
     pub fn network(&self) -> &Network {
         &self.net
     }

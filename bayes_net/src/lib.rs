@@ -8,6 +8,15 @@
 //!
 //! CPT layout: row-major over the parents' state combinations (first parent most significant),
 //! one row of `states.len()` probabilities per combination. A root node's CPT is its prior.
+//!
+//! # Layout
+//!
+//! * `lib.rs`: the model: [`NetworkBuilder`], [`Network`], [`Node`], [`NodeId`], [`Evidence`] with
+//!   its [`Finding`]s, and [`BnError`].
+//! * `engine`: [`Engine`], the compiled junction tree (min-fill elimination order, clique and
+//!   separator tables, index maps) and Hugin propagation over it.
+//! * `query`: targeted queries ([`Engine::set_targets`], [`Engine::query`]): one plan per evidence
+//!   pattern (barren nodes pruned, hard evidence absorbed, d-separated parts dropped), cached.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
@@ -32,48 +41,103 @@ impl fmt::Display for NodeId {
 /// Everything that can be wrong with a network or a query.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum BnError {
+    /// Two nodes share a name.
     #[error("duplicate node name `{0}`")]
     DuplicateNode(String),
+    /// A node has an empty state list.
     #[error("node `{0}` has no states")]
     NoStates(String),
+    /// A node lists the same state name twice.
     #[error("node `{node}` lists state `{state}` twice")]
-    DuplicateState { node: String, state: String },
+    DuplicateState {
+        /// The node.
+        node: String,
+        /// The repeated state name.
+        state: String,
+    },
+    /// A node names a parent that is not in the network.
     #[error("node `{node}` names unknown parent `{parent}`")]
-    UnknownParent { node: String, parent: String },
+    UnknownParent {
+        /// The child node.
+        node: String,
+        /// The parent name that matches no node.
+        parent: String,
+    },
+    /// A node lists the same parent twice.
     #[error("node `{node}` lists parent `{parent}` twice")]
-    DuplicateParent { node: String, parent: String },
+    DuplicateParent {
+        /// The child node.
+        node: String,
+        /// The repeated parent.
+        parent: String,
+    },
+    /// The parent links form a cycle; the names are the nodes on it.
     #[error("cycle through nodes {0:?}")]
     Cycle(Vec<String>),
+    /// A CPT's length is not rows x states.
     #[error(
         "node `{node}`: CPT has {got} entries, expected {expected} ({rows} rows x {states} states)"
     )]
     CptSize {
+        /// The node whose CPT is wrong.
         node: String,
+        /// `rows * states`.
         expected: usize,
+        /// The CPT's actual length.
         got: usize,
+        /// Number of parent state combinations.
         rows: usize,
+        /// Number of the node's states.
         states: usize,
     },
+    /// A CPT row does not sum to 1 within [`ROW_TOLERANCE`].
     #[error("node `{node}`: CPT row {row} sums to {sum}, not 1")]
-    CptRow { node: String, row: usize, sum: f64 },
+    CptRow {
+        /// The node whose CPT is wrong.
+        node: String,
+        /// Index of the row (parent state combination).
+        row: usize,
+        /// The row's actual sum.
+        sum: f64,
+    },
+    /// A CPT entry is NaN or outside `[0, 1]`.
     #[error("node `{node}`: CPT entry {index} is {value}, not a probability")]
     Probability {
+        /// The node whose CPT is wrong.
         node: String,
+        /// Index of the entry in the flat CPT.
         index: usize,
+        /// The rejected entry.
         value: f64,
     },
+    /// A node name or id that is not in the network.
     #[error("unknown node {0}")]
     UnknownNode(String),
+    /// A state name (or index) the node does not have.
     #[error("node `{node}` has no state `{state}`")]
-    UnknownState { node: String, state: String },
+    UnknownState {
+        /// The node.
+        node: String,
+        /// The state name or index asked for.
+        state: String,
+    },
+    /// A soft finding's likelihood does not have one entry per state.
     #[error("node `{node}`: likelihood has {got} entries, expected {expected}")]
     LikelihoodLength {
+        /// The observed node.
         node: String,
+        /// The node's state count.
         expected: usize,
+        /// The likelihood's length.
         got: usize,
     },
+    /// A soft finding's likelihood is negative, not finite, or all zero.
     #[error("node `{node}`: likelihood must be finite, non-negative and not all zero")]
-    InvalidLikelihood { node: String },
+    InvalidLikelihood {
+        /// The observed node.
+        node: String,
+    },
+    /// The findings contradict each other or the model (their joint probability is 0).
     #[error("the evidence has probability zero")]
     ImpossibleEvidence,
 }
@@ -81,9 +145,13 @@ pub enum BnError {
 /// One node: name, state names, parents and CPT.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Node {
+    /// Unique name in the network.
     pub name: String,
+    /// State names; a state is referred to by its index here.
     pub states: Vec<String>,
+    /// Parents, in CPT order (first parent most significant).
     pub parents: Vec<NodeId>,
+    /// Row-major CPT, one row of `states.len()` probabilities per parent combination.
     pub cpt: Vec<f64>,
 }
 
@@ -111,6 +179,7 @@ pub struct NetworkBuilder {
 }
 
 impl NetworkBuilder {
+    /// An empty builder.
     pub fn new() -> Self {
         Self::default()
     }
@@ -198,18 +267,23 @@ pub struct Network {
 }
 
 impl Network {
+    /// Number of nodes.
     pub fn len(&self) -> usize {
         self.nodes.len()
     }
+    /// True for a network without nodes.
     pub fn is_empty(&self) -> bool {
         self.nodes.is_empty()
     }
+    /// All nodes, indexed by [`NodeId`].
     pub fn nodes(&self) -> &[Node] {
         &self.nodes
     }
+    /// The node with id `id` (panics when out of range).
     pub fn node(&self, id: NodeId) -> &Node {
         &self.nodes[id.0]
     }
+    /// The id of the node named `name`, if any.
     pub fn id(&self, name: &str) -> Option<NodeId> {
         self.index.get(name).map(|&i| NodeId(i))
     }
@@ -357,24 +431,30 @@ pub enum Finding {
 /// A set of findings. Several findings on one node multiply.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Evidence {
+    /// The findings in the order given; a node may appear more than once.
     pub findings: Vec<(NodeId, Finding)>,
 }
 
 impl Evidence {
+    /// No findings.
     pub fn new() -> Self {
         Self::default()
     }
+    /// Add hard evidence: `node` is in state index `state`.
     pub fn set_state(&mut self, node: NodeId, state: usize) -> &mut Self {
         self.findings.push((node, Finding::State(state)));
         self
     }
+    /// Add soft evidence on `node`: a likelihood per state.
     pub fn set_likelihood(&mut self, node: NodeId, likelihood: Vec<f64>) -> &mut Self {
         self.findings.push((node, Finding::Likelihood(likelihood)));
         self
     }
+    /// Remove every finding (keeps the allocation).
     pub fn clear(&mut self) {
         self.findings.clear();
     }
+    /// True when there is no finding.
     pub fn is_empty(&self) -> bool {
         self.findings.is_empty()
     }

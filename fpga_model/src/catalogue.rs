@@ -8,16 +8,22 @@ use std::fmt;
 /// Implementation speed class of Table 2: slow, medium, fast.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 pub enum Implementation {
+    /// Slow.
     S,
+    /// Medium.
     M,
+    /// Fast.
     F,
 }
 
 /// Execution support: CPU only, FPGA only, or CPU with an FPGA coprocessor.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 pub enum Support {
+    /// Software on the CPU.
     SW,
+    /// Hardware on FPGA tiles.
     HW,
+    /// A software part on the CPU with a hardware coprocessor part on FPGA tiles.
     #[serde(rename = "SW-HW")]
     SwHw,
 }
@@ -48,19 +54,28 @@ impl fmt::Display for Support {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Variant {
+    /// Application name (`tracking`, `obstacle_detection`, ...).
     pub app: String,
+    /// Application version (`V0`, `V1`, ...).
     pub version: String,
+    /// What this version does, as the paper describes it.
     #[serde(default)]
     pub description: String,
+    /// Speed class.
     pub implementation: Implementation,
+    /// Where it runs.
     pub support: Support,
+    /// Per-part frame times in ms, in the paper's order.
     pub ms: Vec<f64>,
+    /// Support of each `ms` entry (only needed for SW-HW).
     #[serde(default)]
     pub parts: Vec<Support>,
     /// FPGA tiles the HW part occupies (rule stated in params/variants.toml).
     pub tiles: u8,
+    /// Where the row comes from (the Table 2 cell it encodes).
     #[serde(default)]
     pub source: String,
+    /// How the row was read where the paper is ambiguous.
     #[serde(default)]
     pub note: String,
 }
@@ -81,6 +96,7 @@ impl Variant {
         }
     }
 
+    /// Per-frame time of the software parts, ms.
     pub fn sw_ms(&self) -> f64 {
         self.ms
             .iter()
@@ -90,6 +106,7 @@ impl Variant {
             .sum()
     }
 
+    /// Per-frame time of the hardware parts, ms.
     pub fn hw_ms(&self) -> f64 {
         self.ms
             .iter()
@@ -150,6 +167,7 @@ impl Variant {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct VariantsFile {
+    /// The rows, one `[[variant]]` table each.
     pub variant: Vec<Variant>,
 }
 
@@ -248,18 +266,22 @@ impl Catalogue {
         Ok(Self { variants })
     }
 
+    /// Every row, in file order.
     pub fn variants(&self) -> &[Variant] {
         &self.variants
     }
 
+    /// The application names, sorted.
     pub fn apps(&self) -> BTreeSet<&str> {
         self.variants.iter().map(|v| v.app.as_str()).collect()
     }
 
+    /// True when some row is for `app`.
     pub fn has_app(&self, app: &str) -> bool {
         self.variants.iter().any(|v| v.app == app)
     }
 
+    /// True when some row is for version `version` of `app`.
     pub fn has_version(&self, app: &str, version: &str) -> bool {
         self.variants
             .iter()

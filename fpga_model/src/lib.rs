@@ -5,6 +5,16 @@
 //!
 //! Pure: no I/O, no clock, no randomness. Every type is serde so `companion` loads it from
 //! `params/` (`platform.toml`, `variants.toml`, `resource_policies.toml`) and validates it here.
+//!
+//! # Layout
+//!
+//! * `lib.rs`: [`ModelError`] and the millisecond formatting shared by the reports ([`fmt_ms`]).
+//! * `platform`: the board ([`Platform`]): tiles, CPU budget, reconfiguration time, power and
+//!   performance needs.
+//! * `catalogue`: the Table 2 variant catalogue ([`Catalogue`], [`Variant`], [`Implementation`]).
+//! * `policy`: resource policies as data ([`ResourcePolicy`]): priorities and degradation paths.
+//! * `schedule`: the "just enough" scheduler ([`schedule`], [`schedule_into`],
+//!   [`ScheduleWorkspace`]) and its result ([`Schedule`], [`Placement`], [`Degradation`]).
 
 mod catalogue;
 mod platform;
@@ -24,11 +34,14 @@ pub use schedule::{
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{entry}: {reason}")]
 pub struct ModelError {
+    /// Dotted path of the offending entry inside its params file.
     pub entry: String,
+    /// What is wrong with it.
     pub reason: String,
 }
 
 impl ModelError {
+    /// An error at `entry` for `reason`.
     pub fn new(entry: impl Into<String>, reason: impl Into<String>) -> Self {
         Self {
             entry: entry.into(),

@@ -8,11 +8,15 @@ use std::collections::BTreeMap;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Platform {
+    /// Board name (TeraSIC SoCKit).
     pub board: String,
+    /// FPGA SoC device on the board.
     pub device: String,
     /// Dynamically reconfigurable FPGA tiles (section 6.3: four).
     pub tiles: u8,
+    /// CPU cores (two Cortex-A9).
     pub cpu_cores: u8,
+    /// CPU clock in MHz.
     pub cpu_mhz: f64,
     /// Highest allowed CPU utilisation of the online cores (applications plus external load).
     pub cpu_budget: f64,
@@ -20,6 +24,7 @@ pub struct Platform {
     pub cpu_thresholds: Vec<f64>,
     /// Partial reconfiguration time of one tile.
     pub reconfiguration_ms_per_tile: f64,
+    /// Board power estimate.
     pub power: PowerModel,
     /// Frame-rate need per application (section 4.3.2), by app name.
     #[serde(default)]
@@ -30,7 +35,9 @@ pub struct Platform {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PowerModel {
+    /// Power of the idle board, W.
     pub base_w: f64,
+    /// Extra power per configured, used tile, W.
     pub per_active_tile_w: f64,
     /// Extra power with every core fully loaded; scaled by the fraction of nominal CPU in use.
     pub cpu_full_load_w: f64,
@@ -43,9 +50,13 @@ pub struct PowerModel {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Performance {
+    /// Width of the application's window on the ground, m.
     pub window_m: f64,
+    /// Largest fraction of the window the watched thing may move between two frames.
     pub max_shift_fraction: f64,
+    /// Floor on the required rate, frames per second.
     pub min_fps: f64,
+    /// Where the numbers come from.
     #[serde(default)]
     pub source: String,
 }
@@ -84,6 +95,7 @@ fn non_negative(entry: &str, x: f64) -> Result<(), ModelError> {
 }
 
 impl Platform {
+    /// Check every count and quantity is in range, naming the first bad entry.
     pub fn validate(&self) -> Result<(), ModelError> {
         if self.tiles == 0 {
             return Err(ModelError::new("tiles", "must be at least 1"));

@@ -12,6 +12,7 @@ pub struct ResourcePolicy {
     /// Filled from the table's key by the loader (`safety`, `mission`).
     #[serde(default)]
     pub name: String,
+    /// What the policy is for, in words.
     #[serde(default)]
     pub description: String,
     /// Applications, most important first. The last one gives way first.

@@ -10,7 +10,9 @@ use std::fmt::{self, Write as _};
 /// What the decision layer asks to run this cycle.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Request {
+    /// Application to run.
     pub app: String,
+    /// Version of it to run.
     pub version: String,
     /// Frames per second the application must process (1000 / max ms per frame).
     pub required_fps: f64,
@@ -21,6 +23,7 @@ pub struct Request {
 }
 
 impl Request {
+    /// A request at rate `required_fps`, ranked by the policy.
     pub fn new(app: &str, version: &str, required_fps: f64) -> Self {
         Self {
             app: app.into(),
@@ -40,8 +43,10 @@ impl Request {
 /// it has failed.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Tile {
+    /// The partial bitstream loaded, `None` when blank.
     #[serde(default)]
     pub bitstream: Option<String>,
+    /// True once the tile has failed; the scheduler then places nothing on it.
     #[serde(default)]
     pub failed: bool,
 }
@@ -49,7 +54,9 @@ pub struct Tile {
 /// The platform as the scheduler sees it between cycles: passed in, returned updated.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct PlatformState {
+    /// Every tile, indexed by tile number.
     pub tiles: Vec<Tile>,
+    /// CPU cores currently online.
     pub cores_online: u8,
     /// CPU load not caused by scheduled applications (OS, decision core, a monitor reading above
     /// what the placements account for), as a fraction of the nominal (all cores) CPU.
@@ -67,18 +74,21 @@ impl PlatformState {
         }
     }
 
+    /// Mark `tile` failed (ignored when out of range).
     pub fn fail_tile(&mut self, tile: u8) {
         if let Some(t) = self.tiles.get_mut(usize::from(tile)) {
             t.failed = true;
         }
     }
 
+    /// Mark `tile` healthy again (ignored when out of range).
     pub fn repair_tile(&mut self, tile: u8) {
         if let Some(t) = self.tiles.get_mut(usize::from(tile)) {
             t.failed = false;
         }
     }
 
+    /// Numbers of the failed tiles, increasing.
     pub fn failed_tiles(&self) -> Vec<u8> {
         self.tiles
             .iter()
@@ -100,16 +110,23 @@ impl PlatformState {
 /// One application variant placed on the platform.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Placement {
+    /// Application placed.
     pub app: String,
+    /// Version placed (after any degradation).
     pub version: String,
+    /// Speed class chosen: the slowest that meets `required_fps`.
     pub implementation: Implementation,
+    /// Where it runs.
     pub support: Support,
+    /// Tiles its HW part occupies.
     pub tiles: Vec<u8>,
     /// Fraction of the nominal CPU used at `required_fps`.
     pub cpu_share: f64,
+    /// Per-frame time, the sum of the parts, ms.
     pub ms_per_frame: f64,
     /// Per-part times as the paper writes them (`[10, 1]`).
     pub ms: Vec<f64>,
+    /// The rate the request asked for, frames per second.
     pub required_fps: f64,
     /// tiles + cpu_share (section 4.3.1).
     pub u_app: f64,
@@ -117,24 +134,34 @@ pub struct Placement {
     pub reconfigured: Vec<u8>,
 }
 
+/// An application run at another version than requested, along the policy's degradation path.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Degradation {
+    /// The application.
     pub app: String,
+    /// The version requested.
     pub from: String,
+    /// The version placed instead.
     pub to: String,
+    /// Why the requested version did not fit.
     pub reason: String,
 }
 
+/// A requested application left out of the schedule.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Dropped {
+    /// The application.
     pub app: String,
+    /// The version requested, or the last one tried along its degradation path.
     pub version: String,
+    /// Why nothing of it fits.
     pub reason: String,
 }
 
 /// Result of one scheduling decision.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Schedule {
+    /// Name of the resource policy applied.
     pub policy: String,
     /// In request order.
     pub placements: Vec<Placement>,
@@ -143,16 +170,25 @@ pub struct Schedule {
     pub cpu_load: f64,
     /// Sum of placement shares, fraction of the nominal CPU.
     pub app_cpu_share: f64,
+    /// CPU load not caused by the placements, fraction of the nominal CPU.
     pub external_cpu_load: f64,
+    /// CPU cores online during this decision.
     pub cpu_cores_online: u8,
+    /// Tiles occupied by the placements.
     pub tiles_used: u8,
     /// Healthy tiles not used by a placement (the resource BN's `free_tiles` observation).
     pub free_tiles: u8,
+    /// Numbers of the failed tiles.
     pub failed_tiles: Vec<u8>,
+    /// Tiles (re)configured by this decision.
     pub reconfigurations: u32,
+    /// Time those reconfigurations take, ms.
     pub reconfiguration_ms: f64,
+    /// Board power estimate for this schedule, W.
     pub power_w: f64,
+    /// Applications run at a lower version than requested.
     pub degraded: Vec<Degradation>,
+    /// Applications left out.
     pub dropped: Vec<Dropped>,
     /// The paper's Resources column: the placements' times joined by " + " (`10 + 5 + 394 ms`).
     pub summary: String,
@@ -207,6 +243,7 @@ pub struct ScheduleWorkspace {
 }
 
 impl ScheduleWorkspace {
+    /// Empty buffers; the first decision allocates.
     pub fn new() -> Self {
         Self::default()
     }

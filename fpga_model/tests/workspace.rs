@@ -5,6 +5,8 @@
 //! reused across a sequence of calls; and a warm run allocates nothing.
 
 mod common;
+// Shared with the companion tests, whose crate lints it; `pub` is how they reach it.
+#[allow(unreachable_pub)]
 #[path = "../../companion-testkit/tests/support/counting_alloc.rs"]
 mod counting_alloc;
 

@@ -6,7 +6,9 @@ use serde::{Deserialize, Serialize};
 /// A task implementation option: the hardware and software resources that implement one task.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Tio {
+    /// Name, unique within its task.
     pub name: String,
+    /// Hardware and software resources the option uses.
     #[serde(default)]
     pub resources: Vec<String>,
 }
@@ -14,7 +16,9 @@ pub struct Tio {
 /// A robotic task and its options.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Task {
+    /// Name of the robotic task.
     pub name: String,
+    /// The implementation options of the task.
     pub tios: Vec<Tio>,
 }
 
@@ -23,14 +27,30 @@ pub struct Task {
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum CoreConstraint {
     /// The task's TIO must use `resource` (glazed area: moving methods must use sonar).
-    Require { task: String, resource: String },
+    Require {
+        /// The constrained task.
+        task: String,
+        /// The resource every allowed TIO uses.
+        resource: String,
+    },
     /// The task's TIO must not use `resource`.
-    Forbid { task: String, resource: String },
+    Forbid {
+        /// The constrained task.
+        task: String,
+        /// The resource no allowed TIO uses.
+        resource: String,
+    },
     /// Only these TIOs of the task are allowed.
-    Only { task: String, tios: Vec<String> },
+    Only {
+        /// The constrained task.
+        task: String,
+        /// Names of the allowed TIOs.
+        tios: Vec<String>,
+    },
 }
 
 impl CoreConstraint {
+    /// The task this constraint applies to.
     pub fn task(&self) -> &str {
         match self {
             CoreConstraint::Require { task, .. }

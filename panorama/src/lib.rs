@@ -15,6 +15,16 @@
 //!   `measured - estimated so far`, and the reduced mission scenario after a drift or a failure.
 //!
 //! Pure: no I/O, no clock, no randomness.
+//!
+//! # Layout
+//!
+//! * `lib.rs`: the problem ([`Goal`], [`Ia`], [`Activity`], [`Problem`], [`Selection`]), the
+//!   allocation ([`allocate`], [`Allocation`], [`Infeasible`]) and its yardsticks ([`exact`],
+//!   [`exhaustive`], [`nga`]).
+//! * `combine`: implementation alternatives from task implementation options and core-oriented
+//!   constraints ([`combine`], [`Tio`], [`Task`], [`CoreConstraint`]).
+//! * `margins`: online performance management: [`margins`], drift, and the reduced mission
+//!   ([`reallocate`], [`reduced_problem`]).
 
 use serde::{Deserialize, Serialize};
 
@@ -28,7 +38,9 @@ pub use margins::{
 /// An end-oriented goal: the mission total of indicator `name` must stay `<= bound`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Goal {
+    /// The indicator summed over the mission (`energy`, `duration`).
     pub name: String,
+    /// Upper bound on the mission total, in the indicator's unit (J, s).
     pub bound: f64,
 }
 
@@ -37,9 +49,13 @@ pub struct Goal {
 /// (a failure of any of them removes the IA).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Ia {
+    /// Name, unique within its activity.
     pub name: String,
+    /// Estimated cost per goal, in [`Problem::goals`] order.
     pub cost: Vec<f64>,
+    /// Capability rank: higher is more capable.
     pub capability: f64,
+    /// Resources used; the failure of any of them removes this IA.
     #[serde(default)]
     pub resources: Vec<String>,
 }
@@ -47,14 +63,18 @@ pub struct Ia {
 /// A part of the mission flown under constant constraints, with its candidate IAs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Activity {
+    /// Name of the mission part.
     pub name: String,
+    /// The candidate implementation alternatives.
     pub ias: Vec<Ia>,
 }
 
 /// A mission scenario (or a reduced one): activities in flight order and goals in the user's order.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Problem {
+    /// End-oriented goals, processed in this order.
     pub goals: Vec<Goal>,
+    /// Activities in flight order.
     pub activities: Vec<Activity>,
 }
 
@@ -86,14 +106,21 @@ pub enum Infeasible {
         "goal {goal}: lowest reachable total {minimum:.3} exceeds bound {bound:.3} by {excess:.3}"
     )]
     Goal {
+        /// Name of the goal that cannot be met.
         goal: String,
+        /// The lowest total the remaining IAs reach.
         minimum: f64,
+        /// The goal's bound.
         bound: f64,
+        /// `minimum - bound`.
         excess: f64,
     },
     /// An activity has no implementation alternative left (all filtered or all failed).
     #[error("activity {activity}: no implementation alternative left")]
-    NoAlternative { activity: String },
+    NoAlternative {
+        /// Name of the empty activity.
+        activity: String,
+    },
 }
 
 impl Infeasible {
@@ -110,9 +137,13 @@ impl Infeasible {
 /// candidate sets left after the reductions (indices into each activity's `ias`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Allocation {
+    /// The chosen IA per activity (index into its `ias`).
     pub choice: Vec<usize>,
+    /// Mission total per goal of the chosen IAs.
     pub totals: Vec<f64>,
+    /// Summed selection score of the chosen IAs.
     pub score: f64,
+    /// Per activity, the IA indices still allowed after the goals' reductions.
     #[serde(default)]
     pub candidates: Vec<Vec<usize>>,
 }

@@ -8,8 +8,11 @@ use serde::{Deserialize, Serialize};
 /// and the measured total per goal since the mission started.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Measured {
+    /// Index of the activity being flown.
     pub activity: usize,
+    /// Fraction of that activity already flown, in `[0, 1]`.
     pub fraction: f64,
+    /// Measured total per goal since the mission started, in the problem's goal order.
     pub so_far: Vec<f64>,
 }
 

@@ -6,7 +6,7 @@ use bayes_net::{Evidence, Finding, Network, NetworkBuilder, NodeId};
 use proptest::prelude::*;
 
 /// Posterior marginals by summing the full joint (independent of the junction tree).
-pub fn enumerate(net: &Network, ev: &Evidence) -> Option<Vec<Vec<f64>>> {
+pub(crate) fn enumerate(net: &Network, ev: &Evidence) -> Option<Vec<Vec<f64>>> {
     let card: Vec<usize> = net.nodes().iter().map(|n| n.states.len()).collect();
     let mut out: Vec<Vec<f64>> = card.iter().map(|&k| vec![0.0; k]).collect();
     let mut a = vec![0usize; card.len()];
@@ -51,7 +51,7 @@ pub fn enumerate(net: &Network, ev: &Evidence) -> Option<Vec<Vec<f64>>> {
 /// A random network description: states per node, parents (earlier nodes, shuffled order of
 /// insertion via a permutation), raw CPT weights, and evidence.
 #[derive(Debug, Clone)]
-pub struct Case {
+pub(crate) struct Case {
     pub card: Vec<usize>,
     pub parents: Vec<Vec<usize>>,
     pub weights: Vec<f64>,
@@ -59,7 +59,7 @@ pub struct Case {
     pub evidence: Vec<(usize, Option<usize>, Vec<f64>)>,
 }
 
-pub fn case() -> impl Strategy<Value = Case> {
+pub(crate) fn case() -> impl Strategy<Value = Case> {
     (1usize..=10).prop_flat_map(|n| {
         let card = prop::collection::vec(2usize..=4, n);
         // Parent candidates: each earlier node with some probability; at most 3 parents.
@@ -101,7 +101,7 @@ pub fn case() -> impl Strategy<Value = Case> {
     })
 }
 
-pub fn build(c: &Case) -> (Network, Vec<NodeId>) {
+pub(crate) fn build(c: &Case) -> (Network, Vec<NodeId>) {
     let n = c.card.len();
     let name = |i: usize| format!("x{i}");
     let mut b = NetworkBuilder::new();
@@ -137,7 +137,7 @@ pub fn build(c: &Case) -> (Network, Vec<NodeId>) {
 }
 
 /// Lauritzen & Spiegelhalter (1988) chest clinic ("Asia"), the textbook network.
-pub fn asia() -> Network {
+pub(crate) fn asia() -> Network {
     let yn = ["yes", "no"];
     let none: [&str; 0] = [];
     let mut b = NetworkBuilder::new();

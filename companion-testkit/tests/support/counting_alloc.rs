@@ -1,22 +1,23 @@
 //! A counting global allocator for the no-allocation tests (each test file that includes this
 //! module is its own binary, so the allocator is installed there only).
 //!
-//! Only the measuring thread is counted: the harness's threads (output capture, the main thread
-//! waiting on the test) may allocate at any time.
+//! Only the measuring thread is counted, in a counter of its own: the harness's threads (output
+//! capture, the main thread waiting on the test) and the tests running beside it may allocate at
+//! any time.
 
 use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::cell::Cell;
 
 struct Counting;
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
 
 std::thread_local! {
-    static COUNTED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+    static COUNTED: Cell<bool> = const { Cell::new(false) };
+    static ALLOCS: Cell<usize> = const { Cell::new(0) };
 }
 
 fn count() {
     if COUNTED.with(|c| c.get()) {
-        ALLOCS.fetch_add(1, Ordering::SeqCst);
+        ALLOCS.with(|n| n.set(n.get() + 1));
     }
 }
 
@@ -39,11 +40,11 @@ static A: Counting = Counting;
 
 /// Allocations (and reallocations) made by `f` on this thread.
 pub fn allocations(f: impl FnOnce()) -> usize {
-    let before = ALLOCS.load(Ordering::SeqCst);
+    let before = ALLOCS.with(Cell::get);
     COUNTED.with(|c| c.set(true));
     f();
     COUNTED.with(|c| c.set(false));
-    ALLOCS.load(Ordering::SeqCst) - before
+    ALLOCS.with(Cell::get) - before
 }
 
 /// The counter sees an allocation (so a zero elsewhere means something).

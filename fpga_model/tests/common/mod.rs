@@ -4,7 +4,7 @@
 use fpga_model::*;
 use std::sync::OnceLock;
 
-pub struct Params {
+pub(crate) struct Params {
     pub platform: Platform,
     pub catalogue: Catalogue,
     pub safety: ResourcePolicy,
@@ -12,7 +12,7 @@ pub struct Params {
 }
 
 /// Parsed once per test binary.
-pub fn params() -> &'static Params {
+pub(crate) fn params() -> &'static Params {
     static P: OnceLock<Params> = OnceLock::new();
     P.get_or_init(load)
 }
@@ -52,7 +52,7 @@ fn load() -> Params {
     }
 }
 
-pub fn placed<'a>(s: &'a Schedule, app: &str) -> Option<&'a Placement> {
+pub(crate) fn placed<'a>(s: &'a Schedule, app: &str) -> Option<&'a Placement> {
     s.placements.iter().find(|p| p.app == app)
 }
-pub mod reference;
+pub(crate) mod reference;

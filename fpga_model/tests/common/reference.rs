@@ -121,7 +121,7 @@ fn why_not(
 
 /// Decide placements for `requests` on `state` under `policy`. Returns the schedule and the
 /// platform state after it (tile bitstreams updated; faults and loads unchanged).
-pub fn reference_schedule(
+pub(crate) fn reference_schedule(
     platform: &Platform,
     catalogue: &Catalogue,
     policy: &ResourcePolicy,

@@ -3,11 +3,11 @@
 #![allow(dead_code)]
 
 /// 64-bit linear congruential generator (Knuth's MMIX constants).
-pub struct Lcg(pub u64);
+pub(crate) struct Lcg(pub u64);
 
 impl Lcg {
     /// Uniform in [0, 1) from the top 53 bits.
-    pub fn f(&mut self) -> f64 {
+    pub(crate) fn f(&mut self) -> f64 {
         self.0 = self
             .0
             .wrapping_mul(6364136223846793005)
@@ -16,7 +16,7 @@ impl Lcg {
     }
 
     /// Uniform in 0..n (n > 0).
-    pub fn below(&mut self, n: usize) -> usize {
+    pub(crate) fn below(&mut self, n: usize) -> usize {
         ((self.f() * n as f64) as usize).min(n - 1)
     }
 }
