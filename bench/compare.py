@@ -1,4 +1,4 @@
-"""Side-by-side comparison of the companion's MDP and BN engines with Python peers (issue 8).
+"""Side-by-side comparison of the companion's MDP and BN engines with Python peers.
 
 Run through `bench/compare` (sets up bench/.venv, builds and exports). Both sides are timed the
 same way: in-process, around the solve/query call only, after one warm-up call, on the same
