@@ -134,7 +134,6 @@ class StandinAutopilot(LinkIO, MessageHandlers, MissionProtocol, ArmingAndModes,
         self.stop()
 
     @property
-
     def url(self) -> str:
         kind, host, _ = parse_url(self.cfg.listen)
         return f"{'tcp' if kind == 'tcp' else 'udpout'}:{host}:{self.port}"

@@ -8,8 +8,6 @@ from .vocabulary import HOME_ALT_AMSL, HOME_LAT, HOME_LON
 
 
 @dataclass
-
-
 class StandinConfig:
     """Everything a test may want to change. Times are in simulated seconds unless named *_wall."""
 

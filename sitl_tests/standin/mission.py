@@ -13,6 +13,8 @@ class MissionProtocol:
     """Mission items of StandinAutopilot (mixed into it): item 0 is home, uploads follow
     MissionItemProtocol, AUTO flies the items in order."""
 
+    # ----- mission protocol messages (libraries/GCS_MAVLink/MissionItemProtocol.cpp) --------------
+
     def _h_MISSION_COUNT(self, link: Link, m: Any) -> None:
         hdr = m.get_header()
         src = (hdr.srcSystem, hdr.srcComponent)

@@ -9,8 +9,6 @@ from typing import Any, Dict, List
 
 
 @dataclass
-
-
 class Event:
     wall: float      # seconds since stand-in start (wall clock)
     sim: float       # simulated seconds since start

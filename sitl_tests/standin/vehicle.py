@@ -8,8 +8,6 @@ from .vocabulary import MODE_NAMES, MODES, NOT_ARMABLE, POSITION_MODES, PREARM_D
 
 
 @dataclass
-
-
 class Vehicle:
     north: float = 0.0
     east: float = 0.0
