@@ -4,6 +4,9 @@ Run through `bench/compare` (sets up bench/.venv, builds and exports). Both side
 same way: in-process, around the solve/query call only, after one warm-up call, on the same
 exported models. Agreement is checked before speed: MDP values to 1e-6 and actions (ties, where
 the two actions' Q-values differ by <= 1e-6, count as agreeing), BN posteriors to 1e-9.
+
+One function per case group (`mdp_cases`, `bn_cases`, `ingest_cases`, `cycle_cases`) appends its
+cases and notes; `render` makes the tables and `write_doc` fills bench/report_template.md with them.
 """
 
 import argparse
