@@ -1,9 +1,12 @@
-"""Side-by-side comparison of the companion's MDP and BN engines with Python peers (issue 8).
+"""Side-by-side comparison of the companion's MDP and BN engines with Python peers.
 
 Run through `bench/compare` (sets up bench/.venv, builds and exports). Both sides are timed the
 same way: in-process, around the solve/query call only, after one warm-up call, on the same
 exported models. Agreement is checked before speed: MDP values to 1e-6 and actions (ties, where
 the two actions' Q-values differ by <= 1e-6, count as agreeing), BN posteriors to 1e-9.
+
+One function per case group (`mdp_cases`, `bn_cases`, `ingest_cases`, `cycle_cases`) appends its
+cases and notes; `render` makes the tables and `write_doc` fills bench/report_template.md with them.
 """
 
 import argparse
@@ -13,6 +16,7 @@ import json
 import math
 import os
 import platform
+import string
 import subprocess
 import sys
 import time
@@ -21,6 +25,8 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "bench", "out")
+# docs/performance.md is this template filled with one run's numbers (string.Template placeholders).
+REPORT_TEMPLATE = os.path.join(ROOT, "bench", "report_template.md")
 MODELS = os.path.join(ROOT, "mdp_engine", "benches", "models")
 PAPER = ["reference", "navigation", "landing", "tracking", "monolithic"]
 GAMMA, HORIZON, TOL = 0.95, 100, 1e-10
@@ -255,7 +261,7 @@ def agree_mdp(mdl, solver, ref_v, ref_pol, v, pol, vref_next, gamma):
     return err <= 1e-6 and bad == 0, err, bad
 
 
-# ---------------------------------------------------------------- main
+# ---------------------------------------------------------------- the companion's timing examples
 def run_cargo(args):
     env = dict(os.environ)
     r = subprocess.run(args, cwd=ROOT, env=env, capture_output=True, text=True)
@@ -268,400 +274,373 @@ def run_cargo(args):
 LOAD0 = ""
 
 
-def main():
-    global LOAD0
+# ---------------------------------------------------------------- MDP solvers
+def mdp_models(max_states):
+    """The paper's models (exported by the companion's tests) and the random series up to max_states."""
+    models = {}
+    for name in PAPER:
+        models[name] = os.path.join(MODELS, f"{name}.json")
+    for n in [n for n in [10, 100, 1000, 10000] if n <= max_states]:
+        p = os.path.join(OUT, f"random_{n}.json")
+        if not os.path.exists(p):
+            with open(p, "w") as f:
+                json.dump(random_mdp(n), f)
+        models[f"random_{n}"] = p
+    return models
+
+
+def bench_solve(block):
+    """The companion's solves for one model, timed in-process by bench_solve."""
+    with open(os.path.join(OUT, "plan.json"), "w") as f:
+        json.dump({"cases": block}, f)
+    return {c["name"]: c for c in json.loads(run_cargo(
+        [os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "examples", "bench_solve"),
+         os.path.join(OUT, "plan.json")]))["cases"]}
+
+
+def mdp_peers(versions, notes):
+    """The Python MDP peers that import here: (pymdptoolbox's mdp module or None, stormpy or None)."""
     try:
-        with open("/proc/loadavg") as f:
-            LOAD0 = " ".join(f.read().split()[:3])
-    except OSError:
-        pass
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--json", action="store_true")
-    ap.add_argument("--budget", type=float, default=0.3, help="seconds of timed calls per case and side")
-    ap.add_argument("--no-doc", action="store_true", help="do not rewrite docs/performance.md")
-    ap.add_argument("--only", default="", help="comma list of groups to run (mdp, bn, ingest, cycle); "
-                    "a partial run never rewrites docs/performance.md")
-    ap.add_argument("--max-states", type=int, default=10000,
-                    help="skip random MDPs larger than this (a partial run: no doc rewrite)")
-    args = ap.parse_args()
-    if args.max_states < 10000:
-        args.no_doc = True
-    only = {g for g in args.only.split(",") if g}
-    bad = only - {"mdp", "bn", "ingest", "cycle"}
-    if bad:
-        raise SystemExit(f"--only: unknown group(s) {sorted(bad)} (mdp, bn, ingest, cycle)")
-    if only:
-        args.no_doc = True
-
-    def want(group):
-        return not only or group in only
-    os.makedirs(OUT, exist_ok=True)
-    B = args.budget
-    versions = {"python": platform.python_version(), "numpy": np.__version__}
-    cases = []
-    notes = []
-
-    if want("mdp"):
-        # ---- MDP models: the paper's (exported by the companion's tests) and the random series
-        models = {}
-        for name in PAPER:
-            models[name] = os.path.join(MODELS, f"{name}.json")
-        for n in [n for n in [10, 100, 1000, 10000] if n <= args.max_states]:
-            p = os.path.join(OUT, f"random_{n}.json")
-            if not os.path.exists(p):
-                with open(p, "w") as f:
-                    json.dump(random_mdp(n), f)
-            models[f"random_{n}"] = p
-        plan = []
-        for name, p in models.items():
-            big = name == "random_10000"
-            for solver in ["fh", "vi", "pi"]:
-                plan.append({"name": f"{name}/{solver}", "path": p, "solver": solver, "horizon": HORIZON,
-                             "gamma": GAMMA, "tolerance": TOL, "reps": 3 if big else 10000,
-                             "budget_s": B})
-
-        def run_rust(block):
-            # The companion's solves for one model, timed in-process by bench_solve.
-            with open(os.path.join(OUT, "plan.json"), "w") as f:
-                json.dump({"cases": block}, f)
-            return {c["name"]: c for c in json.loads(run_cargo(
-                [os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "examples", "bench_solve"),
-                 os.path.join(OUT, "plan.json")]))["cases"]}
-
+        import mdptoolbox
+        import mdptoolbox.mdp as tb
+        versions["pymdptoolbox"] = "4.0b3"
+    except Exception as e:  # noqa: BLE001
+        tb = None
+        notes.append(f"pymdptoolbox unavailable: {e}")
+    try:
+        import stormpy
+        versions["stormpy"] = stormpy.__version__
+    except Exception as e:  # noqa: BLE001
+        stormpy = None
+        why = ""
         try:
-            import mdptoolbox
-            import mdptoolbox.mdp as tb
-            versions["pymdptoolbox"] = "4.0b3"
-        except Exception as e:  # noqa: BLE001
-            tb = None
-            notes.append(f"pymdptoolbox unavailable: {e}")
-        try:
-            import stormpy
-            versions["stormpy"] = stormpy.__version__
-        except Exception as e:  # noqa: BLE001
-            stormpy = None
-            why = ""
-            try:
-                with open(os.path.join(OUT, "stormpy_pip.log")) as f:
-                    why = " ".join(f.read().split()[-40:])
-            except OSError:
-                pass
-            notes.append(f"stormpy unavailable: {e}; pip: {why}")
+            with open(os.path.join(OUT, "stormpy_pip.log")) as f:
+                why = " ".join(f.read().split()[-40:])
+        except OSError:
+            pass
+        notes.append(f"stormpy unavailable: {e}; pip: {why}")
+    return tb, stormpy
 
-        for name, p in models.items():
-            with open(p) as f:
-                mdl = Model(json.load(f))
-            big = name == "random_10000"
-            reps = 3 if big else 1000
-            # The companion is timed in two blocks, just before and just after the peers on this
-            # model, and its median is over both: on this shared machine the speed changes for
-            # minutes at a time, and both sides should sample the same stretch of it.
-            block = [c for c in plan if c["path"] == p]
-            log(f"running companion MDP solves ({name}, first block) ...")
-            rust = run_rust(block)
-            pending = []  # (key, case without companion timing)
-            deferred_notes = []  # (key, fn(companion median) -> note)
-            npy = NumpySolver(mdl)
-            # the numpy reference values for tie checks
-            ref = {}
-            ref["fh"] = npy.fh(HORIZON) + (npy.v1, 1.0)
-            vv, pp = npy.vi(GAMMA, TOL)
-            ref["vi"] = (vv, pp, vv, GAMMA)
-            ref["pi"] = ref["vi"]
-            P = R = None
-            if tb is not None:
-                P, R = toolbox_arrays(mdl, sparse=mdl.n > 1000)
-            for solver in ["fh", "vi", "pi"]:
-                key = f"{name}/{solver}"
-                if key not in rust:
-                    notes.append(f"{key}: no companion result")
-                    continue
-                rc = rust[key]
-                rv, rp = np.array(rc["values"]), np.array(rc["policy"])
-                _, _, vnext, g = ref[solver]
 
-                def add(peer, v, pol, ts, extra=None, key=key, solver=solver, rv=rv, rp=rp,
-                        vnext=vnext, g=g):
-                    ok, err, bad = agree_mdp(mdl, solver, rv, rp, v, pol, vnext, g)
-                    med, p99, n = stats(ts)
-                    c = {"name": key, "kind": "mdp", "states": mdl.n, "peer": peer, "agree": bool(ok),
-                         "max_value_diff": err, "action_mismatches": bad,
-                         "peer_median_ns": med, "peer_p99_ns": p99, "peer_reps": n,
-                         "target": TARGETS.get(peer), "policy_agree": bad == 0}
-                    if extra:
-                        c.update(extra)
-                    pending.append((key, c))
+def mdp_cases(B, max_states, cases, notes, versions):
+    """Every MDP model solved finite-horizon, by value and by policy iteration, against numpy,
+    pymdptoolbox and Storm."""
+    models = mdp_models(max_states)
+    plan = []
+    for name, p in models.items():
+        big = name == "random_10000"
+        for solver in ["fh", "vi", "pi"]:
+            plan.append({"name": f"{name}/{solver}", "path": p, "solver": solver, "horizon": HORIZON,
+                         "gamma": GAMMA, "tolerance": TOL, "reps": 3 if big else 10000,
+                         "budget_s": B})
+    tb, stormpy = mdp_peers(versions, notes)
+    for name, p in models.items():
+        mdp_model_cases(name, p, [c for c in plan if c["path"] == p], tb, stormpy, B, cases, notes)
 
-                # numpy
-                f_np = {"fh": lambda: npy.fh(HORIZON), "vi": lambda: npy.vi(GAMMA, TOL),
-                        "pi": lambda: npy.pi(GAMMA)}[solver]
-                if solver == "pi" and mdl.n > 1000:
-                    # the numpy baseline evaluates policies with a dense solve: 800 MB at 10000
-                    deferred_notes.append((key, lambda rmed, key=key: (
-                        f"{key}: companion policy iteration (sparse evaluation) "
-                        f"{fmt_ns(rmed)} median; no peer run at this size (numpy's dense "
-                        f"evaluation needs an 800 MB matrix, pymdptoolbox not run)")))
+
+def mdp_model_cases(name, p, block, tb, stormpy, B, cases, notes):
+    """One model's cases: the companion timed in two blocks around the peers (see below)."""
+    with open(p) as f:
+        mdl = Model(json.load(f))
+    big = name == "random_10000"
+    reps = 3 if big else 1000
+    # The companion is timed in two blocks, just before and just after the peers on this
+    # model, and its median is over both: on this shared machine the speed changes for
+    # minutes at a time, and both sides should sample the same stretch of it.
+    log(f"running companion MDP solves ({name}, first block) ...")
+    rust = bench_solve(block)
+    pending = []  # (key, case without companion timing)
+    deferred_notes = []  # (key, fn(companion median) -> note)
+    npy = NumpySolver(mdl)
+    # the numpy reference values for tie checks
+    ref = {}
+    ref["fh"] = npy.fh(HORIZON) + (npy.v1, 1.0)
+    vv, pp = npy.vi(GAMMA, TOL)
+    ref["vi"] = (vv, pp, vv, GAMMA)
+    ref["pi"] = ref["vi"]
+    P = R = None
+    if tb is not None:
+        P, R = toolbox_arrays(mdl, sparse=mdl.n > 1000)
+    for solver in ["fh", "vi", "pi"]:
+        key = f"{name}/{solver}"
+        if key not in rust:
+            notes.append(f"{key}: no companion result")
+            continue
+        rc = rust[key]
+        rv, rp = np.array(rc["values"]), np.array(rc["policy"])
+        _, _, vnext, g = ref[solver]
+
+        def add(peer, v, pol, ts, extra=None, key=key, solver=solver, rv=rv, rp=rp,
+                vnext=vnext, g=g):
+            ok, err, bad = agree_mdp(mdl, solver, rv, rp, v, pol, vnext, g)
+            med, p99, n = stats(ts)
+            c = {"name": key, "kind": "mdp", "states": mdl.n, "peer": peer, "agree": bool(ok),
+                 "max_value_diff": err, "action_mismatches": bad,
+                 "peer_median_ns": med, "peer_p99_ns": p99, "peer_reps": n,
+                 "target": TARGETS.get(peer), "policy_agree": bad == 0}
+            if extra:
+                c.update(extra)
+            pending.append((key, c))
+
+        # numpy
+        f_np = {"fh": lambda: npy.fh(HORIZON), "vi": lambda: npy.vi(GAMMA, TOL),
+                "pi": lambda: npy.pi(GAMMA)}[solver]
+        if solver == "pi" and mdl.n > 1000:
+            # the numpy baseline evaluates policies with a dense solve: 800 MB at 10000
+            deferred_notes.append((key, lambda rmed, key=key: (
+                f"{key}: companion policy iteration (sparse evaluation) "
+                f"{fmt_ns(rmed)} median; no peer run at this size (numpy's dense "
+                f"evaluation needs an 800 MB matrix, pymdptoolbox not run)")))
+        else:
+            v, pol = f_np()[:2]
+            add("numpy", v, pol, timeit(f_np, reps, B))
+        # pymdptoolbox
+        if tb is not None:
+            if solver == "fh":
+                def mk():
+                    with contextlib.redirect_stdout(io.StringIO()):
+                        s = tb.FiniteHorizon(P, R, 1, HORIZON)
+                        s.run()
+                    return s.V[:, 0], s.policy[:, 0]
+            elif solver == "vi":
+                # pymdptoolbox's ValueIteration stops on span(V_k+1 - V_k) < thresh: its
+                # policy is epsilon-optimal but its V is not converged (by design; on the
+                # random models off by 13-22). Agreement needs converged values, so it runs
+                # the sweeps the sup-norm rule needs for the same tolerance (numpy's count
+                # on this model; same Jacobi iteration from V = 0), its span stop disabled
+                # through its public `thresh`/`max_iter`. Its default run is in the notes.
+                sweeps = npy.vi_sweeps
+
+                def mk(sweeps=sweeps):
+                    s = tb.ValueIteration(P, R, GAMMA, epsilon=1e-9, max_iter=100000)
+                    s.thresh = 0.0
+                    s.max_iter = sweeps
+                    s.run()
+                    return np.array(s.V), np.array(s.policy)
+
+                def mk_span():
+                    s = tb.ValueIteration(P, R, GAMMA, epsilon=1e-9, max_iter=100000)
+                    # its own iteration bound (_boundIter) stops early on the random models
+                    s.max_iter = 100000
+                    s.run()
+                    return np.array(s.V), np.array(s.policy), s.iter
+            else:
+                def mk():
+                    s = tb.PolicyIteration(P, R, GAMMA, max_iter=100000)
+                    s.run()
+                    return np.array(s.V), np.array(s.policy)
+            if big and solver == "pi":
+                pass  # noted with numpy above
+            elif big and solver == "vi":
+                notes.append(f"{key}: pymdptoolbox skipped (one solve took over 2 minutes here)")
+            else:
+                if big:
+                    # minutes per solve at this size: one timed call, no warm-up
+                    t0 = time.perf_counter_ns()
+                    v, pol = mk()
+                    ts = [time.perf_counter_ns() - t0]
+                    notes.append(f"{key}: pymdptoolbox timed once, no warm-up (slow at this size)")
                 else:
-                    v, pol = f_np()[:2]
-                    add("numpy", v, pol, timeit(f_np, reps, B))
-                # pymdptoolbox
-                if tb is not None:
-                    if solver == "fh":
-                        def mk():
-                            with contextlib.redirect_stdout(io.StringIO()):
-                                s = tb.FiniteHorizon(P, R, 1, HORIZON)
-                                s.run()
-                            return s.V[:, 0], s.policy[:, 0]
-                    elif solver == "vi":
-                        # pymdptoolbox's ValueIteration stops on span(V_k+1 - V_k) < thresh: its
-                        # policy is epsilon-optimal but its V is not converged (by design; on the
-                        # random models off by 13-22). Agreement needs converged values, so it runs
-                        # the sweeps the sup-norm rule needs for the same tolerance (numpy's count
-                        # on this model; same Jacobi iteration from V = 0), its span stop disabled
-                        # through its public `thresh`/`max_iter`. Its default run is in the notes.
-                        sweeps = npy.vi_sweeps
-
-                        def mk(sweeps=sweeps):
-                            s = tb.ValueIteration(P, R, GAMMA, epsilon=1e-9, max_iter=100000)
-                            s.thresh = 0.0
-                            s.max_iter = sweeps
-                            s.run()
-                            return np.array(s.V), np.array(s.policy)
-
-                        def mk_span():
-                            s = tb.ValueIteration(P, R, GAMMA, epsilon=1e-9, max_iter=100000)
-                            # its own iteration bound (_boundIter) stops early on the random models
-                            s.max_iter = 100000
-                            s.run()
-                            return np.array(s.V), np.array(s.policy), s.iter
-                    else:
-                        def mk():
-                            s = tb.PolicyIteration(P, R, GAMMA, max_iter=100000)
-                            s.run()
-                            return np.array(s.V), np.array(s.policy)
-                    if big and solver == "pi":
-                        pass  # noted with numpy above
-                    elif big and solver == "vi":
-                        notes.append(f"{key}: pymdptoolbox skipped (one solve took over 2 minutes here)")
-                    else:
-                        if big:
-                            # minutes per solve at this size: one timed call, no warm-up
-                            t0 = time.perf_counter_ns()
-                            v, pol = mk()
-                            ts = [time.perf_counter_ns() - t0]
-                            notes.append(f"{key}: pymdptoolbox timed once, no warm-up (slow at this size)")
-                        else:
-                            v, pol = mk()
-                            ts = timeit(mk, reps, B)
-                        pol = np.where(mdl.nonterm, pol, -1)
-                        add("pymdptoolbox", v, pol, ts,
-                            {"note": f"ValueIteration run {sweeps} sweeps (the sup-norm rule's count; "
-                                     "its span stop gives unconverged values, see notes)"}
-                            if solver == "vi" else None)
-                        if solver == "vi" and not big:
-                            sv, spol, sit = mk_span()
-                            spol = np.where(mdl.nonterm, spol, -1)
-                            sok, serr, sbad = agree_mdp(mdl, solver, rv, rp, sv, spol, vnext, g)
-                            smed = stats(timeit(lambda: mk_span()[:2], reps, B))[0]
-                            deferred_notes.append((key, lambda rmed, key=key, sit=sit, smed=smed, sbad=sbad,
-                                                   sok=sok, serr=serr: (
-                                f"{key}: pymdptoolbox ValueIteration with its own span stop: {sit} sweeps, "
-                                f"{fmt_ns(smed)} median ({smed / rmed:.0f}x the companion), policy "
-                                f"{'equal' if sbad == 0 else f'{sbad} actions differ'}, values "
-                                f"{'agree' if sok else f'off by up to {serr:.1e} (not converged, by design)'}")))
-                # Storm: finite horizon as the cumulative reward within 100 steps
-                if stormpy is not None and solver == "fh":
-                    try:
-                        sm = storm_model(mdl, os.path.join(OUT, f"{name}.drn"))
-                        prop = stormpy.parse_properties(f"Rmax=? [C<={HORIZON}]")[0]
-
-                        def mk():
-                            return stormpy.model_checking(sm, prop, only_initial_states=False)
-
-                        res = mk()
-                        v = np.array([res.get_value(s) for s in range(mdl.n)])
-                        # Storm's value query gives no scheduler for step-bounded rewards: values only
-                        add("stormpy", v, rp, timeit(mk, 3 if big else reps, B),
-                            {"note": "values only (no stage-0 scheduler)"})
-                    except Exception as e:  # noqa: BLE001
-                        notes.append(f"{key}: stormpy failed: {type(e).__name__}: {e}")
-            log(f"running companion MDP solves ({name}, second block) ...")
-            second = run_rust(block)
-            cmed = {}
-            for key, rc in rust.items():
-                ts = rc["times_ns"] + second[key]["times_ns"]
-                cmed[key] = stats(ts)
-            for key, c in pending:
-                rmed, rp99, rn = cmed[key]
-                c.update({"companion_median_ns": rmed, "companion_p99_ns": rp99, "companion_reps": rn,
-                          "speedup": c["peer_median_ns"] / rmed})
-                cases.append(c)
-                log(f"{key:28s} {c['peer']:13s} agree={c['agree']} speedup={c['speedup']:9.1f}")
-            for key, fn in deferred_notes:
-                notes.append(fn(cmed[key][0]))
-
-    if want("bn"):
-        # ---- BN
-        bn_path = os.path.join(OUT, "health_bn.json")
-        log("running companion BN queries ...")
-        rbn = {m["name"]: m for m in json.loads(run_cargo(
-            [os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "examples", "bench_bn"), bn_path,
-             "100000", str(B)]))["managers"]}
-        with open(bn_path) as f:
-            bn = json.load(f)
-        peers = {}
-        try:
-            import pgmpy
-            from pgmpy.inference import BeliefPropagation, VariableElimination
-            from pgmpy.models import DiscreteBayesianNetwork
-            from pgmpy.factors.discrete import TabularCPD
-            versions["pgmpy"] = pgmpy.__version__
-            peers["pgmpy"] = True
-        except Exception as e:  # noqa: BLE001
-            notes.append(f"pgmpy unavailable: {e}")
-        try:
-            import pyagrum as gum
-        except Exception:  # noqa: BLE001
+                    v, pol = mk()
+                    ts = timeit(mk, reps, B)
+                pol = np.where(mdl.nonterm, pol, -1)
+                add("pymdptoolbox", v, pol, ts,
+                    {"note": f"ValueIteration run {sweeps} sweeps (the sup-norm rule's count; "
+                             "its span stop gives unconverged values, see notes)"}
+                    if solver == "vi" else None)
+                if solver == "vi" and not big:
+                    sv, spol, sit = mk_span()
+                    spol = np.where(mdl.nonterm, spol, -1)
+                    sok, serr, sbad = agree_mdp(mdl, solver, rv, rp, sv, spol, vnext, g)
+                    smed = stats(timeit(lambda: mk_span()[:2], reps, B))[0]
+                    deferred_notes.append((key, lambda rmed, key=key, sit=sit, smed=smed, sbad=sbad,
+                                           sok=sok, serr=serr: (
+                        f"{key}: pymdptoolbox ValueIteration with its own span stop: {sit} sweeps, "
+                        f"{fmt_ns(smed)} median ({smed / rmed:.0f}x the companion), policy "
+                        f"{'equal' if sbad == 0 else f'{sbad} actions differ'}, values "
+                        f"{'agree' if sok else f'off by up to {serr:.1e} (not converged, by design)'}")))
+        # Storm: finite horizon as the cumulative reward within 100 steps
+        if stormpy is not None and solver == "fh":
             try:
-                import pyAgrum as gum
+                sm = storm_model(mdl, os.path.join(OUT, f"{name}.drn"))
+                prop = stormpy.parse_properties(f"Rmax=? [C<={HORIZON}]")[0]
+
+                def mk():
+                    return stormpy.model_checking(sm, prop, only_initial_states=False)
+
+                res = mk()
+                v = np.array([res.get_value(s) for s in range(mdl.n)])
+                # Storm's value query gives no scheduler for step-bounded rewards: values only
+                add("stormpy", v, rp, timeit(mk, 3 if big else reps, B),
+                    {"note": "values only (no stage-0 scheduler)"})
             except Exception as e:  # noqa: BLE001
-                gum = None
-                notes.append(f"pyAgrum unavailable: {e}")
-        if gum is not None:
-            versions["pyAgrum"] = gum.__version__
-        for m in bn["managers"]:
-            name = m["name"]
-            rc = rbn[name]
-            rmed, rp99, rn = stats(rc["times_ns"])
-            nodes = {n["name"]: n for n in m["nodes"]}
-            query = m["query"]
-            sets = m["evidence"]
-            ref = rc["posteriors"]
+                notes.append(f"{key}: stormpy failed: {type(e).__name__}: {e}")
+    log(f"running companion MDP solves ({name}, second block) ...")
+    second = bench_solve(block)
+    cmed = {}
+    for key, rc in rust.items():
+        ts = rc["times_ns"] + second[key]["times_ns"]
+        cmed[key] = stats(ts)
+    for key, c in pending:
+        rmed, rp99, rn = cmed[key]
+        c.update({"companion_median_ns": rmed, "companion_p99_ns": rp99, "companion_reps": rn,
+                  "speedup": c["peer_median_ns"] / rmed})
+        cases.append(c)
+        log(f"{key:28s} {c['peer']:13s} agree={c['agree']} speedup={c['speedup']:9.1f}")
+    for key, fn in deferred_notes:
+        notes.append(fn(cmed[key][0]))
 
-            def add(peer, post, ts):
-                err = 0.0
-                for e in range(len(sets)):
-                    for j in range(len(query)):
-                        err = max(err, float(np.max(np.abs(np.array(post[e][j]) - np.array(ref[e][j])))))
-                med, p99, n = stats(ts)
-                cases.append({"name": f"bn/{name}", "kind": "bn", "nodes": len(nodes), "peer": peer,
-                              "agree": bool(err <= 1e-9), "max_posterior_diff": err,
-                              "companion_median_ns": rmed, "companion_p99_ns": rp99, "companion_reps": rn,
-                              "peer_median_ns": med, "peer_p99_ns": p99, "peer_reps": n,
-                              "speedup": med / rmed, "target": TARGETS.get(peer)})
-                log(f"bn/{name:25s} {peer:13s} agree={err <= 1e-9} speedup={med / rmed:9.1f}")
 
-            if "pgmpy" in peers:
-                bnm = DiscreteBayesianNetwork()
-                bnm.add_nodes_from(nodes)
-                for n in m["nodes"]:
-                    for par in n["parents"]:
-                        bnm.add_edge(par, n["name"])
-                for n in m["nodes"]:
-                    k = len(n["states"])
-                    cpt = np.array(n["cpt"]).reshape(-1, k).T  # pgmpy: rows = states, cols = parent combos
-                    bnm.add_cpds(TabularCPD(
-                        n["name"], k, cpt, evidence=n["parents"] or None,
-                        evidence_card=[len(nodes[p]["states"]) for p in n["parents"]] or None,
-                        state_names={x: nodes[x]["states"] for x in [n["name"]] + n["parents"]}))
-                bnm.check_model()
-                for peer, cls in [("pgmpy-VE", VariableElimination), ("pgmpy-BP", BeliefPropagation)]:
-                    try:
-                        inf = cls(bnm)
-                    except Exception as e:  # noqa: BLE001
-                        notes.append(f"bn/{name}: {peer} failed: {type(e).__name__}: {e}")
-                        continue
-                    it = iter(range(10**9))
+# ---------------------------------------------------------------- BN engines
+def bn_cases(B, cases, notes, versions):
+    """Every health manager's published posteriors against pgmpy (VE and BP) and pyAgrum."""
+    bn_path = os.path.join(OUT, "health_bn.json")
+    log("running companion BN queries ...")
+    rbn = {m["name"]: m for m in json.loads(run_cargo(
+        [os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "examples", "bench_bn"), bn_path,
+         "100000", str(B)]))["managers"]}
+    with open(bn_path) as f:
+        bn = json.load(f)
+    peers = {}
+    try:
+        import pgmpy
+        from pgmpy.inference import BeliefPropagation, VariableElimination
+        from pgmpy.models import DiscreteBayesianNetwork
+        from pgmpy.factors.discrete import TabularCPD
+        versions["pgmpy"] = pgmpy.__version__
+        peers["pgmpy"] = True
+    except Exception as e:  # noqa: BLE001
+        notes.append(f"pgmpy unavailable: {e}")
+    try:
+        import pyagrum as gum
+    except Exception:  # noqa: BLE001
+        try:
+            import pyAgrum as gum
+        except Exception as e:  # noqa: BLE001
+            gum = None
+            notes.append(f"pyAgrum unavailable: {e}")
+    if gum is not None:
+        versions["pyAgrum"] = gum.__version__
+    for m in bn["managers"]:
+        name = m["name"]
+        rc = rbn[name]
+        rmed, rp99, rn = stats(rc["times_ns"])
+        nodes = {n["name"]: n for n in m["nodes"]}
+        query = m["query"]
+        sets = m["evidence"]
+        ref = rc["posteriors"]
 
-                    def q(e):
-                        r = inf.query(variables=query, evidence=e, joint=False, show_progress=False)
-                        return [[float(x) for x in r[v].values] for v in query]
+        def add(peer, post, ts):
+            err = 0.0
+            for e in range(len(sets)):
+                for j in range(len(query)):
+                    err = max(err, float(np.max(np.abs(np.array(post[e][j]) - np.array(ref[e][j])))))
+            med, p99, n = stats(ts)
+            cases.append({"name": f"bn/{name}", "kind": "bn", "nodes": len(nodes), "peer": peer,
+                          "agree": bool(err <= 1e-9), "max_posterior_diff": err,
+                          "companion_median_ns": rmed, "companion_p99_ns": rp99, "companion_reps": rn,
+                          "peer_median_ns": med, "peer_p99_ns": p99, "peer_reps": n,
+                          "speedup": med / rmed, "target": TARGETS.get(peer)})
+            log(f"bn/{name:25s} {peer:13s} agree={err <= 1e-9} speedup={med / rmed:9.1f}")
 
-                    def one():
-                        i = next(it) % len(sets)
-                        q(sets[i])
-
-                    post = []
-                    for e in sets:
-                        r = inf.query(variables=query, evidence=e, joint=False, show_progress=False)
-                        # pgmpy may reorder state names: map back to the exported order
-                        post.append([[float(r[v].get_value(**{v: s})) for s in nodes[v]["states"]]
-                                     for v in query])
-                    add(peer, post, timeit(one, 2000, B))
-            if gum is not None:
-                g = gum.BayesNet(name)
-                for n in m["nodes"]:
-                    g.add(gum.LabelizedVariable(n["name"], n["name"], n["states"]))
-                for n in m["nodes"]:
-                    for par in n["parents"]:
-                        g.addArc(par, n["name"])
-                for n in m["nodes"]:
-                    k = len(n["states"])
-                    cpt = np.array(n["cpt"]).reshape([len(nodes[p]["states"]) for p in n["parents"]] + [k])
-                    # pyAgrum's CPT tensor: fill through named instantiations
-                    pot = g.cpt(n["name"])
-                    inst = gum.Instantiation(pot)
-                    inst.setFirst()
-                    while not inst.end():
-                        idx = tuple(inst.val(g.variable(x)) for x in n["parents"] + [n["name"]])
-                        pot.set(inst, float(cpt[idx]))
-                        inst.inc()
-                ie = gum.LazyPropagation(g)
+        if "pgmpy" in peers:
+            bnm = DiscreteBayesianNetwork()
+            bnm.add_nodes_from(nodes)
+            for n in m["nodes"]:
+                for par in n["parents"]:
+                    bnm.add_edge(par, n["name"])
+            for n in m["nodes"]:
+                k = len(n["states"])
+                cpt = np.array(n["cpt"]).reshape(-1, k).T  # pgmpy: rows = states, cols = parent combos
+                bnm.add_cpds(TabularCPD(
+                    n["name"], k, cpt, evidence=n["parents"] or None,
+                    evidence_card=[len(nodes[p]["states"]) for p in n["parents"]] or None,
+                    state_names={x: nodes[x]["states"] for x in [n["name"]] + n["parents"]}))
+            bnm.check_model()
+            for peer, cls in [("pgmpy-VE", VariableElimination), ("pgmpy-BP", BeliefPropagation)]:
+                try:
+                    inf = cls(bnm)
+                except Exception as e:  # noqa: BLE001
+                    notes.append(f"bn/{name}: {peer} failed: {type(e).__name__}: {e}")
+                    continue
                 it = iter(range(10**9))
+
+                def q(e):
+                    r = inf.query(variables=query, evidence=e, joint=False, show_progress=False)
+                    return [[float(x) for x in r[v].values] for v in query]
 
                 def one():
                     i = next(it) % len(sets)
-                    ie.eraseAllEvidence()
-                    ie.setEvidence(sets[i])
-                    ie.makeInference()
-                    return [ie.posterior(v) for v in query]
+                    q(sets[i])
 
                 post = []
                 for e in sets:
-                    ie.eraseAllEvidence()
-                    ie.setEvidence(e)
-                    ie.makeInference()
-                    post.append([[float(x) for x in ie.posterior(v).toarray()] for v in query])
-                add("pyAgrum", post, timeit(one, 5000, B))
+                    r = inf.query(variables=query, evidence=e, joint=False, show_progress=False)
+                    # pgmpy may reorder state names: map back to the exported order
+                    post.append([[float(r[v].get_value(**{v: s})) for s in nodes[v]["states"]]
+                                 for v in query])
+                add(peer, post, timeit(one, 2000, B))
+        if gum is not None:
+            g = gum.BayesNet(name)
+            for n in m["nodes"]:
+                g.add(gum.LabelizedVariable(n["name"], n["name"], n["states"]))
+            for n in m["nodes"]:
+                for par in n["parents"]:
+                    g.addArc(par, n["name"])
+            for n in m["nodes"]:
+                k = len(n["states"])
+                cpt = np.array(n["cpt"]).reshape([len(nodes[p]["states"]) for p in n["parents"]] + [k])
+                # pyAgrum's CPT tensor: fill through named instantiations
+                pot = g.cpt(n["name"])
+                inst = gum.Instantiation(pot)
+                inst.setFirst()
+                while not inst.end():
+                    idx = tuple(inst.val(g.variable(x)) for x in n["parents"] + [n["name"]])
+                    pot.set(inst, float(cpt[idx]))
+                    inst.inc()
+            ie = gum.LazyPropagation(g)
+            it = iter(range(10**9))
 
-    if want("ingest"):
-        # ---- MAVLink ingest
-        ingest_case(B, cases, notes, versions)
-    if want("cycle"):
-        # ---- the full decision cycle (no Python peer: the target is 50 us median; agree = met)
-        log("running the companion decision cycle ...")
-        cyc = {c["name"]: c for c in json.loads(run_cargo(
-            [os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "examples", "bench_cycle"),
-             "2000"]))["cases"]}
-        for key, label in [("steady", "decision cycle"), ("changing", "decision cycle, evidence changing"),
-                           ("worst", "decision cycle, worst case (memos off)")]:
-            c = cyc[key]
-            med = c["median_us"]
-            cases.append({"name": label, "kind": "cycle", "peer": "target-50us", "agree": bool(med <= 50.0),
-                          "speedup": 50.0 / med, "target": 1,
-                          "companion_median_ns": med * 1e3, "companion_p99_ns": c["p99_us"] * 1e3,
-                          "companion_reps": c["cycles"], "peer_median_ns": 50e3, "peer_p99_ns": 50e3,
-                          "peer_reps": 0, "allocations_per_cycle": c["allocations_per_cycle"],
-                          "mdp_solves_per_cycle": c["mdp_solves_per_cycle"],
-                          "note": f"{c['allocations_per_cycle']:g} allocations/cycle, "
-                                  f"{c['mdp_solves_per_cycle']:g} MDP solves/cycle"})
-            log(f"{label:40s} median {med:.1f} us p99 {c['p99_us']:.1f} us met={med <= 50.0}")
+            def one():
+                i = next(it) % len(sets)
+                ie.eraseAllEvidence()
+                ie.setEvidence(sets[i])
+                ie.makeInference()
+                return [ie.posterior(v) for v in query]
 
-    machine = {"loadavg": LOAD0, "nproc": os.cpu_count(), "cpu": cpu_model(), "platform": platform.platform()}
-    result = {"budget": B, "machine": machine, "versions": versions, "notes": notes, "cases": cases}
-    with open(os.path.join(OUT, "result.json"), "w") as f:
-        json.dump(result, f, indent=1)
-    table = render(result)
-    if not args.no_doc:
-        write_doc(result, table)
-    if args.json:
-        print(json.dumps(result))
-    else:
-        print(table)
+            post = []
+            for e in sets:
+                ie.eraseAllEvidence()
+                ie.setEvidence(e)
+                ie.makeInference()
+                post.append([[float(x) for x in ie.posterior(v).toarray()] for v in query])
+            add("pyAgrum", post, timeit(one, 5000, B))
+
+
+# ---------------------------------------------------------------- decision cycle
+def cycle_cases(cases):
+    """The full decision cycle (no Python peer: the target is 50 us median; agree = met)."""
+    log("running the companion decision cycle ...")
+    cyc = {c["name"]: c for c in json.loads(run_cargo(
+        [os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "examples", "bench_cycle"),
+         "2000"]))["cases"]}
+    for key, label in [("steady", "decision cycle"), ("changing", "decision cycle, evidence changing"),
+                       ("worst", "decision cycle, worst case (memos off)")]:
+        c = cyc[key]
+        med = c["median_us"]
+        cases.append({"name": label, "kind": "cycle", "peer": "target-50us", "agree": bool(med <= 50.0),
+                      "speedup": 50.0 / med, "target": 1,
+                      "companion_median_ns": med * 1e3, "companion_p99_ns": c["p99_us"] * 1e3,
+                      "companion_reps": c["cycles"], "peer_median_ns": 50e3, "peer_p99_ns": 50e3,
+                      "peer_reps": 0, "allocations_per_cycle": c["allocations_per_cycle"],
+                      "mdp_solves_per_cycle": c["mdp_solves_per_cycle"],
+                      "note": f"{c['allocations_per_cycle']:g} allocations/cycle, "
+                              f"{c['mdp_solves_per_cycle']:g} MDP solves/cycle"})
+        log(f"{label:40s} median {med:.1f} us p99 {c['p99_us']:.1f} us met={med <= 50.0}")
 
 
 # ---------------------------------------------------------------- MAVLink ingest
-def ingest_case(B, cases, notes, versions):
+def ingest_cases(B, cases, notes, versions):
     """Bytes -> decoded messages: the companion's `Ingest::push_each` against pymavlink's
     `MAVLink.parse_buffer`, same capture (bench/make_capture.py), same chunk boundaries."""
     cap = os.path.join(OUT, "ingest_capture.bin")
@@ -827,6 +806,7 @@ def ingest_agreement(mav, py, rust):
     return True, "", max_diff, compared
 
 
+# ---------------------------------------------------------------- report
 def cpu_model():
     try:
         with open("/proc/cpuinfo") as f:
@@ -900,164 +880,11 @@ def render(r):
 
 def write_doc(r, table):
     m, v = r["machine"], r["versions"]
-    text = f"""# Performance: companion engines vs Python peers
-
-Generated by `bench/compare` (issue 8). Do not edit by hand: re-run `bench/compare`.
-
-Machine: {m['nproc']} cores, {m['cpu']}, {m['platform']}; load average at start {m['loadavg']}
-(the machine was shared with other jobs while measured, so absolute times and p99s are noisy; both
-sides ran in the same run, interleaved per model).
-Versions: {', '.join(f'{k} {x}' for k, x in v.items())}.
-
-Method: both sides read the same exported models (MDPs: `mdp_engine/benches/models/*.json`
-from the companion's tests, and random sparse MDPs with |A| = 10, 5 successors, seed fixed in
-`bench/compare.py`, written once to `bench/out/`; BNs: the health managers exported from `params/`
-by `companion --example export_health_bn`, with 20 random hard-evidence sets on observable nodes).
-Timing is in-process around the solve/query call only, after one warm-up call (Rust: `Instant`
-in `mdp_engine --example bench_solve` / `bayes_net --example bench_bn`; Python: `perf_counter_ns`),
-repeated until the repetition count or ~{r['budget']:g} s per case and side; the companion's MDP
-solves are timed in two such blocks per model, one just before and one just after the peers' runs
-on that model, and its median and p99 are over both (the machine's speed drifts for minutes at a
-time; both sides should sample the same stretch of it). `fh` = finite horizon 100
-undiscounted (stage-0 values and actions), `vi`/`pi` = value/policy iteration with gamma 0.95
-(tolerance 1e-10). BN query = posteriors of the manager's published nodes under one evidence set,
-the evidence changing between queries. pymdptoolbox timing includes its constructor (input checks
-and conversion: the toolbox computes there) since its `run()` cannot be called without it;
-inadmissible actions are given to it as self-loops with reward -1e7 and terminal states as
-zero-reward self-loops, which leaves the optimum unchanged. pymdptoolbox's `ValueIteration` stops
-on span(V_k+1 - V_k), which gives an epsilon-optimal policy but values that are not converged by
-design (off by 13-22 on the random models); since agreement needs converged values it is run
-with that stop disabled (`thresh = 0`; `max_iter` set; both public attributes) for exactly the sweeps the
-sup-norm rule takes on the same model (numpy's count: the same Jacobi iteration from V = 0).
-Its default run is still measured and reported in the notes (sweeps, time, whether values agree).
-
-MAVLink ingest: `bench/make_capture.py` (pymavlink, seeded) writes ~300 s of the telemetry a
-companion hears (~50 frames/s: the streams `params/link.toml` requests, ATTITUDE, VFR_HUD, onboard
-monitors, a SiK radio's RADIO_STATUS in MAVLink 1, the autopilot's first 10 s in MAVLink 1, line
-noise without frame markers every ~300 frames, one corrupted frame every ~500) and the chunk sizes
-(64..1024 bytes) it is read in. Companion: `Ingest::push_each` per chunk (`companion --example
-bench_ingest`: each decoded message handed over borrowed, with its wire bytes, and passed to
-`black_box`; `Ingest::push`, which returns owned frames, is the same path plus one copy per
-frame, in the criterion bench); pymavlink: `MAVLink(None).parse_buffer` per chunk with `robust_parsing` (BAD_DATA
-results not counted), a fresh parser per pass on both sides. Agreement: the same number of
-messages, the same (sysid, compid, msgid) sequence and every field equal (floats as float32, enums
-by name, bitmasks as flag sets).
-
-Agreement first: values to 1e-6 and actions (ties, where the two actions' Q-values differ by at
-most 1e-6, count as agreeing), posteriors to 1e-9; a case without agreement fails whatever its speed.
-Speedup = peer median / companion median.
-
-{table}
-
-## Targets not met, and why
-
-(Hand-written section, kept in the template of `bench/compare.py`; which cases miss is in the
-table above and moves between runs.) Every case agrees with every peer; what is missed is speed.
-- Ratios on the paper-sized models swing by up to 2x from run to run on this shared 2-core
-  machine (it alternates between a fast and a slow state for minutes at a time, for either side).
-  Four full runs in session 4 (the last with the companion timed in two blocks per model, the code
-  the same up to one kernel tweak): pymdptoolbox >= 300x met on 18, 15, 20 and 18 of 25 cases,
-  numpy >= 100x on 14, 14, 17 and 13 of 26, Storm >= 10x on 1, 0, 1 and 1 of 9. The companion's
-  own medians in the machine's fast state are the steadier figure: tracking fh 17.7 -> 8.6 us, vi
-  98 -> 41 us, navigation/landing pi 2.1 -> 0.94 us from session 3's run to session 4's third;
-  in a slow stretch both sides take up to twice as long.
-- Storm >= 10x (finite horizon only): one stormpy model-checking call costs ~17-20 us even on the
-  6-state reference model (its fixed cost from Python into C++), and the companion solves the paper
-  models in 2.6-24 us, so 10x needs 1.7-2.7 us solves: below what computing 48-84 stages of
-  backups costs at ~1 ns per transition. On the random models Storm does the same sparse backup
-  per stage at about the same cost per transition as the companion; the companion's lead is the
-  certified early stop (33-46 of 100 stages computed), about 2.5-6x. 10x would need stopping after
-  fewer than ~10 stages, which the certified bound at 1e-12 relative does not allow, and loosening
-  the bound only to win a benchmark would change what the solver guarantees.
-- numpy >= 100x on the larger and random models: from ~100 states on, numpy's per-stage cost is
-  no longer interpreter overhead but vectorised arithmetic on the same transitions, so the ratio
-  tends to numpy's cost per transition over ours times the stages saved: 8-45x here. Policy
-  iteration at 100-1000 states: numpy evaluates with LAPACK's dense solve (fast at these sizes)
-  where the companion uses sparse certified sweeps (which also scale to 10,000 states, where the
-  dense matrix would need 800 MB). 100x there needs a different algorithm, not a faster loop.
-- monolithic (20 states, 95 choices with mixed successor counts): fh/vi/pi at 24-65x numpy and
-  180-300x pymdptoolbox over the session's runs; the fixed-count kernel does not apply, and the
-  plain kernel is at ~1 ns per transition. Small random models (10 states): fh/pi at 41-97x numpy.
-- pgmpy's BeliefPropagation fails on the sensors network ("No sepset found": the network has four
-  disconnected parts, one per sensor: GPS, camera, lidar, fusion; pgmpy's junction tree does not join them); VE and
-  pyAgrum cover it, and BP has no target.
-
-## Decision cycle
-
-(Hand-written section, kept in the template of `bench/compare.py`; the numbers in the table above
-are this run's.) One full cycle is `Core::step_into`: observations to evidence, every health BN,
-the MDPs at horizon 100, behaviour and resource arbitration, the PANORAMA guarantee, plan and
-decision record. `companion --example bench_cycle` times it in-process on a tracking-phase stream
-from the simulated world (`companion::streams`): `steady` (time and battery move, the evidence does
-not), `changing` (the vibration evidence flips every cycle, so the health probabilities and every
-MDP's inputs change: all three MDPs are re-solved each cycle) and `worst` (the changing stream
-with the memos off: every MDP re-solved and the scheduler re-run every cycle). The criterion
-benches `cargo bench -p companion --bench cycle` run the same streams (`cycle_concurrent`,
-`cycle_concurrent_changing`, `cycle_concurrent_worst`, `cycle_monolithic`).
-
-Before this work (criterion `--quick`, one repeated tracking snapshot, same shared machine):
-`cycle_concurrent` 150 µs, `cycle_monolithic` 114 µs, and every cycle allocated (fresh maps,
-strings and vectors for the record, the plan, evidence, probabilities, requests and schedule).
-
-What makes it fast. Three memos keyed on exact inputs, each a pure function so a hit returns
-what a recomputation would: a health manager whose evidence and CPTs (imported priors, carried
-beliefs) are bit-identical to its last propagation keeps its marginals; an MDP whose probability
-values, policy and horizon are bit-identical to its last solve returns the stored stage-0
-decisions and values; a resource schedule is reused for the same platform state and the same
-requests (the last 8 kept). On a steady stream the battery DBN's carried belief settles to a
-bit-exact fixed point within about a hundred cycles, after which no BN propagates and no MDP is
-solved. Tests: `tests/cycle_equivalence.rs` (every scenario, model and policy: memos on equals
-memos off, and `step_into` with reused buffers equals `step`, as decision-log JSON), property
-tests of the MDP memo and of `resolve_into`, and the decision logs of all 96 simulate runs were
-byte-identical to the code before the change.
-
-What makes it allocation-free. `step_into(&obs, &mut plan, &mut rec)` rewrites the caller's
-plan and record in place: record types implement `clone_from` field by field, maps are updated
-in place when their keys are unchanged, action names are `&str` into the model, the health,
-MDP, arbitration and guarantee stages keep their working buffers between cycles.
-`tests/cycle_no_alloc.rs` counts allocations with a global allocator over 1000 cycles after a
-warm-up, on the steady and on the evidence-flipping stream (both policies) and on the
-monolithic model: zero.
-
-When the inputs move every cycle (`changing`, `worst`) the memos miss and the work is done in
-full; what keeps that case fast is in the engines and the MDP fill, session 3 of issue 8:
-- Finite horizon stops early on a certified bound (`mdp_engine` crate docs): once the stage
-  increments d_t = V_t - V_t+1 are known to stay within a bracket, the remaining stages are the
-  last values plus a constant per-stage gain to within 1e-12 relative, and the greedy policy no
-  longer changes beyond the tie rule. Two bounds: the span of d (unichain) and a per-state bound
-  for models with terminal states. The paper models compute 48 (navigation), 54 (landing), 70
-  (tracking), 84 (monolithic) and 64 (reference) of their 100 stages; the random models 33-46.
-  Tested against a plain full backward induction (`mdp_engine/tests/fh_early_stop.rs`).
-- The backup walks the sparse model with running cursors and unchecked reads (the layout
-  invariants are checked at build and debug-asserted): about 23 % fewer instructions per stage.
-- Session 4: a model whose choices all have the same successor count k <= 5 (tracking, landing,
-  the random series) takes a kernel with k fixed at compile time (no per-choice loop or offset
-  load); mixed counts keep the plain loop (unrolled by two it cost 6-8 % more ARMv7 instructions
-  on navigation/monolithic). Cachegrind on tracking: finite
-  horizon 382M -> 280M instructions and 4.5M -> 1.0M simulated branch mispredicts for the same
-  2001 solves, value iteration 239M -> 146M; bit-identical to the general kernel (unit test).
-  Dense policy evaluation solves over the non-terminal states only, row-major (navigation PI
-  424M -> 300M instructions; tested against nalgebra's LU on random and singular systems).
-- Value iteration stops on the MacQueen-Porteus bracket and returns its midpoint: the same
-  gamma/(1-gamma)*tol guarantee as the sup-norm rule, never more sweeps (random models: 478 sweeps
-  down to 24-35; the paper models, whose terminal states keep the bracket wide, barely change).
-- Policy iteration above 50 states evaluates sparsely (warm-started sweeps stopped on a certified
-  bound) instead of a dense LU: 1000 states went from ~250 ms to ~4 ms, 10000 states became
-  feasible (~80 ms).
-- Health BN queries are targeted (`bayes_net::Engine::query`): per evidence pattern a plan
-  prunes barren nodes, absorbs hard evidence, skips d-separated parts, precomputes what does not
-  depend on the evidence values, and passes only the messages towards the cliques holding the
-  nodes the cycle reads (published, carried and imported). `HealthModel::evaluate` (check,
-  reports) still propagates every marginal; its published numbers are bit-identical to the
-  cycle's (`health.rs` tests), and both equal brute-force enumeration (`bayes_net/tests/targeted.rs`).
-- The MDP fill folds constants at parse and evaluates each expression in one forward pass; the
-  health stage resolves evidence names once per changed entry.
-The resource scheduler runs in a reused workspace (`fpga_model::schedule_into`), so even with the
-memos off a warm cycle allocates nothing (`companion/tests/scheduler_no_alloc.rs`); what still
-allocates are events: a re-allocation by the guarantee stage (PANORAMA's search and the RAS
-history row), the event strings of a degradation that starts, and the first query of a new
-evidence pattern (its plan: 20-90 µs once, then kept, 64 at most).
-"""
+    with open(REPORT_TEMPLATE) as f:
+        template = string.Template(f.read())
+    text = template.substitute(
+        nproc=m["nproc"], cpu=m["cpu"], platform=m["platform"], loadavg=m["loadavg"],
+        versions=", ".join(f"{k} {x}" for k, x in v.items()), budget=f"{r['budget']:g}", table=table)
     path = os.path.join(ROOT, "docs", "performance.md")
     # Hand-written sections (from "## Soak" on: measured by scripts/soak.sh, not by this script)
     # are kept as they are.
@@ -1071,6 +898,74 @@ evidence pattern (its plan: 20-90 µs once, then kept, 64 at most).
         pass
     with open(path, "w") as f:
         f.write(text)
+
+
+# ---------------------------------------------------------------- main
+def main():
+    global LOAD0
+    try:
+        with open("/proc/loadavg") as f:
+            LOAD0 = " ".join(f.read().split()[:3])
+    except OSError:
+        pass
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--budget", type=float, default=0.3, help="seconds of timed calls per case and side")
+    ap.add_argument("--no-doc", action="store_true", help="do not rewrite docs/performance.md")
+    ap.add_argument("--only", default="", help="comma list of groups to run (mdp, bn, ingest, cycle); "
+                    "a partial run never rewrites docs/performance.md")
+    ap.add_argument("--max-states", type=int, default=10000,
+                    help="skip random MDPs larger than this (a partial run: no doc rewrite)")
+    ap.add_argument("--render", metavar="RESULT_JSON",
+                    help="run nothing: render the table (and docs/performance.md unless --no-doc) from a saved "
+                         "bench/out/result.json")
+    args = ap.parse_args()
+    if args.render:
+        with open(args.render) as f:
+            result = json.load(f)
+        report(result, args)
+        return
+    if args.max_states < 10000:
+        args.no_doc = True
+    only = {g for g in args.only.split(",") if g}
+    bad = only - {"mdp", "bn", "ingest", "cycle"}
+    if bad:
+        raise SystemExit(f"--only: unknown group(s) {sorted(bad)} (mdp, bn, ingest, cycle)")
+    if only:
+        args.no_doc = True
+
+    def want(group):
+        return not only or group in only
+    os.makedirs(OUT, exist_ok=True)
+    B = args.budget
+    versions = {"python": platform.python_version(), "numpy": np.__version__}
+    cases = []
+    notes = []
+
+    if want("mdp"):
+        mdp_cases(B, args.max_states, cases, notes, versions)
+    if want("bn"):
+        bn_cases(B, cases, notes, versions)
+    if want("ingest"):
+        ingest_cases(B, cases, notes, versions)
+    if want("cycle"):
+        cycle_cases(cases)
+
+    machine = {"loadavg": LOAD0, "nproc": os.cpu_count(), "cpu": cpu_model(), "platform": platform.platform()}
+    result = {"budget": B, "machine": machine, "versions": versions, "notes": notes, "cases": cases}
+    with open(os.path.join(OUT, "result.json"), "w") as f:
+        json.dump(result, f, indent=1)
+    report(result, args)
+
+
+def report(result, args):
+    table = render(result)
+    if not args.no_doc:
+        write_doc(result, table)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(table)
 
 
 if __name__ == "__main__":

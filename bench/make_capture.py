@@ -1,4 +1,4 @@
-"""Write a realistic MAVLink telemetry capture for the ingest benchmark (bench/compare, issue 8).
+"""Write a realistic MAVLink telemetry capture for the ingest benchmark (bench/compare).
 
 What a companion computer hears on its autopilot link, about 50 frames/s:
 - the autopilot (sys 1, comp 1): the streams params/link.toml requests, at those rates (SYS_STATUS,

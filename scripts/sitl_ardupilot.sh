@@ -29,7 +29,8 @@ SELF=$(realpath "$0")
 cd "$(dirname "$0")/.."
 ROOT=$PWD
 
-fail() { echo "sitl_ardupilot.sh: $*" >&2; exit 2; }
+# shellcheck source=lib/sitl_common.sh
+. "$ROOT/scripts/lib/sitl_common.sh"
 
 # ---- find ArduCopter SITL (fail fast, before building or starting anything) ----------------------
 BIN=${ARDUCOPTER_BIN:-}
@@ -65,15 +66,7 @@ for port in 5760 5762 5763; do
 done
 
 # ---- what the run needs: python venv, companion binary --------------------------------------------
-if [ ! -x .venv/bin/python ]; then
-  python3 -m venv .venv
-  .venv/bin/pip install --quiet --disable-pip-version-check -r sitl_tests/requirements.txt
-fi
-if [ -z "${COMPANION_BIN:-}" ]; then
-  cargo build --quiet --bin companion
-  COMPANION_BIN="${CARGO_TARGET_DIR:-$ROOT/target}/debug/companion"
-fi
-export COMPANION_BIN
+sitl_venv_and_companion
 
 WORK=$(mktemp -d "${TMPDIR:-/tmp}/sitl-ardupilot.XXXXXX")
 SITL_PID=""

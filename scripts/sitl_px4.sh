@@ -23,7 +23,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
 
-fail() { echo "sitl_px4.sh: $*" >&2; exit 2; }
+# shellcheck source=lib/sitl_common.sh
+. "$ROOT/scripts/lib/sitl_common.sh"
 
 # ---- find PX4 SITL (fail fast, before building or starting anything) ------------------------------
 PX4_DIR=${PX4_SITL_DIR:-$ROOT/../shared/sitl/px4}
@@ -34,15 +35,7 @@ export PX4_SITL_DIR
 PX4_SITL_DIR=$(cd "$PX4_DIR" && pwd)
 
 # ---- what the run needs: python venv, companion binary ---------------------------------------------
-if [ ! -x .venv/bin/python ]; then
-  python3 -m venv .venv
-  .venv/bin/pip install --quiet --disable-pip-version-check -r sitl_tests/requirements.txt
-fi
-if [ -z "${COMPANION_BIN:-}" ]; then
-  cargo build --quiet --bin companion
-  COMPANION_BIN="${CARGO_TARGET_DIR:-$ROOT/target}/debug/companion"
-fi
-export COMPANION_BIN
+sitl_venv_and_companion
 
 # ---- into a private network namespace (re-run this script there once) ------------------------------
 if [ -z "${SITL_PX4_IN_NETNS:-}" ] && [ "$(id -u)" = 0 ] && command -v unshare >/dev/null; then

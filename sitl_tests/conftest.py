@@ -1,6 +1,6 @@
 """Fixtures for the SITL tests.
 
-* `standin`: a factory that starts the stand-in ArduCopter (standin_autopilot.py, a test fixture) on a free
+* `standin`: a factory that starts the stand-in ArduCopter (the `standin` package, a test fixture) on a free
   loopback port and stops it afterwards.
 * `autopilot`: what the companion flies against: the stand-in, or the real SITL named by env `SITL_URL`
   (then tests marked `standin_only` are skipped, since a real SITL has no hazard hooks or recording).
@@ -30,7 +30,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 
 from helpers import GcsClient, companion_fly_cmd, read_decision_log  # noqa: E402
-from standin_autopilot import OnboardMonitors, StandinAutopilot, StandinConfig  # noqa: E402
+from standin import OnboardMonitors, StandinAutopilot, StandinConfig  # noqa: E402
 from real_autopilot import ARTIFACTS, ArduCopterSitl, GcsObserver, find_arducopter, next_instance  # noqa: E402
 from relay import Relay  # noqa: E402
 

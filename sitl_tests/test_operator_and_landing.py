@@ -25,7 +25,7 @@ from typing import Any, List, Optional
 import pytest
 
 from helpers import GcsClient
-from standin_autopilot import MODES, mavlink
+from standin import MODES, mavlink
 
 pytestmark = [pytest.mark.companion_fly, pytest.mark.standin_only]
 
@@ -390,7 +390,7 @@ FLY=$!
 import json, sys, time
 sys.path.insert(0, {str(here)!r})
 from helpers import GcsClient
-from standin_autopilot import mavlink
+from standin import mavlink
 g = GcsClient("tcp:127.0.0.1:5763")
 t0 = time.monotonic()
 armed_seen = False

@@ -22,7 +22,7 @@ from typing import Any, Callable, Dict, List, Optional
 import pytest
 
 from helpers import COMPANION_LINK_TIMEOUT_S, all_actions, tracking_versions
-from standin_autopilot import mavlink
+from standin import mavlink
 
 pytestmark = [pytest.mark.real_autopilot, pytest.mark.companion_fly]
 

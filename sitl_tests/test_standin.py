@@ -12,9 +12,10 @@ import time
 
 import pytest
 
-import standin_autopilot as sap
+import standin as sap
 from helpers import offset, wp
-from standin_autopilot import mavlink
+from standin import mavlink
+from standin import mission as mission_protocol
 
 pytestmark = pytest.mark.standin_only
 
@@ -312,7 +313,7 @@ def test_mission_errors_out_of_range_wrong_sequence_other_uploader_clear(standin
 
 
 def test_mission_upload_times_out_with_operation_cancelled(standin, client, monkeypatch):
-    monkeypatch.setattr(sap, "MISSION_UPLOAD_TIMEOUT_S", 1.5)   # ArduPilot's 8 s, shortened for the test
+    monkeypatch.setattr(mission_protocol, "MISSION_UPLOAD_TIMEOUT_S", 1.5)   # ArduPilot's 8 s, shortened for the test
     sa = standin(**FAST)
     c = client(sa.url)
     c.wait("HEARTBEAT", timeout=5)
