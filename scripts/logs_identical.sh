@@ -209,7 +209,8 @@ def first_diff(a, b, label):
                 found.append(f"{label} line {i} (header: {header_keys_differing(x, y)})")
         elif not other_seen and x != y:
             other_seen = True
-            found.append(f"{label} line {i}")
+            col = next((j for j, (u, v) in enumerate(zip(x, y)) if u != v), min(len(x), len(y))) + 1
+            found.append(f"{label} line {i} byte {col}")
         if other_seen:
             break
     if not other_seen and len(la) != len(lb):
