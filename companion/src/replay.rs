@@ -198,7 +198,11 @@ pub fn replay(path: &Path) -> Result<Outcome, Refusal> {
             }
         }
         if run.is_none() {
-            return Err(refuse(file, None, "no header line: no params to rebuild the model from"));
+            return Err(refuse(
+                file,
+                None,
+                "no header line: no params to rebuild the model from",
+            ));
         }
     }
     Ok(Outcome::AllEqual {
@@ -316,8 +320,7 @@ impl Run {
             replayed,
             equal: 0,
         };
-        let replayed_value =
-            serde_json::to_value(&replayed).expect("a decision record serialises");
+        let replayed_value = serde_json::to_value(&replayed).expect("a decision record serialises");
         if self.source == Source::Simulate {
             let fields = ["cycle"];
             if let Some(d) = first_difference(&fields, value, &replayed_value) {
@@ -331,10 +334,7 @@ impl Run {
             return Ok(Some(differs(
                 "events".into(),
                 json(&logged.events),
-                format!(
-                    "the observed events followed by {}",
-                    json(&replayed.events)
-                ),
+                format!("the observed events followed by {}", json(&replayed.events)),
             )));
         }
         Ok(None)
@@ -349,9 +349,8 @@ pub fn split_events<'a>(
     core_added: &[String],
     source: Source,
 ) -> Option<(&'a [String], &'a [String], &'a [String])> {
-    let is_shell = |e: &String| {
-        source == Source::Fly && (e.ends_with(": land") || e.starts_with("landing: "))
-    };
+    let is_shell =
+        |e: &String| source == Source::Fly && (e.ends_with(": land") || e.starts_with("landing: "));
     // The shell's events are a tail of recognisable sentences after the core's: take the
     // fewest that leave a head ending with the core's.
     let mut end = logged.len();
@@ -369,7 +368,11 @@ pub fn split_events<'a>(
 
 /// The first of `fields` whose JSON differs between the logged line and the replayed record:
 /// (path of the first differing value, logged, replayed).
-fn first_difference(fields: &[&str], logged: &Value, replayed: &Value) -> Option<(String, String, String)> {
+fn first_difference(
+    fields: &[&str],
+    logged: &Value,
+    replayed: &Value,
+) -> Option<(String, String, String)> {
     fields.iter().find_map(|f| {
         let a = logged.get(*f).unwrap_or(&Value::Null);
         let b = replayed.get(*f).unwrap_or(&Value::Null);
@@ -528,12 +531,20 @@ mod tests {
         // The core added something the log does not end with: not this core's record.
         assert!(split_events(&logged, &s(&["health: x"]), Source::Simulate).is_none());
         // A core that added nothing fits any observed list.
-        assert_eq!(split_events(&logged, &[], Source::Simulate).unwrap().0, &logged[..]);
+        assert_eq!(
+            split_events(&logged, &[], Source::Simulate).unwrap().0,
+            &logged[..]
+        );
     }
 
     #[test]
     fn split_events_puts_fly_shell_events_after_the_core_ones() {
-        let logged = s(&["mode AUTO", "guarantee: no allocation meets the goals", "mission over: land", "landing: land again (the landing was interrupted or not done)"]);
+        let logged = s(&[
+            "mode AUTO",
+            "guarantee: no allocation meets the goals",
+            "mission over: land",
+            "landing: land again (the landing was interrupted or not done)",
+        ]);
         let core = s(&["guarantee: no allocation meets the goals"]);
         let (o, c, sh) = split_events(&logged, &core, Source::Fly).unwrap();
         assert_eq!(o, &logged[..1]);
@@ -546,10 +557,22 @@ mod tests {
     #[test]
     fn the_model_of_a_simulate_command_is_its_first_model() {
         assert_eq!(simulate_model("companion simulate --scenario x"), "bfm");
-        assert_eq!(simulate_model("c simulate --model reference,bfm --runs 3"), "reference");
-        assert_eq!(simulate_model("c simulate --model=monolithic"), "monolithic");
-        assert_eq!(source_of("/a/companion --log-level info simulate"), Some(Source::Simulate));
-        assert_eq!(source_of("companion fly --connect tcp:x"), Some(Source::Fly));
+        assert_eq!(
+            simulate_model("c simulate --model reference,bfm --runs 3"),
+            "reference"
+        );
+        assert_eq!(
+            simulate_model("c simulate --model=monolithic"),
+            "monolithic"
+        );
+        assert_eq!(
+            source_of("/a/companion --log-level info simulate"),
+            Some(Source::Simulate)
+        );
+        assert_eq!(
+            source_of("companion fly --connect tcp:x"),
+            Some(Source::Fly)
+        );
         assert_eq!(source_of("companion review x"), None);
     }
 
@@ -568,7 +591,10 @@ mod tests {
         assert_eq!(d, ("probabilities.P_b".into(), "0.25".into(), "0.5".into()));
         let z = serde_json::json!({"v": -0.0});
         let p = serde_json::json!({"v": 0.0});
-        assert!(first_difference(&["v"], &z, &p).is_some(), "-0.0 is not 0.0");
+        assert!(
+            first_difference(&["v"], &z, &p).is_some(),
+            "-0.0 is not 0.0"
+        );
         assert!(first_difference(&["actions"], &a, &b).is_none());
     }
 }
