@@ -264,3 +264,98 @@ fn a_log_without_the_params_text_or_header_is_refused_naming_file_and_line() {
         text(&out)
     );
 }
+
+/// The events the core appends (a re-allocation when PANORAMA makes one) come after the
+/// observed ones; an event after them in a simulate log is not the core's.
+#[test]
+fn an_event_after_the_core_added_ones_is_reported_on_events() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = simulate(
+        tmp.path(),
+        "run",
+        &["--scenario", "lidar-failure", "--policy", "mission"],
+    );
+    let mut lines = log_lines(&run);
+    // The first record with a re-allocation: the core said so in its events, last.
+    let (i, mut rec) = lines
+        .iter()
+        .enumerate()
+        .map(|(i, l)| (i, serde_json::from_str::<Value>(l).unwrap()))
+        .find(|(_, v)| v.get("kind").is_none() && !v["guarantee"]["reallocation"].is_null())
+        .expect("the lidar failure makes PANORAMA re-allocate");
+    let reason = rec["guarantee"]["reallocation"]["reason"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let last = rec["events"]
+        .as_array()
+        .unwrap()
+        .last()
+        .unwrap()
+        .as_str()
+        .unwrap();
+    assert!(last.contains(&reason), "{rec}");
+    let cycle = rec["cycle"].as_u64().unwrap();
+    rec["events"]
+        .as_array_mut()
+        .unwrap()
+        .push(Value::from("mode LAND"));
+    lines[i] = rec.to_string();
+    let edited = tmp.path().join("edited");
+    std::fs::create_dir_all(&edited).unwrap();
+    write_lines(&edited, &lines);
+    let out = replay(&edited);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        said.contains(&format!("cycle {cycle} differs")) && said.contains("events"),
+        "{said}"
+    );
+}
+
+/// A log rotated into parts (each starting with a copy of the header) replays as one; a last
+/// line cut off by a kill is named and not replayed.
+#[test]
+fn rotated_parts_replay_as_one_log_and_a_cut_off_last_line_is_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = simulate(tmp.path(), "run", &["--scenario", "complete-1"]);
+    let lines = log_lines(&run);
+    let n = n_records(&run);
+    let rotated = tmp.path().join("rotated");
+    std::fs::create_dir_all(&rotated).unwrap();
+    let mut header: Value = serde_json::from_str(&lines[0]).unwrap();
+    let half = lines.len() / 2;
+    write_lines(&rotated, &lines[..half]);
+    header["part"] = Value::from(1);
+    let mut part1 = vec![header.to_string()];
+    part1.extend_from_slice(&lines[half..]);
+    std::fs::write(rotated.join("decisions.1.jsonl"), part1.join("\n") + "\n").unwrap();
+    let out = replay(&rotated);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains(&format!("all {n} cycles equal")),
+        "{}",
+        text(&out)
+    );
+
+    // Killed while writing the last record: no end line, the record cut in half.
+    let killed = tmp.path().join("killed");
+    std::fs::create_dir_all(&killed).unwrap();
+    let last = lines.len() - 2; // the last record (the end line follows it)
+    let mut body = lines[..last].join("\n") + "\n";
+    body.push_str(&lines[last][..lines[last].len() / 2]);
+    std::fs::write(killed.join("decisions.jsonl"), body).unwrap();
+    let out = replay(&killed);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains(&format!("all {} cycles equal", n - 1)),
+        "{}",
+        text(&out)
+    );
+    assert!(
+        String::from_utf8_lossy(&out.stderr)
+            .contains(&format!("decisions.jsonl:{}: last line cut off", last + 1)),
+        "{}",
+        text(&out)
+    );
+}
