@@ -115,6 +115,8 @@ pub fn replay(path: &Path) -> Result<Outcome, Refusal> {
         .map_err(|e| refuse(path, None, e.to_string()))?
         .files()
         .to_vec();
+    // The model rebuilt from the header, alive for the whole replay (the core borrows it).
+    let model_slot = std::cell::OnceCell::new();
     let mut run: Option<Run> = None;
     let mut equal = 0u64;
     let n_files = files.len();
@@ -162,7 +164,8 @@ pub fn replay(path: &Path) -> Result<Outcome, Refusal> {
                         if line_no != 1 || k != 0 {
                             return Err(refuse(file, at, "the header is not the first line"));
                         }
-                        run = Some(Run::from_header(&value, file)?);
+                        let (model, setup) = Run::from_header(&value, file)?;
+                        run = Some(Run::new(model_slot.get_or_init(|| model), setup));
                     }
                     // A rotated part repeats the header: nothing new.
                 }
@@ -211,17 +214,32 @@ pub fn replay(path: &Path) -> Result<Outcome, Refusal> {
     })
 }
 
-/// The model rebuilt from a header, and the core being replayed.
-struct Run {
-    model: &'static Model,
+/// What the header says about the run besides its params.
+#[derive(Clone, Copy)]
+struct Setup {
     kind: ModelKind,
     policy: Policy,
     source: Source,
-    core: Core<'static>,
 }
 
-impl Run {
-    fn from_header(value: &Value, file: &Path) -> Result<Self, Refusal> {
+/// The model rebuilt from a header, and the core being replayed.
+struct Run<'m> {
+    model: &'m Model,
+    setup: Setup,
+    core: Core<'m>,
+}
+
+impl<'m> Run<'m> {
+    fn new(model: &'m Model, setup: Setup) -> Self {
+        Run {
+            model,
+            setup,
+            core: Core::new(model, setup.kind, setup.policy),
+        }
+    }
+
+    /// The model and the run's setup from the header line.
+    fn from_header(value: &Value, file: &Path) -> Result<(Model, Setup), Refusal> {
         let at = Some(1);
         let header: Header = serde_json::from_value(value.clone())
             .map_err(|e| refuse(file, at, format!("not a log header: {e}")))?;
@@ -270,15 +288,14 @@ impl Run {
                 format!("the model cannot be rebuilt from the header's params: {e}"),
             )
         })?;
-        // One model per replay, alive until the process ends (the core borrows it).
-        let model: &'static Model = Box::leak(Box::new(model));
-        Ok(Run {
+        Ok((
             model,
-            kind,
-            policy,
-            source,
-            core: Core::new(model, kind, policy),
-        })
+            Setup {
+                kind,
+                policy,
+                source,
+            },
+        ))
     }
 
     /// Step the core on one logged record's inputs; `Some` when its output differs.
@@ -301,8 +318,9 @@ impl Run {
                 return Err(refuse(file, at, format!("the record has no `{name}`")));
             }
         }
-        if self.source == Source::Fly && logged.events.iter().any(|e| e == NEW_FLIGHT_EVENT) {
-            self.core = Core::new(self.model, self.kind, self.policy);
+        let source = self.setup.source;
+        if source == Source::Fly && logged.events.iter().any(|e| e == NEW_FLIGHT_EVENT) {
+            self.core = Core::new(self.model, self.setup.kind, self.setup.policy);
         }
         let obs = Observations {
             time_s: logged.time_s,
@@ -321,7 +339,7 @@ impl Run {
             equal: 0,
         };
         let replayed_value = serde_json::to_value(&replayed).expect("a decision record serialises");
-        if self.source == Source::Simulate {
+        if source == Source::Simulate {
             let fields = ["cycle"];
             if let Some(d) = first_difference(&fields, value, &replayed_value) {
                 return Ok(Some(differs(d.0, d.1, d.2)));
@@ -330,7 +348,7 @@ impl Run {
         if let Some(d) = first_difference(&CORE_FIELDS, value, &replayed_value) {
             return Ok(Some(differs(d.0, d.1, d.2)));
         }
-        if split_events(&logged.events, &replayed.events, self.source).is_none() {
+        if split_events(&logged.events, &replayed.events, source).is_none() {
             return Ok(Some(differs(
                 "events".into(),
                 json(&logged.events),
