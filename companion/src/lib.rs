@@ -21,5 +21,6 @@ pub mod decision_log;
 pub mod export;
 pub mod fly;
 pub mod params;
+pub mod replay;
 pub mod review;
 pub mod sim;

@@ -135,6 +135,13 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Feed a run's logged observations to a fresh core built from the params in its log
+    /// header, and report the first cycle whose record differs (exit 0 all equal, 1 a cycle
+    /// differs, 2 the log cannot be replayed).
+    Replay {
+        /// Run folder (runs/<UTC time>/) or a decisions*.jsonl file.
+        run_folder: PathBuf,
+    },
 }
 
 fn main() -> Result<()> {
@@ -176,6 +183,9 @@ fn main() -> Result<()> {
                 stats.tlog_frames
             );
             Ok(())
+        }
+        Command::Replay { run_folder } => {
+            std::process::exit(companion::replay::run_cli(&run_folder));
         }
     }
 }

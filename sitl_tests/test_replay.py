@@ -1,0 +1,110 @@
+"""`companion replay` on a real `companion fly` run folder: the stand-in ArduCopter flies the tracking
+mission, then every logged cycle is fed back through a fresh decision core built from the params in the
+log header, and must come out equal (exit 0). An edited copy of the same log must not (exit 1).
+
+The fly shell adds its own fields to each record (commands, link events, telemetry, the shell's events and
+actions); replay compares only what the core computed, so this checks that the flight's records are exactly
+the core's output for the logged observations.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from standin_autopilot import mavlink
+from test_companion_fly import assert_mission_completed, fly_mission
+from test_operator_and_landing import COMPANION, short_route, stop, wait
+
+NEW_FLIGHT_EVENT = "flight over: landed and disarmed; waiting for the operator"
+
+pytestmark = pytest.mark.companion_fly
+
+
+def run_folders(log_dir: Path) -> list:
+    return sorted(p.parent for p in Path(log_dir).glob("*/decisions.jsonl"))
+
+
+def replay(folder: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([os.environ["COMPANION_BIN"], "replay", str(folder)], capture_output=True, text=True,
+                          timeout=300)
+
+
+def test_standin_flight_replays_equal_in_every_cycle(autopilot_factory, fly, monitors_factory, tmp_path):
+    ap = autopilot_factory()
+    f = fly_mission(ap, fly, monitors_factory)
+    assert_mission_completed(f)
+    folders = run_folders(f.run.log_dir)
+    assert len(folders) == 1, folders
+    folder = folders[0]
+    n = sum(1 for r in f.records if "kind" not in r)
+    assert n > 5, n
+
+    out = replay(folder)
+    assert out.returncode == 0, f"{out.stdout}\n{out.stderr}"
+    assert f"all {n} cycles equal" in out.stdout, out.stdout
+
+    # The same flight with one chosen action changed is no longer the core's.
+    edited = tmp_path / "edited"
+    shutil.copytree(folder, edited)
+    log = edited / "decisions.jsonl"
+    lines = log.read_text().splitlines()
+    idx = next(i for i, line in enumerate(lines)
+               if "kind" not in json.loads(line) and json.loads(line).get("actions"))
+    rec = json.loads(lines[idx])
+    rec["actions"] = rec["actions"] + ["return_to_base"]
+    lines[idx] = json.dumps(rec, separators=(",", ":"))
+    log.write_text("\n".join(lines) + "\n")
+    out = replay(edited)
+    assert out.returncode == 1, f"{out.stdout}\n{out.stderr}"
+    assert f"cycle {rec['cycle']} differs" in out.stdout and "actions" in out.stdout, out.stdout
+
+
+def test_two_flights_in_one_run_replay_equal_with_the_core_restarted_between(autopilot_factory, fly, client,
+                                                                                tmp_path):
+    """Without --once, fly starts a fresh core for the next flight: replay restarts its own at the record that
+    says the flight was over, and only then does the second flight replay equal."""
+    ap = autopilot_factory(speedup=2.0, ekf_ready_s=4.0)
+    sa = ap.standin
+    gcs = client(sa.url)
+    run = fly(ap, mission=short_route(tmp_path), once=False)
+    wait(lambda: sa.rec.of("arm") and not sa.state()["armed"] and sa.state()["landed"], 240, "the first landing", run)
+    # the companion sees the landing and starts waiting for the operator (as the operator test waits)
+    time.sleep(6.0)
+    gcs.target = (1, COMPANION)
+    ack = gcs.command_long(mavlink.MAV_CMD_MISSION_START)
+    assert ack.result == mavlink.MAV_RESULT_ACCEPTED
+    wait(lambda: len(sa.rec.of("arm")) == 2 and sa.state()["alt"] > 5.0, 90, "the second take-off", run)
+    time.sleep(2.0)
+    stop(run)
+    records = [r for r in run.records() if "kind" not in r]
+    restarts = [i for i, r in enumerate(records) if NEW_FLIGHT_EVENT in r.get("events", [])]
+    assert len(restarts) == 1 and 0 < restarts[0] < len(records) - 3, (restarts, len(records))
+    folders = run_folders(run.log_dir)
+    assert len(folders) == 1, folders
+
+    out = replay(folders[0])
+    assert out.returncode == 0, f"{out.stdout}\n{out.stderr}"
+    assert f"all {len(records)} cycles equal" in out.stdout, out.stdout
+
+    # Without the restart (the event edited out) the second flight is replayed on the first flight's core state
+    # (the battery model carries over): it differs from the first record of the second flight.
+    edited = tmp_path / "no-restart"
+    shutil.copytree(folders[0], edited)
+    log = edited / "decisions.jsonl"
+    lines = log.read_text().splitlines()
+    for i, line in enumerate(lines):
+        rec = json.loads(line)
+        if "kind" not in rec and NEW_FLIGHT_EVENT in rec.get("events", []):
+            rec["events"] = [e for e in rec["events"] if e != NEW_FLIGHT_EVENT]
+            lines[i] = json.dumps(rec, separators=(",", ":"))
+            cycle = rec["cycle"]
+    log.write_text("\n".join(lines) + "\n")
+    out = replay(edited)
+    assert out.returncode == 1, f"{out.stdout}\n{out.stderr}"
+    assert f"cycle {cycle} differs" in out.stdout, out.stdout
