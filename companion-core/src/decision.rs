@@ -242,7 +242,10 @@ impl<'m> Core<'m> {
     /// PANORAMA's Table 7; `None` when the guarantee stage is off (pre-flight infeasible).
     pub fn allocation_table(&self) -> Option<String> {
         let g = self.guarantee.as_ref()?;
-        Some(crate::guarantee::render_ras_table(&g.spec, g.ras_rows()))
+        Some(crate::report::guarantee::render_ras_table(
+            &g.spec,
+            g.ras_rows(),
+        ))
     }
 
     /// Number of re-allocations so far (RAS0 not counted).

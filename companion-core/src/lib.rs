@@ -32,6 +32,7 @@ pub mod mission;
 pub mod mission_mdp;
 pub mod observations;
 pub mod record;
+pub mod report;
 pub mod resources;
 pub mod spec;
 pub mod tracking;
