@@ -5,16 +5,17 @@
 //! core carries between cycles (its own fields) and one [`Observations`] snapshot. No clock, file,
 //! socket or randomness.
 
+use crate::arbitration::{BehaviourConflicts, ResourceArbiter};
 use crate::guarantee::{Guarantee, MissionSpec, Progress};
 use crate::health::HealthModel;
 pub use crate::mission::Policy;
 use crate::mission::{ActionCatalogue, ActionKind, MissionFile};
-use crate::mission_mdp::{BehaviourConflicts, MissionMdps};
+use crate::mission_mdp::MissionMdps;
 use crate::observations::Observations;
-use crate::record::{DecisionRecord, Plan, ResourcesRecord};
+use crate::record::{DecisionRecord, Plan};
 use crate::resources::ResourceSpec;
 use crate::spec::SpecError;
-use fpga_model::{PlatformState, Request};
+use fpga_model::PlatformState;
 use mdp_engine::Workspace;
 use std::collections::BTreeMap;
 
@@ -146,8 +147,6 @@ pub struct Core<'m> {
     failed_resources: Vec<String>,
     /// The activity being flown and when (observation time, s) it started.
     activity_started: Option<(usize, f64)>,
-    /// Degradations and drops in force after the last cycle.
-    last_degraded: Vec<String>,
     /// What the applications other than the one the resource manager assesses occupied after
     /// the last schedule (tiles, CPU share): the room the resource manager sees before solving.
     others_tiles: u32,
@@ -155,15 +154,8 @@ pub struct Core<'m> {
     /// Number of names the health managers publish (a reused probability map holds exactly these).
     n_published: usize,
     scratch: Scratch<'m>,
-    /// Recent resource schedules keyed on their exact inputs (see [`Core::arbitrate_resources`]).
-    schedules: Vec<ScheduleMemo<'m>>,
-    schedules_next: usize,
-    schedule_cache: bool,
-    scheduler_runs: u64,
-    /// The scheduler's reusable inputs, output and working memory (no allocation once warm).
-    requests: Vec<Request>,
-    schedule_ws: fpga_model::ScheduleWorkspace,
-    schedule_out: fpga_model::Schedule,
+    /// The resource arbitration stage's schedules and degradations in force.
+    arbiter: ResourceArbiter<'m>,
 }
 
 /// How much work the cycles so far really did (the rest came from the memos).
@@ -177,77 +169,20 @@ pub struct WorkDone {
 /// Per-cycle working lists, kept between cycles for their capacity. Action names borrow the
 /// model (`'m`), so filling them allocates nothing.
 #[derive(Default)]
-struct Scratch<'m> {
+pub(crate) struct Scratch<'m> {
     merged: Vec<&'m str>,
-    kept: Vec<&'m str>,
-    owners: Vec<&'m str>,
-    actions: Vec<&'m str>,
+    pub(crate) kept: Vec<&'m str>,
+    pub(crate) owners: Vec<&'m str>,
+    pub(crate) actions: Vec<&'m str>,
     /// Proposals replaced by a re-solve of the same MDP within the cycle.
     superseded: Vec<usize>,
-    key: Vec<(&'m str, &'m str, u64)>,
+    /// The resource requests: (app, version, required fps bits) per request.
+    pub(crate) key: Vec<(&'m str, &'m str, u64)>,
     failed: Vec<String>,
-}
-
-/// One memoised scheduling decision: `fpga_model::schedule` is a pure function of the policy
-/// (fixed per core), the platform state before it and the requests, so the same inputs give
-/// the same record and the same platform state after.
-#[derive(Default)]
-struct ScheduleMemo<'m> {
-    before: PlatformState,
-    /// (app, version, required fps bits) per request, in request order.
-    key: Vec<(&'m str, &'m str, u64)>,
-    after: PlatformState,
-    record: ResourcesRecord,
 }
 
 /// At most this many re-solves per cycle (one per version the MDP may turn to is plenty).
 const MAX_RESOLVES: usize = 3;
-
-/// How many distinct recent schedules are remembered: alternating between two action sets
-/// (a vibration on/off stream) cycles through a few (state before, requests) pairs.
-const SCHEDULE_MEMO: usize = 8;
-
-/// `dst = src.clone()` for a platform state, keeping the tiles' bitstream strings.
-fn copy_platform(dst: &mut PlatformState, src: &PlatformState) {
-    dst.tiles.truncate(src.tiles.len());
-    for (i, t) in src.tiles.iter().enumerate() {
-        match dst.tiles.get_mut(i) {
-            Some(d) => {
-                d.bitstream.clone_from(&t.bitstream);
-                d.failed = t.failed;
-            }
-            None => dst.tiles.push(t.clone()),
-        }
-    }
-    dst.cores_online = src.cores_online;
-    dst.external_cpu_load = src.external_cpu_load;
-}
-
-/// The scheduler's requests for `key` ((app, version, fps bits) per request), reusing the
-/// strings of the previous cycle's requests.
-fn fill_requests(dst: &mut Vec<Request>, key: &[(&str, &str, u64)]) {
-    dst.truncate(key.len());
-    for (i, &(app, version, fps)) in key.iter().enumerate() {
-        if i == dst.len() {
-            dst.push(Request::new(app, version, f64::from_bits(fps)));
-            continue;
-        }
-        let r = &mut dst[i];
-        r.app.clear();
-        r.app.push_str(app);
-        r.version.clear();
-        r.version.push_str(version);
-        r.required_fps = f64::from_bits(fps);
-        r.priority = None;
-    }
-}
-
-/// Bit-exact equality (a `-0.0` load is not the `0.0` one: the record would print it).
-fn same_platform(a: &PlatformState, b: &PlatformState) -> bool {
-    a.tiles == b.tiles
-        && a.cores_online == b.cores_online
-        && a.external_cpu_load.to_bits() == b.external_cpu_load.to_bits()
-}
 
 /// `dst = src` element by element, reusing `dst`'s strings.
 fn fill_strings<S: AsRef<str>>(dst: &mut Vec<String>, src: &[S]) {
@@ -279,18 +214,11 @@ impl<'m> Core<'m> {
             guarantee_infeasible: false,
             failed_resources: Vec::new(),
             activity_started: None,
-            last_degraded: Vec::new(),
             others_tiles: 0,
             others_cpu: 0.0,
             n_published: model.health.publishes().len(),
             scratch: Scratch::default(),
-            schedules: Vec::new(),
-            schedules_next: 0,
-            schedule_cache: true,
-            scheduler_runs: 0,
-            requests: Vec::new(),
-            schedule_ws: fpga_model::ScheduleWorkspace::new(),
-            schedule_out: fpga_model::Schedule::default(),
+            arbiter: ResourceArbiter::new(),
         }
     }
 
@@ -298,7 +226,7 @@ impl<'m> Core<'m> {
         WorkDone {
             cycles: self.cycle,
             mdp_solves: self.mdps.solves(),
-            scheduler_runs: self.scheduler_runs,
+            scheduler_runs: self.arbiter.schedules.runs(),
         }
     }
 
@@ -307,15 +235,17 @@ impl<'m> Core<'m> {
     /// tested against. Outputs are identical either way.
     pub fn set_caches(&mut self, on: bool) {
         self.mdps.set_solve_cache(on);
-        self.schedule_cache = on;
-        self.schedules.clear();
+        self.arbiter.schedules.set_enabled(on);
     }
 
     /// The PANORAMA allocations in force so far (RAS0 then each re-allocation), in the shape of
     /// PANORAMA's Table 7; `None` when the guarantee stage is off (pre-flight infeasible).
     pub fn allocation_table(&self) -> Option<String> {
         let g = self.guarantee.as_ref()?;
-        Some(crate::guarantee::render_ras_table(&g.spec, g.ras_rows()))
+        Some(crate::report::guarantee::render_ras_table(
+            &g.spec,
+            g.ras_rows(),
+        ))
     }
 
     /// Number of re-allocations so far (RAS0 not counted).
@@ -582,7 +512,8 @@ impl<'m> Core<'m> {
             rec.events.push(format!("arbitration: {e}"));
             sc.kept.clone_from(&sc.merged);
         }
-        self.arbitrate_resources(sc, obs, rec);
+        self.arbiter
+            .arbitrate_resources(model, self.policy, &mut self.platform, sc, obs, rec);
     }
 
     /// When the assessed application was requested but not placed: re-evaluate the resource
@@ -702,141 +633,6 @@ impl<'m> Core<'m> {
                 dropped: gave_way,
                 rule: format!("resource policy {policy}: {d}"),
             });
-        }
-    }
-
-    /// Request every application action's variant at the rate the situation needs, schedule them
-    /// under the policy, and rewrite the action set (`sc.actions`) with what actually runs.
-    fn arbitrate_resources(
-        &mut self,
-        sc: &mut Scratch<'m>,
-        obs: &Observations,
-        rec: &mut DecisionRecord,
-    ) {
-        let model = self.model;
-        sc.key.clear();
-        sc.owners.clear();
-        for &a in &sc.kept {
-            let Some(act) = model.actions.get(a) else {
-                continue;
-            };
-            let (Some(app), Some(version)) = (&act.app, &act.version) else {
-                continue;
-            };
-            if sc.key.iter().any(|r| r.0 == app) {
-                continue; // one variant per application (target detection shares the tracker)
-            }
-            let speed = model
-                .mission
-                .rates
-                .get(app.as_str())
-                .and_then(|obs_name| obs.get(obs_name))
-                .unwrap_or(0.0);
-            let fps = model
-                .resources
-                .required_fps(app, [0.0, 0.0], [speed, 0.0])
-                .unwrap_or(1.0);
-            sc.key.push((app, version, fps.to_bits()));
-            sc.owners.push(a);
-        }
-        let hit = self.schedule_cache.then(|| {
-            self.schedules
-                .iter()
-                .position(|m| m.key == sc.key && same_platform(&m.before, &self.platform))
-        });
-        let memo = match hit.flatten() {
-            Some(i) => i,
-            None => {
-                self.scheduler_runs += 1;
-                if let Err(e) = model.resources.policy(self.policy.name()) {
-                    rec.events.push(format!("resources: {e}"));
-                    rec.resources = None;
-                    sc.actions.clone_from(&sc.kept);
-                    return;
-                }
-                fill_requests(&mut self.requests, &sc.key);
-                // The memo slot is rewritten in place (its buffers kept): with the memos off,
-                // the one slot every cycle, so a scheduler run allocates nothing once warm.
-                if !self.schedule_cache {
-                    self.schedules.truncate(1);
-                }
-                let slots = if self.schedule_cache {
-                    SCHEDULE_MEMO
-                } else {
-                    1
-                };
-                let slot = if self.schedules.len() < slots {
-                    self.schedules.push(ScheduleMemo::default());
-                    self.schedules.len() - 1
-                } else if self.schedule_cache {
-                    let i = self.schedules_next;
-                    self.schedules_next = (i + 1) % SCHEDULE_MEMO;
-                    i
-                } else {
-                    0
-                };
-                let m = &mut self.schedules[slot];
-                let ok = model.resources.schedule_into(
-                    self.policy.name(),
-                    &self.platform,
-                    &self.requests,
-                    &mut self.schedule_ws,
-                    &mut self.schedule_out,
-                    &mut m.after,
-                );
-                debug_assert!(ok.is_ok(), "the policy was looked up above");
-                copy_platform(&mut m.before, &self.platform);
-                m.key.clone_from(&sc.key);
-                crate::resources::to_record_into(&self.schedule_out, &mut m.record);
-                slot
-            }
-        };
-        let m = &self.schedules[memo];
-        copy_platform(&mut self.platform, &m.after);
-        match &mut rec.resources {
-            Some(r) => r.clone_from(&m.record),
-            None => rec.resources = Some(m.record.clone()),
-        }
-        let record = &m.record;
-
-        // Rewrite: an application action stays only if its app is placed, under the placed version.
-        sc.actions.clear();
-        for &a in &sc.kept {
-            let act = model.actions.get(a);
-            match act.and_then(|x| x.app.as_deref()) {
-                None => sc.actions.push(a),
-                Some(app) => {
-                    let placed = record.placements.iter().find(|p| p.app == app);
-                    if let Some(p) = placed {
-                        // A degraded variant is named by the action that runs it (track_v3 -> track_v1).
-                        let same =
-                            act.and_then(|x| x.version.as_deref()) == Some(p.version.as_str());
-                        let id = if same || !sc.owners.contains(&a) {
-                            a
-                        } else {
-                            model
-                                .actions
-                                .for_variant(app, &p.version)
-                                .map_or(a, |x| x.id.as_str())
-                        };
-                        if !sc.actions.contains(&id) {
-                            sc.actions.push(id);
-                        }
-                    } else if act.is_some_and(|x| x.kind == ActionKind::Vehicle) {
-                        sc.actions.push(a);
-                    }
-                }
-            }
-        }
-        // Degradations are events when they start, not on every cycle they last.
-        let now = || record.degraded.iter().chain(&record.dropped);
-        if !now().eq(self.last_degraded.iter()) {
-            for d in now() {
-                if !self.last_degraded.contains(d) {
-                    rec.events.push(d.clone());
-                }
-            }
-            self.last_degraded = now().cloned().collect();
         }
     }
 

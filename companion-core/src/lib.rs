@@ -22,6 +22,7 @@
 //! - `record`: the decision record written for every cycle.
 //! - `tracking`: tracking time, shared by the world, the review and the tables.
 
+pub mod arbitration;
 pub mod decision;
 pub mod evidence;
 pub mod fmea;
@@ -31,6 +32,7 @@ pub mod mission;
 pub mod mission_mdp;
 pub mod observations;
 pub mod record;
+pub mod report;
 pub mod resources;
 pub mod spec;
 pub mod tracking;

@@ -72,6 +72,13 @@ enum Purpose {
     },
 }
 
+/// After a job step: run the next (or the same) step now, or wait for a message or tick.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Advance {
+    Again,
+    Wait,
+}
+
 #[derive(Debug, Clone, PartialEq)]
 enum Running {
     /// Nothing issued for the current step yet.
@@ -675,325 +682,358 @@ impl Vehicle {
                 self.last = Some((key, JobStatus::Done));
                 return out;
             };
-            match (&job.running, &step) {
-                (Running::Command(_) | Running::Mission, _) => return out,
+            let next = match (&job.running, &step) {
+                (Running::Command(_) | Running::Mission, _) => Advance::Wait,
                 (Running::Arrive { target, since }, _) => {
                     let (target, since) = (*target, *since);
-                    let off = self.telemetry.position.map(|p| {
-                        let (n, e) = super::telemetry::offset_m(target, (p.lat_e7, p.lon_e7));
-                        n.hypot(e)
-                    });
-                    let result = match off {
-                        Some(d) if d <= self.cfg.zone_radius_m => {
-                            format!("ARRIVED ({d:.1} m from the zone)")
-                        }
-                        _ if now.saturating_sub(since) >= self.cfg.zone_arrive_timeout => format!(
-                            "TIMEOUT (not within {:.1} m of the zone after {:.0} s{}; landing here)",
-                            self.cfg.zone_radius_m,
-                            self.cfg.zone_arrive_timeout.as_secs_f64(),
-                            off.map(|d| format!(", {d:.1} m away")).unwrap_or_default()
-                        ),
-                        _ => return out,
-                    };
-                    self.records.push(CommandRecord {
-                        action,
-                        command: "ARRIVE (zone)".into(),
-                        result,
-                        attempts: 0,
-                        latency_ms: None,
-                    });
-                    self.zone_target = None;
-                    self.step_done();
-                    continue;
+                    self.arrive_step(now, action, target, since)
                 }
-                (Running::Idle, Step::Mode(name)) => {
-                    // Landing and return never wait.
-                    if self.flavor == Flavor::Px4
-                        && !matches!(name.as_str(), "LAND" | "RTL" | "SMART_RTL" | "TAKEOFF")
-                        && self.telemetry.mode.as_deref() == Some("TAKEOFF")
-                    {
-                        let until = *self
-                            .px4_takeoff_wait
-                            .get_or_insert(now + Duration::from_secs(30));
-                        if now < until {
-                            return out; // the heartbeat that shows Hold moves on
-                        }
-                    }
-                    self.px4_takeoff_wait = None;
-                    if name == "AUTO"
-                        && let Some((_, until)) = self.px4_mission_pending
-                    {
-                        if now < until {
-                            return out; // the next MISSION_CURRENT or tick moves on
-                        }
-                        self.px4_mission_pending = None;
-                    }
-                    // A different mode commanded since the last heartbeat: the reported mode is
-                    // stale (LAND reported, GUIDED just accepted for a sidestep).
-                    let stale = self
-                        .commanded_modes
-                        .iter()
-                        .rev()
-                        .find(|(_, at)| self.mode_heard_at.is_none_or(|h| *at >= h))
-                        .is_some_and(|(m, _)| m != name);
-                    self.note_mode(now, name);
-                    if modes::is_in_mode(self.flavor, self.telemetry.custom_mode, name)
-                        && self.telemetry.mode.is_some()
-                        && !stale
-                    {
-                        self.records.push(CommandRecord {
-                            action,
-                            command: format!("SET_MODE {name}"),
-                            result: "ALREADY".into(),
-                            attempts: 0,
-                            latency_ms: None,
-                        });
-                        self.step_done();
-                        continue;
-                    }
-                    match modes::set_mode_command(self.flavor, name) {
-                        Some(spec) => {
-                            if !self.issue(now, &action, format!("SET_MODE {name}"), spec, &mut out)
-                            {
-                                return out;
-                            }
-                        }
-                        None => {
-                            self.records.push(CommandRecord {
-                                action,
-                                command: format!("SET_MODE {name}"),
-                                result: format!("FAILED (no {name} mode for {:?})", self.flavor),
-                                attempts: 0,
-                                latency_ms: None,
-                            });
-                            self.job_failed(now);
-                        }
-                    }
-                }
+                (Running::Idle, Step::Mode(name)) => self.mode_step(now, action, name, &mut out),
                 (Running::Idle | Running::WaitReady { .. }, Step::Arm) => {
-                    if self.telemetry.armed {
-                        self.records.push(CommandRecord {
-                            action,
-                            command: "ARM".into(),
-                            result: "ALREADY".into(),
-                            attempts: 0,
-                            latency_ms: None,
-                        });
-                        self.step_done();
-                        continue;
-                    }
-                    match self.readiness.check() {
-                        Ok(()) => {
-                            // Arm only in the mode this companion set last (ArduCopter may leave GUIDED
-                            // for its RC mode switch right after accepting it): wait for a heartbeat
-                            // newer than the mode command; if it shows another mode, this take-off
-                            // fails and the next request sets the mode again.
-                            if self.flavor == Flavor::ArduPilot
-                                && let Some((want, at)) = self.commanded_modes.last().cloned()
-                                && !modes::is_in_mode(
-                                    self.flavor,
-                                    self.telemetry.custom_mode,
-                                    &want,
-                                )
-                            {
-                                if self.mode_heard_at.is_none_or(|h| h <= at) {
-                                    return out;
-                                }
-                                let now_mode =
-                                    self.telemetry.mode.clone().unwrap_or_else(|| "?".into());
-                                self.records.push(CommandRecord {
-                                    action,
-                                    command: "ARM".into(),
-                                    result: format!(
-                                        "FAILED (vehicle in {now_mode}, not {want} as commanded: not arming)"
-                                    ),
-                                    attempts: 0,
-                                    latency_ms: None,
-                                });
-                                self.job_failed(now);
-                                continue;
-                            }
-                            let spec = CommandSpec::long(
-                                MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-                                [1., 0., 0., 0., 0., 0., 0.],
-                            )
-                            .once();
-                            if let Some(j) = &mut self.job {
-                                j.arm_attempts += 1;
-                            }
-                            if !self.issue(now, &action, "ARM".into(), spec, &mut out) {
-                                return out;
-                            }
-                        }
-                        Err(why) => {
-                            let since = match job.running {
-                                Running::WaitReady { since } => since,
-                                _ => {
-                                    job.running = Running::WaitReady { since: now };
-                                    self.records.push(CommandRecord {
-                                        action: action.clone(),
-                                        command: "ARM".into(),
-                                        result: format!("WAITING_READY ({})", why.join("; ")),
-                                        attempts: 0,
-                                        latency_ms: None,
-                                    });
-                                    now
-                                }
-                            };
-                            if now.saturating_sub(since) >= self.cfg.arm_wait {
-                                self.records.push(CommandRecord {
-                                    action,
-                                    command: "ARM".into(),
-                                    result: format!("NOT_READY ({})", why.join("; ")),
-                                    attempts: 0,
-                                    latency_ms: None,
-                                });
-                                self.job_failed(now);
-                            }
-                            return out;
-                        }
-                    }
+                    self.arm_step(now, action, &mut out)
                 }
                 (Running::Idle, Step::Command { command, params }) => {
-                    // Before take-off the vehicle stands at home: its AMSL altitude serves
-                    // until HOME_POSITION arrives.
-                    let home_amsl_m = self.telemetry.home.map(|h| h.2).or_else(|| {
-                        self.telemetry
-                            .position
-                            .filter(|_| !self.telemetry.armed)
-                            .map(|p| p.alt_amsl_m)
-                    });
-                    let Some(params) =
-                        modes::command_params(self.flavor, *command, *params, home_amsl_m)
-                    else {
-                        self.records.push(CommandRecord {
-                            action,
-                            command: format!("{command:?}"),
-                            result: "FAILED (no home position yet)".into(),
-                            attempts: 0,
-                            latency_ms: None,
-                        });
-                        self.job_failed(now);
-                        continue;
-                    };
-                    if *command == MavCmd::MAV_CMD_NAV_TAKEOFF && self.flavor == Flavor::Px4 {
-                        // PX4 flies a take-off command in its TAKEOFF mode.
-                        self.note_mode(now, "TAKEOFF");
-                    }
-                    let spec = CommandSpec::long(*command, params);
-                    if !self.issue(now, &action, format!("{command:?}"), spec, &mut out) {
-                        return out;
-                    }
+                    self.command_step(now, action, *command, *params, &mut out)
                 }
                 (Running::Idle, Step::UploadMission) => {
-                    let home = self
-                        .telemetry
-                        .home
-                        .map(|h| (h.0, h.1))
-                        .or_else(|| self.telemetry.position.map(|p| (p.lat_e7, p.lon_e7)));
-                    let (Some(route), Some(home)) = (&self.route, home) else {
-                        let why = if self.route.is_none() {
-                            "no route loaded"
-                        } else {
-                            "no home position yet"
-                        };
-                        self.records.push(CommandRecord {
-                            action,
-                            command: "MISSION_UPLOAD".into(),
-                            result: format!("FAILED ({why})"),
-                            attempts: 0,
-                            latency_ms: None,
-                        });
-                        self.job_failed(now);
-                        continue;
-                    };
-                    let items = modes::mission_items(self.flavor, route, home);
-                    match self.mission.upload(now, items) {
-                        Ok(msgs) => {
-                            out.extend(msgs);
-                            let job = self.job.as_mut().expect("job checked above");
-                            job.running = Running::Mission;
-                            self.records.push(CommandRecord {
-                                action,
-                                command: "MISSION_UPLOAD".into(),
-                                result: "SENT".into(),
-                                attempts: 1,
-                                latency_ms: None,
-                            });
-                            return out;
-                        }
-                        Err(_) => return out, // another transfer still running: wait for it
-                    }
+                    self.upload_mission_step(now, action, &mut out)
                 }
-                (Running::Idle, Step::Reposition(o)) => match self.reposition_spec(*o) {
-                    Some(spec) => {
-                        self.note_reposition(now);
-                        if !self.issue(now, &action, "MAV_CMD_DO_REPOSITION".into(), spec, &mut out)
-                        {
-                            return out;
-                        }
-                    }
-                    None => {
-                        self.records.push(CommandRecord {
-                            action,
-                            command: "MAV_CMD_DO_REPOSITION".into(),
-                            result: "FAILED (no position/heading yet)".into(),
-                            attempts: 0,
-                            latency_ms: None,
-                        });
-                        self.job_failed(now);
-                    }
-                },
-                (Running::Idle, Step::GotoZone) => {
-                    let zone = (
-                        self.telemetry.get("zone_north_m"),
-                        self.telemetry.get("zone_east_m"),
-                        self.telemetry.position,
-                    );
-                    match zone {
-                        (Some(n), Some(e), Some(p)) => {
-                            let (x, y) = displace((p.lat_e7, p.lon_e7), n, e);
-                            let (frame, z) = modes::reposition_frame_alt(
-                                self.flavor,
-                                p.alt_rel_m,
-                                p.alt_amsl_m,
-                                p.alt_rel_m,
-                            );
-                            let spec = CommandSpec::int(
-                                MavCmd::MAV_CMD_DO_REPOSITION,
-                                frame,
-                                [-1.0, 1.0, 0.0, f32::NAN],
-                                x,
-                                y,
-                                z,
-                            );
-                            self.note_reposition(now);
-                            self.zone_target = Some((x, y));
-                            if !self.issue(
-                                now,
-                                &action,
-                                "MAV_CMD_DO_REPOSITION (zone)".into(),
-                                spec,
-                                &mut out,
-                            ) {
-                                return out;
-                            }
-                        }
-                        _ => {
-                            self.records.push(CommandRecord {
-                                action,
-                                command: "MAV_CMD_DO_REPOSITION (zone)".into(),
-                                result: "SKIPPED (no zone reported; landing here)".into(),
-                                attempts: 0,
-                                latency_ms: None,
-                            });
-                            self.step_done();
-                        }
-                    }
+                (Running::Idle, Step::Reposition(o)) => {
+                    self.reposition_step(now, action, *o, &mut out)
                 }
+                (Running::Idle, Step::GotoZone) => self.goto_zone_step(now, action, &mut out),
                 (Running::WaitReady { .. }, _) => {
                     job.running = Running::Idle;
+                    Advance::Again
                 }
+            };
+            if next == Advance::Wait {
+                return out;
+            }
+        }
+    }
+
+    /// A step's command: issued (the next step waits for its answer), or waiting to be.
+    fn issued(
+        &mut self,
+        now: Duration,
+        action: &str,
+        name: String,
+        spec: CommandSpec,
+        out: &mut Vec<Msg>,
+    ) -> Advance {
+        if self.issue(now, action, name, spec, out) {
+            Advance::Again
+        } else {
+            Advance::Wait
+        }
+    }
+
+    /// Record a step that did not need a command (`ALREADY`, `SKIPPED ...`).
+    fn record_step(&mut self, action: String, command: String, result: String) {
+        self.records.push(CommandRecord {
+            action,
+            command,
+            result,
+            attempts: 0,
+            latency_ms: None,
+        });
+    }
+
+    /// The zone reposition was accepted: done when within the zone radius, or after the
+    /// timeout (landing where the vehicle is).
+    fn arrive_step(
+        &mut self,
+        now: Duration,
+        action: String,
+        target: (i32, i32),
+        since: Duration,
+    ) -> Advance {
+        let off = self.telemetry.position.map(|p| {
+            let (n, e) = super::telemetry::offset_m(target, (p.lat_e7, p.lon_e7));
+            n.hypot(e)
+        });
+        let result = match off {
+            Some(d) if d <= self.cfg.zone_radius_m => {
+                format!("ARRIVED ({d:.1} m from the zone)")
+            }
+            _ if now.saturating_sub(since) >= self.cfg.zone_arrive_timeout => format!(
+                "TIMEOUT (not within {:.1} m of the zone after {:.0} s{}; landing here)",
+                self.cfg.zone_radius_m,
+                self.cfg.zone_arrive_timeout.as_secs_f64(),
+                off.map(|d| format!(", {d:.1} m away")).unwrap_or_default()
+            ),
+            _ => return Advance::Wait,
+        };
+        self.record_step(action, "ARRIVE (zone)".into(), result);
+        self.zone_target = None;
+        self.step_done();
+        Advance::Again
+    }
+
+    fn mode_step(
+        &mut self,
+        now: Duration,
+        action: String,
+        name: &str,
+        out: &mut Vec<Msg>,
+    ) -> Advance {
+        // Landing and return never wait.
+        if self.flavor == Flavor::Px4
+            && !matches!(name, "LAND" | "RTL" | "SMART_RTL" | "TAKEOFF")
+            && self.telemetry.mode.as_deref() == Some("TAKEOFF")
+        {
+            let until = *self
+                .px4_takeoff_wait
+                .get_or_insert(now + Duration::from_secs(30));
+            if now < until {
+                return Advance::Wait; // the heartbeat that shows Hold moves on
+            }
+        }
+        self.px4_takeoff_wait = None;
+        if name == "AUTO"
+            && let Some((_, until)) = self.px4_mission_pending
+        {
+            if now < until {
+                return Advance::Wait; // the next MISSION_CURRENT or tick moves on
+            }
+            self.px4_mission_pending = None;
+        }
+        // A different mode commanded since the last heartbeat: the reported mode is
+        // stale (LAND reported, GUIDED just accepted for a sidestep).
+        let stale = self
+            .commanded_modes
+            .iter()
+            .rev()
+            .find(|(_, at)| self.mode_heard_at.is_none_or(|h| *at >= h))
+            .is_some_and(|(m, _)| m != name);
+        self.note_mode(now, name);
+        if modes::is_in_mode(self.flavor, self.telemetry.custom_mode, name)
+            && self.telemetry.mode.is_some()
+            && !stale
+        {
+            self.record_step(action, format!("SET_MODE {name}"), "ALREADY".into());
+            self.step_done();
+            return Advance::Again;
+        }
+        match modes::set_mode_command(self.flavor, name) {
+            Some(spec) => self.issued(now, &action, format!("SET_MODE {name}"), spec, out),
+            None => {
+                let result = format!("FAILED (no {name} mode for {:?})", self.flavor);
+                self.record_step(action, format!("SET_MODE {name}"), result);
+                self.job_failed(now);
+                Advance::Again
+            }
+        }
+    }
+
+    fn arm_step(&mut self, now: Duration, action: String, out: &mut Vec<Msg>) -> Advance {
+        if self.telemetry.armed {
+            self.record_step(action, "ARM".into(), "ALREADY".into());
+            self.step_done();
+            return Advance::Again;
+        }
+        match self.readiness.check() {
+            Ok(()) => {
+                // Arm only in the mode this companion set last (ArduCopter may leave GUIDED
+                // for its RC mode switch right after accepting it): wait for a heartbeat
+                // newer than the mode command; if it shows another mode, this take-off
+                // fails and the next request sets the mode again.
+                if self.flavor == Flavor::ArduPilot
+                    && let Some((want, at)) = self.commanded_modes.last().cloned()
+                    && !modes::is_in_mode(self.flavor, self.telemetry.custom_mode, &want)
+                {
+                    if self.mode_heard_at.is_none_or(|h| h <= at) {
+                        return Advance::Wait;
+                    }
+                    let now_mode = self.telemetry.mode.clone().unwrap_or_else(|| "?".into());
+                    self.record_step(
+                        action,
+                        "ARM".into(),
+                        format!(
+                            "FAILED (vehicle in {now_mode}, not {want} as commanded: not arming)"
+                        ),
+                    );
+                    self.job_failed(now);
+                    return Advance::Again;
+                }
+                let spec = CommandSpec::long(
+                    MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                    [1., 0., 0., 0., 0., 0., 0.],
+                )
+                .once();
+                if let Some(j) = &mut self.job {
+                    j.arm_attempts += 1;
+                }
+                self.issued(now, &action, "ARM".into(), spec, out)
+            }
+            Err(why) => {
+                let Some(job) = self.job.as_mut() else {
+                    return Advance::Wait;
+                };
+                let since = match job.running {
+                    Running::WaitReady { since } => since,
+                    _ => {
+                        job.running = Running::WaitReady { since: now };
+                        self.record_step(
+                            action.clone(),
+                            "ARM".into(),
+                            format!("WAITING_READY ({})", why.join("; ")),
+                        );
+                        now
+                    }
+                };
+                if now.saturating_sub(since) >= self.cfg.arm_wait {
+                    self.record_step(
+                        action,
+                        "ARM".into(),
+                        format!("NOT_READY ({})", why.join("; ")),
+                    );
+                    self.job_failed(now);
+                }
+                Advance::Wait
+            }
+        }
+    }
+
+    fn command_step(
+        &mut self,
+        now: Duration,
+        action: String,
+        command: MavCmd,
+        params: [f32; 7],
+        out: &mut Vec<Msg>,
+    ) -> Advance {
+        // Before take-off the vehicle stands at home: its AMSL altitude serves
+        // until HOME_POSITION arrives.
+        let home_amsl_m = self.telemetry.home.map(|h| h.2).or_else(|| {
+            self.telemetry
+                .position
+                .filter(|_| !self.telemetry.armed)
+                .map(|p| p.alt_amsl_m)
+        });
+        let Some(params) = modes::command_params(self.flavor, command, params, home_amsl_m) else {
+            self.record_step(
+                action,
+                format!("{command:?}"),
+                "FAILED (no home position yet)".into(),
+            );
+            self.job_failed(now);
+            return Advance::Again;
+        };
+        if command == MavCmd::MAV_CMD_NAV_TAKEOFF && self.flavor == Flavor::Px4 {
+            // PX4 flies a take-off command in its TAKEOFF mode.
+            self.note_mode(now, "TAKEOFF");
+        }
+        let spec = CommandSpec::long(command, params);
+        self.issued(now, &action, format!("{command:?}"), spec, out)
+    }
+
+    fn upload_mission_step(
+        &mut self,
+        now: Duration,
+        action: String,
+        out: &mut Vec<Msg>,
+    ) -> Advance {
+        let home = self
+            .telemetry
+            .home
+            .map(|h| (h.0, h.1))
+            .or_else(|| self.telemetry.position.map(|p| (p.lat_e7, p.lon_e7)));
+        let (Some(route), Some(home)) = (&self.route, home) else {
+            let why = if self.route.is_none() {
+                "no route loaded"
+            } else {
+                "no home position yet"
+            };
+            self.record_step(action, "MISSION_UPLOAD".into(), format!("FAILED ({why})"));
+            self.job_failed(now);
+            return Advance::Again;
+        };
+        let items = modes::mission_items(self.flavor, route, home);
+        match self.mission.upload(now, items) {
+            Ok(msgs) => {
+                out.extend(msgs);
+                let job = self.job.as_mut().expect("job checked above");
+                job.running = Running::Mission;
+                self.records.push(CommandRecord {
+                    action,
+                    command: "MISSION_UPLOAD".into(),
+                    result: "SENT".into(),
+                    attempts: 1,
+                    latency_ms: None,
+                });
+                Advance::Wait
+            }
+            Err(_) => Advance::Wait, // another transfer still running: wait for it
+        }
+    }
+
+    fn reposition_step(
+        &mut self,
+        now: Duration,
+        action: String,
+        o: Offset,
+        out: &mut Vec<Msg>,
+    ) -> Advance {
+        match self.reposition_spec(o) {
+            Some(spec) => {
+                self.note_reposition(now);
+                self.issued(now, &action, "MAV_CMD_DO_REPOSITION".into(), spec, out)
+            }
+            None => {
+                self.record_step(
+                    action,
+                    "MAV_CMD_DO_REPOSITION".into(),
+                    "FAILED (no position/heading yet)".into(),
+                );
+                self.job_failed(now);
+                Advance::Again
+            }
+        }
+    }
+
+    fn goto_zone_step(&mut self, now: Duration, action: String, out: &mut Vec<Msg>) -> Advance {
+        let zone = (
+            self.telemetry.get("zone_north_m"),
+            self.telemetry.get("zone_east_m"),
+            self.telemetry.position,
+        );
+        match zone {
+            (Some(n), Some(e), Some(p)) => {
+                let (x, y) = displace((p.lat_e7, p.lon_e7), n, e);
+                let (frame, z) = modes::reposition_frame_alt(
+                    self.flavor,
+                    p.alt_rel_m,
+                    p.alt_amsl_m,
+                    p.alt_rel_m,
+                );
+                let spec = CommandSpec::int(
+                    MavCmd::MAV_CMD_DO_REPOSITION,
+                    frame,
+                    [-1.0, 1.0, 0.0, f32::NAN],
+                    x,
+                    y,
+                    z,
+                );
+                self.note_reposition(now);
+                self.zone_target = Some((x, y));
+                self.issued(
+                    now,
+                    &action,
+                    "MAV_CMD_DO_REPOSITION (zone)".into(),
+                    spec,
+                    out,
+                )
+            }
+            _ => {
+                self.record_step(
+                    action,
+                    "MAV_CMD_DO_REPOSITION (zone)".into(),
+                    "SKIPPED (no zone reported; landing here)".into(),
+                );
+                self.step_done();
+                Advance::Again
             }
         }
     }

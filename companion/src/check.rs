@@ -114,13 +114,13 @@ pub fn mdp_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
 }
 
 fn resources_json(cx: &CheckContext) -> anyhow::Result<Value> {
-    Ok(companion_core::resources::check_json(cx.params)?)
+    Ok(companion_core::report::resources::check_json(cx.params)?)
 }
 
 /// The SoC platform (tiles, CPU) from params/platform.toml.
 pub fn platform_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
     let spec = companion_core::resources::ResourceSpec::load(cx.params)?;
-    let text = format!("\n{}", companion_core::resources::check_text(&spec));
+    let text = format!("\n{}", companion_core::report::resources::check_text(&spec));
     Ok((resources_json(cx)?["platform"].clone(), text))
 }
 
@@ -139,10 +139,10 @@ pub fn resource_policies_section(cx: &CheckContext) -> anyhow::Result<(Value, St
 /// PANORAMA: activities, RAS0 (Table 6 shape), NGA and initial margins of `--mission`.
 pub fn guarantee_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
     let mission = cx.args.mission.as_deref().unwrap_or("tracking");
-    let v = companion_core::guarantee::check_json(cx.params, mission)?;
+    let v = companion_core::report::guarantee::check_json(cx.params, mission)?;
     let text = format!(
         "\n{}",
-        companion_core::guarantee::check_text(cx.params, mission)?
+        companion_core::report::guarantee::check_text(cx.params, mission)?
     );
     Ok((v["guarantee"].clone(), text))
 }

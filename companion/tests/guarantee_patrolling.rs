@@ -2,6 +2,7 @@
 //! its in-flight re-allocations in the shape of Table 7.
 
 use companion_core::guarantee::*;
+use companion_core::report::guarantee::*;
 use std::path::Path;
 
 fn params() -> &'static Path {

@@ -2,6 +2,7 @@
 //! failures, (c) an impossible goal; and every kind of bad mission file the loader rejects.
 
 use companion_core::guarantee::*;
+use companion_core::report::guarantee::*;
 use std::path::Path;
 
 fn params() -> &'static Path {

@@ -4,7 +4,7 @@
 //! while keeping the other. The shell only orders what the policies leave standing together.
 
 use companion::params::default_params_dir;
-use companion_core::mission_mdp::BehaviourConflicts;
+use companion_core::arbitration::BehaviourConflicts;
 use companion_link::actions::LinkParams;
 use companion_link::mission_state::select_vehicle_action;
 

@@ -1,4 +1,6 @@
 use super::*;
+use crate::arbitration::BehaviourConflicts;
+use crate::record::Conflict;
 use mdp_engine::Workspace;
 
 pub(super) const KNOWN: &[&str] = &[

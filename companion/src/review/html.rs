@@ -249,8 +249,23 @@ fn why_html(w: &Why) -> String {
 
 /// The whole report.
 pub fn render_html(rev: &Review) -> String {
-    let s = &rev.summary;
     let mut o = String::new();
+    page_head(&mut o, rev);
+    summary_section(&mut o, rev);
+    read_issues_section(&mut o, rev);
+    timeline_section(&mut o, rev);
+    events_section(&mut o, rev);
+    plots_section(&mut o, rev);
+    map_section(&mut o, rev);
+    commands_section(&mut o, rev);
+    why_section(&mut o, rev);
+    params_section(&mut o, rev);
+    o.push_str("</main></body></html>\n");
+    o
+}
+
+/// The document head and the run's header line.
+fn page_head(o: &mut String, rev: &Review) {
     let title = match &rev.header {
         Some(h) => format!("companion review — run started {}", h.started_utc),
         None => "companion review".to_string(),
@@ -281,8 +296,11 @@ pub fn render_html(rev: &Review) -> String {
         ),
     };
     let _ = write!(o, " · {}</p></header><main>", esc(&files));
+}
 
-    // Summary.
+/// The summary cards, with their counts as data attributes.
+fn summary_section(o: &mut String, rev: &Review) {
+    let s = &rev.summary;
     let _ = write!(
         o,
         r#"<section id="summary" data-records="{}" data-tracking-steps="{}" data-conflicts="{}" data-degradations="{}" data-reallocations="{}" data-commands="{}" data-failed-commands="{}""#,
@@ -304,31 +322,31 @@ pub fn render_html(rev: &Review) -> String {
     );
     let bad_outcome = s.outcome.contains("crash") || s.truncated;
     card(
-        &mut o,
+        o,
         "mission outcome",
         "sum-outcome",
         &s.outcome,
         if bad_outcome { "bad" } else { "" },
     );
     card(
-        &mut o,
+        o,
         "policy",
         "sum-policy",
         s.policy.as_deref().unwrap_or("unknown"),
         "",
     );
     if let Some(sc) = &s.scenario {
-        card(&mut o, "scenario", "sum-scenario", sc, "");
+        card(o, "scenario", "sum-scenario", sc, "");
     }
     card(
-        &mut o,
+        o,
         "tracking time",
         "sum-tracking",
         &format!("{} steps / {} s", s.tracking_steps, num(s.tracking_s)),
         "",
     );
     card(
-        &mut o,
+        o,
         "records / duration",
         "sum-records",
         &format!("{} / {} s", s.records, num(s.duration_s)),
@@ -345,7 +363,7 @@ pub fn render_html(rev: &Review) -> String {
             _ => num(m.margin),
         };
         card(
-            &mut o,
+            o,
             &format!("final margin {goal}"),
             &format!("sum-margin-{goal}"),
             &v,
@@ -353,35 +371,35 @@ pub fn render_html(rev: &Review) -> String {
         );
     }
     card(
-        &mut o,
+        o,
         "behaviour conflicts",
         "sum-conflicts",
         &s.conflicts.to_string(),
         "",
     );
     card(
-        &mut o,
+        o,
         "degradations",
         "sum-degradations",
         &s.degradations.to_string(),
         "",
     );
     card(
-        &mut o,
+        o,
         "re-allocations",
         "sum-reallocations",
         &s.reallocations.to_string(),
         "",
     );
     card(
-        &mut o,
+        o,
         "commands",
         "sum-commands",
         &format!("{}: {}", s.commands, s.outcomes.describe()),
         "",
     );
     card(
-        &mut o,
+        o,
         "failed commands",
         "sum-failed-commands",
         &format!("{} of {}", s.failed_commands, s.commands),
@@ -391,7 +409,7 @@ pub fn render_html(rev: &Review) -> String {
         let n = s.outcomes.get(c);
         if n > 0 {
             card(
-                &mut o,
+                o,
                 &format!("{} commands", c.label()),
                 &format!("sum-{}-commands", c.class()),
                 &n.to_string(),
@@ -400,29 +418,32 @@ pub fn render_html(rev: &Review) -> String {
         }
     }
     card(
-        &mut o,
+        o,
         "mode changes",
         "sum-mode-changes",
         &s.mode_changes.to_string(),
         "",
     );
     card(
-        &mut o,
+        o,
         "link events",
         "sum-link-events",
         &s.link_events.to_string(),
         "",
     );
     card(
-        &mut o,
+        o,
         "records lost",
         "sum-dropped",
         &s.dropped.to_string(),
         if s.dropped > 0 { "bad" } else { "" },
     );
     o.push_str("</div></section>");
+}
 
-    // Read issues.
+/// How the log read: skipped and truncated lines, losses, how it ended.
+fn read_issues_section(o: &mut String, rev: &Review) {
+    let s = &rev.summary;
     let n_issues = s.corrupted_lines
         + usize::from(rev.truncated.is_some())
         + rev.notes.len()
@@ -500,8 +521,10 @@ pub fn render_html(rev: &Review) -> String {
         o.push_str("<li class=\"note\">no end line: the run did not close its log (killed or still running)</li>");
     }
     o.push_str("</ul></section>");
+}
 
-    // Timeline, Tables 4–7 shape.
+/// The timeline in the shape of the BFM paper's Tables 4–7: phases, then every cycle.
+fn timeline_section(o: &mut String, rev: &Review) {
     let _ = write!(
         o,
         r#"<section id="timeline" data-phases="{}" data-rows="{}"><h2>Timeline (as the BFM paper's Tables 4–7)</h2><table id="phase-table"><thead><tr><th>cycles</th><th>t (s)</th><th>State</th><th>Set of actions</th><th>Events</th><th>Resources</th><th>marks</th></tr></thead><tbody>"#,
@@ -577,8 +600,10 @@ pub fn render_html(rev: &Review) -> String {
         );
     }
     o.push_str("</section>");
+}
 
-    // Events folded into spans.
+/// Events folded into spans.
+fn events_section(o: &mut String, rev: &Review) {
     let _ = write!(
         o,
         r#"<section id="events" data-spans="{}"><h2>Events</h2>"#,
@@ -601,8 +626,11 @@ pub fn render_html(rev: &Review) -> String {
         o.push_str("</ul>");
     }
     o.push_str("</section>");
+}
 
-    // Plots.
+/// Plots over time: probabilities, margins, CPU, tiles, altitude, battery.
+fn plots_section(o: &mut String, rev: &Review) {
+    let s = &rev.summary;
     let marks: Vec<VMark> = rev
         .plots
         .marks
@@ -730,13 +758,19 @@ pub fn render_html(rev: &Review) -> String {
         &marks,
     ));
     o.push_str("</div></section>");
+}
 
-    // Map.
+/// The flown track.
+fn map_section(o: &mut String, rev: &Review) {
+    let plots = &rev.plots;
     o.push_str(r#"<section id="map-section"><h2>Map</h2>"#);
     o.push_str(&svg_map(&plots.track.points()));
     o.push_str("</section>");
+}
 
-    // Commands.
+/// Every vehicle command with its outcome.
+fn commands_section(o: &mut String, rev: &Review) {
+    let s = &rev.summary;
     let _ = write!(
         o,
         r#"<section id="commands" data-commands="{}" data-failed="{}"><h2>Commands</h2>"#,
@@ -780,8 +814,10 @@ pub fn render_html(rev: &Review) -> String {
         }
     }
     o.push_str("</section>");
+}
 
-    // Why, per cycle.
+/// Why, per cycle.
+fn why_section(o: &mut String, rev: &Review) {
     let _ = write!(
         o,
         r#"<section id="why" data-cycles="{}"><h2>Why, cycle by cycle</h2><p class="note">What each MDP proposed and the probabilities it read, the conflicts and what gave way, the resources, the guarantee margins.</p>"#,
@@ -791,8 +827,10 @@ pub fn render_html(rev: &Review) -> String {
         o.push_str(&why_html(&r.why));
     }
     o.push_str("</section>");
+}
 
-    // Params from the header.
+/// The params files the log header carries.
+fn params_section(o: &mut String, rev: &Review) {
     if let Some(h) = &rev.header
         && !h.params.is_empty()
     {
@@ -811,6 +849,4 @@ pub fn render_html(rev: &Review) -> String {
         }
         o.push_str("</section>");
     }
-    o.push_str("</main></body></html>\n");
-    o
 }
