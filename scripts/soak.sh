@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Soak run (issue 8): a simulated hour of 50 Hz telemetry through the full fly decision cycle,
+# Soak run: a simulated hour of 50 Hz telemetry through the full fly decision cycle,
 # live heap and VmRSS sampled after the 5-minute warm-up, every simulated 5 minutes and at the
 # end; exits non-zero when the live heap grew by more than the tolerance. Not part of CI: it
 # builds in release and takes minutes. Arguments go to the example (see

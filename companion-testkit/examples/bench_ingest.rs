@@ -1,5 +1,5 @@
 //! Time MAVLink ingest (bytes -> decoded frames) on a capture, for the side-by-side comparison
-//! with pymavlink's `parse_buffer` (`bench/compare`, issue 8).
+//! with pymavlink's `parse_buffer` (`bench/compare`).
 //!
 //! Reads the capture and its chunk sizes written by `bench/make_capture.py`, then per repetition
 //! feeds every chunk to a fresh [`Ingest`] (created before the clock starts, as the Python side's

@@ -1,4 +1,4 @@
-//! Soak run (issue 8): a simulated hour of 50 Hz telemetry through the full `fly` cycle, with
+//! Soak run: a simulated hour of 50 Hz telemetry through the full `fly` cycle, with
 //! memory measured after warm-up, every simulated 5 minutes and at the end.
 //!
 //! The simulated world (`companion::sim`, params/world.toml, a scenario) is the truth; every

@@ -3,7 +3,7 @@
 //! monitors), built from an [`Observations`] snapshot of the simulated world, and a minimal
 //! responder that acknowledges commands and accepts mission uploads.
 //!
-//! Why: the ingest benchmark and the soak run (issue 8) need realistic byte streams and a `fly`
+//! Why: the ingest benchmark and the soak run need realistic byte streams and a `fly`
 //! shell that reaches its normal states, without Python or a SITL. Pure: time comes in as a value.
 
 use companion_core::observations::Observations;
