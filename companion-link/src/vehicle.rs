@@ -15,7 +15,7 @@ use super::modes::{self, Flavor};
 use super::readiness::Readiness;
 use super::telemetry::{Telemetry, TelemetryConfig, displace};
 use companion_core::observations::Observations;
-use companion_core::record::CommandRecord;
+use companion_core::record::{CommandOutcome, CommandRecord, Event, LinkEvent};
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
@@ -121,10 +121,10 @@ pub struct Vehicle {
     last: Option<(String, JobStatus)>,
     stream_queue: VecDeque<(u32, f32)>,
     /// Significant events since the last `take_events` (trigger a decision cycle).
-    events: Vec<String>,
+    events: Vec<Event>,
     /// Command records since the last `take_records`.
     records: Vec<CommandRecord>,
-    link_events: Vec<String>,
+    link_events: Vec<LinkEvent>,
     /// Retry a failed action asked for again no sooner than this.
     pub retry_failed_after: Duration,
     /// When the stream requests were last queued, and whether another set is waiting for the
@@ -220,15 +220,15 @@ impl Vehicle {
     pub fn has_events(&self) -> bool {
         !self.events.is_empty()
     }
-    pub fn take_events(&mut self) -> Vec<String> {
+    pub fn take_events(&mut self) -> Vec<Event> {
         std::mem::take(&mut self.events)
     }
     pub fn take_records(&mut self) -> Vec<CommandRecord> {
         std::mem::take(&mut self.records)
     }
-    pub fn take_link_events(&mut self) -> Vec<String> {
+    pub fn take_link_events(&mut self) -> Vec<LinkEvent> {
         if let Some(note) = self.trust_note() {
-            self.link_events.push(note);
+            self.link_events.push(LinkEvent::from(note));
         }
         std::mem::take(&mut self.link_events)
     }
@@ -284,7 +284,11 @@ impl Vehicle {
             "another autopilot {sys}/{comp} heard and ignored ({why})"
         );
         self.link_event(
-            format!("another autopilot {sys}/{comp} heard, ignored ({why})"),
+            LinkEvent::OtherAutopilot {
+                system: sys,
+                component: comp,
+                why: why.to_string(),
+            },
             false,
         );
     }
@@ -307,13 +311,13 @@ impl Vehicle {
         }
     }
 
-    pub fn observations(&self, now: Duration, events: Vec<String>) -> Observations {
+    pub fn observations(&self, now: Duration, events: Vec<Event>) -> Observations {
         self.telemetry.observations(now, events)
     }
 
-    fn link_event(&mut self, e: String, significant: bool) {
+    fn link_event(&mut self, e: LinkEvent, significant: bool) {
         if significant {
-            self.events.push(e.clone());
+            self.events.push(Event::from(e.clone()));
         }
         self.link_events.push(e);
     }
@@ -338,7 +342,14 @@ impl Vehicle {
                 self.commands.set_target(sys, comp);
                 self.mission.set_target(sys, comp);
                 tracing::info!(sys, comp, flavor = ?self.flavor, "autopilot chosen");
-                self.link_event(format!("autopilot {sys}/{comp} ({:?})", self.flavor), false);
+                self.link_event(
+                    LinkEvent::Autopilot {
+                        system: sys,
+                        component: comp,
+                        flavor: format!("{:?}", self.flavor),
+                    },
+                    false,
+                );
             } else {
                 self.other_autopilot(sys, comp);
             }
@@ -387,7 +398,7 @@ impl Vehicle {
                 let text = t.text.to_str().unwrap_or("").to_string();
                 self.readiness.on_text(now, &text);
                 if (t.severity as u8) <= (MavSeverity::MAV_SEVERITY_WARNING as u8) {
-                    self.link_event(format!("autopilot: {text}"), false);
+                    self.link_event(LinkEvent::AutopilotText(text), false);
                 }
             }
             Msg::COMMAND_ACK(a) => {
@@ -444,13 +455,13 @@ impl Vehicle {
                     self.readiness.reset();
                     self.drop_everything(now, "autopilot rebooted");
                 }
-                let name = match ev {
-                    LivenessEvent::Connected => "link connected",
-                    LivenessEvent::Regained => "link regained",
-                    _ => "autopilot rebooted",
+                let link = match ev {
+                    LivenessEvent::Connected => LinkEvent::Connected,
+                    LivenessEvent::Regained => LinkEvent::Regained,
+                    _ => LinkEvent::Rebooted,
                 };
-                tracing::info!("{name}");
-                self.link_event(name.into(), true);
+                tracing::info!("{link}");
+                self.link_event(link, true);
                 self.request_streams(now);
                 Vec::new()
             }
@@ -460,7 +471,7 @@ impl Vehicle {
                     self.cfg.link_timeout
                 );
                 self.drop_everything(now, "link lost");
-                self.link_event("link lost".into(), true);
+                self.link_event(LinkEvent::Lost, true);
                 Vec::new()
             }
         }
@@ -479,7 +490,7 @@ impl Vehicle {
                 self.records.push(CommandRecord {
                     action,
                     command: step_name(&step),
-                    result: format!("CANCELLED ({why})"),
+                    result: CommandOutcome::Cancelled(Some(why.to_string())),
                     attempts: 0,
                     latency_ms: None,
                 });
@@ -497,7 +508,7 @@ impl Vehicle {
     pub fn on_reconnect(&mut self, now: Duration) {
         if self.liveness.alive() {
             self.request_streams(now);
-            self.link_event("transport reconnected".into(), true);
+            self.link_event(LinkEvent::TransportReconnected, true);
         }
     }
 
@@ -573,7 +584,7 @@ impl Vehicle {
                 self.records.push(CommandRecord {
                     action: a.clone(),
                     command: "-".into(),
-                    result: "NOT_SENT (no link)".into(),
+                    result: CommandOutcome::NotSent("no link".into()),
                     attempts: 0,
                     latency_ms: None,
                 });
@@ -587,7 +598,7 @@ impl Vehicle {
                 None => self.records.push(CommandRecord {
                     action: a.clone(),
                     command: "-".into(),
-                    result: "UNMAPPED (not in commands.toml)".into(),
+                    result: CommandOutcome::Unmapped,
                     attempts: 0,
                     latency_ms: None,
                 }),
@@ -598,7 +609,7 @@ impl Vehicle {
                 self.records.push(CommandRecord {
                     action,
                     command: step_name(&step),
-                    result: "SUPERSEDED".into(),
+                    result: CommandOutcome::Superseded,
                     attempts: 0,
                     latency_ms: None,
                 });
@@ -647,7 +658,7 @@ impl Vehicle {
                 self.records.push(CommandRecord {
                     action,
                     command: step_name(&step),
-                    result: "SKIPPED (earlier step failed)".into(),
+                    result: CommandOutcome::Skipped("earlier step failed".into()),
                     attempts: 0,
                     latency_ms: None,
                 });
@@ -685,14 +696,16 @@ impl Vehicle {
                     });
                     let result = match off {
                         Some(d) if d <= self.cfg.zone_radius_m => {
-                            format!("ARRIVED ({d:.1} m from the zone)")
+                            CommandOutcome::Arrived(format!("{d:.1} m from the zone"))
                         }
-                        _ if now.saturating_sub(since) >= self.cfg.zone_arrive_timeout => format!(
-                            "TIMEOUT (not within {:.1} m of the zone after {:.0} s{}; landing here)",
-                            self.cfg.zone_radius_m,
-                            self.cfg.zone_arrive_timeout.as_secs_f64(),
-                            off.map(|d| format!(", {d:.1} m away")).unwrap_or_default()
-                        ),
+                        _ if now.saturating_sub(since) >= self.cfg.zone_arrive_timeout => {
+                            CommandOutcome::Timeout(Some(format!(
+                                "not within {:.1} m of the zone after {:.0} s{}; landing here",
+                                self.cfg.zone_radius_m,
+                                self.cfg.zone_arrive_timeout.as_secs_f64(),
+                                off.map(|d| format!(", {d:.1} m away")).unwrap_or_default()
+                            )))
+                        }
                         _ => return out,
                     };
                     self.records.push(CommandRecord {
@@ -744,7 +757,7 @@ impl Vehicle {
                         self.records.push(CommandRecord {
                             action,
                             command: format!("SET_MODE {name}"),
-                            result: "ALREADY".into(),
+                            result: CommandOutcome::Already,
                             attempts: 0,
                             latency_ms: None,
                         });
@@ -762,7 +775,10 @@ impl Vehicle {
                             self.records.push(CommandRecord {
                                 action,
                                 command: format!("SET_MODE {name}"),
-                                result: format!("FAILED (no {name} mode for {:?})", self.flavor),
+                                result: CommandOutcome::Failed(Some(format!(
+                                    "no {name} mode for {:?}",
+                                    self.flavor
+                                ))),
                                 attempts: 0,
                                 latency_ms: None,
                             });
@@ -775,7 +791,7 @@ impl Vehicle {
                         self.records.push(CommandRecord {
                             action,
                             command: "ARM".into(),
-                            result: "ALREADY".into(),
+                            result: CommandOutcome::Already,
                             attempts: 0,
                             latency_ms: None,
                         });
@@ -804,9 +820,9 @@ impl Vehicle {
                                 self.records.push(CommandRecord {
                                     action,
                                     command: "ARM".into(),
-                                    result: format!(
-                                        "FAILED (vehicle in {now_mode}, not {want} as commanded: not arming)"
-                                    ),
+                                    result: CommandOutcome::Failed(Some(format!(
+                                        "vehicle in {now_mode}, not {want} as commanded: not arming"
+                                    ))),
                                     attempts: 0,
                                     latency_ms: None,
                                 });
@@ -833,7 +849,7 @@ impl Vehicle {
                                     self.records.push(CommandRecord {
                                         action: action.clone(),
                                         command: "ARM".into(),
-                                        result: format!("WAITING_READY ({})", why.join("; ")),
+                                        result: CommandOutcome::WaitingReady(why.join("; ")),
                                         attempts: 0,
                                         latency_ms: None,
                                     });
@@ -844,7 +860,7 @@ impl Vehicle {
                                 self.records.push(CommandRecord {
                                     action,
                                     command: "ARM".into(),
-                                    result: format!("NOT_READY ({})", why.join("; ")),
+                                    result: CommandOutcome::NotReady(why.join("; ")),
                                     attempts: 0,
                                     latency_ms: None,
                                 });
@@ -869,7 +885,7 @@ impl Vehicle {
                         self.records.push(CommandRecord {
                             action,
                             command: format!("{command:?}"),
-                            result: "FAILED (no home position yet)".into(),
+                            result: CommandOutcome::Failed(Some("no home position yet".into())),
                             attempts: 0,
                             latency_ms: None,
                         });
@@ -900,7 +916,7 @@ impl Vehicle {
                         self.records.push(CommandRecord {
                             action,
                             command: "MISSION_UPLOAD".into(),
-                            result: format!("FAILED ({why})"),
+                            result: CommandOutcome::Failed(Some(why.to_string())),
                             attempts: 0,
                             latency_ms: None,
                         });
@@ -916,7 +932,7 @@ impl Vehicle {
                             self.records.push(CommandRecord {
                                 action,
                                 command: "MISSION_UPLOAD".into(),
-                                result: "SENT".into(),
+                                result: CommandOutcome::Sent,
                                 attempts: 1,
                                 latency_ms: None,
                             });
@@ -937,7 +953,7 @@ impl Vehicle {
                         self.records.push(CommandRecord {
                             action,
                             command: "MAV_CMD_DO_REPOSITION".into(),
-                            result: "FAILED (no position/heading yet)".into(),
+                            result: CommandOutcome::Failed(Some("no position/heading yet".into())),
                             attempts: 0,
                             latency_ms: None,
                         });
@@ -983,7 +999,7 @@ impl Vehicle {
                             self.records.push(CommandRecord {
                                 action,
                                 command: "MAV_CMD_DO_REPOSITION (zone)".into(),
-                                result: "SKIPPED (no zone reported; landing here)".into(),
+                                result: CommandOutcome::Skipped("no zone reported; landing here".into()),
                                 attempts: 0,
                                 latency_ms: None,
                             });
@@ -1015,7 +1031,7 @@ impl Vehicle {
                 self.records.push(CommandRecord {
                     action: action.to_string(),
                     command: name.clone(),
-                    result: "SENT".into(),
+                    result: CommandOutcome::Sent,
                     attempts: 1,
                     latency_ms: None,
                 });
@@ -1075,7 +1091,13 @@ impl Vehicle {
                     let name = <Msg as mavlink::Message>::default_message_from_id(id)
                         .map(|m| mavlink::Message::message_name(&m))
                         .unwrap_or("?");
-                    self.link_event(format!("stream {name}: {}", outcome.label()), false);
+                    self.link_event(
+                        LinkEvent::Stream {
+                            name: name.to_string(),
+                            outcome: outcome.label(),
+                        },
+                        false,
+                    );
                 }
                 Some(Purpose::Step {
                     action,
@@ -1089,8 +1111,10 @@ impl Vehicle {
                         attempts,
                         latency_ms,
                     });
-                    self.events
-                        .push(format!("command {action} {}", outcome.label()));
+                    self.events.push(Event::Command {
+                        action: action.clone(),
+                        outcome: outcome.label(),
+                    });
                     let is_current =
                         matches!(&self.job, Some(j) if j.running == Running::Command(ticket));
                     if !is_current {
@@ -1141,7 +1165,9 @@ impl Vehicle {
             let in_job = matches!(&self.job, Some(j) if j.running == Running::Mission);
             match ev {
                 MissionEvent::Uploaded { count } => self.link_event(
-                    format!("mission uploaded ({count} items), verifying"),
+                    LinkEvent::MissionUploaded {
+                        items: count as usize,
+                    },
                     false,
                 ),
                 MissionEvent::Done {
@@ -1151,7 +1177,7 @@ impl Vehicle {
                     self.records.push(CommandRecord {
                         action,
                         command: "MISSION_UPLOAD".into(),
-                        result: format!("ACCEPTED (verified {} items)", items.len()),
+                        result: CommandOutcome::AcceptedVerified { items: items.len() },
                         attempts: 1,
                         latency_ms: None,
                     });
@@ -1168,11 +1194,14 @@ impl Vehicle {
                     self.records.push(CommandRecord {
                         action,
                         command: format!("{op:?}"),
-                        result: format!("FAILED ({error:?})"),
+                        result: CommandOutcome::Failed(Some(format!("{error:?}"))),
                         attempts: 1,
                         latency_ms: None,
                     });
-                    self.events.push("command mission FAILED".into());
+                    self.events.push(Event::Command {
+                        action: "mission".into(),
+                        outcome: CommandOutcome::Failed(None),
+                    });
                     if in_job {
                         self.job_failed(now);
                     }
@@ -1254,14 +1283,14 @@ impl Vehicle {
                 self.records.push(CommandRecord {
                     action,
                     command: step_name(&step),
-                    result: format!("CANCELLED ({why})"),
+                    result: CommandOutcome::Cancelled(Some(why.to_string())),
                     attempts: 0,
                     latency_ms: None,
                 });
             }
         }
         if self.mission.cancel(why).is_some() {
-            self.link_event(format!("mission transfer cancelled ({why})"), false);
+            self.link_event(LinkEvent::MissionTransferCancelled(why.to_string()), false);
         }
         self.zone_target = None;
         self.last = None;
@@ -1435,7 +1464,7 @@ mod tests {
                 MavResult::MAV_RESULT_ACCEPTED,
             ),
         );
-        assert!(v.take_events().contains(&"link connected".to_string()));
+        assert!(v.take_events().contains(&Event::Link(LinkEvent::Connected)));
     }
 
     #[test]
@@ -1463,8 +1492,8 @@ mod tests {
         );
         assert!(v.take_records().iter().any(|r| {
             r.command == "ARM"
-                && r.result
-                    .starts_with("FAILED (vehicle in STABILIZE, not GUIDED")
+                && matches!(&r.result, CommandOutcome::Failed(Some(why))
+                    if why.starts_with("vehicle in STABILIZE, not GUIDED"))
         }));
         // Asked again after the retry delay: GUIDED is set again, and with GUIDED reported it arms.
         let out = v.request_actions(s(7.0), &["take_off".into()]);
@@ -1498,7 +1527,7 @@ mod tests {
         assert!(
             v.take_records()
                 .iter()
-                .any(|r| r.result.starts_with("WAITING_READY"))
+                .any(|r| matches!(r.result, CommandOutcome::WaitingReady(_)))
         );
         v.on_frame(s(3.0), &hb(4, false));
         assert!(commands(&v.tick(s(5.0))).is_empty());
@@ -1578,7 +1607,7 @@ mod tests {
         assert!(
             v.take_records()
                 .iter()
-                .any(|r| r.result.starts_with("NOT_READY"))
+                .any(|r| matches!(r.result, CommandOutcome::NotReady(_)))
         );
     }
 
@@ -1598,11 +1627,11 @@ mod tests {
         let out = v.tick(s(4.1));
         assert!(out.is_empty());
         assert!(!v.liveness.alive());
-        assert!(v.take_events().contains(&"link lost".to_string()));
+        assert!(v.take_events().contains(&Event::Link(LinkEvent::Lost)));
         assert!(
             v.take_records()
                 .iter()
-                .any(|r| r.result.contains("CANCELLED"))
+                .any(|r| matches!(r.result, CommandOutcome::Cancelled(_)))
         );
         assert_eq!(v.commands.pending_count(), 0);
         for t in [5.0, 10.0, 20.0] {
@@ -1612,11 +1641,11 @@ mod tests {
         assert!(
             v.take_records()
                 .iter()
-                .any(|r| r.result.starts_with("NOT_SENT"))
+                .any(|r| matches!(r.result, CommandOutcome::NotSent(_)))
         );
         // Autopilot back: only stream requests go out, never the old SET_MODE.
         let out = v.on_frame(s(21.0), &hb(0, false));
-        assert!(v.take_events().contains(&"link regained".to_string()));
+        assert!(v.take_events().contains(&Event::Link(LinkEvent::Regained)));
         assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL]);
         let out = v.on_frame(
             s(21.1),
@@ -1657,7 +1686,7 @@ mod tests {
             })),
         );
         assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL]);
-        assert!(v.take_events().contains(&"autopilot rebooted".to_string()));
+        assert!(v.take_events().contains(&Event::Link(LinkEvent::Rebooted)));
         assert!(v.readiness.check().is_err());
     }
 
@@ -1729,7 +1758,7 @@ mod tests {
             v.tick(s(t));
         }
         assert!(!v.liveness.alive());
-        assert!(v.take_events().contains(&"link lost".to_string()));
+        assert!(v.take_events().contains(&Event::Link(LinkEvent::Lost)));
     }
 
     fn from(sys: u8, comp: u8, mut f: Frame) -> Frame {
@@ -1761,12 +1790,12 @@ mod tests {
         let evs = v.take_link_events();
         let reports: Vec<_> = evs
             .iter()
-            .filter(|e| e.contains("another autopilot 7/1"))
+            .filter(|e| matches!(e, LinkEvent::OtherAutopilot { system: 7, component: 1, .. }))
             .collect();
         assert_eq!(reports.len(), 1, "{evs:?}");
         assert!(
             evs.iter()
-                .any(|e| e.contains("5 heartbeats from other autopilots")),
+                .any(|e| e.to_string().contains("5 heartbeats from other autopilots")),
             "{evs:?}"
         );
         // Its acks do not finish our commands either.
@@ -1883,7 +1912,7 @@ mod tests {
         assert!(
             v.take_link_events()
                 .iter()
-                .any(|e| e.contains("3 monitor frames from components not allowed"))
+                .any(|e| e.to_string().contains("3 monitor frames from components not allowed"))
         );
 
         let mut v = zone_vehicle();
@@ -1916,12 +1945,12 @@ mod tests {
         for k in 0..30 {
             v.on_frame(s(1.0 + k as f64 * 0.1), &from(77, 158, near.clone()));
         }
-        assert!(!v.take_events().iter().any(|e| e.contains("obstacle")));
+        assert!(!v.take_events().iter().any(|e| e.to_string().contains("obstacle")));
         assert_eq!(v.telemetry.obstacle_m(s(3.0)), None);
         assert_eq!(v.foreign_monitor_frames, 30);
         // The autopilot's own rangefinder still counts.
         v.on_frame(s(4.0), &near);
-        assert!(v.take_events().contains(&"obstacle detected".to_string()));
+        assert!(v.take_events().contains(&Event::ObstacleDetected));
     }
 
     #[test]
@@ -1929,7 +1958,7 @@ mod tests {
         let mut v = vehicle();
         connected(&mut v, 0);
         assert!(v.request_actions(s(1.0), &["track_v3".into()]).is_empty());
-        assert!(v.take_records()[0].result.starts_with("UNMAPPED"));
+        assert_eq!(v.take_records()[0].result, CommandOutcome::Unmapped);
     }
 
     #[test]
@@ -2074,7 +2103,7 @@ mod tests {
         assert!(
             v.take_records()
                 .iter()
-                .any(|r| r.result.starts_with("ACCEPTED (verified 2 items)"))
+                .any(|r| r.result == CommandOutcome::AcceptedVerified { items: 2 })
         );
     }
 
@@ -2091,12 +2120,13 @@ mod tests {
         let recs = v.take_records();
         assert!(
             recs.iter()
-                .any(|r| r.result.contains("VerifyMismatch") && r.result.contains("altitude")),
+                .any(|r| matches!(&r.result, CommandOutcome::Failed(Some(why))
+                    if why.contains("VerifyMismatch") && why.contains("altitude"))),
             "{recs:?}"
         );
         assert!(
             recs.iter()
-                .any(|r| r.command == "SET_MODE AUTO" && r.result.starts_with("SKIPPED"))
+                .any(|r| r.command == "SET_MODE AUTO" && matches!(r.result, CommandOutcome::Skipped(_)))
         );
     }
 
@@ -2173,7 +2203,7 @@ mod tests {
         let recs = v.take_records();
         assert!(
             recs.iter()
-                .any(|r| r.command == "ARRIVE (zone)" && r.result.starts_with("ARRIVED")),
+                .any(|r| r.command == "ARRIVE (zone)" && matches!(r.result, CommandOutcome::Arrived(_))),
             "{recs:?}"
         );
     }
@@ -2195,7 +2225,7 @@ mod tests {
         assert!(
             v.take_records()
                 .iter()
-                .any(|r| r.result.starts_with("TIMEOUT") && r.result.contains("landing here"))
+                .any(|r| matches!(&r.result, CommandOutcome::Timeout(Some(why)) if why.contains("landing here")))
         );
     }
 
@@ -2210,7 +2240,8 @@ mod tests {
         assert!(
             v.take_records()
                 .iter()
-                .any(|r| r.command == "SET_MODE RTL" && r.result.contains("pilot took control"))
+                .any(|r| r.command == "SET_MODE RTL"
+                    && r.result == CommandOutcome::Cancelled(Some("pilot took control".into())))
         );
         for t in [2.0, 3.0, 5.0] {
             v.on_frame(s(t), &hb(0, false));

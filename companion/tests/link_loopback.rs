@@ -3,6 +3,7 @@
 //! commands `take_off` needs, injects garbage bytes between frames, and drops the TCP connection
 //! once the vehicle is airborne to check reconnect + stream re-request without command replay.
 
+use companion_core::record::{Event, LinkEvent};
 use companion::fly::{FlyArgs, ScriptedDecider, run_with};
 use companion_core::record::DecisionRecord;
 use companion_link::dialect::*;
@@ -285,14 +286,17 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
     assert!(
         records
             .iter()
-            .any(|r| r.link_events.iter().any(|e| e.starts_with("disconnected")))
+            .any(|r| r
+                .link_events
+                .iter()
+                .any(|e| matches!(e, LinkEvent::TransportDisconnected(_))))
     );
     assert!(records.windows(2).all(|w| w[1].cycle == w[0].cycle + 1));
     // The onboard monitor's detection reached the observations and triggered a cycle.
     assert!(
         records
             .iter()
-            .any(|r| r.events.iter().any(|e| e == "target detected"))
+            .any(|r| r.events.contains(&Event::TargetDetected))
     );
     assert_eq!(
         records.last().unwrap().observations.get("target_detected"),

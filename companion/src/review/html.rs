@@ -765,7 +765,7 @@ pub fn render_html(rev: &Review) -> String {
                 esc(&c.command.command),
                 class,
                 esc(c.category.label()),
-                esc(&c.command.result),
+                esc(&c.command.result.to_string()),
                 c.command.attempts,
                 c.command.latency_ms.map(num).unwrap_or_else(|| "–".into())
             );

@@ -1,0 +1,547 @@
+//! What happened in a cycle ([`Event`]), on the link ([`LinkEvent`]) and to a vehicle command
+//! ([`CommandOutcome`]), as types. Each is written to the decision log as the sentence it has
+//! always been (docs/decision-log.md) and read back from it: a sentence this build does not
+//! know (an older or newer log, free text) is kept whole in `Other`, so reading never fails and
+//! writing it again gives the same bytes.
+
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
+use std::fmt;
+use std::str::FromStr;
+
+/// `WORD (detail)` split into `WORD` and `detail`; `WORD` alone gives no detail.
+fn word_and_detail(s: &str) -> (&str, Option<&str>) {
+    match s.split_once(" (") {
+        Some((w, rest)) if rest.ends_with(')') => (w, Some(&rest[..rest.len() - 1])),
+        _ => (s, None),
+    }
+}
+
+/// Parses with `known`; keeps `s` whole in `other` unless the value found writes back exactly
+/// as `s` (so `display(parse(s)) == s` for every string).
+fn parse_exact<T: fmt::Display>(
+    s: &str,
+    known: impl FnOnce(&str) -> Option<T>,
+    other: impl FnOnce(String) -> T,
+) -> T {
+    match known(s) {
+        Some(v) if v.to_string() == s => v,
+        _ => other(s.to_string()),
+    }
+}
+
+macro_rules! string_serde {
+    ($t:ty) => {
+        impl Serialize for $t {
+            fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+                serializer.collect_str(self)
+            }
+        }
+        impl<'de> Deserialize<'de> for $t {
+            fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+                let s = <std::borrow::Cow<'de, str>>::deserialize(deserializer)?;
+                Ok(Self::from(s.as_ref()))
+            }
+        }
+        impl FromStr for $t {
+            type Err = std::convert::Infallible;
+            fn from_str(s: &str) -> Result<Self, Self::Err> {
+                Ok(Self::from(s))
+            }
+        }
+        impl From<String> for $t {
+            fn from(s: String) -> Self {
+                Self::from(s.as_str())
+            }
+        }
+        impl PartialEq<str> for $t {
+            fn eq(&self, other: &str) -> bool {
+                // Compares the written form without allocating.
+                struct Eq<'a>(&'a str, bool);
+                impl fmt::Write for Eq<'_> {
+                    fn write_str(&mut self, s: &str) -> fmt::Result {
+                        match self.0.strip_prefix(s) {
+                            Some(rest) => {
+                                self.0 = rest;
+                                Ok(())
+                            }
+                            None => {
+                                self.1 = false;
+                                Err(fmt::Error)
+                            }
+                        }
+                    }
+                }
+                let mut w = Eq(other, true);
+                let _ = fmt::write(&mut w, format_args!("{self}"));
+                w.1 && w.0.is_empty()
+            }
+        }
+        impl PartialEq<&str> for $t {
+            fn eq(&self, other: &&str) -> bool {
+                self == *other
+            }
+        }
+    };
+}
+
+/// What became of a vehicle command (`CommandRecord.result`).
+#[derive(Debug, Clone, PartialEq)]
+pub enum CommandOutcome {
+    /// `ACCEPTED`: the autopilot acknowledged it.
+    Accepted,
+    /// `ACCEPTED (verified N items)`: a mission upload read back and found equal.
+    AcceptedVerified { items: usize },
+    /// `SIMULATED`: flown in the simulated world.
+    Simulated,
+    /// `SENT`: sent, no answer expected or not yet due.
+    Sent,
+    /// `IN_PROGRESS`: the autopilot is still working on it.
+    InProgress,
+    /// `PENDING`.
+    Pending,
+    /// `WAITING_READY (why)`: held until the autopilot reports ready.
+    WaitingReady(String),
+    /// `NOT_READY (why)`: not sent, the autopilot says it is not ready.
+    NotReady(String),
+    /// `ALREADY`: the vehicle was already in the asked state.
+    Already,
+    /// `SKIPPED (why)`: not sent on purpose.
+    Skipped(String),
+    /// `SUPERSEDED`: a newer action set replaced it.
+    Superseded,
+    /// `NOT_SENT (why)`.
+    NotSent(String),
+    /// `CANCELLED` (the autopilot's MAV_RESULT) or `CANCELLED (why)` (commanding stopped).
+    Cancelled(Option<String>),
+    /// `UNMAPPED (not in commands.toml)`.
+    Unmapped,
+    /// `DENIED`.
+    Denied,
+    /// `TEMPORARILY_REJECTED` after every attempt.
+    TemporarilyRejected,
+    /// `UNSUPPORTED`.
+    Unsupported,
+    /// `TIMEOUT` (no answer after every attempt) or `TIMEOUT (why)` (the zone not reached in time).
+    Timeout(Option<String>),
+    /// `ARRIVED (where)`: the vehicle reached the landing zone.
+    Arrived(String),
+    /// `FAILED` or `FAILED (why)`.
+    Failed(Option<String>),
+    /// Any other spelling, kept whole (an autopilot's other MAV_RESULT, a newer log's word).
+    Other(String),
+}
+
+impl Default for CommandOutcome {
+    fn default() -> Self {
+        CommandOutcome::Other(String::new())
+    }
+}
+
+impl fmt::Display for CommandOutcome {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        use CommandOutcome::*;
+        match self {
+            Accepted => f.write_str("ACCEPTED"),
+            AcceptedVerified { items } => write!(f, "ACCEPTED (verified {items} items)"),
+            Simulated => f.write_str("SIMULATED"),
+            Sent => f.write_str("SENT"),
+            InProgress => f.write_str("IN_PROGRESS"),
+            Pending => f.write_str("PENDING"),
+            WaitingReady(why) => write!(f, "WAITING_READY ({why})"),
+            NotReady(why) => write!(f, "NOT_READY ({why})"),
+            Already => f.write_str("ALREADY"),
+            Skipped(why) => write!(f, "SKIPPED ({why})"),
+            Superseded => f.write_str("SUPERSEDED"),
+            NotSent(why) => write!(f, "NOT_SENT ({why})"),
+            Cancelled(None) => f.write_str("CANCELLED"),
+            Cancelled(Some(why)) => write!(f, "CANCELLED ({why})"),
+            Unmapped => f.write_str("UNMAPPED (not in commands.toml)"),
+            Denied => f.write_str("DENIED"),
+            TemporarilyRejected => f.write_str("TEMPORARILY_REJECTED"),
+            Unsupported => f.write_str("UNSUPPORTED"),
+            Timeout(None) => f.write_str("TIMEOUT"),
+            Timeout(Some(why)) => write!(f, "TIMEOUT ({why})"),
+            Arrived(at) => write!(f, "ARRIVED ({at})"),
+            Failed(None) => f.write_str("FAILED"),
+            Failed(Some(why)) => write!(f, "FAILED ({why})"),
+            Other(s) => f.write_str(s),
+        }
+    }
+}
+
+impl CommandOutcome {
+    fn known(s: &str) -> Option<Self> {
+        use CommandOutcome::*;
+        let (word, detail) = word_and_detail(s);
+        let d = || detail.map(str::to_string);
+        Some(match (word, detail) {
+            ("ACCEPTED", None) => Accepted,
+            ("ACCEPTED", Some(x)) => AcceptedVerified {
+                items: x.strip_prefix("verified ")?.strip_suffix(" items")?.parse().ok()?,
+            },
+            ("SIMULATED", None) => Simulated,
+            ("SENT", None) => Sent,
+            ("IN_PROGRESS", None) => InProgress,
+            ("PENDING", None) => Pending,
+            ("WAITING_READY", Some(_)) => WaitingReady(d()?),
+            ("NOT_READY", Some(_)) => NotReady(d()?),
+            ("ALREADY", None) => Already,
+            ("SKIPPED", Some(_)) => Skipped(d()?),
+            ("SUPERSEDED", None) => Superseded,
+            ("NOT_SENT", Some(_)) => NotSent(d()?),
+            ("CANCELLED", _) => Cancelled(d()),
+            ("UNMAPPED", Some(_)) => Unmapped,
+            ("DENIED", None) => Denied,
+            ("TEMPORARILY_REJECTED", None) => TemporarilyRejected,
+            ("UNSUPPORTED", None) => Unsupported,
+            ("TIMEOUT", _) => Timeout(d()),
+            ("ARRIVED", Some(_)) => Arrived(d()?),
+            ("FAILED", _) => Failed(d()),
+            _ => return None,
+        })
+    }
+}
+
+impl From<&str> for CommandOutcome {
+    fn from(s: &str) -> Self {
+        parse_exact(s, Self::known, CommandOutcome::Other)
+    }
+}
+
+string_serde!(CommandOutcome);
+
+/// What triggered or happened at a cycle (`DecisionRecord.events`).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    /// `target detected`
+    TargetDetected,
+    /// `target lost`
+    TargetLost,
+    /// `obstacle detected`
+    ObstacleDetected,
+    /// `obstacle cleared`
+    ObstacleCleared,
+    /// `obstacle avoided` (simulate)
+    ObstacleAvoided,
+    /// `collision` (simulate)
+    Collision,
+    /// `'T' zone found` (simulate)
+    TZoneFound,
+    /// `emergency zone found` (simulate)
+    EmergencyZoneFound,
+    /// `landing` (simulate)
+    Landing,
+    /// `battery exhausted` (simulate)
+    BatteryExhausted,
+    /// `armed`
+    Armed,
+    /// `disarmed`
+    Disarmed,
+    /// `mode NAME`: the autopilot's flight mode changed.
+    Mode(String),
+    /// `waypoint N`: the autopilot reached mission item N.
+    Waypoint(u16),
+    /// `battery below N%`: a threshold of params' telemetry section crossed.
+    BatteryBelow(f64),
+    /// `link connected`, `link regained`, `link lost`, `autopilot rebooted`,
+    /// `transport reconnected`: the link events that also matter to the decision.
+    Link(LinkEvent),
+    /// `command ACTION OUTCOME`: a vehicle command finished.
+    Command {
+        action: String,
+        outcome: CommandOutcome,
+    },
+    /// `health: ERROR`: the health models could not be evaluated.
+    HealthError(String),
+    /// `arbitration: ERROR`: the behaviour conflicts could not be resolved.
+    ArbitrationError(String),
+    /// `resources: ERROR`: no resource policy to arbitrate with.
+    ResourcesError(String),
+    /// `MDP: state `STATE` unknown to this MDP`.
+    MdpStateUnknown { mdp: String, state: String },
+    /// `re-allocation: REASON`: PANORAMA re-allocated the remaining activities.
+    Reallocation(String),
+    /// `guarantee: no allocation meets the goals`
+    GuaranteeInfeasible,
+    /// Free text: a scenario's hazard, a resource degradation, an MDP's error, a shell's or
+    /// operator's sentence, or a spelling this build does not know.
+    Other(String),
+}
+
+impl Default for Event {
+    fn default() -> Self {
+        Event::Other(String::new())
+    }
+}
+
+impl fmt::Display for Event {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        use Event::*;
+        match self {
+            TargetDetected => f.write_str("target detected"),
+            TargetLost => f.write_str("target lost"),
+            ObstacleDetected => f.write_str("obstacle detected"),
+            ObstacleCleared => f.write_str("obstacle cleared"),
+            ObstacleAvoided => f.write_str("obstacle avoided"),
+            Collision => f.write_str("collision"),
+            TZoneFound => f.write_str("'T' zone found"),
+            EmergencyZoneFound => f.write_str("emergency zone found"),
+            Landing => f.write_str("landing"),
+            BatteryExhausted => f.write_str("battery exhausted"),
+            Armed => f.write_str("armed"),
+            Disarmed => f.write_str("disarmed"),
+            Mode(m) => write!(f, "mode {m}"),
+            Waypoint(n) => write!(f, "waypoint {n}"),
+            BatteryBelow(t) => write!(f, "battery below {t}%"),
+            Link(l) => l.fmt(f),
+            Command { action, outcome } => write!(f, "command {action} {outcome}"),
+            HealthError(e) => write!(f, "health: {e}"),
+            ArbitrationError(e) => write!(f, "arbitration: {e}"),
+            ResourcesError(e) => write!(f, "resources: {e}"),
+            MdpStateUnknown { mdp, state } => {
+                write!(f, "{mdp}: state `{state}` unknown to this MDP")
+            }
+            Reallocation(r) => write!(f, "re-allocation: {r}"),
+            GuaranteeInfeasible => f.write_str("guarantee: no allocation meets the goals"),
+            Other(s) => f.write_str(s),
+        }
+    }
+}
+
+impl Event {
+    fn known(s: &str) -> Option<Self> {
+        use Event::*;
+        Some(match s {
+            "target detected" => TargetDetected,
+            "target lost" => TargetLost,
+            "obstacle detected" => ObstacleDetected,
+            "obstacle cleared" => ObstacleCleared,
+            "obstacle avoided" => ObstacleAvoided,
+            "collision" => Collision,
+            "'T' zone found" => TZoneFound,
+            "emergency zone found" => EmergencyZoneFound,
+            "landing" => Landing,
+            "battery exhausted" => BatteryExhausted,
+            "armed" => Armed,
+            "disarmed" => Disarmed,
+            "guarantee: no allocation meets the goals" => GuaranteeInfeasible,
+            _ => {
+                if let Some(l) = LinkEvent::known(s).filter(LinkEvent::is_significant) {
+                    return Some(Link(l));
+                }
+                if let Some(m) = s.strip_prefix("mode ") {
+                    return Some(Mode(m.to_string()));
+                }
+                if let Some(n) = s.strip_prefix("waypoint ") {
+                    return n.parse().ok().map(Waypoint);
+                }
+                if let Some(t) = s.strip_prefix("battery below ") {
+                    return t.strip_suffix('%')?.parse().ok().map(BatteryBelow);
+                }
+                if let Some(rest) = s.strip_prefix("command ") {
+                    let (action, outcome) = rest.split_once(' ')?;
+                    return Some(Command {
+                        action: action.to_string(),
+                        outcome: CommandOutcome::from(outcome),
+                    });
+                }
+                if let Some(e) = s.strip_prefix("health: ") {
+                    return Some(HealthError(e.to_string()));
+                }
+                if let Some(e) = s.strip_prefix("arbitration: ") {
+                    return Some(ArbitrationError(e.to_string()));
+                }
+                if let Some(e) = s.strip_prefix("resources: ") {
+                    return Some(ResourcesError(e.to_string()));
+                }
+                if let Some(r) = s.strip_prefix("re-allocation: ") {
+                    return Some(Reallocation(r.to_string()));
+                }
+                let (mdp, rest) = s.split_once(": state `")?;
+                let state = rest.strip_suffix("` unknown to this MDP")?;
+                return Some(MdpStateUnknown {
+                    mdp: mdp.to_string(),
+                    state: state.to_string(),
+                });
+            }
+        })
+    }
+}
+
+impl From<&str> for Event {
+    fn from(s: &str) -> Self {
+        parse_exact(s, Self::known, Event::Other)
+    }
+}
+
+string_serde!(Event);
+
+/// What happened on the MAVLink link or its transport (`DecisionRecord.link_events`, fly only).
+#[derive(Debug, Clone, PartialEq)]
+pub enum LinkEvent {
+    /// `link connected`: the first heartbeat of the autopilot.
+    Connected,
+    /// `link regained`
+    Regained,
+    /// `link lost`: no message from the autopilot for the link timeout.
+    Lost,
+    /// `autopilot rebooted`
+    Rebooted,
+    /// `transport reconnected`
+    TransportReconnected,
+    /// `autopilot SYS/COMP (FLAVOR)`: the autopilot this link commands.
+    Autopilot { system: u8, component: u8, flavor: String },
+    /// `another autopilot SYS/COMP heard, ignored (WHY)`
+    OtherAutopilot { system: u8, component: u8, why: String },
+    /// `autopilot: TEXT`: the autopilot's STATUSTEXT.
+    AutopilotText(String),
+    /// `stream NAME: OUTCOME`: a telemetry stream request answered.
+    Stream { name: String, outcome: CommandOutcome },
+    /// `mission uploaded (N items), verifying`
+    MissionUploaded { items: usize },
+    /// `mission transfer cancelled (WHY)`
+    MissionTransferCancelled(String),
+    /// `connected NAME`: the transport to the autopilot is up.
+    TransportConnected(String),
+    /// `disconnected: WHY`
+    TransportDisconnected(String),
+    /// `onboard connected NAME`: the onboard applications' transport is up.
+    OnboardConnected(String),
+    /// `onboard disconnected: WHY`
+    OnboardDisconnected(String),
+    /// Free text (the ingest's bad-input report, a transport's note) or a spelling this build
+    /// does not know.
+    Other(String),
+}
+
+impl Default for LinkEvent {
+    fn default() -> Self {
+        LinkEvent::Other(String::new())
+    }
+}
+
+impl fmt::Display for LinkEvent {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        use LinkEvent::*;
+        match self {
+            Connected => f.write_str("link connected"),
+            Regained => f.write_str("link regained"),
+            Lost => f.write_str("link lost"),
+            Rebooted => f.write_str("autopilot rebooted"),
+            TransportReconnected => f.write_str("transport reconnected"),
+            Autopilot {
+                system,
+                component,
+                flavor,
+            } => write!(f, "autopilot {system}/{component} ({flavor})"),
+            OtherAutopilot {
+                system,
+                component,
+                why,
+            } => write!(f, "another autopilot {system}/{component} heard, ignored ({why})"),
+            AutopilotText(t) => write!(f, "autopilot: {t}"),
+            Stream { name, outcome } => write!(f, "stream {name}: {outcome}"),
+            MissionUploaded { items } => write!(f, "mission uploaded ({items} items), verifying"),
+            MissionTransferCancelled(why) => write!(f, "mission transfer cancelled ({why})"),
+            TransportConnected(n) => write!(f, "connected {n}"),
+            TransportDisconnected(why) => write!(f, "disconnected: {why}"),
+            OnboardConnected(n) => write!(f, "onboard connected {n}"),
+            OnboardDisconnected(why) => write!(f, "onboard disconnected: {why}"),
+            Other(s) => f.write_str(s),
+        }
+    }
+}
+
+impl LinkEvent {
+    /// The link events that are also the cycle's events (the decision sees them).
+    pub fn is_significant(&self) -> bool {
+        use LinkEvent::*;
+        matches!(
+            self,
+            Connected | Regained | Lost | Rebooted | TransportReconnected
+        )
+    }
+
+    fn known(s: &str) -> Option<Self> {
+        use LinkEvent::*;
+        let sys_comp = |x: &str| -> Option<(u8, u8)> {
+            let (a, b) = x.split_once('/')?;
+            Some((a.parse().ok()?, b.parse().ok()?))
+        };
+        Some(match s {
+            "link connected" => Connected,
+            "link regained" => Regained,
+            "link lost" => Lost,
+            "autopilot rebooted" => Rebooted,
+            "transport reconnected" => TransportReconnected,
+            _ => {
+                if let Some(t) = s.strip_prefix("autopilot: ") {
+                    return Some(AutopilotText(t.to_string()));
+                }
+                if let Some(rest) = s.strip_prefix("another autopilot ") {
+                    let (ids, why) = rest.split_once(" heard, ignored (")?;
+                    let (system, component) = sys_comp(ids)?;
+                    return Some(OtherAutopilot {
+                        system,
+                        component,
+                        why: why.strip_suffix(')')?.to_string(),
+                    });
+                }
+                if let Some(rest) = s.strip_prefix("autopilot ") {
+                    let (ids, flavor) = rest.split_once(" (")?;
+                    let (system, component) = sys_comp(ids)?;
+                    return Some(Autopilot {
+                        system,
+                        component,
+                        flavor: flavor.strip_suffix(')')?.to_string(),
+                    });
+                }
+                if let Some(rest) = s.strip_prefix("stream ") {
+                    let (name, outcome) = rest.split_once(": ")?;
+                    return Some(Stream {
+                        name: name.to_string(),
+                        outcome: CommandOutcome::from(outcome),
+                    });
+                }
+                if let Some(rest) = s.strip_prefix("mission uploaded (") {
+                    let n = rest.strip_suffix(" items), verifying")?;
+                    return n.parse().ok().map(|items| MissionUploaded { items });
+                }
+                if let Some(rest) = s.strip_prefix("mission transfer cancelled (") {
+                    return Some(MissionTransferCancelled(
+                        rest.strip_suffix(')')?.to_string(),
+                    ));
+                }
+                if let Some(n) = s.strip_prefix("connected ") {
+                    return Some(TransportConnected(n.to_string()));
+                }
+                if let Some(w) = s.strip_prefix("disconnected: ") {
+                    return Some(TransportDisconnected(w.to_string()));
+                }
+                if let Some(n) = s.strip_prefix("onboard connected ") {
+                    return Some(OnboardConnected(n.to_string()));
+                }
+                let w = s.strip_prefix("onboard disconnected: ")?;
+                return Some(OnboardDisconnected(w.to_string()));
+            }
+        })
+    }
+}
+
+impl From<&str> for LinkEvent {
+    fn from(s: &str) -> Self {
+        parse_exact(s, Self::known, LinkEvent::Other)
+    }
+}
+
+string_serde!(LinkEvent);
+
+impl From<LinkEvent> for Event {
+    fn from(l: LinkEvent) -> Self {
+        if l.is_significant() {
+            Event::Link(l)
+        } else {
+            Event::Other(l.to_string())
+        }
+    }
+}
