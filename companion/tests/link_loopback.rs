@@ -302,6 +302,22 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
         records.last().unwrap().observations.get("target_detected"),
         Some(&1.0)
     );
+    // The fly loop's events, link events and command results read back from the log as the
+    // values written (typed, not re-read as free text).
+    let mut typed_link_events = 0;
+    for r in &records {
+        let back: DecisionRecord =
+            serde_json::from_str(&serde_json::to_string(r).unwrap()).unwrap();
+        assert_eq!(back.events, r.events, "cycle {}", r.cycle);
+        assert_eq!(back.link_events, r.link_events, "cycle {}", r.cycle);
+        assert_eq!(back.commands, r.commands, "cycle {}", r.cycle);
+        typed_link_events += r
+            .link_events
+            .iter()
+            .filter(|e| !matches!(e, LinkEvent::Other(_)))
+            .count();
+    }
+    assert!(typed_link_events > 0);
 }
 
 /// UDP + signing: our frames arrive signed with the shared key (checked with the crate's
