@@ -134,9 +134,7 @@ impl Outcome {
                 ),
             },
             Outcome::Failed(FailReason::Timeout) => CommandOutcome::Timeout(None),
-            Outcome::Failed(FailReason::TemporarilyRejected) => {
-                CommandOutcome::TemporarilyRejected
-            }
+            Outcome::Failed(FailReason::TemporarilyRejected) => CommandOutcome::TemporarilyRejected,
             Outcome::Failed(FailReason::Cancelled(why)) => {
                 CommandOutcome::Cancelled(Some(why.clone()))
             }

@@ -633,7 +633,10 @@ mod tests {
             increment: 5,
             ..OBSTACLE_DISTANCE_DATA::DEFAULT
         });
-        assert_eq!(t.on_message(s(0.0), &m, name), vec![Event::ObstacleDetected]);
+        assert_eq!(
+            t.on_message(s(0.0), &m, name),
+            vec![Event::ObstacleDetected]
+        );
         assert_eq!(t.obstacle_m(s(0.0)), Some(9.0));
     }
 
@@ -721,7 +724,10 @@ mod tests {
                 ..HEARTBEAT_DATA::DEFAULT
             })
         };
-        assert_eq!(t.on_message(s(0.0), &hb(4, false), name), vec![Event::Mode("M4".into())]);
+        assert_eq!(
+            t.on_message(s(0.0), &hb(4, false), name),
+            vec![Event::Mode("M4".into())]
+        );
         assert!(t.on_message(s(1.0), &hb(4, false), name).is_empty());
         assert_eq!(
             t.on_message(s(2.0), &hb(3, true), name),

@@ -999,7 +999,9 @@ impl Vehicle {
                             self.records.push(CommandRecord {
                                 action,
                                 command: "MAV_CMD_DO_REPOSITION (zone)".into(),
-                                result: CommandOutcome::Skipped("no zone reported; landing here".into()),
+                                result: CommandOutcome::Skipped(
+                                    "no zone reported; landing here".into(),
+                                ),
                                 attempts: 0,
                                 latency_ms: None,
                             });
@@ -1790,7 +1792,16 @@ mod tests {
         let evs = v.take_link_events();
         let reports: Vec<_> = evs
             .iter()
-            .filter(|e| matches!(e, LinkEvent::OtherAutopilot { system: 7, component: 1, .. }))
+            .filter(|e| {
+                matches!(
+                    e,
+                    LinkEvent::OtherAutopilot {
+                        system: 7,
+                        component: 1,
+                        ..
+                    }
+                )
+            })
             .collect();
         assert_eq!(reports.len(), 1, "{evs:?}");
         assert!(
@@ -1909,11 +1920,10 @@ mod tests {
         assert_eq!(v.telemetry.get("zone_east_m"), None);
         let out = v.request_actions(s(0.2), &["replan_and_land".into()]);
         assert_eq!(repositions(&out), 0, "{out:?}");
-        assert!(
-            v.take_link_events()
-                .iter()
-                .any(|e| e.to_string().contains("3 monitor frames from components not allowed"))
-        );
+        assert!(v.take_link_events().iter().any(|e| {
+            e.to_string()
+                .contains("3 monitor frames from components not allowed")
+        }));
 
         let mut v = zone_vehicle();
         v.on_frame(s(0.1), &from(1, 100, frame(nvf("zone_n", 30.0))));
@@ -1945,7 +1955,11 @@ mod tests {
         for k in 0..30 {
             v.on_frame(s(1.0 + k as f64 * 0.1), &from(77, 158, near.clone()));
         }
-        assert!(!v.take_events().iter().any(|e| e.to_string().contains("obstacle")));
+        assert!(
+            !v.take_events()
+                .iter()
+                .any(|e| e.to_string().contains("obstacle"))
+        );
         assert_eq!(v.telemetry.obstacle_m(s(3.0)), None);
         assert_eq!(v.foreign_monitor_frames, 30);
         // The autopilot's own rangefinder still counts.
@@ -2124,10 +2138,9 @@ mod tests {
                     if why.contains("VerifyMismatch") && why.contains("altitude"))),
             "{recs:?}"
         );
-        assert!(
-            recs.iter()
-                .any(|r| r.command == "SET_MODE AUTO" && matches!(r.result, CommandOutcome::Skipped(_)))
-        );
+        assert!(recs.iter().any(
+            |r| r.command == "SET_MODE AUTO" && matches!(r.result, CommandOutcome::Skipped(_))
+        ));
     }
 
     fn zone_route_vehicle() -> Vehicle {
@@ -2203,7 +2216,8 @@ mod tests {
         let recs = v.take_records();
         assert!(
             recs.iter()
-                .any(|r| r.command == "ARRIVE (zone)" && matches!(r.result, CommandOutcome::Arrived(_))),
+                .any(|r| r.command == "ARRIVE (zone)"
+                    && matches!(r.result, CommandOutcome::Arrived(_))),
             "{recs:?}"
         );
     }
@@ -2237,12 +2251,8 @@ mod tests {
         assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
         v.stop_actions(s(1.2), "pilot took control");
         assert!(!v.busy());
-        assert!(
-            v.take_records()
-                .iter()
-                .any(|r| r.command == "SET_MODE RTL"
-                    && r.result == CommandOutcome::Cancelled(Some("pilot took control".into())))
-        );
+        assert!(v.take_records().iter().any(|r| r.command == "SET_MODE RTL"
+            && r.result == CommandOutcome::Cancelled(Some("pilot took control".into()))));
         for t in [2.0, 3.0, 5.0] {
             v.on_frame(s(t), &hb(0, false));
             assert!(commands(&v.tick(s(t + 0.5))).is_empty(), "no resend at {t}");

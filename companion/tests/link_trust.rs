@@ -2,9 +2,9 @@
 //! answers only the chosen autopilot (junk and impostors get nothing back), the autopilot can be
 //! named with `--autopilot-sysid`, and a TCP link that only reconnects is declared lost.
 
-use companion_core::record::{Event, LinkEvent};
 use companion::fly::{FlyArgs, ScriptedDecider, run_with};
 use companion_core::record::DecisionRecord;
+use companion_core::record::{Event, LinkEvent};
 use companion_link::dialect::*;
 use companion_link::url;
 use mavlink::{MavHeader, MavlinkReader};

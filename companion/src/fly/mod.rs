@@ -785,8 +785,9 @@ impl Shell {
         self.operator.new_flight();
         self.last_actions.clear();
         self.last_told.clear();
-        self.pending_events
-            .push(Event::from("flight over: landed and disarmed; waiting for the operator"));
+        self.pending_events.push(Event::from(
+            "flight over: landed and disarmed; waiting for the operator",
+        ));
     }
 
     /// A change of the cycle's action set, described for the journal and the ground station
