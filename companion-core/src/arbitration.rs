@@ -7,7 +7,7 @@ use crate::decision::{Model, Scratch};
 use crate::mission::{ActionKind, Policy};
 use crate::mission_mdp::InstantiateError;
 use crate::observations::Observations;
-use crate::record::{Conflict, DecisionRecord, ResourcesRecord};
+use crate::record::{Conflict, DecisionRecord, Event, ResourcesRecord};
 use crate::resources::ResourceSpec;
 use crate::spec::{ParamsFiles, SpecError, read_toml};
 use fpga_model::{PlatformState, Request};
@@ -460,7 +460,7 @@ impl<'m> ResourceArbiter<'m> {
         {
             Ok(m) => m,
             Err(e) => {
-                rec.events.push(format!("resources: {e}"));
+                rec.events.push(Event::ResourcesError(e.to_string()));
                 rec.resources = None;
                 sc.actions.clone_from(&sc.kept);
                 return;
@@ -547,7 +547,7 @@ fn degradation_events(
     if !now().eq(last_degraded.iter()) {
         for d in now() {
             if !last_degraded.contains(d) {
-                rec.events.push(d.clone());
+                rec.events.push(Event::from(d.as_str()));
             }
         }
         *last_degraded = now().cloned().collect();

@@ -12,7 +12,7 @@ pub use crate::mission::Policy;
 use crate::mission::{ActionCatalogue, ActionKind, MissionFile};
 use crate::mission_mdp::MissionMdps;
 use crate::observations::Observations;
-use crate::record::{DecisionRecord, Plan};
+use crate::record::{DecisionRecord, Event, Plan};
 use crate::resources::ResourceSpec;
 use crate::spec::SpecError;
 use fpga_model::PlatformState;
@@ -297,7 +297,7 @@ impl<'m> Core<'m> {
             }
             Err(e) => {
                 rec.probabilities.clear();
-                rec.events.push(format!("health: {e}"));
+                rec.events.push(Event::HealthError(e.to_string()));
             }
         }
         if self.guarantee_infeasible {
@@ -320,8 +320,10 @@ impl<'m> Core<'m> {
                 continue;
             };
             let Some(s) = mdp.state_index(local) else {
-                rec.events
-                    .push(format!("{name}: state `{local}` unknown to this MDP"));
+                rec.events.push(Event::MdpStateUnknown {
+                    mdp: name.clone(),
+                    state: local.to_string(),
+                });
                 continue;
             };
             match mdp.decide(
@@ -349,7 +351,7 @@ impl<'m> Core<'m> {
                     n_proposals += 1;
                 }
                 Ok(None) => {}
-                Err(e) => rec.events.push(format!("{name}: {e}")),
+                Err(e) => rec.events.push(Event::from(format!("{name}: {e}"))),
             }
         }
         rec.proposals.truncate(n_proposals);
@@ -509,7 +511,7 @@ impl<'m> Core<'m> {
                 .resolve_into(&sc.merged, policy, &mut sc.kept, &mut rec.conflicts)
         {
             rec.conflicts.clear();
-            rec.events.push(format!("arbitration: {e}"));
+            rec.events.push(Event::ArbitrationError(e.to_string()));
             sc.kept.clone_from(&sc.merged);
         }
         self.arbiter
@@ -561,7 +563,7 @@ impl<'m> Core<'m> {
             self.health
                 .reevaluate_manager_into(manager, &rec.evidence, &mut rec.probabilities)
         {
-            rec.events.push(format!("health: {e}"));
+            rec.events.push(Event::HealthError(e.to_string()));
             return false;
         }
         let name = rec.proposals[k].mdp.clone();
@@ -581,7 +583,7 @@ impl<'m> Core<'m> {
             Ok(Some(d)) => d,
             Ok(None) => return false,
             Err(e) => {
-                rec.events.push(format!("{name}: {e}"));
+                rec.events.push(Event::from(format!("{name}: {e}")));
                 return false;
             }
         };
@@ -745,11 +747,10 @@ impl<'m> Core<'m> {
         }
         record.plan_differs.truncate(n_differs);
         if let Some(r) = &record.reallocation {
-            rec.events.push(format!("re-allocation: {}", r.reason));
+            rec.events.push(Event::Reallocation(r.reason.clone()));
         }
         if record.infeasible && !self.guarantee_infeasible {
-            rec.events
-                .push("guarantee: no allocation meets the goals".into());
+            rec.events.push(Event::GuaranteeInfeasible);
         }
         self.guarantee_infeasible = record.infeasible;
     }
@@ -763,7 +764,12 @@ pub fn table(records: &[DecisionRecord], model: &Model) -> String {
     let mut rows: Vec<[String; 5]> = Vec::new();
     let mut last: Option<&Vec<String>> = None;
     for r in records {
-        let events = r.events.join("; ");
+        let events = r
+            .events
+            .iter()
+            .map(Event::to_string)
+            .collect::<Vec<_>>()
+            .join("; ");
         if last == Some(&r.actions) && events.is_empty() {
             if let Some(row) = rows.last_mut() {
                 let start = row[0].split('-').next().unwrap_or("").to_string();

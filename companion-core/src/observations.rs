@@ -16,7 +16,7 @@ pub struct Observations {
     pub state: String,
     pub values: BTreeMap<String, f64>,
     /// Discrete happenings since the last snapshot (`target detected`, `obstacle detected`).
-    pub events: Vec<String>,
+    pub events: Vec<crate::record::Event>,
 }
 
 impl Observations {

@@ -4,6 +4,9 @@
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
+mod events;
+pub use events::{CommandOutcome, Event, LinkEvent};
+
 pub const SCHEMA_VERSION: u32 = 1;
 
 /// One MDP's view of the cycle.
@@ -131,7 +134,7 @@ pub struct CommandRecord {
     /// MAVLink command or protocol step (`MAV_CMD_NAV_TAKEOFF`, `MISSION_UPLOAD`, `SET_MODE GUIDED`).
     pub command: String,
     /// `ACCEPTED`, `DENIED`, `FAILED`, `TIMEOUT`, `PENDING`, `SIMULATED`, ...
-    pub result: String,
+    pub result: CommandOutcome,
     pub attempts: u32,
     pub latency_ms: Option<f64>,
 }
@@ -146,7 +149,7 @@ pub struct DecisionRecord {
     /// Mission (shared) state: `base`, `wp1`, `wpi`, `wpf`, `target`, `v3`, `landing`, ...
     pub state: String,
     /// What triggered or happened at this cycle (`target detected`, `obstacle detected`, ...).
-    pub events: Vec<String>,
+    pub events: Vec<Event>,
     /// Raw observations by name (units in docs/params.md).
     pub observations: BTreeMap<String, f64>,
     /// BN evidence: node -> state.
@@ -166,7 +169,7 @@ pub struct DecisionRecord {
     pub resources: Option<ResourcesRecord>,
     pub guarantee: Option<GuaranteeRecord>,
     pub commands: Vec<CommandRecord>,
-    pub link_events: Vec<String>,
+    pub link_events: Vec<LinkEvent>,
     /// Telemetry worth plotting that is not an observation (altitude_m, battery_pct, mode).
     pub vehicle: BTreeMap<String, serde_json::Value>,
     /// Wall-clock time of the record, microseconds since the Unix epoch (UTC), the unit and
@@ -246,7 +249,7 @@ mod tests {
         DecisionRecord {
             cycle: x as u64,
             state: format!("s{x}"),
-            events: keys.iter().map(|k| k.to_string()).collect(),
+            events: keys.iter().map(|k| Event::from(*k)).collect(),
             observations: keys.iter().map(|k| (k.to_string(), x)).collect(),
             evidence: keys
                 .iter()

@@ -15,6 +15,7 @@
 
 use super::dialect::{COMMAND_INT_DATA, COMMAND_LONG_DATA, MavCmd, MavFrame, MavResult};
 use super::{Msg, OUR_COMPONENT_ID};
+use companion_core::record::CommandOutcome;
 use std::collections::BTreeMap;
 use std::time::Duration;
 
@@ -114,15 +115,29 @@ pub enum FailReason {
 
 impl Outcome {
     /// The `CommandRecord.result` spelling.
-    pub fn label(&self) -> String {
+    pub fn label(&self) -> CommandOutcome {
         match self {
-            Outcome::Acked => "ACCEPTED".into(),
-            Outcome::Failed(FailReason::Result(r)) => format!("{r:?}")
-                .trim_start_matches("MAV_RESULT_")
-                .to_string(),
-            Outcome::Failed(FailReason::Timeout) => "TIMEOUT".into(),
-            Outcome::Failed(FailReason::TemporarilyRejected) => "TEMPORARILY_REJECTED".into(),
-            Outcome::Failed(FailReason::Cancelled(why)) => format!("CANCELLED ({why})"),
+            Outcome::Acked => CommandOutcome::Accepted,
+            Outcome::Failed(FailReason::Result(r)) => match r {
+                MavResult::MAV_RESULT_ACCEPTED => CommandOutcome::Accepted,
+                MavResult::MAV_RESULT_TEMPORARILY_REJECTED => CommandOutcome::TemporarilyRejected,
+                MavResult::MAV_RESULT_DENIED => CommandOutcome::Denied,
+                MavResult::MAV_RESULT_UNSUPPORTED => CommandOutcome::Unsupported,
+                MavResult::MAV_RESULT_FAILED => CommandOutcome::Failed(None),
+                MavResult::MAV_RESULT_IN_PROGRESS => CommandOutcome::InProgress,
+                MavResult::MAV_RESULT_CANCELLED => CommandOutcome::Cancelled(None),
+                // The rarer answers keep the MAV_RESULT name.
+                other => CommandOutcome::Other(
+                    format!("{other:?}")
+                        .trim_start_matches("MAV_RESULT_")
+                        .to_string(),
+                ),
+            },
+            Outcome::Failed(FailReason::Timeout) => CommandOutcome::Timeout(None),
+            Outcome::Failed(FailReason::TemporarilyRejected) => CommandOutcome::TemporarilyRejected,
+            Outcome::Failed(FailReason::Cancelled(why)) => {
+                CommandOutcome::Cancelled(Some(why.clone()))
+            }
         }
     }
 }

@@ -7,6 +7,7 @@
 use super::Msg;
 use super::dialect::*;
 use companion_core::observations::Observations;
+use companion_core::record::Event;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -216,7 +217,7 @@ impl Telemetry {
         now: Duration,
         msg: &Msg,
         mode_name: impl Fn(u32) -> String,
-    ) -> Vec<String> {
+    ) -> Vec<Event> {
         let before_obstacle = self.obstacle_m(now);
         let before_target = self.get("target_detected");
         let before_battery = self.get("battery_pct");
@@ -227,16 +228,12 @@ impl Telemetry {
                     .base_mode
                     .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
                 if armed != self.armed {
-                    events.push(if armed {
-                        "armed".to_string()
-                    } else {
-                        "disarmed".to_string()
-                    });
+                    events.push(if armed { Event::Armed } else { Event::Disarmed });
                     self.armed = armed;
                 }
                 let name = mode_name(h.custom_mode);
                 if self.mode.as_deref() != Some(name.as_str()) {
-                    events.push(format!("mode {name}"));
+                    events.push(Event::Mode(name.clone()));
                     self.mode = Some(name);
                 }
                 self.custom_mode = h.custom_mode;
@@ -324,7 +321,7 @@ impl Telemetry {
             Msg::MISSION_CURRENT(m) => {
                 if self.mission_seq != Some(m.seq) {
                     self.mission_seq = Some(m.seq);
-                    events.push(format!("waypoint {}", m.seq));
+                    events.push(Event::Waypoint(m.seq));
                 }
                 self.set("mission_seq", m.seq as f64);
             }
@@ -383,10 +380,10 @@ impl Telemetry {
         let near = self.cfg.obstacle_near_m;
         match (before_obstacle, self.obstacle_m(now)) {
             (b, Some(a)) if a < near && b.is_none_or(|b| b >= near) => {
-                events.push("obstacle detected".into())
+                events.push(Event::ObstacleDetected)
             }
             (Some(b), a) if b < near && a.is_none_or(|a| a >= near) => {
-                events.push("obstacle cleared".into())
+                events.push(Event::ObstacleCleared)
             }
             _ => {}
         }
@@ -395,14 +392,14 @@ impl Telemetry {
             before_target.unwrap_or(0.0) > th,
             self.get("target_detected").unwrap_or(0.0) > th,
         ) {
-            (false, true) => events.push("target detected".into()),
-            (true, false) => events.push("target lost".into()),
+            (false, true) => events.push(Event::TargetDetected),
+            (true, false) => events.push(Event::TargetLost),
             _ => {}
         }
         if let (Some(b), Some(a)) = (before_battery, self.get("battery_pct")) {
             for &t in &self.cfg.battery_thresholds_pct {
                 if b > t && a <= t {
-                    events.push(format!("battery below {t}%"));
+                    events.push(Event::BatteryBelow(t));
                 }
             }
         }
@@ -470,7 +467,7 @@ impl Telemetry {
     }
 
     /// One snapshot for the decision core.
-    pub fn observations(&self, now: Duration, events: Vec<String>) -> Observations {
+    pub fn observations(&self, now: Duration, events: Vec<Event>) -> Observations {
         let mut values = self.values.clone();
         values.remove("battery_status_pct");
         if let Some(o) = self.obstacle_m(now) {
@@ -585,7 +582,7 @@ mod tests {
                 &dist(0, 3000, MavSensorOrientation::MAV_SENSOR_ROTATION_NONE),
                 name
             ),
-            Vec::<String>::new()
+            Vec::<Event>::new()
         );
         assert_eq!(
             t.on_message(
@@ -593,7 +590,7 @@ mod tests {
                 &dist(0, 1200, MavSensorOrientation::MAV_SENSOR_ROTATION_NONE),
                 name
             ),
-            vec!["obstacle detected"]
+            vec![Event::ObstacleDetected]
         );
         assert_eq!(t.observations(s(0.3), vec![]).get("obstacle_m"), Some(12.0));
         assert!(
@@ -636,7 +633,10 @@ mod tests {
             increment: 5,
             ..OBSTACLE_DISTANCE_DATA::DEFAULT
         });
-        assert_eq!(t.on_message(s(0.0), &m, name), vec!["obstacle detected"]);
+        assert_eq!(
+            t.on_message(s(0.0), &m, name),
+            vec![Event::ObstacleDetected]
+        );
         assert_eq!(t.obstacle_m(s(0.0)), Some(9.0));
     }
 
@@ -645,7 +645,7 @@ mod tests {
         let mut t = Telemetry::new(TelemetryConfig::default());
         assert_eq!(
             t.on_message(s(0.0), &nvf("tgt_det", 1.0), name),
-            vec!["target detected"]
+            vec![Event::TargetDetected]
         );
         t.on_message(s(0.0), &nvf("lum", 350.0), name);
         t.on_message(s(0.0), &nvf("mystery", 2.0), name);
@@ -670,7 +670,7 @@ mod tests {
                 &track(CameraTrackingStatusFlags::CAMERA_TRACKING_STATUS_FLAGS_ACTIVE),
                 name
             ),
-            vec!["target detected"]
+            vec![Event::TargetDetected]
         );
         assert_eq!(t.get("target_x"), Some(0.4f32 as f64));
     }
@@ -689,12 +689,12 @@ mod tests {
         assert!(t.on_message(s(0.0), &bat(55), name).is_empty());
         assert_eq!(
             t.on_message(s(1.0), &bat(49), name),
-            vec!["battery below 50%"]
+            vec![Event::BatteryBelow(50.0)]
         );
         assert!(t.on_message(s(2.0), &bat(49), name).is_empty());
         assert_eq!(
             t.on_message(s(3.0), &bat(15), name),
-            vec!["battery below 30%", "battery below 20%"]
+            vec![Event::BatteryBelow(30.0), Event::BatteryBelow(20.0)]
         );
         assert_eq!(t.get("energy_consumed_j"), Some(36_000.0));
         // SYS_STATUS does not override BATTERY_STATUS once that is heard.
@@ -724,11 +724,14 @@ mod tests {
                 ..HEARTBEAT_DATA::DEFAULT
             })
         };
-        assert_eq!(t.on_message(s(0.0), &hb(4, false), name), vec!["mode M4"]);
+        assert_eq!(
+            t.on_message(s(0.0), &hb(4, false), name),
+            vec![Event::Mode("M4".into())]
+        );
         assert!(t.on_message(s(1.0), &hb(4, false), name).is_empty());
         assert_eq!(
             t.on_message(s(2.0), &hb(3, true), name),
-            vec!["armed", "mode M3"]
+            vec![Event::Armed, Event::Mode("M3".into())]
         );
     }
 

@@ -15,7 +15,7 @@ use super::modes::{self, Flavor};
 use super::readiness::Readiness;
 use super::telemetry::{Telemetry, TelemetryConfig, displace};
 use companion_core::observations::Observations;
-use companion_core::record::CommandRecord;
+use companion_core::record::{CommandOutcome, CommandRecord, Event, LinkEvent};
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
@@ -128,10 +128,10 @@ pub struct Vehicle {
     last: Option<(String, JobStatus)>,
     stream_queue: VecDeque<(u32, f32)>,
     /// Significant events since the last `take_events` (trigger a decision cycle).
-    events: Vec<String>,
+    events: Vec<Event>,
     /// Command records since the last `take_records`.
     records: Vec<CommandRecord>,
-    link_events: Vec<String>,
+    link_events: Vec<LinkEvent>,
     /// Retry a failed action asked for again no sooner than this.
     pub retry_failed_after: Duration,
     /// When the stream requests were last queued, and whether another set is waiting for the
@@ -227,15 +227,15 @@ impl Vehicle {
     pub fn has_events(&self) -> bool {
         !self.events.is_empty()
     }
-    pub fn take_events(&mut self) -> Vec<String> {
+    pub fn take_events(&mut self) -> Vec<Event> {
         std::mem::take(&mut self.events)
     }
     pub fn take_records(&mut self) -> Vec<CommandRecord> {
         std::mem::take(&mut self.records)
     }
-    pub fn take_link_events(&mut self) -> Vec<String> {
+    pub fn take_link_events(&mut self) -> Vec<LinkEvent> {
         if let Some(note) = self.trust_note() {
-            self.link_events.push(note);
+            self.link_events.push(LinkEvent::from(note));
         }
         std::mem::take(&mut self.link_events)
     }
@@ -291,7 +291,11 @@ impl Vehicle {
             "another autopilot {sys}/{comp} heard and ignored ({why})"
         );
         self.link_event(
-            format!("another autopilot {sys}/{comp} heard, ignored ({why})"),
+            LinkEvent::OtherAutopilot {
+                system: sys,
+                component: comp,
+                why: why.to_string(),
+            },
             false,
         );
     }
@@ -314,13 +318,13 @@ impl Vehicle {
         }
     }
 
-    pub fn observations(&self, now: Duration, events: Vec<String>) -> Observations {
+    pub fn observations(&self, now: Duration, events: Vec<Event>) -> Observations {
         self.telemetry.observations(now, events)
     }
 
-    fn link_event(&mut self, e: String, significant: bool) {
+    fn link_event(&mut self, e: LinkEvent, significant: bool) {
         if significant {
-            self.events.push(e.clone());
+            self.events.push(Event::from(e.clone()));
         }
         self.link_events.push(e);
     }
@@ -345,7 +349,14 @@ impl Vehicle {
                 self.commands.set_target(sys, comp);
                 self.mission.set_target(sys, comp);
                 tracing::info!(sys, comp, flavor = ?self.flavor, "autopilot chosen");
-                self.link_event(format!("autopilot {sys}/{comp} ({:?})", self.flavor), false);
+                self.link_event(
+                    LinkEvent::Autopilot {
+                        system: sys,
+                        component: comp,
+                        flavor: format!("{:?}", self.flavor),
+                    },
+                    false,
+                );
             } else {
                 self.other_autopilot(sys, comp);
             }
@@ -394,7 +405,7 @@ impl Vehicle {
                 let text = t.text.to_str().unwrap_or("").to_string();
                 self.readiness.on_text(now, &text);
                 if (t.severity as u8) <= (MavSeverity::MAV_SEVERITY_WARNING as u8) {
-                    self.link_event(format!("autopilot: {text}"), false);
+                    self.link_event(LinkEvent::AutopilotText(text), false);
                 }
             }
             Msg::COMMAND_ACK(a) => {
@@ -451,13 +462,13 @@ impl Vehicle {
                     self.readiness.reset();
                     self.drop_everything(now, "autopilot rebooted");
                 }
-                let name = match ev {
-                    LivenessEvent::Connected => "link connected",
-                    LivenessEvent::Regained => "link regained",
-                    _ => "autopilot rebooted",
+                let link = match ev {
+                    LivenessEvent::Connected => LinkEvent::Connected,
+                    LivenessEvent::Regained => LinkEvent::Regained,
+                    _ => LinkEvent::Rebooted,
                 };
-                tracing::info!("{name}");
-                self.link_event(name.into(), true);
+                tracing::info!("{link}");
+                self.link_event(link, true);
                 self.request_streams(now);
                 Vec::new()
             }
@@ -467,7 +478,7 @@ impl Vehicle {
                     self.cfg.link_timeout
                 );
                 self.drop_everything(now, "link lost");
-                self.link_event("link lost".into(), true);
+                self.link_event(LinkEvent::Lost, true);
                 Vec::new()
             }
         }
@@ -486,7 +497,7 @@ impl Vehicle {
                 self.records.push(CommandRecord {
                     action,
                     command: step_name(&step),
-                    result: format!("CANCELLED ({why})"),
+                    result: CommandOutcome::Cancelled(Some(why.to_string())),
                     attempts: 0,
                     latency_ms: None,
                 });
@@ -504,7 +515,7 @@ impl Vehicle {
     pub fn on_reconnect(&mut self, now: Duration) {
         if self.liveness.alive() {
             self.request_streams(now);
-            self.link_event("transport reconnected".into(), true);
+            self.link_event(LinkEvent::TransportReconnected, true);
         }
     }
 
@@ -580,7 +591,7 @@ impl Vehicle {
                 self.records.push(CommandRecord {
                     action: a.clone(),
                     command: "-".into(),
-                    result: "NOT_SENT (no link)".into(),
+                    result: CommandOutcome::NotSent("no link".into()),
                     attempts: 0,
                     latency_ms: None,
                 });
@@ -594,7 +605,7 @@ impl Vehicle {
                 None => self.records.push(CommandRecord {
                     action: a.clone(),
                     command: "-".into(),
-                    result: "UNMAPPED (not in commands.toml)".into(),
+                    result: CommandOutcome::Unmapped,
                     attempts: 0,
                     latency_ms: None,
                 }),
@@ -605,7 +616,7 @@ impl Vehicle {
                 self.records.push(CommandRecord {
                     action,
                     command: step_name(&step),
-                    result: "SUPERSEDED".into(),
+                    result: CommandOutcome::Superseded,
                     attempts: 0,
                     latency_ms: None,
                 });
@@ -654,7 +665,7 @@ impl Vehicle {
                 self.records.push(CommandRecord {
                     action,
                     command: step_name(&step),
-                    result: "SKIPPED (earlier step failed)".into(),
+                    result: CommandOutcome::Skipped("earlier step failed".into()),
                     attempts: 0,
                     latency_ms: None,
                 });
@@ -730,11 +741,12 @@ impl Vehicle {
     }
 
     /// Record a step that did not need a command (`ALREADY`, `SKIPPED ...`).
+    /// A step settled without a command on the wire; `result` in the log's spelling.
     fn record_step(&mut self, action: String, command: String, result: String) {
         self.records.push(CommandRecord {
             action,
             command,
-            result,
+            result: CommandOutcome::from(result.as_str()),
             attempts: 0,
             latency_ms: None,
         });
@@ -754,9 +766,7 @@ impl Vehicle {
             n.hypot(e)
         });
         let result = match off {
-            Some(d) if d <= self.cfg.zone_radius_m => {
-                format!("ARRIVED ({d:.1} m from the zone)")
-            }
+            Some(d) if d <= self.cfg.zone_radius_m => format!("ARRIVED ({d:.1} m from the zone)"),
             _ if now.saturating_sub(since) >= self.cfg.zone_arrive_timeout => format!(
                 "TIMEOUT (not within {:.1} m of the zone after {:.0} s{}; landing here)",
                 self.cfg.zone_radius_m,
@@ -959,7 +969,7 @@ impl Vehicle {
                 self.records.push(CommandRecord {
                     action,
                     command: "MISSION_UPLOAD".into(),
-                    result: "SENT".into(),
+                    result: CommandOutcome::Sent,
                     attempts: 1,
                     latency_ms: None,
                 });
@@ -1055,7 +1065,7 @@ impl Vehicle {
                 self.records.push(CommandRecord {
                     action: action.to_string(),
                     command: name.clone(),
-                    result: "SENT".into(),
+                    result: CommandOutcome::Sent,
                     attempts: 1,
                     latency_ms: None,
                 });
@@ -1115,7 +1125,13 @@ impl Vehicle {
                     let name = <Msg as mavlink::Message>::default_message_from_id(id)
                         .map(|m| mavlink::Message::message_name(&m))
                         .unwrap_or("?");
-                    self.link_event(format!("stream {name}: {}", outcome.label()), false);
+                    self.link_event(
+                        LinkEvent::Stream {
+                            name: name.to_string(),
+                            outcome: outcome.label(),
+                        },
+                        false,
+                    );
                 }
                 Some(Purpose::Step {
                     action,
@@ -1129,8 +1145,10 @@ impl Vehicle {
                         attempts,
                         latency_ms,
                     });
-                    self.events
-                        .push(format!("command {action} {}", outcome.label()));
+                    self.events.push(Event::Command {
+                        action: action.clone(),
+                        outcome: outcome.label(),
+                    });
                     let is_current =
                         matches!(&self.job, Some(j) if j.running == Running::Command(ticket));
                     if !is_current {
@@ -1181,7 +1199,9 @@ impl Vehicle {
             let in_job = matches!(&self.job, Some(j) if j.running == Running::Mission);
             match ev {
                 MissionEvent::Uploaded { count } => self.link_event(
-                    format!("mission uploaded ({count} items), verifying"),
+                    LinkEvent::MissionUploaded {
+                        items: count as usize,
+                    },
                     false,
                 ),
                 MissionEvent::Done {
@@ -1191,7 +1211,7 @@ impl Vehicle {
                     self.records.push(CommandRecord {
                         action,
                         command: "MISSION_UPLOAD".into(),
-                        result: format!("ACCEPTED (verified {} items)", items.len()),
+                        result: CommandOutcome::AcceptedVerified { items: items.len() },
                         attempts: 1,
                         latency_ms: None,
                     });
@@ -1208,11 +1228,14 @@ impl Vehicle {
                     self.records.push(CommandRecord {
                         action,
                         command: format!("{op:?}"),
-                        result: format!("FAILED ({error:?})"),
+                        result: CommandOutcome::Failed(Some(format!("{error:?}"))),
                         attempts: 1,
                         latency_ms: None,
                     });
-                    self.events.push("command mission FAILED".into());
+                    self.events.push(Event::Command {
+                        action: "mission".into(),
+                        outcome: CommandOutcome::Failed(None),
+                    });
                     if in_job {
                         self.job_failed(now);
                     }
@@ -1294,14 +1317,14 @@ impl Vehicle {
                 self.records.push(CommandRecord {
                     action,
                     command: step_name(&step),
-                    result: format!("CANCELLED ({why})"),
+                    result: CommandOutcome::Cancelled(Some(why.to_string())),
                     attempts: 0,
                     latency_ms: None,
                 });
             }
         }
         if self.mission.cancel(why).is_some() {
-            self.link_event(format!("mission transfer cancelled ({why})"), false);
+            self.link_event(LinkEvent::MissionTransferCancelled(why.to_string()), false);
         }
         self.zone_target = None;
         self.last = None;
@@ -1475,7 +1498,7 @@ mod tests {
                 MavResult::MAV_RESULT_ACCEPTED,
             ),
         );
-        assert!(v.take_events().contains(&"link connected".to_string()));
+        assert!(v.take_events().contains(&Event::Link(LinkEvent::Connected)));
     }
 
     #[test]
@@ -1503,8 +1526,8 @@ mod tests {
         );
         assert!(v.take_records().iter().any(|r| {
             r.command == "ARM"
-                && r.result
-                    .starts_with("FAILED (vehicle in STABILIZE, not GUIDED")
+                && matches!(&r.result, CommandOutcome::Failed(Some(why))
+                    if why.starts_with("vehicle in STABILIZE, not GUIDED"))
         }));
         // Asked again after the retry delay: GUIDED is set again, and with GUIDED reported it arms.
         let out = v.request_actions(s(7.0), &["take_off".into()]);
@@ -1538,7 +1561,7 @@ mod tests {
         assert!(
             v.take_records()
                 .iter()
-                .any(|r| r.result.starts_with("WAITING_READY"))
+                .any(|r| matches!(r.result, CommandOutcome::WaitingReady(_)))
         );
         v.on_frame(s(3.0), &hb(4, false));
         assert!(commands(&v.tick(s(5.0))).is_empty());
@@ -1618,7 +1641,7 @@ mod tests {
         assert!(
             v.take_records()
                 .iter()
-                .any(|r| r.result.starts_with("NOT_READY"))
+                .any(|r| matches!(r.result, CommandOutcome::NotReady(_)))
         );
     }
 
@@ -1638,11 +1661,11 @@ mod tests {
         let out = v.tick(s(4.1));
         assert!(out.is_empty());
         assert!(!v.liveness.alive());
-        assert!(v.take_events().contains(&"link lost".to_string()));
+        assert!(v.take_events().contains(&Event::Link(LinkEvent::Lost)));
         assert!(
             v.take_records()
                 .iter()
-                .any(|r| r.result.contains("CANCELLED"))
+                .any(|r| matches!(r.result, CommandOutcome::Cancelled(_)))
         );
         assert_eq!(v.commands.pending_count(), 0);
         for t in [5.0, 10.0, 20.0] {
@@ -1652,11 +1675,11 @@ mod tests {
         assert!(
             v.take_records()
                 .iter()
-                .any(|r| r.result.starts_with("NOT_SENT"))
+                .any(|r| matches!(r.result, CommandOutcome::NotSent(_)))
         );
         // Autopilot back: only stream requests go out, never the old SET_MODE.
         let out = v.on_frame(s(21.0), &hb(0, false));
-        assert!(v.take_events().contains(&"link regained".to_string()));
+        assert!(v.take_events().contains(&Event::Link(LinkEvent::Regained)));
         assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL]);
         let out = v.on_frame(
             s(21.1),
@@ -1697,7 +1720,7 @@ mod tests {
             })),
         );
         assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL]);
-        assert!(v.take_events().contains(&"autopilot rebooted".to_string()));
+        assert!(v.take_events().contains(&Event::Link(LinkEvent::Rebooted)));
         assert!(v.readiness.check().is_err());
     }
 
@@ -1769,7 +1792,7 @@ mod tests {
             v.tick(s(t));
         }
         assert!(!v.liveness.alive());
-        assert!(v.take_events().contains(&"link lost".to_string()));
+        assert!(v.take_events().contains(&Event::Link(LinkEvent::Lost)));
     }
 
     fn from(sys: u8, comp: u8, mut f: Frame) -> Frame {
@@ -1801,12 +1824,21 @@ mod tests {
         let evs = v.take_link_events();
         let reports: Vec<_> = evs
             .iter()
-            .filter(|e| e.contains("another autopilot 7/1"))
+            .filter(|e| {
+                matches!(
+                    e,
+                    LinkEvent::OtherAutopilot {
+                        system: 7,
+                        component: 1,
+                        ..
+                    }
+                )
+            })
             .collect();
         assert_eq!(reports.len(), 1, "{evs:?}");
         assert!(
             evs.iter()
-                .any(|e| e.contains("5 heartbeats from other autopilots")),
+                .any(|e| e.to_string().contains("5 heartbeats from other autopilots")),
             "{evs:?}"
         );
         // Its acks do not finish our commands either.
@@ -1920,11 +1952,10 @@ mod tests {
         assert_eq!(v.telemetry.get("zone_east_m"), None);
         let out = v.request_actions(s(0.2), &["replan_and_land".into()]);
         assert_eq!(repositions(&out), 0, "{out:?}");
-        assert!(
-            v.take_link_events()
-                .iter()
-                .any(|e| e.contains("3 monitor frames from components not allowed"))
-        );
+        assert!(v.take_link_events().iter().any(|e| {
+            e.to_string()
+                .contains("3 monitor frames from components not allowed")
+        }));
 
         let mut v = zone_vehicle();
         v.on_frame(s(0.1), &from(1, 100, frame(nvf("zone_n", 30.0))));
@@ -1956,12 +1987,16 @@ mod tests {
         for k in 0..30 {
             v.on_frame(s(1.0 + k as f64 * 0.1), &from(77, 158, near.clone()));
         }
-        assert!(!v.take_events().iter().any(|e| e.contains("obstacle")));
+        assert!(
+            !v.take_events()
+                .iter()
+                .any(|e| e.to_string().contains("obstacle"))
+        );
         assert_eq!(v.telemetry.obstacle_m(s(3.0)), None);
         assert_eq!(v.foreign_monitor_frames, 30);
         // The autopilot's own rangefinder still counts.
         v.on_frame(s(4.0), &near);
-        assert!(v.take_events().contains(&"obstacle detected".to_string()));
+        assert!(v.take_events().contains(&Event::ObstacleDetected));
     }
 
     #[test]
@@ -1969,7 +2004,7 @@ mod tests {
         let mut v = vehicle();
         connected(&mut v, 0);
         assert!(v.request_actions(s(1.0), &["track_v3".into()]).is_empty());
-        assert!(v.take_records()[0].result.starts_with("UNMAPPED"));
+        assert_eq!(v.take_records()[0].result, CommandOutcome::Unmapped);
     }
 
     #[test]
@@ -2114,7 +2149,7 @@ mod tests {
         assert!(
             v.take_records()
                 .iter()
-                .any(|r| r.result.starts_with("ACCEPTED (verified 2 items)"))
+                .any(|r| r.result == CommandOutcome::AcceptedVerified { items: 2 })
         );
     }
 
@@ -2131,13 +2166,13 @@ mod tests {
         let recs = v.take_records();
         assert!(
             recs.iter()
-                .any(|r| r.result.contains("VerifyMismatch") && r.result.contains("altitude")),
+                .any(|r| matches!(&r.result, CommandOutcome::Failed(Some(why))
+                    if why.contains("VerifyMismatch") && why.contains("altitude"))),
             "{recs:?}"
         );
-        assert!(
-            recs.iter()
-                .any(|r| r.command == "SET_MODE AUTO" && r.result.starts_with("SKIPPED"))
-        );
+        assert!(recs.iter().any(
+            |r| r.command == "SET_MODE AUTO" && matches!(r.result, CommandOutcome::Skipped(_))
+        ));
     }
 
     fn zone_route_vehicle() -> Vehicle {
@@ -2213,7 +2248,8 @@ mod tests {
         let recs = v.take_records();
         assert!(
             recs.iter()
-                .any(|r| r.command == "ARRIVE (zone)" && r.result.starts_with("ARRIVED")),
+                .any(|r| r.command == "ARRIVE (zone)"
+                    && matches!(r.result, CommandOutcome::Arrived(_))),
             "{recs:?}"
         );
     }
@@ -2235,7 +2271,7 @@ mod tests {
         assert!(
             v.take_records()
                 .iter()
-                .any(|r| r.result.starts_with("TIMEOUT") && r.result.contains("landing here"))
+                .any(|r| matches!(&r.result, CommandOutcome::Timeout(Some(why)) if why.contains("landing here")))
         );
     }
 
@@ -2247,11 +2283,8 @@ mod tests {
         assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
         v.stop_actions(s(1.2), "pilot took control");
         assert!(!v.busy());
-        assert!(
-            v.take_records()
-                .iter()
-                .any(|r| r.command == "SET_MODE RTL" && r.result.contains("pilot took control"))
-        );
+        assert!(v.take_records().iter().any(|r| r.command == "SET_MODE RTL"
+            && r.result == CommandOutcome::Cancelled(Some("pilot took control".into()))));
         for t in [2.0, 3.0, 5.0] {
             v.on_frame(s(t), &hb(0, false));
             assert!(commands(&v.tick(s(t + 0.5))).is_empty(), "no resend at {t}");

@@ -192,13 +192,13 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
     };
     let prev_state = if i == 0 { "" } else { phase(i - 1, n) };
     if state == "wpf" && prev_state == "wpi" {
-        events.push("target detected".to_string());
+        events.push(Event::TargetDetected);
     }
     if obstacle && ((i - 1) as f64 / n as f64) < 0.40 {
-        events.push("obstacle detected".to_string());
+        events.push(Event::ObstacleDetected);
     }
     if first_degraded {
-        events.push("insufficient resources to execute V3".to_string());
+        events.push(Event::from("insufficient resources to execute V3"));
     }
     let tiles_used = placements.iter().flat_map(|p| p.tiles.iter()).count() as u8;
     let cpu_load: f64 = placements.iter().map(|p| p.cpu_share).sum();
@@ -263,7 +263,7 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
         commands.push(CommandRecord {
             action: "take_off".into(),
             command: "MAV_CMD_NAV_TAKEOFF".into(),
-            result: "ACCEPTED".into(),
+            result: CommandOutcome::Accepted,
             attempts: 1,
             latency_ms: Some(120.0),
         });
@@ -272,23 +272,23 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
         commands.push(CommandRecord {
             action: "land".into(),
             command: "SET_MODE LAND".into(),
-            result: "TIMEOUT".into(),
+            result: CommandOutcome::Timeout(None),
             attempts: 3,
             latency_ms: None,
         });
         commands.push(CommandRecord {
             action: "land".into(),
             command: "MAV_CMD_NAV_LAND".into(),
-            result: "ACCEPTED".into(),
+            result: CommandOutcome::Accepted,
             attempts: 1,
             latency_ms: Some(85.0),
         });
     }
     if i == n / 2 {
-        link_events.push("heartbeat lost for 1.5 s".to_string());
+        link_events.push(LinkEvent::from("heartbeat lost for 1.5 s"));
     }
     if i == n / 2 + 1 {
-        link_events.push("heartbeat regained".to_string());
+        link_events.push(LinkEvent::from("heartbeat regained"));
     }
     let altitude = match state {
         "base" => 0.0,

@@ -8,7 +8,7 @@ use companion::decision_log::{Header, LogEvent, ReadIssue};
 use companion::review::outcomes::Category;
 use companion::review::*;
 use companion_core::record::DecisionRecord;
-use companion_core::record::{CommandRecord, Conflict, MdpProposal};
+use companion_core::record::{CommandRecord, Conflict, Event, MdpProposal};
 use companion_testkit::synthetic;
 use std::time::UNIX_EPOCH;
 
@@ -448,7 +448,7 @@ fn review_of_a_long_log_keeps_bounded_state() {
         let mut r = one[(i % 100) as usize].clone();
         r.cycle = i;
         r.time_s = i as f64;
-        r.events.push(format!("distinct event {i}"));
+        r.events.push(Event::from(format!("distinct event {i}")));
         rev.push(LogItem::Record(Box::new(r), Vec::new()));
     }
     rev.finish();

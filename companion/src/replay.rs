@@ -17,6 +17,7 @@ use crate::decision_log::{Header, SCHEMA_VERSION};
 use companion_core::decision::{Core, Model, ModelKind, Policy};
 use companion_core::observations::Observations;
 use companion_core::record::DecisionRecord;
+use companion_core::record::Event;
 use companion_core::spec::ParamsFiles;
 use serde_json::Value;
 use std::io::{BufRead, BufReader, Read};
@@ -363,12 +364,17 @@ impl<'m> Run<'m> {
 /// adds for the same inputs; `None` when the logged list cannot hold them in that order. The
 /// shell's own events come last and only in `fly` logs.
 pub fn split_events<'a>(
-    logged: &'a [String],
-    core_added: &[String],
+    logged: &'a [Event],
+    core_added: &[Event],
     source: Source,
-) -> Option<(&'a [String], &'a [String], &'a [String])> {
-    let is_shell =
-        |e: &String| source == Source::Fly && (e.ends_with(": land") || e.starts_with("landing: "));
+) -> Option<(&'a [Event], &'a [Event], &'a [Event])> {
+    // The shell's sentences have no variant of their own: told apart by their wording.
+    let is_shell = |e: &Event| {
+        source == Source::Fly && {
+            let t = e.to_string();
+            t.ends_with(": land") || t.starts_with("landing: ")
+        }
+    };
     // The shell's events are a tail of recognisable sentences after the core's: take the
     // fewest that leave a head ending with the core's.
     let mut end = logged.len();
@@ -536,8 +542,8 @@ pub fn run_cli(path: &Path) -> i32 {
 mod tests {
     use super::*;
 
-    fn s(v: &[&str]) -> Vec<String> {
-        v.iter().map(|x| x.to_string()).collect()
+    fn s(v: &[&str]) -> Vec<Event> {
+        v.iter().map(|x| Event::from(*x)).collect()
     }
 
     #[test]

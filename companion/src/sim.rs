@@ -7,7 +7,7 @@
 //! chose. The core never reads the truth.
 
 use companion_core::observations::Observations;
-use companion_core::record::{DecisionRecord, Plan};
+use companion_core::record::{DecisionRecord, Event, Plan};
 use companion_core::spec::{ParamsFiles, SpecError, read_toml};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -323,7 +323,7 @@ impl<'a> World<'a> {
     }
 
     /// Start the hazards whose trigger fires at this step; returns their events.
-    fn trigger_hazards(&mut self) -> Vec<String> {
+    fn trigger_hazards(&mut self) -> Vec<Event> {
         let mut events = Vec::new();
         for (i, h) in self.scenario.hazards.iter().enumerate() {
             if self.active[i].is_some() {
@@ -340,7 +340,7 @@ impl<'a> World<'a> {
             if fire {
                 let end = h.duration.map_or(u32::MAX, |d| self.step + d);
                 self.active[i] = Some((self.step, end));
-                events.push(h.event.clone());
+                events.push(Event::from(h.event.as_str()));
             }
         }
         events
@@ -436,7 +436,7 @@ impl<'a> World<'a> {
     }
 
     /// Advance one step under the plan the core chose. Returns events to append to the record.
-    pub fn advance(&mut self, plan: &Plan, record: &DecisionRecord) -> Vec<String> {
+    pub fn advance(&mut self, plan: &Plan, record: &DecisionRecord) -> Vec<Event> {
         let mut events = Vec::new();
         let values = self.values();
         let acts: Vec<&str> = record.actions.iter().map(String::as_str).collect();
@@ -479,14 +479,14 @@ impl<'a> World<'a> {
                     }
                 }
                 self.obstacle_unavoided_steps = 0;
-                events.push("obstacle avoided".into());
+                events.push(Event::ObstacleAvoided);
                 self.avoided_at = Some(self.step);
                 self.zone_t_found = false;
             } else {
                 self.obstacle_unavoided_steps += 1;
                 if self.obstacle_unavoided_steps > truth.obstacle_grace_steps {
                     self.outcome = Some(Outcome::Collision);
-                    events.push("collision".into());
+                    events.push(Event::Collision);
                 }
             }
         }
@@ -498,14 +498,14 @@ impl<'a> World<'a> {
             && self.rng.random::<f64>() < truth.p_zone_t
         {
             self.zone_t_found = true;
-            events.push("'T' zone found".into());
+            events.push(Event::TZoneFound);
         }
         if has("search_emergency_zone")
             && !self.zone_found
             && self.rng.random::<f64>() < truth.p_zone
         {
             self.zone_found = true;
-            events.push("emergency zone found".into());
+            events.push(Event::EmergencyZoneFound);
         }
 
         // Mission phase.
@@ -513,7 +513,7 @@ impl<'a> World<'a> {
         let before = self.phase.clone();
         let next: Option<String> =
             if airborne && (has("land") || has("replan_and_land") || has("return_to_base")) {
-                events.push("landing".into());
+                events.push(Event::Landing);
                 Some("landing".into())
             } else {
                 match self.phase.as_str() {
@@ -533,7 +533,7 @@ impl<'a> World<'a> {
                     }
                     "wpf" if has("detect_target") => (self.rng.random::<f64>() < truth.p_detect)
                         .then(|| {
-                            events.push("target detected".into());
+                            events.push(Event::TargetDetected);
                             "target".into()
                         }),
                     p if p == "target" || is_tracking(p) => {
@@ -544,7 +544,7 @@ impl<'a> World<'a> {
                                 if self.rng.random::<f64>() < q {
                                     Some(format!("v{v}"))
                                 } else {
-                                    events.push("target lost".into());
+                                    events.push(Event::TargetLost);
                                     Some("target".into())
                                 }
                             }
@@ -570,7 +570,7 @@ impl<'a> World<'a> {
         }
         if self.battery_wh <= 0.0 {
             self.outcome.get_or_insert(Outcome::Crashed);
-            events.push("battery exhausted".into());
+            events.push(Event::BatteryExhausted);
         }
         let _ = plan;
         self.step += 1;
@@ -784,7 +784,7 @@ mod tests {
         );
         let r = run(&w, &s, 2, scripted("track_v3", 25.0));
         let first_wpf = r.records.iter().position(|x| x.state == "wpf").unwrap();
-        assert_eq!(r.records[first_wpf].events, vec!["vibrations".to_string()]);
+        assert_eq!(r.records[first_wpf].events, vec![Event::from("vibrations")]);
         for (i, x) in r.records.iter().enumerate() {
             let vib = x.observations.get("vibration_mps2").copied();
             assert_eq!(

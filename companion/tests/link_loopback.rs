@@ -5,6 +5,7 @@
 
 use companion::fly::{FlyArgs, ScriptedDecider, run_with};
 use companion_core::record::DecisionRecord;
+use companion_core::record::{Event, LinkEvent};
 use companion_link::dialect::*;
 use companion_link::liveness::parse_duration;
 use companion_link::url;
@@ -282,22 +283,38 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
     assert!(cmds.iter().any(|c| c.action == "take_off"
         && c.command == "MAV_CMD_NAV_TAKEOFF"
         && c.result == "ACCEPTED"));
-    assert!(
-        records
+    assert!(records.iter().any(|r| {
+        r.link_events
             .iter()
-            .any(|r| r.link_events.iter().any(|e| e.starts_with("disconnected")))
-    );
+            .any(|e| matches!(e, LinkEvent::TransportDisconnected(_)))
+    }));
     assert!(records.windows(2).all(|w| w[1].cycle == w[0].cycle + 1));
     // The onboard monitor's detection reached the observations and triggered a cycle.
     assert!(
         records
             .iter()
-            .any(|r| r.events.iter().any(|e| e == "target detected"))
+            .any(|r| r.events.contains(&Event::TargetDetected))
     );
     assert_eq!(
         records.last().unwrap().observations.get("target_detected"),
         Some(&1.0)
     );
+    // The fly loop's events, link events and command results read back from the log as the
+    // values written (typed, not re-read as free text).
+    let mut typed_link_events = 0;
+    for r in &records {
+        let back: DecisionRecord =
+            serde_json::from_str(&serde_json::to_string(r).unwrap()).unwrap();
+        assert_eq!(back.events, r.events, "cycle {}", r.cycle);
+        assert_eq!(back.link_events, r.link_events, "cycle {}", r.cycle);
+        assert_eq!(back.commands, r.commands, "cycle {}", r.cycle);
+        typed_link_events += r
+            .link_events
+            .iter()
+            .filter(|e| !matches!(e, LinkEvent::Other(_)))
+            .count();
+    }
+    assert!(typed_link_events > 0);
 }
 
 /// UDP + signing: our frames arrive signed with the shared key (checked with the crate's

@@ -4,6 +4,7 @@
 
 use companion::fly::{FlyArgs, ScriptedDecider, run_with};
 use companion_core::record::DecisionRecord;
+use companion_core::record::{Event, LinkEvent};
 use companion_link::dialect::*;
 use companion_link::url;
 use mavlink::{MavHeader, MavlinkReader};
@@ -221,7 +222,10 @@ async fn udpin_junk_senders_get_nothing_and_the_autopilot_keeps_the_traffic() {
         "commands addressed to another system: {targets:?}"
     );
     assert!(report.ingest.bytes_unframed() > 0, "the junk was counted");
-    let events: Vec<&String> = records.iter().flat_map(|r| r.link_events.iter()).collect();
+    let events: Vec<String> = records
+        .iter()
+        .flat_map(|r| r.link_events.iter().map(LinkEvent::to_string))
+        .collect();
     assert!(
         events
             .iter()
@@ -283,7 +287,10 @@ async fn udpin_peer_follows_the_same_autopilot_to_a_new_address() {
     };
     assert!(hb(&first_got) >= 1, "the first address was answered");
     assert!(hb(&second_got) >= 1, "the traffic followed the autopilot");
-    let events: Vec<&String> = records.iter().flat_map(|r| r.link_events.iter()).collect();
+    let events: Vec<String> = records
+        .iter()
+        .flat_map(|r| r.link_events.iter().map(LinkEvent::to_string))
+        .collect();
     assert!(
         events.iter().any(|e| e.starts_with("udpin peer changed")),
         "{events:?}"
@@ -321,14 +328,14 @@ async fn tcp_link_that_only_reconnects_is_declared_lost() {
     let reconnects = records
         .iter()
         .flat_map(|r| r.link_events.iter())
-        .filter(|e| e.starts_with("connected tcp:"))
+        .filter(|e| matches!(e, LinkEvent::TransportConnected(n) if n.starts_with("tcp:")))
         .count();
     assert!(reconnects >= 3, "the server kept accepting: {reconnects}");
     assert!(report.link_losses >= 1, "never declared lost");
     assert!(
         records
             .iter()
-            .any(|r| r.events.iter().any(|e| e == "link lost")),
+            .any(|r| r.events.contains(&Event::Link(LinkEvent::Lost))),
         "no link lost event"
     );
     assert_eq!(

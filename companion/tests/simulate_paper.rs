@@ -269,7 +269,8 @@ fn infeasible_guarantee_ends_the_mission() {
         .position(|x| x.guarantee.as_ref().is_some_and(|g| g.infeasible))
         .expect("the drift makes the goals infeasible at some point");
     assert!(
-        r[i].events.iter().any(|e| e.contains("no allocation")),
+        r[i].events
+            .contains(&companion_core::record::Event::GuaranteeInfeasible),
         "{:?}",
         r[i].events
     );

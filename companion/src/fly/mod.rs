@@ -21,7 +21,7 @@ use companion_link::operator::{self, Control, GateEvent, GcsText, OperatorGate, 
 pub mod transport;
 use anyhow::Context;
 use companion_core::observations::Observations;
-use companion_core::record::{DecisionRecord, Plan};
+use companion_core::record::{CommandOutcome, DecisionRecord, Event, LinkEvent, Plan};
 use companion_link::url::{self, ConnectUrl};
 use companion_link::vehicle::{Vehicle, VehicleConfig};
 use std::io::Write;
@@ -356,7 +356,7 @@ async fn run_loop<D: Decider, S: RecordSink>(
     let stop_at = args.duration.map(|d| start + d);
     let connect_by = args.connect_timeout.map(|d| start + d);
     let mut report = FlyReport::default();
-    let mut transport_events: Vec<String> = Vec::new();
+    let mut transport_events: Vec<LinkEvent> = Vec::new();
     let ctrl_c = tokio::signal::ctrl_c();
     tokio::pin!(ctrl_c);
     let terminate = terminate_signal();
@@ -407,7 +407,7 @@ async fn run_loop<D: Decider, S: RecordSink>(
                         if let Some(ev) = udp_peer.on_frame(from, autopilot) {
                             tracing::info!("{ev}");
                             let _ = link.peer.send(udp_peer.addr);
-                            transport_events.push(ev);
+                            transport_events.push(LinkEvent::from(ev));
                         }
                     }
                     ingest.set_our_system(vehicle.our_system());
@@ -421,14 +421,14 @@ async fn run_loop<D: Decider, S: RecordSink>(
                         eprintln!("companion fly: {line}");
                     }
                     tracing::info!("connected {name}");
-                    transport_events.push(format!("connected {name}"));
+                    transport_events.push(LinkEvent::TransportConnected(name.to_string()));
                 }
                 Some(Inbound::Disconnected(why)) => {
                     if let Some(line) = link_failures.failed(now(), &why, retry) {
                         tracing::warn!("autopilot link: {line}");
                         eprintln!("companion fly: autopilot link {}: {line}", args.connect);
                     }
-                    transport_events.push(format!("disconnected: {why}"));
+                    transport_events.push(LinkEvent::TransportDisconnected(why.to_string()));
                 }
                 None => anyhow::bail!("the transport task stopped"),
             },
@@ -453,14 +453,14 @@ async fn run_loop<D: Decider, S: RecordSink>(
                     if let Some(line) = onboard_failures.connected(&name) {
                         eprintln!("companion fly: onboard {line}");
                     }
-                    transport_events.push(format!("onboard connected {name}"));
+                    transport_events.push(LinkEvent::OnboardConnected(name.to_string()));
                 }
                 Some(Inbound::Disconnected(why)) => {
                     if let Some(line) = onboard_failures.failed(now(), &why, retry) {
                         tracing::warn!("onboard link: {line}");
                         eprintln!("companion fly: onboard link: {line}");
                     }
-                    transport_events.push(format!("onboard disconnected: {why}"));
+                    transport_events.push(LinkEvent::OnboardDisconnected(why.to_string()));
                 }
                 None => anyhow::bail!("the onboard transport task stopped"),
             },
@@ -552,7 +552,7 @@ async fn run_loop<D: Decider, S: RecordSink>(
                 } else {
                     tracing::info!("{text}");
                 }
-                shell.pending_events.push(text.to_string());
+                shell.pending_events.push(Event::from(text));
                 out.extend(shell.texts.say(
                     t,
                     if lost { WARNING } else { INFO },
@@ -667,7 +667,7 @@ fn on_gate_event(
     out: &mut Vec<Msg>,
 ) {
     let text = ev.describe();
-    shell.pending_events.push(text.clone());
+    shell.pending_events.push(Event::from(text.as_str()));
     let (severity, gcs) = match ev {
         GateEvent::Started(_) => (NOTICE, "companion: mission started".to_string()),
         GateEvent::TakenOver(mode) => {
@@ -730,7 +730,7 @@ pub struct Shell {
     fresh_mission: MissionState,
     precedence: Vec<String>,
     /// Events of the shell itself (the mission's end, the operator) for the next record.
-    pending_events: Vec<String>,
+    pending_events: Vec<Event>,
     /// Who commands: the companion only once the operator started the mission. `Shell::new`
     /// starts it at once (the soak and fuzz runs); `fly` waits unless `--auto-start`.
     pub operator: OperatorGate,
@@ -785,8 +785,9 @@ impl Shell {
         self.operator.new_flight();
         self.last_actions.clear();
         self.last_told.clear();
-        self.pending_events
-            .push("flight over: landed and disarmed; waiting for the operator".into());
+        self.pending_events.push(Event::from(
+            "flight over: landed and disarmed; waiting for the operator",
+        ));
     }
 
     /// A change of the cycle's action set, described for the journal and the ground station
@@ -800,9 +801,8 @@ impl Shell {
         let why = rec
             .events
             .iter()
-            .find(|e| !e.starts_with("command "))
-            .cloned()
-            .unwrap_or_else(|| format!("state {}", rec.state));
+            .find(|e| !matches!(e, Event::Command { .. }))
+            .map_or_else(|| format!("state {}", rec.state), Event::to_string);
         let show = |a: &[String]| {
             if a.is_empty() {
                 "-".to_string()
@@ -835,14 +835,14 @@ impl Shell {
         let why = rec
             .events
             .iter()
-            .find(|e| !e.starts_with("command "))
+            .find(|e| !matches!(e, Event::Command { .. }))
             .map_or(String::new(), |e| format!(" ({e})"));
         Some(format!("companion: {told}{why}"))
     }
 
     /// A link event when bad input arrived since the last report: malformed frames or bad
     /// signatures, or more unframed bytes than one frame still arriving could explain.
-    fn ingest_note(&mut self) -> Option<String> {
+    fn ingest_note(&mut self) -> Option<LinkEvent> {
         let (now, was) = (&self.ingest, &self.ingest_reported);
         let grew = now.frames_malformed > was.frames_malformed
             || now.bad_signatures > was.bad_signatures
@@ -853,14 +853,14 @@ impl Shell {
             return None;
         }
         self.ingest_reported = *now;
-        Some(format!(
+        Some(LinkEvent::from(format!(
             "ingest: {} bytes outside valid frames (garbage or corrupt), {} malformed frames, {} bad signatures, {} unsigned commands refused, {} other unsigned frames refused (since start)",
             now.bytes_unframed(),
             now.frames_malformed,
             now.bad_signatures,
             now.unsigned_commands_refused,
             now.unsigned_refused
-        ))
+        )))
     }
 }
 
@@ -879,7 +879,7 @@ async fn run_cycle_at<D: Decider, S: RecordSink>(
     trigger_at: Duration,
     now: impl Fn() -> Duration,
     report: &mut FlyReport,
-    transport_events: &mut Vec<String>,
+    transport_events: &mut Vec<LinkEvent>,
 ) -> anyhow::Result<()> {
     let decided = decide(decider, shell, vehicle, &now);
     send(encoder, vehicle, tx, tlog, &decided.msgs).await;
@@ -946,7 +946,7 @@ pub fn decide<D: Decider>(
     let mut shell_events = Vec::new();
     if let Some(why) = shell.mission.mission_end(&obs) {
         // The mission's end, not the core's decision: recorded as an event with the action.
-        shell_events.push(format!("{why}: land"));
+        shell_events.push(Event::from(format!("{why}: land")));
         rec.shell_actions.push("land".into());
         shell.mission.after_plan(&["land".to_string()]);
         chosen = Some("land".into());
@@ -962,9 +962,9 @@ pub fn decide<D: Decider>(
             .is_some_and(|a| a == "avoid_obstacle" || LANDING_ACTIONS.contains(&a));
         if !keep {
             if !vehicle.settled(&landing) {
-                shell_events.push(format!(
+                shell_events.push(Event::from(format!(
                     "landing: {landing} again (the landing was interrupted or not done)"
-                ));
+                )));
             }
             if !rec.actions.contains(&landing) && !rec.shell_actions.contains(&landing) {
                 rec.shell_actions.push(landing.clone());
@@ -1000,21 +1000,21 @@ const MAX_EVENTS: usize = 64;
 
 /// Repeated events once each (in first-seen order), at most [`MAX_EVENTS`] with a count of the
 /// rest.
-fn coalesce_events(events: &mut Vec<String>) {
+fn coalesce_events(events: &mut Vec<Event>) {
     let mut seen = std::collections::BTreeSet::new();
     let total = events.len();
-    events.retain(|e| seen.insert(e.clone()));
+    events.retain(|e| seen.insert(e.to_string()));
     let unique = events.len();
     if unique > MAX_EVENTS {
         events.truncate(MAX_EVENTS);
     }
     if events.len() < total {
-        events.push(format!(
+        events.push(Event::from(format!(
             "({} more events since the last cycle: {} repeats, {} not listed)",
             total - events.len(),
             total - unique,
             unique - events.len()
-        ));
+        )));
     }
 }
 
@@ -1027,9 +1027,9 @@ pub struct Decided {
     pub plan: Plan,
     rec: DecisionRecord,
     obs: Observations,
-    events: Vec<String>,
+    events: Vec<Event>,
     /// Events of the shell's own decisions this cycle (mission end, landing resumed).
-    shell_events: Vec<String>,
+    shell_events: Vec<Event>,
 }
 
 impl Decided {
@@ -1046,7 +1046,7 @@ pub fn finish_record(
     shell: &mut Shell,
     vehicle: &mut Vehicle,
     cycle: u64,
-    transport_events: &mut Vec<String>,
+    transport_events: &mut Vec<LinkEvent>,
 ) -> DecisionRecord {
     let Decided {
         mut rec,
@@ -1082,16 +1082,16 @@ pub fn finish_record(
         serde_json::Value::from(shell.operator.control.label()),
     );
     for c in &rec.commands {
-        let failed = [
-            "FAILED",
-            "DENIED",
-            "TIMEOUT",
-            "NOT_",
-            "CANCELLED",
-            "UNMAPPED",
-        ]
-        .iter()
-        .any(|p| c.result.starts_with(p));
+        let failed = matches!(
+            c.result,
+            CommandOutcome::Failed(_)
+                | CommandOutcome::Denied
+                | CommandOutcome::Timeout(_)
+                | CommandOutcome::NotSent(_)
+                | CommandOutcome::NotReady(_)
+                | CommandOutcome::Cancelled(_)
+                | CommandOutcome::Unmapped
+        );
         if failed {
             tracing::warn!("command {} {}: {}", c.action, c.command, c.result);
         } else {
@@ -1101,7 +1101,7 @@ pub fn finish_record(
     for e in &rec.link_events {
         tracing::info!("link: {e}");
     }
-    for e in rec.events.iter().filter(|e| e.starts_with("mode ")) {
+    for e in rec.events.iter().filter(|e| matches!(e, Event::Mode(_))) {
         tracing::info!("vehicle {e}");
     }
     rec
@@ -1221,7 +1221,7 @@ mod tests {
         for (k, v) in vals {
             o.set(k, *v);
         }
-        o.events = events.iter().map(|s| s.to_string()).collect();
+        o.events = events.iter().map(|s| Event::from(*s)).collect();
         o
     }
 
@@ -1300,23 +1300,30 @@ mod tests {
 
     #[test]
     fn an_event_flood_is_coalesced_into_one_bounded_list() {
-        let mut ev: Vec<String> = (0..10_000)
-            .map(|i| format!("mode {}", if i % 2 == 0 { "AUTO" } else { "GUIDED" }))
+        let mut ev: Vec<Event> = (0..10_000)
+            .map(|i| Event::Mode(if i % 2 == 0 { "AUTO" } else { "GUIDED" }.into()))
             .collect();
-        ev.push("obstacle detected".into());
+        ev.push(Event::ObstacleDetected);
         coalesce_events(&mut ev);
-        assert_eq!(ev[..3], ["mode AUTO", "mode GUIDED", "obstacle detected"]);
+        assert_eq!(
+            ev[..3],
+            [
+                Event::Mode("AUTO".into()),
+                Event::Mode("GUIDED".into()),
+                Event::ObstacleDetected
+            ]
+        );
         assert_eq!(ev.len(), 4);
-        assert!(ev[3].contains("9998 repeats"), "{}", ev[3]);
-        let mut many: Vec<String> = (0..500).map(|i| format!("waypoint {i}")).collect();
+        assert!(ev[3].to_string().contains("9998 repeats"), "{}", ev[3]);
+        let mut many: Vec<Event> = (0..500).map(Event::Waypoint).collect();
         coalesce_events(&mut many);
         assert_eq!(many.len(), MAX_EVENTS + 1);
         assert!(
-            many[MAX_EVENTS].contains("436 not listed"),
+            many[MAX_EVENTS].to_string().contains("436 not listed"),
             "{}",
             many[MAX_EVENTS]
         );
-        let mut few = vec!["a".to_string(), "b".to_string()];
+        let mut few = vec![Event::from("a"), Event::from("b")];
         coalesce_events(&mut few);
         assert_eq!(few, ["a", "b"]);
     }

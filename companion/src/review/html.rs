@@ -799,7 +799,7 @@ fn commands_section(o: &mut String, rev: &Review) {
                 esc(&c.command.command),
                 class,
                 esc(c.category.label()),
-                esc(&c.command.result),
+                esc(&c.command.result.to_string()),
                 c.command.attempts,
                 c.command.latency_ms.map(num).unwrap_or_else(|| "–".into())
             );

@@ -19,7 +19,7 @@ pub use html::render_html;
 pub use terminal::{render_terminal, render_why};
 
 use crate::decision_log::{Header, LogItem, LossReason, ReadError, ReadIssue, stream_log};
-use companion_core::record::{CommandRecord, DecisionRecord};
+use companion_core::record::{CommandRecord, DecisionRecord, Event, LinkEvent};
 use companion_core::tracking::TrackingCounter;
 use outcomes::{Category, OutcomeCounts, categorize};
 use plot::Decimator;
@@ -233,7 +233,7 @@ pub struct Review {
     // Streaming state.
     asked_cycle: Option<u64>,
     pending: Option<(Box<DecisionRecord>, Vec<Option<serde_json::Value>>)>,
-    pending_events: BTreeMap<u64, Vec<String>>,
+    pending_events: BTreeMap<u64, Vec<Event>>,
     pending_loss: (u64, LossReason),
     open_spans: HashMap<String, usize>,
     prev_cycle: Option<u64>,
@@ -255,6 +255,8 @@ struct LastRecord {
     altitude: Option<f64>,
 }
 
+/// A failsafe is named in free text (the autopilot's STATUSTEXT, a mode, a note), so it is
+/// found in the written sentence.
 fn is_failsafe(text: &str) -> bool {
     text.to_ascii_lowercase().contains("failsafe")
 }
@@ -325,7 +327,7 @@ impl Review {
                 self.pending = Some((r, inputs));
             }
             LogItem::Event(e) => match &mut self.pending {
-                Some((r, _)) if r.cycle == e.cycle => r.events.push(e.event),
+                Some((r, _)) if r.cycle == e.cycle => r.events.push(Event::from(e.event)),
                 Some((r, _)) if e.cycle < r.cycle => self.attach_late_event(e.cycle, e.event),
                 _ => {
                     if self.pending_events.len() < MAX_PENDING_EVENT_CYCLES
@@ -333,7 +335,7 @@ impl Review {
                     {
                         let v = self.pending_events.entry(e.cycle).or_default();
                         if v.len() < MAX_ISSUES {
-                            v.push(e.event);
+                            v.push(Event::from(e.event));
                         }
                     }
                 }
@@ -480,14 +482,16 @@ impl Review {
         if m.is_some() {
             self.prev_mode = m;
         }
-        for e in r.events.iter().chain(&r.link_events) {
-            if is_failsafe(e) {
-                marks.push(Mark::Failsafe(e.clone()));
+        let event_texts = r.events.iter().map(Event::to_string);
+        let link_texts: Vec<String> = r.link_events.iter().map(LinkEvent::to_string).collect();
+        for e in event_texts.chain(link_texts.iter().cloned()) {
+            if is_failsafe(&e) {
+                marks.push(Mark::Failsafe(e));
             }
         }
-        for l in &r.link_events {
-            if !is_failsafe(l) {
-                marks.push(Mark::Link(l.clone()));
+        for l in link_texts {
+            if !is_failsafe(&l) {
+                marks.push(Mark::Link(l));
             }
         }
         if let Some(res) = &r.resources {
@@ -501,8 +505,9 @@ impl Review {
         let consecutive = self
             .prev_cycle
             .is_some_and(|p| r.cycle == p + 1 || r.cycle == p);
-        let mut texts: Vec<&String> = Vec::new();
+        let mut texts: Vec<String> = Vec::new();
         for e in &r.events {
+            let e = e.to_string();
             if !texts.contains(&e) {
                 texts.push(e);
             }
@@ -510,7 +515,7 @@ impl Review {
         let mut started = Vec::new();
         let mut still_open = HashMap::new();
         for t in &texts {
-            match self.open_spans.get(*t) {
+            match self.open_spans.get(t) {
                 Some(&id) if consecutive => {
                     let sp = &mut self.spans[id];
                     sp.last_cycle = r.cycle;

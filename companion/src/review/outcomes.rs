@@ -4,6 +4,8 @@
 //! its answer, a mode already set, a step skipped because an earlier one failed or the operator
 //! took over are each their own category.
 
+use companion_core::record::CommandOutcome;
+
 /// The category of one command result.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Category {
@@ -62,24 +64,23 @@ impl Category {
 }
 
 /// Category of a `CommandRecord.result`. Unknown spellings count as failed, so nothing new hides.
-pub fn categorize(result: &str) -> Category {
-    let word = result
-        .split(|c: char| c == ' ' || c == '(')
-        .next()
-        .unwrap_or("")
-        .trim();
-    match word {
-        "ACCEPTED" | "SIMULATED" => Category::Accepted,
-        "SENT" | "PENDING" | "IN_PROGRESS" | "WAITING_READY" => Category::InProgress,
-        "ALREADY" => Category::Already,
+pub fn categorize(result: &CommandOutcome) -> Category {
+    use CommandOutcome::*;
+    match result {
+        Accepted | AcceptedVerified { .. } | Simulated => Category::Accepted,
+        Sent | Pending | InProgress | WaitingReady(_) => Category::InProgress,
+        Already => Category::Already,
         // Not sent on purpose: an earlier step failed, a newer action set replaced it, the link
         // was down, or commanding stopped (link loss, pilot takeover).
-        "SKIPPED" | "SUPERSEDED" | "NOT_SENT" | "CANCELLED" => Category::Skipped,
-        "DENIED" | "UNSUPPORTED" | "TEMPORARILY_REJECTED" | "NOT_READY" => Category::Denied,
-        "TIMEOUT" => Category::TimedOut,
-        // A mission transfer stopped by a cancel is a stop, not a failure.
-        "FAILED" if result.starts_with("FAILED (Cancelled") => Category::Skipped,
-        _ => Category::Failed,
+        Skipped(_) | Superseded | NotSent(_) | Cancelled(_) => Category::Skipped,
+        Denied | Unsupported | TemporarilyRejected | NotReady(_) => Category::Denied,
+        Timeout(_) => Category::TimedOut,
+        // A mission transfer stopped by a cancel is a stop, not a failure (the transfer's error,
+        // `Cancelled("why")`, is the detail).
+        Failed(Some(why)) if why.starts_with("Cancelled") => Category::Skipped,
+        // An arrival at the landing zone has no category of its own and counts with the
+        // unknown spellings.
+        Failed(_) | Unmapped | Arrived(_) | Other(_) => Category::Failed,
     }
 }
 
@@ -147,7 +148,7 @@ mod tests {
             ("something new", Category::Failed),
             ("TIMEOUT", Category::TimedOut),
         ] {
-            assert_eq!(categorize(r), c, "{r}");
+            assert_eq!(categorize(&CommandOutcome::from(r)), c, "{r}");
         }
     }
 }

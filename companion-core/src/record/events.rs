@@ -1,0 +1,941 @@
+//! What happened in a cycle ([`Event`]), on the link ([`LinkEvent`]) and to a vehicle command
+//! ([`CommandOutcome`]), as types. Each is written to the decision log as the sentence it has
+//! always been (docs/decision-log.md) and read back from it: a sentence this build does not
+//! know (an older or newer log, free text) is kept whole in `Other`, so reading never fails and
+//! writing it again gives the same bytes.
+
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
+use std::fmt;
+use std::str::FromStr;
+
+/// `WORD (detail)` split into `WORD` and `detail`; `WORD` alone gives no detail.
+fn word_and_detail(s: &str) -> (&str, Option<&str>) {
+    match s.split_once(" (") {
+        Some((w, rest)) if rest.ends_with(')') => (w, Some(&rest[..rest.len() - 1])),
+        _ => (s, None),
+    }
+}
+
+/// Parses with `known`; keeps `s` whole in `other` unless the value found writes back exactly
+/// as `s` (so `display(parse(s)) == s` for every string).
+fn parse_exact<T: fmt::Display>(
+    s: &str,
+    known: impl FnOnce(&str) -> Option<T>,
+    other: impl FnOnce(String) -> T,
+) -> T {
+    match known(s) {
+        Some(v) if v.to_string() == s => v,
+        _ => other(s.to_string()),
+    }
+}
+
+macro_rules! string_serde {
+    ($t:ty) => {
+        impl Serialize for $t {
+            fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+                serializer.collect_str(self)
+            }
+        }
+        impl<'de> Deserialize<'de> for $t {
+            fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+                let s = <std::borrow::Cow<'de, str>>::deserialize(deserializer)?;
+                Ok(Self::from(s.as_ref()))
+            }
+        }
+        impl FromStr for $t {
+            type Err = std::convert::Infallible;
+            fn from_str(s: &str) -> Result<Self, Self::Err> {
+                Ok(Self::from(s))
+            }
+        }
+        impl From<String> for $t {
+            fn from(s: String) -> Self {
+                Self::from(s.as_str())
+            }
+        }
+        impl PartialEq<str> for $t {
+            fn eq(&self, other: &str) -> bool {
+                // Compares the written form without allocating.
+                struct Eq<'a>(&'a str, bool);
+                impl fmt::Write for Eq<'_> {
+                    fn write_str(&mut self, s: &str) -> fmt::Result {
+                        match self.0.strip_prefix(s) {
+                            Some(rest) => {
+                                self.0 = rest;
+                                Ok(())
+                            }
+                            None => {
+                                self.1 = false;
+                                Err(fmt::Error)
+                            }
+                        }
+                    }
+                }
+                let mut w = Eq(other, true);
+                let _ = fmt::write(&mut w, format_args!("{self}"));
+                w.1 && w.0.is_empty()
+            }
+        }
+        impl PartialEq<&str> for $t {
+            fn eq(&self, other: &&str) -> bool {
+                self == *other
+            }
+        }
+    };
+}
+
+/// What became of a vehicle command (`CommandRecord.result`).
+#[derive(Debug, Clone, PartialEq)]
+pub enum CommandOutcome {
+    /// `ACCEPTED`: the autopilot acknowledged it.
+    Accepted,
+    /// `ACCEPTED (verified N items)`: a mission upload read back and found equal.
+    AcceptedVerified { items: usize },
+    /// `SIMULATED`: flown in the simulated world.
+    Simulated,
+    /// `SENT`: sent, no answer expected or not yet due.
+    Sent,
+    /// `IN_PROGRESS`: the autopilot is still working on it.
+    InProgress,
+    /// `PENDING`.
+    Pending,
+    /// `WAITING_READY (why)`: held until the autopilot reports ready.
+    WaitingReady(String),
+    /// `NOT_READY (why)`: not sent, the autopilot says it is not ready.
+    NotReady(String),
+    /// `ALREADY`: the vehicle was already in the asked state.
+    Already,
+    /// `SKIPPED (why)`: not sent on purpose.
+    Skipped(String),
+    /// `SUPERSEDED`: a newer action set replaced it.
+    Superseded,
+    /// `NOT_SENT (why)`.
+    NotSent(String),
+    /// `CANCELLED` (the autopilot's MAV_RESULT) or `CANCELLED (why)` (commanding stopped).
+    Cancelled(Option<String>),
+    /// `UNMAPPED (not in commands.toml)`.
+    Unmapped,
+    /// `DENIED`.
+    Denied,
+    /// `TEMPORARILY_REJECTED` after every attempt.
+    TemporarilyRejected,
+    /// `UNSUPPORTED`.
+    Unsupported,
+    /// `TIMEOUT` (no answer after every attempt) or `TIMEOUT (why)` (the zone not reached in time).
+    Timeout(Option<String>),
+    /// `ARRIVED (where)`: the vehicle reached the landing zone.
+    Arrived(String),
+    /// `FAILED` or `FAILED (why)`.
+    Failed(Option<String>),
+    /// Any other spelling, kept whole (an autopilot's other MAV_RESULT, a newer log's word).
+    Other(String),
+}
+
+impl Default for CommandOutcome {
+    fn default() -> Self {
+        CommandOutcome::Other(String::new())
+    }
+}
+
+impl fmt::Display for CommandOutcome {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        use CommandOutcome::*;
+        match self {
+            Accepted => f.write_str("ACCEPTED"),
+            AcceptedVerified { items } => write!(f, "ACCEPTED (verified {items} items)"),
+            Simulated => f.write_str("SIMULATED"),
+            Sent => f.write_str("SENT"),
+            InProgress => f.write_str("IN_PROGRESS"),
+            Pending => f.write_str("PENDING"),
+            WaitingReady(why) => write!(f, "WAITING_READY ({why})"),
+            NotReady(why) => write!(f, "NOT_READY ({why})"),
+            Already => f.write_str("ALREADY"),
+            Skipped(why) => write!(f, "SKIPPED ({why})"),
+            Superseded => f.write_str("SUPERSEDED"),
+            NotSent(why) => write!(f, "NOT_SENT ({why})"),
+            Cancelled(None) => f.write_str("CANCELLED"),
+            Cancelled(Some(why)) => write!(f, "CANCELLED ({why})"),
+            Unmapped => f.write_str("UNMAPPED (not in commands.toml)"),
+            Denied => f.write_str("DENIED"),
+            TemporarilyRejected => f.write_str("TEMPORARILY_REJECTED"),
+            Unsupported => f.write_str("UNSUPPORTED"),
+            Timeout(None) => f.write_str("TIMEOUT"),
+            Timeout(Some(why)) => write!(f, "TIMEOUT ({why})"),
+            Arrived(at) => write!(f, "ARRIVED ({at})"),
+            Failed(None) => f.write_str("FAILED"),
+            Failed(Some(why)) => write!(f, "FAILED ({why})"),
+            Other(s) => f.write_str(s),
+        }
+    }
+}
+
+impl CommandOutcome {
+    fn known(s: &str) -> Option<Self> {
+        use CommandOutcome::*;
+        let (word, detail) = word_and_detail(s);
+        let d = || detail.map(str::to_string);
+        Some(match (word, detail) {
+            ("ACCEPTED", None) => Accepted,
+            ("ACCEPTED", Some(x)) => AcceptedVerified {
+                items: x
+                    .strip_prefix("verified ")?
+                    .strip_suffix(" items")?
+                    .parse()
+                    .ok()?,
+            },
+            ("SIMULATED", None) => Simulated,
+            ("SENT", None) => Sent,
+            ("IN_PROGRESS", None) => InProgress,
+            ("PENDING", None) => Pending,
+            ("WAITING_READY", Some(_)) => WaitingReady(d()?),
+            ("NOT_READY", Some(_)) => NotReady(d()?),
+            ("ALREADY", None) => Already,
+            ("SKIPPED", Some(_)) => Skipped(d()?),
+            ("SUPERSEDED", None) => Superseded,
+            ("NOT_SENT", Some(_)) => NotSent(d()?),
+            ("CANCELLED", _) => Cancelled(d()),
+            ("UNMAPPED", Some(_)) => Unmapped,
+            ("DENIED", None) => Denied,
+            ("TEMPORARILY_REJECTED", None) => TemporarilyRejected,
+            ("UNSUPPORTED", None) => Unsupported,
+            ("TIMEOUT", _) => Timeout(d()),
+            ("ARRIVED", Some(_)) => Arrived(d()?),
+            ("FAILED", _) => Failed(d()),
+            _ => return None,
+        })
+    }
+}
+
+impl From<&str> for CommandOutcome {
+    fn from(s: &str) -> Self {
+        parse_exact(s, Self::known, CommandOutcome::Other)
+    }
+}
+
+string_serde!(CommandOutcome);
+
+/// What triggered or happened at a cycle (`DecisionRecord.events`).
+#[derive(Debug, PartialEq)]
+pub enum Event {
+    /// `target detected`
+    TargetDetected,
+    /// `target lost`
+    TargetLost,
+    /// `obstacle detected`
+    ObstacleDetected,
+    /// `obstacle cleared`
+    ObstacleCleared,
+    /// `obstacle avoided` (simulate)
+    ObstacleAvoided,
+    /// `collision` (simulate)
+    Collision,
+    /// `'T' zone found` (simulate)
+    TZoneFound,
+    /// `emergency zone found` (simulate)
+    EmergencyZoneFound,
+    /// `landing` (simulate)
+    Landing,
+    /// `battery exhausted` (simulate)
+    BatteryExhausted,
+    /// `armed`
+    Armed,
+    /// `disarmed`
+    Disarmed,
+    /// `mode NAME`: the autopilot's flight mode changed.
+    Mode(String),
+    /// `waypoint N`: the autopilot reached mission item N.
+    Waypoint(u16),
+    /// `battery below N%`: a threshold of params' telemetry section crossed.
+    BatteryBelow(f64),
+    /// `link connected`, `link regained`, `link lost`, `autopilot rebooted`,
+    /// `transport reconnected`: the link events that also matter to the decision.
+    Link(LinkEvent),
+    /// `command ACTION OUTCOME`: a vehicle command finished.
+    Command {
+        action: String,
+        outcome: CommandOutcome,
+    },
+    /// `health: ERROR`: the health models could not be evaluated.
+    HealthError(String),
+    /// `arbitration: ERROR`: the behaviour conflicts could not be resolved.
+    ArbitrationError(String),
+    /// `resources: ERROR`: no resource policy to arbitrate with.
+    ResourcesError(String),
+    /// `MDP: state `STATE` unknown to this MDP`.
+    MdpStateUnknown { mdp: String, state: String },
+    /// `re-allocation: REASON`: PANORAMA re-allocated the remaining activities.
+    Reallocation(String),
+    /// `guarantee: no allocation meets the goals`
+    GuaranteeInfeasible,
+    /// Free text: a scenario's hazard, a resource degradation, an MDP's error, a shell's or
+    /// operator's sentence, or a spelling this build does not know.
+    Other(String),
+}
+
+// `Clone` is written out so that `clone_from` keeps the destination's text buffer when both
+// are the same variant: the decision cycle copies the observed events into a reused record
+// (`Core::step_into`), and a scenario's event held over cycles then allocates nothing.
+impl Clone for Event {
+    fn clone(&self) -> Self {
+        use Event::*;
+        match self {
+            TargetDetected => TargetDetected,
+            TargetLost => TargetLost,
+            ObstacleDetected => ObstacleDetected,
+            ObstacleCleared => ObstacleCleared,
+            ObstacleAvoided => ObstacleAvoided,
+            Collision => Collision,
+            TZoneFound => TZoneFound,
+            EmergencyZoneFound => EmergencyZoneFound,
+            Landing => Landing,
+            BatteryExhausted => BatteryExhausted,
+            Armed => Armed,
+            Disarmed => Disarmed,
+            Mode(m) => Mode(m.clone()),
+            Waypoint(n) => Waypoint(*n),
+            BatteryBelow(t) => BatteryBelow(*t),
+            Link(l) => Link(l.clone()),
+            Command { action, outcome } => Command {
+                action: action.clone(),
+                outcome: outcome.clone(),
+            },
+            HealthError(e) => HealthError(e.clone()),
+            ArbitrationError(e) => ArbitrationError(e.clone()),
+            ResourcesError(e) => ResourcesError(e.clone()),
+            MdpStateUnknown { mdp, state } => MdpStateUnknown {
+                mdp: mdp.clone(),
+                state: state.clone(),
+            },
+            Reallocation(r) => Reallocation(r.clone()),
+            GuaranteeInfeasible => GuaranteeInfeasible,
+            Other(s) => Other(s.clone()),
+        }
+    }
+
+    fn clone_from(&mut self, src: &Self) {
+        use Event::*;
+        match (self, src) {
+            (Mode(d), Mode(s))
+            | (HealthError(d), HealthError(s))
+            | (ArbitrationError(d), ArbitrationError(s))
+            | (ResourcesError(d), ResourcesError(s))
+            | (Reallocation(d), Reallocation(s))
+            | (Other(d), Other(s)) => d.clone_from(s),
+            (
+                Command { action, outcome },
+                Command {
+                    action: a,
+                    outcome: o,
+                },
+            ) => {
+                action.clone_from(a);
+                outcome.clone_from(o);
+            }
+            (MdpStateUnknown { mdp, state }, MdpStateUnknown { mdp: m, state: st }) => {
+                mdp.clone_from(m);
+                state.clone_from(st);
+            }
+            (d, s) => *d = s.clone(),
+        }
+    }
+}
+
+impl Default for Event {
+    fn default() -> Self {
+        Event::Other(String::new())
+    }
+}
+
+impl fmt::Display for Event {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        use Event::*;
+        match self {
+            TargetDetected => f.write_str("target detected"),
+            TargetLost => f.write_str("target lost"),
+            ObstacleDetected => f.write_str("obstacle detected"),
+            ObstacleCleared => f.write_str("obstacle cleared"),
+            ObstacleAvoided => f.write_str("obstacle avoided"),
+            Collision => f.write_str("collision"),
+            TZoneFound => f.write_str("'T' zone found"),
+            EmergencyZoneFound => f.write_str("emergency zone found"),
+            Landing => f.write_str("landing"),
+            BatteryExhausted => f.write_str("battery exhausted"),
+            Armed => f.write_str("armed"),
+            Disarmed => f.write_str("disarmed"),
+            Mode(m) => write!(f, "mode {m}"),
+            Waypoint(n) => write!(f, "waypoint {n}"),
+            BatteryBelow(t) => write!(f, "battery below {t}%"),
+            Link(l) => l.fmt(f),
+            Command { action, outcome } => write!(f, "command {action} {outcome}"),
+            HealthError(e) => write!(f, "health: {e}"),
+            ArbitrationError(e) => write!(f, "arbitration: {e}"),
+            ResourcesError(e) => write!(f, "resources: {e}"),
+            MdpStateUnknown { mdp, state } => {
+                write!(f, "{mdp}: state `{state}` unknown to this MDP")
+            }
+            Reallocation(r) => write!(f, "re-allocation: {r}"),
+            GuaranteeInfeasible => f.write_str("guarantee: no allocation meets the goals"),
+            Other(s) => f.write_str(s),
+        }
+    }
+}
+
+impl Event {
+    fn known(s: &str) -> Option<Self> {
+        use Event::*;
+        Some(match s {
+            "target detected" => TargetDetected,
+            "target lost" => TargetLost,
+            "obstacle detected" => ObstacleDetected,
+            "obstacle cleared" => ObstacleCleared,
+            "obstacle avoided" => ObstacleAvoided,
+            "collision" => Collision,
+            "'T' zone found" => TZoneFound,
+            "emergency zone found" => EmergencyZoneFound,
+            "landing" => Landing,
+            "battery exhausted" => BatteryExhausted,
+            "armed" => Armed,
+            "disarmed" => Disarmed,
+            "guarantee: no allocation meets the goals" => GuaranteeInfeasible,
+            _ => {
+                if let Some(l) = LinkEvent::known(s).filter(LinkEvent::is_significant) {
+                    return Some(Link(l));
+                }
+                if let Some(m) = s.strip_prefix("mode ") {
+                    return Some(Mode(m.to_string()));
+                }
+                if let Some(n) = s.strip_prefix("waypoint ") {
+                    return n.parse().ok().map(Waypoint);
+                }
+                if let Some(t) = s.strip_prefix("battery below ") {
+                    return t.strip_suffix('%')?.parse().ok().map(BatteryBelow);
+                }
+                if let Some(rest) = s.strip_prefix("command ") {
+                    let (action, outcome) = rest.split_once(' ')?;
+                    return Some(Command {
+                        action: action.to_string(),
+                        outcome: CommandOutcome::from(outcome),
+                    });
+                }
+                if let Some(e) = s.strip_prefix("health: ") {
+                    return Some(HealthError(e.to_string()));
+                }
+                if let Some(e) = s.strip_prefix("arbitration: ") {
+                    return Some(ArbitrationError(e.to_string()));
+                }
+                if let Some(e) = s.strip_prefix("resources: ") {
+                    return Some(ResourcesError(e.to_string()));
+                }
+                if let Some(r) = s.strip_prefix("re-allocation: ") {
+                    return Some(Reallocation(r.to_string()));
+                }
+                let (mdp, rest) = s.split_once(": state `")?;
+                let state = rest.strip_suffix("` unknown to this MDP")?;
+                return Some(MdpStateUnknown {
+                    mdp: mdp.to_string(),
+                    state: state.to_string(),
+                });
+            }
+        })
+    }
+}
+
+impl From<&str> for Event {
+    fn from(s: &str) -> Self {
+        parse_exact(s, Self::known, Event::Other)
+    }
+}
+
+string_serde!(Event);
+
+/// What happened on the MAVLink link or its transport (`DecisionRecord.link_events`, fly only).
+#[derive(Debug, Clone, PartialEq)]
+pub enum LinkEvent {
+    /// `link connected`: the first heartbeat of the autopilot.
+    Connected,
+    /// `link regained`
+    Regained,
+    /// `link lost`: no message from the autopilot for the link timeout.
+    Lost,
+    /// `autopilot rebooted`
+    Rebooted,
+    /// `transport reconnected`
+    TransportReconnected,
+    /// `autopilot SYS/COMP (FLAVOR)`: the autopilot this link commands.
+    Autopilot {
+        system: u8,
+        component: u8,
+        flavor: String,
+    },
+    /// `another autopilot SYS/COMP heard, ignored (WHY)`
+    OtherAutopilot {
+        system: u8,
+        component: u8,
+        why: String,
+    },
+    /// `autopilot: TEXT`: the autopilot's STATUSTEXT.
+    AutopilotText(String),
+    /// `stream NAME: OUTCOME`: a telemetry stream request answered.
+    Stream {
+        name: String,
+        outcome: CommandOutcome,
+    },
+    /// `mission uploaded (N items), verifying`
+    MissionUploaded { items: usize },
+    /// `mission transfer cancelled (WHY)`
+    MissionTransferCancelled(String),
+    /// `connected NAME`: the transport to the autopilot is up.
+    TransportConnected(String),
+    /// `disconnected: WHY`
+    TransportDisconnected(String),
+    /// `onboard connected NAME`: the onboard applications' transport is up.
+    OnboardConnected(String),
+    /// `onboard disconnected: WHY`
+    OnboardDisconnected(String),
+    /// Free text (the ingest's bad-input report, a transport's note) or a spelling this build
+    /// does not know.
+    Other(String),
+}
+
+impl Default for LinkEvent {
+    fn default() -> Self {
+        LinkEvent::Other(String::new())
+    }
+}
+
+impl fmt::Display for LinkEvent {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        use LinkEvent::*;
+        match self {
+            Connected => f.write_str("link connected"),
+            Regained => f.write_str("link regained"),
+            Lost => f.write_str("link lost"),
+            Rebooted => f.write_str("autopilot rebooted"),
+            TransportReconnected => f.write_str("transport reconnected"),
+            Autopilot {
+                system,
+                component,
+                flavor,
+            } => write!(f, "autopilot {system}/{component} ({flavor})"),
+            OtherAutopilot {
+                system,
+                component,
+                why,
+            } => write!(
+                f,
+                "another autopilot {system}/{component} heard, ignored ({why})"
+            ),
+            AutopilotText(t) => write!(f, "autopilot: {t}"),
+            Stream { name, outcome } => write!(f, "stream {name}: {outcome}"),
+            MissionUploaded { items } => write!(f, "mission uploaded ({items} items), verifying"),
+            MissionTransferCancelled(why) => write!(f, "mission transfer cancelled ({why})"),
+            TransportConnected(n) => write!(f, "connected {n}"),
+            TransportDisconnected(why) => write!(f, "disconnected: {why}"),
+            OnboardConnected(n) => write!(f, "onboard connected {n}"),
+            OnboardDisconnected(why) => write!(f, "onboard disconnected: {why}"),
+            Other(s) => f.write_str(s),
+        }
+    }
+}
+
+impl LinkEvent {
+    /// The link events that are also the cycle's events (the decision sees them).
+    pub fn is_significant(&self) -> bool {
+        use LinkEvent::*;
+        matches!(
+            self,
+            Connected | Regained | Lost | Rebooted | TransportReconnected
+        )
+    }
+
+    fn known(s: &str) -> Option<Self> {
+        use LinkEvent::*;
+        let sys_comp = |x: &str| -> Option<(u8, u8)> {
+            let (a, b) = x.split_once('/')?;
+            Some((a.parse().ok()?, b.parse().ok()?))
+        };
+        Some(match s {
+            "link connected" => Connected,
+            "link regained" => Regained,
+            "link lost" => Lost,
+            "autopilot rebooted" => Rebooted,
+            "transport reconnected" => TransportReconnected,
+            _ => {
+                if let Some(t) = s.strip_prefix("autopilot: ") {
+                    return Some(AutopilotText(t.to_string()));
+                }
+                if let Some(rest) = s.strip_prefix("another autopilot ") {
+                    let (ids, why) = rest.split_once(" heard, ignored (")?;
+                    let (system, component) = sys_comp(ids)?;
+                    return Some(OtherAutopilot {
+                        system,
+                        component,
+                        why: why.strip_suffix(')')?.to_string(),
+                    });
+                }
+                if let Some(rest) = s.strip_prefix("autopilot ") {
+                    let (ids, flavor) = rest.split_once(" (")?;
+                    let (system, component) = sys_comp(ids)?;
+                    return Some(Autopilot {
+                        system,
+                        component,
+                        flavor: flavor.strip_suffix(')')?.to_string(),
+                    });
+                }
+                if let Some(rest) = s.strip_prefix("stream ") {
+                    let (name, outcome) = rest.split_once(": ")?;
+                    return Some(Stream {
+                        name: name.to_string(),
+                        outcome: CommandOutcome::from(outcome),
+                    });
+                }
+                if let Some(rest) = s.strip_prefix("mission uploaded (") {
+                    let n = rest.strip_suffix(" items), verifying")?;
+                    return n.parse().ok().map(|items| MissionUploaded { items });
+                }
+                if let Some(rest) = s.strip_prefix("mission transfer cancelled (") {
+                    return Some(MissionTransferCancelled(
+                        rest.strip_suffix(')')?.to_string(),
+                    ));
+                }
+                if let Some(n) = s.strip_prefix("connected ") {
+                    return Some(TransportConnected(n.to_string()));
+                }
+                if let Some(w) = s.strip_prefix("disconnected: ") {
+                    return Some(TransportDisconnected(w.to_string()));
+                }
+                if let Some(n) = s.strip_prefix("onboard connected ") {
+                    return Some(OnboardConnected(n.to_string()));
+                }
+                let w = s.strip_prefix("onboard disconnected: ")?;
+                return Some(OnboardDisconnected(w.to_string()));
+            }
+        })
+    }
+}
+
+impl From<&str> for LinkEvent {
+    fn from(s: &str) -> Self {
+        parse_exact(s, Self::known, LinkEvent::Other)
+    }
+}
+
+string_serde!(LinkEvent);
+
+impl From<LinkEvent> for Event {
+    fn from(l: LinkEvent) -> Self {
+        if l.is_significant() {
+            Event::Link(l)
+        } else {
+            Event::Other(l.to_string())
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Free text as producers write it: words of letters, digits and the punctuation the
+    /// sentences use, never empty.
+    fn text() -> impl Strategy<Value = String> {
+        "[A-Za-z0-9_./;,%-]{1,8}( [A-Za-z0-9_./;,%-]{1,8}){0,3}"
+    }
+    fn word() -> impl Strategy<Value = String> {
+        "[a-z_0-9]{1,12}"
+    }
+
+    fn outcome() -> impl Strategy<Value = CommandOutcome> {
+        use CommandOutcome::*;
+        prop_oneof![
+            Just(Accepted),
+            any::<usize>().prop_map(|items| AcceptedVerified { items }),
+            Just(Simulated),
+            Just(Sent),
+            Just(InProgress),
+            Just(Pending),
+            text().prop_map(WaitingReady),
+            text().prop_map(NotReady),
+            Just(Already),
+            text().prop_map(Skipped),
+            Just(Superseded),
+            text().prop_map(NotSent),
+            proptest::option::of(text()).prop_map(Cancelled),
+            Just(Unmapped),
+            Just(Denied),
+            Just(TemporarilyRejected),
+            Just(Unsupported),
+            proptest::option::of(text()).prop_map(Timeout),
+            text().prop_map(Arrived),
+            proptest::option::of(text()).prop_map(Failed),
+            "COMMAND_[A-Z_]{1,12}".prop_map(Other),
+        ]
+    }
+
+    fn link_event() -> impl Strategy<Value = LinkEvent> {
+        use LinkEvent::*;
+        prop_oneof![
+            Just(Connected),
+            Just(Regained),
+            Just(Lost),
+            Just(Rebooted),
+            Just(TransportReconnected),
+            (any::<u8>(), any::<u8>(), "[A-Za-z]{1,10}").prop_map(|(system, component, flavor)| {
+                Autopilot {
+                    system,
+                    component,
+                    flavor,
+                }
+            }),
+            (any::<u8>(), any::<u8>(), text()).prop_map(|(system, component, why)| {
+                OtherAutopilot {
+                    system,
+                    component,
+                    why,
+                }
+            }),
+            text().prop_map(AutopilotText),
+            (word(), outcome()).prop_map(|(name, outcome)| Stream { name, outcome }),
+            any::<usize>().prop_map(|items| MissionUploaded { items }),
+            text().prop_map(MissionTransferCancelled),
+            text().prop_map(TransportConnected),
+            text().prop_map(TransportDisconnected),
+            text().prop_map(OnboardConnected),
+            text().prop_map(OnboardDisconnected),
+            "ingest: [0-9]{1,5} bytes outside valid frames".prop_map(Other),
+        ]
+    }
+
+    fn event() -> impl Strategy<Value = Event> {
+        use Event::*;
+        prop_oneof![
+            prop_oneof![
+                Just(TargetDetected),
+                Just(TargetLost),
+                Just(ObstacleDetected),
+                Just(ObstacleCleared),
+                Just(ObstacleAvoided),
+                Just(Collision),
+                Just(TZoneFound),
+                Just(EmergencyZoneFound),
+                Just(Landing),
+                Just(BatteryExhausted),
+                Just(Armed),
+                Just(Disarmed),
+                Just(GuaranteeInfeasible),
+            ],
+            "[A-Z_]{1,12}".prop_map(Mode),
+            any::<u16>().prop_map(Waypoint),
+            (-1e6f64..1e6).prop_map(BatteryBelow),
+            link_event()
+                .prop_filter("significant", LinkEvent::is_significant)
+                .prop_map(Link),
+            (word(), outcome()).prop_map(|(action, outcome)| Command { action, outcome }),
+            text().prop_map(HealthError),
+            text().prop_map(ArbitrationError),
+            text().prop_map(ResourcesError),
+            (word(), "[a-z0-9_]{1,10}").prop_map(|(mdp, state)| MdpStateUnknown { mdp, state }),
+            text().prop_map(Reallocation),
+            "tracking V[0-9] -> V[0-9]: insufficient resources".prop_map(Other),
+        ]
+    }
+
+    fn json<T: Serialize>(v: &T) -> String {
+        serde_json::to_string(v).unwrap()
+    }
+
+    proptest! {
+        /// Every outcome written reads back as itself, in JSON as a plain string.
+        #[test]
+        fn command_outcome_reads_back_as_written(o in outcome()) {
+            let s = o.to_string();
+            prop_assert_eq!(CommandOutcome::from(s.as_str()), o.clone());
+            prop_assert_eq!(json(&o), json(&s));
+            prop_assert_eq!(serde_json::from_str::<CommandOutcome>(&json(&s)).unwrap(), o);
+        }
+
+        #[test]
+        fn link_event_reads_back_as_written(e in link_event()) {
+            let s = e.to_string();
+            prop_assert_eq!(LinkEvent::from(s.as_str()), e.clone());
+            prop_assert_eq!(json(&e), json(&s));
+            prop_assert_eq!(serde_json::from_str::<LinkEvent>(&json(&s)).unwrap(), e);
+        }
+
+        #[test]
+        fn event_reads_back_as_written(e in event()) {
+            let s = e.to_string();
+            prop_assert_eq!(Event::from(s.as_str()), e.clone());
+            prop_assert!(e == s.as_str());
+            prop_assert_eq!(json(&e), json(&s));
+            prop_assert_eq!(serde_json::from_str::<Event>(&json(&s)).unwrap(), e);
+        }
+
+        /// Any string at all (an older or newer log, free text) reads without failing and
+        /// writes back byte for byte.
+        #[test]
+        fn any_string_writes_back_unchanged(s in ".{0,60}") {
+            prop_assert_eq!(Event::from(s.as_str()).to_string(), s.clone());
+            prop_assert_eq!(LinkEvent::from(s.as_str()).to_string(), s.clone());
+            prop_assert_eq!(CommandOutcome::from(s.as_str()).to_string(), s.clone());
+            prop_assert_eq!(json(&Event::from(s.as_str())), json(&s));
+        }
+    }
+
+    /// The sentences producers have always written read as their variants, not as `Other`.
+    #[test]
+    fn known_sentences_read_as_their_variants() {
+        use CommandOutcome as O;
+        for (s, o) in [
+            (
+                "ACCEPTED (verified 4 items)",
+                O::AcceptedVerified { items: 4 },
+            ),
+            (
+                "WAITING_READY (gps; ekf)",
+                O::WaitingReady("gps; ekf".into()),
+            ),
+            ("CANCELLED", O::Cancelled(None)),
+            (
+                "CANCELLED (pilot took control)",
+                O::Cancelled(Some("pilot took control".into())),
+            ),
+            (
+                "FAILED (Cancelled(\"link lost\"))",
+                O::Failed(Some("Cancelled(\"link lost\")".into())),
+            ),
+            ("UNMAPPED (not in commands.toml)", O::Unmapped),
+            (
+                "TIMEOUT (not within 5.0 m of the zone after 60 s; landing here)",
+                O::Timeout(Some(
+                    "not within 5.0 m of the zone after 60 s; landing here".into(),
+                )),
+            ),
+            (
+                "ARRIVED (2.1 m from the zone)",
+                O::Arrived("2.1 m from the zone".into()),
+            ),
+            ("COMMAND_LONG_ONLY", O::Other("COMMAND_LONG_ONLY".into())),
+            (
+                "UNMAPPED (something else)",
+                O::Other("UNMAPPED (something else)".into()),
+            ),
+        ] {
+            assert_eq!(O::from(s), o, "{s}");
+        }
+        for (s, e) in [
+            (
+                "command take_off ACCEPTED",
+                Event::Command {
+                    action: "take_off".into(),
+                    outcome: O::Accepted,
+                },
+            ),
+            (
+                "command mission FAILED",
+                Event::Command {
+                    action: "mission".into(),
+                    outcome: O::Failed(None),
+                },
+            ),
+            ("battery below 30%", Event::BatteryBelow(30.0)),
+            ("battery below 27.5%", Event::BatteryBelow(27.5)),
+            ("waypoint 3", Event::Waypoint(3)),
+            ("link lost", Event::Link(LinkEvent::Lost)),
+            (
+                "tracking: state `v9` unknown to this MDP",
+                Event::MdpStateUnknown {
+                    mdp: "tracking".into(),
+                    state: "v9".into(),
+                },
+            ),
+            (
+                "guarantee: no allocation meets the goals",
+                Event::GuaranteeInfeasible,
+            ),
+            ("vibrations", Event::Other("vibrations".into())),
+            ("waypoint 03", Event::Other("waypoint 03".into())),
+            (
+                "battery below 30.0%",
+                Event::Other("battery below 30.0%".into()),
+            ),
+        ] {
+            assert_eq!(Event::from(s), e, "{s}");
+        }
+        for (s, e) in [
+            (
+                "autopilot 1/1 (ArduPilot)",
+                LinkEvent::Autopilot {
+                    system: 1,
+                    component: 1,
+                    flavor: "ArduPilot".into(),
+                },
+            ),
+            (
+                "another autopilot 7/1 heard, ignored (not the chosen one)",
+                LinkEvent::OtherAutopilot {
+                    system: 7,
+                    component: 1,
+                    why: "not the chosen one".into(),
+                },
+            ),
+            (
+                "autopilot: PreArm: GPS",
+                LinkEvent::AutopilotText("PreArm: GPS".into()),
+            ),
+            (
+                "stream GPS_RAW_INT: ACCEPTED",
+                LinkEvent::Stream {
+                    name: "GPS_RAW_INT".into(),
+                    outcome: O::Accepted,
+                },
+            ),
+            (
+                "mission uploaded (4 items), verifying",
+                LinkEvent::MissionUploaded { items: 4 },
+            ),
+            (
+                "connected tcp:127.0.0.1:5760",
+                LinkEvent::TransportConnected("tcp:127.0.0.1:5760".into()),
+            ),
+            (
+                "onboard disconnected: refused",
+                LinkEvent::OnboardDisconnected("refused".into()),
+            ),
+            (
+                "autopilot 300/1 (PX4)",
+                LinkEvent::Other("autopilot 300/1 (PX4)".into()),
+            ),
+        ] {
+            assert_eq!(LinkEvent::from(s), e, "{s}");
+        }
+    }
+
+    /// A copy into an event of the same kind keeps its text buffer (the cycle's reused record).
+    #[test]
+    fn clone_from_keeps_the_buffer_of_the_same_kind() {
+        let src = Event::Other("gps jamming".into());
+        let mut dst = Event::Other(String::with_capacity(64));
+        let before = match &dst {
+            Event::Other(s) => s.as_ptr(),
+            _ => unreachable!(),
+        };
+        dst.clone_from(&src);
+        assert_eq!(dst, src);
+        assert!(matches!(&dst, Event::Other(s) if s.as_ptr() == before));
+        let mut other_kind = Event::TargetLost;
+        other_kind.clone_from(&src);
+        assert_eq!(other_kind, src);
+    }
+
+    /// `Event == "text"` compares with the written sentence, whole.
+    #[test]
+    fn event_equals_its_sentence_only() {
+        let e = Event::Mode("AUTO".into());
+        assert!(e == "mode AUTO");
+        assert!(e != "mode AUT");
+        assert!(e != "mode AUTOS");
+        assert!(e != "");
+    }
+}
