@@ -8,7 +8,7 @@
 use crate::guarantee::{Guarantee, MissionSpec, Progress};
 use crate::health::HealthModel;
 pub use crate::mission::Policy;
-use crate::mission::{ActionCatalogue, ActionKind, MissionFile};
+use crate::mission::{ActionCatalogue, ActionKind, MissionFile, MissionStates};
 use crate::mission_mdp::{BehaviourConflicts, MissionMdps};
 use crate::observations::Observations;
 use crate::record::{DecisionRecord, Plan, ResourcesRecord};
@@ -55,6 +55,8 @@ impl std::str::FromStr for ModelKind {
 /// updates in place (the battery DBN's slice, the MDPs' transition storage).
 pub struct Model {
     pub mission: MissionFile,
+    /// The mission's states and phases (params/mission.toml), checked against the catalogue.
+    pub states: MissionStates,
     pub actions: ActionCatalogue,
     pub health: HealthModel,
     pub mdps: MissionMdps,
@@ -69,6 +71,7 @@ impl Model {
         let params = files.dir();
         let mission = MissionFile::load(files)?;
         let actions = ActionCatalogue::load(files)?;
+        let states = MissionStates::compile(&params.join("mission.toml"), &mission, &actions)?;
         let health = HealthModel::load(files)?;
         let names = health.publishes();
         let name_refs: Vec<&str> = names.iter().map(String::as_str).collect();
@@ -100,6 +103,7 @@ impl Model {
         }
         Ok(Model {
             mission,
+            states,
             actions,
             health,
             mdps,
@@ -816,7 +820,7 @@ impl<'m> Core<'m> {
                         } else {
                             model
                                 .actions
-                                .for_variant(app, &p.version)
+                                .for_variant(app, &p.version, &model.states)
                                 .map_or(a, |x| x.id.as_str())
                         };
                         if !sc.actions.contains(&id) {

@@ -464,7 +464,7 @@ pub fn params_one(fx: &ParamsFixture, data: &[u8]) -> ParamsOutcome {
             // What `fly` does next with these numbers (Durations, the mission-state estimator).
             let _ = vehicle_config(&setup.link, Duration::from_secs(3));
             let _ = Duration::from_secs_f64(setup.link.decision_period_s);
-            let _ = MissionState::new(&setup.route, setup.takeoff_alt_m);
+            let _ = MissionState::new(&setup.route, setup.takeoff_alt_m, setup.states.clone());
             let _ = setup.route.items((0, 0));
         }
         let args = companion::check::CheckArgs {

@@ -175,6 +175,8 @@ pub struct FlySetup {
     pub key: Option<[u8; 32]>,
     /// Altitude the take_off action climbs to (m): MAV_CMD_NAV_TAKEOFF param 7, else the route's.
     pub takeoff_alt_m: f64,
+    /// The mission's states and phases (params/mission.toml) the mission estimator moves through.
+    pub states: companion_core::mission::MissionStates,
 }
 
 impl FlySetup {
@@ -221,12 +223,14 @@ impl FlySetup {
                 })
             })
             .unwrap_or(route.altitude_m);
+        let states = companion_core::mission::MissionStates::load(files)?;
         Ok(Self {
             link,
             actions,
             route,
             key,
             takeoff_alt_m,
+            states,
         })
     }
 
@@ -747,7 +751,7 @@ pub struct Shell {
 
 impl Shell {
     pub fn new(setup: &FlySetup) -> Self {
-        let mut mission = MissionState::new(&setup.route, setup.takeoff_alt_m);
+        let mut mission = MissionState::new(&setup.route, setup.takeoff_alt_m, setup.states.clone());
         let f = &setup.link.flight;
         mission.landed_confirm_s = f.landed_confirm_s;
         mission.ground_altitude_m = f.ground_altitude_m;
