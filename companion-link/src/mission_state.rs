@@ -105,6 +105,11 @@ impl MissionState {
         }
     }
 
+    /// The mission's states and phases this estimator moves through.
+    pub fn states(&self) -> &MissionStates {
+        &self.states
+    }
+
     /// The landing action the shell keeps flying in the landing phase (`land`,
     /// `replan_and_land`, `return_to_base`): the last one chosen, or the one matching the
     /// landing mode the vehicle entered. None before the landing phase.

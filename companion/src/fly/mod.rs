@@ -829,8 +829,8 @@ impl Shell {
             .collect();
         let mut told = mission_state::select_vehicle_action(&motions, &self.precedence)
             .unwrap_or_else(|| "hold".into());
-        if let Some(v) = rec.actions.iter().find_map(|a| a.strip_prefix("track_")) {
-            told.push_str(&format!(", track {v}"));
+        if let Some((kept, _)) = self.mission.states().tracking_target(&rec.actions) {
+            told.push_str(&format!(", track {kept}"));
         }
         if told == self.last_told {
             return None;
@@ -1323,6 +1323,39 @@ mod tests {
         let mut few = vec!["a".to_string(), "b".to_string()];
         coalesce_events(&mut few);
         assert_eq!(few, ["a", "b"]);
+    }
+
+    #[test]
+    fn behaviour_text_names_the_tracking_state_the_plan_keeps() {
+        let args = FlyArgs {
+            connect: companion_link::url::parse("udpin:127.0.0.1:14550").unwrap(),
+            mission: None,
+            policy: "safety".into(),
+            signing_key: None,
+            onboard: None,
+            link_timeout: std::time::Duration::from_secs(3),
+            params: None,
+            duration: None,
+            log_dir: PathBuf::from("runs"),
+            auto_start: true,
+            autopilot_sysid: None,
+            connect_timeout: None,
+            once: false,
+        };
+        let mut shell = Shell::new(&FlySetup::load(&args).unwrap());
+        let rec = |actions: &[&str]| DecisionRecord {
+            actions: actions.iter().map(|a| a.to_string()).collect(),
+            ..Default::default()
+        };
+        let text = shell
+            .behaviour_text(&rec(&["follow_trajectory", "track_v3"]))
+            .unwrap();
+        assert!(text.ends_with(", track v3"), "{text}");
+        // detect_target runs the tracking application but keeps no tracking state.
+        let text = shell
+            .behaviour_text(&rec(&["follow_trajectory", "detect_target"]))
+            .unwrap();
+        assert!(!text.contains("track"), "{text}");
     }
 
     #[test]
