@@ -106,12 +106,7 @@ impl ActionCatalogue {
 
     /// The primitive action that runs `app`/`version`, preferring one that keeps a tracking
     /// state of `states` (`track_v1` over `detect_target`, both on tracking V1's variant).
-    pub fn for_variant(
-        &self,
-        app: &str,
-        version: &str,
-        states: &MissionStates,
-    ) -> Option<&Action> {
+    pub fn for_variant(&self, app: &str, version: &str, states: &MissionStates) -> Option<&Action> {
         let mut it = self
             .actions
             .iter()
@@ -264,48 +259,48 @@ impl MissionStates {
                     ),
                 ));
             }
-            let keeping = match (&d.action, d.phase == TRACKING_PHASE) {
-                (None, false) => None,
-                (None, true) => {
-                    return Err(SpecError::new(
-                        file,
-                        entry,
-                        format!("tracking state `{}` names no `action`", d.name),
-                    ));
-                }
-                (Some(_), false) => {
-                    return Err(SpecError::new(
-                        file,
-                        entry,
-                        format!("only a `{TRACKING_PHASE}` state names an `action`"),
-                    ));
-                }
-                (Some(a), true) => {
-                    let version = actions
-                        .get(a)
-                        .and_then(|x| x.version.clone())
-                        .ok_or_else(|| {
-                            SpecError::new(
-                                file,
-                                format!("states[{i}].action"),
-                                format!(
-                                    "`{a}` is not an application action of params/actions.toml"
-                                ),
-                            )
-                        })?;
-                    if states
-                        .iter()
-                        .any(|s| s.keeping.as_ref().is_some_and(|(k, _)| k == a))
-                    {
+            let keeping =
+                match (&d.action, d.phase == TRACKING_PHASE) {
+                    (None, false) => None,
+                    (None, true) => {
                         return Err(SpecError::new(
                             file,
-                            format!("states[{i}].action"),
-                            format!("`{a}` already keeps another state"),
+                            entry,
+                            format!("tracking state `{}` names no `action`", d.name),
                         ));
                     }
-                    Some((a.clone(), version))
-                }
-            };
+                    (Some(_), false) => {
+                        return Err(SpecError::new(
+                            file,
+                            entry,
+                            format!("only a `{TRACKING_PHASE}` state names an `action`"),
+                        ));
+                    }
+                    (Some(a), true) => {
+                        let version = actions.get(a).and_then(|x| x.version.clone()).ok_or_else(
+                            || {
+                                SpecError::new(
+                                    file,
+                                    format!("states[{i}].action"),
+                                    format!(
+                                        "`{a}` is not an application action of params/actions.toml"
+                                    ),
+                                )
+                            },
+                        )?;
+                        if states
+                            .iter()
+                            .any(|s| s.keeping.as_ref().is_some_and(|(k, _)| k == a))
+                        {
+                            return Err(SpecError::new(
+                                file,
+                                format!("states[{i}].action"),
+                                format!("`{a}` already keeps another state"),
+                            ));
+                        }
+                        Some((a.clone(), version))
+                    }
+                };
             states.push(StateInfo {
                 name: d.name.clone(),
                 phase: d.phase.clone(),

@@ -150,11 +150,17 @@ mod tests {
     #[test]
     fn the_undeclared_rule_of_old_logs_agrees_with_the_shipped_states() {
         let (declared, old) = (shipped(), MissionStates::undeclared());
-        for st in ["base", "wp1", "wpi", "wpf", "target", "v0", "v3", "v5", "landing"] {
+        for st in [
+            "base", "wp1", "wpi", "wpf", "target", "v0", "v3", "v5", "landing",
+        ] {
             assert_eq!(declared.phase(st), old.phase(st), "{st}");
         }
         for a in ["track_v0", "track_v5", "detect_target", "land"] {
-            assert_eq!(declared.tracking_target(&[a]), old.tracking_target(&[a]), "{a}");
+            assert_eq!(
+                declared.tracking_target(&[a]),
+                old.tracking_target(&[a]),
+                "{a}"
+            );
         }
     }
 

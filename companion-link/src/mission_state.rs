@@ -302,7 +302,10 @@ mod tests {
         let dir = crate::test_support::default_params_dir();
         let mut files = companion_core::spec::ParamsFiles::new(&dir);
         for name in ["mission.toml", "actions.toml"] {
-            files.insert(dir.join(name), std::fs::read_to_string(dir.join(name)).unwrap());
+            files.insert(
+                dir.join(name),
+                std::fs::read_to_string(dir.join(name)).unwrap(),
+            );
         }
         MissionStates::load(&files).unwrap()
     }

@@ -205,7 +205,6 @@ impl Scenario {
                 format!("{} is out of range: must be in 1..=10000", s.steps),
             ));
         }
-        let states = MissionStates::load(files)?;
         for (i, h) in s.hazards.iter().enumerate() {
             if h.trigger.step.is_none() == h.trigger.phase.is_none() {
                 return Err(SpecError::new(
@@ -214,24 +213,30 @@ impl Scenario {
                     "give exactly one of `step` or `phase`",
                 ));
             }
-            if let Some(p) = &h.trigger.phase
-                && !states.has_phase(p)
-            {
-                return Err(SpecError::new(
-                    &file,
-                    format!("hazard[{i}].trigger.phase"),
-                    format!(
-                        "`{p}` is not a phase of params/mission.toml ({})",
-                        states.phases().join(", ")
-                    ),
-                ));
-            }
             if h.set.is_empty() {
                 return Err(SpecError::new(
                     &file,
                     format!("hazard[{i}].set"),
                     "sets no observation",
                 ));
+            }
+        }
+        // Phase triggers name the mission's declared phases (params/mission.toml).
+        if s.hazards.iter().any(|h| h.trigger.phase.is_some()) {
+            let states = MissionStates::load(files)?;
+            for (i, h) in s.hazards.iter().enumerate() {
+                if let Some(p) = &h.trigger.phase
+                    && !states.has_phase(p)
+                {
+                    return Err(SpecError::new(
+                        &file,
+                        format!("hazard[{i}].trigger.phase"),
+                        format!(
+                            "`{p}` is not a phase of params/mission.toml ({})",
+                            states.phases().join(", ")
+                        ),
+                    ));
+                }
             }
         }
         Ok(s)
