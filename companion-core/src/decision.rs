@@ -76,6 +76,7 @@ impl Model {
         let names = health.publishes();
         let name_refs: Vec<&str> = names.iter().map(String::as_str).collect();
         let mdps = MissionMdps::load(files, &name_refs)?;
+        crate::probabilities::check_vocabulary(params, &health, &mdps, &mission)?;
         let ids: Vec<&str> = actions.actions.iter().map(|a| a.id.as_str()).collect();
         let conflicts = BehaviourConflicts::load(files, &params.join("policies.toml"), &ids)?;
         let resources = ResourceSpec::load(files)?;

@@ -408,6 +408,10 @@ pub struct MissionFile {
     /// The shared mission states and their phases; read through [`MissionStates`].
     #[serde(default)]
     pub states: Vec<StateDecl>,
+    /// Named probabilities published for the decision record and the review only (no MDP reads
+    /// them); every other published name must have a reader (see `crate::probabilities`).
+    #[serde(default)]
+    pub recorded_probabilities: Vec<String>,
     /// Application -> the observation (m/s) giving the relative speed its frame rate must follow
     /// (the BFM paper's section 4.3.2 performance constraint; formula in params/platform.toml).
     pub rates: BTreeMap<String, String>,
