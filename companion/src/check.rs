@@ -124,9 +124,7 @@ pub fn probabilities_section(cx: &CheckContext) -> anyhow::Result<(Value, String
     let mdps = companion_core::mission_mdp::MissionMdps::load(cx.params, &refs)?;
     let mission = companion_core::mission::MissionFile::load(cx.params)?;
     let all = companion_core::probabilities::named_probabilities(&health, &mdps, &mission);
-    let mut text = String::from("
-Named probabilities (publisher -> readers):
-");
+    let mut text = String::from("\nNamed probabilities (publisher -> readers):\n");
     for p in &all {
         let readers: Vec<String> = p
             .consumers
