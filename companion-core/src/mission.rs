@@ -6,31 +6,20 @@ use crate::spec::{SpecError, read_toml};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 
-/// Safety-first or mission-first (the BFM paper's two policies).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Policy {
-    Safety,
-    Mission,
-}
+/// A decision policy (the BFM paper's safety-first and mission-first): one of the names
+/// params/policies.toml declares, interned when the model loads. Get one by name with
+/// `Model::policy` and its name back with `Model::policy_name`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Policy(u8);
 
 impl Policy {
-    pub fn name(self) -> &'static str {
-        match self {
-            Policy::Safety => "safety",
-            Policy::Mission => "mission",
-        }
+    /// Position of the policy in `Model::policies`.
+    pub fn index(self) -> usize {
+        self.0 as usize
     }
-}
 
-impl std::str::FromStr for Policy {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "safety" => Ok(Policy::Safety),
-            "mission" => Ok(Policy::Mission),
-            o => Err(format!("unknown policy `{o}` (safety, mission)")),
-        }
+    pub(crate) fn from_index(i: usize) -> Self {
+        Policy(i as u8)
     }
 }
 

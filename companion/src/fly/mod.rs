@@ -67,13 +67,6 @@ impl RecordSink for Vec<DecisionRecord> {
     }
 }
 
-fn parse_policy(s: &str) -> Result<String, String> {
-    match s {
-        "safety" | "mission" => Ok(s.to_string()),
-        other => Err(format!("{other:?}: expected safety or mission")),
-    }
-}
-
 /// `companion fly` arguments.
 #[derive(Debug, Clone, clap::Args)]
 pub struct FlyArgs {
@@ -84,8 +77,9 @@ pub struct FlyArgs {
     /// Route for follow_trajectory (default params/missions/tracking_route.toml).
     #[arg(long)]
     pub mission: Option<PathBuf>,
-    /// Arbitration policy: safety (safety-first) or mission (mission-first).
-    #[arg(long, default_value = "safety", value_parser = parse_policy)]
+    /// Arbitration policy: a policy of params/policies.toml, safety (safety-first) or mission
+    /// (mission-first); checked when the params load.
+    #[arg(long, default_value = "safety")]
     pub policy: String,
     /// MAVLink 2 signing key (32 raw bytes or 64 hex digits): sign outgoing frames, refuse
     /// unsigned commands addressed to us.
@@ -1359,8 +1353,13 @@ mod tests {
     }
 
     #[test]
-    fn policy_values() {
-        assert!(parse_policy("safety").is_ok() && parse_policy("mission").is_ok());
-        assert!(parse_policy("yolo").is_err());
+    fn policy_values_are_the_names_params_declare() {
+        let model = crate::params::load_model(&crate::params::default_params_dir()).unwrap();
+        for name in ["safety", "mission"] {
+            let p = model.policy(name).unwrap();
+            assert_eq!(model.policy_name(p), name);
+        }
+        let e = model.policy("yolo").unwrap_err();
+        assert!(e.contains("unknown policy `yolo`") && e.contains("safety"), "{e}");
     }
 }
