@@ -454,10 +454,12 @@ impl<'m> ResourceArbiter<'m> {
         rec: &mut DecisionRecord,
     ) {
         request_key(model, sc, obs);
-        let m = match self
-            .schedules
-            .schedule(&model.resources, policy.name(), platform, &sc.key)
-        {
+        let m = match self.schedules.schedule(
+            &model.resources,
+            model.policy_name(policy),
+            platform,
+            &sc.key,
+        ) {
             Ok(m) => m,
             Err(e) => {
                 rec.events.push(Event::ResourcesError(e.to_string()));
@@ -523,7 +525,7 @@ fn rewrite_actions<'m>(model: &'m Model, record: &ResourcesRecord, sc: &mut Scra
                     } else {
                         model
                             .actions
-                            .for_variant(app, &p.version)
+                            .for_variant(app, &p.version, &model.states)
                             .map_or(a, |x| x.id.as_str())
                     };
                     if !sc.actions.contains(&id) {

@@ -9,7 +9,7 @@ use crate::arbitration::{BehaviourConflicts, ResourceArbiter};
 use crate::guarantee::{Guarantee, MissionSpec, Progress};
 use crate::health::HealthModel;
 pub use crate::mission::Policy;
-use crate::mission::{ActionCatalogue, ActionKind, MissionFile};
+use crate::mission::{ActionCatalogue, ActionKind, MissionFile, MissionStates};
 use crate::mission_mdp::MissionMdps;
 use crate::observations::Observations;
 use crate::record::{DecisionRecord, Event, Plan};
@@ -56,28 +56,66 @@ impl std::str::FromStr for ModelKind {
 /// updates in place (the battery DBN's slice, the MDPs' transition storage).
 pub struct Model {
     pub mission: MissionFile,
+    /// The mission's states and phases (params/mission.toml), checked against the catalogue.
+    pub states: MissionStates,
     pub actions: ActionCatalogue,
     pub health: HealthModel,
     pub mdps: MissionMdps,
     pub conflicts: BehaviourConflicts,
     pub resources: ResourceSpec,
     pub guarantee: MissionSpec,
+    /// The decision policies params/policies.toml declares (`priority` tables), in file-key
+    /// order; a [`Policy`] is an index into it.
+    pub policies: Vec<String>,
 }
 
 impl Model {
+    /// The policy named `name`, or why there is none (the names params/policies.toml declares).
+    pub fn policy(&self, name: &str) -> Result<Policy, String> {
+        self.policies
+            .iter()
+            .position(|p| p == name)
+            .map(Policy::from_index)
+            .ok_or_else(|| {
+                format!(
+                    "unknown policy `{name}` (params/policies.toml: {})",
+                    self.policies.join(", ")
+                )
+            })
+    }
+
+    /// The name of a policy of this model.
+    pub fn policy_name(&self, policy: Policy) -> &str {
+        self.policies.get(policy.index()).map_or("", String::as_str)
+    }
+
     /// Compile the whole model from the params files (the shell reads them).
     pub fn load(files: &crate::spec::ParamsFiles) -> Result<Self, SpecError> {
         let params = files.dir();
         let mission = MissionFile::load(files)?;
         let actions = ActionCatalogue::load(files)?;
+        let states = MissionStates::compile(&params.join("mission.toml"), &mission, &actions)?;
         let health = HealthModel::load(files)?;
         let names = health.publishes();
         let name_refs: Vec<&str> = names.iter().map(String::as_str).collect();
         let mdps = MissionMdps::load(files, &name_refs)?;
+        crate::probabilities::check_vocabulary(params, &health, &mdps, &mission)?;
         let ids: Vec<&str> = actions.actions.iter().map(|a| a.id.as_str()).collect();
         let conflicts = BehaviourConflicts::load(files, &params.join("policies.toml"), &ids)?;
         let resources = ResourceSpec::load(files)?;
         let guarantee = crate::guarantee::load_mission(files, &mission.guarantee.mission)?;
+        let policies: Vec<String> = conflicts.policies().map(str::to_owned).collect();
+        if policies.is_empty() || policies.len() > usize::from(u8::MAX) {
+            return Err(SpecError::new(
+                params.join("policies.toml"),
+                "priority",
+                format!("declares {} policies: 1 to 255 expected", policies.len()),
+            ));
+        }
+        // Every policy arbitrates resources too: its resource policy must exist.
+        for p in &policies {
+            resources.policy(p)?;
+        }
         let file = params.join("actions.toml");
         for a in mdps.primitive_actions() {
             if actions.get(&a).is_none() {
@@ -101,12 +139,14 @@ impl Model {
         }
         Ok(Model {
             mission,
+            states,
             actions,
             health,
             mdps,
             conflicts,
             resources,
             guarantee,
+            policies,
         })
     }
 
@@ -268,7 +308,7 @@ impl<'m> Core<'m> {
     /// observations of the same shape allocates nothing once warm (tests/cycle_no_alloc.rs).
     pub fn step_into(&mut self, obs: &Observations, plan: &mut Plan, rec: &mut DecisionRecord) {
         let model = self.model;
-        let policy = self.policy.name();
+        let policy = self.model.policy_name(self.policy);
         rec.cycle = self.cycle;
         rec.time_s = obs.time_s;
         rec.state.clone_from(&obs.state);
@@ -471,7 +511,11 @@ impl<'m> Core<'m> {
     /// counts as the assessed application's.
     fn note_others(&mut self, rec: &DecisionRecord) {
         let app = self.assessed_app();
-        let policy = self.model.resources.policy(self.policy.name()).ok();
+        let policy = self
+            .model
+            .resources
+            .policy(self.model.policy_name(self.policy))
+            .ok();
         let rank = |a: &str| policy.map_or(0, |p| p.rank(a));
         let limit = app.map_or(usize::MAX, rank);
         let (tiles, cpu) = rec.resources.as_ref().map_or((0, 0.0), |r| {
@@ -489,7 +533,7 @@ impl<'m> Core<'m> {
     /// Behaviour arbitration over the live proposals, then resource arbitration.
     fn arbitrate(&mut self, sc: &mut Scratch<'m>, obs: &Observations, rec: &mut DecisionRecord) {
         let model = self.model;
-        let policy = self.policy.name();
+        let policy = self.model.policy_name(self.policy);
         sc.merged.clear();
         for (k, pr) in rec.proposals.iter().enumerate() {
             if sc.superseded.contains(&k) {
@@ -577,7 +621,7 @@ impl<'m> Core<'m> {
             &mut self.workspace,
             s,
             &rec.probabilities,
-            self.policy.name(),
+            self.model.policy_name(self.policy),
             model.mission.horizon,
         ) {
             Ok(Some(d)) => d,
@@ -603,7 +647,7 @@ impl<'m> Core<'m> {
     /// proposal's action gave way to the new one.
     fn record_resource_conflicts(&self, sc: &Scratch<'m>, rec: &mut DecisionRecord) {
         let model = self.model;
-        let policy = self.policy.name();
+        let policy = self.model.policy_name(self.policy);
         for &k in &sc.superseded {
             let old = &rec.proposals[k];
             let new = rec.proposals[k + 1..]

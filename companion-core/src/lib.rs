@@ -19,6 +19,7 @@
 //! - `resources`: Table 2 (variants), the platform, and resource arbitration onto FPGA tiles and CPU.
 //! - `guarantee`: PANORAMA's activities, IAs, pre-flight allocation, margins and re-allocation.
 //! - `decision`: the [`decision::Model`] and the per-cycle [`decision::Core`].
+//! - `probabilities`: the named probabilities, their publishers and consumers (checked at load).
 //! - `record`: the decision record written for every cycle.
 //! - `tracking`: tracking time, shared by the world, the review and the tables.
 
@@ -31,6 +32,7 @@ pub mod health;
 pub mod mission;
 pub mod mission_mdp;
 pub mod observations;
+pub mod probabilities;
 pub mod record;
 pub mod report;
 pub mod resources;

@@ -6,31 +6,20 @@ use crate::spec::{SpecError, read_toml};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 
-/// Safety-first or mission-first (the BFM paper's two policies).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Policy {
-    Safety,
-    Mission,
-}
+/// A decision policy (the BFM paper's safety-first and mission-first): one of the names
+/// params/policies.toml declares, interned when the model loads. Get one by name with
+/// `Model::policy` and its name back with `Model::policy_name`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Policy(u8);
 
 impl Policy {
-    pub fn name(self) -> &'static str {
-        match self {
-            Policy::Safety => "safety",
-            Policy::Mission => "mission",
-        }
+    /// Position of the policy in `Model::policies`.
+    pub fn index(self) -> usize {
+        self.0 as usize
     }
-}
 
-impl std::str::FromStr for Policy {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "safety" => Ok(Policy::Safety),
-            "mission" => Ok(Policy::Mission),
-            o => Err(format!("unknown policy `{o}` (safety, mission)")),
-        }
+    pub(crate) fn from_index(i: usize) -> Self {
+        Policy(i as u8)
     }
 }
 
@@ -104,14 +93,18 @@ impl ActionCatalogue {
         self.get(id).map_or(id, |a| a.label.as_str())
     }
 
-    /// The primitive action that runs `app`/`version`, preferring `track_*`-style dedicated ones.
-    pub fn for_variant(&self, app: &str, version: &str) -> Option<&Action> {
+    /// The primitive action that runs `app`/`version`, preferring one that keeps a tracking
+    /// state of `states` (`track_v1` over `detect_target`, both on tracking V1's variant).
+    pub fn for_variant(&self, app: &str, version: &str, states: &MissionStates) -> Option<&Action> {
         let mut it = self
             .actions
             .iter()
             .filter(|a| a.app.as_deref() == Some(app) && a.version.as_deref() == Some(version));
         let first = it.next()?;
-        Some(it.find(|a| a.id.starts_with("track_")).unwrap_or(first))
+        Some(
+            it.find(|a| states.is_keeping_action(&a.id))
+                .unwrap_or(first),
+        )
     }
 }
 
@@ -160,6 +153,236 @@ pub struct GuaranteeCoupling {
     pub failures: BTreeMap<String, String>,
 }
 
+/// One shared mission state as params/mission.toml declares it.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StateDecl {
+    pub name: String,
+    pub phase: String,
+    /// In a tracking state: the action (params/actions.toml) that keeps the target in it.
+    pub action: Option<String>,
+}
+
+/// The phase whose states keep the target: tracking time (the paper's Table 8) counts cycles
+/// spent there, and each of its states names the tracking action flown in it.
+pub const TRACKING_PHASE: &str = "tracking";
+
+/// The shared state where the target is seen but not yet tracked (or was lost): tracking starts
+/// from it as from a tracking state.
+pub const TARGET_STATE: &str = "target";
+
+/// One mission state, compiled: its phase and, in a tracking state, the action that keeps the
+/// target there and that action's variant version.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct StateInfo {
+    name: String,
+    phase: String,
+    keeping: Option<(String, String)>,
+}
+
+/// The mission's states and phases (params/mission.toml `phases`, `states`), checked against the
+/// action catalogue: the one answer to "which phase is this state in" and "which tracking state
+/// does this action set aim at" for the simulated world, the flight shell and the review.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MissionStates {
+    phases: Vec<String>,
+    states: Vec<StateInfo>,
+}
+
+impl Default for MissionStates {
+    /// The rule of params sets that declare no states (decision logs written before
+    /// `mission.toml` declared them): see [`MissionStates::undeclared`].
+    fn default() -> Self {
+        Self::undeclared()
+    }
+}
+
+impl MissionStates {
+    /// Read params/mission.toml and params/actions.toml.
+    pub fn load(files: &crate::spec::ParamsFiles) -> Result<Self, SpecError> {
+        let mission = MissionFile::load(files)?;
+        let actions = ActionCatalogue::load(files)?;
+        Self::compile(&files.dir().join("mission.toml"), &mission, &actions)
+    }
+
+    /// Check `mission`'s declared states against the catalogue. A params set that declares no
+    /// states is refused: only old decision logs go without (see [`MissionStates::undeclared`]).
+    pub fn compile(
+        file: &std::path::Path,
+        mission: &MissionFile,
+        actions: &ActionCatalogue,
+    ) -> Result<Self, SpecError> {
+        if mission.states.is_empty() {
+            return Err(SpecError::new(file, "states", "declares no mission state"));
+        }
+        let mut phases: Vec<String> = Vec::new();
+        for (i, p) in mission.phases.iter().enumerate() {
+            if phases.contains(p) {
+                return Err(SpecError::new(
+                    file,
+                    format!("phases[{i}]"),
+                    format!("duplicate phase `{p}`"),
+                ));
+            }
+            phases.push(p.clone());
+        }
+        let mut states: Vec<StateInfo> = Vec::new();
+        for (i, d) in mission.states.iter().enumerate() {
+            let entry = format!("states[{i}]");
+            if states.iter().any(|s| s.name == d.name) {
+                return Err(SpecError::new(
+                    file,
+                    entry,
+                    format!("duplicate state `{}`", d.name),
+                ));
+            }
+            if !phases.contains(&d.phase) {
+                return Err(SpecError::new(
+                    file,
+                    entry,
+                    format!(
+                        "state `{}` is in the unknown phase `{}` (phases: {})",
+                        d.name,
+                        d.phase,
+                        phases.join(", ")
+                    ),
+                ));
+            }
+            let keeping =
+                match (&d.action, d.phase == TRACKING_PHASE) {
+                    (None, false) => None,
+                    (None, true) => {
+                        return Err(SpecError::new(
+                            file,
+                            entry,
+                            format!("tracking state `{}` names no `action`", d.name),
+                        ));
+                    }
+                    (Some(_), false) => {
+                        return Err(SpecError::new(
+                            file,
+                            entry,
+                            format!("only a `{TRACKING_PHASE}` state names an `action`"),
+                        ));
+                    }
+                    (Some(a), true) => {
+                        let version = actions.get(a).and_then(|x| x.version.clone()).ok_or_else(
+                            || {
+                                SpecError::new(
+                                    file,
+                                    format!("states[{i}].action"),
+                                    format!(
+                                        "`{a}` is not an application action of params/actions.toml"
+                                    ),
+                                )
+                            },
+                        )?;
+                        if states
+                            .iter()
+                            .any(|s| s.keeping.as_ref().is_some_and(|(k, _)| k == a))
+                        {
+                            return Err(SpecError::new(
+                                file,
+                                format!("states[{i}].action"),
+                                format!("`{a}` already keeps another state"),
+                            ));
+                        }
+                        Some((a.clone(), version))
+                    }
+                };
+            states.push(StateInfo {
+                name: d.name.clone(),
+                phase: d.phase.clone(),
+                keeping,
+            });
+        }
+        // The rest of mission.toml names shared states too: they must be declared ones.
+        let declared = |s: &str| states.iter().any(|x| x.name == s);
+        for s in mission.guarantee.activity_of_state.keys() {
+            if !declared(s) {
+                return Err(SpecError::new(
+                    file,
+                    "guarantee.activity_of_state",
+                    format!("`{s}` is not a declared state"),
+                ));
+            }
+        }
+        for (name, rules) in &mission.projection {
+            for (i, r) in rules.iter().enumerate() {
+                if let Some(s) = r.states.iter().find(|s| !declared(s)) {
+                    return Err(SpecError::new(
+                        file,
+                        format!("projection.{name}[{i}].states"),
+                        format!("`{s}` is not a declared state"),
+                    ));
+                }
+            }
+        }
+        Ok(Self { phases, states })
+    }
+
+    /// The rule used before mission.toml declared its states, kept only to read the decision
+    /// logs written then: `v0`..`v9` are the tracking states, kept by `track_v0`..`track_v9`
+    /// (versions `V0`..`V9`); every other state is its own phase.
+    pub fn undeclared() -> Self {
+        let states = (0..10)
+            .map(|n| StateInfo {
+                name: format!("v{n}"),
+                phase: TRACKING_PHASE.into(),
+                keeping: Some((format!("track_v{n}"), format!("V{n}"))),
+            })
+            .collect();
+        Self {
+            phases: Vec::new(),
+            states,
+        }
+    }
+
+    /// The declared phases, in flight order (empty for [`MissionStates::undeclared`]).
+    pub fn phases(&self) -> &[String] {
+        &self.phases
+    }
+
+    /// Whether `phase` is one of the mission's phases.
+    pub fn has_phase(&self, phase: &str) -> bool {
+        self.phases.iter().any(|p| p == phase)
+    }
+
+    /// Whether `state` is a declared state.
+    pub fn has_state(&self, state: &str) -> bool {
+        self.states.iter().any(|s| s.name == state)
+    }
+
+    /// The phase `state` is in; a state not declared is taken as its own phase.
+    pub fn phase<'a>(&'a self, state: &'a str) -> &'a str {
+        self.states
+            .iter()
+            .find(|s| s.name == state)
+            .map_or(state, |s| s.phase.as_str())
+    }
+
+    /// Whether `state` keeps the target (is in the tracking phase).
+    pub fn is_tracking(&self, state: &str) -> bool {
+        self.phase(state) == TRACKING_PHASE
+    }
+
+    /// The tracking state the action set aims at, and the tracking variant version flown there:
+    /// the first action that keeps a tracking state.
+    pub fn tracking_target<S: AsRef<str>>(&self, actions: &[S]) -> Option<(&str, &str)> {
+        actions.iter().find_map(|a| {
+            self.states.iter().find_map(|s| match &s.keeping {
+                Some((k, v)) if k == a.as_ref() => Some((s.name.as_str(), v.as_str())),
+                _ => None,
+            })
+        })
+    }
+
+    /// Whether action `id` keeps some tracking state.
+    pub fn is_keeping_action(&self, id: &str) -> bool {
+        self.tracking_target(&[id]).is_some()
+    }
+}
+
 /// Longest MDP horizon (steps) `mission.toml` may ask for (the BFM paper uses 100).
 pub const MAX_HORIZON: usize = 10_000;
 
@@ -168,6 +391,16 @@ pub const MAX_HORIZON: usize = 10_000;
 #[serde(deny_unknown_fields)]
 pub struct MissionFile {
     pub horizon: usize,
+    /// The mission's phases, in flight order; read through [`MissionStates`].
+    #[serde(default)]
+    pub phases: Vec<String>,
+    /// The shared mission states and their phases; read through [`MissionStates`].
+    #[serde(default)]
+    pub states: Vec<StateDecl>,
+    /// Named probabilities published for the decision record and the review only (no MDP reads
+    /// them); every other published name must have a reader (see `crate::probabilities`).
+    #[serde(default)]
+    pub recorded_probabilities: Vec<String>,
     /// Application -> the observation (m/s) giving the relative speed its frame rate must follow
     /// (the BFM paper's section 4.3.2 performance constraint; formula in params/platform.toml).
     pub rates: BTreeMap<String, String>,

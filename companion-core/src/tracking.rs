@@ -1,34 +1,27 @@
 //! Tracking time, the paper's Table 8 "tracking time (nbr steps)", defined once for `simulate`
 //! (counted while the world advances) and `review` (counted from the decision records).
 //!
-//! A tracking step is a decision cycle that starts at the target or in a tracking phase
-//! (`target`, `v0`..`v5`), chooses a tracking variant (`track_vN`) and ends in that variant's
-//! tracking phase (`vN`): the target was kept for that step. A cycle that chose to track but lost
-//! the target (back to `target`) or broke off to land is not one.
+//! A tracking step is a decision cycle that starts at the target or in a tracking state (the
+//! `tracking` phase of params/mission.toml), chooses the action that keeps one tracking state
+//! (`track_v3` keeps `v3`) and ends in that state: the target was kept for that step. A cycle
+//! that chose to track but lost the target (back to `target`) or broke off to land is not one.
 
+use crate::mission::{MissionStates, TARGET_STATE};
 use crate::record::DecisionRecord;
 
-/// `v0`..`v9`: a tracking phase of the mission.
-pub fn is_tracking_phase(state: &str) -> bool {
-    state.len() == 2 && state.starts_with('v') && state.as_bytes()[1].is_ascii_digit()
-}
-
-/// The tracking variant chosen in an action set (`track_v3` -> `3`), the first if several.
-pub fn tracked_variant<S: AsRef<str>>(actions: &[S]) -> Option<&str> {
-    actions
-        .iter()
-        .find_map(|a| a.as_ref().strip_prefix("track_v"))
-}
-
 /// One cycle: in state `before`, the action set `actions`, then in state `after`.
-pub fn is_tracking_step<S: AsRef<str>>(before: &str, actions: &[S], after: &str) -> bool {
-    if before != "target" && !is_tracking_phase(before) {
+pub fn is_tracking_step<S: AsRef<str>>(
+    states: &MissionStates,
+    before: &str,
+    actions: &[S],
+    after: &str,
+) -> bool {
+    if before != TARGET_STATE && !states.is_tracking(before) {
         return false;
     }
-    match tracked_variant(actions) {
-        Some(v) => after.strip_prefix('v') == Some(v) && is_tracking_phase(after),
-        None => false,
-    }
+    states
+        .tracking_target(actions)
+        .is_some_and(|(kept, _)| kept == after)
 }
 
 /// Key under `DecisionRecord::vehicle` where `simulate` writes the world's phase after the step
@@ -48,6 +41,7 @@ pub fn state_after<'a>(r: &'a DecisionRecord, next: Option<&'a DecisionRecord>) 
 /// arrives, or at [`TrackingCounter::finish`]), so a log can be streamed.
 #[derive(Debug, Default, Clone)]
 pub struct TrackingCounter {
+    states: MissionStates,
     pending: Option<Pending>,
     steps: usize,
     seconds: f64,
@@ -56,12 +50,22 @@ pub struct TrackingCounter {
 #[derive(Debug, Clone)]
 struct Pending {
     state: String,
-    variant: Option<String>,
+    /// The tracking state the cycle's actions aimed at.
+    kept: Option<String>,
     state_after: Option<String>,
     time_s: f64,
 }
 
 impl TrackingCounter {
+    /// A counter judging by the mission's declared states ([`TrackingCounter::default`] uses
+    /// [`MissionStates::undeclared`]).
+    pub fn new(states: MissionStates) -> Self {
+        Self {
+            states,
+            ..Self::default()
+        }
+    }
+
     /// Feed the next record; `step_s` is the nominal cycle length, used for the last record.
     pub fn push(&mut self, r: &DecisionRecord) {
         if let Some(p) = self.pending.take() {
@@ -71,7 +75,10 @@ impl TrackingCounter {
         }
         self.pending = Some(Pending {
             state: r.state.clone(),
-            variant: tracked_variant(&r.actions).map(str::to_string),
+            kept: self
+                .states
+                .tracking_target(&r.actions)
+                .map(|(kept, _)| kept.to_string()),
             state_after: r
                 .vehicle
                 .get(STATE_AFTER_KEY)
@@ -82,8 +89,8 @@ impl TrackingCounter {
     }
 
     fn judge(&mut self, p: &Pending, after: &str, dt: f64) {
-        let actions: Vec<String> = p.variant.iter().map(|v| format!("track_v{v}")).collect();
-        if is_tracking_step(&p.state, &actions, after) {
+        let from_tracking = p.state == TARGET_STATE || self.states.is_tracking(&p.state);
+        if from_tracking && p.kept.as_deref() == Some(after) {
             self.steps += 1;
             self.seconds += dt;
         }
@@ -101,8 +108,8 @@ impl TrackingCounter {
 }
 
 /// Tracking steps of a whole run's records.
-pub fn tracking_steps(records: &[DecisionRecord]) -> usize {
-    let mut c = TrackingCounter::default();
+pub fn tracking_steps(states: &MissionStates, records: &[DecisionRecord]) -> usize {
+    let mut c = TrackingCounter::new(states.clone());
     for r in records {
         c.push(r);
     }
@@ -121,15 +128,40 @@ mod tests {
         }
     }
 
+    fn shipped() -> MissionStates {
+        MissionStates::load(&crate::shipped::params()).unwrap()
+    }
+
     #[test]
     fn a_tracking_step_keeps_the_target_in_the_chosen_variant() {
-        assert!(is_tracking_step("target", &["track_v3"], "v3"));
-        assert!(is_tracking_step("v3", &["track_v1", "land"], "v1"));
-        // Target lost, or broke off to land, or not at the target yet.
-        assert!(!is_tracking_step("v3", &["track_v3"], "target"));
-        assert!(!is_tracking_step("v3", &["track_v3"], "landing"));
-        assert!(!is_tracking_step("wpf", &["track_v0"], "v0"));
-        assert!(!is_tracking_step("v2", &["follow_trajectory"], "v2"));
+        for s in [shipped(), MissionStates::undeclared()] {
+            assert!(is_tracking_step(&s, "target", &["track_v3"], "v3"));
+            assert!(is_tracking_step(&s, "v3", &["track_v1", "land"], "v1"));
+            // Target lost, or broke off to land, or not at the target yet.
+            assert!(!is_tracking_step(&s, "v3", &["track_v3"], "target"));
+            assert!(!is_tracking_step(&s, "v3", &["track_v3"], "landing"));
+            assert!(!is_tracking_step(&s, "wpf", &["track_v0"], "v0"));
+            assert!(!is_tracking_step(&s, "v2", &["follow_trajectory"], "v2"));
+            // detect_target runs the tracking application too but keeps no tracking state.
+            assert!(!is_tracking_step(&s, "target", &["detect_target"], "v0"));
+        }
+    }
+
+    #[test]
+    fn the_undeclared_rule_of_old_logs_agrees_with_the_shipped_states() {
+        let (declared, old) = (shipped(), MissionStates::undeclared());
+        for st in [
+            "base", "wp1", "wpi", "wpf", "target", "v0", "v3", "v5", "landing",
+        ] {
+            assert_eq!(declared.phase(st), old.phase(st), "{st}");
+        }
+        for a in ["track_v0", "track_v5", "detect_target", "land"] {
+            assert_eq!(
+                declared.tracking_target(&[a]),
+                old.tracking_target(&[a]),
+                "{a}"
+            );
+        }
     }
 
     #[test]
@@ -144,6 +176,6 @@ mod tests {
             rec("target", &["track_v0"]), // -> v0: counted
             last,                         // says it ended in v0: counted
         ];
-        assert_eq!(tracking_steps(&recs), 3);
+        assert_eq!(tracking_steps(&shipped(), &recs), 3);
     }
 }

@@ -19,6 +19,7 @@
 //! at altitude (spoofed or corrupt) neither starts the landing nor ends the flight.
 
 use super::actions::Route;
+use companion_core::mission::{MissionStates, TARGET_STATE};
 use companion_core::observations::Observations;
 
 /// Vehicle actions that end the flight.
@@ -71,10 +72,12 @@ pub struct MissionState {
     /// ground and disarmed without a break.
     ground_since: Option<(f64, u32)>,
     landing_action: Option<String>,
+    /// The mission's states and phases (params/mission.toml).
+    states: MissionStates,
 }
 
 impl MissionState {
-    pub fn new(route: &Route, takeoff_alt_m: f64) -> Self {
+    pub fn new(route: &Route, takeoff_alt_m: f64, states: MissionStates) -> Self {
         let first = if route.takeoff_first { 2 } else { 1 };
         let last = route.waypoints.len() as u16 + first - 1;
         Self {
@@ -98,7 +101,13 @@ impl MissionState {
             ground_altitude_m: 1.0,
             ground_since: None,
             landing_action: None,
+            states,
         }
+    }
+
+    /// The mission's states and phases this estimator moves through.
+    pub fn states(&self) -> &MissionStates {
+        &self.states
     }
 
     /// The landing action the shell keeps flying in the landing phase (`land`,
@@ -186,7 +195,8 @@ impl MissionState {
             self.state = "landing".into();
             return &self.state;
         }
-        let past = |s: &str| matches!(s, "wpf" | "target") || is_tracking(s);
+        let states = &self.states;
+        let past = |s: &str| s == "wpf" || s == TARGET_STATE || states.is_tracking(s);
         self.state = if !self.flown {
             "base".into()
         } else if past(&self.state)
@@ -223,10 +233,10 @@ impl MissionState {
     /// After the core's decision: remember the tracking version it runs and whether it chose to
     /// land. `time_s` is the cycle's observation time.
     pub fn after_plan(&mut self, actions: &[String]) {
-        self.tracking = actions
-            .iter()
-            .find_map(|a| a.strip_prefix("track_v"))
-            .map(|v| format!("v{v}"));
+        self.tracking = self
+            .states
+            .tracking_target(actions)
+            .map(|(kept, _)| kept.to_string());
         if self.flown
             && let Some(a) = actions
                 .iter()
@@ -272,10 +282,6 @@ pub fn mission_clock(obs: &Observations) -> f64 {
     obs.get("vehicle_time_s").unwrap_or(obs.time_s)
 }
 
-fn is_tracking(s: &str) -> bool {
-    s.len() == 2 && s.starts_with('v') && s.as_bytes()[1].is_ascii_digit()
-}
-
 /// One motion at a time: the autopilot flies one vehicle action, so when the core's plan holds
 /// several (its behaviour arbitration leaves e.g. `return_to_base` with `follow_trajectory`), the
 /// first in `precedence` (params/link.toml `vehicle_action_precedence`) wins; actions not listed
@@ -291,6 +297,18 @@ pub fn select_vehicle_action(actions: &[String], precedence: &[String]) -> Optio
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn states() -> MissionStates {
+        let dir = crate::test_support::default_params_dir();
+        let mut files = companion_core::spec::ParamsFiles::new(&dir);
+        for name in ["mission.toml", "actions.toml"] {
+            files.insert(
+                dir.join(name),
+                std::fs::read_to_string(dir.join(name)).unwrap(),
+            );
+        }
+        MissionStates::load(&files).unwrap()
+    }
 
     fn route() -> Route {
         crate::test_support::disk(Route::load)(
@@ -313,7 +331,7 @@ mod tests {
     #[test]
     fn follows_the_simulation_phases_on_the_default_route() {
         // Default route: seq 0 home, 1 take-off, 2 wp1, 3 and 4 intermediate, 5 wpf.
-        let mut m = MissionState::new(&route(), 10.0);
+        let mut m = MissionState::new(&route(), 10.0, states());
         let none = Extra::default();
         let auto = Extra {
             mode: Some("AUTO"),
@@ -378,7 +396,7 @@ mod tests {
 
     #[test]
     fn one_disarmed_heartbeat_at_altitude_neither_lands_nor_ends_the_flight() {
-        let mut m = MissionState::new(&route(), 10.0);
+        let mut m = MissionState::new(&route(), 10.0, states());
         let auto = Extra {
             mode: Some("AUTO"),
             landed_state: Some("IN_AIR"),
@@ -396,7 +414,7 @@ mod tests {
 
     #[test]
     fn the_flight_ends_only_after_ground_and_disarm_hold_for_the_confirm_time() {
-        let mut m = MissionState::new(&route(), 10.0);
+        let mut m = MissionState::new(&route(), 10.0, states());
         let in_air = Extra {
             mode: Some("LAND"),
             landed_state: Some("IN_AIR"),
@@ -428,7 +446,7 @@ mod tests {
         m.update(&obs(15.0, &down), &on_ground);
         assert!(m.finished());
         // Without a landed state, the altitude decides.
-        let mut m = MissionState::new(&route(), 10.0);
+        let mut m = MissionState::new(&route(), 10.0, states());
         m.update(&obs(1.0, &flying()), &Extra::default());
         let high = [("armed", 0.0), ("altitude_m", 15.0)];
         m.update(&obs(2.0, &high), &Extra::default());
@@ -441,7 +459,7 @@ mod tests {
 
     #[test]
     fn autopilot_landing_modes_and_disarm_mean_landing() {
-        let mut m = MissionState::new(&route(), 10.0);
+        let mut m = MissionState::new(&route(), 10.0, states());
         let flying = [("armed", 1.0), ("altitude_m", 15.0), ("mission_seq", 2.0)];
         assert_eq!(m.update(&obs(1.0, &flying), &Extra::default()), "wp1");
         let rtl = Extra {
@@ -451,7 +469,7 @@ mod tests {
         assert_eq!(m.update(&obs(2.0, &flying), &rtl), "landing");
         assert_eq!(m.landing_action(), Some("return_to_base"));
         // a disarmed vehicle that never flew is at base, not landing
-        let mut m = MissionState::new(&route(), 10.0);
+        let mut m = MissionState::new(&route(), 10.0, states());
         assert_eq!(m.update(&obs(1.0, &[("armed", 0.0)]), &rtl), "base");
         assert!(!m.finished());
     }

@@ -10,7 +10,7 @@
 //! ratio to `cycle_concurrent_worst` compares solve work like for like.
 
 use companion::params::default_params_dir;
-use companion_core::decision::{Core, ModelKind, Policy};
+use companion_core::decision::{Core, ModelKind};
 use companion_core::record::{DecisionRecord, Plan};
 use companion_testkit::streams::{Stream, StreamGen, tracking_snapshot};
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -42,7 +42,7 @@ fn cycle(c: &mut Criterion) {
         ),
     ] {
         let stream_gen = StreamGen::new(&model, base.clone(), stream);
-        let mut core = Core::new(&model, kind, Policy::Safety);
+        let mut core = Core::new(&model, kind, model.policy("safety").unwrap());
         core.set_caches(caches);
         let mut obs = base.clone();
         let (mut plan, mut rec) = (Plan::default(), DecisionRecord::default());

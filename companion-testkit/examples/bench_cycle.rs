@@ -15,7 +15,7 @@
 //! Run: `cargo run --release -p companion --example bench_cycle -- 2000 [CASE,CASE...]` (the
 //! optional second argument keeps only the named cases, e.g. `changing` for a profile).
 use companion::params::default_params_dir;
-use companion_core::decision::{Core, ModelKind, Policy};
+use companion_core::decision::{Core, ModelKind};
 use companion_core::record::{DecisionRecord, Plan};
 use companion_testkit::streams::{Stream, StreamGen, tracking_snapshot};
 use serde_json::json;
@@ -55,7 +55,7 @@ fn main() {
             continue;
         }
         let stream_gen = StreamGen::new(&model, base.clone(), stream);
-        let mut core = Core::new(&model, kind, Policy::Safety);
+        let mut core = Core::new(&model, kind, model.policy("safety").unwrap());
         core.set_caches(caches);
         let mut obs = base.clone();
         let (mut plan, mut rec) = (Plan::default(), DecisionRecord::default());

@@ -26,7 +26,7 @@
 
 use companion::fly::{self, Decider, FlyArgs, FlySetup, JsonLines, RecordSink, Shell};
 use companion::sim::{Scenario, World, WorldSpec};
-use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion_core::decision::{Core, Model, ModelKind};
 use companion_core::observations::Observations;
 use companion_core::record::{DecisionRecord, Plan};
 use companion_link::ingest::{Encoder, Ingest};
@@ -195,7 +195,11 @@ impl<'m> Session<'m> {
         let period = Duration::from_secs_f64(setup.link.decision_period_s);
         Self {
             start,
-            decider: CoreDecider(Core::new(model, ModelKind::Bfm, Policy::Safety)),
+            decider: CoreDecider(Core::new(
+                model,
+                ModelKind::Bfm,
+                model.policy("safety").unwrap(),
+            )),
             vehicle: setup.vehicle(Duration::from_secs(3)),
             shell: Shell::new(setup),
             ingest: Ingest::new(None),

@@ -16,7 +16,6 @@
 
 use companion::fly::{self, FlyArgs, FlySetup, Shell};
 use companion_core::decision::{Core, Model, ModelKind};
-use companion_core::mission::Policy;
 use companion_core::spec::{ParamsFiles, SpecError};
 use companion_link::Msg;
 use companion_link::actions::LinkParams;
@@ -100,7 +99,8 @@ fn vehicle_config(link: &LinkParams, link_timeout: Duration) -> VehicleConfig {
 #[derive(Debug, Clone, PartialEq)]
 pub struct IngestInput<'a> {
     pub signing: bool,
-    pub policy: Policy,
+    /// The policy's name in params/policies.toml.
+    pub policy: &'static str,
     pub onboard_odd_chunks: bool,
     pub reconnect: bool,
     pub step: Duration,
@@ -118,11 +118,7 @@ impl<'a> IngestInput<'a> {
         let step = [10, 100, 1000, 5000][((flags >> 4) & 3) as usize];
         Self {
             signing: flags & 1 != 0,
-            policy: if flags & 2 != 0 {
-                Policy::Mission
-            } else {
-                Policy::Safety
-            },
+            policy: if flags & 2 != 0 { "mission" } else { "safety" },
             onboard_odd_chunks: flags & 4 != 0,
             reconnect: flags & 8 != 0,
             step: Duration::from_millis(step),
@@ -255,7 +251,11 @@ pub fn ingest_one(fx: &IngestFixture, data: &[u8]) -> IngestOutcome {
         Some(fx.setup.route.clone()),
     );
     let mut shell = Shell::new(&fx.setup);
-    let mut core = Core::new(&fx.model, ModelKind::Bfm, input.policy);
+    let policy = fx
+        .model
+        .policy(input.policy)
+        .expect("a policy of the shipped params");
+    let mut core = Core::new(&fx.model, ModelKind::Bfm, policy);
     let mut out = IngestOutcome::default();
     let (mut pushed, mut returned) = (0u64, 0u64);
     let (mut ob_pushed, mut ob_returned) = (0u64, 0u64);
@@ -464,7 +464,7 @@ pub fn params_one(fx: &ParamsFixture, data: &[u8]) -> ParamsOutcome {
             // What `fly` does next with these numbers (Durations, the mission-state estimator).
             let _ = vehicle_config(&setup.link, Duration::from_secs(3));
             let _ = Duration::from_secs_f64(setup.link.decision_period_s);
-            let _ = MissionState::new(&setup.route, setup.takeoff_alt_m);
+            let _ = MissionState::new(&setup.route, setup.takeoff_alt_m, setup.states.clone());
             let _ = setup.route.items((0, 0));
         }
         let args = companion::check::CheckArgs {
@@ -477,7 +477,8 @@ pub fn params_one(fx: &ParamsFixture, data: &[u8]) -> ParamsOutcome {
         // Whatever loaded must fly: a few simulation steps with the real core.
         if let (Ok(model), Ok(world), Ok(mut scen)) = (&model, &world, scen) {
             scen.steps = scen.steps.min(PARAMS_SIM_STEPS);
-            for policy in [Policy::Safety, Policy::Mission] {
+            for name in &model.policies {
+                let policy = model.policy(name).expect("a policy of this model");
                 let mut core = Core::new(model, ModelKind::Bfm, policy);
                 let run = companion::sim::run(world, &scen, 1, |o| core.step(o));
                 out.cycles += run.records.len();

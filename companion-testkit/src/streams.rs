@@ -3,7 +3,7 @@
 //! way flight telemetry moves. Not used by the decision core itself.
 
 use companion::sim::{Scenario, World, WorldSpec};
-use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion_core::decision::{Core, Model, ModelKind};
 use companion_core::observations::Observations;
 use std::path::Path;
 
@@ -14,7 +14,7 @@ pub fn tracking_snapshot(model: &Model, params: &Path, scenario: &str) -> Observ
     let spec = WorldSpec::load(&files).expect("world params");
     let scenario = Scenario::load(&files, scenario).expect("scenario");
     let mut world = World::new(&spec, &scenario, 1);
-    let mut core = Core::new(model, ModelKind::Bfm, Policy::Safety);
+    let mut core = Core::new(model, ModelKind::Bfm, model.policy("safety").unwrap());
     loop {
         let obs = world.observe();
         if obs.state.starts_with('v') {

@@ -18,6 +18,15 @@ fn model() -> &'static Model {
     })
 }
 
+/// The policies by name (params/policies.toml).
+fn safety() -> Policy {
+    model().policy("safety").unwrap()
+}
+
+fn mission() -> Policy {
+    model().policy("mission").unwrap()
+}
+
 fn json(plan: &Plan, rec: &DecisionRecord) -> String {
     format!(
         "{}\n{}",
@@ -32,7 +41,7 @@ fn missions() -> Vec<(String, ModelKind, Policy, u64)> {
     let mut out = Vec::new();
     for s in Scenario::names(&params) {
         for kind in [ModelKind::Bfm, ModelKind::Monolithic, ModelKind::Reference] {
-            for policy in [Policy::Safety, Policy::Mission] {
+            for policy in [safety(), mission()] {
                 for seed in [1, 7] {
                     out.push((s.clone(), kind, policy, seed));
                 }
@@ -116,7 +125,7 @@ fn memos_hit_on_a_settled_stream_and_miss_when_evidence_flips() {
     let base = tracking_snapshot(model(), &params, "complete-1");
     for (stream, solves_per_cycle) in [(Stream::Steady, 0), (Stream::Changing, 3)] {
         let stream_gen = StreamGen::new(model(), base.clone(), stream);
-        let mut core = Core::new(model(), ModelKind::Bfm, Policy::Safety);
+        let mut core = Core::new(model(), ModelKind::Bfm, safety());
         let mut obs = base.clone();
         for k in 0..200 {
             stream_gen.advance(&mut obs, k);

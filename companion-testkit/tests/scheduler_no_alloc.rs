@@ -5,7 +5,7 @@
 //! binary.
 
 use companion::params::default_params_dir;
-use companion_core::decision::{Core, ModelKind, Policy};
+use companion_core::decision::{Core, ModelKind};
 use companion_core::record::{DecisionRecord, Plan};
 use companion_testkit::streams::{Stream, StreamGen, tracking_snapshot};
 #[path = "support/counting_alloc.rs"]
@@ -20,7 +20,7 @@ fn memos_off_cycle_allocates_nothing_once_warm() {
     let params = default_params_dir();
     let model = companion::params::load_model(&params).unwrap();
     let base = tracking_snapshot(&model, &params, "complete-1");
-    for policy in [Policy::Safety, Policy::Mission] {
+    for policy in model.policies.iter().map(|p| model.policy(p).unwrap()) {
         let stream = StreamGen::new(&model, base.clone(), Stream::Changing);
         let mut core = Core::new(&model, ModelKind::Bfm, policy);
         core.set_caches(false);

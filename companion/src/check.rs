@@ -44,6 +44,7 @@ pub type SectionFn = fn(&CheckContext) -> anyhow::Result<(Value, String)>;
 pub const SECTIONS: &[(&str, SectionFn)] = &[
     ("health", health_section),
     ("mdps", mdp_section),
+    ("probabilities", probabilities_section),
     ("platform", platform_section),
     ("variants", variants_section),
     ("resource_policies", resource_policies_section),
@@ -111,6 +112,34 @@ pub fn mdp_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
     }
     let _ = writeln!(text, "  concurrent: {}", mdps.concurrent().join(", "));
     Ok((Value::Array(arr), text))
+}
+
+/// Every named probability with the health manager that publishes it and what reads it (MDPs,
+/// the guarantee's cap, the record only), as the model load checks them.
+pub fn probabilities_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
+    use std::fmt::Write;
+    let health = HealthModel::load(cx.params)?;
+    let names = health.publishes();
+    let refs: Vec<&str> = names.iter().map(String::as_str).collect();
+    let mdps = companion_core::mission_mdp::MissionMdps::load(cx.params, &refs)?;
+    let mission = companion_core::mission::MissionFile::load(cx.params)?;
+    let all = companion_core::probabilities::named_probabilities(&health, &mdps, &mission);
+    let mut text = String::from("\nNamed probabilities (publisher -> readers):\n");
+    for p in &all {
+        let readers: Vec<String> = p
+            .consumers
+            .iter()
+            .map(|c| format!("{} {}", c.kind, c.name))
+            .collect();
+        let _ = writeln!(
+            text,
+            "  {:<10} {:<12} -> {}",
+            p.name,
+            p.publisher,
+            readers.join(", ")
+        );
+    }
+    Ok((serde_json::to_value(&all)?, text))
 }
 
 fn resources_json(cx: &CheckContext) -> anyhow::Result<Value> {

@@ -1,7 +1,7 @@
 //! `companion`: the command-line edge. Parses arguments, owns I/O and time, calls the pure core.
 
 use anyhow::{Context, Result};
-use clap::{Parser, Subcommand, ValueEnum};
+use clap::{Parser, Subcommand};
 use companion::fly::{Decider, FlyArgs};
 use companion::params::default_params_dir;
 use companion::sim::{self, Scenario};
@@ -48,21 +48,6 @@ fn init_logging(level: Option<&str>) -> Result<()> {
     Ok(())
 }
 
-#[derive(Clone, Copy, ValueEnum)]
-enum PolicyArg {
-    Safety,
-    Mission,
-}
-
-impl From<PolicyArg> for Policy {
-    fn from(p: PolicyArg) -> Self {
-        match p {
-            PolicyArg::Safety => Policy::Safety,
-            PolicyArg::Mission => Policy::Mission,
-        }
-    }
-}
-
 /// Most `simulate --runs` (each run is a full simulation; the per-run results are kept).
 const MAX_RUNS: i64 = 10_000;
 /// Most `simulate --steps` (the first run's records are all held and logged).
@@ -73,8 +58,10 @@ struct SimulateArgs {
     /// Scenario name in params/scenarios/ or a path to a scenario file.
     #[arg(long, default_value = "complete-1")]
     scenario: String,
-    #[arg(long, value_enum, default_value = "safety")]
-    policy: PolicyArg,
+    /// Decision policy: a policy of params/policies.toml (safety, mission), checked when the
+    /// params load.
+    #[arg(long, default_value = "safety")]
+    policy: String,
     /// bfm (the three concurrent MDPs), reference (Figure 1), monolithic (section 5), or a
     /// comma-separated list run side by side on the same seeds.
     #[arg(long, default_value = "bfm")]
@@ -219,10 +206,9 @@ fn fly(args: FlyArgs) -> Result<()> {
     let loaded = companion::params::Params::load(&params, args.mission.as_deref())
         .context("loading params")?;
     let model: &'static Model = Box::leak(Box::new(loaded.model));
-    let policy: Policy = args
-        .policy
-        .parse()
-        .map_err(|e: String| anyhow::anyhow!(e))?;
+    let policy: Policy = model
+        .policy(&args.policy)
+        .map_err(|e| anyhow::anyhow!("--policy: {e}"))?;
     let decider = CoreDecider {
         core: Core::new(model, ModelKind::Bfm, policy),
         model,
@@ -244,8 +230,10 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         .map(|m| m.trim().parse::<ModelKind>())
         .collect::<Result<_, _>>()
         .map_err(|e| anyhow::anyhow!("--model: {e}"))?;
-    let policy: Policy = args.policy.into();
     let model = loaded.model;
+    let policy: Policy = model
+        .policy(&args.policy)
+        .map_err(|e| anyhow::anyhow!("--policy: {e}"))?;
     let runs = args.runs.max(1);
     let progress = (!args.json && runs > 1 && std::io::stderr().is_terminal()).then(|| {
         let pb = indicatif::ProgressBar::new(runs as u64 * kinds.len() as u64);
@@ -289,7 +277,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         let mut header = companion::decision_log::Header::new(command.join(" "), now)
             .with_params_dir(params)
             .with_context(|| format!("reading {} for the log header", params.display()))?;
-        header.policy = Some(policy.name().to_string());
+        header.policy = Some(model.policy_name(policy).to_string());
         header.scenario = Some(scenario.name.clone());
         header.seed = Some(args.seed);
         header.step_s = Some(world.step_s);
@@ -332,7 +320,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
             .collect();
         let out = serde_json::json!({
             "scenario": scenario.name,
-            "policy": policy.name(),
+            "policy": model.policy_name(policy),
             "runs": runs,
             "steps": scenario.steps,
             "seed": args.seed,
@@ -349,7 +337,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         "scenario {} ({}), policy {}, model {}, seed {}, {} steps",
         scenario.name,
         scenario.description,
-        policy.name(),
+        model.policy_name(policy),
         first_kind,
         args.seed,
         scenario.steps

@@ -272,12 +272,10 @@ impl<'m> Run<'m> {
                 .parse()
                 .map_err(|e: String| refuse(file, at, format!("header command: {e}")))?,
         };
-        let policy: Policy = header
+        let policy_name = header
             .policy
             .as_deref()
-            .ok_or_else(|| refuse(file, at, "the header names no policy"))?
-            .parse()
-            .map_err(|e: String| refuse(file, at, format!("header policy: {e}")))?;
+            .ok_or_else(|| refuse(file, at, "the header names no policy"))?;
         if header.params.is_empty() {
             return Err(refuse(file, at, "the header holds no params"));
         }
@@ -289,6 +287,10 @@ impl<'m> Run<'m> {
                 format!("the model cannot be rebuilt from the header's params: {e}"),
             )
         })?;
+        // Policy names are the params' own: resolved against the model the header rebuilds.
+        let policy: Policy = model
+            .policy(policy_name)
+            .map_err(|e| refuse(file, at, format!("header policy: {e}")))?;
         Ok((
             model,
             Setup {

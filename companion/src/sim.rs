@@ -6,6 +6,7 @@
 //! build from MAVLink, then advances by sampling the true dynamics under the actions the core
 //! chose. The core never reads the truth.
 
+use companion_core::mission::{MissionStates, TARGET_STATE};
 use companion_core::observations::Observations;
 use companion_core::record::{DecisionRecord, Event, Plan};
 use companion_core::spec::{ParamsFiles, SpecError, read_toml};
@@ -30,6 +31,9 @@ pub struct WorldSpec {
     pub vehicle: Vehicle,
     pub baseline: BTreeMap<String, f64>,
     pub truth: Truth,
+    /// The mission's states and phases (params/mission.toml), which the world moves through.
+    #[serde(skip)]
+    pub states: MissionStates,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -122,7 +126,18 @@ pub struct Trigger {
 impl WorldSpec {
     pub fn load(files: &ParamsFiles) -> Result<Self, SpecError> {
         let file = files.dir().join("world.toml");
-        let w: WorldSpec = read_toml(files, &file)?;
+        let mut w: WorldSpec = read_toml(files, &file)?;
+        w.states = MissionStates::load(files)?;
+        if !w.states.has_state(&w.initial_state) {
+            return Err(SpecError::new(
+                &file,
+                "initial_state",
+                format!(
+                    "`{}` is not a state of params/mission.toml",
+                    w.initial_state
+                ),
+            ));
+        }
         let prob = |entry: &str, p: f64| {
             if (0.0..=1.0).contains(&p) {
                 Ok(())
@@ -206,6 +221,24 @@ impl Scenario {
                 ));
             }
         }
+        // Phase triggers name the mission's declared phases (params/mission.toml).
+        if s.hazards.iter().any(|h| h.trigger.phase.is_some()) {
+            let states = MissionStates::load(files)?;
+            for (i, h) in s.hazards.iter().enumerate() {
+                if let Some(p) = &h.trigger.phase
+                    && !states.has_phase(p)
+                {
+                    return Err(SpecError::new(
+                        &file,
+                        format!("hazard[{i}].trigger.phase"),
+                        format!(
+                            "`{p}` is not a phase of params/mission.toml ({})",
+                            states.phases().join(", ")
+                        ),
+                    ));
+                }
+            }
+        }
         Ok(s)
     }
 
@@ -280,10 +313,6 @@ pub struct World<'a> {
     outcome: Option<Outcome>,
 }
 
-fn is_tracking(phase: &str) -> bool {
-    companion_core::tracking::is_tracking_phase(phase)
-}
-
 impl<'a> World<'a> {
     pub fn new(spec: &'a WorldSpec, scenario: &'a Scenario, seed: u64) -> Self {
         let mut w = World {
@@ -309,16 +338,12 @@ impl<'a> World<'a> {
         w
     }
 
-    fn phase_family(phase: &str) -> &str {
-        if is_tracking(phase) {
-            "tracking"
-        } else {
-            phase
-        }
+    fn is_tracking(&self, state: &str) -> bool {
+        self.spec.states.is_tracking(state)
     }
 
     fn enter_phase(&mut self) {
-        let fam = Self::phase_family(&self.phase).to_string();
+        let fam = self.spec.states.phase(&self.phase).to_string();
         self.entered.entry(fam).or_insert(self.step);
     }
 
@@ -383,7 +408,7 @@ impl<'a> World<'a> {
         );
         let failed = values.get("failed_tiles").copied().unwrap_or(0.0);
         values.insert("free_tiles".into(), (self.free_tiles - failed).max(0.0));
-        let in_tracking_area = self.phase == "target" || is_tracking(&self.phase);
+        let in_tracking_area = self.phase == TARGET_STATE || self.is_tracking(&self.phase);
         values.insert(
             "target_detected".into(),
             if in_tracking_area { 1.0 } else { 0.0 },
@@ -536,13 +561,12 @@ impl<'a> World<'a> {
                             events.push(Event::TargetDetected);
                             "target".into()
                         }),
-                    p if p == "target" || is_tracking(p) => {
-                        let version = acts.iter().find_map(|a| a.strip_prefix("track_v"));
-                        match version {
-                            Some(v) => {
-                                let q = self.qos(&format!("V{v}"), &values);
+                    p if p == TARGET_STATE || self.is_tracking(p) => {
+                        match self.spec.states.tracking_target(&acts) {
+                            Some((kept, version)) => {
+                                let q = self.qos(version, &values);
                                 if self.rng.random::<f64>() < q {
-                                    Some(format!("v{v}"))
+                                    Some(kept.to_string())
                                 } else {
                                     events.push(Event::TargetLost);
                                     Some("target".into())
@@ -562,7 +586,12 @@ impl<'a> World<'a> {
             self.enter_phase();
         }
         // The one definition of a tracking step, shared with `review`.
-        if companion_core::tracking::is_tracking_step(&before, &record.actions, &self.phase) {
+        if companion_core::tracking::is_tracking_step(
+            &self.spec.states,
+            &before,
+            &record.actions,
+            &self.phase,
+        ) {
             self.tracking_steps += 1;
         }
         if self.phase == "landing" {
@@ -703,7 +732,7 @@ mod tests {
         let in_tracking = r
             .records
             .iter()
-            .filter(|x| is_tracking(&x.state) || x.state == "target")
+            .filter(|x| w.states.is_tracking(&x.state) || x.state == "target")
             .count() as u32;
         // Each tracking step is a cycle spent at target/vX with a successful draw.
         assert!(

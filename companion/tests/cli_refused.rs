@@ -265,3 +265,34 @@ fn a_scenario_of_a_billion_steps_is_refused() {
         &["long.toml", "steps", "out of range"],
     );
 }
+
+/// `--policy` takes the names params/policies.toml declares: another name is refused before
+/// any run folder or socket, naming the flag and the declared policies.
+#[test]
+fn a_policy_params_do_not_declare_is_refused_naming_the_known_ones() {
+    let d = tempfile::tempdir().unwrap();
+    refused(
+        &["simulate", "--policy", "yolo", "--runs-dir", "runs"],
+        d.path(),
+        &[
+            "--policy",
+            "unknown policy `yolo`",
+            "policies.toml",
+            "safety",
+        ],
+    );
+    refused(
+        &[
+            "fly",
+            "--connect",
+            CONNECT,
+            "--policy",
+            "yolo",
+            "--log-dir",
+            "runs",
+        ],
+        d.path(),
+        &["--policy", "unknown policy `yolo`", "mission"],
+    );
+    assert!(!d.path().join("runs").exists(), "a run folder was started");
+}

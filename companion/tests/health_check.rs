@@ -85,3 +85,42 @@ fn bad_input_fails_with_a_reason() {
     assert!(!ok);
     assert!(err.contains("/nonexistent/params"), "{err}");
 }
+
+/// `check --json`'s `probabilities`: every published name once, with the manager that publishes
+/// it and every MDP that reads it among its consumers; nothing published goes unread.
+#[test]
+fn json_lists_each_probability_with_its_publisher_and_readers() {
+    let (ok, out, err) = check(&["--json"]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let listed = v["probabilities"].as_array().unwrap();
+    let mut published = Vec::new();
+    for h in v["health"].as_array().unwrap() {
+        for p in h["publishes"].as_array().unwrap() {
+            let name = p["name"].as_str().unwrap();
+            published.push(name);
+            let entry: Vec<_> = listed.iter().filter(|x| x["name"] == name).collect();
+            assert_eq!(entry.len(), 1, "{name}");
+            assert_eq!(entry[0]["publisher"], h["name"], "{name}");
+            assert!(
+                !entry[0]["consumers"].as_array().unwrap().is_empty(),
+                "{name} has no reader"
+            );
+        }
+    }
+    assert_eq!(listed.len(), published.len());
+    for m in v["mdps"].as_array().unwrap() {
+        for p in m["probabilities"].as_array().unwrap() {
+            let entry = listed.iter().find(|x| x["name"] == *p).unwrap();
+            assert!(
+                entry["consumers"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .any(|c| c["kind"] == "mdp" && c["name"] == m["name"]),
+                "{p} read by {} but not listed",
+                m["name"]
+            );
+        }
+    }
+}

@@ -21,6 +21,15 @@ fn model() -> &'static Model {
     })
 }
 
+/// The policies by name (params/policies.toml).
+fn safety() -> Policy {
+    model().policy("safety").unwrap()
+}
+
+fn mission() -> Policy {
+    model().policy("mission").unwrap()
+}
+
 fn run(scenario: &str, policy: Policy, seed: u64) -> Vec<DecisionRecord> {
     let params = default_params_dir();
     let files = companion::params::read_params_dir(&params).unwrap();
@@ -167,7 +176,7 @@ fn no_degrade_key_in_any_params_file() {
 #[test]
 fn every_running_action_is_in_a_proposal_of_its_record() {
     for scenario in ["complete-1", "complete-2"] {
-        for policy in [Policy::Safety, Policy::Mission] {
+        for policy in [safety(), mission()] {
             for seed in 1..=5 {
                 for r in run(scenario, policy, seed) {
                     for a in &r.actions {
@@ -187,7 +196,7 @@ fn every_running_action_is_in_a_proposal_of_its_record() {
 /// Each proposal names the probabilities it read and their values (tracking reads P_V0..P_V5).
 #[test]
 fn proposals_carry_the_probabilities_they_read() {
-    let recs = run("complete-1", Policy::Safety, 1);
+    let recs = run("complete-1", safety(), 1);
     let r = recs.iter().find(|r| r.state == "v3").expect("V3 runs");
     let t = r.proposals.iter().find(|p| p.mdp == "tracking").unwrap();
     for i in 0..6 {
@@ -202,7 +211,7 @@ fn proposals_carry_the_probabilities_they_read() {
 /// way to a resource conflict for the rest of the run.
 #[test]
 fn table5_mission_keeps_v3_after_insufficient_resources() {
-    let recs = run("complete-1", Policy::Mission, 1);
+    let recs = run("complete-1", mission(), 1);
     let after = from_event(&recs, "insufficient resources");
     let r = &after[0];
     assert!(r.actions.iter().any(|a| a == "track_v3"), "{:?}", r.actions);
@@ -230,7 +239,7 @@ fn table5_mission_keeps_v3_after_insufficient_resources() {
 #[test]
 fn tables4_to_7_emergency_area_search_after_the_obstacle() {
     for scenario in ["complete-1", "complete-2"] {
-        for policy in [Policy::Safety, Policy::Mission] {
+        for policy in [safety(), mission()] {
             let recs = run(scenario, policy, 1);
             let r = after_avoidance(&recs);
             assert!(
@@ -252,7 +261,7 @@ fn tables4_to_7_emergency_area_search_after_the_obstacle() {
 /// avoidance the navigation MDP proposes from `wp_avoid`.
 #[test]
 fn navigation_reaches_wp_avoid_after_an_avoidance() {
-    let recs = run("complete-1", Policy::Safety, 1);
+    let recs = run("complete-1", safety(), 1);
     let r = after_avoidance(&recs);
     let nav = r.proposals.iter().find(|p| p.mdp == "navigation").unwrap();
     assert_eq!(nav.state, "wp_avoid");
@@ -267,7 +276,7 @@ fn navigation_reaches_wp_avoid_after_an_avoidance() {
 /// fusion runs in every cycle after the failure while flying.
 #[test]
 fn lidar_failure_runs_fusion_obstacle_detection_and_lowers_p_lidar() {
-    let recs = run("lidar-failure", Policy::Safety, 1);
+    let recs = run("lidar-failure", safety(), 1);
     let before = recs[0].probabilities["P_lidar"];
     let after = from_event(&recs, "lidar failed");
     assert!(after[0].probabilities["P_lidar"] < 0.2 * before);
@@ -299,7 +308,7 @@ fn lidar_failure_runs_fusion_obstacle_detection_and_lowers_p_lidar() {
 /// paper shows V1: docs/simulation.md gives the numbers).
 #[test]
 fn table4_safety_leaves_v3_and_keeps_the_landing_search() {
-    let recs = run("complete-1", Policy::Safety, 1);
+    let recs = run("complete-1", safety(), 1);
     let r = &from_event(&recs, "insufficient resources")[0];
     assert!(
         !r.actions.iter().any(|a| a == "track_v3"),
@@ -327,7 +336,7 @@ fn table4_safety_leaves_v3_and_keeps_the_landing_search() {
 #[test]
 fn emergency_landing_replans_and_lands_from_zone_t_nok() {
     for seed in 1..=3 {
-        let recs = run("emergency-landing", Policy::Safety, seed);
+        let recs = run("emergency-landing", safety(), seed);
         let r = recs
             .iter()
             .find(|r| r.actions.iter().any(|a| a == "replan_and_land"))
@@ -348,7 +357,7 @@ fn emergency_landing_replans_and_lands_from_zone_t_nok() {
 /// the landing search gives way, recorded as a resource conflict of the mission policy.
 #[test]
 fn table7_mission_keeps_v2_fast_and_gives_up_landing_search() {
-    let recs = run("complete-2", Policy::Mission, 1);
+    let recs = run("complete-2", mission(), 1);
     let r = &from_event(&recs, "higher speed target")[0];
     assert!(r.actions.iter().any(|a| a == "track_v2"), "{:?}", r.actions);
     assert!(
@@ -378,7 +387,7 @@ fn table7_mission_keeps_v2_fast_and_gives_up_landing_search() {
 /// docs/simulation.md.)
 #[test]
 fn table6_safety_v2_gives_way_and_the_tracking_mdp_is_solved_again() {
-    let recs = run("complete-2", Policy::Safety, 1);
+    let recs = run("complete-2", safety(), 1);
     let r = &from_event(&recs, "higher speed target")[0];
     assert!(
         !r.actions.iter().any(|a| a == "track_v2"),
@@ -446,7 +455,7 @@ fn table2_panorama_tios_must_match_variants_toml() {
 /// and why; where they agree it says nothing.
 #[test]
 fn guarantee_record_says_where_the_allocation_and_the_placement_differ() {
-    let recs = run("complete-1", Policy::Safety, 1);
+    let recs = run("complete-1", safety(), 1);
     let r = recs
         .iter()
         .find(|r| r.actions.iter().any(|a| a == "track_v3"))

@@ -473,3 +473,78 @@ fn mdp_horizon_of_a_billion_steps_is_refused() {
         "1..=10000",
     );
 }
+
+/// An edit of one mission state of params/mission.toml, refused by every loader with `entry`
+/// and `reason`; `fly`'s own setup (its mission-state estimator reads the states) too.
+fn mission_state_refused(from: &str, to: &str, entry: &str, reason: &str) {
+    let d = params_copy();
+    edit(d.path(), "mission.toml", |t| t.replacen(from, to, 1));
+    refused_everywhere(d.path(), "mission.toml", entry, reason);
+    let e = FlySetup::load(&fly_args(d.path()))
+        .err()
+        .unwrap_or_else(|| panic!("{entry}: fly's setup accepted it"));
+    let msg = format!("{e:#}");
+    assert!(
+        msg.contains("mission.toml") && msg.contains(entry) && msg.contains(reason),
+        "{msg}"
+    );
+}
+
+#[test]
+fn mission_state_in_an_unknown_phase_is_refused() {
+    mission_state_refused(
+        r#"{ name = "wpf", phase = "wpf" }"#,
+        r#"{ name = "wpf", phase = "cruise" }"#,
+        "states[3]",
+        "unknown phase `cruise`",
+    );
+}
+
+#[test]
+fn duplicate_mission_state_is_refused() {
+    mission_state_refused(
+        r#"{ name = "wp1", phase = "wp1" }"#,
+        r#"{ name = "base", phase = "wp1" }"#,
+        "states[1]",
+        "duplicate state `base`",
+    );
+}
+
+#[test]
+fn tracking_state_kept_by_an_unknown_or_missing_action_is_refused() {
+    mission_state_refused(
+        r#"action = "track_v5""#,
+        r#"action = "track_v9""#,
+        "states[10].action",
+        "`track_v9` is not an application action",
+    );
+    mission_state_refused(
+        r#"{ name = "v2", phase = "tracking", action = "track_v2" }"#,
+        r#"{ name = "v2", phase = "tracking" }"#,
+        "states[7]",
+        "names no `action`",
+    );
+}
+
+#[test]
+fn projection_naming_an_undeclared_state_is_refused() {
+    mission_state_refused(
+        r#"states = ["target", "v0", "v1", "v2", "v3", "v4", "v5"]"#,
+        r#"states = ["target", "v0", "v1", "v2", "v3", "v4", "v6"]"#,
+        "projection.navigation[3].states",
+        "`v6` is not a declared state",
+    );
+}
+
+#[test]
+fn scenario_triggered_in_an_unknown_phase_is_refused() {
+    let d = params_copy();
+    edit(d.path(), "scenarios/complete-1.toml", |t| {
+        t.replacen(r#"phase = "tracking""#, r#"phase = "trackng""#, 1)
+    });
+    let files = companion::params::read_params_dir(d.path()).unwrap();
+    let e = companion::sim::Scenario::load(&files, "complete-1").unwrap_err();
+    assert!(e.file.ends_with("scenarios/complete-1.toml"), "{e}");
+    assert_eq!(e.entry, "hazard[0].trigger.phase");
+    assert!(e.reason.contains("`trackng` is not a phase"), "{e}");
+}

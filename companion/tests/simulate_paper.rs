@@ -16,6 +16,15 @@ fn model() -> &'static Model {
     })
 }
 
+/// The policies by name (params/policies.toml).
+fn safety() -> Policy {
+    model().policy("safety").unwrap()
+}
+
+fn mission() -> Policy {
+    model().policy("mission").unwrap()
+}
+
 fn world() -> WorldSpec {
     WorldSpec::load(
         &companion::params::read_params_dir(&companion::params::default_params_dir()).unwrap(),
@@ -43,15 +52,15 @@ fn mean_tracking(scenario: &str, kind: ModelKind, policy: Policy) -> (f64, f64) 
 /// Table 3: nominal, BFM about equal to the reference; every hazard, BFM clearly longer.
 #[test]
 fn table3_bfm_tracks_longer_than_reference_under_hazards_and_equal_in_nominal() {
-    let (bfm, bfm_ci) = mean_tracking("nominal", ModelKind::Bfm, Policy::Safety);
-    let (reference, ref_ci) = mean_tracking("nominal", ModelKind::Reference, Policy::Safety);
+    let (bfm, bfm_ci) = mean_tracking("nominal", ModelKind::Bfm, safety());
+    let (reference, ref_ci) = mean_tracking("nominal", ModelKind::Reference, safety());
     assert!(
         (bfm - reference).abs() <= bfm_ci + ref_ci + 2.0,
         "nominal: bfm {bfm:.1}±{bfm_ci:.1} vs reference {reference:.1}±{ref_ci:.1}"
     );
     for scenario in ["vibrations", "high-speed", "wind"] {
-        let (bfm, bfm_ci) = mean_tracking(scenario, ModelKind::Bfm, Policy::Safety);
-        let (reference, ref_ci) = mean_tracking(scenario, ModelKind::Reference, Policy::Safety);
+        let (bfm, bfm_ci) = mean_tracking(scenario, ModelKind::Bfm, safety());
+        let (reference, ref_ci) = mean_tracking(scenario, ModelKind::Reference, safety());
         // "Clearly longer": the confidence intervals are disjoint with a margin of 5 steps.
         assert!(
             bfm - bfm_ci > reference + ref_ci + 5.0,
@@ -65,8 +74,8 @@ fn table3_bfm_tracks_longer_than_reference_under_hazards_and_equal_in_nominal() 
 #[test]
 fn table8_mission_policy_tracks_at_least_as_long_as_safety() {
     for scenario in ["complete-1", "complete-2"] {
-        let (safety, s_ci) = mean_tracking(scenario, ModelKind::Bfm, Policy::Safety);
-        let (mission, m_ci) = mean_tracking(scenario, ModelKind::Bfm, Policy::Mission);
+        let (safety, s_ci) = mean_tracking(scenario, ModelKind::Bfm, safety());
+        let (mission, m_ci) = mean_tracking(scenario, ModelKind::Bfm, mission());
         assert!(
             mission + m_ci >= safety - s_ci,
             "{scenario}: mission {mission:.1}±{m_ci:.1} below safety {safety:.1}±{s_ci:.1}"
@@ -98,7 +107,7 @@ fn tables_4_and_6_safety_policy_decisions() {
         ("complete-1", "track_v3", "insufficient resources"),
         ("complete-2", "track_v2", "higher speed target"),
     ] {
-        let r = run(scenario, ModelKind::Bfm, Policy::Safety, 1).records;
+        let r = run(scenario, ModelKind::Bfm, safety(), 1).records;
         assert_eq!(r[0].state, "base");
         assert!(has(&r[0], "take_off"), "{scenario}: {:?}", r[0].actions);
         let wp1 = first_with(&r, |x| x.state == "wp1").unwrap();
@@ -152,7 +161,7 @@ fn tables_4_and_6_safety_policy_decisions() {
 /// obstacle detection; later (phase 3) V3 runs with obstacle detection alone.
 #[test]
 fn table5_mission_policy_keeps_v3_and_drops_landing_search() {
-    let r = run("complete-1", ModelKind::Bfm, Policy::Mission, 1).records;
+    let r = run("complete-1", ModelKind::Bfm, mission(), 1).records;
     let i = r
         .iter()
         .position(|x| x.events.iter().any(|e| e == "insufficient resources"))
@@ -177,7 +186,7 @@ fn table5_mission_policy_keeps_v3_and_drops_landing_search() {
 #[test]
 fn monolithic_and_concurrent_reach_the_same_decisions() {
     for scenario in ["vibrations", "high-speed", "complete-1", "complete-2"] {
-        for policy in [Policy::Safety, Policy::Mission] {
+        for policy in [safety(), mission()] {
             let a = run(scenario, ModelKind::Bfm, policy, 3).records;
             let b = run(scenario, ModelKind::Monolithic, policy, 3).records;
             // Ending the mission: the concurrent landing MDP may land on the zone it found where
@@ -219,8 +228,8 @@ fn monolithic_and_concurrent_reach_the_same_decisions() {
 /// The same seed gives the same run; the decision record carries every stage.
 #[test]
 fn runs_are_reproducible_and_records_carry_every_stage() {
-    let a = run("complete-1", ModelKind::Bfm, Policy::Safety, 9);
-    let b = run("complete-1", ModelKind::Bfm, Policy::Safety, 9);
+    let a = run("complete-1", ModelKind::Bfm, safety(), 9);
+    let b = run("complete-1", ModelKind::Bfm, safety(), 9);
     assert_eq!(a.records, b.records);
     let r = &a.records[8];
     assert!(!r.evidence.is_empty() && !r.probabilities.is_empty());
@@ -233,7 +242,7 @@ fn runs_are_reproducible_and_records_carry_every_stage() {
 #[test]
 fn drift_and_failure_reallocate_and_restore_margins() {
     for scenario in ["energy-drift", "lidar-failure"] {
-        let r = run(scenario, ModelKind::Bfm, Policy::Safety, 1).records;
+        let r = run(scenario, ModelKind::Bfm, safety(), 1).records;
         let realloc = r
             .iter()
             .filter_map(|x| x.guarantee.as_ref()?.reallocation.as_ref())
@@ -246,7 +255,7 @@ fn drift_and_failure_reallocate_and_restore_margins() {
         );
     }
     // Without a hazard, no re-allocation before the tracking phase ends.
-    let r = run("nominal", ModelKind::Bfm, Policy::Safety, 1).records;
+    let r = run("nominal", ModelKind::Bfm, safety(), 1).records;
     let first = r.iter().position(|x| {
         x.guarantee
             .as_ref()
@@ -263,7 +272,7 @@ fn drift_and_failure_reallocate_and_restore_margins() {
 /// the mission (land or return) on the next cycles.
 #[test]
 fn infeasible_guarantee_ends_the_mission() {
-    let r = run("energy-drift", ModelKind::Bfm, Policy::Safety, 1).records;
+    let r = run("energy-drift", ModelKind::Bfm, safety(), 1).records;
     let i = r
         .iter()
         .position(|x| x.guarantee.as_ref().is_some_and(|g| g.infeasible))

@@ -3,7 +3,7 @@
 //! models (the fly loop's records are checked the same way in link_loopback.rs).
 
 use companion::sim::{self, Scenario, WorldSpec};
-use companion_core::decision::{Core, ModelKind, Policy};
+use companion_core::decision::{Core, ModelKind};
 use companion_core::record::{DecisionRecord, Event};
 use std::collections::BTreeSet;
 
@@ -38,7 +38,10 @@ fn every_simulated_event_reads_back_as_the_variant_written() {
     let mut others = BTreeSet::new();
     for name in &scenarios {
         let scenario = Scenario::load(&files, name).unwrap();
-        for policy in [Policy::Safety, Policy::Mission] {
+        for policy in [
+            model.policy("safety").unwrap(),
+            model.policy("mission").unwrap(),
+        ] {
             for kind in [ModelKind::Bfm, ModelKind::Reference, ModelKind::Monolithic] {
                 let mut core = Core::new(&model, kind, policy);
                 let run = sim::run(&world, &scenario, 1, |obs| core.step(obs));

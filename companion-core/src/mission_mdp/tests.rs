@@ -3,31 +3,23 @@ use crate::arbitration::BehaviourConflicts;
 use crate::record::Conflict;
 use mdp_engine::Workspace;
 
-pub(super) const KNOWN: &[&str] = &[
-    "P_sys",
-    "P_battery",
-    "P_obs",
-    "P_SI",
-    "P_SF",
-    "P_appT",
-    "P_appZ",
-    "P_crash",
-    "P_detect",
-    "P_track",
-    "P_V0",
-    "P_V1",
-    "P_V2",
-    "P_V3",
-    "P_V4",
-    "P_V5",
-];
+/// The probability names the shipped health managers publish: what `Model::load` hands the MDPs,
+/// read from params/health/ rather than copied here.
+pub(super) static KNOWN: std::sync::LazyLock<Vec<&'static str>> = std::sync::LazyLock::new(|| {
+    crate::health::HealthModel::load(&crate::shipped::params())
+        .expect("params/health loads")
+        .publishes()
+        .into_iter()
+        .map(|n| &*n.leak())
+        .collect()
+});
 
 fn params() -> ParamsFiles {
     crate::shipped::params()
 }
 
 fn load_all() -> MissionMdps {
-    MissionMdps::load(&params(), KNOWN).expect("params/mdp loads")
+    MissionMdps::load(&params(), &KNOWN).expect("params/mdp loads")
 }
 
 /// Section 7.1 values (vibration context), written out here independently of index.toml; the
@@ -479,7 +471,7 @@ fn load_text(text: &str) -> Result<MissionMdps, SpecError> {
         "concurrent = [\"tiny\"]\n[check_point]\nP_sys = 0.9\n",
     );
     dir.insert(dir.dir().join("mdp/tiny.toml"), text);
-    MissionMdps::load(&dir, KNOWN)
+    MissionMdps::load(&dir, &KNOWN)
 }
 
 fn load_err(text: &str) -> SpecError {
@@ -611,9 +603,9 @@ fn rejects_policy_sets_that_differ_between_mdps() {
         GOOD.replace(r#"name = "tiny""#, r#"name = "other""#)
             .replace("reward.safety", "reward.mission"),
     );
-    let e = MissionMdps::load(&dir, KNOWN).unwrap_err();
+    let e = MissionMdps::load(&dir, &KNOWN).unwrap_err();
     assert!(e.file.ends_with("other.toml") && e.entry == "reward", "{e}");
-    let e = MissionMdps::load(&ParamsFiles::new("/nonexistent"), KNOWN).unwrap_err();
+    let e = MissionMdps::load(&ParamsFiles::new("/nonexistent"), &KNOWN).unwrap_err();
     assert!(e.reason.contains("cannot read"), "{e}");
 }
 
@@ -626,7 +618,7 @@ fn rejects_bad_check_point() {
         "concurrent = [\"tiny\"]\n[check_point]\nP_nope = 0.5\n",
     );
     assert_eq!(
-        MissionMdps::load(&dir, KNOWN).unwrap_err().entry,
+        MissionMdps::load(&dir, &KNOWN).unwrap_err().entry,
         "check_point.P_nope"
     );
     dir.insert(
@@ -634,7 +626,7 @@ fn rejects_bad_check_point() {
         "concurrent = [\"tiny\"]\n[check_point]\nP_sys = 1.5\n",
     );
     assert_eq!(
-        MissionMdps::load(&dir, KNOWN).unwrap_err().entry,
+        MissionMdps::load(&dir, &KNOWN).unwrap_err().entry,
         "check_point.P_sys"
     );
 }
@@ -816,7 +808,7 @@ mod fast_cycle {
         /// both policies, every state.
         #[test]
         fn memoised_decide_equals_fresh_solve(
-            points in proptest::collection::vec((0usize..3, proptest::collection::vec(0.0f64..=1.0, 16)), 1..6),
+            points in proptest::collection::vec((0usize..3, proptest::collection::vec(0.0f64..=1.0, KNOWN.len())), 1..6),
         ) {
             let mut memo = load_all();
             let mut fresh = load_all();

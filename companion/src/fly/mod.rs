@@ -67,13 +67,6 @@ impl RecordSink for Vec<DecisionRecord> {
     }
 }
 
-fn parse_policy(s: &str) -> Result<String, String> {
-    match s {
-        "safety" | "mission" => Ok(s.to_string()),
-        other => Err(format!("{other:?}: expected safety or mission")),
-    }
-}
-
 /// `companion fly` arguments.
 #[derive(Debug, Clone, clap::Args)]
 pub struct FlyArgs {
@@ -84,8 +77,9 @@ pub struct FlyArgs {
     /// Route for follow_trajectory (default params/missions/tracking_route.toml).
     #[arg(long)]
     pub mission: Option<PathBuf>,
-    /// Arbitration policy: safety (safety-first) or mission (mission-first).
-    #[arg(long, default_value = "safety", value_parser = parse_policy)]
+    /// Arbitration policy: a policy of params/policies.toml, safety (safety-first) or mission
+    /// (mission-first); checked when the params load.
+    #[arg(long, default_value = "safety")]
     pub policy: String,
     /// MAVLink 2 signing key (32 raw bytes or 64 hex digits): sign outgoing frames, refuse
     /// unsigned commands addressed to us.
@@ -175,6 +169,8 @@ pub struct FlySetup {
     pub key: Option<[u8; 32]>,
     /// Altitude the take_off action climbs to (m): MAV_CMD_NAV_TAKEOFF param 7, else the route's.
     pub takeoff_alt_m: f64,
+    /// The mission's states and phases (params/mission.toml) the mission estimator moves through.
+    pub states: companion_core::mission::MissionStates,
 }
 
 impl FlySetup {
@@ -221,12 +217,14 @@ impl FlySetup {
                 })
             })
             .unwrap_or(route.altitude_m);
+        let states = companion_core::mission::MissionStates::load(files)?;
         Ok(Self {
             link,
             actions,
             route,
             key,
             takeoff_alt_m,
+            states,
         })
     }
 
@@ -747,7 +745,8 @@ pub struct Shell {
 
 impl Shell {
     pub fn new(setup: &FlySetup) -> Self {
-        let mut mission = MissionState::new(&setup.route, setup.takeoff_alt_m);
+        let mut mission =
+            MissionState::new(&setup.route, setup.takeoff_alt_m, setup.states.clone());
         let f = &setup.link.flight;
         mission.landed_confirm_s = f.landed_confirm_s;
         mission.ground_altitude_m = f.ground_altitude_m;
@@ -825,8 +824,8 @@ impl Shell {
             .collect();
         let mut told = mission_state::select_vehicle_action(&motions, &self.precedence)
             .unwrap_or_else(|| "hold".into());
-        if let Some(v) = rec.actions.iter().find_map(|a| a.strip_prefix("track_")) {
-            told.push_str(&format!(", track {v}"));
+        if let Some((kept, _)) = self.mission.states().tracking_target(&rec.actions) {
+            told.push_str(&format!(", track {kept}"));
         }
         if told == self.last_told {
             return None;
@@ -1329,8 +1328,49 @@ mod tests {
     }
 
     #[test]
-    fn policy_values() {
-        assert!(parse_policy("safety").is_ok() && parse_policy("mission").is_ok());
-        assert!(parse_policy("yolo").is_err());
+    fn behaviour_text_names_the_tracking_state_the_plan_keeps() {
+        let args = FlyArgs {
+            connect: companion_link::url::parse("udpin:127.0.0.1:14550").unwrap(),
+            mission: None,
+            policy: "safety".into(),
+            signing_key: None,
+            onboard: None,
+            link_timeout: std::time::Duration::from_secs(3),
+            params: None,
+            duration: None,
+            log_dir: PathBuf::from("runs"),
+            auto_start: true,
+            autopilot_sysid: None,
+            connect_timeout: None,
+            once: false,
+        };
+        let mut shell = Shell::new(&FlySetup::load(&args).unwrap());
+        let rec = |actions: &[&str]| DecisionRecord {
+            actions: actions.iter().map(|a| a.to_string()).collect(),
+            ..Default::default()
+        };
+        let text = shell
+            .behaviour_text(&rec(&["follow_trajectory", "track_v3"]))
+            .unwrap();
+        assert!(text.ends_with(", track v3"), "{text}");
+        // detect_target runs the tracking application but keeps no tracking state.
+        let text = shell
+            .behaviour_text(&rec(&["follow_trajectory", "detect_target"]))
+            .unwrap();
+        assert!(!text.contains("track"), "{text}");
+    }
+
+    #[test]
+    fn policy_values_are_the_names_params_declare() {
+        let model = crate::params::load_model(&crate::params::default_params_dir()).unwrap();
+        for name in ["safety", "mission"] {
+            let p = model.policy(name).unwrap();
+            assert_eq!(model.policy_name(p), name);
+        }
+        let e = model.policy("yolo").unwrap_err();
+        assert!(
+            e.contains("unknown policy `yolo`") && e.contains("safety"),
+            "{e}"
+        );
     }
 }

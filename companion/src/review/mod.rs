@@ -19,6 +19,7 @@ pub use html::render_html;
 pub use terminal::{render_terminal, render_why};
 
 use crate::decision_log::{Header, LogItem, LossReason, ReadError, ReadIssue, stream_log};
+use companion_core::mission::MissionStates;
 use companion_core::record::{CommandRecord, DecisionRecord, Event, LinkEvent};
 use companion_core::tracking::TrackingCounter;
 use outcomes::{Category, OutcomeCounts, categorize};
@@ -297,6 +298,20 @@ pub fn policy_from_command(cmd: &str) -> Option<String> {
     None
 }
 
+/// The mission's states as the run's own params declared them (embedded in the log's header).
+/// Logs written before params/mission.toml declared its states, or whose header carries no
+/// readable params, are read by the rule of that time ([`MissionStates::undeclared`]).
+fn mission_states_of(h: &Header) -> MissionStates {
+    let dir = Path::new("params");
+    let mut files = companion_core::spec::ParamsFiles::new(dir);
+    for name in ["mission.toml", "actions.toml"] {
+        if let Some(text) = h.params.get(name) {
+            files.insert(dir.join(name), text.as_str());
+        }
+    }
+    MissionStates::load(&files).unwrap_or_else(|_| MissionStates::undeclared())
+}
+
 impl Review {
     pub fn new() -> Self {
         Self::default()
@@ -313,6 +328,7 @@ impl Review {
         match item {
             LogItem::Header(h) => {
                 if self.header.is_none() {
+                    self.tracking = TrackingCounter::new(mission_states_of(&h));
                     self.header = Some(*h);
                 }
             }
@@ -819,4 +835,55 @@ pub fn run_with_cycle(
     })?;
     println!("report: {}", text::clean(&path.display().to_string()));
     Ok(Some(path))
+}
+
+#[cfg(test)]
+mod mission_states_tests {
+    use super::*;
+
+    fn header_with(mission: Option<String>) -> Header {
+        let dir = crate::params::default_params_dir();
+        let mut h = Header::new("companion simulate", std::time::SystemTime::UNIX_EPOCH);
+        if let Some(m) = mission {
+            h.params.insert("mission.toml".into(), m);
+            h.params.insert(
+                "actions.toml".into(),
+                std::fs::read_to_string(dir.join("actions.toml")).unwrap(),
+            );
+        }
+        h
+    }
+
+    #[test]
+    fn review_reads_the_mission_states_from_the_log_header() {
+        let shipped =
+            std::fs::read_to_string(crate::params::default_params_dir().join("mission.toml"))
+                .unwrap();
+        let declared = mission_states_of(&header_with(Some(shipped.clone())));
+        assert_eq!(declared.phase("v4"), "tracking");
+        assert!(declared.has_phase("wpi"));
+        // The run's own params decide: a run whose v5 was a landing state is read as such.
+        let changed = shipped.replacen(
+            r#"{ name = "v5", phase = "tracking", action = "track_v5" }"#,
+            r#"{ name = "v5", phase = "landing" }"#,
+            1,
+        );
+        assert_ne!(changed, shipped);
+        assert!(!mission_states_of(&header_with(Some(changed))).is_tracking("v5"));
+    }
+
+    #[test]
+    fn review_of_a_log_without_declared_states_uses_the_earlier_rule() {
+        // No params in the header, or a mission.toml from before `states` existed.
+        let old = MissionStates::undeclared();
+        assert_eq!(mission_states_of(&header_with(None)), old);
+        let pre_states = "horizon = 100\n[rates]\n[guarantee]\nmission = \"tracking\"\n\
+            capped_probability = \"P_battery\"\ninfeasible_p_battery = 0.05\n\
+            progress_goal = \"duration_s\"\nactivity_of_state = {}\n";
+        assert_eq!(
+            mission_states_of(&header_with(Some(pre_states.into()))),
+            old
+        );
+        assert!(old.is_tracking("v7") && !old.is_tracking("wpf"));
+    }
 }
