@@ -23,6 +23,10 @@
 #       started_utc, git_revision, command
 #     (the header's `params` map, holding every params file's contents, is compared byte for byte);
 #   - the `--json` stdout byte for byte, and the exit status.
+# PARAMS_MAY_DIFFER="mission.toml ..." names params files whose contents changed on purpose
+# between the revisions (a new key the new loader reads, say): their entries in the header's
+# `params` map are cut out too, and said so in the summary; every record is still compared
+# byte for byte.
 # Prints one line per case (`same`, or `DIFFERS` with the file and first differing line) and a
 # summary; exits 0 only when every case matches.
 set -euo pipefail
@@ -33,7 +37,8 @@ NEW_REV=${2:-${NEW_REV:-}}
 PROFILE=${PROFILE:-debug}
 JOBS=${JOBS:-2}
 CASES=${CASES:-}
-HEADER_VOLATILE_FIELDS="started_utc git_revision command"
+PARAMS_MAY_DIFFER=${PARAMS_MAY_DIFFER:-}
+HEADER_VOLATILE_FIELDS="started_utc git_revision command $PARAMS_MAY_DIFFER"
 MODELS="bfm reference monolithic"
 WORK=$ROOT/target/logs-identical
 mkdir -p "$WORK"
@@ -275,5 +280,6 @@ n_same=$(grep -c '^same' "$RUN/results" || true)
 n_diff=$((n_cases - n_same))
 echo "summary: $n_same of $n_cases cases identical, $n_diff differ (base $BASE_DESC; new $NEW_DESC);" \
   "build $((t_built - t_build)) s, runs $((t_end - t_runs)) s, total $((t_end - t_start)) s"
+[ -n "$PARAMS_MAY_DIFFER" ] && echo "header params entries not compared (PARAMS_MAY_DIFFER): $PARAMS_MAY_DIFFER"
 [ "${KEEP:-}" = 1 ] && echo "run folders kept in $RUN"
 [ "$n_diff" -eq 0 ] && [ "$n_cases" -gt 0 ]
