@@ -177,8 +177,9 @@ def field_re(name):
 
 def strip_header(line, where):
     obj = json.loads(line)
+    params = obj.get("params") if isinstance(obj.get("params"), dict) else {}
     for name in volatile:
-        if name not in obj:
+        if name not in obj and name not in params:
             continue
         line, n = field_re(name).subn(b"", line, count=1)
         if n != 1:
