@@ -10,6 +10,8 @@
 //! - `stress`: decision-log and telemetry-log writers for the log-loss tests
 //!   (binaries `companion-log-stress`, `companion-tlog-sample`).
 
+#![allow(missing_docs)] // test support, never published
+
 pub mod fuzzing;
 pub mod sim_link;
 pub mod streams;
