@@ -238,54 +238,50 @@ pub fn export_mcap(input: &Path, path: &Path) -> Result<ExportStats, ExportError
     } else {
         input.with_file_name("flight.tlog")
     };
-    if tlog.is_file() {
-        if let Ok((frames, _)) = read_tlog(&tlog) {
-            let mut ingest = companion_link::ingest::Ingest::new(None);
-            for f in frames {
-                let t = f.t_us.saturating_mul(1000);
-                let mut msgs = Vec::new();
-                ingest.push_each(&f.frame, |fr| {
-                    let name = mavlink::Message::message_name(fr.msg).to_string();
-                    let mut v = serde_json::to_value(fr.msg).unwrap_or(serde_json::Value::Null);
-                    if let Some(o) = v.as_object_mut() {
-                        o.insert("sysid".into(), fr.header.system_id.into());
-                        o.insert("compid".into(), fr.header.component_id.into());
-                    }
-                    msgs.push((name, v));
-                });
-                for (name, v) in msgs {
-                    stats.tlog_frames += 1;
-                    let topic = format!("/mavlink/{name}");
-                    let id = match channels.get(&topic) {
-                        Some(id) => *id,
-                        None => {
-                            let schema = serde_json::json!({"title": format!("mavlink.{name}"), "type": "object", "additionalProperties": true}).to_string();
-                            let sid = w
-                                .add_schema(
-                                    &format!("mavlink.{name}"),
-                                    "jsonschema",
-                                    schema.as_bytes(),
-                                )
-                                .map_err(merr)?;
-                            let id = w.add_channel(sid, &topic, "json", &no_meta).map_err(merr)?;
-                            channels.insert(topic.clone(), id);
-                            id
-                        }
-                    };
-                    seq = seq.wrapping_add(1);
-                    let data = serde_json::to_vec(&v).unwrap_or_default();
-                    w.write_to_known_channel(
-                        &mcap::records::MessageHeader {
-                            channel_id: id,
-                            sequence: seq,
-                            log_time: t,
-                            publish_time: t,
-                        },
-                        &data,
-                    )
-                    .map_err(merr)?;
-                    *stats.messages.entry(topic).or_default() += 1;
+    if tlog.is_file()
+        && let Ok((frames, _)) = read_tlog(&tlog)
+    {
+        let mut ingest = companion_link::ingest::Ingest::new(None);
+        for f in frames {
+            let t = f.t_us.saturating_mul(1000);
+            let mut msgs = Vec::new();
+            ingest.push_each(&f.frame, |fr| {
+                let name = mavlink::Message::message_name(fr.msg).to_string();
+                let mut v = serde_json::to_value(fr.msg).unwrap_or(serde_json::Value::Null);
+                if let Some(o) = v.as_object_mut() {
+                    o.insert("sysid".into(), fr.header.system_id.into());
+                    o.insert("compid".into(), fr.header.component_id.into());
                 }
+                msgs.push((name, v));
+            });
+            for (name, v) in msgs {
+                stats.tlog_frames += 1;
+                let topic = format!("/mavlink/{name}");
+                let id = match channels.get(&topic) {
+                    Some(id) => *id,
+                    None => {
+                        let schema = serde_json::json!({"title": format!("mavlink.{name}"), "type": "object", "additionalProperties": true}).to_string();
+                        let sid = w
+                            .add_schema(&format!("mavlink.{name}"), "jsonschema", schema.as_bytes())
+                            .map_err(merr)?;
+                        let id = w.add_channel(sid, &topic, "json", &no_meta).map_err(merr)?;
+                        channels.insert(topic.clone(), id);
+                        id
+                    }
+                };
+                seq = seq.wrapping_add(1);
+                let data = serde_json::to_vec(&v).unwrap_or_default();
+                w.write_to_known_channel(
+                    &mcap::records::MessageHeader {
+                        channel_id: id,
+                        sequence: seq,
+                        log_time: t,
+                        publish_time: t,
+                    },
+                    &data,
+                )
+                .map_err(merr)?;
+                *stats.messages.entry(topic).or_default() += 1;
             }
         }
     }

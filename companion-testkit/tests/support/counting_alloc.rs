@@ -39,7 +39,7 @@ unsafe impl GlobalAlloc for Counting {
 static A: Counting = Counting;
 
 /// Allocations (and reallocations) made by `f` on this thread.
-pub fn allocations(f: impl FnOnce()) -> usize {
+pub(crate) fn allocations(f: impl FnOnce()) -> usize {
     let before = ALLOCS.with(Cell::get);
     COUNTED.with(|c| c.set(true));
     f();

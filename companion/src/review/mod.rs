@@ -413,7 +413,7 @@ impl Review {
         });
         row.events.push(id);
         row.event_count += 1;
-        let mark = is_failsafe(&text).then(|| Mark::Failsafe(text));
+        let mark = is_failsafe(&text).then_some(Mark::Failsafe(text));
         if let Some(m) = &mark {
             row.marks.push(m.clone());
         }
