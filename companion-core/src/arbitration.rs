@@ -143,6 +143,7 @@ impl BehaviourConflicts {
         })
     }
 
+    /// Names of the policies params/policies.toml ranks actions for.
     pub fn policies(&self) -> impl Iterator<Item = &str> {
         self.priority.keys().map(String::as_str)
     }

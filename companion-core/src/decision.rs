@@ -31,6 +31,7 @@ pub enum ModelKind {
 }
 
 impl ModelKind {
+    /// The model's name as on the command line (`bfm`, `reference`, `monolithic`).
     pub fn name(self) -> &'static str {
         match self {
             ModelKind::Bfm => "bfm",
@@ -55,14 +56,21 @@ impl std::str::FromStr for ModelKind {
 /// Everything loaded from params/ once at start-up. Immutable; each [`Core`] clones the parts it
 /// updates in place (the battery DBN's slice, the MDPs' transition storage).
 pub struct Model {
+    /// params/mission.toml: horizon, rates, guarantee coupling, state projections.
     pub mission: MissionFile,
     /// The mission's states and phases (params/mission.toml), checked against the catalogue.
     pub states: MissionStates,
+    /// The primitive actions (params/actions.toml).
     pub actions: ActionCatalogue,
+    /// The health managers and observation mapping (params/health/, params/observations.toml).
     pub health: HealthModel,
+    /// The MDPs of params/mdp/.
     pub mdps: MissionMdps,
+    /// Behaviour conflict rules and policy priorities (params/policies.toml).
     pub conflicts: BehaviourConflicts,
+    /// Platform, variant catalogue and resource policies.
     pub resources: ResourceSpec,
+    /// The PANORAMA mission whose goals the guarantee stage watches.
     pub guarantee: MissionSpec,
     /// The decision policies params/policies.toml declares (`priority` tables), in file-key
     /// order; a [`Policy`] is an index into it.
@@ -172,8 +180,11 @@ impl Model {
 
 /// A decision core bound to a model, a model kind and a policy; `step` once per cycle.
 pub struct Core<'m> {
+    /// The loaded params this core decides with.
     pub model: &'m Model,
+    /// Which MDPs decide (concurrent, reference or monolithic).
     pub kind: ModelKind,
+    /// Decision policy whose rewards and priorities apply.
     pub policy: Policy,
     cycle: u64,
     mdp_names: Vec<String>,
@@ -201,8 +212,11 @@ pub struct Core<'m> {
 /// How much work the cycles so far really did (the rest came from the memos).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct WorkDone {
+    /// Decision cycles stepped.
     pub cycles: u64,
+    /// MDP solves actually run (memo hits not counted).
     pub mdp_solves: u64,
+    /// Platform scheduler runs actually made (memo hits not counted).
     pub scheduler_runs: u64,
 }
 
@@ -239,6 +253,7 @@ fn fill_strings<S: AsRef<str>>(dst: &mut Vec<String>, src: &[S]) {
 }
 
 impl<'m> Core<'m> {
+    /// A core at cycle 0 with fresh copies of the model's stateful parts.
     pub fn new(model: &'m Model, kind: ModelKind, policy: Policy) -> Self {
         Core {
             model,
@@ -262,6 +277,7 @@ impl<'m> Core<'m> {
         }
     }
 
+    /// Work done by the cycles stepped so far.
     pub fn work_done(&self) -> WorkDone {
         WorkDone {
             cycles: self.cycle,

@@ -20,14 +20,18 @@ struct ObservationsFile {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ObservationSpec {
+    /// Observation name, the key in `Observations.values` (`wind_mps`).
     pub name: String,
+    /// Unit of the value (`m/s`, `%`, `lx`, ...), for display.
     #[serde(default)]
     pub unit: String,
     /// The BN node (in any health manager) that receives the evidence.
     pub node: String,
     /// Strictly increasing; `states.len() == thresholds.len() + 1`.
     pub thresholds: Vec<f64>,
+    /// The node's state for each interval between thresholds, in value order.
     pub states: Vec<String>,
+    /// Free text from the file.
     #[serde(default)]
     pub description: String,
 }
@@ -46,11 +50,14 @@ impl ObservationSpec {
 /// The validated observation mapping.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ObservationMap {
+    /// File the mapping was read from (params/observations.toml).
     pub file: PathBuf,
+    /// Every observation mapped to evidence, in file order.
     pub observations: Vec<ObservationSpec>,
 }
 
 impl ObservationMap {
+    /// Read and validate the mapping at `path`.
     pub fn load(params: &crate::spec::ParamsFiles, path: &Path) -> Result<Self, SpecError> {
         let f: ObservationsFile = read_toml(params, path)?;
         if f.observation.is_empty() {
@@ -119,6 +126,7 @@ impl ObservationMap {
         })
     }
 
+    /// The mapping of the observation named `name`.
     pub fn get(&self, name: &str) -> Option<&ObservationSpec> {
         self.observations.iter().find(|o| o.name == name)
     }

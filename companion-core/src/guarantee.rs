@@ -22,6 +22,7 @@ use std::path::{Path, PathBuf};
 
 /// Indicator names the cost model produces; goals may name only these.
 pub const ENERGY: &str = "energy_j";
+/// Indicator name of the mission's duration (s).
 pub const DURATION: &str = "duration_s";
 
 // ---------------------------------------------------------------- compiled mission
@@ -30,10 +31,15 @@ pub const DURATION: &str = "duration_s";
 /// the TIO names and the speed the estimate assumes.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ActivityInfo {
+    /// Activity name from the mission file (`take_off`, `transit`, ...).
     pub name: String,
+    /// What the activity achieves (`reach wp1`).
     pub objective: String,
+    /// Environment it is flown in (`GPS-degraded zone`).
     pub env: String,
+    /// Tasks to be run throughout the activity (`localisation`, `obstacle_detection`).
     pub tasks: Vec<String>,
+    /// Core-oriented constraint classes in force (`gps_degraded`).
     pub constraints: Vec<String>,
     /// Per IA: TIO name per task.
     pub ia_tios: Vec<Vec<String>>,
@@ -46,11 +52,17 @@ pub struct ActivityInfo {
 /// A loaded, validated mission: the generic problem plus what the text and JSON views need.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MissionSpec {
+    /// Mission name (params/missions/NAME.toml).
     pub name: String,
+    /// File it was loaded from.
     pub file: PathBuf,
+    /// Free text from the file.
     pub description: String,
+    /// The generic PANORAMA problem: activities, IAs, goals.
     pub problem: Problem,
+    /// How an IA is picked among those every goal leaves.
     pub selection: Selection,
+    /// Per activity, what the text and JSON views show.
     pub activities: Vec<ActivityInfo>,
     /// Usable battery energy (J) before the reserve, when a `[battery]` is given: turns a
     /// remaining-percentage reading into consumed joules.
@@ -100,9 +112,13 @@ pub fn parse_mission(path: &Path, text: &str) -> Result<MissionSpec, SpecError> 
 /// The pre-flight allocation: RAS0, its NGA and initial margins (per goal, `goal - estimate`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Ras0 {
+    /// Chosen IA index per activity.
     pub choice: Vec<usize>,
+    /// Estimated total per indicator (`energy_j` J, `duration_s` s).
     pub totals: BTreeMap<String, f64>,
+    /// Goal minus estimate per goal, in the goal's unit.
     pub margins: BTreeMap<String, f64>,
+    /// Number of global alternatives (PANORAMA eq. 6); `None` when it overflows.
     pub nga: Option<u128>,
 }
 
@@ -110,9 +126,13 @@ pub struct Ras0 {
 /// and per activity the chosen IA (`None` for activities before `from_activity`).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct RasRow {
+    /// RAS label (`RAS0`, `RAS1`, ...).
     pub label: String,
+    /// Why this RAS was computed (pre-flight, or the in-flight trigger).
     pub reason: String,
+    /// Index of the first activity it allocates.
     pub from_activity: usize,
+    /// Chosen IA name per activity.
     pub cells: Vec<Option<String>>,
 }
 
@@ -127,6 +147,7 @@ pub struct Progress<'a> {
     pub energy_used_j: Option<f64>,
     /// Remaining battery percentage, used when `energy_used_j` is not given.
     pub battery_remaining_pct: Option<f64>,
+    /// Time since the mission started (s).
     pub elapsed_s: f64,
     /// Resources reported failed (sensor names, tile names); cumulative use is fine.
     pub failed_resources: &'a [String],
@@ -135,6 +156,7 @@ pub struct Progress<'a> {
 /// The guarantee stage's state across cycles: the mission, the RAS in force and its history.
 #[derive(Debug, Clone)]
 pub struct Guarantee {
+    /// The mission being flown.
     pub spec: MissionSpec,
     choice: Vec<usize>,
     failed: Vec<String>,
@@ -275,6 +297,7 @@ impl Guarantee {
         Some(ia.name.as_str())
     }
 
+    /// Every RAS computed so far, pre-flight first.
     pub fn ras_rows(&self) -> &[RasRow] {
         &self.rows
     }

@@ -19,27 +19,49 @@ use std::path::PathBuf;
 /// A query failed at run time (only reachable with hand-written evidence).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum HealthError {
+    /// Evidence names a node no manager has.
     #[error("no health manager has a node `{0}`")]
     UnknownNode(String),
+    /// Evidence names a state the node does not have.
     #[error("node `{node}` has no state `{state}` (states: {states})")]
     UnknownState {
+        /// Node the evidence names.
         node: String,
+        /// State the evidence asks for.
         state: String,
+        /// The node's states, comma-separated.
         states: String,
     },
+    /// An observation given as text is not a number.
     #[error("observation `{name}`: `{value}` is not a number")]
-    BadValue { name: String, value: String },
+    BadValue {
+        /// Observation name.
+        name: String,
+        /// The text given for it.
+        value: String,
+    },
+    /// Inference failed in one manager's network (impossible evidence, say).
     #[error("health manager `{manager}`: {error}")]
-    Inference { manager: String, error: BnError },
+    Inference {
+        /// Manager whose network failed.
+        manager: String,
+        /// The inference engine's error.
+        error: BnError,
+    },
 }
 
 /// One compiled health manager.
 #[derive(Debug, Clone)]
 pub struct Manager {
+    /// Manager name from its file (`applications`, `sensors`, ...).
     pub name: String,
+    /// Free text from the file.
     pub description: String,
+    /// File it was compiled from.
     pub file: PathBuf,
+    /// Every node of its network, in the file's order.
     pub nodes: Vec<NodeInfo>,
+    /// The probabilities it publishes.
     pub publish: Vec<Publish>,
     engine: Engine,
     /// Prior CPTs as loaded, to reset carried beliefs.
@@ -58,6 +80,7 @@ impl Manager {
             .id(node)
             .map(|id| self.engine.marginal(id))
     }
+    /// The inference engine holding the network and its last posteriors.
     pub fn engine(&self) -> &Engine {
         &self.engine
     }
@@ -66,7 +89,9 @@ impl Manager {
 /// All health managers plus the observation mapping.
 #[derive(Debug, Clone)]
 pub struct HealthModel {
+    /// The managers, in evaluation (import) order.
     pub managers: Vec<Manager>,
+    /// Raw observations -> evidence (params/observations.toml).
     pub observations: ObservationMap,
     /// Activation nodes compiled from the variant catalogue, with what they publish.
     pub activations: Vec<CatalogueActivation>,
@@ -77,9 +102,13 @@ pub struct HealthModel {
 /// An activation node compiled from params/variants.toml (`variant = "app/version"`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct CatalogueActivation {
+    /// Manager holding the node.
     pub manager: String,
+    /// Activation node name.
     pub node: String,
+    /// Application in params/variants.toml.
     pub app: String,
+    /// Version of that application the node gates.
     pub version: String,
     /// The probability names published from the node (`P_V3`).
     pub published: Vec<String>,
@@ -395,6 +424,7 @@ impl HealthModel {
         v
     }
 
+    /// The manager named `name`, if loaded.
     pub fn manager(&self, name: &str) -> Option<&Manager> {
         self.managers.iter().find(|m| m.name == name)
     }
@@ -740,6 +770,20 @@ impl HealthModel {
     }
 }
 
+/// The index of `state` of `node` (found at `id` in `net`), or why the evidence names no state of it.
+fn state_of(
+    net: &bayes_net::Network,
+    id: bayes_net::NodeId,
+    node: &str,
+    state: &str,
+) -> Result<usize, HealthError> {
+    net.state(id, state).map_err(|_| HealthError::UnknownState {
+        node: node.to_string(),
+        state: state.to_string(),
+        states: net.node(id).states.join(", "),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -875,18 +919,4 @@ mod tests {
         e.propagate(&evd).unwrap();
         e.marginal(src).to_vec()
     }
-}
-
-/// The index of `state` of `node` (found at `id` in `net`), or why the evidence names no state of it.
-fn state_of(
-    net: &bayes_net::Network,
-    id: bayes_net::NodeId,
-    node: &str,
-    state: &str,
-) -> Result<usize, HealthError> {
-    net.state(id, state).map_err(|_| HealthError::UnknownState {
-        node: node.to_string(),
-        state: state.to_string(),
-        states: net.node(id).states.join(", "),
-    })
 }

@@ -23,10 +23,13 @@ impl Policy {
     }
 }
 
+/// Whether a primitive action moves the vehicle or runs an application on the platform.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ActionKind {
+    /// Becomes an autopilot command (params/commands.toml).
     Vehicle,
+    /// Starts an application variant on the modeled platform.
     Application,
 }
 
@@ -34,17 +37,24 @@ pub enum ActionKind {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Action {
+    /// Action name used throughout params and the decision record (`take_off`).
     pub id: String,
+    /// The paper's name for it (`A1`..`A17`).
     pub paper: String,
+    /// Vehicle command or application.
     pub kind: ActionKind,
+    /// The paper's wording (Tables 4-7), used in decision tables.
     pub label: String,
     /// Application variant it runs on the platform (fpga_model), if any.
     pub app: Option<String>,
+    /// Version of `app` it runs (`V3`).
     pub version: Option<String>,
 }
 
+/// The primitive actions of params/actions.toml.
 #[derive(Debug, Clone)]
 pub struct ActionCatalogue {
+    /// Every action, in file order.
     pub actions: Vec<Action>,
 }
 
@@ -54,6 +64,7 @@ struct ActionsFile {
 }
 
 impl ActionCatalogue {
+    /// Read params/actions.toml from `files`.
     pub fn load(files: &crate::spec::ParamsFiles) -> Result<Self, SpecError> {
         let params = files.dir();
         let file = params.join("actions.toml");
@@ -85,10 +96,12 @@ impl ActionCatalogue {
         Ok(Self { actions: f.action })
     }
 
+    /// The action with this id.
     pub fn get(&self, id: &str) -> Option<&Action> {
         self.actions.iter().find(|a| a.id == id)
     }
 
+    /// The action's label, or the id itself when no action has it.
     pub fn label<'a>(&'a self, id: &'a str) -> &'a str {
         self.get(id).map_or(id, |a| a.label.as_str())
     }
@@ -112,11 +125,16 @@ impl ActionCatalogue {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ProjectionRule {
+    /// Shared mission states the rule applies in (empty: any).
     #[serde(default)]
     pub states: Vec<String>,
+    /// Observation the rule tests, if any.
     pub observation: Option<String>,
+    /// Matches when the observation is below this value.
     pub below: Option<f64>,
+    /// Matches when the observation is above this value.
     pub above: Option<f64>,
+    /// The MDP's state when the rule matches.
     pub state: String,
 }
 
@@ -142,6 +160,7 @@ pub struct GuaranteeCoupling {
     pub mission: String,
     /// The named probability capped when no allocation meets the goals, and the cap.
     pub capped_probability: String,
+    /// The cap put on `capped_probability` when no allocation meets the goals.
     pub infeasible_p_battery: f64,
     /// The end-oriented goal measuring time (its per-activity estimate tells how far into an
     /// activity the drone is).
@@ -157,7 +176,9 @@ pub struct GuaranteeCoupling {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct StateDecl {
+    /// State name (`base`, `wp1`, `v3`, ...).
     pub name: String,
+    /// Phase it belongs to, one of the file's `phases`.
     pub phase: String,
     /// In a tracking state: the action (params/actions.toml) that keeps the target in it.
     pub action: Option<String>,
@@ -390,6 +411,7 @@ pub const MAX_HORIZON: usize = 10_000;
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MissionFile {
+    /// Finite horizon of every MDP solve (steps; at most [`MAX_HORIZON`]).
     pub horizon: usize,
     /// The mission's phases, in flight order; read through [`MissionStates`].
     #[serde(default)]
@@ -404,12 +426,15 @@ pub struct MissionFile {
     /// Application -> the observation (m/s) giving the relative speed its frame rate must follow
     /// (the BFM paper's section 4.3.2 performance constraint; formula in params/platform.toml).
     pub rates: BTreeMap<String, String>,
+    /// How the decision core feeds and reads the PANORAMA guarantee.
     pub guarantee: GuaranteeCoupling,
+    /// MDP name -> rules projecting the shared mission state onto that MDP's states, tried in order.
     #[serde(default)]
     pub projection: BTreeMap<String, Vec<ProjectionRule>>,
 }
 
 impl MissionFile {
+    /// Read params/mission.toml from `files`.
     pub fn load(files: &crate::spec::ParamsFiles) -> Result<Self, SpecError> {
         let params = files.dir();
         let file = params.join("mission.toml");

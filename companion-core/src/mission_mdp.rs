@@ -26,21 +26,37 @@ pub const LOAD_SUM_TOLERANCE: f64 = 1e-9;
 /// Why an MDP could not be instantiated with the given probabilities.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum InstantiateError {
+    /// A probability the MDP reads was not given.
     #[error("probability {0} not provided")]
     MissingProbability(String),
+    /// A probability given is outside [0, 1] (or not a number).
     #[error("probability {name} = {value} not in [0, 1]")]
-    BadProbability { name: String, value: f64 },
+    BadProbability {
+        /// Probability name.
+        name: String,
+        /// The value given.
+        value: f64,
+    },
+    /// The policy named has no rewards in this MDP.
     #[error("unknown policy '{0}'")]
     UnknownPolicy(String),
+    /// The filled-in model is not a valid MDP (a transition row not summing to 1, say).
     #[error("mdp '{mdp}': {err}")]
-    Invalid { mdp: String, err: MdpError },
+    Invalid {
+        /// MDP name from params.
+        mdp: String,
+        /// The engine's validation error.
+        err: MdpError,
+    },
 }
 
 /// A stage-0 decision: the MDP action index (see [`MissionMdp::action_name`],
 /// [`MissionMdp::primitives`]) and the optimal expected total reward from the current state.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Decision {
+    /// Index of the chosen MDP action.
     pub action: usize,
+    /// Optimal expected total reward from the current state, in the policy's reward units.
     pub value: f64,
 }
 
@@ -105,30 +121,39 @@ impl Solved {
 }
 
 impl MissionMdp {
+    /// MDP name from params.
     pub fn name(&self) -> &str {
         &self.name
     }
+    /// File it was read from.
     pub fn file(&self) -> &Path {
         &self.file
     }
+    /// Number of states.
     pub fn n_states(&self) -> usize {
         self.states.len()
     }
+    /// Number of MDP actions.
     pub fn n_actions(&self) -> usize {
         self.actions.len()
     }
+    /// Index of the state named `name`.
     pub fn state_index(&self, name: &str) -> Option<usize> {
         self.states.iter().position(|s| s == name)
     }
+    /// Name of state `s` (panics when out of range).
     pub fn state_name(&self, s: usize) -> &str {
         &self.states[s]
     }
+    /// State names, in index order.
     pub fn states(&self) -> &[String] {
         &self.states
     }
+    /// Index of the state the MDP starts in.
     pub fn initial_state(&self) -> usize {
         self.initial
     }
+    /// Index of the MDP action named `name` (`"A2+A11"`).
     pub fn action_index(&self, name: &str) -> Option<usize> {
         self.actions.iter().position(|a| a == name)
     }
@@ -136,6 +161,7 @@ impl MissionMdp {
     pub fn action_name(&self, a: usize) -> &str {
         &self.actions[a]
     }
+    /// MDP action names, in index order.
     pub fn action_names(&self) -> &[String] {
         &self.actions
     }
@@ -147,6 +173,7 @@ impl MissionMdp {
     pub fn probability_names(&self) -> &[String] {
         &self.vars
     }
+    /// Policies this MDP has rewards for (params/policies.toml names).
     pub fn policies(&self) -> &[String] {
         &self.policies
     }
@@ -423,12 +450,15 @@ impl MissionMdps {
         })
     }
 
+    /// The MDP named `name`.
     pub fn get(&self, name: &str) -> Option<&MissionMdp> {
         self.mdps.iter().find(|m| m.name == name)
     }
+    /// The MDP named `name`, mutable.
     pub fn get_mut(&mut self, name: &str) -> Option<&mut MissionMdp> {
         self.mdps.iter_mut().find(|m| m.name == name)
     }
+    /// Every loaded MDP.
     pub fn all(&self) -> &[MissionMdp] {
         &self.mdps
     }
@@ -444,9 +474,11 @@ impl MissionMdps {
     pub fn concurrent(&self) -> &[String] {
         &self.concurrent
     }
+    /// Name of the MDP solving the whole mission at once, if the index names one.
     pub fn monolithic(&self) -> Option<&str> {
         self.monolithic.as_deref()
     }
+    /// Name of the reference tracking MDP (paper Figure 1), if the index names one.
     pub fn reference(&self) -> Option<&str> {
         self.reference.as_deref()
     }

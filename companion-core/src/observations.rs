@@ -9,20 +9,24 @@ use std::collections::BTreeMap;
 /// `target_speed_rel`, `cpu_load`, `free_tiles`, `obstacle_m`, `target_detected`, ...
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Observations {
+    /// Time of the snapshot (s since the run started).
     pub time_s: f64,
     /// The mission state as the shell observes it (GPS waypoint reached, MISSION_CURRENT, target
     /// detected/tracked by the onboard application): `base`, `wp1`, `wpi`, `wpf`, `target`, `v3`, ...
     #[serde(default)]
     pub state: String,
+    /// Raw observations by name (units in docs/params/health.md).
     pub values: BTreeMap<String, f64>,
     /// Discrete happenings since the last snapshot (`target detected`, `obstacle detected`).
     pub events: Vec<crate::record::Event>,
 }
 
 impl Observations {
+    /// The observation named `name`, if present.
     pub fn get(&self, name: &str) -> Option<f64> {
         self.values.get(name).copied()
     }
+    /// Set (or replace) the observation named `name`.
     pub fn set(&mut self, name: &str, value: f64) {
         self.values.insert(name.to_string(), value);
     }

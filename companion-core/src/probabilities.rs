@@ -25,11 +25,13 @@ pub struct Consumer {
 /// One named probability, its publisher and its consumers.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 pub struct NamedProbability {
+    /// Probability name (`P_V3`).
     pub name: String,
     /// The health manager that publishes it (params/health/).
     pub publisher: String,
     /// Its BN query (`P(R_V3 = ToActivate)`, `1 - P(E_t1 = low)`).
     pub query: String,
+    /// Who reads it.
     pub consumers: Vec<Consumer>,
 }
 

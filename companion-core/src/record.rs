@@ -7,6 +7,7 @@ use std::collections::BTreeMap;
 mod events;
 pub use events::{CommandOutcome, Event, LinkEvent};
 
+/// Version of the decision-log schema, written in each log's header.
 pub const SCHEMA_VERSION: u32 = 1;
 
 /// One MDP's view of the cycle.
@@ -19,6 +20,7 @@ pub struct MdpProposal {
     pub state: String,
     /// The chosen MDP action (as named in params) and the primitive actions it stands for.
     pub action: String,
+    /// Primitive actions the chosen MDP action stands for (`take_off`, `track_v3`, ...).
     pub actions: Vec<String>,
     /// Optimal expected value at `state` under the active policy's rewards.
     pub value: f64,
@@ -37,7 +39,9 @@ pub struct MdpProposal {
 #[derive(Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct Conflict {
+    /// Primitive action kept.
     pub kept: String,
+    /// Primitive actions dropped in its favour.
     pub dropped: Vec<String>,
     /// The rule from params/policies.toml that decided it.
     pub rule: String,
@@ -47,14 +51,19 @@ pub struct Conflict {
 #[derive(Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct PlacementRecord {
+    /// Application name (`tracking`, `detection`, ...), as in params/variants.toml.
     pub app: String,
+    /// Version name (paper Table 2: `V0`..`V5`).
     pub version: String,
     /// S, M or F.
     pub implementation: String,
     /// SW, HW or SW-HW.
     pub support: String,
+    /// FPGA tiles it occupies, by tile index (empty in software).
     pub tiles: Vec<u8>,
+    /// Share of the CPU budget it takes (1.0 = the whole budget).
     pub cpu_share: f64,
+    /// Processing time per frame (ms).
     pub ms_per_frame: f64,
 }
 
@@ -62,12 +71,17 @@ pub struct PlacementRecord {
 #[derive(Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct ResourcesRecord {
+    /// Every variant placed this cycle.
     pub placements: Vec<PlacementRecord>,
+    /// Share of the CPU budget in use (1.0 = full).
     pub cpu_load: f64,
+    /// FPGA tiles in use.
     pub tiles_used: u8,
+    /// Tile reconfigurations this cycle.
     pub reconfigurations: u32,
     /// Human-readable: "tracking V3 -> V1: insufficient resources (cpu 1.12 > 1.00)".
     pub degraded: Vec<String>,
+    /// Applications dropped for lack of resources.
     pub dropped: Vec<String>,
     /// The paper's Resources column: "10 + 5 + 394 ms".
     pub summary: String,
@@ -94,9 +108,11 @@ pub struct ResourcesRecord {
 pub struct GuaranteeRecord {
     /// Activity being flown (index and name).
     pub activity: usize,
+    /// Name of the activity at index `activity`.
     pub activity_name: String,
     /// goal - (measured so far + estimated remainder), per end-oriented goal name (`energy_j`, `duration_s`).
     pub margins: BTreeMap<String, f64>,
+    /// Goal value per end-oriented goal name (`energy_j` in J, `duration_s` in s).
     pub goals: BTreeMap<String, f64>,
     /// measured - estimated so far, per goal.
     pub drift: BTreeMap<String, f64>,
@@ -116,12 +132,15 @@ pub struct GuaranteeRecord {
     pub plan_differs: Vec<String>,
 }
 
+/// How PANORAMA re-allocated the remaining activities on one cycle.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct Reallocation {
+    /// What triggered the re-allocation.
     pub reason: String,
     /// Activity name -> chosen implementation alternative, for the remaining activities.
     pub allocation: Vec<(String, String)>,
+    /// Margin per goal after the re-allocation, in the goal's unit.
     pub margins_after: BTreeMap<String, f64>,
 }
 
@@ -135,7 +154,9 @@ pub struct CommandRecord {
     pub command: String,
     /// `ACCEPTED`, `DENIED`, `FAILED`, `TIMEOUT`, `PENDING`, `SIMULATED`, ...
     pub result: CommandOutcome,
+    /// Sends it took (retries included).
     pub attempts: u32,
+    /// Time from the first send to the final answer (ms); `None` when no answer came.
     pub latency_ms: Option<f64>,
 }
 
@@ -143,6 +164,7 @@ pub struct CommandRecord {
 #[derive(Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct DecisionRecord {
+    /// Decision cycle number, from 0.
     pub cycle: u64,
     /// Seconds since the run started (simulate: step index times the step length).
     pub time_s: f64,
@@ -156,7 +178,9 @@ pub struct DecisionRecord {
     pub evidence: BTreeMap<String, String>,
     /// Named probabilities published by the health managers.
     pub probabilities: BTreeMap<String, f64>,
+    /// One proposal per MDP solve (re-solves included).
     pub proposals: Vec<MdpProposal>,
+    /// Behaviour conflicts and how the policy resolved them.
     pub conflicts: Vec<Conflict>,
     /// Final primitive action set after behaviour and resource arbitration.
     pub actions: Vec<String>,
@@ -166,9 +190,13 @@ pub struct DecisionRecord {
     /// record's events say why. Empty in `simulate`.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub shell_actions: Vec<String>,
+    /// Resource arbitration result; `None` when it did not run.
     pub resources: Option<ResourcesRecord>,
+    /// PANORAMA margins; `None` without a guarantee.
     pub guarantee: Option<GuaranteeRecord>,
+    /// Vehicle commands issued this cycle and their outcome.
     pub commands: Vec<CommandRecord>,
+    /// MAVLink link happenings this cycle.
     pub link_events: Vec<LinkEvent>,
     /// Telemetry worth plotting that is not an observation (altitude_m, battery_pct, mode).
     pub vehicle: BTreeMap<String, serde_json::Value>,

@@ -13,14 +13,19 @@ use fpga_model::{
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+/// Platform model file in the params dir.
 pub const PLATFORM_FILE: &str = "platform.toml";
+/// Variant catalogue file in the params dir.
 pub const VARIANTS_FILE: &str = "variants.toml";
+/// Resource policies file in the params dir.
 pub const POLICIES_FILE: &str = "resource_policies.toml";
 
 /// Everything the scheduler needs, validated.
 #[derive(Debug, Clone)]
 pub struct ResourceSpec {
+    /// The platform model (params/platform.toml).
     pub platform: Platform,
+    /// The variant catalogue (params/variants.toml), checked against the platform.
     pub catalogue: Catalogue,
     /// By name (`safety`, `mission`).
     pub policies: BTreeMap<String, ResourcePolicy>,
@@ -111,6 +116,7 @@ impl ResourceSpec {
     }
 }
 
+/// Read and validate the platform model at `path`.
 pub fn load_platform(params: &ParamsFiles, path: &Path) -> Result<Platform, SpecError> {
     let platform: Platform = read_toml(params, path)?;
     platform
@@ -119,6 +125,7 @@ pub fn load_platform(params: &ParamsFiles, path: &Path) -> Result<Platform, Spec
     Ok(platform)
 }
 
+/// Read the variant catalogue at `path` and check it against `platform`.
 pub fn load_variants(
     params: &ParamsFiles,
     path: &Path,
@@ -128,6 +135,7 @@ pub fn load_variants(
     Catalogue::new(file.variant, platform).map_err(|e| SpecError::new(path, e.entry, e.reason))
 }
 
+/// Read the resource policies at `path` and check them against `catalogue`.
 pub fn load_policies(
     params: &ParamsFiles,
     path: &Path,
@@ -272,6 +280,7 @@ impl ResourceObservations {
     }
 }
 
+/// What the resource BN observes after `schedule`.
 pub fn observations(schedule: &Schedule) -> ResourceObservations {
     ResourceObservations {
         free_tiles: f64::from(schedule.free_tiles),

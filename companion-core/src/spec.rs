@@ -11,8 +11,11 @@ use std::path::{Path, PathBuf};
 /// `entry` is a dotted path inside the file (`node.U_Vibration.cpt[2]`), or `-` for the whole file.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub struct SpecError {
+    /// File the error is in.
     pub file: PathBuf,
+    /// Dotted path of the entry inside the file, or `-` for the whole file.
     pub entry: String,
+    /// What is wrong with it.
     pub reason: String,
 }
 
@@ -29,6 +32,7 @@ impl fmt::Display for SpecError {
 }
 
 impl SpecError {
+    /// An error in `file` at `entry`, saying `reason`.
     pub fn new(
         file: impl AsRef<Path>,
         entry: impl Into<String>,
@@ -162,10 +166,10 @@ pub fn parse_toml<T: serde::de::DeserializeOwned>(path: &Path, text: &str) -> Re
     if text.trim().is_empty() {
         return Err(SpecError::new(path, "-", "the file is empty"));
     }
-    let value: T = toml::from_str(&text).map_err(syntax)?;
+    let value: T = toml::from_str(text).map_err(syntax)?;
     // Typed parsing succeeded, so the text is a valid TOML document: read it again untyped to
     // check every number once, whatever the loader does with it.
-    let table: toml::Table = toml::from_str(&text).map_err(syntax)?;
+    let table: toml::Table = toml::from_str(text).map_err(syntax)?;
     check_leaves(path, "", &toml::Value::Table(table))?;
     Ok(value)
 }

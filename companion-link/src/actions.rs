@@ -28,10 +28,13 @@ struct RawStep {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Offset {
+    /// Metres ahead along the vehicle's heading.
     #[serde(default)]
     pub forward_m: f64,
+    /// Metres to the vehicle's right.
     #[serde(default)]
     pub right_m: f64,
+    /// Metres up.
     #[serde(default)]
     pub up_m: f64,
 }
@@ -44,7 +47,12 @@ pub enum Step {
     /// Arm, once the autopilot reports ready.
     Arm,
     /// A COMMAND_LONG with these seven params.
-    Command { command: MavCmd, params: [f32; 7] },
+    Command {
+        /// MAV_CMD to send.
+        command: MavCmd,
+        /// param1..param7 as the command defines them.
+        params: [f32; 7],
+    },
     /// Upload the route (verified by download).
     UploadMission,
     /// MAV_CMD_DO_REPOSITION to an offset from the vehicle.
@@ -64,6 +72,7 @@ struct RawAction {
 /// Vehicle action name -> steps.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct ActionTable {
+    /// Every vehicle action of params/commands.toml and its steps, in order.
     pub actions: BTreeMap<String, Vec<Step>>,
 }
 
@@ -73,6 +82,7 @@ fn parse_cmd(name: &str) -> Option<MavCmd> {
 }
 
 impl ActionTable {
+    /// Read and check params/commands.toml at `path`.
     pub fn load(files: &ParamsFiles, path: &Path) -> Result<Self, SpecError> {
         let raw: BTreeMap<String, RawAction> = read_toml(files, path)?;
         if raw.is_empty() {
@@ -214,17 +224,25 @@ struct RawWaypoint {
     alt_m: Option<f64>,
 }
 
+/// One route waypoint as the route file gives it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Waypoint {
     /// Metres north / east of home.
     Relative {
+        /// Metres north of home.
         north_m: f64,
+        /// Metres east of home.
         east_m: f64,
+        /// Metres above home.
         alt_m: f64,
     },
+    /// Global position.
     Absolute {
+        /// Latitude, degrees * 1e7.
         lat_e7: i32,
+        /// Longitude, degrees * 1e7.
         lon_e7: i32,
+        /// Metres above home.
         alt_m: f64,
     },
 }
@@ -236,17 +254,23 @@ pub const MAX_ALTITUDE_M: f64 = 10_000.0;
 /// few hundred (ArduPilot's default storage holds 724 on most boards).
 pub const MAX_WAYPOINTS: usize = 1000;
 
+/// The route flown by `follow_trajectory` (`fly --mission`, params/missions/tracking_route.toml).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Route {
+    /// Waypoints in flight order.
     pub waypoints: Vec<Waypoint>,
+    /// Altitude (m above home) of the waypoints that give no `alt_m`.
     pub altitude_m: f64,
+    /// Land after this long (s) at the last waypoint without a target: the mission's end.
     pub search_time_limit_s: Option<f64>,
     /// Land after tracking this long (s): the mission's end, which the fly shell enforces.
     pub tracking_time_limit_s: Option<f64>,
+    /// Upload a NAV_TAKEOFF before the waypoints, so AUTO also works from the ground.
     pub takeoff_first: bool,
 }
 
 impl Route {
+    /// Read and check the route file at `path`.
     pub fn load(files: &ParamsFiles, path: &Path) -> Result<Self, SpecError> {
         let raw: RawRoute = read_toml(files, path)?;
         let _ = raw.description;
@@ -402,6 +426,7 @@ impl Route {
 pub struct LinkParams {
     /// Message name -> rate in Hz, requested with MAV_CMD_SET_MESSAGE_INTERVAL.
     pub streams: BTreeMap<String, f32>,
+    /// Telemetry settings (`[telemetry]`).
     pub telemetry: TelemetryConfig,
     /// Seconds between decision cycles when nothing significant happens.
     pub decision_period_s: f64,
@@ -508,6 +533,7 @@ impl FlightParams {
 }
 
 impl LinkParams {
+    /// Read and check params/link.toml at `path`.
     pub fn load(files: &ParamsFiles, path: &Path) -> Result<Self, SpecError> {
         let p: LinkParams = read_toml(files, path)?;
         for (name, hz) in &p.streams {

@@ -22,14 +22,22 @@ use std::time::Duration;
 /// What to send: COMMAND_LONG, or COMMAND_INT when it carries a position.
 #[derive(Debug, Clone, PartialEq)]
 pub enum CommandBody {
+    /// COMMAND_LONG: seven float parameters.
     Long {
+        /// param1..param7 as the command defines them.
         params: [f32; 7],
     },
+    /// COMMAND_INT: a position in integer coordinates.
     Int {
+        /// param1..param4 as the command defines them.
         params: [f32; 4],
+        /// Coordinate frame of `x`, `y`, `z`.
         frame: MavFrame,
+        /// Latitude (degE7) or local x, depending on `frame`.
         x: i32,
+        /// Longitude (degE7) or local y, depending on `frame`.
         y: i32,
+        /// Altitude (m) in `frame`.
         z: f32,
     },
 }
@@ -37,13 +45,16 @@ pub enum CommandBody {
 /// A command to run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CommandSpec {
+    /// MAV_CMD id.
     pub command: MavCmd,
+    /// Message kind and parameters.
     pub body: CommandBody,
     /// Never resend on timeout or temporary rejection (arming).
     pub no_blind_retry: bool,
 }
 
 impl CommandSpec {
+    /// A COMMAND_LONG that may be resent.
     pub fn long(command: MavCmd, params: [f32; 7]) -> Self {
         Self {
             command,
@@ -51,6 +62,7 @@ impl CommandSpec {
             no_blind_retry: false,
         }
     }
+    /// A COMMAND_INT that may be resent.
     pub fn int(command: MavCmd, frame: MavFrame, params: [f32; 4], x: i32, y: i32, z: f32) -> Self {
         Self {
             command,
@@ -64,6 +76,7 @@ impl CommandSpec {
             no_blind_retry: false,
         }
     }
+    /// The same command, sent once only (no resend on timeout or temporary rejection).
     pub fn once(mut self) -> Self {
         self.no_blind_retry = true;
         self
@@ -77,9 +90,13 @@ impl CommandSpec {
 /// Protocol timing; defaults follow MAVSDK/QGC practice (ArduPilot ACKs within one loop).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CommandConfig {
+    /// Time to wait for an ACK before resending (default 1.5 s).
     pub ack_timeout: Duration,
+    /// Sends allowed per command, the first included (default 3).
     pub max_attempts: u32,
+    /// Wait after TEMPORARILY_REJECTED before trying again (default 1 s).
     pub retry_later: Duration,
+    /// Deadline after an IN_PROGRESS answer, from that answer (default 10 s).
     pub in_progress_timeout: Duration,
 }
 
@@ -97,10 +114,13 @@ impl Default for CommandConfig {
 /// How a command ended.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Outcome {
+    /// ACCEPTED.
     Acked,
+    /// Anything else, and why.
     Failed(FailReason),
 }
 
+/// Why a command did not end ACCEPTED.
 #[derive(Debug, Clone, PartialEq)]
 pub enum FailReason {
     /// A final MAV_RESULT other than ACCEPTED (DENIED, FAILED, UNSUPPORTED, ...).
@@ -145,17 +165,28 @@ impl Outcome {
 /// Something the caller should know.
 #[derive(Debug, Clone, PartialEq)]
 pub enum CommandEvent {
+    /// IN_PROGRESS with a progress report.
     Progress {
+        /// Ticket [`CommandClient::submit`] returned.
         ticket: u64,
+        /// The command's MAV_CMD id.
         command: MavCmd,
+        /// Progress the autopilot reported (%).
         percent: u8,
     },
+    /// The command ended; the last event of its ticket.
     Finished {
+        /// Ticket [`CommandClient::submit`] returned.
         ticket: u64,
+        /// The command's MAV_CMD id.
         command: MavCmd,
+        /// How it ended.
         outcome: Outcome,
+        /// Sends made.
         attempts: u32,
+        /// Caller's clock at the first send.
         first_sent: Duration,
+        /// Caller's clock when it ended.
         finished: Duration,
     },
 }
@@ -184,8 +215,11 @@ pub struct Busy(pub MavCmd);
 /// The command client for one autopilot.
 #[derive(Debug, Clone)]
 pub struct CommandClient {
+    /// Protocol timing.
     pub cfg: CommandConfig,
+    /// MAVLink system id commands go to.
     pub target_system: u8,
+    /// MAVLink component id commands go to.
     pub target_component: u8,
     our_system: u8,
     pending: BTreeMap<u32, Pending>,
@@ -193,6 +227,8 @@ pub struct CommandClient {
 }
 
 impl CommandClient {
+    /// A client with no command in flight, targeting system 1 component 1 until
+    /// [`Self::set_target`].
     pub fn new(cfg: CommandConfig) -> Self {
         Self {
             cfg,
@@ -204,16 +240,19 @@ impl CommandClient {
         }
     }
 
+    /// Address the autopilot `system`/`component` from now on.
     pub fn set_target(&mut self, system: u8, component: u8) {
         self.target_system = system;
         self.target_component = component;
         self.our_system = system;
     }
 
+    /// Whether a command with this id waits for its answer.
     pub fn in_flight(&self, command: MavCmd) -> bool {
         self.pending.contains_key(&(command as u32))
     }
 
+    /// Commands waiting for their answer.
     pub fn pending_count(&self) -> usize {
         self.pending.len()
     }

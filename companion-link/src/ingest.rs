@@ -15,9 +15,11 @@ use std::path::Path;
 /// What the ingest path accepted and dropped, for the decision log and docs/mavlink.md.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct IngestStats {
+    /// Bytes received.
     pub bytes_in: u64,
     /// Bytes inside CRC-valid frames.
     pub frame_bytes: u64,
+    /// Frames accepted (CRC, dialect and signing checks passed).
     pub frames_ok: u64,
     /// CRC-valid frames whose payload the dialect could not decode (bad enum value, ...).
     pub frames_malformed: u64,
@@ -40,9 +42,13 @@ impl IngestStats {
 /// One accepted message.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Frame {
+    /// Sender's system and component ids and sequence number.
     pub header: MavHeader,
+    /// The decoded message.
     pub msg: Msg,
+    /// Whether the frame carried a verified MAVLink 2 signature.
     pub signed: bool,
+    /// MAVLink 1 or 2 framing.
     pub version: MavlinkVersion,
     /// The frame exactly as it arrived (start byte through checksum and signature), for the
     /// `.tlog`: re-encoding would lose the signature and could differ from the wire.
@@ -53,9 +59,13 @@ pub struct Frame {
 /// reader put them (see [`Ingest::push_each`]); nothing is copied unless kept.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FrameRef<'a> {
+    /// Sender's system and component ids and sequence number.
     pub header: MavHeader,
+    /// The decoded message.
     pub msg: &'a Msg,
+    /// Whether the frame carried a verified MAVLink 2 signature.
     pub signed: bool,
+    /// MAVLink 1 or 2 framing.
     pub version: MavlinkVersion,
     /// The frame exactly as it arrived (start byte through checksum and signature).
     pub raw: &'a [u8],
@@ -109,6 +119,7 @@ pub struct Ingest {
     reader: MavlinkReader<Chunks>,
     signing: Option<SigningData>,
     our_system: u8,
+    /// Counts of what was accepted and dropped on this stream.
     pub stats: IngestStats,
 }
 
@@ -213,13 +224,16 @@ impl Ingest {
 pub struct Encoder {
     signing: Option<SigningData>,
     sequence: u8,
+    /// System id written in every header (the autopilot's, as a companion on the same vehicle).
     pub system_id: u8,
     /// Ours by default; benches and the soak run encode an autopilot's telemetry (component 1).
     pub component_id: u8,
+    /// Frames encoded so far.
     pub frames_out: u64,
 }
 
 impl Encoder {
+    /// An encoder with our ids, signing with `signing` when given.
     pub fn new(signing: Option<SigningData>) -> Self {
         Self {
             signing,
@@ -230,6 +244,7 @@ impl Encoder {
         }
     }
 
+    /// One MAVLink 2 frame of `msg`, with the next sequence number (signed when a key is set).
     pub fn encode(&mut self, msg: &Msg) -> Vec<u8> {
         let header = MavHeader {
             system_id: self.system_id as u32,
@@ -248,8 +263,10 @@ impl Encoder {
 /// Why a signing key file was rejected.
 #[derive(Debug, thiserror::Error)]
 pub enum KeyError {
+    /// The key file could not be read (file, error).
     #[error("signing key {0}: cannot read: {1}")]
     Read(String, std::io::Error),
+    /// The key file holds neither form (file, its length in bytes).
     #[error("signing key {0}: expected 32 raw bytes or 64 hex digits, got {1} bytes")]
     Format(String, usize),
 }

@@ -7,26 +7,33 @@
 
 use std::time::Duration;
 
+/// A change in whether the autopilot is heard.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LivenessEvent {
     /// First message from the autopilot.
     Connected,
+    /// Nothing heard for the timeout.
     Lost,
+    /// Heard again after a loss.
     Regained,
     /// The autopilot restarted (boot clock went backwards).
     Rebooted,
 }
 
+/// Whether the autopilot is heard, from message arrival times on the caller's clock.
 #[derive(Debug, Clone)]
 pub struct Liveness {
+    /// Silence after which the link counts as lost.
     pub timeout: Duration,
     last_heard: Option<Duration>,
     alive: bool,
     last_boot_ms: Option<u32>,
+    /// Losses since start.
     pub losses: u32,
 }
 
 impl Liveness {
+    /// Not yet heard; lost after `timeout` of silence once heard.
     pub fn new(timeout: Duration) -> Self {
         Self {
             timeout,
@@ -37,6 +44,7 @@ impl Liveness {
         }
     }
 
+    /// Whether the autopilot was heard within the timeout.
     pub fn alive(&self) -> bool {
         self.alive
     }
@@ -66,6 +74,7 @@ impl Liveness {
         }
     }
 
+    /// Check the clock: `Lost` once, when the silence reaches the timeout.
     pub fn tick(&mut self, now: Duration) -> Option<LivenessEvent> {
         match self.last_heard {
             Some(t) if self.alive && now.saturating_sub(t) >= self.timeout => {

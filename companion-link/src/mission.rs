@@ -29,17 +29,22 @@ use std::time::Duration;
 /// One mission item as we store and compare it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MissionItem {
+    /// MAV_CMD of the item (`MAV_CMD_NAV_WAYPOINT`, ...).
     pub command: MavCmd,
+    /// Coordinate frame of `x`, `y`, `z`.
     pub frame: MavFrame,
+    /// param1..param4 as the command defines them.
     pub params: [f32; 4],
     /// Latitude / longitude in degrees * 1e7.
     pub x: i32,
+    /// Longitude in degrees * 1e7 (`x` is the latitude).
     pub y: i32,
     /// Altitude in metres (meaning depends on the frame).
     pub z: f32,
 }
 
 impl MissionItem {
+    /// A NAV_WAYPOINT at `lat_e7`/`lon_e7` (degrees * 1e7), `alt_rel_m` metres above home.
     pub fn waypoint(lat_e7: i32, lon_e7: i32, alt_rel_m: f32) -> Self {
         Self {
             command: MavCmd::MAV_CMD_NAV_WAYPOINT,
@@ -144,6 +149,7 @@ pub fn compare_from(sent: &[MissionItem], got: &[MissionItem], first: usize) -> 
     Ok(())
 }
 
+/// Mission protocol timing.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MissionConfig {
     /// Silence from the autopilot during a transfer before we re-send our last message.
@@ -162,14 +168,20 @@ impl Default for MissionConfig {
     }
 }
 
+/// A mission operation, as its outcome names it.
 #[derive(Debug, Clone, PartialEq)]
 pub enum MissionOp {
+    /// Upload, then download and compare.
     UploadVerified,
+    /// Download the autopilot's mission.
     Download,
+    /// Clear the autopilot's mission.
     Clear,
+    /// Make this sequence number the current item.
     SetCurrent(u16),
 }
 
+/// Why a mission operation failed or was refused.
 #[derive(Debug, Clone, PartialEq)]
 pub enum MissionError {
     /// The autopilot answered MISSION_ACK with this result.
@@ -184,18 +196,27 @@ pub enum MissionError {
     Cancelled(String),
 }
 
+/// Progress and outcome of a mission operation.
 #[derive(Debug, Clone, PartialEq)]
 pub enum MissionEvent {
     /// Upload acknowledged by the autopilot; verification download starts.
     Uploaded {
+        /// Items sent.
         count: u16,
     },
+    /// The operation succeeded.
     Done {
+        /// Which operation.
         op: MissionOp,
+        /// Items downloaded (the verified read-back for an upload; empty for clear and
+        /// set-current).
         items: Vec<MissionItem>,
     },
+    /// The operation failed; the client is idle again.
     Failed {
+        /// Which operation.
         op: MissionOp,
+        /// Why.
         error: MissionError,
     },
 }
@@ -219,6 +240,7 @@ enum State {
 /// Mission client for one autopilot: one operation at a time.
 #[derive(Debug, Clone)]
 pub struct MissionClient {
+    /// Protocol timing.
     pub cfg: MissionConfig,
     target: (u8, u8),
     state: State,
@@ -234,6 +256,7 @@ pub struct MissionClient {
 }
 
 impl MissionClient {
+    /// An idle client targeting system 1 component 1, expecting ArduPilot's home at seq 0.
     pub fn new(cfg: MissionConfig) -> Self {
         Self {
             cfg,
@@ -247,10 +270,12 @@ impl MissionClient {
         }
     }
 
+    /// Address the autopilot `system`/`component` from now on.
     pub fn set_target(&mut self, system: u8, component: u8) {
         self.target = (system, component);
     }
 
+    /// Whether an operation is running.
     pub fn busy(&self) -> bool {
         self.state != State::Idle
     }
@@ -305,6 +330,7 @@ impl MissionClient {
         Ok(self.send(now, msg))
     }
 
+    /// Start downloading the autopilot's mission; refused while another operation runs.
     pub fn download(&mut self, now: Duration) -> Result<Vec<Msg>, MissionError> {
         if self.busy() {
             return Err(MissionError::Busy);
@@ -326,6 +352,7 @@ impl MissionClient {
         self.send(now, msg)
     }
 
+    /// Start clearing the autopilot's mission; refused while another operation runs.
     pub fn clear(&mut self, now: Duration) -> Result<Vec<Msg>, MissionError> {
         if self.busy() {
             return Err(MissionError::Busy);
@@ -514,6 +541,7 @@ impl MissionClient {
         (self.last.clone().into_iter().collect(), vec![])
     }
 
+    /// End the running operation as cancelled (`why`); `None` when idle.
     pub fn cancel(&mut self, why: &str) -> Option<MissionEvent> {
         if self.busy() {
             Some(self.fail(MissionError::Cancelled(why.to_string())))

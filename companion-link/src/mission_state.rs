@@ -77,6 +77,8 @@ pub struct MissionState {
 }
 
 impl MissionState {
+    /// Mission-state estimator for `route`; armed at or above 0.8 * `takeoff_alt_m` (m above
+    /// home) counts as airborne.
     pub fn new(route: &Route, takeoff_alt_m: f64, states: MissionStates) -> Self {
         let first = if route.takeoff_first { 2 } else { 1 };
         let last = route.waypoints.len() as u16 + first - 1;
@@ -134,6 +136,7 @@ impl MissionState {
         !armed && low
     }
 
+    /// The shared mission state as estimated now (`base`, `wp1`, `target`, ...).
     pub fn state(&self) -> &str {
         &self.state
     }

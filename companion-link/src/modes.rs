@@ -25,14 +25,20 @@ use super::command::CommandSpec;
 use super::dialect::{MavAutopilot, MavCmd, MavFrame};
 use super::mission::MissionItem;
 
+/// Autopilot firmware family, from HEARTBEAT.autopilot: it decides mode numbers and protocol
+/// quirks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Flavor {
+    /// ArduPilot (MAV_AUTOPILOT_ARDUPILOTMEGA).
     ArduPilot,
+    /// PX4 (MAV_AUTOPILOT_PX4).
     Px4,
+    /// Any other autopilot: no mode names are known for it.
     Other,
 }
 
 impl Flavor {
+    /// The family a HEARTBEAT's autopilot field names.
     pub fn from_autopilot(a: MavAutopilot) -> Self {
         match a {
             MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA => Flavor::ArduPilot,
@@ -44,36 +50,58 @@ impl Flavor {
 
 /// `enum PX4_CUSTOM_MAIN_MODE` (px4_custom_mode.h): MANUAL = 1, then in order.
 pub mod px4_main {
+    /// Manual: direct stick control.
     pub const MANUAL: u8 = 1;
+    /// Altitude control: sticks with altitude hold.
     pub const ALTCTL: u8 = 2;
+    /// Position control: sticks with position hold (sub modes in `px4_posctl`).
     pub const POSCTL: u8 = 3;
+    /// Auto: the autopilot flies on its own (sub modes in `px4_auto`).
     pub const AUTO: u8 = 4;
+    /// Acro: body rates from the sticks.
     pub const ACRO: u8 = 5;
+    /// Offboard: setpoints streamed by a companion computer.
     pub const OFFBOARD: u8 = 6;
+    /// Stabilized: attitude from the sticks.
     pub const STABILIZED: u8 = 7;
+    /// Rattitude (removed from current PX4; the number stays reserved).
     pub const RATTITUDE_LEGACY: u8 = 8;
+    /// Simple: position control with stick input in the world frame.
     pub const SIMPLE: u8 = 9;
+    /// Termination: flight terminated.
     pub const TERMINATION: u8 = 10;
 }
 
 /// `enum PX4_CUSTOM_SUB_MODE_AUTO` (px4_custom_mode.h): READY = 1, then in order; 7 was RTGS,
 /// now RESERVED_DO_NOT_USE.
 pub mod px4_auto {
+    /// AUTO.READY: armed on the ground, waiting.
     pub const READY: u8 = 1;
+    /// AUTO.TAKEOFF: take-off to the take-off altitude.
     pub const TAKEOFF: u8 = 2;
+    /// AUTO.LOITER: hold position (PX4 "Hold").
     pub const LOITER: u8 = 3;
+    /// AUTO.MISSION: fly the uploaded mission.
     pub const MISSION: u8 = 4;
+    /// AUTO.RTL: return to launch.
     pub const RTL: u8 = 5;
+    /// AUTO.LAND: land where it is.
     pub const LAND: u8 = 6;
+    /// AUTO.FOLLOW_TARGET: follow a target's position.
     pub const FOLLOW_TARGET: u8 = 8;
+    /// AUTO.PRECLAND: precision landing.
     pub const PRECLAND: u8 = 9;
+    /// AUTO.VTOL_TAKEOFF: VTOL take-off.
     pub const VTOL_TAKEOFF: u8 = 10;
 }
 
 /// `enum PX4_CUSTOM_SUB_MODE_POSCTL` (px4_custom_mode.h): POSCTL = 0, ORBIT, SLOW.
 pub mod px4_posctl {
+    /// POSCTL.POSCTL: plain position control.
     pub const POSCTL: u8 = 0;
+    /// POSCTL.ORBIT: orbit a point.
     pub const ORBIT: u8 = 1;
+    /// POSCTL.SLOW: position control at reduced speed.
     pub const SLOW: u8 = 2;
 }
 

@@ -25,10 +25,14 @@ pub enum Control {
     /// The operator started the mission (or `--auto-start`): the companion commands.
     Started,
     /// A mode the companion did not command (`mode`): the pilot or the autopilot flies.
-    TakenOver { mode: String },
+    TakenOver {
+        /// Name of the mode the autopilot reported.
+        mode: String,
+    },
 }
 
 impl Control {
+    /// The decision record's `vehicle.operator` value: `waiting`, `started` or `taken_over`.
     pub fn label(&self) -> &'static str {
         match self {
             Control::Waiting => "waiting",
@@ -41,17 +45,24 @@ impl Control {
 /// How a mission start or a hand-back came about.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum StartBy {
+    /// `fly --auto-start`: no operator.
     AutoStart,
+    /// The pilot armed the vehicle.
     PilotArmed,
+    /// MAV_CMD_MISSION_START from the ground station.
     StartCommand,
+    /// The pilot switched to GUIDED (hand-back only).
     GuidedSwitch,
 }
 
 /// What the gate decided on one observation.
 #[derive(Debug, Clone, PartialEq)]
 pub enum GateEvent {
+    /// The companion may command from now on.
     Started(StartBy),
+    /// A mode the companion did not command (its name): the companion stops commanding.
     TakenOver(String),
+    /// Control came back to the companion after a take-over.
     HandedBack(StartBy),
 }
 
@@ -85,9 +96,11 @@ impl GateEvent {
 /// What the gate reads from the vehicle each loop turn.
 #[derive(Debug, Clone, Copy)]
 pub struct VehicleView<'a> {
+    /// Autopilot family (mode names differ).
     pub flavor: Flavor,
     /// The heartbeat's custom mode and its name, once known.
     pub custom_mode: u32,
+    /// Name of `custom_mode` for this autopilot, if known.
     pub mode: Option<&'a str>,
     /// Consecutive autopilot heartbeats that reported the vehicle armed (0 when disarmed).
     pub armed_heartbeats: u32,
@@ -98,6 +111,7 @@ pub struct VehicleView<'a> {
 /// The operator gate: one per `fly` run; [`OperatorGate::new_flight`] after each landing.
 #[derive(Debug, Clone)]
 pub struct OperatorGate {
+    /// Who commands the vehicle now.
     pub control: Control,
     /// A mode change to a mode commanded less than this long ago is the companion's own.
     pub grace: Duration,
@@ -250,6 +264,7 @@ pub struct GcsText {
     pub max_per_s: u32,
     last: BTreeMap<String, Duration>,
     window: VecDeque<Duration>,
+    /// Texts dropped by the rate limit, since start.
     pub dropped: u64,
 }
 
@@ -257,6 +272,7 @@ pub struct GcsText {
 const TEXT_LEN: usize = 50;
 
 impl GcsText {
+    /// A limiter sending a text again after `repeat` at the earliest, at most `max_per_s` a second.
     pub fn new(repeat: Duration, max_per_s: u32) -> Self {
         Self {
             repeat,

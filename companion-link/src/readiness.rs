@@ -33,6 +33,7 @@ use super::dialect::{
 use super::modes::Flavor;
 use std::time::Duration;
 
+/// Whether the autopilot reports itself ready to arm, from its own pre-arm and estimator reports.
 #[derive(Debug, Clone)]
 pub struct Readiness {
     /// Whose evidence counts (set when the autopilot's HEARTBEAT is first seen).
@@ -50,6 +51,7 @@ pub struct Readiness {
     /// Any SYS_STATUS seen (PX4 sets at most the prearm health bit, never present/enabled, so
     /// its EKF flags decide).
     sys_status_at: Option<Duration>,
+    /// Whether the last HEARTBEAT said armed.
     pub armed: bool,
 }
 
@@ -60,6 +62,7 @@ impl Default for Readiness {
 }
 
 impl Readiness {
+    /// No report yet; `flavor` says whose evidence counts.
     pub fn new(flavor: Flavor) -> Self {
         Self {
             flavor,
@@ -92,18 +95,20 @@ impl Readiness {
         self.ekf = Some((e.flags.contains(need) && !e.flags.intersects(bad), now));
     }
 
+    /// SYS_STATUS: the prearm-check health bit (ArduPilot only when present and enabled).
     pub fn on_sys_status(&mut self, now: Duration, s: &SYS_STATUS_DATA) {
         self.sys_status_at = Some(now);
         let bit = MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK;
-        if self.flavor == Flavor::Px4 {
-            self.prearm = Some((s.onboard_control_sensors_health.contains(bit), now));
-        } else if s.onboard_control_sensors_present.contains(bit)
-            && s.onboard_control_sensors_enabled.contains(bit)
+        // PX4 sets only the health bit; ArduPilot's counts when the check is present and enabled.
+        if self.flavor == Flavor::Px4
+            || (s.onboard_control_sensors_present.contains(bit)
+                && s.onboard_control_sensors_enabled.contains(bit))
         {
             self.prearm = Some((s.onboard_control_sensors_health.contains(bit), now));
         }
     }
 
+    /// EKF_STATUS_REPORT (ArduPilot's estimator report; the EKF verdict for ArduPilot).
     pub fn on_ekf(&mut self, now: Duration, e: &EKF_STATUS_REPORT_DATA) {
         let need = EkfStatusFlags::EKF_ATTITUDE
             | EkfStatusFlags::EKF_VELOCITY_HORIZ

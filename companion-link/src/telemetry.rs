@@ -171,35 +171,50 @@ impl Default for TelemetryConfig {
 /// Where the vehicle is (for relative missions and sidesteps).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Position {
+    /// Latitude, degrees * 1e7.
     pub lat_e7: i32,
+    /// Longitude, degrees * 1e7.
     pub lon_e7: i32,
+    /// Altitude above home (m).
     pub alt_rel_m: f64,
+    /// Altitude above mean sea level (m).
     pub alt_amsl_m: f64,
     /// Heading in degrees, None when the autopilot does not know.
     pub heading_deg: Option<f64>,
 }
 
+/// Telemetry state of one autopilot: observations by name plus position, mode and flight status.
 #[derive(Debug, Clone, Default)]
 pub struct Telemetry {
+    /// Telemetry settings (params/link.toml `[telemetry]`).
     pub cfg: TelemetryConfig,
     values: BTreeMap<String, f64>,
+    /// Latest GLOBAL_POSITION_INT, with the heading.
     pub position: Option<Position>,
     /// HOME_POSITION (lat e7, lon e7, amsl m).
     pub home: Option<(i32, i32, f64)>,
+    /// Name of the current flight mode, as the caller's mode naming gives it.
     pub mode: Option<String>,
+    /// HEARTBEAT.custom_mode as last heard.
     pub custom_mode: u32,
+    /// Whether the last HEARTBEAT said armed.
     pub armed: bool,
+    /// EXTENDED_SYS_STATE landed state without its prefix (`ON_GROUND`, `IN_AIR`, ...).
     pub landed_state: Option<String>,
+    /// MISSION_CURRENT sequence number as last heard.
     pub mission_seq: Option<u16>,
     distances: BTreeMap<u8, (f64, Duration)>,
     obstacle_scan: Option<(f64, Duration)>,
+    /// Latest STATUSTEXT from the autopilot.
     pub last_text: Option<String>,
     /// Unmapped onboard names kept so far (bounded by `max_onboard_names`).
     onboard_names: usize,
+    /// Telemetry refused as implausible, counted.
     pub rejected: Rejected,
 }
 
 impl Telemetry {
+    /// Empty telemetry with these settings.
     pub fn new(cfg: TelemetryConfig) -> Self {
         Self {
             cfg,
@@ -207,6 +222,7 @@ impl Telemetry {
         }
     }
 
+    /// The observation named `name` (units in docs/params/health.md), if heard.
     pub fn get(&self, name: &str) -> Option<f64> {
         self.values.get(name).copied()
     }

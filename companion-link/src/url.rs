@@ -10,22 +10,41 @@ use std::fmt;
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum ConnectUrl {
     /// A serial device at a baud rate.
-    Serial { path: String, baud: u32 },
+    Serial {
+        /// Device path (`/dev/ttyAMA0`).
+        path: String,
+        /// Baud rate (bit/s).
+        baud: u32,
+    },
     /// Listen for UDP datagrams; replies go to the last sender.
-    UdpIn { bind: String },
+    UdpIn {
+        /// Local address to listen on (`0.0.0.0:14550`).
+        bind: String,
+    },
     /// Send UDP datagrams to a fixed peer.
-    UdpOut { peer: String },
+    UdpOut {
+        /// Address to send to.
+        peer: String,
+    },
     /// Connect to a TCP server (SITL's default `tcp:127.0.0.1:5760`); reconnects on loss.
-    TcpOut { peer: String },
+    TcpOut {
+        /// Server address to connect to.
+        peer: String,
+    },
     /// Accept one TCP client at a time; accepts again after it leaves.
-    TcpIn { bind: String },
+    TcpIn {
+        /// Local address to listen on.
+        bind: String,
+    },
 }
 
 /// Why a URL was rejected.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("connection URL {url:?}: {reason}")]
 pub struct UrlError {
+    /// The URL as given.
     pub url: String,
+    /// What is wrong with it.
     pub reason: String,
 }
 

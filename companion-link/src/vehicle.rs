@@ -19,15 +19,22 @@ use companion_core::record::{CommandOutcome, CommandRecord, Event, LinkEvent};
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
+/// Settings of the vehicle link, from params/link.toml and the `fly` flags.
 #[derive(Debug, Clone)]
 pub struct VehicleConfig {
+    /// Command protocol timing.
     pub command: CommandConfig,
+    /// Mission protocol timing.
     pub mission: MissionConfig,
+    /// Silence from the autopilot after which the link counts as lost.
     pub link_timeout: Duration,
     /// (message id, Hz) requested with SET_MESSAGE_INTERVAL.
     pub streams: Vec<(u32, f32)>,
+    /// Telemetry settings.
     pub telemetry: TelemetryConfig,
+    /// Time to wait for the autopilot to report ready before an arm step fails.
     pub arm_wait: Duration,
+    /// Arm attempts, each only after a fresh ready report.
     pub max_arm_attempts: u32,
     /// Only an autopilot with this system id is chosen (`fly --autopilot-sysid`).
     pub autopilot_sysid: Option<u8>,
@@ -112,16 +119,25 @@ enum JobStatus {
 
 /// The link protocol state for one autopilot.
 pub struct Vehicle {
+    /// Link settings.
     pub cfg: VehicleConfig,
     /// (system, component) of the autopilot, once its HEARTBEAT is seen.
     pub target: Option<(u8, u8)>,
+    /// Autopilot family, from its HEARTBEAT (`Other` until one is seen).
     pub flavor: Flavor,
+    /// COMMAND_LONG / COMMAND_INT client.
     pub commands: CommandClient,
+    /// Mission protocol client.
     pub mission: MissionClient,
+    /// Whether the autopilot is still heard.
     pub liveness: Liveness,
+    /// Whether the autopilot reports itself ready to arm.
     pub readiness: Readiness,
+    /// Telemetry turned into observations.
     pub telemetry: Telemetry,
+    /// Vehicle action name -> steps (params/commands.toml).
     pub actions: ActionTable,
+    /// The route `follow_trajectory` uploads, if one was given.
     pub route: Option<Route>,
     purposes: BTreeMap<u64, Purpose>,
     job: Option<Job>,
@@ -143,6 +159,7 @@ pub struct Vehicle {
     /// Refused for trust reasons since start: monitor frames from components not allowed, and
     /// the totals as last reported in a link event.
     pub foreign_monitor_frames: u64,
+    /// HEARTBEATs from other autopilots, ignored, since start.
     pub other_autopilot_heartbeats: u64,
     trust_reported: (u64, u64, u64, u64),
     /// Consecutive autopilot heartbeats reporting the vehicle armed (0 once one says disarmed).
@@ -171,6 +188,7 @@ pub struct Vehicle {
 }
 
 impl Vehicle {
+    /// A link to no autopilot yet: it chooses one on its first HEARTBEAT.
     pub fn new(cfg: VehicleConfig, actions: ActionTable, route: Option<Route>) -> Self {
         Self {
             commands: CommandClient::new(cfg.command),
@@ -224,15 +242,20 @@ impl Vehicle {
         })
     }
 
+    /// Whether significant events wait to be taken (they trigger a decision cycle).
     pub fn has_events(&self) -> bool {
         !self.events.is_empty()
     }
+    /// Take the significant events since the last call.
     pub fn take_events(&mut self) -> Vec<Event> {
         std::mem::take(&mut self.events)
     }
+    /// Take the command records since the last call.
     pub fn take_records(&mut self) -> Vec<CommandRecord> {
         std::mem::take(&mut self.records)
     }
+    /// Take the link events since the last call, with a trust note when refused frames were
+    /// counted.
     pub fn take_link_events(&mut self) -> Vec<LinkEvent> {
         if let Some(note) = self.trust_note() {
             self.link_events.push(LinkEvent::from(note));
@@ -318,6 +341,7 @@ impl Vehicle {
         }
     }
 
+    /// An observation snapshot at `now` from the latest telemetry, carrying `events`.
     pub fn observations(&self, now: Duration, events: Vec<Event>) -> Observations {
         self.telemetry.observations(now, events)
     }

@@ -47,23 +47,33 @@ pub const ROLES: &[&str] = &[
 /// A compiled node, for display and for wiring imports.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NodeInfo {
+    /// Node name as written in the FMEA file (`U_vibration`, `A_wind`, ...).
     pub name: String,
+    /// Role that chose its CPT rule (`error`, `monitor`, `context`, ...).
     pub role: String,
+    /// State names, in CPT order.
     pub states: Vec<String>,
+    /// Parents in CPT order: the rule's parents, then the node's extra `parents`.
     pub parents: Vec<String>,
+    /// Free text from the file.
     pub description: String,
 }
 
 /// A published probability: `P(node = state)`, or its complement.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Publish {
+    /// Probability name the MDPs read (`P_track`, `P_V3`, ...).
     pub name: String,
+    /// Node whose posterior gives the value.
     pub node: String,
+    /// State of that node.
     pub state: String,
+    /// True for `1 - P(node = state)`.
     pub complement: bool,
 }
 
 impl Publish {
+    /// The expression as written in the file: `P(NODE = STATE)` or `1 - P(NODE = STATE)`.
     pub fn expr(&self) -> String {
         let p = format!("P({} = {})", self.node, self.state);
         if self.complement {
@@ -77,14 +87,21 @@ impl Publish {
 /// An FMEA file compiled to a network, not yet wired to other managers.
 #[derive(Debug, Clone)]
 pub struct CompiledHm {
+    /// Manager name from the file.
     pub name: String,
+    /// Free text from the file.
     pub description: String,
+    /// File it was compiled from (named in load errors).
     pub file: PathBuf,
+    /// Every node of the network, in the file's order.
     pub nodes: Vec<NodeInfo>,
+    /// The Bayesian network the nodes compile to.
     pub network: Network,
+    /// The probabilities this manager publishes.
     pub publish: Vec<Publish>,
     /// (local import node, source manager, source node).
     pub imports: Vec<(String, String, String)>,
+    /// Dynamic-BN links applied after each evaluation.
     pub carry: Vec<Carry>,
 }
 

@@ -90,7 +90,10 @@ pub enum CommandOutcome {
     /// `ACCEPTED`: the autopilot acknowledged it.
     Accepted,
     /// `ACCEPTED (verified N items)`: a mission upload read back and found equal.
-    AcceptedVerified { items: usize },
+    AcceptedVerified {
+        /// Mission items read back from the autopilot.
+        items: usize,
+    },
     /// `SIMULATED`: flown in the simulated world.
     Simulated,
     /// `SENT`: sent, no answer expected or not yet due.
@@ -252,7 +255,9 @@ pub enum Event {
     Link(LinkEvent),
     /// `command ACTION OUTCOME`: a vehicle command finished.
     Command {
+        /// Primitive action the command carried out (`take_off`, `land`, ...).
         action: String,
+        /// What the autopilot answered, or that it did not.
         outcome: CommandOutcome,
     },
     /// `health: ERROR`: the health models could not be evaluated.
@@ -262,7 +267,12 @@ pub enum Event {
     /// `resources: ERROR`: no resource policy to arbitrate with.
     ResourcesError(String),
     /// `MDP: state `STATE` unknown to this MDP`.
-    MdpStateUnknown { mdp: String, state: String },
+    MdpStateUnknown {
+        /// MDP name from params.
+        mdp: String,
+        /// Mission state the MDP has no local state for.
+        state: String,
+    },
     /// `re-allocation: REASON`: PANORAMA re-allocated the remaining activities.
     Reallocation(String),
     /// `guarantee: no allocation meets the goals`
@@ -463,25 +473,36 @@ pub enum LinkEvent {
     TransportReconnected,
     /// `autopilot SYS/COMP (FLAVOR)`: the autopilot this link commands.
     Autopilot {
+        /// MAVLink system id of the autopilot.
         system: u8,
+        /// MAVLink component id of the autopilot.
         component: u8,
+        /// Autopilot family read from its HEARTBEAT, as the link's `Flavor` prints it.
         flavor: String,
     },
     /// `another autopilot SYS/COMP heard, ignored (WHY)`
     OtherAutopilot {
+        /// MAVLink system id of the ignored autopilot.
         system: u8,
+        /// MAVLink component id of the ignored autopilot.
         component: u8,
+        /// Why it is ignored (the autopilot already chosen, or the `--autopilot-sysid` asked for).
         why: String,
     },
     /// `autopilot: TEXT`: the autopilot's STATUSTEXT.
     AutopilotText(String),
     /// `stream NAME: OUTCOME`: a telemetry stream request answered.
     Stream {
+        /// Telemetry message requested (`ATTITUDE`, `GPS_RAW_INT`, ...).
         name: String,
+        /// How the autopilot answered the interval request.
         outcome: CommandOutcome,
     },
     /// `mission uploaded (N items), verifying`
-    MissionUploaded { items: usize },
+    MissionUploaded {
+        /// Number of mission items the upload sent.
+        items: usize,
+    },
     /// `mission transfer cancelled (WHY)`
     MissionTransferCancelled(String),
     /// `connected NAME`: the transport to the autopilot is up.
