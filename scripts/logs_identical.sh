@@ -268,9 +268,10 @@ EOF
 export RUN WORK BASE_SRC NEW_SRC HEADER_VOLATILE_FIELDS
 export -f run_side compare_case
 one_case() {
-  run_side base "$1" "$BASE_SRC"
-  run_side new "$1" "$NEW_SRC"
-  compare_case "$1"
+  # One write per case: parallel jobs' lines must not interleave in the shared pipe.
+  local out
+  out=$(run_side base "$1" "$BASE_SRC"; run_side new "$1" "$NEW_SRC"; compare_case "$1")
+  printf '%s\n' "$out"
 }
 export -f one_case
 t_runs=$(date +%s)
