@@ -296,3 +296,20 @@ fn a_policy_params_do_not_declare_is_refused_naming_the_known_ones() {
     );
     assert!(!d.path().join("runs").exists(), "a run folder was started");
 }
+
+/// The test helpers are the testkit's own binaries: the shipped one has no hidden subcommands.
+#[test]
+fn the_binary_has_no_hidden_test_subcommands() {
+    for hidden in ["__log-stress", "__tlog-sample"] {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_companion"))
+            .arg(hidden)
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "{hidden} is accepted");
+        assert!(
+            String::from_utf8_lossy(&out.stderr).contains("unrecognized subcommand"),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+}

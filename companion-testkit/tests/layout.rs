@@ -1,0 +1,86 @@
+//! The crate boundaries hold: the core reads no files and depends on no I/O, runtime, CLI or
+//! randomness crate (directly or through its dependencies), and the binary does not link the
+//! testkit (its hidden-subcommand check is in companion/tests/cli_refused.rs).
+
+use std::path::{Path, PathBuf};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn rs_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            rs_files(&p, out);
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+}
+
+#[test]
+fn no_file_of_the_core_names_std_fs() {
+    let mut files = Vec::new();
+    rs_files(&root().join("companion-core"), &mut files);
+    assert!(files.len() > 10, "{files:?}");
+    for f in files {
+        let text = std::fs::read_to_string(&f).unwrap();
+        assert!(!text.contains("std::fs"), "{} names std::fs", f.display());
+    }
+}
+
+/// The normal dependencies of `krate` in the workspace, transitively, from `cargo metadata`.
+fn normal_deps(krate: &str) -> Vec<String> {
+    let out = std::process::Command::new(env!("CARGO"))
+        .args([
+            "tree",
+            "-p",
+            krate,
+            "-e",
+            "normal",
+            "--prefix",
+            "none",
+            "--offline",
+        ])
+        .current_dir(root())
+        .output()
+        .expect("cargo tree runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .filter_map(|l| l.split_whitespace().next().map(str::to_string))
+        .collect()
+}
+
+#[test]
+#[cfg_attr(
+    not(target_arch = "x86_64"),
+    ignore = "runs cargo, a host binary (the cross-built tests run under qemu)"
+)]
+fn the_core_depends_on_no_io_runtime_cli_or_randomness_crate() {
+    let deps = normal_deps("companion-core");
+    assert!(deps.iter().any(|d| d == "bayes_net"), "{deps:?}");
+    for banned in ["tokio", "mavlink", "rand", "clap", "anyhow"] {
+        assert!(
+            !deps.iter().any(|d| d == banned),
+            "companion-core depends on {banned}"
+        );
+    }
+    let link = normal_deps("companion-link");
+    assert!(link.iter().any(|d| d == "mavlink"), "{link:?}");
+    assert!(
+        !link.iter().any(|d| d == "tokio"),
+        "companion-link depends on tokio"
+    );
+    let bin = normal_deps("companion");
+    assert!(
+        !bin.iter().any(|d| d == "companion-testkit"),
+        "the binary links the testkit"
+    );
+}
