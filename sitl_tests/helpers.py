@@ -41,7 +41,7 @@ COMPANION_LINK_TIMEOUT_S = 3.0
 
 
 # ------------------------------------------------------------------------------------------------
-# Decision log (JSON Lines of DecisionRecord, companion/src/record.rs); a header line without `cycle` is skipped.
+# Decision log (JSON Lines of DecisionRecord, companion-core/src/record.rs); a header line without `cycle` is skipped.
 # ------------------------------------------------------------------------------------------------
 
 def read_decision_log(log_dir: Path, fallback: Optional[Path] = None) -> List[Dict[str, Any]]:

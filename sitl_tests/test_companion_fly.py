@@ -3,7 +3,7 @@
 Each test flies the companion's own tracking mission (from params/), with the onboard monitors
 (NAMED_VALUE_FLOAT tgt_det/tgt_spd/trk_conf/lum/cpu_load) playing the camera application, injects one hazard,
 and checks what reached the autopilot (the stand-in's recording) and what the companion decided (its decision
-log: JSON Lines of DecisionRecord, companion/src/record.rs). Names checked are the shared vocabulary of the
+log: JSON Lines of DecisionRecord, companion-core/src/record.rs). Names checked are the shared vocabulary of the
 project brief: states `wp1`, `landing`, `target`, `v0`..`v5`; actions `take_off`, `avoid_obstacle`, `land`,
 `return_to_base`, `replan_and_land`, `track_v0`..`track_v5`; observations `vibration_mps2`,
 `target_speed_rel`, `battery_pct`.

@@ -162,7 +162,7 @@ def run_chromium(args, url):
 
 
 def tracking_steps(recs):
-    """The shared definition (companion/src/tracking.rs), written here again: a cycle at the
+    """The shared definition (companion-core/src/tracking.rs), written here again: a cycle at the
     target or in a tracking phase that chooses track_vN and is in phase vN at the next record."""
     n = 0
     for r, nxt in zip(recs, recs[1:]):
