@@ -67,7 +67,8 @@ impl Category {
 pub fn categorize(result: &CommandOutcome) -> Category {
     use CommandOutcome::*;
     match result {
-        Accepted | AcceptedVerified { .. } | Simulated => Category::Accepted,
+        // Arrived: the vehicle reached the landing zone the step flew it to (the step succeeded).
+        Accepted | AcceptedVerified { .. } | Simulated | Arrived(_) => Category::Accepted,
         Sent | Pending | InProgress | WaitingReady(_) => Category::InProgress,
         Already => Category::Already,
         // Not sent on purpose: an earlier step failed, a newer action set replaced it, the link
@@ -78,9 +79,7 @@ pub fn categorize(result: &CommandOutcome) -> Category {
         // A mission transfer stopped by a cancel is a stop, not a failure (the transfer's error,
         // `Cancelled("why")`, is the detail).
         Failed(Some(why)) if why.starts_with("Cancelled") => Category::Skipped,
-        // An arrival at the landing zone has no category of its own and counts with the
-        // unknown spellings.
-        Failed(_) | Unmapped | Arrived(_) | Other(_) => Category::Failed,
+        Failed(_) | Unmapped | Other(_) => Category::Failed,
     }
 }
 
@@ -117,6 +116,17 @@ impl OutcomeCounts {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn an_arrival_at_the_zone_counts_as_accepted_and_a_timeout_does_not() {
+        let arrived = CommandOutcome::from("ARRIVED (1.2 m from the zone)");
+        assert!(matches!(arrived, CommandOutcome::Arrived(_)), "{arrived:?}");
+        assert_eq!(categorize(&arrived), Category::Accepted);
+        let late = CommandOutcome::from(
+            "TIMEOUT (not within 3.0 m of the zone after 30 s, 7.5 m away; landing here)",
+        );
+        assert_eq!(categorize(&late), Category::TimedOut);
+    }
     use super::*;
 
     #[test]
