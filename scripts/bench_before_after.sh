@@ -53,23 +53,8 @@ NEW_REV=${POS[1]:-${NEW_REV:-}}
 WORK=$ROOT/target/bench-before-after
 mkdir -p "$WORK"
 t_start=$(date +%s)
-log() { echo "$*" >&2; }
-
-checkout() {
-  local side=$1 rev=$2 dir=$WORK/$1 sha
-  sha=$(git rev-parse --verify "$rev^{commit}") || { log "unknown revision: $rev"; exit 2; }
-  if [ ! -e "$dir/.git" ]; then
-    git worktree prune
-    git worktree add -q --detach "$dir" "$sha" >&2
-  else
-    if [ -n "$(git -C "$dir" status --porcelain --untracked-files=no)" ]; then
-      log "$dir has local changes; remove it (git worktree remove --force $dir) or clean it"
-      exit 2
-    fi
-    git -C "$dir" checkout -q --detach "$sha"
-  fi
-  echo "$dir"
-}
+# log, checkout
+. "$ROOT/scripts/lib/revisions.sh"
 
 EXAMPLES=(bench_cycle bench_solve bench_bn export_health_bn)
 # Build every program of one side; write "<target name> <executable>" lines to $WORK/<side>.exes.

@@ -44,24 +44,8 @@ WORK=$ROOT/target/logs-identical
 mkdir -p "$WORK"
 t_start=$(date +%s)
 
-log() { echo "$*" >&2; }
-
-# Check out REV in a detached worktree at $WORK/<side> (created once, then moved to REV).
-checkout() {
-  local side=$1 rev=$2 dir=$WORK/$1 sha
-  sha=$(git rev-parse --verify "$rev^{commit}") || { log "unknown revision: $rev"; exit 2; }
-  if [ ! -e "$dir/.git" ]; then
-    git worktree prune
-    git worktree add -q --detach "$dir" "$sha" >&2
-  else
-    if [ -n "$(git -C "$dir" status --porcelain --untracked-files=no)" ]; then
-      log "$dir has local changes; remove it (git worktree remove --force $dir) or clean it"
-      exit 2
-    fi
-    git -C "$dir" checkout -q --detach "$sha"
-  fi
-  echo "$dir"
-}
+# log, checkout
+. "$ROOT/scripts/lib/revisions.sh"
 
 # Build the companion binary in source dir $1 with target dir $2; print the executable's path.
 # Asks cargo for the path (--message-format=json) so a moved crate or target dir is followed.
