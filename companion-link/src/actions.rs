@@ -466,6 +466,10 @@ pub struct FlightParams {
     pub statustext_repeat_s: f64,
     /// At most this many STATUSTEXTs per second.
     pub statustext_max_per_s: u32,
+    /// PX4: an accepted SET_MODE counts only once a HEARTBEAT shows the mode within this long (s).
+    pub mode_confirm_s: f64,
+    /// PX4: SET_MODE sent at most this many times while the vehicle stays in its earlier mode.
+    pub max_mode_attempts: u32,
 }
 
 impl Default for FlightParams {
@@ -478,6 +482,8 @@ impl Default for FlightParams {
             zone_arrive_timeout_s: 60.0,
             statustext_repeat_s: 15.0,
             statustext_max_per_s: 2,
+            mode_confirm_s: 3.0,
+            max_mode_attempts: 3,
         }
     }
 }
@@ -486,7 +492,7 @@ impl FlightParams {
     /// Every number finite and in range, against `decision_period_s`.
     fn check(&self, path: &Path, decision_period_s: f64) -> Result<(), SpecError> {
         let within = |v: f64, lo: f64, hi: f64| v.is_finite() && v > lo && v <= hi;
-        let checks: [(&str, bool, String); 7] = [
+        let checks: [(&str, bool, String); 9] = [
             (
                 "flight.min_event_cycle_interval_s",
                 within(self.min_event_cycle_interval_s, 0.0, decision_period_s),
@@ -521,6 +527,16 @@ impl FlightParams {
                 "flight.statustext_max_per_s",
                 (1..=20).contains(&self.statustext_max_per_s),
                 "must be 1..20".into(),
+            ),
+            (
+                "flight.mode_confirm_s",
+                within(self.mode_confirm_s, 0.0, 60.0),
+                "must be in (0, 60] s".into(),
+            ),
+            (
+                "flight.max_mode_attempts",
+                (1..=10).contains(&self.max_mode_attempts),
+                "must be 1..10".into(),
             ),
         ];
         for (entry, ok, why) in checks {

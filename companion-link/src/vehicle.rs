@@ -45,6 +45,10 @@ pub struct VehicleConfig {
     pub zone_radius_m: f64,
     /// ... and gets this long to get there; then it lands where it is (said in the record).
     pub zone_arrive_timeout: Duration,
+    /// PX4: an accepted SET_MODE is done only when a HEARTBEAT shows the mode within this long.
+    pub mode_confirm: Duration,
+    /// PX4: SET_MODE attempts while the vehicle stays in the mode it was in.
+    pub max_mode_attempts: u32,
 }
 
 /// Distinct other autopilots reported by name; more are only counted.
@@ -64,6 +68,8 @@ impl Default for VehicleConfig {
             stream_request_min_interval: Duration::from_secs(5),
             zone_radius_m: 3.0,
             zone_arrive_timeout: Duration::from_secs(60),
+            mode_confirm: Duration::from_secs(3),
+            max_mode_attempts: 3,
         }
     }
 }
@@ -100,6 +106,12 @@ enum Running {
         target: (i32, i32),
         since: Duration,
     },
+    /// PX4 accepted SET_MODE: waiting for a HEARTBEAT that shows the mode. `from` is the
+    /// custom mode the vehicle reported when the command was issued.
+    ConfirmMode {
+        from: Option<u32>,
+        since: Duration,
+    },
 }
 
 #[derive(Debug, Clone)]
@@ -108,6 +120,10 @@ struct Job {
     steps: VecDeque<(String, Step)>,
     running: Running,
     arm_attempts: u32,
+    /// SET_MODE sent for the current mode step (PX4 confirmation resends).
+    mode_attempts: u32,
+    /// The custom mode reported when the current step's SET_MODE was first issued.
+    mode_from: Option<u32>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -654,6 +670,8 @@ impl Vehicle {
             steps,
             running: Running::Idle,
             arm_attempts: 0,
+            mode_attempts: 0,
+            mode_from: None,
         });
         self.last = Some((key, JobStatus::Running));
         self.advance_job(now)
@@ -703,6 +721,8 @@ impl Vehicle {
             job.steps.pop_front();
             job.running = Running::Idle;
             job.arm_attempts = 0;
+            job.mode_attempts = 0;
+            job.mode_from = None;
         }
     }
 
@@ -722,6 +742,14 @@ impl Vehicle {
                 (Running::Arrive { target, since }, _) => {
                     let (target, since) = (*target, *since);
                     self.arrive_step(now, action, target, since)
+                }
+                (Running::ConfirmMode { from, since }, Step::Mode(name)) => {
+                    let (from, since) = (*from, *since);
+                    self.confirm_mode_step(now, action, name, from, since)
+                }
+                (Running::ConfirmMode { .. }, _) => {
+                    job.running = Running::Idle;
+                    Advance::Again
                 }
                 (Running::Idle, Step::Mode(name)) => self.mode_step(now, action, name, &mut out),
                 (Running::Idle | Running::WaitReady { .. }, Step::Arm) => {
@@ -851,7 +879,20 @@ impl Vehicle {
             return Advance::Again;
         }
         match modes::set_mode_command(self.flavor, name) {
-            Some(spec) => self.issued(now, &action, format!("SET_MODE {name}"), spec, out),
+            Some(spec) => {
+                let shown = self
+                    .telemetry
+                    .mode
+                    .is_some()
+                    .then_some(self.telemetry.custom_mode);
+                if let Some(j) = &mut self.job {
+                    if j.mode_attempts == 0 {
+                        j.mode_from = shown;
+                    }
+                    j.mode_attempts += 1;
+                }
+                self.issued(now, &action, format!("SET_MODE {name}"), spec, out)
+            }
             None => {
                 let result = format!("FAILED (no {name} mode for {:?})", self.flavor);
                 self.record_step(action, format!("SET_MODE {name}"), result);
@@ -859,6 +900,60 @@ impl Vehicle {
                 Advance::Again
             }
         }
+    }
+
+    /// PX4 accepted SET_MODE `name`: PX4's ACK says the user's intention changed, not the mode
+    /// (it can still refuse to run it, e.g. a mission not yet valid). Done when a HEARTBEAT newer
+    /// than the acceptance shows the mode. After `mode_confirm` without it: sent again while the
+    /// vehicle still shows the mode it was in (the command had no effect), at most
+    /// `max_mode_attempts` in all; a third mode is someone else's and is never overridden.
+    fn confirm_mode_step(
+        &mut self,
+        now: Duration,
+        action: String,
+        name: &str,
+        from: Option<u32>,
+        since: Duration,
+    ) -> Advance {
+        let heard_since = self.mode_heard_at.is_some_and(|h| h > since);
+        if heard_since && modes::is_in_mode(self.flavor, self.telemetry.custom_mode, name) {
+            self.step_done();
+            return Advance::Again;
+        }
+        if now.saturating_sub(since) < self.cfg.mode_confirm {
+            return Advance::Wait;
+        }
+        let shown = self.telemetry.mode.clone().unwrap_or_else(|| "?".into());
+        let unchanged = heard_since && from == Some(self.telemetry.custom_mode);
+        let attempts = self.job.as_ref().map_or(0, |j| j.mode_attempts);
+        let waited = self.cfg.mode_confirm.as_secs_f64();
+        if unchanged && attempts < self.cfg.max_mode_attempts {
+            self.record_step(
+                action,
+                format!("SET_MODE {name}"),
+                format!(
+                    "NOT_CONFIRMED (still {shown} {waited:.0} s after ACCEPTED; sending again)"
+                ),
+            );
+            if let Some(j) = &mut self.job {
+                j.running = Running::Idle;
+            }
+            return Advance::Again;
+        }
+        let why = if !heard_since {
+            format!("accepted, but no HEARTBEAT in {waited:.0} s to show it")
+        } else if unchanged {
+            format!("accepted {attempts} times, but the vehicle stays in {shown}")
+        } else {
+            format!("accepted, but the vehicle went to {shown}, not {name}: not overriding")
+        };
+        self.record_step(
+            action,
+            format!("SET_MODE {name}"),
+            format!("FAILED ({why})"),
+        );
+        self.job_failed(now);
+        Advance::Again
     }
 
     fn arm_step(&mut self, now: Duration, action: String, out: &mut Vec<Msg>) -> Advance {
@@ -1178,6 +1273,7 @@ impl Vehicle {
                     if !is_current {
                         continue;
                     }
+                    let px4 = self.flavor == Flavor::Px4;
                     match outcome {
                         Outcome::Acked => match (&mut self.job, self.zone_target) {
                             (Some(j), Some(target))
@@ -1185,6 +1281,15 @@ impl Vehicle {
                             {
                                 // Accepted is not arrived: LAND only once there.
                                 j.running = Running::Arrive { target, since: now };
+                            }
+                            // PX4: accepted is not in the mode (see `confirm_mode_step`).
+                            (Some(j), _)
+                                if px4 && matches!(j.steps.front(), Some((_, Step::Mode(_)))) =>
+                            {
+                                j.running = Running::ConfirmMode {
+                                    from: j.mode_from,
+                                    since: now,
+                                };
                             }
                             _ => self.step_done(),
                         },
@@ -2625,5 +2730,135 @@ mod tests {
         assert!(commands(&v.request_actions(s(1.1), &["hold".into()])).is_empty());
         let out = v.on_frame(s(3.0), &px4_heartbeat(4, 3)); // PX4 switched itself to Hold
         assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+    }
+
+    fn px4_ack(command: MavCmd, result: MavResult) -> Frame {
+        let mut f = px4_frame(Msg::COMMAND_ACK(COMMAND_ACK_DATA {
+            command,
+            result,
+            ..COMMAND_ACK_DATA::DEFAULT
+        }));
+        f.header.component_id = 1;
+        f
+    }
+
+    /// A PX4 vehicle in Hold with an action "go": AUTO, then LAND (to see when AUTO counts done).
+    fn px4_go() -> Vehicle {
+        let mut t = table();
+        t.actions.insert(
+            "go".into(),
+            vec![Step::Mode("AUTO".into()), Step::Mode("LAND".into())],
+        );
+        let mut v = Vehicle::new(VehicleConfig::default(), t, None);
+        px4_ready(&mut v, 0.0);
+        v.on_frame(s(0.5), &px4_heartbeat(4, 3));
+        v.take_records();
+        v
+    }
+
+    fn results(v: &mut Vehicle) -> Vec<String> {
+        v.take_records()
+            .iter()
+            .map(|r| format!("{} {}", r.command, r.result))
+            .collect()
+    }
+
+    // Seen on PX4 SITL: DO_SET_MODE AUTO ACCEPTED, then TEMPORARILY_REJECTED, vehicle in LOITER.
+    #[test]
+    fn px4_accepted_mode_counts_only_when_a_heartbeat_shows_it_and_is_sent_again_if_not() {
+        let mut v = px4_go();
+        let out = v.request_actions(s(1.0), &["go".into()]);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        let ok = MavResult::MAV_RESULT_ACCEPTED;
+        let out = v.on_frame(s(1.1), &px4_ack(MavCmd::MAV_CMD_DO_SET_MODE, ok));
+        assert!(
+            commands(&out).is_empty(),
+            "LAND only once AUTO shows: {out:?}"
+        );
+        for t in [2.0, 3.0, 4.0] {
+            assert!(commands(&v.on_frame(s(t), &px4_heartbeat(4, 3))).is_empty());
+        }
+        // 3 s after ACCEPTED, still in Hold: the command had no effect, send it again.
+        let out = v.tick(s(4.2));
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        let r = results(&mut v);
+        let pos = |p: &str| r.iter().position(|x| x.starts_with(p));
+        assert!(pos("SET_MODE AUTO ACCEPTED") < pos("SET_MODE AUTO NOT_CONFIRMED (still LOITER"));
+        assert!(pos("SET_MODE AUTO NOT_CONFIRMED").is_some(), "{r:?}");
+        v.on_frame(s(4.3), &px4_ack(MavCmd::MAV_CMD_DO_SET_MODE, ok));
+        // A heartbeat from before the acceptance does not count; the next one in AUTO does.
+        let out = v.on_frame(s(5.0), &px4_heartbeat(4, 4));
+        assert_eq!(
+            commands(&out),
+            vec![MavCmd::MAV_CMD_DO_SET_MODE],
+            "now LAND"
+        );
+        match &out[..] {
+            [Msg::COMMAND_LONG(c)] => assert_eq!((c.param2, c.param3), (4.0, 6.0), "AUTO.LAND"),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn px4_mode_that_never_shows_fails_after_the_attempts_and_another_mode_is_never_overridden() {
+        let ok = MavResult::MAV_RESULT_ACCEPTED;
+        let mut v = px4_go();
+        let mut sent = commands(&v.request_actions(s(1.0), &["go".into()])).len();
+        let mut t = 1.0;
+        for _ in 0..6 {
+            v.on_frame(s(t + 0.1), &px4_ack(MavCmd::MAV_CMD_DO_SET_MODE, ok));
+            v.on_frame(s(t + 1.0), &px4_heartbeat(4, 3));
+            sent += commands(&v.tick(s(t + 3.5))).len();
+            t += 3.5;
+        }
+        let r = results(&mut v);
+        assert_eq!(sent, 3, "max_mode_attempts = 3 in all: {r:?}");
+        assert!(
+            r.iter()
+                .any(|x| x
+                    == "SET_MODE AUTO FAILED (accepted 3 times, but the vehicle stays in LOITER)"),
+            "{r:?}"
+        );
+        assert_eq!(
+            r.last().map(String::as_str),
+            Some("SET_MODE LAND SKIPPED (earlier step failed)")
+        );
+
+        // The pilot switches to Position right after AUTO is accepted: never overridden.
+        let mut v = px4_go();
+        v.request_actions(s(1.0), &["go".into()]);
+        v.on_frame(s(1.1), &px4_ack(MavCmd::MAV_CMD_DO_SET_MODE, ok));
+        v.on_frame(s(2.0), &px4_heartbeat(3, 0)); // POSCTL
+        assert!(commands(&v.tick(s(4.5))).is_empty());
+        assert!(commands(&v.tick(s(9.0))).is_empty());
+        let r = results(&mut v);
+        assert!(
+            r.iter()
+                .any(|x| x.ends_with("went to POSHOLD, not AUTO: not overriding)")),
+            "{r:?}"
+        );
+    }
+
+    #[test]
+    fn ardupilot_accepted_mode_is_the_mode() {
+        // ArduPilot acknowledges DO_SET_MODE after set_mode() succeeded: no wait.
+        let mut t = table();
+        t.actions.insert(
+            "go".into(),
+            vec![Step::Mode("AUTO".into()), Step::Mode("LAND".into())],
+        );
+        let mut v = Vehicle::new(VehicleConfig::default(), t, None);
+        v.on_frame(s(0.0), &hb(5, true)); // LOITER
+        let out = v.request_actions(s(1.0), &["go".into()]);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        let out = v.on_frame(
+            s(1.1),
+            &ack(MavCmd::MAV_CMD_DO_SET_MODE, MavResult::MAV_RESULT_ACCEPTED),
+        );
+        assert_eq!(
+            commands(&out),
+            vec![MavCmd::MAV_CMD_DO_SET_MODE],
+            "LAND at once"
+        );
     }
 }

@@ -128,6 +128,9 @@ pub enum CommandOutcome {
     Timeout(Option<String>),
     /// `ARRIVED (where)`: the vehicle reached the landing zone.
     Arrived(String),
+    /// `NOT_CONFIRMED (why)`: accepted, but no HEARTBEAT showed the mode in time (PX4); sent
+    /// again while the vehicle stays in its earlier mode.
+    NotConfirmed(String),
     /// `FAILED` or `FAILED (why)`.
     Failed(Option<String>),
     /// Any other spelling, kept whole (an autopilot's other MAV_RESULT, a newer log's word).
@@ -151,6 +154,7 @@ impl fmt::Display for CommandOutcome {
             InProgress => f.write_str("IN_PROGRESS"),
             Pending => f.write_str("PENDING"),
             WaitingReady(why) => write!(f, "WAITING_READY ({why})"),
+            NotConfirmed(why) => write!(f, "NOT_CONFIRMED ({why})"),
             NotReady(why) => write!(f, "NOT_READY ({why})"),
             Already => f.write_str("ALREADY"),
             Skipped(why) => write!(f, "SKIPPED ({why})"),
@@ -203,6 +207,7 @@ impl CommandOutcome {
             ("UNSUPPORTED", None) => Unsupported,
             ("TIMEOUT", _) => Timeout(d()),
             ("ARRIVED", Some(_)) => Arrived(d()?),
+            ("NOT_CONFIRMED", Some(_)) => NotConfirmed(d()?),
             ("FAILED", _) => Failed(d()),
             _ => return None,
         })
@@ -689,6 +694,7 @@ mod tests {
             Just(Unsupported),
             proptest::option::of(text()).prop_map(Timeout),
             text().prop_map(Arrived),
+            text().prop_map(NotConfirmed),
             proptest::option::of(text()).prop_map(Failed),
             "COMMAND_[A-Z_]{1,12}".prop_map(Other),
         ]

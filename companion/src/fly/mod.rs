@@ -239,6 +239,8 @@ impl FlySetup {
             max_arm_attempts: self.link.max_arm_attempts,
             zone_radius_m: self.link.flight.zone_radius_m,
             zone_arrive_timeout: Duration::from_secs_f64(self.link.flight.zone_arrive_timeout_s),
+            mode_confirm: Duration::from_secs_f64(self.link.flight.mode_confirm_s),
+            max_mode_attempts: self.link.flight.max_mode_attempts,
             ..VehicleConfig::default()
         };
         Vehicle::new(cfg, self.actions.clone(), Some(self.route.clone()))

@@ -69,7 +69,8 @@ pub fn categorize(result: &CommandOutcome) -> Category {
     match result {
         // Arrived: the vehicle reached the landing zone the step flew it to (the step succeeded).
         Accepted | AcceptedVerified { .. } | Simulated | Arrived(_) => Category::Accepted,
-        Sent | Pending | InProgress | WaitingReady(_) => Category::InProgress,
+        // Not confirmed: sent again, the attempt that follows says how it ended.
+        Sent | Pending | InProgress | WaitingReady(_) | NotConfirmed(_) => Category::InProgress,
         Already => Category::Already,
         // Not sent on purpose: an earlier step failed, a newer action set replaced it, the link
         // was down, or commanding stopped (link loss, pilot takeover).
