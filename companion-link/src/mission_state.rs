@@ -19,7 +19,7 @@
 //! at altitude (spoofed or corrupt) neither starts the landing nor ends the flight.
 
 use super::actions::Route;
-use companion_core::mission::{MissionStates, TARGET_STATE};
+use companion_core::mission::{MissionStates, RouteRole};
 use companion_core::observations::Observations;
 
 /// Vehicle actions that end the flight.
@@ -90,7 +90,7 @@ impl MissionState {
             arrived_speed_mps: 1.0,
             tracking_time_limit_s: route.tracking_time_limit_s,
             search_time_limit_s: route.search_time_limit_s,
-            state: "base".into(),
+            state: states.route_state(RouteRole::OnGround).to_string(),
             flown: false,
             landing: false,
             finished: false,
@@ -194,38 +194,45 @@ impl MissionState {
             self.landing = true;
             self.finished = true;
         }
+        let route = self.states.route();
+        let named = |role: RouteRole| route.state(role).to_string();
         if self.landing {
-            self.state = "landing".into();
+            self.state = named(RouteRole::Landing);
             return &self.state;
         }
-        let states = &self.states;
-        let past = |s: &str| s == "wpf" || s == TARGET_STATE || states.is_tracking(s);
+        // Reached the last waypoint once: the rest of the flight is in the tracking area.
+        let past = route.is(RouteRole::LastWaypoint, &self.state)
+            || self.states.is_target_in_sight(&self.state);
         self.state = if !self.flown {
-            "base".into()
-        } else if past(&self.state)
+            named(RouteRole::OnGround)
+        } else if past
             || (seq.is_some_and(|s| s >= self.last_seq) && speed < self.arrived_speed_mps)
         {
             self.wpf_at.get_or_insert(clock);
             if detected {
                 self.tracking_since.get_or_insert(clock);
-                self.tracking.clone().unwrap_or_else(|| "target".into())
+                self.tracking
+                    .clone()
+                    .unwrap_or_else(|| named(RouteRole::TargetFound))
             } else {
                 self.tracking = None;
-                "wpf".into()
+                named(RouteRole::LastWaypoint)
             }
         } else if seq.is_some_and(|s| s > self.wp1_seq) {
-            "wpi".into()
+            named(RouteRole::BetweenWaypoints)
         } else {
-            "wp1".into()
+            named(RouteRole::FirstLeg)
         };
         &self.state
     }
 
     /// Waypoints not yet reached (the `waypoints_remaining` observation).
     pub fn waypoints_remaining(&self, obs: &Observations) -> f64 {
-        match self.state.as_str() {
-            "base" | "wp1" => (self.last_seq - self.wp1_seq + 1) as f64,
-            "wpi" => {
+        match self.states.route().role_of(&self.state) {
+            Some(RouteRole::OnGround | RouteRole::FirstLeg) => {
+                (self.last_seq - self.wp1_seq + 1) as f64
+            }
+            Some(RouteRole::BetweenWaypoints) => {
                 let seq = obs.get("mission_seq").unwrap_or(0.0) as u16;
                 (self.last_seq + 1).saturating_sub(seq.max(self.wp1_seq)) as f64
             }
