@@ -702,6 +702,107 @@ mod tests {
         assert_eq!(m.project("navigation", &obs("wpi", &[])), "wpi");
     }
 
+    /// The shipped params with mission.toml's `[route_states]` table replaced by `table` (TOML
+    /// lines; empty: no table).
+    fn with_route_states(table: &str) -> crate::spec::ParamsFiles {
+        let mut files = crate::shipped::params();
+        let path = files.dir().join("mission.toml");
+        let text = files.text(&path).unwrap().to_string();
+        let start = text.find("[route_states]\n").unwrap();
+        let end = start + text[start..].find("\n\n").unwrap();
+        let replaced = format!("{}{table}{}", &text[..start], &text[end..]);
+        files.insert(path, replaced);
+        files
+    }
+
+    const SHIPPED_ROUTE: &str = "[route_states]\non_ground = \"base\"\nfirst_leg = \"wp1\"\n\
+        between_waypoints = \"wpi\"\nlast_waypoint = \"wpf\"\ntarget_found = \"target\"\n\
+        landing = \"landing\"";
+
+    #[test]
+    fn shipped_route_states_name_each_point_of_the_route() {
+        let states = MissionStates::load(&crate::shipped::params()).unwrap();
+        let route = states.route();
+        let names: Vec<&str> = RouteRole::ALL.iter().map(|&r| route.state(r)).collect();
+        assert_eq!(
+            names,
+            ["base", "wp1", "wpi", "wpf", "target", "landing"],
+            "the route of the paper's Figure 1, in flight order"
+        );
+        assert_eq!(route.role_of("wpf"), Some(RouteRole::LastWaypoint));
+        assert_eq!(route.role_of("v3"), None);
+        assert!(states.is_target_in_sight("target") && states.is_target_in_sight("v3"));
+        assert!(!states.is_target_in_sight("wpf"));
+        // The table rebuilt from SHIPPED_ROUTE is the shipped one (the helper replaces it whole).
+        let same = MissionStates::load(&with_route_states(SHIPPED_ROUTE)).unwrap();
+        assert_eq!(same, states);
+        // The rule of old logs flies the same route.
+        assert_eq!(MissionStates::undeclared().route(), route);
+    }
+
+    #[test]
+    fn route_states_follow_the_names_the_params_give() {
+        // `wp1` and `wpi` swap roles: the route is read from the table, not from the names.
+        let files = with_route_states(
+            &SHIPPED_ROUTE
+                .replace("\"wp1\"", "\"x\"")
+                .replace("\"wpi\"", "\"wp1\"")
+                .replace("\"x\"", "\"wpi\""),
+        );
+        let states = MissionStates::load(&files).unwrap();
+        assert_eq!(states.route_state(RouteRole::FirstLeg), "wpi");
+        assert_eq!(states.route_state(RouteRole::BetweenWaypoints), "wp1");
+        assert!(states.is_route(RouteRole::FirstLeg, "wpi"));
+    }
+
+    fn route_error(table: &str) -> SpecError {
+        MissionStates::load(&with_route_states(table)).unwrap_err()
+    }
+
+    #[test]
+    fn a_missing_route_role_is_refused_with_its_entry() {
+        let e = route_error(&SHIPPED_ROUTE.replace("last_waypoint = \"wpf\"\n", ""));
+        assert!(e.file.ends_with("mission.toml"), "{e}");
+        assert_eq!(e.entry, "route_states.last_waypoint");
+        assert!(e.reason.contains("missing"), "{e}");
+        // No table at all: the first role is the one reported.
+        let e = route_error("");
+        assert_eq!(e.entry, "route_states.on_ground");
+    }
+
+    #[test]
+    fn a_route_role_naming_an_undeclared_state_is_refused() {
+        let e = route_error(&SHIPPED_ROUTE.replace("\"target\"", "\"tgt\""));
+        assert_eq!(e.entry, "route_states.target_found");
+        assert!(e.reason.contains("`tgt` is not a declared state"), "{e}");
+    }
+
+    #[test]
+    fn a_state_playing_two_route_roles_is_refused() {
+        let e = route_error(&SHIPPED_ROUTE.replace("\"wp1\"", "\"wpi\""));
+        // `wpi` plays first_leg first, then between_waypoints again.
+        assert_eq!(e.entry, "route_states.between_waypoints");
+        assert!(
+            e.reason
+                .contains("`wpi` already plays the route role `first_leg`"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn an_unknown_route_role_is_refused() {
+        let e = route_error(&format!("{SHIPPED_ROUTE}\nhovering = \"wpf\""));
+        assert_eq!(e.entry, "route_states.hovering");
+        assert!(e.reason.contains("not a route role"), "{e}");
+    }
+
+    #[test]
+    fn a_tracking_state_cannot_play_a_route_role() {
+        let e = route_error(&SHIPPED_ROUTE.replace("\"target\"", "\"v0\""));
+        assert_eq!(e.entry, "route_states.target_found");
+        assert!(e.reason.contains("`v0` is a `tracking` state"), "{e}");
+    }
+
     #[test]
     fn action_catalogue_rejects_duplicates_and_half_variants() {
         let mut files = crate::spec::ParamsFiles::new("p");

@@ -484,6 +484,79 @@ mod tests {
         assert!(!m.finished());
     }
 
+    /// The shipped mission states with every route state (and its phase) renamed `r_NAME`.
+    fn renamed_states() -> MissionStates {
+        let dir = crate::test_support::default_params_dir();
+        let mut text = std::fs::read_to_string(dir.join("mission.toml")).unwrap();
+        for x in ["base", "wp1", "wpi", "wpf", "target", "landing"] {
+            text = text
+                .replace(&format!("\"{x}\""), &format!("\"r_{x}\""))
+                .replace(&format!(" {x} = "), &format!(" r_{x} = "));
+        }
+        let mut files = companion_core::spec::ParamsFiles::new(&dir);
+        files.insert(dir.join("mission.toml"), text);
+        files.insert(
+            dir.join("actions.toml"),
+            std::fs::read_to_string(dir.join("actions.toml")).unwrap(),
+        );
+        MissionStates::load(&files).unwrap()
+    }
+
+    #[test]
+    fn the_estimator_names_the_route_states_the_params_give() {
+        let renamed = renamed_states();
+        assert!(!renamed.has_state("wpf") && renamed.has_state("r_wpf"));
+        let (mut old, mut new) = (
+            MissionState::new(&route(), 10.0, states()),
+            MissionState::new(&route(), 10.0, renamed),
+        );
+        assert_eq!((old.state(), new.state()), ("base", "r_base"));
+        let auto = Extra {
+            mode: Some("AUTO"),
+            ..Extra::default()
+        };
+        let fly = |t: f64, seq: f64, spd: f64, det: f64| {
+            obs(
+                t,
+                &[
+                    ("armed", 1.0),
+                    ("altitude_m", 20.0),
+                    ("mission_seq", seq),
+                    ("groundspeed_mps", spd),
+                    ("target_detected", det),
+                ],
+            )
+        };
+        // (snapshot, plan after it, the shipped state expected)
+        let flight: Vec<(Observations, Vec<String>, &str)> = vec![
+            (obs(0.0, &[("armed", 0.0)]), vec![], "base"),
+            (fly(1.0, 1.0, 0.0, 0.0), vec![], "wp1"),
+            (fly(2.0, 3.0, 5.0, 0.0), vec![], "wpi"),
+            (fly(3.0, 5.0, 0.2, 0.0), vec![], "wpf"),
+            (fly(4.0, 5.0, 0.2, 1.0), vec!["track_v3".into()], "target"),
+            (fly(5.0, 5.0, 0.2, 1.0), vec![], "v3"),
+            (fly(6.0, 5.0, 0.2, 1.0), vec!["land".into()], "target"),
+            (fly(7.0, 5.0, 0.2, 1.0), vec![], "landing"),
+        ];
+        for (o, plan, expected) in flight {
+            let (a, b) = (
+                old.update(&o, &auto).to_string(),
+                new.update(&o, &auto).to_string(),
+            );
+            assert_eq!(a, expected, "shipped names at t={}", o.time_s);
+            let want = if expected.starts_with('v') {
+                expected.to_string()
+            } else {
+                format!("r_{expected}")
+            };
+            assert_eq!(b, want, "renamed at t={}", o.time_s);
+            assert_eq!(old.waypoints_remaining(&o), new.waypoints_remaining(&o));
+            old.after_plan(&plan);
+            new.after_plan(&plan);
+        }
+        assert_eq!(new.landing_action(), Some("land"));
+    }
+
     #[test]
     fn precedence_picks_one_motion() {
         let p: Vec<String> = ["avoid_obstacle", "return_to_base", "follow_trajectory"]
