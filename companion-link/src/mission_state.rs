@@ -1,5 +1,7 @@
 //! The shared mission state (`base`, `wp1`, `wpi`, `wpf`, `target`, `v0`..`v5`, `landing`) as
-//! the fly shell observes it, for `Observations.state`.
+//! the fly shell observes it, for `Observations.state`. Those are the shipped names: the estimator
+//! reports whichever states params/mission.toml `[route_states]` names for each point of the route
+//! (`RouteRole`), and the tracking states the mission declares.
 //!
 //! Why in the shell: the decision core is pure and learns where the mission is only from its
 //! observations; the simulation world computes the state from its own bookkeeping
