@@ -108,6 +108,7 @@ impl Model {
         let name_refs: Vec<&str> = names.iter().map(String::as_str).collect();
         let mdps = MissionMdps::load(files, &name_refs)?;
         crate::probabilities::check_vocabulary(params, &health, &mdps, &mission)?;
+        crate::vocabulary::check_actions(params, &actions, &mdps)?;
         let ids: Vec<&str> = actions.actions.iter().map(|a| a.id.as_str()).collect();
         let conflicts = BehaviourConflicts::load(files, &params.join("policies.toml"), &ids)?;
         let resources = ResourceSpec::load(files)?;
@@ -125,15 +126,6 @@ impl Model {
             resources.policy(p)?;
         }
         let file = params.join("actions.toml");
-        for a in mdps.primitive_actions() {
-            if actions.get(&a).is_none() {
-                return Err(SpecError::new(
-                    &file,
-                    "action",
-                    format!("MDP action `{a}` is not in the catalogue"),
-                ));
-            }
-        }
         for (i, a) in actions.actions.iter().enumerate() {
             if let (Some(app), Some(v)) = (&a.app, &a.version)
                 && !resources.catalogue.has_version(app, v)
