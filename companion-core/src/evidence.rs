@@ -38,12 +38,22 @@ pub const MAX_OBSERVATIONS: usize = u16::MAX as usize;
 
 /// Observations the decision core reads itself, besides the evidence mapping: the platform
 /// model's inputs (failed tiles, CPU load from other processes), reported by the shell.
-pub const CORE_READS: [&str; 2] = ["failed_tiles", "external_cpu_load"];
+pub const CORE_READS: [&str; 2] = [FAILED_TILES, EXTERNAL_CPU_LOAD];
+/// Tiles out of service (count), an input of the core's platform model.
+pub const FAILED_TILES: &str = "failed_tiles";
+/// CPU share taken by processes outside the companion, an input of the core's platform model.
+pub const EXTERNAL_CPU_LOAD: &str = "external_cpu_load";
 
 /// Observations the decision core computes itself from its platform model (the room left beside
 /// the other applications, the rate the assessed application needs) and puts in the evidence in
 /// place of the snapshot's values.
-pub const CORE_COMPUTES: [&str; 3] = ["free_tiles", "cpu_headroom", "tracking_fps"];
+pub const CORE_COMPUTES: [&str; 3] = [FREE_TILES, CPU_HEADROOM, TRACKING_FPS];
+/// Healthy tiles left beside the other applications (count), computed by the core.
+pub const FREE_TILES: &str = "free_tiles";
+/// CPU share left beside the other applications and external load, computed by the core.
+pub const CPU_HEADROOM: &str = "cpu_headroom";
+/// Frame rate the assessed application needs now, computed by the core.
+pub const TRACKING_FPS: &str = "tracking_fps";
 
 /// One observation and how it discretises.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
