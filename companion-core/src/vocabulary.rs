@@ -81,7 +81,7 @@ pub fn named_actions(actions: &ActionCatalogue, mdps: &MissionMdps) -> Vec<Named
             proposed_by: mdps
                 .all()
                 .iter()
-                .filter(|m| (0..m.n_actions()).any(|k| m.primitives(k).iter().any(|p| *p == a.id)))
+                .filter(|m| (0..m.n_actions()).any(|k| m.primitives(k).contains(&a.id)))
                 .map(|m| m.name().to_string())
                 .collect(),
         })
