@@ -108,6 +108,7 @@ impl Model {
         let name_refs: Vec<&str> = names.iter().map(String::as_str).collect();
         let mdps = MissionMdps::load(files, &name_refs)?;
         crate::probabilities::check_vocabulary(params, &health, &mdps, &mission)?;
+        crate::vocabulary::check_actions(params, &actions, &mdps)?;
         let ids: Vec<&str> = actions.actions.iter().map(|a| a.id.as_str()).collect();
         let conflicts = BehaviourConflicts::load(files, &params.join("policies.toml"), &ids)?;
         let resources = ResourceSpec::load(files)?;
@@ -125,15 +126,6 @@ impl Model {
             resources.policy(p)?;
         }
         let file = params.join("actions.toml");
-        for a in mdps.primitive_actions() {
-            if actions.get(&a).is_none() {
-                return Err(SpecError::new(
-                    &file,
-                    "action",
-                    format!("MDP action `{a}` is not in the catalogue"),
-                ));
-            }
-        }
         for (i, a) in actions.actions.iter().enumerate() {
             if let (Some(app), Some(v)) = (&a.app, &a.version)
                 && !resources.catalogue.has_version(app, v)
@@ -457,13 +449,19 @@ impl<'m> Core<'m> {
 
     /// Faults and monitor readings the shell reports, applied to the platform model.
     fn update_platform(&mut self, obs: &Observations) {
-        let failed = obs.get("failed_tiles").unwrap_or(0.0).max(0.0) as usize;
+        let failed = obs
+            .get(crate::evidence::FAILED_TILES)
+            .unwrap_or(0.0)
+            .max(0.0) as usize;
         // The last `failed` tiles are out of service (which ones fail does not matter to the model).
         let n = self.platform.tiles.len();
         for (i, t) in self.platform.tiles.iter_mut().enumerate() {
             t.failed = i >= n.saturating_sub(failed);
         }
-        self.platform.external_cpu_load = obs.get("external_cpu_load").unwrap_or(0.0).max(0.0);
+        self.platform.external_cpu_load = obs
+            .get(crate::evidence::EXTERNAL_CPU_LOAD)
+            .unwrap_or(0.0)
+            .max(0.0);
     }
 
     /// The application the resource manager's activation nodes assess (tracking).
@@ -506,9 +504,9 @@ impl<'m> Core<'m> {
             - self.platform.external_cpu_load
             - self.others_cpu;
         [
-            ("free_tiles", f64::from(free)),
-            ("cpu_headroom", headroom.max(0.0)),
-            ("tracking_fps", self.required_fps(app, obs)),
+            (crate::evidence::FREE_TILES, f64::from(free)),
+            (crate::evidence::CPU_HEADROOM, headroom.max(0.0)),
+            (crate::evidence::TRACKING_FPS, self.required_fps(app, obs)),
         ]
     }
 
@@ -720,7 +718,10 @@ impl<'m> Core<'m> {
                 self.failed_resources.push(resource.clone());
             }
         }
-        let failed_tiles = obs.get("failed_tiles").unwrap_or(0.0).max(0.0) as usize;
+        let failed_tiles = obs
+            .get(crate::evidence::FAILED_TILES)
+            .unwrap_or(0.0)
+            .max(0.0) as usize;
         let n_tiles = self.platform.tiles.len();
         let tile_names = (0..failed_tiles.min(n_tiles)).map(|k| {
             g.spec

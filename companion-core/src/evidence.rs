@@ -2,6 +2,11 @@
 //! (params/observations.toml). A value `v` maps to `states[i]` where `i` counts the thresholds
 //! `t <= v` (a value on a threshold goes to the upper state). A missing or non-finite value puts
 //! no evidence on its node.
+//!
+//! Observation names are interned at load: each observation of the file gets an
+//! [`ObservationId`] (its position in the file), and the per-cycle evidence path works on ids
+//! (the caller's computed values come as ids, resolved once; the snapshot is read in one ordered
+//! pass instead of one lookup per name).
 
 use crate::observations::Observations;
 use crate::spec::{SpecError, read_toml};
@@ -15,6 +20,40 @@ struct ObservationsFile {
     #[serde(default)]
     observation: Vec<ObservationSpec>,
 }
+
+/// An observation of params/observations.toml, interned at load: its position in
+/// [`ObservationMap::observations`]. Only a map's own [`ObservationMap::id`] makes one.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct ObservationId(u16);
+
+impl ObservationId {
+    /// Position of the observation in its map's `observations`.
+    pub fn index(self) -> usize {
+        usize::from(self.0)
+    }
+}
+
+/// Most observations params/observations.toml may declare (ids are `u16`).
+pub const MAX_OBSERVATIONS: usize = u16::MAX as usize;
+
+/// Observations the decision core reads itself, besides the evidence mapping: the platform
+/// model's inputs (failed tiles, CPU load from other processes), reported by the shell.
+pub const CORE_READS: [&str; 2] = [FAILED_TILES, EXTERNAL_CPU_LOAD];
+/// Tiles out of service (count), an input of the core's platform model.
+pub const FAILED_TILES: &str = "failed_tiles";
+/// CPU share taken by processes outside the companion, an input of the core's platform model.
+pub const EXTERNAL_CPU_LOAD: &str = "external_cpu_load";
+
+/// Observations the decision core computes itself from its platform model (the room left beside
+/// the other applications, the rate the assessed application needs) and puts in the evidence in
+/// place of the snapshot's values.
+pub const CORE_COMPUTES: [&str; 3] = [FREE_TILES, CPU_HEADROOM, TRACKING_FPS];
+/// Healthy tiles left beside the other applications (count), computed by the core.
+pub const FREE_TILES: &str = "free_tiles";
+/// CPU share left beside the other applications and external load, computed by the core.
+pub const CPU_HEADROOM: &str = "cpu_headroom";
+/// Frame rate the assessed application needs now, computed by the core.
+pub const TRACKING_FPS: &str = "tracking_fps";
 
 /// One observation and how it discretises.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -52,8 +91,10 @@ impl ObservationSpec {
 pub struct ObservationMap {
     /// File the mapping was read from (params/observations.toml).
     pub file: PathBuf,
-    /// Every observation mapped to evidence, in file order.
+    /// Every observation mapped to evidence, in file order; an [`ObservationId`] indexes it.
     pub observations: Vec<ObservationSpec>,
+    /// The ids sorted by name: name lookups at load, and the ordered pass over a snapshot.
+    by_name: Vec<ObservationId>,
 }
 
 impl ObservationMap {
@@ -73,6 +114,16 @@ impl ObservationMap {
     /// Validate: unique names, one observation per node, thresholds strictly increasing and
     /// finite, one more state than thresholds.
     pub fn new(file: &Path, observations: Vec<ObservationSpec>) -> Result<Self, SpecError> {
+        if observations.len() > MAX_OBSERVATIONS {
+            return Err(SpecError::new(
+                file,
+                "observation",
+                format!(
+                    "{} observations: at most {MAX_OBSERVATIONS}",
+                    observations.len()
+                ),
+            ));
+        }
         let mut names = BTreeMap::new();
         let mut nodes = BTreeMap::new();
         for (i, o) in observations.iter().enumerate() {
@@ -120,15 +171,34 @@ impl ObservationMap {
                 ));
             }
         }
+        // `names` is sorted by name and holds each index once (duplicates were refused above).
+        let by_name = names
+            .into_values()
+            .map(|i| ObservationId(i as u16))
+            .collect();
         Ok(Self {
             file: file.to_path_buf(),
             observations,
+            by_name,
         })
+    }
+
+    /// The id of the observation named `name`, if the file declares it.
+    pub fn id(&self, name: &str) -> Option<ObservationId> {
+        self.by_name
+            .binary_search_by(|id| self.observations[id.index()].name.as_str().cmp(name))
+            .ok()
+            .map(|k| self.by_name[k])
+    }
+
+    /// The observation an id of this map names.
+    pub fn spec(&self, id: ObservationId) -> &ObservationSpec {
+        &self.observations[id.index()]
     }
 
     /// The mapping of the observation named `name`.
     pub fn get(&self, name: &str) -> Option<&ObservationSpec> {
-        self.observations.iter().find(|o| o.name == name)
+        self.id(name).map(|id| self.spec(id))
     }
 
     /// Evidence (node -> state) for every observation present in the snapshot.
@@ -146,45 +216,158 @@ impl ObservationMap {
     }
 
     /// As [`ObservationMap::evidence_into`], with `extra` (name, value) pairs taking the place
-    /// of the snapshot's values of those names (values the caller computes itself).
+    /// of the snapshot's values of those names (values the caller computes itself). Names the
+    /// file does not declare are ignored.
     pub fn evidence_with_into(
         &self,
         obs: &Observations,
         extra: &[(&str, f64)],
         out: &mut BTreeMap<String, String>,
     ) {
-        let value = |name: &str| {
-            extra
-                .iter()
-                .find(|(n, _)| *n == name)
-                .map(|&(_, v)| v)
-                .or_else(|| obs.get(name))
-        };
+        // Resolved once per call; a caller passes a handful (the core's three).
+        let mut ids = [(ObservationId(0), 0.0); 8];
         let mut n = 0;
-        let mut same = true;
-        for o in &self.observations {
-            if let Some(s) = value(&o.name).and_then(|v| o.state(v)) {
-                n += 1;
-                match out.get_mut(o.node.as_str()) {
-                    Some(v) => {
-                        v.clear();
-                        v.push_str(s);
-                    }
-                    None => {
-                        same = false;
-                        break;
-                    }
+        for &(name, v) in extra {
+            if let Some(id) = self.id(name) {
+                if n == ids.len() {
+                    // More than fit on the stack: the slow path, same result.
+                    let all: Vec<(ObservationId, f64)> = extra
+                        .iter()
+                        .filter_map(|&(name, v)| Some((self.id(name)?, v)))
+                        .collect();
+                    return self.evidence_with_ids_into(obs, &all, out);
                 }
+                ids[n] = (id, v);
+                n += 1;
             }
         }
+        self.evidence_with_ids_into(obs, &ids[..n], out)
+    }
+
+    /// The values of every declared observation this cycle, by id: `extra` first (the first
+    /// entry of an id wins), else the snapshot's, read in one pass over both sorted lists.
+    fn values_by_id(
+        &self,
+        obs: &Observations,
+        extra: &[(ObservationId, f64)],
+        mut f: impl FnMut(ObservationId, f64),
+    ) {
+        let mut snapshot = obs.values.iter().peekable();
+        for &id in &self.by_name {
+            let name = self.observations[id.index()].name.as_str();
+            let mut from_snapshot = None;
+            while let Some((k, v)) = snapshot.peek() {
+                match k.as_str().cmp(name) {
+                    std::cmp::Ordering::Less => {
+                        snapshot.next();
+                    }
+                    std::cmp::Ordering::Equal => {
+                        from_snapshot = Some(**v);
+                        break;
+                    }
+                    std::cmp::Ordering::Greater => break,
+                }
+            }
+            let value = extra
+                .iter()
+                .find(|(x, _)| *x == id)
+                .map(|&(_, v)| v)
+                .or(from_snapshot);
+            if let Some(v) = value {
+                f(id, v);
+            }
+        }
+    }
+
+    /// As [`ObservationMap::evidence_with_into`], with the caller's values given by id.
+    pub fn evidence_with_ids_into(
+        &self,
+        obs: &Observations,
+        extra: &[(ObservationId, f64)],
+        out: &mut BTreeMap<String, String>,
+    ) {
+        let mut n = 0;
+        let mut same = true;
+        self.values_by_id(obs, extra, |id, v| {
+            let o = self.spec(id);
+            if !same {
+                return;
+            }
+            if let Some(s) = o.state(v) {
+                n += 1;
+                match out.get_mut(o.node.as_str()) {
+                    Some(e) => {
+                        e.clear();
+                        e.push_str(s);
+                    }
+                    None => same = false,
+                }
+            }
+        });
         if same && n == out.len() {
             return;
         }
         out.clear();
-        for o in &self.observations {
-            if let Some(s) = value(&o.name).and_then(|v| o.state(v)) {
+        self.values_by_id(obs, extra, |id, v| {
+            let o = self.spec(id);
+            if let Some(s) = o.state(v) {
                 out.insert(o.node.clone(), s.to_string());
             }
+        });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn map() -> ObservationMap {
+        let files = crate::shipped::params();
+        ObservationMap::load(&files, &files.dir().join("observations.toml")).unwrap()
+    }
+
+    #[test]
+    fn observation_names_are_interned_in_file_order_and_found_by_name() {
+        let m = map();
+        for (i, o) in m.observations.iter().enumerate() {
+            let id = m.id(&o.name).unwrap();
+            assert_eq!(id.index(), i, "{}", o.name);
+            assert_eq!(m.spec(id).name, o.name);
         }
+        assert_eq!(m.id("no_such_observation"), None);
+        assert_eq!(m.get("wind_mps").unwrap().node, "A_wind");
+    }
+
+    #[test]
+    fn evidence_reads_the_snapshot_and_the_callers_values_by_id() {
+        let m = map();
+        let mut obs = Observations::default();
+        obs.set("wind_mps", 12.0);
+        obs.set("aaa_unknown", 1.0);
+        obs.set("zzz_unknown", 1.0);
+        obs.set("vibration_mps2", 3.0);
+        obs.set("free_tiles", 4.0);
+        let mut out = BTreeMap::new();
+        // The caller's value replaces the snapshot's; an undeclared name is ignored.
+        m.evidence_with_into(&obs, &[("free_tiles", 0.0), ("nothing", 1.0)], &mut out);
+        let want: BTreeMap<String, String> = [
+            ("A_wind", "strong"),
+            ("A_vibration", "low"),
+            ("A_free_tiles", "0"),
+        ]
+        .into_iter()
+        .map(|(a, b)| (a.to_string(), b.to_string()))
+        .collect();
+        assert_eq!(out, want);
+        // Again into the same map, with a node gone: exactly the new evidence.
+        obs.values.remove("wind_mps");
+        m.evidence_with_into(&obs, &[("free_tiles", 0.0)], &mut out);
+        assert_eq!(out.len(), 2);
+        assert!(!out.contains_key("A_wind"));
+        // More caller values than the stack holds: same result.
+        let many: Vec<(&str, f64)> = std::iter::repeat_n(("free_tiles", 0.0), 12).collect();
+        let mut again = BTreeMap::new();
+        m.evidence_with_into(&obs, &many, &mut again);
+        assert_eq!(again, out);
     }
 }

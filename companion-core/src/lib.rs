@@ -38,6 +38,7 @@ pub mod report;
 pub mod resources;
 pub mod spec;
 pub mod tracking;
+pub mod vocabulary;
 
 /// The shipped params/ for the unit tests, compiled in (this crate reads no files). The
 /// `companion` crate's `shipped_params_are_all_compiled_into_the_core_tests` test keeps this list

@@ -67,6 +67,10 @@ struct RawAction {
     steps: Vec<RawStep>,
     #[serde(default)]
     description: String,
+    /// A shell-only entry: the fly shell flies it in place of this action (a resume of an
+    /// action already begun); no MDP proposes it.
+    #[serde(default)]
+    flown_for: Option<String>,
 }
 
 /// Vehicle action name -> steps.
@@ -74,6 +78,8 @@ struct RawAction {
 pub struct ActionTable {
     /// Every vehicle action of params/commands.toml and its steps, in order.
     pub actions: BTreeMap<String, Vec<Step>>,
+    /// Shell-only entries (`flown_for = "ACTION"`): entry name -> the action it is flown for.
+    pub flown_for: BTreeMap<String, String>,
 }
 
 fn parse_cmd(name: &str) -> Option<MavCmd> {
@@ -93,8 +99,12 @@ impl ActionTable {
             ));
         }
         let mut actions = BTreeMap::new();
+        let mut flown_for = BTreeMap::new();
         for (name, a) in raw {
             let _ = a.description;
+            if let Some(f) = a.flown_for {
+                flown_for.insert(name.clone(), f);
+            }
             if a.steps.is_empty() {
                 return Err(SpecError::new(
                     path,
@@ -181,7 +191,16 @@ impl ActionTable {
             }
             actions.insert(name, steps);
         }
-        Ok(Self { actions })
+        for (name, f) in &flown_for {
+            if !actions.contains_key(f) || flown_for.contains_key(f) {
+                return Err(SpecError::new(
+                    path,
+                    format!("{name}.flown_for"),
+                    format!("`{f}` is not an entry of this file that an MDP action maps to"),
+                ));
+            }
+        }
+        Ok(Self { actions, flown_for })
     }
 }
 

@@ -112,6 +112,34 @@ pub const DEFAULT_ONBOARD: [(&str, &str); 6] = [
     ("free_tiles", "free_tiles"),
 ];
 
+/// Observations the telemetry produces from the autopilot's own messages (besides the onboard
+/// monitors' names, params/link.toml `[telemetry.onboard]`): what `fly` can observe, checked
+/// against what params/observations.toml declares. A test keeps it in step with `on_message`.
+pub const TELEMETRY_OBSERVATIONS: [&str; 22] = [
+    "battery_pct",
+    "battery_v",
+    "energy_consumed_j",
+    "consumed_mah",
+    "lat_deg",
+    "lon_deg",
+    "altitude_m",
+    "groundspeed_mps",
+    "distance_home_m",
+    "gps_fix",
+    "gps_sats",
+    "vibration_mps2",
+    "vibration_clipping",
+    "wind_mps",
+    "wind_dir_deg",
+    "mission_seq",
+    "target_detected",
+    "target_x",
+    "target_y",
+    "vehicle_time_s",
+    "obstacle_m",
+    "armed",
+];
+
 /// Most unlisted onboard names a params file may allow (each is one observation per record).
 pub const MAX_ONBOARD_NAMES_LIMIT: usize = 1024;
 
@@ -578,6 +606,62 @@ mod tests {
             value: v,
             name: n.into(),
         })
+    }
+
+    #[test]
+    fn telemetry_observations_lists_every_name_the_autopilot_messages_produce() {
+        let mut t = Telemetry::new(TelemetryConfig {
+            onboard: BTreeMap::new(),
+            ..TelemetryConfig::default()
+        });
+        let msgs = [
+            Msg::HOME_POSITION(HOME_POSITION_DATA {
+                latitude: 473_977_420,
+                longitude: 85_455_940,
+                ..HOME_POSITION_DATA::DEFAULT
+            }),
+            Msg::SYS_STATUS(SYS_STATUS_DATA {
+                battery_remaining: 80,
+                voltage_battery: 16_000,
+                ..SYS_STATUS_DATA::DEFAULT
+            }),
+            Msg::BATTERY_STATUS(BATTERY_STATUS_DATA {
+                battery_remaining: 80,
+                energy_consumed: 10,
+                current_consumed: 10,
+                ..BATTERY_STATUS_DATA::DEFAULT
+            }),
+            Msg::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
+                lat: 473_977_420,
+                lon: 85_455_940,
+                ..GLOBAL_POSITION_INT_DATA::DEFAULT
+            }),
+            Msg::GPS_RAW_INT(GPS_RAW_INT_DATA {
+                satellites_visible: 10,
+                ..GPS_RAW_INT_DATA::DEFAULT
+            }),
+            Msg::VIBRATION(VIBRATION_DATA::DEFAULT),
+            Msg::WIND(WIND_DATA::DEFAULT),
+            Msg::MISSION_CURRENT(MISSION_CURRENT_DATA::DEFAULT),
+            Msg::CAMERA_TRACKING_IMAGE_STATUS(CAMERA_TRACKING_IMAGE_STATUS_DATA {
+                tracking_status: CameraTrackingStatusFlags::CAMERA_TRACKING_STATUS_FLAGS_ACTIVE,
+                ..CAMERA_TRACKING_IMAGE_STATUS_DATA::DEFAULT
+            }),
+            Msg::SYSTEM_TIME(SYSTEM_TIME_DATA::DEFAULT),
+            dist(0, 1200, MavSensorOrientation::MAV_SENSOR_ROTATION_NONE),
+        ];
+        for m in &msgs {
+            t.on_message(s(0.0), m, name);
+        }
+        let mut produced: Vec<String> = t.observations(s(0.0), vec![]).values.into_keys().collect();
+        // BATTERY_STATUS's copy of the percentage is internal (removed from the snapshot).
+        produced.sort();
+        let mut listed: Vec<String> = TELEMETRY_OBSERVATIONS
+            .iter()
+            .map(|n| n.to_string())
+            .collect();
+        listed.sort();
+        assert_eq!(produced, listed);
     }
 
     #[test]

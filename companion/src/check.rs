@@ -35,6 +35,8 @@ pub struct CheckArgs {
 pub struct CheckContext<'a> {
     pub params: &'a companion_core::spec::ParamsFiles,
     pub args: &'a CheckArgs,
+    /// Everything loaded and cross-checked from `params`.
+    pub loaded: &'a crate::params::Params,
 }
 
 /// A section: its JSON value and its human text.
@@ -45,6 +47,8 @@ pub const SECTIONS: &[(&str, SectionFn)] = &[
     ("health", health_section),
     ("mdps", mdp_section),
     ("probabilities", probabilities_section),
+    ("observations", observations_section),
+    ("actions", actions_section),
     ("platform", platform_section),
     ("variants", variants_section),
     ("resource_policies", resource_policies_section),
@@ -142,6 +146,61 @@ pub fn probabilities_section(cx: &CheckContext) -> anyhow::Result<(Value, String
     Ok((serde_json::to_value(&all)?, text))
 }
 
+/// Every observation something reads, with its BN node, who produces it (world, scenarios, fly,
+/// core) and who reads it, as the load checks them.
+pub fn observations_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
+    use std::fmt::Write;
+    let all = crate::vocabulary::named_observations(cx.loaded)?;
+    let roles = |rs: &[crate::vocabulary::Role]| {
+        rs.iter()
+            .map(|r| format!("{} {}", r.kind, r.name))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let mut text = String::from("\nObservations (producers -> readers):\n");
+    for o in &all {
+        let _ = writeln!(
+            text,
+            "  {:<20} {:<22} {} -> {}",
+            o.name,
+            o.node.as_deref().unwrap_or("-"),
+            roles(&o.producers),
+            roles(&o.consumers)
+        );
+    }
+    Ok((serde_json::to_value(&all)?, text))
+}
+
+/// Every primitive action with the MDPs that propose it, its application variant and whether fly
+/// maps it to MAVLink steps (params/commands.toml).
+pub fn actions_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
+    use std::fmt::Write;
+    let all = crate::vocabulary::actions(cx.loaded);
+    let mut text = String::from("\nActions (proposed by; application or MAVLink steps):\n");
+    for a in &all {
+        let runs = match &a.action.application {
+            Some(app) => format!("{}/{}", app.app, app.version),
+            None if a.vehicle_steps => "steps".to_string(),
+            None => "-".to_string(),
+        };
+        let _ = writeln!(
+            text,
+            "  {:<24} {:<4} {:<11} {:<20} {}{}",
+            a.action.name,
+            a.action.paper,
+            a.action.kind,
+            runs,
+            a.action.proposed_by.join(", "),
+            if a.flown_as.is_empty() {
+                String::new()
+            } else {
+                format!(" (also flown as {})", a.flown_as.join(", "))
+            }
+        );
+    }
+    Ok((serde_json::to_value(&all)?, text))
+}
+
 fn resources_json(cx: &CheckContext) -> anyhow::Result<Value> {
     Ok(companion_core::report::resources::check_json(cx.params)?)
 }
@@ -218,10 +277,11 @@ pub fn report_from(
     files: companion_core::spec::ParamsFiles,
     args: &CheckArgs,
 ) -> anyhow::Result<(Value, String)> {
-    let files = crate::params::Params::from_files(files, args.route.as_deref())?.files;
+    let loaded = crate::params::Params::from_files(files, args.route.as_deref())?;
     let cx = CheckContext {
-        params: &files,
+        params: &loaded.files,
         args,
+        loaded: &loaded,
     };
     let mut obj = serde_json::Map::new();
     let mut text = String::new();

@@ -11,6 +11,8 @@
 //! - `sim`: the seeded discrete-step world and its scenarios (`simulate`).
 //! - `fly`: the MAVLink flight shell (`fly`) and its byte transports (serial, UDP, TCP).
 //! - `decision_log`: run folders, the decision-log writer and reader, telemetry logs.
+//! - `vocabulary`: the observation and action vocabularies across the params and both shells
+//!   (producers, consumers), checked at load and listed by `check`.
 //! - `check`: `companion check` (params validation and the compiled models, text or JSON).
 //! - `review`: `companion review` (HTML report, summary, why of a cycle).
 //! - `export`: `companion export` (MCAP or CSV).
@@ -26,3 +28,4 @@ pub mod params;
 pub mod replay;
 pub mod review;
 pub mod sim;
+pub mod vocabulary;

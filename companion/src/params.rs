@@ -95,7 +95,8 @@ impl Params {
             }
         }
         self.check_mission_projections()?;
-        self.check_performance_models()
+        self.check_performance_models()?;
+        crate::vocabulary::check(self)
     }
 
     /// `mission.toml`'s projections against the MDPs: each names a loaded MDP and one of its

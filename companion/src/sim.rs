@@ -16,6 +16,26 @@ use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+/// The observations the world itself computes (`computes`, in [`World::observe`]) and the ones it
+/// reads from its baseline and hazards (`reads`, besides `truth.contexts`): the world's side of
+/// the observation vocabulary checked at load (companion/src/vocabulary.rs).
+pub const WORLD_OBSERVATIONS: [(&str, &str); 14] = [
+    ("battery_pct", "computes"),
+    ("cpu_load", "computes"),
+    ("free_tiles", "computes"),
+    ("target_detected", "computes"),
+    ("zone_t_found", "computes"),
+    ("zone_found", "computes"),
+    ("avoidance_wp", "computes"),
+    ("zone_t_lost", "computes"),
+    ("waypoints_remaining", "computes"),
+    ("obstacle_m", "reads"),
+    ("external_cpu_load", "reads"),
+    ("failed_tiles", "reads"),
+    ("wind_mps", "reads"),
+    ("extra_power_w", "reads"),
+];
+
 /// params/world.toml.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]

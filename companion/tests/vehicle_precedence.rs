@@ -8,34 +8,28 @@ use companion_core::arbitration::BehaviourConflicts;
 use companion_link::actions::LinkParams;
 use companion_link::mission_state::select_vehicle_action;
 
-/// The primitive actions of the BFM paper, section 5 (A1..A17): the names policies.toml patterns match.
-const PRIMITIVES: &[&str] = &[
-    "take_off",
-    "follow_trajectory",
-    "avoid_obstacle",
-    "detect_obstacles_fusion",
-    "search_zone_t",
-    "search_emergency_zone",
-    "land",
-    "replan_and_land",
-    "detect_target",
-    "return_to_base",
-    "detect_obstacles_lidar",
-    "track_v0",
-    "track_v1",
-    "track_v2",
-    "track_v3",
-    "track_v4",
-    "track_v5",
-];
+/// The primitive actions (the names policies.toml patterns match), as `companion check --json`
+/// lists them under `actions`.
+fn primitives() -> Vec<String> {
+    let files = companion::params::read_params_dir(&default_params_dir()).unwrap();
+    let (v, _) =
+        companion::check::report_from(files, &companion::check::CheckArgs::default()).unwrap();
+    v["actions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a["name"].as_str().unwrap().to_string())
+        .collect()
+}
 
 #[test]
 fn precedence_never_overrules_a_policy() {
     let dir = default_params_dir();
     let files = companion::params::read_params_dir(&dir).unwrap();
     let link = LinkParams::load(&files, &dir.join("link.toml")).unwrap();
-    let conflicts =
-        BehaviourConflicts::load(&files, &dir.join("policies.toml"), PRIMITIVES).unwrap();
+    let primitives = primitives();
+    let names: Vec<&str> = primitives.iter().map(String::as_str).collect();
+    let conflicts = BehaviourConflicts::load(&files, &dir.join("policies.toml"), &names).unwrap();
     let order = &link.vehicle_action_precedence;
     assert!(order.len() >= 2, "{order:?}");
     for policy in ["safety", "mission"] {
@@ -61,8 +55,9 @@ fn a_precedence_that_contradicts_the_policy_is_caught() {
     // return_to_base before land contradicts both policies' return_vs_landing rule (land wins).
     let dir = default_params_dir();
     let files = companion::params::read_params_dir(&dir).unwrap();
-    let conflicts =
-        BehaviourConflicts::load(&files, &dir.join("policies.toml"), PRIMITIVES).unwrap();
+    let primitives = primitives();
+    let names: Vec<&str> = primitives.iter().map(String::as_str).collect();
+    let conflicts = BehaviourConflicts::load(&files, &dir.join("policies.toml"), &names).unwrap();
     let (kept, _) = conflicts
         .resolve(&["land", "return_to_base"], "safety")
         .unwrap();

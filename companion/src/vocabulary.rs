@@ -1,0 +1,299 @@
+//! The observation and action vocabularies across every params file and both shells: who
+//! produces each observation (the simulated world, its scenarios, fly's telemetry and onboard
+//! monitors, the decision core) and who reads it (a health manager's node, a mission.toml
+//! projection, rate or failure, the core's platform model, the world), and which MDPs propose
+//! each action and how fly maps it. `Params::load` refuses a name with no producer or no
+//! consumer ([`check`]); `companion check --json` lists both under `observations` and `actions`.
+//!
+//! The core checks what it sees alone (an observation's node, MDP actions against
+//! params/actions.toml); the checks needing a shell's producers live here, because the core must
+//! not depend on the shells.
+
+use crate::params::Params;
+use crate::sim::{Scenario, WORLD_OBSERVATIONS};
+use companion_core::evidence::{CORE_COMPUTES, CORE_READS};
+use companion_core::spec::SpecError;
+use companion_core::vocabulary::NamedAction;
+use companion_link::telemetry::TELEMETRY_OBSERVATIONS;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+/// One producer or consumer of an observation.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+pub struct Role {
+    /// Producers: `world` (params/world.toml baseline, or the world's own bookkeeping),
+    /// `scenario` (a hazard's `set`), `fly_telemetry` (the autopilot's messages), `fly_onboard`
+    /// (a NAMED_VALUE_FLOAT of params/link.toml `[telemetry.onboard]`), `fly` (derived by the fly
+    /// shell), `core` (the decision core's platform model). Consumers: `health` (a manager with
+    /// the node), `projection` (params/mission.toml, per MDP), `rate` (mission.toml `rates`, per
+    /// application), `failure` (mission.toml `guarantee.failures`, per resource), `core`, `world`.
+    pub kind: &'static str,
+    /// Which one: the manager, MDP, application, resource, scenario or source.
+    pub name: String,
+}
+
+/// One observation of the vocabulary: a name something reads.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct NamedObservation {
+    /// Observation name (`vibration_mps2`).
+    pub name: String,
+    /// The BN node it gives evidence to (params/observations.toml), if any.
+    pub node: Option<String>,
+    /// Who produces it.
+    pub producers: Vec<Role>,
+    /// Who reads it.
+    pub consumers: Vec<Role>,
+}
+
+fn role(kind: &'static str, name: impl Into<String>) -> Role {
+    Role {
+        kind,
+        name: name.into(),
+    }
+}
+
+/// Every scenario file of the params set (params/scenarios/*.toml), loaded, with its file.
+fn scenarios(p: &Params) -> Result<Vec<(PathBuf, Scenario)>, SpecError> {
+    let dir = p.dir.join("scenarios");
+    p.files
+        .files_in(&dir, "toml")
+        .into_iter()
+        .map(|f| {
+            let s = Scenario::load(&p.files, &f.display().to_string())?;
+            Ok((f, s))
+        })
+        .collect()
+}
+
+/// Consumers of every name something reads, by name.
+fn consumers(p: &Params) -> BTreeMap<String, Vec<Role>> {
+    let mut out: BTreeMap<String, Vec<Role>> = BTreeMap::new();
+    let mut add = |name: &str, r: Role| {
+        let v = out.entry(name.to_string()).or_default();
+        if !v.contains(&r) {
+            v.push(r);
+        }
+    };
+    let health = &p.model.health;
+    for o in &health.observations.observations {
+        for m in &health.managers {
+            if m.nodes.iter().any(|n| n.name == o.node) {
+                add(&o.name, role("health", &m.name));
+            }
+        }
+    }
+    let mission = &p.model.mission;
+    for (mdp, rules) in &mission.projection {
+        for r in rules {
+            if let Some(o) = &r.observation {
+                add(o, role("projection", mdp));
+            }
+        }
+    }
+    for (app, o) in &mission.rates {
+        add(o, role("rate", app));
+    }
+    for (resource, o) in &mission.guarantee.failures {
+        add(o, role("failure", resource));
+    }
+    for o in CORE_READS {
+        add(o, role("core", "platform model"));
+    }
+    for (o, what) in WORLD_OBSERVATIONS {
+        if what == "reads" {
+            add(o, role("world", "simulated world"));
+        }
+    }
+    for (ctx, rule) in &p.world.truth.contexts {
+        add(
+            &rule.observation,
+            role("world", format!("truth.contexts.{ctx}")),
+        );
+    }
+    out
+}
+
+/// Producers of every name something produces, by name.
+fn producers(p: &Params, scenarios: &[(PathBuf, Scenario)]) -> BTreeMap<String, Vec<Role>> {
+    let mut out: BTreeMap<String, Vec<Role>> = BTreeMap::new();
+    let mut add = |name: &str, r: Role| {
+        let v = out.entry(name.to_string()).or_default();
+        if !v.contains(&r) {
+            v.push(r);
+        }
+    };
+    for o in p.world.baseline.keys() {
+        add(o, role("world", "world.toml baseline"));
+    }
+    for (o, what) in WORLD_OBSERVATIONS {
+        if what == "computes" {
+            add(o, role("world", "simulated world"));
+        }
+    }
+    for (_, s) in scenarios {
+        for h in &s.hazards {
+            for o in h.set.keys() {
+                add(o, role("scenario", &s.name));
+            }
+        }
+    }
+    for o in TELEMETRY_OBSERVATIONS {
+        add(o, role("fly_telemetry", "autopilot"));
+    }
+    for (nvf, o) in &p.link.telemetry.onboard {
+        add(o, role("fly_onboard", nvf));
+    }
+    for o in crate::fly::DERIVED_OBSERVATIONS {
+        add(o, role("fly", "derived"));
+    }
+    for o in CORE_COMPUTES {
+        add(o, role("core", "platform model"));
+    }
+    out
+}
+
+/// Every name something reads, sorted, with its node, producers and consumers.
+pub fn named_observations(p: &Params) -> Result<Vec<NamedObservation>, SpecError> {
+    let scenarios = scenarios(p)?;
+    let producers = producers(p, &scenarios);
+    Ok(consumers(p)
+        .into_iter()
+        .map(|(name, consumers)| NamedObservation {
+            node: p
+                .model
+                .health
+                .observations
+                .get(&name)
+                .map(|o| o.node.clone()),
+            producers: producers.get(&name).cloned().unwrap_or_default(),
+            name,
+            consumers,
+        })
+        .collect())
+}
+
+/// Refuse a world baseline or scenario hazard that sets a name nothing reads, and an observation
+/// of params/observations.toml that neither the world, its scenarios, fly nor the core produces.
+pub fn check_observations(p: &Params) -> Result<(), SpecError> {
+    let scenarios = scenarios(p)?;
+    let consumers = consumers(p);
+    let unread = |o: &str| {
+        format!(
+            "`{o}` is an observation nothing reads: not in params/observations.toml, not in \
+             params/mission.toml (projection, rates, guarantee.failures), not read by the decision \
+             core ({}) or the world ({})",
+            CORE_READS.join(", "),
+            WORLD_OBSERVATIONS
+                .iter()
+                .filter(|(_, w)| *w == "reads")
+                .map(|(o, _)| *o)
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+    };
+    for o in p.world.baseline.keys() {
+        if !consumers.contains_key(o) {
+            return Err(SpecError::new(
+                p.dir.join("world.toml"),
+                format!("baseline.{o}"),
+                unread(o),
+            ));
+        }
+    }
+    for (file, s) in &scenarios {
+        for (i, h) in s.hazards.iter().enumerate() {
+            for o in h.set.keys() {
+                if !consumers.contains_key(o) {
+                    return Err(SpecError::new(
+                        file,
+                        format!("hazard[{i}].set.{o}"),
+                        unread(o),
+                    ));
+                }
+            }
+        }
+    }
+    let producers = producers(p, &scenarios);
+    let obs = &p.model.health.observations;
+    for (i, o) in obs.observations.iter().enumerate() {
+        if !producers.contains_key(&o.name) {
+            return Err(SpecError::new(
+                &obs.file,
+                format!("observation[{i}]({})", o.name),
+                "nothing produces it: not the simulated world (params/world.toml baseline, its \
+                 own bookkeeping, a scenario's `set`), not fly (the autopilot's telemetry, \
+                 params/link.toml [telemetry.onboard], its derived values), not the decision core",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// One primitive action with the MDPs that propose it and how fly maps it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct ActionEntry {
+    /// The action, its application and the MDPs proposing it (the core's view).
+    #[serde(flatten)]
+    pub action: NamedAction,
+    /// Whether params/commands.toml maps it to MAVLink steps (every vehicle action must).
+    pub vehicle_steps: bool,
+    /// The shell-only params/commands.toml entries flown in its place (`flown_for`).
+    pub flown_as: Vec<String>,
+}
+
+/// Every primitive action, in params/actions.toml order.
+pub fn actions(p: &Params) -> Vec<ActionEntry> {
+    companion_core::vocabulary::named_actions(&p.model.actions, &p.model.mdps)
+        .into_iter()
+        .map(|a| ActionEntry {
+            vehicle_steps: p.commands.actions.contains_key(&a.name),
+            flown_as: p
+                .commands
+                .flown_for
+                .iter()
+                .filter(|(_, f)| **f == a.name)
+                .map(|(e, _)| e.clone())
+                .collect(),
+            action: a,
+        })
+        .collect()
+}
+
+/// Refuse a params/commands.toml entry that is no action some MDP proposes, unless it is marked
+/// shell-only (`flown_for`), and an application action that has MAVLink steps.
+pub fn check_commands(p: &Params) -> Result<(), SpecError> {
+    let file = p.dir.join("commands.toml");
+    let all = actions(p);
+    for name in p.commands.actions.keys() {
+        if p.commands.flown_for.contains_key(name) {
+            continue;
+        }
+        match all.iter().find(|a| a.action.name == *name) {
+            None => {
+                return Err(SpecError::new(
+                    &file,
+                    name.as_str(),
+                    "not an action of params/actions.toml, so no MDP proposes it (a shell-only \
+                     entry says so with `flown_for = \"ACTION\"`)",
+                ));
+            }
+            Some(a) if a.action.kind != "vehicle" => {
+                return Err(SpecError::new(
+                    &file,
+                    name.as_str(),
+                    "an application action (params/actions.toml): it runs on the platform, not \
+                     as MAVLink steps",
+                ));
+            }
+            Some(_) => {}
+        }
+    }
+    Ok(())
+}
+
+/// Both vocabularies' load checks.
+pub fn check(p: &Params) -> Result<(), SpecError> {
+    check_observations(p)?;
+    check_commands(p)
+}

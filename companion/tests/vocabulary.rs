@@ -1,0 +1,294 @@
+//! The observation and action vocabularies: a name with no producer or no consumer stops the load
+//! with file, entry and reason (params edited in memory), and `check --json` lists every
+//! observation and action with its producers and consumers, which the tests read instead of
+//! copying names.
+
+use companion::params::{Params, default_params_dir, read_params_dir};
+use companion_core::spec::SpecError;
+use serde_json::Value;
+
+/// The shipped params with `file`'s text edited by `edit`, loaded as `fly` and `simulate` load.
+fn load_edited(file: &str, edit: impl Fn(&str) -> String) -> Result<Params, SpecError> {
+    let mut files = read_params_dir(&default_params_dir()).unwrap();
+    let path = files.dir().join(file);
+    let text = edit(files.text(&path).unwrap());
+    assert_ne!(text, files.text(&path).unwrap(), "the edit changed nothing");
+    files.insert(&path, text);
+    Params::from_files(files, None)
+}
+
+fn expect_err(file: &str, edit: impl Fn(&str) -> String, entry: &str, reason: &str) {
+    let e = match load_edited(file, edit) {
+        Ok(_) => panic!("{file}: the edit must be refused"),
+        Err(e) => e,
+    };
+    assert!(e.file.ends_with(file), "{e}");
+    assert_eq!(e.entry, entry, "{e}");
+    assert!(e.reason.contains(reason), "{e}");
+}
+
+fn check_json() -> Value {
+    let files = read_params_dir(&default_params_dir()).unwrap();
+    let (v, _) =
+        companion::check::report_from(files, &companion::check::CheckArgs::default()).unwrap();
+    v
+}
+
+fn names(list: &Value) -> Vec<&str> {
+    list.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x["name"].as_str().unwrap())
+        .collect()
+}
+
+#[test]
+fn a_world_baseline_observation_nothing_reads_is_refused() {
+    expect_err(
+        "world.toml",
+        |t| {
+            t.replace(
+                "temperature_c = 20.0",
+                "temperature_c = 20.0\nhumidity_pct = 40.0",
+            )
+        },
+        "baseline.humidity_pct",
+        "`humidity_pct` is an observation nothing reads",
+    );
+}
+
+#[test]
+fn a_scenario_setting_an_observation_nothing_reads_is_refused() {
+    expect_err(
+        "scenarios/vibrations.toml",
+        |t| t.replace("vibration_mps2 =", "vibrations_mps2 ="),
+        "hazard[0].set.vibrations_mps2",
+        "`vibrations_mps2` is an observation nothing reads",
+    );
+}
+
+#[test]
+fn a_declared_observation_nothing_produces_is_refused() {
+    // The scenario still sets lidar_failed (mission.toml reads it), but the evidence mapping now
+    // names an observation neither the world, a scenario, fly nor the core produces.
+    expect_err(
+        "observations.toml",
+        |t| t.replace("name = \"lidar_failed\"", "name = \"lidar_fault\""),
+        "observation[15](lidar_fault)",
+        "nothing produces it",
+    );
+}
+
+#[test]
+fn an_observation_for_a_node_no_manager_has_is_refused() {
+    expect_err(
+        "observations.toml",
+        |t| t.replace("node = \"A_temperature\"", "node = \"A_humidity\""),
+        "observation[12](temperature_c).node",
+        "no health manager has a node `A_humidity`",
+    );
+}
+
+#[test]
+fn a_mavlink_mapping_no_mdp_proposes_is_refused() {
+    expect_err(
+        "commands.toml",
+        |t| format!("{t}\n[hover]\nsteps = [{{ mode = \"LOITER\" }}]\n"),
+        "hover",
+        "no MDP proposes it",
+    );
+}
+
+#[test]
+fn the_resume_entry_without_its_shell_only_marker_is_refused() {
+    expect_err(
+        "commands.toml",
+        |t| t.replace("flown_for = \"follow_trajectory\"\n", ""),
+        "follow_trajectory_resume",
+        "no MDP proposes it",
+    );
+}
+
+#[test]
+fn a_shell_only_entry_must_be_flown_for_an_entry_of_the_file() {
+    expect_err(
+        "commands.toml",
+        |t| {
+            t.replace(
+                "flown_for = \"follow_trajectory\"",
+                "flown_for = \"follow_route\"",
+            )
+        },
+        "follow_trajectory_resume.flown_for",
+        "`follow_route` is not an entry",
+    );
+}
+
+#[test]
+fn mavlink_steps_for_an_application_action_are_refused() {
+    expect_err(
+        "commands.toml",
+        |t| format!("{t}\n[track_v3]\nsteps = [{{ mode = \"GUIDED\" }}]\n"),
+        "track_v3",
+        "an application action",
+    );
+}
+
+#[test]
+fn an_mdp_action_missing_from_actions_toml_is_refused() {
+    expect_err(
+        "mdp/landing.toml",
+        |t| t.replacen("does = [\"land\"]", "does = [\"land_here\"]", 1),
+        "action[4](A7).does[0]",
+        "`land_here` is not an action of params/actions.toml",
+    );
+}
+
+#[test]
+fn an_action_no_mdp_proposes_is_refused() {
+    expect_err(
+        "actions.toml",
+        |t| {
+            format!(
+                "{t}\n[[action]]\nid = \"hover\"\npaper = \"-\"\nkind = \"vehicle\"\nlabel = \"hover\"\n"
+            )
+        },
+        "action[17](hover)",
+        "no MDP proposes it",
+    );
+}
+
+/// `check --json`'s `observations`: every observation of the evidence mapping (from `health`'s
+/// evidence nodes) is listed with its node, a producer and its health manager as a consumer;
+/// every name listed has a reader, and every name a scenario sets is listed.
+#[test]
+fn json_lists_each_observation_with_its_producers_and_readers() {
+    let v = check_json();
+    let listed = v["observations"].as_array().unwrap();
+    let params = Params::load(&default_params_dir(), None).unwrap();
+    for o in &params.model.health.observations.observations {
+        let entry = listed
+            .iter()
+            .find(|x| x["name"] == o.name.as_str())
+            .unwrap_or_else(|| panic!("{} not listed", o.name));
+        assert_eq!(entry["node"], o.node.as_str(), "{}", o.name);
+        assert!(
+            !entry["producers"].as_array().unwrap().is_empty(),
+            "{}",
+            o.name
+        );
+        // The node's managers read it, as `health` shows them.
+        for h in v["health"].as_array().unwrap() {
+            let has_node = h["nodes"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|n| n["name"] == o.node.as_str());
+            let reads = entry["consumers"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|c| c["kind"] == "health" && c["name"] == h["name"]);
+            assert_eq!(has_node, reads, "{} in {}", o.name, h["name"]);
+        }
+    }
+    for x in listed {
+        assert!(!x["consumers"].as_array().unwrap().is_empty(), "{x}");
+    }
+    let set: Vec<&str> = names(&v["observations"]);
+    for s in companion::sim::Scenario::names(&default_params_dir()) {
+        let sc = companion::sim::Scenario::load(&params.files, &s).unwrap();
+        for h in &sc.hazards {
+            for k in h.set.keys() {
+                assert!(set.contains(&k.as_str()), "{s} sets {k}, not listed");
+                let entry = listed.iter().find(|x| x["name"] == k.as_str()).unwrap();
+                assert!(
+                    entry["producers"]
+                        .as_array()
+                        .unwrap()
+                        .iter()
+                        .any(|p| p["kind"] == "scenario" && p["name"] == sc.name.as_str()),
+                    "{k} set by {s}"
+                );
+            }
+        }
+    }
+}
+
+/// `check --json`'s `actions`: every action some MDP does (from `mdps`) is listed and proposed by
+/// that MDP; every vehicle action has MAVLink steps (from `fly`), no application action has.
+#[test]
+fn json_lists_each_action_with_its_mdps_and_mapping() {
+    let v = check_json();
+    let listed = v["actions"].as_array().unwrap();
+    let params = Params::load(&default_params_dir(), None).unwrap();
+    for m in params.model.mdps.all() {
+        for k in 0..m.n_actions() {
+            for p in m.primitives(k) {
+                let entry = listed
+                    .iter()
+                    .find(|x| x["name"] == p.as_str())
+                    .unwrap_or_else(|| panic!("{p} not listed"));
+                assert!(
+                    entry["proposed_by"]
+                        .as_array()
+                        .unwrap()
+                        .iter()
+                        .any(|x| x == m.name()),
+                    "{p} proposed by {}",
+                    m.name()
+                );
+            }
+        }
+    }
+    let fly: Vec<&str> = v["fly"]["vehicle_actions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_str().unwrap())
+        .collect();
+    for a in listed {
+        let name = a["name"].as_str().unwrap();
+        assert!(!a["proposed_by"].as_array().unwrap().is_empty(), "{name}");
+        assert_eq!(a["vehicle_steps"], fly.contains(&name), "{name}");
+        if a["kind"] == "application" {
+            assert_eq!(a["vehicle_steps"], false, "{name}");
+            assert!(a["application"].is_object(), "{name}");
+        }
+    }
+    // Every fly entry is an action or flown in place of one.
+    for f in &fly {
+        assert!(
+            listed
+                .iter()
+                .any(|a| a["name"] == *f
+                    || a["flown_as"].as_array().unwrap().iter().any(|x| x == *f)),
+            "{f}"
+        );
+    }
+}
+
+/// The world's own observations (`WORLD_OBSERVATIONS` `computes`) are exactly what a step's
+/// snapshot holds beyond the baseline and the hazards in force.
+#[test]
+fn the_world_computes_what_it_declares() {
+    let params = Params::load(&default_params_dir(), None).unwrap();
+    let sc = companion::sim::Scenario::load(&params.files, "nominal").unwrap();
+    let mut w = companion::sim::World::new(&params.world, &sc, 1);
+    let obs = w.observe();
+    let mut extra: Vec<&str> = obs
+        .values
+        .keys()
+        .map(String::as_str)
+        .filter(|k| !params.world.baseline.contains_key(*k))
+        .collect();
+    let mut computes: Vec<&str> = companion::sim::WORLD_OBSERVATIONS
+        .iter()
+        .filter(|(_, w)| *w == "computes")
+        .map(|(o, _)| *o)
+        .filter(|o| !params.world.baseline.contains_key(*o))
+        .collect();
+    extra.sort();
+    computes.sort();
+    assert_eq!(extra, computes);
+}
