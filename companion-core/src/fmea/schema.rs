@@ -525,8 +525,23 @@ impl NodeSpec {
                 ),
             ));
         }
-        table.insert("role".into(), toml::Value::String(role.as_str().into()));
-        NodeSpec::deserialize(toml::Value::Table(table))
-            .map_err(|e| err(file, format!("node.{name}"), e.message().to_string()))
+        let tag = toml::Value::String(role.as_str().into());
+        table.insert("role".into(), tag.clone());
+        NodeSpec::deserialize(toml::Value::Table(table.clone())).map_err(|e| {
+            // The error does not say which key it is about: find the first key that fails on
+            // its own (every key of a role is optional, so each parses alone).
+            let key = table.iter().find(|(k, v)| {
+                let alone = toml::Table::from_iter([
+                    ("role".to_string(), tag.clone()),
+                    (k.to_string(), (*v).clone()),
+                ]);
+                NodeSpec::deserialize(toml::Value::Table(alone)).is_err()
+            });
+            let entry = match key {
+                Some((k, _)) => format!("node.{name}.{k}"),
+                None => format!("node.{name}"),
+            };
+            err(file, entry, e.message().to_string())
+        })
     }
 }

@@ -361,13 +361,31 @@ fn typo_field_is_refused() {
     assert!(e.reason.contains("stay"), "lists the keys it takes: {e}");
 }
 
-/// A key of the role with a value of the wrong type names the node.
+/// A key of the role with a value of the wrong type names the node and the key.
 #[test]
-fn mistyped_value_names_the_node() {
-    let e = read(&format!("{FMEA_ROW}[node.U_e]\nleak = \"high\"\n")).unwrap_err();
+fn mistyped_value_names_the_node_and_key() {
+    let e = read(&format!(
+        "{FMEA_ROW}[node.U_e]\ndescription = \"d\"\nleak = \"high\"\nstates = [\"a\", \"b\"]\n"
+    ))
+    .unwrap_err();
     assert_eq!(e.file, Path::new(FILE));
-    assert_eq!(e.entry, "node.U_e", "{e}");
-    assert!(e.reason.contains("invalid type"), "{e}");
+    assert_eq!(e.entry, "node.U_e.leak", "{e}");
+    assert!(
+        e.reason
+            .contains("invalid type: string \"high\", expected f64"),
+        "{e}"
+    );
+    // Inside a common key too, and a required key missing in an implementation.
+    let e = read(&format!(
+        "{FMEA_ROW}[node.U_e]\noverride = [{{ when = {{}}, p = 1 }}]\n"
+    ))
+    .unwrap_err();
+    assert_eq!(e.entry, "node.U_e.override", "{e}");
+    let e =
+        read("name = \"t\"\n[node.R]\nrole = \"activation\"\nimplementations = [{ tiles = 1 }]\n")
+            .unwrap_err();
+    assert_eq!(e.entry, "node.R.implementations", "{e}");
+    assert!(e.reason.contains("missing field `name`"), "{e}");
 }
 
 /// `parents` stays a common key, so a root role keeps the error saying why it takes none.
