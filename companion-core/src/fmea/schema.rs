@@ -65,7 +65,7 @@ impl HmFile {
                     return Err(err(
                         file,
                         format!("node.{name}.role"),
-                        format!("`role` is a {}, not a string", v.type_str()),
+                        format!("`role` must be a string, found {}", v.type_str()),
                     ));
                 }
             };

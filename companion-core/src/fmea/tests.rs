@@ -293,7 +293,7 @@ fn missing_unknown_or_mistyped_role_is_refused() {
             "role = \"sensor\"",
             "unknown role `sensor` (one of qos, error",
         ),
-        ("role = 3", "`role` is a integer, not a string"),
+        ("role = 3", "`role` must be a string, found integer"),
     ] {
         let e = read(&format!("name = \"t\"\n[node.N]\n{entry}\n")).unwrap_err();
         assert_eq!(e.file, Path::new(FILE));
