@@ -177,11 +177,12 @@ impl HealthModel {
         let hms = files
             .iter()
             .map(|f| {
-                let mut spec: crate::fmea::HmFile = crate::spec::read_toml(params, f)?;
+                let mut spec = crate::fmea::read_hm(params, f)?;
                 crate::fmea::fill_from_catalogue(f, &mut spec, &catalogue, platform.cpu_cores)?;
                 for (node, n) in &spec.node {
-                    if let Some((app, version)) =
-                        n.variant.as_deref().and_then(|v| v.split_once('/'))
+                    if let crate::fmea::NodeSpec::Activation(n) = n
+                        && let Some((app, version)) =
+                            n.variant.as_deref().and_then(|v| v.split_once('/'))
                     {
                         let published = spec
                             .publish

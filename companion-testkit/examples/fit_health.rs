@@ -2,7 +2,7 @@
 //! paper's worked examples and prints the values, then the versions under a few hazards.
 //! Run from the workspace root: `cargo run -p companion-testkit --example fit_health`.
 use companion_core::evidence::ObservationMap;
-use companion_core::fmea::{CptSpec, HmFile, compile_hm};
+use companion_core::fmea::{CptSpec, HmFile, NodeSpec, NoisyOrNode, compile_hm};
 use companion_core::health::HealthModel;
 use companion_core::observations::Observations;
 use std::collections::BTreeMap;
@@ -13,7 +13,14 @@ fn params() -> companion_core::spec::ParamsFiles {
 }
 fn load(name: &str) -> HmFile {
     let p = Path::new("params/health").join(format!("{name}.toml"));
-    companion_core::spec::read_toml(&params(), &p).unwrap()
+    companion_core::fmea::read_hm(&params(), &p).unwrap()
+}
+/// The noisy-OR settings of an error node.
+fn noisy_or<'a>(f: &'a mut HmFile, node: &str) -> &'a mut NoisyOrNode {
+    match f.node.get_mut(node) {
+        Some(NodeSpec::Error(e)) => e,
+        _ => panic!("{node} is not an error node"),
+    }
 }
 fn model(files: &BTreeMap<&str, HmFile>) -> HealthModel {
     let hms = files
@@ -65,19 +72,18 @@ fn main() {
     let mut x = [0.01f64, 0.93, 0.96];
     let f = |x: &[f64; 3], files: &mut BTreeMap<&str, HmFile>| -> [f64; 3] {
         let a = files.get_mut("applications").unwrap();
-        a.node.get_mut("QoS").unwrap().by_uncorrected = Some(vec![
+        let Some(NodeSpec::Qos(qos)) = a.node.get_mut("QoS") else {
+            panic!("QoS is not a qos node")
+        };
+        qos.by_uncorrected = Some(vec![
             vec![0.90, 0.08, 0.02],
             vec![x[0], 0.5 - x[0], 0.5],
             vec![0.0, 0.2, 0.8],
         ]);
-        a.node
-            .get_mut("U_vibration")
-            .unwrap()
+        noisy_or(a, "U_vibration")
             .strength
             .insert("A_wind".into(), vec![0.0, x[1]]);
-        a.node
-            .get_mut("U_motion_lost")
-            .unwrap()
+        noisy_or(a, "U_motion_lost")
             .strength
             .insert("A_target_speed".into(), vec![0.0, x[2]]);
         let mut m = model(files);
@@ -133,7 +139,7 @@ fn main() {
     for (v, t) in targets {
         let val = |r: f64, files: &mut BTreeMap<&str, HmFile>| {
             let a = files.get_mut("applications").unwrap();
-            a.node.get_mut(v).unwrap().overrides[0].p = vec![1.0 - r, r];
+            a.node.get_mut(v).unwrap().common_mut().overrides[0].p = vec![1.0 - r, r];
             let mut m = model(files);
             let e: Vec<(&str, &str)> = ev.iter().map(|(a, b)| (a.as_str(), b.as_str())).collect();
             post(&mut m, &e, "applications", v, 1)
@@ -172,11 +178,7 @@ fn main() {
         "P_obs",
         &mut files,
         &|f, x| {
-            f.get_mut("applications")
-                .unwrap()
-                .node
-                .get_mut("U_obstacle_missed")
-                .unwrap()
+            noisy_or(f.get_mut("applications").unwrap(), "U_obstacle_missed")
                 .strength
                 .insert("A_vibration".into(), vec![0.0, x]);
         },
@@ -193,6 +195,7 @@ fn main() {
                 .node
                 .get_mut("N_next")
                 .unwrap()
+                .common_mut()
                 .cpt = Some(CptSpec::Rows(vec![
                 vec![0.1, 0.9],
                 vec![0.5, 0.5],
@@ -210,12 +213,10 @@ fn main() {
         "P_battery",
         &mut files,
         &|f, x| {
-            f.get_mut("system")
-                .unwrap()
-                .node
-                .get_mut("E_t1")
-                .unwrap()
-                .stay = Some(x);
+            let Some(NodeSpec::State(e)) = f.get_mut("system").unwrap().node.get_mut("E_t1") else {
+                panic!("E_t1 is not a state node")
+            };
+            e.stay = Some(x);
         },
         0.8,
         0.5,
@@ -225,11 +226,7 @@ fn main() {
         "P_sys",
         &mut files,
         &|f, x| {
-            f.get_mut("system")
-                .unwrap()
-                .node
-                .get_mut("U_system_fault")
-                .unwrap()
+            noisy_or(f.get_mut("system").unwrap(), "U_system_fault")
                 .strength
                 .insert("A_vibration".into(), vec![0.0, x]);
         },

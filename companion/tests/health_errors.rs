@@ -228,14 +228,18 @@ fn other_structural_errors() {
         "fmea[0].contexts",
         "already as monitor",
     );
-    // Unknown keys are typos, not silently ignored.
-    let text = std::fs::read_to_string(default_params_dir().join("health/system.toml")).unwrap();
-    let line = text.lines().position(|l| l.starts_with("stay = ")).unwrap() + 1;
+    // Unknown keys are typos, not silently ignored; so are keys of another role.
     expect_err(
         "health/system.toml",
         |t| t.replace("stay = 0.8476", "stai = 0.8476"),
-        &format!("line {line}"),
+        "node.E_t1.stai",
         "unknown field",
+    );
+    expect_err(
+        "health/system.toml",
+        |t| t.replace("stay = 0.8476", "stay = 0.8476\nleak = 0.1"),
+        "node.E_t1.leak",
+        "unknown field `leak` for a state node",
     );
     // The same probability published twice.
     expect_err(

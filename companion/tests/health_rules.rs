@@ -1,10 +1,13 @@
 //! The default CPT rules, checked against hand computation on small FMEA files.
 
-use companion_core::fmea::{HmFile, compile_hm};
+use companion_core::fmea::{compile_hm, read_hm};
+use companion_core::spec::ParamsFiles;
 use std::path::Path;
 
 fn compile(text: &str) -> companion_core::fmea::CompiledHm {
-    let f: HmFile = toml::from_str(text).unwrap();
+    let mut params = ParamsFiles::new("p");
+    params.insert("p/t.toml", text);
+    let f = read_hm(&params, Path::new("p/t.toml")).unwrap();
     compile_hm(Path::new("t.toml"), &f).unwrap()
 }
 

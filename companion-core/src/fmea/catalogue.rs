@@ -1,7 +1,7 @@
 //! Activation nodes filled from the variant catalogue (params/variants.toml).
 
 use super::err;
-use super::schema::{HmFile, Implementation};
+use super::schema::{HmFile, Implementation, NodeSpec};
 use crate::spec::SpecError;
 use std::path::Path;
 
@@ -15,6 +15,9 @@ pub fn fill_from_catalogue(
     cpu_cores: u8,
 ) -> Result<(), SpecError> {
     for (n, node) in spec.node.iter_mut() {
+        let NodeSpec::Activation(node) = node else {
+            continue;
+        };
         let Some(v) = &node.variant else { continue };
         let entry = format!("node.{n}.variant");
         if !node.implementations.is_empty() {

@@ -3,7 +3,7 @@
 //! `publish` and `carry` entries checked against it.
 
 use super::rules::{NodeCtx, row_rule};
-use super::schema::{HmFile, NodeSpec};
+use super::schema::{ActivationNode, FmeaRow, HmFile, ImportNode, MonitorNode, NodeSpec};
 use super::{
     CompiledHm, MAX_CLIQUE_ENTRIES, MAX_CPT_ENTRIES, MAX_NODES, MAX_PARENTS, NodeInfo, Publish,
     ROLES, bn_to_spec, err, parse_publish,
@@ -32,7 +32,7 @@ pub(super) enum Role {
 }
 
 impl Role {
-    const ALL: [Role; 12] = [
+    pub(super) const ALL: [Role; 12] = [
         Role::Qos,
         Role::Error,
         Role::Monitor,
@@ -113,12 +113,13 @@ pub(super) struct Hm<'a> {
     order: Vec<String>,
     pub(super) states: BTreeMap<String, Vec<String>>,
     pub(super) solutions_of: BTreeMap<&'a str, Vec<String>>,
-    empty: NodeSpec,
+    /// The settings of the nodes named only in FMEA rows: their role's defaults.
+    defaults: BTreeMap<String, NodeSpec>,
 }
 
 impl Hm<'_> {
     fn node(&self, n: &str) -> &NodeSpec {
-        self.spec.node.get(n).unwrap_or(&self.empty)
+        self.spec.node.get(n).unwrap_or_else(|| &self.defaults[n])
     }
 
     pub(super) fn known(&self, node: &str, entry: String) -> Result<(), SpecError> {
@@ -160,7 +161,16 @@ impl Hm<'_> {
 /// Compile a parsed FMEA file; `file` names it in errors.
 pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
     check_size(file, spec)?;
-    let (role, order) = assign_roles(file, spec)?;
+    let node_roles = spec
+        .node
+        .iter()
+        .map(|(n, ns)| (n.as_str(), Some(ns.role().as_str())));
+    let (role, order) = assign_roles(file, &spec.fmea, node_roles)?;
+    let defaults = role
+        .iter()
+        .filter(|(n, _)| !spec.node.contains_key(*n))
+        .map(|(n, r)| (n.clone(), NodeSpec::empty(*r)))
+        .collect();
     let mut hm = Hm {
         file,
         spec,
@@ -168,7 +178,7 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
         order,
         states: BTreeMap::new(),
         solutions_of: solutions_of(spec),
-        empty: NodeSpec::default(),
+        defaults,
     };
     hm.states = node_states(&hm)?;
 
@@ -179,9 +189,9 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
         let r = hm.role[n];
         let spec_n = hm.node(n);
         let parents = parents_of(&hm, n, r, spec_n)?;
-        let cpt = node_table(&hm, n, r, spec_n, &parents)?;
-        if r == Role::Import {
-            imports.push(import_source(file, n, spec_n)?);
+        let cpt = node_table(&hm, n, spec_n, &parents)?;
+        if let NodeSpec::Import(import) = spec_n {
+            imports.push(import_source(file, n, import)?);
         }
         builder.add_node(n, &hm.states[n], &parents, cpt);
         infos.push(NodeInfo {
@@ -189,7 +199,7 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
             role: r.to_string(),
             states: hm.states[n].clone(),
             parents,
-            description: spec_n.description.clone(),
+            description: spec_n.common().description.clone(),
         });
     }
     let network = assemble(file, builder)?;
@@ -247,14 +257,17 @@ fn assign(
     }
 }
 
-/// Roles: from the FMEA rows, then explicit `role` keys (which must agree).
-fn assign_roles(
+/// Roles: from the FMEA rows, then the `role` key of each node entry (which must agree), given
+/// as (node, `role` key if any) in the file's order. The loader calls it on the raw entries,
+/// the compiler on the parsed ones: the same roles, order and errors.
+pub(super) fn assign_roles<'a>(
     file: &Path,
-    spec: &HmFile,
+    fmea: &[FmeaRow],
+    node_roles: impl IntoIterator<Item = (&'a str, Option<&'a str>)>,
 ) -> Result<(BTreeMap<String, Role>, Vec<String>), SpecError> {
     let mut role: BTreeMap<String, Role> = BTreeMap::new();
     let mut order: Vec<String> = Vec::new();
-    for (i, row) in spec.fmea.iter().enumerate() {
+    for (i, row) in fmea.iter().enumerate() {
         let mut named = |name: &str, r: Role, key: &str| {
             assign(
                 file,
@@ -276,9 +289,9 @@ fn assign_roles(
             named(s, Role::Solution, "solutions")?;
         }
     }
-    for (name, ns) in &spec.node {
+    for (name, key) in node_roles {
         let entry = format!("node.{name}.role");
-        match (&ns.role, role.get(name)) {
+        match (key, role.get(name)) {
             (Some(r), _) => {
                 let Some(r) = Role::parse(r) else {
                     return Err(err(
@@ -304,7 +317,7 @@ fn node_states(hm: &Hm) -> Result<BTreeMap<String, Vec<String>>, SpecError> {
     let mut states: BTreeMap<String, Vec<String>> = BTreeMap::new();
     for n in &hm.order {
         let r = hm.role[n];
-        let ns = hm.node(n);
+        let ns = hm.node(n).common();
         let s = match (&ns.states, r.default_states()) {
             (Some(s), _) => s.clone(),
             (None, Some(d)) => d.iter().map(|x| x.to_string()).collect(),
@@ -354,17 +367,18 @@ fn push(parents: &mut Vec<String>, p: &str) {
 /// A node's parents: those its role implies, then its `parents` key; all must exist.
 fn parents_of(hm: &Hm, n: &str, r: Role, spec_n: &NodeSpec) -> Result<Vec<String>, SpecError> {
     let mut parents: Vec<String> = Vec::new();
-    match r {
-        Role::Error => {
+    match spec_n {
+        NodeSpec::Error(_) => {
             for row in hm.spec.fmea.iter().filter(|row| row.error == n) {
                 row.contexts.iter().for_each(|c| push(&mut parents, c));
             }
         }
-        Role::Monitor => monitor_parents(hm, n, spec_n, &mut parents)?,
-        Role::Qos | Role::Version => error_parents(hm, n, r, spec_n, &mut parents)?,
-        Role::Activation => activation_parents(hm, n, spec_n, &mut parents)?,
-        Role::State => {
-            if let Some(prev) = &spec_n.previous {
+        NodeSpec::Monitor(m) => monitor_parents(hm, n, m, &mut parents)?,
+        NodeSpec::Qos(q) => error_parents(hm, n, r, q.errors.as_ref(), &mut parents)?,
+        NodeSpec::Version(v) => error_parents(hm, n, r, v.errors.as_ref(), &mut parents)?,
+        NodeSpec::Activation(a) => activation_parents(hm, n, a, &mut parents)?,
+        NodeSpec::State(s) => {
+            if let Some(prev) = &s.previous {
                 hm.known(prev, format!("node.{n}.previous"))?;
                 if hm.states[prev] != hm.states[n] {
                     return Err(err(
@@ -378,7 +392,7 @@ fn parents_of(hm: &Hm, n: &str, r: Role, spec_n: &NodeSpec) -> Result<Vec<String
         }
         _ => {}
     }
-    if let Some(extra) = &spec_n.parents {
+    if let Some(extra) = &spec_n.common().parents {
         if r.is_root() {
             return Err(err(
                 hm.file,
@@ -400,7 +414,7 @@ fn parents_of(hm: &Hm, n: &str, r: Role, spec_n: &NodeSpec) -> Result<Vec<String
 fn monitor_parents(
     hm: &Hm,
     n: &str,
-    spec_n: &NodeSpec,
+    spec_n: &MonitorNode,
     parents: &mut Vec<String>,
 ) -> Result<(), SpecError> {
     for row in hm
@@ -423,10 +437,10 @@ fn error_parents(
     hm: &Hm,
     n: &str,
     r: Role,
-    spec_n: &NodeSpec,
+    errors: Option<&Vec<String>>,
     parents: &mut Vec<String>,
 ) -> Result<(), SpecError> {
-    let errs = spec_n.errors.as_ref().ok_or_else(|| {
+    let errs = errors.ok_or_else(|| {
         err(
             hm.file,
             format!("node.{n}.errors"),
@@ -457,7 +471,7 @@ fn error_parents(
 fn activation_parents(
     hm: &Hm,
     n: &str,
-    spec_n: &NodeSpec,
+    spec_n: &ActivationNode,
     parents: &mut Vec<String>,
 ) -> Result<(), SpecError> {
     for (key, v) in [
@@ -497,7 +511,6 @@ fn next_row(a: &mut [usize], pstates: &[&Vec<String>]) {
 fn node_table(
     hm: &Hm,
     n: &str,
-    r: Role,
     spec_n: &NodeSpec,
     parents: &[String],
 ) -> Result<Vec<f64>, SpecError> {
@@ -533,18 +546,17 @@ fn node_table(
         ));
     };
 
-    let mut cpt: Vec<f64> = if let Some(c) = &spec_n.cpt {
+    let mut cpt: Vec<f64> = if let Some(c) = &spec_n.common().cpt {
         c.flat()
     } else {
         let node = NodeCtx {
             hm,
             n,
-            spec: spec_n,
             parents,
             pstates: &pstates,
             k,
         };
-        let mut rule = row_rule(&node, r)?;
+        let mut rule = row_rule(&node, spec_n)?;
         let mut cpt = Vec::with_capacity(rows * k);
         let mut a = vec![0usize; parents.len()];
         for _ in 0..rows {
@@ -569,7 +581,7 @@ fn apply_overrides(
 ) -> Result<(), SpecError> {
     let file = hm.file;
     let k = hm.states[n].len();
-    for (oi, o) in spec_n.overrides.iter().enumerate() {
+    for (oi, o) in spec_n.common().overrides.iter().enumerate() {
         let oe = format!("node.{n}.override[{oi}]");
         if o.p.len() != k {
             return Err(err(
@@ -607,7 +619,7 @@ fn apply_overrides(
 fn import_source(
     file: &Path,
     n: &str,
-    spec_n: &NodeSpec,
+    spec_n: &ImportNode,
 ) -> Result<(String, String, String), SpecError> {
     let entry = format!("node.{n}.from");
     let from = spec_n.from.as_ref().ok_or_else(|| {

@@ -10,9 +10,13 @@ mod schema;
 
 pub use catalogue::fill_from_catalogue;
 pub use compile::compile_hm;
-pub use schema::{Carry, CptSpec, FmeaRow, HmFile, Implementation, NodeSpec, RowOverride};
+pub use schema::{
+    ActivationNode, Carry, CptSpec, FmeaRow, HmFile, Implementation, ImportNode, MonitorNode,
+    NodeCommon, NodeSpec, NoisyOrNode, QosNode, RootNode, RowOverride, StateNode, VersionNode,
+    read_hm,
+};
 
-use crate::spec::{SpecError, read_toml};
+use crate::spec::SpecError;
 use bayes_net::{BnError, Network};
 use std::path::{Path, PathBuf};
 
@@ -139,7 +143,7 @@ fn check_prob(file: &Path, entry: &str, v: f64) -> Result<f64, SpecError> {
 
 /// Load and compile one FMEA file.
 pub fn load_hm(params: &crate::spec::ParamsFiles, path: &Path) -> Result<CompiledHm, SpecError> {
-    let spec: HmFile = read_toml(params, path)?;
+    let spec = read_hm(params, path)?;
     compile_hm(path, &spec)
 }
 
@@ -161,3 +165,6 @@ fn bn_to_spec(file: &Path, e: BnError) -> SpecError {
     };
     SpecError::new(file, entry, reason)
 }
+
+#[cfg(test)]
+mod tests;

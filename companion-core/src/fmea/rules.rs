@@ -1,8 +1,10 @@
 //! The default CPT rule of each role (docs/params/health.md): one function per role, each
-//! checking the node's rule parameters and returning its row generator.
+//! taking its role's settings, checking the rule parameters and returning its row generator.
 
 use super::compile::{Hm, Role};
-use super::schema::NodeSpec;
+use super::schema::{
+    ActivationNode, MonitorNode, NodeSpec, NoisyOrNode, QosNode, StateNode, VersionNode,
+};
 use super::{check_prob, err};
 use crate::spec::SpecError;
 
@@ -13,7 +15,6 @@ pub(super) type RowRule = Box<dyn FnMut(&[usize]) -> Result<Vec<f64>, SpecError>
 pub(super) struct NodeCtx<'a> {
     pub(super) hm: &'a Hm<'a>,
     pub(super) n: &'a str,
-    pub(super) spec: &'a NodeSpec,
     pub(super) parents: &'a [String],
     pub(super) pstates: &'a [&'a Vec<String>],
     /// The node's state count.
@@ -34,20 +35,23 @@ impl NodeCtx<'_> {
     }
 }
 
-/// The row generator of a node without `cpt`.
-pub(super) fn row_rule(c: &NodeCtx, r: Role) -> Result<RowRule, SpecError> {
-    match r {
-        Role::State if c.spec.previous.is_some() => state_transition(c),
-        Role::State if c.parents.is_empty() => root_state(c),
-        Role::Context | Role::Resource | Role::Solution | Role::Import => root_prior(c, r),
-        Role::Error | Role::MonitorHealth => noisy_or(c),
-        Role::Monitor => monitor(c),
-        Role::Qos => qos(c),
-        Role::Version => version(c),
-        Role::Activation => activation(c),
-        _ => Err(c.err(
+/// The row generator of a node without `cpt`: the rule of its role.
+pub(super) fn row_rule(c: &NodeCtx, spec: &NodeSpec) -> Result<RowRule, SpecError> {
+    match spec {
+        NodeSpec::State(s) if s.previous.is_some() => state_transition(c, s),
+        NodeSpec::State(s) if c.parents.is_empty() => root_state(c, s),
+        NodeSpec::Context(s) | NodeSpec::Resource(s) | NodeSpec::Solution(s) => {
+            root_prior(c, spec.role(), s.prior.as_ref())
+        }
+        NodeSpec::Import(s) => root_prior(c, Role::Import, s.prior.as_ref()),
+        NodeSpec::Error(s) | NodeSpec::MonitorHealth(s) => noisy_or(c, s),
+        NodeSpec::Monitor(s) => monitor(c, s),
+        NodeSpec::Qos(s) => qos(c, s),
+        NodeSpec::Version(s) => version(c, s),
+        NodeSpec::Activation(s) => activation(c, s),
+        NodeSpec::State(_) | NodeSpec::Performance(_) => Err(c.err(
             c.entry("cpt"),
-            format!("a {r} node needs an explicit `cpt`"),
+            format!("a {} node needs an explicit `cpt`", spec.role()),
         )),
     }
 }
@@ -92,9 +96,9 @@ fn per_parent(
 
 /// A dynamic state: stays with `stay` (times the drain of the other parents), else falls one
 /// state; the last state is absorbing.
-fn state_transition(c: &NodeCtx) -> Result<RowRule, SpecError> {
-    let stay = c.prob("stay", c.spec.stay.unwrap_or(0.9))?;
-    let drains = per_parent(c, "drain", &c.spec.drain, 1, |len| vec![1.0; len])?;
+fn state_transition(c: &NodeCtx, s: &StateNode) -> Result<RowRule, SpecError> {
+    let stay = c.prob("stay", s.stay.unwrap_or(0.9))?;
+    let drains = per_parent(c, "drain", &s.drain, 1, |len| vec![1.0; len])?;
     let k = c.k;
     Ok(Box::new(move |a| {
         let s = stay
@@ -114,8 +118,8 @@ fn state_transition(c: &NodeCtx) -> Result<RowRule, SpecError> {
     }))
 }
 
-fn root_state(c: &NodeCtx) -> Result<RowRule, SpecError> {
-    let prior = c.spec.prior.clone().ok_or_else(|| {
+fn root_state(c: &NodeCtx, s: &StateNode) -> Result<RowRule, SpecError> {
+    let prior = s.prior.clone().ok_or_else(|| {
         c.err(
             c.entry("prior"),
             "a root state node needs `prior` (or `cpt`)",
@@ -124,9 +128,10 @@ fn root_state(c: &NodeCtx) -> Result<RowRule, SpecError> {
     Ok(Box::new(move |_| Ok(prior.clone())))
 }
 
-fn root_prior(c: &NodeCtx, r: Role) -> Result<RowRule, SpecError> {
+/// Context, resource, solution and import: a root with its `prior` or the role's default.
+fn root_prior(c: &NodeCtx, r: Role, prior: Option<&Vec<f64>>) -> Result<RowRule, SpecError> {
     let k = c.k;
-    let prior = match (&c.spec.prior, r) {
+    let prior = match (prior, r) {
         (Some(p), _) => p.clone(),
         (None, Role::Solution) => vec![0.9, 0.1],
         (None, _) => {
@@ -145,9 +150,9 @@ fn root_prior(c: &NodeCtx, r: Role) -> Result<RowRule, SpecError> {
 }
 
 /// Error and monitor health: noisy-OR of the parents with a leak.
-fn noisy_or(c: &NodeCtx) -> Result<RowRule, SpecError> {
-    let leak = c.prob("leak", c.spec.leak.unwrap_or(0.01))?;
-    let strengths = per_parent(c, "strength", &c.spec.strength, 0, |len| {
+fn noisy_or(c: &NodeCtx, s: &NoisyOrNode) -> Result<RowRule, SpecError> {
+    let leak = c.prob("leak", s.leak.unwrap_or(0.01))?;
+    let strengths = per_parent(c, "strength", &s.strength, 0, |len| {
         std::iter::once(0.0)
             .chain(std::iter::repeat_n(0.8, len - 1))
             .collect()
@@ -164,8 +169,7 @@ fn noisy_or(c: &NodeCtx) -> Result<RowRule, SpecError> {
 
 /// A monitor alarms on each present error with `sensitivity`, falsely with `false_alarm`, and
 /// with `faulty_alarm` when its health node says it is faulty.
-fn monitor(c: &NodeCtx) -> Result<RowRule, SpecError> {
-    let s = c.spec;
+fn monitor(c: &NodeCtx, s: &MonitorNode) -> Result<RowRule, SpecError> {
     let sens = c.prob("sensitivity", s.sensitivity.unwrap_or(0.95))?;
     let fa = c.prob("false_alarm", s.false_alarm.unwrap_or(0.05))?;
     let fy = c.prob("faulty_alarm", s.faulty_alarm.unwrap_or(0.5))?;
@@ -190,9 +194,9 @@ fn monitor(c: &NodeCtx) -> Result<RowRule, SpecError> {
 }
 
 /// QoS: row `by_uncorrected[k]` where k errors are present with none of their solutions active.
-fn qos(c: &NodeCtx) -> Result<RowRule, SpecError> {
+fn qos(c: &NodeCtx, s: &QosNode) -> Result<RowRule, SpecError> {
     let (n, k) = (c.n, c.k);
-    let table = c.spec.by_uncorrected.clone().unwrap_or_else(|| {
+    let table = s.by_uncorrected.clone().unwrap_or_else(|| {
         vec![
             vec![0.90, 0.08, 0.02],
             vec![0.10, 0.50, 0.40],
@@ -211,7 +215,7 @@ fn qos(c: &NodeCtx) -> Result<RowRule, SpecError> {
         return Err(c.err(c.entry("by_uncorrected"), "empty table"));
     }
     // Error parent position -> positions of its solution parents.
-    let errs = c.spec.errors.clone().unwrap_or_default();
+    let errs = s.errors.clone().unwrap_or_default();
     let fixes: Vec<(usize, Vec<usize>)> = errs
         .iter()
         .map(|e| {
@@ -240,24 +244,24 @@ fn qos(c: &NodeCtx) -> Result<RowRule, SpecError> {
 
 /// A version works with `p_ok`, times `miss` per present error none of its solutions fixes and
 /// `extra` per solution running for an absent error.
-fn version(c: &NodeCtx) -> Result<RowRule, SpecError> {
-    let sols = c.spec.solutions.clone().ok_or_else(|| {
+fn version(c: &NodeCtx, s: &VersionNode) -> Result<RowRule, SpecError> {
+    let sols = s.solutions.clone().ok_or_else(|| {
         c.err(
             c.entry("solutions"),
             "a version node must list `solutions` (may be empty)",
         )
     })?;
-    for s in &sols {
-        if !c.hm.has_role(s, Role::Solution) {
+    for sol in &sols {
+        if !c.hm.has_role(sol, Role::Solution) {
             return Err(c.err(
                 c.entry("solutions"),
-                format!("`{s}` is not a solution node"),
+                format!("`{sol}` is not a solution node"),
             ));
         }
     }
-    let p_ok = c.prob("p_ok", c.spec.p_ok.unwrap_or(0.95))?;
-    let miss = c.prob("miss", c.spec.miss.unwrap_or(0.1))?;
-    let extra = c.prob("extra", c.spec.extra.unwrap_or(0.5))?;
+    let p_ok = c.prob("p_ok", s.p_ok.unwrap_or(0.95))?;
+    let miss = c.prob("miss", s.miss.unwrap_or(0.1))?;
+    let extra = c.prob("extra", s.extra.unwrap_or(0.5))?;
     // For each error parent: is it fixed by one of this version's solutions?
     let fixed: Vec<bool> = c
         .parents
@@ -292,17 +296,17 @@ type FitsRule = Box<dyn Fn(u32, usize, usize) -> bool>;
 
 /// Activation (paper section 4.3): an activated version becomes active with `p_fit` when one of
 /// its implementations fits the free tiles, the CPU and the required performance, else `p_nofit`.
-fn activation(c: &NodeCtx) -> Result<RowRule, SpecError> {
-    let p_fit = c.prob("p_fit", c.spec.p_fit.unwrap_or(1.0))?;
-    let p_nofit = c.prob("p_nofit", c.spec.p_nofit.unwrap_or(0.05))?;
-    if c.spec.implementations.is_empty() {
+fn activation(c: &NodeCtx, s: &ActivationNode) -> Result<RowRule, SpecError> {
+    let p_fit = c.prob("p_fit", s.p_fit.unwrap_or(1.0))?;
+    let p_nofit = c.prob("p_nofit", s.p_nofit.unwrap_or(0.05))?;
+    if s.implementations.is_empty() {
         return Err(c.err(
             c.entry("implementations"),
             "an activation node needs implementations (or a `variant` of params/variants.toml)",
         ));
     }
     let version_on = 1usize; // `activate` is the second state of a version node.
-    let tiles_node = c.spec.tiles.clone().unwrap_or_default();
+    let tiles_node = s.tiles.clone().unwrap_or_default();
     let tile_counts: Vec<u32> = c.hm.states[&tiles_node]
         .iter()
         .map(|s| s.parse::<u32>())
@@ -313,16 +317,12 @@ fn activation(c: &NodeCtx) -> Result<RowRule, SpecError> {
                 format!("states of `{tiles_node}` must be tile counts"),
             )
         })?;
-    let numeric = c
-        .spec
-        .implementations
-        .iter()
-        .any(|im| im.cpu_per_fps.is_some());
-    let has_perf = c.spec.performance.is_some();
+    let numeric = s.implementations.iter().any(|im| im.cpu_per_fps.is_some());
+    let has_perf = s.performance.is_some();
     let fits_rule = if numeric {
-        catalogue_fits(c)?
+        catalogue_fits(c, s)?
     } else {
-        hand_written_fits(c)?
+        hand_written_fits(c, s)?
     };
     Ok(Box::new(move |a| {
         if a[0] != version_on {
@@ -338,8 +338,8 @@ fn activation(c: &NodeCtx) -> Result<RowRule, SpecError> {
 /// Catalogue-compiled: an implementation fits when its tiles are free, it reaches the highest
 /// rate of the required-rate state, and its CPU share at that rate is within the lowest
 /// headroom of the headroom state.
-fn catalogue_fits(c: &NodeCtx) -> Result<FitsRule, SpecError> {
-    let cpu_node = c.spec.cpu.clone().unwrap_or_default();
+fn catalogue_fits(c: &NodeCtx, s: &ActivationNode) -> Result<FitsRule, SpecError> {
+    let cpu_node = s.cpu.clone().unwrap_or_default();
     let parse = |node: &str, key: &str| -> Result<Vec<f64>, SpecError> {
         c.hm.states[node]
             .iter()
@@ -348,15 +348,14 @@ fn catalogue_fits(c: &NodeCtx) -> Result<FitsRule, SpecError> {
             .ok_or_else(|| c.err(c.entry(key), format!("states of `{node}` must be numbers")))
     };
     let headroom = parse(&cpu_node, "cpu")?;
-    let perf_node = c.spec.performance.clone().ok_or_else(|| {
+    let perf_node = s.performance.clone().ok_or_else(|| {
         c.err(
             c.entry("performance"),
             "a catalogue-compiled activation node needs a required-rate `performance` node",
         )
     })?;
     let rate = parse(&perf_node, "performance")?;
-    let impls: Vec<(u32, f64, f64)> = c
-        .spec
+    let impls: Vec<(u32, f64, f64)> = s
         .implementations
         .iter()
         .map(|im| {
@@ -380,12 +379,12 @@ fn catalogue_fits(c: &NodeCtx) -> Result<FitsRule, SpecError> {
 
 /// Hand-written: each implementation names the highest CPU state it fits in and whether it is
 /// fast enough when the performance node demands speed.
-fn hand_written_fits(c: &NodeCtx) -> Result<FitsRule, SpecError> {
+fn hand_written_fits(c: &NodeCtx, s: &ActivationNode) -> Result<FitsRule, SpecError> {
     let n = c.n;
-    let cpu_node = c.spec.cpu.clone().unwrap_or_default();
-    let has_perf = c.spec.performance.is_some();
+    let cpu_node = s.cpu.clone().unwrap_or_default();
+    let has_perf = s.performance.is_some();
     let mut impls = Vec::new();
-    for (i, im) in c.spec.implementations.iter().enumerate() {
+    for (i, im) in s.implementations.iter().enumerate() {
         let cpu = c.hm.state_idx(
             &cpu_node,
             &im.cpu,
