@@ -798,8 +798,38 @@ impl<'m> Core<'m> {
                     line.clear();
                     let _ = write!(
                         line,
-                        "{app}: allocation plans {token}, {} {} runs (chosen by the health models and MDPs; the allocation's alternative is its energy and duration estimate)",
+                        "{app}: allocation plans {token}, {} {} runs",
                         p.version, p.implementation
+                    );
+                    // Why: the proposal that started this application, and what it read of the
+                    // planned and the running version (the allocation is only an estimate).
+                    let actions = &self.model.actions;
+                    let proposal = rec.proposals.iter().rev().find(|pr| {
+                        pr.actions.iter().any(|a| {
+                            actions.get(a).and_then(|x| x.app.as_deref()) == Some(app)
+                        })
+                    });
+                    if p.version != version
+                        && let Some(pr) = proposal
+                    {
+                        let _ = write!(line, ": the {} MDP chose {}", pr.mdp, pr.action);
+                        let mut sep = " reading ";
+                        for (name, value) in &pr.inputs {
+                            let v = name.strip_prefix("P_");
+                            if v == Some(version) || v == Some(p.version.as_str()) {
+                                let _ = write!(line, "{sep}{name} = {value:.3}");
+                                sep = ", ";
+                            }
+                        }
+                    } else {
+                        let _ = write!(
+                            line,
+                            ": the resource arbitration placed the just-enough implementation"
+                        );
+                    }
+                    let _ = write!(
+                        line,
+                        " (the allocation's alternative is its energy and duration estimate)"
                     );
                     n_differs += 1;
                 }
