@@ -476,7 +476,10 @@ fn guarantee_record_says_where_the_allocation_and_the_placement_differ() {
     );
     for v in ["P_V3", "P_V4"] {
         let value = tracking.inputs[v];
-        assert!(planned.contains(&format!("{v} = {value:.3}")), "{v}: {planned}");
+        assert!(
+            planned.contains(&format!("{v} = {value:.3}")),
+            "{v}: {planned}"
+        );
     }
     for r in &recs {
         let (Some(g), Some(res)) = (&r.guarantee, &r.resources) else {
