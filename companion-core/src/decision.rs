@@ -805,9 +805,9 @@ impl<'m> Core<'m> {
                     // planned and the running version (the allocation is only an estimate).
                     let actions = &self.model.actions;
                     let proposal = rec.proposals.iter().rev().find(|pr| {
-                        pr.actions.iter().any(|a| {
-                            actions.get(a).and_then(|x| x.app.as_deref()) == Some(app)
-                        })
+                        pr.actions
+                            .iter()
+                            .any(|a| actions.get(a).and_then(|x| x.app.as_deref()) == Some(app))
                     });
                     if p.version != version
                         && let Some(pr) = proposal

@@ -264,11 +264,14 @@ impl<'m> Run<'m> {
                 ),
             )
         })?;
-        let kind = match source {
-            // `fly` runs the three concurrent MDPs; `simulate` logs the first run of its first
-            // `--model`.
-            Source::Fly => ModelKind::Bfm,
-            Source::Simulate => simulate_model(&header.command)
+        let kind = match (&header.model, source) {
+            (Some(m), _) => m
+                .parse()
+                .map_err(|e: String| refuse(file, at, format!("header model: {e}")))?,
+            // Logs of older builds name no model: `fly` runs the three concurrent MDPs;
+            // `simulate` logs the first run of its first `--model`.
+            (None, Source::Fly) => ModelKind::Bfm,
+            (None, Source::Simulate) => simulate_model(&header.command)
                 .parse()
                 .map_err(|e: String| refuse(file, at, format!("header command: {e}")))?,
         };

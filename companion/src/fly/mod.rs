@@ -268,6 +268,7 @@ pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
         .with_params_dir(&params)
         .with_context(|| format!("reading {} for the log header", params.display()))?;
     header.policy = Some(args.policy.clone());
+    header.model = Some(companion_core::decision::ModelKind::Bfm.name().to_string());
     let log = dlog::start_run(&args.log_dir, now, header, WriterOptions::default())
         .with_context(|| format!("starting a run folder in {}", args.log_dir.display()))?;
     let dir = log.dir().to_path_buf();
