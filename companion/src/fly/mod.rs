@@ -948,7 +948,7 @@ pub fn decide<D: Decider>(
     let mut shell_events = Vec::new();
     if let Some(why) = shell.mission.mission_end(&obs) {
         // The mission's end, not the core's decision: recorded as an event with the action.
-        shell_events.push(Event::from(format!("{why}: land")));
+        shell_events.push(Event::ShellLand(why.to_string()));
         rec.shell_actions.push("land".into());
         shell.mission.after_plan(&["land".to_string()]);
         chosen = Some("land".into());
@@ -964,9 +964,7 @@ pub fn decide<D: Decider>(
             .is_some_and(|a| a == "avoid_obstacle" || LANDING_ACTIONS.contains(&a));
         if !keep {
             if !vehicle.settled(&landing) {
-                shell_events.push(Event::from(format!(
-                    "landing: {landing} again (the landing was interrupted or not done)"
-                )));
+                shell_events.push(Event::LandingKept(landing.clone()));
             }
             if !rec.actions.contains(&landing) && !rec.shell_actions.contains(&landing) {
                 rec.shell_actions.push(landing.clone());
