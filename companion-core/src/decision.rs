@@ -230,8 +230,8 @@ pub(crate) struct Scratch<'m> {
     pub(crate) actions: Vec<&'m str>,
     /// Proposals replaced by a re-solve of the same MDP within the cycle.
     superseded: Vec<usize>,
-    /// The resource requests: (app, version, required fps bits) per request.
-    pub(crate) key: Vec<(&'m str, &'m str, u64)>,
+    /// The resource requests, one key each.
+    pub(crate) key: Vec<crate::arbitration::RequestKey<'m>>,
     failed: Vec<String>,
 }
 
@@ -574,8 +574,23 @@ impl<'m> Core<'m> {
             rec.events.push(Event::ArbitrationError(e.to_string()));
             sc.kept.clone_from(&sc.merged);
         }
-        self.arbiter
-            .arbitrate_resources(model, self.policy, &mut self.platform, sc, obs, rec);
+        // The IA in force for the activity being flown (PANORAMA's plan, `gps_vision fusion
+        // V4.F`): its implementations are requested for the versions the MDPs chose.
+        let plan = self.guarantee.as_ref().and_then(|g| {
+            let at = *model.mission.guarantee.activity_of_state.get(&obs.state)?;
+            let ia = *g.choice().get(at)?;
+            let activity = model.guarantee.problem.activities.get(at)?;
+            Some(activity.ias.get(ia)?.name.as_str())
+        });
+        self.arbiter.arbitrate_resources(
+            model,
+            self.policy,
+            &mut self.platform,
+            sc,
+            obs,
+            plan,
+            rec,
+        );
     }
 
     /// When the assessed application was requested but not placed: re-evaluate the resource
@@ -824,7 +839,7 @@ impl<'m> Core<'m> {
                     } else {
                         let _ = write!(
                             line,
-                            ": the resource arbitration placed the just-enough implementation"
+                            ": the planned implementation does not fit beside what runs or is too slow for the rate, so the just-enough one runs"
                         );
                     }
                     let _ = write!(
