@@ -188,9 +188,155 @@ pub struct StateDecl {
 /// spent there, and each of its states names the tracking action flown in it.
 pub const TRACKING_PHASE: &str = "tracking";
 
-/// The shared state where the target is seen but not yet tracked (or was lost): tracking starts
-/// from it as from a tracking state.
-pub const TARGET_STATE: &str = "target";
+/// A point of the route the mission flies, which one declared state stands for (params/
+/// mission.toml `route_states`): on the ground, to the first waypoint, through the intermediate
+/// ones, at the last one (the tracking area), the target found, landing. The simulated world and
+/// the flight shell's estimator move through the route by these roles, never by state names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum RouteRole {
+    /// On the ground before take-off.
+    OnGround,
+    /// Airborne, flying to the route's first waypoint.
+    FirstLeg,
+    /// Flying through the intermediate waypoints.
+    BetweenWaypoints,
+    /// The last waypoint reached: the tracking area, where the target is searched.
+    LastWaypoint,
+    /// The target seen but not yet tracked (or lost): tracking starts from it as from a
+    /// tracking state.
+    TargetFound,
+    /// Landing (or returning to base): the end of the flight.
+    Landing,
+}
+
+impl RouteRole {
+    /// Every role, in flight order.
+    pub const ALL: [RouteRole; 6] = [
+        RouteRole::OnGround,
+        RouteRole::FirstLeg,
+        RouteRole::BetweenWaypoints,
+        RouteRole::LastWaypoint,
+        RouteRole::TargetFound,
+        RouteRole::Landing,
+    ];
+
+    /// The role's key in params/mission.toml `route_states`.
+    pub fn key(self) -> &'static str {
+        match self {
+            RouteRole::OnGround => "on_ground",
+            RouteRole::FirstLeg => "first_leg",
+            RouteRole::BetweenWaypoints => "between_waypoints",
+            RouteRole::LastWaypoint => "last_waypoint",
+            RouteRole::TargetFound => "target_found",
+            RouteRole::Landing => "landing",
+        }
+    }
+
+    /// The role whose key is `key`.
+    pub fn from_key(key: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|r| r.key() == key)
+    }
+}
+
+/// Which declared state plays each [`RouteRole`] (params/mission.toml `route_states`, checked):
+/// every role has one, and no state plays two.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RouteStates {
+    /// Indexed by `RouteRole as usize`.
+    names: [String; RouteRole::ALL.len()],
+}
+
+impl RouteStates {
+    /// The state standing for `role`.
+    pub fn state(&self, role: RouteRole) -> &str {
+        &self.names[role as usize]
+    }
+
+    /// Whether `state` is the one standing for `role`.
+    pub fn is(&self, role: RouteRole, state: &str) -> bool {
+        self.state(role) == state
+    }
+
+    /// The role `state` plays, if any.
+    pub fn role_of(&self, state: &str) -> Option<RouteRole> {
+        RouteRole::ALL.into_iter().find(|&r| self.is(r, state))
+    }
+
+    /// Check `table` (role key -> state name) against the declared states `declared`; `file`
+    /// names the file in errors.
+    fn compile(
+        file: &std::path::Path,
+        table: &BTreeMap<String, String>,
+        declared: &[StateInfo],
+    ) -> Result<Self, SpecError> {
+        let roles = || {
+            RouteRole::ALL
+                .iter()
+                .map(|r| r.key())
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        if let Some(k) = table.keys().find(|k| RouteRole::from_key(k).is_none()) {
+            return Err(SpecError::new(
+                file,
+                format!("route_states.{k}"),
+                format!("`{k}` is not a route role (roles: {})", roles()),
+            ));
+        }
+        let mut names: Vec<String> = Vec::with_capacity(RouteRole::ALL.len());
+        for role in RouteRole::ALL {
+            let entry = format!("route_states.{}", role.key());
+            let Some(name) = table.get(role.key()) else {
+                return Err(SpecError::new(
+                    file,
+                    entry,
+                    format!(
+                        "missing: every route role names the declared state standing for it (roles: {})",
+                        roles()
+                    ),
+                ));
+            };
+            let Some(info) = declared.iter().find(|s| &s.name == name) else {
+                return Err(SpecError::new(
+                    file,
+                    entry,
+                    format!("`{name}` is not a declared state"),
+                ));
+            };
+            if info.phase == TRACKING_PHASE {
+                return Err(SpecError::new(
+                    file,
+                    entry,
+                    format!(
+                        "`{name}` is a `{TRACKING_PHASE}` state: the route's states are the ones around tracking"
+                    ),
+                ));
+            }
+            if let Some(i) = names.iter().position(|n| n == name) {
+                return Err(SpecError::new(
+                    file,
+                    entry,
+                    format!(
+                        "`{name}` already plays the route role `{}`",
+                        RouteRole::ALL[i].key()
+                    ),
+                ));
+            }
+            names.push(name.clone());
+        }
+        let names = names
+            .try_into()
+            .expect("one name per route role, pushed in the loop above");
+        Ok(Self { names })
+    }
+
+    /// The route of the decision logs written before params/mission.toml declared its states.
+    fn undeclared() -> Self {
+        Self {
+            names: ["base", "wp1", "wpi", "wpf", "target", "landing"].map(String::from),
+        }
+    }
+}
 
 /// One mission state, compiled: its phase and, in a tracking state, the action that keeps the
 /// target there and that action's variant version.
@@ -208,6 +354,7 @@ struct StateInfo {
 pub struct MissionStates {
     phases: Vec<String>,
     states: Vec<StateInfo>,
+    route: RouteStates,
 }
 
 impl Default for MissionStates {
@@ -339,12 +486,18 @@ impl MissionStates {
                 }
             }
         }
-        Ok(Self { phases, states })
+        let route = RouteStates::compile(file, &mission.route_states, &states)?;
+        Ok(Self {
+            phases,
+            states,
+            route,
+        })
     }
 
     /// The rule used before mission.toml declared its states, kept only to read the decision
     /// logs written then: `v0`..`v9` are the tracking states, kept by `track_v0`..`track_v9`
-    /// (versions `V0`..`V9`); every other state is its own phase.
+    /// (versions `V0`..`V9`); every other state is its own phase; the route is `base`, `wp1`,
+    /// `wpi`, `wpf`, `target`, `landing`.
     pub fn undeclared() -> Self {
         let states = (0..10)
             .map(|n| StateInfo {
@@ -356,6 +509,7 @@ impl MissionStates {
         Self {
             phases: Vec::new(),
             states,
+            route: RouteStates::undeclared(),
         }
     }
 
@@ -385,6 +539,27 @@ impl MissionStates {
     /// Whether `state` keeps the target (is in the tracking phase).
     pub fn is_tracking(&self, state: &str) -> bool {
         self.phase(state) == TRACKING_PHASE
+    }
+
+    /// Which state stands for each point of the route.
+    pub fn route(&self) -> &RouteStates {
+        &self.route
+    }
+
+    /// The state standing for the route's `role`.
+    pub fn route_state(&self, role: RouteRole) -> &str {
+        self.route.state(role)
+    }
+
+    /// Whether `state` is `role`'s state.
+    pub fn is_route(&self, role: RouteRole, state: &str) -> bool {
+        self.route.is(role, state)
+    }
+
+    /// Whether the target is in sight in `state`: found, or kept in a tracking state. Tracking
+    /// starts from such a state.
+    pub fn is_target_in_sight(&self, state: &str) -> bool {
+        self.route.is(RouteRole::TargetFound, state) || self.is_tracking(state)
     }
 
     /// The tracking state the action set aims at, and the tracking variant version flown there:
@@ -419,6 +594,10 @@ pub struct MissionFile {
     /// The shared mission states and their phases; read through [`MissionStates`].
     #[serde(default)]
     pub states: Vec<StateDecl>,
+    /// Route role key (`on_ground`, ...) -> the declared state standing for it; read through
+    /// [`MissionStates`] (see [`RouteRole`]).
+    #[serde(default)]
+    pub route_states: BTreeMap<String, String>,
     /// Named probabilities published for the decision record and the review only (no MDP reads
     /// them); every other published name must have a reader (see `crate::probabilities`).
     #[serde(default)]
@@ -521,6 +700,107 @@ mod tests {
         // No rule: the shared state itself.
         assert_eq!(m.project("tracking", &obs("v2", &[])), "v2");
         assert_eq!(m.project("navigation", &obs("wpi", &[])), "wpi");
+    }
+
+    /// The shipped params with mission.toml's `[route_states]` table replaced by `table` (TOML
+    /// lines; empty: no table).
+    fn with_route_states(table: &str) -> crate::spec::ParamsFiles {
+        let mut files = crate::shipped::params();
+        let path = files.dir().join("mission.toml");
+        let text = files.text(&path).unwrap().to_string();
+        let start = text.find("[route_states]\n").unwrap();
+        let end = start + text[start..].find("\n\n").unwrap();
+        let replaced = format!("{}{table}{}", &text[..start], &text[end..]);
+        files.insert(path, replaced);
+        files
+    }
+
+    const SHIPPED_ROUTE: &str = "[route_states]\non_ground = \"base\"\nfirst_leg = \"wp1\"\n\
+        between_waypoints = \"wpi\"\nlast_waypoint = \"wpf\"\ntarget_found = \"target\"\n\
+        landing = \"landing\"";
+
+    #[test]
+    fn shipped_route_states_name_each_point_of_the_route() {
+        let states = MissionStates::load(&crate::shipped::params()).unwrap();
+        let route = states.route();
+        let names: Vec<&str> = RouteRole::ALL.iter().map(|&r| route.state(r)).collect();
+        assert_eq!(
+            names,
+            ["base", "wp1", "wpi", "wpf", "target", "landing"],
+            "the route of the paper's Figure 1, in flight order"
+        );
+        assert_eq!(route.role_of("wpf"), Some(RouteRole::LastWaypoint));
+        assert_eq!(route.role_of("v3"), None);
+        assert!(states.is_target_in_sight("target") && states.is_target_in_sight("v3"));
+        assert!(!states.is_target_in_sight("wpf"));
+        // The table rebuilt from SHIPPED_ROUTE is the shipped one (the helper replaces it whole).
+        let same = MissionStates::load(&with_route_states(SHIPPED_ROUTE)).unwrap();
+        assert_eq!(same, states);
+        // The rule of old logs flies the same route.
+        assert_eq!(MissionStates::undeclared().route(), route);
+    }
+
+    #[test]
+    fn route_states_follow_the_names_the_params_give() {
+        // `wp1` and `wpi` swap roles: the route is read from the table, not from the names.
+        let files = with_route_states(
+            &SHIPPED_ROUTE
+                .replace("\"wp1\"", "\"x\"")
+                .replace("\"wpi\"", "\"wp1\"")
+                .replace("\"x\"", "\"wpi\""),
+        );
+        let states = MissionStates::load(&files).unwrap();
+        assert_eq!(states.route_state(RouteRole::FirstLeg), "wpi");
+        assert_eq!(states.route_state(RouteRole::BetweenWaypoints), "wp1");
+        assert!(states.is_route(RouteRole::FirstLeg, "wpi"));
+    }
+
+    fn route_error(table: &str) -> SpecError {
+        MissionStates::load(&with_route_states(table)).unwrap_err()
+    }
+
+    #[test]
+    fn a_missing_route_role_is_refused_with_its_entry() {
+        let e = route_error(&SHIPPED_ROUTE.replace("last_waypoint = \"wpf\"\n", ""));
+        assert!(e.file.ends_with("mission.toml"), "{e}");
+        assert_eq!(e.entry, "route_states.last_waypoint");
+        assert!(e.reason.contains("missing"), "{e}");
+        // No table at all: the first role is the one reported.
+        let e = route_error("");
+        assert_eq!(e.entry, "route_states.on_ground");
+    }
+
+    #[test]
+    fn a_route_role_naming_an_undeclared_state_is_refused() {
+        let e = route_error(&SHIPPED_ROUTE.replace("\"target\"", "\"tgt\""));
+        assert_eq!(e.entry, "route_states.target_found");
+        assert!(e.reason.contains("`tgt` is not a declared state"), "{e}");
+    }
+
+    #[test]
+    fn a_state_playing_two_route_roles_is_refused() {
+        let e = route_error(&SHIPPED_ROUTE.replace("\"wp1\"", "\"wpi\""));
+        // `wpi` plays first_leg first, then between_waypoints again.
+        assert_eq!(e.entry, "route_states.between_waypoints");
+        assert!(
+            e.reason
+                .contains("`wpi` already plays the route role `first_leg`"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn an_unknown_route_role_is_refused() {
+        let e = route_error(&format!("{SHIPPED_ROUTE}\nhovering = \"wpf\""));
+        assert_eq!(e.entry, "route_states.hovering");
+        assert!(e.reason.contains("not a route role"), "{e}");
+    }
+
+    #[test]
+    fn a_tracking_state_cannot_play_a_route_role() {
+        let e = route_error(&SHIPPED_ROUTE.replace("\"target\"", "\"v0\""));
+        assert_eq!(e.entry, "route_states.target_found");
+        assert!(e.reason.contains("`v0` is a `tracking` state"), "{e}");
     }
 
     #[test]

@@ -6,7 +6,7 @@
 //! (`track_v3` keeps `v3`) and ends in that state: the target was kept for that step. A cycle
 //! that chose to track but lost the target (back to `target`) or broke off to land is not one.
 
-use crate::mission::{MissionStates, TARGET_STATE};
+use crate::mission::MissionStates;
 use crate::record::DecisionRecord;
 
 /// One cycle: in state `before`, the action set `actions`, then in state `after`.
@@ -16,7 +16,7 @@ pub fn is_tracking_step<S: AsRef<str>>(
     actions: &[S],
     after: &str,
 ) -> bool {
-    if before != TARGET_STATE && !states.is_tracking(before) {
+    if !states.is_target_in_sight(before) {
         return false;
     }
     states
@@ -89,7 +89,7 @@ impl TrackingCounter {
     }
 
     fn judge(&mut self, p: &Pending, after: &str, dt: f64) {
-        let from_tracking = p.state == TARGET_STATE || self.states.is_tracking(&p.state);
+        let from_tracking = self.states.is_target_in_sight(&p.state);
         if from_tracking && p.kept.as_deref() == Some(after) {
             self.steps += 1;
             self.seconds += dt;

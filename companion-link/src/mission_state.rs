@@ -1,5 +1,7 @@
 //! The shared mission state (`base`, `wp1`, `wpi`, `wpf`, `target`, `v0`..`v5`, `landing`) as
-//! the fly shell observes it, for `Observations.state`.
+//! the fly shell observes it, for `Observations.state`. Those are the shipped names: the estimator
+//! reports whichever states params/mission.toml `[route_states]` names for each point of the route
+//! (`RouteRole`), and the tracking states the mission declares.
 //!
 //! Why in the shell: the decision core is pure and learns where the mission is only from its
 //! observations; the simulation world computes the state from its own bookkeeping
@@ -19,7 +21,7 @@
 //! at altitude (spoofed or corrupt) neither starts the landing nor ends the flight.
 
 use super::actions::Route;
-use companion_core::mission::{MissionStates, TARGET_STATE};
+use companion_core::mission::{MissionStates, RouteRole};
 use companion_core::observations::Observations;
 
 /// Vehicle actions that end the flight.
@@ -90,7 +92,7 @@ impl MissionState {
             arrived_speed_mps: 1.0,
             tracking_time_limit_s: route.tracking_time_limit_s,
             search_time_limit_s: route.search_time_limit_s,
-            state: "base".into(),
+            state: states.route_state(RouteRole::OnGround).to_string(),
             flown: false,
             landing: false,
             finished: false,
@@ -194,38 +196,45 @@ impl MissionState {
             self.landing = true;
             self.finished = true;
         }
+        let route = self.states.route();
+        let named = |role: RouteRole| route.state(role).to_string();
         if self.landing {
-            self.state = "landing".into();
+            self.state = named(RouteRole::Landing);
             return &self.state;
         }
-        let states = &self.states;
-        let past = |s: &str| s == "wpf" || s == TARGET_STATE || states.is_tracking(s);
+        // Reached the last waypoint once: the rest of the flight is in the tracking area.
+        let past = route.is(RouteRole::LastWaypoint, &self.state)
+            || self.states.is_target_in_sight(&self.state);
         self.state = if !self.flown {
-            "base".into()
-        } else if past(&self.state)
+            named(RouteRole::OnGround)
+        } else if past
             || (seq.is_some_and(|s| s >= self.last_seq) && speed < self.arrived_speed_mps)
         {
             self.wpf_at.get_or_insert(clock);
             if detected {
                 self.tracking_since.get_or_insert(clock);
-                self.tracking.clone().unwrap_or_else(|| "target".into())
+                self.tracking
+                    .clone()
+                    .unwrap_or_else(|| named(RouteRole::TargetFound))
             } else {
                 self.tracking = None;
-                "wpf".into()
+                named(RouteRole::LastWaypoint)
             }
         } else if seq.is_some_and(|s| s > self.wp1_seq) {
-            "wpi".into()
+            named(RouteRole::BetweenWaypoints)
         } else {
-            "wp1".into()
+            named(RouteRole::FirstLeg)
         };
         &self.state
     }
 
     /// Waypoints not yet reached (the `waypoints_remaining` observation).
     pub fn waypoints_remaining(&self, obs: &Observations) -> f64 {
-        match self.state.as_str() {
-            "base" | "wp1" => (self.last_seq - self.wp1_seq + 1) as f64,
-            "wpi" => {
+        match self.states.route().role_of(&self.state) {
+            Some(RouteRole::OnGround | RouteRole::FirstLeg) => {
+                (self.last_seq - self.wp1_seq + 1) as f64
+            }
+            Some(RouteRole::BetweenWaypoints) => {
                 let seq = obs.get("mission_seq").unwrap_or(0.0) as u16;
                 (self.last_seq + 1).saturating_sub(seq.max(self.wp1_seq)) as f64
             }
@@ -475,6 +484,79 @@ mod tests {
         let mut m = MissionState::new(&route(), 10.0, states());
         assert_eq!(m.update(&obs(1.0, &[("armed", 0.0)]), &rtl), "base");
         assert!(!m.finished());
+    }
+
+    /// The shipped mission states with every route state (and its phase) renamed `r_NAME`.
+    fn renamed_states() -> MissionStates {
+        let dir = crate::test_support::default_params_dir();
+        let mut text = std::fs::read_to_string(dir.join("mission.toml")).unwrap();
+        for x in ["base", "wp1", "wpi", "wpf", "target", "landing"] {
+            text = text
+                .replace(&format!("\"{x}\""), &format!("\"r_{x}\""))
+                .replace(&format!(" {x} = "), &format!(" r_{x} = "));
+        }
+        let mut files = companion_core::spec::ParamsFiles::new(&dir);
+        files.insert(dir.join("mission.toml"), text);
+        files.insert(
+            dir.join("actions.toml"),
+            std::fs::read_to_string(dir.join("actions.toml")).unwrap(),
+        );
+        MissionStates::load(&files).unwrap()
+    }
+
+    #[test]
+    fn the_estimator_names_the_route_states_the_params_give() {
+        let renamed = renamed_states();
+        assert!(!renamed.has_state("wpf") && renamed.has_state("r_wpf"));
+        let (mut old, mut new) = (
+            MissionState::new(&route(), 10.0, states()),
+            MissionState::new(&route(), 10.0, renamed),
+        );
+        assert_eq!((old.state(), new.state()), ("base", "r_base"));
+        let auto = Extra {
+            mode: Some("AUTO"),
+            ..Extra::default()
+        };
+        let fly = |t: f64, seq: f64, spd: f64, det: f64| {
+            obs(
+                t,
+                &[
+                    ("armed", 1.0),
+                    ("altitude_m", 20.0),
+                    ("mission_seq", seq),
+                    ("groundspeed_mps", spd),
+                    ("target_detected", det),
+                ],
+            )
+        };
+        // (snapshot, plan after it, the shipped state expected)
+        let flight: Vec<(Observations, Vec<String>, &str)> = vec![
+            (obs(0.0, &[("armed", 0.0)]), vec![], "base"),
+            (fly(1.0, 1.0, 0.0, 0.0), vec![], "wp1"),
+            (fly(2.0, 3.0, 5.0, 0.0), vec![], "wpi"),
+            (fly(3.0, 5.0, 0.2, 0.0), vec![], "wpf"),
+            (fly(4.0, 5.0, 0.2, 1.0), vec!["track_v3".into()], "target"),
+            (fly(5.0, 5.0, 0.2, 1.0), vec![], "v3"),
+            (fly(6.0, 5.0, 0.2, 1.0), vec!["land".into()], "target"),
+            (fly(7.0, 5.0, 0.2, 1.0), vec![], "landing"),
+        ];
+        for (o, plan, expected) in flight {
+            let (a, b) = (
+                old.update(&o, &auto).to_string(),
+                new.update(&o, &auto).to_string(),
+            );
+            assert_eq!(a, expected, "shipped names at t={}", o.time_s);
+            let want = if expected.starts_with('v') {
+                expected.to_string()
+            } else {
+                format!("r_{expected}")
+            };
+            assert_eq!(b, want, "renamed at t={}", o.time_s);
+            assert_eq!(old.waypoints_remaining(&o), new.waypoints_remaining(&o));
+            old.after_plan(&plan);
+            new.after_plan(&plan);
+        }
+        assert_eq!(new.landing_action(), Some("land"));
     }
 
     #[test]

@@ -6,7 +6,7 @@
 //! build from MAVLink, then advances by sampling the true dynamics under the actions the core
 //! chose. The core never reads the truth.
 
-use companion_core::mission::{MissionStates, TARGET_STATE};
+use companion_core::mission::{MissionStates, RouteRole};
 use companion_core::observations::Observations;
 use companion_core::record::{DecisionRecord, Event, Plan};
 use companion_core::spec::{ParamsFiles, SpecError, read_toml};
@@ -338,10 +338,6 @@ impl<'a> World<'a> {
         w
     }
 
-    fn is_tracking(&self, state: &str) -> bool {
-        self.spec.states.is_tracking(state)
-    }
-
     fn enter_phase(&mut self) {
         let fam = self.spec.states.phase(&self.phase).to_string();
         self.entered.entry(fam).or_insert(self.step);
@@ -408,11 +404,8 @@ impl<'a> World<'a> {
         );
         let failed = values.get("failed_tiles").copied().unwrap_or(0.0);
         values.insert("free_tiles".into(), (self.free_tiles - failed).max(0.0));
-        let in_tracking_area = self.phase == TARGET_STATE || self.is_tracking(&self.phase);
-        values.insert(
-            "target_detected".into(),
-            if in_tracking_area { 1.0 } else { 0.0 },
-        );
+        let in_sight = self.spec.states.is_target_in_sight(&self.phase);
+        values.insert("target_detected".into(), if in_sight { 1.0 } else { 0.0 });
         values.insert(
             "zone_t_found".into(),
             if self.zone_t_found { 1.0 } else { 0.0 },
@@ -425,9 +418,9 @@ impl<'a> World<'a> {
         values.insert("avoidance_wp".into(), if avoided { 1.0 } else { 0.0 });
         let lost = self.avoided_at.is_some();
         values.insert("zone_t_lost".into(), if lost { 1.0 } else { 0.0 });
-        let remaining = match self.phase.as_str() {
-            "base" | "wp1" => self.spec.route.waypoints as f64,
-            "wpi" => {
+        let remaining = match self.spec.states.route().role_of(&self.phase) {
+            Some(RouteRole::OnGround | RouteRole::FirstLeg) => self.spec.route.waypoints as f64,
+            Some(RouteRole::BetweenWaypoints) => {
                 (self.spec.route.waypoints - self.waypoint.min(self.spec.route.waypoints)) as f64
             }
             _ => 0.0,
@@ -474,11 +467,15 @@ impl<'a> World<'a> {
         let extra = values.get("extra_power_w").copied().unwrap_or(0.0);
         let mut prop_w =
             self.spec.vehicle.hover_w + self.spec.vehicle.wind_w_per_mps2 * wind * wind + extra;
-        if self.phase == "base" && has("take_off") {
+        // The spec outlives the world: the route's names are read while the world changes.
+        let spec: &'a WorldSpec = self.spec;
+        let route = spec.states.route();
+        let on_ground = route.is(RouteRole::OnGround, &self.phase);
+        if on_ground && has("take_off") {
             prop_w *= self.spec.vehicle.climb_factor;
         }
         let compute_w = record.resources.as_ref().map_or(0.0, |r| r.power_w);
-        if self.phase != "base" || has("take_off") {
+        if !on_ground || has("take_off") {
             self.battery_wh -= (prop_w + compute_w) * self.spec.step_s / 3600.0;
         }
         if let Some(r) = &record.resources {
@@ -496,7 +493,7 @@ impl<'a> World<'a> {
         }
 
         // Obstacles: avoided, or a collision after the grace period.
-        if self.obstacle_present(&values) && self.phase != "base" {
+        if self.obstacle_present(&values) && !on_ground {
             if has("avoid_obstacle") {
                 for (i, h) in self.scenario.hazards.iter().enumerate() {
                     if self.in_force(i) && h.set.contains_key("obstacle_m") {
@@ -534,50 +531,61 @@ impl<'a> World<'a> {
         }
 
         // Mission phase.
-        let airborne = self.phase != "base" && self.phase != "landing";
+        let state = |role: RouteRole| Some(route.state(role).to_string());
+        let airborne = !on_ground && !route.is(RouteRole::Landing, &self.phase);
         let before = self.phase.clone();
+        let p = before.as_str();
         let next: Option<String> =
             if airborne && (has("land") || has("replan_and_land") || has("return_to_base")) {
                 events.push(Event::Landing);
-                Some("landing".into())
-            } else {
-                match self.phase.as_str() {
-                    "base" if has("take_off") => {
-                        (self.rng.random::<f64>() < truth.p_leg).then(|| "wp1".into())
-                    }
-                    "wp1" if has("follow_trajectory") => (self.rng.random::<f64>() < truth.p_leg)
-                        .then(|| {
-                            self.waypoint = 1;
-                            "wpi".into()
-                        }),
-                    "wpi" if has("follow_trajectory") => {
-                        if self.rng.random::<f64>() < truth.p_leg {
-                            self.waypoint += 1;
-                        }
-                        (self.waypoint > self.spec.route.waypoints).then(|| "wpf".into())
-                    }
-                    "wpf" if has("detect_target") => (self.rng.random::<f64>() < truth.p_detect)
-                        .then(|| {
-                            events.push(Event::TargetDetected);
-                            "target".into()
-                        }),
-                    p if p == TARGET_STATE || self.is_tracking(p) => {
-                        match self.spec.states.tracking_target(&acts) {
-                            Some((kept, version)) => {
-                                let q = self.qos(version, &values);
-                                if self.rng.random::<f64>() < q {
-                                    Some(kept.to_string())
-                                } else {
-                                    events.push(Event::TargetLost);
-                                    Some("target".into())
-                                }
-                            }
-                            None if has("detect_target") && p != "target" => Some("target".into()),
-                            None => None,
-                        }
-                    }
-                    _ => None,
+                state(RouteRole::Landing)
+            } else if on_ground && has("take_off") {
+                if self.rng.random::<f64>() < truth.p_leg {
+                    state(RouteRole::FirstLeg)
+                } else {
+                    None
                 }
+            } else if route.is(RouteRole::FirstLeg, p) && has("follow_trajectory") {
+                if self.rng.random::<f64>() < truth.p_leg {
+                    self.waypoint = 1;
+                    state(RouteRole::BetweenWaypoints)
+                } else {
+                    None
+                }
+            } else if route.is(RouteRole::BetweenWaypoints, p) && has("follow_trajectory") {
+                if self.rng.random::<f64>() < truth.p_leg {
+                    self.waypoint += 1;
+                }
+                if self.waypoint > self.spec.route.waypoints {
+                    state(RouteRole::LastWaypoint)
+                } else {
+                    None
+                }
+            } else if route.is(RouteRole::LastWaypoint, p) && has("detect_target") {
+                if self.rng.random::<f64>() < truth.p_detect {
+                    events.push(Event::TargetDetected);
+                    state(RouteRole::TargetFound)
+                } else {
+                    None
+                }
+            } else if spec.states.is_target_in_sight(p) {
+                match spec.states.tracking_target(&acts) {
+                    Some((kept, version)) => {
+                        let q = self.qos(version, &values);
+                        if self.rng.random::<f64>() < q {
+                            Some(kept.to_string())
+                        } else {
+                            events.push(Event::TargetLost);
+                            state(RouteRole::TargetFound)
+                        }
+                    }
+                    None if has("detect_target") && !route.is(RouteRole::TargetFound, p) => {
+                        state(RouteRole::TargetFound)
+                    }
+                    None => None,
+                }
+            } else {
+                None
             };
         if let Some(n) = next
             && n != self.phase
@@ -594,7 +602,7 @@ impl<'a> World<'a> {
         ) {
             self.tracking_steps += 1;
         }
-        if self.phase == "landing" {
+        if route.is(RouteRole::Landing, &self.phase) {
             self.outcome.get_or_insert(Outcome::Landed);
         }
         if self.battery_wh <= 0.0 {

@@ -537,6 +537,34 @@ fn projection_naming_an_undeclared_state_is_refused() {
 }
 
 #[test]
+fn route_state_missing_undeclared_or_playing_two_roles_is_refused() {
+    mission_state_refused(
+        "between_waypoints = \"wpi\"\n",
+        "",
+        "route_states.between_waypoints",
+        "missing",
+    );
+    mission_state_refused(
+        r#"last_waypoint = "wpf""#,
+        r#"last_waypoint = "wp_final""#,
+        "route_states.last_waypoint",
+        "`wp_final` is not a declared state",
+    );
+    mission_state_refused(
+        r#"landing = "landing""#,
+        r#"landing = "base""#,
+        "route_states.landing",
+        "`base` already plays the route role `on_ground`",
+    );
+    mission_state_refused(
+        r#"on_ground = "base""#,
+        "on_ground = \"base\"\nhover = \"wpf\"",
+        "route_states.hover",
+        "not a route role",
+    );
+}
+
+#[test]
 fn scenario_triggered_in_an_unknown_phase_is_refused() {
     let d = params_copy();
     edit(d.path(), "scenarios/complete-1.toml", |t| {
