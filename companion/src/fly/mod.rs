@@ -1119,16 +1119,39 @@ fn complete_observations(obs: &mut Observations, mission: &MissionState) {
     obs.set("waypoints_remaining", remaining);
 }
 
-/// A tiny rule-based stand-in for the decision core, for link tests and for flying before the
-/// real core is wired in: take off, fly the route, sidestep obstacles, return on low battery,
-/// land when the route is done.
+/// Where the scripted decider is in its script (its own steps, not the mission's states: it
+/// reads no params).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Script {
+    OnGround,
+    Route,
+    Sidestep,
+    Return,
+    Landing,
+}
+
+impl Script {
+    /// The step's name in the record's `state`.
+    fn name(self) -> &'static str {
+        match self {
+            Script::OnGround => "scripted: on the ground",
+            Script::Route => "scripted: route",
+            Script::Sidestep => "scripted: sidestep",
+            Script::Return => "scripted: return",
+            Script::Landing => "scripted: landing",
+        }
+    }
+}
+
+/// A tiny rule-based stand-in for the decision core, for link tests: take off, fly the route,
+/// sidestep obstacles, return on low battery, land when the route is done.
 pub struct ScriptedDecider {
     pub takeoff_alt_m: f64,
     /// Mission seq of the last waypoint.
     pub last_seq: u16,
     pub low_battery_pct: f64,
     pub policy: String,
-    phase: &'static str,
+    phase: Script,
     avoid_until: f64,
 }
 
@@ -1139,7 +1162,7 @@ impl ScriptedDecider {
             last_seq,
             low_battery_pct: 20.0,
             policy: policy.to_string(),
-            phase: "base",
+            phase: Script::OnGround,
             avoid_until: 0.0,
         }
     }
@@ -1154,7 +1177,7 @@ impl ScriptedDecider {
 
 impl Decider for ScriptedDecider {
     fn new_flight(&mut self) {
-        self.phase = "base";
+        self.phase = Script::OnGround;
         self.avoid_until = 0.0;
     }
 
@@ -1165,33 +1188,33 @@ impl Decider for ScriptedDecider {
         let speed = obs.get("groundspeed_mps").unwrap_or(0.0);
         let obstacle = obs.events.iter().any(|e| e == "obstacle detected");
         let airborne = alt > 0.8 * self.takeoff_alt_m;
-        let action = if battery <= self.low_battery_pct && self.phase != "landing" {
-            self.phase = "return";
+        let action = if battery <= self.low_battery_pct && self.phase != Script::Landing {
+            self.phase = Script::Return;
             "return_to_base"
         } else {
             match self.phase {
-                "base" if airborne => {
-                    self.phase = "wpi";
+                Script::OnGround if airborne => {
+                    self.phase = Script::Route;
                     "follow_trajectory"
                 }
-                "base" => "take_off",
-                "wpi" if obstacle => {
-                    self.phase = "wp_avoid";
+                Script::OnGround => "take_off",
+                Script::Route if obstacle => {
+                    self.phase = Script::Sidestep;
                     self.avoid_until = obs.time_s + 5.0;
                     "avoid_obstacle"
                 }
-                "wpi" if seq >= self.last_seq && speed < 1.0 => {
-                    self.phase = "landing";
+                Script::Route if seq >= self.last_seq && speed < 1.0 => {
+                    self.phase = Script::Landing;
                     "land"
                 }
-                "wpi" => "follow_trajectory",
-                "wp_avoid" if obs.time_s >= self.avoid_until => {
-                    self.phase = "wpi";
+                Script::Route => "follow_trajectory",
+                Script::Sidestep if obs.time_s >= self.avoid_until => {
+                    self.phase = Script::Route;
                     "follow_trajectory"
                 }
-                "wp_avoid" => "avoid_obstacle",
-                "return" => "return_to_base",
-                _ => "land",
+                Script::Sidestep => "avoid_obstacle",
+                Script::Return => "return_to_base",
+                Script::Landing => "land",
             }
         };
         let plan = Plan {
@@ -1199,7 +1222,7 @@ impl Decider for ScriptedDecider {
             applications: vec![],
         };
         let rec = DecisionRecord {
-            state: self.phase.to_string(),
+            state: self.phase.name().to_string(),
             actions: vec![action.to_string()],
             events: obs.events.clone(),
             observations: obs.values.clone(),
