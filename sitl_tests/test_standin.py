@@ -616,11 +616,16 @@ def test_onboard_monitor_values_are_routed_to_other_links(standin, client):
     companion.wait("HEARTBEAT", timeout=5)
     mon = sap.OnboardMonitors(sa.url).start()
     try:
-        mon.set(tgt_det=1, tgt_spd=12.5, trk_conf=0.8, lum=90, cpu_load=0.7)
+        want = dict(tgt_det=1, tgt_spd=12.5, trk_conf=0.8, lum=90, cpu_load=0.7)
+        t_set = time.monotonic()
+        mon.set(**want)
+        # The monitor was already sending its defaults: keep the newest value of each name (in
+        # arrival order) until every one shows what was set, or the deadline.
         got = {}
         deadline = time.monotonic() + 5
-        while time.monotonic() < deadline and len(got) < 5:
-            for m in companion.since(0, "NAMED_VALUE_FLOAT"):
+        while time.monotonic() < deadline and any(
+                got.get(k) != pytest.approx(v) for k, v in want.items()):
+            for m in companion.since(t_set, "NAMED_VALUE_FLOAT"):
                 if m.get_srcComponent() == mavlink.MAV_COMP_ID_CAMERA and m.value != 0.0:
                     got[m.name] = m.value
             time.sleep(0.05)

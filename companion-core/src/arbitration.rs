@@ -10,7 +10,7 @@ use crate::observations::Observations;
 use crate::record::{Conflict, DecisionRecord, Event, ResourcesRecord};
 use crate::resources::ResourceSpec;
 use crate::spec::{ParamsFiles, SpecError, read_toml};
-use fpga_model::{PlatformState, Request};
+use fpga_model::{Implementation, PlatformState, Request};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -278,8 +278,8 @@ const SCHEDULE_MEMO: usize = 8;
 #[derive(Default)]
 struct ScheduleMemo<'m> {
     before: PlatformState,
-    /// (app, version, required fps bits) per request, in request order.
-    key: Vec<(&'m str, &'m str, u64)>,
+    /// One [`RequestKey`] per request, in request order.
+    key: Vec<RequestKey<'m>>,
     after: PlatformState,
     record: ResourcesRecord,
 }
@@ -327,7 +327,7 @@ impl<'m> ScheduleCache<'m> {
         resources: &ResourceSpec,
         policy: &str,
         platform: &PlatformState,
-        key: &[(&'m str, &'m str, u64)],
+        key: &[RequestKey<'m>],
     ) -> Result<&ScheduleMemo<'m>, SpecError> {
         let hit = self.enabled.then(|| {
             self.memos
@@ -347,7 +347,7 @@ impl<'m> ScheduleCache<'m> {
         resources: &ResourceSpec,
         policy: &str,
         platform: &PlatformState,
-        key: &[(&'m str, &'m str, u64)],
+        key: &[RequestKey<'m>],
     ) -> Result<usize, SpecError> {
         self.runs += 1;
         resources.policy(policy)?;
@@ -402,13 +402,18 @@ fn copy_platform(dst: &mut PlatformState, src: &PlatformState) {
     dst.external_cpu_load = src.external_cpu_load;
 }
 
-/// The scheduler's requests for `key` ((app, version, fps bits) per request), reusing the
-/// strings of the previous cycle's requests.
-fn fill_requests(dst: &mut Vec<Request>, key: &[(&str, &str, u64)]) {
+/// One resource request as the schedule memo keys it: app, version, the implementation the
+/// allocation in force plans for it (if any), required fps bits.
+pub(crate) type RequestKey<'m> = (&'m str, &'m str, Option<Implementation>, u64);
+
+/// The scheduler's requests for `key`, reusing the strings of the previous cycle's requests.
+fn fill_requests(dst: &mut Vec<Request>, key: &[RequestKey<'_>]) {
     dst.truncate(key.len());
-    for (i, &(app, version, fps)) in key.iter().enumerate() {
+    for (i, &(app, version, planned, fps)) in key.iter().enumerate() {
         if i == dst.len() {
-            dst.push(Request::new(app, version, f64::from_bits(fps)));
+            let mut r = Request::new(app, version, f64::from_bits(fps));
+            r.implementation = planned;
+            dst.push(r);
             continue;
         }
         let r = &mut dst[i];
@@ -418,6 +423,7 @@ fn fill_requests(dst: &mut Vec<Request>, key: &[(&str, &str, u64)]) {
         r.version.push_str(version);
         r.required_fps = f64::from_bits(fps);
         r.priority = None;
+        r.implementation = planned;
     }
 }
 
@@ -443,8 +449,11 @@ impl<'m> ResourceArbiter<'m> {
         }
     }
 
-    /// Request every application action's variant at the rate the situation needs, schedule
-    /// them under the policy, and rewrite the action set (`sc.actions`) with what actually runs.
+    /// Request every application action's variant at the rate the situation needs (in the
+    /// implementation `plan` names for it, PANORAMA's IA in force for this activity, when it
+    /// meets the rate and fits), schedule them under the policy, and rewrite the action set
+    /// (`sc.actions`) with what actually runs.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn arbitrate_resources(
         &mut self,
         model: &'m Model,
@@ -452,9 +461,10 @@ impl<'m> ResourceArbiter<'m> {
         platform: &mut PlatformState,
         sc: &mut Scratch<'m>,
         obs: &Observations,
+        plan: Option<&'m str>,
         rec: &mut DecisionRecord,
     ) {
-        request_key(model, sc, obs);
+        request_key(model, sc, obs, plan);
         let m = match self.schedules.schedule(
             &model.resources,
             model.policy_name(policy),
@@ -479,9 +489,23 @@ impl<'m> ResourceArbiter<'m> {
     }
 }
 
+/// The implementation an IA name (`gps_vision fusion V4.F`) plans for `version`: `F` for `V4`.
+fn planned_implementation(plan: Option<&str>, version: &str) -> Option<Implementation> {
+    plan?.split_whitespace().find_map(|token| {
+        let (v, imp) = token.split_once('.')?;
+        (v == version).then(|| imp.parse().ok()).flatten()
+    })
+}
+
 /// The requests (`sc.key`) of the kept application actions and the actions asking for them
-/// (`sc.owners`): one variant per application, at the rate the observed speed requires.
-fn request_key<'m>(model: &'m Model, sc: &mut Scratch<'m>, obs: &Observations) {
+/// (`sc.owners`): one variant per application, at the rate the observed speed requires, in the
+/// implementation the plan names for that version (if it does).
+fn request_key<'m>(
+    model: &'m Model,
+    sc: &mut Scratch<'m>,
+    obs: &Observations,
+    plan: Option<&'m str>,
+) {
     sc.key.clear();
     sc.owners.clear();
     for &a in &sc.kept {
@@ -504,7 +528,8 @@ fn request_key<'m>(model: &'m Model, sc: &mut Scratch<'m>, obs: &Observations) {
             .resources
             .required_fps(app, [0.0, 0.0], [speed, 0.0])
             .unwrap_or(1.0);
-        sc.key.push((app, version, fps.to_bits()));
+        let planned = planned_implementation(plan, version);
+        sc.key.push((app, version, planned, fps.to_bits()));
         sc.owners.push(a);
     }
 }

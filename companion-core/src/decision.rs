@@ -222,8 +222,8 @@ pub(crate) struct Scratch<'m> {
     pub(crate) actions: Vec<&'m str>,
     /// Proposals replaced by a re-solve of the same MDP within the cycle.
     superseded: Vec<usize>,
-    /// The resource requests: (app, version, required fps bits) per request.
-    pub(crate) key: Vec<(&'m str, &'m str, u64)>,
+    /// The resource requests, one key each.
+    pub(crate) key: Vec<crate::arbitration::RequestKey<'m>>,
     failed: Vec<String>,
 }
 
@@ -572,8 +572,23 @@ impl<'m> Core<'m> {
             rec.events.push(Event::ArbitrationError(e.to_string()));
             sc.kept.clone_from(&sc.merged);
         }
-        self.arbiter
-            .arbitrate_resources(model, self.policy, &mut self.platform, sc, obs, rec);
+        // The IA in force for the activity being flown (PANORAMA's plan, `gps_vision fusion
+        // V4.F`): its implementations are requested for the versions the MDPs chose.
+        let plan = self.guarantee.as_ref().and_then(|g| {
+            let at = *model.mission.guarantee.activity_of_state.get(&obs.state)?;
+            let ia = *g.choice().get(at)?;
+            let activity = model.guarantee.problem.activities.get(at)?;
+            Some(activity.ias.get(ia)?.name.as_str())
+        });
+        self.arbiter.arbitrate_resources(
+            model,
+            self.policy,
+            &mut self.platform,
+            sc,
+            obs,
+            plan,
+            rec,
+        );
     }
 
     /// When the assessed application was requested but not placed: re-evaluate the resource
@@ -799,8 +814,38 @@ impl<'m> Core<'m> {
                     line.clear();
                     let _ = write!(
                         line,
-                        "{app}: allocation plans {token}, {} {} runs (chosen by the health models and MDPs; the allocation's alternative is its energy and duration estimate)",
+                        "{app}: allocation plans {token}, {} {} runs",
                         p.version, p.implementation
+                    );
+                    // Why: the proposal that started this application, and what it read of the
+                    // planned and the running version (the allocation is only an estimate).
+                    let actions = &self.model.actions;
+                    let proposal = rec.proposals.iter().rev().find(|pr| {
+                        pr.actions
+                            .iter()
+                            .any(|a| actions.get(a).and_then(|x| x.app.as_deref()) == Some(app))
+                    });
+                    if p.version != version
+                        && let Some(pr) = proposal
+                    {
+                        let _ = write!(line, ": the {} MDP chose {}", pr.mdp, pr.action);
+                        let mut sep = " reading ";
+                        for (name, value) in &pr.inputs {
+                            let v = name.strip_prefix("P_");
+                            if v == Some(version) || v == Some(p.version.as_str()) {
+                                let _ = write!(line, "{sep}{name} = {value:.3}");
+                                sep = ", ";
+                            }
+                        }
+                    } else {
+                        let _ = write!(
+                            line,
+                            ": the planned implementation does not fit beside what runs or is too slow for the rate, so the just-enough one runs"
+                        );
+                    }
+                    let _ = write!(
+                        line,
+                        " (the allocation's alternative is its energy and duration estimate)"
                     );
                     n_differs += 1;
                 }

@@ -279,6 +279,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
             .with_context(|| format!("reading {} for the log header", params.display()))?;
         header.policy = Some(model.policy_name(policy).to_string());
         header.scenario = Some(scenario.name.clone());
+        header.model = Some(first_kind.to_string());
         header.seed = Some(args.seed);
         header.step_s = Some(world.step_s);
         let log = companion::decision_log::start_run(

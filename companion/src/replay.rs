@@ -264,11 +264,14 @@ impl<'m> Run<'m> {
                 ),
             )
         })?;
-        let kind = match source {
-            // `fly` runs the three concurrent MDPs; `simulate` logs the first run of its first
-            // `--model`.
-            Source::Fly => ModelKind::Bfm,
-            Source::Simulate => simulate_model(&header.command)
+        let kind = match (&header.model, source) {
+            (Some(m), _) => m
+                .parse()
+                .map_err(|e: String| refuse(file, at, format!("header model: {e}")))?,
+            // Logs of older builds name no model: `fly` runs the three concurrent MDPs;
+            // `simulate` logs the first run of its first `--model`.
+            (None, Source::Fly) => ModelKind::Bfm,
+            (None, Source::Simulate) => simulate_model(&header.command)
                 .parse()
                 .map_err(|e: String| refuse(file, at, format!("header command: {e}")))?,
         };
@@ -370,13 +373,7 @@ pub fn split_events<'a>(
     core_added: &[Event],
     source: Source,
 ) -> Option<(&'a [Event], &'a [Event], &'a [Event])> {
-    // The shell's sentences have no variant of their own: told apart by their wording.
-    let is_shell = |e: &Event| {
-        source == Source::Fly && {
-            let t = e.to_string();
-            t.ends_with(": land") || t.starts_with("landing: ")
-        }
-    };
+    let is_shell = |e: &Event| source == Source::Fly && e.is_shell();
     // The shell's events are a tail of recognisable sentences after the core's: take the
     // fewest that leave a head ending with the core's.
     let mut end = logged.len();

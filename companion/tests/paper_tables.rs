@@ -467,6 +467,20 @@ fn guarantee_record_says_where_the_allocation_and_the_placement_differ() {
         .find(|l| l.starts_with("tracking:"))
         .unwrap_or_else(|| panic!("{:?}", g.plan_differs));
     assert!(planned.contains("V3"), "{planned}");
+    // The why names the tracking proposal of the same record and the values it read of the
+    // planned and the running version.
+    let tracking = r.proposals.iter().find(|p| p.mdp == "tracking").unwrap();
+    assert!(
+        planned.contains(&format!("the tracking MDP chose {}", tracking.action)),
+        "{planned}"
+    );
+    for v in ["P_V3", "P_V4"] {
+        let value = tracking.inputs[v];
+        assert!(
+            planned.contains(&format!("{v} = {value:.3}")),
+            "{v}: {planned}"
+        );
+    }
     for r in &recs {
         let (Some(g), Some(res)) = (&r.guarantee, &r.resources) else {
             continue;

@@ -103,10 +103,11 @@ fn fresh_simulate_runs_replay_equal_in_every_cycle() {
     }
 }
 
-/// `simulate --model reference,bfm` logs the first run of the first model: replay must build
-/// that model, so a header naming another one makes the records differ.
+/// `simulate --model reference,bfm` logs the first run of the first model, and its header says
+/// which (`model`): replay must build that model, so a header naming another one makes the
+/// records differ. A header without `model` (an older build's log) falls back to the command.
 #[test]
-fn replay_uses_the_first_model_the_simulate_command_names() {
+fn replay_builds_the_model_the_header_names() {
     let tmp = tempfile::tempdir().unwrap();
     let run = simulate(
         tmp.path(),
@@ -115,24 +116,42 @@ fn replay_uses_the_first_model_the_simulate_command_names() {
     );
     let out = replay(&run);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let header: Value = serde_json::from_str(&log_lines(&run)[0]).unwrap();
+    assert_eq!(header["model"], "reference");
 
-    let edited = copy_run(&run, &tmp.path().join("as-bfm"));
-    let mut lines = log_lines(&edited);
-    let mut header: Value = serde_json::from_str(&lines[0]).unwrap();
-    let command = header["command"]
-        .as_str()
-        .unwrap()
-        .replace("reference,bfm", "bfm");
-    header["command"] = Value::from(command);
-    lines[0] = header.to_string();
-    write_lines(&edited, &lines);
-    let out = replay(&edited);
-    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
-    assert!(
-        String::from_utf8_lossy(&out.stdout).contains("cycle 0 differs"),
-        "{}",
-        text(&out)
-    );
+    let edit = |name: &str, f: &dyn Fn(&mut Value)| {
+        let edited = copy_run(&run, &tmp.path().join(name));
+        let mut lines = log_lines(&edited);
+        let mut header: Value = serde_json::from_str(&lines[0]).unwrap();
+        f(&mut header);
+        lines[0] = header.to_string();
+        write_lines(&edited, &lines);
+        replay(&edited)
+    };
+    let differs = |out: &Output| {
+        assert_eq!(out.status.code(), Some(1), "{}", text(out));
+        assert!(
+            String::from_utf8_lossy(&out.stdout).contains("cycle 0 differs"),
+            "{}",
+            text(out)
+        );
+    };
+    differs(&edit("as-bfm", &|h| h["model"] = Value::from("bfm")));
+    let old_log = edit("old-log", &|h| {
+        h.as_object_mut().unwrap().remove("model");
+    });
+    assert_eq!(old_log.status.code(), Some(0), "{}", text(&old_log));
+    differs(&edit("old-log-as-bfm", &|h| {
+        h.as_object_mut().unwrap().remove("model");
+        let command = h["command"]
+            .as_str()
+            .unwrap()
+            .replace("reference,bfm", "bfm");
+        h["command"] = Value::from(command);
+    }));
+    let bad = edit("unknown-model", &|h| h["model"] = Value::from("oracle"));
+    assert_eq!(bad.status.code(), Some(2), "{}", text(&bad));
+    assert!(text(&bad).contains("header model"), "{}", text(&bad));
 }
 
 #[test]

@@ -38,6 +38,18 @@ impl fmt::Display for Implementation {
     }
 }
 
+impl std::str::FromStr for Implementation {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "S" => Ok(Self::S),
+            "M" => Ok(Self::M),
+            "F" => Ok(Self::F),
+            _ => Err(format!("`{s}` is not an implementation (S, M or F)")),
+        }
+    }
+}
+
 impl fmt::Display for Support {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {

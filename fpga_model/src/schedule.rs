@@ -20,6 +20,10 @@ pub struct Request {
     /// the policy's `priority` list). `None`: the policy decides.
     #[serde(default)]
     pub priority: Option<u32>,
+    /// Implementation (`S`, `M`, `F`) a plan asks for (PANORAMA's allocation: `V4.F`): tried
+    /// first when it meets the rate, the just-enough order after it. `None`: just enough.
+    #[serde(default)]
+    pub implementation: Option<Implementation>,
 }
 
 impl Request {
@@ -30,7 +34,14 @@ impl Request {
             version: version.into(),
             required_fps,
             priority: None,
+            implementation: None,
         }
+    }
+
+    /// The same request with `implementation` tried first.
+    pub fn preferring(mut self, implementation: Implementation) -> Self {
+        self.implementation = Some(implementation);
+        self
     }
 
     /// A request given as a frame deadline instead of a rate.
@@ -344,8 +355,17 @@ fn search(
             &vs[it.version].version,
             &mut ws.impls,
         );
+        let first = ws.cand.len();
         ws.cand
             .extend(ws.impls.iter().copied().filter(|&i| vs[i].meets(it.fps)));
+        // A planned implementation that meets the rate goes first; the rest keep their order.
+        if let Some(want) = requests[it.req].implementation
+            && let Some(k) = ws.cand[first..]
+                .iter()
+                .position(|&i| vs[i].implementation == want)
+        {
+            ws.cand[first..=first + k].rotate_right(1);
+        }
     }
     ws.cand_start.push(ws.cand.len());
     ws.chosen.clear();

@@ -123,6 +123,7 @@ fn arb_input() -> impl Strategy<Value = Input> {
                         version: vs[v].clone(),
                         required_fps: fps,
                         priority: prio,
+                        implementation: None,
                     })
                     .collect();
                 let state = PlatformState {

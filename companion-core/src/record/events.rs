@@ -282,6 +282,12 @@ pub enum Event {
     Reallocation(String),
     /// `guarantee: no allocation meets the goals`
     GuaranteeInfeasible,
+    /// `WHY: land`: the fly shell ended the mission on its own rule (not a model's proposal)
+    /// and flies `land` (`DecisionRecord.shell_actions`).
+    ShellLand(String),
+    /// `landing: ACTION again (the landing was interrupted or not done)`: the fly shell keeps
+    /// flying the landing chosen until the vehicle is down.
+    LandingKept(String),
     /// Free text: a scenario's hazard, a resource degradation, an MDP's error, a shell's or
     /// operator's sentence, or a spelling this build does not know.
     Other(String),
@@ -323,6 +329,8 @@ impl Clone for Event {
             },
             Reallocation(r) => Reallocation(r.clone()),
             GuaranteeInfeasible => GuaranteeInfeasible,
+            ShellLand(w) => ShellLand(w.clone()),
+            LandingKept(a) => LandingKept(a.clone()),
             Other(s) => Other(s.clone()),
         }
     }
@@ -335,6 +343,8 @@ impl Clone for Event {
             | (ArbitrationError(d), ArbitrationError(s))
             | (ResourcesError(d), ResourcesError(s))
             | (Reallocation(d), Reallocation(s))
+            | (ShellLand(d), ShellLand(s))
+            | (LandingKept(d), LandingKept(s))
             | (Other(d), Other(s)) => d.clone_from(s),
             (
                 Command { action, outcome },
@@ -390,12 +400,22 @@ impl fmt::Display for Event {
             }
             Reallocation(r) => write!(f, "re-allocation: {r}"),
             GuaranteeInfeasible => f.write_str("guarantee: no allocation meets the goals"),
+            ShellLand(why) => write!(f, "{why}: land"),
+            LandingKept(action) => write!(
+                f,
+                "landing: {action} again (the landing was interrupted or not done)"
+            ),
             Other(s) => f.write_str(s),
         }
     }
 }
 
 impl Event {
+    /// Written by the fly shell on its own safety rules, after the core's events.
+    pub fn is_shell(&self) -> bool {
+        matches!(self, Event::ShellLand(_) | Event::LandingKept(_))
+    }
+
     fn known(s: &str) -> Option<Self> {
         use Event::*;
         Some(match s {
@@ -443,6 +463,14 @@ impl Event {
                 }
                 if let Some(r) = s.strip_prefix("re-allocation: ") {
                     return Some(Reallocation(r.to_string()));
+                }
+                if let Some(a) = s.strip_prefix("landing: ").and_then(|r| {
+                    r.strip_suffix(" again (the landing was interrupted or not done)")
+                }) {
+                    return Some(LandingKept(a.to_string()));
+                }
+                if let Some(why) = s.strip_suffix(": land") {
+                    return Some(ShellLand(why.to_string()));
                 }
                 let (mdp, rest) = s.split_once(": state `")?;
                 let state = rest.strip_suffix("` unknown to this MDP")?;
@@ -764,6 +792,8 @@ mod tests {
             text().prop_map(ResourcesError),
             (word(), "[a-z0-9_]{1,10}").prop_map(|(mdp, state)| MdpStateUnknown { mdp, state }),
             text().prop_map(Reallocation),
+            "mission: [a-z ]{1,20}".prop_map(ShellLand),
+            word().prop_map(LandingKept),
             "tracking V[0-9] -> V[0-9]: insufficient resources".prop_map(Other),
         ]
     }
@@ -880,6 +910,14 @@ mod tests {
             (
                 "guarantee: no allocation meets the goals",
                 Event::GuaranteeInfeasible,
+            ),
+            (
+                "mission: search time 120 s over, target not found: land",
+                Event::ShellLand("mission: search time 120 s over, target not found".into()),
+            ),
+            (
+                "landing: land_at_zone again (the landing was interrupted or not done)",
+                Event::LandingKept("land_at_zone".into()),
             ),
             ("vibrations", Event::Other("vibrations".into())),
             ("waypoint 03", Event::Other("waypoint 03".into())),

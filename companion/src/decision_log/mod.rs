@@ -63,6 +63,10 @@ pub struct Header {
     pub policy: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scenario: Option<String>,
+    /// Decision model of the logged run (`bfm`, `reference`, ...), so `replay` rebuilds the same
+    /// core; absent in logs of older builds (replay then reads `--model` from `command`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed: Option<u64>,
     /// Nominal seconds per decision cycle (simulate's step length), when there is one.
@@ -85,6 +89,7 @@ impl Header {
             params: BTreeMap::new(),
             policy: None,
             scenario: None,
+            model: None,
             seed: None,
             step_s: None,
             part: 0,

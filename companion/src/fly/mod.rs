@@ -268,6 +268,7 @@ pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
         .with_params_dir(&params)
         .with_context(|| format!("reading {} for the log header", params.display()))?;
     header.policy = Some(args.policy.clone());
+    header.model = Some(companion_core::decision::ModelKind::Bfm.name().to_string());
     let log = dlog::start_run(&args.log_dir, now, header, WriterOptions::default())
         .with_context(|| format!("starting a run folder in {}", args.log_dir.display()))?;
     let dir = log.dir().to_path_buf();
@@ -947,7 +948,7 @@ pub fn decide<D: Decider>(
     let mut shell_events = Vec::new();
     if let Some(why) = shell.mission.mission_end(&obs) {
         // The mission's end, not the core's decision: recorded as an event with the action.
-        shell_events.push(Event::from(format!("{why}: land")));
+        shell_events.push(Event::ShellLand(why.to_string()));
         rec.shell_actions.push("land".into());
         shell.mission.after_plan(&["land".to_string()]);
         chosen = Some("land".into());
@@ -963,9 +964,7 @@ pub fn decide<D: Decider>(
             .is_some_and(|a| a == "avoid_obstacle" || LANDING_ACTIONS.contains(&a));
         if !keep {
             if !vehicle.settled(&landing) {
-                shell_events.push(Event::from(format!(
-                    "landing: {landing} again (the landing was interrupted or not done)"
-                )));
+                shell_events.push(Event::LandingKept(landing.clone()));
             }
             if !rec.actions.contains(&landing) && !rec.shell_actions.contains(&landing) {
                 rec.shell_actions.push(landing.clone());
@@ -1124,16 +1123,39 @@ fn complete_observations(obs: &mut Observations, mission: &MissionState) {
     obs.set("waypoints_remaining", remaining);
 }
 
-/// A tiny rule-based stand-in for the decision core, for link tests and for flying before the
-/// real core is wired in: take off, fly the route, sidestep obstacles, return on low battery,
-/// land when the route is done.
+/// Where the scripted decider is in its script (its own steps, not the mission's states: it
+/// reads no params).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Script {
+    OnGround,
+    Route,
+    Sidestep,
+    Return,
+    Landing,
+}
+
+impl Script {
+    /// The step's name in the record's `state`.
+    fn name(self) -> &'static str {
+        match self {
+            Script::OnGround => "scripted: on the ground",
+            Script::Route => "scripted: route",
+            Script::Sidestep => "scripted: sidestep",
+            Script::Return => "scripted: return",
+            Script::Landing => "scripted: landing",
+        }
+    }
+}
+
+/// A tiny rule-based stand-in for the decision core, for link tests: take off, fly the route,
+/// sidestep obstacles, return on low battery, land when the route is done.
 pub struct ScriptedDecider {
     pub takeoff_alt_m: f64,
     /// Mission seq of the last waypoint.
     pub last_seq: u16,
     pub low_battery_pct: f64,
     pub policy: String,
-    phase: &'static str,
+    phase: Script,
     avoid_until: f64,
 }
 
@@ -1144,7 +1166,7 @@ impl ScriptedDecider {
             last_seq,
             low_battery_pct: 20.0,
             policy: policy.to_string(),
-            phase: "base",
+            phase: Script::OnGround,
             avoid_until: 0.0,
         }
     }
@@ -1159,7 +1181,7 @@ impl ScriptedDecider {
 
 impl Decider for ScriptedDecider {
     fn new_flight(&mut self) {
-        self.phase = "base";
+        self.phase = Script::OnGround;
         self.avoid_until = 0.0;
     }
 
@@ -1170,33 +1192,33 @@ impl Decider for ScriptedDecider {
         let speed = obs.get("groundspeed_mps").unwrap_or(0.0);
         let obstacle = obs.events.iter().any(|e| e == "obstacle detected");
         let airborne = alt > 0.8 * self.takeoff_alt_m;
-        let action = if battery <= self.low_battery_pct && self.phase != "landing" {
-            self.phase = "return";
+        let action = if battery <= self.low_battery_pct && self.phase != Script::Landing {
+            self.phase = Script::Return;
             "return_to_base"
         } else {
             match self.phase {
-                "base" if airborne => {
-                    self.phase = "wpi";
+                Script::OnGround if airborne => {
+                    self.phase = Script::Route;
                     "follow_trajectory"
                 }
-                "base" => "take_off",
-                "wpi" if obstacle => {
-                    self.phase = "wp_avoid";
+                Script::OnGround => "take_off",
+                Script::Route if obstacle => {
+                    self.phase = Script::Sidestep;
                     self.avoid_until = obs.time_s + 5.0;
                     "avoid_obstacle"
                 }
-                "wpi" if seq >= self.last_seq && speed < 1.0 => {
-                    self.phase = "landing";
+                Script::Route if seq >= self.last_seq && speed < 1.0 => {
+                    self.phase = Script::Landing;
                     "land"
                 }
-                "wpi" => "follow_trajectory",
-                "wp_avoid" if obs.time_s >= self.avoid_until => {
-                    self.phase = "wpi";
+                Script::Route => "follow_trajectory",
+                Script::Sidestep if obs.time_s >= self.avoid_until => {
+                    self.phase = Script::Route;
                     "follow_trajectory"
                 }
-                "wp_avoid" => "avoid_obstacle",
-                "return" => "return_to_base",
-                _ => "land",
+                Script::Sidestep => "avoid_obstacle",
+                Script::Return => "return_to_base",
+                Script::Landing => "land",
             }
         };
         let plan = Plan {
@@ -1204,7 +1226,7 @@ impl Decider for ScriptedDecider {
             applications: vec![],
         };
         let rec = DecisionRecord {
-            state: self.phase.to_string(),
+            state: self.phase.name().to_string(),
             actions: vec![action.to_string()],
             events: obs.events.clone(),
             observations: obs.values.clone(),
