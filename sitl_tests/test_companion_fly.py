@@ -342,3 +342,32 @@ def test_signing_on_unsigned_injection_is_ignored(autopilot_factory, fly, monito
     assert max(r.get("observations", {}).get("target_speed_rel", 0.0) for r in f.records) < 20.0
     t_inj = f.ctx.marks["inject@wall"]
     assert not [e for e in sa.mode_changes() if e.wall >= t_inj and e.data["new"] == "RTL"]
+
+
+@pytest.mark.standin_only(reason="counts the stand-in's mission uploads")
+def test_route_is_resumed_by_the_entry_params_mark_for_it(autopilot_factory, fly, monitors_factory, tmp_path):
+    """The shell flies `follow_trajectory` again as the commands.toml entry marked `flown_for` it
+    (whatever its name), so the route is resumed in AUTO, never uploaded a second time."""
+    import shutil
+    params = tmp_path / "params"
+    shutil.copytree(os.path.join(os.path.dirname(__file__), "..", "params"), params)
+    commands = params / "commands.toml"
+    text = commands.read_text()
+    assert "[follow_trajectory_resume]" in text
+    commands.write_text(text.replace("[follow_trajectory_resume]", "[resume_the_route]"))
+    ap = autopilot_factory()
+    mon = monitors_factory(ap)
+    run = fly(ap, extra=("--params", str(params)))
+    ctx = Ctx(ap, mon, time.monotonic())
+    deadline = time.monotonic() + FLY_TIMEOUT_S
+    resumed = []
+    while time.monotonic() < deadline and run.proc.poll() is None and not resumed:
+        v = view(ap, mon)
+        if v["armed"] and v["alt"] > 2.0 and ctx.airborne_at is None:
+            ctx.airborne_at = time.monotonic()
+        nominal_target(ctx)
+        resumed = [c for r in run.records() for c in r.get("commands", []) if c.get("action") == "resume_the_route"]
+        time.sleep(0.2)
+    assert resumed, "follow_trajectory never flown again as the renamed resume entry\n" + run.output()
+    assert all(c["command"] != "MISSION_UPLOAD" for c in resumed), resumed
+    assert len(ap.standin.mission_uploads()) == 1, ap.standin.mission_uploads()

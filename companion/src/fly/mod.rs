@@ -972,11 +972,14 @@ pub fn decide<D: Decider>(
             chosen = Some(landing);
         }
     }
-    if chosen.as_deref() == Some("follow_trajectory")
-        && shell.mission.route_on_vehicle()
-        && vehicle.actions.actions.contains_key(RESUME)
+    // Once the route is on the vehicle, an action with a shell-only entry flown for it
+    // (`flown_for` in params/commands.toml: follow_trajectory -> resume in AUTO) is flown as that
+    // entry, so the route is resumed where it was left, not uploaded again.
+    if shell.mission.route_on_vehicle()
+        && let Some(action) = chosen.as_deref()
+        && let Some((resume, _)) = vehicle.actions.flown_for.iter().find(|(_, f)| *f == action)
     {
-        chosen = Some(RESUME.into());
+        chosen = Some(resume.clone());
     }
     // No motion until the operator starts the mission, none while the pilot has control.
     let msgs = if shell.operator.commanding() {
@@ -1106,9 +1109,6 @@ pub fn finish_record(
     }
     rec
 }
-
-/// params/commands.toml entry flown for `follow_trajectory` once the route is on the vehicle.
-const RESUME: &str = "follow_trajectory_resume";
 
 /// The observations [`complete_observations`] adds to the telemetry's (fly's side of the
 /// observation vocabulary checked at load, companion/src/vocabulary.rs).
