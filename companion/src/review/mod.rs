@@ -298,9 +298,14 @@ pub fn policy_from_command(cmd: &str) -> Option<String> {
     None
 }
 
+/// The route roles as params/mission.toml named them before it declared `[route_states]`.
+const ROUTE_STATES_BEFORE_DECLARED: &str = "\n[route_states]\non_ground = \"base\"\nfirst_leg = \"wp1\"\nbetween_waypoints = \"wpi\"\nlast_waypoint = \"wpf\"\ntarget_found = \"target\"\nlanding = \"landing\"\n";
+
 /// The mission's states as the run's own params declared them (embedded in the log's header).
-/// Logs written before params/mission.toml declared its states, or whose header carries no
-/// readable params, are read by the rule of that time ([`MissionStates::undeclared`]).
+/// Logs whose mission.toml declared states and phases but not yet `[route_states]` take the
+/// route names of that time; logs written before the states were declared, or whose header
+/// carries no readable params, are read by the rule of that time
+/// ([`MissionStates::undeclared`]).
 fn mission_states_of(h: &Header) -> MissionStates {
     let dir = Path::new("params");
     let mut files = companion_core::spec::ParamsFiles::new(dir);
@@ -309,7 +314,18 @@ fn mission_states_of(h: &Header) -> MissionStates {
             files.insert(dir.join(name), text.as_str());
         }
     }
-    MissionStates::load(&files).unwrap_or_else(|_| MissionStates::undeclared())
+    MissionStates::load(&files)
+        .or_else(|e| match h.params.get("mission.toml") {
+            Some(text) if !text.contains("[route_states]") => {
+                files.insert(
+                    dir.join("mission.toml"),
+                    format!("{text}{ROUTE_STATES_BEFORE_DECLARED}"),
+                );
+                MissionStates::load(&files)
+            }
+            _ => Err(e),
+        })
+        .unwrap_or_else(|_| MissionStates::undeclared())
 }
 
 impl Review {
@@ -870,6 +886,22 @@ mod mission_states_tests {
         );
         assert_ne!(changed, shipped);
         assert!(!mission_states_of(&header_with(Some(changed))).is_tracking("v5"));
+    }
+
+    #[test]
+    fn review_of_a_log_declaring_states_but_no_route_states_keeps_its_phases() {
+        let shipped =
+            std::fs::read_to_string(crate::params::default_params_dir().join("mission.toml"))
+                .unwrap();
+        let table = "[route_states]\non_ground = \"base\"\nfirst_leg = \"wp1\"\n\
+            between_waypoints = \"wpi\"\nlast_waypoint = \"wpf\"\ntarget_found = \"target\"\n\
+            landing = \"landing\"\n";
+        assert!(shipped.contains(table), "the shipped table as written here");
+        let before = shipped.replacen(table, "", 1);
+        let read = mission_states_of(&header_with(Some(before)));
+        assert_ne!(read, MissionStates::undeclared(), "not the earlier rule");
+        assert!(read.has_phase("wpi") && read.phase("v4") == "tracking");
+        assert_eq!(read, mission_states_of(&header_with(Some(shipped))));
     }
 
     #[test]
