@@ -215,6 +215,28 @@ pub fn check_observations(p: &Params) -> Result<(), SpecError> {
         }
     }
     let producers = producers(p, &scenarios);
+    // What params/mission.toml reads (projections, rates, failures) must come from somewhere.
+    for (name, readers) in &consumers {
+        let from_mission = readers
+            .iter()
+            .find(|r| matches!(r.kind, "projection" | "rate" | "failure"));
+        if let Some(r) = from_mission
+            && !producers.contains_key(name)
+        {
+            let entry = match r.kind {
+                "failure" => format!("guarantee.failures.{}", r.name),
+                "rate" => format!("rates.{}", r.name),
+                _ => format!("projection.{}", r.name),
+            };
+            return Err(SpecError::new(
+                p.dir.join("mission.toml"),
+                entry,
+                format!(
+                    "`{name}` is produced by nothing: not the simulated world, a scenario, fly                      (telemetry, params/link.toml [telemetry.onboard], derived) or the core"
+                ),
+            ));
+        }
+    }
     let obs = &p.model.health.observations;
     for (i, o) in obs.observations.iter().enumerate() {
         if !producers.contains_key(&o.name) {

@@ -80,6 +80,18 @@ fn a_declared_observation_nothing_produces_is_refused() {
 }
 
 #[test]
+fn a_failure_the_guarantee_reads_that_nothing_produces_is_refused() {
+    // The camera's failure report comes from the onboard monitors (params/link.toml
+    // [telemetry.onboard] cam_fail); a name nobody reports would leave the guarantee blind.
+    expect_err(
+        "mission.toml",
+        |t| t.replace("camera = \"camera_failed\"", "camera = \"camera_broken\""),
+        "guarantee.failures.camera",
+        "`camera_broken` is produced by nothing",
+    );
+}
+
+#[test]
 fn an_observation_for_a_node_no_manager_has_is_refused() {
     expect_err(
         "observations.toml",
