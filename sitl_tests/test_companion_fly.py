@@ -371,3 +371,25 @@ def test_route_is_resumed_by_the_entry_params_mark_for_it(autopilot_factory, fly
     assert resumed, "follow_trajectory never flown again as the renamed resume entry\n" + run.output()
     assert all(c["command"] != "MISSION_UPLOAD" for c in resumed), resumed
     assert len(ap.standin.mission_uploads()) == 1, ap.standin.mission_uploads()
+
+
+@pytest.mark.standin_only(reason="the stand-in's onboard monitors report the lidar driver's failure")
+def test_lidar_driver_failure_report_turns_obstacle_detection_to_fusion(autopilot_factory, fly, monitors_factory):
+    """`lidar_fail` from an onboard monitor (params/link.toml [telemetry.onboard]) is the observation
+    `lidar_failed`: evidence for the sensors health manager (P_lidar falls, the navigation MDP turns
+    to fusion) and a failed resource for the guarantee (a re-allocation without the lidar)."""
+    def scenario(ctx: Ctx) -> None:
+        nominal_target(ctx)
+        if ctx.airborne_for() > 3.0 and ctx.once("lidar"):
+            ctx.mon.set(lidar_fail=1)
+
+    f = fly_mission(autopilot_factory(), fly, monitors_factory, scenario)
+    assert "lidar" in f.ctx.marks, f.why()
+    failed = [r for r in f.records if (r.get("observations") or {}).get("lidar_failed") == 1.0]
+    assert failed, "lidar_failed never observed\n" + f.why()
+    first = failed[0]["cycle"]
+    later = [r for r in f.records if r["cycle"] >= first]
+    assert any(r["probabilities"].get("P_lidar", 1.0) < 0.5 for r in later), [r["probabilities"].get("P_lidar") for r in later][:5]
+    assert any("detect_obstacles_fusion" in r.get("actions", []) for r in later), sorted({a for r in later for a in r.get("actions", [])})
+    assert not any("detect_obstacles_lidar" in r.get("actions", []) for r in later[3:]), "lidar detection kept running"
+    assert any("lidar" in ((r.get("guarantee") or {}).get("failed_resources") or []) for r in later)

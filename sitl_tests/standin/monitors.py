@@ -9,6 +9,9 @@ from .link import accept_unsigned
 from .vocabulary import MODE_NAMES, mavlink
 
 MONITOR_NAMES = ("tgt_det", "tgt_spd", "trk_conf", "lum", "cpu_load")
+# Sensor drivers' failure reports (1 = failed): sent only once a scenario sets them, as a driver
+# reports a failure, so a flight without one carries no failure observation at all.
+REPORT_NAMES = ("lidar_fail", "cam_fail", "gps_fail")
 
 
 class OnboardMonitors:
@@ -58,8 +61,8 @@ class OnboardMonitors:
     def set(self, **values: float) -> None:
         with self._lock:
             for k, val in values.items():
-                if k not in MONITOR_NAMES:
-                    raise KeyError(f"unknown monitor value {k!r}; known: {MONITOR_NAMES}")
+                if k not in MONITOR_NAMES + REPORT_NAMES:
+                    raise KeyError(f"unknown monitor value {k!r}; known: {MONITOR_NAMES + REPORT_NAMES}")
                 self.values[k] = float(val)
 
     def snapshot(self) -> Dict[str, Any]:
