@@ -17,7 +17,7 @@
 #   PX4_SITL_DIR       the PX4 SITL tree (see above)
 #   PX4_INSTANCE       instance for the default flight (default: the first free one in 0-9)
 #   PX4_FLY_TIMEOUT    seconds for the default-mission flight (default 900)
-#   PX4_PYTEST_ARGS    extra pytest arguments (default: -n 3, the three tests side by side)
+#   PX4_PYTEST_ARGS    extra pytest arguments (default: -n 4, the four tests side by side)
 #   COMPANION_BIN      the companion binary (default: built with cargo)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -101,4 +101,4 @@ PX4_PID=""
 # ---- the PX4 sitl_tests (a fresh vehicle each, side by side) --------------------------------------
 echo "== pytest sitl_tests -m px4"
 # shellcheck disable=SC2086
-.venv/bin/python -m pytest -q -p no:cacheprovider sitl_tests/test_px4_flight.py -m px4 ${PX4_PYTEST_ARGS:--n 3}
+.venv/bin/python -m pytest -q -p no:cacheprovider sitl_tests/test_px4_flight.py -m px4 ${PX4_PYTEST_ARGS:--n 4}

@@ -188,6 +188,8 @@ class GcsObserver:
         self.texts: List[str] = []
         self.battery_pct: Optional[int] = None
         self.heartbeats = 0
+        # (time, lat_e7, lon_e7, relative alt m, mode) of every GLOBAL_POSITION_INT while armed
+        self.track: List[tuple] = []
         self._stop = False
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
@@ -222,6 +224,7 @@ class GcsObserver:
                     self.alt_m = m.relative_alt / 1000.0
                     if self.armed:
                         self.max_alt_m = max(self.max_alt_m, self.alt_m)
+                        self.track.append((time.time(), m.lat, m.lon, self.alt_m, self.mode))
                 elif t == "MISSION_ITEM_REACHED":
                     if not self.reached or self.reached[-1] != m.seq:
                         self.reached.append(m.seq)

@@ -2,7 +2,7 @@
 GCS port as a ground station sees it (and from the companion's decision log where the question is
 what the companion did). Skipped with how to get PX4 when none is found (px4_sitl.find_px4_dir).
 
-Each test flies a short route of its own (a temp file) so the three fit in a few minutes side by
+Each test flies a short route of its own (a temp file) so the four fit in a few minutes side by
 side; the default mission is flown by scripts/sitl_px4.sh. No SITL speed-up: the companion's link
 timers are wall-clock.
 """
@@ -17,7 +17,7 @@ import pytest
 
 pytest.register_assert_rewrite("px4_sitl")
 from helpers import companion_fly_cmd, read_decision_log  # noqa: E402
-from px4_sitl import UdpRelay  # noqa: E402
+from px4_sitl import UdpRelay, mavlink  # noqa: E402
 
 # The px4_vehicle fixture, the report hook and the `px4` marker (registered there and put on every
 # test of this module, so `-m px4` selects them) live in px4_sitl.py.
@@ -159,4 +159,78 @@ def test_px4_link_cut_no_commands_while_lost_no_second_upload(px4_vehicle, tmp_p
     events = [e for r in records for e in (r.get("events") or [])]
     assert "link lost" in events and "link regained" in events, events[-20:]
     assert "MISSION" in o.modes and (3 in o.reached or 4 in o.reached), o.summary()
+    assert rc == 0, f"companion fly exited {rc}; {o.summary()}"
+
+
+def metres(a, b) -> tuple:
+    """(north, east) metres from track point a to b (lat/lon in 1e-7 degrees; flat earth)."""
+    import math
+    north = (b[1] - a[1]) * 1e-7 * 111_320.0
+    east = (b[2] - a[2]) * 1e-7 * 111_320.0 * math.cos(math.radians(a[1] * 1e-7))
+    return north, east
+
+
+def test_px4_obstacle_sidestep_is_flown_at_route_altitude_then_the_route_resumed(px4_vehicle, tmp_path):
+    """An obstacle reported by an onboard sensor (DISTANCE_SENSOR on the companion's `--onboard`
+    link, from component 100 of the vehicle's system) makes the companion sidestep with
+    MAV_CMD_DO_REPOSITION. PX4 reads the altitude of a reposition as AMSL (docs/mavlink.md): judged
+    by what the vehicle did, it moves sideways at the route altitude (a wrong frame would send it
+    toward the ground or far up), holds, then the route is resumed and the flight ends landed."""
+    from pymavlink import mavutil
+    exe = companion_bin()
+    v = px4_vehicle(NOMINAL)
+    route = write_route(tmp_path / "route.toml", [(80, 0), (80, 40)])
+    onboard_port = 25540 + v.instance
+    log_dir = tmp_path / "runs"
+    cmd = companion_fly_cmd(exe, f"udpin:127.0.0.1:{v.onboard_port}", log_dir, mission=route,
+                            extra=("--onboard", f"udpin:127.0.0.1:{onboard_port}"))
+    out = open(tmp_path / "fly.out", "w")
+    proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+    sensor = mavutil.mavlink_connection(f"udpout:127.0.0.1:{onboard_port}", source_system=v.observer.sysid,
+                                        source_component=100)
+    o = v.observer
+    try:
+        o.wait("MISSION mode, on the way to the first waypoint",
+               lambda o: o.mode == "MISSION" and o.alt_m > 0.8 * ROUTE_ALT_M, 150)
+        # 3 m ahead, for 8 s at 10 Hz; then nothing in range.
+        t_obstacle = time.time()
+        while time.time() < t_obstacle + 8.0:
+            ms = int((time.time() - t_obstacle) * 1000)
+            sensor.mav.distance_sensor_send(ms, 20, 4000, 300, mavlink.MAV_DISTANCE_SENSOR_LASER, 1,
+                                            mavlink.MAV_SENSOR_ROTATION_NONE, 0)
+            time.sleep(0.1)
+        for _ in range(20):
+            sensor.mav.distance_sensor_send(0, 20, 4000, 3999, mavlink.MAV_DISTANCE_SENSOR_LASER, 1,
+                                            mavlink.MAV_SENSOR_ROTATION_NONE, 0)
+            time.sleep(0.1)
+        o.wait("landed and disarmed", landed_and_disarmed, 240)
+    finally:
+        rc = finish(proc, out, 30)
+        sensor.close()
+    records = read_decision_log(log_dir)
+    sidesteps = [c for c in commanded(records, {"avoid_obstacle"}) if c[1] == "MAV_CMD_DO_REPOSITION"]
+    assert any(c[2] == "ACCEPTED" for c in sidesteps), f"no accepted sidestep: {sidesteps}; {o.summary()}"
+    with o.lock:
+        track = list(o.track)
+    # PX4 holds at the reposition target: the LOITER stretch after the obstacle, before MISSION again.
+    after = [p for p in track if p[0] >= t_obstacle]
+    hold = []
+    for p in after:
+        if p[4] == "LOITER":
+            hold.append(p)
+        elif hold and p[4] == "MISSION":
+            break
+    assert len(hold) > 10, f"no hold after the sidestep; modes {o.modes}"
+    start = hold[0]
+    moved = max(abs(complex(*metres(start, p))) for p in hold)
+    assert moved >= 5.0, f"the vehicle moved {moved:.1f} m in the sidestep; {o.summary()}"
+    low, high = min(p[3] for p in hold), max(p[3] for p in hold)
+    assert low > 0.7 * ROUTE_ALT_M and high < 1.5 * ROUTE_ALT_M, \
+        f"sidestep altitude {low:.1f}..{high:.1f} m, route {ROUTE_ALT_M} m"
+    i = o.modes.index("LOITER", o.modes.index("MISSION"))
+    assert "MISSION" in o.modes[i:], f"the route was not resumed after the sidestep: {o.modes}"
+    assert 3 in o.reached, f"last waypoint never reached: {o.reached}"
+    uploads = [c for c in commanded(records, {"follow_trajectory"}) if c[1] == "MISSION_UPLOAD"
+               and c[2].startswith("ACCEPTED")]
+    assert len(uploads) == 1, uploads
     assert rc == 0, f"companion fly exited {rc}; {o.summary()}"
