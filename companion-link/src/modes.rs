@@ -241,9 +241,13 @@ pub fn command_params(
 
 /// Frame and altitude of a COMMAND_INT DO_REPOSITION to `target_rel_m` above home, from the
 /// vehicle's current AMSL and above-home altitudes. ArduPilot honours
-/// MAV_FRAME_GLOBAL_RELATIVE_ALT. PX4's `MavlinkReceiver::handle_message_command_int` copies `z`
-/// into param7 without reading the frame and the navigator takes it as AMSL, so for PX4 the
-/// altitude goes as AMSL (home = current AMSL - current above-home) in MAV_FRAME_GLOBAL.
+/// MAV_FRAME_GLOBAL_RELATIVE_ALT. PX4 (main 02e73e3b, SITL) takes a DO_REPOSITION COMMAND_INT
+/// only in MAV_FRAME_GLOBAL_INT and answers COMMAND_UNSUPPORTED_MAV_FRAME to GLOBAL, the relative
+/// frames and terrain frames ("frame invalid for command 192" in its log); its navigator reads the
+/// altitude as AMSL. So for PX4 the altitude goes as AMSL (home = current AMSL - current
+/// above-home) in MAV_FRAME_GLOBAL_INT.
+// MAV_FRAME_GLOBAL_INT is superseded in the MAVLink definitions, but it is the one PX4 accepts here.
+#[allow(deprecated)]
 pub fn reposition_frame_alt(
     flavor: Flavor,
     target_rel_m: f64,
@@ -252,7 +256,7 @@ pub fn reposition_frame_alt(
 ) -> (MavFrame, f32) {
     match flavor {
         Flavor::Px4 => (
-            MavFrame::MAV_FRAME_GLOBAL,
+            MavFrame::MAV_FRAME_GLOBAL_INT,
             (vehicle_amsl_m - vehicle_rel_m + target_rel_m) as f32,
         ),
         _ => (MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT, target_rel_m as f32),
@@ -530,13 +534,14 @@ mod tests {
         }
     }
 
-    /// PX4 reads a DO_REPOSITION COMMAND_INT altitude as AMSL whatever the frame: 20 m above a
-    /// home at 488 m goes as 508 m in MAV_FRAME_GLOBAL; ArduPilot keeps the relative frame.
+    /// PX4 takes a DO_REPOSITION COMMAND_INT only in MAV_FRAME_GLOBAL_INT and reads its altitude
+    /// as AMSL: 20 m above a home at 488 m goes as 508 m; ArduPilot keeps the relative frame.
     #[test]
+    #[allow(deprecated)]
     fn px4_reposition_altitude_is_amsl() {
         assert_eq!(
             reposition_frame_alt(Flavor::Px4, 20.0, 500.0, 12.0),
-            (MavFrame::MAV_FRAME_GLOBAL, 508.0)
+            (MavFrame::MAV_FRAME_GLOBAL_INT, 508.0)
         );
         assert_eq!(
             reposition_frame_alt(Flavor::ArduPilot, 20.0, 500.0, 12.0),
