@@ -17,7 +17,7 @@
 #   PX4_SITL_DIR       the PX4 SITL tree (see above)
 #   PX4_INSTANCE       instance for the default flight (default: the first free one in 0-9)
 #   PX4_FLY_TIMEOUT    seconds for the default-mission flight (default 900)
-#   PX4_PYTEST_ARGS    extra pytest arguments (default: -n 4, the four tests side by side)
+#   PX4_PYTEST_ARGS    extra pytest arguments (default: -n 4: the five tests, four at a time)
 #   COMPANION_BIN      the companion binary (default: built with cargo)
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -2,7 +2,7 @@
 GCS port as a ground station sees it (and from the companion's decision log where the question is
 what the companion did). Skipped with how to get PX4 when none is found (px4_sitl.find_px4_dir).
 
-Each test flies a short route of its own (a temp file) so the four fit in a few minutes side by
+Each test flies a short route of its own (a temp file) so the five fit in a few minutes side by
 side; the default mission is flown by scripts/sitl_px4.sh. No SITL speed-up: the companion's link
 timers are wall-clock.
 """
@@ -233,4 +233,42 @@ def test_px4_obstacle_sidestep_is_flown_at_route_altitude_then_the_route_resumed
     uploads = [c for c in commanded(records, {"follow_trajectory"}) if c[1] == "MISSION_UPLOAD"
                and c[2].startswith("ACCEPTED")]
     assert len(uploads) == 1, uploads
+    assert rc == 0, f"companion fly exited {rc}; {o.summary()}"
+
+
+def test_px4_ground_station_takeover_stops_the_companion_and_px4_flies_it_home(px4_vehicle, tmp_path):
+    """A ground station switches the vehicle to RTL mid-route (a mode the companion did not command):
+    the companion counts it as a takeover, says so, and commands nothing more; PX4 flies the return,
+    lands and disarms, and the route is not resumed."""
+    exe = companion_bin()
+    v = px4_vehicle(NOMINAL)
+    route = write_route(tmp_path / "route.toml", [(80, 0), (80, 40), (0, 40)])
+    proc, out = fly(exe, v.onboard_port, route, tmp_path / "runs")
+    o = v.observer
+    try:
+        o.wait("MISSION mode, on the route", lambda o: o.mode == "MISSION" and o.alt_m > 0.8 * ROUTE_ALT_M, 150)
+        time.sleep(3.0)
+        t_takeover = time.time()
+        # DO_SET_MODE: custom mode, main AUTO (4), sub RTL (5), from the ground station's id.
+        for _ in range(3):
+            o.conn.mav.command_long_send(o.sysid, 1, mavlink.MAV_CMD_DO_SET_MODE, 0, 1, 4, 5, 0, 0, 0, 0)
+            time.sleep(0.3)
+        o.wait("RTL", lambda o: o.mode == "RTL", 20)
+        o.wait("landed and disarmed", landed_and_disarmed, 240)
+    finally:
+        rc = finish(proc, out, 30)
+    # Airborne after the takeover the vehicle flies PX4's return only (after landing PX4 may show
+    # its earlier mode again by itself; the companion sends nothing then, checked below).
+    with o.lock:
+        flown = [p[4] for p in o.track if p[0] > t_takeover + 2.0 and p[3] > 1.0]
+    assert flown and set(flown) <= {"RTL", "LAND"}, f"modes flown after the takeover: {sorted(set(flown))}"
+    assert any("pilot has control (RTL)" in t for t in o.texts), o.summary()
+    records = read_decision_log(tmp_path / "runs")
+    taken = [k for k, r in enumerate(records)
+             if any(e.startswith("operator: mode RTL was not commanded by the companion") for e in r.get("events", []))]
+    assert taken, [e for r in records for e in r.get("events", [])][-20:]
+    # Nothing sent from the takeover on: later command records are cancellations at most.
+    later_sent = [c for r in records[taken[0] + 1:] for c in (r.get("commands") or [])
+                  if c.get("result") in ("SENT", "ACCEPTED", "ALREADY")]
+    assert not later_sent, later_sent
     assert rc == 0, f"companion fly exited {rc}; {o.summary()}"
