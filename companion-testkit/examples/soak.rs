@@ -29,9 +29,9 @@ use companion::sim::{Scenario, World, WorldSpec};
 use companion_core::decision::{Core, Model, ModelKind};
 use companion_core::observations::Observations;
 use companion_core::record::{DecisionRecord, Plan};
+use companion_link::Msg;
 use companion_link::ingest::{Encoder, Ingest};
 use companion_link::vehicle::Vehicle;
-use companion_link::{Msg, url};
 use companion_testkit::sim_link::{AUTOPILOT, Responder, Telemetry50, VehicleView};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicI64, AtomicU64, Ordering::Relaxed};
@@ -252,21 +252,8 @@ fn main() -> anyhow::Result<()> {
     let wall0 = Instant::now();
     let files = companion::params::read_params_dir(&o.params)?;
     let model = Model::load(&files)?;
-    let args = FlyArgs {
-        connect: url::parse("udpin:0.0.0.0:14550").map_err(anyhow::Error::msg)?,
-        mission: None,
-        policy: "safety".into(),
-        signing_key: None,
-        onboard: None,
-        link_timeout: Duration::from_secs(3),
-        params: Some(o.params.clone()),
-        duration: None,
-        log_dir: "runs".into(),
-        auto_start: true,
-        autopilot_sysid: None,
-        connect_timeout: None,
-        once: false,
-    };
+    let mut args = FlyArgs::from_cli(["--connect", "udpin:0.0.0.0:14550", "--auto-start"])?;
+    args.params = Some(o.params.clone());
     let setup = FlySetup::load(&args)?;
     let spec = WorldSpec::load(&files)?;
     let scenario = Scenario::load(&files, &o.scenario)?;

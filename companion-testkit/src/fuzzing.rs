@@ -59,21 +59,10 @@ impl IngestFixture {
 
 /// Fly arguments naming only a params directory (the connect URL is never opened here).
 fn fly_args(params: &Path) -> FlyArgs {
-    FlyArgs {
-        connect: companion_link::url::parse("udpin:127.0.0.1:14550").expect("a valid literal URL"),
-        mission: None,
-        policy: "safety".into(),
-        signing_key: None,
-        onboard: None,
-        link_timeout: Duration::from_secs(3),
-        params: Some(params.to_path_buf()),
-        duration: None,
-        log_dir: PathBuf::from("runs"),
-        auto_start: true,
-        autopilot_sysid: None,
-        connect_timeout: None,
-        once: false,
-    }
+    let mut args = FlyArgs::from_cli(["--connect", "udpin:127.0.0.1:14550", "--auto-start"])
+        .expect("valid literal arguments");
+    args.params = Some(params.to_path_buf());
+    args
 }
 
 /// As in `link::fly::run_with_tlog`: the protocol configuration from `params/link.toml`.

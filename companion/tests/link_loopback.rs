@@ -7,8 +7,6 @@ use companion::fly::{FlyArgs, ScriptedDecider, run_with};
 use companion_core::record::DecisionRecord;
 use companion_core::record::{Event, LinkEvent};
 use companion_link::dialect::*;
-use companion_link::liveness::parse_duration;
-use companion_link::url;
 use mavlink::{AsyncMavlinkReader, MavHeader};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -209,21 +207,16 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
             tokio::time::sleep(Duration::from_millis(100)).await;
         }
     });
-    let args = FlyArgs {
-        connect: url::parse(&format!("tcp:127.0.0.1:{port}")).unwrap(),
-        mission: None,
-        policy: "safety".into(),
-        signing_key: None,
-        onboard: Some(url::parse(&format!("udpin:127.0.0.1:{onboard_port}")).unwrap()),
-        link_timeout: parse_duration("3s").unwrap(),
-        params: None,
-        duration: Some(parse_duration("6s").unwrap()),
-        log_dir: std::path::PathBuf::from("runs"),
-        auto_start: true,
-        autopilot_sysid: None,
-        connect_timeout: None,
-        once: false,
-    };
+    let args = FlyArgs::from_cli([
+        "--connect".to_string(),
+        format!("tcp:127.0.0.1:{port}"),
+        "--onboard".into(),
+        format!("udpin:127.0.0.1:{onboard_port}"),
+        "--duration".into(),
+        "6s".into(),
+        "--auto-start".into(),
+    ])
+    .unwrap();
     let decider = ScriptedDecider::new(20.0, 6, "safety");
     let mut records: Vec<DecisionRecord> = Vec::new();
     let report = run_with(args, decider, &mut records).await.unwrap();
@@ -392,21 +385,17 @@ async fn fly_over_udp_signs_frames_and_refuses_unsigned_commands() {
         (signed_ok, unsigned)
     });
 
-    let args = FlyArgs {
-        connect: url::parse(&format!("udpout:127.0.0.1:{port}")).unwrap(),
-        mission: None,
-        policy: "mission".into(),
-        signing_key: Some(key_path),
-        onboard: None,
-        link_timeout: parse_duration("3s").unwrap(),
-        params: None,
-        duration: Some(parse_duration("3s").unwrap()),
-        log_dir: std::path::PathBuf::from("runs"),
-        auto_start: true,
-        autopilot_sysid: None,
-        connect_timeout: None,
-        once: false,
-    };
+    let mut args = FlyArgs::from_cli([
+        "--connect".to_string(),
+        format!("udpout:127.0.0.1:{port}"),
+        "--policy".into(),
+        "mission".into(),
+        "--duration".into(),
+        "3s".into(),
+        "--auto-start".into(),
+    ])
+    .unwrap();
+    args.signing_key = Some(key_path);
     let mut records: Vec<DecisionRecord> = Vec::new();
     let report = run_with(args, ScriptedDecider::new(20.0, 6, "mission"), &mut records)
         .await

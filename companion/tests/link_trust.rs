@@ -6,7 +6,6 @@ use companion::fly::{FlyArgs, ScriptedDecider, run_with};
 use companion_core::record::DecisionRecord;
 use companion_core::record::{Event, LinkEvent};
 use companion_link::dialect::*;
-use companion_link::url;
 use mavlink::{MavHeader, MavlinkReader};
 use std::net::SocketAddr;
 use std::time::Duration;
@@ -46,21 +45,9 @@ fn position() -> Msg {
 }
 
 fn args(connect: &str, duration_s: f64) -> FlyArgs {
-    FlyArgs {
-        connect: url::parse(connect).unwrap(),
-        mission: None,
-        policy: "safety".into(),
-        signing_key: None,
-        onboard: None,
-        link_timeout: Duration::from_secs(3),
-        params: None,
-        duration: Some(Duration::from_secs_f64(duration_s)),
-        log_dir: std::path::PathBuf::from("runs"),
-        auto_start: true,
-        autopilot_sysid: None,
-        connect_timeout: None,
-        once: false,
-    }
+    let mut args = FlyArgs::from_cli(["--connect", connect, "--auto-start"]).unwrap();
+    args.duration = Some(Duration::from_secs_f64(duration_s));
+    args
 }
 
 fn free_udp_port() -> u16 {

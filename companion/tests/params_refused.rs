@@ -7,8 +7,7 @@ use companion::check::{self, CheckArgs};
 use companion::fly::{FlyArgs, FlySetup};
 use companion::params::Params;
 use companion::params::default_params_dir;
-use std::path::{Path, PathBuf};
-use std::time::Duration;
+use std::path::Path;
 
 fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
@@ -57,21 +56,10 @@ fn set(dir: &Path, rel: &str, key: &str, value: &str) {
 }
 
 fn fly_args(dir: &Path) -> FlyArgs {
-    FlyArgs {
-        connect: companion_link::url::parse("udpin:127.0.0.1:14550").unwrap(),
-        mission: None,
-        policy: "safety".into(),
-        signing_key: None,
-        onboard: None,
-        link_timeout: Duration::from_secs(3),
-        params: Some(dir.to_path_buf()),
-        duration: None,
-        log_dir: PathBuf::from("runs"),
-        auto_start: true,
-        autopilot_sysid: None,
-        connect_timeout: None,
-        once: false,
-    }
+    let mut args =
+        FlyArgs::from_cli(["--connect", "udpin:127.0.0.1:14550", "--auto-start"]).unwrap();
+    args.params = Some(dir.to_path_buf());
+    args
 }
 
 /// Params::load, check's report and (for the files fly reads itself) FlySetup::load all fail,

@@ -122,6 +122,24 @@ pub struct FlyArgs {
     pub once: bool,
 }
 
+impl FlyArgs {
+    /// The arguments `companion fly ARGS...` gives, the command line's defaults for the rest
+    /// (for tests and tools that build a fly setup without a process).
+    pub fn from_cli<I: IntoIterator<Item = S>, S: Into<std::ffi::OsString> + Clone>(
+        args: I,
+    ) -> Result<Self, clap::Error> {
+        use clap::Parser;
+        #[derive(clap::Parser)]
+        struct Fly {
+            #[command(flatten)]
+            args: FlyArgs,
+        }
+        let argv = std::iter::once(std::ffi::OsString::from("fly"))
+            .chain(args.into_iter().map(Into::into));
+        Ok(Fly::try_parse_from(argv)?.args)
+    }
+}
+
 /// The decision log as a record sink: records go to its writer thread (never blocking the loop).
 pub struct LogSink(pub crate::decision_log::DecisionLog);
 
@@ -1357,21 +1375,8 @@ mod tests {
 
     #[test]
     fn behaviour_text_names_the_tracking_state_the_plan_keeps() {
-        let args = FlyArgs {
-            connect: companion_link::url::parse("udpin:127.0.0.1:14550").unwrap(),
-            mission: None,
-            policy: "safety".into(),
-            signing_key: None,
-            onboard: None,
-            link_timeout: std::time::Duration::from_secs(3),
-            params: None,
-            duration: None,
-            log_dir: PathBuf::from("runs"),
-            auto_start: true,
-            autopilot_sysid: None,
-            connect_timeout: None,
-            once: false,
-        };
+        let args =
+            FlyArgs::from_cli(["--connect", "udpin:127.0.0.1:14550", "--auto-start"]).unwrap();
         let mut shell = Shell::new(&FlySetup::load(&args).unwrap());
         let rec = |actions: &[&str]| DecisionRecord {
             actions: actions.iter().map(|a| a.to_string()).collect(),
