@@ -60,16 +60,7 @@ EXAMPLES=(bench_cycle bench_solve bench_bn export_health_bn)
 # Build every program of one side; write "<target name> <executable>" lines to $WORK/<side>.exes.
 build_side() {
   local side=$1 rev=$2 src tdir desc args=()
-  if [ -z "$rev" ]; then
-    src=$ROOT
-    tdir=${CARGO_TARGET_DIR:-$ROOT/target}
-    desc="working tree ($(git rev-parse --short HEAD))"
-    [ -z "$(git status --porcelain --untracked-files=no)" ] || desc="working tree ($(git rev-parse --short HEAD) + changes)"
-  else
-    src=$(checkout "$side" "$rev")
-    tdir=$WORK/$side-target
-    desc="$rev ($(git rev-parse --short "$rev^{commit}"))"
-  fi
+  resolve_side "$side" "$rev"
   for e in "${EXAMPLES[@]}"; do args+=(--example "$e"); done
   for b in ${CRITERION//,/ }; do args+=(--bench "$b"); done
   log "building $side: $desc (release) ..."

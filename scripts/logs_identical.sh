@@ -74,17 +74,8 @@ for line in sys.stdin:
 
 # Prepare one side: source dir, binary and params dir, written to $WORK/<side>.env.
 prepare() {
-  local side=$1 rev=$2 src tdir bin
-  if [ -z "$rev" ]; then
-    src=$ROOT
-    tdir=${CARGO_TARGET_DIR:-$ROOT/target}
-    desc="working tree ($(git rev-parse --short HEAD))"
-    [ -z "$(git status --porcelain --untracked-files=no)" ] || desc="working tree ($(git rev-parse --short HEAD) + changes)"
-  else
-    src=$(checkout "$side" "$rev")
-    tdir=$WORK/$side-target
-    desc="$rev ($(git rev-parse --short "$rev^{commit}"))"
-  fi
+  local side=$1 rev=$2 src tdir desc bin
+  resolve_side "$side" "$rev"
   log "building $side: $desc ($PROFILE) ..."
   bin=$(build_companion "$src" "$tdir")
   [ -x "$bin" ] || { log "no companion executable for $side"; exit 2; }

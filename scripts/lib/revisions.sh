@@ -1,6 +1,6 @@
 # Sourced by scripts/logs_identical.sh and scripts/bench_before_after.sh: a revision checked out
 # in a detached worktree of its own, for builds side by side with the working tree. The caller
-# sets WORK (the directory holding one worktree per side).
+# sets WORK (the directory holding one worktree per side) and ROOT (the repository).
 
 log() { echo "$*" >&2; }
 
@@ -20,4 +20,21 @@ checkout() {
     git -C "$dir" checkout -q --detach "$sha"
   fi
   echo "$dir"
+}
+
+# One side of a comparison: REV empty is the working tree (its own target dir), else REV checked
+# out by `checkout`. Sets the caller's `src` (source dir), `tdir` (target dir) and `desc` (what it
+# is, for the log); the caller declares them local.
+resolve_side() {
+  local side=$1 rev=$2
+  if [ -z "$rev" ]; then
+    src=$ROOT
+    tdir=${CARGO_TARGET_DIR:-$ROOT/target}
+    desc="working tree ($(git rev-parse --short HEAD))"
+    [ -z "$(git status --porcelain --untracked-files=no)" ] || desc="working tree ($(git rev-parse --short HEAD) + changes)"
+  else
+    src=$(checkout "$side" "$rev")
+    tdir=$WORK/$side-target
+    desc="$rev ($(git rev-parse --short "$rev^{commit}"))"
+  fi
 }
