@@ -19,7 +19,7 @@ pub use html::render_html;
 pub use terminal::{render_terminal, render_why};
 
 use crate::decision_log::{Header, LogItem, LossReason, ReadError, ReadIssue, stream_log};
-use companion_core::mission::MissionStates;
+use companion_core::mission::{MissionStates, RouteRole};
 use companion_core::record::{CommandRecord, DecisionRecord, Event, LinkEvent};
 use companion_core::tracking::TrackingCounter;
 use outcomes::{Category, OutcomeCounts, categorize};
@@ -298,8 +298,20 @@ pub fn policy_from_command(cmd: &str) -> Option<String> {
     None
 }
 
-/// The route roles as params/mission.toml named them before it declared `[route_states]`.
-const ROUTE_STATES_BEFORE_DECLARED: &str = "\n[route_states]\non_ground = \"base\"\nfirst_leg = \"wp1\"\nbetween_waypoints = \"wpi\"\nlast_waypoint = \"wpf\"\ntarget_found = \"target\"\nlanding = \"landing\"\n";
+/// A `[route_states]` table naming the route states of the logs before params/mission.toml
+/// declared them ([`MissionStates::undeclared`]).
+fn route_states_before_declared() -> String {
+    let undeclared = MissionStates::undeclared();
+    let mut table = String::from("\n[route_states]\n");
+    for role in RouteRole::ALL {
+        table.push_str(&format!(
+            "{} = {:?}\n",
+            role.key(),
+            undeclared.route().state(role)
+        ));
+    }
+    table
+}
 
 /// The mission's states as the run's own params declared them (embedded in the log's header).
 /// Logs whose mission.toml declared states and phases but not yet `[route_states]` take the
@@ -319,7 +331,7 @@ fn mission_states_of(h: &Header) -> MissionStates {
             Some(text) if !text.contains("[route_states]") => {
                 files.insert(
                     dir.join("mission.toml"),
-                    format!("{text}{ROUTE_STATES_BEFORE_DECLARED}"),
+                    format!("{text}{}", route_states_before_declared()),
                 );
                 MissionStates::load(&files)
             }
