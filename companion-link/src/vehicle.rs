@@ -106,10 +106,8 @@ enum Running {
         target: (i32, i32),
         since: Duration,
     },
-    /// PX4 accepted SET_MODE: waiting for a HEARTBEAT that shows the mode. `from` is the
-    /// custom mode the vehicle reported when the command was issued.
+    /// PX4 accepted SET_MODE at `since`: waiting for a HEARTBEAT that shows the mode.
     ConfirmMode {
-        from: Option<u32>,
         since: Duration,
     },
 }
@@ -743,8 +741,8 @@ impl Vehicle {
                     let (target, since) = (*target, *since);
                     self.arrive_step(now, action, target, since)
                 }
-                (Running::ConfirmMode { from, since }, Step::Mode(name)) => {
-                    let (from, since) = (*from, *since);
+                (Running::ConfirmMode { since }, Step::Mode(name)) => {
+                    let (from, since) = (job.mode_from, *since);
                     self.confirm_mode_step(now, action, name, from, since)
                 }
                 (Running::ConfirmMode { .. }, _) => {
@@ -1286,10 +1284,7 @@ impl Vehicle {
                             (Some(j), _)
                                 if px4 && matches!(j.steps.front(), Some((_, Step::Mode(_)))) =>
                             {
-                                j.running = Running::ConfirmMode {
-                                    from: j.mode_from,
-                                    since: now,
-                                };
+                                j.running = Running::ConfirmMode { since: now };
                             }
                             _ => self.step_done(),
                         },
