@@ -461,7 +461,7 @@ impl<'m> ResourceArbiter<'m> {
         platform: &mut PlatformState,
         sc: &mut Scratch<'m>,
         obs: &Observations,
-        plan: Option<&'m str>,
+        plan: Option<&str>,
         rec: &mut DecisionRecord,
     ) {
         request_key(model, sc, obs, plan);
@@ -491,21 +491,15 @@ impl<'m> ResourceArbiter<'m> {
 
 /// The implementation an IA name (`gps_vision fusion V4.F`) plans for `version`: `F` for `V4`.
 fn planned_implementation(plan: Option<&str>, version: &str) -> Option<Implementation> {
-    plan?.split_whitespace().find_map(|token| {
-        let (v, imp) = token.split_once('.')?;
-        (v == version).then(|| imp.parse().ok()).flatten()
-    })
+    crate::guarantee::ia_variants(plan?)
+        .find(|(v, _)| *v == version)
+        .and_then(|(_, imp)| imp.parse().ok())
 }
 
 /// The requests (`sc.key`) of the kept application actions and the actions asking for them
 /// (`sc.owners`): one variant per application, at the rate the observed speed requires, in the
 /// implementation the plan names for that version (if it does).
-fn request_key<'m>(
-    model: &'m Model,
-    sc: &mut Scratch<'m>,
-    obs: &Observations,
-    plan: Option<&'m str>,
-) {
+fn request_key<'m>(model: &'m Model, sc: &mut Scratch<'m>, obs: &Observations, plan: Option<&str>) {
     sc.key.clear();
     sc.owners.clear();
     for &a in &sc.kept {

@@ -574,12 +574,10 @@ impl<'m> Core<'m> {
         }
         // The IA in force for the activity being flown (PANORAMA's plan, `gps_vision fusion
         // V4.F`): its implementations are requested for the versions the MDPs chose.
-        let plan = self.guarantee.as_ref().and_then(|g| {
-            let at = *model.mission.guarantee.activity_of_state.get(&obs.state)?;
-            let ia = *g.choice().get(at)?;
-            let activity = model.guarantee.problem.activities.get(at)?;
-            Some(activity.ias.get(ia)?.name.as_str())
-        });
+        let plan = self
+            .guarantee
+            .as_ref()
+            .and_then(|g| g.allocated(*model.mission.guarantee.activity_of_state.get(&obs.state)?));
         self.arbiter.arbitrate_resources(
             model,
             self.policy,
@@ -789,10 +787,7 @@ impl<'m> Core<'m> {
         let mut n_differs = 0;
         if let (Some(cell), Some(res)) = (g.allocated(activity_index), &rec.resources) {
             let cat = &self.model.resources.catalogue;
-            for token in cell.split_whitespace() {
-                let Some((version, imp)) = token.split_once('.') else {
-                    continue;
-                };
+            for (version, imp) in crate::guarantee::ia_variants(cell) {
                 let Some(app) = cat
                     .variants()
                     .iter()
@@ -814,7 +809,7 @@ impl<'m> Core<'m> {
                     line.clear();
                     let _ = write!(
                         line,
-                        "{app}: allocation plans {token}, {} {} runs",
+                        "{app}: allocation plans {version}.{imp}, {} {} runs",
                         p.version, p.implementation
                     );
                     // Why: the proposal that started this application, and what it read of the

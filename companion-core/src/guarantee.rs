@@ -517,5 +517,12 @@ impl Guarantee {
     }
 }
 
+/// The application alternatives an IA name carries, as (version, implementation): `V4.F` and
+/// `zone_t.F` in `gps_vision fusion V4.F`; tokens without an implementation are skipped.
+pub fn ia_variants(ia: &str) -> impl Iterator<Item = (&str, &str)> {
+    ia.split_whitespace()
+        .filter_map(|token| token.split_once('.'))
+}
+
 /// Node budget of the exact fallback: bounded work per cycle.
 const EXACT_FALLBACK_NODES: u64 = 200_000;
