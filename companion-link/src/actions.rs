@@ -567,6 +567,15 @@ impl FlightParams {
     }
 }
 
+/// Slowest stream rate a params file may ask for: one message per 10 s. The slowest stream the
+/// link needs is HOME_POSITION at 0.2 Hz; anything slower is older than every freshness limit
+/// the decisions use (the link timeout, `distance_max_age_s`), and a rate like `1e-40` Hz
+/// becomes a message interval no autopilot can hold (MAV_CMD_SET_MESSAGE_INTERVAL takes
+/// microseconds as a float).
+pub const MIN_STREAM_HZ: f32 = 0.1;
+/// Fastest stream rate a params file may ask for.
+pub const MAX_STREAM_HZ: f32 = 100.0;
+
 impl LinkParams {
     /// Read and check params/link.toml at `path`.
     pub fn load(files: &ParamsFiles, path: &Path) -> Result<Self, SpecError> {
@@ -579,11 +588,14 @@ impl LinkParams {
                     "unknown MAVLink message name",
                 ));
             }
-            if !(hz.is_finite() && *hz > 0.0 && *hz <= 100.0) {
+            if !(hz.is_finite() && *hz >= MIN_STREAM_HZ && *hz <= MAX_STREAM_HZ) {
                 return Err(SpecError::new(
                     path,
                     format!("streams.{name}"),
-                    "rate must be in (0, 100] Hz",
+                    format!(
+                        "rate {hz} Hz is out of range: must be in [{MIN_STREAM_HZ}, {MAX_STREAM_HZ}] Hz \
+                         (slower than one message per 10 s is no stream: docs/params.md)"
+                    ),
                 ));
             }
         }

@@ -140,6 +140,9 @@ pub const TELEMETRY_OBSERVATIONS: [&str; 22] = [
     "armed",
 ];
 
+/// Longest NAMED_VALUE_FLOAT name: its `name` field is `char[10]`.
+pub const NAMED_VALUE_NAME_MAX: usize = 10;
+
 /// Most unlisted onboard names a params file may allow (each is one observation per record).
 pub const MAX_ONBOARD_NAMES_LIMIT: usize = 1024;
 
@@ -151,6 +154,20 @@ impl TelemetryConfig {
                 "telemetry.max_onboard_names".into(),
                 format!("at most {MAX_ONBOARD_NAMES_LIMIT}"),
             ));
+        }
+        for name in self.onboard.keys() {
+            // NAMED_VALUE_FLOAT.name is char[10]: a longer name can never arrive, so the
+            // mapping would silently never fire.
+            if name.is_empty() || name.len() > NAMED_VALUE_NAME_MAX || !name.is_ascii() {
+                return Err((
+                    format!("telemetry.onboard.{}", name.escape_debug()),
+                    format!(
+                        "a NAMED_VALUE_FLOAT name is 1 to {NAMED_VALUE_NAME_MAX} ASCII \
+                         characters ({} given)",
+                        name.len()
+                    ),
+                ));
+            }
         }
         for (name, [lo, hi]) in &self.ranges {
             if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
