@@ -293,12 +293,17 @@ pub fn report_from(
     Ok((Value::Object(obj), text))
 }
 
+/// `companion check` as the CLI runs it. The report and any error are escaped for the
+/// terminal: params strings and folder names are the user's, and a control character in one is
+/// shown, not sent (JSON escapes them itself).
 pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
-    let (v, text) = report(args)?;
+    use crate::review::text::escape_controls;
+    let (v, text) =
+        report(args).map_err(|e| anyhow::anyhow!(escape_controls(&format!("{e:#}"), true)))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
-        print!("{text}");
+        print!("{}", escape_controls(&text, true));
     }
     Ok(())
 }

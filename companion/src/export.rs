@@ -10,8 +10,16 @@
 //!   columns (`probabilities.P_sys`, `proposals.0.value`); lists of plain values joined by `;`.
 //!
 //! Both stream the log (CSV reads it twice: once for the columns, once for the rows).
+//!
+//! An export never destroys its inputs: `--out` may not be the log, any part of it, the run's
+//! tlog or any other file of the run folder but an earlier export of the same format (compared
+//! by device and inode, so symlinks and hard links are seen through); an existing `--out` must
+//! be a regular file (a FIFO is never opened); the file is written beside the target under a
+//! temporary name and renamed over it only when whole. Lines that cannot be read are counted and
+//! named (at most [`MAX_SKIPPED_SHOWN`]); an input with no readable record is an error.
 
-use crate::decision_log::{LogItem, ReadError, read_tlog, stream_log};
+use crate::decision_log::{LogItem, ReadError, ReadIssue, log_files, read_tlog, stream_log};
+use crate::review::text::escape_controls;
 use companion_core::record::DecisionRecord;
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufWriter, Write};
@@ -21,6 +29,8 @@ use std::path::{Path, PathBuf};
 /// stderr).
 pub const MAX_CSV_COLUMNS: usize = 10_000;
 const MAX_DEPTH: usize = 6;
+/// Skipped lines named one by one in [`ExportStats::skipped_lines`]; the rest are counted.
+pub const MAX_SKIPPED_SHOWN: usize = 20;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Format {
@@ -43,6 +53,18 @@ pub enum ExportError {
         path: PathBuf,
         #[source]
         source: mcap::McapError,
+    },
+    /// `--out` names something the export must not replace.
+    #[error("--out {path}: {reason}")]
+    Refused { path: PathBuf, reason: String },
+    /// Nothing to export: every line that looked like a record was unreadable.
+    #[error(
+        "{path}: no decision record could be read ({skipped} lines skipped): nothing exported"
+    )]
+    NoRecords {
+        path: PathBuf,
+        skipped: usize,
+        skipped_lines: Vec<ReadIssue>,
     },
 }
 
@@ -150,6 +172,156 @@ pub struct ExportStats {
     pub columns: usize,
     pub columns_dropped: usize,
     pub tlog_frames: usize,
+    /// Lines of the log that could not be read (not JSON, not a record, cut off).
+    pub skipped: usize,
+    /// The first [`MAX_SKIPPED_SHOWN`] of them, with file, line and reason.
+    pub skipped_lines: Vec<ReadIssue>,
+}
+
+impl ExportStats {
+    fn skip(&mut self, issue: ReadIssue) {
+        self.skipped += 1;
+        if self.skipped_lines.len() < MAX_SKIPPED_SHOWN {
+            self.skipped_lines.push(issue);
+        }
+    }
+}
+
+#[cfg(unix)]
+fn file_id(m: &std::fs::Metadata) -> Option<(u64, u64)> {
+    use std::os::unix::fs::MetadataExt;
+    Some((m.dev(), m.ino()))
+}
+
+#[cfg(not(unix))]
+fn file_id(_: &std::fs::Metadata) -> Option<(u64, u64)> {
+    None
+}
+
+/// The same file (device and inode; canonical paths where there are no inodes), whatever the
+/// names, symlinks or hard links that lead to it.
+fn same_file(a: &Path, a_meta: &std::fs::Metadata, b: &Path) -> bool {
+    let Ok(b_meta) = std::fs::metadata(b) else {
+        return false;
+    };
+    match (file_id(a_meta), file_id(&b_meta)) {
+        (Some(x), Some(y)) => x == y,
+        _ => match (a.canonicalize(), b.canonicalize()) {
+            (Ok(x), Ok(y)) => x == y,
+            _ => false,
+        },
+    }
+}
+
+/// The run folder of a run folder or log file (a log file's own folder).
+fn run_dir_of(input: &Path) -> PathBuf {
+    if input.is_dir() {
+        input.to_path_buf()
+    } else {
+        match input.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        }
+    }
+}
+
+fn tlog_of(input: &Path) -> PathBuf {
+    if input.is_dir() {
+        input.join("flight.tlog")
+    } else {
+        input.with_file_name("flight.tlog")
+    }
+}
+
+/// Refuse an `--out` that is an input or any other file of the run (but an earlier export of
+/// this format), or that exists and is not a regular file. Only metadata is read: nothing at
+/// `out` is opened.
+pub fn check_out(input: &Path, out: &Path, format: Format) -> Result<(), ExportError> {
+    let refuse = |reason: String| ExportError::Refused {
+        path: out.to_path_buf(),
+        reason,
+    };
+    let out_meta = match std::fs::metadata(out) {
+        Ok(m) => m,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(refuse(format!("cannot inspect it: {e}"))),
+    };
+    if !out_meta.is_file() {
+        let what = if out_meta.is_dir() {
+            "a directory"
+        } else {
+            "not a regular file (a FIFO, device or socket)"
+        };
+        return Err(refuse(format!("{what}: an export is written to a file")));
+    }
+    let mut inputs = log_files(input).unwrap_or_default();
+    inputs.push(tlog_of(input));
+    for f in &inputs {
+        if same_file(out, &out_meta, f) {
+            return Err(refuse(format!(
+                "is {} itself, an input of this export: refusing to overwrite it",
+                escape_controls(&f.display().to_string(), false)
+            )));
+        }
+    }
+    let ext = match format {
+        Format::Mcap => "mcap",
+        Format::Csv => "csv",
+    };
+    let run_dir = run_dir_of(input);
+    if let Ok(entries) = std::fs::read_dir(&run_dir) {
+        for e in entries.flatten() {
+            let p = e.path();
+            if same_file(out, &out_meta, &p) && p.extension().is_none_or(|x| x != ext) {
+                return Err(refuse(format!(
+                    "is {}, a file of the run folder: an export may only replace an earlier \
+                     .{ext} export there",
+                    escape_controls(&p.display().to_string(), false)
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A temporary file beside `out` (same filesystem, so the final rename is atomic).
+fn temp_beside(out: &Path) -> Result<tempfile::NamedTempFile, ExportError> {
+    let dir = match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    tempfile::Builder::new()
+        .prefix(".export-")
+        .suffix(".tmp")
+        .tempfile_in(dir)
+        .map_err(|source| ExportError::Write {
+            path: out.to_path_buf(),
+            source,
+        })
+}
+
+/// Rename the finished temporary file over `out`, readable like any file the user writes.
+fn persist(tmp: tempfile::NamedTempFile, out: &Path) -> Result<(), ExportError> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let _ = tmp
+            .as_file()
+            .set_permissions(std::fs::Permissions::from_mode(0o644));
+    }
+    tmp.persist(out).map_err(|e| ExportError::Write {
+        path: out.to_path_buf(),
+        source: e.error,
+    })?;
+    Ok(())
+}
+
+fn no_records(input: &Path, stats: ExportStats) -> ExportError {
+    ExportError::NoRecords {
+        path: input.to_path_buf(),
+        skipped: stats.skipped,
+        skipped_lines: stats.skipped_lines,
+    }
 }
 
 /// The `companion export` command.
@@ -168,6 +340,58 @@ pub fn run(
     Ok((path, stats))
 }
 
+/// `companion export` as the CLI runs it: the summary on stdout, skipped lines and left-out
+/// columns on stderr, every path escaped for the terminal.
+pub fn run_cli(input: &Path, format: Format, out: Option<&Path>) -> anyhow::Result<()> {
+    let shown = |p: &Path| escape_controls(&p.display().to_string(), false);
+    let say_skipped = |skipped: usize, lines: &[ReadIssue]| {
+        for i in lines {
+            eprintln!(
+                "skipped {}:{}: {}",
+                shown(&i.file),
+                i.line,
+                escape_controls(&i.reason, false)
+            );
+        }
+        if skipped > lines.len() {
+            eprintln!("skipped {} more lines", skipped - lines.len());
+        }
+    };
+    let (path, stats) = match run(input, format, out) {
+        Ok(x) => x,
+        Err(e) => {
+            if let ExportError::NoRecords {
+                skipped,
+                skipped_lines,
+                ..
+            } = &e
+            {
+                say_skipped(*skipped, skipped_lines);
+            }
+            anyhow::bail!("export: {}", escape_controls(&e.to_string(), false));
+        }
+    };
+    say_skipped(stats.skipped, &stats.skipped_lines);
+    if stats.columns_dropped > 0 {
+        eprintln!(
+            "warning: {} columns beyond the first {MAX_CSV_COLUMNS} left out",
+            stats.columns_dropped,
+        );
+    }
+    let skipped = if stats.skipped > 0 {
+        format!(", {} unreadable lines skipped", stats.skipped)
+    } else {
+        String::new()
+    };
+    println!(
+        "export: {} ({} records, {} telemetry messages{skipped})",
+        shown(&path),
+        stats.records,
+        stats.tlog_frames
+    );
+    Ok(())
+}
+
 fn record_value(r: &DecisionRecord) -> serde_json::Value {
     serde_json::to_value(r).unwrap_or(serde_json::Value::Null)
 }
@@ -181,16 +405,20 @@ pub fn export_mcap(input: &Path, path: &Path) -> Result<ExportStats, ExportError
         path: path.to_path_buf(),
         source,
     };
-    let file = std::fs::File::create(path).map_err(werr)?;
+    check_out(input, path, Format::Mcap)?;
+    let items = stream_log(input)?;
+    let tmp = temp_beside(path)?;
+    let file = tmp.reopen().map_err(werr)?;
     let mut w = mcap::Writer::new(BufWriter::new(file)).map_err(merr)?;
     let mut stats = ExportStats::default();
     let mut channels: BTreeMap<String, u16> = BTreeMap::new();
     let no_meta = BTreeMap::new();
     let mut start_ns = 0u64;
     let mut seq = 0u32;
-    for item in stream_log(input)? {
+    for item in items {
         match item? {
             LogItem::Header(h) => start_ns = rfc3339_ns(&h.started_utc).unwrap_or(0),
+            LogItem::Corrupted(i) | LogItem::Truncated(i) => stats.skip(i),
             LogItem::Record(r, _) => {
                 stats.records += 1;
                 let v = record_value(&r);
@@ -232,12 +460,11 @@ pub fn export_mcap(input: &Path, path: &Path) -> Result<ExportStats, ExportError
             _ => {}
         }
     }
+    if stats.records == 0 {
+        return Err(no_records(input, stats));
+    }
     // Telemetry from the run folder's tlog, when there is one.
-    let tlog = if input.is_dir() {
-        input.join("flight.tlog")
-    } else {
-        input.with_file_name("flight.tlog")
-    };
+    let tlog = tlog_of(input);
     if tlog.is_file()
         && let Ok((frames, _)) = read_tlog(&tlog)
     {
@@ -286,6 +513,8 @@ pub fn export_mcap(input: &Path, path: &Path) -> Result<ExportStats, ExportError
         }
     }
     w.finish().map_err(merr)?;
+    drop(w);
+    persist(tmp, path)?;
     Ok(stats)
 }
 
@@ -329,8 +558,10 @@ fn scalar(v: &serde_json::Value) -> String {
 /// One CSV field: quoted when needed; text that a spreadsheet would run as a formula gets a
 /// leading `'` (numbers are left alone).
 pub fn csv_field(s: &str) -> String {
-    let formula =
-        matches!(s.chars().next(), Some('=' | '+' | '-' | '@')) && s.parse::<f64>().is_err();
+    // TAB and CR too: spreadsheets strip them and read what follows as a formula (OWASP CSV
+    // injection).
+    let formula = matches!(s.chars().next(), Some('=' | '+' | '-' | '@' | '\t' | '\r'))
+        && s.parse::<f64>().is_err();
     let s = if formula {
         format!("'{s}")
     } else {
@@ -354,31 +585,43 @@ pub fn export_csv(input: &Path, path: &Path) -> Result<ExportStats, ExportError>
         path: path.to_path_buf(),
         source,
     };
+    check_out(input, path, Format::Csv)?;
     let mut stats = ExportStats::default();
     // Pass 1: the columns, in first-seen order with cycle and time_s first.
     let mut order: Vec<String> = vec!["cycle".into(), "time_s".into()];
     let mut seen: BTreeSet<String> = order.iter().cloned().collect();
+    let mut readable = 0usize;
     for item in stream_log(input)? {
-        if let LogItem::Record(r, _) = item? {
-            for (k, _) in record_columns(&r) {
-                if !seen.contains(&k) {
-                    if order.len() < MAX_CSV_COLUMNS {
-                        seen.insert(k.clone());
-                        order.push(k);
-                    } else {
-                        stats.columns_dropped += 1;
-                    }
+        let r = match item? {
+            LogItem::Record(r, _) => r,
+            LogItem::Corrupted(i) | LogItem::Truncated(i) => {
+                stats.skip(i);
+                continue;
+            }
+            _ => continue,
+        };
+        readable += 1;
+        for (k, _) in record_columns(&r) {
+            if !seen.contains(&k) {
+                if order.len() < MAX_CSV_COLUMNS {
+                    seen.insert(k.clone());
+                    order.push(k);
+                } else {
+                    stats.columns_dropped += 1;
                 }
             }
         }
+    }
+    if readable == 0 {
+        return Err(no_records(input, stats));
     }
     let index: BTreeMap<&str, usize> = order
         .iter()
         .enumerate()
         .map(|(i, k)| (k.as_str(), i))
         .collect();
-    let file = std::fs::File::create(path).map_err(werr)?;
-    let mut w = BufWriter::new(file);
+    let tmp = temp_beside(path)?;
+    let mut w = BufWriter::new(tmp.reopen().map_err(werr)?);
     let head: Vec<String> = order.iter().map(|c| csv_field(c)).collect();
     writeln!(w, "{}", head.join(",")).map_err(werr)?;
     // Pass 2: the rows.
@@ -396,6 +639,8 @@ pub fn export_csv(input: &Path, path: &Path) -> Result<ExportStats, ExportError>
         }
     }
     w.flush().map_err(werr)?;
+    drop(w);
+    persist(tmp, path)?;
     stats.columns = order.len();
     Ok(stats)
 }

@@ -147,30 +147,21 @@ fn main() -> Result<()> {
             summary,
             cycle,
         } => {
-            companion::review::run_with_cycle(&run_or_log, out.as_deref(), summary, cycle)?;
+            // The folder name is the user's: shown escaped, never sent to the terminal raw.
+            companion::review::run_with_cycle(&run_or_log, out.as_deref(), summary, cycle)
+                .map_err(|e| {
+                    anyhow::anyhow!(companion::review::text::escape_controls(
+                        &e.to_string(),
+                        false
+                    ))
+                })?;
             Ok(())
         }
         Command::Export {
             run_or_log,
             format,
             out,
-        } => {
-            let (path, stats) = companion::export::run(&run_or_log, format, out.as_deref())?;
-            if stats.columns_dropped > 0 {
-                eprintln!(
-                    "warning: {} columns beyond the first {} left out",
-                    stats.columns_dropped,
-                    companion::export::MAX_CSV_COLUMNS
-                );
-            }
-            println!(
-                "export: {} ({} records, {} telemetry messages)",
-                path.display(),
-                stats.records,
-                stats.tlog_frames
-            );
-            Ok(())
-        }
+        } => companion::export::run_cli(&run_or_log, format, out.as_deref()),
         Command::Replay { run_folder } => {
             std::process::exit(companion::replay::run_cli(&run_folder));
         }

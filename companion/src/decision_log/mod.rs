@@ -14,6 +14,7 @@ mod stream;
 mod tlog;
 mod writer;
 
+pub(crate) use reader::log_files;
 pub use reader::{LogEnd, LogEvent, LogRead, LossMark, ReadError, ReadIssue, read_log};
 pub use stream::{LogItem, LogStream, LossReason, MAX_LINE_BYTES, stream_log};
 pub use tlog::{TlogFrame, TlogWriter, read_tlog};

@@ -157,7 +157,8 @@ pub fn read_log(path: &Path) -> Result<LogRead, ReadError> {
     Ok(out)
 }
 
-pub(super) fn log_files(path: &Path) -> Result<Vec<PathBuf>, ReadError> {
+/// The log parts of a run folder or `.jsonl` file, in order (regular files only).
+pub(crate) fn log_files(path: &Path) -> Result<Vec<PathBuf>, ReadError> {
     if !path.exists() {
         return Err(ReadError::NotFound {
             path: path.to_path_buf(),

@@ -78,6 +78,24 @@ pub fn clean(s: &str) -> String {
     o
 }
 
+/// Text for the terminal with every control character (C0, DEL, C1, and `\n` unless
+/// `keep_newlines`) and bidi override written as its Rust escape (`\u{1b}`, `\t`), the rest as
+/// is: for paths and params strings, where the reader needs to see what is there (a folder named
+/// with an escape sequence is shown, not obeyed).
+pub fn escape_controls(s: &str, keep_newlines: bool) -> String {
+    let mut o = String::with_capacity(s.len());
+    for c in s.chars() {
+        if c == '\n' && keep_newlines {
+            o.push(c);
+        } else if c.is_control() || is_bidi_control(c) {
+            o.extend(c.escape_debug());
+        } else {
+            o.push(c);
+        }
+    }
+    o
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -96,5 +114,17 @@ mod tests {
         let c = clean(evil);
         assert_eq!(c, "okred bellc1txt tab nl");
         assert!(!c.chars().any(|ch| ch.is_control()));
+    }
+
+    #[test]
+    fn escaped_text_shows_control_characters_without_sending_them() {
+        let evil = "run\x1b[2J\x1b]0;t\x07\u{9b}1m\u{202e}a\tb\r\nc";
+        let e = escape_controls(evil, false);
+        assert_eq!(
+            e,
+            "run\\u{1b}[2J\\u{1b}]0;t\\u{7}\\u{9b}1m\\u{202e}a\\tb\\r\\nc"
+        );
+        assert!(!e.chars().any(|ch| ch.is_control()));
+        assert_eq!(escape_controls("a\nb\x1b", true), "a\nb\\u{1b}");
     }
 }
