@@ -549,10 +549,13 @@ impl Review {
         let consecutive = self
             .prev_cycle
             .is_some_and(|p| r.cycle == p + 1 || r.cycle == p);
+        // Distinct sentences in first-seen order, through a set: a flood of events stays
+        // linear (a list lookup per event was quadratic: 34 s for 100,000 events).
         let mut texts: Vec<String> = Vec::new();
+        let mut seen_texts = std::collections::HashSet::new();
         for e in &r.events {
             let e = e.to_string();
-            if !texts.contains(&e) {
+            if seen_texts.insert(e.clone()) {
                 texts.push(e);
             }
         }
