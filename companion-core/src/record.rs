@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
 mod events;
-pub use events::{CommandOutcome, Event, LinkEvent};
+pub use events::{CommandOutcome, Event, LinkEvent, MAX_LINK_EVENTS, coalesce_link_events};
 
 /// Version of the decision-log schema, written in each log's header.
 pub const SCHEMA_VERSION: u32 = 1;

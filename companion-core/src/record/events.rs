@@ -676,6 +676,33 @@ impl From<&str> for LinkEvent {
 
 string_serde!(LinkEvent);
 
+/// At most this many link events in one record (as for events): a flood of STATUSTEXT from the
+/// autopilot is summarised, not copied, so it cannot make the record too large to log.
+pub const MAX_LINK_EVENTS: usize = 64;
+
+/// Over [`MAX_LINK_EVENTS`]: repeated link events once each (in first-seen order), at most
+/// [`MAX_LINK_EVENTS`], then one `Other` line with the count of the rest: `(N more link events
+/// since the last cycle: R repeats, K not listed)`. At or under the cap they stay as they came
+/// (order and repeats: `link lost`, `link regained`, `link lost` is a story).
+pub fn coalesce_link_events(events: &mut Vec<LinkEvent>) {
+    let total = events.len();
+    if total <= MAX_LINK_EVENTS {
+        return;
+    }
+    let mut seen = std::collections::HashSet::with_capacity(total.min(4 * MAX_LINK_EVENTS));
+    events.retain(|e| seen.insert(e.to_string()));
+    let unique = events.len();
+    events.truncate(MAX_LINK_EVENTS);
+    if events.len() < total {
+        events.push(LinkEvent::Other(format!(
+            "({} more link events since the last cycle: {} repeats, {} not listed)",
+            total - events.len(),
+            total - unique,
+            unique - events.len()
+        )));
+    }
+}
+
 impl From<LinkEvent> for Event {
     fn from(l: LinkEvent) -> Self {
         if l.is_significant() {
@@ -1002,5 +1029,27 @@ mod tests {
         assert!(e != "mode AUT");
         assert!(e != "mode AUTOS");
         assert!(e != "");
+    }
+
+    #[test]
+    fn a_link_event_flood_is_capped_with_its_count() {
+        let mut evs: Vec<LinkEvent> = (0..11_653)
+            .map(|i| LinkEvent::AutopilotText(format!("flood {}", i % 10_000)))
+            .collect();
+        evs.insert(0, LinkEvent::Lost);
+        coalesce_link_events(&mut evs);
+        assert_eq!(evs.len(), MAX_LINK_EVENTS + 1);
+        assert_eq!(evs[0], LinkEvent::Lost, "first seen stays first");
+        assert_eq!(evs[1], LinkEvent::AutopilotText("flood 0".into()));
+        // 11,654 in; 64 listed; 1,653 repeats; 10,001 distinct of which 9,937 not listed.
+        assert_eq!(
+            evs[MAX_LINK_EVENTS].to_string(),
+            "(11590 more link events since the last cycle: 1653 repeats, 9937 not listed)"
+        );
+        // Under the cap nothing changes: repeats and order are the link's story.
+        let story = vec![LinkEvent::Lost, LinkEvent::Regained, LinkEvent::Lost];
+        let mut few = story.clone();
+        coalesce_link_events(&mut few);
+        assert_eq!(few, story);
     }
 }

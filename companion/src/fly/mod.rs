@@ -1093,6 +1093,9 @@ pub fn finish_record(
     rec.link_events.append(transport_events);
     rec.link_events.extend(shell.ingest_note());
     rec.link_events.extend(vehicle.take_link_events());
+    // A flood (STATUSTEXT from the autopilot) is summarised like events are, so the record stays
+    // small enough to be logged.
+    companion_core::record::coalesce_link_events(&mut rec.link_events);
     rec.vehicle.extend(vehicle.telemetry.vehicle());
     rec.vehicle.insert(
         "link_alive".into(),
