@@ -209,6 +209,8 @@ fn fly(args: FlyArgs) -> Result<()> {
 }
 
 fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
+    // An unparsable COMPANION_LOG_MAX_BYTES stops the start, before any work.
+    let log_opts = companion::decision_log::WriterOptions::from_env()?;
     let loaded = companion::params::Params::load(params, None).context("loading params")?;
     let world = loaded.world;
     let mut scenario = Scenario::load(&loaded.files, &args.scenario)?;
@@ -277,7 +279,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
             &args.runs_dir,
             now,
             header,
-            companion::decision_log::WriterOptions::default(),
+            log_opts,
         )
         .with_context(|| format!("starting a run folder in {}", args.runs_dir.display()))?;
         let dir = log.dir().to_path_buf();

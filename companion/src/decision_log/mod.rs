@@ -19,8 +19,8 @@ pub use reader::{LogEnd, LogEvent, LogRead, LossMark, ReadError, ReadIssue, read
 pub use stream::{LogItem, LogStream, LossReason, MAX_LINE_BYTES, stream_log};
 pub use tlog::{TlogFrame, TlogWriter, read_tlog};
 pub use writer::{
-    DEFAULT_MAX_BYTES, DEFAULT_MAX_LINE_BYTES, DecisionLog, RESERVE_BYTES, RESERVE_FILE,
-    WriterOptions, WriterStats,
+    DEFAULT_MAX_BYTES, DEFAULT_MAX_LINE_BYTES, DecisionLog, LogCapError, RESERVE_BYTES,
+    RESERVE_FILE, WriterOptions, WriterStats, max_bytes_from_env, parse_max_bytes,
 };
 
 use serde::{Deserialize, Serialize};

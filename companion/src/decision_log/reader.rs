@@ -93,6 +93,9 @@ pub struct LogRead {
     pub lost_capped: u64,
     /// Not written because the record was over the line-size limit (reason `too_large`).
     pub lost_too_large: u64,
+    /// Frames of the run's `flight.tlog` not written because it reached its cap (reason
+    /// `tlog_cap`): not records, so neither in `losses` nor in `dropped()`.
+    pub tlog_capped: u64,
 }
 
 impl LogRead {
@@ -267,6 +270,10 @@ fn read_part(out: &mut LogRead, file: &Path, bytes: &[u8], first_part: bool, las
             }
             Some("loss") => {
                 let dropped = value.get("dropped").and_then(|d| d.as_u64()).unwrap_or(0);
+                if value.get("reason").and_then(|r| r.as_str()) == Some("tlog_cap") {
+                    out.tlog_capped += dropped;
+                    continue;
+                }
                 // Loss lines from before reasons were written are all queue drops.
                 match value.get("reason").and_then(|r| r.as_str()) {
                     Some("write_failed") => out.lost_write_failed += dropped,

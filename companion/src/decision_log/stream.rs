@@ -46,6 +46,8 @@ pub enum LossReason {
     Cap,
     /// One record was over the line-size limit.
     TooLarge,
+    /// Frames of the run's `flight.tlog` past its cap (not records).
+    TlogCap,
 }
 
 impl LossReason {
@@ -54,6 +56,7 @@ impl LossReason {
             Some("write_failed") => Self::WriteFailed,
             Some("cap") => Self::Cap,
             Some("too_large") => Self::TooLarge,
+            Some("tlog_cap") => Self::TlogCap,
             _ => Self::QueueFull,
         }
     }
@@ -65,6 +68,7 @@ impl LossReason {
             Self::WriteFailed => "write failed: disk full or I/O error",
             Self::Cap => "log size cap reached",
             Self::TooLarge => "record over the line-size limit",
+            Self::TlogCap => "flight.tlog size cap reached: telemetry frames not written",
         }
     }
 }

@@ -4,7 +4,9 @@
 
 use std::fs::File;
 use std::io::{self, Seek, SeekFrom, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Writes a `.tlog`. Each entry goes out in one write, so a killed process leaves whole frames
 /// behind; a failed write (disk full) is cut back to the last whole entry and counted.
@@ -14,24 +16,33 @@ pub struct TlogWriter {
     bytes: u64,
     frames: u64,
     failed: u64,
-    capped: u64,
+    /// Shared with the decision log, which says the cap ([`super::DecisionLog::watch_tlog`]).
+    capped: Arc<AtomicU64>,
     max_bytes: u64,
     buf: Vec<u8>,
+    path: PathBuf,
 }
 
 impl TlogWriter {
-    /// Create (or truncate) the file at `path`, capped like the decision log
-    /// (`$COMPANION_LOG_MAX_BYTES`, default 1 GiB).
+    /// Create (or truncate) the file at `path`, capped at [`super::DEFAULT_MAX_BYTES`] (`fly`
+    /// gives it the decision log's cap, `$COMPANION_LOG_MAX_BYTES`, with [`Self::with_max_bytes`]).
     pub fn create(path: &Path) -> io::Result<Self> {
         Ok(TlogWriter {
             out: File::create(path)?,
             bytes: 0,
             frames: 0,
             failed: 0,
-            capped: 0,
-            max_bytes: super::WriterOptions::default().max_bytes,
+            capped: Arc::new(AtomicU64::new(0)),
+            max_bytes: super::DEFAULT_MAX_BYTES,
             buf: Vec::with_capacity(8 + 280),
+            path: path.to_path_buf(),
         })
+    }
+
+    /// The count of frames not written for the cap, for the decision log to say
+    /// ([`super::DecisionLog::watch_tlog`]).
+    pub fn capped_counter(&self) -> Arc<AtomicU64> {
+        self.capped.clone()
     }
 
     /// Stop writing (count instead) once the file would pass `max_bytes`.
@@ -48,7 +59,14 @@ impl TlogWriter {
         self.buf.extend_from_slice(&t_us.to_be_bytes());
         self.buf.extend_from_slice(frame);
         if self.bytes + self.buf.len() as u64 > self.max_bytes {
-            self.capped += 1;
+            if self.capped.fetch_add(1, Ordering::AcqRel) == 0 {
+                eprintln!(
+                    "warning: {} reached its cap of {} bytes: further frames are counted, not \
+                     written",
+                    crate::review::text::escape_controls(&self.path.display().to_string(), false),
+                    self.max_bytes
+                );
+            }
             return Err(io::Error::other(format!(
                 "tlog cap of {} bytes reached: frame counted, not written",
                 self.max_bytes
@@ -81,7 +99,7 @@ impl TlogWriter {
 
     /// Frames not written because the file reached its cap.
     pub fn capped(&self) -> u64 {
-        self.capped
+        self.capped.load(Ordering::Acquire)
     }
 }
 

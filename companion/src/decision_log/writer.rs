@@ -46,19 +46,64 @@ pub const RESERVE_BYTES: u64 = 16 * 1024;
 pub const RESERVE_FILE: &str = ".log-reserve";
 
 impl Default for WriterOptions {
+    /// The defaults, whatever the environment ([`WriterOptions::from_env`] reads it).
     fn default() -> Self {
-        let max_bytes = std::env::var("COMPANION_LOG_MAX_BYTES")
-            .ok()
-            .and_then(|v| v.trim().parse::<u64>().ok())
-            .unwrap_or(DEFAULT_MAX_BYTES);
         WriterOptions {
             capacity: 1024,
             rotate_bytes: 64 * 1024 * 1024,
-            max_bytes,
+            max_bytes: DEFAULT_MAX_BYTES,
             max_line_bytes: DEFAULT_MAX_LINE_BYTES,
             stall: None,
             disk_bytes: None,
         }
+    }
+}
+
+/// `COMPANION_LOG_MAX_BYTES` is set to something that is not a number of bytes.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error(
+    "COMPANION_LOG_MAX_BYTES={value:?} is not a size: expected a whole number of bytes of at \
+     least 1, digits only (e.g. 1073741824 for 1 GiB; no unit, sign or separator)"
+)]
+pub struct LogCapError {
+    /// The value as set (shown with Rust escapes, so a control character is seen, not sent).
+    pub value: String,
+}
+
+/// The cap `COMPANION_LOG_MAX_BYTES` sets: `None` when unset; an error naming the value when it
+/// is set to anything but digits (surrounding spaces allowed) giving at least 1 byte. `abc`,
+/// `100KB`, `-5`, `1e9`, `0` and an empty value are errors, never a silent default.
+pub fn max_bytes_from_env() -> Result<Option<u64>, LogCapError> {
+    match std::env::var_os("COMPANION_LOG_MAX_BYTES") {
+        None => Ok(None),
+        Some(v) => parse_max_bytes(&v.to_string_lossy()).map(Some),
+    }
+}
+
+/// See [`max_bytes_from_env`].
+pub fn parse_max_bytes(value: &str) -> Result<u64, LogCapError> {
+    let t = value.trim();
+    let err = || LogCapError {
+        value: value.to_string(),
+    };
+    if t.is_empty() || !t.bytes().all(|b| b.is_ascii_digit()) {
+        return Err(err());
+    }
+    match t.parse::<u64>() {
+        Ok(n) if n >= 1 => Ok(n),
+        _ => Err(err()),
+    }
+}
+
+impl WriterOptions {
+    /// The defaults with the cap from `COMPANION_LOG_MAX_BYTES` when set (what `fly` and
+    /// `simulate` start with); an unparsable value is an error, not 1 GiB.
+    pub fn from_env() -> Result<Self, LogCapError> {
+        let mut o = WriterOptions::default();
+        if let Some(b) = max_bytes_from_env()? {
+            o.max_bytes = b;
+        }
+        Ok(o)
     }
 }
 
@@ -77,6 +122,9 @@ pub struct WriterStats {
     pub capped: u64,
     /// Not written because the line exceeded [`WriterOptions::max_line_bytes`].
     pub too_large: u64,
+    /// Frames the run's `flight.tlog` did not write because it reached its cap (told to this log
+    /// by [`DecisionLog::watch_tlog`]; not records, so not in `dropped`).
+    pub tlog_capped: u64,
     /// Parts written (1 = only `decisions.jsonl`).
     pub parts: u32,
     /// Writes that failed (lines of any kind) and the last such error.
@@ -91,6 +139,8 @@ enum Payload {
         time_s: f64,
         text: String,
     },
+    /// More tlog frames counted, not written, since the last report.
+    TlogCapped(u64),
 }
 
 struct Msg {
@@ -107,6 +157,8 @@ enum Loss {
     WriteFailed,
     Cap,
     TooLarge,
+    /// Frames of the run's tlog past its cap (not records: counted apart from `dropped`).
+    TlogCap,
 }
 
 impl Loss {
@@ -116,6 +168,7 @@ impl Loss {
             Loss::WriteFailed => "write_failed",
             Loss::Cap => "cap",
             Loss::TooLarge => "too_large",
+            Loss::TlogCap => "tlog_cap",
         }
     }
 }
@@ -145,6 +198,7 @@ struct EndLine {
     write_failed: u64,
     capped: u64,
     too_large: u64,
+    tlog_capped: u64,
 }
 
 /// Handle to a running decision log. Cheap to call from the decision loop: [`Self::record`]
@@ -155,6 +209,8 @@ pub struct DecisionLog {
     dropped_total: Arc<AtomicU64>,
     handle: Option<JoinHandle<WriterStats>>,
     dir: PathBuf,
+    /// The tlog's count of capped frames, and how much of it this log has said.
+    tlog: Option<(Arc<AtomicU64>, AtomicU64)>,
 }
 
 impl DecisionLog {
@@ -192,6 +248,7 @@ impl DecisionLog {
             dropped_total,
             handle: Some(handle),
             dir: dir.to_path_buf(),
+            tlog: None,
         })
     }
 
@@ -215,6 +272,40 @@ impl DecisionLog {
         })
     }
 
+    /// Say in this log when the run's tlog reaches its cap: `capped` is the tlog's counter
+    /// ([`TlogWriter::capped_counter`](super::TlogWriter::capped_counter)). The first capped
+    /// frames get a loss line (reason `tlog_cap`) with the next record, the rest one at close,
+    /// and the end line carries the total.
+    pub fn watch_tlog(&mut self, capped: Arc<AtomicU64>) {
+        self.tlog = Some((capped, AtomicU64::new(0)));
+    }
+
+    /// Tell the writer about tlog frames capped since the last call.
+    fn report_tlog(&self, tx: &SyncSender<Msg>, blocking: bool) {
+        let Some((counter, said)) = &self.tlog else {
+            return;
+        };
+        let now = counter.load(Ordering::Acquire);
+        let before = said.swap(now, Ordering::AcqRel);
+        if now <= before {
+            said.fetch_max(before, Ordering::AcqRel);
+            return;
+        }
+        let msg = Msg {
+            lost_before: 0,
+            payload: Payload::TlogCapped(now - before),
+        };
+        let sent = if blocking {
+            tx.send(msg).is_ok()
+        } else {
+            tx.try_send(msg).is_ok()
+        };
+        if !sent {
+            // Said with a later record or at close.
+            said.store(before, Ordering::Release);
+        }
+    }
+
     /// Records and events dropped so far.
     pub fn dropped(&self) -> u64 {
         self.dropped_total.load(Ordering::Relaxed)
@@ -222,6 +313,7 @@ impl DecisionLog {
 
     fn send(&self, payload: Payload) -> bool {
         let Some(tx) = &self.tx else { return false };
+        self.report_tlog(tx, false);
         let lost_before = self.pending_lost.swap(0, Ordering::AcqRel);
         match tx.try_send(Msg {
             lost_before,
@@ -246,6 +338,9 @@ impl DecisionLog {
     }
 
     fn shutdown(&mut self) -> WriterStats {
+        if let Some(tx) = &self.tx {
+            self.report_tlog(tx, true);
+        }
         drop(self.tx.take());
         match self.handle.take() {
             Some(h) => h.join().unwrap_or_else(|_| WriterStats {
@@ -453,6 +548,16 @@ impl WriterThread {
                         self.stats.events += 1;
                     }
                 }
+                Payload::TlogCapped(n) => {
+                    // The first at once (a killed run still says it), the rest at close.
+                    let first = self.stats.tlog_capped == 0;
+                    self.count(Loss::TlogCap, n);
+                    if first {
+                        self.write_loss_line(Loss::TlogCap, n);
+                    } else {
+                        self.defer(Loss::TlogCap, n);
+                    }
+                }
             }
         }
         // Channel closed: drops after the last accepted message are still owed a loss line.
@@ -475,6 +580,7 @@ impl WriterThread {
             write_failed: st.write_failed,
             capped: st.capped,
             too_large: st.too_large,
+            tlog_capped: st.tlog_capped,
         };
         self.write_json(&end, LineKind::Meta);
         if let Err(e) = self.part.sync() {
@@ -485,12 +591,17 @@ impl WriterThread {
 
     /// Count `n` lost for `why`.
     fn count(&mut self, why: Loss, n: u64) {
+        if why == Loss::TlogCap {
+            self.stats.tlog_capped += n;
+            return;
+        }
         self.stats.dropped += n;
         match why {
             Loss::QueueFull => self.stats.queue_full += n,
             Loss::WriteFailed => self.stats.write_failed += n,
             Loss::Cap => self.stats.capped += n,
             Loss::TooLarge => self.stats.too_large += n,
+            Loss::TlogCap => {}
         }
     }
 

@@ -287,22 +287,27 @@ pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
         .with_context(|| format!("reading {} for the log header", params.display()))?;
     header.policy = Some(args.policy.clone());
     header.model = Some(companion_core::decision::ModelKind::Bfm.name().to_string());
-    let log = dlog::start_run(&args.log_dir, now, header, WriterOptions::default())
+    let opts = WriterOptions::from_env()?;
+    let mut log = dlog::start_run(&args.log_dir, now, header, opts.clone())
         .with_context(|| format!("starting a run folder in {}", args.log_dir.display()))?;
     let dir = log.dir().to_path_buf();
     println!("run folder: {}", dir.display());
     tracing::info!("run folder {}", dir.display());
     let tlog = TlogWriter::create(&dir.join("flight.tlog"))
-        .with_context(|| format!("creating {}", dir.join("flight.tlog").display()))?;
+        .with_context(|| format!("creating {}", dir.join("flight.tlog").display()))?
+        .with_max_bytes(opts.max_bytes);
+    // The tlog's cap is told like the decision log's: a loss line there, the end line, the exit.
+    log.watch_tlog(tlog.capped_counter());
     let mut sink = LogSink(log);
     let result = rt.block_on(run_loop(args, setup, decider, &mut sink, Some(Tlog(tlog))));
     let stats = sink.0.close();
     let report = result?;
     eprintln!(
-        "companion fly: {} records {} dropped {}",
+        "companion fly: {} records {} dropped {} tlog_capped {}",
         serde_json::to_string(&report).unwrap_or_default(),
         stats.records,
-        stats.dropped
+        stats.dropped,
+        stats.tlog_capped
     );
     Ok(())
 }

@@ -95,6 +95,8 @@ pub struct Summary {
     /// log without its end line ran out of room rather than being killed.
     pub lost_write_failed: u64,
     pub lost_capped: u64,
+    /// Telemetry frames `flight.tlog` did not write because it reached its size cap.
+    pub tlog_capped: u64,
 }
 
 /// Something to flag on a cycle.
@@ -384,6 +386,8 @@ impl Review {
                     }
                 }
             },
+            // Telemetry frames, not records: said in the summary, not as a gap in the records.
+            LogItem::Loss(n, LossReason::TlogCap) => self.summary.tlog_capped += n,
             LogItem::Loss(n, why) => {
                 if let Some((prev, prev_inputs)) = self.pending.take() {
                     self.finalize(*prev, &prev_inputs);
@@ -391,7 +395,7 @@ impl Review {
                 match why {
                     LossReason::WriteFailed => self.summary.lost_write_failed += n,
                     LossReason::Cap => self.summary.lost_capped += n,
-                    LossReason::QueueFull | LossReason::TooLarge => {}
+                    LossReason::QueueFull | LossReason::TooLarge | LossReason::TlogCap => {}
                 }
                 self.pending_loss = (self.pending_loss.0 + n, why);
                 self.summary.dropped += n;

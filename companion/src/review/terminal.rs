@@ -102,6 +102,15 @@ pub fn render_terminal(rev: &Review, color: bool) -> String {
     if s.lost_capped > 0 {
         kv("lost to the size cap", s.lost_capped.to_string());
     }
+    if s.tlog_capped > 0 {
+        kv(
+            "flight.tlog capped",
+            format!(
+                "{} telemetry frames not written (size cap, COMPANION_LOG_MAX_BYTES)",
+                s.tlog_capped
+            ),
+        );
+    }
     if s.corrupted_lines > 0 {
         kv("corrupted lines", s.corrupted_lines.to_string());
     }
