@@ -247,6 +247,14 @@ pub struct Review {
     last_time: f64,
     crash: Option<(String, u64)>,
     last: Option<LastRecord>,
+    /// Where the vehicle took off from: the first position before it armed (fly logs).
+    home: Option<(f64, f64)>,
+    /// Some record said the vehicle was armed.
+    ever_armed: bool,
+    /// The previous record's `vehicle.armed`.
+    prev_armed: Option<bool>,
+    /// (action, command) -> in-progress results not yet followed by an outcome.
+    open_in_progress: HashMap<(String, String), usize>,
 }
 
 #[derive(Debug, Default)]
@@ -256,6 +264,22 @@ struct LastRecord {
     landing: bool,
     returning: bool,
     altitude: Option<f64>,
+    armed: Option<bool>,
+    mode: Option<String>,
+    /// `vehicle.operator`: `waiting`, `started`, `taken_over`.
+    operator: Option<String>,
+    /// (longitude, latitude).
+    position: Option<(f64, f64)>,
+}
+
+/// Metres between two (longitude, latitude) points in degrees (haversine, mean Earth radius:
+/// well under a metre off at the distances of one flight).
+pub fn distance_m(a: (f64, f64), b: (f64, f64)) -> f64 {
+    let (lon1, lat1) = (a.0.to_radians(), a.1.to_radians());
+    let (lon2, lat2) = (b.0.to_radians(), b.1.to_radians());
+    let h = ((lat2 - lat1) / 2.0).sin().powi(2)
+        + lat1.cos() * lat2.cos() * ((lon2 - lon1) / 2.0).sin().powi(2);
+    2.0 * 6_371_008.8 * h.sqrt().min(1.0).asin()
 }
 
 /// A failsafe is named in free text (the autopilot's STATUSTEXT, a mode, a note), so it is
@@ -480,10 +504,31 @@ impl Review {
         if let Some(res) = &r.resources {
             s.degradations += res.degraded.len();
         }
+        // Flights in the log (fly): a flight is over when the vehicle disarms; the records after
+        // it (the next flight's, its fresh guarantee) do not replace its margins until the
+        // vehicle arms again. Logs without `armed` (simulate) are one flight.
+        let armed = r.vehicle.get("armed").and_then(|v| v.as_bool());
+        let flight_over = self.ever_armed && armed == Some(false);
+        let first_disarm = flight_over && self.prev_armed == Some(true);
+        if armed == Some(true) {
+            self.ever_armed = true;
+        }
+        if !self.ever_armed
+            && let Some(p) = position(&r)
+        {
+            // The newest position on the ground before the first arming.
+            self.home = Some(p);
+        }
+        if self.home.is_none() {
+            self.home = position(&r);
+        }
+        self.prev_armed = armed.or(self.prev_armed);
         if let Some(g) = &r.guarantee {
             if g.reallocation.is_some() {
                 s.reallocations += 1;
             }
+        }
+        if let Some(g) = r.guarantee.as_ref().filter(|_| !flight_over || first_disarm) {
             s.final_margins = g
                 .margins
                 .iter()
@@ -496,8 +541,15 @@ impl Review {
         }
         for c in &r.commands {
             let cat = categorize(&c.result);
-            s.outcomes.add(cat);
-            s.commands += 1;
+            // "In progress" is what is still unresolved at the end of the log: a step sent and
+            // awaiting its answer is counted by the outcome that follows it, if one does.
+            let key = (c.action.clone(), c.command.clone());
+            if cat == Category::InProgress {
+                *self.open_in_progress.entry(key).or_default() += 1;
+            } else {
+                self.open_in_progress.remove(&key);
+                s.outcomes.add(cat);
+            }
             if cat == Category::Failed {
                 s.failed_commands += 1;
             }
@@ -694,6 +746,14 @@ impl Review {
                     .any(|a| a == "land" || a == "replan_and_land"),
             returning: r.actions.iter().any(|a| a == "return_to_base"),
             altitude: vehicle_f64(&r, "altitude_m"),
+            armed,
+            mode: mode(&r),
+            operator: r
+                .vehicle
+                .get("operator")
+                .and_then(|v| v.as_str())
+                .map(str::to_string),
+            position: position(&r),
         });
 
         // Rows and why.
@@ -727,13 +787,23 @@ impl Review {
         let last_step = h.and_then(|h| h.step_s).or(self.last_gap).unwrap_or(0.0);
         let (steps, secs) = self.tracking.finish(last_step);
         let s = &mut self.summary;
+        for n in self.open_in_progress.values() {
+            for _ in 0..*n {
+                s.outcomes.add(Category::InProgress);
+            }
+        }
+        s.commands = s.outcomes.total();
         s.tracking_steps = steps;
         s.tracking_s = secs;
         s.policy = h.and_then(|h| h.policy.clone().or_else(|| policy_from_command(&h.command)));
         s.scenario = h.and_then(|h| h.scenario.clone());
+        let home = self.home;
+        let ever_armed = self.ever_armed;
         let mut out = match (&self.crash, &self.last) {
             (_, None) => "no decision records".to_string(),
             (Some((state, cycle)), _) => format!("crashed ({state} at cycle {cycle})"),
+            // Fly logs say whether the vehicle is armed: the end is told from that.
+            (None, Some(l)) if l.armed.is_some() => flight_end(l, home, ever_armed),
             (None, Some(l)) if l.landing => match l.altitude {
                 Some(a) if a > 0.5 => format!("landing (log ends at {a:.1} m)"),
                 _ => "landed".into(),
@@ -779,6 +849,35 @@ impl Review {
         }
         r.finish();
         r
+    }
+}
+
+/// How a fly log ends, from its last record: taken over (by which mode), landed and disarmed
+/// (where, how far from home) or still armed (altitude, mode).
+fn flight_end(l: &LastRecord, home: Option<(f64, f64)>, ever_armed: bool) -> String {
+    let mode = l.mode.as_deref().unwrap_or("unknown");
+    let taken = (l.operator.as_deref() == Some("taken_over"))
+        .then(|| format!("taken over by the pilot (mode {mode}); "))
+        .unwrap_or_default();
+    let at = match l.position {
+        Some((lon, lat)) => {
+            let from_home = home
+                .map(|h| format!(", {:.0} m from home", distance_m(h, (lon, lat))))
+                .unwrap_or_else(|| ", home unknown".into());
+            format!(" at {lat:.6}, {lon:.6}{from_home}")
+        }
+        None => " (no position in the log)".into(),
+    };
+    let alt = l
+        .altitude
+        .map(|a| format!(" at {a:.1} m"))
+        .unwrap_or_else(|| " (altitude unknown)".into());
+    match l.armed {
+        Some(true) => format!(
+            "{taken}log ended with the vehicle armed{alt} in {mode}{at}"
+        ),
+        _ if ever_armed => format!("{taken}landed and disarmed{at}"),
+        _ => format!("{taken}never armed: log ends on the ground in state {}", l.state),
     }
 }
 
