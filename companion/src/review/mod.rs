@@ -550,6 +550,7 @@ impl Review {
                 self.open_in_progress.remove(&key);
                 s.outcomes.add(cat);
             }
+            s.commands += 1;
             if cat == Category::Failed {
                 s.failed_commands += 1;
             }
@@ -792,7 +793,6 @@ impl Review {
                 s.outcomes.add(Category::InProgress);
             }
         }
-        s.commands = s.outcomes.total();
         s.tracking_steps = steps;
         s.tracking_s = secs;
         s.policy = h.and_then(|h| h.policy.clone().or_else(|| policy_from_command(&h.command)));
