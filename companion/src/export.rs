@@ -58,9 +58,7 @@ pub enum ExportError {
     #[error("--out {path}: {reason}")]
     Refused { path: PathBuf, reason: String },
     /// Nothing to export: every line that looked like a record was unreadable.
-    #[error(
-        "{path}: no decision record could be read ({skipped} lines skipped): nothing exported"
-    )]
+    #[error("{path}: no decision record could be read ({skipped} lines skipped): nothing exported")]
     NoRecords {
         path: PathBuf,
         skipped: usize,

@@ -275,13 +275,8 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         header.model = Some(first_kind.to_string());
         header.seed = Some(args.seed);
         header.step_s = Some(world.step_s);
-        let log = companion::decision_log::start_run(
-            &args.runs_dir,
-            now,
-            header,
-            log_opts,
-        )
-        .with_context(|| format!("starting a run folder in {}", args.runs_dir.display()))?;
+        let log = companion::decision_log::start_run(&args.runs_dir, now, header, log_opts)
+            .with_context(|| format!("starting a run folder in {}", args.runs_dir.display()))?;
         let dir = log.dir().to_path_buf();
         if args.json {
             eprintln!("run folder: {}", dir.display());

@@ -72,7 +72,11 @@ fn refused(run: &Path, format: &str, out: &Path, why: &str) {
     let tlog = std::fs::read(run.join("flight.tlog")).unwrap();
     let o = export(&[os(run), os("--format"), os(format), os("--out"), os(out)]);
     assert!(!o.status.success(), "{format} --out {out:?} was accepted");
-    assert!(stderr(&o).contains(why), "expected {why:?} in: {}", stderr(&o));
+    assert!(
+        stderr(&o).contains(why),
+        "expected {why:?} in: {}",
+        stderr(&o)
+    );
     assert_eq!(std::fs::read(run.join("decisions.jsonl")).unwrap(), log);
     assert_eq!(std::fs::read(run.join("flight.tlog")).unwrap(), tlog);
 }
@@ -81,8 +85,18 @@ fn refused(run: &Path, format: &str, out: &Path, why: &str) {
 fn export_out_naming_its_input_log_fails_and_leaves_it_byte_identical() {
     let d = tempfile::tempdir().unwrap();
     let run = run_folder(d.path(), "run", 50);
-    refused(&run, "csv", &run.join("decisions.jsonl"), "input of this export");
-    refused(&run, "mcap", &run.join("decisions.jsonl"), "input of this export");
+    refused(
+        &run,
+        "csv",
+        &run.join("decisions.jsonl"),
+        "input of this export",
+    );
+    refused(
+        &run,
+        "mcap",
+        &run.join("decisions.jsonl"),
+        "input of this export",
+    );
     // Given as the log file rather than the folder, through `..` as well.
     let log = run.join("decisions.jsonl");
     let o = export(&[
@@ -99,9 +113,19 @@ fn export_out_naming_its_input_log_fails_and_leaves_it_byte_identical() {
 fn export_out_naming_the_tlog_or_another_run_file_is_refused() {
     let d = tempfile::tempdir().unwrap();
     let run = run_folder(d.path(), "run", 5);
-    refused(&run, "mcap", &run.join("flight.tlog"), "input of this export");
+    refused(
+        &run,
+        "mcap",
+        &run.join("flight.tlog"),
+        "input of this export",
+    );
     std::fs::write(run.join("report.html"), "<html>").unwrap();
-    refused(&run, "csv", &run.join("report.html"), "file of the run folder");
+    refused(
+        &run,
+        "csv",
+        &run.join("report.html"),
+        "file of the run folder",
+    );
     assert_eq!(std::fs::read(run.join("report.html")).unwrap(), b"<html>");
 }
 
@@ -164,9 +188,15 @@ fn unreadable_lines_are_counted_and_named() {
     let err = stderr(&o);
     // Header + 3 records + end = lines 1..5; the bad ones are lines 6 and 7.
     assert!(err.contains("decisions.jsonl:6: not JSON"), "{err}");
-    assert!(err.contains("decisions.jsonl:7: not a decision record"), "{err}");
+    assert!(
+        err.contains("decisions.jsonl:7: not a decision record"),
+        "{err}"
+    );
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(out.contains("3 records") && out.contains("2 unreadable lines skipped"), "{out}");
+    assert!(
+        out.contains("3 records") && out.contains("2 unreadable lines skipped"),
+        "{out}"
+    );
 }
 
 #[test]
@@ -175,11 +205,16 @@ fn an_input_without_one_readable_record_fails() {
     let run = d.path().join("junk");
     std::fs::create_dir(&run).unwrap();
     // Bytes that are no log at all (what `random_1MB` was), without a newline in them.
-    let junk: Vec<u8> = (0..100_000u32).map(|i| (i * 7 % 251) as u8 | 0x80).collect();
+    let junk: Vec<u8> = (0..100_000u32)
+        .map(|i| (i * 7 % 251) as u8 | 0x80)
+        .collect();
     std::fs::write(run.join("decisions.jsonl"), &junk).unwrap();
     for format in ["csv", "mcap"] {
         let o = export(&[os(&run), os("--format"), os(format)]);
-        assert!(!o.status.success(), "{format}: exported nothing with exit 0");
+        assert!(
+            !o.status.success(),
+            "{format}: exported nothing with exit 0"
+        );
         assert!(stderr(&o).contains("no decision record"), "{}", stderr(&o));
         assert!(!run.join(format!("export.{format}")).exists());
     }

@@ -3,7 +3,9 @@
 //! `fly`'s own cycle (`decide`, `finish_record`) and the decision log, every record of a flood is
 //! written, with the flood summarised and its size counted.
 
-use companion::decision_log::{DecisionLog, DEFAULT_MAX_LINE_BYTES, Header, WriterOptions, read_log};
+use companion::decision_log::{
+    DEFAULT_MAX_LINE_BYTES, DecisionLog, Header, WriterOptions, read_log,
+};
 use companion::fly::{self, Decider, FlyArgs, FlySetup, Shell};
 use companion::params::default_params_dir;
 use companion_core::observations::Observations;
@@ -35,7 +37,11 @@ fn flood(cycle: u64) -> Vec<LinkEvent> {
 fn a_statustext_flood_loses_no_decision_record() {
     // Without the cap, one cycle's flood is over the log's line limit by itself.
     let raw = serde_json::to_string(&flood(0)).unwrap();
-    assert!(raw.len() as u64 > DEFAULT_MAX_LINE_BYTES, "{} bytes", raw.len());
+    assert!(
+        raw.len() as u64 > DEFAULT_MAX_LINE_BYTES,
+        "{} bytes",
+        raw.len()
+    );
 
     let mut args =
         FlyArgs::from_cli(["--connect", "udpin:127.0.0.1:14550", "--auto-start"]).unwrap();
@@ -64,7 +70,12 @@ fn a_statustext_flood_loses_no_decision_record() {
     let read = read_log(dir.path()).unwrap();
     assert_eq!(read.records.len(), cycles as usize);
     for r in &read.records {
-        assert_eq!(r.link_events.len(), MAX_LINK_EVENTS + 1, "cycle {}", r.cycle);
+        assert_eq!(
+            r.link_events.len(),
+            MAX_LINK_EVENTS + 1,
+            "cycle {}",
+            r.cycle
+        );
         let summary = r.link_events.last().unwrap().to_string();
         let more = FLOOD - MAX_LINK_EVENTS;
         assert!(

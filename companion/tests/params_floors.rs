@@ -41,18 +41,23 @@ fn refused(dir: &Path, entry: &str, reason: &str) {
             "{what}: expected link.toml / {entry} / {reason:?} in: {msg}"
         );
     };
-    let e = Params::load(dir, None).err().expect("Params::load accepted it");
+    let Err(e) = Params::load(dir, None) else {
+        panic!("Params::load accepted it")
+    };
     want("Params::load", e.to_string());
     let args = CheckArgs {
         params: Some(dir.to_path_buf()),
         ..Default::default()
     };
-    let e = check::report(&args).err().expect("check accepted it");
+    let Err(e) = check::report(&args) else {
+        panic!("check accepted it")
+    };
     want("check", format!("{e:#}"));
-    let mut fa =
-        FlyArgs::from_cli(["--connect", "udpin:127.0.0.1:14550", "--auto-start"]).unwrap();
+    let mut fa = FlyArgs::from_cli(["--connect", "udpin:127.0.0.1:14550", "--auto-start"]).unwrap();
     fa.params = Some(dir.to_path_buf());
-    let e = FlySetup::load(&fa).err().expect("fly's setup accepted it");
+    let Err(e) = FlySetup::load(&fa) else {
+        panic!("fly's setup accepted it")
+    };
     want("FlySetup::load", format!("{e:#}"));
 }
 

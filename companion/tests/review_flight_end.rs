@@ -115,7 +115,11 @@ fn a_log_that_ends_armed_in_the_air_says_so_with_altitude_and_mode() {
     let mut last = air(300.0, 20.0, "AUTO", 100.0);
     // Sent and never answered before the log ended: in progress.
     last.commands = vec![("MAV_CMD_DO_SET_MODE", "SENT")];
-    let rev = review(vec![ground(0.0, 900.0), air(100.0, 20.0, "AUTO", 300.0), last]);
+    let rev = review(vec![
+        ground(0.0, 900.0),
+        air(100.0, 20.0, "AUTO", 300.0),
+        last,
+    ]);
     let out = &rev.summary.outcome;
     assert!(
         out.starts_with("log ended with the vehicle armed at 20.0 m in AUTO at 47."),
@@ -130,7 +134,11 @@ fn a_log_that_ends_armed_in_the_air_says_so_with_altitude_and_mode() {
 fn a_takeover_names_the_pilots_mode() {
     let mut taken = air(50.0, 15.0, "LOITER", 200.0);
     taken.operator = "taken_over";
-    let rev = review(vec![ground(0.0, 900.0), air(20.0, 15.0, "AUTO", 300.0), taken]);
+    let rev = review(vec![
+        ground(0.0, 900.0),
+        air(20.0, 15.0, "AUTO", 300.0),
+        taken,
+    ]);
     let out = &rev.summary.outcome;
     assert!(
         out.starts_with("taken over by the pilot (mode LOITER); log ended with the vehicle armed at 15.0 m in LOITER"),

@@ -523,12 +523,17 @@ impl Review {
             self.home = position(&r);
         }
         self.prev_armed = armed.or(self.prev_armed);
-        if let Some(g) = &r.guarantee {
-            if g.reallocation.is_some() {
-                s.reallocations += 1;
-            }
+        if r.guarantee
+            .as_ref()
+            .is_some_and(|g| g.reallocation.is_some())
+        {
+            s.reallocations += 1;
         }
-        if let Some(g) = r.guarantee.as_ref().filter(|_| !flight_over || first_disarm) {
+        if let Some(g) = r
+            .guarantee
+            .as_ref()
+            .filter(|_| !flight_over || first_disarm)
+        {
             s.final_margins = g
                 .margins
                 .iter()
@@ -856,9 +861,11 @@ impl Review {
 /// (where, how far from home) or still armed (altitude, mode).
 fn flight_end(l: &LastRecord, home: Option<(f64, f64)>, ever_armed: bool) -> String {
     let mode = l.mode.as_deref().unwrap_or("unknown");
-    let taken = (l.operator.as_deref() == Some("taken_over"))
-        .then(|| format!("taken over by the pilot (mode {mode}); "))
-        .unwrap_or_default();
+    let taken = if l.operator.as_deref() == Some("taken_over") {
+        format!("taken over by the pilot (mode {mode}); ")
+    } else {
+        String::new()
+    };
     let at = match l.position {
         Some((lon, lat)) => {
             let from_home = home
@@ -873,11 +880,12 @@ fn flight_end(l: &LastRecord, home: Option<(f64, f64)>, ever_armed: bool) -> Str
         .map(|a| format!(" at {a:.1} m"))
         .unwrap_or_else(|| " (altitude unknown)".into());
     match l.armed {
-        Some(true) => format!(
-            "{taken}log ended with the vehicle armed{alt} in {mode}{at}"
-        ),
+        Some(true) => format!("{taken}log ended with the vehicle armed{alt} in {mode}{at}"),
         _ if ever_armed => format!("{taken}landed and disarmed{at}"),
-        _ => format!("{taken}never armed: log ends on the ground in state {}", l.state),
+        _ => format!(
+            "{taken}never armed: log ends on the ground in state {}",
+            l.state
+        ),
     }
 }
 
