@@ -361,15 +361,27 @@ fn base_stays_on_the_ground_when_battery_or_system_is_failing() {
             // A healthy start as the simulated world sees it at base.
             p.insert("P_battery".into(), 0.99);
             p.insert("P_sys".into(), 0.98);
-            assert_eq!(decide(&mut all, n, "base", &p, pol), "A1", "{n} {pol} healthy");
+            assert_eq!(
+                decide(&mut all, n, "base", &p, pol),
+                "A1",
+                "{n} {pol} healthy"
+            );
             for pb in [0.0, 0.05, 0.2] {
                 p.insert("P_battery".into(), pb);
-                assert_eq!(decide(&mut all, n, "base", &p, pol), "A0", "{n} {pol} P_battery {pb}");
+                assert_eq!(
+                    decide(&mut all, n, "base", &p, pol),
+                    "A0",
+                    "{n} {pol} P_battery {pb}"
+                );
             }
             p.insert("P_battery".into(), 0.99);
             for ps in [0.0, 0.05] {
                 p.insert("P_sys".into(), ps);
-                assert_eq!(decide(&mut all, n, "base", &p, pol), "A0", "{n} {pol} P_sys {ps}");
+                assert_eq!(
+                    decide(&mut all, n, "base", &p, pol),
+                    "A0",
+                    "{n} {pol} P_sys {ps}"
+                );
             }
         }
         assert_eq!(
@@ -459,7 +471,11 @@ fn base_decision_matches_exhaustive_policy_search() {
                 }
             }
             assert_eq!(count, 972, "every stationary policy searched");
-            assert_eq!(m.action_name(best_first as usize), want, "{pol} P_battery {pb}");
+            assert_eq!(
+                m.action_name(best_first as usize),
+                want,
+                "{pol} P_battery {pb}"
+            );
             let mut ws = Workspace::new();
             let fh = ws.finite_horizon(&mdp, 100);
             assert_eq!(
