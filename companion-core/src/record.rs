@@ -202,6 +202,11 @@ pub struct DecisionRecord {
     pub observations: BTreeMap<String, f64>,
     /// BN evidence: node -> state.
     pub evidence: BTreeMap<String, String>,
+    /// The evidence nodes of params/observations.toml that received no evidence this cycle (in
+    /// file order): their observation was absent from the snapshot (a sensor never heard, an
+    /// estimator not estimating: WIND all zero) or not finite. Their BN nodes keep their priors.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub absent_evidence: Vec<String>,
     /// Named probabilities published by the health managers.
     pub probabilities: BTreeMap<String, f64>,
     /// One proposal per MDP solve (re-solves included).
@@ -291,7 +296,7 @@ reuse_clone!(GuaranteeRecord {
 } maps { margins, goals, drift });
 reuse_clone!(DecisionRecord {
     cycle, time_s, state, events, proposals, conflicts, actions, resources, guarantee, commands,
-    link_events, utc_us, shell_actions
+    link_events, utc_us, shell_actions, absent_evidence
 } maps { observations, evidence, probabilities, vehicle });
 reuse_clone!(Plan { vehicle_actions, applications } maps {});
 
