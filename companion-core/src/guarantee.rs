@@ -314,7 +314,9 @@ impl Guarantee {
     fn energy_used(&self, p: &Progress) -> (Option<f64>, EnergySource) {
         let from_pct = p.battery_remaining_pct.and_then(|pct| {
             let cap = self.spec.battery_capacity_j?;
-            Some(((1.0 - pct.clamp(0.0, 100.0) / 100.0) * cap).max(0.0))
+            // Written as the drop from 100 % so that a pack starting full gives, bit for bit,
+            // what the old "drop since the first reading" gave.
+            Some(((100.0 - pct.clamp(0.0, 100.0)) / 100.0 * cap).max(0.0))
         });
         match (from_pct, p.energy_used_j.filter(|e| e.is_finite())) {
             (Some(a), Some(b)) if b > a => (Some(b), EnergySource::EnergyConsumed),

@@ -263,8 +263,9 @@ impl Telemetry {
         self.wind_estimating
     }
 
-    /// One wind reading: `raw` are the message's fields (all exactly zero while the autopilot
-    /// does not estimate the wind), `speed` m/s and `dir_deg` the direction it blows from.
+    /// One wind reading: `raw` are the message's speed fields (all exactly zero while the
+    /// autopilot does not estimate the wind), `speed` m/s and `dir_deg` the direction it blows
+    /// from.
     fn on_wind(&mut self, raw: [f32; 3], speed: f64, dir_deg: f64) {
         if !(speed.is_finite() && dir_deg.is_finite()) {
             return;
@@ -374,11 +375,12 @@ impl Telemetry {
                 );
             }
             Msg::WIND(w) => {
-                // ArduPilot sends WIND all zero while its EKF has no wind states (no airspeed
-                // sensor, no drag fusion): that is no estimate, not calm air. Only a non-zero
-                // reading shows the estimator runs; from then on a zero is a calm estimate.
+                // ArduPilot sends WIND with zero speeds while its EKF has no wind states (no
+                // airspeed sensor, no drag fusion): that is no estimate, not calm air. The
+                // direction is then atan2 of zeros (ArduCopter SITL: -180), so only the speeds
+                // count. A non-zero speed shows the estimator runs; from then on zero is calm.
                 self.on_wind(
-                    [w.speed, w.direction, w.speed_z],
+                    [w.speed, w.speed_z, 0.0],
                     w.speed as f64,
                     w.direction as f64,
                 );
@@ -903,10 +905,14 @@ mod tests {
         );
         t.on_message(s(10.4), &wind(0.0, 0.0), name);
         assert_eq!(t.observations(s(10.4), vec![]).get("wind_mps"), Some(0.0));
-        // A direction alone is a sign of estimation too (calm, but from somewhere).
+        // ArduCopter SITL without wind states: speed 0, direction -180 (atan2 of zeros) in
+        // every message. The direction of a zero vector is no sign of estimation.
         let mut t = Telemetry::new(TelemetryConfig::default());
-        t.on_message(s(0.0), &wind(0.0, 90.0), name);
-        assert_eq!(t.observations(s(0.0), vec![]).get("wind_mps"), Some(0.0));
+        for k in 0..10 {
+            t.on_message(s(k as f64), &wind(0.0, -180.0), name);
+        }
+        assert_eq!(t.observations(s(10.0), vec![]).get("wind_mps"), None);
+        assert!(!t.wind_estimating());
     }
 
     /// PX4's WIND_COV: speed from the north/east components, direction the wind blows from;
