@@ -332,6 +332,18 @@ impl<'m> Core<'m> {
         let room = self.platform_room(obs);
         self.health
             .evidence_with_into(obs, &room, &mut rec.evidence);
+        // Absent is not zero: the nodes no observation fed this cycle, listed (strings reused).
+        let mut n_absent = 0;
+        for o in &self.health.observations.observations {
+            if !rec.evidence.contains_key(o.node.as_str()) {
+                if n_absent == rec.absent_evidence.len() {
+                    rec.absent_evidence.push(String::new());
+                }
+                rec.absent_evidence[n_absent].clone_from(&o.node);
+                n_absent += 1;
+            }
+        }
+        rec.absent_evidence.truncate(n_absent);
         match self
             .health
             .evaluate_into(&rec.evidence, &mut rec.probabilities)
@@ -932,4 +944,45 @@ pub fn table(records: &[DecisionRecord], model: &Model) -> String {
         line([&row[0], &row[1], &row[2], &row[3], &row[4]], &mut out);
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Absent is not zero: a snapshot without `wind_mps` (the autopilot not estimating) gives
+    /// no wind evidence and the record lists `A_wind` as absent; a zero reading is calm evidence.
+    #[test]
+    fn absent_observation_is_listed_and_gives_no_evidence() {
+        let model = Model::load(&crate::shipped::params()).unwrap();
+        let mut core = Core::new(&model, ModelKind::Bfm, model.policy("safety").unwrap());
+        let mut obs = Observations {
+            state: "base".into(),
+            ..Default::default()
+        };
+        obs.set("battery_pct", 100.0);
+        let (_, rec) = core.step(&obs);
+        assert!(!rec.evidence.contains_key("A_wind"), "{:?}", rec.evidence);
+        assert!(
+            rec.absent_evidence.iter().any(|n| n == "A_wind"),
+            "{:?}",
+            rec.absent_evidence
+        );
+        assert!(!rec.absent_evidence.iter().any(|n| n == "S_battery"));
+        // Core-computed evidence is never absent.
+        assert!(!rec.absent_evidence.iter().any(|n| n == "A_free_tiles"));
+        obs.set("wind_mps", f64::NAN);
+        let (_, rec) = core.step(&obs);
+        assert!(rec.absent_evidence.iter().any(|n| n == "A_wind"));
+        obs.set("wind_mps", 0.0);
+        let (_, rec) = core.step(&obs);
+        assert_eq!(rec.evidence.get("A_wind").map(String::as_str), Some("calm"));
+        assert!(
+            !rec.absent_evidence.iter().any(|n| n == "A_wind"),
+            "{:?}",
+            rec.absent_evidence
+        );
+        let json = serde_json::to_value(&rec).unwrap();
+        assert!(json["absent_evidence"].is_array(), "{json}");
+    }
 }

@@ -12,7 +12,7 @@
 mod compile;
 mod schema;
 
-use crate::record::{GuaranteeRecord, Reallocation};
+use crate::record::{EnergySource, GuaranteeRecord, Reallocation};
 use crate::spec::{ParamsFiles, SpecError, read_toml};
 use compile::{check_against_catalogue, compile};
 use panorama::{Goal, Infeasible, MarginReport, Measured, Problem, Selection};
@@ -143,9 +143,11 @@ pub struct Progress<'a> {
     pub activity_index: usize,
     /// Fraction of that activity already flown (0..1; 0 when unknown, the conservative choice).
     pub activity_fraction: f64,
-    /// Consumed energy from battery telemetry, when the autopilot reports it.
+    /// Energy the autopilot reports consumed since it booted (BATTERY_STATUS.energy_consumed),
+    /// when it reports it. Counts from the boot, not from a full pack.
     pub energy_used_j: Option<f64>,
-    /// Remaining battery percentage, used when `energy_used_j` is not given.
+    /// Remaining battery percentage the autopilot reports (of the full pack): the energy still
+    /// in the pack, with the mission's `[battery]` capacity.
     pub battery_remaining_pct: Option<f64>,
     /// Time since the mission started (s).
     pub elapsed_s: f64,
@@ -160,7 +162,6 @@ pub struct Guarantee {
     pub spec: MissionSpec,
     choice: Vec<usize>,
     failed: Vec<String>,
-    first_pct: Option<f64>,
     rows: Vec<RasRow>,
     /// Buffers reused by [`Guarantee::watch_into`] (no allocation on a cycle that keeps the RAS).
     scratch: WatchScratch,
@@ -260,7 +261,6 @@ impl Guarantee {
             choice: ras0.choice,
             spec,
             failed: Vec::new(),
-            first_pct: None,
             rows,
             scratch: WatchScratch::default(),
         })
@@ -302,15 +302,28 @@ impl Guarantee {
         &self.rows
     }
 
-    /// Consumed energy: `energy_used_j` if given, else the drop of the battery percentage since
-    /// the first reading times the battery capacity, else `None` (the plan's estimate is used).
-    fn energy_used(&mut self, p: &Progress) -> Option<f64> {
-        p.energy_used_j.or_else(|| {
-            let pct = p.battery_remaining_pct?;
+    /// Energy counted as used against the energy goal, and where it came from.
+    ///
+    /// The goal's bound is the pack's usable energy above the reserve, for a full pack. What the
+    /// mission may still spend is what the pack holds now: `pct` % of the capacity, less the
+    /// part that is never drawn (`1 - usable_fraction`) and the reserve. Counted as used is the
+    /// bound minus that, `(1 - pct / 100) x capacity`, so a vehicle that starts at 12 % starts
+    /// with 12 % (not "full at the first reading"). The autopilot's consumed energy counts from
+    /// its boot (a full pack assumed); when both are reported the larger use counts (the
+    /// conservative reading). Neither: `None`, the plan's estimate is used.
+    fn energy_used(&self, p: &Progress) -> (Option<f64>, EnergySource) {
+        let from_pct = p.battery_remaining_pct.and_then(|pct| {
             let cap = self.spec.battery_capacity_j?;
-            let first = *self.first_pct.get_or_insert(pct);
-            Some(((first - pct) / 100.0 * cap).max(0.0))
-        })
+            // Written as the drop from 100 % so that a pack starting full gives, bit for bit,
+            // what the old "drop since the first reading" gave.
+            Some(((100.0 - pct.clamp(0.0, 100.0)) / 100.0 * cap).max(0.0))
+        });
+        match (from_pct, p.energy_used_j.filter(|e| e.is_finite())) {
+            (Some(a), Some(b)) if b > a => (Some(b), EnergySource::EnergyConsumed),
+            (Some(a), _) => (Some(a), EnergySource::BatteryRemaining),
+            (None, Some(b)) => (Some(b), EnergySource::EnergyConsumed),
+            (None, None) => (None, EnergySource::Estimate),
+        }
     }
 
     /// PANORAMA P3, one cycle: margins and drift for the RAS in force; a new RAS for the reduced
@@ -326,7 +339,8 @@ impl Guarantee {
     /// (no negative margin, no failed resource in the plan) allocates nothing once the record
     /// and the internal buffers have their shape; a re-allocation builds its strings as before.
     pub fn watch_into(&mut self, progress: Progress, rec: &mut GuaranteeRecord) {
-        let energy = self.energy_used(&progress);
+        let (energy, energy_source) = self.energy_used(&progress);
+        rec.energy_source = energy_source;
         let p = &self.spec.problem;
         let n = p.activities.len();
         let at = progress.activity_index.min(n.saturating_sub(1));

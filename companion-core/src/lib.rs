@@ -19,6 +19,7 @@
 //! - `resources`: Table 2 (variants), the platform, and resource arbitration onto FPGA tiles and CPU.
 //! - `guarantee`: PANORAMA's activities, IAs, pre-flight allocation, margins and re-allocation.
 //! - `decision`: the [`decision::Model`] and the per-cycle [`decision::Core`].
+//! - `launch`: the launch verdict, whether the models agree to a start ([`launch::verdict`]).
 //! - `probabilities`: the named probabilities, their publishers and consumers (checked at load).
 //! - `record`: the decision record written for every cycle.
 //! - `tracking`: tracking time, shared by the world, the review and the tables.
@@ -29,6 +30,7 @@ pub mod evidence;
 pub mod fmea;
 pub mod guarantee;
 pub mod health;
+pub mod launch;
 pub mod mission;
 pub mod mission_mdp;
 pub mod observations;

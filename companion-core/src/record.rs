@@ -130,6 +130,32 @@ pub struct GuaranteeRecord {
     /// why (PANORAMA's alternative is its cost estimate; the BFM chooses what runs).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub plan_differs: Vec<String>,
+    /// Where the energy counted as used came from; omitted when it is the autopilot's remaining
+    /// battery percentage (`battery_remaining`), else `energy_consumed` or `estimate`.
+    #[serde(default, skip_serializing_if = "EnergySource::is_battery_remaining")]
+    pub energy_source: EnergySource,
+}
+
+/// Where the energy counted as used against the energy goal came from.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EnergySource {
+    /// The autopilot's remaining battery percentage (of the full pack) with the mission's
+    /// `[battery]` capacity: the energy actually left. The usual case, so the record omits it.
+    #[default]
+    BatteryRemaining,
+    /// The energy the autopilot reports consumed since its boot (BATTERY_STATUS), larger than
+    /// what the percentage says (or no percentage reported).
+    EnergyConsumed,
+    /// No battery telemetry: the plan's estimate of the activities flown so far.
+    Estimate,
+}
+
+impl EnergySource {
+    /// True for the default ([`EnergySource::BatteryRemaining`]), which the record omits.
+    pub fn is_battery_remaining(&self) -> bool {
+        *self == EnergySource::BatteryRemaining
+    }
 }
 
 /// How PANORAMA re-allocated the remaining activities on one cycle.
@@ -176,6 +202,11 @@ pub struct DecisionRecord {
     pub observations: BTreeMap<String, f64>,
     /// BN evidence: node -> state.
     pub evidence: BTreeMap<String, String>,
+    /// The evidence nodes of params/observations.toml that received no evidence this cycle (in
+    /// file order): their observation was absent from the snapshot (a sensor never heard, an
+    /// estimator not estimating: WIND all zero) or not finite. Their BN nodes keep their priors.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub absent_evidence: Vec<String>,
     /// Named probabilities published by the health managers.
     pub probabilities: BTreeMap<String, f64>,
     /// One proposal per MDP solve (re-solves included).
@@ -261,11 +292,11 @@ reuse_clone!(ResourcesRecord {
 } maps {});
 reuse_clone!(GuaranteeRecord {
     activity, activity_name, reallocation, infeasible, infeasible_reason, failed_resources,
-    plan_differs
+    plan_differs, energy_source
 } maps { margins, goals, drift });
 reuse_clone!(DecisionRecord {
     cycle, time_s, state, events, proposals, conflicts, actions, resources, guarantee, commands,
-    link_events, utc_us, shell_actions
+    link_events, utc_us, shell_actions, absent_evidence
 } maps { observations, evidence, probabilities, vehicle });
 reuse_clone!(Plan { vehicle_actions, applications } maps {});
 

@@ -179,7 +179,7 @@ mod tests {
         });
         let e = crate::decision::Model::load(&files).err().unwrap();
         assert!(e.file.ends_with("actions.toml"), "{e}");
-        assert_eq!(e.entry, "action[17](hover)", "{e}");
+        assert_eq!(e.entry, "action[18](hover)", "{e}");
         assert!(e.reason.contains("no MDP proposes it"), "{e}");
     }
 }

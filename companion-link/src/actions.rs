@@ -71,6 +71,10 @@ struct RawAction {
     /// action already begun); no MDP proposes it.
     #[serde(default)]
     flown_for: Option<String>,
+    /// The action commands nothing on the vehicle (`stay_on_ground`): its `steps` must be
+    /// empty. Said explicitly so that a forgotten step list is still refused.
+    #[serde(default)]
+    nothing: bool,
 }
 
 /// Vehicle action name -> steps.
@@ -105,11 +109,18 @@ impl ActionTable {
             if let Some(f) = a.flown_for {
                 flown_for.insert(name.clone(), f);
             }
-            if a.steps.is_empty() {
+            if a.nothing && !a.steps.is_empty() {
                 return Err(SpecError::new(
                     path,
                     format!("{name}.steps"),
-                    "an action needs at least one step",
+                    "`nothing = true` commands nothing: its steps must be empty",
+                ));
+            }
+            if a.steps.is_empty() && !a.nothing {
+                return Err(SpecError::new(
+                    path,
+                    format!("{name}.steps"),
+                    "an action needs at least one step (or `nothing = true`)",
                 ));
             }
             let mut steps = Vec::new();
@@ -701,6 +712,8 @@ mod tests {
             }
         ));
         assert_eq!(t.actions["return_to_base"], vec![Step::Mode("RTL".into())]);
+        // Staying on the ground commands nothing (an addition to the paper's actions).
+        assert_eq!(t.actions["stay_on_ground"], Vec::<Step>::new());
         let r = crate::test_support::disk(Route::load)(&dir.join("missions/tracking_route.toml"))
             .unwrap();
         assert!(r.waypoints.len() >= 3);
@@ -742,6 +755,11 @@ mod tests {
                 "[x]\nsteps = [{ mode = \"RTL\", params = [1] }]\n",
                 "x.steps[0]",
                 "only go with command",
+            ),
+            (
+                "[x]\nnothing = true\nsteps = [{ mode = \"RTL\" }]\n",
+                "x.steps",
+                "must be empty",
             ),
         ];
         for (text, entry, why) in cases {

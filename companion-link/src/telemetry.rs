@@ -256,6 +256,8 @@ pub struct Telemetry {
     onboard_names: usize,
     /// Telemetry refused as implausible, counted.
     pub rejected: Rejected,
+    /// A non-zero wind reading was heard: the autopilot estimates the wind.
+    wind_estimating: bool,
 }
 
 impl Telemetry {
@@ -270,6 +272,28 @@ impl Telemetry {
     /// The observation named `name` (units in docs/params/health.md), if heard.
     pub fn get(&self, name: &str) -> Option<f64> {
         self.values.get(name).copied()
+    }
+
+    /// Whether the autopilot has shown a wind estimate (a non-zero WIND or WIND_COV reading)
+    /// since the link started; until then an all-zero reading gives no `wind_mps`.
+    pub fn wind_estimating(&self) -> bool {
+        self.wind_estimating
+    }
+
+    /// One wind reading: `raw` are the message's speed fields (all exactly zero while the
+    /// autopilot does not estimate the wind), `speed` m/s and `dir_deg` the direction it blows
+    /// from.
+    fn on_wind(&mut self, raw: [f32; 3], speed: f64, dir_deg: f64) {
+        if !(speed.is_finite() && dir_deg.is_finite()) {
+            return;
+        }
+        if raw.iter().any(|v| *v != 0.0) {
+            self.wind_estimating = true;
+        }
+        if self.wind_estimating {
+            self.set("wind_mps", speed);
+            self.set("wind_dir_deg", dir_deg);
+        }
     }
 
     /// Update from one message. Returns significant events (`obstacle detected`, ...).
@@ -368,8 +392,22 @@ impl Telemetry {
                 );
             }
             Msg::WIND(w) => {
-                self.set("wind_mps", w.speed as f64);
-                self.set("wind_dir_deg", w.direction as f64);
+                // ArduPilot sends WIND with zero speeds while its EKF has no wind states (no
+                // airspeed sensor, no drag fusion): that is no estimate, not calm air. The
+                // direction is then atan2 of zeros (ArduCopter SITL: -180), so only the speeds
+                // count. A non-zero speed shows the estimator runs; from then on zero is calm.
+                self.on_wind(
+                    [w.speed, w.speed_z, 0.0],
+                    w.speed as f64,
+                    w.direction as f64,
+                );
+            }
+            Msg::WIND_COV(w) => {
+                // PX4's wind estimate (north wind_x, east wind_y, m/s; NaN when unknown): the
+                // speed, and the direction the wind blows from, as WIND gives it.
+                let (x, y) = (w.wind_x as f64, w.wind_y as f64);
+                let from_deg = (-y).atan2(-x).to_degrees().rem_euclid(360.0);
+                self.on_wind([w.wind_x, w.wind_y, w.wind_z], x.hypot(y), from_deg);
             }
             Msg::EXTENDED_SYS_STATE(e) => {
                 let s = format!("{:?}", e.landed_state)
@@ -658,7 +696,11 @@ mod tests {
                 ..GPS_RAW_INT_DATA::DEFAULT
             }),
             Msg::VIBRATION(VIBRATION_DATA::DEFAULT),
-            Msg::WIND(WIND_DATA::DEFAULT),
+            // A wind estimate (an all-zero WIND is no estimate and produces nothing).
+            Msg::WIND(WIND_DATA {
+                speed: 1.0,
+                ..WIND_DATA::DEFAULT
+            }),
             Msg::MISSION_CURRENT(MISSION_CURRENT_DATA::DEFAULT),
             Msg::CAMERA_TRACKING_IMAGE_STATUS(CAMERA_TRACKING_IMAGE_STATUS_DATA {
                 tracking_status: CameraTrackingStatusFlags::CAMERA_TRACKING_STATUS_FLAGS_ACTIVE,
@@ -849,6 +891,75 @@ mod tests {
         assert_eq!(
             t.on_message(s(2.0), &hb(3, true), name),
             vec![Event::Armed, Event::Mode("M3".into())]
+        );
+    }
+
+    fn wind(speed: f32, direction: f32) -> Msg {
+        Msg::WIND(WIND_DATA {
+            direction,
+            speed,
+            speed_z: 0.0,
+        })
+    }
+
+    /// ArduCopter without wind states sends WIND all zero: no wind observation (absent, not
+    /// calm) until a non-zero reading shows the estimator runs; after that, zero is calm.
+    #[test]
+    fn all_zero_wind_is_no_estimate_until_the_autopilot_estimates() {
+        let mut t = Telemetry::new(TelemetryConfig::default());
+        for k in 0..50 {
+            t.on_message(s(k as f64 * 0.2), &wind(0.0, 0.0), name);
+        }
+        let o = t.observations(s(10.0), vec![]);
+        assert_eq!(o.get("wind_mps"), None);
+        assert_eq!(o.get("wind_dir_deg"), None);
+        assert!(!t.wind_estimating());
+        t.on_message(s(10.2), &wind(0.4, 185.0), name);
+        assert!(t.wind_estimating());
+        assert_eq!(
+            t.observations(s(10.2), vec![]).get("wind_mps"),
+            Some(0.4f32 as f64)
+        );
+        t.on_message(s(10.4), &wind(0.0, 0.0), name);
+        assert_eq!(t.observations(s(10.4), vec![]).get("wind_mps"), Some(0.0));
+        // ArduCopter SITL without wind states: speed 0, direction -180 (atan2 of zeros) in
+        // every message. The direction of a zero vector is no sign of estimation.
+        let mut t = Telemetry::new(TelemetryConfig::default());
+        for k in 0..10 {
+            t.on_message(s(k as f64), &wind(0.0, -180.0), name);
+        }
+        assert_eq!(t.observations(s(10.0), vec![]).get("wind_mps"), None);
+        assert!(!t.wind_estimating());
+    }
+
+    /// PX4's WIND_COV: speed from the north/east components, direction the wind blows from;
+    /// NaN (no estimate) and all-zero before any estimate give no observation.
+    #[test]
+    fn wind_cov_gives_speed_and_direction() {
+        let cov = |x: f32, y: f32| {
+            Msg::WIND_COV(WIND_COV_DATA {
+                wind_x: x,
+                wind_y: y,
+                ..WIND_COV_DATA::DEFAULT
+            })
+        };
+        let mut t = Telemetry::new(TelemetryConfig::default());
+        t.on_message(s(0.0), &cov(f32::NAN, f32::NAN), name);
+        t.on_message(s(0.1), &cov(0.0, 0.0), name);
+        assert_eq!(t.observations(s(0.1), vec![]).get("wind_mps"), None);
+        // Air moving 3 m/s north and 4 m/s east: 5 m/s from the south-west (233.13 deg).
+        t.on_message(s(0.2), &cov(3.0, 4.0), name);
+        let o = t.observations(s(0.2), vec![]);
+        assert!((o.get("wind_mps").unwrap() - 5.0).abs() < 1e-9);
+        assert!((o.get("wind_dir_deg").unwrap() - 233.130_102).abs() < 1e-4);
+        // Wind from the north (air moving south): 0 deg.
+        t.on_message(s(0.3), &cov(-2.0, 0.0), name);
+        assert!(
+            t.observations(s(0.3), vec![])
+                .get("wind_dir_deg")
+                .unwrap()
+                .abs()
+                < 1e-9
         );
     }
 

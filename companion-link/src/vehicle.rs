@@ -637,16 +637,20 @@ impl Vehicle {
             return Vec::new();
         }
         let mut steps = VecDeque::new();
+        let mut unmapped = false;
         for a in actions {
             match self.actions.actions.get(a) {
                 Some(s) => steps.extend(s.iter().cloned().map(|st| (a.clone(), st))),
-                None => self.records.push(CommandRecord {
-                    action: a.clone(),
-                    command: "-".into(),
-                    result: CommandOutcome::Unmapped,
-                    attempts: 0,
-                    latency_ms: None,
-                }),
+                None => {
+                    unmapped = true;
+                    self.records.push(CommandRecord {
+                        action: a.clone(),
+                        command: "-".into(),
+                        result: CommandOutcome::Unmapped,
+                        attempts: 0,
+                        latency_ms: None,
+                    })
+                }
             }
         }
         if let Some(old) = self.job.take() {
@@ -661,6 +665,11 @@ impl Vehicle {
             }
         }
         if steps.is_empty() {
+            if !unmapped {
+                // An action that commands nothing (stay_on_ground) is done at once: the job it
+                // superseded starts afresh when asked for again.
+                self.last = Some((key, JobStatus::Done));
+            }
             return Vec::new();
         }
         self.job = Some(Job {
@@ -1662,6 +1671,55 @@ mod tests {
         );
         let out = v.on_frame(s(7.5), &hb(4, false));
         assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_COMPONENT_ARM_DISARM]);
+    }
+
+    /// An action that commands nothing (stay_on_ground) supersedes a take-off being flown, and a
+    /// take-off asked for again afterwards starts afresh (it used to stay "running" and never
+    /// resumed: seen on ArduCopter SITL).
+    #[test]
+    fn take_off_after_staying_on_the_ground_starts_again() {
+        let mut t = table();
+        t.actions.insert("stay_on_ground".into(), Vec::new());
+        let mut v = Vehicle::new(
+            VehicleConfig {
+                streams: vec![(168, 1.0)],
+                ..VehicleConfig::default()
+            },
+            t,
+            None,
+        );
+        connected(&mut v, 0);
+        for f in ready_frames() {
+            v.on_frame(s(0.1), &f);
+        }
+        let out = v.request_actions(s(0.2), &["take_off".into()]);
+        assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+        v.on_frame(
+            s(0.25),
+            &ack(MavCmd::MAV_CMD_DO_SET_MODE, MavResult::MAV_RESULT_ACCEPTED),
+        );
+        let out = v.request_actions(s(0.3), &["stay_on_ground".into()]);
+        assert!(out.is_empty(), "staying commands nothing");
+        assert!(
+            v.take_records()
+                .iter()
+                .any(|r| r.action == "take_off" && r.result == CommandOutcome::Superseded)
+        );
+        // GUIDED reported: no arming while staying.
+        let out = v.on_frame(s(0.5), &hb(4, false));
+        assert!(
+            commands(&out).is_empty(),
+            "armed while staying on the ground"
+        );
+        let mut out = v.request_actions(s(1.3), &["take_off".into()]);
+        out.extend(v.on_frame(s(1.4), &hb(4, false)));
+        out.extend(v.tick(s(1.5)));
+        let sent = commands(&out);
+        assert!(
+            sent.contains(&MavCmd::MAV_CMD_DO_SET_MODE)
+                || sent.contains(&MavCmd::MAV_CMD_COMPONENT_ARM_DISARM),
+            "take-off again: {sent:?}"
+        );
     }
 
     #[test]

@@ -339,6 +339,7 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
         events,
         observations,
         evidence: BTreeMap::from([("vibration".to_string(), "high".to_string())]),
+        absent_evidence: Vec::new(),
         probabilities,
         proposals,
         conflicts,

@@ -48,6 +48,7 @@ pub const SECTIONS: &[(&str, SectionFn)] = &[
     ("mdps", mdp_section),
     ("probabilities", probabilities_section),
     ("observations", observations_section),
+    ("absent_evidence", absent_evidence_section),
     ("actions", actions_section),
     ("platform", platform_section),
     ("variants", variants_section),
@@ -169,6 +170,72 @@ pub fn observations_section(cx: &CheckContext) -> anyhow::Result<(Value, String)
         );
     }
     Ok((serde_json::to_value(&all)?, text))
+}
+
+/// Absent is not zero: for every BN evidence node, what feeds it in `fly` and in `simulate`, and
+/// so when the node gets no evidence (the record's `absent_evidence`): a sensor never heard, an
+/// onboard monitor that does not run, the autopilot not estimating the wind.
+pub fn absent_evidence_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
+    use std::fmt::Write;
+    let all = crate::vocabulary::named_observations(cx.loaded)?;
+    let mut rows = Vec::new();
+    let mut text = String::from("\nEvidence absent when not fed (the record's absent_evidence):\n");
+    for o in &all {
+        let Some(node) = &o.node else { continue };
+        let kinds = |ks: &[&str]| -> Vec<String> {
+            o.producers
+                .iter()
+                .filter(|r| ks.contains(&r.kind))
+                .map(|r| match r.kind {
+                    "fly_telemetry" => "the autopilot's telemetry".to_string(),
+                    "fly_onboard" => format!("onboard NAMED_VALUE_FLOAT `{}`", r.name),
+                    "fly" => "the fly shell (derived)".to_string(),
+                    k => format!("{k} {}", r.name),
+                })
+                .collect()
+        };
+        let computed = o.producers.iter().any(|r| r.kind == "core");
+        let fly = if computed {
+            "never absent: the decision core computes it".to_string()
+        } else {
+            let from = kinds(&["fly_telemetry", "fly_onboard", "fly"]);
+            let mut t = if from.is_empty() {
+                "absent on every cycle: nothing feeds it in fly".to_string()
+            } else {
+                format!("absent until heard from {}", from.join(" or "))
+            };
+            if o.name == "wind_mps" {
+                t.push_str(
+                    ", and while WIND / WIND_COV read all zero (the autopilot not estimating the wind; docs/mavlink.md)",
+                );
+            }
+            t
+        };
+        let simulate = if computed {
+            "never absent".to_string()
+        } else if o.producers.iter().any(|r| r.kind == "world") {
+            "fed by the simulated world".to_string()
+        } else {
+            let from = kinds(&["scenario"]);
+            if from.is_empty() {
+                "absent on every cycle".to_string()
+            } else {
+                format!("absent except in {}", from.join(", "))
+            }
+        };
+        let _ = writeln!(
+            text,
+            "  {node:<22} {:<20} fly: {fly}; simulate: {simulate}",
+            o.name
+        );
+        rows.push(serde_json::json!({
+            "node": node,
+            "observation": o.name,
+            "fly": fly,
+            "simulate": simulate,
+        }));
+    }
+    Ok((Value::from(rows), text))
 }
 
 /// Every primitive action with the MDPs that propose it, its application variant and whether fly

@@ -123,26 +123,100 @@ fn energy_drift_reallocation_restores_margin() {
     println!("{}", render_ras_table(&s, g.ras_rows()));
 }
 
-/// Energy from the battery percentage when the consumed energy is not reported.
+/// Energy from the battery percentage: the energy the reported percentage represents, from the
+/// first reading on (a pack that is not full at the first reading is not counted as full).
 #[test]
 fn battery_percentage_is_converted() {
     let s = spec();
     let mut g = Guarantee::start(s.clone()).unwrap();
-    let mk = |pct: f64| Progress {
+    let mk = |pct: f64, consumed: Option<f64>| Progress {
         activity_index: 1,
         activity_fraction: 0.0,
-        energy_used_j: None,
+        energy_used_j: consumed,
         battery_remaining_pct: Some(pct),
         elapsed_s: 12.0,
         failed_resources: &[],
     };
-    g.watch(mk(98.0)); // first reading is the reference
-    let r = g.watch(mk(95.0));
+    let cap = 74.0 * 3600.0;
     let est0: f64 = s.problem.activities[0].ias[g.choice()[0]].cost[0];
-    // 3 % of 74 Wh = 7992 J used, plan said est0.
+    // 95 % left of 74 Wh: 5 % of it counted as used, already at the first reading.
+    let r = g.watch(mk(95.0, None));
     assert!(
-        (r.drift["energy_j"] - (0.03 * 74.0 * 3600.0 - est0)).abs() < 1e-6,
+        (r.drift["energy_j"] - (0.05 * cap - est0)).abs() < 1e-6,
         "{r:?}"
+    );
+    assert_eq!(
+        r.energy_source,
+        companion_core::record::EnergySource::BatteryRemaining
+    );
+    // The autopilot's consumed energy counts when it says more was used (conservative).
+    let r = g.watch(mk(95.0, Some(0.08 * cap)));
+    assert!(
+        (r.drift["energy_j"] - (0.08 * cap - est0)).abs() < 1e-6,
+        "{r:?}"
+    );
+    assert_eq!(
+        r.energy_source,
+        companion_core::record::EnergySource::EnergyConsumed
+    );
+    let r = g.watch(mk(95.0, Some(0.01 * cap)));
+    assert_eq!(
+        r.energy_source,
+        companion_core::record::EnergySource::BatteryRemaining
+    );
+}
+
+/// A vehicle whose first reading is 12 % has 12 % of the pack: what the mission may still spend
+/// is 12 % of 74 Wh less the never-drawn 15 % and the reserve, which is below zero, so the
+/// energy margin is negative and no allocation meets the goal. At 100 % the margin is the
+/// pre-flight one.
+#[test]
+fn first_reading_of_12_percent_is_12_percent() {
+    let s = spec();
+    let bound = s
+        .problem
+        .goals
+        .iter()
+        .find(|g| g.name == ENERGY)
+        .unwrap()
+        .bound;
+    let remainder: f64 = (0..s.problem.activities.len())
+        .map(|j| {
+            let g = Guarantee::start(s.clone()).unwrap();
+            s.problem.activities[j].ias[g.choice()[j]].cost[0]
+        })
+        .sum();
+    let at = |pct: f64| {
+        let mut g = Guarantee::start(s.clone()).unwrap();
+        g.watch(Progress {
+            activity_index: 0,
+            activity_fraction: 0.0,
+            energy_used_j: None,
+            battery_remaining_pct: Some(pct),
+            elapsed_s: 0.0,
+            failed_resources: &[],
+        })
+    };
+    let full = at(100.0);
+    assert!(
+        (full.margins["energy_j"] - (bound - remainder)).abs() < 1e-6,
+        "{full:?}"
+    );
+    assert!(!full.infeasible);
+    let low = at(12.0);
+    // Left to spend: 0.12 x 74 Wh - (1 - 0.85) x 74 Wh - 7.4 Wh = -9.62 Wh: nothing at all.
+    let left_j = (0.12 * 74.0 - 0.15 * 74.0 - 7.4) * 3600.0;
+    assert!(low.infeasible, "{low:?}");
+    assert!(
+        low.infeasible_reason
+            .as_deref()
+            .unwrap()
+            .contains("energy_j"),
+        "{low:?}"
+    );
+    assert!(
+        (low.margins["energy_j"] - (left_j - remainder)).abs() < 1e-6,
+        "{low:?}"
     );
 }
 

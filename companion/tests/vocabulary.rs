@@ -165,7 +165,7 @@ fn an_action_no_mdp_proposes_is_refused() {
                 "{t}\n[[action]]\nid = \"hover\"\npaper = \"-\"\nkind = \"vehicle\"\nlabel = \"hover\"\n"
             )
         },
-        "action[17](hover)",
+        "action[18](hover)",
         "no MDP proposes it",
     );
 }
@@ -303,4 +303,44 @@ fn the_world_computes_what_it_declares() {
     extra.sort();
     computes.sort();
     assert_eq!(extra, computes);
+}
+
+/// `check --json`'s `absent_evidence`: each evidence node with when it goes without evidence;
+/// the wind node says an all-zero WIND is no estimate, a node nothing feeds in fly says so, and
+/// a node the core computes is never absent.
+#[test]
+fn json_says_which_evidence_is_absent_when_not_fed() {
+    let v = check_json();
+    let rows = v["absent_evidence"].as_array().unwrap();
+    let row = |node: &str| {
+        rows.iter()
+            .find(|r| r["node"] == node)
+            .unwrap_or_else(|| panic!("{node} not listed"))
+    };
+    let wind = row("A_wind");
+    assert_eq!(wind["observation"], "wind_mps");
+    assert!(wind["fly"].as_str().unwrap().contains("all zero"), "{wind}");
+    assert!(
+        row("A_temperature")["fly"]
+            .as_str()
+            .unwrap()
+            .contains("nothing feeds it in fly")
+    );
+    assert!(
+        row("A_free_tiles")["fly"]
+            .as_str()
+            .unwrap()
+            .starts_with("never absent")
+    );
+    assert!(
+        row("S_lidar_failed")["simulate"]
+            .as_str()
+            .unwrap()
+            .contains("lidar-failure")
+    );
+    let params = Params::load(&default_params_dir(), None).unwrap();
+    assert_eq!(
+        rows.len(),
+        params.model.health.observations.observations.len()
+    );
 }

@@ -81,8 +81,9 @@ fn sizes_match_table_9() {
         let m = all.get(n).unwrap();
         (m.n_states(), m.n_actions())
     };
-    assert_eq!(size("monolithic"), (20, 21)); // section 5, Table 9
-    assert_eq!(size("navigation"), (9, 7));
+    // Table 9, plus A0 (stay on the ground), an addition (docs/params/mdp.md).
+    assert_eq!(size("monolithic"), (20, 22)); // section 5, Table 9
+    assert_eq!(size("navigation"), (9, 8));
     assert_eq!(size("tracking"), (12, 10));
     // Table 9 says 9 states; the prose names 10 (documented deviation), 6 actions as in Table 9.
     assert_eq!(size("landing"), (10, 6));
@@ -346,6 +347,145 @@ fn low_battery_sends_safety_home_first() {
             ["return_to_base"],
             "{pol}"
         );
+    }
+}
+
+/// The models' honest way to stay on the ground (A0, an addition to the paper): a healthy vehicle
+/// takes off, a battery belief near 0 (the guarantee's cap is 0.05) or a failing system stays.
+#[test]
+fn base_stays_on_the_ground_when_battery_or_system_is_failing() {
+    let mut all = load_all();
+    for pol in ["safety", "mission"] {
+        for n in ["navigation", "monolithic"] {
+            let mut p = paper_point();
+            // A healthy start as the simulated world sees it at base.
+            p.insert("P_battery".into(), 0.99);
+            p.insert("P_sys".into(), 0.98);
+            assert_eq!(
+                decide(&mut all, n, "base", &p, pol),
+                "A1",
+                "{n} {pol} healthy"
+            );
+            for pb in [0.0, 0.05, 0.2] {
+                p.insert("P_battery".into(), pb);
+                assert_eq!(
+                    decide(&mut all, n, "base", &p, pol),
+                    "A0",
+                    "{n} {pol} P_battery {pb}"
+                );
+            }
+            p.insert("P_battery".into(), 0.99);
+            for ps in [0.0, 0.05] {
+                p.insert("P_sys".into(), ps);
+                assert_eq!(
+                    decide(&mut all, n, "base", &p, pol),
+                    "A0",
+                    "{n} {pol} P_sys {ps}"
+                );
+            }
+        }
+        assert_eq!(
+            primitives_of(&all, "navigation", "A0"),
+            ["stay_on_ground"],
+            "{pol}"
+        );
+    }
+}
+
+/// Expected total reward over `horizon` steps from every state of the stationary policy `pi`
+/// (one action index per state; terminal states ignored), by plain backward summation.
+fn evaluate_stationary(mdp: &mdp_engine::Mdp, pi: &[Option<u32>], horizon: usize) -> Vec<f64> {
+    let n = mdp.n_states();
+    let mut v = vec![0.0; n];
+    for _ in 0..horizon {
+        let mut next = vec![0.0; n];
+        for s in 0..n {
+            let Some(a) = pi[s] else { continue };
+            let c = mdp
+                .choices(s as _)
+                .find(|c| c.action as u32 == a)
+                .expect("policy action available");
+            next[s] = c.reward
+                + c.next
+                    .iter()
+                    .zip(c.prob)
+                    .map(|(t, p)| p * v[*t as usize])
+                    .sum::<f64>();
+        }
+        v = next;
+    }
+    v
+}
+
+/// Independent answer for the base decision: exhaustive search over every stationary
+/// deterministic policy of the navigation MDP (972 of them), each evaluated over the 100-step
+/// horizon by direct summation. At a low battery the best policy stays on the ground, at a high
+/// one it takes off, and the engine's finite-horizon decision agrees; its stage-0 value is at
+/// least the best stationary one (a time-dependent policy can only do better: near the end of
+/// the horizon a short hop home pays more than staying).
+#[test]
+fn base_decision_matches_exhaustive_policy_search() {
+    let mut all = load_all();
+    for pol in ["safety", "mission"] {
+        for (pb, want) in [(0.02, "A0"), (0.3, "A0"), (0.95, "A1")] {
+            let mut p = paper_point();
+            p.insert("P_battery".into(), pb);
+            p.insert("P_sys".into(), 0.98);
+            let m = all.get_mut("navigation").unwrap();
+            let base = m.state_index("base").unwrap();
+            let mdp = m.instantiate(&p, pol).unwrap().clone();
+            let options: Vec<Vec<u32>> = (0..mdp.n_states())
+                .map(|s| mdp.choices(s as _).map(|c| c.action as u32).collect())
+                .collect();
+            let mut pi: Vec<Option<u32>> = options.iter().map(|o| o.first().copied()).collect();
+            let mut idx = vec![0usize; options.len()];
+            let (mut best, mut best_first, mut count) = (f64::NEG_INFINITY, 0u32, 0);
+            loop {
+                count += 1;
+                let v = evaluate_stationary(&mdp, &pi, 100)[base];
+                if v > best {
+                    best = v;
+                    best_first = pi[base].unwrap();
+                }
+                // Next policy: odometer over every state's available actions.
+                let mut s = 0;
+                loop {
+                    if s == options.len() {
+                        break;
+                    }
+                    if options[s].is_empty() {
+                        s += 1;
+                        continue;
+                    }
+                    idx[s] += 1;
+                    if idx[s] < options[s].len() {
+                        pi[s] = Some(options[s][idx[s]]);
+                        break;
+                    }
+                    idx[s] = 0;
+                    pi[s] = Some(options[s][0]);
+                    s += 1;
+                }
+                if s == options.len() {
+                    break;
+                }
+            }
+            assert_eq!(count, 972, "every stationary policy searched");
+            assert_eq!(
+                m.action_name(best_first as usize),
+                want,
+                "{pol} P_battery {pb}"
+            );
+            let mut ws = Workspace::new();
+            let fh = ws.finite_horizon(&mdp, 100);
+            assert_eq!(
+                m.action_name(fh.decision(base as _).unwrap() as usize),
+                want,
+                "{pol} P_battery {pb}: engine"
+            );
+            let engine = fh.value(0, base as _);
+            assert!(engine >= best - 1e-9, "{pol} {pb}: {engine} < {best}");
+        }
     }
 }
 
@@ -700,6 +840,12 @@ fn section_6_2_conflicts_by_policy() {
         let (kept, why) = c.resolve(&quiet, pol).unwrap();
         assert_eq!(kept, quiet);
         assert!(why.is_empty());
+    }
+    // Staying on the ground (an addition) beats another MDP's take-off under every policy.
+    for pol in ["safety", "mission"] {
+        let (kept, why) = c.resolve(&["stay_on_ground", "take_off"], pol).unwrap();
+        assert_eq!(kept, ["stay_on_ground"], "{pol}");
+        assert_eq!(why[0].rule, "ground_vs_take_off");
     }
     assert!(c.resolve(&["land"], "reckless").is_err());
 }
