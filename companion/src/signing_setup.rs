@@ -222,7 +222,7 @@ impl Provisioner {
             Phase::WaitAutopilot => {
                 if self.vehicle.readiness.armed {
                     self.phase = Phase::Done(Err(format!(
-                        "autopilot {}/{} is armed: a key is set up on the ground, disarmed (ArduPilot ignores SETUP_SIGNING while armed)",
+                        "autopilot {}/{} is armed: a key is set up on the ground, disarmed, not in flight",
                         target.0, target.1
                     )));
                     return Vec::new();
