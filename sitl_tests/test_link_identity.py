@@ -23,15 +23,14 @@ def impostor_heartbeat() -> Any:
                                              mavlink.MAV_STATE_STANDBY, 3)
 
 
-def impostor_first(rl: Any, seconds: float) -> None:
-    """Hold the real autopilot back for `seconds` while an impostor 1/2 sends autopilot heartbeats."""
+def impostor_first(rl: Any) -> None:
+    """While the relay holds the real autopilot back (a blackout set before the companion connected), an
+    impostor 1/2 sends autopilot heartbeats: it is heard first."""
     deadline = time.monotonic() + 10
     while rl._pair is None and time.monotonic() < deadline:
         time.sleep(0.02)
     assert rl._pair is not None, "the companion never connected to the relay"
-    rl.blackout(seconds)
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
+    while rl.in_blackout():
         rl.inject_unsigned(impostor_heartbeat(), srcsys=1, srccomp=2)
         time.sleep(0.25)
 
@@ -51,8 +50,9 @@ def test_the_pin_is_system_and_component_an_impostor_1_2_heard_first_is_never_ob
     sa = ap.standin
     rl = relay(int(ap.url.rsplit(":", 1)[1]))
     via = type(ap)(url=rl.url, monitor_url=ap.monitor_url)
+    rl.blackout(6.0)
     run = fly(via, extra=("--autopilot-sysid", "1", "--duration", "60s"))
-    impostor_first(rl, 4.0)
+    impostor_first(rl)
     armed = wait_for(lambda: bool(sa.rec.of("arm")) or run.proc.poll() is not None, 50)
     assert armed and sa.rec.of("arm"), "the real autopilot 1/1 was never armed\n" + run.output()
     with rl._lock:
@@ -86,4 +86,6 @@ def test_require_signing_without_a_key_refuses_to_start(autopilot_factory, fly):
     run = fly(ap, extra=("--require-signing",))
     rc = run.wait_exit(30)
     assert rc not in (None, 0), run.output()
-    assert "--require-signing" in run.stderr_path.read_text() and not ap.standin.rec.of("arm")
+    err = run.stderr_path.read_text()
+    assert "--require-signing: no --signing-key given" in err, err[-2000:]
+    assert not ap.standin.rec.of("arm")
