@@ -42,7 +42,17 @@ pub struct LinkSecurity {
     unpinned_printed: bool,
     refused_said: bool,
     refused_printed: bool,
+    /// When this run first had something to say to the ground station, and when it last said
+    /// something: its texts wait out the burst at link-up and go one at a time, so they do not
+    /// use up the STATUSTEXT rate limit that the mission's own texts need.
+    first_due: Option<Duration>,
+    last_said: Option<Duration>,
 }
+
+/// The ground-station texts wait this long after the first one is due ...
+const TEXT_DELAY: Duration = Duration::from_secs(3);
+/// ... and go out at least this far apart.
+const TEXT_GAP: Duration = Duration::from_millis(1500);
 
 impl LinkSecurity {
     /// At the start of `fly`: the unsigned-network-link warning on stderr.
@@ -78,9 +88,19 @@ impl LinkSecurity {
     ) -> Vec<Msg> {
         let mut out = Vec::new();
         let chosen = vehicle.target.is_some() && vehicle.liveness.alive();
+        let first_due = self.first_due;
+        let mut last_said = self.last_said;
+        let mut due = false;
         let mut say = |done: &mut bool, severity, text: &str| {
-            if !*done && let Some(m) = texts.say(now, severity, text) {
+            if *done {
+                return;
+            }
+            due = true;
+            let ready = first_due.is_some_and(|t| now.saturating_sub(t) >= TEXT_DELAY)
+                && last_said.is_none_or(|t| now.saturating_sub(t) >= TEXT_GAP);
+            if ready && let Some(m) = texts.say(now, severity, text) {
                 *done = true;
+                last_said = Some(now);
                 out.push(m);
             }
         };
@@ -126,6 +146,10 @@ impl LinkSecurity {
                 REFUSED_TEXT,
             );
         }
+        self.last_said = last_said;
+        if due && self.first_due.is_none() {
+            self.first_due = Some(now);
+        }
         out
     }
 }
@@ -133,6 +157,69 @@ impl LinkSecurity {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn texts_said(args: &[&str], keyed: bool, frames: &[Vec<u8>]) -> Vec<(f64, String)> {
+        let args = FlyArgs::from_cli(args.iter().copied()).unwrap();
+        let mut sec = LinkSecurity::start(&args, keyed);
+        let mut v = Vehicle::new(Default::default(), Default::default(), None);
+        v.cfg.autopilot_sysid = args.autopilot_sysid;
+        let mut texts = GcsText::new(Duration::from_secs(15), 2);
+        let mut ingest = companion_link::ingest::Ingest::new(None);
+        let mut said = Vec::new();
+        for k in 0..100 {
+            let now = Duration::from_millis(100 * k);
+            for b in frames {
+                for f in ingest.push(b) {
+                    v.on_frame(now, &f);
+                }
+            }
+            for m in sec.check(now, &v, &ingest.stats, &mut texts) {
+                if let Msg::STATUSTEXT(t) = m {
+                    said.push((now.as_secs_f64(), t.text.to_str().unwrap().to_string()));
+                }
+            }
+        }
+        said
+    }
+
+    fn autopilot_heartbeat() -> Vec<u8> {
+        use companion_link::dialect::*;
+        let mut enc = companion_link::ingest::Encoder::new(None);
+        enc.component_id = 1;
+        enc.encode(&Msg::HEARTBEAT(HEARTBEAT_DATA {
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+            ..HEARTBEAT_DATA::DEFAULT
+        }))
+    }
+
+    /// An unsigned, unpinned network link: each text once, after the link-up burst, apart.
+    #[test]
+    fn an_unsigned_unpinned_network_link_is_said_once_each() {
+        let said = texts_said(
+            &["--connect", "tcp:127.0.0.1:5760"],
+            false,
+            &[autopilot_heartbeat()],
+        );
+        let texts: Vec<&str> = said.iter().map(|(_, t)| t.as_str()).collect();
+        assert_eq!(texts, vec![UNSIGNED_TEXT, UNPINNED_TEXT], "{said:?}");
+        assert!(said[0].0 >= TEXT_DELAY.as_secs_f64(), "{said:?}");
+        assert!(said[1].0 - said[0].0 >= TEXT_GAP.as_secs_f64(), "{said:?}");
+    }
+
+    /// Serial, or pinned and signed: nothing to say.
+    #[test]
+    fn a_serial_link_or_a_pinned_signed_one_says_nothing() {
+        let hb = [autopilot_heartbeat()];
+        assert!(texts_said(&["--connect", "serial:/dev/null:57600"], false, &hb).is_empty());
+        let keyed = texts_said(
+            &["--connect", "udpin:0.0.0.0:14550", "--autopilot-sysid", "1"],
+            true,
+            &hb,
+        );
+        // (with a key the ingest here is unkeyed: the heartbeat counts as heard, signed)
+        assert!(keyed.is_empty(), "{keyed:?}");
+    }
 
     #[test]
     fn ground_station_texts_fit_statustext() {
