@@ -219,9 +219,9 @@ impl FlySetup {
         files: &companion_core::spec::ParamsFiles,
         args: &FlyArgs,
     ) -> anyhow::Result<Self> {
+        link_security::check_args(args)?;
         let (link, actions, route, _) =
             crate::params::load_fly_files(files, args.mission.as_deref())?;
-        link_security::check_args(args)?;
         let key = match &args.signing_key {
             Some(p) => {
                 crate::params::regular_file(p)
