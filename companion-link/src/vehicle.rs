@@ -36,8 +36,11 @@ pub struct VehicleConfig {
     pub arm_wait: Duration,
     /// Arm attempts, each only after a fresh ready report.
     pub max_arm_attempts: u32,
-    /// Only an autopilot with this system id is chosen (`fly --autopilot-sysid`).
+    /// Only the autopilot with this system id is chosen (`fly --autopilot-sysid`) ...
     pub autopilot_sysid: Option<u8>,
+    /// ... and this component id (`fly --autopilot-compid`, default 1 = MAV_COMP_ID_AUTOPILOT1);
+    /// read only when `autopilot_sysid` is set.
+    pub autopilot_compid: u8,
     /// Streams are re-requested (connect, reconnect, regain, reboot) no more often than this:
     /// spoofed or flapping triggers cannot multiply the requests.
     pub stream_request_min_interval: Duration,
@@ -54,6 +57,26 @@ pub struct VehicleConfig {
 /// Distinct other autopilots reported by name; more are only counted.
 const MAX_OTHER_AUTOPILOTS: usize = 16;
 
+/// MAV_COMP_ID_AUTOPILOT1: the component an autopilot speaks from (ArduPilot and PX4 alike).
+pub const AUTOPILOT_COMPONENT: u8 = 1;
+
+/// Without a pin, an autopilot HEARTBEAT from a component other than 1 is chosen only after it
+/// has been heard this long with no component-1 autopilot speaking: a real autopilot is
+/// preferred over an impostor on another component of the same system that spoke first.
+pub const OTHER_COMPONENT_WAIT: Duration = Duration::from_secs(2);
+
+/// What an autopilot HEARTBEAT does to the choice of the autopilot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Choice {
+    /// It is the autopilot: choose it now.
+    Take,
+    /// Not component 1 and no pin: chosen only if it is still the only one after
+    /// [`OTHER_COMPONENT_WAIT`].
+    Wait,
+    /// Another autopilot: reported, never obeyed.
+    Other,
+}
+
 impl Default for VehicleConfig {
     fn default() -> Self {
         Self {
@@ -65,6 +88,7 @@ impl Default for VehicleConfig {
             arm_wait: Duration::from_secs(60),
             max_arm_attempts: 3,
             autopilot_sysid: None,
+            autopilot_compid: AUTOPILOT_COMPONENT,
             stream_request_min_interval: Duration::from_secs(5),
             zone_radius_m: 3.0,
             zone_arrive_timeout: Duration::from_secs(60),
@@ -168,6 +192,9 @@ pub struct Vehicle {
     /// minimum interval.
     streams_queued_at: Option<Duration>,
     streams_deferred: bool,
+    /// Without a pin: an autopilot on a component other than 1, and when it was first heard,
+    /// waiting [`OTHER_COMPONENT_WAIT`] for a component-1 autopilot before it is chosen.
+    candidate: Option<((u8, u8), Duration)>,
     /// Other autopilots heard (reported once each, never obeyed).
     other_autopilots: std::collections::BTreeSet<(u8, u8)>,
     /// Refused for trust reasons since start: monitor frames from components not allowed, and
@@ -225,6 +252,7 @@ impl Vehicle {
             retry_failed_after: Duration::from_secs(5),
             streams_queued_at: None,
             streams_deferred: false,
+            candidate: None,
             other_autopilots: Default::default(),
             foreign_monitor_frames: 0,
             other_autopilot_heartbeats: 0,
@@ -319,8 +347,14 @@ impl Vehicle {
         }
         let why = match (self.target, self.cfg.autopilot_sysid) {
             (Some((ts, tc)), _) => format!("autopilot {ts}/{tc} already chosen"),
-            (None, Some(want)) => format!("--autopilot-sysid {want}"),
-            (None, None) => "not chosen".to_string(),
+            (None, Some(want)) => format!(
+                "--autopilot-sysid {want} --autopilot-compid {}",
+                self.cfg.autopilot_compid
+            ),
+            (None, None) => match self.candidate {
+                Some(((cs, cc), _)) => format!("autopilot {cs}/{cc} heard first"),
+                None => "not chosen".to_string(),
+            },
         };
         tracing::warn!(
             sys,
@@ -335,6 +369,57 @@ impl Vehicle {
             },
             false,
         );
+    }
+
+    /// Whether the autopilot HEARTBEAT of `sys`/`comp` (not the chosen one) chooses it: with a
+    /// pin only that system and component; without one, component 1 at once and another
+    /// component only after [`OTHER_COMPONENT_WAIT`] with no component 1 heard.
+    fn choice(&mut self, now: Duration, sys: u8, comp: u8) -> Choice {
+        if self.target.is_some() {
+            return Choice::Other;
+        }
+        if let Some(want) = self.cfg.autopilot_sysid {
+            return if (sys, comp) == (want, self.cfg.autopilot_compid) {
+                Choice::Take
+            } else {
+                Choice::Other
+            };
+        }
+        if comp == AUTOPILOT_COMPONENT {
+            return Choice::Take;
+        }
+        match self.candidate {
+            None => {
+                self.candidate = Some(((sys, comp), now));
+                Choice::Wait
+            }
+            Some((id, since)) if id == (sys, comp) => {
+                if now.saturating_sub(since) >= OTHER_COMPONENT_WAIT {
+                    Choice::Take
+                } else {
+                    Choice::Wait
+                }
+            }
+            Some(_) => Choice::Other,
+        }
+    }
+
+    /// When the autopilot was chosen without a pin (`--autopilot-sysid`): which one, that it was
+    /// the first heard, and how to pin it. `fly` says it on stderr and to the ground station on
+    /// a network link, where anyone who can reach the port can speak first.
+    pub fn identity_note(&self) -> Option<String> {
+        if self.cfg.autopilot_sysid.is_some() {
+            return None;
+        }
+        let (sys, comp) = self.target?;
+        let compid = if comp == AUTOPILOT_COMPONENT {
+            String::new()
+        } else {
+            format!(" --autopilot-compid {comp}")
+        };
+        Some(format!(
+            "autopilot {sys}/{comp} chosen: the first autopilot heard (no pin); pin it with --autopilot-sysid {sys}{compid}"
+        ))
     }
 
     /// Queue every stream request, unless a set was queued less than the minimum interval ago:
@@ -378,8 +463,9 @@ impl Vehicle {
             && Self::is_autopilot_heartbeat(h)
             && self.target != Some((sys, comp))
         {
-            let wanted = self.cfg.autopilot_sysid.is_none_or(|want| want == sys);
-            if self.target.is_none() && wanted {
+            let choice = self.choice(now, sys, comp);
+            if choice == Choice::Take {
+                self.candidate = None;
                 self.target = Some((sys, comp));
                 self.flavor = Flavor::from_autopilot(h.autopilot);
                 self.readiness.flavor = self.flavor;
@@ -395,7 +481,10 @@ impl Vehicle {
                     },
                     false,
                 );
-            } else {
+                if let Some(note) = self.identity_note() {
+                    self.link_event(LinkEvent::from(note.as_str()), false);
+                }
+            } else if choice == Choice::Other {
                 self.other_autopilot(sys, comp);
             }
         }
@@ -2037,6 +2126,100 @@ mod tests {
         assert!(
             v.busy(),
             "an ack from another system is not our autopilot's"
+        );
+    }
+
+    /// Issue 26: `--autopilot-sysid 1` pinned only the system, so an impostor 1/2 heard first
+    /// became the autopilot. The pin is system and component: 1/2 is reported, 1/1 chosen, and
+    /// only 1/1's frames drive the state.
+    #[test]
+    fn the_pin_names_the_component_and_an_impostor_on_another_component_is_refused() {
+        let cfg = VehicleConfig {
+            autopilot_sysid: Some(1),
+            ..VehicleConfig::default()
+        };
+        let mut v = Vehicle::new(cfg, table(), None);
+        for t in 0..3 {
+            v.on_frame(s(t as f64), &from(1, 2, hb(4, true)));
+        }
+        assert_eq!(v.target, None, "1/2 is not the pinned 1/1");
+        v.on_frame(s(3.0), &hb(0, false));
+        assert_eq!(v.target, Some((1, 1)));
+        v.on_frame(s(3.5), &from(1, 2, hb(4, true)));
+        assert!(!v.telemetry.armed, "armed came only from the impostor 1/2");
+        let evs = v.take_link_events();
+        assert!(
+            evs.iter().any(|e| matches!(
+                e,
+                LinkEvent::OtherAutopilot {
+                    system: 1,
+                    component: 2,
+                    ..
+                }
+            )),
+            "{evs:?}"
+        );
+        assert!(
+            !evs.iter()
+                .any(|e| e.to_string().contains("first autopilot heard")),
+            "a pinned choice is not 'the first heard': {evs:?}"
+        );
+        assert_eq!(v.identity_note(), None);
+    }
+
+    /// `--autopilot-compid` moves the pin to another component: then 1/1 is the stranger.
+    #[test]
+    fn autopilot_compid_pins_another_component() {
+        let cfg = VehicleConfig {
+            autopilot_sysid: Some(1),
+            autopilot_compid: 2,
+            ..VehicleConfig::default()
+        };
+        let mut v = Vehicle::new(cfg, table(), None);
+        v.on_frame(s(0.0), &hb(0, false));
+        assert_eq!(v.target, None);
+        v.on_frame(s(0.5), &from(1, 2, hb(0, false)));
+        assert_eq!(v.target, Some((1, 2)));
+    }
+
+    /// Without a pin, the autopilot component (1) is preferred over an impostor on another
+    /// component heard first, and the choice is said with how to pin it.
+    #[test]
+    fn without_a_pin_component_1_is_preferred_and_the_choice_is_named() {
+        let mut v = vehicle();
+        v.on_frame(s(0.0), &from(1, 2, hb(4, true)));
+        v.on_frame(s(1.0), &from(1, 2, hb(4, true)));
+        assert_eq!(v.target, None, "1/2 waits for a component-1 autopilot");
+        v.on_frame(s(1.5), &hb(0, false));
+        assert_eq!(v.target, Some((1, 1)));
+        v.on_frame(s(2.0), &from(1, 2, hb(4, true)));
+        assert!(!v.telemetry.armed);
+        let note = v.identity_note().expect("an unpinned choice is named");
+        assert!(note.contains("autopilot 1/1"), "{note}");
+        assert!(note.contains("first autopilot heard"), "{note}");
+        assert!(note.contains("--autopilot-sysid 1"), "{note}");
+        let evs: Vec<String> = v.take_link_events().iter().map(|e| e.to_string()).collect();
+        assert!(evs.iter().any(|e| e == &note), "{evs:?}");
+        assert!(
+            evs.iter().any(|e| e.contains("another autopilot 1/2")),
+            "{evs:?}"
+        );
+    }
+
+    /// An autopilot that speaks only from another component is still chosen (alone on the link
+    /// for the wait), and the note says how to pin it, component included.
+    #[test]
+    fn without_a_pin_a_lone_autopilot_on_another_component_is_chosen_after_the_wait() {
+        let mut v = vehicle();
+        v.on_frame(s(0.0), &from(3, 2, hb(0, false)));
+        v.on_frame(s(1.0), &from(3, 2, hb(0, false)));
+        assert_eq!(v.target, None);
+        v.on_frame(s(2.0), &from(3, 2, hb(0, false)));
+        assert_eq!(v.target, Some((3, 2)));
+        let note = v.identity_note().unwrap();
+        assert!(
+            note.contains("--autopilot-sysid 3 --autopilot-compid 2"),
+            "{note}"
         );
     }
 

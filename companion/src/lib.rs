@@ -17,6 +17,7 @@
 //! - `review`: `companion review` (HTML report, summary, why of a cycle).
 //! - `export`: `companion export` (MCAP or CSV).
 //! - `replay`: `companion replay` (a run's log fed back through a fresh core).
+//! - `signing_setup`: `companion signing-setup` (a MAVLink 2 signing key made, provisioned, proven).
 
 #![allow(missing_docs)] // the shells are documented per module; their items are not an API
 
@@ -27,5 +28,6 @@ pub mod fly;
 pub mod params;
 pub mod replay;
 pub mod review;
+pub mod signing_setup;
 pub mod sim;
 pub mod vocabulary;

@@ -96,6 +96,9 @@ enum Command {
     Check(companion::check::CheckArgs),
     /// Fly a real autopilot over MAVLink (ArduPilot or PX4; SITL or hardware).
     Fly(FlyArgs),
+    /// Make a MAVLink 2 signing key (mode 0600), provision it on the autopilot with
+    /// SETUP_SIGNING, and prove it by a signed exchange; exit 0 only when proven.
+    SigningSetup(companion::signing_setup::SigningSetupArgs),
     /// Post-flight review of a run folder or decision log: an HTML report (or --summary).
     Review {
         /// Run folder (runs/<UTC time>/) or a decisions*.jsonl file.
@@ -141,6 +144,7 @@ fn main() -> Result<()> {
         }
         Command::Check(args) => companion::check::run(&args),
         Command::Fly(args) => fly(args),
+        Command::SigningSetup(args) => companion::signing_setup::run(&args),
         Command::Review {
             run_or_log,
             out,

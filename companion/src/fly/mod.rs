@@ -18,6 +18,7 @@ use companion_link::ingest::{self, Encoder, Ingest};
 use companion_link::liveness::parse_duration;
 use companion_link::mission_state::{self, Extra, LANDING_ACTIONS, MissionState};
 use companion_link::operator::{self, Control, GateEvent, GcsText, OperatorGate, VehicleView};
+pub mod link_security;
 pub mod transport;
 use anyhow::Context;
 use companion_core::observations::Observations;
@@ -112,6 +113,14 @@ pub struct FlyArgs {
     /// default: the first autopilot heard. Others are reported, never obeyed.
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
     pub autopilot_sysid: Option<u8>,
+    /// With --autopilot-sysid: the autopilot's component id (default 1, MAV_COMP_ID_AUTOPILOT1).
+    /// The pin is system and component: another component of that system is not obeyed.
+    #[arg(long, default_value_t = 1, requires = "autopilot_sysid", value_parser = clap::value_parser!(u8).range(1..))]
+    pub autopilot_compid: u8,
+    /// Refuse to start without --signing-key, and to fly an autopilot whose frames are not
+    /// signed with it (nothing is commanded; said on stderr and to the ground station).
+    #[arg(long)]
+    pub require_signing: bool,
     /// Exit with an error when no autopilot HEARTBEAT arrives within this time (e.g. 30s);
     /// default: wait (and retry the connection) for ever.
     #[arg(long, value_parser = parse_duration)]
@@ -210,6 +219,7 @@ impl FlySetup {
         files: &companion_core::spec::ParamsFiles,
         args: &FlyArgs,
     ) -> anyhow::Result<Self> {
+        link_security::check_args(args)?;
         let (link, actions, route, _) =
             crate::params::load_fly_files(files, args.mission.as_deref())?;
         let key = match &args.signing_key {
@@ -354,6 +364,8 @@ async fn run_loop<D: Decider, S: RecordSink>(
     }
     let mut vehicle = setup.vehicle(args.link_timeout);
     vehicle.cfg.autopilot_sysid = args.autopilot_sysid;
+    vehicle.cfg.autopilot_compid = args.autopilot_compid;
+    let mut link_security = link_security::LinkSecurity::start(&args, setup.key.is_some());
     let signing = || setup.key.map(ingest::signing_data);
     let mut ingest = Ingest::new(signing());
     let mut encoder = Encoder::new(signing());
@@ -584,6 +596,7 @@ async fn run_loop<D: Decider, S: RecordSink>(
                 ));
             }
         }
+        out.extend(link_security.check(now(), &vehicle, &ingest.stats, &mut shell.texts));
         send(&mut encoder, &vehicle, &link.outbound, &mut tlog, &out).await;
         vehicle.stamp_latency(trigger.unwrap_or_else(now), now());
         // Significant telemetry (a new obstacle, a found target, a crossed battery threshold, a
