@@ -253,6 +253,7 @@ impl FlySetup {
         let cfg = VehicleConfig {
             link_timeout,
             streams: self.link.stream_ids(),
+            streams_not_sent: self.link.streams_not_sent(),
             telemetry: self.link.telemetry.clone(),
             arm_wait: Duration::from_secs_f64(self.link.arm_wait_s),
             max_arm_attempts: self.link.max_arm_attempts,
