@@ -439,15 +439,14 @@ async fn run_loop<D: Decider, S: RecordSink>(
                     ingest.reset();
                     vehicle.on_reconnect(now());
                     if let Some(line) = link_failures.connected(&name) {
-                        eprintln!("companion fly: {line}");
+                        tracing::info!("autopilot link: {line}");
                     }
-                    tracing::info!("connected {name}");
                     transport_events.push(LinkEvent::TransportConnected(name.to_string()));
                 }
                 Some(Inbound::Disconnected(why)) => {
+                    // One line (tracing writes to stderr, the journal), not one per retry.
                     if let Some(line) = link_failures.failed(now(), &why, retry) {
-                        tracing::warn!("autopilot link: {line}");
-                        eprintln!("companion fly: autopilot link {}: {line}", args.connect);
+                        tracing::warn!("autopilot link {}: {line}", args.connect);
                     }
                     transport_events.push(LinkEvent::TransportDisconnected(why.to_string()));
                 }
@@ -472,14 +471,13 @@ async fn run_loop<D: Decider, S: RecordSink>(
                 Some(Inbound::Connected(name)) => {
                     onboard_ingest.reset();
                     if let Some(line) = onboard_failures.connected(&name) {
-                        eprintln!("companion fly: onboard {line}");
+                        tracing::info!("onboard link: {line}");
                     }
                     transport_events.push(LinkEvent::OnboardConnected(name.to_string()));
                 }
                 Some(Inbound::Disconnected(why)) => {
                     if let Some(line) = onboard_failures.failed(now(), &why, retry) {
                         tracing::warn!("onboard link: {line}");
-                        eprintln!("companion fly: onboard link: {line}");
                     }
                     transport_events.push(LinkEvent::OnboardDisconnected(why.to_string()));
                 }
@@ -1169,7 +1167,17 @@ pub fn finish_record(
             tracing::info!("command {} {}: {}", c.action, c.command, c.result);
         }
     }
-    for e in &rec.link_events {
+    // Transport (dis)connections are said by `FailureLines` at most once per 10 s; the record
+    // keeps every one.
+    for e in rec.link_events.iter().filter(|e| {
+        !matches!(
+            e,
+            LinkEvent::TransportConnected(_)
+                | LinkEvent::TransportDisconnected(_)
+                | LinkEvent::OnboardConnected(_)
+                | LinkEvent::OnboardDisconnected(_)
+        )
+    }) {
         tracing::info!("link: {e}");
     }
     for e in rec.events.iter().filter(|e| matches!(e, Event::Mode(_))) {
