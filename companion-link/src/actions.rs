@@ -456,6 +456,11 @@ impl Route {
 pub struct LinkParams {
     /// Message name -> rate in Hz, requested with MAV_CMD_SET_MESSAGE_INTERVAL.
     pub streams: BTreeMap<String, f32>,
+    /// Streams of `[streams]` an autopilot does not have, by flavour: never requested from it
+    /// (`[streams_not_sent_by]`; ArduPilot answers each such request with a STATUSTEXT to the
+    /// ground station).
+    #[serde(default)]
+    pub streams_not_sent_by: StreamsNotSentBy,
     /// Telemetry settings (`[telemetry]`).
     pub telemetry: TelemetryConfig,
     /// Seconds between decision cycles when nothing significant happens.
@@ -472,6 +477,17 @@ pub struct LinkParams {
     /// zone, STATUSTEXT limits (`[flight]`, defaults when absent).
     #[serde(default)]
     pub flight: FlightParams,
+}
+
+/// `params/link.toml` `[streams_not_sent_by]`: message names of `[streams]` per autopilot
+/// flavour that it does not send, so they are not requested from it.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StreamsNotSentBy {
+    /// Not requested from ArduPilot (MAV_AUTOPILOT_ARDUPILOTMEGA).
+    pub ardupilot: Vec<String>,
+    /// Not requested from PX4 (MAV_AUTOPILOT_PX4).
+    pub px4: Vec<String>,
 }
 
 /// `params/link.toml` `[flight]`.
@@ -628,6 +644,19 @@ impl LinkParams {
             ));
         }
         p.flight.check(path, p.decision_period_s)?;
+        for (flavour, names) in [
+            ("ardupilot", &p.streams_not_sent_by.ardupilot),
+            ("px4", &p.streams_not_sent_by.px4),
+        ] {
+            // A name not in [streams] is a typo that would leave the stream requested.
+            if let Some(n) = names.iter().find(|n| !p.streams.contains_key(n.as_str())) {
+                return Err(SpecError::new(
+                    path,
+                    format!("streams_not_sent_by.{flavour}"),
+                    format!("{n} is not a stream of [streams]"),
+                ));
+            }
+        }
         let t = &p.telemetry;
         if let Err((entry, reason)) = t.check_trust() {
             return Err(SpecError::new(path, entry, reason));
@@ -675,6 +704,23 @@ impl LinkParams {
                 <super::Msg as mavlink::Message>::message_id_from_name(n).map(|id| (id, *hz))
             })
             .collect()
+    }
+
+    /// (flavour, message id) of each stream that autopilot flavour does not send.
+    pub fn streams_not_sent(&self) -> Vec<(super::modes::Flavor, u32)> {
+        use super::modes::Flavor;
+        let ids = |names: &[String]| -> Vec<u32> {
+            names
+                .iter()
+                .filter_map(|n| <super::Msg as mavlink::Message>::message_id_from_name(n))
+                .collect()
+        };
+        let n = &self.streams_not_sent_by;
+        let ap = ids(&n.ardupilot)
+            .into_iter()
+            .map(|id| (Flavor::ArduPilot, id));
+        let px4 = ids(&n.px4).into_iter().map(|id| (Flavor::Px4, id));
+        ap.chain(px4).collect()
     }
 }
 

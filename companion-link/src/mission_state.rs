@@ -65,7 +65,7 @@ pub struct MissionState {
     wpf_at: Option<f64>,
     tracking_since: Option<f64>,
     /// Why the shell ended the mission, once.
-    end_reason: Option<String>,
+    end_reason: Option<MissionEnd>,
     /// On the ground and disarmed this long (s, shell clock) ends the flight.
     pub landed_confirm_s: f64,
     /// Without a landed state: disarmed below this altitude (m) is on the ground.
@@ -263,28 +263,51 @@ impl MissionState {
     /// after tracking for `tracking_time_limit_s`, or searching at wpf for `search_time_limit_s`
     /// without a target, the mission script lands. Returns the reason once. Times are on the
     /// mission clock (see [`mission_clock`]).
-    pub fn mission_end(&mut self, obs: &Observations) -> Option<String> {
+    pub fn mission_end(&mut self, obs: &Observations) -> Option<MissionEnd> {
         let time_s = mission_clock(obs);
         if self.landing || self.end_reason.is_some() {
             return None;
         }
         let reason = match (self.tracking_since, self.wpf_at) {
             (Some(t0), _) if self.tracking_time_limit_s.is_some_and(|l| time_s - t0 >= l) => {
-                format!(
-                    "mission: tracking time limit {:.0} s reached",
-                    self.tracking_time_limit_s.unwrap_or(0.0)
-                )
+                MissionEnd::TrackingTimeLimit(self.tracking_time_limit_s.unwrap_or(0.0))
             }
             (None, Some(t0)) if self.search_time_limit_s.is_some_and(|l| time_s - t0 >= l) => {
-                format!(
-                    "mission: search time limit {:.0} s reached without a target",
-                    self.search_time_limit_s.unwrap_or(0.0)
-                )
+                MissionEnd::SearchTimeLimit(self.search_time_limit_s.unwrap_or(0.0))
             }
             _ => return None,
         };
         self.end_reason = Some(reason.clone());
         Some(reason)
+    }
+
+    /// Why the shell ended this flight's mission, once it did.
+    pub fn end(&self) -> Option<&MissionEnd> {
+        self.end_reason.as_ref()
+    }
+}
+
+/// Why the mission script ended the mission (the shell then lands).
+#[derive(Debug, Clone, PartialEq)]
+pub enum MissionEnd {
+    /// Tracked for the route's `tracking_time_limit_s` (the limit, s).
+    TrackingTimeLimit(f64),
+    /// Searched at the last waypoint for `search_time_limit_s` without a target (the limit, s).
+    SearchTimeLimit(f64),
+}
+
+impl std::fmt::Display for MissionEnd {
+    /// The decision record's sentence (docs/decision-log.md).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            MissionEnd::TrackingTimeLimit(l) => {
+                write!(f, "mission: tracking time limit {l:.0} s reached")
+            }
+            MissionEnd::SearchTimeLimit(l) => write!(
+                f,
+                "mission: search time limit {l:.0} s reached without a target"
+            ),
+        }
     }
 }
 

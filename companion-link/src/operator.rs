@@ -266,9 +266,11 @@ pub struct GcsText {
     window: VecDeque<Duration>,
     /// Texts dropped by the rate limit, since start.
     pub dropped: u64,
+    /// The `id` of the last text sent in chunks.
+    chunk_id: u16,
 }
 
-/// STATUSTEXT carries 50 characters.
+/// STATUSTEXT carries 50 bytes of text.
 const TEXT_LEN: usize = 50;
 
 impl GcsText {
@@ -280,21 +282,30 @@ impl GcsText {
             last: BTreeMap::new(),
             window: VecDeque::new(),
             dropped: 0,
+            chunk_id: 0,
         }
     }
 
-    /// The STATUSTEXT to send now, or None when the same text went out less than `repeat` ago
-    /// or the per-second cap is reached. Texts are cut to 50 characters.
-    pub fn say(&mut self, now: Duration, severity: MavSeverity, text: &str) -> Option<Msg> {
+    /// The STATUSTEXT to send now: none when the same text went out less than `repeat` ago or
+    /// the per-second cap is reached. A text longer than one STATUSTEXT (50 bytes) goes out in
+    /// MAVLink 2 chunks, as ArduPilot sends its own and QGroundControl and pymavlink join them:
+    /// one non-zero `id` for all, `chunk_seq` 0, 1, ..., 50 bytes each, the last one shorter (an
+    /// empty last chunk when the text fills the others exactly) so its NUL ends the text. At most
+    /// [`MAX_CHUNKS`] chunks; a longer text is cut. One text counts once against `max_per_s`,
+    /// however many chunks it takes, so its chunks are never split by the cap.
+    pub fn say(&mut self, now: Duration, severity: MavSeverity, text: &str) -> Vec<Msg> {
+        // ASCII only: a non-final chunk must be exactly 50 bytes, which a multi-byte character
+        // could not always fill, and ground stations show STATUSTEXT as plain bytes.
         let text: String = text
             .chars()
             .filter(|c| !c.is_control())
-            .take(TEXT_LEN)
+            .map(|c| if c.is_ascii() { c } else { '?' })
+            .take(MAX_CHUNKS * TEXT_LEN - 1)
             .collect();
         if let Some(at) = self.last.get(&text)
             && now.saturating_sub(*at) < self.repeat
         {
-            return None;
+            return Vec::new();
         }
         while self
             .window
@@ -305,10 +316,9 @@ impl GcsText {
         }
         if self.window.len() as u32 >= self.max_per_s {
             self.dropped += 1;
-            return None;
+            return Vec::new();
         }
         self.window.push_back(now);
-        self.last.insert(text.clone(), now);
         // Old texts no longer hold anything back: keep the map small.
         let repeat = self.repeat;
         self.last.retain(|_, at| now.saturating_sub(*at) < repeat);
@@ -323,13 +333,48 @@ impl GcsText {
             }
             _ => tracing::info!(target: "companion::gcs", "STATUSTEXT {text}"),
         }
-        Some(Msg::STATUSTEXT(STATUSTEXT_DATA {
-            severity,
-            text: text.as_str().into(),
-            id: 0,
-            chunk_seq: 0,
-        }))
+        let chunks = chunks(&text);
+        let id = if chunks.len() > 1 {
+            // Non-zero and new for each long text (0 means "a text of one chunk").
+            self.chunk_id = self.chunk_id.checked_add(1).unwrap_or(1);
+            self.chunk_id
+        } else {
+            0
+        };
+        chunks
+            .into_iter()
+            .enumerate()
+            .map(|(seq, part)| {
+                Msg::STATUSTEXT(STATUSTEXT_DATA {
+                    severity,
+                    text: part.into(),
+                    id,
+                    chunk_seq: seq as u8,
+                })
+            })
+            .collect()
     }
+}
+
+/// Most STATUSTEXT chunks one text is sent in (ArduPilot queues up to about this many).
+pub const MAX_CHUNKS: usize = 4;
+
+/// `text` in pieces of [`TEXT_LEN`] bytes; a text longer than one piece ends with a piece
+/// shorter than that, empty if need be, whose NUL padding tells the receiver the text is
+/// complete. `text` is ASCII (see [`GcsText::say`]), so every byte index is a boundary.
+fn chunks(text: &str) -> Vec<&str> {
+    if text.len() <= TEXT_LEN {
+        return vec![text];
+    }
+    let mut out: Vec<&str> = text
+        .as_bytes()
+        .chunks(TEXT_LEN)
+        .map(|c| std::str::from_utf8(c).unwrap_or_default())
+        .collect();
+    if text.len().is_multiple_of(TEXT_LEN) {
+        out.push("");
+    }
+    out
 }
 
 #[cfg(test)]
@@ -469,24 +514,105 @@ mod tests {
     fn statustext_is_rate_limited_per_text_and_per_second() {
         let mut t = GcsText::new(Duration::from_secs(10), 2);
         let sev = MavSeverity::MAV_SEVERITY_INFO;
-        assert!(t.say(s(0.0), sev, "a").is_some());
-        assert!(t.say(s(1.0), sev, "a").is_none(), "same text within 10 s");
-        assert!(t.say(s(1.1), sev, "b").is_some());
-        assert!(t.say(s(1.2), sev, "c").is_some());
+        assert_eq!(t.say(s(0.0), sev, "a").len(), 1);
+        assert!(t.say(s(1.0), sev, "a").is_empty(), "same text within 10 s");
+        assert_eq!(t.say(s(1.1), sev, "b").len(), 1);
+        assert_eq!(t.say(s(1.2), sev, "c").len(), 1);
         assert!(
-            t.say(s(1.3), sev, "d").is_none(),
+            t.say(s(1.3), sev, "d").is_empty(),
             "third text in one second"
         );
         assert_eq!(t.dropped, 1);
-        assert!(t.say(s(2.5), sev, "d").is_some());
-        assert!(
-            t.say(s(10.5), sev, "a").is_some(),
+        assert_eq!(t.say(s(2.5), sev, "d").len(), 1);
+        assert_eq!(
+            t.say(s(10.5), sev, "a").len(),
+            1,
             "after the repeat interval"
         );
-        let long = "x".repeat(80);
-        match t.say(s(20.0), sev, &long) {
-            Some(Msg::STATUSTEXT(st)) => assert_eq!(st.text.to_str().unwrap().len(), 50),
-            other => panic!("{other:?}"),
+    }
+
+    /// (id, chunk_seq, text) of each STATUSTEXT.
+    fn parts(msgs: &[Msg]) -> Vec<(u16, u8, String)> {
+        msgs.iter()
+            .map(|m| match m {
+                Msg::STATUSTEXT(st) => (st.id, st.chunk_seq, st.text.to_str().unwrap().to_string()),
+                other => panic!("{other:?}"),
+            })
+            .collect()
+    }
+
+    /// A receiver's join, as the MAVLink spec describes it: chunks of one non-zero id in
+    /// chunk_seq order, complete at the first chunk shorter than 50 bytes.
+    fn joined(parts: &[(u16, u8, String)]) -> String {
+        let id = parts[0].0;
+        let mut text = String::new();
+        for (i, (pid, seq, t)) in parts.iter().enumerate() {
+            assert_eq!((*pid, *seq as usize), (id, i), "{parts:?}");
+            text.push_str(t);
+            if t.len() < 50 {
+                assert_eq!(i, parts.len() - 1, "a short chunk ends the text: {parts:?}");
+            }
         }
+        assert!(
+            parts.last().unwrap().2.len() < 50,
+            "the last chunk ends the text: {parts:?}"
+        );
+        text
+    }
+
+    #[test]
+    fn a_short_text_is_one_statustext_with_id_zero() {
+        let mut t = GcsText::new(Duration::from_secs(10), 2);
+        let sev = MavSeverity::MAV_SEVERITY_NOTICE;
+        let fifty = "y".repeat(50);
+        assert_eq!(
+            parts(&t.say(s(0.0), sev, "Battery 7%: returning home")),
+            vec![(0, 0, "Battery 7%: returning home".to_string())]
+        );
+        assert_eq!(
+            parts(&t.say(s(2.0), sev, &fifty)),
+            vec![(0, 0, fifty.clone())]
+        );
+    }
+
+    #[test]
+    fn a_long_text_goes_out_whole_in_chunks_sharing_a_new_id() {
+        let mut t = GcsText::new(Duration::from_secs(10), 2);
+        let sev = MavSeverity::MAV_SEVERITY_WARNING;
+        let long = "Cannot meet goals: energy short 4.2 kJ, time short 35 s, lidar failed";
+        let first = parts(&t.say(s(0.0), sev, long));
+        assert_eq!(first.len(), 2, "{first:?}");
+        assert_ne!(first[0].0, 0, "chunks carry a non-zero id");
+        assert_eq!(joined(&first), long);
+        // Exactly two chunks' worth: an empty third chunk ends it.
+        let hundred: String = ('a'..='z').cycle().take(100).collect();
+        let second = parts(&t.say(s(2.0), sev, &hundred));
+        assert_eq!(second.len(), 3, "{second:?}");
+        assert_eq!(second[2].2, "");
+        assert_eq!(joined(&second), hundred);
+        assert_ne!(second[0].0, first[0].0, "each long text has its own id");
+        // Longer than the chunks allow: cut, still ended by a short chunk.
+        let huge = "z".repeat(500);
+        let third = parts(&t.say(s(4.0), sev, &huge));
+        assert_eq!(third.len(), MAX_CHUNKS);
+        assert_eq!(joined(&third), "z".repeat(MAX_CHUNKS * 50 - 1));
+    }
+
+    #[test]
+    fn the_chunks_of_one_text_count_once_against_the_rate() {
+        let mut t = GcsText::new(Duration::from_secs(10), 1);
+        let sev = MavSeverity::MAV_SEVERITY_INFO;
+        assert_eq!(t.say(s(0.0), sev, &"q".repeat(120)).len(), 3);
+        assert!(t.say(s(0.5), sev, "next").is_empty());
+        assert_eq!(t.dropped, 1);
+    }
+
+    #[test]
+    fn non_ascii_and_control_characters_never_break_a_chunk() {
+        let mut t = GcsText::new(Duration::from_secs(10), 2);
+        let sev = MavSeverity::MAV_SEVERITY_INFO;
+        let text = format!("{}\n{}", "é".repeat(30), "ü".repeat(40));
+        let got = parts(&t.say(s(0.0), sev, &text));
+        assert_eq!(joined(&got), "?".repeat(70));
     }
 }

@@ -30,6 +30,10 @@ pub struct VehicleConfig {
     pub link_timeout: Duration,
     /// (message id, Hz) requested with SET_MESSAGE_INTERVAL.
     pub streams: Vec<(u32, f32)>,
+    /// (flavour, message id): streams that autopilot flavour does not send, never requested
+    /// from it (ArduPilot answers such a request with `No ap_message for mavlink id (N)` to the
+    /// ground station).
+    pub streams_not_sent: Vec<(Flavor, u32)>,
     /// Telemetry settings.
     pub telemetry: TelemetryConfig,
     /// Time to wait for the autopilot to report ready before an arm step fails.
@@ -84,6 +88,7 @@ impl Default for VehicleConfig {
             mission: MissionConfig::default(),
             link_timeout: Duration::from_secs(3),
             streams: Vec::new(),
+            streams_not_sent: Vec::new(),
             telemetry: TelemetryConfig::default(),
             arm_wait: Duration::from_secs(60),
             max_arm_attempts: 3,
@@ -429,11 +434,19 @@ impl Vehicle {
             .streams_queued_at
             .is_none_or(|t| now.saturating_sub(t) >= self.cfg.stream_request_min_interval);
         if due {
-            self.stream_queue = self.cfg.streams.iter().copied().collect();
+            let flavor = self.flavor;
+            let not_sent = &self.cfg.streams_not_sent;
+            self.stream_queue = self
+                .cfg
+                .streams
+                .iter()
+                .filter(|(id, _)| !not_sent.contains(&(flavor, *id)))
+                .copied()
+                .collect();
             self.streams_queued_at = Some(now);
             self.streams_deferred = false;
-            if !self.cfg.streams.is_empty() {
-                tracing::debug!(count = self.cfg.streams.len(), "requesting streams");
+            if !self.stream_queue.is_empty() {
+                tracing::debug!(count = self.stream_queue.len(), "requesting streams");
             }
         } else {
             self.streams_deferred = true;
@@ -2017,6 +2030,82 @@ mod tests {
             );
         }
         n
+    }
+
+    /// Message ids the vehicle asks for with SET_MESSAGE_INTERVAL after a HEARTBEAT of
+    /// `autopilot`, with the shipped params/link.toml, every request acknowledged in turn.
+    fn streams_requested(autopilot: MavAutopilot) -> Vec<u32> {
+        let path = crate::test_support::default_params_dir().join("link.toml");
+        let link = crate::test_support::disk(crate::actions::LinkParams::load)(&path).unwrap();
+        let cfg = VehicleConfig {
+            streams: link.stream_ids(),
+            streams_not_sent: link.streams_not_sent(),
+            ..VehicleConfig::default()
+        };
+        let mut v = Vehicle::new(cfg, table(), None);
+        let mut heartbeat = hb(0, false);
+        if let Msg::HEARTBEAT(h) = &mut heartbeat.msg {
+            h.autopilot = autopilot;
+        }
+        let mut out = v.on_frame(s(0.0), &heartbeat);
+        let mut ids = Vec::new();
+        for _ in 0..100 {
+            let asked: Vec<u32> = out
+                .iter()
+                .filter_map(|m| match m {
+                    Msg::COMMAND_LONG(c) if c.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL => {
+                        Some(c.param1 as u32)
+                    }
+                    _ => None,
+                })
+                .collect();
+            if asked.is_empty() {
+                break;
+            }
+            ids.extend(asked);
+            out = v.on_frame(
+                s(0.1),
+                &ack(
+                    MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                    MavResult::MAV_RESULT_ACCEPTED,
+                ),
+            );
+        }
+        ids
+    }
+
+    /// ArduPilot has no ESTIMATOR_STATUS (230), OBSTACLE_DISTANCE (330) or STATUSTEXT (253) in
+    /// its ap_message map: asking makes it send `No ap_message for mavlink id (N)` to the ground
+    /// station on every connect. PX4 has those streams and no EKF_STATUS_REPORT (193) or WIND
+    /// (168).
+    #[test]
+    fn each_autopilot_is_asked_only_for_streams_it_has() {
+        let ardupilot = streams_requested(MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA);
+        for id in [230, 330, 253] {
+            assert!(
+                !ardupilot.contains(&id),
+                "ArduPilot asked for {id}: {ardupilot:?}"
+            );
+        }
+        for id in [1, 33, 147, 193, 168, 241, 245, 42, 242, 2] {
+            assert!(
+                ardupilot.contains(&id),
+                "ArduPilot not asked for {id}: {ardupilot:?}"
+            );
+        }
+        let px4 = streams_requested(MavAutopilot::MAV_AUTOPILOT_PX4);
+        for id in [230, 330, 253, 1, 33, 147, 241, 245, 242, 2] {
+            assert!(px4.contains(&id), "PX4 not asked for {id}: {px4:?}");
+        }
+        for id in [193, 168] {
+            assert!(!px4.contains(&id), "PX4 asked for {id}: {px4:?}");
+        }
+        // An autopilot of neither flavour is asked for everything listed.
+        let other = streams_requested(MavAutopilot::MAV_AUTOPILOT_GENERIC);
+        assert!(
+            other.len() > px4.len() && other.len() > ardupilot.len(),
+            "{other:?}"
+        );
     }
 
     /// 35 spoofed "reboots" (the boot clock jumping back and forth) in 3.5 s cannot multiply the

@@ -70,6 +70,7 @@ fn vehicle_config(link: &LinkParams, link_timeout: Duration) -> VehicleConfig {
     VehicleConfig {
         link_timeout,
         streams: link.stream_ids(),
+        streams_not_sent: link.streams_not_sent(),
         telemetry: link.telemetry.clone(),
         arm_wait: Duration::from_secs_f64(link.arm_wait_s),
         max_arm_attempts: link.max_arm_attempts,

@@ -237,3 +237,61 @@ fn autopilot_sysid_zero_and_bad_connect_timeout_are_cli_errors() {
         assert!(err.contains(flag), "{flag} {value}: {err}");
     }
 }
+
+/// A link existed (an ArduPilot heartbeat over TCP), then the autopilot's end closed and every
+/// reconnect is refused: stderr (the journal) says the failures at most once per 10 s, each
+/// once, not once per 1 s retry and not twice, although decision cycles run every second.
+#[test]
+fn refused_reconnects_after_a_link_are_said_once_per_10s() {
+    use companion_link::dialect::*;
+    use std::io::Write as _;
+    let dir = tempfile::tempdir().unwrap();
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    let url = format!("tcp:127.0.0.1:{port}");
+    let mut child = companion(&["--connect", &url, "--duration", "14s"], dir.path());
+    let err = lines(child.stderr.take().unwrap());
+    let (mut conn, _) = listener.accept().unwrap();
+    // Nothing listens on the port from now on: every reconnect is refused.
+    drop(listener);
+    let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+        custom_mode: 0,
+        mavtype: MavType::MAV_TYPE_QUADROTOR,
+        autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+        base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+        system_status: MavState::MAV_STATE_STANDBY,
+        mavlink_version: 3,
+    });
+    for seq in 0..8u8 {
+        let mut buf = Vec::new();
+        let h = mavlink::MavHeader {
+            system_id: 1,
+            component_id: 1,
+            sequence: seq,
+        };
+        mavlink::write_v2_msg(&mut buf, h, &hb).unwrap();
+        conn.write_all(&buf).unwrap();
+        std::thread::sleep(Duration::from_millis(250));
+    }
+    drop(conn);
+    let status = wait_exit(&mut child, Duration::from_secs(60));
+    assert!(status.success(), "fly failed: {status}");
+    let seen: Vec<String> = err.try_iter().collect();
+    assert!(
+        seen.iter().any(|l| l.contains("autopilot chosen")),
+        "the heartbeat was not heard: {seen:#?}"
+    );
+    let failures: Vec<&String> = seen
+        .iter()
+        .filter(|l| {
+            l.contains(&format!("127.0.0.1:{port}"))
+                && (l.contains("refused") || l.contains("closed"))
+        })
+        .collect();
+    // About 12 s of 1 s retries after the close: the close at once, the refusals once 10 s on.
+    assert!(
+        !failures.is_empty() && failures.len() <= 2,
+        "{} failure lines: {failures:#?}",
+        failures.len()
+    );
+}

@@ -20,6 +20,7 @@ use companion_link::mission_state::{self, Extra, LANDING_ACTIONS, MissionState};
 use companion_link::operator::{self, Control, GateEvent, GcsText, OperatorGate, VehicleView};
 pub mod link_security;
 pub mod transport;
+pub mod words;
 use anyhow::Context;
 use companion_core::observations::Observations;
 use companion_core::record::{CommandOutcome, DecisionRecord, Event, LinkEvent, Plan};
@@ -262,6 +263,7 @@ impl FlySetup {
         let cfg = VehicleConfig {
             link_timeout,
             streams: self.link.stream_ids(),
+            streams_not_sent: self.link.streams_not_sent(),
             telemetry: self.link.telemetry.clone(),
             arm_wait: Duration::from_secs_f64(self.link.arm_wait_s),
             max_arm_attempts: self.link.max_arm_attempts,
@@ -454,15 +456,14 @@ async fn run_loop<D: Decider, S: RecordSink>(
                     ingest.reset();
                     vehicle.on_reconnect(now());
                     if let Some(line) = link_failures.connected(&name) {
-                        eprintln!("companion fly: {line}");
+                        tracing::info!("autopilot link: {line}");
                     }
-                    tracing::info!("connected {name}");
                     transport_events.push(LinkEvent::TransportConnected(name.to_string()));
                 }
                 Some(Inbound::Disconnected(why)) => {
+                    // One line (tracing writes to stderr, the journal), not one per retry.
                     if let Some(line) = link_failures.failed(now(), &why, retry) {
-                        tracing::warn!("autopilot link: {line}");
-                        eprintln!("companion fly: autopilot link {}: {line}", args.connect);
+                        tracing::warn!("autopilot link {}: {line}", args.connect);
                     }
                     transport_events.push(LinkEvent::TransportDisconnected(why.to_string()));
                 }
@@ -487,14 +488,13 @@ async fn run_loop<D: Decider, S: RecordSink>(
                 Some(Inbound::Connected(name)) => {
                     onboard_ingest.reset();
                     if let Some(line) = onboard_failures.connected(&name) {
-                        eprintln!("companion fly: onboard {line}");
+                        tracing::info!("onboard link: {line}");
                     }
                     transport_events.push(LinkEvent::OnboardConnected(name.to_string()));
                 }
                 Some(Inbound::Disconnected(why)) => {
                     if let Some(line) = onboard_failures.failed(now(), &why, retry) {
                         tracing::warn!("onboard link: {line}");
-                        eprintln!("companion fly: onboard link: {line}");
                     }
                     transport_events.push(LinkEvent::OnboardDisconnected(why.to_string()));
                 }
@@ -775,8 +775,12 @@ pub struct Shell {
     pub texts: GcsText,
     /// The last cycle's action set, to tell a change of behaviour.
     last_actions: Vec<String>,
-    /// The last behaviour told to the ground station (motion and tracking version).
-    last_told: String,
+    /// The last behaviour told to the ground station (motion and tracking version), and the
+    /// evidence of that cycle (to say what changed).
+    last_told: words::Behaviour,
+    told_evidence: std::collections::BTreeMap<String, String>,
+    /// What the guarantee's last verdict told was about (None: it could meet the goals).
+    guarantee_told: Option<Vec<String>>,
     /// Ingest counters now, and as last reported in a record's link_events.
     ingest: ingest::IngestStats,
     ingest_reported: ingest::IngestStats,
@@ -800,7 +804,9 @@ impl Shell {
                 f.statustext_max_per_s,
             ),
             last_actions: Vec::new(),
-            last_told: String::new(),
+            last_told: Default::default(),
+            told_evidence: Default::default(),
+            guarantee_told: None,
             ingest: Default::default(),
             ingest_reported: Default::default(),
         }
@@ -822,7 +828,8 @@ impl Shell {
         self.mission = self.fresh_mission.clone();
         self.operator.new_flight();
         self.last_actions.clear();
-        self.last_told.clear();
+        self.last_told = Default::default();
+        self.told_evidence.clear();
         self.pending_events.push(Event::from(
             "flight over: landed and disarmed; waiting for the operator",
         ));
@@ -851,31 +858,68 @@ impl Shell {
         Some(format!("{} -> {} ({why})", show(&was), show(&rec.actions)))
     }
 
-    /// What a pilot needs of a behaviour change, in a STATUSTEXT's 50 characters: the motion
-    /// flown and the tracking version, and why ("companion: land (mission: search time ...").
-    /// None when that part did not change.
-    fn behaviour_text(&mut self, rec: &DecisionRecord) -> Option<String> {
-        let motions: Vec<String> = rec
-            .actions
-            .iter()
-            .filter(|a| self.precedence.contains(a))
-            .cloned()
-            .collect();
-        let mut told = mission_state::select_vehicle_action(&motions, &self.precedence)
-            .unwrap_or_else(|| "hold".into());
-        if let Some((kept, _)) = self.mission.states().tracking_target(&rec.actions) {
-            told.push_str(&format!(", track {kept}"));
-        }
-        if told == self.last_told {
+    /// What a pilot needs of a behaviour change: what the vehicle will do and why
+    /// (`Battery 7%: returning home`, docs/mavlink.md "Words to the ground station"). `flown` is
+    /// the vehicle action flown this cycle (the shell's landing included), so a landing the
+    /// shell keeps is told as a landing. None when neither the motion nor the tracking version
+    /// changed: one text per change, never one per cycle.
+    fn behaviour_text(&mut self, rec: &DecisionRecord, flown: Option<&str>) -> Option<String> {
+        let now = words::Behaviour {
+            motion: flown.map(str::to_string),
+            tracking: self
+                .mission
+                .states()
+                .tracking_target(&rec.actions)
+                .map(|(kept, _)| kept.to_string()),
+        };
+        if now == self.last_told {
             return None;
         }
-        self.last_told = told.clone();
-        let why = rec
-            .events
-            .iter()
-            .find(|e| !matches!(e, Event::Command { .. }))
-            .map_or(String::new(), |e| format!(" ({e})"));
-        Some(format!("companion: {told}{why}"))
+        let text = words::behaviour_text(
+            &now,
+            &self.last_told,
+            rec,
+            &self.told_evidence,
+            self.mission.end(),
+        );
+        self.last_told = now;
+        self.told_evidence.clone_from(&rec.evidence);
+        Some(text)
+    }
+
+    /// The guarantee's verdict when it changed (what it is short of, not by how much): the
+    /// journal line and the STATUSTEXT with its severity. None while it is the same, so a
+    /// vehicle on the ground after landing hears it once, not once a cycle.
+    fn guarantee_change(
+        &mut self,
+        rec: &DecisionRecord,
+    ) -> Option<(String, companion_link::dialect::MavSeverity, String)> {
+        let g = rec.guarantee.as_ref()?;
+        let key = words::guarantee_key(g);
+        if key == self.guarantee_told {
+            return None;
+        }
+        let was = std::mem::replace(&mut self.guarantee_told, key);
+        match &self.guarantee_told {
+            Some(_) => {
+                let why = g
+                    .infeasible_reason
+                    .as_deref()
+                    .unwrap_or("no allocation meets the goals");
+                Some((
+                    format!("guarantee: cannot meet the goals: {why}"),
+                    WARNING,
+                    words::guarantee_text(g),
+                ))
+            }
+            None => was.map(|_| {
+                (
+                    "guarantee: the goals can be met again".to_string(),
+                    NOTICE,
+                    "Goals can be met again".to_string(),
+                )
+            }),
+        }
     }
 
     /// A link event when bad input arrived since the last report: malformed frames or bad
@@ -923,6 +967,16 @@ async fn run_cycle_at<D: Decider, S: RecordSink>(
     send(encoder, vehicle, tx, tlog, &decided.msgs).await;
     vehicle.stamp_latency(trigger_at, now());
     report.cycles += 1;
+    // The action flown, under its own name (a shell-only entry such as the route's resume is
+    // told as the action it is flown for).
+    let flown = decided.chosen.as_deref().map(|c| {
+        vehicle
+            .actions
+            .flown_for
+            .get(c)
+            .map_or(c, String::as_str)
+            .to_string()
+    });
     let rec = finish_record(decided, shell, vehicle, report.cycles, transport_events);
     tracing::debug!(
         cycle = rec.cycle,
@@ -934,24 +988,18 @@ async fn run_cycle_at<D: Decider, S: RecordSink>(
     if let Some(change) = shell.action_change(&rec) {
         tracing::info!("actions: {change}");
     }
-    if let Some(text) = shell.behaviour_text(&rec)
-        && shell.operator.commanding()
+    if shell.operator.commanding()
+        && let Some(text) = shell.behaviour_text(&rec, flown.as_deref())
     {
         texts.extend(shell.texts.say(now(), NOTICE, &text));
     }
-    if let Some(g) = &rec.guarantee
-        && g.infeasible
-    {
-        let why = g
-            .infeasible_reason
-            .as_deref()
-            .unwrap_or("no allocation meets the goals");
-        tracing::warn!("guarantee: cannot meet the goals: {why}");
-        texts.extend(shell.texts.say(
-            now(),
-            WARNING,
-            &format!("companion: guarantee cannot: {why}"),
-        ));
+    if let Some((line, severity, text)) = shell.guarantee_change(&rec) {
+        if severity == WARNING {
+            tracing::warn!("{line}");
+        } else {
+            tracing::info!("{line}");
+        }
+        texts.extend(shell.texts.say(now(), severity, &text));
     }
     send(encoder, vehicle, tx, tlog, &texts).await;
     sink.write(&rec).context("writing the decision record")?;
@@ -1140,7 +1188,17 @@ pub fn finish_record(
             tracing::info!("command {} {}: {}", c.action, c.command, c.result);
         }
     }
-    for e in &rec.link_events {
+    // Transport (dis)connections are said by `FailureLines` at most once per 10 s; the record
+    // keeps every one.
+    for e in rec.link_events.iter().filter(|e| {
+        !matches!(
+            e,
+            LinkEvent::TransportConnected(_)
+                | LinkEvent::TransportDisconnected(_)
+                | LinkEvent::OnboardConnected(_)
+                | LinkEvent::OnboardDisconnected(_)
+        )
+    }) {
         tracing::info!("link: {e}");
     }
     for e in rec.events.iter().filter(|e| matches!(e, Event::Mode(_))) {
@@ -1394,24 +1452,101 @@ mod tests {
         assert_eq!(few, ["a", "b"]);
     }
 
-    #[test]
-    fn behaviour_text_names_the_tracking_state_the_plan_keeps() {
+    fn test_shell() -> Shell {
         let args =
             FlyArgs::from_cli(["--connect", "udpin:127.0.0.1:14550", "--auto-start"]).unwrap();
-        let mut shell = Shell::new(&FlySetup::load(&args).unwrap());
+        Shell::new(&FlySetup::load(&args).unwrap())
+    }
+
+    #[test]
+    fn behaviour_text_names_the_tracking_state_the_plan_keeps() {
+        let mut shell = test_shell();
         let rec = |actions: &[&str]| DecisionRecord {
             actions: actions.iter().map(|a| a.to_string()).collect(),
             ..Default::default()
         };
         let text = shell
-            .behaviour_text(&rec(&["follow_trajectory", "track_v3"]))
+            .behaviour_text(
+                &rec(&["follow_trajectory", "track_v3"]),
+                Some("follow_trajectory"),
+            )
             .unwrap();
-        assert!(text.ends_with(", track v3"), "{text}");
+        assert_eq!(text, "Flying the route, tracking with V3");
         // detect_target runs the tracking application but keeps no tracking state.
         let text = shell
-            .behaviour_text(&rec(&["follow_trajectory", "detect_target"]))
+            .behaviour_text(
+                &rec(&["follow_trajectory", "detect_target"]),
+                Some("follow_trajectory"),
+            )
             .unwrap();
-        assert!(!text.contains("track"), "{text}");
+        assert_eq!(text, "Flying the route");
+    }
+
+    /// The landing the shell keeps flying (the MDPs plan nothing in `landing`) is told as a
+    /// landing, once, not as "hold (mode LAND)" and not once a cycle.
+    #[test]
+    fn a_kept_landing_is_told_once_as_a_landing() {
+        let mut shell = test_shell();
+        let flying = DecisionRecord {
+            actions: vec!["follow_trajectory".into()],
+            ..Default::default()
+        };
+        assert!(
+            shell
+                .behaviour_text(&flying, Some("follow_trajectory"))
+                .is_some()
+        );
+        let landing = DecisionRecord {
+            state: "landing".into(),
+            shell_actions: vec!["land".into()],
+            events: vec![Event::Mode("LAND".into())],
+            observations: [("zone_found".to_string(), 0.0)].into_iter().collect(),
+            ..Default::default()
+        };
+        assert_eq!(
+            shell.behaviour_text(&landing, Some("land")).as_deref(),
+            Some("Landing here")
+        );
+        for _ in 0..5 {
+            assert_eq!(shell.behaviour_text(&landing, Some("land")), None);
+        }
+    }
+
+    /// The guarantee's verdict is said when it changes: its amounts changing every cycle (the
+    /// margins of a vehicle on the ground) say nothing more.
+    #[test]
+    fn the_guarantee_verdict_is_said_once_per_change() {
+        use companion_core::record::GuaranteeRecord;
+        let mut shell = test_shell();
+        let rec = |infeasible: bool, energy: f64| DecisionRecord {
+            guarantee: Some(GuaranteeRecord {
+                margins: [("energy_j".to_string(), energy)].into_iter().collect(),
+                infeasible,
+                infeasible_reason: infeasible
+                    .then(|| format!("negative energy_j margin {energy:.1}: no allocation")),
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        assert!(shell.guarantee_change(&rec(false, 100.0)).is_none());
+        let (line, severity, text) = shell.guarantee_change(&rec(true, -4210.0)).unwrap();
+        assert_eq!(severity, WARNING);
+        assert!(line.contains("negative energy_j margin -4210.0"), "{line}");
+        assert_eq!(text, "Cannot meet goals: energy short 4.2 kJ");
+        for cycle in 0..30 {
+            assert!(
+                shell
+                    .guarantee_change(&rec(true, -4210.0 - cycle as f64))
+                    .is_none(),
+                "cycle {cycle}"
+            );
+        }
+        let (_, severity, text) = shell.guarantee_change(&rec(false, 50.0)).unwrap();
+        assert_eq!(
+            (severity, text.as_str()),
+            (NOTICE, "Goals can be met again")
+        );
+        assert!(shell.guarantee_change(&rec(true, -10.0)).is_some());
     }
 
     #[test]

@@ -262,14 +262,26 @@ impl UdpPeer {
     }
 }
 
-/// Connection failures said aloud without flooding: the first at once, then at most one line
-/// per `every` with how many failed in between; the next connection says how many it took.
+/// Connection failures said aloud without flooding, one line each (docs/mavlink.md, "Failures
+/// said aloud"): the first failure at once, then at most one failure line per `every`, with how
+/// many attempts failed (and how many connections did not last) since the last line. A
+/// connection is said when it answers a failure line ("connected ... after N failed attempts")
+/// or is the first; a link that connects and drops again within `every` (a flapping link) is
+/// only counted, so it costs two lines per `every`, not two per retry. Unlike the record's
+/// `link_events`, which keep every attempt.
 #[derive(Debug, Clone)]
 pub struct FailureLines {
     every: Duration,
+    /// When the last failure line was said.
     last_line: Option<Duration>,
+    /// Failed attempts since the last connection said.
     failures: u32,
+    /// Failed attempts, and connections, since the last failure line and not said.
     unsaid: u32,
+    unsaid_connections: u32,
+    /// A failure line was said since the last connection line: the next connection answers it.
+    failure_said: bool,
+    connected_before: bool,
 }
 
 impl FailureLines {
@@ -279,6 +291,9 @@ impl FailureLines {
             last_line: None,
             failures: 0,
             unsaid: 0,
+            unsaid_connections: 0,
+            failure_said: false,
+            connected_before: false,
         }
     }
 
@@ -292,24 +307,37 @@ impl FailureLines {
             self.unsaid += 1;
             return None;
         }
-        let more = match self.unsaid {
-            0 => String::new(),
-            n => format!(" ({n} more failed attempts since the last line)"),
+        let more = match (self.unsaid, self.unsaid_connections) {
+            (0, 0) => String::new(),
+            (n, 0) => format!(" ({n} more failed attempts since the last line)"),
+            (n, c) => format!(
+                " ({n} more failed attempts and {c} connections that did not last since the last line)"
+            ),
         };
         self.last_line = Some(now);
         self.unsaid = 0;
+        self.unsaid_connections = 0;
+        self.failure_said = true;
         Some(format!(
             "{why}; retrying every {}s{more}",
             retry.as_secs_f64()
         ))
     }
 
-    /// Connected: the line to print when failures came before, and a fresh count.
+    /// Connected: the line to print (the first connection, or one that answers a failure line
+    /// said), else None (counted for the next failure line).
     pub fn connected(&mut self, name: &str) -> Option<String> {
+        let first = !std::mem::replace(&mut self.connected_before, true);
+        if !first && !self.failure_said {
+            self.unsaid_connections += 1;
+            return None;
+        }
+        self.failure_said = false;
         let n = std::mem::take(&mut self.failures);
-        self.unsaid = 0;
-        self.last_line = None;
-        (n > 0).then(|| format!("connected {name} after {n} failed attempts"))
+        Some(match n {
+            0 => format!("connected {name}"),
+            n => format!("connected {name} after {n} failed attempts"),
+        })
     }
 }
 
@@ -341,31 +369,69 @@ mod tests {
         );
     }
 
+    fn secs(v: f64) -> Duration {
+        Duration::from_secs_f64(v)
+    }
+
     #[test]
     fn failure_lines_are_rate_limited_and_counted() {
-        let s = |v: f64| Duration::from_secs_f64(v);
-        let mut f = FailureLines::new(s(10.0));
-        let retry = s(1.0);
+        let mut f = FailureLines::new(secs(10.0));
+        let retry = secs(1.0);
         let first = f
-            .failed(s(0.0), "tcp connect 127.0.0.1:1: refused", retry)
+            .failed(secs(0.0), "tcp connect 127.0.0.1:1: refused", retry)
             .unwrap();
         assert!(
             first.contains("127.0.0.1:1") && first.contains("retrying"),
             "{first}"
         );
         for t in 1..10 {
-            assert_eq!(f.failed(s(t as f64), "again", retry), None);
+            assert_eq!(f.failed(secs(t as f64), "again", retry), None);
         }
-        let later = f.failed(s(10.0), "again", retry).unwrap();
+        let later = f.failed(secs(10.0), "again", retry).unwrap();
         assert!(later.contains("9 more failed attempts"), "{later}");
         assert_eq!(
             f.connected("tcp:127.0.0.1:1").as_deref(),
             Some("connected tcp:127.0.0.1:1 after 11 failed attempts")
         );
-        assert_eq!(f.connected("tcp:127.0.0.1:1"), None);
         assert!(
-            f.failed(s(11.0), "lost", retry).is_some(),
-            "a new outage is said at once"
+            f.failed(secs(25.0), "lost", retry).is_some(),
+            "a new outage after a quiet spell is said at once"
         );
+    }
+
+    /// The autopilot's end accepts and drops the connection again and again (or a link was
+    /// there, then every retry is refused): at most one failure line, and the connection that
+    /// answers it, per 10 s, whatever the retries do in between.
+    #[test]
+    fn a_flapping_link_says_at_most_one_failure_per_interval() {
+        let mut f = FailureLines::new(secs(10.0));
+        let retry = secs(1.0);
+        let mut lines = Vec::new();
+        lines.extend(f.connected("tcp:127.0.0.1:5760"));
+        for t in 0..60 {
+            let t = 1.0 + t as f64;
+            lines.extend(f.failed(secs(t), "tcp:127.0.0.1:5760: closed by peer", retry));
+            lines.extend(f.connected("tcp:127.0.0.1:5760"));
+        }
+        let failures = lines
+            .iter()
+            .filter(|l| l.contains("closed by peer"))
+            .count();
+        assert_eq!(
+            failures, 6,
+            "one failure line per 10 s over 60 s: {lines:#?}"
+        );
+        assert_eq!(lines.len(), 1 + 2 * 6, "{lines:#?}");
+        assert!(
+            lines[3].contains("9 more failed attempts and 9 connections that did not last"),
+            "{lines:#?}"
+        );
+        // Refused every second after the link existed: each failure once, one line per 10 s.
+        let mut g = FailureLines::new(secs(10.0));
+        assert!(g.connected("tcp:127.0.0.1:5760").is_some());
+        let said: Vec<String> = (0..30)
+            .filter_map(|t| g.failed(secs(t as f64), "tcp connect: Connection refused", retry))
+            .collect();
+        assert_eq!(said.len(), 3, "{said:#?}");
     }
 }

@@ -1,0 +1,468 @@
+//! What the fly shell tells the ground station, in a pilot's words: what the vehicle will do and
+//! why (`Battery 7%: returning home`, `Search time over: landing here`, `Vibration high:
+//! tracking with V3`), and when the guarantee cannot meet the goals (`Cannot meet goals: energy
+//! short 4.2 kJ`). Sans IO: every text is built from the decision record's typed fields (the
+//! action flown, the proposal that chose it and the probabilities it read, observations,
+//! evidence, the guarantee's margins and failed resources, the mission's end), never by reading
+//! its sentences back. docs/mavlink.md, "Words to the ground station".
+
+use companion_core::record::{DecisionRecord, Event, GuaranteeRecord};
+use companion_link::mission_state::MissionEnd;
+use std::collections::BTreeMap;
+
+/// What the vehicle does, as told to the ground station: the motion flown (a primitive vehicle
+/// action, None for none) and the tracking version kept (`v3`), if any.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Behaviour {
+    pub motion: Option<String>,
+    pub tracking: Option<String>,
+}
+
+/// Motions that end the flight: their reason is what a pilot must hear.
+const ENDING: [&str; 3] = ["land", "replan_and_land", "return_to_base"];
+
+/// Below this, the `P_battery` a proposal read counts as the battery being its reason
+/// (P_battery is the health model's belief that the battery lasts the mission).
+const P_BATTERY_LOW: f64 = 0.5;
+
+/// The STATUSTEXT for `now`: "Reason: doing", or "Doing" when the record holds no reason.
+/// `was` is what was told before (to tell what changed), `evidence_was` the evidence of that
+/// cycle, `end` why the mission script ended the mission (when it did).
+pub fn behaviour_text(
+    now: &Behaviour,
+    was: &Behaviour,
+    rec: &DecisionRecord,
+    evidence_was: &BTreeMap<String, String>,
+    end: Option<&MissionEnd>,
+) -> String {
+    let doing = doing(now, rec);
+    match reason(now, was, rec, evidence_was, end) {
+        Some(why) => format!("{}: {doing}", capitalised(&why)),
+        None => capitalised(&doing),
+    }
+}
+
+/// What the vehicle will do, in words.
+fn doing(b: &Behaviour, rec: &DecisionRecord) -> String {
+    let zone = rec.observations.get("zone_found").is_some_and(|v| *v > 0.5);
+    let motion = b.motion.as_deref().map(|m| match m {
+        "take_off" => "taking off".to_string(),
+        "follow_trajectory" => "flying the route".to_string(),
+        "avoid_obstacle" => "avoiding the obstacle".to_string(),
+        "land" if zone => "landing at the found zone".to_string(),
+        "land" => "landing here".to_string(),
+        "replan_and_land" if zone => "landing at the emergency zone".to_string(),
+        "replan_and_land" => "emergency landing here".to_string(),
+        "return_to_base" => "returning home".to_string(),
+        other => other.replace('_', " "),
+    });
+    let tracking = b
+        .tracking
+        .as_deref()
+        .map(|v| format!("tracking with {}", v.to_uppercase()));
+    match (motion, tracking) {
+        (Some(m), Some(t)) => format!("{m}, {t}"),
+        (Some(m), None) => m,
+        (None, Some(t)) => t,
+        (None, None) => "holding position".to_string(),
+    }
+}
+
+/// Why, from the record's typed data, most telling first; None when it holds no reason.
+fn reason(
+    now: &Behaviour,
+    was: &Behaviour,
+    rec: &DecisionRecord,
+    evidence_was: &BTreeMap<String, String>,
+    end: Option<&MissionEnd>,
+) -> Option<String> {
+    let motion = now.motion.as_deref();
+    let motion_changed = now.motion != was.motion;
+    if motion_changed && let Some(m) = motion {
+        // The mission script's own end: the shell flies the landing (shell_actions).
+        if rec.shell_actions.iter().any(|a| a == m)
+            && let Some(end) = end
+        {
+            return Some(
+                match end {
+                    MissionEnd::SearchTimeLimit(_) => "search time over",
+                    MissionEnd::TrackingTimeLimit(_) => "tracking time over",
+                }
+                .to_string(),
+            );
+        }
+        if ENDING.contains(&m) {
+            if let Some(why) = ending_reason(m, rec) {
+                return Some(why);
+            }
+        }
+        if m == "avoid_obstacle"
+            && let Some(d) = rec.observations.get("obstacle_m")
+        {
+            return Some(format!("obstacle {d:.0} m"));
+        }
+    }
+    // What happened this cycle, as typed events.
+    for e in &rec.events {
+        let why = match e {
+            Event::TargetDetected => "target found",
+            Event::TargetLost => "target lost",
+            Event::ObstacleCleared if motion_changed => "obstacle cleared",
+            _ => continue,
+        };
+        return Some(why.to_string());
+    }
+    if now.tracking != was.tracking && now.tracking.is_some() {
+        if let Some(r) = &rec.resources
+            && !r.failed_tiles.is_empty()
+        {
+            return Some("FPGA tile failed".to_string());
+        }
+        // The first piece of evidence that changed since the last text.
+        if let Some((node, state)) = rec
+            .evidence
+            .iter()
+            .find(|(n, s)| evidence_was.get(*n).is_some_and(|w| w != *s))
+        {
+            return Some(format!("{} {state}", evidence_words(node)));
+        }
+    }
+    if motion_changed
+        && let Some(m) = motion
+        && ENDING.contains(&m)
+        && let Some(p) = proposer(rec, m)
+    {
+        // No evidence stood out: name the model that chose it.
+        return Some(format!("{} model", p.mdp));
+    }
+    None
+}
+
+/// Why a flight-ending motion: a low battery the proposing model read, then the guarantee's
+/// energy or time shortfall, then a failed resource.
+fn ending_reason(motion: &str, rec: &DecisionRecord) -> Option<String> {
+    if let Some(p) = proposer(rec, motion)
+        && p.inputs
+            .get("P_battery")
+            .is_some_and(|v| *v < P_BATTERY_LOW)
+    {
+        return Some(match rec.observations.get("battery_pct") {
+            Some(pct) => format!("battery {pct:.0}%"),
+            None => "battery low".to_string(),
+        });
+    }
+    let g = rec.guarantee.as_ref()?;
+    shortfalls(g).into_iter().next()
+}
+
+/// The proposal whose actions hold `motion` (the first, as the record lists them).
+fn proposer<'a>(
+    rec: &'a DecisionRecord,
+    motion: &str,
+) -> Option<&'a companion_core::record::MdpProposal> {
+    rec.proposals
+        .iter()
+        .find(|p| p.actions.iter().any(|a| a == motion))
+}
+
+/// `A_vibration` -> `vibration`, `S_battery` -> `battery`, `A_target_speed` -> `target speed`.
+fn evidence_words(node: &str) -> String {
+    node.strip_prefix("A_")
+        .or_else(|| node.strip_prefix("S_"))
+        .unwrap_or(node)
+        .replace('_', " ")
+}
+
+fn capitalised(s: &str) -> String {
+    let mut c = s.chars();
+    match c.next() {
+        Some(f) => f.to_uppercase().chain(c).collect(),
+        None => String::new(),
+    }
+}
+
+/// What the guarantee is short of, in words, most pressing first: each goal with a negative
+/// margin (`energy short 4.2 kJ`, `time short 35 s`), then each failed resource.
+fn shortfalls(g: &GuaranteeRecord) -> Vec<String> {
+    let mut out = Vec::new();
+    for (goal, margin) in &g.margins {
+        if *margin >= 0.0 || !margin.is_finite() {
+            continue;
+        }
+        let short = -margin;
+        out.push(match goal.as_str() {
+            "energy_j" => format!("energy short {:.1} kJ", short / 1000.0),
+            "duration_s" => format!("time short {short:.0} s"),
+            other => format!("{} short {short:.1}", other.replace('_', " ")),
+        });
+    }
+    let mut failed: Vec<String> = g
+        .failed_resources
+        .iter()
+        .map(|r| {
+            if r.starts_with("tile_slot:") {
+                "FPGA tile failed".to_string()
+            } else {
+                format!("{r} failed")
+            }
+        })
+        .collect();
+    let mut seen = std::collections::BTreeSet::new();
+    failed.retain(|f| seen.insert(f.clone()));
+    out.extend(failed);
+    out
+}
+
+/// What the guarantee's verdict is about, to say it once per change: the goals short and the
+/// failed resources (their names, not their changing amounts); None when it can meet the goals.
+pub fn guarantee_key(g: &GuaranteeRecord) -> Option<Vec<String>> {
+    if !g.infeasible {
+        return None;
+    }
+    let mut key: Vec<String> = g
+        .margins
+        .iter()
+        .filter(|(_, m)| **m < 0.0)
+        .map(|(goal, _)| goal.clone())
+        .collect();
+    key.extend(g.failed_resources.iter().cloned());
+    Some(key)
+}
+
+/// The STATUSTEXT when the guarantee cannot meet the goals.
+pub fn guarantee_text(g: &GuaranteeRecord) -> String {
+    let short = shortfalls(g);
+    if short.is_empty() {
+        "Cannot meet the mission goals".to_string()
+    } else {
+        format!("Cannot meet goals: {}", short.join(", "))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use companion_core::record::{MdpProposal, ResourcesRecord};
+
+    fn b(motion: Option<&str>, tracking: Option<&str>) -> Behaviour {
+        Behaviour {
+            motion: motion.map(str::to_string),
+            tracking: tracking.map(str::to_string),
+        }
+    }
+
+    fn proposal(mdp: &str, actions: &[&str], inputs: &[(&str, f64)]) -> MdpProposal {
+        MdpProposal {
+            mdp: mdp.into(),
+            actions: actions.iter().map(|a| a.to_string()).collect(),
+            inputs: inputs.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+            ..Default::default()
+        }
+    }
+
+    fn guarantee(margins: &[(&str, f64)], failed: &[&str]) -> GuaranteeRecord {
+        GuaranteeRecord {
+            margins: margins.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+            failed_resources: failed.iter().map(|r| r.to_string()).collect(),
+            infeasible: true,
+            infeasible_reason: Some("negative energy_j margin -4200.0: no allocation".into()),
+            ..Default::default()
+        }
+    }
+
+    fn obs(vals: &[(&str, f64)]) -> BTreeMap<String, f64> {
+        vals.iter().map(|(k, v)| (k.to_string(), *v)).collect()
+    }
+
+    const NONE: Option<&MissionEnd> = None;
+
+    #[test]
+    fn a_low_battery_return_says_the_battery_and_what_the_vehicle_does() {
+        let rec = DecisionRecord {
+            actions: vec!["return_to_base".into()],
+            proposals: vec![
+                proposal("navigation", &["follow_trajectory"], &[("P_battery", 0.02)]),
+                proposal("landing", &["return_to_base"], &[("P_battery", 0.02)]),
+            ],
+            observations: obs(&[("battery_pct", 7.2)]),
+            guarantee: Some(guarantee(&[("energy_j", -4200.0)], &[])),
+            ..Default::default()
+        };
+        let was = b(Some("follow_trajectory"), None);
+        let now = b(Some("return_to_base"), None);
+        let text = behaviour_text(&now, &was, &rec, &BTreeMap::new(), NONE);
+        assert_eq!(text, "Battery 7%: returning home");
+    }
+
+    #[test]
+    fn an_energy_shortfall_return_says_how_much_energy_is_missing() {
+        let rec = DecisionRecord {
+            actions: vec!["return_to_base".into()],
+            proposals: vec![proposal(
+                "landing",
+                &["return_to_base"],
+                &[("P_battery", 0.9)],
+            )],
+            observations: obs(&[("battery_pct", 64.0)]),
+            guarantee: Some(guarantee(
+                &[("duration_s", 10.0), ("energy_j", -4210.0)],
+                &[],
+            )),
+            ..Default::default()
+        };
+        let text = behaviour_text(
+            &b(Some("return_to_base"), None),
+            &b(Some("follow_trajectory"), None),
+            &rec,
+            &BTreeMap::new(),
+            NONE,
+        );
+        assert_eq!(text, "Energy short 4.2 kJ: returning home");
+    }
+
+    #[test]
+    fn the_mission_scripts_landing_says_why_and_where() {
+        let rec = DecisionRecord {
+            shell_actions: vec!["land".into()],
+            events: vec![Event::ShellLand(
+                MissionEnd::SearchTimeLimit(120.0).to_string(),
+            )],
+            observations: obs(&[("zone_found", 0.0)]),
+            ..Default::default()
+        };
+        let end = MissionEnd::SearchTimeLimit(120.0);
+        let text = behaviour_text(
+            &b(Some("land"), None),
+            &b(Some("follow_trajectory"), None),
+            &rec,
+            &BTreeMap::new(),
+            Some(&end),
+        );
+        assert_eq!(text, "Search time over: landing here");
+    }
+
+    #[test]
+    fn a_tracking_version_change_names_the_evidence_that_changed() {
+        let was_ev: BTreeMap<String, String> = [("A_vibration", "low"), ("A_wind", "calm")]
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect();
+        let mut now_ev = was_ev.clone();
+        now_ev.insert("A_vibration".into(), "high".into());
+        let rec = DecisionRecord {
+            actions: vec!["track_v3".into()],
+            evidence: now_ev,
+            ..Default::default()
+        };
+        let text = behaviour_text(
+            &b(None, Some("v3")),
+            &b(None, Some("v0")),
+            &rec,
+            &was_ev,
+            NONE,
+        );
+        assert_eq!(text, "Vibration high: tracking with V3");
+        let tile = DecisionRecord {
+            resources: Some(ResourcesRecord {
+                failed_tiles: vec![2],
+                ..Default::default()
+            }),
+            ..rec
+        };
+        assert_eq!(
+            behaviour_text(
+                &b(None, Some("v5")),
+                &b(None, Some("v3")),
+                &tile,
+                &was_ev,
+                NONE
+            ),
+            "FPGA tile failed: tracking with V5"
+        );
+    }
+
+    #[test]
+    fn an_obstacle_sidestep_says_how_near_and_a_found_target_says_so() {
+        let rec = DecisionRecord {
+            observations: obs(&[("obstacle_m", 4.4)]),
+            events: vec![Event::ObstacleDetected],
+            ..Default::default()
+        };
+        assert_eq!(
+            behaviour_text(
+                &b(Some("avoid_obstacle"), None),
+                &b(Some("follow_trajectory"), None),
+                &rec,
+                &BTreeMap::new(),
+                NONE
+            ),
+            "Obstacle 4 m: avoiding the obstacle"
+        );
+        let found = DecisionRecord {
+            events: vec![Event::TargetDetected],
+            ..Default::default()
+        };
+        assert_eq!(
+            behaviour_text(
+                &b(None, Some("v0")),
+                &b(Some("follow_trajectory"), None),
+                &found,
+                &BTreeMap::new(),
+                NONE
+            ),
+            "Target found: tracking with V0"
+        );
+    }
+
+    #[test]
+    fn without_a_reason_the_text_says_only_what_the_vehicle_does() {
+        let rec = DecisionRecord::default();
+        assert_eq!(
+            behaviour_text(
+                &b(Some("take_off"), None),
+                &b(None, None),
+                &rec,
+                &BTreeMap::new(),
+                NONE
+            ),
+            "Taking off"
+        );
+        let by_model = DecisionRecord {
+            proposals: vec![proposal(
+                "tracking",
+                &["return_to_base"],
+                &[("P_battery", 0.9)],
+            )],
+            ..Default::default()
+        };
+        assert_eq!(
+            behaviour_text(
+                &b(Some("return_to_base"), None),
+                &b(Some("follow_trajectory"), None),
+                &by_model,
+                &BTreeMap::new(),
+                NONE
+            ),
+            "Tracking model: returning home"
+        );
+    }
+
+    #[test]
+    fn the_guarantee_text_names_each_shortfall_and_its_key_ignores_the_amounts() {
+        let g = guarantee(
+            &[("duration_s", -35.2), ("energy_j", -4210.0)],
+            &["lidar", "tile_slot:1", "tile_slot:2"],
+        );
+        assert_eq!(
+            guarantee_text(&g),
+            "Cannot meet goals: time short 35 s, energy short 4.2 kJ, lidar failed, FPGA tile failed"
+        );
+        let mut later = g.clone();
+        later.margins.insert("energy_j".into(), -5000.0);
+        assert_eq!(guarantee_key(&g), guarantee_key(&later));
+        later.margins.insert("duration_s".into(), 3.0);
+        assert_ne!(guarantee_key(&g), guarantee_key(&later));
+        later.infeasible = false;
+        assert_eq!(guarantee_key(&later), None);
+    }
+}
