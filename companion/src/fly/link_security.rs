@@ -98,10 +98,13 @@ impl LinkSecurity {
             due = true;
             let ready = first_due.is_some_and(|t| now.saturating_sub(t) >= TEXT_DELAY)
                 && last_said.is_none_or(|t| now.saturating_sub(t) >= TEXT_GAP);
-            if ready && let Some(m) = texts.say(now, severity, text) {
-                *done = true;
-                last_said = Some(now);
-                out.push(m);
+            if ready {
+                let msgs = texts.say(now, severity, text);
+                if !msgs.is_empty() {
+                    *done = true;
+                    last_said = Some(now);
+                    out.extend(msgs);
+                }
             }
         };
         if self.network && !self.keyed && chosen {
