@@ -2,11 +2,18 @@
 //! what the companion tells the ground station.
 //!
 //! `fly` connects, streams, decides and logs from the start, but commands no motion until the
-//! operator starts the mission: the pilot arms the vehicle (RC or GCS), or a ground station sends
-//! MAV_CMD_MISSION_START addressed to this companion (component 191). A mode change the companion
-//! did not command (the pilot switches to LOITER, POSHOLD, RTL, LAND, ..., or an autopilot
-//! failsafe does) stops its commanding until the operator hands control back: the start command
-//! again, or (ArduPilot) a switch to GUIDED. docs/mavlink.md, "Operator in command".
+//! operator starts the mission: a ground station sends MAV_CMD_MISSION_START addressed to this
+//! companion (component 191), or (ArduPilot) the pilot puts an armed vehicle into GUIDED, or, with
+//! `--start-on-arm` only, the pilot arms the vehicle. A start is only a request: the shell grants
+//! it when the models agree (the launch verdict) and refuses it otherwise. A granted start is used
+//! once: disarmed, or a failed take-off, before the vehicle is airborne voids it.
+//!
+//! Every confirmation takes wall time, not a count of frames (docs/mavlink.md, "What an attacker
+//! on an unsigned link can do"): a start by arming or by GUIDED, a hand-back and a takeover count
+//! only when every autopilot heartbeat over `confirm` agrees; a contradicting heartbeat resets
+//! the window. A takeover stops commanding at once (safety first) but is confirmed the same way:
+//! when the autopilot's heartbeats show the companion's own mode again within the window, the
+//! companion resumes and records a false alarm.
 //!
 //! [`GcsText`] is the STATUSTEXT outbox: MAVLink severities, no repeat of the same text within
 //! `repeat`, and at most `max_per_s` texts in any second.
@@ -24,6 +31,16 @@ pub enum Control {
     Waiting,
     /// The operator started the mission (or `--auto-start`): the companion commands.
     Started,
+    /// A mode the companion did not command was reported (`mode`, first at `since`): the
+    /// companion stopped commanding at once; the takeover is confirmed once every heartbeat over
+    /// the confirmation window shows a mode not the companion's, or withdrawn (a false alarm)
+    /// when one shows the companion's own mode again.
+    Unconfirmed {
+        /// Name of the mode the autopilot reported.
+        mode: String,
+        /// When it was first reported.
+        since: Duration,
+    },
     /// A mode the companion did not command (`mode`): the pilot or the autopilot flies.
     TakenOver {
         /// Name of the mode the autopilot reported.
@@ -32,11 +49,13 @@ pub enum Control {
 }
 
 impl Control {
-    /// The decision record's `vehicle.operator` value: `waiting`, `started` or `taken_over`.
+    /// The decision record's `vehicle.operator` value: `waiting`, `started`,
+    /// `takeover_unconfirmed` or `taken_over`.
     pub fn label(&self) -> &'static str {
         match self {
             Control::Waiting => "waiting",
             Control::Started => "started",
+            Control::Unconfirmed { .. } => "takeover_unconfirmed",
             Control::TakenOver { .. } => "taken_over",
         }
     }
@@ -47,21 +66,56 @@ impl Control {
 pub enum StartBy {
     /// `fly --auto-start`: no operator.
     AutoStart,
-    /// The pilot armed the vehicle.
+    /// The pilot armed the vehicle (`--start-on-arm` only).
     PilotArmed,
     /// MAV_CMD_MISSION_START from the ground station.
     StartCommand,
-    /// The pilot switched to GUIDED (hand-back only).
+    /// The pilot switched an armed vehicle to GUIDED (ArduPilot).
     GuidedSwitch,
+}
+
+impl StartBy {
+    /// How the operator asked, in words.
+    pub fn describe(self) -> &'static str {
+        match self {
+            StartBy::AutoStart => "--auto-start (no operator)",
+            StartBy::PilotArmed => "the pilot armed the vehicle (--start-on-arm)",
+            StartBy::StartCommand => "MAV_CMD_MISSION_START from the ground station",
+            StartBy::GuidedSwitch => "the pilot switched the armed vehicle to GUIDED",
+        }
+    }
+}
+
+/// Why a granted start was voided before the vehicle was airborne.
+#[derive(Debug, Clone, PartialEq)]
+pub enum VoidReason {
+    /// The autopilot reported the vehicle disarmed after it had been armed.
+    Disarmed,
+    /// The take-off failed (the step and the autopilot's answer).
+    TakeoffFailed(String),
 }
 
 /// What the gate decided on one observation.
 #[derive(Debug, Clone, PartialEq)]
 pub enum GateEvent {
+    /// The operator asks for a start: the shell grants it ([`OperatorGate::grant`]) when the
+    /// models agree, else refuses it ([`OperatorGate::refuse`]).
+    StartRequested(StartBy),
     /// The companion may command from now on.
     Started(StartBy),
-    /// A mode the companion did not command (its name): the companion stops commanding.
+    /// The start was refused (the models' reason, in words); the companion keeps waiting.
+    StartRefused(StartBy, String),
+    /// A granted start was voided before the vehicle was airborne: back to waiting, and no arming
+    /// without a new operator action.
+    StartVoided(VoidReason),
+    /// A mode the companion did not command (its name): commanding stopped at once, the
+    /// takeover waits for confirmation.
+    TakeoverSuspected(String),
+    /// The takeover is confirmed: the pilot or the autopilot flies in this mode.
     TakenOver(String),
+    /// The suspected takeover's mode (first) was not confirmed: the autopilot shows the
+    /// companion's own mode (second) again, and the companion resumes.
+    FalseAlarm(String, String),
     /// Control came back to the companion after a take-over.
     HandedBack(StartBy),
 }
@@ -70,17 +124,26 @@ impl GateEvent {
     /// The decision record's event text.
     pub fn describe(&self) -> String {
         match self {
-            GateEvent::Started(StartBy::AutoStart) => {
-                "operator: mission started by --auto-start (no operator)".into()
+            GateEvent::StartRequested(by) => {
+                format!("operator: start requested ({})", by.describe())
             }
-            GateEvent::Started(StartBy::PilotArmed) => {
-                "operator: mission started (the pilot armed the vehicle)".into()
-            }
-            GateEvent::Started(_) => {
-                "operator: mission started (MAV_CMD_MISSION_START from the ground station)".into()
-            }
+            GateEvent::Started(by) => format!("operator: mission started ({})", by.describe()),
+            GateEvent::StartRefused(by, why) => format!(
+                "operator: start refused ({}): {why}; still waiting for the operator",
+                by.describe()
+            ),
+            GateEvent::StartVoided(VoidReason::Disarmed) => "operator: start void: the vehicle was disarmed before it was airborne; waiting for a new start".into(),
+            GateEvent::StartVoided(VoidReason::TakeoffFailed(why)) => format!(
+                "operator: start void: the take-off failed before the vehicle was airborne ({why}); waiting for a new start"
+            ),
+            GateEvent::TakeoverSuspected(m) => format!(
+                "operator: mode {m} was not commanded by the companion: commanding stopped until every heartbeat confirms it or shows the companion's mode again"
+            ),
             GateEvent::TakenOver(m) => format!(
                 "operator: mode {m} was not commanded by the companion: the pilot or the autopilot has control; the companion stops commanding"
+            ),
+            GateEvent::FalseAlarm(m, own) => format!(
+                "operator: takeover not confirmed: {m} was reported, then the autopilot showed the companion's {own} again; commanding resumed (false alarm)"
             ),
             GateEvent::HandedBack(StartBy::GuidedSwitch) => {
                 "operator: control handed back (switch to GUIDED)".into()
@@ -104,8 +167,21 @@ pub struct VehicleView<'a> {
     pub mode: Option<&'a str>,
     /// Consecutive autopilot heartbeats that reported the vehicle armed (0 when disarmed).
     pub armed_heartbeats: u32,
+    /// Every autopilot heartbeat has reported the vehicle armed for this long (None when the
+    /// last one reported it disarmed).
+    pub armed_for: Option<Duration>,
+    /// Every autopilot heartbeat has shown `custom_mode` for this long.
+    pub mode_for: Duration,
+    /// The vehicle has been airborne in this flight (the mission estimator's word).
+    pub airborne: bool,
     /// Modes the companion commanded, with the time it sent each (newest last).
     pub commanded_modes: &'a [(String, Duration)],
+}
+
+impl VehicleView<'_> {
+    fn armed(&self) -> bool {
+        self.armed_heartbeats > 0
+    }
 }
 
 /// The operator gate: one per `fly` run; [`OperatorGate::new_flight`] after each landing.
@@ -115,29 +191,54 @@ pub struct OperatorGate {
     pub control: Control,
     /// A mode change to a mode commanded less than this long ago is the companion's own.
     pub grace: Duration,
-    /// Armed reported by this many consecutive heartbeats starts the mission (one spoofed or
-    /// corrupt heartbeat cannot).
+    /// Armed (or in GUIDED, or the pilot's mode) on every autopilot heartbeat for this long
+    /// confirms a start by arming, a start or hand-back by GUIDED, and a takeover.
+    pub confirm: Duration,
+    /// Armed reported by at least this many consecutive heartbeats besides `confirm` (one
+    /// spoofed or corrupt heartbeat cannot start anything).
     pub armed_heartbeats_to_start: u32,
+    /// `--start-on-arm`: the pilot arming the vehicle is a start request.
+    pub start_on_arm: bool,
+    /// `--auto-start`: a start is requested until the models grant it.
+    auto_start_pending: bool,
     last_custom_mode: Option<u32>,
     /// The vehicle was seen disarmed since the gate began waiting: only then is arming the
     /// pilot's start (a companion started next to a vehicle already flying does not take it).
     seen_disarmed: bool,
+    /// This run of armed heartbeats already made a start request (granted or refused).
+    arm_used: bool,
+    /// The pilot switched the armed vehicle into GUIDED while the gate waited or had handed
+    /// control over; consumed by the request it makes.
+    guided_entered: bool,
+    /// The vehicle was armed since the start was granted (a disarm after that voids the start
+    /// while not airborne).
+    armed_since_start: bool,
 }
 
 impl OperatorGate {
-    /// `auto_start`: start at once (SITL and tests), as the first [`GateEvent`] of the run.
+    /// `auto_start`: request a start at once (SITL and tests); it is granted like any other, when
+    /// the models agree.
     pub fn new(auto_start: bool) -> Self {
         Self {
-            control: if auto_start {
-                Control::Started
-            } else {
-                Control::Waiting
-            },
+            control: Control::Waiting,
             grace: Duration::from_secs(5),
+            confirm: Duration::from_secs(2),
             armed_heartbeats_to_start: 2,
+            start_on_arm: false,
+            auto_start_pending: auto_start,
             last_custom_mode: None,
             seen_disarmed: false,
+            arm_used: false,
+            guided_entered: false,
+            armed_since_start: false,
         }
+    }
+
+    /// A gate already commanding (soak and fuzz runs of the cycle, no operator).
+    pub fn started() -> Self {
+        let mut g = Self::new(false);
+        g.control = Control::Started;
+        g
     }
 
     /// The companion may command motion now.
@@ -149,16 +250,52 @@ impl OperatorGate {
     pub fn new_flight(&mut self) {
         self.control = Control::Waiting;
         self.seen_disarmed = false;
+        self.arm_used = true; // the arming of the flight just flown is not a new start
+        self.guided_entered = false;
+        self.armed_since_start = false;
     }
 
-    /// A MAV_CMD_MISSION_START addressed to us. Returns the event (a start or a hand-back).
+    /// Grant a requested start (the models agree).
+    pub fn grant(&mut self, by: StartBy) -> GateEvent {
+        if by == StartBy::AutoStart {
+            self.auto_start_pending = false;
+        }
+        self.control = Control::Started;
+        self.armed_since_start = false;
+        GateEvent::Started(by)
+    }
+
+    /// Refuse a requested start (the models do not agree): still waiting. An `--auto-start`
+    /// request stays pending (asked again each turn, said once per reason by the shell).
+    pub fn refuse(&mut self, by: StartBy, why: &str) -> GateEvent {
+        GateEvent::StartRefused(by, why.to_string())
+    }
+
+    /// The take-off failed: a granted start not yet airborne is void.
+    pub fn takeoff_failed(&mut self, airborne: bool, why: &str) -> Option<GateEvent> {
+        if self.control == Control::Started && !airborne {
+            self.void();
+            return Some(GateEvent::StartVoided(VoidReason::TakeoffFailed(
+                why.to_string(),
+            )));
+        }
+        None
+    }
+
+    fn void(&mut self) {
+        self.control = Control::Waiting;
+        self.auto_start_pending = false; // --auto-start starts the first flight only
+        self.armed_since_start = false;
+        self.arm_used = true;
+        self.guided_entered = false;
+    }
+
+    /// A MAV_CMD_MISSION_START addressed to us from a ground station. Returns the event (a start
+    /// request or a hand-back).
     pub fn on_start_command(&mut self) -> Option<GateEvent> {
         match self.control {
-            Control::Waiting => {
-                self.control = Control::Started;
-                Some(GateEvent::Started(StartBy::StartCommand))
-            }
-            Control::TakenOver { .. } => {
+            Control::Waiting => Some(GateEvent::StartRequested(StartBy::StartCommand)),
+            Control::TakenOver { .. } | Control::Unconfirmed { .. } => {
                 self.control = Control::Started;
                 Some(GateEvent::HandedBack(StartBy::StartCommand))
             }
@@ -166,48 +303,92 @@ impl OperatorGate {
         }
     }
 
-    /// One look at the vehicle: a pilot's arming starts the mission; a mode change the companion
-    /// did not command is a takeover; GUIDED (ArduPilot) hands control back.
+    /// One look at the vehicle: start requests (GUIDED, arming with `--start-on-arm`,
+    /// `--auto-start`), a disarm that voids a start, a takeover and its confirmation, a hand-back.
     pub fn observe(&mut self, now: Duration, v: &VehicleView) -> Option<GateEvent> {
-        if v.armed_heartbeats == 0 && v.mode.is_some() {
+        if v.mode.is_none() {
+            return None; // no heartbeat yet
+        }
+        if !v.armed() {
             self.seen_disarmed = true;
+            self.arm_used = false;
         }
-        let changed = v.mode.is_some() && self.last_custom_mode != Some(v.custom_mode);
+        let changed = self.last_custom_mode != Some(v.custom_mode);
         let first_mode = self.last_custom_mode.is_none();
-        if v.mode.is_some() {
-            self.last_custom_mode = Some(v.custom_mode);
+        self.last_custom_mode = Some(v.custom_mode);
+        let in_guided =
+            v.flavor == Flavor::ArduPilot && modes::is_in_mode(v.flavor, v.custom_mode, "GUIDED");
+        if !in_guided || !v.armed() {
+            self.guided_entered = false;
+        } else if changed && !first_mode && !self.is_own_mode(now, v) {
+            self.guided_entered = true;
         }
+        let guided_held = self.guided_entered && v.mode_for >= self.confirm;
         match &self.control {
             Control::Waiting => {
-                if v.armed_heartbeats >= self.armed_heartbeats_to_start && self.seen_disarmed {
-                    self.control = Control::Started;
-                    return Some(GateEvent::Started(StartBy::PilotArmed));
+                if self.auto_start_pending {
+                    return Some(GateEvent::StartRequested(StartBy::AutoStart));
+                }
+                if guided_held {
+                    self.guided_entered = false;
+                    return Some(GateEvent::StartRequested(StartBy::GuidedSwitch));
+                }
+                if self.start_on_arm
+                    && !self.arm_used
+                    && self.seen_disarmed
+                    && v.armed_heartbeats >= self.armed_heartbeats_to_start
+                    && v.armed_for.is_some_and(|d| d >= self.confirm)
+                {
+                    self.arm_used = true;
+                    return Some(GateEvent::StartRequested(StartBy::PilotArmed));
                 }
                 None
             }
             Control::Started => {
+                if v.armed() {
+                    self.armed_since_start = true;
+                } else if self.armed_since_start && !v.airborne {
+                    self.void();
+                    return Some(GateEvent::StartVoided(VoidReason::Disarmed));
+                }
                 if !changed || first_mode {
                     return None;
                 }
                 // Disarmed, nothing moves: a mode change on the ground (ArduCopter reads the RC
                 // mode switch at start-up and leaves GUIDED for it) takes no flight from the
                 // companion. Its take-off arms only in the mode it set (the vehicle's ARM step).
-                if v.armed_heartbeats == 0 {
+                if !v.armed() {
                     return None;
                 }
                 if self.is_own_mode(now, v) {
                     return None;
                 }
                 let name = v.mode.unwrap_or("?").to_string();
-                self.control = Control::TakenOver { mode: name.clone() };
-                Some(GateEvent::TakenOver(name))
+                self.control = Control::Unconfirmed {
+                    mode: name.clone(),
+                    since: now,
+                };
+                Some(GateEvent::TakeoverSuspected(name))
+            }
+            Control::Unconfirmed { mode, .. } => {
+                let mode = mode.clone();
+                if self.is_own_mode(now, v) {
+                    self.control = Control::Started;
+                    return Some(GateEvent::FalseAlarm(
+                        mode,
+                        v.mode.unwrap_or("?").to_string(),
+                    ));
+                }
+                if v.mode_for >= self.confirm {
+                    let name = v.mode.unwrap_or("?").to_string();
+                    self.control = Control::TakenOver { mode: name.clone() };
+                    return Some(GateEvent::TakenOver(name));
+                }
+                None
             }
             Control::TakenOver { .. } => {
-                if changed
-                    && v.flavor == Flavor::ArduPilot
-                    && modes::is_in_mode(v.flavor, v.custom_mode, "GUIDED")
-                    && !self.is_own_mode(now, v)
-                {
+                if guided_held {
+                    self.guided_entered = false;
                     self.control = Control::Started;
                     return Some(GateEvent::HandedBack(StartBy::GuidedSwitch));
                 }
@@ -389,60 +570,199 @@ mod tests {
     const LOITER: u32 = 5;
     const AUTO: u32 = 3;
     const LAND: u32 = 9;
+    const STABILIZE: u32 = 0;
 
-    fn view<'a>(
-        mode: u32,
-        name: &'a str,
+    /// A simulated autopilot heartbeat stream as the vehicle tracks it: the view after each
+    /// heartbeat, with `armed_for` and `mode_for` computed over the frames fed so far (a
+    /// contradicting frame resets them, as `Vehicle::on_frame` does).
+    struct Feed {
+        cmds: Vec<(String, Duration)>,
+        armed_since: Option<Duration>,
         armed_hb: u32,
-        cmds: &'a [(String, Duration)],
-    ) -> VehicleView<'a> {
-        VehicleView {
-            flavor: Flavor::ArduPilot,
-            custom_mode: mode,
-            mode: Some(name),
-            armed_heartbeats: armed_hb,
-            commanded_modes: cmds,
+        mode: u32,
+        mode_since: Duration,
+        airborne: bool,
+        last: Option<(Duration, u32, bool)>,
+    }
+
+    fn name(mode: u32) -> &'static str {
+        match mode {
+            GUIDED => "GUIDED",
+            LOITER => "LOITER",
+            AUTO => "AUTO",
+            LAND => "LAND",
+            _ => "STABILIZE",
+        }
+    }
+
+    impl Feed {
+        fn new() -> Self {
+            Self {
+                cmds: Vec::new(),
+                armed_since: None,
+                armed_hb: 0,
+                mode: u32::MAX,
+                mode_since: Duration::ZERO,
+                airborne: false,
+                last: None,
+            }
+        }
+        fn hb(&mut self, t: f64, mode: u32, armed: bool) {
+            let t = s(t);
+            if armed {
+                self.armed_since.get_or_insert(t);
+                self.armed_hb += 1;
+            } else {
+                self.armed_since = None;
+                self.armed_hb = 0;
+            }
+            if mode != self.mode {
+                self.mode = mode;
+                self.mode_since = t;
+            }
+            self.last = Some((t, mode, armed));
+        }
+        fn view(&self, now: Duration) -> VehicleView<'_> {
+            VehicleView {
+                flavor: Flavor::ArduPilot,
+                custom_mode: self.mode,
+                mode: self.last.map(|(_, m, _)| name(m)),
+                armed_heartbeats: self.armed_hb,
+                armed_for: self.armed_since.map(|a| now.saturating_sub(a)),
+                mode_for: now.saturating_sub(self.mode_since),
+                airborne: self.airborne,
+                commanded_modes: &self.cmds,
+            }
+        }
+        /// Feed a heartbeat and let the gate look, at the heartbeat's time.
+        fn at(&mut self, g: &mut OperatorGate, t: f64, mode: u32, armed: bool) -> Option<GateEvent> {
+            self.hb(t, mode, armed);
+            g.observe(s(t), &self.view(s(t)))
+        }
+        /// The gate looks without a new heartbeat (the loop's 100 ms tick).
+        fn look(&self, g: &mut OperatorGate, t: f64) -> Option<GateEvent> {
+            g.observe(s(t), &self.view(s(t)))
         }
     }
 
     #[test]
-    fn waits_until_the_pilot_arms_in_two_heartbeats() {
+    fn arming_is_no_start_without_start_on_arm() {
         let mut g = OperatorGate::new(false);
-        assert!(!g.commanding());
-        assert_eq!(g.observe(s(1.0), &view(0, "STABILIZE", 0, &[])), None);
-        // One heartbeat saying armed (spoofed or a glitch) is not a start.
-        assert_eq!(g.observe(s(2.0), &view(0, "STABILIZE", 1, &[])), None);
-        assert!(!g.commanding());
+        let mut f = Feed::new();
+        assert_eq!(f.at(&mut g, 0.0, LOITER, false), None);
+        for i in 1..20 {
+            assert_eq!(f.at(&mut g, f64::from(i), LOITER, true), None);
+        }
+        assert_eq!(g.control, Control::Waiting);
+    }
+
+    #[test]
+    fn with_start_on_arm_every_heartbeat_armed_for_two_seconds_requests_a_start_once() {
+        let mut g = OperatorGate::new(false);
+        g.start_on_arm = true;
+        let mut f = Feed::new();
+        assert_eq!(f.at(&mut g, 1.0, STABILIZE, false), None);
+        assert_eq!(f.at(&mut g, 2.0, STABILIZE, true), None);
+        assert_eq!(f.at(&mut g, 3.0, STABILIZE, true), None, "two heartbeats, 1 s");
         assert_eq!(
-            g.observe(s(3.0), &view(0, "STABILIZE", 2, &[])),
-            Some(GateEvent::Started(StartBy::PilotArmed))
+            f.look(&mut g, 4.0),
+            Some(GateEvent::StartRequested(StartBy::PilotArmed))
         );
-        assert!(g.commanding());
+        assert_eq!(f.look(&mut g, 4.1), None, "one request per arming");
+        let ev = g.refuse(StartBy::PilotArmed, "battery 12%");
+        assert!(matches!(ev, GateEvent::StartRefused(..)));
+        assert_eq!(f.at(&mut g, 5.0, STABILIZE, true), None, "refused: not asked again");
+        // Disarm and arm again: a new operator action.
+        assert_eq!(f.at(&mut g, 6.0, STABILIZE, false), None);
+        assert_eq!(f.at(&mut g, 7.0, STABILIZE, true), None);
+        assert_eq!(
+            f.at(&mut g, 9.0, STABILIZE, true),
+            Some(GateEvent::StartRequested(StartBy::PilotArmed))
+        );
+    }
+
+    #[test]
+    fn two_back_to_back_spoofed_armed_heartbeats_request_nothing() {
+        let mut g = OperatorGate::new(false);
+        g.start_on_arm = true;
+        let mut f = Feed::new();
+        let mut t = 0.0;
+        for _ in 0..10 {
+            assert_eq!(f.at(&mut g, t, STABILIZE, false), None);
+            // two spoofed frames in one write, then the real disarmed heartbeat a second later
+            assert_eq!(f.at(&mut g, t + 0.3, STABILIZE, true), None);
+            assert_eq!(f.at(&mut g, t + 0.3, STABILIZE, true), None);
+            assert_eq!(f.look(&mut g, t + 0.9), None);
+            t += 1.0;
+        }
+        assert_eq!(g.control, Control::Waiting);
+    }
+
+    #[test]
+    fn guided_switch_of_an_armed_vehicle_requests_a_start_after_two_seconds() {
+        let mut g = OperatorGate::new(false);
+        let mut f = Feed::new();
+        f.at(&mut g, 0.0, LOITER, false);
+        f.at(&mut g, 1.0, LOITER, true);
+        assert_eq!(f.at(&mut g, 2.0, GUIDED, true), None);
+        assert_eq!(f.at(&mut g, 3.0, GUIDED, true), None);
+        assert_eq!(
+            f.at(&mut g, 4.0, GUIDED, true),
+            Some(GateEvent::StartRequested(StartBy::GuidedSwitch))
+        );
+        assert_eq!(f.at(&mut g, 5.0, GUIDED, true), None, "once per switch");
+    }
+
+    #[test]
+    fn a_guided_heartbeat_among_real_loiter_ones_is_no_start_and_no_hand_back() {
+        for taken_over in [false, true] {
+            let mut g = OperatorGate::new(false);
+            if taken_over {
+                g.control = Control::TakenOver {
+                    mode: "LOITER".into(),
+                };
+            }
+            let mut f = Feed::new();
+            f.at(&mut g, 0.0, LOITER, true);
+            for i in 1..10 {
+                let t = f64::from(i);
+                assert_eq!(f.at(&mut g, t, LOITER, true), None);
+                assert_eq!(f.at(&mut g, t + 0.5, GUIDED, true), None, "spoofed");
+                assert_eq!(f.look(&mut g, t + 0.9), None);
+            }
+            assert!(!g.commanding());
+        }
     }
 
     #[test]
     fn a_mode_change_on_the_ground_disarmed_is_not_a_takeover() {
         // ArduCopter SITL: GUIDED accepted, then STABILIZE from the RC mode switch, disarmed.
-        let mut g = OperatorGate::new(true);
-        let cmds = vec![("GUIDED".to_string(), s(1.0))];
-        assert_eq!(g.observe(s(1.0), &view(0, "STABILIZE", 0, &cmds)), None);
-        assert_eq!(g.observe(s(1.5), &view(GUIDED, "GUIDED", 0, &cmds)), None);
-        assert_eq!(g.observe(s(9.0), &view(0, "STABILIZE", 0, &cmds)), None);
+        let mut g = OperatorGate::started();
+        let mut f = Feed::new();
+        f.cmds = vec![("GUIDED".to_string(), s(1.0))];
+        assert_eq!(f.at(&mut g, 1.0, STABILIZE, false), None);
+        assert_eq!(f.at(&mut g, 1.5, GUIDED, false), None);
+        assert_eq!(f.at(&mut g, 9.0, STABILIZE, false), None);
         assert!(g.commanding());
-        // Armed, the same change is the pilot's.
-        assert_eq!(g.observe(s(20.0), &view(GUIDED, "GUIDED", 2, &cmds)), None);
+        // Armed, the same change is the pilot's (suspected at once).
+        assert_eq!(f.at(&mut g, 20.0, GUIDED, true), None);
         assert_eq!(
-            g.observe(s(30.0), &view(0, "STABILIZE", 2, &cmds)),
-            Some(GateEvent::TakenOver("STABILIZE".into()))
+            f.at(&mut g, 30.0, STABILIZE, true),
+            Some(GateEvent::TakeoverSuspected("STABILIZE".into()))
         );
     }
 
     #[test]
-    fn start_command_starts_and_hands_back() {
+    fn start_command_requests_and_hands_back() {
         let mut g = OperatorGate::new(false);
         assert_eq!(
             g.on_start_command(),
-            Some(GateEvent::Started(StartBy::StartCommand))
+            Some(GateEvent::StartRequested(StartBy::StartCommand))
+        );
+        assert_eq!(g.control, Control::Waiting, "only a request");
+        assert_eq!(
+            g.grant(StartBy::StartCommand),
+            GateEvent::Started(StartBy::StartCommand)
         );
         assert_eq!(g.on_start_command(), None, "already started");
         g.control = Control::TakenOver {
@@ -455,58 +775,147 @@ mod tests {
     }
 
     #[test]
-    fn a_mode_the_companion_did_not_command_is_a_takeover() {
-        let mut g = OperatorGate::new(true);
-        let cmds = vec![("GUIDED".to_string(), s(1.0))];
-        assert_eq!(g.observe(s(1.0), &view(0, "STABILIZE", 2, &cmds)), None);
-        assert_eq!(g.observe(s(1.5), &view(GUIDED, "GUIDED", 2, &cmds)), None);
-        let cmds = vec![
+    fn a_takeover_stops_at_once_and_is_confirmed_after_two_seconds_of_heartbeats() {
+        let mut g = OperatorGate::started();
+        let mut f = Feed::new();
+        f.airborne = true;
+        f.cmds = vec![
             ("GUIDED".to_string(), s(1.0)),
             ("AUTO".to_string(), s(10.0)),
         ];
-        assert_eq!(g.observe(s(10.5), &view(AUTO, "AUTO", 2, &cmds)), None);
+        assert_eq!(f.at(&mut g, 10.5, AUTO, true), None);
         assert!(g.commanding());
         assert_eq!(
-            g.observe(s(30.0), &view(LOITER, "LOITER", 2, &cmds)),
+            f.at(&mut g, 30.0, LOITER, true),
+            Some(GateEvent::TakeoverSuspected("LOITER".into()))
+        );
+        assert!(!g.commanding(), "commanding stops at once");
+        assert_eq!(f.at(&mut g, 31.0, LOITER, true), None);
+        assert_eq!(
+            f.at(&mut g, 32.0, LOITER, true),
             Some(GateEvent::TakenOver("LOITER".into()))
         );
-        assert!(!g.commanding());
         // The pilot moves on to LAND: still theirs.
-        assert_eq!(g.observe(s(31.0), &view(LAND, "LAND", 2, &cmds)), None);
+        assert_eq!(f.at(&mut g, 33.0, LAND, true), None);
         assert_eq!(
             g.control,
             Control::TakenOver {
                 mode: "LAND".into()
             }
         );
-        // Switching to GUIDED hands control back.
+        // Switching to GUIDED and staying there hands control back.
+        assert_eq!(f.at(&mut g, 40.0, GUIDED, true), None);
+        assert_eq!(f.at(&mut g, 41.0, GUIDED, true), None);
         assert_eq!(
-            g.observe(s(40.0), &view(GUIDED, "GUIDED", 2, &cmds)),
+            f.at(&mut g, 42.0, GUIDED, true),
             Some(GateEvent::HandedBack(StartBy::GuidedSwitch))
         );
         assert!(g.commanding());
     }
 
     #[test]
-    fn a_late_heartbeat_of_an_earlier_command_is_not_a_takeover() {
-        let mut g = OperatorGate::new(true);
-        // AUTO commanded at 5 s, GUIDED at 6 s; the heartbeat showing AUTO arrives at 6.5 s.
-        let cmds = vec![("AUTO".to_string(), s(5.0)), ("GUIDED".to_string(), s(6.0))];
-        g.observe(s(4.0), &view(GUIDED, "GUIDED", 2, &cmds));
-        assert_eq!(g.observe(s(6.5), &view(AUTO, "AUTO", 2, &cmds)), None);
-        assert_eq!(g.observe(s(7.0), &view(GUIDED, "GUIDED", 2, &cmds)), None);
+    fn one_spoofed_loiter_heartbeat_is_a_false_alarm_and_commanding_resumes() {
+        let mut g = OperatorGate::started();
+        let mut f = Feed::new();
+        f.airborne = true;
+        f.cmds = vec![("AUTO".to_string(), s(10.0))];
+        assert_eq!(f.at(&mut g, 20.0, AUTO, true), None);
+        assert_eq!(
+            f.at(&mut g, 20.4, LOITER, true),
+            Some(GateEvent::TakeoverSuspected("LOITER".into()))
+        );
+        assert_eq!(f.look(&mut g, 20.9), None);
+        assert_eq!(
+            f.at(&mut g, 21.0, AUTO, true),
+            Some(GateEvent::FalseAlarm("LOITER".into(), "AUTO".into()))
+        );
         assert!(g.commanding());
+    }
+
+    #[test]
+    fn a_late_heartbeat_of_an_earlier_command_is_not_a_takeover() {
+        let mut g = OperatorGate::started();
+        let mut f = Feed::new();
+        // AUTO commanded at 5 s, GUIDED at 6 s; the heartbeat showing AUTO arrives at 6.5 s.
+        f.cmds = vec![("AUTO".to_string(), s(5.0)), ("GUIDED".to_string(), s(6.0))];
+        f.at(&mut g, 4.0, GUIDED, true);
+        assert_eq!(f.at(&mut g, 6.5, AUTO, true), None);
+        assert_eq!(f.at(&mut g, 7.0, GUIDED, true), None);
+        assert!(g.commanding());
+    }
+
+    #[test]
+    fn a_disarm_before_airborne_voids_the_start_and_nothing_restarts_it() {
+        let mut g = OperatorGate::new(false);
+        g.start_on_arm = true;
+        let mut f = Feed::new();
+        f.at(&mut g, 0.0, STABILIZE, false);
+        f.at(&mut g, 1.0, STABILIZE, true);
+        f.at(&mut g, 2.0, STABILIZE, true);
+        assert_eq!(
+            f.at(&mut g, 3.0, STABILIZE, true),
+            Some(GateEvent::StartRequested(StartBy::PilotArmed))
+        );
+        g.grant(StartBy::PilotArmed);
+        assert_eq!(f.at(&mut g, 4.0, STABILIZE, true), None);
+        // ArduCopter's DISARM_DELAY: disarmed on the ground.
+        assert_eq!(
+            f.at(&mut g, 12.0, STABILIZE, false),
+            Some(GateEvent::StartVoided(VoidReason::Disarmed))
+        );
+        assert_eq!(g.control, Control::Waiting);
+        for i in 13..80 {
+            assert_eq!(f.at(&mut g, f64::from(i), STABILIZE, false), None);
+        }
+        assert!(!g.commanding());
+    }
+
+    #[test]
+    fn a_failed_take_off_voids_only_before_airborne() {
+        let mut g = OperatorGate::started();
+        assert_eq!(
+            g.takeoff_failed(false, "SET_MODE GUIDED: DENIED"),
+            Some(GateEvent::StartVoided(VoidReason::TakeoffFailed(
+                "SET_MODE GUIDED: DENIED".into()
+            )))
+        );
+        assert!(!g.commanding());
+        let mut g = OperatorGate::started();
+        assert_eq!(g.takeoff_failed(true, "x"), None);
+        assert!(g.commanding());
+    }
+
+    #[test]
+    fn auto_start_is_requested_until_granted_then_never_again() {
+        let mut g = OperatorGate::new(true);
+        let mut f = Feed::new();
+        assert_eq!(
+            f.at(&mut g, 0.0, STABILIZE, false),
+            Some(GateEvent::StartRequested(StartBy::AutoStart))
+        );
+        g.refuse(StartBy::AutoStart, "energy short");
+        assert_eq!(
+            f.at(&mut g, 1.0, STABILIZE, false),
+            Some(GateEvent::StartRequested(StartBy::AutoStart))
+        );
+        g.grant(StartBy::AutoStart);
+        g.new_flight();
+        assert_eq!(f.at(&mut g, 2.0, STABILIZE, false), None);
     }
 
     #[test]
     fn armed_before_waiting_is_not_a_start_until_seen_disarmed() {
         let mut g = OperatorGate::new(false);
+        g.start_on_arm = true;
         g.new_flight();
-        assert_eq!(g.observe(s(1.0), &view(LAND, "LAND", 5, &[])), None);
-        assert_eq!(g.observe(s(2.0), &view(LAND, "LAND", 0, &[])), None);
+        let mut f = Feed::new();
+        assert_eq!(f.at(&mut g, 1.0, LAND, true), None);
+        assert_eq!(f.at(&mut g, 5.0, LAND, true), None);
+        assert_eq!(f.at(&mut g, 6.0, LAND, false), None);
+        f.at(&mut g, 7.0, LAND, true);
         assert_eq!(
-            g.observe(s(3.0), &view(LAND, "LAND", 2, &[])),
-            Some(GateEvent::Started(StartBy::PilotArmed))
+            f.at(&mut g, 9.0, LAND, true),
+            Some(GateEvent::StartRequested(StartBy::PilotArmed))
         );
     }
 
