@@ -516,6 +516,51 @@ pub struct FlightParams {
     pub mode_confirm_s: f64,
     /// PX4: SET_MODE sent at most this many times while the vehicle stays in its earlier mode.
     pub max_mode_attempts: u32,
+    /// A start by GUIDED (or by arming, with `--start-on-arm`), a takeover and a hand-back count
+    /// only when every autopilot heartbeat over this long (s) agrees.
+    pub operator_confirm_s: f64,
+    /// A command addressed to the companion that waited longer than this (s) is refused with a
+    /// COMMAND_ACK, never run late.
+    pub command_max_age_s: f64,
+    /// What the vehicle is told to do when the companion stops while it commands an armed
+    /// vehicle (SIGINT, SIGTERM, a fatal error): `none`, `hold`, `rtl` or `land`.
+    pub handoff: Handoff,
+}
+
+/// The hand-off when the companion stops in flight (params/link.toml `[flight] handoff`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Handoff {
+    /// Tell the ground station only; the vehicle goes on with what it was doing.
+    None,
+    /// Hold position (LOITER) where it is.
+    Hold,
+    /// Return to launch and land there (the autopilot's own RTL).
+    Rtl,
+    /// Land where it is.
+    Land,
+}
+
+impl Handoff {
+    /// The flight mode the hand-off sets (the names params/commands.toml uses), if any.
+    pub fn mode(self) -> Option<&'static str> {
+        match self {
+            Handoff::None => None,
+            Handoff::Hold => Some("LOITER"),
+            Handoff::Rtl => Some("RTL"),
+            Handoff::Land => Some("LAND"),
+        }
+    }
+
+    /// What the vehicle will do, for the pilot.
+    pub fn pilot_words(self) -> &'static str {
+        match self {
+            Handoff::None => "vehicle continues",
+            Handoff::Hold => "holding",
+            Handoff::Rtl => "RTL",
+            Handoff::Land => "landing",
+        }
+    }
 }
 
 impl Default for FlightParams {
@@ -530,6 +575,9 @@ impl Default for FlightParams {
             statustext_max_per_s: 2,
             mode_confirm_s: 3.0,
             max_mode_attempts: 3,
+            operator_confirm_s: 2.0,
+            command_max_age_s: 2.0,
+            handoff: Handoff::Rtl,
         }
     }
 }
@@ -538,7 +586,7 @@ impl FlightParams {
     /// Every number finite and in range, against `decision_period_s`.
     fn check(&self, path: &Path, decision_period_s: f64) -> Result<(), SpecError> {
         let within = |v: f64, lo: f64, hi: f64| v.is_finite() && v > lo && v <= hi;
-        let checks: [(&str, bool, String); 9] = [
+        let checks: [(&str, bool, String); 11] = [
             (
                 "flight.min_event_cycle_interval_s",
                 within(self.min_event_cycle_interval_s, 0.0, decision_period_s),
@@ -583,6 +631,16 @@ impl FlightParams {
                 "flight.max_mode_attempts",
                 (1..=10).contains(&self.max_mode_attempts),
                 "must be 1..10".into(),
+            ),
+            (
+                "flight.operator_confirm_s",
+                within(self.operator_confirm_s, 0.0, 30.0),
+                "must be in (0, 30] s".into(),
+            ),
+            (
+                "flight.command_max_age_s",
+                within(self.command_max_age_s, 0.0, 60.0),
+                "must be in (0, 60] s".into(),
             ),
         ];
         for (entry, ok, why) in checks {

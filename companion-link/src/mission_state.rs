@@ -35,6 +35,12 @@ pub struct Extra<'a> {
     /// EXTENDED_SYS_STATE landed state (`ON_GROUND`, `IN_AIR`, `TAKEOFF`, `LANDING`), once
     /// reported.
     pub landed_state: Option<&'a str>,
+    /// How long every autopilot frame has agreed that the vehicle is disarmed on the ground
+    /// (s; 0 when the last one disagreed), when the caller watches frames (the fly shell). The
+    /// flight then ends only after `landed_confirm_s` of it: a frame in between that says
+    /// otherwise restarts the wait, so spoofed "landed" frames between the autopilot's own
+    /// cannot end a flight.
+    pub down_for_s: Option<f64>,
 }
 
 /// Mission-state estimator; one per flight.
@@ -148,6 +154,11 @@ impl MissionState {
         self.finished
     }
 
+    /// The vehicle has been airborne in this flight (armed at or above `airborne_m`).
+    pub fn flown(&self) -> bool {
+        self.flown
+    }
+
     /// The route was uploaded and flown in AUTO once.
     pub fn route_on_vehicle(&self) -> bool {
         self.auto_seen
@@ -188,7 +199,11 @@ impl MissionState {
         } else {
             None
         };
+        let frames_agree = extra
+            .down_for_s
+            .is_none_or(|d| d >= self.landed_confirm_s);
         if self.flown
+            && frames_agree
             && let Some((since, n)) = self.ground_since
             && n >= 2
             && t - since >= self.landed_confirm_s
@@ -435,6 +450,7 @@ mod tests {
         let auto = Extra {
             mode: Some("AUTO"),
             landed_state: Some("IN_AIR"),
+            ..Extra::default()
         };
         assert_eq!(m.update(&obs(1.0, &flying()), &auto), "wpi");
         // One heartbeat says disarmed; altitude and landed state say flying.
@@ -453,10 +469,12 @@ mod tests {
         let in_air = Extra {
             mode: Some("LAND"),
             landed_state: Some("IN_AIR"),
+            ..Extra::default()
         };
         let on_ground = Extra {
             mode: Some("LAND"),
             landed_state: Some("ON_GROUND"),
+            ..Extra::default()
         };
         m.update(&obs(1.0, &flying()), &in_air);
         assert_eq!(
@@ -489,6 +507,26 @@ mod tests {
         assert!(!m.finished());
         m.update(&obs(10.0, &down), &Extra::default());
         m.update(&obs(13.0, &down), &Extra::default());
+        assert!(m.finished());
+    }
+
+    #[test]
+    fn landed_snapshots_end_the_flight_only_when_every_frame_agreed_for_the_confirm_time() {
+        // Spoofed "disarmed on the ground" frames make every snapshot look landed, but the
+        // autopilot's own armed heartbeats in between keep the frame window short.
+        let mut m = MissionState::new(&route(), 10.0, states());
+        m.update(&obs(1.0, &flying()), &Extra::default());
+        let down = [("armed", 0.0), ("altitude_m", 0.0)];
+        let spoofed = |d: f64| Extra {
+            landed_state: Some("ON_GROUND"),
+            down_for_s: Some(d),
+            ..Extra::default()
+        };
+        for (i, t) in [2.0, 3.0, 4.0, 5.0, 6.0, 7.0].into_iter().enumerate() {
+            m.update(&obs(t, &down), &spoofed(0.2 * i as f64 % 0.9));
+            assert!(!m.finished(), "at {t} s");
+        }
+        m.update(&obs(8.0, &down), &spoofed(3.0));
         assert!(m.finished());
     }
 

@@ -46,6 +46,9 @@ pub enum Control {
         /// Name of the mode the autopilot reported.
         mode: String,
     },
+    /// The companion is stopping (a signal, the end of `--duration`, a fatal error): it handed
+    /// the vehicle to the autopilot and commands nothing more.
+    Stopping,
 }
 
 impl Control {
@@ -57,6 +60,7 @@ impl Control {
             Control::Started => "started",
             Control::Unconfirmed { .. } => "takeover_unconfirmed",
             Control::TakenOver { .. } => "taken_over",
+            Control::Stopping => "stopping",
         }
     }
 }
@@ -197,7 +201,8 @@ pub struct OperatorGate {
     /// Armed reported by at least this many consecutive heartbeats besides `confirm` (one
     /// spoofed or corrupt heartbeat cannot start anything).
     pub armed_heartbeats_to_start: u32,
-    /// `--start-on-arm`: the pilot arming the vehicle is a start request.
+    /// `--start-on-arm`: the pilot arming the vehicle is a start request (off by default:
+    /// arming for a manual flight is not a start).
     pub start_on_arm: bool,
     /// `--auto-start`: a start is requested until the models grant it.
     auto_start_pending: bool,
@@ -299,7 +304,7 @@ impl OperatorGate {
                 self.control = Control::Started;
                 Some(GateEvent::HandedBack(StartBy::StartCommand))
             }
-            Control::Started => None,
+            Control::Started | Control::Stopping => None,
         }
     }
 
@@ -386,6 +391,7 @@ impl OperatorGate {
                 }
                 None
             }
+            Control::Stopping => None,
             Control::TakenOver { .. } => {
                 if guided_held {
                     self.guided_entered = false;

@@ -56,6 +56,9 @@ pub struct VehicleConfig {
     pub mode_confirm: Duration,
     /// PX4: SET_MODE attempts while the vehicle stays in the mode it was in.
     pub max_mode_attempts: u32,
+    /// Without EXTENDED_SYS_STATE: disarmed at or below this altitude above home (m) is on the
+    /// ground (params/link.toml `[flight] ground_altitude_m`).
+    pub ground_altitude_m: f64,
 }
 
 /// Distinct other autopilots reported by name; more are only counted.
@@ -99,8 +102,23 @@ impl Default for VehicleConfig {
             zone_arrive_timeout: Duration::from_secs(60),
             mode_confirm: Duration::from_secs(3),
             max_mode_attempts: 3,
+            ground_altitude_m: 1.0,
         }
     }
+}
+
+/// A command addressed to this companion (our system, component 191), kept for the shell, which
+/// answers it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CommandToUs {
+    /// The MAV_CMD.
+    pub command: MavCmd,
+    /// Sender (system, component) from the frame header.
+    pub from: (u8, u8),
+    /// When it arrived (shell clock): a command that waited too long is refused, never run late.
+    pub at: Duration,
+    /// The autopilot was not known yet when it arrived: refused, never queued for later.
+    pub before_autopilot: bool,
 }
 
 /// What a command ticket is for.
@@ -215,8 +233,20 @@ pub struct Vehicle {
     /// changes from a pilot's with them.
     pub commanded_modes: Vec<(String, Duration)>,
     /// Commands addressed to this companion (component 191) since the last
-    /// [`Vehicle::take_commands_to_us`]: (command, sender system, sender component).
-    commands_to_us: Vec<(MavCmd, u8, u8)>,
+    /// [`Vehicle::take_commands_to_us`].
+    commands_to_us: Vec<CommandToUs>,
+    /// Since when every autopilot heartbeat has reported the vehicle armed (None once one
+    /// reports it disarmed).
+    armed_since: Option<Duration>,
+    /// The custom mode of the last autopilot heartbeat, and since when every heartbeat has
+    /// shown it.
+    mode_since: Option<(u32, Duration)>,
+    /// Since when every autopilot frame has agreed that the vehicle is disarmed on the ground
+    /// (heartbeats disarmed, altitude at most `ground_altitude_m`, landed state ON_GROUND);
+    /// any contradicting frame resets it.
+    down_since: Option<Duration>,
+    /// The hand-off job's mode, once [`Vehicle::hand_off`] issued it.
+    handoff: Option<String>,
     /// Where the running zone reposition goes.
     zone_target: Option<(i32, i32)>,
     /// When the autopilot last reported its mode (its heartbeat).
@@ -265,6 +295,10 @@ impl Vehicle {
             armed_heartbeats: 0,
             commanded_modes: Vec::new(),
             commands_to_us: Vec::new(),
+            armed_since: None,
+            mode_since: None,
+            down_since: None,
+            handoff: None,
             zone_target: None,
             mode_heard_at: None,
             px4_mission_pending: None,
@@ -467,7 +501,7 @@ impl Vehicle {
 
     /// A frame from the autopilot link.
     pub fn on_frame(&mut self, now: Duration, f: &Frame) -> Vec<Msg> {
-        if self.command_to_us(f) {
+        if self.command_to_us(now, f) {
             return Vec::new();
         }
         let sys = f.header.system_id.min(255) as u8;
@@ -531,9 +565,27 @@ impl Vehicle {
                 } else {
                     0
                 };
+                if self.readiness.armed {
+                    self.armed_since.get_or_insert(now);
+                    self.down_since = None;
+                } else {
+                    self.armed_since = None;
+                    if self.low_now() {
+                        self.down_since.get_or_insert(now);
+                    } else {
+                        self.down_since = None;
+                    }
+                }
+                if self.mode_since.map(|(m, _)| m) != Some(h.custom_mode) {
+                    self.mode_since = Some((h.custom_mode, now));
+                }
                 self.readiness.on_heartbeat_status(h.system_status);
             }
             Msg::SYS_STATUS(s) => self.readiness.on_sys_status(now, s),
+            // Frames that say "in the air" reset the end-of-flight window.
+            Msg::GLOBAL_POSITION_INT(_) | Msg::EXTENDED_SYS_STATE(_) if !self.low_now() => {
+                self.down_since = None;
+            }
             Msg::EKF_STATUS_REPORT(e) => self.readiness.on_ekf(now, e),
             Msg::ESTIMATOR_STATUS(e) => self.readiness.on_estimator(now, e),
             Msg::MISSION_CURRENT(m) => {
@@ -1505,8 +1557,10 @@ impl Vehicle {
     }
 
     /// A COMMAND_LONG / COMMAND_INT addressed to this companion (our system, component 191)
-    /// from anyone on the link: kept for the shell, which answers it. True when it was one.
-    fn command_to_us(&mut self, f: &Frame) -> bool {
+    /// from anyone on the link: kept for the shell, which answers it, even before the autopilot
+    /// is known (the shell refuses such a command; it is never queued for later). True when it
+    /// was one.
+    fn command_to_us(&mut self, now: Duration, f: &Frame) -> bool {
         let (command, sys, comp) = match &f.msg {
             Msg::COMMAND_LONG(c) => (c.command, c.target_system, c.target_component),
             Msg::COMMAND_INT(c) => (c.command, c.target_system, c.target_component),
@@ -1516,18 +1570,89 @@ impl Vehicle {
             return false;
         }
         if self.commands_to_us.len() < 16 {
-            self.commands_to_us.push((
+            self.commands_to_us.push(CommandToUs {
                 command,
-                f.header.system_id.min(255) as u8,
-                f.header.component_id,
-            ));
+                from: (f.header.system_id.min(255) as u8, f.header.component_id),
+                at: now,
+                before_autopilot: self.target.is_none(),
+            });
         }
         true
     }
 
-    /// Commands addressed to us since the last call: (command, sender system, component).
-    pub fn take_commands_to_us(&mut self) -> Vec<(MavCmd, u8, u8)> {
+    /// Commands addressed to us since the last call.
+    pub fn take_commands_to_us(&mut self) -> Vec<CommandToUs> {
         std::mem::take(&mut self.commands_to_us)
+    }
+
+    /// Every autopilot heartbeat has reported the vehicle armed for this long (None: the last
+    /// one reported it disarmed, or none was heard).
+    pub fn armed_for(&self, now: Duration) -> Option<Duration> {
+        self.armed_since.map(|s| now.saturating_sub(s))
+    }
+
+    /// Every autopilot heartbeat has shown the current custom mode for this long.
+    pub fn mode_for(&self, now: Duration) -> Duration {
+        self.mode_since
+            .map_or(Duration::ZERO, |(_, s)| now.saturating_sub(s))
+    }
+
+    /// Every autopilot frame has agreed for this long that the vehicle is disarmed on the
+    /// ground (None: the last one disagreed).
+    pub fn down_for(&self, now: Duration) -> Option<Duration> {
+        self.down_since.map(|s| now.saturating_sub(s))
+    }
+
+    /// The last telemetry puts the vehicle low: landed state ON_GROUND when the autopilot
+    /// reports one, else at most `ground_altitude_m` above home (or no position yet).
+    fn low_now(&self) -> bool {
+        match self.telemetry.landed_state.as_deref() {
+            Some(s) => s == "ON_GROUND",
+            None => self
+                .telemetry
+                .position
+                .is_none_or(|p| p.alt_rel_m <= self.cfg.ground_altitude_m),
+        }
+    }
+
+    /// When the last action failed (its key and the time), if it did and nothing ran since.
+    pub fn failed_action(&self) -> Option<(&str, Duration)> {
+        match &self.last {
+            Some((k, JobStatus::Failed(at))) => Some((k.as_str(), *at)),
+            _ => None,
+        }
+    }
+
+    /// The companion stops: whatever it was doing ends now (recorded CANCELLED) and the vehicle
+    /// is put in `mode` (`LOITER`, `RTL`, `LAND`) for the autopilot to fly on its own. The
+    /// step is acknowledged (or fails) like any other; [`Vehicle::handoff_status`] tells.
+    pub fn hand_off(&mut self, now: Duration, mode: &str) -> Vec<Msg> {
+        self.stop_actions(now, "companion stopping");
+        let key = format!("handoff:{mode}");
+        self.job = Some(Job {
+            key: key.clone(),
+            steps: VecDeque::from([(key.clone(), Step::Mode(mode.to_string()))]),
+            running: Running::Idle,
+            arm_attempts: 0,
+            mode_attempts: 0,
+            mode_from: None,
+        });
+        self.last = Some((key, JobStatus::Running));
+        self.handoff = Some(mode.to_string());
+        self.advance_job(now)
+    }
+
+    /// The hand-off's outcome: None while it runs (or none was issued), Some(true) when the
+    /// autopilot accepted the mode, Some(false) when the step failed.
+    pub fn handoff_status(&self) -> Option<bool> {
+        let mode = self.handoff.as_deref()?;
+        match &self.last {
+            Some((k, JobStatus::Done)) if k.strip_prefix("handoff:") == Some(mode) => Some(true),
+            Some((k, JobStatus::Failed(_))) if k.strip_prefix("handoff:") == Some(mode) => {
+                Some(false)
+            }
+            _ => None,
+        }
     }
 
     /// Stop commanding motion (the pilot took over, or the flight is over): the running action
@@ -2768,9 +2893,60 @@ mod tests {
         v.on_frame(s(1.1), &start(1)); // for the autopilot: not ours
         assert_eq!(
             v.take_commands_to_us(),
-            vec![(MavCmd::MAV_CMD_MISSION_START, 255, 190)]
+            vec![CommandToUs {
+                command: MavCmd::MAV_CMD_MISSION_START,
+                from: (255, 190),
+                at: s(1.0),
+                before_autopilot: false
+            }]
         );
         assert!(v.take_commands_to_us().is_empty());
+    }
+
+    #[test]
+    fn a_command_before_the_autopilot_is_kept_marked_so_the_shell_can_refuse_it() {
+        let mut v = Vehicle::new(VehicleConfig::default(), ActionTable::default(), None);
+        let mut f = frame(Msg::COMMAND_LONG(COMMAND_LONG_DATA {
+            command: MavCmd::MAV_CMD_MISSION_START,
+            target_system: crate::DEFAULT_SYSTEM_ID,
+            target_component: crate::OUR_COMPONENT_ID,
+            ..COMMAND_LONG_DATA::DEFAULT
+        }));
+        f.header.system_id = 66;
+        v.on_frame(s(0.5), &f);
+        let got = v.take_commands_to_us();
+        assert_eq!(got.len(), 1);
+        assert!(got[0].before_autopilot);
+        assert_eq!(got[0].from.0, 66);
+    }
+
+    #[test]
+    fn the_end_of_flight_window_resets_on_any_frame_that_says_airborne() {
+        let mut v = vehicle();
+        connected(&mut v, 0);
+        let hb = |armed: bool| hb(0, armed);
+        let pos = |alt_mm: i32| {
+            frame(Msg::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
+                relative_alt: alt_mm,
+                lat: 473_977_000,
+                lon: 85_455_000,
+                ..GLOBAL_POSITION_INT_DATA::DEFAULT
+            }))
+        };
+        v.on_frame(s(1.0), &pos(20_000));
+        v.on_frame(s(1.1), &hb(false)); // a disarmed heartbeat at 20 m: not down
+        assert_eq!(v.down_for(s(1.2)), None);
+        v.on_frame(s(1.3), &pos(100));
+        v.on_frame(s(1.4), &hb(false));
+        assert_eq!(v.down_for(s(2.4)), Some(Duration::from_secs(1)));
+        v.on_frame(s(2.5), &hb(true)); // the real armed heartbeat in between
+        assert_eq!(v.down_for(s(2.6)), None);
+        assert_eq!(v.armed_for(s(3.5)), Some(Duration::from_secs(1)));
+        v.on_frame(s(3.6), &hb(false));
+        assert_eq!(v.armed_for(s(3.7)), None);
+        assert!(v.down_for(s(3.7)).is_some());
+        v.on_frame(s(3.8), &pos(15_000)); // a position in the air
+        assert_eq!(v.down_for(s(3.9)), None);
     }
 
     #[test]

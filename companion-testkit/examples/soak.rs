@@ -80,6 +80,12 @@ impl Decider for CoreDecider<'_> {
     fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
         self.0.step(obs)
     }
+    fn launch_verdict(
+        &self,
+        rec: &DecisionRecord,
+    ) -> Result<(), companion_core::launch::LaunchRefusal> {
+        companion_core::launch::verdict(rec, self.0.model)
+    }
 }
 
 struct Opts {

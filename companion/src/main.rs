@@ -190,6 +190,13 @@ impl Decider for CoreDecider {
         self.core.step(obs)
     }
 
+    fn launch_verdict(
+        &self,
+        rec: &companion_core::record::DecisionRecord,
+    ) -> Result<(), companion_core::launch::LaunchRefusal> {
+        companion_core::launch::verdict(rec, self.model)
+    }
+
     fn new_flight(&mut self) {
         self.core = Core::new(self.model, ModelKind::Bfm, self.policy);
     }

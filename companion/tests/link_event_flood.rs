@@ -19,6 +19,12 @@ impl Decider for Idle {
     fn step(&mut self, _: &Observations) -> (Plan, DecisionRecord) {
         (Plan::default(), DecisionRecord::default())
     }
+    fn launch_verdict(
+        &self,
+        _: &DecisionRecord,
+    ) -> Result<(), companion_core::launch::LaunchRefusal> {
+        Err(companion_core::launch::LaunchRefusal::NoGuarantee) // idles: never starts
+    }
 }
 
 const FLOOD: usize = 11_653;

@@ -17,11 +17,14 @@ use companion_link::actions::{ActionTable, LinkParams, Route};
 use companion_link::ingest::{self, Encoder, Ingest};
 use companion_link::liveness::parse_duration;
 use companion_link::mission_state::{self, Extra, LANDING_ACTIONS, MissionState};
-use companion_link::operator::{self, Control, GateEvent, GcsText, OperatorGate, VehicleView};
+use companion_link::operator::{Control, GcsText, OperatorGate};
+pub mod gate;
 pub mod link_security;
 pub mod transport;
 pub mod words;
 use anyhow::Context;
+use companion_core::launch::LaunchRefusal;
+use companion_core::mission::RouteRole;
 use companion_core::observations::Observations;
 use companion_core::record::{CommandOutcome, DecisionRecord, Event, LinkEvent, Plan};
 use companion_link::url::{self, ConnectUrl};
@@ -35,6 +38,9 @@ use transport::Inbound;
 /// The decision core as the shell sees it: one observation snapshot in, one plan and its record out.
 pub trait Decider {
     fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord);
+    /// Do the models agree to a start, judged from this record (the launch verdict,
+    /// [`companion_core::launch::verdict`])?
+    fn launch_verdict(&self, rec: &DecisionRecord) -> Result<(), LaunchRefusal>;
     /// A new flight begins (the last one ended landed and disarmed): forget the last one.
     fn new_flight(&mut self) {}
 }
@@ -43,6 +49,9 @@ pub trait Decider {
 impl Decider for companion_core::decision::Core<'_> {
     fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
         companion_core::decision::Core::step(self, obs)
+    }
+    fn launch_verdict(&self, rec: &DecisionRecord) -> Result<(), LaunchRefusal> {
+        companion_core::launch::verdict(rec, self.model)
     }
 }
 
@@ -130,6 +139,15 @@ pub struct FlyArgs {
     /// operator's next start.
     #[arg(long)]
     pub once: bool,
+    /// The pilot arming the vehicle is a start request (held armed over every heartbeat for
+    /// `[flight] operator_confirm_s`). Off by default: arming for a manual flight is not a start.
+    #[arg(long)]
+    pub start_on_arm: bool,
+    /// A ground station's MAVLink system id whose MAV_CMD_MISSION_START is taken even before it
+    /// sent a GCS HEARTBEAT (repeat for several). Systems heard sending a GCS HEARTBEAT count
+    /// too; an autopilot component never does.
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
+    pub gcs_sysid: Vec<u8>,
 }
 
 impl FlyArgs {
@@ -271,6 +289,7 @@ impl FlySetup {
             zone_arrive_timeout: Duration::from_secs_f64(self.link.flight.zone_arrive_timeout_s),
             mode_confirm: Duration::from_secs_f64(self.link.flight.mode_confirm_s),
             max_mode_attempts: self.link.flight.max_mode_attempts,
+            ground_altitude_m: self.link.flight.ground_altitude_m,
             ..VehicleConfig::default()
         };
         Vehicle::new(cfg, self.actions.clone(), Some(self.route.clone()))
@@ -353,6 +372,12 @@ async fn run_loop<D: Decider, S: RecordSink>(
 ) -> anyhow::Result<FlyReport> {
     let mut shell = Shell::new(&setup);
     shell.operator = OperatorGate::new(args.auto_start);
+    shell.operator.confirm = Duration::from_secs_f64(setup.link.flight.operator_confirm_s);
+    shell.operator.start_on_arm = args.start_on_arm;
+    let mut stations = gate::GroundStations {
+        pinned: args.gcs_sysid.iter().copied().collect(),
+        ..Default::default()
+    };
     if args.auto_start {
         eprintln!(
             "companion fly: WARNING --auto-start: the companion will set the mode, ARM and take off by itself as soon as the autopilot is ready (SITL and tests only)"
@@ -360,8 +385,13 @@ async fn run_loop<D: Decider, S: RecordSink>(
         tracing::warn!("--auto-start: no operator start; the companion arms the vehicle itself");
     } else {
         tracing::info!(
-            "waiting for the operator: the pilot arms the vehicle, or a ground station sends MAV_CMD_MISSION_START to component {}",
-            companion_link::OUR_COMPONENT_ID
+            "waiting for the operator: a ground station sends MAV_CMD_MISSION_START to component {}, or the pilot switches the armed vehicle to GUIDED (ArduPilot){}",
+            companion_link::OUR_COMPONENT_ID,
+            if args.start_on_arm {
+                ", or arms it (--start-on-arm)"
+            } else {
+                "; arming alone is not a start (see --start-on-arm)"
+            }
         );
     }
     let mut vehicle = setup.vehicle(args.link_timeout);
@@ -409,7 +439,9 @@ async fn run_loop<D: Decider, S: RecordSink>(
     let mut announced_auto_start = false;
     let mut gcs = GcsWatch::default();
 
-    loop {
+    // The loop ends with why it stopped, or an error; either way the stop below runs (the
+    // ground station told, the vehicle handed to the autopilot when the companion commands it).
+    let outcome: anyhow::Result<&'static str> = async { Ok(loop {
         let mut out: Vec<Msg> = Vec::new();
         let mut trigger: Option<Duration> = None;
         let mut wake = false;
@@ -422,6 +454,7 @@ async fn run_loop<D: Decider, S: RecordSink>(
                             w.received(&f);
                         }
                         gcs.on_frame(t, &f);
+                        stations.on_frame(&f);
                         out.extend(vehicle.on_frame(t, &f));
                     }
                     ingest.set_our_system(vehicle.our_system());
@@ -438,6 +471,8 @@ async fn run_loop<D: Decider, S: RecordSink>(
                         if let Some(w) = tlog.as_mut() {
                             w.received(&f);
                         }
+                        gcs.on_frame(t, &f);
+                        stations.on_frame(&f);
                         out.extend(vehicle.on_frame(t, &f));
                         // Replies go to the autopilot's address, learned from its own frames only.
                         let src = (f.header.system_id.min(255) as u8, f.header.component_id);
@@ -525,37 +560,19 @@ async fn run_loop<D: Decider, S: RecordSink>(
                 cycle_due = None;
                 wake = true;
             },
-            _ = &mut ctrl_c => break,
-            _ = &mut terminate => break,
-            _ = async { match stop_at { Some(t) => tokio::time::sleep_until(t).await, None => std::future::pending().await } } => break,
+            _ = &mut ctrl_c => break "SIGINT",
+            _ = &mut terminate => break "SIGTERM",
+            _ = async { match stop_at { Some(t) => tokio::time::sleep_until(t).await, None => std::future::pending().await } } => break "--duration elapsed",
+        }
+        // Commands addressed to us: answered every turn, before the autopilot is known too
+        // (refused then, never queued for later).
+        let t = now();
+        for cmd in vehicle.take_commands_to_us() {
+            wake |= gate::answer_command(&mut shell, &mut vehicle, &stations, cmd, t, &mut out);
         }
         if vehicle.target.is_some() {
-            let t = now();
-            // The operator: commands addressed to us, a pilot's arming or mode change.
-            for (command, sys, comp) in vehicle.take_commands_to_us() {
-                let result = if command == operator::START_COMMAND {
-                    if let Some(ev) = shell.operator.on_start_command() {
-                        on_gate_event(&mut shell, &mut vehicle, t, &ev, &mut out);
-                        wake = true;
-                    }
-                    companion_link::dialect::MavResult::MAV_RESULT_ACCEPTED
-                } else {
-                    companion_link::dialect::MavResult::MAV_RESULT_UNSUPPORTED
-                };
-                tracing::info!("command {command:?} from {sys}/{comp} addressed to us: {result:?}");
-                out.push(operator::ack(command, result, (sys, comp)));
-            }
-            let view = VehicleView {
-                flavor: vehicle.flavor,
-                custom_mode: vehicle.telemetry.custom_mode,
-                mode: vehicle.telemetry.mode.as_deref(),
-                armed_heartbeats: vehicle.armed_heartbeats,
-                commanded_modes: &vehicle.commanded_modes,
-            };
-            if let Some(ev) = shell.operator.observe(t, &view) {
-                on_gate_event(&mut shell, &mut vehicle, t, &ev, &mut out);
-                wake = true;
-            }
+            // The operator: a pilot's arming, GUIDED or mode change; a start voided.
+            wake |= gate::observe(&mut shell, &mut vehicle, t, &mut out);
             let alive = vehicle.liveness.alive();
             if alive != was_alive {
                 if alive {
@@ -635,7 +652,7 @@ async fn run_loop<D: Decider, S: RecordSink>(
         if shell.finished() {
             if args.once {
                 tracing::info!("flight over: landed and disarmed; exiting (--once)");
-                break;
+                break "flight over (--once)";
             }
             tracing::info!("flight over: landed and disarmed; waiting for the operator");
             vehicle.stop_actions(now(), "flight over");
@@ -648,7 +665,81 @@ async fn run_loop<D: Decider, S: RecordSink>(
                 .collect();
             send(&mut encoder, &vehicle, &link.outbound, &mut tlog, &msgs).await;
         }
+    }) }
+    .await;
+
+    // The stop: said to the ground station; an armed vehicle the companion commands is handed to
+    // the autopilot (params/link.toml [flight] handoff), its answer awaited a moment, and a last
+    // record says so.
+    let why = match &outcome {
+        Ok(why) => (*why).to_string(),
+        Err(e) => format!("error: {e:#}"),
+    };
+    let armed = vehicle.target.is_some() && vehicle.readiness.armed;
+    let (msgs, commanded) =
+        gate::begin_stop(&mut shell, &mut vehicle, setup.link.flight.handoff, &why, now());
+    send(&mut encoder, &vehicle, &link.outbound, &mut tlog, &msgs).await;
+    if commanded {
+        let deadline = Instant::now() + HANDOFF_WAIT;
+        let mut tick = tokio::time::interval(Duration::from_millis(100));
+        while vehicle.handoff_status().is_none() {
+            let mut out = Vec::new();
+            tokio::select! {
+                m = link.inbound.recv() => match m {
+                    Some(Inbound::Bytes(b)) => {
+                        let t = now();
+                        for f in ingest.push(&b) {
+                            if let Some(w) = tlog.as_mut() {
+                                w.received(&f);
+                            }
+                            out.extend(vehicle.on_frame(t, &f));
+                        }
+                    }
+                    Some(Inbound::Datagram(b, _)) => {
+                        let t = now();
+                        ingest.reset();
+                        for f in ingest.push(&b) {
+                            if let Some(w) = tlog.as_mut() {
+                                w.received(&f);
+                            }
+                            out.extend(vehicle.on_frame(t, &f));
+                        }
+                    }
+                    Some(_) => {}
+                    None => break,
+                },
+                _ = tick.tick() => out.extend(vehicle.tick(now())),
+                _ = tokio::time::sleep_until(deadline) => break,
+            }
+            send(&mut encoder, &vehicle, &link.outbound, &mut tlog, &out).await;
+        }
+        gate::end_stop(&mut shell, &vehicle, true);
     }
+    if armed {
+        let t = now();
+        let recorded = run_cycle_at(
+            &mut decider,
+            &mut shell,
+            &mut vehicle,
+            &mut encoder,
+            &link.outbound,
+            &mut tlog,
+            sink,
+            t,
+            now,
+            &mut report,
+            &mut transport_events,
+        )
+        .await;
+        if let Err(e) = recorded {
+            tracing::error!("the stop's record was not written: {e:#}");
+        }
+    }
+    if !msgs.is_empty() {
+        // Let the transport write the stop's words before the process ends.
+        tokio::time::sleep(Duration::from_millis(300)).await;
+    }
+    outcome?;
     report.ingest = ingest.stats;
     report.frames_out = encoder.frames_out;
     report.link_losses = vehicle.liveness.losses;
@@ -681,6 +772,10 @@ const NOTICE: companion_link::dialect::MavSeverity =
 const WARNING: companion_link::dialect::MavSeverity =
     companion_link::dialect::MavSeverity::MAV_SEVERITY_WARNING;
 
+/// How long the stop waits for the autopilot's answer to the hand-off mode (within systemd's
+/// TimeoutStopSec in deploy/companion.service, and the 5 s a pilot can be asked to wait).
+const HANDOFF_WAIT: Duration = Duration::from_millis(4500);
+
 /// SIGTERM (systemd's stop): ends the loop like Ctrl-C, so the logs close whole.
 async fn terminate_signal() {
     #[cfg(unix)]
@@ -692,36 +787,6 @@ async fn terminate_signal() {
         }
     }
     std::future::pending::<()>().await
-}
-
-/// A gate decision: said in the record, the journal and to the ground station; a takeover
-/// stops the running action at once.
-fn on_gate_event(
-    shell: &mut Shell,
-    vehicle: &mut Vehicle,
-    now: Duration,
-    ev: &GateEvent,
-    out: &mut Vec<Msg>,
-) {
-    let text = ev.describe();
-    shell.pending_events.push(Event::from(text.as_str()));
-    let (severity, gcs) = match ev {
-        GateEvent::Started(_) => (NOTICE, "companion: mission started".to_string()),
-        GateEvent::TakenOver(mode) => {
-            vehicle.stop_actions(now, "pilot took control");
-            (
-                WARNING,
-                format!("companion: pilot has control ({mode}), standing by"),
-            )
-        }
-        GateEvent::HandedBack(_) => (NOTICE, "companion: control handed back".to_string()),
-    };
-    if severity == WARNING {
-        tracing::warn!("{text}");
-    } else {
-        tracing::info!("{text}");
-    }
-    out.extend(shell.texts.say(now, severity, &gcs));
 }
 
 /// The ground station's heartbeats, to tell when it goes silent and when it is back.
@@ -784,6 +849,15 @@ pub struct Shell {
     /// Ingest counters now, and as last reported in a record's link_events.
     ingest: ingest::IngestStats,
     ingest_reported: ingest::IngestStats,
+    /// The launch verdict of the latest record while the gate waits (before any record: not
+    /// on the ground yet, no decision to read).
+    launch: Result<(), LaunchRefusal>,
+    /// When the running start was granted (a job failing after it, before airborne, voids it).
+    granted_at: Option<Duration>,
+    /// The last `--auto-start` refusal said (said once per reason).
+    refusal_told: Option<String>,
+    /// A command addressed to us older than this is refused.
+    command_max_age: Duration,
 }
 
 impl Shell {
@@ -798,7 +872,7 @@ impl Shell {
             mission,
             precedence: setup.link.vehicle_action_precedence.clone(),
             pending_events: Vec::new(),
-            operator: OperatorGate::new(true),
+            operator: OperatorGate::started(),
             texts: GcsText::new(
                 Duration::from_secs_f64(f.statustext_repeat_s),
                 f.statustext_max_per_s,
@@ -809,6 +883,13 @@ impl Shell {
             guarantee_told: None,
             ingest: Default::default(),
             ingest_reported: Default::default(),
+            launch: Err(LaunchRefusal::NotOnGround {
+                state: String::new(),
+                on_ground: setup.states.route_state(RouteRole::OnGround).to_string(),
+            }),
+            granted_at: None,
+            refusal_told: None,
+            command_max_age: Duration::from_secs_f64(f.command_max_age_s),
         }
     }
 
@@ -827,6 +908,7 @@ impl Shell {
     pub fn new_flight(&mut self) {
         self.mission = self.fresh_mission.clone();
         self.operator.new_flight();
+        self.granted_at = None;
         self.last_actions.clear();
         self.last_told = Default::default();
         self.told_evidence.clear();
@@ -978,6 +1060,9 @@ async fn run_cycle_at<D: Decider, S: RecordSink>(
             .to_string()
     });
     let rec = finish_record(decided, shell, vehicle, report.cycles, transport_events);
+    if !shell.operator.commanding() {
+        shell.launch = decider.launch_verdict(&rec);
+    }
     tracing::debug!(
         cycle = rec.cycle,
         state = %rec.state,
@@ -1023,6 +1108,7 @@ pub fn decide<D: Decider>(
     let extra = Extra {
         mode: vehicle.telemetry.mode.as_deref(),
         landed_state: vehicle.telemetry.landed_state.as_deref(),
+        down_for_s: Some(vehicle.down_for(now()).map_or(0.0, |d| d.as_secs_f64())),
     };
     obs.state = shell.mission.update(&obs, &extra).to_string();
     complete_observations(&mut obs, &shell.mission);
@@ -1277,6 +1363,17 @@ impl ScriptedDecider {
 }
 
 impl Decider for ScriptedDecider {
+    /// The script agrees to a start when it proposes to take off (it has no guarantee).
+    fn launch_verdict(&self, rec: &DecisionRecord) -> Result<(), LaunchRefusal> {
+        if rec.actions.iter().any(|a| a == companion_core::launch::TAKE_OFF) {
+            Ok(())
+        } else {
+            Err(LaunchRefusal::NoTakeOff {
+                actions: rec.actions.join("+"),
+            })
+        }
+    }
+
     fn new_flight(&mut self) {
         self.phase = Script::OnGround;
         self.avoid_until = 0.0;
