@@ -169,6 +169,18 @@ class GcsClient:
         self.mav.command_int_send(self.target[0], self.target[1], frame, cmd, 0, 0, p1, p2, p3, p4, x, y, z)
         return self.wait("COMMAND_ACK", lambda m: m.command == cmd, timeout=timeout, since=t0)
 
+    def gcs_heartbeat(self) -> None:
+        """One HEARTBEAT as a ground station (QGroundControl, Mission Planner and MAVProxy send one a second): the
+        companion takes MAV_CMD_MISSION_START only from a system it heard do this (or --gcs-sysid)."""
+        self.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, mavlink.MAV_STATE_ACTIVE)
+
+    def start_mission(self, companion: int = 191, system: int = 1, timeout: float = 5.0) -> Any:
+        """The operator's start: a GCS heartbeat, then MAV_CMD_MISSION_START to the companion; the COMMAND_ACK."""
+        self.gcs_heartbeat()
+        time.sleep(0.3)
+        self.target = (system, companion)
+        return self.command_long(mavlink.MAV_CMD_MISSION_START, timeout=timeout)
+
     def set_mode(self, name: str) -> Any:
         modes = {"STABILIZE": 0, "ALT_HOLD": 2, "AUTO": 3, "GUIDED": 4, "LOITER": 5, "RTL": 6, "LAND": 9, "BRAKE": 17}
         return self.command_long(mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, modes[name])

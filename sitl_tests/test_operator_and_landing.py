@@ -165,13 +165,13 @@ def test_bad_params_stop_fly_before_any_run_folder(tmp_path):
     assert not runs.exists() or not any(runs.iterdir()), list(runs.iterdir())
 
 
-def test_pilot_arming_from_the_gcs_starts_the_mission(autopilot_factory, fly, client):
+def test_pilot_arming_from_the_gcs_starts_the_mission_with_start_on_arm(autopilot_factory, fly, client):
     # speedup 2: ArduCopter disarms an idle armed vehicle after DISARM_DELAY (10 s simulated, 5 s wall here); the
-    # companion needs two armed heartbeats (about 2 s) to take the arming as the pilot's start.
+    # companion needs every heartbeat armed over operator_confirm_s (2 s) to take the arming as the pilot's start.
     ap = autopilot_factory(speedup=2.0, ekf_ready_s=4.0)
     sa = ap.standin
     gcs = client(sa.url)
-    run = fly(ap, auto_start=False)
+    run = fly(ap, auto_start=False, extra=("--start-on-arm",))
     wait(lambda: sa.state()["position_ok"], 30, "the position estimate", run)
     time.sleep(2.0)
     assert not motion_from_companion(sa)
@@ -186,6 +186,26 @@ def test_pilot_arming_from_the_gcs_starts_the_mission(autopilot_factory, fly, cl
     assert any("mission started (the pilot armed" in e for e in events(run.records())), events(run.records())[:20]
 
 
+def test_pilot_arming_without_start_on_arm_starts_nothing(autopilot_factory, fly, client):
+    # Arming for a manual flight is not a start: the companion commands nothing, the record stays `waiting`.
+    ap = autopilot_factory(speedup=2.0, ekf_ready_s=4.0)
+    sa = ap.standin
+    gcs = client(sa.url)
+    run = fly(ap, auto_start=False)
+    wait(lambda: sa.state()["position_ok"], 30, "the position estimate", run)
+    time.sleep(2.0)
+    t_arm = sa.wall()
+    ack = gcs.arm()
+    assert ack.result == mavlink.MAV_RESULT_ACCEPTED, ack
+    time.sleep(6.0)
+    assert not motion_from_companion(sa, t_arm), [e.data for e in motion_from_companion(sa, t_arm)]
+    assert sa.state()["alt"] < 1.0, sa.state()
+    stop(run)
+    assert all(r.get("vehicle", {}).get("operator") == "waiting" for r in run.records()), \
+        sorted({r.get("vehicle", {}).get("operator") for r in run.records()})
+    assert not any("mission started" in e for e in events(run.records()))
+
+
 def test_gcs_start_command_to_component_191_starts_the_mission(autopilot_factory, fly, client):
     ap = autopilot_factory()
     sa = ap.standin
@@ -197,9 +217,8 @@ def test_gcs_start_command_to_component_191_starts_the_mission(autopilot_factory
                      [e.data["src"] for e in sa.received("HEARTBEAT")]]), 10, "the companion's heartbeat", run)
     time.sleep(2.0)
     assert not sa.rec.of("arm")
-    gcs.target = (1, COMPANION)
     t0 = sa.wall()
-    ack = gcs.command_long(mavlink.MAV_CMD_MISSION_START)
+    ack = gcs.start_mission()
     assert ack.result == mavlink.MAV_RESULT_ACCEPTED and ack.get_srcComponent() == COMPANION, ack
     # A command the companion does not implement is answered, not ignored.
     ack = gcs.command_long(mavlink.MAV_CMD_DO_SET_SERVO, 1, 1500)
@@ -225,9 +244,8 @@ def test_pilot_takeover_in_loiter_stops_the_companion_until_handed_back(autopilo
     assert sa.state()["mode"] == "LOITER"
     assert run.proc.poll() is None
     # Handed back with the start command: the companion commands again.
-    gcs.target = (1, COMPANION)
     t_back = sa.wall()
-    ack = gcs.command_long(mavlink.MAV_CMD_MISSION_START)
+    ack = gcs.start_mission()
     assert ack.result == mavlink.MAV_RESULT_ACCEPTED
     wait(lambda: motion_from_companion(sa, t_back), 15, "a command after the hand-back", run)
     stop(run)
@@ -297,8 +315,7 @@ def test_after_landing_fly_waits_for_the_operator_and_flies_again(autopilot_fact
     assert run.proc.poll() is None, "fly exited after the landing without --once\n" + run.output()
     assert len(sa.rec.of("arm")) == 1, "--auto-start armed again: it starts the first flight only"
     assert not motion_from_companion(sa, t_down + 4.0), "commanded after the landing without an operator start"
-    gcs.target = (1, COMPANION)
-    ack = gcs.command_long(mavlink.MAV_CMD_MISSION_START)
+    ack = gcs.start_mission()
     assert ack.result == mavlink.MAV_RESULT_ACCEPTED
     wait(lambda: len(sa.rec.of("arm")) == 2 and sa.state()["alt"] > 5.0, 90, "the second take-off", run)
     stop(run)

@@ -76,8 +76,7 @@ def test_two_flights_in_one_run_replay_equal_with_the_core_restarted_between(aut
     wait(lambda: sa.rec.of("arm") and not sa.state()["armed"] and sa.state()["landed"], 240, "the first landing", run)
     # the companion sees the landing and starts waiting for the operator (as the operator test waits)
     time.sleep(6.0)
-    gcs.target = (1, COMPANION)
-    ack = gcs.command_long(mavlink.MAV_CMD_MISSION_START)
+    ack = gcs.start_mission()
     assert ack.result == mavlink.MAV_RESULT_ACCEPTED
     wait(lambda: len(sa.rec.of("arm")) == 2 and sa.state()["alt"] > 5.0, 90, "the second take-off", run)
     time.sleep(2.0)

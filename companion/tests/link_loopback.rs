@@ -244,7 +244,10 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
         vec![
             (1, MavCmd::MAV_CMD_DO_SET_MODE, 0),
             (1, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 0),
-            (1, MavCmd::MAV_CMD_NAV_TAKEOFF, 0)
+            (1, MavCmd::MAV_CMD_NAV_TAKEOFF, 0),
+            // The stop at the end of --duration, the vehicle armed in the air: the hand-off
+            // (params/link.toml [flight] handoff = "rtl"), a new command, not a replay.
+            (2, MavCmd::MAV_CMD_DO_SET_MODE, 0)
         ],
         "{:?}",
         log.commands
@@ -263,6 +266,22 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
         streams(2) >= 1,
         "streams re-requested after reconnect: {:?}",
         log.commands
+    );
+    let said: Vec<String> = records
+        .iter()
+        .flat_map(|r| r.events.iter().map(|e| e.to_string()))
+        .collect();
+    assert!(
+        said.iter()
+            .any(|e| e.contains("companion stopping (--duration elapsed)") && e.contains("hand-off RTL")),
+        "{said:?}"
+    );
+    assert_eq!(
+        records
+            .last()
+            .and_then(|r| r.vehicle.get("operator"))
+            .and_then(|v| v.as_str()),
+        Some("stopping")
     );
     // The garbage was counted, not fatal.
     assert!(report.ingest.bytes_unframed() > 0);

@@ -217,6 +217,18 @@ class StandinAutopilot(LinkIO, MessageHandlers, MissionProtocol, ArmingAndModes,
                 link.send_raw(buf)
             self.rec.add(self.wall(), self._sim, "inject_unsigned", type=msg.get_type())
 
+    def inject_unsigned_burst(self, msgs: List[Any], srcsys: Optional[int] = None,
+                              srccomp: Optional[int] = None) -> None:
+        """Several unsigned frames in one write (back to back, one TCP segment), as the attacker's two armed
+        heartbeats were: nothing of the autopilot's own can arrive in between."""
+        with self.lock:
+            enc = mavlink.MAVLink(None, srcsys if srcsys is not None else self.cfg.sysid,
+                                  srccomp if srccomp is not None else self.cfg.compid)
+            buf = b"".join(bytes(m.pack(enc)) for m in msgs)
+            for link in self.links:
+                link.send_raw(buf)
+            self.rec.add(self.wall(), self._sim, "inject_unsigned", type="+".join(m.get_type() for m in msgs))
+
     def send_statustext(self, text: str, severity: int = mavlink.MAV_SEVERITY_INFO) -> None:
         with self.lock:
             self._statustext(text, severity)
