@@ -188,6 +188,8 @@ class GcsObserver:
         self.texts: List[str] = []
         self.battery_pct: Optional[int] = None
         self.heartbeats = 0
+        # (time, source component, command, result) of every COMMAND_ACK from the vehicle's system
+        self.acks: List[tuple] = []
         # (time, lat_e7, lon_e7, relative alt m, mode) of every GLOBAL_POSITION_INT while armed
         self.track: List[tuple] = []
         self._stop = False
@@ -234,6 +236,8 @@ class GcsObserver:
                     self.texts.append(m.text)
                 elif t == "SYS_STATUS":
                     self.battery_pct = m.battery_remaining
+                elif t == "COMMAND_ACK":
+                    self.acks.append((time.time(), m.get_srcComponent(), m.command, m.result))
 
     def wait(self, what: str, cond, timeout: float) -> None:
         deadline = time.time() + timeout

@@ -215,6 +215,7 @@ class GcsObserver:
         self.gps_fix: Optional[int] = None
         self.params: Dict[str, Tuple[float, float]] = {}
         self.acks: List[Tuple[float, int, int]] = []            # (t, command, result)
+        self.acks_by: List[Tuple[float, int, int, int]] = []    # (t, source component, command, result)
         self.connects = 0
         self.signing_key: Optional[bytes] = None
         self._t = threading.Thread(target=self._run, daemon=True, name="gcs-observer")
@@ -341,6 +342,7 @@ class GcsObserver:
                 self.params[pid.rstrip("\x00")] = (m.param_value, now)
             elif t == "COMMAND_ACK":
                 self.acks.append((now, m.command, m.result))
+                self.acks_by.append((now, m.get_srcComponent(), m.command, m.result))
 
     # ---- queries ----
     def wait(self, cond: Callable[[], bool], timeout: float, what: str) -> None:
@@ -417,15 +419,16 @@ class GcsObserver:
                 time.sleep(0.05)
         raise AssertionError(f"PARAM_REQUEST_READ {name}: no PARAM_VALUE{self.summary()}")
 
-    def command_long(self, cmd: int, *params: float, timeout: float = 5.0) -> Optional[int]:
-        """COMMAND_LONG to the autopilot; the COMMAND_ACK result, or None when none came."""
+    def command_long(self, cmd: int, *params: float, timeout: float = 5.0, component: int = 1) -> Optional[int]:
+        """COMMAND_LONG to `component` of the vehicle (the autopilot by default; 191 is the companion); the
+        COMMAND_ACK result from that component, or None when none came."""
         p = list(params) + [0.0] * (7 - len(params))
         t0 = time.monotonic()
-        self.conn.mav.command_long_send(1, 1, cmd, 0, *p)
+        self.conn.mav.command_long_send(1, component, cmd, 0, *p)
         end = t0 + timeout
         while time.monotonic() < end:
             with self._lock:
-                got = [r for (t, c, r) in self.acks if t >= t0 and c == cmd]
+                got = [r for (t, src, c, r) in self.acks_by if t >= t0 and c == cmd and src == component]
             if got:
                 return got[0]
             time.sleep(0.05)

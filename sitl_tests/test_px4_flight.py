@@ -9,6 +9,7 @@ timers are wall-clock.
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import time
 from pathlib import Path
@@ -46,9 +47,9 @@ def write_route(path: Path, waypoints, search_s: float = 5.0) -> Path:
     return path
 
 
-def fly(exe: str, port: int, route: Path, log_dir: Path):
-    # companion_fly_cmd passes --auto-start and --once (exit after the one flight)
-    cmd = companion_fly_cmd(exe, f"udpin:127.0.0.1:{port}", log_dir, mission=route)
+def fly(exe: str, port: int, route: Path, log_dir: Path, auto_start: bool = True):
+    # companion_fly_cmd passes --auto-start (unless told not to) and --once (exit after the one flight)
+    cmd = companion_fly_cmd(exe, f"udpin:127.0.0.1:{port}", log_dir, mission=route, auto_start=auto_start)
     out = open(log_dir.parent / f"fly-{port}.out", "w")
     return subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL), out
 
@@ -276,3 +277,70 @@ def test_px4_ground_station_takeover_stops_the_companion_and_px4_flies_it_home(p
                   if c.get("result") in ("SENT", "ACCEPTED", "ALREADY")]
     assert not later_sent, later_sent
     assert rc == 0, f"companion fly exited {rc}; {o.summary()}"
+
+
+def test_px4_low_battery_mission_start_is_refused_and_the_vehicle_stays_disarmed(px4_vehicle, tmp_path):
+    """The battery empty on the ground (SIH's battery failure injection): MAV_CMD_MISSION_START to the companion
+    is refused with a COMMAND_ACK and a STATUSTEXT, and the vehicle stays disarmed."""
+    exe = companion_bin()
+    v = px4_vehicle({**NOMINAL, "SYS_FAILURE_EN": 1})
+    o = v.observer
+    o.wait("a battery reading", lambda o: o.battery_pct is not None and o.battery_pct > 0, 60)
+    # MAV_CMD_INJECT_FAILURE: unit FAILURE_UNIT_SYSTEM_BATTERY (100), type FAILURE_TYPE_OFF (1): the battery
+    # simulator reports the empty-cell voltage (BatterySimulator.cpp).
+    for _ in range(3):
+        o.conn.mav.command_long_send(o.sysid, 1, mavlink.MAV_CMD_INJECT_FAILURE, 0, 100, 1, 0, 0, 0, 0, 0)
+        time.sleep(0.3)
+    o.wait("the battery reported low", lambda o: o.battery_pct is not None and 0 <= o.battery_pct <= 15, 60)
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    route = write_route(tmp_path / "route.toml", [(30, 0)])
+    proc, out = fly(exe, v.onboard_port, route, runs, auto_start=False)
+    try:
+        o.wait("the companion waiting for the operator",
+               lambda o: any("waiting for the operator" in t for t in o.texts), 60)
+        time.sleep(3.0)
+        t0 = time.time()
+        for _ in range(3):              # the GCS heartbeat reaches the companion through PX4's forwarding
+            o.conn.mav.command_long_send(o.sysid, 191, mavlink.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
+            time.sleep(1.0)
+            with o.lock:
+                got = [a for a in o.acks if a[0] >= t0 and a[1] == 191 and a[2] == mavlink.MAV_CMD_MISSION_START]
+            if got:
+                break
+        assert got, f"no COMMAND_ACK from the companion; {o.summary()}"
+        assert got[0][3] == mavlink.MAV_RESULT_DENIED, got
+        o.wait("the refusal's STATUSTEXT", lambda o: any(t.startswith("Start refused") for t in o.texts), 10)
+        time.sleep(10.0)
+        assert not o.armed_seen, o.summary()
+    finally:
+        proc.terminate()
+        finish(proc, out, 20)
+    records = read_decision_log(runs)
+    assert any(e.startswith("operator: start refused") for r in records for e in r.get("events", []))
+
+
+def test_px4_sigterm_mid_route_hands_the_vehicle_to_rtl(px4_vehicle, tmp_path):
+    """SIGTERM while the companion flies the route: a CRITICAL STATUSTEXT and RTL within 5 s, as the ground
+    station sees it; the companion exits 0 and its last record says it stopped."""
+    exe = companion_bin()
+    v = px4_vehicle(NOMINAL)
+    route = write_route(tmp_path / "route.toml", [(80, 0), (80, 40), (0, 40)])
+    runs = tmp_path / "runs"
+    proc, out = fly(exe, v.onboard_port, route, runs)
+    o = v.observer
+    try:
+        o.wait("MISSION mode, on the route", lambda o: o.mode == "MISSION" and o.alt_m > 0.8 * ROUTE_ALT_M, 150)
+        time.sleep(2.0)
+        proc.send_signal(signal.SIGTERM)
+        o.wait("RTL within 5 s of SIGTERM", lambda o: o.mode == "RTL", 5)
+        o.wait("the stop's STATUSTEXT", lambda o: any(t.startswith("Companion stopping: RTL") for t in o.texts), 5)
+        rc = proc.wait(timeout=15)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        out.close()
+    assert rc == 0, rc
+    assert o.armed, "the vehicle should still be flying its return" + o.summary()
+    records = read_decision_log(runs)
+    assert records[-1].get("vehicle", {}).get("operator") == "stopping", records[-1].get("vehicle")
