@@ -199,9 +199,7 @@ impl MissionState {
         } else {
             None
         };
-        let frames_agree = extra
-            .down_for_s
-            .is_none_or(|d| d >= self.landed_confirm_s);
+        let frames_agree = extra.down_for_s.is_none_or(|d| d >= self.landed_confirm_s);
         if self.flown
             && frames_agree
             && let Some((since, n)) = self.ground_since

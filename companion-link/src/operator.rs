@@ -641,7 +641,13 @@ mod tests {
             }
         }
         /// Feed a heartbeat and let the gate look, at the heartbeat's time.
-        fn at(&mut self, g: &mut OperatorGate, t: f64, mode: u32, armed: bool) -> Option<GateEvent> {
+        fn at(
+            &mut self,
+            g: &mut OperatorGate,
+            t: f64,
+            mode: u32,
+            armed: bool,
+        ) -> Option<GateEvent> {
             self.hb(t, mode, armed);
             g.observe(s(t), &self.view(s(t)))
         }
@@ -669,7 +675,11 @@ mod tests {
         let mut f = Feed::new();
         assert_eq!(f.at(&mut g, 1.0, STABILIZE, false), None);
         assert_eq!(f.at(&mut g, 2.0, STABILIZE, true), None);
-        assert_eq!(f.at(&mut g, 3.0, STABILIZE, true), None, "two heartbeats, 1 s");
+        assert_eq!(
+            f.at(&mut g, 3.0, STABILIZE, true),
+            None,
+            "two heartbeats, 1 s"
+        );
         assert_eq!(
             f.look(&mut g, 4.0),
             Some(GateEvent::StartRequested(StartBy::PilotArmed))
@@ -677,7 +687,11 @@ mod tests {
         assert_eq!(f.look(&mut g, 4.1), None, "one request per arming");
         let ev = g.refuse(StartBy::PilotArmed, "battery 12%");
         assert!(matches!(ev, GateEvent::StartRefused(..)));
-        assert_eq!(f.at(&mut g, 5.0, STABILIZE, true), None, "refused: not asked again");
+        assert_eq!(
+            f.at(&mut g, 5.0, STABILIZE, true),
+            None,
+            "refused: not asked again"
+        );
         // Disarm and arm again: a new operator action.
         assert_eq!(f.at(&mut g, 6.0, STABILIZE, false), None);
         assert_eq!(f.at(&mut g, 7.0, STABILIZE, true), None);

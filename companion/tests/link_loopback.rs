@@ -273,7 +273,8 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
         .collect();
     assert!(
         said.iter()
-            .any(|e| e.contains("companion stopping (--duration elapsed)") && e.contains("hand-off RTL")),
+            .any(|e| e.contains("companion stopping (--duration elapsed)")
+                && e.contains("hand-off RTL")),
         "{said:?}"
     );
     assert_eq!(

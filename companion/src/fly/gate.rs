@@ -80,9 +80,7 @@ fn command_refusal(
     if cmd.command == operator::START_COMMAND && !gcs.knows(sys) {
         return Some((
             MavResult::MAV_RESULT_DENIED,
-            format!(
-                "system {sys} sent no GCS HEARTBEAT and is not named by --gcs-sysid"
-            ),
+            format!("system {sys} sent no GCS HEARTBEAT and is not named by --gcs-sysid"),
             "Start refused: sender is not a ground station",
         ));
     }
@@ -163,8 +161,17 @@ pub fn request_start(
             Ok(())
         }
         Err(refusal) => {
+            let no_decision_yet =
+                matches!(&refusal, LaunchRefusal::NotOnGround { state, .. } if state.is_empty());
+            if no_decision_yet && by == StartBy::AutoStart {
+                return Err(refusal); // asked again once the first record is in
+            }
             let ev = shell.operator.refuse(by, &refusal.description());
-            let text = refusal.pilot_text();
+            let text = if no_decision_yet {
+                "Start refused: not ready yet, send again".to_string()
+            } else {
+                refusal.pilot_text()
+            };
             if by != StartBy::AutoStart || shell.refusal_told.as_deref() != Some(&text) {
                 let line = ev.describe();
                 tracing::warn!("{line}");
@@ -180,7 +187,12 @@ pub fn request_start(
 /// One look at the vehicle for the gate: start requests, a void, a takeover and its
 /// confirmation, a hand-back; and a take-off that failed before the vehicle was airborne.
 /// True when the gate changed.
-pub fn observe(shell: &mut Shell, vehicle: &mut Vehicle, now: Duration, out: &mut Vec<Msg>) -> bool {
+pub fn observe(
+    shell: &mut Shell,
+    vehicle: &mut Vehicle,
+    now: Duration,
+    out: &mut Vec<Msg>,
+) -> bool {
     let view = VehicleView {
         flavor: vehicle.flavor,
         custom_mode: vehicle.telemetry.custom_mode,
@@ -257,9 +269,10 @@ pub fn on_gate_event(
                 format!("companion: pilot has control ({mode}), standing by"),
             ))
         }
-        GateEvent::FalseAlarm(mode, _) => {
-            Some((WARNING, format!("Mode {mode} not confirmed: companion resumes")))
-        }
+        GateEvent::FalseAlarm(mode, _) => Some((
+            WARNING,
+            format!("Mode {mode} not confirmed: companion resumes"),
+        )),
         GateEvent::HandedBack(_) => Some((NOTICE, "companion: control handed back".to_string())),
     };
     if matches!(ev, GateEvent::Started(_) | GateEvent::HandedBack(_)) {
@@ -358,4 +371,223 @@ pub fn end_stop(shell: &mut Shell, vehicle: &Vehicle, commanded: bool) {
     };
     tracing::warn!("{line}");
     shell.pending_events.push(Event::from(line));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fly::{FlyArgs, FlySetup};
+    use companion_link::Msg;
+    use companion_link::dialect::*;
+    use companion_link::ingest::Frame;
+    use companion_link::operator::{Control, OperatorGate};
+    use mavlink::{MavHeader, MavlinkVersion};
+
+    fn setup() -> (Shell, Vehicle) {
+        let args = FlyArgs::from_cli(["--connect", "udpin:127.0.0.1:14550"]).unwrap();
+        let setup = FlySetup::load(&args).unwrap();
+        let mut shell = Shell::new(&setup);
+        shell.operator = OperatorGate::new(false);
+        (shell, setup.vehicle(Duration::from_secs(3)))
+    }
+
+    fn frame(sys: u8, comp: u8, msg: Msg) -> Frame {
+        Frame {
+            header: MavHeader {
+                system_id: sys.into(),
+                component_id: comp,
+                sequence: 0,
+            },
+            msg,
+            signed: false,
+            version: MavlinkVersion::V2,
+            raw: Vec::new(),
+        }
+    }
+
+    fn autopilot_heartbeat() -> Frame {
+        frame(
+            1,
+            1,
+            Msg::HEARTBEAT(HEARTBEAT_DATA {
+                mavtype: MavType::MAV_TYPE_QUADROTOR,
+                autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+                ..HEARTBEAT_DATA::DEFAULT
+            }),
+        )
+    }
+
+    fn start_from(sys: u8, comp: u8) -> Frame {
+        frame(
+            sys,
+            comp,
+            Msg::COMMAND_LONG(COMMAND_LONG_DATA {
+                command: MavCmd::MAV_CMD_MISSION_START,
+                target_system: 1,
+                target_component: companion_link::OUR_COMPONENT_ID,
+                ..COMMAND_LONG_DATA::DEFAULT
+            }),
+        )
+    }
+
+    fn gcs_heartbeat(sys: u8) -> Frame {
+        frame(
+            sys,
+            190,
+            Msg::HEARTBEAT(HEARTBEAT_DATA {
+                mavtype: MavType::MAV_TYPE_GCS,
+                autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+                ..HEARTBEAT_DATA::DEFAULT
+            }),
+        )
+    }
+
+    /// Feed `f` at `t` s; answer the commands to us; the ACK results sent.
+    fn feed(
+        shell: &mut Shell,
+        v: &mut Vehicle,
+        gcs: &mut GroundStations,
+        t: f64,
+        f: &Frame,
+    ) -> Vec<MavResult> {
+        let now = Duration::from_secs_f64(t);
+        gcs.on_frame(f);
+        v.on_frame(now, f);
+        let mut out = Vec::new();
+        for cmd in v.take_commands_to_us() {
+            answer_command(shell, v, gcs, cmd, now, &mut out);
+        }
+        out.iter()
+            .filter_map(|m| match m {
+                Msg::COMMAND_ACK(a) => Some(a.result),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_start_before_the_autopilot_is_heard_is_refused_and_not_kept() {
+        let (mut shell, mut v) = setup();
+        let mut gcs = GroundStations::default();
+        feed(&mut shell, &mut v, &mut gcs, 0.1, &gcs_heartbeat(255));
+        let acks = feed(&mut shell, &mut v, &mut gcs, 0.2, &start_from(255, 190));
+        assert_eq!(acks, vec![MavResult::MAV_RESULT_TEMPORARILY_REJECTED]);
+        shell.launch = Ok(()); // the models would agree now
+        feed(&mut shell, &mut v, &mut gcs, 1.0, &autopilot_heartbeat());
+        assert!(v.take_commands_to_us().is_empty());
+        assert_eq!(shell.operator.control, Control::Waiting);
+    }
+
+    #[test]
+    fn a_start_is_taken_only_from_a_ground_station() {
+        let (mut shell, mut v) = setup();
+        let mut gcs = GroundStations::default();
+        shell.launch = Ok(());
+        feed(&mut shell, &mut v, &mut gcs, 0.0, &autopilot_heartbeat());
+        feed(&mut shell, &mut v, &mut gcs, 0.1, &gcs_heartbeat(255));
+        // The autopilot's own component, another system's component 1, a system never heard as a GCS.
+        for (sys, comp) in [(1, 1), (66, 1), (77, 190)] {
+            let acks = feed(&mut shell, &mut v, &mut gcs, 0.5, &start_from(sys, comp));
+            assert_eq!(acks, vec![MavResult::MAV_RESULT_DENIED], "{sys}/{comp}");
+            assert_eq!(shell.operator.control, Control::Waiting);
+        }
+        // --gcs-sysid names a ground station before its heartbeat.
+        gcs.pinned.insert(77);
+        let acks = feed(&mut shell, &mut v, &mut gcs, 0.6, &start_from(77, 190));
+        assert_eq!(acks, vec![MavResult::MAV_RESULT_ACCEPTED]);
+        assert_eq!(shell.operator.control, Control::Started);
+    }
+
+    #[test]
+    fn a_command_that_waited_too_long_is_refused() {
+        let (mut shell, mut v) = setup();
+        let mut gcs = GroundStations::default();
+        shell.launch = Ok(());
+        feed(&mut shell, &mut v, &mut gcs, 0.0, &autopilot_heartbeat());
+        feed(&mut shell, &mut v, &mut gcs, 0.1, &gcs_heartbeat(255));
+        v.on_frame(Duration::from_secs(1), &start_from(255, 190));
+        let mut out = Vec::new();
+        let late = Duration::from_secs(1) + shell.command_max_age + Duration::from_millis(1);
+        for cmd in v.take_commands_to_us() {
+            answer_command(&mut shell, &mut v, &gcs, cmd, late, &mut out);
+        }
+        assert!(
+            matches!(&out[..], [.., Msg::COMMAND_ACK(a)] if a.result == MavResult::MAV_RESULT_TEMPORARILY_REJECTED)
+        );
+        assert_eq!(shell.operator.control, Control::Waiting);
+    }
+
+    #[test]
+    fn the_models_refusal_is_denied_with_the_pilots_words_and_the_gate_keeps_waiting() {
+        let (mut shell, mut v) = setup();
+        let mut gcs = GroundStations::default();
+        shell.launch = Err(LaunchRefusal::BatteryLow {
+            pct: 12.0,
+            short_j: 9_600.0,
+            reason: String::new(),
+        });
+        feed(&mut shell, &mut v, &mut gcs, 0.0, &autopilot_heartbeat());
+        feed(&mut shell, &mut v, &mut gcs, 0.1, &gcs_heartbeat(255));
+        let now = Duration::from_millis(500);
+        v.on_frame(now, &start_from(255, 190));
+        let mut out = Vec::new();
+        for cmd in v.take_commands_to_us() {
+            answer_command(&mut shell, &mut v, &gcs, cmd, now, &mut out);
+        }
+        let texts: Vec<String> = out
+            .iter()
+            .filter_map(|m| match m {
+                Msg::STATUSTEXT(t) => Some(t.text.to_str().unwrap_or("").to_string()),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(
+            texts,
+            vec!["Start refused: battery 12%, 9.6 kJ short".to_string()]
+        );
+        assert!(
+            matches!(&out[..], [.., Msg::COMMAND_ACK(a)] if a.result == MavResult::MAV_RESULT_DENIED)
+        );
+        assert_eq!(shell.operator.control, Control::Waiting);
+        assert!(
+            shell
+                .pending_events
+                .iter()
+                .any(|e| e.to_string().starts_with("operator: start refused"))
+        );
+    }
+
+    #[test]
+    fn an_auto_start_refusal_is_said_once_per_reason() {
+        let (mut shell, mut v) = setup();
+        shell.operator = OperatorGate::new(true);
+        shell.launch = Err(LaunchRefusal::NoGuarantee);
+        let mut out = Vec::new();
+        for i in 0..5 {
+            let _ = request_start(
+                &mut shell,
+                &mut v,
+                StartBy::AutoStart,
+                Duration::from_secs(i),
+                &mut out,
+            );
+        }
+        let said = out
+            .iter()
+            .filter(|m| matches!(m, Msg::STATUSTEXT(_)))
+            .count();
+        assert_eq!(said, 1);
+        shell.launch = Ok(());
+        assert!(
+            request_start(
+                &mut shell,
+                &mut v,
+                StartBy::AutoStart,
+                Duration::from_secs(6),
+                &mut out
+            )
+            .is_ok()
+        );
+        assert!(shell.operator.commanding());
+    }
 }

@@ -676,8 +676,13 @@ async fn run_loop<D: Decider, S: RecordSink>(
         Err(e) => format!("error: {e:#}"),
     };
     let armed = vehicle.target.is_some() && vehicle.readiness.armed;
-    let (msgs, commanded) =
-        gate::begin_stop(&mut shell, &mut vehicle, setup.link.flight.handoff, &why, now());
+    let (msgs, commanded) = gate::begin_stop(
+        &mut shell,
+        &mut vehicle,
+        setup.link.flight.handoff,
+        &why,
+        now(),
+    );
     send(&mut encoder, &vehicle, &link.outbound, &mut tlog, &msgs).await;
     if commanded {
         let deadline = Instant::now() + HANDOFF_WAIT;
@@ -1365,7 +1370,11 @@ impl ScriptedDecider {
 impl Decider for ScriptedDecider {
     /// The script agrees to a start when it proposes to take off (it has no guarantee).
     fn launch_verdict(&self, rec: &DecisionRecord) -> Result<(), LaunchRefusal> {
-        if rec.actions.iter().any(|a| a == companion_core::launch::TAKE_OFF) {
+        if rec
+            .actions
+            .iter()
+            .any(|a| a == companion_core::launch::TAKE_OFF)
+        {
             Ok(())
         } else {
             Err(LaunchRefusal::NoTakeOff {
