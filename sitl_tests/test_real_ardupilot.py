@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 import re
+import subprocess
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional
@@ -179,6 +180,15 @@ def test_real_nominal_tracking_mission_end_to_end(arducopter, fly, monitors_fact
         f"no tracking after the target was reported: states {sorted(states)}, actions {sorted(actions)}"
     assert actions & LANDING_ACTIONS, sorted(actions)
     assert len(mission_uploads(f.ctx.relay)) == 1, "the route was uploaded more than once"
+    # The review tells how the flight ended: landed and disarmed, where, and how far from home.
+    run_dir = next(p.parent for p in f.run.log_dir.rglob("decisions*.jsonl"))
+    out = subprocess.run([os.environ["COMPANION_BIN"], "review", str(run_dir), "--summary"], capture_output=True,
+                         text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    ended = [ln for ln in out.stdout.splitlines() if "landed and disarmed" in ln]
+    assert ended, out.stdout[-2000:]
+    m = re.search(r"([0-9]+) m from home", ended[0])
+    assert m and int(m.group(1)) < 500, ended[0]
 
 
 def test_real_companion_arms_only_in_the_mode_it_commanded(arducopter, fly, monitors_factory, relay):
