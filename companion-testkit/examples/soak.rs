@@ -388,7 +388,7 @@ fn main() -> anyhow::Result<()> {
                 if let Some(a) = rec
                     .actions
                     .iter()
-                    .find(|a| companion_link::mission_state::LANDING_ACTIONS.contains(&a.as_str()))
+                    .find(|a| s.shell.mission.is_landing_action(a))
                 {
                     s.landing_cmd = Some(a.clone());
                 }
