@@ -837,9 +837,18 @@ impl<'m> Core<'m> {
                     {
                         let _ = write!(line, ": the {} MDP chose {}", pr.mdp, pr.action);
                         let mut sep = " reading ";
+                        // A version's probabilities are the ones its activation node publishes
+                        // (the list the health layer builds from params/variants.toml).
+                        let activations = &self.model.health.activations;
+                        let publishes = |v: &str, name: &str| {
+                            activations.iter().any(|a| {
+                                a.app == app
+                                    && a.version == v
+                                    && a.published.iter().any(|n| n == name)
+                            })
+                        };
                         for (name, value) in &pr.inputs {
-                            let v = name.strip_prefix("P_");
-                            if v == Some(version) || v == Some(p.version.as_str()) {
+                            if publishes(version, name) || publishes(&p.version, name) {
                                 let _ = write!(line, "{sep}{name} = {value:.3}");
                                 sep = ", ";
                             }
