@@ -27,6 +27,7 @@
 
 pub mod action_role;
 pub mod arbitration;
+pub mod conflicts;
 pub mod decision;
 pub mod evidence;
 pub mod fmea;
@@ -35,11 +36,13 @@ pub mod health;
 pub mod launch;
 pub mod mission;
 pub mod mission_mdp;
+pub mod model;
 pub mod observations;
 pub mod probabilities;
 pub mod record;
 pub mod report;
 pub mod resources;
+pub(crate) mod scratch;
 pub mod spec;
 pub mod tracking;
 pub mod vocabulary;
