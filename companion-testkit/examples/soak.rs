@@ -388,7 +388,7 @@ fn main() -> anyhow::Result<()> {
                 if let Some(a) = rec
                     .actions
                     .iter()
-                    .find(|a| s.shell.mission.is_landing_action(a))
+                    .find(|a| model.states.actions().ends_flight(a))
                 {
                     s.landing_cmd = Some(a.clone());
                 }
