@@ -5,170 +5,19 @@
 //! core carries between cycles (its own fields) and one [`Observations`] snapshot. No clock, file,
 //! socket or randomness.
 
-use crate::arbitration::{BehaviourConflicts, ResourceArbiter};
-use crate::guarantee::{Guarantee, MissionSpec, Progress};
+use crate::arbitration::ResourceArbiter;
+use crate::guarantee::{Guarantee, Progress};
 use crate::health::HealthModel;
+use crate::mission::ActionKind;
 pub use crate::mission::Policy;
-use crate::mission::{ActionCatalogue, ActionKind, MissionFile, MissionStates};
 use crate::mission_mdp::MissionMdps;
+pub use crate::model::{Model, ModelKind};
 use crate::observations::Observations;
 use crate::record::{DecisionRecord, Event, Plan};
-use crate::resources::ResourceSpec;
-use crate::spec::SpecError;
+use crate::scratch::Scratch;
 use fpga_model::PlatformState;
 use mdp_engine::Workspace;
 use std::collections::BTreeMap;
-
-/// Which decision model drives a run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ModelKind {
-    /// The three concurrent MDPs of section 6 (navigation, landing, tracking).
-    Bfm,
-    /// Figure 1's reference MDP: nominal tracking only.
-    Reference,
-    /// Section 5's monolithic MDP.
-    Monolithic,
-}
-
-impl ModelKind {
-    /// The model's name as on the command line (`bfm`, `reference`, `monolithic`).
-    pub fn name(self) -> &'static str {
-        match self {
-            ModelKind::Bfm => "bfm",
-            ModelKind::Reference => "reference",
-            ModelKind::Monolithic => "monolithic",
-        }
-    }
-}
-
-impl std::str::FromStr for ModelKind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "bfm" => Ok(ModelKind::Bfm),
-            "reference" => Ok(ModelKind::Reference),
-            "monolithic" => Ok(ModelKind::Monolithic),
-            o => Err(format!("unknown model `{o}` (bfm, reference, monolithic)")),
-        }
-    }
-}
-
-/// Everything loaded from params/ once at start-up. Immutable; each [`Core`] clones the parts it
-/// updates in place (the battery DBN's slice, the MDPs' transition storage).
-pub struct Model {
-    /// params/mission.toml: horizon, rates, guarantee coupling, state projections.
-    pub mission: MissionFile,
-    /// The mission's states and phases (params/mission.toml), checked against the catalogue.
-    pub states: MissionStates,
-    /// The primitive actions (params/actions.toml).
-    pub actions: ActionCatalogue,
-    /// The health managers and observation mapping (params/health/, params/observations.toml).
-    pub health: HealthModel,
-    /// The MDPs of params/mdp/.
-    pub mdps: MissionMdps,
-    /// Behaviour conflict rules and policy priorities (params/policies.toml).
-    pub conflicts: BehaviourConflicts,
-    /// Platform, variant catalogue and resource policies.
-    pub resources: ResourceSpec,
-    /// The PANORAMA mission whose goals the guarantee stage watches.
-    pub guarantee: MissionSpec,
-    /// The decision policies params/policies.toml declares (`priority` tables), in file-key
-    /// order; a [`Policy`] is an index into it.
-    pub policies: Vec<String>,
-}
-
-impl Model {
-    /// The policy named `name`, or why there is none (the names params/policies.toml declares).
-    pub fn policy(&self, name: &str) -> Result<Policy, String> {
-        self.policies
-            .iter()
-            .position(|p| p == name)
-            .map(Policy::from_index)
-            .ok_or_else(|| {
-                format!(
-                    "unknown policy `{name}` (params/policies.toml: {})",
-                    self.policies.join(", ")
-                )
-            })
-    }
-
-    /// The name of a policy of this model.
-    pub fn policy_name(&self, policy: Policy) -> &str {
-        self.policies.get(policy.index()).map_or("", String::as_str)
-    }
-
-    /// Compile the whole model from the params files (the shell reads them).
-    pub fn load(files: &crate::spec::ParamsFiles) -> Result<Self, SpecError> {
-        let params = files.dir();
-        let mission = MissionFile::load(files)?;
-        let actions = ActionCatalogue::load(files)?;
-        let states = MissionStates::compile(&params.join("mission.toml"), &mission, &actions)?;
-        let health = HealthModel::load(files)?;
-        let names = health.publishes();
-        let name_refs: Vec<&str> = names.iter().map(String::as_str).collect();
-        let mdps = MissionMdps::load(files, &name_refs)?;
-        crate::probabilities::check_vocabulary(params, &health, &mdps, &mission)?;
-        crate::vocabulary::check_actions(params, &actions, &mdps)?;
-        let ids: Vec<&str> = actions.actions.iter().map(|a| a.id.as_str()).collect();
-        let conflicts = BehaviourConflicts::load(files, &params.join("policies.toml"), &ids)?;
-        let resources = ResourceSpec::load(files)?;
-        let guarantee = crate::guarantee::load_mission(files, &mission.guarantee.mission)?;
-        let policies: Vec<String> = conflicts.policies().map(str::to_owned).collect();
-        if policies.is_empty() || policies.len() > usize::from(u8::MAX) {
-            return Err(SpecError::new(
-                params.join("policies.toml"),
-                "priority",
-                format!("declares {} policies: 1 to 255 expected", policies.len()),
-            ));
-        }
-        // Every policy arbitrates resources too: its resource policy must exist.
-        for p in &policies {
-            resources.policy(p)?;
-        }
-        let file = params.join("actions.toml");
-        for (i, a) in actions.actions.iter().enumerate() {
-            if let (Some(app), Some(v)) = (&a.app, &a.version)
-                && !resources.catalogue.has_version(app, v)
-            {
-                return Err(SpecError::new(
-                    &file,
-                    format!("action[{i}]"),
-                    format!("variant {app}/{v} is not in params/variants.toml"),
-                ));
-            }
-        }
-        Ok(Model {
-            mission,
-            states,
-            actions,
-            health,
-            mdps,
-            conflicts,
-            resources,
-            guarantee,
-            policies,
-        })
-    }
-
-    /// The MDP names a model kind runs concurrently.
-    pub fn mdp_names(&self, kind: ModelKind) -> Vec<String> {
-        match kind {
-            ModelKind::Bfm => self.mdps.concurrent().to_vec(),
-            ModelKind::Monolithic => self
-                .mdps
-                .monolithic()
-                .map(str::to_owned)
-                .into_iter()
-                .collect(),
-            ModelKind::Reference => self
-                .mdps
-                .reference()
-                .map(str::to_owned)
-                .into_iter()
-                .collect(),
-        }
-    }
-}
 
 /// A decision core bound to a model, a model kind and a policy; `step` once per cycle.
 pub struct Core<'m> {
@@ -210,21 +59,6 @@ pub struct WorkDone {
     pub mdp_solves: u64,
     /// Platform scheduler runs actually made (memo hits not counted).
     pub scheduler_runs: u64,
-}
-
-/// Per-cycle working lists, kept between cycles for their capacity. Action names borrow the
-/// model (`'m`), so filling them allocates nothing.
-#[derive(Default)]
-pub(crate) struct Scratch<'m> {
-    merged: Vec<&'m str>,
-    pub(crate) kept: Vec<&'m str>,
-    pub(crate) owners: Vec<&'m str>,
-    pub(crate) actions: Vec<&'m str>,
-    /// Proposals replaced by a re-solve of the same MDP within the cycle.
-    superseded: Vec<usize>,
-    /// The resource requests, one key each.
-    pub(crate) key: Vec<crate::arbitration::RequestKey<'m>>,
-    failed: Vec<String>,
 }
 
 /// At most this many re-solves per cycle (one per version the MDP may turn to is plenty).
@@ -837,9 +671,18 @@ impl<'m> Core<'m> {
                     {
                         let _ = write!(line, ": the {} MDP chose {}", pr.mdp, pr.action);
                         let mut sep = " reading ";
+                        // A version's probabilities are the ones its activation node publishes
+                        // (the list the health layer builds from params/variants.toml).
+                        let activations = &self.model.health.activations;
+                        let publishes = |v: &str, name: &str| {
+                            activations.iter().any(|a| {
+                                a.app == app
+                                    && a.version == v
+                                    && a.published.iter().any(|n| n == name)
+                            })
+                        };
                         for (name, value) in &pr.inputs {
-                            let v = name.strip_prefix("P_");
-                            if v == Some(version) || v == Some(p.version.as_str()) {
+                            if publishes(version, name) || publishes(&p.version, name) {
                                 let _ = write!(line, "{sep}{name} = {value:.3}");
                                 sep = ", ";
                             }

@@ -7,15 +7,10 @@
 
 use crate::decision::Model;
 use crate::guarantee::{DURATION, ENERGY};
-use crate::mission::RouteRole;
+use crate::mission::{ActionRole, RouteRole};
 use crate::record::{DecisionRecord, EnergySource};
 use serde::Serialize;
 
-/// The primitive action that leaves the ground (params/actions.toml).
-pub const TAKE_OFF: &str = "take_off";
-/// The primitive action that keeps the vehicle on the ground (params/actions.toml; an addition
-/// to the paper's actions, docs/params/mdp.md).
-pub const STAY_ON_GROUND: &str = "stay_on_ground";
 /// The named probability the verdict quotes when a model stays (the battery belief).
 const P_BATTERY: &str = "P_battery";
 /// MAVLink STATUSTEXT holds at most this many characters.
@@ -205,10 +200,12 @@ pub fn verdict(record: &DecisionRecord, model: &Model) -> Result<(), LaunchRefus
             reason: g.infeasible_reason.clone().unwrap_or_default(),
         });
     }
+    // The actions that leave or keep the ground, by their roles (params/actions.toml).
+    let roles = model.states.actions();
     if let Some(p) = record
         .proposals
         .iter()
-        .find(|p| p.actions.iter().any(|a| a == STAY_ON_GROUND))
+        .find(|p| roles.any(&p.actions, ActionRole::StayOnGround))
     {
         let read = |name: &str| {
             p.inputs
@@ -224,7 +221,7 @@ pub fn verdict(record: &DecisionRecord, model: &Model) -> Result<(), LaunchRefus
         });
     }
     let acts = &record.actions;
-    if !acts.iter().any(|a| a == TAKE_OFF) || acts.iter().any(|a| a == STAY_ON_GROUND) {
+    if !roles.any(acts, ActionRole::TakeOff) || roles.any(acts, ActionRole::StayOnGround) {
         return Err(LaunchRefusal::NoTakeOff {
             actions: acts.join("+"),
         });
@@ -280,11 +277,16 @@ mod tests {
         (verdict(&rec, model), rec)
     }
 
+    /// The shipped actions playing the take-off and stay-on-ground roles.
+    const TAKE_OFF: &str = "take_off";
+    const STAY_ON_GROUND: &str = "stay_on_ground";
+
     #[test]
-    fn the_actions_it_reads_are_in_the_catalogue() {
+    fn the_actions_it_reads_are_the_roles_of_the_catalogue() {
         let m = model();
-        assert!(m.actions.get(TAKE_OFF).is_some());
-        assert!(m.actions.get(STAY_ON_GROUND).is_some());
+        let roles = m.states.actions();
+        assert_eq!(roles.action(ActionRole::TakeOff), TAKE_OFF);
+        assert_eq!(roles.action(ActionRole::StayOnGround), STAY_ON_GROUND);
     }
 
     /// A full pack: the models agree to the default mission, under both policies and every model.

@@ -15,6 +15,7 @@
 //! - `fmea`: FMEA tables (`params/health/*.toml`) compiled into Bayesian networks.
 //! - `health`: the health managers, evaluated per cycle; the battery as a two-slice DBN.
 //! - `mission`: the mission's states, phases and action catalogue (`mission.toml`, `actions.toml`).
+//! - `action_role`: what each action does for the code acting on it (`actions.toml` `role`).
 //! - `mission_mdp`: the concurrent MDPs built from `params/mdp/`, solved at the projected state.
 //! - `resources`: Table 2 (variants), the platform, and resource arbitration onto FPGA tiles and CPU.
 //! - `guarantee`: PANORAMA's activities, IAs, pre-flight allocation, margins and re-allocation.
@@ -24,7 +25,9 @@
 //! - `record`: the decision record written for every cycle.
 //! - `tracking`: tracking time, shared by the world, the review and the tables.
 
+pub mod action_role;
 pub mod arbitration;
+pub mod conflicts;
 pub mod decision;
 pub mod evidence;
 pub mod fmea;
@@ -33,11 +36,13 @@ pub mod health;
 pub mod launch;
 pub mod mission;
 pub mod mission_mdp;
+pub mod model;
 pub mod observations;
 pub mod probabilities;
 pub mod record;
 pub mod report;
 pub mod resources;
+pub(crate) mod scratch;
 pub mod spec;
 pub mod tracking;
 pub mod vocabulary;

@@ -1,6 +1,7 @@
 //! The mission as the decision core reads it: the primitive action catalogue (params/actions.toml)
 //! and params/mission.toml (model sets, horizon, projections of the shared mission state).
 
+pub use crate::action_role::{ActionRole, ActionRoles};
 use crate::observations::Observations;
 use crate::spec::{SpecError, read_toml};
 use serde::Deserialize;
@@ -49,6 +50,9 @@ pub struct Action {
     pub app: Option<String>,
     /// Version of `app` it runs (`V3`).
     pub version: Option<String>,
+    /// What the action does for the code that acts on it (an [`ActionRole`] key); read through
+    /// [`ActionCatalogue::roles`].
+    pub role: Option<String>,
 }
 
 /// The primitive actions of params/actions.toml.
@@ -56,9 +60,12 @@ pub struct Action {
 pub struct ActionCatalogue {
     /// Every action, in file order.
     pub actions: Vec<Action>,
+    /// The role each action plays, checked.
+    pub roles: ActionRoles,
 }
 
 #[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
 struct ActionsFile {
     action: Vec<Action>,
 }
@@ -93,7 +100,16 @@ impl ActionCatalogue {
                 ));
             }
         }
-        Ok(Self { actions: f.action })
+        let declared: Vec<(&str, Option<&str>)> = f
+            .action
+            .iter()
+            .map(|a| (a.id.as_str(), a.role.as_deref()))
+            .collect();
+        let roles = ActionRoles::compile(&file, &declared)?;
+        Ok(Self {
+            actions: f.action,
+            roles,
+        })
     }
 
     /// The action with this id.
@@ -355,6 +371,7 @@ pub struct MissionStates {
     phases: Vec<String>,
     states: Vec<StateInfo>,
     route: RouteStates,
+    actions: ActionRoles,
 }
 
 impl Default for MissionStates {
@@ -416,26 +433,43 @@ impl MissionStates {
                     ),
                 ));
             }
-            let keeping =
-                match (&d.action, d.phase == TRACKING_PHASE) {
-                    (None, false) => None,
-                    (None, true) => {
+            let keeping = match (&d.action, d.phase == TRACKING_PHASE) {
+                (None, false) => None,
+                (None, true) => {
+                    return Err(SpecError::new(
+                        file,
+                        entry,
+                        format!("tracking state `{}` names no `action`", d.name),
+                    ));
+                }
+                (Some(_), false) => {
+                    return Err(SpecError::new(
+                        file,
+                        entry,
+                        format!("only a `{TRACKING_PHASE}` state names an `action`"),
+                    ));
+                }
+                (Some(a), true) => {
+                    if actions
+                        .roles
+                        .role_of(a)
+                        .is_some_and(|r| r != ActionRole::Track)
+                    {
                         return Err(SpecError::new(
                             file,
-                            entry,
-                            format!("tracking state `{}` names no `action`", d.name),
+                            format!("states[{i}].action"),
+                            format!(
+                                "`{a}` keeps a tracking state but plays the role `{}`, not `{}`",
+                                actions.roles.role_of(a).map_or("", ActionRole::key),
+                                ActionRole::Track.key()
+                            ),
                         ));
                     }
-                    (Some(_), false) => {
-                        return Err(SpecError::new(
-                            file,
-                            entry,
-                            format!("only a `{TRACKING_PHASE}` state names an `action`"),
-                        ));
-                    }
-                    (Some(a), true) => {
-                        let version = actions.get(a).and_then(|x| x.version.clone()).ok_or_else(
-                            || {
+                    let version =
+                        actions
+                            .get(a)
+                            .and_then(|x| x.version.clone())
+                            .ok_or_else(|| {
                                 SpecError::new(
                                     file,
                                     format!("states[{i}].action"),
@@ -443,21 +477,20 @@ impl MissionStates {
                                         "`{a}` is not an application action of params/actions.toml"
                                     ),
                                 )
-                            },
-                        )?;
-                        if states
-                            .iter()
-                            .any(|s| s.keeping.as_ref().is_some_and(|(k, _)| k == a))
-                        {
-                            return Err(SpecError::new(
-                                file,
-                                format!("states[{i}].action"),
-                                format!("`{a}` already keeps another state"),
-                            ));
-                        }
-                        Some((a.clone(), version))
+                            })?;
+                    if states
+                        .iter()
+                        .any(|s| s.keeping.as_ref().is_some_and(|(k, _)| k == a))
+                    {
+                        return Err(SpecError::new(
+                            file,
+                            format!("states[{i}].action"),
+                            format!("`{a}` already keeps another state"),
+                        ));
                     }
-                };
+                    Some((a.clone(), version))
+                }
+            };
             states.push(StateInfo {
                 name: d.name.clone(),
                 phase: d.phase.clone(),
@@ -491,6 +524,7 @@ impl MissionStates {
             phases,
             states,
             route,
+            actions: actions.roles.clone(),
         })
     }
 
@@ -510,6 +544,7 @@ impl MissionStates {
             phases: Vec::new(),
             states,
             route: RouteStates::undeclared(),
+            actions: ActionRoles::undeclared(),
         }
     }
 
@@ -544,6 +579,11 @@ impl MissionStates {
     /// Which state stands for each point of the route.
     pub fn route(&self) -> &RouteStates {
         &self.route
+    }
+
+    /// The role each primitive action plays (params/actions.toml `role`).
+    pub fn actions(&self) -> &ActionRoles {
+        &self.actions
     }
 
     /// The state standing for the route's `role`.

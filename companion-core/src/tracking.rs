@@ -66,6 +66,11 @@ impl TrackingCounter {
         }
     }
 
+    /// The mission's states (and the roles of its actions) the counter judges by.
+    pub fn states(&self) -> &MissionStates {
+        &self.states
+    }
+
     /// Feed the next record; `step_s` is the nominal cycle length, used for the last record.
     pub fn push(&mut self, r: &DecisionRecord) {
         if let Some(p) = self.pending.take() {

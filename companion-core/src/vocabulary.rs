@@ -174,7 +174,7 @@ mod tests {
     fn a_catalogue_action_no_mdp_proposes_is_refused() {
         let files = edited("actions.toml", |t| {
             format!(
-                "{t}\n[[action]]\nid = \"hover\"\npaper = \"-\"\nkind = \"vehicle\"\nlabel = \"hover\"\n"
+                "{t}\n[[action]]\nid = \"hover\"\npaper = \"-\"\nkind = \"vehicle\"\nlabel = \"hover\"\nrole = \"detect_obstacles\"\n"
             )
         });
         let e = crate::decision::Model::load(&files).err().unwrap();

@@ -21,11 +21,8 @@
 //! at altitude (spoofed or corrupt) neither starts the landing nor ends the flight.
 
 use super::actions::Route;
-use companion_core::mission::{MissionStates, RouteRole};
+use companion_core::mission::{ActionRole, MissionStates, RouteRole};
 use companion_core::observations::Observations;
-
-/// Vehicle actions that end the flight.
-pub const LANDING_ACTIONS: [&str; 3] = ["land", "replan_and_land", "return_to_base"];
 
 /// Inputs that are not observations (telemetry the estimator needs besides `Observations`).
 #[derive(Debug, Clone, Default)]
@@ -131,6 +128,12 @@ impl MissionState {
         }
     }
 
+    /// Whether action `id` ends the flight (its role in params/actions.toml: land, replan and
+    /// land, return to base).
+    pub fn is_landing_action(&self, id: &str) -> bool {
+        self.states.actions().ends_flight(id)
+    }
+
     /// On the ground and disarmed now: EXTENDED_SYS_STATE says ON_GROUND (when the autopilot
     /// reports it), else the altitude is below `ground_altitude_m`.
     fn on_ground(&self, obs: &Observations, extra: &Extra) -> bool {
@@ -182,14 +185,12 @@ impl MissionState {
         if self.flown && matches!(mode, "LAND" | "RTL") {
             self.landing = true;
             if self.landing_action.is_none() {
-                self.landing_action = Some(
-                    if mode == "RTL" {
-                        "return_to_base"
-                    } else {
-                        "land"
-                    }
-                    .into(),
-                );
+                let role = if mode == "RTL" {
+                    ActionRole::ReturnToBase
+                } else {
+                    ActionRole::Land
+                };
+                self.landing_action = Some(self.states.actions().action(role).into());
             }
         }
         let t = obs.time_s;
@@ -263,9 +264,7 @@ impl MissionState {
             .tracking_target(actions)
             .map(|(kept, _)| kept.to_string());
         if self.flown
-            && let Some(a) = actions
-                .iter()
-                .find(|a| LANDING_ACTIONS.contains(&a.as_str()))
+            && let Some(a) = self.states.actions().first_ending(actions)
         {
             self.landing = true;
             self.landing_action = Some(a.clone());

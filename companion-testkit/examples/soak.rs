@@ -394,7 +394,7 @@ fn main() -> anyhow::Result<()> {
                 if let Some(a) = rec
                     .actions
                     .iter()
-                    .find(|a| companion_link::mission_state::LANDING_ACTIONS.contains(&a.as_str()))
+                    .find(|a| model.states.actions().ends_flight(a))
                 {
                     s.landing_cmd = Some(a.clone());
                 }

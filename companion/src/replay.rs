@@ -35,10 +35,6 @@ pub const CORE_FIELDS: [&str; 7] = [
     "guarantee",
 ];
 
-/// The event `fly` queues for the first cycle after a flight ended landed and disarmed, when it
-/// starts a fresh core for the next flight (`Shell::new_flight`): replay restarts its core there.
-pub const NEW_FLIGHT_EVENT: &str = "flight over: landed and disarmed; waiting for the operator";
-
 /// The longest log line read (the reader's bound).
 const MAX_LINE_BYTES: usize = crate::decision_log::MAX_LINE_BYTES;
 
@@ -325,7 +321,9 @@ impl<'m> Run<'m> {
             }
         }
         let source = self.setup.source;
-        if source == Source::Fly && logged.events.iter().any(|e| e == NEW_FLIGHT_EVENT) {
+        // `fly` queues Event::NewFlight for the first cycle after a flight ended landed and
+        // disarmed, when it starts a fresh core for the next flight: replay restarts its core there.
+        if source == Source::Fly && logged.events.contains(&Event::NewFlight) {
             self.core = Core::new(self.model, self.setup.kind, self.setup.policy);
         }
         let obs = Observations {

@@ -6,7 +6,7 @@
 //! build from MAVLink, then advances by sampling the true dynamics under the actions the core
 //! chose. The core never reads the truth.
 
-use companion_core::mission::{MissionStates, RouteRole};
+use companion_core::mission::{ActionRole, MissionStates, RouteRole};
 use companion_core::observations::Observations;
 use companion_core::record::{DecisionRecord, Event, Plan};
 use companion_core::spec::{ParamsFiles, SpecError, read_toml};
@@ -478,7 +478,11 @@ impl<'a> World<'a> {
         let mut events = Vec::new();
         let values = self.values();
         let acts: Vec<&str> = record.actions.iter().map(String::as_str).collect();
-        let has = |a: &str| acts.contains(&a);
+        // The spec outlives the world: the route's names are read while the world changes.
+        let spec: &'a WorldSpec = self.spec;
+        // What the chosen actions do, by their roles (params/actions.toml), never their names.
+        let roles = spec.states.actions();
+        let has = |role: ActionRole| roles.any(&acts, role);
         let truth = &self.spec.truth;
 
         // Battery: propulsion (hover, climb, wind) plus the platform's compute power.
@@ -487,15 +491,13 @@ impl<'a> World<'a> {
         let extra = values.get("extra_power_w").copied().unwrap_or(0.0);
         let mut prop_w =
             self.spec.vehicle.hover_w + self.spec.vehicle.wind_w_per_mps2 * wind * wind + extra;
-        // The spec outlives the world: the route's names are read while the world changes.
-        let spec: &'a WorldSpec = self.spec;
         let route = spec.states.route();
         let on_ground = route.is(RouteRole::OnGround, &self.phase);
-        if on_ground && has("take_off") {
+        if on_ground && has(ActionRole::TakeOff) {
             prop_w *= self.spec.vehicle.climb_factor;
         }
         let compute_w = record.resources.as_ref().map_or(0.0, |r| r.power_w);
-        if !on_ground || has("take_off") {
+        if !on_ground || has(ActionRole::TakeOff) {
             self.battery_wh -= (prop_w + compute_w) * self.spec.step_s / 3600.0;
         }
         if let Some(r) = &record.resources {
@@ -514,7 +516,7 @@ impl<'a> World<'a> {
 
         // Obstacles: avoided, or a collision after the grace period.
         if self.obstacle_present(&values) && !on_ground {
-            if has("avoid_obstacle") {
+            if has(ActionRole::AvoidObstacle) {
                 for (i, h) in self.scenario.hazards.iter().enumerate() {
                     if self.in_force(i) && h.set.contains_key("obstacle_m") {
                         self.active[i] = Some((self.active[i].unwrap().0, self.step + 1));
@@ -534,7 +536,7 @@ impl<'a> World<'a> {
         }
 
         // Landing-zone search.
-        if has("search_zone_t")
+        if has(ActionRole::SearchZone)
             && !self.zone_t_found
             && self.avoided_at.is_none()
             && self.rng.random::<f64>() < truth.p_zone_t
@@ -542,7 +544,7 @@ impl<'a> World<'a> {
             self.zone_t_found = true;
             events.push(Event::TZoneFound);
         }
-        if has("search_emergency_zone")
+        if has(ActionRole::SearchEmergencyZone)
             && !self.zone_found
             && self.rng.random::<f64>() < truth.p_zone
         {
@@ -555,58 +557,57 @@ impl<'a> World<'a> {
         let airborne = !on_ground && !route.is(RouteRole::Landing, &self.phase);
         let before = self.phase.clone();
         let p = before.as_str();
-        let next: Option<String> =
-            if airborne && (has("land") || has("replan_and_land") || has("return_to_base")) {
-                events.push(Event::Landing);
-                state(RouteRole::Landing)
-            } else if on_ground && has("take_off") {
-                if self.rng.random::<f64>() < truth.p_leg {
-                    state(RouteRole::FirstLeg)
-                } else {
-                    None
-                }
-            } else if route.is(RouteRole::FirstLeg, p) && has("follow_trajectory") {
-                if self.rng.random::<f64>() < truth.p_leg {
-                    self.waypoint = 1;
-                    state(RouteRole::BetweenWaypoints)
-                } else {
-                    None
-                }
-            } else if route.is(RouteRole::BetweenWaypoints, p) && has("follow_trajectory") {
-                if self.rng.random::<f64>() < truth.p_leg {
-                    self.waypoint += 1;
-                }
-                if self.waypoint > self.spec.route.waypoints {
-                    state(RouteRole::LastWaypoint)
-                } else {
-                    None
-                }
-            } else if route.is(RouteRole::LastWaypoint, p) && has("detect_target") {
-                if self.rng.random::<f64>() < truth.p_detect {
-                    events.push(Event::TargetDetected);
-                    state(RouteRole::TargetFound)
-                } else {
-                    None
-                }
-            } else if spec.states.is_target_in_sight(p) {
-                match spec.states.tracking_target(&acts) {
-                    Some((kept, version)) => {
-                        let q = self.qos(version, &values);
-                        if self.rng.random::<f64>() < q {
-                            Some(kept.to_string())
-                        } else {
-                            events.push(Event::TargetLost);
-                            state(RouteRole::TargetFound)
-                        }
-                    }
-                    None if has("detect_target") && !route.is(RouteRole::TargetFound, p) => {
-                        state(RouteRole::TargetFound)
-                    }
-                    None => None,
-                }
+        let next: Option<String> = if airborne && roles.first_ending(&acts).is_some() {
+            events.push(Event::Landing);
+            state(RouteRole::Landing)
+        } else if on_ground && has(ActionRole::TakeOff) {
+            if self.rng.random::<f64>() < truth.p_leg {
+                state(RouteRole::FirstLeg)
             } else {
                 None
-            };
+            }
+        } else if route.is(RouteRole::FirstLeg, p) && has(ActionRole::FollowRoute) {
+            if self.rng.random::<f64>() < truth.p_leg {
+                self.waypoint = 1;
+                state(RouteRole::BetweenWaypoints)
+            } else {
+                None
+            }
+        } else if route.is(RouteRole::BetweenWaypoints, p) && has(ActionRole::FollowRoute) {
+            if self.rng.random::<f64>() < truth.p_leg {
+                self.waypoint += 1;
+            }
+            if self.waypoint > self.spec.route.waypoints {
+                state(RouteRole::LastWaypoint)
+            } else {
+                None
+            }
+        } else if route.is(RouteRole::LastWaypoint, p) && has(ActionRole::DetectTarget) {
+            if self.rng.random::<f64>() < truth.p_detect {
+                events.push(Event::TargetDetected);
+                state(RouteRole::TargetFound)
+            } else {
+                None
+            }
+        } else if spec.states.is_target_in_sight(p) {
+            match spec.states.tracking_target(&acts) {
+                Some((kept, version)) => {
+                    let q = self.qos(version, &values);
+                    if self.rng.random::<f64>() < q {
+                        Some(kept.to_string())
+                    } else {
+                        events.push(Event::TargetLost);
+                        state(RouteRole::TargetFound)
+                    }
+                }
+                None if has(ActionRole::DetectTarget) && !route.is(RouteRole::TargetFound, p) => {
+                    state(RouteRole::TargetFound)
+                }
+                None => None,
+            }
+        } else {
+            None
+        };
         if let Some(n) = next
             && n != self.phase
         {

@@ -378,3 +378,58 @@ fn rotated_parts_replay_as_one_log_and_a_cut_off_last_line_is_named() {
         text(&out)
     );
 }
+
+/// A `fly` log holding two flights: the second starts at the record carrying the new-flight
+/// event (written as the sentence fly has always written), where fly started a fresh core, and
+/// replay restarts its own core there; without the event the second flight replays against the
+/// first flight's core and differs.
+#[test]
+fn a_fly_log_restarts_the_core_at_the_new_flight_event() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = simulate(
+        tmp.path(),
+        "run",
+        &["--scenario", "complete-1", "--policy", "safety"],
+    );
+    let lines = log_lines(&run);
+    let mut header: Value = serde_json::from_str(&lines[0]).unwrap();
+    let command = header["command"]
+        .as_str()
+        .unwrap()
+        .replace(" simulate ", " fly ");
+    assert!(command.contains(" fly "), "{command}");
+    header["command"] = Value::from(command);
+    let flight: Vec<Value> = lines[1..]
+        .iter()
+        .map(|l| serde_json::from_str::<Value>(l).unwrap())
+        .filter(|v| v.get("kind").is_none())
+        .take(20)
+        .collect();
+    assert_eq!(flight.len(), 20);
+    let two_flights = |event: Option<&str>| {
+        let mut second = flight.clone();
+        if let Some(e) = event {
+            // Observed before the cycle: the head of the record's events.
+            second[0]["events"]
+                .as_array_mut()
+                .unwrap()
+                .insert(0, Value::from(e));
+        }
+        let mut out = vec![header.to_string()];
+        out.extend(flight.iter().chain(&second).map(Value::to_string));
+        out
+    };
+    let dir = tmp.path().join("two");
+    std::fs::create_dir_all(&dir).unwrap();
+    write_lines(
+        &dir,
+        &two_flights(Some(
+            "flight over: landed and disarmed; waiting for the operator",
+        )),
+    );
+    let out = replay(&dir);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    write_lines(&dir, &two_flights(None));
+    let out = replay(&dir);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+}

@@ -162,7 +162,7 @@ fn an_action_no_mdp_proposes_is_refused() {
         "actions.toml",
         |t| {
             format!(
-                "{t}\n[[action]]\nid = \"hover\"\npaper = \"-\"\nkind = \"vehicle\"\nlabel = \"hover\"\n"
+                "{t}\n[[action]]\nid = \"hover\"\npaper = \"-\"\nkind = \"vehicle\"\nlabel = \"hover\"\nrole = \"detect_obstacles\"\n"
             )
         },
         "action[18](hover)",

@@ -2,161 +2,18 @@
 //! rule of its role (rules.rs) with the row overrides, then the shared network assembly and the
 //! `publish` and `carry` entries checked against it.
 
+use super::nodes::Hm;
+use super::roles::{Role, assign_roles};
 use super::rules::{NodeCtx, row_rule};
 use super::schema::{ActivationNode, FmeaRow, HmFile, ImportNode, MonitorNode, NodeSpec};
 use super::{
     CompiledHm, MAX_CLIQUE_ENTRIES, MAX_CPT_ENTRIES, MAX_NODES, MAX_PARENTS, NodeInfo, Publish,
-    ROLES, bn_to_spec, err, parse_publish,
+    bn_to_spec, err, parse_publish,
 };
 use crate::spec::SpecError;
 use bayes_net::{Network, NetworkBuilder};
 use std::collections::BTreeMap;
-use std::fmt;
 use std::path::Path;
-
-/// A node's role: its `role` key, or where the FMEA rows name it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum Role {
-    Qos,
-    Error,
-    Monitor,
-    Context,
-    MonitorHealth,
-    Solution,
-    Version,
-    Resource,
-    Performance,
-    Activation,
-    Import,
-    State,
-}
-
-impl Role {
-    pub(super) const ALL: [Role; 12] = [
-        Role::Qos,
-        Role::Error,
-        Role::Monitor,
-        Role::Context,
-        Role::MonitorHealth,
-        Role::Solution,
-        Role::Version,
-        Role::Resource,
-        Role::Performance,
-        Role::Activation,
-        Role::Import,
-        Role::State,
-    ];
-
-    fn parse(s: &str) -> Option<Role> {
-        Role::ALL.into_iter().find(|r| r.as_str() == s)
-    }
-
-    pub(super) fn as_str(self) -> &'static str {
-        match self {
-            Role::Qos => "qos",
-            Role::Error => "error",
-            Role::Monitor => "monitor",
-            Role::Context => "context",
-            Role::MonitorHealth => "monitor_health",
-            Role::Solution => "solution",
-            Role::Version => "version",
-            Role::Resource => "resource",
-            Role::Performance => "performance",
-            Role::Activation => "activation",
-            Role::Import => "import",
-            Role::State => "state",
-        }
-    }
-
-    /// Roots take a prior and no parents.
-    pub(super) fn is_root(self) -> bool {
-        matches!(
-            self,
-            Role::Context | Role::Resource | Role::Solution | Role::Import
-        )
-    }
-
-    fn default_states(self) -> Option<&'static [&'static str]> {
-        Some(match self {
-            Role::Qos => &["high", "medium", "low"],
-            Role::Error => &["absent", "present"],
-            Role::Monitor => &["ok", "alarm"],
-            Role::MonitorHealth => &["ok", "faulty"],
-            Role::Solution | Role::Version => &["deactivate", "activate"],
-            Role::Activation => &["ToDeactivate", "ToActivate"],
-            _ => return None,
-        })
-    }
-
-    /// Roles whose default rule is written for two states, nominal first.
-    fn binary_rule(self) -> bool {
-        matches!(
-            self,
-            Role::Error | Role::Monitor | Role::MonitorHealth | Role::Version | Role::Activation
-        )
-    }
-}
-
-impl fmt::Display for Role {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-/// What the whole file says about every node: its role, its states, and the solutions of each
-/// error.
-pub(super) struct Hm<'a> {
-    pub(super) file: &'a Path,
-    pub(super) spec: &'a HmFile,
-    pub(super) role: BTreeMap<String, Role>,
-    /// Nodes in the order they were first named (FMEA rows, then `node` tables).
-    order: Vec<String>,
-    pub(super) states: BTreeMap<String, Vec<String>>,
-    pub(super) solutions_of: BTreeMap<&'a str, Vec<String>>,
-    /// The settings of the nodes named only in FMEA rows: their role's defaults.
-    defaults: BTreeMap<String, NodeSpec>,
-}
-
-impl Hm<'_> {
-    fn node(&self, n: &str) -> &NodeSpec {
-        self.spec.node.get(n).unwrap_or_else(|| &self.defaults[n])
-    }
-
-    pub(super) fn known(&self, node: &str, entry: String) -> Result<(), SpecError> {
-        if self.states.contains_key(node) {
-            Ok(())
-        } else {
-            Err(err(self.file, entry, format!("unknown node `{node}`")))
-        }
-    }
-
-    pub(super) fn state_idx(
-        &self,
-        node: &str,
-        st: &str,
-        entry: String,
-    ) -> Result<usize, SpecError> {
-        let file = self.file;
-        let s = self
-            .states
-            .get(node)
-            .ok_or_else(|| err(file, entry.clone(), format!("unknown node `{node}`")))?;
-        s.iter().position(|x| x == st).ok_or_else(|| {
-            err(
-                file,
-                entry,
-                format!(
-                    "node `{node}` has no state `{st}` (states: {})",
-                    s.join(", ")
-                ),
-            )
-        })
-    }
-
-    pub(super) fn has_role(&self, node: &str, r: Role) -> bool {
-        self.role.get(node) == Some(&r)
-    }
-}
 
 /// Compile a parsed FMEA file; `file` names it in errors.
 pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
@@ -165,7 +22,7 @@ pub fn compile_hm(file: &Path, spec: &HmFile) -> Result<CompiledHm, SpecError> {
         .node
         .iter()
         .map(|(n, ns)| (n.as_str(), Some(ns.role().as_str())));
-    let (role, order) = assign_roles(file, &spec.fmea, node_roles)?;
+    let (role, order) = assign_roles(file, spec.fmea.iter().map(FmeaRow::nodes), node_roles)?;
     let defaults = role
         .iter()
         .filter(|(n, _)| !spec.node.contains_key(*n))
@@ -231,84 +88,6 @@ fn check_size(file: &Path, spec: &HmFile) -> Result<(), SpecError> {
         ));
     }
     Ok(())
-}
-
-/// Give `name` role `r`, or refuse a second, different role.
-fn assign(
-    file: &Path,
-    role: &mut BTreeMap<String, Role>,
-    order: &mut Vec<String>,
-    name: &str,
-    r: Role,
-    entry: String,
-) -> Result<(), SpecError> {
-    match role.get(name) {
-        Some(old) if *old != r => Err(err(
-            file,
-            entry,
-            format!("node `{name}` is used as {r} but already as {old}"),
-        )),
-        Some(_) => Ok(()),
-        None => {
-            role.insert(name.to_string(), r);
-            order.push(name.to_string());
-            Ok(())
-        }
-    }
-}
-
-/// Roles: from the FMEA rows, then the `role` key of each node entry (which must agree), given
-/// as (node, `role` key if any) in the file's order. The loader calls it on the raw entries,
-/// the compiler on the parsed ones: the same roles, order and errors.
-pub(super) fn assign_roles<'a>(
-    file: &Path,
-    fmea: &[FmeaRow],
-    node_roles: impl IntoIterator<Item = (&'a str, Option<&'a str>)>,
-) -> Result<(BTreeMap<String, Role>, Vec<String>), SpecError> {
-    let mut role: BTreeMap<String, Role> = BTreeMap::new();
-    let mut order: Vec<String> = Vec::new();
-    for (i, row) in fmea.iter().enumerate() {
-        let mut named = |name: &str, r: Role, key: &str| {
-            assign(
-                file,
-                &mut role,
-                &mut order,
-                name,
-                r,
-                format!("fmea[{i}].{key}"),
-            )
-        };
-        named(&row.error, Role::Error, "error")?;
-        for m in &row.monitors {
-            named(m, Role::Monitor, "monitors")?;
-        }
-        for c in &row.contexts {
-            named(c, Role::Context, "contexts")?;
-        }
-        for s in &row.solutions {
-            named(s, Role::Solution, "solutions")?;
-        }
-    }
-    for (name, key) in node_roles {
-        let entry = format!("node.{name}.role");
-        match (key, role.get(name)) {
-            (Some(r), _) => {
-                let Some(r) = Role::parse(r) else {
-                    return Err(err(
-                        file,
-                        entry,
-                        format!("unknown role `{r}` (one of {})", ROLES.join(", ")),
-                    ));
-                };
-                assign(file, &mut role, &mut order, name, r, entry)?
-            }
-            (None, Some(_)) => {}
-            (None, None) => {
-                return Err(err(file, entry, "node is in no FMEA row and has no `role`"));
-            }
-        }
-    }
-    Ok((role, order))
 }
 
 /// Each node's states: given, or the default of its role.

@@ -5,6 +5,8 @@
 
 mod catalogue;
 mod compile;
+mod nodes;
+mod roles;
 mod rules;
 mod schema;
 

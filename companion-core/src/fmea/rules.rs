@@ -1,7 +1,8 @@
 //! The default CPT rule of each role (docs/params/health.md): one function per role, each
 //! taking its role's settings, checking the rule parameters and returning its row generator.
 
-use super::compile::{Hm, Role};
+use super::nodes::Hm;
+use super::roles::Role;
 use super::schema::{
     ActivationNode, MonitorNode, NodeSpec, NoisyOrNode, QosNode, StateNode, VersionNode,
 };

@@ -5,8 +5,8 @@
 //! roles are derived from the rows and the `role` keys, and each entry is then checked against
 //! the keys of its role and parsed as that role's variant of [`NodeSpec`].
 
-use super::compile::{Role, assign_roles};
 use super::err;
+use super::roles::{Role, RowNodes, assign_roles};
 use crate::spec::{ParamsFiles, SpecError, read_toml};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -73,7 +73,7 @@ impl HmFile {
         }
         // The same derivation, with the same errors, as the compiler's (which sees the parsed
         // variants): the FMEA rows first, then the `role` keys, which must agree.
-        let (roles, _) = assign_roles(file, &raw.fmea, role_keys)?;
+        let (roles, _) = assign_roles(file, raw.fmea.iter().map(FmeaRow::nodes), role_keys)?;
         let mut node = BTreeMap::new();
         for (name, table) in raw.node {
             let role = roles[&name];
@@ -112,6 +112,18 @@ pub struct FmeaRow {
     /// Free text shown by `companion check`.
     #[serde(default)]
     pub description: String,
+}
+
+impl FmeaRow {
+    /// The nodes the row names, by role.
+    pub(super) fn nodes(&self) -> RowNodes<'_> {
+        RowNodes {
+            error: &self.error,
+            monitors: &self.monitors,
+            contexts: &self.contexts,
+            solutions: &self.solutions,
+        }
+    }
 }
 
 /// A dynamic-BN link: after each evaluation the posterior of `from` becomes the prior of `to`.

@@ -222,6 +222,9 @@ impl From<&str> for CommandOutcome {
 
 string_serde!(CommandOutcome);
 
+/// The sentence of [`Event::NewFlight`].
+const NEW_FLIGHT: &str = "flight over: landed and disarmed; waiting for the operator";
+
 /// What triggered or happened at a cycle (`DecisionRecord.events`).
 #[derive(Debug, PartialEq)]
 pub enum Event {
@@ -288,6 +291,9 @@ pub enum Event {
     /// `landing: ACTION again (the landing was interrupted or not done)`: the fly shell keeps
     /// flying the landing chosen until the vehicle is down.
     LandingKept(String),
+    /// `flight over: landed and disarmed; waiting for the operator`: the fly shell starts a
+    /// fresh core for the next flight at this cycle (replay restarts its core there).
+    NewFlight,
     /// Free text: a scenario's hazard, a resource degradation, an MDP's error, a shell's or
     /// operator's sentence, or a spelling this build does not know.
     Other(String),
@@ -331,6 +337,7 @@ impl Clone for Event {
             GuaranteeInfeasible => GuaranteeInfeasible,
             ShellLand(w) => ShellLand(w.clone()),
             LandingKept(a) => LandingKept(a.clone()),
+            NewFlight => NewFlight,
             Other(s) => Other(s.clone()),
         }
     }
@@ -405,6 +412,7 @@ impl fmt::Display for Event {
                 f,
                 "landing: {action} again (the landing was interrupted or not done)"
             ),
+            NewFlight => f.write_str(NEW_FLIGHT),
             Other(s) => f.write_str(s),
         }
     }
@@ -432,6 +440,7 @@ impl Event {
             "armed" => Armed,
             "disarmed" => Disarmed,
             "guarantee: no allocation meets the goals" => GuaranteeInfeasible,
+            NEW_FLIGHT => NewFlight,
             _ => {
                 if let Some(l) = LinkEvent::known(s).filter(LinkEvent::is_significant) {
                     return Some(Link(l));
@@ -803,6 +812,7 @@ mod tests {
                 Just(EmergencyZoneFound),
                 Just(Landing),
                 Just(BatteryExhausted),
+                Just(NewFlight),
                 Just(Armed),
                 Just(Disarmed),
                 Just(GuaranteeInfeasible),
@@ -945,6 +955,11 @@ mod tests {
             (
                 "landing: land_at_zone again (the landing was interrupted or not done)",
                 Event::LandingKept("land_at_zone".into()),
+            ),
+            // As fly has always written it (logs before the variant): read as the variant.
+            (
+                "flight over: landed and disarmed; waiting for the operator",
+                Event::NewFlight,
             ),
             ("vibrations", Event::Other("vibrations".into())),
             ("waypoint 03", Event::Other("waypoint 03".into())),

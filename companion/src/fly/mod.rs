@@ -16,7 +16,7 @@ use companion_link::Msg;
 use companion_link::actions::{ActionTable, LinkParams, Route};
 use companion_link::ingest::{self, Encoder, Ingest};
 use companion_link::liveness::parse_duration;
-use companion_link::mission_state::{self, Extra, LANDING_ACTIONS, MissionState};
+use companion_link::mission_state::{self, Extra, MissionState};
 use companion_link::operator::{Control, GcsText, OperatorGate};
 pub mod gate;
 pub mod link_security;
@@ -1136,7 +1136,7 @@ pub fn decide<D: Decider>(
     {
         let keep = chosen
             .as_deref()
-            .is_some_and(|a| a == "avoid_obstacle" || LANDING_ACTIONS.contains(&a));
+            .is_some_and(|a| a == "avoid_obstacle" || shell.mission.is_landing_action(a));
         if !keep {
             if !vehicle.settled(&landing) {
                 shell_events.push(Event::LandingKept(landing.clone()));
@@ -1373,7 +1373,7 @@ impl Decider for ScriptedDecider {
         if rec
             .actions
             .iter()
-            .any(|a| a == companion_core::launch::TAKE_OFF)
+            .any(|a| a == "take_off")
         {
             Ok(())
         } else {

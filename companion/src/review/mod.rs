@@ -19,7 +19,7 @@ pub use html::render_html;
 pub use terminal::{render_terminal, render_why};
 
 use crate::decision_log::{Header, LogItem, LossReason, ReadError, ReadIssue, stream_log};
-use companion_core::mission::{MissionStates, RouteRole};
+use companion_core::mission::{ActionRole, MissionStates, RouteRole};
 use companion_core::record::{CommandRecord, DecisionRecord, Event, LinkEvent};
 use companion_core::tracking::TrackingCounter;
 use outcomes::{Category, OutcomeCounts, categorize};
@@ -742,15 +742,17 @@ impl Review {
         if self.crash.is_none() && (r.state == "crash" || r.state == "collision") {
             self.crash = Some((r.state.clone(), r.cycle));
         }
+        // The run's own params say which state lands and which actions do (their roles).
+        let states = self.tracking.states();
+        let roles = states.actions();
         self.last = Some(LastRecord {
             state: r.state.clone(),
             cycle: r.cycle,
-            landing: r.state == "landing"
+            landing: states.is_route(RouteRole::Landing, &r.state)
                 || r.state == "zone_ok"
-                || r.actions
-                    .iter()
-                    .any(|a| a == "land" || a == "replan_and_land"),
-            returning: r.actions.iter().any(|a| a == "return_to_base"),
+                || roles.any(&r.actions, ActionRole::Land)
+                || roles.any(&r.actions, ActionRole::ReplanAndLand),
+            returning: roles.any(&r.actions, ActionRole::ReturnToBase),
             altitude: vehicle_f64(&r, "altitude_m"),
             armed,
             mode: mode(&r),

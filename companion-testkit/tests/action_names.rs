@@ -1,0 +1,126 @@
+//! The shells know actions by their role, never by name: no action id params/actions.toml
+//! declares appears as a string literal in the non-test code of `companion/` or
+//! `companion-link/` (the world, the flight shell, the link, the review). Renaming an action is an
+//! edit of params alone (companion/tests/actions_renamed.rs flies it).
+
+use std::path::{Path, PathBuf};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// Files not yet moved to roles, each with why. The flight shell's loop and its words are being
+/// rewritten on another branch; their literals go with that rewrite (issue 25).
+const NOT_YET: [(&str, &str); 1] = [(
+    "companion/src/fly/",
+    "the fly shell (run loop, words, scripted decider) is being rewritten; roles come with it",
+)];
+
+fn rs_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            rs_files(&p, out);
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+}
+
+/// The action ids of params/actions.toml.
+fn action_ids() -> Vec<String> {
+    let text = std::fs::read_to_string(root().join("params/actions.toml")).unwrap();
+    let doc: toml::Table = toml::from_str(&text).unwrap();
+    doc["action"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a["id"].as_str().unwrap().to_string())
+        .collect()
+}
+
+/// The shipped part of a source file: up to its `#[cfg(test)]` module (the crates keep their
+/// unit tests last), comment lines blanked (line numbers kept). None for a test-only file.
+fn shipped_code(path: &Path, text: &str) -> Option<String> {
+    let name = path.file_name()?.to_str()?;
+    if name == "tests.rs" || path.components().any(|c| c.as_os_str() == "tests") {
+        return None;
+    }
+    let code = text.split("#[cfg(test)]").next().unwrap_or("");
+    Some(
+        code.lines()
+            .map(|l| {
+                if l.trim_start().starts_with("//") {
+                    ""
+                } else {
+                    l
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("\n"),
+    )
+}
+
+/// Every `"id"` literal of the shipped code under `dirs` (relative to the repository), as
+/// `file:line: id`, skipping the [`NOT_YET`] files.
+fn literals(dirs: &[&str], ids: &[String]) -> Vec<String> {
+    let mut found = Vec::new();
+    for dir in dirs {
+        let mut files = Vec::new();
+        rs_files(&root().join(dir), &mut files);
+        assert!(!files.is_empty(), "no source under {dir}");
+        for f in files {
+            let rel = f
+                .strip_prefix(root())
+                .unwrap()
+                .to_string_lossy()
+                .replace('\\', "/");
+            if NOT_YET.iter().any(|(p, _)| rel.starts_with(p)) {
+                continue;
+            }
+            let text = std::fs::read_to_string(&f).unwrap();
+            let Some(code) = shipped_code(&f, &text) else {
+                continue;
+            };
+            for (n, line) in code.lines().enumerate() {
+                for id in ids {
+                    if line.contains(&format!("\"{id}\"")) {
+                        found.push(format!("{rel}:{}: {id}", n + 1));
+                    }
+                }
+            }
+        }
+    }
+    found
+}
+
+#[test]
+fn no_action_name_literal_in_the_shells_code() {
+    let ids = action_ids();
+    assert!(
+        ids.len() > 10 && ids.iter().any(|i| i == "take_off"),
+        "{ids:?}"
+    );
+    let found = literals(&["companion/src", "companion-link/src"], &ids);
+    assert!(
+        found.is_empty(),
+        "action names in shipped code (ask the role, companion_core::action_role):\n{}",
+        found.join("\n")
+    );
+}
+
+#[test]
+fn the_search_finds_a_literal_and_skips_tests_and_comments() {
+    let ids = vec!["take_off".to_string()];
+    let f = Path::new("companion/src/x.rs");
+    let code = "let a = \"take_off\";\n// \"take_off\"\n#[cfg(test)]\nmod tests { \"take_off\" }";
+    let shipped = shipped_code(f, code).unwrap();
+    assert_eq!(shipped, "let a = \"take_off\";\n");
+    assert!(shipped_code(Path::new("companion/src/tests.rs"), code).is_none());
+    // The exception list names the fly shell only.
+    assert!(
+        NOT_YET
+            .iter()
+            .all(|(p, _)| p.starts_with("companion/src/fly/"))
+    );
+}

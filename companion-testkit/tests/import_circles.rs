@@ -1,0 +1,162 @@
+//! No import circle among the Rust files of a crate: file A naming `crate::b` (or `super::b`)
+//! while b, directly or around a longer circle, names A. A circle means two concerns that cannot
+//! be read, changed or tested apart (issue 25). The core has none; the shells' known circles are
+//! listed by name until their files are split.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// Circles still in the shells, each with why. They are the fly shell's and the link's files
+/// the lead is rewriting (issue 25 part 2): `fly` with `params`, `sim`, `vocabulary` (file
+/// helpers), and `actions` with `modes` (`Route`).
+const KNOWN: [(&str, &[&str]); 2] = [
+    ("companion", &["fly", "params", "sim", "vocabulary"]),
+    ("companion-link", &["actions", "modes"]),
+];
+
+/// Module path (`fmea::compile`) -> source file, for the crate's `src/`.
+fn modules(src: &Path) -> BTreeMap<String, PathBuf> {
+    fn walk(dir: &Path, src: &Path, out: &mut BTreeMap<String, PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                walk(&p, src, out);
+            } else if p.extension().is_some_and(|x| x == "rs") {
+                let rel = p.strip_prefix(src).unwrap().with_extension("");
+                let mut name = rel.to_string_lossy().replace(['/', '\\'], "::");
+                if let Some(parent) = name.strip_suffix("::mod") {
+                    name = parent.to_string();
+                }
+                if name != "lib" && name != "main" {
+                    out.insert(name, p);
+                }
+            }
+        }
+    }
+    let mut out = BTreeMap::new();
+    walk(src, src, &mut out);
+    out
+}
+
+/// The shipped code of a file (up to its test module), comment lines dropped.
+fn code(path: &Path) -> String {
+    let text = std::fs::read_to_string(path).unwrap();
+    let shipped = text.split("#[cfg(test)]").next().unwrap_or("");
+    shipped
+        .lines()
+        .filter(|l| !l.trim_start().starts_with("//"))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// Which modules each module names by `crate::` or `super::` paths (the longest known prefix).
+fn edges(mods: &BTreeMap<String, PathBuf>) -> BTreeMap<String, BTreeSet<String>> {
+    let mut out = BTreeMap::new();
+    for (m, path) in mods {
+        let text = code(path);
+        let parent: Vec<&str> = m.split("::").collect();
+        let parent = parent[..parent.len() - 1].join("::");
+        let mut to = BTreeSet::new();
+        for (prefix, base) in [("crate::", String::new()), ("super::", parent.clone())] {
+            for (i, _) in text.match_indices(prefix) {
+                let rest = &text[i + prefix.len()..];
+                let path: String = rest
+                    .chars()
+                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_' || *c == ':')
+                    .collect();
+                let parts: Vec<&str> = path.split("::").filter(|p| !p.is_empty()).collect();
+                let found = (1..=parts.len()).rev().find_map(|k| {
+                    let name = parts[..k].join("::");
+                    let full = if base.is_empty() {
+                        name
+                    } else {
+                        format!("{base}::{name}")
+                    };
+                    mods.contains_key(&full).then_some(full)
+                });
+                if let Some(f) = found.filter(|f| f != m) {
+                    to.insert(f);
+                }
+            }
+        }
+        out.insert(m.clone(), to);
+    }
+    out
+}
+
+/// The circles: every set of two or more modules each reachable from the others.
+fn circles(edges: &BTreeMap<String, BTreeSet<String>>) -> Vec<Vec<String>> {
+    let reach = |from: &str| {
+        let mut seen = BTreeSet::new();
+        let mut todo = vec![from.to_string()];
+        while let Some(m) = todo.pop() {
+            for n in &edges[&m] {
+                if seen.insert(n.clone()) {
+                    todo.push(n.clone());
+                }
+            }
+        }
+        seen
+    };
+    let all: BTreeMap<&String, BTreeSet<String>> = edges.keys().map(|m| (m, reach(m))).collect();
+    let mut out: Vec<Vec<String>> = Vec::new();
+    for m in edges.keys() {
+        let mut c: Vec<String> = all[m]
+            .iter()
+            .filter(|n| all[n].contains(m))
+            .cloned()
+            .collect();
+        if c.is_empty() {
+            continue;
+        }
+        if !c.contains(m) {
+            c.push(m.clone());
+        }
+        c.sort();
+        if !out.contains(&c) {
+            out.push(c);
+        }
+    }
+    out
+}
+
+#[test]
+fn no_import_circle_among_the_files_of_a_crate() {
+    for krate in ["companion-core", "companion-link", "companion"] {
+        let mods = modules(&root().join(krate).join("src"));
+        assert!(mods.len() > 5, "{krate}: {mods:?}");
+        let found = circles(&edges(&mods));
+        let known: Vec<Vec<String>> = KNOWN
+            .iter()
+            .filter(|(k, _)| *k == krate)
+            .map(|(_, c)| c.iter().map(|s| s.to_string()).collect())
+            .collect();
+        let new: Vec<&Vec<String>> = found.iter().filter(|c| !known.contains(c)).collect();
+        assert!(new.is_empty(), "{krate}: import circles {new:?}");
+    }
+}
+
+#[test]
+fn a_circle_is_found_through_crate_and_super_paths() {
+    let mods: BTreeMap<String, PathBuf> = ["a", "b", "c"]
+        .iter()
+        .map(|m| (m.to_string(), PathBuf::new()))
+        .collect();
+    let e = |pairs: &[(&str, &str)]| {
+        let mut out: BTreeMap<String, BTreeSet<String>> =
+            mods.keys().map(|m| (m.clone(), BTreeSet::new())).collect();
+        for (f, t) in pairs {
+            out.get_mut(*f).unwrap().insert(t.to_string());
+        }
+        out
+    };
+    assert!(circles(&e(&[("a", "b"), ("b", "c")])).is_empty());
+    assert_eq!(
+        circles(&e(&[("a", "b"), ("b", "c"), ("c", "a")])),
+        vec![vec!["a".to_string(), "b".into(), "c".into()]]
+    );
+}
