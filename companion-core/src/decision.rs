@@ -15,6 +15,7 @@ use crate::observations::Observations;
 use crate::record::{DecisionRecord, Event, Plan};
 use crate::resources::ResourceSpec;
 use crate::spec::SpecError;
+use crate::stage_hook::{Stage, mark};
 use fpga_model::PlatformState;
 use mdp_engine::Workspace;
 use std::collections::BTreeMap;
@@ -315,6 +316,7 @@ impl<'m> Core<'m> {
     /// equals [`Core::step`]'s whatever they held) and keep their capacity, so a steady stream of
     /// observations of the same shape allocates nothing once warm (tests/cycle_no_alloc.rs).
     pub fn step_into(&mut self, obs: &Observations, plan: &mut Plan, rec: &mut DecisionRecord) {
+        mark(Stage::CycleStart);
         let model = self.model;
         let policy = self.model.policy_name(self.policy);
         rec.cycle = self.cycle;
@@ -326,6 +328,7 @@ impl<'m> Core<'m> {
         rec.link_events.clear();
         rec.vehicle.clear();
         self.cycle += 1;
+        mark(Stage::Record);
 
         // evidence -> health (the platform's room comes from the core's own platform model)
         self.update_platform(obs);
@@ -344,6 +347,7 @@ impl<'m> Core<'m> {
             }
         }
         rec.absent_evidence.truncate(n_absent);
+        mark(Stage::Evidence);
         match self
             .health
             .evaluate_into(&rec.evidence, &mut rec.probabilities)
@@ -413,6 +417,7 @@ impl<'m> Core<'m> {
                 Ok(None) => {}
                 Err(e) => rec.events.push(Event::from(format!("{name}: {e}"))),
             }
+            mark(Stage::Mdp(name));
         }
         rec.proposals.truncate(n_proposals);
 
@@ -424,7 +429,9 @@ impl<'m> Core<'m> {
         // the resource manager sees the room this cycle's placements leave, the MDP that chose
         // the application is solved again, and its new proposal is what runs.
         for _ in 0..MAX_RESOLVES {
-            if !self.resolve_conflict(&mut sc, obs, rec) {
+            let resolved = self.resolve_conflict(&mut sc, obs, rec);
+            mark(Stage::Resolve);
+            if !resolved {
                 break;
             }
             self.arbitrate(&mut sc, obs, rec);
@@ -432,10 +439,12 @@ impl<'m> Core<'m> {
         self.record_resource_conflicts(&sc, rec);
         self.note_others(rec);
         fill_strings(&mut rec.actions, &sc.actions);
+        mark(Stage::Arbitration);
 
         // guarantee: PANORAMA margins on the activity being flown
         self.watch_guarantee(&mut sc, obs, rec);
         self.scratch = sc;
+        mark(Stage::Guarantee);
 
         // plan
         let mut n = 0;
@@ -457,6 +466,7 @@ impl<'m> Core<'m> {
             Some(r) => plan.applications.clone_from(&r.placements),
             None => plan.applications.clear(),
         }
+        mark(Stage::Record);
     }
 
     /// Faults and monitor readings the shell reports, applied to the platform model.

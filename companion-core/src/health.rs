@@ -585,6 +585,7 @@ impl HealthModel {
                 per[mi].set_state(id, s);
             }
         }
+        crate::stage_hook::mark(crate::stage_hook::Stage::Evidence);
         let n = self.managers.len();
         let (last, fresh, full) = (
             &mut self.scratch.last,
@@ -642,6 +643,7 @@ impl HealthModel {
                     }
                 }
             }
+            crate::stage_hook::mark(crate::stage_hook::Stage::HealthManager(&m.name));
         }
         for (i, m) in self.managers.iter_mut().enumerate() {
             for &(from, to) in &m.carry {
@@ -662,6 +664,7 @@ impl HealthModel {
                     })?;
             }
         }
+        crate::stage_hook::mark(crate::stage_hook::Stage::HealthCarry);
         Ok(())
     }
 
