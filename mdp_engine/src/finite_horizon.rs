@@ -178,6 +178,7 @@ impl Workspace {
         let n = mdp.n_states();
         self.reserve(n, horizon, false);
         self.horizon = horizon;
+        let par = crate::kernels::split(mdp, self.par_min_transitions);
         let (vals, pol) = (&mut self.fh_values, &mut self.fh_policy);
         vals[horizon * n..(horizon + 1) * n].fill(0.0);
         let mut computed = 0u32;
@@ -230,10 +231,11 @@ impl Workspace {
                     next2,
                     cur,
                     &mut pol[t * n..(t + 1) * n],
+                    par,
                 ));
             } else {
                 let (cur, next) = vals[t * n..(t + 2) * n].split_at_mut(n);
-                backup_stage(mdp, next, cur, &mut pol[t * n..(t + 1) * n]);
+                backup_stage(mdp, next, cur, &mut pol[t * n..(t + 1) * n], par);
             }
         }
         FiniteHorizonSolution {

@@ -78,6 +78,7 @@ impl Workspace {
         let gamma = cfg.gamma;
         self.reserve(n, 0, false);
         self.v[..n].fill(0.0);
+        let par = crate::kernels::split(mdp, self.par_min_transitions);
         let mut iterations = 0;
         let mut converged = false;
         while iterations < cfg.max_iterations {
@@ -87,7 +88,7 @@ impl Workspace {
             } else {
                 (f64::INFINITY, f64::NEG_INFINITY)
             };
-            let (lo_d, hi_d) = vi_sweep(mdp, gamma, &self.v[..n], &mut self.v2[..n]);
+            let (lo_d, hi_d) = vi_sweep(mdp, gamma, &self.v[..n], &mut self.v2[..n], par);
             dmin = dmin.min(lo_d);
             dmax = dmax.max(hi_d);
             std::mem::swap(&mut self.v, &mut self.v2);

@@ -61,6 +61,7 @@ pub use builder::MdpBuilder;
 pub use evaluation::{SPARSE_EVAL_MAX_SWEEPS, SPARSE_EVAL_STALL_SWEEPS, SPARSE_EVAL_TOLERANCE};
 pub use finite_horizon::FH_STOP_TOLERANCE;
 pub use infinite_horizon::{Config, DENSE_EVAL_MAX_STATES, SolveError};
+pub use kernels::PARALLEL_MIN_TRANSITIONS;
 pub use linalg::{SINGULAR_TOLERANCE, solve_dense};
 pub use model::{ActionId, Choice, Mdp, MdpError, ROW_SUM_TOLERANCE, StateId, TIE_TOLERANCE};
 pub use solution::{FiniteHorizonSolution, Solution, Stats};
