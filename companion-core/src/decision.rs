@@ -228,6 +228,10 @@ pub(crate) struct Scratch<'m> {
     failed: Vec<String>,
 }
 
+/// Distinct recent queries each health manager's engine answers from memory: evidence flapping
+/// across a threshold alternates between two, with the resource re-evaluation a few more.
+const BN_QUERY_MEMO: usize = 4;
+
 /// At most this many re-solves per cycle (one per version the MDP may turn to is plenty).
 const MAX_RESOLVES: usize = 3;
 
@@ -254,7 +258,11 @@ impl<'m> Core<'m> {
             policy,
             cycle: 0,
             mdp_names: model.mdp_names(kind),
-            health: model.health.clone(),
+            health: {
+                let mut h = model.health.clone();
+                h.set_query_memo(BN_QUERY_MEMO);
+                h
+            },
             mdps: model.mdps.clone(),
             workspace: Workspace::new(),
             platform: PlatformState::new(&model.resources.platform),
@@ -279,12 +287,14 @@ impl<'m> Core<'m> {
         }
     }
 
-    /// Turn the memos (MDP solves, resource schedules) on or off. Off, every cycle re-solves
-    /// every MDP and re-runs the scheduler: the worst case, and the reference the memos are
+    /// Turn the memos (MDP solves, health queries, resource schedules) on or off. Off, every
+    /// cycle re-solves every MDP, re-runs the scheduler and runs every BN query whose inputs
+    /// changed since its last: the worst case, and the reference the memos are
     /// tested against. Outputs are identical either way.
     pub fn set_caches(&mut self, on: bool) {
         self.mdps.set_solve_cache(on);
         self.arbiter.schedules.set_enabled(on);
+        self.health.set_query_memo(if on { BN_QUERY_MEMO } else { 0 });
     }
 
     /// The PANORAMA allocations in force so far (RAS0 then each re-allocation), in the shape of

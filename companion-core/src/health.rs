@@ -668,6 +668,14 @@ impl HealthModel {
         Ok(())
     }
 
+    /// Let every manager's engine answer the last `slots` distinct queries (evidence and
+    /// imported or carried priors, bit for bit) from memory (`Engine::set_query_memo`; 0: off).
+    pub fn set_query_memo(&mut self, slots: usize) {
+        for m in &mut self.managers {
+            m.engine.set_query_memo(slots);
+        }
+    }
+
     /// The carried (dynamic) beliefs: (manager, node) -> prior for the next evaluation.
     pub fn belief(&self) -> BTreeMap<(String, String), Vec<f64>> {
         let mut out = BTreeMap::new();

@@ -87,29 +87,41 @@ pub struct MissionMdp {
     solved: Solved,
 }
 
-/// Memo of the last finite-horizon solve. The solve is a pure function of the probability
-/// values (which fix every transition probability and reward), the policy and the horizon, so
-/// when all three are bit-identical the stored stage-0 decisions and values are exactly what a
-/// new solve would give. `decide` then skips instantiate + solve.
+/// How many recent finite-horizon solves each MDP remembers. The probabilities come from BNs
+/// over discrete evidence, so they take few distinct values: evidence flapping across one
+/// threshold (vibration on/off) alternates between two input points, a second flapping reading
+/// makes four.
+const SOLVE_MEMO: usize = 4;
+
+/// Memo of recent finite-horizon solves. A solve is a pure function of the probability values
+/// (which fix every transition probability and reward), the policy and the horizon, so when all
+/// three are bit-identical to a remembered solve's, its stage-0 decisions and values are exactly
+/// what a new solve would give. `decide` then skips instantiate + solve.
 #[derive(Debug, Clone, Default)]
 struct Solved {
     enabled: bool,
-    valid: bool,
+    /// Up to [`SOLVE_MEMO`] solves; a miss replaces them in turn (`next`), their buffers kept.
+    entries: Vec<SolvedEntry>,
+    next: usize,
+    /// The entry `decide` answered from last.
+    current: usize,
+    /// Solves actually run (memo misses), for benchmarks and tests.
+    solves: u64,
+}
+
+#[derive(Debug, Clone, Default)]
+struct SolvedEntry {
     values: Vec<f64>,
     policy: usize,
     horizon: usize,
     /// Stage-0 action per state (`u32::MAX`: terminal / none) and stage-0 value per state.
     decision: Vec<u32>,
     value: Vec<f64>,
-    /// Solves actually run (memo misses), for benchmarks and tests.
-    solves: u64,
 }
 
-impl Solved {
-    fn hit(&self, values: &[f64], policy: usize, horizon: usize) -> bool {
-        self.enabled
-            && self.valid
-            && self.policy == policy
+impl SolvedEntry {
+    fn is(&self, values: &[f64], policy: usize, horizon: usize) -> bool {
+        self.policy == policy
             && self.horizon == horizon
             && self.values.len() == values.len()
             && self
@@ -117,6 +129,31 @@ impl Solved {
                 .iter()
                 .zip(values)
                 .all(|(a, b)| a.to_bits() == b.to_bits())
+    }
+}
+
+impl Solved {
+    /// The remembered solve of exactly these inputs (the last answered checked first).
+    fn hit(&self, values: &[f64], policy: usize, horizon: usize) -> Option<usize> {
+        if !self.enabled {
+            return None;
+        }
+        let n = self.entries.len();
+        (0..n)
+            .map(|k| (self.current + k) % n)
+            .find(|&i| self.entries[i].is(values, policy, horizon))
+    }
+
+    /// The slot a new solve goes into: the only one with the memo off, else the next in turn.
+    fn slot(&mut self) -> usize {
+        let slots = if self.enabled { SOLVE_MEMO } else { 1 };
+        if self.entries.len() < slots {
+            self.entries.push(SolvedEntry::default());
+            return self.entries.len() - 1;
+        }
+        let i = self.next % self.entries.len();
+        self.next = (i + 1) % slots;
+        i
     }
 }
 
@@ -186,7 +223,14 @@ impl MissionMdp {
     /// and the worst-case benchmark).
     pub fn set_solve_cache(&mut self, on: bool) {
         self.solved.enabled = on;
-        self.solved.valid = false;
+        self.solved.entries.truncate(1);
+        self.solved.next = 0;
+        self.solved.current = 0;
+        if let Some(e) = self.solved.entries.first_mut() {
+            // Never matches: values are in [0, 1].
+            e.values.clear();
+            e.values.push(f64::NAN);
+        }
     }
 
     /// Finite-horizon solves `decide` has actually run (the rest came from the memo).
@@ -270,30 +314,38 @@ impl MissionMdp {
     ) -> Result<Option<Decision>, InstantiateError> {
         let pi = self.policy_index(policy)?;
         self.load_values(|n| probs.get(n).copied())?;
-        if !self.solved.hit(&self.values, pi, horizon) {
-            self.solved.valid = false;
-            self.fill_checked(pi)?;
-            let fh = ws.finite_horizon(&self.mdp, horizon);
-            let n = self.states.len();
-            let memo = &mut self.solved;
-            memo.decision.clear();
-            memo.value.clear();
-            for s in 0..n {
-                memo.decision
-                    .push(fh.decision(s).map_or(u32::MAX, |a| a as u32));
-                memo.value.push(fh.value(0, s));
+        let i = match self.solved.hit(&self.values, pi, horizon) {
+            Some(i) => i,
+            None => {
+                let i = self.solved.slot();
+                // Invalid until filled (a failed fill leaves it matching nothing).
+                self.solved.entries[i].values.clear();
+                self.solved.entries[i].values.push(f64::NAN);
+                self.fill_checked(pi)?;
+                let fh = ws.finite_horizon(&self.mdp, horizon);
+                let n = self.states.len();
+                let memo = &mut self.solved.entries[i];
+                memo.decision.clear();
+                memo.value.clear();
+                for s in 0..n {
+                    memo.decision
+                        .push(fh.decision(s).map_or(u32::MAX, |a| a as u32));
+                    memo.value.push(fh.value(0, s));
+                }
+                memo.values.clear();
+                memo.values.extend_from_slice(&self.values);
+                memo.policy = pi;
+                memo.horizon = horizon;
+                self.solved.solves += 1;
+                i
             }
-            memo.values.clear();
-            memo.values.extend_from_slice(&self.values);
-            memo.policy = pi;
-            memo.horizon = horizon;
-            memo.valid = true;
-            memo.solves += 1;
-        }
-        let a = self.solved.decision[state];
+        };
+        self.solved.current = i;
+        let memo = &self.solved.entries[i];
+        let a = memo.decision[state];
         Ok((a != u32::MAX).then(|| Decision {
             action: a as usize,
-            value: self.solved.value[state],
+            value: memo.value[state],
         }))
     }
 
