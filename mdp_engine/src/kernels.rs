@@ -171,17 +171,17 @@ pub(crate) fn split(mdp: &Mdp, min_transitions: usize) -> bool {
 /// [`Workspace::set_parallel_min_transitions`]: crate::Workspace::set_parallel_min_transitions
 pub const PARALLEL_MIN_TRANSITIONS: usize = 20_000;
 
-/// `f(s0, cur_chunk, pol_chunk)` over chunks of the states, on rayon's pool, the results
-/// combined by `fold` (a componentwise max (exact whatever the order, so the split gives the same
-/// bits as one pass).
+/// `f(s0, cur_chunk, pol_chunk)` over chunks of the states (`cur` and `pol` chunked alike), on
+/// rayon's pool, the results combined by `fold` (componentwise min/max, exact whatever the order,
+/// so the split gives the same bits as one pass).
 #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
-fn par_chunks(
+pub(crate) fn par_chunks<R: Send + Sync + Copy>(
     cur: &mut [f64],
     pol: &mut [u32],
-    f: impl Fn(usize, &mut [f64], &mut [u32]) -> (f64, f64) + Sync,
-    fold: fn((f64, f64), (f64, f64)) -> (f64, f64),
-    init: (f64, f64),
-) -> (f64, f64) {
+    f: impl Fn(usize, &mut [f64], &mut [u32]) -> R + Sync,
+    fold: fn(R, R) -> R,
+    init: R,
+) -> R {
     use rayon::prelude::*;
     let size = chunk_size(cur.len());
     cur.par_chunks_mut(size)
@@ -195,6 +195,30 @@ fn par_chunks(
 #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
 fn chunk_size(n: usize) -> usize {
     n.div_ceil(rayon::current_num_threads() * 4).max(1)
+}
+
+/// `f(s0, chunk)` over chunks of `out` (the states `s0..`), on rayon's pool when the `parallel`
+/// feature is on (else one call), the results combined by `fold` (exact min/max reductions keep
+/// the answer independent of the split).
+pub(crate) fn par_states<T: Send, R: Send + Sync + Copy>(
+    out: &mut [T],
+    f: impl Fn(usize, &mut [T]) -> R + Sync,
+    fold: fn(R, R) -> R,
+    init: R,
+) -> R {
+    #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
+    {
+        use rayon::prelude::*;
+        let size = chunk_size(out.len());
+        out.par_chunks_mut(size)
+            .enumerate()
+            .map(|(k, c)| f(k * size, c))
+            .reduce(|| init, fold)
+    }
+    #[cfg(not(all(feature = "parallel", not(target_arch = "arm"))))]
+    {
+        fold(init, f(0, out))
+    }
 }
 
 #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
