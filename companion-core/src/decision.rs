@@ -200,6 +200,10 @@ pub struct Core<'m> {
     scratch: Scratch<'m>,
     /// The resource arbitration stage's schedules and degradations in force.
     arbiter: ResourceArbiter<'m>,
+    /// The ids of [`ROOM`]'s observations (`None`: params do not observe it), and their values
+    /// this cycle (capacity kept).
+    room_ids: [Option<crate::evidence::ObservationId>; 3],
+    room_extra: Vec<(crate::evidence::ObservationId, f64)>,
 }
 
 /// How much work the cycles so far really did (the rest came from the memos).
@@ -227,6 +231,13 @@ pub(crate) struct Scratch<'m> {
     pub(crate) key: Vec<crate::arbitration::RequestKey<'m>>,
     failed: Vec<String>,
 }
+
+/// The observations [`Core::platform_room`] gives, in its order.
+const ROOM: [&str; 3] = [
+    crate::evidence::FREE_TILES,
+    crate::evidence::CPU_HEADROOM,
+    crate::evidence::TRACKING_FPS,
+];
 
 /// Distinct recent queries each health manager's engine answers from memory: evidence flapping
 /// across a threshold alternates between two, with the resource re-evaluation a few more.
@@ -275,6 +286,8 @@ impl<'m> Core<'m> {
             n_published: model.health.publishes().len(),
             scratch: Scratch::default(),
             arbiter: ResourceArbiter::new(),
+            room_ids: ROOM.map(|name| model.health.observations.id(name)),
+            room_extra: Vec::with_capacity(ROOM.len()),
         }
     }
 
@@ -343,8 +356,18 @@ impl<'m> Core<'m> {
         // evidence -> health (the platform's room comes from the core's own platform model)
         self.update_platform(obs);
         let room = self.platform_room(obs);
+        // As `evidence_with_into(obs, &room, ..)`, with the names' ids resolved once in `new`.
+        let mut extra = std::mem::take(&mut self.room_extra);
+        extra.clear();
+        for ((name, v), id) in room.iter().zip(self.room_ids) {
+            if let (false, Some(id)) = (name.is_empty(), id) {
+                extra.push((id, *v));
+            }
+        }
         self.health
-            .evidence_with_into(obs, &room, &mut rec.evidence);
+            .observations
+            .evidence_with_ids_into(obs, &extra, &mut rec.evidence);
+        self.room_extra = extra;
         // Absent is not zero: the nodes no observation fed this cycle, listed (strings reused).
         let mut n_absent = 0;
         for o in &self.health.observations.observations {
@@ -536,9 +559,9 @@ impl<'m> Core<'m> {
             - self.platform.external_cpu_load
             - self.others_cpu;
         [
-            (crate::evidence::FREE_TILES, f64::from(free)),
-            (crate::evidence::CPU_HEADROOM, headroom.max(0.0)),
-            (crate::evidence::TRACKING_FPS, self.required_fps(app, obs)),
+            (ROOM[0], f64::from(free)),
+            (ROOM[1], headroom.max(0.0)),
+            (ROOM[2], self.required_fps(app, obs)),
         ]
     }
 

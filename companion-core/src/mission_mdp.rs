@@ -71,6 +71,9 @@ pub struct MissionMdp {
     does: Vec<Vec<String>>,
     /// Probability names used by this MDP; slot `k` of every expression is `vars[k]`.
     vars: Vec<String>,
+    /// Indices into `vars` in name order (the order of the name-keyed maps the cycle reads and
+    /// writes), so they are matched in one ordered walk instead of a lookup each.
+    by_name: Vec<usize>,
     values: Vec<f64>,
     /// Expression per engine transition index.
     trans_expr: Vec<Expr>,
@@ -246,6 +249,29 @@ impl MissionMdp {
     }
 
     /// Read every probability this MDP uses into `self.values`, checking range.
+    /// [`MissionMdp::load_values`] from a name-ordered map: one walk over both (names compared
+    /// as the map's lookups would), the same values and the same errors.
+    fn load_values_from(&mut self, probs: &BTreeMap<String, f64>) -> Result<(), InstantiateError> {
+        let mut it = probs.iter();
+        for &k in &self.by_name {
+            let name = self.vars[k].as_str();
+            let v = loop {
+                match it.next() {
+                    Some((key, v)) if key.as_str() == name => break Some(*v),
+                    Some((key, _)) if key.as_str() < name => continue,
+                    // Passed it or ran out: not in the map.
+                    _ => break None,
+                }
+            };
+            match v {
+                Some(v) if (0.0..=1.0).contains(&v) => self.values[k] = v,
+                // The error the lookup order (file order) finds first.
+                _ => return self.load_values(|n| probs.get(n).copied()),
+            }
+        }
+        Ok(())
+    }
+
     fn load_values(
         &mut self,
         lookup: impl Fn(&str) -> Option<f64>,
@@ -313,7 +339,7 @@ impl MissionMdp {
         horizon: usize,
     ) -> Result<Option<Decision>, InstantiateError> {
         let pi = self.policy_index(policy)?;
-        self.load_values(|n| probs.get(n).copied())?;
+        self.load_values_from(probs)?;
         let i = match self.solved.hit(&self.values, pi, horizon) {
             Some(i) => i,
             None => {
@@ -376,7 +402,22 @@ impl MissionMdp {
         out.actions.clone_from(&self.does[d.action]);
         out.value = d.value;
         out.iterations = horizon as u32;
-        // Provenance: the named probabilities this solve read, at the values it read.
+        // Provenance: the named probabilities this solve read, at the values it read. Usually
+        // the entry already holds exactly these names: overwrite the values in one ordered walk.
+        if out.inputs.len() == self.vars.len() {
+            let mut same = true;
+            for ((key, x), &k) in out.inputs.iter_mut().zip(&self.by_name) {
+                if *key != self.vars[k] {
+                    same = false;
+                    break;
+                }
+                *x = self.values[k];
+            }
+            if same {
+                out.reason.clear();
+                return;
+            }
+        }
         out.inputs.retain(|k, _| self.vars.contains(k));
         for (name, &v) in self.vars.iter().zip(&self.values) {
             match out.inputs.get_mut(name.as_str()) {

@@ -47,7 +47,11 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
 thread_local! {
     /// The last stage boundary's time, and per stage (in first-seen order) its total and count.
     static LAST: Cell<Option<Instant>> = const { Cell::new(None) };
-    static STAGES: RefCell<Vec<(String, Duration)>> = const { RefCell::new(Vec::new()) };
+    /// Per stage: its key (the addresses and length of its group and name: the names are the
+    /// model's own strings, so a stage is found without comparing text, which would add to the
+    /// times measured), its label and its total.
+    #[allow(clippy::type_complexity)]
+    static STAGES: RefCell<Vec<((usize, usize, usize), String, Duration)>> = const { RefCell::new(Vec::new()) };
 }
 
 /// The stage hook: the time since the last boundary goes to the stage that just ended.
@@ -69,14 +73,10 @@ fn on_stage(stage: Stage<'_>) {
         Stage::Guarantee => ("guarantee", ""),
         Stage::Record => ("record", ""),
     };
-    STAGES.with_borrow_mut(|st| {
-        match st
-            .iter_mut()
-            .find(|(k, _)| k.len() == group.len() + name.len() && k.starts_with(group) && k.ends_with(name))
-        {
-            Some((_, t)) => *t += dt,
-            None => st.push((format!("{group}{name}"), dt)),
-        }
+    let key = (group.as_ptr() as usize, name.as_ptr() as usize, name.len());
+    STAGES.with_borrow_mut(|st| match st.iter_mut().find(|(k, _, _)| *k == key) {
+        Some((_, _, t)) => *t += dt,
+        None => st.push((key, format!("{group}{name}"), dt)),
     });
 }
 
@@ -200,7 +200,16 @@ fn main() {
             core.step_into(black_box(&obs), &mut plan, &mut rec);
             LAST.set(None);
         }
-        let stages = STAGES.with_borrow(Clone::clone);
+        // Labels merged (two keys may name one stage if its name lives in two places).
+        let mut stages: Vec<(String, Duration)> = Vec::new();
+        STAGES.with_borrow(|st| {
+            for (_, label, t) in st {
+                match stages.iter_mut().find(|(l, _)| l == label) {
+                    Some((_, x)) => *x += *t,
+                    None => stages.push((label.clone(), *t)),
+                }
+            }
+        });
         let total: f64 = stages.iter().map(|(_, t)| t.as_secs_f64()).sum();
         eprintln!("case {name}: {:.2} us/cycle in stages", total * 1e6 / n as f64);
         let rows: Vec<_> = stages
