@@ -88,7 +88,8 @@ fn same_findings(a: &[(NodeId, Finding)], b: &[(NodeId, Finding)]) -> bool {
                 && match (fa, fb) {
                     (Finding::State(x), Finding::State(y)) => x == y,
                     (Finding::Likelihood(x), Finding::Likelihood(y)) => {
-                        x.len() == y.len() && x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits())
+                        x.len() == y.len()
+                            && x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits())
                     }
                     _ => false,
                 }
@@ -588,7 +589,10 @@ impl Engine {
         let hit = self.memo.entries.iter().position(|e| {
             same_findings(&e.findings, &evidence.findings)
                 && e.cpts.len() == key_cpts().count()
-                && e.cpts.iter().zip(key_cpts()).all(|(a, b)| a.to_bits() == b.to_bits())
+                && e.cpts
+                    .iter()
+                    .zip(key_cpts())
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
         });
         if let Some(k) = hit {
             let mut at = 0;

@@ -307,7 +307,8 @@ impl<'m> Core<'m> {
     pub fn set_caches(&mut self, on: bool) {
         self.mdps.set_solve_cache(on);
         self.arbiter.schedules.set_enabled(on);
-        self.health.set_query_memo(if on { BN_QUERY_MEMO } else { 0 });
+        self.health
+            .set_query_memo(if on { BN_QUERY_MEMO } else { 0 });
     }
 
     /// The PANORAMA allocations in force so far (RAS0 then each re-allocation), in the shape of

@@ -28,9 +28,9 @@ use companion::params::default_params_dir;
 use companion_core::decision::{Core, ModelKind};
 use companion_core::record::{DecisionRecord, Plan};
 use companion_core::stage_hook::{Stage, set_stage_hook};
-use std::cell::{Cell, RefCell};
 use companion_testkit::streams::{Stream, StreamGen, tracking_snapshot};
 use serde_json::json;
+use std::cell::{Cell, RefCell};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
@@ -211,7 +211,10 @@ fn main() {
             }
         });
         let total: f64 = stages.iter().map(|(_, t)| t.as_secs_f64()).sum();
-        eprintln!("case {name}: {:.2} us/cycle in stages", total * 1e6 / n as f64);
+        eprintln!(
+            "case {name}: {:.2} us/cycle in stages",
+            total * 1e6 / n as f64
+        );
         let rows: Vec<_> = stages
             .iter()
             .map(|(k, t)| {

@@ -91,30 +91,32 @@ fn main() {
         };
         let mut times = Vec::with_capacity(reps);
         let mut spent = 0.0;
-        in_pool(&mut || while times.len() < reps && (times.len() < 3 || spent < budget) {
-            let t0 = Instant::now();
-            match solver {
-                "fh" => {
-                    black_box(ws.finite_horizon(black_box(mdp), horizon).decision(0));
+        in_pool(&mut || {
+            while times.len() < reps && (times.len() < 3 || spent < budget) {
+                let t0 = Instant::now();
+                match solver {
+                    "fh" => {
+                        black_box(ws.finite_horizon(black_box(mdp), horizon).decision(0));
+                    }
+                    "vi" => {
+                        black_box(
+                            ws.value_iteration(black_box(mdp), &cfg)
+                                .map(|s| s.action(0)),
+                        )
+                        .ok();
+                    }
+                    _ => {
+                        black_box(
+                            ws.policy_iteration(black_box(mdp), &cfg)
+                                .map(|s| s.action(0)),
+                        )
+                        .ok();
+                    }
                 }
-                "vi" => {
-                    black_box(
-                        ws.value_iteration(black_box(mdp), &cfg)
-                            .map(|s| s.action(0)),
-                    )
-                    .ok();
-                }
-                _ => {
-                    black_box(
-                        ws.policy_iteration(black_box(mdp), &cfg)
-                            .map(|s| s.action(0)),
-                    )
-                    .ok();
-                }
+                let dt = t0.elapsed();
+                spent += dt.as_secs_f64();
+                times.push(dt.as_nanos() as u64);
             }
-            let dt = t0.elapsed();
-            spent += dt.as_secs_f64();
-            times.push(dt.as_nanos() as u64);
         });
         out.push(json!({
             "name": name,

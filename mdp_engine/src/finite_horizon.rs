@@ -114,7 +114,11 @@ fn backup_certified(
         Partial::merge(init, range(0, cur, pol))
     };
     let mut cert = p.cert;
-    cert.span = if p.gmaxs >= p.gmin { p.gmaxs - p.gmin } else { 0.0 };
+    cert.span = if p.gmaxs >= p.gmin {
+        p.gmaxs - p.gmin
+    } else {
+        0.0
+    };
     cert
 }
 

@@ -241,7 +241,11 @@ pub(crate) fn backup_stage(mdp: &Mdp, next: &[f64], cur: &mut [f64], pol: &mut [
         return;
     }
     let _ = par;
-    by_successors!(mdp, backup_stage_impl::<false>, (mdp, next, &[], 0, cur, pol));
+    by_successors!(
+        mdp,
+        backup_stage_impl::<false>,
+        (mdp, next, &[], 0, cur, pol)
+    );
 }
 
 /// [`backup_stage_impl`] with the screen from `next2`, split across threads when `par` (the
@@ -260,15 +264,17 @@ pub(crate) fn backup_stage_screened(
         return par_chunks(
             cur,
             pol,
-            |s0, c, p| {
-                by_successors!(mdp, backup_stage_impl::<true>, (mdp, next, next2, s0, c, p))
-            },
+            |s0, c, p| by_successors!(mdp, backup_stage_impl::<true>, (mdp, next, next2, s0, c, p)),
             max_both,
             (0.0, 1.0),
         );
     }
     let _ = par;
-    by_successors!(mdp, backup_stage_impl::<true>, (mdp, next, next2, 0, cur, pol))
+    by_successors!(
+        mdp,
+        backup_stage_impl::<true>,
+        (mdp, next, next2, 0, cur, pol)
+    )
 }
 
 /// One value-iteration sweep `nxt = T cur` (terminal states 0), returning `(min d, max d)` of `d =
@@ -276,7 +282,13 @@ pub(crate) fn backup_stage_screened(
 /// [`backup_stage_impl`] (same invariants), with `q = R + gamma * (sum p v)` in transition order.
 /// Split across threads when `par` (min and max are exact, so equal to one pass's).
 #[inline]
-pub(crate) fn vi_sweep(mdp: &Mdp, gamma: f64, cur: &[f64], nxt: &mut [f64], par: bool) -> (f64, f64) {
+pub(crate) fn vi_sweep(
+    mdp: &Mdp,
+    gamma: f64,
+    cur: &[f64],
+    nxt: &mut [f64],
+    par: bool,
+) -> (f64, f64) {
     #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
     if par {
         use rayon::prelude::*;

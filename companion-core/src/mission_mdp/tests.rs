@@ -1038,8 +1038,15 @@ mod fast_cycle {
                 let p = point(k);
                 let got = m.decide(&mut ws, s, &p, "safety", 100).unwrap();
                 let want = f.decide(&mut ws, s, &p, "safety", 100).unwrap();
-                assert_eq!(got.map(|d| (d.action, d.value.to_bits())), want.map(|d| (d.action, d.value.to_bits())));
-                assert_eq!(m.solves(), 4.min(round * 4 + k + 1) as u64, "round {round} point {k}");
+                assert_eq!(
+                    got.map(|d| (d.action, d.value.to_bits())),
+                    want.map(|d| (d.action, d.value.to_bits()))
+                );
+                assert_eq!(
+                    m.solves(),
+                    4.min(round * 4 + k + 1) as u64,
+                    "round {round} point {k}"
+                );
             }
         }
         m.decide(&mut ws, s, &point(4), "safety", 100).unwrap();
