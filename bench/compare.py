@@ -322,6 +322,10 @@ def mdp_peers(versions, notes):
     return tb, stormpy
 
 
+# Threads of the two timed finite-horizon runs on the 10,000-state model: one, and both cores.
+THREAD_SPLIT = (1, 2)
+
+
 def mdp_cases(B, max_states, cases, notes, versions):
     """Every MDP model solved finite-horizon, by value and by policy iteration, against numpy,
     pymdptoolbox and Storm."""
@@ -333,6 +337,12 @@ def mdp_cases(B, max_states, cases, notes, versions):
             plan.append({"name": f"{name}/{solver}", "path": p, "solver": solver, "horizon": HORIZON,
                          "gamma": GAMMA, "tolerance": TOL, "reps": 3 if big else 10000,
                          "budget_s": B})
+        if big:
+            # Both cores against one on the same model in the same run (the plain `fh` case
+            # is the engine's default: split, the model being far above its threshold).
+            for threads in THREAD_SPLIT:
+                plan.append({"name": f"{name}/fh/{threads}t", "path": p, "solver": "fh",
+                             "horizon": HORIZON, "reps": 5, "budget_s": B, "threads": threads})
     tb, stormpy = mdp_peers(versions, notes)
     for name, p in models.items():
         mdp_model_cases(name, p, [c for c in plan if c["path"] == p], tb, stormpy, B, cases, notes)
@@ -481,6 +491,15 @@ def mdp_model_cases(name, p, block, tb, stormpy, B, cases, notes):
     for key, rc in rust.items():
         ts = rc["times_ns"] + second[key]["times_ns"]
         cmed[key] = stats(ts)
+    split = [f"{name}/fh/{t}t" for t in THREAD_SPLIT]
+    if all(k in rust for k in split):
+        (one, two) = (cmed[k][0] for k in split)
+        same = all(rust[k]["values"] == rust[f"{name}/fh"]["values"]
+                   and rust[k]["policy"] == rust[f"{name}/fh"]["policy"] for k in split)
+        notes.append(f"{name}/fh: {THREAD_SPLIT[1]} threads {fmt_ns(two)} median, 1 thread "
+                     f"{fmt_ns(one)} in the same run: {two / one:.2f}x (target <= 0.55x); stage-0 "
+                     f"values and decisions {'identical' if same else 'DIFFER'} (JSON floats, "
+                     f"round-trip exact)")
     for key, c in pending:
         rmed, rp99, rn = cmed[key]
         c.update({"companion_median_ns": rmed, "companion_p99_ns": rp99, "companion_reps": rn,

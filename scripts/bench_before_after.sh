@@ -2,7 +2,9 @@
 # Before/after speed check between two git revisions, in one run on the same machine state.
 #
 # Usage: scripts/bench_before_after.sh [--quick] [--rounds N] [--criterion LIST] [BASE_REV] [NEW_REV]
-#   BASE_REV  default $BASE_REV, else 4e6a5f6 (main before the crates-by-role restructure)
+#   BASE_REV  default $BASE_REV, else 4e6a5f6 (main before the crates-by-role restructure); any
+#             revision from b5c24f9 on (one `companion` crate with nested engine crates) works:
+#             targets are found by name, models under any benches/models/ dir
 #   NEW_REV   default: the working tree (uncommitted changes included)
 #   --rounds N        alternating rounds (default 6; --quick: 2 rounds and smaller budgets)
 #   --criterion LIST  criterion benches to run besides the examples, comma-separated bench target
@@ -18,8 +20,8 @@
 # bench instead (it makes its capture in Rust).
 #
 # How: each revision other than the working tree is checked out in a detached `git worktree`
-# under target/bench-before-after/<side>/ and built there with its own CARGO_TARGET_DIR
-# (target/bench-before-after/<side>-target, kept so rebuilds are incremental); the working tree
+# under target/bench-before-after/<side>-<sha>/ and built there with its own CARGO_TARGET_DIR
+# (target/bench-before-after/<side>-<sha>-target, kept so rebuilds are incremental); the working tree
 # builds in its normal target/. Targets are found by name across the workspace
 # (`cargo build --release --workspace --example NAME --bench NAME`), so crates may move between
 # revisions. Every program runs with its revision's own source dir as working directory and
@@ -59,8 +61,11 @@ t_start=$(date +%s)
 EXAMPLES=(bench_cycle bench_solve bench_bn export_health_bn)
 # Build every program of one side; write "<target name> <executable>" lines to $WORK/<side>.exes.
 build_side() {
-  local side=$1 rev=$2 src tdir desc args=()
-  resolve_side "$side" "$rev"
+  local side=$1 rev=$2 src tdir desc args=() key=$1
+  # One checkout and target dir per revision, so comparing against another base and back
+  # rebuilds nothing.
+  [ -n "$rev" ] && key=$side-$(git rev-parse --short=10 "$rev^{commit}")
+  resolve_side "$key" "$rev"
   for e in "${EXAMPLES[@]}"; do args+=(--example "$e"); done
   for b in ${CRITERION//,/ }; do args+=(--bench "$b"); done
   log "building $side: $desc (release) ..."
@@ -130,10 +135,21 @@ def exe(side, key):
     return e
 
 # Inputs, made per side from its own sources (they should be byte-identical; a warning if not).
+def exported_models(src):
+    """Every `benches/models/*.json` of the revision at any depth (`mdp_engine/benches/models`
+    since the crate split, `companion/mdp_engine/benches/models` before it), build output and
+    checkouts of other revisions (target/) left out."""
+    found = []
+    for d, subdirs, files in os.walk(src):
+        subdirs[:] = [x for x in subdirs if x not in ("target", ".git", ".venv", "node_modules")]
+        if d.endswith(os.path.join("benches", "models")):
+            found += [os.path.join(d, f) for f in files if f.endswith(".json")]
+    return sorted(found, key=os.path.basename)
+
 for side, s in sides.items():
-    models = sorted(glob.glob(os.path.join(s["src"], "*", "benches", "models", "*.json")))
+    models = exported_models(s["src"])
     if not models:
-        raise SystemExit(f"{side}: no exported MDP models under */benches/models/")
+        raise SystemExit(f"{side}: no exported MDP models (benches/models/*.json) in {s['src']}")
     budget = 0.05 if quick else 0.15
     s["plan"] = os.path.join(s["dir"], "plan.json")
     with open(s["plan"], "w") as f:

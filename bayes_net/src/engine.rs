@@ -5,7 +5,7 @@ use crate::{BnError, Evidence, Finding, Network, NodeId};
 use std::collections::BTreeSet;
 
 /// A clique table over `vars` (row-major: last var varies fastest).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 struct Clique {
     vars: Vec<usize>,
     /// Product of the CPTs assigned here: the potential before evidence.
@@ -53,6 +53,47 @@ pub struct Engine {
     targeted: Targeted,
     /// Bumped by every [`Engine::set_cpt`]: plans recompute their evidence-independent parts.
     cpt_version: u64,
+    /// Cliques whose base potential waits for a CPT set since (rebuilt by the next propagate).
+    stale_base: Vec<bool>,
+    /// Recent [`Engine::query`] answers (see [`Engine::set_query_memo`]).
+    memo: QueryMemo,
+}
+
+/// Recent targeted queries keyed on their exact inputs: the findings and the CPTs of every node
+/// [`Engine::set_cpt`] has changed (the others are as compiled). A query is a pure function of
+/// those, so a remembered answer is the one a new run would give, bit for bit.
+#[derive(Debug, Clone, Default)]
+struct QueryMemo {
+    slots: usize,
+    entries: Vec<MemoEntry>,
+    next: usize,
+    /// Nodes whose CPT was set, ascending: their CPTs are part of the key.
+    changed: Vec<usize>,
+    hits: u64,
+}
+
+#[derive(Debug, Clone, Default)]
+struct MemoEntry {
+    findings: Vec<(NodeId, Finding)>,
+    /// The changed nodes' CPTs, concatenated.
+    cpts: Vec<f64>,
+    /// The targets' posteriors, concatenated in target order.
+    marginals: Vec<f64>,
+}
+
+fn same_findings(a: &[(NodeId, Finding)], b: &[(NodeId, Finding)]) -> bool {
+    a.len() == b.len()
+        && a.iter().zip(b).all(|((na, fa), (nb, fb))| {
+            na == nb
+                && match (fa, fb) {
+                    (Finding::State(x), Finding::State(y)) => x == y,
+                    (Finding::Likelihood(x), Finding::Likelihood(y)) => {
+                        x.len() == y.len()
+                            && x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits())
+                    }
+                    _ => false,
+                }
+        })
 }
 
 /// Map each entry of a table over `vars` to its index in a table over `sub` (a subset, any order).
@@ -280,6 +321,8 @@ impl Engine {
         let mut e = Engine {
             targeted: Targeted::new(Vec::new(), &card),
             cpt_version: 0,
+            stale_base: Vec::new(),
+            memo: QueryMemo::default(),
             card,
             order,
             cliques: Vec::new(),
@@ -294,6 +337,7 @@ impl Engine {
         for (c, clique) in cliques.iter_mut().enumerate() {
             e.rebuild_base(clique, c);
         }
+        e.stale_base = vec![false; cliques.len()];
         e.cliques = cliques;
         e
     }
@@ -335,18 +379,42 @@ impl Engine {
         self.net.check_cpt(id, cpt)?;
         self.net.nodes[id.0].cpt.copy_from_slice(cpt);
         self.cpt_version += 1;
-        let c = self.cpt_home[id.0];
-        let mut clique = std::mem::replace(
-            &mut self.cliques[c],
-            Clique {
-                vars: Vec::new(),
-                base: Vec::new(),
-                pot: Vec::new(),
-            },
-        );
-        self.rebuild_base(&mut clique, c);
-        self.cliques[c] = clique;
+        // The junction tree's base potential is rebuilt when propagate needs it: a dynamic
+        // network sets CPTs every cycle and mostly answers targeted queries, which read the CPTs.
+        self.stale_base[self.cpt_home[id.0]] = true;
+        if let Err(k) = self.memo.changed.binary_search(&id.0) {
+            // A new part of the key: the remembered answers' keys lack it.
+            self.memo.changed.insert(k, id.0);
+            self.memo.entries.clear();
+            self.memo.next = 0;
+        }
         Ok(())
+    }
+
+    /// Remember the answers of the last `slots` distinct [`Engine::query`] inputs (findings and
+    /// changed CPTs, compared bit for bit) and answer a repeat from memory (0, the default: off).
+    /// For a network queried with few distinct inputs, such as evidence flapping across a
+    /// threshold, every repeat costs a comparison instead of a run.
+    pub fn set_query_memo(&mut self, slots: usize) {
+        self.memo.slots = slots;
+        self.memo.entries.truncate(slots);
+        self.memo.next = 0;
+    }
+
+    /// Queries answered from the memo so far.
+    pub fn query_memo_hits(&self) -> u64 {
+        self.memo.hits
+    }
+
+    fn rebuild_stale(&mut self) {
+        for c in 0..self.cliques.len() {
+            if self.stale_base[c] {
+                let mut clique = std::mem::take(&mut self.cliques[c]);
+                self.rebuild_base(&mut clique, c);
+                self.cliques[c] = clique;
+                self.stale_base[c] = false;
+            }
+        }
     }
 
     fn check_finding(&self, node: NodeId, f: &Finding) -> Result<(), BnError> {
@@ -382,6 +450,7 @@ impl Engine {
         for (node, f) in &evidence.findings {
             self.check_finding(*node, f)?;
         }
+        self.rebuild_stale();
         for c in &mut self.cliques {
             c.pot.copy_from_slice(&c.base);
         }
@@ -476,6 +545,9 @@ impl Engine {
             }
         }
         self.targeted = Targeted::new(t, &self.card);
+        // Remembered answers are for the old targets.
+        self.memo.entries.clear();
+        self.memo.next = 0;
         Ok(())
     }
 
@@ -503,13 +575,63 @@ impl Engine {
         for (node, f) in &evidence.findings {
             self.check_finding(*node, f)?;
         }
+        if self.memo.slots == 0 {
+            return self.targeted.run(
+                &self.net,
+                &self.card,
+                self.cpt_version,
+                &evidence.findings,
+                &mut self.marginals,
+            );
+        }
+        let nodes = &self.net.nodes;
+        let key_cpts = || self.memo.changed.iter().flat_map(|&i| nodes[i].cpt.iter());
+        let hit = self.memo.entries.iter().position(|e| {
+            same_findings(&e.findings, &evidence.findings)
+                && e.cpts.len() == key_cpts().count()
+                && e.cpts
+                    .iter()
+                    .zip(key_cpts())
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+        });
+        if let Some(k) = hit {
+            let mut at = 0;
+            for &t in &self.targeted.targets {
+                let m = &mut self.marginals[t];
+                let len = m.len();
+                m.copy_from_slice(&self.memo.entries[k].marginals[at..at + len]);
+                at += len;
+            }
+            self.memo.hits += 1;
+            return Ok(());
+        }
         self.targeted.run(
             &self.net,
             &self.card,
             self.cpt_version,
             &evidence.findings,
             &mut self.marginals,
-        )
+        )?;
+        let memo = &mut self.memo;
+        let k = if memo.entries.len() < memo.slots {
+            memo.entries.push(MemoEntry::default());
+            memo.entries.len() - 1
+        } else {
+            let k = memo.next;
+            memo.next = (k + 1) % memo.slots;
+            k
+        };
+        let e = &mut memo.entries[k];
+        e.findings.clone_from(&evidence.findings);
+        e.cpts.clear();
+        for &i in &memo.changed {
+            e.cpts.extend_from_slice(&self.net.nodes[i].cpt);
+        }
+        e.marginals.clear();
+        for &t in &self.targeted.targets {
+            e.marginals.extend_from_slice(&self.marginals[t]);
+        }
+        Ok(())
     }
 
     /// Propagate and return one node's posterior.

@@ -286,3 +286,68 @@ fn impossibility_d_separated_from_the_targets_is_not_looked_for() {
     e.query(&ev).unwrap();
     assert_eq!(e.marginal(net.id("c").unwrap()), &[1.0, 0.0]);
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    /// The query memo (`set_query_memo`) answers exactly as a run: over sequences drawn from a
+    /// few evidence sets and two priors of a root node (so inputs repeat, as evidence flapping
+    /// across a threshold does), every target's posterior is bit for bit the memo-less engine's,
+    /// and repeats are answered from memory.
+    #[test]
+    fn query_memo_answers_exactly_as_a_run(
+        c in case(),
+        pool in prop::collection::vec(step(), 1..4),
+        seq in prop::collection::vec((0usize..4, any::<bool>()), 1..24),
+        slots in 1usize..5,
+        root_w in prop::collection::vec(0.01f64..1.0, 4),
+    ) {
+        let (net, ids) = build(&c);
+        let mut plain = net.compile();
+        plain.set_targets(&ids).unwrap();
+        let mut memo = plain.clone();
+        memo.set_query_memo(slots);
+        let root = (0..c.card.len()).find(|&i| c.parents[i].is_empty());
+        let priors: Vec<Vec<f64>> = root.map_or(vec![], |r| {
+            let k = c.card[r];
+            let s: f64 = root_w[..k].iter().sum();
+            vec![net.node(ids[r]).cpt.clone(), root_w[..k].iter().map(|x| x / s).collect()]
+        });
+        // Each pool entry's own pattern (a `None` pattern keeps none: no findings).
+        let evs: Vec<Evidence> = pool.iter().map(|s| evidence(&c.card, &ids, &mut Vec::new(), s)).collect();
+        for &(k, alt) in &seq {
+            if let Some(r) = root {
+                let p = &priors[usize::from(alt)];
+                plain.set_cpt(ids[r], p).unwrap();
+                memo.set_cpt(ids[r], p).unwrap();
+            }
+            let ev = &evs[k % evs.len()];
+            let (a, b) = (plain.query(ev), memo.query(ev));
+            prop_assert_eq!(&a, &b);
+            if a.is_ok() {
+                for &t in &ids {
+                    let (x, y) = (plain.marginal(t), memo.marginal(t));
+                    prop_assert!(x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits()),
+                        "target {} memo {:?} run {:?}", t, y, x);
+                }
+            }
+        }
+        prop_assert_eq!(plain.query_memo_hits(), 0);
+    }
+}
+
+/// Evidence alternating between two values is run twice, then answered from memory.
+#[test]
+fn query_memo_serves_flapping_evidence() {
+    let net = asia();
+    let mut e = target(&net, &["lung", "bronc"]);
+    e.set_query_memo(2);
+    let xray = net.id("xray").unwrap();
+    let mut evs = [Evidence::new(), Evidence::new()];
+    evs[0].set_state(xray, 0);
+    evs[1].set_state(xray, 1);
+    for k in 0..10 {
+        e.query(&evs[k % 2]).unwrap();
+    }
+    assert_eq!(e.query_memo_hits(), 8);
+}

@@ -210,12 +210,15 @@ impl<'m> ResourceArbiter<'m> {
         rec: &mut DecisionRecord,
     ) {
         request_key(model, sc, obs, plan);
-        let m = match self.schedules.schedule(
+        crate::stage_hook::mark(crate::stage_hook::Stage::Arbitration);
+        let scheduled = self.schedules.schedule(
             &model.resources,
             model.policy_name(policy),
             platform,
             &sc.key,
-        ) {
+        );
+        crate::stage_hook::mark(crate::stage_hook::Stage::Scheduler);
+        let m = match scheduled {
             Ok(m) => m,
             Err(e) => {
                 rec.events.push(Event::ResourcesError(e.to_string()));

@@ -15,6 +15,7 @@ pub use crate::model::{Model, ModelKind};
 use crate::observations::Observations;
 use crate::record::{DecisionRecord, Event, Plan};
 use crate::scratch::Scratch;
+use crate::stage_hook::{Stage, mark};
 use fpga_model::PlatformState;
 use mdp_engine::Workspace;
 use std::collections::BTreeMap;
@@ -48,6 +49,10 @@ pub struct Core<'m> {
     scratch: Scratch<'m>,
     /// The resource arbitration stage's schedules and degradations in force.
     arbiter: ResourceArbiter<'m>,
+    /// The ids of [`ROOM`]'s observations (`None`: params do not observe it), and their values
+    /// this cycle (capacity kept).
+    room_ids: [Option<crate::evidence::ObservationId>; 3],
+    room_extra: Vec<(crate::evidence::ObservationId, f64)>,
 }
 
 /// How much work the cycles so far really did (the rest came from the memos).
@@ -60,6 +65,17 @@ pub struct WorkDone {
     /// Platform scheduler runs actually made (memo hits not counted).
     pub scheduler_runs: u64,
 }
+
+/// The observations [`Core::platform_room`] gives, in its order.
+const ROOM: [&str; 3] = [
+    crate::evidence::FREE_TILES,
+    crate::evidence::CPU_HEADROOM,
+    crate::evidence::TRACKING_FPS,
+];
+
+/// Distinct recent queries each health manager's engine answers from memory: evidence flapping
+/// across a threshold alternates between two, with the resource re-evaluation a few more.
+const BN_QUERY_MEMO: usize = 4;
 
 /// At most this many re-solves per cycle (one per version the MDP may turn to is plenty).
 const MAX_RESOLVES: usize = 3;
@@ -87,7 +103,11 @@ impl<'m> Core<'m> {
             policy,
             cycle: 0,
             mdp_names: model.mdp_names(kind),
-            health: model.health.clone(),
+            health: {
+                let mut h = model.health.clone();
+                h.set_query_memo(BN_QUERY_MEMO);
+                h
+            },
             mdps: model.mdps.clone(),
             workspace: Workspace::new(),
             platform: PlatformState::new(&model.resources.platform),
@@ -100,6 +120,8 @@ impl<'m> Core<'m> {
             n_published: model.health.publishes().len(),
             scratch: Scratch::default(),
             arbiter: ResourceArbiter::new(),
+            room_ids: ROOM.map(|name| model.health.observations.id(name)),
+            room_extra: Vec::with_capacity(ROOM.len()),
         }
     }
 
@@ -112,12 +134,15 @@ impl<'m> Core<'m> {
         }
     }
 
-    /// Turn the memos (MDP solves, resource schedules) on or off. Off, every cycle re-solves
-    /// every MDP and re-runs the scheduler: the worst case, and the reference the memos are
+    /// Turn the memos (MDP solves, health queries, resource schedules) on or off. Off, every
+    /// cycle re-solves every MDP, re-runs the scheduler and runs every BN query whose inputs
+    /// changed since its last: the worst case, and the reference the memos are
     /// tested against. Outputs are identical either way.
     pub fn set_caches(&mut self, on: bool) {
         self.mdps.set_solve_cache(on);
         self.arbiter.schedules.set_enabled(on);
+        self.health
+            .set_query_memo(if on { BN_QUERY_MEMO } else { 0 });
     }
 
     /// The PANORAMA allocations in force so far (RAS0 then each re-allocation), in the shape of
@@ -149,6 +174,7 @@ impl<'m> Core<'m> {
     /// equals [`Core::step`]'s whatever they held) and keep their capacity, so a steady stream of
     /// observations of the same shape allocates nothing once warm (tests/cycle_no_alloc.rs).
     pub fn step_into(&mut self, obs: &Observations, plan: &mut Plan, rec: &mut DecisionRecord) {
+        mark(Stage::CycleStart);
         let model = self.model;
         let policy = self.model.policy_name(self.policy);
         rec.cycle = self.cycle;
@@ -160,12 +186,23 @@ impl<'m> Core<'m> {
         rec.link_events.clear();
         rec.vehicle.clear();
         self.cycle += 1;
+        mark(Stage::Record);
 
         // evidence -> health (the platform's room comes from the core's own platform model)
         self.update_platform(obs);
         let room = self.platform_room(obs);
+        // As `evidence_with_into(obs, &room, ..)`, with the names' ids resolved once in `new`.
+        let mut extra = std::mem::take(&mut self.room_extra);
+        extra.clear();
+        for ((name, v), id) in room.iter().zip(self.room_ids) {
+            if let (false, Some(id)) = (name.is_empty(), id) {
+                extra.push((id, *v));
+            }
+        }
         self.health
-            .evidence_with_into(obs, &room, &mut rec.evidence);
+            .observations
+            .evidence_with_ids_into(obs, &extra, &mut rec.evidence);
+        self.room_extra = extra;
         // Absent is not zero: the nodes no observation fed this cycle, listed (strings reused).
         let mut n_absent = 0;
         for o in &self.health.observations.observations {
@@ -178,6 +215,7 @@ impl<'m> Core<'m> {
             }
         }
         rec.absent_evidence.truncate(n_absent);
+        mark(Stage::Evidence);
         match self
             .health
             .evaluate_into(&rec.evidence, &mut rec.probabilities)
@@ -247,6 +285,7 @@ impl<'m> Core<'m> {
                 Ok(None) => {}
                 Err(e) => rec.events.push(Event::from(format!("{name}: {e}"))),
             }
+            mark(Stage::Mdp(name));
         }
         rec.proposals.truncate(n_proposals);
 
@@ -258,7 +297,9 @@ impl<'m> Core<'m> {
         // the resource manager sees the room this cycle's placements leave, the MDP that chose
         // the application is solved again, and its new proposal is what runs.
         for _ in 0..MAX_RESOLVES {
-            if !self.resolve_conflict(&mut sc, obs, rec) {
+            let resolved = self.resolve_conflict(&mut sc, obs, rec);
+            mark(Stage::Resolve);
+            if !resolved {
                 break;
             }
             self.arbitrate(&mut sc, obs, rec);
@@ -266,10 +307,12 @@ impl<'m> Core<'m> {
         self.record_resource_conflicts(&sc, rec);
         self.note_others(rec);
         fill_strings(&mut rec.actions, &sc.actions);
+        mark(Stage::Arbitration);
 
         // guarantee: PANORAMA margins on the activity being flown
         self.watch_guarantee(&mut sc, obs, rec);
         self.scratch = sc;
+        mark(Stage::Guarantee);
 
         // plan
         let mut n = 0;
@@ -291,6 +334,7 @@ impl<'m> Core<'m> {
             Some(r) => plan.applications.clone_from(&r.placements),
             None => plan.applications.clear(),
         }
+        mark(Stage::Record);
     }
 
     /// Faults and monitor readings the shell reports, applied to the platform model.
@@ -350,9 +394,9 @@ impl<'m> Core<'m> {
             - self.platform.external_cpu_load
             - self.others_cpu;
         [
-            (crate::evidence::FREE_TILES, f64::from(free)),
-            (crate::evidence::CPU_HEADROOM, headroom.max(0.0)),
-            (crate::evidence::TRACKING_FPS, self.required_fps(app, obs)),
+            (ROOM[0], f64::from(free)),
+            (ROOM[1], headroom.max(0.0)),
+            (ROOM[2], self.required_fps(app, obs)),
         ]
     }
 

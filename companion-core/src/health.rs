@@ -585,6 +585,7 @@ impl HealthModel {
                 per[mi].set_state(id, s);
             }
         }
+        crate::stage_hook::mark(crate::stage_hook::Stage::Evidence);
         let n = self.managers.len();
         let (last, fresh, full) = (
             &mut self.scratch.last,
@@ -642,6 +643,7 @@ impl HealthModel {
                     }
                 }
             }
+            crate::stage_hook::mark(crate::stage_hook::Stage::HealthManager(&m.name));
         }
         for (i, m) in self.managers.iter_mut().enumerate() {
             for &(from, to) in &m.carry {
@@ -662,7 +664,16 @@ impl HealthModel {
                     })?;
             }
         }
+        crate::stage_hook::mark(crate::stage_hook::Stage::HealthCarry);
         Ok(())
+    }
+
+    /// Let every manager's engine answer the last `slots` distinct queries (evidence and
+    /// imported or carried priors, bit for bit) from memory (`Engine::set_query_memo`; 0: off).
+    pub fn set_query_memo(&mut self, slots: usize) {
+        for m in &mut self.managers {
+            m.engine.set_query_memo(slots);
+        }
     }
 
     /// The carried (dynamic) beliefs: (manager, node) -> prior for the next evaluation.

@@ -24,6 +24,7 @@
 //! - `probabilities`: the named probabilities, their publishers and consumers (checked at load).
 //! - `record`: the decision record written for every cycle.
 //! - `tracking`: tracking time, shared by the world, the review and the tables.
+//! - `stage_hook`: an optional observer of the cycle's stage boundaries (benchmarks' breakdown).
 
 pub mod action_role;
 pub mod arbitration;
@@ -44,6 +45,7 @@ pub mod report;
 pub mod resources;
 pub(crate) mod scratch;
 pub mod spec;
+pub mod stage_hook;
 pub mod tracking;
 pub mod vocabulary;
 

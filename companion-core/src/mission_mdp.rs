@@ -71,6 +71,9 @@ pub struct MissionMdp {
     does: Vec<Vec<String>>,
     /// Probability names used by this MDP; slot `k` of every expression is `vars[k]`.
     vars: Vec<String>,
+    /// Indices into `vars` in name order (the order of the name-keyed maps the cycle reads and
+    /// writes), so they are matched in one ordered walk instead of a lookup each.
+    by_name: Vec<usize>,
     values: Vec<f64>,
     /// Expression per engine transition index.
     trans_expr: Vec<Expr>,
@@ -87,29 +90,41 @@ pub struct MissionMdp {
     solved: Solved,
 }
 
-/// Memo of the last finite-horizon solve. The solve is a pure function of the probability
-/// values (which fix every transition probability and reward), the policy and the horizon, so
-/// when all three are bit-identical the stored stage-0 decisions and values are exactly what a
-/// new solve would give. `decide` then skips instantiate + solve.
+/// How many recent finite-horizon solves each MDP remembers. The probabilities come from BNs
+/// over discrete evidence, so they take few distinct values: evidence flapping across one
+/// threshold (vibration on/off) alternates between two input points, a second flapping reading
+/// makes four.
+const SOLVE_MEMO: usize = 4;
+
+/// Memo of recent finite-horizon solves. A solve is a pure function of the probability values
+/// (which fix every transition probability and reward), the policy and the horizon, so when all
+/// three are bit-identical to a remembered solve's, its stage-0 decisions and values are exactly
+/// what a new solve would give. `decide` then skips instantiate + solve.
 #[derive(Debug, Clone, Default)]
 struct Solved {
     enabled: bool,
-    valid: bool,
+    /// Up to [`SOLVE_MEMO`] solves; a miss replaces them in turn (`next`), their buffers kept.
+    entries: Vec<SolvedEntry>,
+    next: usize,
+    /// The entry `decide` answered from last.
+    current: usize,
+    /// Solves actually run (memo misses), for benchmarks and tests.
+    solves: u64,
+}
+
+#[derive(Debug, Clone, Default)]
+struct SolvedEntry {
     values: Vec<f64>,
     policy: usize,
     horizon: usize,
     /// Stage-0 action per state (`u32::MAX`: terminal / none) and stage-0 value per state.
     decision: Vec<u32>,
     value: Vec<f64>,
-    /// Solves actually run (memo misses), for benchmarks and tests.
-    solves: u64,
 }
 
-impl Solved {
-    fn hit(&self, values: &[f64], policy: usize, horizon: usize) -> bool {
-        self.enabled
-            && self.valid
-            && self.policy == policy
+impl SolvedEntry {
+    fn is(&self, values: &[f64], policy: usize, horizon: usize) -> bool {
+        self.policy == policy
             && self.horizon == horizon
             && self.values.len() == values.len()
             && self
@@ -117,6 +132,31 @@ impl Solved {
                 .iter()
                 .zip(values)
                 .all(|(a, b)| a.to_bits() == b.to_bits())
+    }
+}
+
+impl Solved {
+    /// The remembered solve of exactly these inputs (the last answered checked first).
+    fn hit(&self, values: &[f64], policy: usize, horizon: usize) -> Option<usize> {
+        if !self.enabled {
+            return None;
+        }
+        let n = self.entries.len();
+        (0..n)
+            .map(|k| (self.current + k) % n)
+            .find(|&i| self.entries[i].is(values, policy, horizon))
+    }
+
+    /// The slot a new solve goes into: the only one with the memo off, else the next in turn.
+    fn slot(&mut self) -> usize {
+        let slots = if self.enabled { SOLVE_MEMO } else { 1 };
+        if self.entries.len() < slots {
+            self.entries.push(SolvedEntry::default());
+            return self.entries.len() - 1;
+        }
+        let i = self.next % self.entries.len();
+        self.next = (i + 1) % slots;
+        i
     }
 }
 
@@ -186,7 +226,14 @@ impl MissionMdp {
     /// and the worst-case benchmark).
     pub fn set_solve_cache(&mut self, on: bool) {
         self.solved.enabled = on;
-        self.solved.valid = false;
+        self.solved.entries.truncate(1);
+        self.solved.next = 0;
+        self.solved.current = 0;
+        if let Some(e) = self.solved.entries.first_mut() {
+            // Never matches: values are in [0, 1].
+            e.values.clear();
+            e.values.push(f64::NAN);
+        }
     }
 
     /// Finite-horizon solves `decide` has actually run (the rest came from the memo).
@@ -202,6 +249,29 @@ impl MissionMdp {
     }
 
     /// Read every probability this MDP uses into `self.values`, checking range.
+    /// [`MissionMdp::load_values`] from a name-ordered map: one walk over both (names compared
+    /// as the map's lookups would), the same values and the same errors.
+    fn load_values_from(&mut self, probs: &BTreeMap<String, f64>) -> Result<(), InstantiateError> {
+        let mut it = probs.iter();
+        for &k in &self.by_name {
+            let name = self.vars[k].as_str();
+            let v = loop {
+                match it.next() {
+                    Some((key, v)) if key.as_str() == name => break Some(*v),
+                    Some((key, _)) if key.as_str() < name => continue,
+                    // Passed it or ran out: not in the map.
+                    _ => break None,
+                }
+            };
+            match v {
+                Some(v) if (0.0..=1.0).contains(&v) => self.values[k] = v,
+                // The error the lookup order (file order) finds first.
+                _ => return self.load_values(|n| probs.get(n).copied()),
+            }
+        }
+        Ok(())
+    }
+
     fn load_values(
         &mut self,
         lookup: impl Fn(&str) -> Option<f64>,
@@ -269,31 +339,39 @@ impl MissionMdp {
         horizon: usize,
     ) -> Result<Option<Decision>, InstantiateError> {
         let pi = self.policy_index(policy)?;
-        self.load_values(|n| probs.get(n).copied())?;
-        if !self.solved.hit(&self.values, pi, horizon) {
-            self.solved.valid = false;
-            self.fill_checked(pi)?;
-            let fh = ws.finite_horizon(&self.mdp, horizon);
-            let n = self.states.len();
-            let memo = &mut self.solved;
-            memo.decision.clear();
-            memo.value.clear();
-            for s in 0..n {
-                memo.decision
-                    .push(fh.decision(s).map_or(u32::MAX, |a| a as u32));
-                memo.value.push(fh.value(0, s));
+        self.load_values_from(probs)?;
+        let i = match self.solved.hit(&self.values, pi, horizon) {
+            Some(i) => i,
+            None => {
+                let i = self.solved.slot();
+                // Invalid until filled (a failed fill leaves it matching nothing).
+                self.solved.entries[i].values.clear();
+                self.solved.entries[i].values.push(f64::NAN);
+                self.fill_checked(pi)?;
+                let fh = ws.finite_horizon(&self.mdp, horizon);
+                let n = self.states.len();
+                let memo = &mut self.solved.entries[i];
+                memo.decision.clear();
+                memo.value.clear();
+                for s in 0..n {
+                    memo.decision
+                        .push(fh.decision(s).map_or(u32::MAX, |a| a as u32));
+                    memo.value.push(fh.value(0, s));
+                }
+                memo.values.clear();
+                memo.values.extend_from_slice(&self.values);
+                memo.policy = pi;
+                memo.horizon = horizon;
+                self.solved.solves += 1;
+                i
             }
-            memo.values.clear();
-            memo.values.extend_from_slice(&self.values);
-            memo.policy = pi;
-            memo.horizon = horizon;
-            memo.valid = true;
-            memo.solves += 1;
-        }
-        let a = self.solved.decision[state];
+        };
+        self.solved.current = i;
+        let memo = &self.solved.entries[i];
+        let a = memo.decision[state];
         Ok((a != u32::MAX).then(|| Decision {
             action: a as usize,
-            value: self.solved.value[state],
+            value: memo.value[state],
         }))
     }
 
@@ -324,7 +402,22 @@ impl MissionMdp {
         out.actions.clone_from(&self.does[d.action]);
         out.value = d.value;
         out.iterations = horizon as u32;
-        // Provenance: the named probabilities this solve read, at the values it read.
+        // Provenance: the named probabilities this solve read, at the values it read. Usually
+        // the entry already holds exactly these names: overwrite the values in one ordered walk.
+        if out.inputs.len() == self.vars.len() {
+            let mut same = true;
+            for ((key, x), &k) in out.inputs.iter_mut().zip(&self.by_name) {
+                if *key != self.vars[k] {
+                    same = false;
+                    break;
+                }
+                *x = self.values[k];
+            }
+            if same {
+                out.reason.clear();
+                return;
+            }
+        }
         out.inputs.retain(|k, _| self.vars.contains(k));
         for (name, &v) in self.vars.iter().zip(&self.values) {
             match out.inputs.get_mut(name.as_str()) {

@@ -16,12 +16,13 @@ const COUNTED_CYCLES: u64 = 1000;
 
 /// Allocations over `COUNTED_CYCLES` cycles after `WARM` warm-up cycles, and the evidence
 /// changes and MDP solves seen while counting (to show the stream really moved).
-fn run(kind: ModelKind, policy: &str, stream: Stream) -> (usize, usize, u64) {
+fn run(kind: ModelKind, policy: &str, stream: Stream, memos: bool) -> (usize, usize, u64) {
     let params = default_params_dir();
     let model = companion::params::load_model(&params).unwrap();
     let base = tracking_snapshot(&model, &params, "complete-1");
     let stream_gen = StreamGen::new(&model, base.clone(), stream);
     let mut core = Core::new(&model, kind, model.policy(policy).unwrap());
+    core.set_caches(memos);
     let mut obs = base.clone();
     let (mut plan, mut rec) = (Plan::default(), DecisionRecord::default());
     for k in 0..WARM {
@@ -49,7 +50,7 @@ fn run(kind: ModelKind, policy: &str, stream: Stream) -> (usize, usize, u64) {
 #[test]
 fn steady_stream_allocates_nothing() {
     for policy in ["safety", "mission"] {
-        let (allocs, _, _) = run(ModelKind::Bfm, policy, Stream::Steady);
+        let (allocs, _, _) = run(ModelKind::Bfm, policy, Stream::Steady, true);
         assert_eq!(
             allocs, 0,
             "{policy:?}: {allocs} allocations in {COUNTED_CYCLES} cycles"
@@ -60,22 +61,25 @@ fn steady_stream_allocates_nothing() {
 #[test]
 fn evidence_flipping_every_cycle_allocates_nothing_and_resolves_every_cycle() {
     for policy in ["safety", "mission"] {
-        let (allocs, changes, solves) = run(ModelKind::Bfm, policy, Stream::Changing);
+        // Memos off: three concurrent MDPs re-solved and every BN query run each cycle.
+        let (allocs, changes, solves) = run(ModelKind::Bfm, policy, Stream::Changing, false);
         assert_eq!(
             changes as u64, COUNTED_CYCLES,
             "{policy:?}: evidence must flip every cycle"
         );
-        // Three concurrent MDPs, each re-solved whenever its probabilities moved.
         assert!(solves >= COUNTED_CYCLES, "{policy:?}: only {solves} solves");
         assert_eq!(
             allocs, 0,
             "{policy:?}: {allocs} allocations in {COUNTED_CYCLES} cycles"
         );
+        // Memos on: both evidence points answered from memory, nothing allocated either.
+        let (allocs, _, _) = run(ModelKind::Bfm, policy, Stream::Changing, true);
+        assert_eq!(allocs, 0, "{policy:?} with memos: {allocs} allocations");
     }
 }
 
 #[test]
 fn monolithic_model_allocates_nothing_either() {
-    let (allocs, _, _) = run(ModelKind::Monolithic, "safety", Stream::Changing);
+    let (allocs, _, _) = run(ModelKind::Monolithic, "safety", Stream::Changing, true);
     assert_eq!(allocs, 0);
 }

@@ -7,7 +7,10 @@
 //! where `values`/`policy` are stage 0 for the finite horizon, `policy` uses -1 for terminal states,
 //! and `times_ns` holds one `Instant` measurement around the solve call only per repetition, with a
 //! warm workspace (one untimed solve first). Repetitions stop at `reps` or once `budget_s` seconds
-//! of timed solving have passed (at least 3).
+//! of timed solving have passed (at least 3). An optional `"threads"` per case: 1 sweeps on one
+//! thread, N >= 2 splits every finite-horizon / value-iteration sweep across a pool of N threads
+//! (`Workspace::set_parallel_min_transitions(0)`), absent or 0 the engine's default (split from
+//! `PARALLEL_MIN_TRANSITIONS` transitions on, on rayon's global pool).
 //!
 //! Run: `cargo run --release -p mdp_engine --example bench_solve -- plan.json`.
 use mdp_engine::{Config, Mdp, Workspace};
@@ -41,6 +44,21 @@ fn main() {
         let reps = case["reps"].as_u64().unwrap_or(100) as usize;
         let budget = case["budget_s"].as_f64().unwrap_or(1.0);
         let n = mdp.n_states();
+        let threads = case["threads"].as_u64().unwrap_or(0) as usize;
+        ws.set_parallel_min_transitions(match threads {
+            0 => mdp_engine::PARALLEL_MIN_TRANSITIONS,
+            1 => usize::MAX,
+            _ => 0,
+        });
+        #[cfg(feature = "parallel")]
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("thread pool");
+        #[cfg(feature = "parallel")]
+        let in_pool = |f: &mut (dyn FnMut() + Send)| pool.install(f);
+        #[cfg(not(feature = "parallel"))]
+        let in_pool = |f: &mut (dyn FnMut() + Send)| f();
         // One solve untimed: sizes the workspace (the warm state the companion runs in) and
         // gives the answer for the agreement check.
         let (values, policy, iterations): (Vec<f64>, Vec<i64>, u32) = match solver {
@@ -73,36 +91,39 @@ fn main() {
         };
         let mut times = Vec::with_capacity(reps);
         let mut spent = 0.0;
-        while times.len() < reps && (times.len() < 3 || spent < budget) {
-            let t0 = Instant::now();
-            match solver {
-                "fh" => {
-                    black_box(ws.finite_horizon(black_box(mdp), horizon).decision(0));
+        in_pool(&mut || {
+            while times.len() < reps && (times.len() < 3 || spent < budget) {
+                let t0 = Instant::now();
+                match solver {
+                    "fh" => {
+                        black_box(ws.finite_horizon(black_box(mdp), horizon).decision(0));
+                    }
+                    "vi" => {
+                        black_box(
+                            ws.value_iteration(black_box(mdp), &cfg)
+                                .map(|s| s.action(0)),
+                        )
+                        .ok();
+                    }
+                    _ => {
+                        black_box(
+                            ws.policy_iteration(black_box(mdp), &cfg)
+                                .map(|s| s.action(0)),
+                        )
+                        .ok();
+                    }
                 }
-                "vi" => {
-                    black_box(
-                        ws.value_iteration(black_box(mdp), &cfg)
-                            .map(|s| s.action(0)),
-                    )
-                    .ok();
-                }
-                _ => {
-                    black_box(
-                        ws.policy_iteration(black_box(mdp), &cfg)
-                            .map(|s| s.action(0)),
-                    )
-                    .ok();
-                }
+                let dt = t0.elapsed();
+                spent += dt.as_secs_f64();
+                times.push(dt.as_nanos() as u64);
             }
-            let dt = t0.elapsed();
-            spent += dt.as_secs_f64();
-            times.push(dt.as_nanos() as u64);
-        }
+        });
         out.push(json!({
             "name": name,
             "values": values,
             "policy": policy,
             "iterations": iterations,
+            "threads": threads,
             "times_ns": times,
         }));
     }

@@ -76,7 +76,8 @@ fn screen(vb: &[f64], vb1: &[f64], vb2: &[f64]) -> (f64, f64) {
 }
 
 /// [`backup_stage`] from `vb` (`V_b`) that also measures the [`FhCertificate`] of `g = vb -
-/// vb1`, with `pol_b` the decision rule of stage `b`.
+/// vb1`, with `pol_b` the decision rule of stage `b`; split across threads when `par` (every
+/// measure is a maximum or minimum, so the split changes no bit).
 fn backup_certified(
     mdp: &Mdp,
     vb: &[f64],
@@ -84,7 +85,79 @@ fn backup_certified(
     pol_b: &[u32],
     cur: &mut [f64],
     pol: &mut [u32],
+    par: bool,
 ) -> FhCertificate {
+    let range = |s0: usize, cur: &mut [f64], pol: &mut [u32]| {
+        certified_range(mdp, vb, vb1, pol_b, s0, cur, pol)
+    };
+    let init = Partial {
+        cert: FhCertificate {
+            eps_up: 0.0,
+            eps_lo: 0.0,
+            eps_star: 0.0,
+            span: 0.0,
+            vmax: 0.0,
+            gmax: 0.0,
+        },
+        gmin: f64::INFINITY,
+        gmaxs: f64::NEG_INFINITY,
+    };
+    #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
+    let p = if par {
+        crate::kernels::par_chunks(cur, pol, range, Partial::merge, init)
+    } else {
+        Partial::merge(init, range(0, cur, pol))
+    };
+    #[cfg(not(all(feature = "parallel", not(target_arch = "arm"))))]
+    let p = {
+        let _ = par;
+        Partial::merge(init, range(0, cur, pol))
+    };
+    let mut cert = p.cert;
+    cert.span = if p.gmaxs >= p.gmin {
+        p.gmaxs - p.gmin
+    } else {
+        0.0
+    };
+    cert
+}
+
+/// A certificate's measures over some of the states (`span` not yet: from `gmin`, `gmaxs`).
+#[derive(Debug, Clone, Copy)]
+struct Partial {
+    cert: FhCertificate,
+    gmin: f64,
+    gmaxs: f64,
+}
+
+impl Partial {
+    fn merge(a: Partial, b: Partial) -> Partial {
+        let (x, y) = (a.cert, b.cert);
+        Partial {
+            cert: FhCertificate {
+                eps_up: x.eps_up.max(y.eps_up),
+                eps_lo: x.eps_lo.max(y.eps_lo),
+                eps_star: x.eps_star.max(y.eps_star),
+                span: 0.0,
+                vmax: x.vmax.max(y.vmax),
+                gmax: x.gmax.max(y.gmax),
+            },
+            gmin: a.gmin.min(b.gmin),
+            gmaxs: a.gmaxs.max(b.gmaxs),
+        }
+    }
+}
+
+/// [`backup_certified`] over the states `s0 .. s0 + cur.len()` (`cur`, `pol` hold just those).
+fn certified_range(
+    mdp: &Mdp,
+    vb: &[f64],
+    vb1: &[f64],
+    pol_b: &[u32],
+    s0: usize,
+    cur: &mut [f64],
+    pol: &mut [u32],
+) -> Partial {
     let ss = &mdp.state_start;
     let mut cert = FhCertificate {
         eps_up: 0.0,
@@ -95,7 +168,8 @@ fn backup_certified(
         gmax: 0.0,
     };
     let (mut gmin, mut gmaxs) = (f64::INFINITY, f64::NEG_INFINITY);
-    for s in 0..cur.len() {
+    for k in 0..cur.len() {
+        let s = s0 + k;
         let gs = vb[s] - vb1[s];
         gmin = gmin.min(gs);
         gmaxs = gmaxs.max(gs);
@@ -104,8 +178,8 @@ fn backup_certified(
         let lo = ss[s] as usize;
         let hi = ss[s + 1] as usize;
         if lo == hi {
-            cur[s] = 0.0;
-            pol[s] = NONE;
+            cur[k] = 0.0;
+            pol[k] = NONE;
             continue;
         }
         let mut best_c = lo;
@@ -133,11 +207,10 @@ fn backup_certified(
             }
         }
         cert.eps_star = cert.eps_star.max(gs - best_pg);
-        cur[s] = best;
-        pol[s] = mdp.choice_action[best_c];
+        cur[k] = best;
+        pol[k] = mdp.choice_action[best_c];
     }
-    cert.span = if gmaxs >= gmin { gmaxs - gmin } else { 0.0 };
-    cert
+    Partial { cert, gmin, gmaxs }
 }
 
 /// Fill stages `0..t` by the certified extrapolation from base `b = t + 1`: `V_{t'} = V_b + (b -
@@ -178,6 +251,7 @@ impl Workspace {
         let n = mdp.n_states();
         self.reserve(n, horizon, false);
         self.horizon = horizon;
+        let par = crate::kernels::split(mdp, self.par_min_transitions);
         let (vals, pol) = (&mut self.fh_values, &mut self.fh_policy);
         vals[horizon * n..(horizon + 1) * n].fill(0.0);
         let mut computed = 0u32;
@@ -203,7 +277,7 @@ impl Workspace {
                     let (cur, rest) = vals[t * n..(t + 3) * n].split_at_mut(n);
                     let (vb, vb1) = rest.split_at(n);
                     let (pol_t, pol_b) = pol[t * n..(t + 2) * n].split_at_mut(n);
-                    let cert = backup_certified(mdp, vb, vb1, pol_b, cur, pol_t);
+                    let cert = backup_certified(mdp, vb, vb1, pol_b, cur, pol_t, par);
                     match cert.stop_bound(b) {
                         Some(e) if e.action <= FH_STOP_TOLERANCE * cert.scale(b) => {
                             bound = e.value;
@@ -230,10 +304,11 @@ impl Workspace {
                     next2,
                     cur,
                     &mut pol[t * n..(t + 1) * n],
+                    par,
                 ));
             } else {
                 let (cur, next) = vals[t * n..(t + 2) * n].split_at_mut(n);
-                backup_stage(mdp, next, cur, &mut pol[t * n..(t + 1) * n]);
+                backup_stage(mdp, next, cur, &mut pol[t * n..(t + 1) * n], par);
             }
         }
         FiniteHorizonSolution {

@@ -78,6 +78,7 @@ impl Workspace {
         let gamma = cfg.gamma;
         self.reserve(n, 0, false);
         self.v[..n].fill(0.0);
+        let par = crate::kernels::split(mdp, self.par_min_transitions);
         let mut iterations = 0;
         let mut converged = false;
         while iterations < cfg.max_iterations {
@@ -87,7 +88,7 @@ impl Workspace {
             } else {
                 (f64::INFINITY, f64::NEG_INFINITY)
             };
-            let (lo_d, hi_d) = vi_sweep(mdp, gamma, &self.v[..n], &mut self.v2[..n]);
+            let (lo_d, hi_d) = vi_sweep(mdp, gamma, &self.v[..n], &mut self.v2[..n], par);
             dmin = dmin.min(lo_d);
             dmax = dmax.max(hi_d);
             std::mem::swap(&mut self.v, &mut self.v2);
@@ -244,16 +245,28 @@ impl Workspace {
     /// Greedy extraction (lowest-index tie-breaking) and Bellman residual at the final values.
     fn finish(&mut self, mdp: &Mdp, gamma: f64, iterations: u32, converged: bool) -> Solution<'_> {
         let n = mdp.n_states();
-        let mut residual: f64 = 0.0;
-        for s in 0..n {
-            match mdp.greedy(s, gamma, &self.v[..n]) {
-                Some((c, q)) => {
-                    self.policy[s] = mdp.choice_action[c];
-                    residual = residual.max((q - self.v[s]).abs());
+        let v = &self.v[..n];
+        // The greedy policy of states `s0..` into `pol`, and the largest residual among them.
+        let extract = |s0: usize, pol: &mut [u32]| {
+            let mut residual: f64 = 0.0;
+            for (k, p) in pol.iter_mut().enumerate() {
+                let s = s0 + k;
+                match mdp.greedy(s, gamma, v) {
+                    Some((c, q)) => {
+                        *p = mdp.choice_action[c];
+                        residual = residual.max((q - v[s]).abs());
+                    }
+                    None => *p = NONE,
                 }
-                None => self.policy[s] = NONE,
             }
-        }
+            residual
+        };
+        let pol = &mut self.policy[..n];
+        let residual = if crate::kernels::split(mdp, self.par_min_transitions) {
+            crate::kernels::par_states(pol, |s0, p| extract(s0, p), f64::max, 0.0)
+        } else {
+            extract(0, pol)
+        };
         Solution {
             values: &self.v[..n],
             policy: &self.policy[..n],

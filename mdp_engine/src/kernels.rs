@@ -55,16 +55,21 @@ unsafe fn dot_choice<const K: usize>(
 ///
 /// [`Workspace::finite_horizon`]: crate::Workspace::finite_horizon
 /// [`MdpBuilder::build_unchecked`]: crate::MdpBuilder::build_unchecked
+///
+/// `cur` and `pol` hold the states `s0 .. s0 + cur.len()` (all of them, or one thread's chunk);
+/// `next` and `next2` hold every state.
 #[inline(always)]
 fn backup_stage_impl<const SCREEN: bool, const K: usize>(
     mdp: &Mdp,
     next: &[f64],
     next2: &[f64],
+    s0: usize,
     cur: &mut [f64],
     pol: &mut [u32],
 ) -> (f64, f64) {
-    let n = cur.len();
-    assert!(next.len() == n && pol.len() == n && mdp.state_start.len() == n + 1);
+    let n = next.len();
+    let s1 = s0 + cur.len();
+    assert!(s1 <= n && pol.len() == cur.len() && mdp.state_start.len() == n + 1);
     if SCREEN {
         assert!(next2.len() == n);
     }
@@ -75,9 +80,10 @@ fn backup_stage_impl<const SCREEN: bool, const K: usize>(
     debug_assert!(cs[rw.len()] as usize == nx.len() && pr.len() == nx.len());
     debug_assert!(nx.iter().all(|&j| (j as usize) < n));
     let (mut delta, mut scale) = (0.0f64, 1.0f64);
-    let mut c = 0usize;
-    let mut t = 0usize;
-    for s in 0..n {
+    // The cursors at the range's first state (0, 0 for the whole model).
+    let mut c = ss[s0] as usize;
+    let mut t = cs[c] as usize;
+    for s in s0..s1 {
         // SAFETY: see the function docs; s < n, c < hi <= n_choices, t < choice_start[c + 1]
         // <= n_transitions, next[t] < n.
         unsafe {
@@ -106,8 +112,8 @@ fn backup_stage_impl<const SCREEN: bool, const K: usize>(
                 }
                 (best, *ca.get_unchecked(best_c))
             };
-            *cur.get_unchecked_mut(s) = best;
-            *pol.get_unchecked_mut(s) = act;
+            *cur.get_unchecked_mut(s - s0) = best;
+            *pol.get_unchecked_mut(s - s0) = act;
             if SCREEN {
                 let d = best - 2.0 * *next.get_unchecked(s) + *next2.get_unchecked(s);
                 delta = delta.max(d.abs());
@@ -148,13 +154,102 @@ macro_rules! by_successors {
     };
 }
 
-/// [`backup_stage_impl`] without the screen.
+/// Whether a sweep over `mdp` is split across threads: the `parallel` feature is on (never on
+/// 32-bit ARM, the A9 build), and the model has at least `min_transitions` transitions (see
+/// [`PARALLEL_MIN_TRANSITIONS`]).
 #[inline]
-pub(crate) fn backup_stage(mdp: &Mdp, next: &[f64], cur: &mut [f64], pol: &mut [u32]) {
-    by_successors!(mdp, backup_stage_impl::<false>, (mdp, next, &[], cur, pol));
+pub(crate) fn split(mdp: &Mdp, min_transitions: usize) -> bool {
+    cfg!(all(feature = "parallel", not(target_arch = "arm")))
+        && mdp.n_transitions() >= min_transitions
+        && mdp.n_states() >= 2
 }
 
-/// [`backup_stage_impl`] with the screen from `next2`.
+/// Default [`Workspace::set_parallel_min_transitions`]: models with fewer transitions sweep on
+/// one thread (a fork-join per stage costs microseconds; the paper's models take under ten
+/// microseconds per solve). MEASURED_THRESHOLD
+///
+/// [`Workspace::set_parallel_min_transitions`]: crate::Workspace::set_parallel_min_transitions
+pub const PARALLEL_MIN_TRANSITIONS: usize = 20_000;
+
+/// `f(s0, cur_chunk, pol_chunk)` over chunks of the states (`cur` and `pol` chunked alike), on
+/// rayon's pool, the results combined by `fold` (componentwise min/max, exact whatever the order,
+/// so the split gives the same bits as one pass).
+#[cfg(all(feature = "parallel", not(target_arch = "arm")))]
+pub(crate) fn par_chunks<R: Send + Sync + Copy>(
+    cur: &mut [f64],
+    pol: &mut [u32],
+    f: impl Fn(usize, &mut [f64], &mut [u32]) -> R + Sync,
+    fold: fn(R, R) -> R,
+    init: R,
+) -> R {
+    use rayon::prelude::*;
+    let size = chunk_size(cur.len());
+    cur.par_chunks_mut(size)
+        .zip(pol.par_chunks_mut(size))
+        .enumerate()
+        .map(|(k, (c, p))| f(k * size, c, p))
+        .reduce(|| init, fold)
+}
+
+/// States per chunk: four chunks per thread, so uneven rows balance out.
+#[cfg(all(feature = "parallel", not(target_arch = "arm")))]
+fn chunk_size(n: usize) -> usize {
+    n.div_ceil(rayon::current_num_threads() * 4).max(1)
+}
+
+/// `f(s0, chunk)` over chunks of `out` (the states `s0..`), on rayon's pool when the `parallel`
+/// feature is on (else one call), the results combined by `fold` (exact min/max reductions keep
+/// the answer independent of the split).
+pub(crate) fn par_states<T: Send, R: Send + Sync + Copy>(
+    out: &mut [T],
+    f: impl Fn(usize, &mut [T]) -> R + Sync,
+    fold: fn(R, R) -> R,
+    init: R,
+) -> R {
+    #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
+    {
+        use rayon::prelude::*;
+        let size = chunk_size(out.len());
+        out.par_chunks_mut(size)
+            .enumerate()
+            .map(|(k, c)| f(k * size, c))
+            .reduce(|| init, fold)
+    }
+    #[cfg(not(all(feature = "parallel", not(target_arch = "arm"))))]
+    {
+        fold(init, f(0, out))
+    }
+}
+
+#[cfg(all(feature = "parallel", not(target_arch = "arm")))]
+fn max_both(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
+    (a.0.max(b.0), a.1.max(b.1))
+}
+
+/// [`backup_stage_impl`] without the screen, split across threads when `par`.
+#[inline]
+pub(crate) fn backup_stage(mdp: &Mdp, next: &[f64], cur: &mut [f64], pol: &mut [u32], par: bool) {
+    #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
+    if par {
+        par_chunks(
+            cur,
+            pol,
+            |s0, c, p| by_successors!(mdp, backup_stage_impl::<false>, (mdp, next, &[], s0, c, p)),
+            max_both,
+            (0.0, 1.0),
+        );
+        return;
+    }
+    let _ = par;
+    by_successors!(
+        mdp,
+        backup_stage_impl::<false>,
+        (mdp, next, &[], 0, cur, pol)
+    );
+}
+
+/// [`backup_stage_impl`] with the screen from `next2`, split across threads when `par` (the
+/// screen's maxima are exact, so equal to one pass's).
 #[inline]
 pub(crate) fn backup_stage_screened(
     mdp: &Mdp,
@@ -162,16 +257,53 @@ pub(crate) fn backup_stage_screened(
     next2: &[f64],
     cur: &mut [f64],
     pol: &mut [u32],
+    par: bool,
 ) -> (f64, f64) {
-    by_successors!(mdp, backup_stage_impl::<true>, (mdp, next, next2, cur, pol))
+    #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
+    if par {
+        return par_chunks(
+            cur,
+            pol,
+            |s0, c, p| by_successors!(mdp, backup_stage_impl::<true>, (mdp, next, next2, s0, c, p)),
+            max_both,
+            (0.0, 1.0),
+        );
+    }
+    let _ = par;
+    by_successors!(
+        mdp,
+        backup_stage_impl::<true>,
+        (mdp, next, next2, 0, cur, pol)
+    )
 }
 
 /// One value-iteration sweep `nxt = T cur` (terminal states 0), returning `(min d, max d)` of `d =
 /// nxt - cur` (infinities when there is no state). The same cursor walk and unchecked reads as
 /// [`backup_stage_impl`] (same invariants), with `q = R + gamma * (sum p v)` in transition order.
+/// Split across threads when `par` (min and max are exact, so equal to one pass's).
 #[inline]
-pub(crate) fn vi_sweep(mdp: &Mdp, gamma: f64, cur: &[f64], nxt: &mut [f64]) -> (f64, f64) {
-    by_successors!(mdp, vi_sweep_impl, (mdp, gamma, cur, nxt))
+pub(crate) fn vi_sweep(
+    mdp: &Mdp,
+    gamma: f64,
+    cur: &[f64],
+    nxt: &mut [f64],
+    par: bool,
+) -> (f64, f64) {
+    #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
+    if par {
+        use rayon::prelude::*;
+        let size = chunk_size(nxt.len());
+        return nxt
+            .par_chunks_mut(size)
+            .enumerate()
+            .map(|(k, c)| by_successors!(mdp, vi_sweep_impl, (mdp, gamma, cur, k * size, c)))
+            .reduce(
+                || (f64::INFINITY, f64::NEG_INFINITY),
+                |a, b| (a.0.min(b.0), a.1.max(b.1)),
+            );
+    }
+    let _ = par;
+    by_successors!(mdp, vi_sweep_impl, (mdp, gamma, cur, 0, nxt))
 }
 
 /// [`vi_sweep`] for models whose choices all have `K` transitions (`K = 0`: any count).
@@ -180,10 +312,12 @@ fn vi_sweep_impl<const K: usize>(
     mdp: &Mdp,
     gamma: f64,
     cur: &[f64],
+    s0: usize,
     nxt: &mut [f64],
 ) -> (f64, f64) {
     let n = cur.len();
-    assert!(nxt.len() == n && mdp.state_start.len() == n + 1);
+    let s1 = s0 + nxt.len();
+    assert!(s1 <= n && mdp.state_start.len() == n + 1);
     let (ss, cs, nx, pr, rw) = (
         &mdp.state_start,
         &mdp.choice_start,
@@ -195,8 +329,9 @@ fn vi_sweep_impl<const K: usize>(
     debug_assert!(cs.len() == rw.len() + 1 && cs[rw.len()] as usize == nx.len());
     debug_assert!(pr.len() == nx.len() && nx.iter().all(|&j| (j as usize) < n));
     let (mut dmin, mut dmax) = (f64::INFINITY, f64::NEG_INFINITY);
-    let (mut c, mut t) = (0usize, 0usize);
-    for s in 0..n {
+    let mut c = ss[s0] as usize;
+    let mut t = cs[c] as usize;
+    for s in s0..s1 {
         // SAFETY: as in backup_stage_impl.
         unsafe {
             let hi = *ss.get_unchecked(s + 1) as usize;
@@ -215,7 +350,7 @@ fn vi_sweep_impl<const K: usize>(
             let d = q - *cur.get_unchecked(s);
             dmin = dmin.min(d);
             dmax = dmax.max(d);
-            *nxt.get_unchecked_mut(s) = q;
+            *nxt.get_unchecked_mut(s - s0) = q;
         }
     }
     (dmin, dmax)

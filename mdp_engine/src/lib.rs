@@ -16,6 +16,13 @@
 //!   [`Config::dense_eval_max_states`] states, above by warm-started sparse sweeps with a
 //!   certified stop) and modified policy iteration.
 //!
+//! **Threads.** With the `parallel` feature (default on) the finite-horizon and value-iteration
+//! sweeps of a model with at least [`PARALLEL_MIN_TRANSITIONS`] transitions are split across
+//! rayon's threads by states ([`Workspace::set_parallel_min_transitions`]); each state's backup
+//! is the same sum in the same order and the sweeps' reductions are minima and maxima, so the
+//! values, decisions and statistics are bit-identical to one thread. On 32-bit ARM (the A9
+//! build) the split is compiled out whatever the features: the flight build stays one thread.
+//!
 //! **Tie-breaking** is deterministic everywhere: a later action (higher action index) replaces the
 //! current best only if its Q-value is larger by more than [`TIE_TOLERANCE`] relative to the best
 //! (`q > best + TIE_TOLERANCE * max(1, |best|)`). So among (numerically) equal Q-values the lowest
@@ -61,6 +68,7 @@ pub use builder::MdpBuilder;
 pub use evaluation::{SPARSE_EVAL_MAX_SWEEPS, SPARSE_EVAL_STALL_SWEEPS, SPARSE_EVAL_TOLERANCE};
 pub use finite_horizon::FH_STOP_TOLERANCE;
 pub use infinite_horizon::{Config, DENSE_EVAL_MAX_STATES, SolveError};
+pub use kernels::PARALLEL_MIN_TRANSITIONS;
 pub use linalg::{SINGULAR_TOLERANCE, solve_dense};
 pub use model::{ActionId, Choice, Mdp, MdpError, ROW_SUM_TOLERANCE, StateId, TIE_TOLERANCE};
 pub use solution::{FiniteHorizonSolution, Solution, Stats};

@@ -27,6 +27,8 @@ pub struct Workspace {
     pub(crate) rev_start: Vec<u32>,
     pub(crate) rev: Vec<u32>,
     pub(crate) queue: Vec<u32>,
+    /// Sweeps of models with at least this many transitions are split across threads.
+    pub(crate) par_min_transitions: usize,
 }
 
 impl Default for Workspace {
@@ -53,7 +55,21 @@ impl Workspace {
             rev_start: Vec::new(),
             rev: Vec::new(),
             queue: Vec::new(),
+            par_min_transitions: crate::kernels::PARALLEL_MIN_TRANSITIONS,
         }
+    }
+
+    /// Split the finite-horizon and value-iteration sweeps of models with at least
+    /// `min_transitions` transitions across rayon's threads (default
+    /// [`PARALLEL_MIN_TRANSITIONS`]; `usize::MAX`: always one thread; 0: split whenever the
+    /// model has a few chunks' worth of states). The values and decisions are bit-identical
+    /// either way: every state's backup is the same sum in the same order, and the sweep's
+    /// reductions are minima and maxima. Without the `parallel` feature, and on 32-bit ARM, one
+    /// thread whatever this says.
+    ///
+    /// [`PARALLEL_MIN_TRANSITIONS`]: crate::PARALLEL_MIN_TRANSITIONS
+    pub fn set_parallel_min_transitions(&mut self, min_transitions: usize) {
+        self.par_min_transitions = min_transitions;
     }
 
     /// Preallocate for `n_states` states, a finite horizon up to `horizon`, and (when

@@ -271,6 +271,8 @@ fn compile(
         }
     }
     let values = vec![0.0; vars.len()];
+    let mut by_name: Vec<usize> = (0..vars.len()).collect();
+    by_name.sort_by(|&a, &b| vars[a].cmp(&vars[b]));
     Ok(MissionMdp {
         name: f.name.clone(),
         file: path.to_path_buf(),
@@ -279,6 +281,7 @@ fn compile(
         actions: f.action.iter().map(|a| a.name.clone()).collect(),
         does: f.action.iter().map(|a| a.does.clone()).collect(),
         vars,
+        by_name,
         values,
         trans_expr,
         policies: rewards.policies,

@@ -1014,4 +1014,46 @@ mod fast_cycle {
         m.decide(&mut ws, s, &p, "mission", 99).unwrap();
         assert_eq!(m.solves(), 4, "a one-ulp change re-solves");
     }
+
+    /// Inputs flapping between a few points (evidence across a threshold) are solved once each,
+    /// and every answer is the one a fresh solve gives; a fifth point evicts the oldest.
+    #[test]
+    fn memo_remembers_recent_input_points() {
+        let mut all = load_all();
+        let mut fresh = load_all();
+        fresh.set_solve_cache(false);
+        let mut ws = Workspace::new();
+        let base = paper_point();
+        let point = |k: u64| {
+            let mut p = base.clone();
+            let v3 = p.get_mut("P_V3").unwrap();
+            *v3 = f64::from_bits(v3.to_bits() - k); // k ulps below
+            p
+        };
+        let m = all.get_mut("tracking").unwrap();
+        let f = fresh.get_mut("tracking").unwrap();
+        let s = m.state_index("v3").unwrap();
+        for round in 0..3 {
+            for k in 0..4 {
+                let p = point(k);
+                let got = m.decide(&mut ws, s, &p, "safety", 100).unwrap();
+                let want = f.decide(&mut ws, s, &p, "safety", 100).unwrap();
+                assert_eq!(
+                    got.map(|d| (d.action, d.value.to_bits())),
+                    want.map(|d| (d.action, d.value.to_bits()))
+                );
+                assert_eq!(
+                    m.solves(),
+                    4.min(round * 4 + k + 1) as u64,
+                    "round {round} point {k}"
+                );
+            }
+        }
+        m.decide(&mut ws, s, &point(4), "safety", 100).unwrap();
+        assert_eq!(m.solves(), 5, "a fifth point is solved");
+        m.decide(&mut ws, s, &point(0), "safety", 100).unwrap();
+        assert_eq!(m.solves(), 6, "the oldest point was evicted");
+        m.decide(&mut ws, s, &point(4), "safety", 100).unwrap();
+        assert_eq!(m.solves(), 6);
+    }
 }
