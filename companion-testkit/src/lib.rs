@@ -4,6 +4,7 @@
 //! # Layout
 //! - `fuzzing`: the fuzz targets' bodies (MAVLink ingest, params loading), shared with the
 //!   corpus replay test.
+//! - `scripted`: a rule-based decider for the fly loop's link tests.
 //! - `sim_link`: a simulated autopilot's byte stream and a minimal responder (ingest bench, soak).
 //! - `streams`: observation streams for measuring the decision cycle.
 //! - `synthetic`: a synthetic 100-cycle mission's decision records (review and export tests).
@@ -13,6 +14,7 @@
 #![allow(missing_docs)] // test support, never published
 
 pub mod fuzzing;
+pub mod scripted;
 pub mod sim_link;
 pub mod streams;
 pub mod stress;

@@ -2,7 +2,8 @@
 //! answers only the chosen autopilot (junk and impostors get nothing back), the autopilot can be
 //! named with `--autopilot-sysid`, and a TCP link that only reconnects is declared lost.
 
-use companion::fly::{FlyArgs, ScriptedDecider, run_with};
+use companion::fly::{FlyArgs, run_with};
+use companion_testkit::scripted::ScriptedDecider;
 use companion_core::record::DecisionRecord;
 use companion_core::record::{Event, LinkEvent};
 use companion_link::dialect::*;

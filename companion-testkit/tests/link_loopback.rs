@@ -3,7 +3,8 @@
 //! commands `take_off` needs, injects garbage bytes between frames, and drops the TCP connection
 //! once the vehicle is airborne to check reconnect + stream re-request without command replay.
 
-use companion::fly::{FlyArgs, ScriptedDecider, run_with};
+use companion::fly::{FlyArgs, run_with};
+use companion_testkit::scripted::ScriptedDecider;
 use companion_core::record::DecisionRecord;
 use companion_core::record::{Event, LinkEvent};
 use companion_link::dialect::*;

@@ -1,0 +1,96 @@
+//! `companion fly`'s command-line arguments.
+
+use companion_link::liveness::parse_duration;
+use companion_link::url::{self, ConnectUrl};
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// `companion fly` arguments.
+#[derive(Debug, Clone, clap::Args)]
+pub struct FlyArgs {
+    /// Autopilot connection: serial:/dev/ttyAMA0:921600, udpin:0.0.0.0:14550, udpout:HOST:PORT,
+    /// tcp:HOST:PORT, tcpin:ADDR:PORT.
+    #[arg(long, value_parser = url::parse)]
+    pub connect: ConnectUrl,
+    /// Route for follow_trajectory (default params/missions/tracking_route.toml).
+    #[arg(long)]
+    pub mission: Option<PathBuf>,
+    /// Arbitration policy: a policy of params/policies.toml, safety (safety-first) or mission
+    /// (mission-first); checked when the params load.
+    #[arg(long, default_value = "safety")]
+    pub policy: String,
+    /// MAVLink 2 signing key (32 raw bytes or 64 hex digits): sign outgoing frames, refuse
+    /// unsigned commands addressed to us.
+    #[arg(long)]
+    pub signing_key: Option<PathBuf>,
+    /// Second MAVLink connection carrying onboard monitors (NAMED_VALUE_FLOAT, ...).
+    #[arg(long, value_parser = url::parse)]
+    pub onboard: Option<ConnectUrl>,
+    /// Silence after which the autopilot counts as lost (e.g. 3s, 500ms).
+    #[arg(long, default_value = "3s", value_parser = parse_duration)]
+    pub link_timeout: Duration,
+    /// Params directory (default: $COMPANION_PARAMS or the workspace params/).
+    #[arg(long)]
+    pub params: Option<PathBuf>,
+    /// Stop after this long (e.g. 60s); default: run until Ctrl-C or SIGTERM, flight after
+    /// flight (see --once).
+    #[arg(long, value_parser = parse_duration)]
+    pub duration: Option<Duration>,
+    /// Where run folders go (a new `<UTC time>/` inside with decisions.jsonl and flight.tlog,
+    /// printed at the start).
+    #[arg(long, default_value = crate::decision_log::DEFAULT_RUNS_DIR)]
+    pub log_dir: PathBuf,
+    /// For SITL and tests only: start the first mission (mode, ARM, take-off) as soon as the
+    /// autopilot is ready, without waiting for the operator. This ARMS THE VEHICLE by itself.
+    /// Without it, the companion commands no motion until the pilot arms the vehicle or a
+    /// ground station sends MAV_CMD_MISSION_START to component 191.
+    #[arg(long)]
+    pub auto_start: bool,
+    /// Command only the autopilot with this MAVLink system id (when several speak on the link);
+    /// default: the first autopilot heard. Others are reported, never obeyed.
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
+    pub autopilot_sysid: Option<u8>,
+    /// With --autopilot-sysid: the autopilot's component id (default 1, MAV_COMP_ID_AUTOPILOT1).
+    /// The pin is system and component: another component of that system is not obeyed.
+    #[arg(long, default_value_t = 1, requires = "autopilot_sysid", value_parser = clap::value_parser!(u8).range(1..))]
+    pub autopilot_compid: u8,
+    /// Refuse to start without --signing-key, and to fly an autopilot whose frames are not
+    /// signed with it (nothing is commanded; said on stderr and to the ground station).
+    #[arg(long)]
+    pub require_signing: bool,
+    /// Exit with an error when no autopilot HEARTBEAT arrives within this time (e.g. 30s);
+    /// default: wait (and retry the connection) for ever.
+    #[arg(long, value_parser = parse_duration)]
+    pub connect_timeout: Option<Duration>,
+    /// Exit after one flight (flown, then landed and disarmed) instead of waiting for the
+    /// operator's next start.
+    #[arg(long)]
+    pub once: bool,
+    /// The pilot arming the vehicle is a start request (held armed over every heartbeat for
+    /// `[flight] operator_confirm_s`). Off by default: arming for a manual flight is not a start.
+    #[arg(long)]
+    pub start_on_arm: bool,
+    /// A ground station's MAVLink system id whose MAV_CMD_MISSION_START is taken even before it
+    /// sent a GCS HEARTBEAT (repeat for several). Systems heard sending a GCS HEARTBEAT count
+    /// too; an autopilot component never does.
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
+    pub gcs_sysid: Vec<u8>,
+}
+
+impl FlyArgs {
+    /// The arguments `companion fly ARGS...` gives, the command line's defaults for the rest
+    /// (for tests and tools that build a fly setup without a process).
+    pub fn from_cli<I: IntoIterator<Item = S>, S: Into<std::ffi::OsString> + Clone>(
+        args: I,
+    ) -> Result<Self, clap::Error> {
+        use clap::Parser;
+        #[derive(clap::Parser)]
+        struct Fly {
+            #[command(flatten)]
+            args: FlyArgs,
+        }
+        let argv = std::iter::once(std::ffi::OsString::from("fly"))
+            .chain(args.into_iter().map(Into::into));
+        Ok(Fly::try_parse_from(argv)?.args)
+    }
+}

@@ -1,0 +1,325 @@
+//! One decision cycle, sans IO where it can be: the observation snapshot, the mission state, the
+//! core's step, the commands for the chosen vehicle action ([`decide`]), then the record
+//! ([`finish_record`]); [`run_cycle_at`] sends and writes between them.
+
+use super::shell::Shell;
+use super::{Decider, FlyReport, NOTICE, RecordSink, Tlog, WARNING, send};
+use anyhow::Context;
+use companion_core::observations::Observations;
+use companion_core::record::{CommandOutcome, DecisionRecord, Event, LinkEvent, Plan};
+use companion_link::Msg;
+use companion_link::ingest::Encoder;
+use companion_link::mission_state::{self, Extra, MissionState};
+use companion_link::vehicle::Vehicle;
+use std::time::Duration;
+
+#[allow(clippy::too_many_arguments)]
+pub(super) async fn run_cycle_at<D: Decider, S: RecordSink>(
+    decider: &mut D,
+    shell: &mut Shell,
+    vehicle: &mut Vehicle,
+    encoder: &mut Encoder,
+    tx: &tokio::sync::mpsc::Sender<Vec<u8>>,
+    tlog: &mut Option<Tlog>,
+    sink: &mut S,
+    trigger_at: Duration,
+    now: impl Fn() -> Duration,
+    report: &mut FlyReport,
+    transport_events: &mut Vec<LinkEvent>,
+) -> anyhow::Result<()> {
+    let decided = decide(decider, shell, vehicle, &now);
+    send(encoder, vehicle, tx, tlog, &decided.msgs).await;
+    vehicle.stamp_latency(trigger_at, now());
+    report.cycles += 1;
+    // The action flown, under its own name (a shell-only entry such as the route's resume is
+    // told as the action it is flown for).
+    let flown = decided.chosen.as_deref().map(|c| {
+        vehicle
+            .actions
+            .flown_for
+            .get(c)
+            .map_or(c, String::as_str)
+            .to_string()
+    });
+    let rec = finish_record(decided, shell, vehicle, report.cycles, transport_events);
+    if !shell.operator.commanding() {
+        shell.launch = decider.launch_verdict(&rec);
+    }
+    tracing::debug!(
+        cycle = rec.cycle,
+        state = %rec.state,
+        actions = %rec.actions.join(","),
+        "decision cycle"
+    );
+    let mut texts = Vec::new();
+    if let Some(change) = shell.action_change(&rec) {
+        tracing::info!("actions: {change}");
+    }
+    if shell.operator.commanding()
+        && let Some(text) = shell.behaviour_text(&rec, flown.as_deref())
+    {
+        texts.extend(shell.texts.say(now(), NOTICE, &text));
+    }
+    if let Some((line, severity, text)) = shell.guarantee_change(&rec) {
+        if severity == WARNING {
+            tracing::warn!("{line}");
+        } else {
+            tracing::info!("{line}");
+        }
+        texts.extend(shell.texts.say(now(), severity, &text));
+    }
+    send(encoder, vehicle, tx, tlog, &texts).await;
+    sink.write(&rec).context("writing the decision record")?;
+    Ok(())
+}
+
+/// The first half of one decision cycle, without I/O: the observation snapshot from the
+/// vehicle's telemetry and events, the mission state, the core's step, and the commands for
+/// the chosen vehicle action. The shell sends `msgs`, stamps latency, then calls
+/// [`finish_record`]. Public so that a soak run drives exactly the cycle `fly` runs.
+pub fn decide<D: Decider>(
+    decider: &mut D,
+    shell: &mut Shell,
+    vehicle: &mut Vehicle,
+    now: impl Fn() -> Duration,
+) -> Decided {
+    let mut events = vehicle.take_events();
+    events.append(&mut shell.pending_events);
+    coalesce_events(&mut events);
+    let mut obs = vehicle.observations(now(), events.clone());
+    let extra = Extra {
+        mode: vehicle.telemetry.mode.as_deref(),
+        landed_state: vehicle.telemetry.landed_state.as_deref(),
+        down_for_s: Some(vehicle.down_for(now()).map_or(0.0, |d| d.as_secs_f64())),
+    };
+    obs.state = shell.mission.update(&obs, &extra).to_string();
+    complete_observations(&mut obs, &shell.mission);
+    let (plan, mut rec) = decider.step(&obs);
+    shell.mission.after_plan(&rec.actions);
+    let mut chosen = mission_state::select_vehicle_action(&plan.vehicle_actions, &shell.precedence);
+    let mut shell_events = Vec::new();
+    if let Some(why) = shell.mission.mission_end(&obs) {
+        // The mission's end, not the core's decision: recorded as an event with the action.
+        shell_events.push(Event::ShellLand(why.to_string()));
+        rec.shell_actions.push("land".into());
+        shell.mission.after_plan(&["land".to_string()]);
+        chosen = Some("land".into());
+    }
+    // The landing phase: the MDPs see `landing` as terminal and plan nothing there, so the shell
+    // keeps flying the landing chosen until the vehicle is down, resuming it after an avoidance
+    // sidestep and sending it again after a refusal or a timeout.
+    if shell.operator.commanding()
+        && let Some(landing) = shell.mission.landing_action().map(str::to_string)
+    {
+        let keep = chosen
+            .as_deref()
+            .is_some_and(|a| a == "avoid_obstacle" || shell.mission.is_landing_action(a));
+        if !keep {
+            if !vehicle.settled(&landing) {
+                shell_events.push(Event::LandingKept(landing.clone()));
+            }
+            if !rec.actions.contains(&landing) && !rec.shell_actions.contains(&landing) {
+                rec.shell_actions.push(landing.clone());
+            }
+            chosen = Some(landing);
+        }
+    }
+    // Once the route is on the vehicle, an action with a shell-only entry flown for it
+    // (`flown_for` in params/commands.toml: follow_trajectory -> resume in AUTO) is flown as that
+    // entry, so the route is resumed where it was left, not uploaded again.
+    if shell.mission.route_on_vehicle()
+        && let Some(action) = chosen.as_deref()
+        && let Some((resume, _)) = vehicle.actions.flown_for.iter().find(|(_, f)| *f == action)
+    {
+        chosen = Some(resume.clone());
+    }
+    // No motion until the operator starts the mission, none while the pilot has control.
+    let msgs = if shell.operator.commanding() {
+        vehicle.request_actions(now(), chosen.as_slice())
+    } else {
+        Vec::new()
+    };
+    Decided {
+        msgs,
+        chosen,
+        plan,
+        rec,
+        obs,
+        events,
+        shell_events,
+    }
+}
+
+/// At most this many events in one record: a flood is summarised, not copied.
+const MAX_EVENTS: usize = 64;
+
+/// Repeated events once each (in first-seen order), at most [`MAX_EVENTS`] with a count of the
+/// rest.
+fn coalesce_events(events: &mut Vec<Event>) {
+    let mut seen = std::collections::BTreeSet::new();
+    let total = events.len();
+    events.retain(|e| seen.insert(e.to_string()));
+    let unique = events.len();
+    if unique > MAX_EVENTS {
+        events.truncate(MAX_EVENTS);
+    }
+    if events.len() < total {
+        events.push(Event::from(format!(
+            "({} more events since the last cycle: {} repeats, {} not listed)",
+            total - events.len(),
+            total - unique,
+            unique - events.len()
+        )));
+    }
+}
+
+/// One cycle between [`decide`] and [`finish_record`].
+pub struct Decided {
+    /// Commands for the chosen vehicle action, to send now.
+    pub msgs: Vec<Msg>,
+    /// The vehicle action chosen this cycle (after the mission's end and the route's resume).
+    pub chosen: Option<String>,
+    pub plan: Plan,
+    rec: DecisionRecord,
+    obs: Observations,
+    events: Vec<Event>,
+    /// Events of the shell's own decisions this cycle (mission end, landing resumed).
+    shell_events: Vec<Event>,
+}
+
+impl Decided {
+    /// The core's record so far (its actions, state, ...).
+    pub fn record(&self) -> &DecisionRecord {
+        &self.rec
+    }
+}
+
+/// The second half of one decision cycle: the record with the cycle number, the command
+/// results, link events and vehicle telemetry, ready for the decision log.
+pub fn finish_record(
+    d: Decided,
+    shell: &mut Shell,
+    vehicle: &mut Vehicle,
+    cycle: u64,
+    transport_events: &mut Vec<LinkEvent>,
+) -> DecisionRecord {
+    let Decided {
+        mut rec,
+        obs,
+        events,
+        shell_events,
+        ..
+    } = d;
+    rec.cycle = cycle;
+    rec.time_s = obs.time_s;
+    rec.utc_us = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .ok()
+        .map(|d| d.as_micros() as u64);
+    if rec.events.is_empty() {
+        rec.events = events;
+    }
+    rec.events.extend(shell_events);
+    if rec.observations.is_empty() {
+        rec.observations = obs.values;
+    }
+    rec.commands.extend(vehicle.take_records());
+    rec.link_events.append(transport_events);
+    rec.link_events.extend(shell.ingest_note());
+    rec.link_events.extend(vehicle.take_link_events());
+    // A flood (STATUSTEXT from the autopilot) is summarised like events are, so the record stays
+    // small enough to be logged.
+    companion_core::record::coalesce_link_events(&mut rec.link_events);
+    rec.vehicle.extend(vehicle.telemetry.vehicle());
+    rec.vehicle.insert(
+        "link_alive".into(),
+        serde_json::Value::from(vehicle.liveness.alive()),
+    );
+    rec.vehicle.insert(
+        "operator".into(),
+        serde_json::Value::from(shell.operator.control.label()),
+    );
+    for c in &rec.commands {
+        let failed = matches!(
+            c.result,
+            CommandOutcome::Failed(_)
+                | CommandOutcome::Denied
+                | CommandOutcome::Timeout(_)
+                | CommandOutcome::NotSent(_)
+                | CommandOutcome::NotReady(_)
+                | CommandOutcome::Cancelled(_)
+                | CommandOutcome::Unmapped
+        );
+        if failed {
+            tracing::warn!("command {} {}: {}", c.action, c.command, c.result);
+        } else {
+            tracing::info!("command {} {}: {}", c.action, c.command, c.result);
+        }
+    }
+    // Transport (dis)connections are said by `FailureLines` at most once per 10 s; the record
+    // keeps every one.
+    for e in rec.link_events.iter().filter(|e| {
+        !matches!(
+            e,
+            LinkEvent::TransportConnected(_)
+                | LinkEvent::TransportDisconnected(_)
+                | LinkEvent::OnboardConnected(_)
+                | LinkEvent::OnboardDisconnected(_)
+        )
+    }) {
+        tracing::info!("link: {e}");
+    }
+    for e in rec.events.iter().filter(|e| matches!(e, Event::Mode(_))) {
+        tracing::info!("vehicle {e}");
+    }
+    rec
+}
+
+/// The observations [`complete_observations`] adds to the telemetry's (fly's side of the
+/// observation vocabulary checked at load, companion/src/vocabulary.rs).
+pub const DERIVED_OBSERVATIONS: [&str; 2] = ["drone_speed_mps", "waypoints_remaining"];
+
+/// Observations the health BNs read under names the telemetry does not produce directly.
+fn complete_observations(obs: &mut Observations, mission: &MissionState) {
+    if let Some(v) = obs.get("groundspeed_mps") {
+        obs.values.entry("drone_speed_mps".into()).or_insert(v);
+    }
+    let remaining = mission.waypoints_remaining(obs);
+    obs.set("waypoints_remaining", remaining);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_event_flood_is_coalesced_into_one_bounded_list() {
+        let mut ev: Vec<Event> = (0..10_000)
+            .map(|i| Event::Mode(if i % 2 == 0 { "AUTO" } else { "GUIDED" }.into()))
+            .collect();
+        ev.push(Event::ObstacleDetected);
+        coalesce_events(&mut ev);
+        assert_eq!(
+            ev[..3],
+            [
+                Event::Mode("AUTO".into()),
+                Event::Mode("GUIDED".into()),
+                Event::ObstacleDetected
+            ]
+        );
+        assert_eq!(ev.len(), 4);
+        assert!(ev[3].to_string().contains("9998 repeats"), "{}", ev[3]);
+        let mut many: Vec<Event> = (0..500).map(Event::Waypoint).collect();
+        coalesce_events(&mut many);
+        assert_eq!(many.len(), MAX_EVENTS + 1);
+        assert!(
+            many[MAX_EVENTS].to_string().contains("436 not listed"),
+            "{}",
+            many[MAX_EVENTS]
+        );
+        let mut few = vec![Event::from("a"), Event::from("b")];
+        coalesce_events(&mut few);
+        assert_eq!(few, ["a", "b"]);
+    }
+
+}

@@ -1,0 +1,96 @@
+//! Everything `fly` loads from params before any socket opens.
+
+use super::{FlyArgs, link_security};
+use companion_link::actions::{ActionTable, LinkParams, Route};
+use companion_link::ingest;
+use companion_link::vehicle::{Vehicle, VehicleConfig};
+use std::time::Duration;
+
+/// Everything loaded from params before any socket opens.
+pub struct FlySetup {
+    pub link: LinkParams,
+    pub actions: ActionTable,
+    pub route: Route,
+    pub key: Option<[u8; 32]>,
+    /// Altitude the take_off action climbs to (m): MAV_CMD_NAV_TAKEOFF param 7, else the route's.
+    pub takeoff_alt_m: f64,
+    /// The mission's states and phases (params/mission.toml) the mission estimator moves through.
+    pub states: companion_core::mission::MissionStates,
+}
+
+impl FlySetup {
+    pub fn load(args: &FlyArgs) -> anyhow::Result<Self> {
+        let dir = args
+            .params
+            .clone()
+            .unwrap_or_else(crate::params::default_params_dir);
+        // The same loader `check` and `simulate` use (crate::params), so they cannot drift.
+        let mut files = crate::params::read_params_dir(&dir)?;
+        if let Some(r) = args.mission.as_deref() {
+            crate::params::add_file(&mut files, r);
+        }
+        Self::from_files(&files, args)
+    }
+
+    /// [`FlySetup::load`] on params already read (`--mission`'s file, when given, among them).
+    pub fn from_files(
+        files: &companion_core::spec::ParamsFiles,
+        args: &FlyArgs,
+    ) -> anyhow::Result<Self> {
+        link_security::check_args(args)?;
+        let (link, actions, route, _) =
+            crate::params::load_fly_files(files, args.mission.as_deref())?;
+        let key = match &args.signing_key {
+            Some(p) => {
+                crate::params::regular_file(p)
+                    .map_err(|reason| anyhow::anyhow!("--signing-key {}: {reason}", p.display()))?;
+                Some(ingest::load_signing_key(p)?)
+            }
+            None => None,
+        };
+        let takeoff_alt_m = actions
+            .actions
+            .get("take_off")
+            .and_then(|steps| {
+                steps.iter().find_map(|st| match st {
+                    companion_link::actions::Step::Command { command, params }
+                        if *command == companion_link::dialect::MavCmd::MAV_CMD_NAV_TAKEOFF
+                            && params[6] > 0.0 =>
+                    {
+                        Some(params[6] as f64)
+                    }
+                    _ => None,
+                })
+            })
+            .unwrap_or(route.altitude_m);
+        let states = companion_core::mission::MissionStates::load(files)?;
+        Ok(Self {
+            link,
+            actions,
+            route,
+            key,
+            takeoff_alt_m,
+            states,
+        })
+    }
+
+    /// The protocol state `fly` drives, configured from these params (clones the action table
+    /// and route, so a soak run can build a fresh one per mission).
+    pub fn vehicle(&self, link_timeout: Duration) -> Vehicle {
+        let cfg = VehicleConfig {
+            link_timeout,
+            streams: self.link.stream_ids(),
+            streams_not_sent: self.link.streams_not_sent(),
+            telemetry: self.link.telemetry.clone(),
+            arm_wait: Duration::from_secs_f64(self.link.arm_wait_s),
+            max_arm_attempts: self.link.max_arm_attempts,
+            zone_radius_m: self.link.flight.zone_radius_m,
+            zone_arrive_timeout: Duration::from_secs_f64(self.link.flight.zone_arrive_timeout_s),
+            mode_confirm: Duration::from_secs_f64(self.link.flight.mode_confirm_s),
+            max_mode_attempts: self.link.flight.max_mode_attempts,
+            ground_altitude_m: self.link.flight.ground_altitude_m,
+            ..VehicleConfig::default()
+        };
+        Vehicle::new(cfg, self.actions.clone(), Some(self.route.clone()))
+    }
+}
