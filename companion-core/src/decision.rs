@@ -459,7 +459,7 @@ impl<'m> Core<'m> {
         let why = res
             .dropped
             .iter()
-            .find(|d| d.starts_with(app))
+            .find(|d| d.app == app)
             .cloned()
             .unwrap_or_default();
         let app_of = |a: &str| model.actions.get(a).and_then(|x| x.app.as_deref());
@@ -537,7 +537,7 @@ impl<'m> Core<'m> {
             return;
         };
         for d in &res.dropped {
-            let app = d.split(' ').next().unwrap_or("");
+            let app = d.app.as_str();
             let gave_way: Vec<String> = sc
                 .kept
                 .iter()

@@ -601,7 +601,7 @@ impl Review {
             }
         }
         if let Some(res) = &r.resources {
-            marks.extend(res.degraded.iter().cloned().map(Mark::Degraded));
+            marks.extend(res.degraded.iter().map(|d| Mark::Degraded(d.to_string())));
         }
         if let Some(re) = r.guarantee.as_ref().and_then(|g| g.reallocation.as_ref()) {
             marks.push(Mark::Reallocated(re.reason.clone()));
