@@ -245,7 +245,10 @@ impl<'m> Core<'m> {
                     n_proposals += 1;
                 }
                 Ok(None) => {}
-                Err(e) => rec.events.push(Event::from(format!("{name}: {e}"))),
+                Err(e) => rec.events.push(Event::MdpError {
+                    mdp: name.to_string(),
+                    error: e.to_string(),
+                }),
             }
         }
         rec.proposals.truncate(n_proposals);
@@ -500,7 +503,10 @@ impl<'m> Core<'m> {
             Ok(Some(d)) => d,
             Ok(None) => return false,
             Err(e) => {
-                rec.events.push(Event::from(format!("{name}: {e}")));
+                rec.events.push(Event::MdpError {
+                    mdp: name.to_string(),
+                    error: e.to_string(),
+                });
                 return false;
             }
         };
