@@ -7,7 +7,7 @@ pub use crate::conflicts::BehaviourConflicts;
 use crate::mission::{ActionKind, Policy};
 use crate::model::Model;
 use crate::observations::Observations;
-use crate::record::{DecisionRecord, Event, ResourcesRecord};
+use crate::record::{DecisionRecord, Degraded, Dropped, Event, ResourcesRecord};
 use crate::resources::ResourceSpec;
 use crate::scratch::Scratch;
 use crate::spec::SpecError;
@@ -183,7 +183,8 @@ fn same_platform(a: &PlatformState, b: &PlatformState) -> bool {
 pub(crate) struct ResourceArbiter<'m> {
     pub(crate) schedules: ScheduleCache<'m>,
     /// Degradations and drops in force after the last cycle.
-    last_degraded: Vec<String>,
+    last_degraded: Vec<Degraded>,
+    last_dropped: Vec<Dropped>,
 }
 
 impl<'m> ResourceArbiter<'m> {
@@ -191,6 +192,7 @@ impl<'m> ResourceArbiter<'m> {
         ResourceArbiter {
             schedules: ScheduleCache::new(),
             last_degraded: Vec::new(),
+            last_dropped: Vec::new(),
         }
     }
 
@@ -233,7 +235,11 @@ impl<'m> ResourceArbiter<'m> {
             None => rec.resources = Some(m.record.clone()),
         }
         rewrite_actions(model, &m.record, sc);
-        degradation_events(&mut self.last_degraded, &m.record, rec);
+        degradation_events(
+            (&mut self.last_degraded, &mut self.last_dropped),
+            &m.record,
+            rec,
+        );
     }
 }
 
@@ -307,19 +313,25 @@ fn rewrite_actions<'m>(model: &'m Model, record: &ResourcesRecord, sc: &mut Scra
     }
 }
 
-/// Degradations are events when they start, not on every cycle they last.
+/// Degradations are events (their sentences) when they start, not on every cycle they last.
 fn degradation_events(
-    last_degraded: &mut Vec<String>,
+    (last_degraded, last_dropped): (&mut Vec<Degraded>, &mut Vec<Dropped>),
     record: &ResourcesRecord,
     rec: &mut DecisionRecord,
 ) {
-    let now = || record.degraded.iter().chain(&record.dropped);
-    if !now().eq(last_degraded.iter()) {
-        for d in now() {
-            if !last_degraded.contains(d) {
-                rec.events.push(Event::from(d.as_str()));
-            }
-        }
-        *last_degraded = now().cloned().collect();
+    if record.degraded == *last_degraded && record.dropped == *last_dropped {
+        return;
     }
+    for d in &record.degraded {
+        if !last_degraded.contains(d) {
+            rec.events.push(Event::from(d.to_string()));
+        }
+    }
+    for d in &record.dropped {
+        if !last_dropped.contains(d) {
+            rec.events.push(Event::from(d.to_string()));
+        }
+    }
+    last_degraded.clone_from(&record.degraded);
+    last_dropped.clone_from(&record.dropped);
 }

@@ -283,7 +283,10 @@ impl<'m> Core<'m> {
                     n_proposals += 1;
                 }
                 Ok(None) => {}
-                Err(e) => rec.events.push(Event::from(format!("{name}: {e}"))),
+                Err(e) => rec.events.push(Event::MdpError {
+                    mdp: name.to_string(),
+                    error: e.to_string(),
+                }),
             }
             mark(Stage::Mdp(name));
         }
@@ -503,7 +506,7 @@ impl<'m> Core<'m> {
         let why = res
             .dropped
             .iter()
-            .find(|d| d.starts_with(app))
+            .find(|d| d.app == app)
             .cloned()
             .unwrap_or_default();
         let app_of = |a: &str| model.actions.get(a).and_then(|x| x.app.as_deref());
@@ -544,7 +547,10 @@ impl<'m> Core<'m> {
             Ok(Some(d)) => d,
             Ok(None) => return false,
             Err(e) => {
-                rec.events.push(Event::from(format!("{name}: {e}")));
+                rec.events.push(Event::MdpError {
+                    mdp: name.to_string(),
+                    error: e.to_string(),
+                });
                 return false;
             }
         };
@@ -581,7 +587,7 @@ impl<'m> Core<'m> {
             return;
         };
         for d in &res.dropped {
-            let app = d.split(' ').next().unwrap_or("");
+            let app = d.app.as_str();
             let gave_way: Vec<String> = sc
                 .kept
                 .iter()

@@ -335,21 +335,11 @@ impl Guarantee {
         rec
     }
 
-    /// As [`Guarantee::watch`], overwriting a reused record. A cycle that keeps the RAS in force
-    /// (no negative margin, no failed resource in the plan) allocates nothing once the record
-    /// and the internal buffers have their shape; a re-allocation builds its strings as before.
-    pub fn watch_into(&mut self, progress: Progress, rec: &mut GuaranteeRecord) {
-        let (energy, energy_source) = self.energy_used(&progress);
-        rec.energy_source = energy_source;
-        let p = &self.spec.problem;
-        let n = p.activities.len();
-        let at = progress.activity_index.min(n.saturating_sub(1));
-        let fraction = if progress.activity_index >= n {
-            1.0
-        } else {
-            progress.activity_fraction.clamp(0.0, 1.0)
-        };
-        for r in progress.failed_resources {
+    /// Add the resources reported failed, then write the failed list the allocation avoids
+    /// (`scratch.failed`): those resources and the tile slots lost to failed tiles (a failed tile
+    /// removes the highest slot still available), over the reused strings.
+    fn note_failed(&mut self, failed_resources: &[String]) {
+        for r in failed_resources {
             if !self.failed.contains(r) {
                 self.failed.push(r.clone());
             }
@@ -386,6 +376,24 @@ impl Guarantee {
             len += 1;
         }
         sc.failed.truncate(len);
+    }
+
+    /// As [`Guarantee::watch`], overwriting a reused record. A cycle that keeps the RAS in force
+    /// (no negative margin, no failed resource in the plan) allocates nothing once the record
+    /// and the internal buffers have their shape; a re-allocation builds its strings as before.
+    pub fn watch_into(&mut self, progress: Progress, rec: &mut GuaranteeRecord) {
+        let (energy, energy_source) = self.energy_used(&progress);
+        rec.energy_source = energy_source;
+        self.note_failed(progress.failed_resources);
+        let p = &self.spec.problem;
+        let n = p.activities.len();
+        let at = progress.activity_index.min(n.saturating_sub(1));
+        let fraction = if progress.activity_index >= n {
+            1.0
+        } else {
+            progress.activity_fraction.clamp(0.0, 1.0)
+        };
+        let sc = &mut self.scratch;
         let failed = &sc.failed;
 
         sc.zero.activity = at;
@@ -443,41 +451,7 @@ impl Guarantee {
         if !any_failed && !report.margin.iter().any(|x| *x < 0.0) {
             return;
         }
-        let uses_failed: Vec<String> = (at..n)
-            .flat_map(|j| p.activities[j].ias[self.choice[j]].resources.iter())
-            .filter(|r| failed.contains(r))
-            .cloned()
-            .collect::<BTreeSet<_>>()
-            .into_iter()
-            .collect();
-        let negative: Vec<String> = p
-            .goals
-            .iter()
-            .zip(&report.margin)
-            .filter(|(_, x)| **x < 0.0)
-            .map(|(g, x)| format!("{} margin {x:.1}", g.name))
-            .collect();
-        let mut why = Vec::new();
-        if !negative.is_empty() {
-            why.push(format!("negative {}", negative.join(", ")));
-        }
-        if !uses_failed.is_empty() {
-            let shown: Vec<String> = uses_failed
-                .iter()
-                .map(|r| {
-                    if r.starts_with("tile_slot:") {
-                        "FPGA tile".to_string()
-                    } else {
-                        r.clone()
-                    }
-                })
-                .collect::<BTreeSet<_>>()
-                .into_iter()
-                .collect();
-            why.push(format!("failed resource in plan: {}", shown.join(", ")));
-        }
-        let reason = why.join("; ");
-        let mut reason = reason;
+        let mut reason = reallocation_reason(p, &self.choice, at, failed, &report.margin);
         let found = panorama::reallocate_or_exact(
             p,
             &self.choice,
@@ -529,6 +503,52 @@ impl Guarantee {
             }
         }
     }
+}
+
+/// Why the allocation in force must change from activity `at`: its negative margins and the
+/// failed resources its remaining IAs use (`FPGA tile` for a lost tile slot).
+fn reallocation_reason(
+    p: &panorama::Problem,
+    choice: &[usize],
+    at: usize,
+    failed: &[String],
+    margin: &[f64],
+) -> String {
+    let n = p.activities.len();
+    let uses_failed: Vec<String> = (at..n)
+        .flat_map(|j| p.activities[j].ias[choice[j]].resources.iter())
+        .filter(|r| failed.contains(r))
+        .cloned()
+        .collect::<BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    let negative: Vec<String> = p
+        .goals
+        .iter()
+        .zip(margin)
+        .filter(|(_, x)| **x < 0.0)
+        .map(|(g, x)| format!("{} margin {x:.1}", g.name))
+        .collect();
+    let mut why = Vec::new();
+    if !negative.is_empty() {
+        why.push(format!("negative {}", negative.join(", ")));
+    }
+    if !uses_failed.is_empty() {
+        let shown: Vec<String> = uses_failed
+            .iter()
+            .map(|r| {
+                if r.starts_with("tile_slot:") {
+                    "FPGA tile".to_string()
+                } else {
+                    r.clone()
+                }
+            })
+            .collect::<BTreeSet<_>>()
+            .into_iter()
+            .collect();
+        why.push(format!("failed resource in plan: {}", shown.join(", ")));
+    }
+    why.join("; ")
 }
 
 /// The application alternatives an IA name carries, as (version, implementation): `V4.F` and

@@ -143,6 +143,230 @@ struct Resolved {
     hits: Vec<(usize, NodeId, usize)>,
 }
 
+/// Manager name -> position in `hms`; a name defined twice is refused.
+fn manager_index(hms: &[CompiledHm]) -> Result<BTreeMap<&str, usize>, SpecError> {
+    let index: BTreeMap<&str, usize> = hms
+        .iter()
+        .enumerate()
+        .map(|(i, h)| (h.name.as_str(), i))
+        .collect();
+    if index.len() != hms.len() {
+        let mut seen = BTreeMap::new();
+        for h in hms {
+            if let Some(prev) = seen.insert(h.name.as_str(), &h.file) {
+                return Err(SpecError::new(
+                    &h.file,
+                    "name",
+                    format!("manager `{}` is also defined in {}", h.name, prev.display()),
+                ));
+            }
+        }
+    }
+    Ok(index)
+}
+
+/// The managers in evaluation order: each after the ones it imports from (checked: the import
+/// names a manager and a node with the same states; no cycle).
+fn import_order(
+    hms: &[CompiledHm],
+    index: &BTreeMap<&str, usize>,
+) -> Result<Vec<usize>, SpecError> {
+    // Import edges and a topological order over managers.
+    let mut deps: Vec<Vec<usize>> = vec![Vec::new(); hms.len()];
+    for (i, h) in hms.iter().enumerate() {
+        for (local, m, src) in &h.imports {
+            let entry = format!("node.{local}.from");
+            let &j = index.get(m.as_str()).ok_or_else(|| {
+                SpecError::new(&h.file, &entry, format!("no health manager `{m}`"))
+            })?;
+            let sid = hms[j].network.id(src).ok_or_else(|| {
+                SpecError::new(
+                    &h.file,
+                    &entry,
+                    format!("manager `{m}` has no node `{src}`"),
+                )
+            })?;
+            let lid = h.network.id(local).expect("compiled node");
+            if hms[j].network.node(sid).states != h.network.node(lid).states {
+                return Err(SpecError::new(
+                    &h.file,
+                    entry,
+                    format!(
+                        "states differ from `{m}.{src}` ({:?})",
+                        hms[j].network.node(sid).states
+                    ),
+                ));
+            }
+            deps[i].push(j);
+        }
+    }
+    let mut order = Vec::new();
+    let mut mark = vec![0u8; hms.len()];
+    fn visit(
+        i: usize,
+        deps: &[Vec<usize>],
+        mark: &mut [u8],
+        order: &mut Vec<usize>,
+    ) -> Result<(), usize> {
+        match mark[i] {
+            2 => return Ok(()),
+            1 => return Err(i),
+            _ => {}
+        }
+        mark[i] = 1;
+        for &j in &deps[i] {
+            visit(j, deps, mark, order)?;
+        }
+        mark[i] = 2;
+        order.push(i);
+        Ok(())
+    }
+    for i in 0..hms.len() {
+        visit(i, &deps, &mut mark, &mut order).map_err(|j| {
+            SpecError::new(
+                &hms[j].file,
+                "node",
+                "imports between health managers form a cycle",
+            )
+        })?;
+    }
+    Ok(order)
+}
+
+/// Every named probability has one publisher.
+fn check_publishers(hms: &[CompiledHm]) -> Result<(), SpecError> {
+    let mut publishers: BTreeMap<&str, &str> = BTreeMap::new();
+    for h in hms {
+        for p in &h.publish {
+            if let Some(other) = publishers.insert(&p.name, &h.name) {
+                return Err(SpecError::new(
+                    &h.file,
+                    format!("publish.{}", p.name),
+                    format!("also published by manager `{other}`"),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Every observation targets an existing node and its states.
+fn check_observations(hms: &[CompiledHm], observations: &ObservationMap) -> Result<(), SpecError> {
+    for (i, o) in observations.observations.iter().enumerate() {
+        let mut found = false;
+        for h in hms {
+            if let Some(id) = h.network.id(&o.node) {
+                found = true;
+                for s in &o.states {
+                    if h.network.state(id, s).is_err() {
+                        return Err(SpecError::new(
+                            &observations.file,
+                            format!("observation[{i}]({}).states", o.name),
+                            format!(
+                                "node `{}` in {} has no state `{s}`",
+                                o.node,
+                                h.file.display()
+                            ),
+                        ));
+                    }
+                }
+            }
+        }
+        if !found {
+            return Err(SpecError::new(
+                &observations.file,
+                format!("observation[{i}]({}).node", o.name),
+                format!("no health manager has a node `{}`", o.node),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The managers in evaluation `order`, import sources remapped to positions in it, each
+/// engine's targets set to what the cycle reads.
+fn build_managers(
+    hms: &[CompiledHm],
+    index: &BTreeMap<&str, usize>,
+    order: &[usize],
+) -> Vec<Manager> {
+    // Build managers in evaluation order; remap import sources to positions in that order.
+    let pos: BTreeMap<usize, usize> = order.iter().enumerate().map(|(p, &i)| (i, p)).collect();
+    let mut managers = Vec::new();
+    for &i in order {
+        let h = &hms[i];
+        let net = &h.network;
+        let mut engine = net.compile();
+        let imports = h
+            .imports
+            .iter()
+            .map(|(local, m, src)| {
+                let j = index[m.as_str()];
+                (
+                    net.id(local).unwrap(),
+                    pos[&j],
+                    hms[j].network.id(src).unwrap(),
+                )
+            })
+            .collect();
+        let carry: Vec<(NodeId, NodeId)> = h
+            .carry
+            .iter()
+            .map(|c| (net.id(&c.from).unwrap(), net.id(&c.to).unwrap()))
+            .collect();
+        let initial = carry
+            .iter()
+            .map(|&(_, t)| (t, net.node(t).cpt.clone()))
+            .collect();
+        let published = h
+            .publish
+            .iter()
+            .enumerate()
+            .map(|(k, p)| {
+                let id = net.id(&p.node).unwrap();
+                (k, id, net.state(id, &p.state).unwrap(), p.complement)
+            })
+            .collect();
+        // Marginals are defined from the start (prior, before any evidence).
+        let _ = engine.propagate(&Evidence::new());
+        managers.push(Manager {
+            name: h.name.clone(),
+            description: h.description.clone(),
+            file: h.file.clone(),
+            nodes: h.nodes.clone(),
+            publish: h.publish.clone(),
+            engine,
+            initial,
+            imports,
+            carry,
+            published,
+        });
+    }
+    // Targeted queries answer what the cycle reads: published nodes, carried beliefs, and the
+    // nodes later managers import as priors.
+    let mut targets: Vec<Vec<NodeId>> = managers
+        .iter()
+        .map(|m| {
+            m.published
+                .iter()
+                .map(|&(_, id, _, _)| id)
+                .chain(m.carry.iter().map(|&(from, _)| from))
+                .collect()
+        })
+        .collect();
+    for m in &managers {
+        for &(_, j, src) in &m.imports {
+            targets[j].push(src);
+        }
+    }
+    for (m, t) in managers.iter_mut().zip(&targets) {
+        m.engine
+            .set_targets(t)
+            .expect("targets are nodes of the network");
+    }
+    managers
+}
+
 /// True when `cpt` is bit-for-bit node `id`'s current CPT (setting it would change nothing).
 fn same_cpt(engine: &Engine, id: NodeId, cpt: &[f64]) -> bool {
     let cur = &engine.network().node(id).cpt;
@@ -216,196 +440,11 @@ impl HealthModel {
         hms: Vec<CompiledHm>,
         observations: ObservationMap,
     ) -> Result<HealthModel, SpecError> {
-        let index: BTreeMap<&str, usize> = hms
-            .iter()
-            .enumerate()
-            .map(|(i, h)| (h.name.as_str(), i))
-            .collect();
-        if index.len() != hms.len() {
-            let mut seen = BTreeMap::new();
-            for h in &hms {
-                if let Some(prev) = seen.insert(h.name.as_str(), &h.file) {
-                    return Err(SpecError::new(
-                        &h.file,
-                        "name",
-                        format!("manager `{}` is also defined in {}", h.name, prev.display()),
-                    ));
-                }
-            }
-        }
-        // Import edges and a topological order over managers.
-        let mut deps: Vec<Vec<usize>> = vec![Vec::new(); hms.len()];
-        for (i, h) in hms.iter().enumerate() {
-            for (local, m, src) in &h.imports {
-                let entry = format!("node.{local}.from");
-                let &j = index.get(m.as_str()).ok_or_else(|| {
-                    SpecError::new(&h.file, &entry, format!("no health manager `{m}`"))
-                })?;
-                let sid = hms[j].network.id(src).ok_or_else(|| {
-                    SpecError::new(
-                        &h.file,
-                        &entry,
-                        format!("manager `{m}` has no node `{src}`"),
-                    )
-                })?;
-                let lid = h.network.id(local).expect("compiled node");
-                if hms[j].network.node(sid).states != h.network.node(lid).states {
-                    return Err(SpecError::new(
-                        &h.file,
-                        entry,
-                        format!(
-                            "states differ from `{m}.{src}` ({:?})",
-                            hms[j].network.node(sid).states
-                        ),
-                    ));
-                }
-                deps[i].push(j);
-            }
-        }
-        let mut order = Vec::new();
-        let mut mark = vec![0u8; hms.len()];
-        fn visit(
-            i: usize,
-            deps: &[Vec<usize>],
-            mark: &mut [u8],
-            order: &mut Vec<usize>,
-        ) -> Result<(), usize> {
-            match mark[i] {
-                2 => return Ok(()),
-                1 => return Err(i),
-                _ => {}
-            }
-            mark[i] = 1;
-            for &j in &deps[i] {
-                visit(j, deps, mark, order)?;
-            }
-            mark[i] = 2;
-            order.push(i);
-            Ok(())
-        }
-        for i in 0..hms.len() {
-            visit(i, &deps, &mut mark, &mut order).map_err(|j| {
-                SpecError::new(
-                    &hms[j].file,
-                    "node",
-                    "imports between health managers form a cycle",
-                )
-            })?;
-        }
-        let mut publishers: BTreeMap<&str, &str> = BTreeMap::new();
-        for h in &hms {
-            for p in &h.publish {
-                if let Some(other) = publishers.insert(&p.name, &h.name) {
-                    return Err(SpecError::new(
-                        &h.file,
-                        format!("publish.{}", p.name),
-                        format!("also published by manager `{other}`"),
-                    ));
-                }
-            }
-        }
-        for (i, o) in observations.observations.iter().enumerate() {
-            let mut found = false;
-            for h in &hms {
-                if let Some(id) = h.network.id(&o.node) {
-                    found = true;
-                    for s in &o.states {
-                        if h.network.state(id, s).is_err() {
-                            return Err(SpecError::new(
-                                &observations.file,
-                                format!("observation[{i}]({}).states", o.name),
-                                format!(
-                                    "node `{}` in {} has no state `{s}`",
-                                    o.node,
-                                    h.file.display()
-                                ),
-                            ));
-                        }
-                    }
-                }
-            }
-            if !found {
-                return Err(SpecError::new(
-                    &observations.file,
-                    format!("observation[{i}]({}).node", o.name),
-                    format!("no health manager has a node `{}`", o.node),
-                ));
-            }
-        }
-        // Build managers in evaluation order; remap import sources to positions in that order.
-        let pos: BTreeMap<usize, usize> = order.iter().enumerate().map(|(p, &i)| (i, p)).collect();
-        let mut managers = Vec::new();
-        for &i in &order {
-            let h = &hms[i];
-            let net = &h.network;
-            let mut engine = net.compile();
-            let imports = h
-                .imports
-                .iter()
-                .map(|(local, m, src)| {
-                    let j = index[m.as_str()];
-                    (
-                        net.id(local).unwrap(),
-                        pos[&j],
-                        hms[j].network.id(src).unwrap(),
-                    )
-                })
-                .collect();
-            let carry: Vec<(NodeId, NodeId)> = h
-                .carry
-                .iter()
-                .map(|c| (net.id(&c.from).unwrap(), net.id(&c.to).unwrap()))
-                .collect();
-            let initial = carry
-                .iter()
-                .map(|&(_, t)| (t, net.node(t).cpt.clone()))
-                .collect();
-            let published = h
-                .publish
-                .iter()
-                .enumerate()
-                .map(|(k, p)| {
-                    let id = net.id(&p.node).unwrap();
-                    (k, id, net.state(id, &p.state).unwrap(), p.complement)
-                })
-                .collect();
-            // Marginals are defined from the start (prior, before any evidence).
-            let _ = engine.propagate(&Evidence::new());
-            managers.push(Manager {
-                name: h.name.clone(),
-                description: h.description.clone(),
-                file: h.file.clone(),
-                nodes: h.nodes.clone(),
-                publish: h.publish.clone(),
-                engine,
-                initial,
-                imports,
-                carry,
-                published,
-            });
-        }
-        // Targeted queries answer what the cycle reads: published nodes, carried beliefs, and the
-        // nodes later managers import as priors.
-        let mut targets: Vec<Vec<NodeId>> = managers
-            .iter()
-            .map(|m| {
-                m.published
-                    .iter()
-                    .map(|&(_, id, _, _)| id)
-                    .chain(m.carry.iter().map(|&(from, _)| from))
-                    .collect()
-            })
-            .collect();
-        for m in &managers {
-            for &(_, j, src) in &m.imports {
-                targets[j].push(src);
-            }
-        }
-        for (m, t) in managers.iter_mut().zip(&targets) {
-            m.engine
-                .set_targets(t)
-                .expect("targets are nodes of the network");
-        }
+        let index = manager_index(&hms)?;
+        let order = import_order(&hms, &index)?;
+        check_publishers(&hms)?;
+        check_observations(&hms, &observations)?;
+        let managers = build_managers(&hms, &index, &order);
         Ok(HealthModel {
             managers,
             observations,

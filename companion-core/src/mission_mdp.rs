@@ -136,6 +136,35 @@ impl SolvedEntry {
 }
 
 impl Solved {
+    /// A memo with its [`SOLVE_MEMO`] slots allocated for a model of `n_states` states reading
+    /// `n_vars` probabilities (so filling them allocates nothing), holding no solve.
+    pub(crate) fn new(n_states: usize, n_vars: usize) -> Self {
+        // Built one by one: a clone would not keep the capacity.
+        let empty = || SolvedEntry {
+            values: Vec::with_capacity(n_vars.max(1)),
+            decision: Vec::with_capacity(n_states),
+            value: Vec::with_capacity(n_states),
+            ..SolvedEntry::default()
+        };
+        let mut memo = Solved {
+            enabled: true,
+            entries: (0..SOLVE_MEMO).map(|_| empty()).collect(),
+            ..Solved::default()
+        };
+        memo.forget();
+        memo
+    }
+
+    /// Hold no solve (every slot's values set to a point no input can be: NaN).
+    fn forget(&mut self) {
+        for e in &mut self.entries {
+            e.values.clear();
+            e.values.push(f64::NAN);
+        }
+        self.next = 0;
+        self.current = 0;
+    }
+
     /// The remembered solve of exactly these inputs (the last answered checked first).
     fn hit(&self, values: &[f64], policy: usize, horizon: usize) -> Option<usize> {
         if !self.enabled {
@@ -226,14 +255,7 @@ impl MissionMdp {
     /// and the worst-case benchmark).
     pub fn set_solve_cache(&mut self, on: bool) {
         self.solved.enabled = on;
-        self.solved.entries.truncate(1);
-        self.solved.next = 0;
-        self.solved.current = 0;
-        if let Some(e) = self.solved.entries.first_mut() {
-            // Never matches: values are in [0, 1].
-            e.values.clear();
-            e.values.push(f64::NAN);
-        }
+        self.solved.forget();
     }
 
     /// Finite-horizon solves `decide` has actually run (the rest came from the memo).

@@ -5,7 +5,9 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
 mod events;
+mod resources;
 pub use events::{CommandOutcome, Event, LinkEvent, MAX_LINK_EVENTS, coalesce_link_events};
+pub use resources::{Degraded, Dropped};
 
 /// Version of the decision-log schema, written in each log's header.
 pub const SCHEMA_VERSION: u32 = 1;
@@ -79,10 +81,11 @@ pub struct ResourcesRecord {
     pub tiles_used: u8,
     /// Tile reconfigurations this cycle.
     pub reconfigurations: u32,
-    /// Human-readable: "tracking V3 -> V1: insufficient resources (cpu 1.12 > 1.00)".
-    pub degraded: Vec<String>,
-    /// Applications dropped for lack of resources.
-    pub dropped: Vec<String>,
+    /// Variants placed in a lower version; written as
+    /// "tracking V3 -> V1: insufficient resources (cpu 1.12 > 1.00)".
+    pub degraded: Vec<Degraded>,
+    /// Applications dropped for lack of resources; written as "tracking V3: REASON".
+    pub dropped: Vec<Dropped>,
     /// The paper's Resources column: "10 + 5 + 394 ms".
     pub summary: String,
     /// Resource policy that resolved conflicts (`safety`, `mission`).
@@ -329,7 +332,7 @@ mod tests {
                     tiles: vec![1, 2],
                     ..Default::default()
                 }],
-                degraded: vec![format!("d{x}")],
+                degraded: vec![Degraded::from(format!("d{x}").as_str())],
                 ..Default::default()
             }),
             guarantee: Some(GuaranteeRecord {

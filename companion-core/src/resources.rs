@@ -4,7 +4,7 @@
 //! BN its observations (`free_tiles`, `cpu_load`). Format: docs/params/platform.md.
 
 use crate::observations::Observations;
-use crate::record::{PlacementRecord, ResourcesRecord};
+use crate::record::{Degraded, Dropped, PlacementRecord, ResourcesRecord};
 use crate::spec::{ParamsFiles, SpecError, read_toml};
 use fpga_model::{
     Catalogue, Platform, PlatformState, PoliciesFile, Request, ResourcePolicy, Schedule,
@@ -181,12 +181,21 @@ pub fn to_record(schedule: &Schedule) -> ResourcesRecord {
         degraded: schedule
             .degraded
             .iter()
-            .map(|d| format!("{} {} -> {}: {}", d.app, d.from, d.to, d.reason))
+            .map(|d| Degraded {
+                app: d.app.clone(),
+                from: d.from.clone(),
+                to: d.to.clone(),
+                reason: d.reason.clone(),
+            })
             .collect(),
         dropped: schedule
             .dropped
             .iter()
-            .map(|d| format!("{} {}: {}", d.app, d.version, d.reason))
+            .map(|d| Dropped {
+                app: d.app.clone(),
+                version: d.version.clone(),
+                reason: d.reason.clone(),
+            })
             .collect(),
         summary: schedule.summary.clone(),
         policy: schedule.policy.clone(),
@@ -233,11 +242,16 @@ pub fn to_record_into(schedule: &Schedule, rec: &mut ResourcesRecord) {
     rec.cpu_load = schedule.cpu_load;
     rec.tiles_used = schedule.tiles_used;
     rec.reconfigurations = schedule.reconfigurations;
-    fill_lines(&mut rec.degraded, &schedule.degraded, |s, d| {
-        write!(s, "{} {} -> {}: {}", d.app, d.from, d.to, d.reason)
+    fill(&mut rec.degraded, &schedule.degraded, |r, d| {
+        set(&mut r.app, &d.app);
+        set(&mut r.from, &d.from);
+        set(&mut r.to, &d.to);
+        set(&mut r.reason, &d.reason);
     });
-    fill_lines(&mut rec.dropped, &schedule.dropped, |s, d| {
-        write!(s, "{} {}: {}", d.app, d.version, d.reason)
+    fill(&mut rec.dropped, &schedule.dropped, |r, d| {
+        set(&mut r.app, &d.app);
+        set(&mut r.version, &d.version);
+        set(&mut r.reason, &d.reason);
     });
     set(&mut rec.summary, &schedule.summary);
     set(&mut rec.policy, &schedule.policy);
@@ -247,19 +261,14 @@ pub fn to_record_into(schedule: &Schedule, rec: &mut ResourcesRecord) {
     rec.power_w = schedule.power_w;
 }
 
-/// `lines = items.map(write)`, reusing the strings already in `lines`.
-fn fill_lines<T>(
-    lines: &mut Vec<String>,
-    items: &[T],
-    write: impl Fn(&mut String, &T) -> std::fmt::Result,
-) {
-    lines.truncate(items.len());
+/// `out = items.map(copy)`, reusing the entries (and their strings) already in `out`.
+fn fill<R: Default, T>(out: &mut Vec<R>, items: &[T], copy: impl Fn(&mut R, &T)) {
+    out.truncate(items.len());
     for (i, x) in items.iter().enumerate() {
-        if i == lines.len() {
-            lines.push(String::new());
+        if i == out.len() {
+            out.push(R::default());
         }
-        lines[i].clear();
-        let _ = write(&mut lines[i], x);
+        copy(&mut out[i], x);
     }
 }
 
@@ -533,11 +542,12 @@ mod tests {
         assert_eq!(rec.summary, "5 + 7 ms");
         assert!(rec.degraded.is_empty(), "{:?}", rec.degraded);
         assert_eq!(rec.dropped.len(), 1);
+        let d = &rec.dropped[0];
+        assert_eq!((d.app.as_str(), d.version.as_str()), ("tracking", "V3"), "{d}");
         assert!(
-            rec.dropped[0].starts_with("tracking V3: insufficient resources")
-                && rec.dropped[0].contains("policy safety ranks tracking 5 of 5"),
-            "{}",
-            rec.dropped[0]
+            d.reason.starts_with("insufficient resources")
+                && d.reason.contains("policy safety ranks tracking 5 of 5"),
+            "{d}"
         );
         assert_eq!(
             (rec.tiles_used, rec.free_tiles, rec.failed_tiles.clone()),

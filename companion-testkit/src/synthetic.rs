@@ -138,9 +138,12 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
         }
         _ if degraded => {
             if first_degraded {
-                res_degraded.push(
-                    "tracking V3 -> V1: insufficient resources (cpu 1.12 > 1.00)".to_string(),
-                );
+                res_degraded.push(Degraded {
+                    app: "tracking".into(),
+                    from: "V3".into(),
+                    to: "V1".into(),
+                    reason: "insufficient resources (cpu 1.12 > 1.00)".into(),
+                });
             }
             (
                 s(&[

@@ -26,6 +26,7 @@ pub mod decision_log;
 pub mod export;
 pub mod fly;
 pub mod params;
+pub mod params_files;
 pub mod replay;
 pub mod review;
 pub mod signing_setup;

@@ -2,10 +2,12 @@
 //! `fly` all start with [`Params::load`], so what one accepts the others accept, and a file that
 //! stops `fly` also fails `check` with the same file, entry and reason (docs/params.md).
 
+// The file helpers, under the paths callers have always used (`params::read_params_dir`, ...).
+pub use crate::params_files::{add_file, default_params_dir, read_params_dir, regular_file};
 use crate::sim::WorldSpec;
 use companion_core::decision::Model;
 use companion_core::mission::ActionKind;
-use companion_core::spec::{MAX_FILE_BYTES, ParamsFiles, SpecError};
+use companion_core::spec::{ParamsFiles, SpecError};
 use companion_link::actions::{ActionTable, LinkParams, Route};
 use std::path::{Path, PathBuf};
 
@@ -192,90 +194,7 @@ pub fn load_fly_files(
     Ok((link, commands, route, route_file))
 }
 
-/// Deepest directory level read below the params directory (the shipped tree is two deep).
-const MAX_DEPTH: usize = 4;
-/// Most files read from a params directory (the shipped tree has about 30).
-const MAX_FILES: usize = 1000;
-
-/// Read every `.toml` file below `dir` into a [`ParamsFiles`] for the core to compile. A file
-/// that cannot be read (not a regular file, too large, not UTF-8) is kept with its reason and
-/// fails the load only if a loader needs it; an unlistable `dir` fails here.
-pub fn read_params_dir(dir: &Path) -> Result<ParamsFiles, SpecError> {
-    let mut files = ParamsFiles::new(dir);
-    let mut pending = vec![(dir.to_path_buf(), 0usize)];
-    let mut n = 0usize;
-    while let Some((d, depth)) = pending.pop() {
-        let entries = std::fs::read_dir(&d)
-            .map_err(|e| SpecError::new(&d, "-", format!("cannot list: {e}")))?;
-        let mut paths: Vec<PathBuf> = entries.filter_map(|e| e.ok().map(|e| e.path())).collect();
-        paths.sort();
-        for p in paths {
-            if p.is_dir() {
-                if depth < MAX_DEPTH {
-                    pending.push((p, depth + 1));
-                }
-            } else if p.extension().is_some_and(|x| x == "toml") {
-                n += 1;
-                if n > MAX_FILES {
-                    return Err(SpecError::new(
-                        dir,
-                        "-",
-                        format!("more than {MAX_FILES} params files"),
-                    ));
-                }
-                add_file(&mut files, &p);
-            }
-        }
-    }
-    Ok(files)
-}
-
-/// Add the file at `path` to `files` as read now (or as unreadable, with the reason).
-pub fn add_file(files: &mut ParamsFiles, path: &Path) {
-    if let Err(reason) = regular_file(path) {
-        files.insert_unreadable(path, reason);
-        return;
-    }
-    match std::fs::metadata(path) {
-        Ok(m) if m.len() > MAX_FILE_BYTES as u64 => files.insert_unreadable(
-            path,
-            format!(
-                "{} bytes: a params file is at most {MAX_FILE_BYTES} bytes",
-                m.len()
-            ),
-        ),
-        _ => match std::fs::read(path) {
-            Ok(bytes) => files.insert_bytes(path, &bytes),
-            Err(e) => files.insert_unreadable(path, format!("cannot read: {e}")),
-        },
-    }
-}
-
 /// The model alone from a params directory (tests, tools).
 pub fn load_model(dir: &Path) -> Result<Model, SpecError> {
     Model::load(&read_params_dir(dir)?)
-}
-
-/// Ok when `path` is a regular file (following symlinks), else why not. Opening a FIFO or a
-/// device where a file is expected would block or read forever.
-pub fn regular_file(path: &Path) -> Result<(), String> {
-    match std::fs::metadata(path) {
-        Ok(m) if m.is_file() => Ok(()),
-        Ok(m) if m.is_dir() => Err("is a directory, not a file".into()),
-        Ok(_) => Err("is not a regular file (a FIFO, socket or device?)".into()),
-        Err(e) => Err(format!("cannot read: {e}")),
-    }
-}
-
-/// The params directory: `$COMPANION_PARAMS`, else `params/` next to the workspace root this
-/// binary was built from, else `./params`.
-pub fn default_params_dir() -> PathBuf {
-    if let Ok(p) = std::env::var("COMPANION_PARAMS") {
-        return PathBuf::from(p);
-    }
-    let built = Path::new(env!("CARGO_MANIFEST_DIR")).join("../params");
-    if built.is_dir() {
-        return built;
-    }
-    PathBuf::from("params")
 }

@@ -214,7 +214,7 @@ impl Scenario {
             read_toml(files, &file)?
         } else {
             let mut one = ParamsFiles::new(files.dir());
-            crate::params::add_file(&mut one, &file);
+            crate::params_files::add_file(&mut one, &file);
             read_toml(&one, &file)?
         };
         // Every step's record is kept for the run's log: bounded as `simulate --steps` is.

@@ -50,13 +50,20 @@ fn main() {
             1 => usize::MAX,
             _ => 0,
         });
+        // Only a split case runs in a pool of its own: the others time on this thread, as
+        // before the split existed (a pool's idle workers would share the cores with it).
         #[cfg(feature = "parallel")]
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .expect("thread pool");
+        let pool = (threads >= 2).then(|| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .expect("thread pool")
+        });
         #[cfg(feature = "parallel")]
-        let in_pool = |f: &mut (dyn FnMut() + Send)| pool.install(f);
+        let in_pool = |f: &mut (dyn FnMut() + Send)| match &pool {
+            Some(p) => p.install(f),
+            None => f(),
+        };
         #[cfg(not(feature = "parallel"))]
         let in_pool = |f: &mut (dyn FnMut() + Send)| f();
         // One solve untimed: sizes the workspace (the warm state the companion runs in) and

@@ -271,6 +271,7 @@ fn compile(
         }
     }
     let values = vec![0.0; vars.len()];
+    let n_vars = vars.len();
     let mut by_name: Vec<usize> = (0..vars.len()).collect();
     by_name.sort_by(|&a, &b| vars[a].cmp(&vars[b]));
     Ok(MissionMdp {
@@ -289,10 +290,7 @@ fn compile(
         enter_reward: rewards.enter,
         enter_value: vec![0.0; f.states.len()],
         mdp,
-        solved: Solved {
-            enabled: true,
-            ..Solved::default()
-        },
+        solved: Solved::new(f.states.len(), n_vars),
     })
 }
 

@@ -1044,7 +1044,7 @@ mod fast_cycle {
                 );
                 assert_eq!(
                     m.solves(),
-                    4.min(round * 4 + k + 1) as u64,
+                    4.min(round * 4 + k + 1),
                     "round {round} point {k}"
                 );
             }

@@ -222,6 +222,17 @@ impl From<&str> for CommandOutcome {
 
 string_serde!(CommandOutcome);
 
+/// Whether `MDP: ERROR` is an MDP's instantiate or solve error (the sentences of
+/// `mission_mdp::InstantiateError`), not free text that happens to hold a colon.
+fn is_mdp_error(mdp: &str, error: &str) -> bool {
+    let word = !mdp.is_empty() && !mdp.contains(char::is_whitespace);
+    let known = (error.starts_with("probability ")
+        && (error.ends_with(" not provided") || error.ends_with(" not in [0, 1]")))
+        || (error.starts_with("unknown policy '") && error.ends_with('\''))
+        || error.starts_with("mdp '");
+    word && known
+}
+
 /// The sentence of [`Event::NewFlight`].
 const NEW_FLIGHT: &str = "flight over: landed and disarmed; waiting for the operator";
 
@@ -281,6 +292,14 @@ pub enum Event {
         /// Mission state the MDP has no local state for.
         state: String,
     },
+    /// `MDP: ERROR`: an MDP could not be instantiated or solved this cycle (a probability it
+    /// reads missing or out of [0, 1], a policy it has no rewards for, an invalid model).
+    MdpError {
+        /// MDP name from params.
+        mdp: String,
+        /// What went wrong (the error's sentence).
+        error: String,
+    },
     /// `re-allocation: REASON`: PANORAMA re-allocated the remaining activities.
     Reallocation(String),
     /// `guarantee: no allocation meets the goals`
@@ -332,6 +351,10 @@ impl Clone for Event {
             MdpStateUnknown { mdp, state } => MdpStateUnknown {
                 mdp: mdp.clone(),
                 state: state.clone(),
+            },
+            MdpError { mdp, error } => MdpError {
+                mdp: mdp.clone(),
+                error: error.clone(),
             },
             Reallocation(r) => Reallocation(r.clone()),
             GuaranteeInfeasible => GuaranteeInfeasible,
@@ -405,6 +428,7 @@ impl fmt::Display for Event {
             MdpStateUnknown { mdp, state } => {
                 write!(f, "{mdp}: state `{state}` unknown to this MDP")
             }
+            MdpError { mdp, error } => write!(f, "{mdp}: {error}"),
             Reallocation(r) => write!(f, "re-allocation: {r}"),
             GuaranteeInfeasible => f.write_str("guarantee: no allocation meets the goals"),
             ShellLand(why) => write!(f, "{why}: land"),
@@ -480,6 +504,14 @@ impl Event {
                 }
                 if let Some(why) = s.strip_suffix(": land") {
                     return Some(ShellLand(why.to_string()));
+                }
+                if let Some((mdp, error)) = s.split_once(": ")
+                    && is_mdp_error(mdp, error)
+                {
+                    return Some(MdpError {
+                        mdp: mdp.to_string(),
+                        error: error.to_string(),
+                    });
                 }
                 let (mdp, rest) = s.split_once(": state `")?;
                 let state = rest.strip_suffix("` unknown to this MDP")?;
@@ -828,6 +860,8 @@ mod tests {
             text().prop_map(ArbitrationError),
             text().prop_map(ResourcesError),
             (word(), "[a-z0-9_]{1,10}").prop_map(|(mdp, state)| MdpStateUnknown { mdp, state }),
+            (word(), "probability P_[A-Za-z0-9]{1,6} not provided")
+                .prop_map(|(mdp, error)| MdpError { mdp, error }),
             text().prop_map(Reallocation),
             "mission: [a-z ]{1,20}".prop_map(ShellLand),
             word().prop_map(LandingKept),
@@ -947,6 +981,32 @@ mod tests {
             (
                 "guarantee: no allocation meets the goals",
                 Event::GuaranteeInfeasible,
+            ),
+            (
+                "tracking: probability P_V3 not provided",
+                Event::MdpError {
+                    mdp: "tracking".into(),
+                    error: "probability P_V3 not provided".into(),
+                },
+            ),
+            (
+                "landing: probability P_appZ = 1.5 not in [0, 1]",
+                Event::MdpError {
+                    mdp: "landing".into(),
+                    error: "probability P_appZ = 1.5 not in [0, 1]".into(),
+                },
+            ),
+            (
+                "navigation: unknown policy 'fast'",
+                Event::MdpError {
+                    mdp: "navigation".into(),
+                    error: "unknown policy 'fast'".into(),
+                },
+            ),
+            // Free text with a colon stays free text.
+            (
+                "operator: probability of rain high",
+                Event::Other("operator: probability of rain high".into()),
             ),
             (
                 "mission: search time 120 s over, target not found: land",

@@ -187,13 +187,17 @@ fn why_html(w: &Why) -> String {
         );
     }
     for d in &w.degraded {
-        let _ = write!(o, r#"<li class="degraded">degraded: {}</li>"#, esc(d));
+        let _ = write!(
+            o,
+            r#"<li class="degraded">degraded: {}</li>"#,
+            esc(&d.to_string())
+        );
     }
     for d in &w.dropped {
         let _ = write!(
             o,
             r#"<li class="degraded">dropped for resources: {}</li>"#,
-            esc(d)
+            esc(&d.to_string())
         );
     }
     if let Some(g) = &w.guarantee {

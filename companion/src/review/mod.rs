@@ -487,8 +487,38 @@ impl Review {
     }
 
     fn finalize(&mut self, r: DecisionRecord, inputs: &[Option<serde_json::Value>]) {
+        let armed = self.count(&r);
+        self.count_commands(&r);
+        let marks = self.marks(&r);
+        let (started, n_texts) = self.spans(&r);
+        let res = r.resources.as_ref().map(|x| x.summary.clone());
+        self.phase(&r, res.as_ref(), &started, &marks);
+        self.plot(&r, &marks);
+        self.outcome_inputs(&r, armed);
+        // Rows and why.
+        if self.asked_cycle == Some(r.cycle) && self.asked_why.is_none() {
+            self.asked_why = Some(Why::of(&r, inputs));
+        }
+        if self.rows.len() < MAX_ROWS {
+            self.rows.push(Row {
+                cycle: r.cycle,
+                time_s: r.time_s,
+                state: r.state.clone(),
+                actions: r.actions.clone(),
+                events: started,
+                event_count: n_texts,
+                resources: res,
+                marks,
+                why: Why::of(&r, inputs),
+            });
+        } else {
+            self.rows_omitted += 1;
+        }
+    }
+
+    /// The summary's counts, the flight's bounds, home and final margins; the record's `armed`.
+    fn count(&mut self, r: &DecisionRecord) -> Option<bool> {
         let s = &mut self.summary;
-        let index = s.records;
         s.records += 1;
         s.first_cycle.get_or_insert(r.cycle);
         s.last_cycle = Some(r.cycle);
@@ -499,7 +529,7 @@ impl Review {
             self.first_time = Some(r.time_s);
         }
         self.last_time = r.time_s;
-        self.tracking.push(&r);
+        self.tracking.push(r);
         s.conflicts += r.conflicts.len();
         if let Some(res) = &r.resources {
             s.degradations += res.degraded.len();
@@ -514,13 +544,13 @@ impl Review {
             self.ever_armed = true;
         }
         if !self.ever_armed
-            && let Some(p) = position(&r)
+            && let Some(p) = position(r)
         {
             // The newest position on the ground before the first arming.
             self.home = Some(p);
         }
         if self.home.is_none() {
-            self.home = position(&r);
+            self.home = position(r);
         }
         self.prev_armed = armed.or(self.prev_armed);
         if r.guarantee
@@ -544,6 +574,11 @@ impl Review {
                 })
                 .collect();
         }
+        armed
+    }
+
+    /// The commands' outcomes and rows.
+    fn count_commands(&mut self, r: &DecisionRecord) {
         for c in &r.commands {
             let cat = categorize(&c.result);
             // "In progress" is what is still unresolved at the end of the log: a step sent and
@@ -553,11 +588,11 @@ impl Review {
                 *self.open_in_progress.entry(key).or_default() += 1;
             } else {
                 self.open_in_progress.remove(&key);
-                s.outcomes.add(cat);
+                self.summary.outcomes.add(cat);
             }
-            s.commands += 1;
+            self.summary.commands += 1;
             if cat == Category::Failed {
-                s.failed_commands += 1;
+                self.summary.failed_commands += 1;
             }
             if self.commands.len() < MAX_COMMANDS {
                 self.commands.push(CommandRow {
@@ -570,19 +605,23 @@ impl Review {
                 self.commands_omitted += 1;
             }
         }
-        s.link_events += r.link_events.len();
+        self.summary.link_events += r.link_events.len();
+    }
 
+    /// The record's marks: losses, mode changes, failsafes, link events, degradations,
+    /// re-allocations.
+    fn marks(&mut self, r: &DecisionRecord) -> Vec<Mark> {
         // Marks.
         let mut marks = Vec::new();
         if self.pending_loss.0 > 0 {
             marks.push(Mark::Loss(self.pending_loss.0, self.pending_loss.1));
             self.pending_loss.0 = 0;
         }
-        let m = mode(&r);
+        let m = mode(r);
         if let (Some(now), Some(before)) = (&m, &self.prev_mode)
             && now != before
         {
-            s.mode_changes += 1;
+            self.summary.mode_changes += 1;
             marks.push(Mark::Mode(format!("mode {before} → {now}")));
         }
         if m.is_some() {
@@ -601,12 +640,18 @@ impl Review {
             }
         }
         if let Some(res) = &r.resources {
-            marks.extend(res.degraded.iter().cloned().map(Mark::Degraded));
+            marks.extend(res.degraded.iter().map(|d| Mark::Degraded(d.to_string())));
         }
         if let Some(re) = r.guarantee.as_ref().and_then(|g| g.reallocation.as_ref()) {
             marks.push(Mark::Reallocated(re.reason.clone()));
         }
 
+        marks
+    }
+
+    /// The event spans the record extends or starts; the spans started and the number of
+    /// distinct sentences.
+    fn spans(&mut self, r: &DecisionRecord) -> (Vec<usize>, usize) {
         // Event spans: a sentence also present in the previous cycle extends its span.
         let consecutive = self
             .prev_cycle
@@ -651,8 +696,18 @@ impl Review {
         self.open_spans = still_open;
         self.prev_cycle = Some(r.cycle);
 
+        (started, texts.len())
+    }
+
+    /// The phase (state and actions) the record extends or starts.
+    fn phase(
+        &mut self,
+        r: &DecisionRecord,
+        res: Option<&String>,
+        started: &[usize],
+        marks: &[Mark],
+    ) {
         // Phases.
-        let res = r.resources.as_ref().map(|x| x.summary.clone());
         let same = self
             .phases
             .last()
@@ -681,20 +736,23 @@ impl Review {
             p.last_cycle = r.cycle;
             p.records += 1;
             p.events.extend(started.iter().copied());
-            if let Some(x) = &res
+            if let Some(x) = res
                 && !x.is_empty()
                 && !p.resources.contains(x)
                 && p.resources.len() < 16
             {
                 p.resources.push(x.clone());
             }
-            for m in &marks {
+            for m in marks {
                 if p.marks.len() < 64 && !p.marks.contains(m) {
                     p.marks.push(m.clone());
                 }
             }
         }
+    }
 
+    /// The plotted series.
+    fn plot(&mut self, r: &DecisionRecord, marks: &[Mark]) {
         // Plots.
         let t = r.time_s;
         for (name, p) in &r.probabilities {
@@ -723,21 +781,24 @@ impl Review {
             self.plots.cpu_load.push(t, x.cpu_load);
             self.plots.tiles_used.push(t, f64::from(x.tiles_used));
         }
-        if let Some(a) = vehicle_f64(&r, "altitude_m") {
+        if let Some(a) = vehicle_f64(r, "altitude_m") {
             self.plots.altitude.push(t, a);
         }
-        if let Some(b) = vehicle_f64(&r, "battery_pct") {
+        if let Some(b) = vehicle_f64(r, "battery_pct") {
             self.plots.battery.push(t, b);
         }
-        if let Some((lon, lat)) = position(&r) {
+        if let Some((lon, lat)) = position(r) {
             self.plots.track.push(lon, lat);
         }
-        for m in &marks {
+        for m in marks {
             if self.plots.marks.len() < MAX_MARKS {
                 self.plots.marks.push((t, m.clone()));
             }
         }
+    }
 
+    /// What the outcome is judged from: a crash, and the last record.
+    fn outcome_inputs(&mut self, r: &DecisionRecord, armed: Option<bool>) {
         // Outcome inputs.
         if self.crash.is_none() && (r.state == "crash" || r.state == "collision") {
             self.crash = Some((r.state.clone(), r.cycle));
@@ -753,37 +814,16 @@ impl Review {
                 || roles.any(&r.actions, ActionRole::Land)
                 || roles.any(&r.actions, ActionRole::ReplanAndLand),
             returning: roles.any(&r.actions, ActionRole::ReturnToBase),
-            altitude: vehicle_f64(&r, "altitude_m"),
+            altitude: vehicle_f64(r, "altitude_m"),
             armed,
-            mode: mode(&r),
+            mode: mode(r),
             operator: r
                 .vehicle
                 .get("operator")
                 .and_then(|v| v.as_str())
                 .map(str::to_string),
-            position: position(&r),
+            position: position(r),
         });
-
-        // Rows and why.
-        if self.asked_cycle == Some(r.cycle) && self.asked_why.is_none() {
-            self.asked_why = Some(Why::of(&r, inputs));
-        }
-        if self.rows.len() < MAX_ROWS {
-            self.rows.push(Row {
-                cycle: r.cycle,
-                time_s: r.time_s,
-                state: r.state.clone(),
-                actions: r.actions.clone(),
-                events: started,
-                event_count: texts.len(),
-                resources: res,
-                marks,
-                why: Why::of(&r, inputs),
-            });
-        } else {
-            self.rows_omitted += 1;
-        }
-        let _ = index;
     }
 
     /// Close the stream: judge the last record and word the outcome.

@@ -2,7 +2,7 @@
 //! conflicts arose and what gave way, what the resources dropped or degraded, and the PANORAMA
 //! margins. Bounded per cycle so a hostile record cannot make the report grow without end.
 
-use companion_core::record::DecisionRecord;
+use companion_core::record::{DecisionRecord, Degraded, Dropped};
 
 const MAX_PROPOSALS: usize = 32;
 const MAX_INPUTS: usize = 48;
@@ -54,8 +54,8 @@ pub struct Why {
     /// The cycle's named probabilities (what every proposal could read).
     pub probabilities: Vec<(String, f64)>,
     pub conflicts: Vec<ConflictWhy>,
-    pub degraded: Vec<String>,
-    pub dropped: Vec<String>,
+    pub degraded: Vec<Degraded>,
+    pub dropped: Vec<Dropped>,
     pub guarantee: Option<GuaranteeWhy>,
     /// Entries left out by the bounds above.
     pub omitted: usize,
