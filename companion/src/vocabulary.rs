@@ -19,6 +19,11 @@ use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
+
+/// The observations the fly shell derives and adds to the telemetry's
+/// (`fly::cycle::complete_observations`): here, with the rest of the vocabulary, so the shell
+/// reads the list and the vocabulary check imports nothing of the shell.
+pub const DERIVED_OBSERVATIONS: [&str; 2] = ["drone_speed_mps", "waypoints_remaining"];
 /// One producer or consumer of an observation.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Serialize)]
 pub struct Role {
@@ -144,7 +149,7 @@ fn producers(p: &Params, scenarios: &[(PathBuf, Scenario)]) -> BTreeMap<String, 
     for (nvf, o) in &p.link.telemetry.onboard {
         add(o, role("fly_onboard", nvf));
     }
-    for o in crate::fly::DERIVED_OBSERVATIONS {
+    for o in DERIVED_OBSERVATIONS {
         add(o, role("fly", "derived"));
     }
     for o in CORE_COMPUTES {

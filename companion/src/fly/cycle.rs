@@ -275,9 +275,6 @@ pub fn finish_record(
     rec
 }
 
-/// The observations [`complete_observations`] adds to the telemetry's (fly's side of the
-/// observation vocabulary checked at load, companion/src/vocabulary.rs).
-pub const DERIVED_OBSERVATIONS: [&str; 2] = ["drone_speed_mps", "waypoints_remaining"];
 
 /// Observations the health BNs read under names the telemetry does not produce directly.
 fn complete_observations(obs: &mut Observations, mission: &MissionState) {

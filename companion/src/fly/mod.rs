@@ -7,10 +7,17 @@
 //! the message that triggered the cycle to the command handed to the transport) and the results
 //! of earlier commands that finished since.
 //!
-//! The operator decides when to fly ([`companion_link::operator`]): until the pilot arms or a ground
-//! station sends the start command, cycles decide and log but command no motion; a pilot's mode
-//! change stops the commanding until control is handed back. After a flight ends landed and
-//! disarmed, `fly` waits for the operator again (`--once` exits instead).
+//! The operator decides when to fly ([`companion_link::operator`], [`gate`]): until a ground
+//! station sends the start command (or the pilot switches to GUIDED, or arms with
+//! `--start-on-arm`) and the models agree, cycles decide and log but command no motion; a
+//! pilot's mode change stops the commanding until control is handed back. After a flight ends
+//! landed and disarmed, `fly` waits for the operator again (`--once` exits instead). Stopped in
+//! flight, it hands the vehicle to the autopilot.
+//!
+//! Files: `args` (the command line), `setup` (params loaded before any socket), `run_loop` (the
+//! loop, one method per event source, and the stop), `cycle` (one decision cycle), `shell` (what
+//! is kept between cycles), `gate` (the operator gate's shell side), `words` (texts for the
+//! ground station), `link_security` (signing warnings), `transport` (bytes in and out).
 
 mod args;
 mod cycle;
@@ -23,7 +30,8 @@ pub mod transport;
 pub mod words;
 
 pub use args::FlyArgs;
-pub use cycle::{DERIVED_OBSERVATIONS, Decided, decide, finish_record};
+pub use cycle::{Decided, decide, finish_record};
+pub use crate::vocabulary::DERIVED_OBSERVATIONS;
 pub use setup::FlySetup;
 pub use shell::Shell;
 
