@@ -543,7 +543,11 @@ mod tests {
         assert!(rec.degraded.is_empty(), "{:?}", rec.degraded);
         assert_eq!(rec.dropped.len(), 1);
         let d = &rec.dropped[0];
-        assert_eq!((d.app.as_str(), d.version.as_str()), ("tracking", "V3"), "{d}");
+        assert_eq!(
+            (d.app.as_str(), d.version.as_str()),
+            ("tracking", "V3"),
+            "{d}"
+        );
         assert!(
             d.reason.starts_with("insufficient resources")
                 && d.reason.contains("policy safety ranks tracking 5 of 5"),

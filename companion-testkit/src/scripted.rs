@@ -66,11 +66,7 @@ impl ScriptedDecider {
 impl Decider for ScriptedDecider {
     /// The script agrees to a start when it proposes to take off (it has no guarantee).
     fn launch_verdict(&self, rec: &DecisionRecord) -> Result<(), LaunchRefusal> {
-        if rec
-            .actions
-            .iter()
-            .any(|a| a == "take_off")
-        {
+        if rec.actions.iter().any(|a| a == "take_off") {
             Ok(())
         } else {
             Err(LaunchRefusal::NoTakeOff {
@@ -201,5 +197,4 @@ mod tests {
             "return_to_base"
         );
     }
-
 }

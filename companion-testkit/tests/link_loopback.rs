@@ -4,10 +4,10 @@
 //! once the vehicle is airborne to check reconnect + stream re-request without command replay.
 
 use companion::fly::{FlyArgs, run_with};
-use companion_testkit::scripted::ScriptedDecider;
 use companion_core::record::DecisionRecord;
 use companion_core::record::{Event, LinkEvent};
 use companion_link::dialect::*;
+use companion_testkit::scripted::ScriptedDecider;
 use mavlink::{AsyncMavlinkReader, MavHeader};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;

@@ -3,10 +3,10 @@
 //! named with `--autopilot-sysid`, and a TCP link that only reconnects is declared lost.
 
 use companion::fly::{FlyArgs, run_with};
-use companion_testkit::scripted::ScriptedDecider;
 use companion_core::record::DecisionRecord;
 use companion_core::record::{Event, LinkEvent};
 use companion_link::dialect::*;
+use companion_testkit::scripted::ScriptedDecider;
 use mavlink::{MavHeader, MavlinkReader};
 use std::net::SocketAddr;
 use std::time::Duration;

@@ -19,7 +19,6 @@ use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-
 /// The observations the fly shell derives and adds to the telemetry's
 /// (`fly::cycle::complete_observations`): here, with the rest of the vocabulary, so the shell
 /// reads the list and the vocabulary check imports nothing of the shell.

@@ -275,7 +275,6 @@ pub fn finish_record(
     rec
 }
 
-
 /// Observations the health BNs read under names the telemetry does not produce directly.
 fn complete_observations(obs: &mut Observations, mission: &MissionState) {
     if let Some(v) = obs.get("groundspeed_mps") {
@@ -318,5 +317,4 @@ mod tests {
         coalesce_events(&mut few);
         assert_eq!(few, ["a", "b"]);
     }
-
 }

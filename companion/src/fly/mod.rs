@@ -29,9 +29,9 @@ mod shell;
 pub mod transport;
 pub mod words;
 
+pub use crate::vocabulary::DERIVED_OBSERVATIONS;
 pub use args::FlyArgs;
 pub use cycle::{Decided, decide, finish_record};
-pub use crate::vocabulary::DERIVED_OBSERVATIONS;
 pub use setup::FlySetup;
 pub use shell::Shell;
 
@@ -251,7 +251,6 @@ mod tests {
         let back: DecisionRecord = serde_json::from_str(lines[1]).unwrap();
         assert_eq!(back.cycle, 2);
     }
-
 
     #[test]
     fn policy_values_are_the_names_params_declare() {

@@ -130,7 +130,11 @@ impl Shell {
     /// the vehicle action flown this cycle (the shell's landing included), so a landing the
     /// shell keeps is told as a landing. None when neither the motion nor the tracking version
     /// changed: one text per change, never one per cycle.
-    pub(super) fn behaviour_text(&mut self, rec: &DecisionRecord, flown: Option<&str>) -> Option<String> {
+    pub(super) fn behaviour_text(
+        &mut self,
+        rec: &DecisionRecord,
+        flown: Option<&str>,
+    ) -> Option<String> {
         let now = words::Behaviour {
             motion: flown.map(str::to_string),
             tracking: self
@@ -317,5 +321,4 @@ mod tests {
         );
         assert!(shell.guarantee_change(&rec(true, -10.0)).is_some());
     }
-
 }
