@@ -5,6 +5,7 @@
 use super::shell::Shell;
 use super::{Decider, FlyReport, NOTICE, RecordSink, Tlog, WARNING, send};
 use anyhow::Context;
+use companion_core::action_role::ActionRole;
 use companion_core::observations::Observations;
 use companion_core::record::{CommandOutcome, DecisionRecord, Event, LinkEvent, Plan};
 use companion_link::Msg;
@@ -101,9 +102,15 @@ pub fn decide<D: Decider>(
     if let Some(why) = shell.mission.mission_end(&obs) {
         // The mission's end, not the core's decision: recorded as an event with the action.
         shell_events.push(Event::ShellLand(why.to_string()));
-        rec.shell_actions.push("land".into());
-        shell.mission.after_plan(&["land".to_string()]);
-        chosen = Some("land".into());
+        let land = shell
+            .mission
+            .states()
+            .actions()
+            .action(ActionRole::Land)
+            .to_string();
+        rec.shell_actions.push(land.clone());
+        shell.mission.after_plan(std::slice::from_ref(&land));
+        chosen = Some(land);
     }
     // The landing phase: the MDPs see `landing` as terminal and plan nothing there, so the shell
     // keeps flying the landing chosen until the vehicle is down, resuming it after an avoidance
@@ -111,9 +118,14 @@ pub fn decide<D: Decider>(
     if shell.operator.commanding()
         && let Some(landing) = shell.mission.landing_action().map(str::to_string)
     {
-        let keep = chosen
-            .as_deref()
-            .is_some_and(|a| a == "avoid_obstacle" || shell.mission.is_landing_action(a));
+        let keep = chosen.as_deref().is_some_and(|a| {
+            shell
+                .mission
+                .states()
+                .actions()
+                .is(a, ActionRole::AvoidObstacle)
+                || shell.mission.is_landing_action(a)
+        });
         if !keep {
             if !vehicle.settled(&landing) {
                 shell_events.push(Event::LandingKept(landing.clone()));

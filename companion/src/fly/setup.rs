@@ -48,9 +48,13 @@ impl FlySetup {
             }
             None => None,
         };
+        let states = companion_core::mission::MissionStates::load(files)?;
+        let take_off = states
+            .actions()
+            .action(companion_core::action_role::ActionRole::TakeOff);
         let takeoff_alt_m = actions
             .actions
-            .get("take_off")
+            .get(take_off)
             .and_then(|steps| {
                 steps.iter().find_map(|st| match st {
                     companion_link::actions::Step::Command { command, params }
@@ -63,7 +67,6 @@ impl FlySetup {
                 })
             })
             .unwrap_or(route.altitude_m);
-        let states = companion_core::mission::MissionStates::load(files)?;
         Ok(Self {
             link,
             actions,

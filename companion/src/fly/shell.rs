@@ -137,6 +137,7 @@ impl Shell {
     ) -> Option<String> {
         let now = words::Behaviour {
             motion: flown.map(str::to_string),
+            motion_role: flown.and_then(|a| self.mission.states().actions().role_of(a)),
             tracking: self
                 .mission
                 .states()

@@ -6,6 +6,7 @@
 //! evidence, the guarantee's margins and failed resources, the mission's end), never by reading
 //! its sentences back. docs/mavlink.md, "Words to the ground station".
 
+use companion_core::action_role::ActionRole;
 use companion_core::record::{DecisionRecord, Event, GuaranteeRecord};
 use companion_link::mission_state::MissionEnd;
 use std::collections::BTreeMap;
@@ -14,12 +15,13 @@ use std::collections::BTreeMap;
 /// action, None for none) and the tracking version kept (`v3`), if any.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Behaviour {
+    /// The vehicle action flown (its id, as the record names it).
     pub motion: Option<String>,
+    /// What that action does (params/actions.toml `role`): the words follow the role, so a
+    /// renamed action is told the same.
+    pub motion_role: Option<ActionRole>,
     pub tracking: Option<String>,
 }
-
-/// Motions that end the flight: their reason is what a pilot must hear.
-const ENDING: [&str; 3] = ["land", "replan_and_land", "return_to_base"];
 
 /// Below this, the `P_battery` a proposal read counts as the battery being its reason
 /// (P_battery is the health model's belief that the battery lasts the mission).
@@ -45,16 +47,16 @@ pub fn behaviour_text(
 /// What the vehicle will do, in words.
 fn doing(b: &Behaviour, rec: &DecisionRecord) -> String {
     let zone = rec.observations.get("zone_found").is_some_and(|v| *v > 0.5);
-    let motion = b.motion.as_deref().map(|m| match m {
-        "take_off" => "taking off".to_string(),
-        "follow_trajectory" => "flying the route".to_string(),
-        "avoid_obstacle" => "avoiding the obstacle".to_string(),
-        "land" if zone => "landing at the found zone".to_string(),
-        "land" => "landing here".to_string(),
-        "replan_and_land" if zone => "landing at the emergency zone".to_string(),
-        "replan_and_land" => "emergency landing here".to_string(),
-        "return_to_base" => "returning home".to_string(),
-        other => other.replace('_', " "),
+    let motion = b.motion.as_deref().map(|m| match b.motion_role {
+        Some(ActionRole::TakeOff) => "taking off".to_string(),
+        Some(ActionRole::FollowRoute) => "flying the route".to_string(),
+        Some(ActionRole::AvoidObstacle) => "avoiding the obstacle".to_string(),
+        Some(ActionRole::Land) if zone => "landing at the found zone".to_string(),
+        Some(ActionRole::Land) => "landing here".to_string(),
+        Some(ActionRole::ReplanAndLand) if zone => "landing at the emergency zone".to_string(),
+        Some(ActionRole::ReplanAndLand) => "emergency landing here".to_string(),
+        Some(ActionRole::ReturnToBase) => "returning home".to_string(),
+        _ => m.replace('_', " "),
     });
     let tracking = b
         .tracking
@@ -91,12 +93,12 @@ fn reason(
                 .to_string(),
             );
         }
-        if ENDING.contains(&m) {
+        if ends_flight(now) {
             if let Some(why) = ending_reason(m, rec) {
                 return Some(why);
             }
         }
-        if m == "avoid_obstacle"
+        if now.motion_role == Some(ActionRole::AvoidObstacle)
             && let Some(d) = rec.observations.get("obstacle_m")
         {
             return Some(format!("obstacle {d:.0} m"));
@@ -129,13 +131,19 @@ fn reason(
     }
     if motion_changed
         && let Some(m) = motion
-        && ENDING.contains(&m)
+        && ends_flight(now)
         && let Some(p) = proposer(rec, m)
     {
         // No evidence stood out: name the model that chose it.
         return Some(format!("{} model", p.mdp));
     }
     None
+}
+
+/// The motion ends the flight (land, replan and land, return to base): its reason is what a
+/// pilot must hear.
+fn ends_flight(b: &Behaviour) -> bool {
+    b.motion_role.is_some_and(ActionRole::ends_flight)
 }
 
 /// Why a flight-ending motion: a low battery the proposing model read, then the guarantee's
@@ -245,8 +253,10 @@ mod tests {
     use companion_core::record::{MdpProposal, ResourcesRecord};
 
     fn b(motion: Option<&str>, tracking: Option<&str>) -> Behaviour {
+        let roles = companion_core::action_role::ActionRoles::undeclared();
         Behaviour {
             motion: motion.map(str::to_string),
+            motion_role: motion.and_then(|m| roles.role_of(m)),
             tracking: tracking.map(str::to_string),
         }
     }
