@@ -147,6 +147,13 @@ impl Shell {
         if now == self.last_told {
             return None;
         }
+        // Nothing flown, nothing tracked, the vehicle disarmed (down after a landing, or not yet
+        // up): there is no behaviour to tell ("holding position" would be false on the ground).
+        let disarmed = rec.observations.get("armed").is_some_and(|a| *a < 0.5);
+        if now.motion.is_none() && now.tracking.is_none() && disarmed {
+            self.last_told = now;
+            return None;
+        }
         let text = words::behaviour_text(
             &now,
             &self.last_told,
@@ -258,6 +265,27 @@ mod tests {
 
     /// The landing the shell keeps flying (the MDPs plan nothing in `landing`) is told as a
     /// landing, once, not as "hold (mode LAND)" and not once a cycle.
+    #[test]
+    fn nothing_flown_on_the_ground_is_not_told_as_holding_position() {
+        let mut shell = test_shell();
+        let mut rec = DecisionRecord::default();
+        rec.observations.insert("armed".into(), 1.0);
+        assert_eq!(
+            shell.behaviour_text(&rec, Some("land")).as_deref(),
+            Some("Landing here")
+        );
+        rec.observations.insert("armed".into(), 0.0);
+        assert_eq!(shell.behaviour_text(&rec, None), None);
+        // In the air, nothing flown after a motion is holding position.
+        let mut shell = test_shell();
+        rec.observations.insert("armed".into(), 1.0);
+        assert!(shell.behaviour_text(&rec, Some("land")).is_some());
+        assert_eq!(
+            shell.behaviour_text(&rec, None).as_deref(),
+            Some("Holding position")
+        );
+    }
+
     #[test]
     fn a_kept_landing_is_told_once_as_a_landing() {
         let mut shell = test_shell();
