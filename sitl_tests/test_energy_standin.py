@@ -44,8 +44,13 @@ def test_standin_pack_capacity_and_measured_power_reach_the_record(autopilot_fac
     records = run.records()
     assert len(airborne) >= 15, "no airborne records with a measured power\n" + run.output()
 
-    with_pack = [r for r in records if guarantee(r).get("pack")]
-    assert with_pack, "no record holds the pack"
+    packed = [r for r in records if guarantee(r).get("pack")]
+    assert packed, "no record holds the pack"
+    # until the autopilot answers PARAM_REQUEST_READ the params' pack is used, and said; from its answer on, its own
+    first = next((i for i, r in enumerate(packed) if "capacity_mah" in guarantee(r)["pack"]), len(packed))
+    assert all(guarantee(r)["pack"]["capacity_source"] == "params" for r in packed[:first])
+    with_pack = packed[first:]
+    assert with_pack, "no record holds the autopilot's capacity"
     c_j = cap_mah * 3.6 * cells * CELL_NOMINAL_V
     for r in with_pack:
         p, o = guarantee(r)["pack"], r["observations"]

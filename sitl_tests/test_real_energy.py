@@ -60,8 +60,13 @@ def test_real_energy_bound_at_12_percent_is_12_percent_of_batt_capacity(arducopt
     time.sleep(3.0)
     run.proc.terminate()
     run.proc.wait(timeout=20)
-    with_pack = [r for r in run.records() if guarantee(r).get("pack")]
-    assert with_pack, "no record holds the autopilot's pack\n" + run.output()
+    packed = [r for r in run.records() if guarantee(r).get("pack")]
+    assert packed, "no record holds the autopilot's pack\n" + run.output()
+    # until the autopilot answers PARAM_REQUEST_READ the params' pack is used, and said; from its answer on, its own
+    first = next((i for i, r in enumerate(packed) if "capacity_mah" in guarantee(r)["pack"]), len(packed))
+    assert all(guarantee(r)["pack"]["capacity_source"] == "params" for r in packed[:first])
+    with_pack = packed[first:]
+    assert with_pack, "no record holds the autopilot's capacity"
     c_j = pack_energy_j(cap_mah, full_v)
     k = kept_back_fraction()
     for r in with_pack:

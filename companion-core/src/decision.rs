@@ -798,6 +798,8 @@ impl<'m> Core<'m> {
                     voltage_v: obs.get("battery_v"),
                     current_a: obs.get("battery_current_a"),
                     consumed_mah: obs.get("consumed_mah"),
+                    vehicle_time_s: obs.get("vehicle_time_s"),
+                    armed: obs.get("armed").map(|a| a > 0.5),
                 },
             },
             record,

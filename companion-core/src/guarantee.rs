@@ -178,6 +178,13 @@ pub struct PackReading {
     /// Charge consumed (BATTERY_STATUS.current_consumed, mAh), counted by the autopilot from a
     /// full pack or from its last battery reset.
     pub consumed_mah: Option<f64>,
+    /// The autopilot's clock (s, SYSTEM_TIME): an activity's time is counted on it, since the
+    /// consumed energy accrues on it (a SITL may run faster than the companion's clock).
+    pub vehicle_time_s: Option<f64>,
+    /// Whether the vehicle is armed (`None`: not known). Disarmed, nothing is flown: the
+    /// activity's power is not judged (on the ground before the take-off it draws next to
+    /// nothing, which is no drift) and its measurement starts again at the arming.
+    pub armed: Option<bool>,
 }
 
 /// Nominal voltage of a lithium-polymer cell (V): a pack's rated energy is its capacity at this
@@ -481,8 +488,17 @@ impl Guarantee {
         if measured_w.is_none() && consumed.is_none() {
             return None;
         }
-        let now = p.elapsed_s;
+        let now = p.pack.vehicle_time_s.unwrap_or(p.elapsed_s);
         let st = &mut self.power;
+        if p.pack.armed == Some(false) {
+            *st = PowerState::default();
+            return Some(PowerRecord {
+                predicted_w: self.predicted_power(at),
+                measured_w,
+                energy_scale: self.energy_scale,
+                ..Default::default()
+            });
+        }
         if st.activity.map(|a| a.0) != Some(at) {
             st.activity = Some((at, now, consumed));
             st.integrated_j = 0.0;

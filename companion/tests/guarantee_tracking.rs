@@ -599,6 +599,51 @@ fn measured_power_is_confronted_with_the_prediction_and_a_drift_rescales_the_res
         assert!(!pw.drift, "{pw:?}");
         assert_eq!(pw.energy_scale, 1.0);
     }
+    // Disarmed on the ground nothing is flown: no judgement however long it waits, and the
+    // measurement starts again at the arming.
+    let mut g = Guarantee::start(s.clone()).unwrap();
+    let idle = PackReading {
+        armed: Some(false),
+        ..drawing(0.0)
+    };
+    for t in [0.0, 30.0, 60.0] {
+        let pw = g.watch(pack_at(Some(90.0), idle, 0, t)).power.unwrap();
+        assert!(
+            !pw.drift && pw.ratio.is_none() && pw.activity_s == 0.0,
+            "{pw:?}"
+        );
+    }
+    let armed = |w: f64| PackReading {
+        armed: Some(true),
+        ..drawing(w)
+    };
+    let p0 = {
+        let ia = &s.problem.activities[0].ias[g.choice()[0]];
+        ia.cost[0] / ia.cost[1]
+    };
+    g.watch(pack_at(Some(90.0), armed(p0), 0, 61.0));
+    let pw = g
+        .watch(pack_at(Some(90.0), armed(p0), 0, 72.0))
+        .power
+        .unwrap();
+    assert_eq!(pw.activity_s, 11.0);
+    assert!(
+        (pw.ratio.unwrap() - 1.0).abs() < 1e-9 && !pw.drift,
+        "{pw:?}"
+    );
+    // The autopilot's clock counts (a SITL at speedup 3): 15 vehicle seconds in 5 companion seconds.
+    let mut g = Guarantee::start(s.clone()).unwrap();
+    let clocked = |vt: f64| PackReading {
+        vehicle_time_s: Some(vt),
+        ..drawing(p_pred)
+    };
+    g.watch(pack_at(Some(90.0), clocked(30.0), 1, 100.0));
+    let pw = g
+        .watch(pack_at(Some(90.0), clocked(45.0), 1, 105.0))
+        .power
+        .unwrap();
+    assert_eq!(pw.activity_s, 15.0);
+    assert!((pw.ratio.unwrap() - 1.0).abs() < 1e-9, "{pw:?}");
     // The autopilot's consumed energy, when it reports it, is the measured energy of the activity.
     let mut g = Guarantee::start(s.clone()).unwrap();
     let mut at = |t: f64, consumed: f64| {
