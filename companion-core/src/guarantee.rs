@@ -198,6 +198,10 @@ pub const POWER_DRIFT_TOLERANCE: f64 = 0.25;
 /// An activity's power is judged only after this long in it (s): take-off and mode changes draw
 /// short peaks that are no drift.
 pub const POWER_DRIFT_MIN_S: f64 = 10.0;
+/// The params' power model counts as this many seconds of measurement when a drift is learned:
+/// the factor is `(W x 1 + t x ratio) / (W + t)` after `t` seconds in the drifting activity, so a
+/// short transient (a climb) moves it little and a sustained drift moves it most of the way.
+pub const PRIOR_WEIGHT_S: f64 = 60.0;
 /// The factor learned from a drift is kept within these bounds.
 pub const ENERGY_SCALE_BOUNDS: (f64, f64) = (0.5, 2.0);
 
@@ -527,7 +531,9 @@ impl Guarantee {
         if drift {
             self.power.drift_said = true;
             let (lo, hi) = ENERGY_SCALE_BOUNDS;
-            self.set_energy_scale(at, ratio.unwrap_or(1.0).clamp(lo, hi));
+            let r = ratio.unwrap_or(1.0);
+            let k = (PRIOR_WEIGHT_S + activity_s * r) / (PRIOR_WEIGHT_S + activity_s);
+            self.set_energy_scale(at, k.clamp(lo, hi));
         }
         Some(PowerRecord {
             predicted_w,

@@ -544,8 +544,9 @@ fn the_bound_is_the_autopilot_pack_and_12_percent_is_12_percent_of_it() {
 
 /// Power measured against predicted: the transit's allocation predicts P = E / T. Measured at
 /// exactly 2 P (12 V x 2P/12 A) from t = 100 s: after 10 s in the activity the ratio is 2 (beyond
-/// 25 %), a drift; the remaining activities' energy estimates are doubled (bounded to [0.5, 2]).
-/// At 1.2 P nothing drifts.
+/// 25 %), a drift; the remaining activities' energy estimates are scaled by the factor with the
+/// params' prior worth 60 s: (60 x 1 + 10 x 2) / (60 + 10) = 8/7, bounded to [0.5, 2]. At 1.2 P
+/// nothing drifts.
 #[test]
 fn measured_power_is_confronted_with_the_prediction_and_a_drift_rescales_the_rest() {
     let s = spec();
@@ -573,13 +574,12 @@ fn measured_power_is_confronted_with_the_prediction_and_a_drift_rescales_the_res
     let pw = r.power.unwrap();
     assert!((pw.ratio.unwrap() - 2.0).abs() < 1e-9, "{pw:?}");
     assert!(pw.drift && pw.drift_began);
-    assert_eq!(pw.energy_scale, 2.0);
+    let k = 8.0 / 7.0;
+    assert!((pw.energy_scale - k).abs() < 1e-12, "{pw:?}");
     for j in 1..s.problem.activities.len() {
         for (i, ia) in s.problem.activities[j].ias.iter().enumerate() {
-            assert_eq!(
-                g.spec.problem.activities[j].ias[i].cost[0],
-                2.0 * ia.cost[0]
-            );
+            let c = g.spec.problem.activities[j].ias[i].cost[0];
+            assert!((c - k * ia.cost[0]).abs() < 1e-9 * ia.cost[0].max(1.0));
         }
     }
     assert_eq!(
@@ -657,5 +657,9 @@ fn measured_power_is_confronted_with_the_prediction_and_a_drift_rescales_the_res
     at(100.0, 5_000.0);
     let pw = at(112.0, 5_000.0 + 3.0 * p_pred * 12.0);
     assert!((pw.measured_j.unwrap() - 3.0 * p_pred * 12.0).abs() < 1e-6);
-    assert_eq!(pw.energy_scale, 2.0, "x3 bounded to 2");
+    // (60 + 12 x 3) / 72 = 4/3
+    assert!((pw.energy_scale - 4.0 / 3.0).abs() < 1e-12, "{pw:?}");
+    // sustained: after 1000 s at x3, (60 + 3000) / 1060 = 2.89, bounded to 2
+    let pw = at(1100.0, 5_000.0 + 3.0 * p_pred * 1000.0);
+    assert_eq!(pw.energy_scale, 2.0, "bounded to 2");
 }
