@@ -402,7 +402,7 @@ impl Guarantee {
     /// left is `pct / 100 x C`, or `(capacity - consumed mAh) x 3.6 x cells x 3.7 V`, the smaller
     /// when both are reported. Counted as used: `C - left`, so the margin is
     /// `left - k x C - remainder`: a vehicle that starts at 12 % starts with 12 % of its pack.
-    /// Otherwise the params' `[battery]` as before ([`Guarantee::energy_used_params`]).
+    /// Otherwise the params' `[battery]` as before ([`Guarantee::energy_used`]).
     fn energy_pack(&mut self, p: &Progress) -> (Option<f64>, EnergySource, Option<PackRecord>) {
         let pk = &p.pack;
         if self.cells_seen.is_none() {
