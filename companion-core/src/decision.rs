@@ -676,9 +676,31 @@ impl<'m> Core<'m> {
                 battery_remaining_pct: obs.get("battery_pct"),
                 elapsed_s: obs.time_s,
                 failed_resources: failed,
+                pack: crate::guarantee::PackReading {
+                    capacity_mah: obs.get("battery_capacity_mah"),
+                    cells: obs.get("battery_cells"),
+                    voltage_v: obs.get("battery_v"),
+                    current_a: obs.get("battery_current_a"),
+                    consumed_mah: obs.get("consumed_mah"),
+                    vehicle_time_s: obs.get("vehicle_time_s"),
+                    armed: obs.get("armed").map(|a| a > 0.5),
+                },
             },
             record,
         );
+        // PANORAMA's performance drift: the measured power of the activity beyond the tolerance.
+        if let Some(pw) = record.power.as_ref().filter(|pw| pw.drift_began) {
+            rec.events.push(Event::Other(format!(
+                "performance drift: {} measured {:.0} J against {:.0} J predicted in {:.0} s (x{:.2}, beyond {:.0} %); remaining energy estimates x{:.2}",
+                record.activity_name,
+                pw.measured_j.unwrap_or(0.0),
+                pw.predicted_j,
+                pw.activity_s,
+                pw.ratio.unwrap_or(1.0),
+                crate::guarantee::POWER_DRIFT_TOLERANCE * 100.0,
+                pw.energy_scale
+            )));
+        }
         // The allocation's application alternatives (`V4.F`, `zone_t.F`) against what was placed.
         let mut n_differs = 0;
         if let (Some(cell), Some(res)) = (g.allocated(activity_index), &rec.resources) {

@@ -12,7 +12,10 @@
 mod compile;
 mod schema;
 
-use crate::record::{EnergySource, GuaranteeRecord, Reallocation};
+use crate::record::{
+    CapacitySource, CellsSource, EnergySource, GuaranteeRecord, PackRecord, PowerRecord,
+    Reallocation,
+};
 use crate::spec::{ParamsFiles, SpecError, read_toml};
 use compile::{check_against_catalogue, compile};
 use panorama::{Goal, Infeasible, MarginReport, Measured, Problem, Selection};
@@ -67,6 +70,10 @@ pub struct MissionSpec {
     /// Usable battery energy (J) before the reserve, when a `[battery]` is given: turns a
     /// remaining-percentage reading into consumed joules.
     pub battery_capacity_j: Option<f64>,
+    /// What the energy goal keeps back of a full pack, as a fraction of its capacity: the part
+    /// never drawn (`1 - usable_fraction`) plus the reserve (`reserve_wh / capacity_wh`). Applied
+    /// to the pack the autopilot describes.
+    pub battery_kept_back: Option<f64>,
     /// Tile names of the platform (a failure of one reduces the tiles available).
     pub tile_names: Vec<String>,
 }
@@ -153,6 +160,61 @@ pub struct Progress<'a> {
     pub elapsed_s: f64,
     /// Resources reported failed (sensor names, tile names); cumulative use is fine.
     pub failed_resources: &'a [String],
+    /// What the autopilot says of its pack besides the percentage (all `None` in `simulate`).
+    pub pack: PackReading,
+}
+
+/// The pack as the autopilot reports it (fly's telemetry; docs/mavlink.md).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PackReading {
+    /// Capacity parameter (`BATT_CAPACITY`, `BAT1_CAPACITY`, mAh); zero or negative: not set.
+    pub capacity_mah: Option<f64>,
+    /// Cells in series (PX4 `BAT1_N_CELLS`); zero: not set.
+    pub cells: Option<f64>,
+    /// Pack voltage now (V).
+    pub voltage_v: Option<f64>,
+    /// Current drawn now (A).
+    pub current_a: Option<f64>,
+    /// Charge consumed (BATTERY_STATUS.current_consumed, mAh), counted by the autopilot from a
+    /// full pack or from its last battery reset.
+    pub consumed_mah: Option<f64>,
+    /// The autopilot's clock (s, SYSTEM_TIME): an activity's time is counted on it, since the
+    /// consumed energy accrues on it (a SITL may run faster than the companion's clock).
+    pub vehicle_time_s: Option<f64>,
+    /// Whether the vehicle is armed (`None`: not known). Disarmed, nothing is flown: the
+    /// activity's power is not judged (on the ground before the take-off it draws next to
+    /// nothing, which is no drift) and its measurement starts again at the arming.
+    pub armed: Option<bool>,
+}
+
+/// Nominal voltage of a lithium-polymer cell (V): a pack's rated energy is its capacity at this
+/// voltage a cell (ASSUMPTION: LiPo or Li-ion packs, as both autopilots' defaults are).
+pub const NOMINAL_CELL_V: f64 = 3.7;
+/// Highest voltage a cell is taken to hold (V) when the cells are counted from the pack voltage:
+/// a charged LiPo is 4.2 V, so `ceil(V / 4.25)` counts a 3S pack anywhere from 8.5 to 12.75 V.
+pub const MAX_CELL_V: f64 = 4.25;
+/// A measured power this far from the prediction (as a fraction of it) is a performance drift.
+pub const POWER_DRIFT_TOLERANCE: f64 = 0.25;
+/// An activity's power is judged only after this long in it (s): take-off and mode changes draw
+/// short peaks that are no drift.
+pub const POWER_DRIFT_MIN_S: f64 = 10.0;
+/// The params' power model counts as this many seconds of measurement when a drift is learned:
+/// the factor is `(W x 1 + t x ratio) / (W + t)` after `t` seconds in the drifting activity, so a
+/// short transient (a climb) moves it little and a sustained drift moves it most of the way.
+pub const PRIOR_WEIGHT_S: f64 = 60.0;
+/// The factor learned from a drift is kept within these bounds.
+pub const ENERGY_SCALE_BOUNDS: (f64, f64) = (0.5, 2.0);
+
+/// What the guarantee keeps across cycles to measure the activity in force.
+#[derive(Debug, Clone, Default)]
+struct PowerState {
+    /// Activity, when it began (s), the autopilot's consumed energy then (J).
+    activity: Option<(usize, f64, Option<f64>)>,
+    /// Measured power integrated since the activity began (J), and the last (time, power).
+    integrated_j: f64,
+    last: Option<(f64, f64)>,
+    /// A drift was already said for this activity.
+    drift_said: bool,
 }
 
 /// The guarantee stage's state across cycles: the mission, the RAS in force and its history.
@@ -165,6 +227,15 @@ pub struct Guarantee {
     rows: Vec<RasRow>,
     /// Buffers reused by [`Guarantee::watch_into`] (no allocation on a cycle that keeps the RAS).
     scratch: WatchScratch,
+    /// The energy goal's index and its bound from the mission file (params' `[battery]`).
+    energy_goal: Option<(usize, f64)>,
+    /// Cells counted from the first pack voltage heard (kept: the voltage sags in flight).
+    cells_seen: Option<f64>,
+    /// The remaining activities' energy estimates as compiled (`energy_scale` applies to them).
+    base_energy: Vec<Vec<f64>>,
+    power: PowerState,
+    /// The factor on the remaining activities' energy estimates (1 until a drift is measured).
+    energy_scale: f64,
 }
 
 #[derive(Debug, Clone)]
@@ -257,12 +328,32 @@ impl Guarantee {
                 .map(|(j, &i)| Some(spec.problem.activities[j].ias[i].name.clone()))
                 .collect(),
         }];
+        let energy_goal = spec
+            .problem
+            .goals
+            .iter()
+            .position(|g| g.name == ENERGY)
+            .map(|e| (e, spec.problem.goals[e].bound));
+        let base_energy = match energy_goal {
+            Some((e, _)) => spec
+                .problem
+                .activities
+                .iter()
+                .map(|a| a.ias.iter().map(|ia| ia.cost[e]).collect())
+                .collect(),
+            None => Vec::new(),
+        };
         Ok(Self {
             choice: ras0.choice,
             spec,
             failed: Vec::new(),
             rows,
             scratch: WatchScratch::default(),
+            energy_goal,
+            cells_seen: None,
+            base_energy,
+            power: PowerState::default(),
+            energy_scale: 1.0,
         })
     }
 
@@ -302,7 +393,199 @@ impl Guarantee {
         &self.rows
     }
 
-    /// Energy counted as used against the energy goal, and where it came from.
+    /// The pack the energy goal is reckoned from this cycle, and the energy counted as used.
+    ///
+    /// With the autopilot's capacity (mAh > 0) and a cell count (its parameter, else counted
+    /// from the first pack voltage, `ceil(V / 4.25)`), the pack's energy is
+    /// `C = capacity_mAh x 3.6 x cells x 3.7 V` (J), the goal's bound is `C x (1 - k)` with `k`
+    /// the fraction params' `[battery]` keeps back (never drawn, and the reserve), and the energy
+    /// left is `pct / 100 x C`, or `(capacity - consumed mAh) x 3.6 x cells x 3.7 V`, the smaller
+    /// when both are reported. Counted as used: `C - left`, so the margin is
+    /// `left - k x C - remainder`: a vehicle that starts at 12 % starts with 12 % of its pack.
+    /// Otherwise the params' `[battery]` as before ([`Guarantee::energy_used`]).
+    fn energy_pack(&mut self, p: &Progress) -> (Option<f64>, EnergySource, Option<PackRecord>) {
+        let pk = &p.pack;
+        if self.cells_seen.is_none() {
+            self.cells_seen = pk
+                .voltage_v
+                .filter(|v| v.is_finite() && *v > 0.0)
+                .map(|v| (v / MAX_CELL_V).ceil());
+        }
+        let cells = match pk.cells.filter(|c| *c >= 1.0) {
+            Some(c) => Some((c, CellsSource::Autopilot)),
+            None => self.cells_seen.map(|c| (c, CellsSource::FirstVoltage)),
+        };
+        let kept = self.spec.battery_kept_back;
+        let ap = pk
+            .capacity_mah
+            .filter(|c| *c > 0.0)
+            .zip(cells)
+            .zip(kept.zip(self.energy_goal));
+        let Some(((cap_mah, (cells, cells_source)), (kept, (e, _)))) = ap else {
+            // The params' pack: the goal's bound as compiled.
+            if let Some((e, bound)) = self.energy_goal {
+                self.spec.problem.goals[e].bound = bound;
+            }
+            let (used, source) = self.energy_used(p);
+            let said = pk.capacity_mah.is_some() || pk.voltage_v.is_some();
+            let rec = self.spec.battery_capacity_j.filter(|_| said).map(|cap| {
+                let kept_back_j = kept.unwrap_or(0.0) * cap;
+                let left_j = p
+                    .battery_remaining_pct
+                    .map(|pct| pct.clamp(0.0, 100.0) / 100.0 * cap);
+                PackRecord {
+                    capacity_source: CapacitySource::Params,
+                    capacity_mah: pk.capacity_mah,
+                    capacity_j: cap,
+                    nominal_v: None,
+                    cells: cells.map(|c| c.0),
+                    cells_source: cells.map(|c| c.1),
+                    left_j,
+                    kept_back_j,
+                    spendable_j: left_j.map(|l| l - kept_back_j),
+                }
+            });
+            return (used, source, rec);
+        };
+        let nominal_v = cells * NOMINAL_CELL_V;
+        let cap_j = cap_mah * 3.6 * nominal_v;
+        let kept_back_j = kept * cap_j;
+        self.spec.problem.goals[e].bound = cap_j - kept_back_j;
+        let from_pct = p
+            .battery_remaining_pct
+            .map(|pct| pct.clamp(0.0, 100.0) / 100.0 * cap_j);
+        let from_mah = pk
+            .consumed_mah
+            .filter(|c| c.is_finite())
+            .map(|c| (cap_mah - c).clamp(0.0, cap_mah) * 3.6 * nominal_v);
+        let (left, source) = match (from_pct, from_mah) {
+            (Some(a), Some(b)) if b < a => (Some(b), EnergySource::CurrentConsumed),
+            (Some(a), _) => (Some(a), EnergySource::BatteryRemaining),
+            (None, Some(b)) => (Some(b), EnergySource::CurrentConsumed),
+            (None, None) => (None, EnergySource::Estimate),
+        };
+        let rec = PackRecord {
+            capacity_source: CapacitySource::Autopilot,
+            capacity_mah: Some(cap_mah),
+            capacity_j: cap_j,
+            nominal_v: Some(nominal_v),
+            cells: Some(cells),
+            cells_source: Some(cells_source),
+            left_j: left,
+            kept_back_j,
+            spendable_j: left.map(|l| l - kept_back_j),
+        };
+        (left.map(|l| (cap_j - l).max(0.0)), source, Some(rec))
+    }
+
+    /// Predicted against measured power of activity `at` (index into the problem) at `now`, and
+    /// the energy factor learned from it. `None` when the autopilot reports neither power nor
+    /// consumed energy (`simulate`).
+    fn power(&mut self, at: usize, p: &Progress) -> Option<PowerRecord> {
+        let measured_w = p
+            .pack
+            .voltage_v
+            .zip(p.pack.current_a)
+            .map(|(v, i)| v * i)
+            .filter(|w| w.is_finite());
+        let consumed = p.energy_used_j.filter(|e| e.is_finite());
+        if measured_w.is_none() && consumed.is_none() {
+            return None;
+        }
+        let now = p.pack.vehicle_time_s.unwrap_or(p.elapsed_s);
+        let st = &mut self.power;
+        if p.pack.armed == Some(false) {
+            *st = PowerState::default();
+            return Some(PowerRecord {
+                predicted_w: self.predicted_power(at),
+                measured_w,
+                energy_scale: self.energy_scale,
+                ..Default::default()
+            });
+        }
+        if st.activity.map(|a| a.0) != Some(at) {
+            st.activity = Some((at, now, consumed));
+            st.integrated_j = 0.0;
+            st.last = None;
+            st.drift_said = false;
+        }
+        if let (Some((t0, w0)), Some(w)) = (st.last, measured_w) {
+            st.integrated_j += 0.5 * (w0 + w) * (now - t0).max(0.0);
+        }
+        if let Some(w) = measured_w {
+            st.last = Some((now, w));
+        }
+        let (_, began, consumed0) = st.activity.unwrap_or((at, now, None));
+        let activity_s = (now - began).max(0.0);
+        let measured_j = match (consumed, consumed0) {
+            (Some(c), Some(c0)) => Some((c - c0).max(0.0)),
+            _ => measured_w.map(|_| st.integrated_j),
+        };
+        let predicted_w = self.predicted_power(at);
+        let predicted_j = predicted_w * activity_s;
+        let ratio = measured_j
+            .filter(|_| activity_s >= POWER_DRIFT_MIN_S && predicted_j > 0.0)
+            .map(|m| m / predicted_j);
+        let drift = ratio.is_some_and(|r| (r - 1.0).abs() > POWER_DRIFT_TOLERANCE);
+        let drift_began = drift && !self.power.drift_said;
+        if drift {
+            self.power.drift_said = true;
+            let (lo, hi) = ENERGY_SCALE_BOUNDS;
+            let r = ratio.unwrap_or(1.0);
+            let k = (PRIOR_WEIGHT_S + activity_s * r) / (PRIOR_WEIGHT_S + activity_s);
+            self.set_energy_scale(at, k.clamp(lo, hi));
+        }
+        Some(PowerRecord {
+            predicted_w,
+            measured_w,
+            activity_s,
+            predicted_j,
+            measured_j,
+            ratio,
+            drift,
+            drift_began,
+            energy_scale: self.energy_scale,
+        })
+    }
+
+    /// The power the allocation in force predicts for activity `at` (W): its energy estimate
+    /// over its duration estimate, as compiled (the learned factor not applied).
+    fn predicted_power(&self, at: usize) -> f64 {
+        let p = &self.spec.problem;
+        let d = p.goals.iter().position(|g| g.name == DURATION);
+        let (Some(_), Some(d)) = (self.energy_goal, d) else {
+            return 0.0;
+        };
+        let Some(ia) = p
+            .activities
+            .get(at)
+            .and_then(|a| a.ias.get(self.choice[at]))
+        else {
+            return 0.0;
+        };
+        let base = self.base_energy[at][self.choice[at]];
+        if ia.cost[d] > 0.0 {
+            base / ia.cost[d]
+        } else {
+            0.0
+        }
+    }
+
+    /// Scale the energy estimates of activities `at..` by `k` (those before are flown, measured).
+    fn set_energy_scale(&mut self, at: usize, k: f64) {
+        let Some((e, _)) = self.energy_goal else {
+            return;
+        };
+        self.energy_scale = k;
+        for (j, a) in self.spec.problem.activities.iter_mut().enumerate().skip(at) {
+            for (i, ia) in a.ias.iter_mut().enumerate() {
+                ia.cost[e] = self.base_energy[j][i] * k;
+            }
+        }
+    }
+
+    /// Energy counted as used against the energy goal with params' `[battery]` (the fallback,
+    /// and `simulate`), and where it came from.
     ///
     /// The goal's bound is the pack's usable energy above the reserve, for a full pack. What the
     /// mission may still spend is what the pack holds now: `pct` % of the capacity, less the
@@ -382,12 +665,14 @@ impl Guarantee {
     /// (no negative margin, no failed resource in the plan) allocates nothing once the record
     /// and the internal buffers have their shape; a re-allocation builds its strings as before.
     pub fn watch_into(&mut self, progress: Progress, rec: &mut GuaranteeRecord) {
-        let (energy, energy_source) = self.energy_used(&progress);
+        let (energy, energy_source, pack) = self.energy_pack(&progress);
         rec.energy_source = energy_source;
+        rec.pack = pack;
         self.note_failed(progress.failed_resources);
-        let p = &self.spec.problem;
-        let n = p.activities.len();
+        let n = self.spec.problem.activities.len();
         let at = progress.activity_index.min(n.saturating_sub(1));
+        rec.power = self.power(at, &progress);
+        let p = &self.spec.problem;
         let fraction = if progress.activity_index >= n {
             1.0
         } else {

@@ -137,6 +137,100 @@ pub struct GuaranteeRecord {
     /// battery percentage (`battery_remaining`), else `energy_consumed` or `estimate`.
     #[serde(default, skip_serializing_if = "EnergySource::is_battery_remaining")]
     pub energy_source: EnergySource,
+    /// The pack the energy goal was reckoned from, and where each number came from; present when
+    /// the autopilot says anything of its pack beyond the percentage (fly), absent in `simulate`
+    /// and in logs written before it existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pack: Option<PackRecord>,
+    /// The activity in force: its predicted power against the power and energy measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub power: Option<PowerRecord>,
+}
+
+/// The pack behind the energy goal (docs/guarantee.md, "Energy from the autopilot").
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct PackRecord {
+    /// Where the capacity came from.
+    pub capacity_source: CapacitySource,
+    /// The capacity the autopilot reports (mAh; zero or negative: not set), when it reported one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub capacity_mah: Option<f64>,
+    /// The full pack's energy (J): capacity (mAh) x 3.6 x nominal voltage, or params' `[battery]`.
+    pub capacity_j: f64,
+    /// Nominal pack voltage (V): cells x 3.7 V, when the capacity is the autopilot's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nominal_v: Option<f64>,
+    /// Cells in series, and where that came from.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cells: Option<f64>,
+    /// Where the cell count came from.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cells_source: Option<CellsSource>,
+    /// Energy in the pack now (J), when the autopilot reports its state of charge.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub left_j: Option<f64>,
+    /// Never planned to be drawn (J): the never-drawn part and the reserve of params'
+    /// `[battery]`, as fractions of this pack's capacity.
+    pub kept_back_j: f64,
+    /// What the mission may still spend (J): `left_j - kept_back_j`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub spendable_j: Option<f64>,
+}
+
+/// Where the pack's capacity came from.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CapacitySource {
+    /// The autopilot's capacity parameter (`BATT_CAPACITY`, `BAT1_CAPACITY`).
+    Autopilot,
+    /// The mission's `[battery]`: the autopilot reported none, or none usable (-1 or 0, or no
+    /// voltage to turn mAh into joules).
+    #[default]
+    Params,
+}
+
+/// Where the pack's cell count came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CellsSource {
+    /// The autopilot's cell-count parameter (PX4 `BAT1_N_CELLS`).
+    Autopilot,
+    /// The first pack voltage heard, at most 4.25 V a cell (a charged LiPo is 4.2 V).
+    FirstVoltage,
+}
+
+/// Predicted against measured power of the activity in force (docs/guarantee.md, "Power
+/// measured").
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct PowerRecord {
+    /// Predicted power of the activity in force (W): its implementation alternative's energy
+    /// estimate over its duration estimate.
+    pub predicted_w: f64,
+    /// Measured power now (W): pack voltage x current, when the autopilot reports both.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub measured_w: Option<f64>,
+    /// Time in the activity so far (s).
+    pub activity_s: f64,
+    /// Predicted energy of the activity so far (J): `predicted_w x activity_s`.
+    pub predicted_j: f64,
+    /// Measured energy of the activity so far (J): the autopilot's consumed energy since the
+    /// activity began, or measured power integrated over the cycles when it reports none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub measured_j: Option<f64>,
+    /// `measured_j / predicted_j`, once the activity has run long enough to judge.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ratio: Option<f64>,
+    /// The ratio is beyond the tolerance: PANORAMA's performance drift.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub drift: bool,
+    /// Set on the cycle a drift is first seen in this activity (the record's events say it).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub drift_began: bool,
+    /// The factor the guarantee applies to the remaining activities' energy estimates, learned
+    /// from the measured ratio (1: the params' model as is).
+    pub energy_scale: f64,
 }
 
 /// Where the energy counted as used against the energy goal came from.
@@ -152,6 +246,9 @@ pub enum EnergySource {
     EnergyConsumed,
     /// No battery telemetry: the plan's estimate of the activities flown so far.
     Estimate,
+    /// The charge the autopilot reports consumed (BATTERY_STATUS.current_consumed, mAh) against
+    /// its pack's capacity, smaller than what the percentage says.
+    CurrentConsumed,
 }
 
 impl EnergySource {
@@ -295,7 +392,7 @@ reuse_clone!(ResourcesRecord {
 } maps {});
 reuse_clone!(GuaranteeRecord {
     activity, activity_name, reallocation, infeasible, infeasible_reason, failed_resources,
-    plan_differs, energy_source
+    plan_differs, energy_source, pack, power
 } maps { margins, goals, drift });
 reuse_clone!(DecisionRecord {
     cycle, time_s, state, events, proposals, conflicts, actions, resources, guarantee, commands,

@@ -115,9 +115,12 @@ pub const DEFAULT_ONBOARD: [(&str, &str); 6] = [
 /// Observations the telemetry produces from the autopilot's own messages (besides the onboard
 /// monitors' names, params/link.toml `[telemetry.onboard]`): what `fly` can observe, checked
 /// against what params/observations.toml declares. A test keeps it in step with `on_message`.
-pub const TELEMETRY_OBSERVATIONS: [&str; 22] = [
+pub const TELEMETRY_OBSERVATIONS: [&str; 25] = [
     "battery_pct",
     "battery_v",
+    "battery_current_a",
+    "battery_capacity_mah",
+    "battery_cells",
     "energy_consumed_j",
     "consumed_mah",
     "lat_deg",
@@ -139,6 +142,20 @@ pub const TELEMETRY_OBSERVATIONS: [&str; 22] = [
     "obstacle_m",
     "armed",
 ];
+
+/// Which pack parameter an autopilot reported ([`Telemetry::on_pack_param`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PackParam {
+    /// The pack's capacity (mAh).
+    CapacityMah,
+    /// Cells in series.
+    Cells,
+}
+
+/// Largest pack capacity believed (mAh): a 1,000 Ah pack is no drone's.
+pub const MAX_PACK_CAPACITY_MAH: f64 = 1.0e6;
+/// Most cells in series believed (a 24S pack is the largest in common use; 0 means "not set").
+pub const MAX_PACK_CELLS: f64 = 24.0;
 
 /// Longest NAMED_VALUE_FLOAT name: its `name` field is `char[10]`.
 pub const NAMED_VALUE_NAME_MAX: usize = 10;
@@ -327,8 +344,12 @@ impl Telemetry {
                 if s.battery_remaining >= 0 && !self.values.contains_key("battery_status_pct") {
                     self.set("battery_pct", s.battery_remaining as f64);
                 }
-                if s.voltage_battery != u16::MAX {
+                if s.voltage_battery != u16::MAX && !self.values.contains_key("battery_status_v") {
                     self.set("battery_v", s.voltage_battery as f64 / 1000.0);
+                }
+                // cA, -1: not measured.
+                if s.current_battery >= 0 && !self.values.contains_key("battery_status_v") {
+                    self.set("battery_current_a", s.current_battery as f64 / 100.0);
                 }
             }
             Msg::BATTERY_STATUS(b) if b.id == 0 => {
@@ -341,6 +362,24 @@ impl Telemetry {
                 }
                 if b.current_consumed >= 0 {
                     self.set("consumed_mah", b.current_consumed as f64);
+                }
+                // The pack voltage: the sum of the cells given (UINT16_MAX: no such cell; ArduPilot
+                // puts the whole pack in cell 0 when it does not measure cells, PX4 each cell).
+                let mv: u32 = b
+                    .voltages
+                    .iter()
+                    .filter(|v| **v != u16::MAX)
+                    .map(|v| *v as u32)
+                    .sum();
+                if mv > 0 {
+                    self.set("battery_v", mv as f64 / 1000.0);
+                    self.set("battery_status_v", mv as f64 / 1000.0);
+                    // Current and voltage from one message: their product is the power drawn.
+                    if b.current_battery >= 0 {
+                        self.set("battery_current_a", b.current_battery as f64 / 100.0);
+                    } else {
+                        self.values.remove("battery_current_a");
+                    }
                 }
             }
             Msg::GLOBAL_POSITION_INT(p) if !on_globe(p.lat, p.lon) => {
@@ -509,6 +548,28 @@ impl Telemetry {
         self.values.insert(name.to_string(), v);
     }
 
+    /// The pack as the autopilot's parameters describe it (the caller decoded the PARAM_VALUE):
+    /// its capacity in mAh (`BATT_CAPACITY`, `BAT1_CAPACITY`; kept as reported, a zero or
+    /// negative one means "not configured" and the guarantee falls back on params) or its cell
+    /// count (`BAT1_N_CELLS`). An implausible value is refused and counted.
+    pub fn on_pack_param(&mut self, what: PackParam, value: f64) {
+        let (name, ok) = match what {
+            PackParam::CapacityMah => (
+                "battery_capacity_mah",
+                value.is_finite() && value <= MAX_PACK_CAPACITY_MAH,
+            ),
+            PackParam::Cells => (
+                "battery_cells",
+                value.is_finite() && (0.0..=MAX_PACK_CELLS).contains(&value),
+            ),
+        };
+        if ok {
+            self.set(name, value);
+        } else {
+            self.reject(format!("{name} = {value}"));
+        }
+    }
+
     fn reject(&mut self, what: String) {
         self.rejected.out_of_range += 1;
         self.rejected.last = Some(what);
@@ -569,6 +630,7 @@ impl Telemetry {
     pub fn observations(&self, now: Duration, events: Vec<Event>) -> Observations {
         let mut values = self.values.clone();
         values.remove("battery_status_pct");
+        values.remove("battery_status_v");
         if let Some(o) = self.obstacle_m(now) {
             values.insert("obstacle_m".into(), o);
         }
@@ -712,6 +774,8 @@ mod tests {
         for m in &msgs {
             t.on_message(s(0.0), m, name);
         }
+        t.on_pack_param(PackParam::CapacityMah, 5000.0);
+        t.on_pack_param(PackParam::Cells, 4.0);
         let mut produced: Vec<String> = t.observations(s(0.0), vec![]).values.into_keys().collect();
         // BATTERY_STATUS's copy of the percentage is internal (removed from the snapshot).
         produced.sort();
@@ -832,6 +896,44 @@ mod tests {
             vec![Event::TargetDetected]
         );
         assert_eq!(t.get("target_x"), Some(0.4f32 as f64));
+    }
+
+    #[test]
+    fn battery_status_gives_pack_voltage_and_current_over_sys_status() {
+        let mut t = Telemetry::new(TelemetryConfig::default());
+        let sys = Msg::SYS_STATUS(SYS_STATUS_DATA {
+            voltage_battery: 12_000,
+            current_battery: 500,
+            battery_remaining: 50,
+            ..SYS_STATUS_DATA::DEFAULT
+        });
+        t.on_message(s(0.0), &sys, name);
+        assert_eq!(t.get("battery_v"), Some(12.0));
+        assert_eq!(t.get("battery_current_a"), Some(5.0));
+        // PX4 style: four cells of 3.9 V, 12.34 A.
+        let mut voltages = [u16::MAX; 10];
+        voltages[..4].copy_from_slice(&[3900; 4]);
+        let bat = Msg::BATTERY_STATUS(BATTERY_STATUS_DATA {
+            voltages,
+            current_battery: 1234,
+            battery_remaining: 50,
+            ..BATTERY_STATUS_DATA::DEFAULT
+        });
+        t.on_message(s(1.0), &bat, name);
+        assert_eq!(t.get("battery_v"), Some(15.6));
+        assert_eq!(t.get("battery_current_a"), Some(12.34));
+        // SYS_STATUS no longer overrides BATTERY_STATUS's reading.
+        t.on_message(s(2.0), &sys, name);
+        assert_eq!(t.get("battery_v"), Some(15.6));
+        assert_eq!(t.get("battery_current_a"), Some(12.34));
+        assert_eq!(t.observations(s(2.0), vec![]).get("battery_status_v"), None);
+        // A pack parameter out of reason is refused and counted; -1 ("not set") is kept.
+        t.on_pack_param(PackParam::CapacityMah, f64::NAN);
+        t.on_pack_param(PackParam::Cells, 300.0);
+        assert_eq!(t.rejected.out_of_range, 2);
+        assert_eq!(t.get("battery_capacity_mah"), None);
+        t.on_pack_param(PackParam::CapacityMah, -1.0);
+        assert_eq!(t.get("battery_capacity_mah"), Some(-1.0));
     }
 
     #[test]

@@ -13,7 +13,7 @@ use super::liveness::{Liveness, LivenessEvent};
 use super::mission::{MissionClient, MissionConfig, MissionEvent, MissionOp};
 use super::modes::{self, Flavor};
 use super::readiness::Readiness;
-use super::telemetry::{Telemetry, TelemetryConfig, displace};
+use super::telemetry::{PackParam, Telemetry, TelemetryConfig, displace};
 use companion_core::observations::Observations;
 use companion_core::record::{CommandOutcome, CommandRecord, Event, LinkEvent};
 use std::collections::{BTreeMap, VecDeque};
@@ -59,6 +59,34 @@ pub struct VehicleConfig {
     /// Without EXTENDED_SYS_STATE: disarmed at or below this altitude above home (m) is on the
     /// ground (params/link.toml `[flight] ground_altitude_m`).
     pub ground_altitude_m: f64,
+}
+
+/// The pack parameters each autopilot family names, read with PARAM_REQUEST_READ: the capacity
+/// (mAh) and, where there is one, the cell count. ArduPilot has no cell-count parameter.
+pub fn pack_params(flavor: Flavor) -> &'static [(&'static str, PackParam)] {
+    match flavor {
+        Flavor::ArduPilot => &[("BATT_CAPACITY", PackParam::CapacityMah)],
+        Flavor::Px4 => &[
+            ("BAT1_CAPACITY", PackParam::CapacityMah),
+            ("BAT1_N_CELLS", PackParam::Cells),
+        ],
+        Flavor::Other => &[],
+    }
+}
+
+/// PARAM_REQUEST_READ of one pack parameter is sent at most this many times ...
+pub const PACK_PARAM_ATTEMPTS: u32 = 5;
+/// ... this far apart, until the autopilot answers (PARAM_VALUE is not acknowledged otherwise).
+pub const PACK_PARAM_RETRY: Duration = Duration::from_secs(2);
+
+/// One pack parameter asked for until the autopilot answers.
+#[derive(Debug, Clone)]
+struct PackRequest {
+    name: &'static str,
+    what: PackParam,
+    sent: u32,
+    next_at: Duration,
+    answered: bool,
 }
 
 /// Distinct other autopilots reported by name; more are only counted.
@@ -261,6 +289,8 @@ pub struct Vehicle {
     /// acknowledged and then overridden by that switch (seen on PX4 SITL: AUTO accepted at 8-9 m
     /// of a 10 m take-off, then Hold, the mission never flown).
     px4_takeoff_wait: Option<Duration>,
+    /// The pack parameters asked for (the chosen autopilot's family's [`pack_params`]).
+    pack_requests: Vec<PackRequest>,
 }
 
 impl Vehicle {
@@ -303,6 +333,79 @@ impl Vehicle {
             mode_heard_at: None,
             px4_mission_pending: None,
             px4_takeoff_wait: None,
+            pack_requests: Vec::new(),
+        }
+    }
+
+    /// Ask (again) for the pack parameters of the chosen autopilot's family.
+    fn reset_pack_requests(&mut self) {
+        self.pack_requests = pack_params(self.flavor)
+            .iter()
+            .map(|&(name, what)| PackRequest {
+                name,
+                what,
+                sent: 0,
+                next_at: Duration::ZERO,
+                answered: false,
+            })
+            .collect();
+    }
+
+    /// PARAM_REQUEST_READ of the pack parameters not answered yet, each retried a few times.
+    fn request_pack_params(&mut self, now: Duration, out: &mut Vec<Msg>) {
+        let Some((sys, comp)) = self.target else {
+            return;
+        };
+        for r in &mut self.pack_requests {
+            if r.answered || r.sent >= PACK_PARAM_ATTEMPTS || now < r.next_at {
+                continue;
+            }
+            r.sent += 1;
+            r.next_at = now + PACK_PARAM_RETRY;
+            out.push(Msg::PARAM_REQUEST_READ(PARAM_REQUEST_READ_DATA {
+                param_index: -1,
+                target_system: sys,
+                target_component: comp,
+                param_id: r.name.into(),
+            }));
+        }
+    }
+
+    /// A PARAM_VALUE from the autopilot: a pack parameter asked for goes to the telemetry.
+    fn on_param_value(&mut self, p: &PARAM_VALUE_DATA) {
+        let id = p.param_id.to_str().unwrap_or("").trim_end_matches('\0');
+        let Some(r) = self.pack_requests.iter_mut().find(|r| r.name == id) else {
+            return;
+        };
+        // PX4 sends integer parameters bytewise in the float (MAV_PROTOCOL_CAPABILITY_PARAM_
+        // ENCODE_BYTEWISE); ArduPilot casts them to float.
+        let int = matches!(
+            p.param_type,
+            MavParamType::MAV_PARAM_TYPE_INT32
+                | MavParamType::MAV_PARAM_TYPE_UINT32
+                | MavParamType::MAV_PARAM_TYPE_INT16
+                | MavParamType::MAV_PARAM_TYPE_UINT16
+                | MavParamType::MAV_PARAM_TYPE_INT8
+                | MavParamType::MAV_PARAM_TYPE_UINT8
+        );
+        let value = if int && self.flavor == Flavor::Px4 {
+            p.param_value.to_bits() as i32 as f64
+        } else {
+            p.param_value as f64
+        };
+        r.answered = true;
+        let (name, what) = (r.name, r.what);
+        self.telemetry.on_pack_param(what, value);
+        if what == PackParam::CapacityMah && value <= 0.0 {
+            self.link_event(
+                LinkEvent::from(
+                    format!(
+                        "autopilot {name} = {value}: the pack's capacity is not set, the guarantee uses params [battery]"
+                    )
+                    .as_str(),
+                ),
+                false,
+            );
         }
     }
 
@@ -519,6 +622,7 @@ impl Vehicle {
                 self.mission.home_at_seq0 = self.flavor != Flavor::Px4;
                 self.commands.set_target(sys, comp);
                 self.mission.set_target(sys, comp);
+                self.reset_pack_requests();
                 tracing::info!(sys, comp, flavor = ?self.flavor, "autopilot chosen");
                 self.link_event(
                     LinkEvent::Autopilot {
@@ -600,6 +704,7 @@ impl Vehicle {
                     self.link_event(LinkEvent::AutopilotText(text), false);
                 }
             }
+            Msg::PARAM_VALUE(p) => self.on_param_value(p),
             Msg::COMMAND_ACK(a) => {
                 let (msgs, evs) = self.commands.on_ack(now, a);
                 out.extend(msgs);
@@ -652,6 +757,7 @@ impl Vehicle {
             LivenessEvent::Connected | LivenessEvent::Regained | LivenessEvent::Rebooted => {
                 if ev == LivenessEvent::Rebooted {
                     self.readiness.reset();
+                    self.reset_pack_requests();
                     self.drop_everything(now, "autopilot rebooted");
                 }
                 let link = match ev {
@@ -753,6 +859,7 @@ impl Vehicle {
                 out.extend(msgs);
             }
         }
+        self.request_pack_params(now, &mut out);
         out.extend(self.advance_job(now));
         out
     }
@@ -3360,6 +3467,106 @@ mod tests {
             commands(&out),
             vec![MavCmd::MAV_CMD_DO_SET_MODE],
             "LAND at once"
+        );
+    }
+
+    fn param_requests(out: &[Msg]) -> Vec<String> {
+        out.iter()
+            .filter_map(|m| match m {
+                Msg::PARAM_REQUEST_READ(p) => Some(p.param_id.to_str().unwrap_or("").to_string()),
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn param_value(name: &str, value: f32, param_type: MavParamType) -> Msg {
+        Msg::PARAM_VALUE(PARAM_VALUE_DATA {
+            param_value: value,
+            param_id: name.into(),
+            param_type,
+            ..PARAM_VALUE_DATA::DEFAULT
+        })
+    }
+
+    #[test]
+    fn ardupilot_pack_capacity_is_read_retried_until_answered_and_observed() {
+        let mut v = vehicle();
+        let mut asked = Vec::new();
+        for t in 0..20 {
+            asked.extend(param_requests(&v.on_frame(s(t as f64), &hb(0, false))));
+        }
+        // Asked, re-asked every PACK_PARAM_RETRY while unanswered, never more than the attempts.
+        assert_eq!(asked, vec!["BATT_CAPACITY"; PACK_PARAM_ATTEMPTS as usize]);
+        // A parameter nobody asked for changes nothing.
+        v.on_frame(
+            s(21.0),
+            &frame(param_value(
+                "BATT_LOW_MAH",
+                500.0,
+                MavParamType::MAV_PARAM_TYPE_INT32,
+            )),
+        );
+        assert_eq!(v.telemetry.get("battery_capacity_mah"), None);
+        // ArduPilot casts its integer parameters to float.
+        v.on_frame(
+            s(22.0),
+            &frame(param_value(
+                "BATT_CAPACITY",
+                3300.0,
+                MavParamType::MAV_PARAM_TYPE_INT32,
+            )),
+        );
+        assert_eq!(v.telemetry.get("battery_capacity_mah"), Some(3300.0));
+        // Answered at once: asked once only.
+        let mut v = vehicle();
+        v.on_frame(s(0.0), &hb(0, false));
+        v.on_frame(
+            s(0.5),
+            &frame(param_value(
+                "BATT_CAPACITY",
+                5000.0,
+                MavParamType::MAV_PARAM_TYPE_REAL32,
+            )),
+        );
+        let out: Vec<Msg> = (1..6)
+            .flat_map(|t| v.on_frame(s(t as f64), &hb(0, false)))
+            .collect();
+        assert!(param_requests(&out).is_empty(), "answered: not asked again");
+    }
+
+    #[test]
+    fn px4_pack_parameters_are_decoded_bytewise_and_an_unset_capacity_is_said() {
+        let mut v = vehicle();
+        let out = px4_ready(&mut v, 0.0);
+        assert_eq!(param_requests(&out), vec!["BAT1_CAPACITY", "BAT1_N_CELLS"]);
+        // PX4 SIH: capacity -1 (a float parameter), 4 cells (an int32, sent bytewise).
+        v.on_frame(
+            s(1.0),
+            &px4_frame(param_value(
+                "BAT1_CAPACITY",
+                -1.0,
+                MavParamType::MAV_PARAM_TYPE_REAL32,
+            )),
+        );
+        v.on_frame(
+            s(1.1),
+            &px4_frame(param_value(
+                "BAT1_N_CELLS",
+                f32::from_bits(4),
+                MavParamType::MAV_PARAM_TYPE_INT32,
+            )),
+        );
+        assert_eq!(v.telemetry.get("battery_capacity_mah"), Some(-1.0));
+        assert_eq!(v.telemetry.get("battery_cells"), Some(4.0));
+        let said = v
+            .take_link_events()
+            .iter()
+            .map(|e| e.to_string())
+            .collect::<Vec<_>>();
+        assert!(
+            said.iter()
+                .any(|e| e.contains("BAT1_CAPACITY = -1") && e.contains("params [battery]")),
+            "{said:?}"
         );
     }
 }

@@ -89,6 +89,7 @@ fn energy_drift_then_laser_fault_table_7() {
         battery_remaining_pct: None,
         elapsed_s: est_t,
         failed_resources: &[],
+        pack: Default::default(),
     });
     assert!((rec.drift["energy_j"] - 400.0).abs() < 1e-6);
     assert!(rec.margins["energy_j"] < 0.0, "{rec:?}");
@@ -123,6 +124,7 @@ fn energy_drift_then_laser_fault_table_7() {
         battery_remaining_pct: None,
         elapsed_s: 400.0,
         failed_resources: &failed,
+        pack: Default::default(),
     });
     let re = rec.reallocation.expect("re-allocated after the fault");
     assert!(re.reason.contains("laser2"), "{}", re.reason);

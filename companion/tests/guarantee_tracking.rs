@@ -103,6 +103,7 @@ fn energy_drift_reallocation_restores_margin() {
         battery_remaining_pct: None,
         elapsed_s: 130.0,
         failed_resources: &[],
+        pack: Default::default(),
     });
     assert!((rec.margins["energy_j"] + 1500.0).abs() < 1e-6, "{rec:?}");
     assert!((rec.drift["energy_j"] - overrun).abs() < 1e-6);
@@ -118,6 +119,7 @@ fn energy_drift_reallocation_restores_margin() {
         battery_remaining_pct: None,
         elapsed_s: 130.0,
         failed_resources: &[],
+        pack: Default::default(),
     });
     assert!(again.reallocation.is_none() && again.margins["energy_j"] >= 0.0);
     println!("{}", render_ras_table(&s, g.ras_rows()));
@@ -136,6 +138,7 @@ fn battery_percentage_is_converted() {
         battery_remaining_pct: Some(pct),
         elapsed_s: 12.0,
         failed_resources: &[],
+        pack: Default::default(),
     };
     let cap = 74.0 * 3600.0;
     let est0: f64 = s.problem.activities[0].ias[g.choice()[0]].cost[0];
@@ -195,6 +198,7 @@ fn first_reading_of_12_percent_is_12_percent() {
             battery_remaining_pct: Some(pct),
             elapsed_s: 0.0,
             failed_resources: &[],
+            pack: Default::default(),
         })
     };
     let full = at(100.0);
@@ -235,6 +239,7 @@ fn lidar_failure_reallocation() {
         battery_remaining_pct: None,
         elapsed_s: 40.0,
         failed_resources: &failed,
+        pack: Default::default(),
     });
     let re = rec.reallocation.expect("re-allocated");
     assert!(re.reason.contains("lidar"), "{}", re.reason);
@@ -266,6 +271,7 @@ fn tile_failure_reallocation() {
         battery_remaining_pct: None,
         elapsed_s: 250.0,
         failed_resources: &failed,
+        pack: Default::default(),
     });
     let re = rec.reallocation.expect("re-allocated");
     assert!(re.reason.contains("FPGA tile"), "{}", re.reason);
@@ -314,6 +320,7 @@ fn impossible_goal_is_infeasible_with_numbers() {
         battery_remaining_pct: None,
         elapsed_s: 200.0,
         failed_resources: &[],
+        pack: Default::default(),
     });
     assert!(rec.infeasible && rec.reallocation.is_none());
     let why = rec.infeasible_reason.unwrap();
@@ -428,4 +435,231 @@ fn ras0_gap_on_the_tracking_mission() {
         }
         other => panic!("{other:?}"),
     }
+}
+
+/// The energy estimate of the allocation in force, activities `from..`.
+fn estimate_from(s: &MissionSpec, g: &Guarantee, from: usize) -> f64 {
+    (from..s.problem.activities.len())
+        .map(|j| s.problem.activities[j].ias[g.choice()[j]].cost[0])
+        .sum()
+}
+
+fn pack_at(
+    pct: Option<f64>,
+    pack: PackReading,
+    activity_index: usize,
+    elapsed_s: f64,
+) -> Progress<'static> {
+    Progress {
+        activity_index,
+        activity_fraction: 0.0,
+        energy_used_j: None,
+        battery_remaining_pct: pct,
+        elapsed_s,
+        failed_resources: &[],
+        pack,
+    }
+}
+
+/// The autopilot's pack, not the params': ArduCopter SITL's 3300 mAh at 12.6 V is 3 cells
+/// (ceil(12.6 / 4.25) = 3), 11.1 V nominal, C = 3300 x 3.6 x 11.1 = 131,868 J. Params keep back
+/// 15 % (never drawn) + 7.4 / 74 = 10 % (reserve) = 25 % = 32,967 J; the bound is 98,901 J. At
+/// 12 % the pack holds 15,824.16 J: what the mission may spend is 15,824.16 - 32,967 J.
+#[test]
+fn the_bound_is_the_autopilot_pack_and_12_percent_is_12_percent_of_it() {
+    use companion_core::record::{CapacitySource, CellsSource, EnergySource};
+    let s = spec();
+    let mut g = Guarantee::start(s.clone()).unwrap();
+    let est = estimate_from(&s, &g, 0);
+    let ardu = PackReading {
+        capacity_mah: Some(3300.0),
+        voltage_v: Some(12.6),
+        ..Default::default()
+    };
+    let r = g.watch(pack_at(Some(12.0), ardu, 0, 0.0));
+    let p = r.pack.expect("pack recorded");
+    assert_eq!(p.capacity_source, CapacitySource::Autopilot);
+    assert_eq!(p.cells, Some(3.0));
+    assert_eq!(p.cells_source, Some(CellsSource::FirstVoltage));
+    assert!((p.capacity_j - 131_868.0).abs() < 1e-6, "{p:?}");
+    assert!((p.kept_back_j - 32_967.0).abs() < 1e-6, "{p:?}");
+    assert!((p.left_j.unwrap() - 15_824.16).abs() < 1e-6, "{p:?}");
+    assert!((r.goals["energy_j"] - 98_901.0).abs() < 1e-6, "{r:?}");
+    assert_eq!(r.energy_source, EnergySource::BatteryRemaining);
+    assert!(
+        (r.margins["energy_j"] - (15_824.16 - 32_967.0 - est)).abs() < 1e-6,
+        "{r:?}"
+    );
+    assert!(r.margins["energy_j"] < 0.0);
+
+    // The consumed charge says less is left (3000 of 3300 mAh: 300 x 3.6 x 11.1 = 11,988 J); the
+    // voltage has sagged to 8 V, but the cells stay counted from the first reading.
+    let mut g = Guarantee::start(s.clone()).unwrap();
+    g.watch(pack_at(Some(12.0), ardu, 0, 0.0));
+    let sagged = PackReading {
+        voltage_v: Some(8.0),
+        consumed_mah: Some(3000.0),
+        ..ardu
+    };
+    let r = g.watch(pack_at(Some(12.0), sagged, 0, 1.0));
+    let p = r.pack.unwrap();
+    assert_eq!(p.cells, Some(3.0));
+    assert_eq!(r.energy_source, EnergySource::CurrentConsumed);
+    assert!((p.left_j.unwrap() - 11_988.0).abs() < 1e-6, "{p:?}");
+
+    // PX4 names its cells: 4 x 3.7 V; 5000 mAh x 3.6 x 14.8 = 266,400 J, at 100 %.
+    let mut g = Guarantee::start(s.clone()).unwrap();
+    let px4 = PackReading {
+        capacity_mah: Some(5000.0),
+        cells: Some(4.0),
+        voltage_v: Some(16.2),
+        ..Default::default()
+    };
+    let r = g.watch(pack_at(Some(100.0), px4, 0, 0.0));
+    let p = r.pack.unwrap();
+    assert_eq!(p.cells_source, Some(CellsSource::Autopilot));
+    assert!((p.capacity_j - 266_400.0).abs() < 1e-6, "{p:?}");
+    assert!((r.goals["energy_j"] - 199_800.0).abs() < 1e-6, "{r:?}");
+
+    // PX4 SIH's capacity -1: the params' pack, and the record says so.
+    let mut g = Guarantee::start(s.clone()).unwrap();
+    let unset = PackReading {
+        capacity_mah: Some(-1.0),
+        voltage_v: Some(16.2),
+        ..Default::default()
+    };
+    let r = g.watch(pack_at(Some(50.0), unset, 0, 0.0));
+    let p = r.pack.unwrap();
+    assert_eq!(p.capacity_source, CapacitySource::Params);
+    assert_eq!(p.capacity_mah, Some(-1.0));
+    assert!((p.capacity_j - 74.0 * 3600.0).abs() < 1e-6);
+    assert!((p.left_j.unwrap() - 0.5 * 74.0 * 3600.0).abs() < 1e-6);
+    assert!((r.goals["energy_j"] - (74.0 * 0.85 - 7.4) * 3600.0).abs() < 1e-6);
+
+    // Nothing said of the pack (simulate): no pack record, the params' goal.
+    let mut g = Guarantee::start(s.clone()).unwrap();
+    let r = g.watch(pack_at(Some(50.0), PackReading::default(), 0, 0.0));
+    assert!(r.pack.is_none() && r.power.is_none());
+}
+
+/// Power measured against predicted: the transit's allocation predicts P = E / T. Measured at
+/// exactly 2 P (12 V x 2P/12 A) from t = 100 s: after 10 s in the activity the ratio is 2 (beyond
+/// 25 %), a drift; the remaining activities' energy estimates are scaled by the factor with the
+/// params' prior worth 60 s: (60 x 1 + 10 x 2) / (60 + 10) = 8/7, bounded to [0.5, 2]. At 1.2 P
+/// nothing drifts.
+#[test]
+fn measured_power_is_confronted_with_the_prediction_and_a_drift_rescales_the_rest() {
+    let s = spec();
+    let mut g = Guarantee::start(s.clone()).unwrap();
+    let ia = &s.problem.activities[1].ias[g.choice()[1]];
+    let (e_pred, t_pred) = (ia.cost[0], ia.cost[1]);
+    let p_pred = e_pred / t_pred;
+    let drawing = |w: f64| PackReading {
+        voltage_v: Some(12.0),
+        current_a: Some(w / 12.0),
+        ..Default::default()
+    };
+    let r = g.watch(pack_at(Some(90.0), drawing(2.0 * p_pred), 1, 100.0));
+    let pw = r.power.unwrap();
+    assert!((pw.predicted_w - p_pred).abs() < 1e-9);
+    assert!((pw.measured_w.unwrap() - 2.0 * p_pred).abs() < 1e-9);
+    assert_eq!(pw.measured_j, Some(0.0));
+    assert!(!pw.drift && pw.ratio.is_none());
+    let r = g.watch(pack_at(Some(90.0), drawing(2.0 * p_pred), 1, 105.0));
+    let pw = r.power.unwrap();
+    assert!((pw.measured_j.unwrap() - 2.0 * p_pred * 5.0).abs() < 1e-6);
+    assert!((pw.predicted_j - p_pred * 5.0).abs() < 1e-6);
+    assert!(!pw.drift, "judged only after 10 s");
+    let r = g.watch(pack_at(Some(90.0), drawing(2.0 * p_pred), 1, 110.0));
+    let pw = r.power.unwrap();
+    assert!((pw.ratio.unwrap() - 2.0).abs() < 1e-9, "{pw:?}");
+    assert!(pw.drift && pw.drift_began);
+    let k = 8.0 / 7.0;
+    assert!((pw.energy_scale - k).abs() < 1e-12, "{pw:?}");
+    for j in 1..s.problem.activities.len() {
+        for (i, ia) in s.problem.activities[j].ias.iter().enumerate() {
+            let c = g.spec.problem.activities[j].ias[i].cost[0];
+            assert!((c - k * ia.cost[0]).abs() < 1e-9 * ia.cost[0].max(1.0));
+        }
+    }
+    assert_eq!(
+        g.spec.problem.activities[0].ias[0].cost[0], s.problem.activities[0].ias[0].cost[0],
+        "flown activities keep their estimate"
+    );
+    let r = g.watch(pack_at(Some(90.0), drawing(2.0 * p_pred), 1, 111.0));
+    let pw = r.power.unwrap();
+    assert!(pw.drift && !pw.drift_began, "said once per activity");
+
+    let mut g = Guarantee::start(s.clone()).unwrap();
+    for t in [100.0, 105.0, 110.0, 120.0] {
+        let pw = g
+            .watch(pack_at(Some(90.0), drawing(1.2 * p_pred), 1, t))
+            .power
+            .unwrap();
+        assert!(!pw.drift, "{pw:?}");
+        assert_eq!(pw.energy_scale, 1.0);
+    }
+    // Disarmed on the ground nothing is flown: no judgement however long it waits, and the
+    // measurement starts again at the arming.
+    let mut g = Guarantee::start(s.clone()).unwrap();
+    let idle = PackReading {
+        armed: Some(false),
+        ..drawing(0.0)
+    };
+    for t in [0.0, 30.0, 60.0] {
+        let pw = g.watch(pack_at(Some(90.0), idle, 0, t)).power.unwrap();
+        assert!(
+            !pw.drift && pw.ratio.is_none() && pw.activity_s == 0.0,
+            "{pw:?}"
+        );
+    }
+    let armed = |w: f64| PackReading {
+        armed: Some(true),
+        ..drawing(w)
+    };
+    let p0 = {
+        let ia = &s.problem.activities[0].ias[g.choice()[0]];
+        ia.cost[0] / ia.cost[1]
+    };
+    g.watch(pack_at(Some(90.0), armed(p0), 0, 61.0));
+    let pw = g
+        .watch(pack_at(Some(90.0), armed(p0), 0, 72.0))
+        .power
+        .unwrap();
+    assert_eq!(pw.activity_s, 11.0);
+    assert!(
+        (pw.ratio.unwrap() - 1.0).abs() < 1e-9 && !pw.drift,
+        "{pw:?}"
+    );
+    // The autopilot's clock counts (a SITL at speedup 3): 15 vehicle seconds in 5 companion seconds.
+    let mut g = Guarantee::start(s.clone()).unwrap();
+    let clocked = |vt: f64| PackReading {
+        vehicle_time_s: Some(vt),
+        ..drawing(p_pred)
+    };
+    g.watch(pack_at(Some(90.0), clocked(30.0), 1, 100.0));
+    let pw = g
+        .watch(pack_at(Some(90.0), clocked(45.0), 1, 105.0))
+        .power
+        .unwrap();
+    assert_eq!(pw.activity_s, 15.0);
+    assert!((pw.ratio.unwrap() - 1.0).abs() < 1e-9, "{pw:?}");
+    // The autopilot's consumed energy, when it reports it, is the measured energy of the activity.
+    let mut g = Guarantee::start(s.clone()).unwrap();
+    let mut at = |t: f64, consumed: f64| {
+        g.watch(Progress {
+            energy_used_j: Some(consumed),
+            ..pack_at(Some(90.0), drawing(p_pred), 1, t)
+        })
+        .power
+        .unwrap()
+    };
+    at(100.0, 5_000.0);
+    let pw = at(112.0, 5_000.0 + 3.0 * p_pred * 12.0);
+    assert!((pw.measured_j.unwrap() - 3.0 * p_pred * 12.0).abs() < 1e-6);
+    // (60 + 12 x 3) / 72 = 4/3
+    assert!((pw.energy_scale - 4.0 / 3.0).abs() < 1e-12, "{pw:?}");
+    // sustained: after 1000 s at x3, (60 + 3000) / 1060 = 2.89, bounded to 2
+    let pw = at(1100.0, 5_000.0 + 3.0 * p_pred * 1000.0);
+    assert_eq!(pw.energy_scale, 2.0, "bounded to 2");
 }

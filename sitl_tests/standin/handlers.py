@@ -255,6 +255,8 @@ class MessageHandlers:
                 v.gps_lost_since = None
         elif name == "SIM_BATT_PCT" and value >= 0:
             v.consumed_ah = self._capacity_ah() * (1.0 - min(100.0, value) / 100.0)
+            # as AP_BattMonitor_Backend::reset_remaining: the energy at the present voltage
+            v.consumed_j = v.consumed_ah * 3600.0 * self._battery_voltage()
         elif name == "SIM_OBST_DIST":
             if value > 0:
                 self._place_obstacle(value)

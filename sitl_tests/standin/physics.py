@@ -180,6 +180,7 @@ class Physics:
             current = 14.0 + 0.6 * self.params["SIM_WIND_SPD"] + 4.0 * max(0.0, -v.vd)
         self._current_a = current
         v.consumed_ah += current * dt / 3600.0
+        v.consumed_j += self._battery_voltage() * current * dt     # as AP_BattMonitor integrates V x I
 
     def _capacity_ah(self) -> float:
         cap = self.params["SIM_BATT_CAP_AH"]

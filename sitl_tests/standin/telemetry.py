@@ -89,7 +89,7 @@ class Telemetry:
             pct = self._battery_pct()
             charge = M.MAV_BATTERY_CHARGE_STATE_OK if pct > 20 else (M.MAV_BATTERY_CHARGE_STATE_LOW if pct > 10 else M.MAV_BATTERY_CHARGE_STATE_CRITICAL)
             return M.MAVLink_battery_status_message(0, M.MAV_BATTERY_FUNCTION_ALL, M.MAV_BATTERY_TYPE_LIPO, 3000, cells,
-                                                    int(getattr(self, "_current_a", 0.0) * 100), int(v.consumed_ah * 1000), -1, pct,
+                                                    int(getattr(self, "_current_a", 0.0) * 100), int(v.consumed_ah * 1000), int(v.consumed_j / 100), pct,
                                                     0, charge, [0, 0, 0, 0], 0, 0)
         if mid == M.MAVLINK_MSG_ID_VIBRATION:
             vib = self._vibration_level()

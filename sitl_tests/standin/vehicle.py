@@ -26,6 +26,7 @@ class Vehicle:
     vel_target_until: float = 0.0
     speed_override: Optional[float] = None                   # DO_CHANGE_SPEED
     consumed_ah: float = 0.0
+    consumed_j: float = 0.0     # energy drawn (BATTERY_STATUS.energy_consumed, hJ on the wire)
     rtl_stage: str = ""
     rtl_loiter_until: float = 0.0
     land_target: Optional[Tuple[float, float]] = None

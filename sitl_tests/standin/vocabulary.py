@@ -58,7 +58,10 @@ DEFAULT_PARAMS: Dict[str, float] = {
     "WPNAV_RADIUS": 200,       # cm waypoint acceptance radius (default 2 m)
     "LAND_SPEED": 50,          # cm/s final descent (default 0.5 m/s)
     "LAND_ALT_LOW": 1000,      # cm; below it LAND descends at LAND_SPEED (default 10 m)
-    "BATT_CAPACITY": 3300,     # mAh (SITL default)
+    # mAh. SITL's default is 3300; the stand-in flies the mission's 74 Wh (params/missions/tracking.toml
+    # [battery]) as a 3S pack, 74 Wh / 11.1 V = 6667 mAh: the companion reckons its energy goal from the
+    # autopilot's BATT_CAPACITY (docs/guarantee.md), and SITL's 3300 mAh does not hold the default mission.
+    "BATT_CAPACITY": 6667,
     "FS_EKF_ACTION": 1,        # 1 = LAND on EKF failsafe (ArduCopter default)
     "ARMING_CHECK": 1,
     "SIM_SPEEDUP": 1,

@@ -123,6 +123,13 @@ pub(super) fn compile(path: &Path, f: MissionFile) -> Result<MissionSpec, SpecEr
         }
     }
     let battery_capacity_j = f.battery.as_ref().map(|b| b.capacity_wh * 3600.0);
+    // What the energy goal keeps back of a full pack, as a fraction of it: applied to a pack
+    // the autopilot describes (`Guarantee::watch`).
+    let battery_kept_back = f
+        .battery
+        .as_ref()
+        .filter(|b| b.capacity_wh > 0.0)
+        .map(|b| (1.0 - b.usable_fraction) + b.reserve_wh / b.capacity_wh);
     Ok(MissionSpec {
         name: f.mission.name,
         file: path.to_path_buf(),
@@ -134,6 +141,7 @@ pub(super) fn compile(path: &Path, f: MissionFile) -> Result<MissionSpec, SpecEr
         selection,
         activities: infos,
         battery_capacity_j,
+        battery_kept_back,
         tile_names: f.compute.map(|c| c.tile_names).unwrap_or_default(),
     })
 }
