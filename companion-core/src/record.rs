@@ -6,7 +6,9 @@ use std::collections::BTreeMap;
 
 mod events;
 mod resources;
-pub use events::{CommandOutcome, Event, LinkEvent, MAX_LINK_EVENTS, coalesce_link_events};
+pub use events::{
+    CommandOutcome, Event, LinkEvent, MAX_LINK_EVENTS, coalesce_link_events, dedupe_capped,
+};
 pub use resources::{Degraded, Dropped};
 
 /// Version of the decision-log schema, written in each log's header.

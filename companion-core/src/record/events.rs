@@ -726,22 +726,29 @@ pub const MAX_LINK_EVENTS: usize = 64;
 /// since the last cycle: R repeats, K not listed)`. At or under the cap they stay as they came
 /// (order and repeats: `link lost`, `link regained`, `link lost` is a story).
 pub fn coalesce_link_events(events: &mut Vec<LinkEvent>) {
-    let total = events.len();
-    if total <= MAX_LINK_EVENTS {
+    if events.len() <= MAX_LINK_EVENTS {
         return;
     }
-    let mut seen = std::collections::HashSet::with_capacity(total.min(4 * MAX_LINK_EVENTS));
-    events.retain(|e| seen.insert(e.to_string()));
-    let unique = events.len();
-    events.truncate(MAX_LINK_EVENTS);
-    if events.len() < total {
+    if let Some((more, repeats, not_listed)) = dedupe_capped(events, MAX_LINK_EVENTS) {
         events.push(LinkEvent::Other(format!(
-            "({} more link events since the last cycle: {} repeats, {} not listed)",
-            total - events.len(),
-            total - unique,
-            unique - events.len()
+            "({more} more link events since the last cycle: {repeats} repeats, {not_listed} not listed)"
         )));
     }
+}
+
+/// Repeated items once each (by their text, in first-seen order), at most `max` kept. When any
+/// were dropped: (how many, of which repeats, of which distinct but not listed), for the line
+/// that says so (the record's events and link events both summarise a flood this way).
+pub fn dedupe_capped<T: std::fmt::Display>(
+    items: &mut Vec<T>,
+    max: usize,
+) -> Option<(usize, usize, usize)> {
+    let total = items.len();
+    let mut seen = std::collections::HashSet::with_capacity(total.min(4 * max));
+    items.retain(|e| seen.insert(e.to_string()));
+    let unique = items.len();
+    items.truncate(max);
+    (items.len() < total).then(|| (total - items.len(), total - unique, unique - items.len()))
 }
 
 impl From<LinkEvent> for Event {

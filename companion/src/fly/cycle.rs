@@ -168,19 +168,11 @@ const MAX_EVENTS: usize = 64;
 /// Repeated events once each (in first-seen order), at most [`MAX_EVENTS`] with a count of the
 /// rest.
 fn coalesce_events(events: &mut Vec<Event>) {
-    let mut seen = std::collections::BTreeSet::new();
-    let total = events.len();
-    events.retain(|e| seen.insert(e.to_string()));
-    let unique = events.len();
-    if unique > MAX_EVENTS {
-        events.truncate(MAX_EVENTS);
-    }
-    if events.len() < total {
+    if let Some((more, repeats, not_listed)) =
+        companion_core::record::dedupe_capped(events, MAX_EVENTS)
+    {
         events.push(Event::from(format!(
-            "({} more events since the last cycle: {} repeats, {} not listed)",
-            total - events.len(),
-            total - unique,
-            unique - events.len()
+            "({more} more events since the last cycle: {repeats} repeats, {not_listed} not listed)"
         )));
     }
 }
