@@ -4,23 +4,12 @@
 //! seen by every loader (`Params::load`, `check`, `fly`'s setup) and names the file, the entry
 //! and the reason. docs/params.md, "Limits".
 
+mod common;
+use common::copy_dir;
 use companion::check::{self, CheckArgs};
 use companion::fly::{FlyArgs, FlySetup};
 use companion::params::{Params, default_params_dir};
 use std::path::Path;
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap().flatten() {
-        let p = e.path();
-        let dest = to.join(e.file_name());
-        if p.is_dir() {
-            copy_dir(&p, &dest);
-        } else {
-            std::fs::copy(&p, &dest).unwrap();
-        }
-    }
-}
 
 /// A copy of the shipped params with `link.toml` edited by `f`.
 fn link_edited(f: impl FnOnce(String) -> String) -> tempfile::TempDir {

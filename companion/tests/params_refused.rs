@@ -3,24 +3,13 @@
 //! (`Params::load`), `companion check`'s report and, for the link files, `fly`'s own setup all
 //! refuse it with a message naming the file and the entry. docs/params.md, "Limits".
 
+mod common;
+use common::copy_dir;
 use companion::check::{self, CheckArgs};
 use companion::fly::{FlyArgs, FlySetup};
 use companion::params::Params;
 use companion::params::default_params_dir;
 use std::path::Path;
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap().flatten() {
-        let p = e.path();
-        let dest = to.join(e.file_name());
-        if p.is_dir() {
-            copy_dir(&p, &dest);
-        } else {
-            std::fs::copy(&p, &dest).unwrap();
-        }
-    }
-}
 
 /// A fresh copy of the real params.
 fn params_copy() -> tempfile::TempDir {
