@@ -24,6 +24,8 @@
 #   SITL_FLY_TIMEOUT  seconds for the default-mission flight (default 600)
 #   SITL_WORKERS      vehicles flown side by side by the tests (pytest-xdist workers, default 4)
 #   SITL_PYTEST_ARGS  extra pytest arguments (default none)
+#   SITL_KEEP_RUNS    copy the default flight's run folder (records, tlog) there, for `companion calibrate`
+#   SITL_DEFAULT_ONLY fly the default mission only, no tests (with SITL_KEEP_RUNS: a profile flight)
 #   COMPANION_BIN     the companion binary (default: built with cargo)
 set -euo pipefail
 SELF=$(realpath "$0")
@@ -122,12 +124,18 @@ fly_rc=$?
 set -e
 [ "$fly_rc" -eq 0 ] || fail "companion fly exited $fly_rc (run folder under $WORK/runs)"
 
+# The default flight's run folder kept for `companion calibrate` (docs/calibrate.md: the vehicle profiles)
+if [ -n "${SITL_KEEP_RUNS:-}" ]; then
+  mkdir -p "$SITL_KEEP_RUNS" && cp -r "$WORK/runs/." "$SITL_KEEP_RUNS/"
+  echo "== run folder kept in $SITL_KEEP_RUNS"
+fi
 # this vehicle has flown: the tests each start their own
 kill "$KEEPER_PID" "$SITL_PID" 2>/dev/null || true
 wait "$KEEPER_PID" "$SITL_PID" 2>/dev/null || true
 KEEPER_PID="" SITL_PID=""
 
 # ---- the real-autopilot tests: a fresh vehicle each ------------------------------------------------
+if [ -n "${SITL_DEFAULT_ONLY:-}" ]; then echo "== SITL_DEFAULT_ONLY: tests not run"; exit 0; fi
 echo "== pytest sitl_tests/test_real_*.py: a fresh ArduCopter SITL per test, ${SITL_WORKERS:-4} side by side"
 export ARDUCOPTER_BIN=$BIN SITL_DEFAULTS=$DEFAULTS
 # shellcheck disable=SC2086

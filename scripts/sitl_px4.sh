@@ -18,6 +18,8 @@
 #   PX4_INSTANCE       instance for the default flight (default: the first free one in 0-9)
 #   PX4_FLY_TIMEOUT    seconds for the default-mission flight (default 900)
 #   PX4_PYTEST_ARGS    extra pytest arguments (default: -n 4: the five tests, four at a time)
+#   SITL_KEEP_RUNS     copy the default flight's run folder (records, tlog) there, for `companion calibrate`
+#   SITL_DEFAULT_ONLY  fly the default mission only, no tests (with SITL_KEEP_RUNS: a profile flight)
 #   COMPANION_BIN      the companion binary (default: built with cargo)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -94,11 +96,17 @@ grep -q "Disarmed by landing\|Disarmed by auto preflight disarming\|Disarmed by 
   || fail "PX4 did not report a disarm after landing; see $WORK/px4.log"
 grep -q "Takeoff detected" "$WORK/px4.log" || fail "PX4 never took off; see $WORK/px4.log"
 echo "== default mission flown: PX4 reports take-off, landing and disarm"
+# The default flight's run folder kept for `companion calibrate` (docs/calibrate.md: the vehicle profiles)
+if [ -n "${SITL_KEEP_RUNS:-}" ]; then
+  mkdir -p "$SITL_KEEP_RUNS" && cp -r "$WORK/runs/." "$SITL_KEEP_RUNS/"
+  echo "== run folder kept in $SITL_KEEP_RUNS"
+fi
 kill "$PX4_PID" 2>/dev/null || true
 wait "$PX4_PID" 2>/dev/null || true
 PX4_PID=""
 
 # ---- the PX4 sitl_tests (a fresh vehicle each, side by side) --------------------------------------
+if [ -n "${SITL_DEFAULT_ONLY:-}" ]; then echo "== SITL_DEFAULT_ONLY: tests not run"; exit 0; fi
 echo "== pytest sitl_tests -m px4"
 # shellcheck disable=SC2086
 .venv/bin/python -m pytest -q -p no:cacheprovider sitl_tests/test_px4_flight.py -m px4 ${PX4_PYTEST_ARGS:--n 4}
