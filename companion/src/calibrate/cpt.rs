@@ -48,6 +48,8 @@ const COUNTABLE: [Countable; 3] = [
 #[derive(Default)]
 pub struct CptCounts {
     counts: BTreeMap<&'static str, BTreeMap<Vec<(String, String)>, (u64, u64)>>,
+    /// Tracking steps per version node and error row: (target kept, steps).
+    versions: BTreeMap<(String, Vec<(String, String)>), (u64, u64)>,
     /// Per node: the application has succeeded this run (the world stops trying it).
     done: BTreeMap<&'static str, bool>,
     /// An obstacle was avoided this run: the world searches no T zone after it.
@@ -60,12 +62,15 @@ pub struct LearnedRow {
     pub node: String,
     /// Parent -> state.
     pub when: Vec<(String, String)>,
-    /// P(absent) of the shipped row.
-    pub shipped_absent: f64,
+    /// The child's state a success stands for, and its index in the node's states.
+    pub success_state: &'static str,
+    pub success_index: usize,
+    /// P(success state) of the shipped row.
+    pub shipped: f64,
     pub successes: u64,
     pub trials: u64,
-    /// P(absent) learned.
-    pub learned_absent: f64,
+    /// P(success state) learned.
+    pub learned: f64,
 }
 
 impl CptCounts {
@@ -76,7 +81,7 @@ impl CptCounts {
     }
 
     /// Count the trials of one record, with the parents' states from `parents_of`.
-    pub fn add(&mut self, r: &DecisionRecord, states: &MissionStates, parents_of: &BTreeMap<String, Vec<String>>) {
+    pub fn add(&mut self, r: &DecisionRecord, states: &MissionStates, shipped: &ShippedRows, parents_of: &BTreeMap<String, Vec<String>>) {
         let Some(after) = r.vehicle.get("world_events_after").and_then(|v| v.as_array()) else {
             return;
         };
@@ -114,24 +119,66 @@ impl CptCounts {
         if events.contains(&Event::ObstacleAvoided.to_string().as_str()) {
             self.avoided = true;
         }
+        self.add_tracking(r, &events, states, shipped);
+    }
+
+    /// A tracking step with version `Vk` is a trial of `C_Vk`'s row at the errors' states: the
+    /// target kept (no `target lost`) is `activate`. The errors are hidden; each is taken in
+    /// the state its shipped noisy-OR row makes more likely under the cycle's context evidence
+    /// (docs/calibrate.md: hard assignment, an approximation).
+    fn add_tracking(&mut self, r: &DecisionRecord, events: &[&str], states: &MissionStates, shipped: &ShippedRows) {
+        if !states.is_target_in_sight(&r.state) {
+            return;
+        }
+        let Some((_, version)) = states.tracking_target(&r.actions) else { return };
+        let node = format!("C_{version}");
+        let Some(errors) = shipped.version_errors(&node) else { return };
+        let Some(row) = errors
+            .iter()
+            .map(|e| shipped.map_error_state(e, &r.evidence).map(|s| (e.clone(), s.to_string())))
+            .collect::<Option<Vec<_>>>()
+        else {
+            return;
+        };
+        let kept = !events.contains(&Event::TargetLost.to_string().as_str());
+        let c = self.versions.entry((node, row)).or_default();
+        c.0 += u64::from(kept);
+        c.1 += 1;
     }
 
     /// The learned rows, each against its shipped row.
     pub fn learn(&self, shipped: &ShippedRows) -> Vec<LearnedRow> {
         let mut out = Vec::new();
+        let learned = |p0: f64, k: u64, n: u64| {
+            (PRIOR_PSEUDO_COUNTS * p0 + k as f64) / (PRIOR_PSEUDO_COUNTS + n as f64)
+        };
         for (node, rows) in &self.counts {
             for (when, &(k, n)) in rows {
                 let p0 = shipped.p_absent(node, when);
                 out.push(LearnedRow {
                     node: node.to_string(),
                     when: when.clone(),
-                    shipped_absent: p0,
+                    success_state: "absent",
+                    success_index: 0,
+                    shipped: p0,
                     successes: k,
                     trials: n,
-                    learned_absent: (PRIOR_PSEUDO_COUNTS * p0 + k as f64)
-                        / (PRIOR_PSEUDO_COUNTS + n as f64),
+                    learned: learned(p0, k, n),
                 });
             }
+        }
+        for ((node, when), &(k, n)) in &self.versions {
+            let p0 = shipped.p_activate(node, when);
+            out.push(LearnedRow {
+                node: node.clone(),
+                when: when.clone(),
+                success_state: "activate",
+                success_index: 1,
+                shipped: p0,
+                successes: k,
+                trials: n,
+                learned: learned(p0, k, n),
+            });
         }
         out
     }
@@ -141,6 +188,8 @@ impl CptCounts {
 pub struct ShippedRows {
     file: PathBuf,
     nodes: Table,
+    /// The FMEA rows: error -> its solutions.
+    solutions_of: BTreeMap<String, Vec<String>>,
 }
 
 impl ShippedRows {
@@ -152,7 +201,18 @@ impl ShippedRows {
             .parse()
             .map_err(|e| SpecError::new(&file, "-", format!("not TOML: {e}")))?;
         let nodes = t.get("node").and_then(Value::as_table).cloned().unwrap_or_default();
-        Ok(ShippedRows { file, nodes })
+        let strs = |v: Option<&Value>| -> Vec<String> {
+            v.and_then(Value::as_array)
+                .map(|a| a.iter().filter_map(|x| x.as_str().map(String::from)).collect())
+                .unwrap_or_default()
+        };
+        let mut solutions_of: BTreeMap<String, Vec<String>> = BTreeMap::new();
+        for row in t.get("fmea").and_then(Value::as_array).into_iter().flatten() {
+            if let Some(e) = row.get("error").and_then(Value::as_str) {
+                solutions_of.entry(e.into()).or_default().extend(strs(row.get("solutions")));
+            }
+        }
+        Ok(ShippedRows { file, nodes, solutions_of })
     }
 
     pub fn file(&self) -> &Path {
@@ -171,6 +231,83 @@ impl ShippedRows {
             .collect()
     }
 
+    /// A version node's errors (its parents), when `node` is a version node.
+    pub fn version_errors(&self, node: &str) -> Option<Vec<String>> {
+        let n = self.nodes.get(node)?;
+        if n.get("role").and_then(Value::as_str) != Some("version") {
+            return None;
+        }
+        n.get("errors")?
+            .as_array()?
+            .iter()
+            .map(|e| e.as_str().map(String::from))
+            .collect()
+    }
+
+    /// The more likely state of error `e` under the contexts in `evidence` (its shipped
+    /// noisy-OR row; a context without evidence, `A_small_roi`, weighted by its prior).
+    pub fn map_error_state(&self, e: &str, evidence: &BTreeMap<String, String>) -> Option<&'static str> {
+        let parents: Vec<String> = self.nodes.get(e)?.get("strength")?.as_table()?.keys().cloned().collect();
+        let p = self.p_absent_marginal(e, &parents, evidence, &mut Vec::new())?;
+        Some(if p >= 0.5 { "absent" } else { "present" })
+    }
+
+    fn p_absent_marginal(
+        &self,
+        e: &str,
+        parents: &[String],
+        evidence: &BTreeMap<String, String>,
+        when: &mut Vec<(String, String)>,
+    ) -> Option<f64> {
+        let Some((first, rest)) = parents.split_first() else {
+            return Some(self.p_absent(e, when));
+        };
+        if let Some(s) = evidence.get(first) {
+            when.push((first.clone(), s.clone()));
+            let p = self.p_absent_marginal(e, rest, evidence, when);
+            when.pop();
+            return p;
+        }
+        let node = self.nodes.get(first)?;
+        let states = node.get("states")?.as_array()?;
+        let prior = node.get("prior")?.as_array()?;
+        let mut total = 0.0;
+        for (s, w) in states.iter().zip(prior) {
+            when.push((first.clone(), s.as_str()?.to_string()));
+            let p = self.p_absent_marginal(e, rest, evidence, when);
+            when.pop();
+            total += w.as_float()? * p?;
+        }
+        Some(total)
+    }
+
+    /// P(activate | errors) of a shipped version node: its matching `override` row, else the
+    /// version rule (docs/params/health.md): `p_ok · miss^(present errors it does not fix) ·
+    /// extra^(its solutions whose error is absent)`.
+    pub fn p_activate(&self, node: &str, when: &[(String, String)]) -> f64 {
+        let Some(n) = self.nodes.get(node) else { return 0.5 };
+        if let Some(p) = self.override_row(n, when) {
+            return p.get(1).copied().unwrap_or(0.5);
+        }
+        let f = |k: &str, d: f64| n.get(k).and_then(Value::as_float).unwrap_or(d);
+        let (p_ok, miss, extra) = (f("p_ok", 0.95), f("miss", 0.1), f("extra", 0.5));
+        let sols: Vec<&str> = n
+            .get("solutions")
+            .and_then(Value::as_array)
+            .map(|a| a.iter().filter_map(Value::as_str).collect())
+            .unwrap_or_default();
+        let fixes = |e: &str| {
+            self.solutions_of
+                .get(e)
+                .is_some_and(|s| s.iter().any(|x| sols.contains(&x.as_str())))
+        };
+        when.iter().fold(p_ok, |acc, (e, st)| match (st.as_str(), fixes(e)) {
+            ("present", false) => acc * miss,
+            ("absent", true) => acc * extra,
+            _ => acc,
+        })
+    }
+
     fn state_index(&self, node: &str, state: &str) -> Option<usize> {
         let states = self.nodes.get(node)?.get("states")?.as_array()?;
         states.iter().position(|s| s.as_str() == Some(state))
@@ -181,7 +318,7 @@ impl ShippedRows {
     pub fn p_absent(&self, node: &str, when: &[(String, String)]) -> f64 {
         let Some(n) = self.nodes.get(node) else { return 0.5 };
         if let Some(p) = self.override_row(n, when) {
-            return p;
+            return p.first().copied().unwrap_or(0.5);
         }
         let leak = n.get("leak").and_then(Value::as_float).unwrap_or(0.01);
         let strength = n.get("strength").and_then(Value::as_table);
@@ -197,14 +334,15 @@ impl ShippedRows {
         })
     }
 
-    fn override_row(&self, n: &Value, when: &[(String, String)]) -> Option<f64> {
+    fn override_row(&self, n: &Value, when: &[(String, String)]) -> Option<Vec<f64>> {
         let rows = n.get("override")?.as_array()?;
         rows.iter().rev().find_map(|r| {
             let w = r.get("when")?.as_table()?;
             let all = w.iter().all(|(p, s)| {
                 when.iter().any(|(wp, ws)| wp == p && Some(ws.as_str()) == s.as_str())
             });
-            all.then(|| r.get("p")?.as_array()?.first()?.as_float())?
+            let p = r.get("p")?.as_array()?;
+            all.then(|| p.iter().map(|v| v.as_float()).collect::<Option<Vec<f64>>>())?
         })
     }
 
@@ -225,10 +363,12 @@ impl ShippedRows {
                 .map(|(p, s)| (p.clone(), Value::String(s.clone())))
                 .collect();
             rows.retain(|r| r.get("when").and_then(Value::as_table) != Some(&when));
-            let p = round6(l.learned_absent);
+            let p = round6(l.learned);
+            let q = round6(1.0 - p);
+            let pair = if l.success_index == 0 { [p, q] } else { [q, p] };
             let mut row = Table::new();
             row.insert("when".into(), Value::Table(when));
-            row.insert("p".into(), Value::Array(vec![p.into(), round6(1.0 - p).into()]));
+            row.insert("p".into(), Value::Array(pair.map(Value::from).to_vec()));
             rows.push(Value::Table(row));
         }
         Value::Array(rows)
@@ -275,7 +415,7 @@ mod tests {
         let rows = c.learn(&s);
         assert_eq!(rows.len(), 1);
         // (10 x 0.5 + 45) / (10 + 50)
-        assert!((rows[0].learned_absent - 50.0 / 60.0).abs() < 1e-12, "{rows:?}");
+        assert!((rows[0].learned - 50.0 / 60.0).abs() < 1e-12, "{rows:?}");
         let v = s.overrides_with("U_zone_t_fail", &[&rows[0]]);
         let a = v.as_array().unwrap();
         assert_eq!(a.len(), 2, "the shipped override is kept: {v}");

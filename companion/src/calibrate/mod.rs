@@ -61,7 +61,7 @@ pub fn calibrate(shipped: &shipped::Shipped, runs: Vec<PathBuf>) -> anyhow::Resu
                 fit.add(s);
             }
             durations.add(r);
-            counts.add(r, &shipped.states, &parents);
+            counts.add(r, &shipped.states, &shipped.rows, &parents);
         })?;
     }
     Ok(Calibration {

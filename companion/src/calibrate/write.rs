@@ -102,12 +102,13 @@ pub fn report(shipped: &Shipped, cal: &Calibration) -> String {
     for r in &cal.rows {
         let _ = writeln!(
             s,
-            "  {}[{}]: P(absent) {:.4} -> {:.4} ({:+.4}) from {}/{} successes",
+            "  {}[{}]: P({}) {:.4} -> {:.4} ({:+.4}) from {}/{} successes",
             r.node,
             when_text(r),
-            r.shipped_absent,
-            r.learned_absent,
-            r.learned_absent - r.shipped_absent,
+            r.success_state,
+            r.shipped,
+            r.learned,
+            r.learned - r.shipped,
             r.successes,
             r.trials
         );
@@ -143,8 +144,9 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
     let mut sources = Table::new();
     let cal_t = table_at(&mut t, &["calibration"]);
     cal_t.insert("made_by".into(), Value::String("companion calibrate".into()));
-    let base = std::path::absolute(&shipped.dir).unwrap_or_else(|_| shipped.dir.clone());
-    let out_dir = out.parent().map(|p| std::path::absolute(p).unwrap_or_default()).unwrap_or_default();
+    let canon = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
+    let base = canon(&shipped.dir);
+    let out_dir = canon(out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")));
     let rel = relative(&out_dir, &base);
     cal_t.insert("params".into(), Value::String(rel));
     let runs: Vec<Value> = cal.runs.iter().map(|r| Value::String(r.display().to_string())).collect();
@@ -195,11 +197,12 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
                 format!("{file}:node.{node}.override[{}]", when_text(r)),
                 Value::String(format!(
                     "companion calibrate: {}/{} successes in {} run(s), prior: the shipped row \
-                     P(absent) {:.4} worth {PRIOR_PSEUDO_COUNTS} trials",
+                     P({}) {:.4} worth {PRIOR_PSEUDO_COUNTS} trials",
                     r.successes,
                     r.trials,
                     cal.runs.len(),
-                    r.shipped_absent
+                    r.success_state,
+                    r.shipped
                 )),
             );
         }
