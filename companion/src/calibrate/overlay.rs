@@ -116,12 +116,35 @@ fn merge_table(dst: &mut Table, src: &Table, at: &str, err: &ErrFn) -> Result<()
             (Some(d), Value::Table(_)) if !matches!(d, Value::Table(_)) => {
                 return Err(err(&entry, "the params file has a value here, the overlay a table".into()));
             }
+            (Some(d), v) if !same_kind(d, v) => {
+                return Err(err(
+                    &entry,
+                    format!("the params file has {} here, the overlay {}", kind(d), kind(v)),
+                ));
+            }
             _ => {
                 dst.insert(k.clone(), v.clone());
             }
         }
     }
     Ok(())
+}
+
+/// Numbers are numbers (an integer where a float was is fine); otherwise the same TOML type.
+fn same_kind(a: &Value, b: &Value) -> bool {
+    let num = |v: &Value| matches!(v, Value::Integer(_) | Value::Float(_));
+    (num(a) && num(b)) || std::mem::discriminant(a) == std::mem::discriminant(b)
+}
+
+fn kind(v: &Value) -> &'static str {
+    match v {
+        Value::String(_) => "a string",
+        Value::Integer(_) | Value::Float(_) => "a number",
+        Value::Boolean(_) => "a boolean",
+        Value::Datetime(_) => "a date",
+        Value::Array(_) => "an array",
+        Value::Table(_) => "a table",
+    }
 }
 
 /// An array of tables each with a string `name` (the mission's `activities`).
@@ -196,6 +219,7 @@ mod tests {
             ("[\"m.toml\"]\nbase = 3.0\n", "m.toml.base", "a table here"),
             ("[\"m.toml\".base]\npower_w = nan\n", "m.toml.base.power_w", "not a finite"),
             ("[\"m.toml\".base.power_w]\nx = 1\n", "m.toml.base.power_w", "a value here"),
+            ("[\"m.toml\".base]\npower_w = \"9\"\n", "m.toml.base.power_w", "a number here, the overlay a string"),
         ];
         for (text, entry, reason) in cases {
             let e = apply_text(&mut files(), text).unwrap_err();
