@@ -373,6 +373,14 @@ mod tests {
         a * (2.0 * x - 1.0)
     }
 
+    /// Zeng et al. 2019 eq. 12 plus the base power, written out here apart from the code under
+    /// test so that a wrong regressor there cannot also generate the data.
+    fn zeng(t: PowerModel, v: f64) -> f64 {
+        let (p0, pi, v0, u) = (t.blade_profile_w, t.induced_hover_w, t.induced_velocity_mps, t.tip_speed_mps);
+        let induced = ((1.0 + v.powi(4) / (4.0 * v0.powi(4))).sqrt() - v.powi(2) / (2.0 * v0.powi(2))).sqrt();
+        t.base_w + p0 * (1.0 + 3.0 * v * v / (u * u)) + pi * induced + 0.5 * t.air_density_kgm3 * t.drag_area_m2 * v.powi(3)
+    }
+
     fn fed(samples: impl Iterator<Item = Sample>) -> PowerFit {
         let mut f = PowerFit::new(shipped());
         samples.for_each(|s| f.add(s));
@@ -389,7 +397,7 @@ mod tests {
         for &v in speeds {
             for _ in 0..40 {
                 i += 1;
-                out.push(Sample { speed_mps: v, power_w: t.power(v, true) + noise(i, noise_w), airborne: true });
+                out.push(Sample { speed_mps: v, power_w: zeng(t, v) + noise(i, noise_w), airborne: true });
             }
         }
         out
@@ -406,8 +414,13 @@ mod tests {
         assert!((f.induced_velocity_mps / t.induced_velocity_mps - 1.0).abs() < 0.02, "{f:?}");
         assert!((f.base_w - t.base_w).abs() < 0.01, "{f:?}");
         assert!((f.hover_w() / t.hover_w() - 1.0).abs() < 0.02, "{f:?}");
+        // The split of the hover power is the weakly determined direction (docs/calibrate.md):
+        // without noise it is still found within 2 %.
+        assert!((f.blade_profile_w / t.blade_profile_w - 1.0).abs() < 0.02, "{f:?}");
+        assert!((f.induced_hover_w / t.induced_hover_w - 1.0).abs() < 0.02, "{f:?}");
         assert!((f.drag_area_m2 / t.drag_area_m2 - 1.0).abs() < 0.05, "{f:?}");
-        assert!(r.rms_w < 1.0 && r.shipped_rms_w > 50.0, "{r:?}");
+        // 8 m/s is on the grid (0.5 x 1.02^140 = 7.9996): the fit is exact.
+        assert!(r.rms_w < 0.05 && r.shipped_rms_w > 50.0, "{r:?}");
     }
 
     #[test]
@@ -417,7 +430,7 @@ mod tests {
         // Uniform noise of ±10 W has an RMS of 5.8 W: the fit's error is that, no more.
         assert!(r.rms_w < 6.5, "{r:?}");
         for v in SPEEDS {
-            let e = (r.fitted.power(v, true) - t.power(v, true)).abs();
+            let e = (r.fitted.power(v, true) - zeng(t, v)).abs();
             assert!(e < 5.0, "at {v} m/s: {e} W off ({r:?})");
         }
         assert!((r.fitted.base_w - t.base_w).abs() < 2.0, "{r:?}");
