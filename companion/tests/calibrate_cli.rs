@@ -279,3 +279,105 @@ fn a_changed_tracking_row_is_recovered_and_changes_the_version_flown() {
     let learned = versions(out.to_str().unwrap());
     assert!(!learned.is_empty() && !learned.contains(&"track_v3".to_string()), "{learned:?}");
 }
+
+/// A tlog entry: time stamp, then one MAVLink 2 frame from `sys`.
+fn tlog_entry(out: &mut Vec<u8>, t_us: u64, sys: u8, msg: &companion_link::Msg) {
+    out.extend_from_slice(&t_us.to_be_bytes());
+    let h = mavlink::MavHeader { system_id: sys.into(), component_id: 1, sequence: 0 };
+    mavlink::write_v2_msg(out, h, msg).unwrap();
+}
+
+/// The tlog of a flight of [`FLIGHT`]'s speeds at 5 Hz: the autopilot (system 1) says armed,
+/// position and pack; the companion's own frames (system 255, a pack reading of 1 kW) are not
+/// the vehicle's and must not count.
+fn write_tlog(path: &Path) {
+    use companion_link::Msg;
+    use companion_link::dialect::*;
+    let hb = |armed: bool, autopilot| {
+        Msg::HEARTBEAT(HEARTBEAT_DATA {
+            autopilot,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            base_mode: if armed { MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED } else { MavModeFlag::empty() },
+            mavlink_version: 3,
+            ..Default::default()
+        })
+    };
+    let bat = |p: f64| {
+        let mut voltages = [u16::MAX; 10];
+        voltages[0] = 15_000;
+        Msg::BATTERY_STATUS(BATTERY_STATUS_DATA {
+            voltages,
+            current_battery: (p / 15.0 * 100.0).round() as i16,
+            battery_remaining: 80,
+            current_consumed: -1,
+            energy_consumed: -1,
+            ..Default::default()
+        })
+    };
+    let pos = |v: f64, alt_m: f64| {
+        Msg::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
+            lat: 434_000_000,
+            lon: 38_000_000,
+            relative_alt: (alt_m * 1000.0) as i32,
+            vx: (v * 100.0).round() as i16,
+            hdg: u16::MAX,
+            ..Default::default()
+        })
+    };
+    let mut out = Vec::new();
+    let mut t = 1_000_000u64;
+    let mut step = |out: &mut Vec<u8>, armed: bool, v: f64, alt: f64, p: f64| {
+        tlog_entry(out, t, 255, &hb(false, MavAutopilot::MAV_AUTOPILOT_INVALID));
+        tlog_entry(out, t, 255, &bat(1000.0));
+        tlog_entry(out, t, 1, &hb(armed, MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA));
+        tlog_entry(out, t, 1, &pos(v, alt));
+        tlog_entry(out, t, 1, &bat(p));
+        t += 200_000;
+    };
+    for _ in 0..100 {
+        step(&mut out, false, 0.0, 0.0, TRUTH.base);
+    }
+    for (_, v, secs) in FLIGHT {
+        for _ in 0..secs * 5 {
+            step(&mut out, true, v, 30.0, truth_power(v));
+        }
+    }
+    std::fs::write(path, out).unwrap();
+}
+
+#[test]
+fn power_is_read_from_the_tlog_of_the_autopilot_alone() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    // Records without any power observation: the fit can only come from the tlog.
+    write_run(&run, &[("take_off", 0.0, 5)], false);
+    let log = run.join("decisions.jsonl");
+    let stripped: String = std::fs::read_to_string(&log)
+        .unwrap()
+        .lines()
+        .map(|l| l.replace("\"battery_current_a\"", "\"unused_a\"") + "\n")
+        .collect();
+    std::fs::write(&log, stripped).unwrap();
+    write_tlog(&run.join("flight.tlog"));
+    let out = tmp.path().join("o.toml");
+    let o = companion(&["calibrate", run.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let report = text(&o);
+    assert!(o.status.success(), "{report}");
+    let t = overlay(&out);
+    let m = "missions/tracking.toml";
+    assert!((num(&t, m, "base", "power_w") - TRUTH.base).abs() < 0.5, "{report}");
+    let hover = num(&t, m, "propulsion", "blade_profile_w") + num(&t, m, "propulsion", "induced_hover_w");
+    assert!((hover / (TRUTH.p0 + TRUTH.pi) - 1.0).abs() < 0.03, "hover {hover}: {report}");
+    // 100 samples on the ground and 1,400 in the air at 5 Hz (the records' 5 are not used).
+    assert!(report.contains("over 1500 samples (100 on the ground)"), "{report}");
+
+    // Garbage in the middle of the tlog: its byte offset and why.
+    let mut bytes = std::fs::read(run.join("flight.tlog")).unwrap();
+    let at = 8 + bytes[9] as usize + 12 + 8;
+    bytes[at] = 0x42;
+    std::fs::write(run.join("flight.tlog"), &bytes).unwrap();
+    let o = companion(&["calibrate", run.to_str().unwrap()]);
+    let e = text(&o);
+    assert!(!o.status.success(), "{e}");
+    assert!(e.contains("flight.tlog, byte") && e.contains("found 0x42"), "{e}");
+}

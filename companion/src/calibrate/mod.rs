@@ -6,6 +6,7 @@
 //! - `power_fit`: the rotary-wing and base power fit (nalgebra SVD least squares);
 //! - `durations`: how long each activity ran;
 //! - `cpt`: CPT rows counted with a Dirichlet prior from the shipped rows;
+//! - `tlog`: power samples from a run's `flight.tlog`, when it has one;
 //! - `shipped`: the shipped numbers the fit starts from;
 //! - `write`: the report and the overlay;
 //! - `overlay`: reading an overlay back (`--params FILE`).
@@ -16,6 +17,7 @@ pub mod overlay;
 pub mod power_fit;
 pub mod runs;
 pub mod shipped;
+pub mod tlog;
 pub mod write;
 
 use anyhow::Context;
@@ -56,8 +58,11 @@ pub fn calibrate(shipped: &shipped::Shipped, runs: Vec<PathBuf>) -> anyhow::Resu
     for run in &runs {
         durations.start_run();
         counts.start_run();
+        // The tlog has the autopilot's telemetry at its own rate; the records, once a cycle.
+        let tlog = run.join("flight.tlog");
+        let from_tlog = tlog.is_file() && tlog::for_each_sample(&tlog, |s| fit.add(s))? > 0;
         records += runs::for_each_record(run, |r| {
-            if let Some(s) = runs::sample_of(r) {
+            if !from_tlog && let Some(s) = runs::sample_of(r) {
                 fit.add(s);
             }
             durations.add(r);
