@@ -130,6 +130,7 @@ fn a_generated_run_is_fitted_back_and_the_overlay_loads() {
     let out = tmp.path().join("fitted.toml");
     let o = companion(&["calibrate", runs.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     let report = text(&o);
+    eprintln!("{report}\n{}", std::fs::read_to_string(&out).unwrap_or_default());
     assert!(o.status.success(), "{report}");
     assert!(report.contains("fit error before (shipped params)"), "{report}");
     assert!(report.contains("fit error after (fitted)"), "{report}");
@@ -149,6 +150,9 @@ fn a_generated_run_is_fitted_back_and_the_overlay_loads() {
     // The durations: tracking_area flew 60 s in each run; its hold is what makes that.
     let sources = t["calibration"]["sources"].as_table().unwrap();
     assert!(sources.contains_key("missions/tracking.toml:activities.tracking_area.hold_s"), "{sources:?}");
+    // The shipped tracking_area is a 600 s hold without motion: flown 60 s, its hold is 60 s.
+    let hold = t[m]["activities"]["tracking_area"]["hold_s"].as_float();
+    assert_eq!(hold, Some(60.0), "{report}");
 
     // check and simulate take the overlay; check's pre-flight estimate moves with it.
     let c = companion(&["check", "--params", out.to_str().unwrap(), "--json"]);

@@ -219,7 +219,8 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
 /// `to` relative to `from` when it lies below it, else `to` as is (both absolute).
 fn relative(from: &Path, to: &Path) -> String {
     let common = from.components().zip(to.components()).take_while(|(a, b)| a == b).count();
-    if common == 0 {
+    // Sharing only the root: the absolute path survives moving the overlay better.
+    if common <= 1 {
         return to.display().to_string();
     }
     let ups = from.components().count() - common;
