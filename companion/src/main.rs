@@ -83,7 +83,8 @@ struct SimulateArgs {
     /// Do not write a run folder.
     #[arg(long)]
     no_log: bool,
-    /// The params directory (default: $COMPANION_PARAMS, else the repository's params/).
+    /// The params directory (default: $COMPANION_PARAMS, else the repository's params/) or a params overlay file
+    /// (`companion calibrate --out`, docs/calibrate.md).
     #[arg(long)]
     params: Option<PathBuf>,
 }

@@ -50,8 +50,12 @@ const TRUTH: Truth = Truth {
 /// The Zeng et al. model written out here, independently of the code under test.
 fn truth_power(v: f64) -> f64 {
     let t = TRUTH;
-    let induced = ((1.0 + v.powi(4) / (4.0 * t.v0.powi(4))).sqrt() - v * v / (2.0 * t.v0 * t.v0)).sqrt();
-    t.base + t.p0 * (1.0 + 3.0 * v * v / (80.0 * 80.0)) + t.pi * induced + 0.5 * 1.225 * t.cda * v.powi(3)
+    let induced =
+        ((1.0 + v.powi(4) / (4.0 * t.v0.powi(4))).sqrt() - v * v / (2.0 * t.v0 * t.v0)).sqrt();
+    t.base
+        + t.p0 * (1.0 + 3.0 * v * v / (80.0 * 80.0))
+        + t.pi * induced
+        + 0.5 * 1.225 * t.cda * v.powi(3)
 }
 
 /// A run folder as `fly` writes it: header, then one record a second with the observations
@@ -89,14 +93,22 @@ fn write_run(dir: &Path, speeds: &[(&str, f64, u32)], noise: bool) {
         t += 1.0;
     };
     for i in 0..20 {
-        let e = if noise { [0.3, -0.2, 0.1, -0.4][i % 4] } else { 0.0 };
+        let e = if noise {
+            [0.3, -0.2, 0.1, -0.4][i % 4]
+        } else {
+            0.0
+        };
         write("take_off", false, 0.0, 0.0, TRUTH.base + e);
     }
     let mut k = 0usize;
     for (activity, v, secs) in speeds {
         for _ in 0..*secs {
             k += 1;
-            let e = if noise { [3.0, -2.0, 1.0, -4.0, 2.0][k % 5] } else { 0.0 };
+            let e = if noise {
+                [3.0, -2.0, 1.0, -4.0, 2.0][k % 5]
+            } else {
+                0.0
+            };
             write(activity, true, *v, 30.0, truth_power(*v) + e);
         }
     }
@@ -118,7 +130,9 @@ fn overlay(path: &Path) -> toml::Table {
 }
 
 fn num(t: &toml::Table, file: &str, table: &str, key: &str) -> f64 {
-    t[file][table][key].as_float().unwrap_or_else(|| panic!("{file} {table}.{key}"))
+    t[file][table][key]
+        .as_float()
+        .unwrap_or_else(|| panic!("{file} {table}.{key}"))
 }
 
 #[test]
@@ -128,28 +142,52 @@ fn a_generated_run_is_fitted_back_and_the_overlay_loads() {
     write_run(&runs.join("a"), &FLIGHT, true);
     write_run(&runs.join("b"), &FLIGHT, false);
     let out = tmp.path().join("fitted.toml");
-    let o = companion(&["calibrate", runs.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let o = companion(&[
+        "calibrate",
+        runs.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     let report = text(&o);
-    eprintln!("{report}\n{}", std::fs::read_to_string(&out).unwrap_or_default());
+    eprintln!(
+        "{report}\n{}",
+        std::fs::read_to_string(&out).unwrap_or_default()
+    );
     assert!(o.status.success(), "{report}");
-    assert!(report.contains("fit error before (shipped params)"), "{report}");
+    assert!(
+        report.contains("fit error before (shipped params)"),
+        "{report}"
+    );
     assert!(report.contains("fit error after (fitted)"), "{report}");
     let t = overlay(&out);
     let m = "missions/tracking.toml";
-    let hover = num(&t, m, "propulsion", "blade_profile_w") + num(&t, m, "propulsion", "induced_hover_w");
-    assert!((hover / (TRUTH.p0 + TRUTH.pi) - 1.0).abs() < 0.03, "hover {hover}: {report}");
-    assert!((num(&t, m, "base", "power_w") - TRUTH.base).abs() < 0.5, "{report}");
+    let hover =
+        num(&t, m, "propulsion", "blade_profile_w") + num(&t, m, "propulsion", "induced_hover_w");
+    assert!(
+        (hover / (TRUTH.p0 + TRUTH.pi) - 1.0).abs() < 0.03,
+        "hover {hover}: {report}"
+    );
+    assert!(
+        (num(&t, m, "base", "power_w") - TRUTH.base).abs() < 0.5,
+        "{report}"
+    );
     let v0 = num(&t, m, "propulsion", "induced_velocity_mps");
     assert!((v0 / TRUTH.v0 - 1.0).abs() < 0.1, "v0 {v0}: {report}");
     let cda = num(&t, m, "propulsion", "drag_area_m2");
     assert!((cda / TRUTH.cda - 1.0).abs() < 0.15, "cda {cda}: {report}");
     // Every fitted number says where it came from, in place of ASSUMPTION.
     let src = t[m]["propulsion"]["source"].as_str().unwrap();
-    assert!(src.contains("2 run(s)") && src.contains("fit RMS") && !src.contains("ASSUMPTION"), "{src}");
+    assert!(
+        src.contains("2 run(s)") && src.contains("fit RMS") && !src.contains("ASSUMPTION"),
+        "{src}"
+    );
     assert_eq!(t[m]["base"]["source"].as_str(), Some(src));
     // The durations: tracking_area flew 60 s in each run; its hold is what makes that.
     let sources = t["calibration"]["sources"].as_table().unwrap();
-    assert!(sources.contains_key("missions/tracking.toml:activities.tracking_area.hold_s"), "{sources:?}");
+    assert!(
+        sources.contains_key("missions/tracking.toml:activities.tracking_area.hold_s"),
+        "{sources:?}"
+    );
     // The shipped tracking_area is a 600 s hold without motion: flown 60 s, its hold is 60 s.
     let hold = t[m]["activities"]["tracking_area"]["hold_s"].as_float();
     assert_eq!(hold, Some(60.0), "{report}");
@@ -158,8 +196,18 @@ fn a_generated_run_is_fitted_back_and_the_overlay_loads() {
     let c = companion(&["check", "--params", out.to_str().unwrap(), "--json"]);
     assert!(c.status.success(), "{}", text(&c));
     let shipped = companion(&["check", "--json"]);
-    assert_ne!(c.stdout, shipped.stdout, "the overlay changed nothing check shows");
-    let s = companion(&["simulate", "--params", out.to_str().unwrap(), "--no-log", "--steps", "5"]);
+    assert_ne!(
+        c.stdout, shipped.stdout,
+        "the overlay changed nothing check shows"
+    );
+    let s = companion(&[
+        "simulate",
+        "--params",
+        out.to_str().unwrap(),
+        "--no-log",
+        "--steps",
+        "5",
+    ]);
     assert!(s.status.success(), "{}", text(&s));
 }
 
@@ -171,7 +219,10 @@ fn one_speed_is_reported_unidentifiable_by_name() {
     let o = companion(&["calibrate", run.to_str().unwrap()]);
     let report = text(&o);
     assert!(report.contains("not fitted"), "{report}");
-    assert!(report.contains("induced_velocity_mps") && report.contains("unidentifiable"), "{report}");
+    assert!(
+        report.contains("induced_velocity_mps") && report.contains("unidentifiable"),
+        "{report}"
+    );
 }
 
 #[test]
@@ -180,7 +231,11 @@ fn a_corrupted_run_file_names_file_and_line() {
     let run = tmp.path().join("run");
     write_run(&run, &FLIGHT, false);
     let log = run.join("decisions.jsonl");
-    let mut lines: Vec<String> = std::fs::read_to_string(&log).unwrap().lines().map(String::from).collect();
+    let mut lines: Vec<String> = std::fs::read_to_string(&log)
+        .unwrap()
+        .lines()
+        .map(String::from)
+        .collect();
     lines[3] = "{\"cycle\": \"three\", ".into();
     std::fs::write(&log, lines.join("\n") + "\n").unwrap();
     let o = companion(&["calibrate", run.to_str().unwrap()]);
@@ -198,16 +253,31 @@ fn a_corrupted_run_file_names_file_and_line() {
 fn a_malformed_overlay_stops_start_up_with_file_entry_and_reason() {
     let tmp = tempfile::tempdir().unwrap();
     let bad = [
-        ("[\"missions/tracking.toml\".propulsion]\nblade_profile_w = \"x\"\n", "propulsion.blade_profile_w"),
-        ("[\"missions/tracking.toml\".activities.nowhere]\nhold_s = 1.0\n", "activities.nowhere"),
-        ("[\"missions/nope.toml\".base]\npower_w = 1.0\n", "missions/nope.toml"),
-        ("[\"missions/tracking.toml\".base]\npower_w = inf\n", "base.power_w"),
+        (
+            "[\"missions/tracking.toml\".propulsion]\nblade_profile_w = \"x\"\n",
+            "propulsion.blade_profile_w",
+        ),
+        (
+            "[\"missions/tracking.toml\".activities.nowhere]\nhold_s = 1.0\n",
+            "activities.nowhere",
+        ),
+        (
+            "[\"missions/nope.toml\".base]\npower_w = 1.0\n",
+            "missions/nope.toml",
+        ),
+        (
+            "[\"missions/tracking.toml\".base]\npower_w = inf\n",
+            "base.power_w",
+        ),
         ("not toml [", "not TOML"),
     ];
     for (i, (body, what)) in bad.iter().enumerate() {
         let p = tmp.path().join(format!("bad{i}.toml"));
         std::fs::write(&p, body).unwrap();
-        for cmd in [&["check"][..], &["simulate", "--no-log", "--steps", "1"][..]] {
+        for cmd in [
+            &["check"][..],
+            &["simulate", "--no-log", "--steps", "1"][..],
+        ] {
             let mut args = cmd.to_vec();
             args.extend(["--params", p.to_str().unwrap()]);
             let o = companion(&args);
@@ -240,16 +310,30 @@ fn a_changed_tracking_row_is_recovered_and_changes_the_version_flown() {
     let runs = tmp.path().join("runs");
     for seed in 1..=6 {
         let o = companion(&[
-            "simulate", "--params", copy.to_str().unwrap(), "--scenario", "vibrations",
-            "--seed", &seed.to_string(), "--runs-dir", runs.to_str().unwrap(),
+            "simulate",
+            "--params",
+            copy.to_str().unwrap(),
+            "--scenario",
+            "vibrations",
+            "--seed",
+            &seed.to_string(),
+            "--runs-dir",
+            runs.to_str().unwrap(),
         ]);
         assert!(o.status.success(), "{}", text(&o));
     }
     let out = tmp.path().join("learned.toml");
-    let o = companion(&["calibrate", runs.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let o = companion(&[
+        "calibrate",
+        runs.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let t = overlay(&out);
-    let rows = t["health/applications.toml"]["node"]["C_V3"]["override"].as_array().unwrap();
+    let rows = t["health/applications.toml"]["node"]["C_V3"]["override"]
+        .as_array()
+        .unwrap();
     let row = rows
         .iter()
         .find(|r| {
@@ -265,7 +349,17 @@ fn a_changed_tracking_row_is_recovered_and_changes_the_version_flown() {
     assert!((p - TRUE_ROW).abs() < 0.08, "learned {p}: {}", text(&o));
 
     let versions = |params: &str| -> Vec<String> {
-        let o = companion(&["simulate", "--params", params, "--scenario", "vibrations", "--seed", "1", "--no-log", "--json"]);
+        let o = companion(&[
+            "simulate",
+            "--params",
+            params,
+            "--scenario",
+            "vibrations",
+            "--seed",
+            "1",
+            "--no-log",
+            "--json",
+        ]);
         assert!(o.status.success(), "{}", text(&o));
         let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         let mut out: Vec<String> = v["decisions"]
@@ -273,7 +367,16 @@ fn a_changed_tracking_row_is_recovered_and_changes_the_version_flown() {
             .unwrap()
             .iter()
             .filter(|r| r["evidence"]["A_vibration"] == "high")
-            .flat_map(|r| r["actions"].as_array().unwrap().iter().filter_map(|a| a.as_str()).filter(|a| a.starts_with("track_")).map(String::from).collect::<Vec<_>>())
+            .flat_map(|r| {
+                r["actions"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .filter_map(|a| a.as_str())
+                    .filter(|a| a.starts_with("track_"))
+                    .map(String::from)
+                    .collect::<Vec<_>>()
+            })
             .collect();
         out.dedup();
         out
@@ -281,13 +384,20 @@ fn a_changed_tracking_row_is_recovered_and_changes_the_version_flown() {
     let shipped = default_params_dir();
     assert_eq!(versions(shipped.to_str().unwrap()), ["track_v3"]);
     let learned = versions(out.to_str().unwrap());
-    assert!(!learned.is_empty() && !learned.contains(&"track_v3".to_string()), "{learned:?}");
+    assert!(
+        !learned.is_empty() && !learned.contains(&"track_v3".to_string()),
+        "{learned:?}"
+    );
 }
 
 /// A tlog entry: time stamp, then one MAVLink 2 frame from `sys`.
 fn tlog_entry(out: &mut Vec<u8>, t_us: u64, sys: u8, msg: &companion_link::Msg) {
     out.extend_from_slice(&t_us.to_be_bytes());
-    let h = mavlink::MavHeader { system_id: sys.into(), component_id: 1, sequence: 0 };
+    let h = mavlink::MavHeader {
+        system_id: sys.into(),
+        component_id: 1,
+        sequence: 0,
+    };
     mavlink::write_v2_msg(out, h, msg).unwrap();
 }
 
@@ -301,7 +411,11 @@ fn write_tlog(path: &Path) {
         Msg::HEARTBEAT(HEARTBEAT_DATA {
             autopilot,
             mavtype: MavType::MAV_TYPE_QUADROTOR,
-            base_mode: if armed { MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED } else { MavModeFlag::empty() },
+            base_mode: if armed {
+                MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED
+            } else {
+                MavModeFlag::empty()
+            },
             mavlink_version: 3,
             ..Default::default()
         })
@@ -333,7 +447,12 @@ fn write_tlog(path: &Path) {
     let mut step = |out: &mut Vec<u8>, armed: bool, v: f64, alt: f64, p: f64| {
         tlog_entry(out, t, 255, &hb(false, MavAutopilot::MAV_AUTOPILOT_INVALID));
         tlog_entry(out, t, 255, &bat(1000.0));
-        tlog_entry(out, t, 1, &hb(armed, MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA));
+        tlog_entry(
+            out,
+            t,
+            1,
+            &hb(armed, MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA),
+        );
         tlog_entry(out, t, 1, &pos(v, alt));
         tlog_entry(out, t, 1, &bat(p));
         t += 200_000;
@@ -364,16 +483,31 @@ fn power_is_read_from_the_tlog_of_the_autopilot_alone() {
     std::fs::write(&log, stripped).unwrap();
     write_tlog(&run.join("flight.tlog"));
     let out = tmp.path().join("o.toml");
-    let o = companion(&["calibrate", run.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let o = companion(&[
+        "calibrate",
+        run.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     let report = text(&o);
     assert!(o.status.success(), "{report}");
     let t = overlay(&out);
     let m = "missions/tracking.toml";
-    assert!((num(&t, m, "base", "power_w") - TRUTH.base).abs() < 0.5, "{report}");
-    let hover = num(&t, m, "propulsion", "blade_profile_w") + num(&t, m, "propulsion", "induced_hover_w");
-    assert!((hover / (TRUTH.p0 + TRUTH.pi) - 1.0).abs() < 0.03, "hover {hover}: {report}");
+    assert!(
+        (num(&t, m, "base", "power_w") - TRUTH.base).abs() < 0.5,
+        "{report}"
+    );
+    let hover =
+        num(&t, m, "propulsion", "blade_profile_w") + num(&t, m, "propulsion", "induced_hover_w");
+    assert!(
+        (hover / (TRUTH.p0 + TRUTH.pi) - 1.0).abs() < 0.03,
+        "hover {hover}: {report}"
+    );
     // 100 samples on the ground and 1,400 in the air at 5 Hz (the records' 5 are not used).
-    assert!(report.contains("over 1500 samples (100 on the ground)"), "{report}");
+    assert!(
+        report.contains("over 1500 samples (100 on the ground)"),
+        "{report}"
+    );
 
     // Garbage in the middle of the tlog: its byte offset and why.
     let mut bytes = std::fs::read(run.join("flight.tlog")).unwrap();
@@ -383,5 +517,8 @@ fn power_is_read_from_the_tlog_of_the_autopilot_alone() {
     let o = companion(&["calibrate", run.to_str().unwrap()]);
     let e = text(&o);
     assert!(!o.status.success(), "{e}");
-    assert!(e.contains("flight.tlog, byte") && e.contains("found 0x42"), "{e}");
+    assert!(
+        e.contains("flight.tlog, byte") && e.contains("found 0x42"),
+        "{e}"
+    );
 }

@@ -39,17 +39,34 @@ struct Countable {
 }
 
 const COUNTABLE: [Countable; 3] = [
-    Countable { node: "U_detection_fail", role: ActionRole::DetectTarget, success: Event::TargetDetected },
-    Countable { node: "U_zone_t_fail", role: ActionRole::SearchZone, success: Event::TZoneFound },
-    Countable { node: "U_zone_e_fail", role: ActionRole::SearchEmergencyZone, success: Event::EmergencyZoneFound },
+    Countable {
+        node: "U_detection_fail",
+        role: ActionRole::DetectTarget,
+        success: Event::TargetDetected,
+    },
+    Countable {
+        node: "U_zone_t_fail",
+        role: ActionRole::SearchZone,
+        success: Event::TZoneFound,
+    },
+    Countable {
+        node: "U_zone_e_fail",
+        role: ActionRole::SearchEmergencyZone,
+        success: Event::EmergencyZoneFound,
+    },
 ];
+
+/// Parent (or error) -> state: one CPT row's condition.
+pub type Row = Vec<(String, String)>;
+/// (successes, trials) of one row.
+type Tally = (u64, u64);
 
 /// Counts per node, per parent-state row: (successes, trials).
 #[derive(Default)]
 pub struct CptCounts {
-    counts: BTreeMap<&'static str, BTreeMap<Vec<(String, String)>, (u64, u64)>>,
+    counts: BTreeMap<&'static str, BTreeMap<Row, Tally>>,
     /// Tracking steps per version node and error row: (target kept, steps).
-    versions: BTreeMap<(String, Vec<(String, String)>), (u64, u64)>,
+    versions: BTreeMap<(String, Row), Tally>,
     /// Per node: the application has succeeded this run (the world stops trying it).
     done: BTreeMap<&'static str, bool>,
     /// An obstacle was avoided this run: the world searches no T zone after it.
@@ -81,8 +98,18 @@ impl CptCounts {
     }
 
     /// Count the trials of one record, with the parents' states from `parents_of`.
-    pub fn add(&mut self, r: &DecisionRecord, states: &MissionStates, shipped: &ShippedRows, parents_of: &BTreeMap<String, Vec<String>>) {
-        let Some(after) = r.vehicle.get("world_events_after").and_then(|v| v.as_array()) else {
+    pub fn add(
+        &mut self,
+        r: &DecisionRecord,
+        states: &MissionStates,
+        shipped: &ShippedRows,
+        parents_of: &BTreeMap<String, Vec<String>>,
+    ) {
+        let Some(after) = r
+            .vehicle
+            .get("world_events_after")
+            .and_then(|v| v.as_array())
+        else {
             return;
         };
         let events: Vec<&str> = after.iter().filter_map(|e| e.as_str()).collect();
@@ -100,7 +127,9 @@ impl CptCounts {
             if !trial {
                 continue;
             }
-            let Some(parents) = parents_of.get(c.node) else { continue };
+            let Some(parents) = parents_of.get(c.node) else {
+                continue;
+            };
             let Some(row) = parents
                 .iter()
                 .map(|p| r.evidence.get(p).map(|s| (p.clone(), s.clone())))
@@ -109,7 +138,12 @@ impl CptCounts {
                 continue; // a parent without evidence: the row is unknown
             };
             let ok = events.contains(&c.success.to_string().as_str());
-            let e = self.counts.entry(c.node).or_default().entry(row).or_default();
+            let e = self
+                .counts
+                .entry(c.node)
+                .or_default()
+                .entry(row)
+                .or_default();
             e.0 += u64::from(ok);
             e.1 += 1;
             if ok {
@@ -126,16 +160,30 @@ impl CptCounts {
     /// target kept (no `target lost`) is `activate`. The errors are hidden; each is taken in
     /// the state its shipped noisy-OR row makes more likely under the cycle's context evidence
     /// (docs/calibrate.md: hard assignment, an approximation).
-    fn add_tracking(&mut self, r: &DecisionRecord, events: &[&str], states: &MissionStates, shipped: &ShippedRows) {
+    fn add_tracking(
+        &mut self,
+        r: &DecisionRecord,
+        events: &[&str],
+        states: &MissionStates,
+        shipped: &ShippedRows,
+    ) {
         if !states.is_target_in_sight(&r.state) {
             return;
         }
-        let Some((_, version)) = states.tracking_target(&r.actions) else { return };
+        let Some((_, version)) = states.tracking_target(&r.actions) else {
+            return;
+        };
         let node = format!("C_{version}");
-        let Some(errors) = shipped.version_errors(&node) else { return };
+        let Some(errors) = shipped.version_errors(&node) else {
+            return;
+        };
         let Some(row) = errors
             .iter()
-            .map(|e| shipped.map_error_state(e, &r.evidence).map(|s| (e.clone(), s.to_string())))
+            .map(|e| {
+                shipped
+                    .map_error_state(e, &r.evidence)
+                    .map(|s| (e.clone(), s.to_string()))
+            })
             .collect::<Option<Vec<_>>>()
         else {
             return;
@@ -200,19 +248,39 @@ impl ShippedRows {
             .text(&file)?
             .parse()
             .map_err(|e| SpecError::new(&file, "-", format!("not TOML: {e}")))?;
-        let nodes = t.get("node").and_then(Value::as_table).cloned().unwrap_or_default();
+        let nodes = t
+            .get("node")
+            .and_then(Value::as_table)
+            .cloned()
+            .unwrap_or_default();
         let strs = |v: Option<&Value>| -> Vec<String> {
             v.and_then(Value::as_array)
-                .map(|a| a.iter().filter_map(|x| x.as_str().map(String::from)).collect())
+                .map(|a| {
+                    a.iter()
+                        .filter_map(|x| x.as_str().map(String::from))
+                        .collect()
+                })
                 .unwrap_or_default()
         };
         let mut solutions_of: BTreeMap<String, Vec<String>> = BTreeMap::new();
-        for row in t.get("fmea").and_then(Value::as_array).into_iter().flatten() {
+        for row in t
+            .get("fmea")
+            .and_then(Value::as_array)
+            .into_iter()
+            .flatten()
+        {
             if let Some(e) = row.get("error").and_then(Value::as_str) {
-                solutions_of.entry(e.into()).or_default().extend(strs(row.get("solutions")));
+                solutions_of
+                    .entry(e.into())
+                    .or_default()
+                    .extend(strs(row.get("solutions")));
             }
         }
-        Ok(ShippedRows { file, nodes, solutions_of })
+        Ok(ShippedRows {
+            file,
+            nodes,
+            solutions_of,
+        })
     }
 
     pub fn file(&self) -> &Path {
@@ -246,8 +314,19 @@ impl ShippedRows {
 
     /// The more likely state of error `e` under the contexts in `evidence` (its shipped
     /// noisy-OR row; a context without evidence, `A_small_roi`, weighted by its prior).
-    pub fn map_error_state(&self, e: &str, evidence: &BTreeMap<String, String>) -> Option<&'static str> {
-        let parents: Vec<String> = self.nodes.get(e)?.get("strength")?.as_table()?.keys().cloned().collect();
+    pub fn map_error_state(
+        &self,
+        e: &str,
+        evidence: &BTreeMap<String, String>,
+    ) -> Option<&'static str> {
+        let parents: Vec<String> = self
+            .nodes
+            .get(e)?
+            .get("strength")?
+            .as_table()?
+            .keys()
+            .cloned()
+            .collect();
         let p = self.p_absent_marginal(e, &parents, evidence, &mut Vec::new())?;
         Some(if p >= 0.5 { "absent" } else { "present" })
     }
@@ -285,7 +364,9 @@ impl ShippedRows {
     /// version rule (docs/params/health.md): `p_ok · miss^(present errors it does not fix) ·
     /// extra^(its solutions whose error is absent)`.
     pub fn p_activate(&self, node: &str, when: &[(String, String)]) -> f64 {
-        let Some(n) = self.nodes.get(node) else { return 0.5 };
+        let Some(n) = self.nodes.get(node) else {
+            return 0.5;
+        };
         if let Some(p) = self.override_row(n, when) {
             return p.get(1).copied().unwrap_or(0.5);
         }
@@ -301,11 +382,12 @@ impl ShippedRows {
                 .get(e)
                 .is_some_and(|s| s.iter().any(|x| sols.contains(&x.as_str())))
         };
-        when.iter().fold(p_ok, |acc, (e, st)| match (st.as_str(), fixes(e)) {
-            ("present", false) => acc * miss,
-            ("absent", true) => acc * extra,
-            _ => acc,
-        })
+        when.iter()
+            .fold(p_ok, |acc, (e, st)| match (st.as_str(), fixes(e)) {
+                ("present", false) => acc * miss,
+                ("absent", true) => acc * extra,
+                _ => acc,
+            })
     }
 
     fn state_index(&self, node: &str, state: &str) -> Option<usize> {
@@ -316,7 +398,9 @@ impl ShippedRows {
     /// P(absent | when) of the shipped node: its matching `override` row, else the noisy-OR
     /// rule (docs/params/health.md): `(1 - leak) · Π (1 - strength.PARENT[state])`.
     pub fn p_absent(&self, node: &str, when: &[(String, String)]) -> f64 {
-        let Some(n) = self.nodes.get(node) else { return 0.5 };
+        let Some(n) = self.nodes.get(node) else {
+            return 0.5;
+        };
         if let Some(p) = self.override_row(n, when) {
             return p.first().copied().unwrap_or(0.5);
         }
@@ -339,7 +423,8 @@ impl ShippedRows {
         rows.iter().rev().find_map(|r| {
             let w = r.get("when")?.as_table()?;
             let all = w.iter().all(|(p, s)| {
-                when.iter().any(|(wp, ws)| wp == p && Some(ws.as_str()) == s.as_str())
+                when.iter()
+                    .any(|(wp, ws)| wp == p && Some(ws.as_str()) == s.as_str())
             });
             let p = r.get("p")?.as_array()?;
             all.then(|| p.iter().map(|v| v.as_float()).collect::<Option<Vec<f64>>>())?
@@ -395,7 +480,10 @@ mod tests {
     }
 
     fn w(l: &str, wd: &str) -> Vec<(String, String)> {
-        vec![("A_luminosity".into(), l.into()), ("A_wind".into(), wd.into())]
+        vec![
+            ("A_luminosity".into(), l.into()),
+            ("A_wind".into(), wd.into()),
+        ]
     }
 
     #[test]
@@ -411,7 +499,10 @@ mod tests {
     fn learned_row_is_the_dirichlet_posterior_mean() {
         let s = shipped();
         let mut c = CptCounts::default();
-        c.counts.entry("U_zone_t_fail").or_default().insert(w("normal", "calm"), (45, 50));
+        c.counts
+            .entry("U_zone_t_fail")
+            .or_default()
+            .insert(w("normal", "calm"), (45, 50));
         let rows = c.learn(&s);
         assert_eq!(rows.len(), 1);
         // (10 x 0.5 + 45) / (10 + 50)

@@ -92,7 +92,13 @@ mod tests {
     #[test]
     fn completed_activities_are_timed_and_the_cut_one_is_not() {
         let mut d = Durations::default();
-        for (t, a) in [(0.0, "a"), (5.0, "a"), (10.0, "b"), (40.0, "c"), (45.0, "c")] {
+        for (t, a) in [
+            (0.0, "a"),
+            (5.0, "a"),
+            (10.0, "b"),
+            (40.0, "c"),
+            (45.0, "c"),
+        ] {
             d.add(&rec(t, a));
         }
         d.start_run();

@@ -80,7 +80,10 @@ pub fn calibrate(shipped: &shipped::Shipped, runs: Vec<PathBuf>) -> anyhow::Resu
 
 /// The subcommand.
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
-    let params = args.params.clone().unwrap_or_else(crate::params::default_params_dir);
+    let params = args
+        .params
+        .clone()
+        .unwrap_or_else(crate::params::default_params_dir);
     let shipped = shipped::Shipped::load(&params).context("loading params")?;
     let runs = runs::discover(&args.runs)?;
     let cal = calibrate(&shipped, runs)?;

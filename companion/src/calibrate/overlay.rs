@@ -34,10 +34,7 @@ pub fn is_overlay(path: &Path) -> bool {
 /// relative to the overlay's folder, else `default_dir`), layered.
 pub fn read_overlaid(overlay: &Path, default_dir: PathBuf) -> Result<ParamsFiles, SpecError> {
     let table = read_overlay_table(overlay)?;
-    let base = match table
-        .get(CALIBRATION_TABLE)
-        .and_then(|c| c.get("params"))
-    {
+    let base = match table.get(CALIBRATION_TABLE).and_then(|c| c.get("params")) {
         None => default_dir,
         Some(Value::String(p)) => overlay.parent().unwrap_or(Path::new(".")).join(p),
         Some(_) => {
@@ -71,7 +68,11 @@ pub fn read_overlay_table(overlay: &Path) -> Result<Table, SpecError> {
 }
 
 /// Layer `overlay` (read from the file `overlay_file`) onto `files`.
-pub fn apply(files: &mut ParamsFiles, overlay_file: &Path, overlay: &Table) -> Result<(), SpecError> {
+pub fn apply(
+    files: &mut ParamsFiles,
+    overlay_file: &Path,
+    overlay: &Table,
+) -> Result<(), SpecError> {
     let dir = files.dir().to_path_buf();
     for (name, entries) in overlay {
         if name == CALIBRATION_TABLE {
@@ -79,7 +80,10 @@ pub fn apply(files: &mut ParamsFiles, overlay_file: &Path, overlay: &Table) -> R
         }
         let err = |entry: &str, reason: String| SpecError::new(overlay_file, entry, reason);
         let Value::Table(entries) = entries else {
-            return Err(err(name, "must be a table of the params file's entries".into()));
+            return Err(err(
+                name,
+                "must be a table of the params file's entries".into(),
+            ));
         };
         let path = dir.join(name);
         let text = files.text(&path).map_err(|e| {
@@ -88,9 +92,9 @@ pub fn apply(files: &mut ParamsFiles, overlay_file: &Path, overlay: &Table) -> R
                 format!("not a params file of {}: {}", dir.display(), e.reason),
             )
         })?;
-        let mut target: Table = text.parse().map_err(|e| {
-            err(name, format!("the params file is not TOML: {e}"))
-        })?;
+        let mut target: Table = text
+            .parse()
+            .map_err(|e| err(name, format!("the params file is not TOML: {e}")))?;
         merge_table(&mut target, entries, name, &|e, r| err(e, r))?;
         let merged = toml::to_string(&target)
             .map_err(|e| err(name, format!("cannot write the merged file: {e}")))?;
@@ -111,15 +115,25 @@ fn merge_table(dst: &mut Table, src: &Table, at: &str, err: &ErrFn) -> Result<()
                 merge_named(d, s, &entry, err)?;
             }
             (Some(Value::Table(_)), _) => {
-                return Err(err(&entry, "the params file has a table here, the overlay a value".into()));
+                return Err(err(
+                    &entry,
+                    "the params file has a table here, the overlay a value".into(),
+                ));
             }
             (Some(d), Value::Table(_)) if !matches!(d, Value::Table(_)) => {
-                return Err(err(&entry, "the params file has a value here, the overlay a table".into()));
+                return Err(err(
+                    &entry,
+                    "the params file has a value here, the overlay a table".into(),
+                ));
             }
             (Some(d), v) if !same_kind(d, v) => {
                 return Err(err(
                     &entry,
-                    format!("the params file has {} here, the overlay {}", kind(d), kind(v)),
+                    format!(
+                        "the params file has {} here, the overlay {}",
+                        kind(d),
+                        kind(v)
+                    ),
                 ));
             }
             _ => {
@@ -150,8 +164,10 @@ fn kind(v: &Value) -> &'static str {
 /// An array of tables each with a string `name` (the mission's `activities`).
 fn is_named_array(a: &[Value]) -> bool {
     !a.is_empty()
-        && a.iter()
-            .all(|e| e.as_table().is_some_and(|t| t.get("name").is_some_and(Value::is_str)))
+        && a.iter().all(|e| {
+            e.as_table()
+                .is_some_and(|t| t.get("name").is_some_and(Value::is_str))
+        })
 }
 
 fn merge_named(dst: &mut [Value], src: &Table, at: &str, err: &ErrFn) -> Result<(), SpecError> {
@@ -161,10 +177,16 @@ fn merge_named(dst: &mut [Value], src: &Table, at: &str, err: &ErrFn) -> Result<
             .iter_mut()
             .find(|e| e.get("name").and_then(Value::as_str) == Some(name.as_str()))
         else {
-            return Err(err(&entry, format!("no element named `{name}` in the params file")));
+            return Err(err(
+                &entry,
+                format!("no element named `{name}` in the params file"),
+            ));
         };
         let Value::Table(s) = v else {
-            return Err(err(&entry, "must be a table of the element's entries".into()));
+            return Err(err(
+                &entry,
+                "must be a table of the element's entries".into(),
+            ));
         };
         merge_table(d, s, &entry, err)?;
     }
@@ -214,12 +236,32 @@ mod tests {
     #[test]
     fn malformed_overlays_name_entry_and_reason() {
         let cases = [
-            ("[\"x.toml\".base]\npower_w = 1.0\n", "x.toml", "not a params file"),
-            ("[\"m.toml\".activities.c]\nhold_s = 1.0\n", "m.toml.activities.c", "no element named"),
+            (
+                "[\"x.toml\".base]\npower_w = 1.0\n",
+                "x.toml",
+                "not a params file",
+            ),
+            (
+                "[\"m.toml\".activities.c]\nhold_s = 1.0\n",
+                "m.toml.activities.c",
+                "no element named",
+            ),
             ("[\"m.toml\"]\nbase = 3.0\n", "m.toml.base", "a table here"),
-            ("[\"m.toml\".base]\npower_w = nan\n", "m.toml.base.power_w", "not a finite"),
-            ("[\"m.toml\".base.power_w]\nx = 1\n", "m.toml.base.power_w", "a value here"),
-            ("[\"m.toml\".base]\npower_w = \"9\"\n", "m.toml.base.power_w", "a number here, the overlay a string"),
+            (
+                "[\"m.toml\".base]\npower_w = nan\n",
+                "m.toml.base.power_w",
+                "not a finite",
+            ),
+            (
+                "[\"m.toml\".base.power_w]\nx = 1\n",
+                "m.toml.base.power_w",
+                "a value here",
+            ),
+            (
+                "[\"m.toml\".base]\npower_w = \"9\"\n",
+                "m.toml.base.power_w",
+                "a number here, the overlay a string",
+            ),
         ];
         for (text, entry, reason) in cases {
             let e = apply_text(&mut files(), text).unwrap_err();

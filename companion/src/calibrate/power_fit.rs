@@ -128,7 +128,9 @@ pub struct FitResult {
 /// Why the data cannot determine the model.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum FitError {
-    #[error("no power sample in the air (armed, pack voltage and current reported): nothing to fit the propulsion on")]
+    #[error(
+        "no power sample in the air (armed, pack voltage and current reported): nothing to fit the propulsion on"
+    )]
     NoAirborne,
     #[error(
         "base.power_w is unidentifiable: no power sample on the ground (disarmed), so the base \
@@ -331,9 +333,7 @@ fn solve_normal(n: &Normal) -> Result<SVector<f64, 4>, (&'static str, f64)> {
             .unwrap_or(0);
         return Err((NAMES[worst], ratio));
     }
-    let z = svd
-        .solve(&b, smax * 1e-14)
-        .map_err(|_| (NAMES[0], ratio))?;
+    let z = svd.solve(&b, smax * 1e-14).map_err(|_| (NAMES[0], ratio))?;
     Ok(dm * z)
 }
 
@@ -367,8 +367,10 @@ mod tests {
 
     /// Deterministic noise in [-a, a] (a linear congruential sequence: no RNG needed).
     fn noise(i: u64, a: f64) -> f64 {
-        let x = (i.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407) >> 33)
-            as f64
+        let x = (i
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407)
+            >> 33) as f64
             / (1u64 << 31) as f64;
         a * (2.0 * x - 1.0)
     }
@@ -376,9 +378,18 @@ mod tests {
     /// Zeng et al. 2019 eq. 12 plus the base power, written out here apart from the code under
     /// test so that a wrong regressor there cannot also generate the data.
     fn zeng(t: PowerModel, v: f64) -> f64 {
-        let (p0, pi, v0, u) = (t.blade_profile_w, t.induced_hover_w, t.induced_velocity_mps, t.tip_speed_mps);
-        let induced = ((1.0 + v.powi(4) / (4.0 * v0.powi(4))).sqrt() - v.powi(2) / (2.0 * v0.powi(2))).sqrt();
-        t.base_w + p0 * (1.0 + 3.0 * v * v / (u * u)) + pi * induced + 0.5 * t.air_density_kgm3 * t.drag_area_m2 * v.powi(3)
+        let (p0, pi, v0, u) = (
+            t.blade_profile_w,
+            t.induced_hover_w,
+            t.induced_velocity_mps,
+            t.tip_speed_mps,
+        );
+        let induced =
+            ((1.0 + v.powi(4) / (4.0 * v0.powi(4))).sqrt() - v.powi(2) / (2.0 * v0.powi(2))).sqrt();
+        t.base_w
+            + p0 * (1.0 + 3.0 * v * v / (u * u))
+            + pi * induced
+            + 0.5 * t.air_density_kgm3 * t.drag_area_m2 * v.powi(3)
     }
 
     fn fed(samples: impl Iterator<Item = Sample>) -> PowerFit {
@@ -392,12 +403,20 @@ mod tests {
         let mut i = 0u64;
         for _ in 0..50 {
             i += 1;
-            out.push(Sample { speed_mps: 0.0, power_w: t.base_w + noise(i, noise_w), airborne: false });
+            out.push(Sample {
+                speed_mps: 0.0,
+                power_w: t.base_w + noise(i, noise_w),
+                airborne: false,
+            });
         }
         for &v in speeds {
             for _ in 0..40 {
                 i += 1;
-                out.push(Sample { speed_mps: v, power_w: zeng(t, v) + noise(i, noise_w), airborne: true });
+                out.push(Sample {
+                    speed_mps: v,
+                    power_w: zeng(t, v) + noise(i, noise_w),
+                    airborne: true,
+                });
             }
         }
         out
@@ -411,14 +430,26 @@ mod tests {
         let r = fed(flight(t, &SPEEDS, 0.0).into_iter()).solve().unwrap();
         let f = r.fitted;
         // v0 is profiled on a 2 % grid: within one step of the truth, the rest within 2 %.
-        assert!((f.induced_velocity_mps / t.induced_velocity_mps - 1.0).abs() < 0.02, "{f:?}");
+        assert!(
+            (f.induced_velocity_mps / t.induced_velocity_mps - 1.0).abs() < 0.02,
+            "{f:?}"
+        );
         assert!((f.base_w - t.base_w).abs() < 0.01, "{f:?}");
         assert!((f.hover_w() / t.hover_w() - 1.0).abs() < 0.02, "{f:?}");
         // The split of the hover power is the weakly determined direction (docs/calibrate.md):
         // without noise it is still found within 2 %.
-        assert!((f.blade_profile_w / t.blade_profile_w - 1.0).abs() < 0.02, "{f:?}");
-        assert!((f.induced_hover_w / t.induced_hover_w - 1.0).abs() < 0.02, "{f:?}");
-        assert!((f.drag_area_m2 / t.drag_area_m2 - 1.0).abs() < 0.05, "{f:?}");
+        assert!(
+            (f.blade_profile_w / t.blade_profile_w - 1.0).abs() < 0.02,
+            "{f:?}"
+        );
+        assert!(
+            (f.induced_hover_w / t.induced_hover_w - 1.0).abs() < 0.02,
+            "{f:?}"
+        );
+        assert!(
+            (f.drag_area_m2 / t.drag_area_m2 - 1.0).abs() < 0.05,
+            "{f:?}"
+        );
         // 8 m/s is on the grid (0.5 x 1.02^140 = 7.9996): the fit is exact.
         assert!(r.rms_w < 0.05 && r.shipped_rms_w > 50.0, "{r:?}");
     }
@@ -438,15 +469,22 @@ mod tests {
 
     #[test]
     fn one_speed_names_the_unidentifiable_parameters() {
-        let e = fed(flight(truth(), &[5.0], 1.0).into_iter()).solve().unwrap_err();
+        let e = fed(flight(truth(), &[5.0], 1.0).into_iter())
+            .solve()
+            .unwrap_err();
         assert!(matches!(e, FitError::OneSpeed { .. }), "{e}");
         let text = e.to_string();
-        assert!(text.contains("induced_velocity_mps") && text.contains("drag_area_m2"), "{text}");
+        assert!(
+            text.contains("induced_velocity_mps") && text.contains("drag_area_m2"),
+            "{text}"
+        );
     }
 
     #[test]
     fn no_ground_sample_names_base_power() {
-        let s = flight(truth(), &SPEEDS, 0.0).into_iter().filter(|s| s.airborne);
+        let s = flight(truth(), &SPEEDS, 0.0)
+            .into_iter()
+            .filter(|s| s.airborne);
         let e = fed(s).solve().unwrap_err();
         assert_eq!(e, FitError::NoGround);
         assert!(e.to_string().contains("base.power_w"));
@@ -454,7 +492,9 @@ mod tests {
 
     #[test]
     fn no_airborne_sample_is_said() {
-        let s = flight(truth(), &SPEEDS, 0.0).into_iter().filter(|s| !s.airborne);
+        let s = flight(truth(), &SPEEDS, 0.0)
+            .into_iter()
+            .filter(|s| !s.airborne);
         assert_eq!(fed(s).solve().unwrap_err(), FitError::NoAirborne);
     }
 
@@ -463,15 +503,25 @@ mod tests {
         // Power falling as the cube of speed: only a negative drag area fits.
         let mut t = truth();
         t.drag_area_m2 = -0.2;
-        let e = fed(flight(t, &SPEEDS, 0.0).into_iter()).solve().unwrap_err();
+        let e = fed(flight(t, &SPEEDS, 0.0).into_iter())
+            .solve()
+            .unwrap_err();
         assert!(matches!(e, FitError::Negative { .. }), "{e}");
     }
 
     #[test]
     fn non_finite_samples_are_skipped() {
         let mut f = PowerFit::new(shipped());
-        f.add(Sample { speed_mps: f64::NAN, power_w: 1.0, airborne: true });
-        f.add(Sample { speed_mps: 1.0, power_w: f64::INFINITY, airborne: false });
+        f.add(Sample {
+            speed_mps: f64::NAN,
+            power_w: 1.0,
+            airborne: true,
+        });
+        f.add(Sample {
+            speed_mps: 1.0,
+            power_w: f64::INFINITY,
+            airborne: false,
+        });
         assert_eq!(f.samples(), 0);
     }
 }

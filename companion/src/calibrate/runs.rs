@@ -1,8 +1,8 @@
 //! The runs `calibrate` reads: run folders as `fly` and `simulate` write them, or folders of
 //! run folders, read one record at a time (docs/calibrate.md).
 
-use crate::decision_log::{LOG_STEM, LogItem, stream_log};
 use super::power_fit::Sample;
+use crate::decision_log::{LOG_STEM, LogItem, stream_log};
 use companion_core::record::DecisionRecord;
 use std::path::{Path, PathBuf};
 
@@ -21,7 +21,10 @@ pub fn discover(args: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
             continue;
         }
         let entries = std::fs::read_dir(a).map_err(|e| {
-            anyhow::anyhow!("{}: not a run folder and cannot be listed: {e}", a.display())
+            anyhow::anyhow!(
+                "{}: not a run folder and cannot be listed: {e}",
+                a.display()
+            )
         })?;
         let mut runs: Vec<PathBuf> = entries
             .filter_map(|e| e.ok().map(|e| e.path()))
@@ -52,12 +55,9 @@ pub fn for_each_record(dir: &Path, mut each: impl FnMut(&DecisionRecord)) -> any
                 each(&r);
                 n += 1;
             }
-            LogItem::Corrupted(i) => anyhow::bail!(
-                "{}, line {}: {}",
-                i.file.display(),
-                i.line,
-                i.reason
-            ),
+            LogItem::Corrupted(i) => {
+                anyhow::bail!("{}, line {}: {}", i.file.display(), i.line, i.reason)
+            }
             LogItem::Truncated(i) => tracing::warn!(
                 "{}, line {}: {} (skipped)",
                 i.file.display(),
@@ -117,15 +117,49 @@ mod tests {
 
     #[test]
     fn samples_are_read_from_the_observations() {
-        let air = rec(&[("battery_v", 12.0), ("battery_current_a", 20.0), ("armed", 1.0), ("groundspeed_mps", 5.0), ("altitude_m", 30.0)]);
-        assert_eq!(sample_of(&air), Some(Sample { speed_mps: 5.0, power_w: 240.0, airborne: true }));
-        let ground = rec(&[("battery_v", 12.0), ("battery_current_a", 0.5), ("armed", 0.0)]);
-        assert_eq!(sample_of(&ground), Some(Sample { speed_mps: 0.0, power_w: 6.0, airborne: false }));
-        let spinning = rec(&[("battery_v", 12.0), ("battery_current_a", 5.0), ("armed", 1.0), ("groundspeed_mps", 0.0), ("altitude_m", 0.2)]);
+        let air = rec(&[
+            ("battery_v", 12.0),
+            ("battery_current_a", 20.0),
+            ("armed", 1.0),
+            ("groundspeed_mps", 5.0),
+            ("altitude_m", 30.0),
+        ]);
+        assert_eq!(
+            sample_of(&air),
+            Some(Sample {
+                speed_mps: 5.0,
+                power_w: 240.0,
+                airborne: true
+            })
+        );
+        let ground = rec(&[
+            ("battery_v", 12.0),
+            ("battery_current_a", 0.5),
+            ("armed", 0.0),
+        ]);
+        assert_eq!(
+            sample_of(&ground),
+            Some(Sample {
+                speed_mps: 0.0,
+                power_w: 6.0,
+                airborne: false
+            })
+        );
+        let spinning = rec(&[
+            ("battery_v", 12.0),
+            ("battery_current_a", 5.0),
+            ("armed", 1.0),
+            ("groundspeed_mps", 0.0),
+            ("altitude_m", 0.2),
+        ]);
         assert_eq!(sample_of(&spinning), None);
         let no_current = rec(&[("battery_v", 12.0), ("armed", 1.0)]);
         assert_eq!(sample_of(&no_current), None);
-        let bad = rec(&[("battery_v", 12.0), ("battery_current_a", -3.0), ("armed", 0.0)]);
+        let bad = rec(&[
+            ("battery_v", 12.0),
+            ("battery_current_a", -3.0),
+            ("armed", 0.0),
+        ]);
         assert_eq!(sample_of(&bad), None);
     }
 }

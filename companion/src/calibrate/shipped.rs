@@ -45,14 +45,23 @@ impl Shipped {
                 Some((name, a.get("hold_s").and_then(number).unwrap_or(0.0)))
             })
             .collect();
-        let dur = spec.problem.goals.iter().position(|g| g.name == "duration_s");
+        let dur = spec
+            .problem
+            .goals
+            .iter()
+            .position(|g| g.name == "duration_s");
         let fastest_s = spec
             .problem
             .activities
             .iter()
             .filter_map(|a| {
                 let d = dur?;
-                let min = a.ias.iter().filter_map(|ia| ia.cost.get(d)).copied().reduce(f64::min)?;
+                let min = a
+                    .ias
+                    .iter()
+                    .filter_map(|ia| ia.cost.get(d))
+                    .copied()
+                    .reduce(f64::min)?;
                 Some((a.name.clone(), min))
             })
             .collect();

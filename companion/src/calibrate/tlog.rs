@@ -18,7 +18,8 @@ const MAX_ENTRY: usize = 8 + 10 + 255 + 2 + 13;
 /// last entry (a run killed while writing) ends the read with a warning; an entry that does not
 /// start a MAVLink frame stops it with the file, the byte offset and the reason.
 pub fn for_each_sample(path: &Path, mut each: impl FnMut(Sample)) -> anyhow::Result<u64> {
-    crate::params_files::regular_file(path).map_err(|r| anyhow::anyhow!("{}: {r}", path.display()))?;
+    crate::params_files::regular_file(path)
+        .map_err(|r| anyhow::anyhow!("{}: {r}", path.display()))?;
     let file = std::fs::File::open(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     let mut rd = BufReader::new(file);
     let mut ingest = companion_link::ingest::Ingest::new(None);
@@ -35,7 +36,10 @@ pub fn for_each_sample(path: &Path, mut each: impl FnMut(Sample)) -> anyhow::Res
         let len = (head == 11).then(|| frame_len(&buf[8..11])).flatten();
         let Some(len) = len else {
             if head < 11 {
-                tracing::warn!("{}: last entry at byte {offset} cut off (skipped)", path.display());
+                tracing::warn!(
+                    "{}: last entry at byte {offset} cut off (skipped)",
+                    path.display()
+                );
                 break;
             }
             anyhow::bail!(
@@ -46,12 +50,17 @@ pub fn for_each_sample(path: &Path, mut each: impl FnMut(Sample)) -> anyhow::Res
         };
         let got = read_upto(&mut rd, &mut buf[11..8 + len])?;
         if got < len - 3 {
-            tracing::warn!("{}: last entry at byte {offset} cut off (skipped)", path.display());
+            tracing::warn!(
+                "{}: last entry at byte {offset} cut off (skipped)",
+                path.display()
+            );
             break;
         }
         offset += (8 + len) as u64;
         let mut msgs: Vec<(u32, Msg)> = Vec::new();
-        ingest.push_each(&buf[8..8 + len], |fr| msgs.push((fr.header.system_id, fr.msg.clone())));
+        ingest.push_each(&buf[8..8 + len], |fr| {
+            msgs.push((fr.header.system_id, fr.msg.clone()))
+        });
         for (sys, msg) in msgs {
             if let Msg::HEARTBEAT(h) = &msg
                 && autopilot.is_none()
@@ -94,11 +103,17 @@ fn read_upto(rd: &mut impl Read, buf: &mut [u8]) -> anyhow::Result<usize> {
 
 fn sample_of(tel: &Telemetry) -> Option<Sample> {
     let mut r = companion_core::record::DecisionRecord::default();
-    for k in ["battery_v", "battery_current_a", "groundspeed_mps", "altitude_m"] {
+    for k in [
+        "battery_v",
+        "battery_current_a",
+        "groundspeed_mps",
+        "altitude_m",
+    ] {
         if let Some(v) = tel.get(k) {
             r.observations.insert(k.into(), v);
         }
     }
-    r.observations.insert("armed".into(), if tel.armed { 1.0 } else { 0.0 });
+    r.observations
+        .insert("armed".into(), if tel.armed { 1.0 } else { 0.0 });
     super::runs::sample_of(&r)
 }

@@ -1,10 +1,10 @@
 //! What `calibrate` prints (the fit error before and after, each number's change) and the
 //! overlay it writes, every fitted number with its source in place of `ASSUMPTION`.
 
+use super::Calibration;
 use super::cpt::{LearnedRow, PRIOR_PSEUDO_COUNTS};
 use super::power_fit::{FitResult, PowerModel};
 use super::shipped::Shipped;
-use super::Calibration;
 use std::fmt::Write;
 use std::path::Path;
 use toml::{Table, Value};
@@ -13,7 +13,11 @@ use toml::{Table, Value};
 pub const MIN_DURATION_RUNS: u64 = 1;
 
 fn pct(x: f64, of: f64) -> f64 {
-    if of.abs() > 0.0 { 100.0 * x / of } else { f64::NAN }
+    if of.abs() > 0.0 {
+        100.0 * x / of
+    } else {
+        f64::NAN
+    }
 }
 
 /// The fit's provenance, the text of each fitted number's `source`.
@@ -37,7 +41,10 @@ pub fn power_source(cal: &Calibration, r: &FitResult) -> String {
 fn model_rows(m: &PowerModel) -> [(&'static str, f64); 6] {
     [
         ("base.power_w", m.base_w),
-        ("hover power (blade_profile_w + induced_hover_w)", m.hover_w()),
+        (
+            "hover power (blade_profile_w + induced_hover_w)",
+            m.hover_w(),
+        ),
         ("propulsion.blade_profile_w", m.blade_profile_w),
         ("propulsion.induced_hover_w", m.induced_hover_w),
         ("propulsion.induced_velocity_mps", m.induced_velocity_mps),
@@ -48,7 +55,12 @@ fn model_rows(m: &PowerModel) -> [(&'static str, f64); 6] {
 /// The report: runs, power fit (error before and after, each parameter), durations, CPT rows.
 pub fn report(shipped: &Shipped, cal: &Calibration) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "calibrated from {} run(s), {} records", cal.runs.len(), cal.records);
+    let _ = writeln!(
+        s,
+        "calibrated from {} run(s), {} records",
+        cal.runs.len(),
+        cal.records
+    );
     let _ = writeln!(s, "\npower ({}):", shipped.mission_file);
     match &cal.power {
         Ok(r) => {
@@ -65,7 +77,9 @@ pub fn report(shipped: &Shipped, cal: &Calibration) -> String {
                 r.v_max,
                 r.mean_w
             );
-            for ((name, before), (_, after)) in model_rows(&shipped.power).iter().zip(model_rows(&r.fitted)) {
+            for ((name, before), (_, after)) in
+                model_rows(&shipped.power).iter().zip(model_rows(&r.fitted))
+            {
                 let _ = writeln!(s, "  {name:<50} {before:>10.4} -> {after:>10.4}");
             }
             let _ = writeln!(
@@ -97,7 +111,10 @@ pub fn report(shipped: &Shipped, cal: &Calibration) -> String {
         "\nBN rows learned (Dirichlet prior: the shipped row worth {PRIOR_PSEUDO_COUNTS} trials):"
     );
     if cal.rows.is_empty() {
-        let _ = writeln!(s, "  none: no countable trial in the records (docs/calibrate.md)");
+        let _ = writeln!(
+            s,
+            "  none: no countable trial in the records (docs/calibrate.md)"
+        );
     }
     for r in &cal.rows {
         let _ = writeln!(
@@ -117,7 +134,11 @@ pub fn report(shipped: &Shipped, cal: &Calibration) -> String {
 }
 
 fn when_text(r: &LearnedRow) -> String {
-    r.when.iter().map(|(p, st)| format!("{p}={st}")).collect::<Vec<_>>().join(",")
+    r.when
+        .iter()
+        .map(|(p, st)| format!("{p}={st}"))
+        .collect::<Vec<_>>()
+        .join(",")
 }
 
 /// Four significant decimals are more than any fit here supports.
@@ -143,22 +164,39 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
     let mut t = Table::new();
     let mut sources = Table::new();
     let cal_t = table_at(&mut t, &["calibration"]);
-    cal_t.insert("made_by".into(), Value::String("companion calibrate".into()));
+    cal_t.insert(
+        "made_by".into(),
+        Value::String("companion calibrate".into()),
+    );
     let canon = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
     let base = canon(&shipped.dir);
-    let out_dir = canon(out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")));
+    let out_dir = canon(
+        out.parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new(".")),
+    );
     let rel = relative(&out_dir, &base);
     cal_t.insert("params".into(), Value::String(rel));
-    let runs: Vec<Value> = cal.runs.iter().map(|r| Value::String(r.display().to_string())).collect();
+    let runs: Vec<Value> = cal
+        .runs
+        .iter()
+        .map(|r| Value::String(r.display().to_string()))
+        .collect();
     cal_t.insert("runs".into(), Value::Array(runs));
-    cal_t.insert("prior_pseudo_counts".into(), Value::Float(PRIOR_PSEUDO_COUNTS));
+    cal_t.insert(
+        "prior_pseudo_counts".into(),
+        Value::Float(PRIOR_PSEUDO_COUNTS),
+    );
     let mf = shipped.mission_file.clone();
     if let Ok(r) = &cal.power {
         let src = Value::String(power_source(cal, r));
         let p = table_at(&mut t, &[&mf, "propulsion"]);
         p.insert("blade_profile_w".into(), round4(r.fitted.blade_profile_w));
         p.insert("induced_hover_w".into(), round4(r.fitted.induced_hover_w));
-        p.insert("induced_velocity_mps".into(), round4(r.fitted.induced_velocity_mps));
+        p.insert(
+            "induced_velocity_mps".into(),
+            round4(r.fitted.induced_velocity_mps),
+        );
         p.insert("drag_area_m2".into(), round4(r.fitted.drag_area_m2));
         p.insert("source".into(), src.clone());
         let b = table_at(&mut t, &[&mf, "base"]);
@@ -166,7 +204,8 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
         b.insert("source".into(), src);
     }
     for (name, d) in cal.durations.stats() {
-        let (Some(fastest), Some(hold)) = (shipped.fastest_s.get(name), shipped.hold_s.get(name)) else {
+        let (Some(fastest), Some(hold)) = (shipped.fastest_s.get(name), shipped.hold_s.get(name))
+        else {
             continue;
         };
         if d.n < MIN_DURATION_RUNS {
@@ -191,7 +230,10 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
     nodes.dedup();
     for node in nodes {
         let learned: Vec<&LearnedRow> = cal.rows.iter().filter(|r| r.node == node).collect();
-        table_at(&mut t, &[file, "node", node]).insert("override".into(), shipped.rows.overrides_with(node, &learned));
+        table_at(&mut t, &[file, "node", node]).insert(
+            "override".into(),
+            shipped.rows.overrides_with(node, &learned),
+        );
         for r in learned {
             sources.insert(
                 format!("{file}:node.{node}.override[{}]", when_text(r)),
@@ -218,7 +260,11 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
 
 /// `to` relative to `from` when it lies below it, else `to` as is (both absolute).
 fn relative(from: &Path, to: &Path) -> String {
-    let common = from.components().zip(to.components()).take_while(|(a, b)| a == b).count();
+    let common = from
+        .components()
+        .zip(to.components())
+        .take_while(|(a, b)| a == b)
+        .count();
     // Sharing only the root: the absolute path survives moving the overlay better.
     if common <= 1 {
         return to.display().to_string();

@@ -17,8 +17,8 @@ mod writer;
 pub(crate) use reader::log_files;
 pub use reader::{LogEnd, LogEvent, LogRead, LossMark, ReadError, ReadIssue, read_log};
 pub use stream::{LogItem, LogStream, LossReason, MAX_LINE_BYTES, stream_log};
-pub use tlog::{TlogFrame, TlogWriter, read_tlog};
 pub(crate) use tlog::frame_len;
+pub use tlog::{TlogFrame, TlogWriter, read_tlog};
 pub use writer::{
     DEFAULT_MAX_BYTES, DEFAULT_MAX_LINE_BYTES, DecisionLog, LogCapError, RESERVE_BYTES,
     RESERVE_FILE, WriterOptions, WriterStats, max_bytes_from_env, parse_max_bytes,
