@@ -522,3 +522,66 @@ fn power_is_read_from_the_tlog_of_the_autopilot_alone() {
         "{e}"
     );
 }
+
+/// The drift tuning is the mission's `[guarantee]` (an overlay may set it), range-checked with
+/// file, entry and reason; the guarantee judges with it.
+#[test]
+fn the_drift_tuning_is_the_missions_and_range_checked() {
+    use companion_core::guarantee::{Guarantee, PackReading, Progress, load_mission};
+    let tmp = tempfile::tempdir().unwrap();
+    let tuned = |name: &str, tolerance: f64| {
+        let p = tmp.path().join(name);
+        std::fs::write(
+            &p,
+            format!(
+                "[\"missions/tracking.toml\".guarantee]\npower_drift_tolerance = {tolerance}\n\
+                 power_drift_min_s = 2.0\nprior_weight_s = 0.0\n"
+            ),
+        )
+        .unwrap();
+        p
+    };
+    let ratio_two_after_5_s = |overlay: &Path| {
+        let files = companion::params::read_params_dir(overlay).unwrap();
+        let s = load_mission(&files, "tracking").unwrap();
+        let mut g = Guarantee::start(s.clone()).unwrap();
+        let ia = &s.problem.activities[1].ias[g.choice()[1]];
+        let p = ia.cost[0] / ia.cost[1];
+        let at = |t: f64| Progress {
+            activity_index: 1,
+            activity_fraction: 0.0,
+            energy_used_j: None,
+            battery_remaining_pct: Some(90.0),
+            elapsed_s: t,
+            failed_resources: &[],
+            pack: PackReading {
+                voltage_v: Some(12.0),
+                current_a: Some(2.0 * p / 12.0),
+                ..Default::default()
+            },
+        };
+        g.watch(at(100.0));
+        g.watch(at(105.0)).power.unwrap()
+    };
+    // Twice the predicted power for 5 s: judged (min 2 s), a drift beyond 50 %, none within 150 %.
+    let tight = ratio_two_after_5_s(&tuned("tight.toml", 0.5));
+    assert!(
+        tight.drift && (tight.ratio.unwrap() - 2.0).abs() < 1e-9,
+        "{tight:?}"
+    );
+    // Prior weight 0: the factor is the measured ratio.
+    assert!((tight.energy_scale - 2.0).abs() < 1e-12, "{tight:?}");
+    let loose = ratio_two_after_5_s(&tuned("loose.toml", 1.5));
+    assert!(!loose.drift && loose.ratio.is_some(), "{loose:?}");
+
+    let bad = tuned("bad.toml", 20.0);
+    let o = companion(&["check", "--params", bad.to_str().unwrap()]);
+    let e = text(&o);
+    assert!(!o.status.success(), "{e}");
+    assert!(
+        e.contains("tracking.toml")
+            && e.contains("guarantee.power_drift_tolerance")
+            && e.contains("outside"),
+        "{e}"
+    );
+}

@@ -1,6 +1,8 @@
 //! How long each activity actually ran (docs/calibrate.md): from the records' activity in force
-//! (`guarantee.activity_name`) and their time (`time_s`), one duration per activity completed
-//! (left for the next one) in each run. An activity a run ends in is not counted: it was cut.
+//! (`guarantee.activity_name`) and their time, one duration per activity completed (left for the
+//! next one) in each run. An activity a run ends in is not counted: it was cut. The time is the
+//! autopilot's clock (observation `vehicle_time_s`, SYSTEM_TIME) when the records have it (a SITL
+//! at `--speedup 3` flies three seconds a companion second), else the record's `time_s`.
 
 use companion_core::record::DecisionRecord;
 use std::collections::BTreeMap;
@@ -51,19 +53,24 @@ impl Durations {
 
     pub fn add(&mut self, r: &DecisionRecord) {
         let Some(g) = &r.guarantee else { return };
-        if g.activity_name.is_empty() || !r.time_s.is_finite() {
+        let t = r
+            .observations
+            .get("vehicle_time_s")
+            .copied()
+            .unwrap_or(r.time_s);
+        if g.activity_name.is_empty() || !t.is_finite() {
             return;
         }
         match &self.current {
             Some((name, _)) if *name == g.activity_name => {}
             Some((name, t0)) => {
-                let d = r.time_s - t0;
+                let d = t - t0;
                 if d >= 0.0 {
                     self.stats.entry(name.clone()).or_default().add(d);
                 }
-                self.current = Some((g.activity_name.clone(), r.time_s));
+                self.current = Some((g.activity_name.clone(), t));
             }
-            None => self.current = Some((g.activity_name.clone(), r.time_s)),
+            None => self.current = Some((g.activity_name.clone(), t)),
         }
     }
 
@@ -112,5 +119,18 @@ mod tests {
         assert_eq!(s["b"].n, 1);
         assert!((s["b"].mean() - 30.0).abs() < 1e-12);
         assert!(!s.contains_key("c"), "the run ended in c: not completed");
+    }
+
+    #[test]
+    fn the_autopilots_clock_is_used_when_recorded() {
+        let mut d = Durations::default();
+        for (t, a) in [(0.0, "a"), (10.0, "b"), (11.0, "c")] {
+            let mut r = rec(t, a);
+            // A SITL at --speedup 3.
+            r.observations
+                .insert("vehicle_time_s".into(), 1000.0 + 3.0 * t);
+            d.add(&r);
+        }
+        assert!((d.stats()["a"].mean() - 30.0).abs() < 1e-12);
     }
 }

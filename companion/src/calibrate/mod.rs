@@ -37,6 +37,11 @@ pub struct CalibrateArgs {
     /// workspace's params/); a directory or an overlay.
     #[arg(long)]
     pub params: Option<PathBuf>,
+    /// Keep `propulsion.induced_velocity_mps` as shipped and fit the rest with it: for a
+    /// vehicle whose power does not fall with speed as the induced power does (ArduCopter
+    /// SITL's quad), which leaves v0 unidentifiable.
+    #[arg(long)]
+    pub keep_induced_velocity: bool,
 }
 
 /// Everything learned from the runs.
@@ -49,8 +54,16 @@ pub struct Calibration {
 }
 
 /// Read every run once, one record at a time, into the fit's statistics.
-pub fn calibrate(shipped: &shipped::Shipped, runs: Vec<PathBuf>) -> anyhow::Result<Calibration> {
-    let mut fit = power_fit::PowerFit::new(shipped.power);
+pub fn calibrate(
+    shipped: &shipped::Shipped,
+    runs: Vec<PathBuf>,
+    keep_v0: bool,
+) -> anyhow::Result<Calibration> {
+    let mut fit = if keep_v0 {
+        power_fit::PowerFit::keeping_v0(shipped.power)
+    } else {
+        power_fit::PowerFit::new(shipped.power)
+    };
     let mut durations = durations::Durations::default();
     let mut counts = cpt::CptCounts::default();
     let parents = shipped.rows.parents();
@@ -86,7 +99,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         .unwrap_or_else(crate::params::default_params_dir);
     let shipped = shipped::Shipped::load(&params).context("loading params")?;
     let runs = runs::discover(&args.runs)?;
-    let cal = calibrate(&shipped, runs)?;
+    let cal = calibrate(&shipped, runs, args.keep_induced_velocity)?;
     print!("{}", write::report(&shipped, &cal));
     if let Some(out) = &args.out {
         let text = write::overlay(&shipped, &cal, out)?;

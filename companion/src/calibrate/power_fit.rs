@@ -123,6 +123,9 @@ pub struct FitResult {
     pub mean_w: f64,
     pub v_min: f64,
     pub v_max: f64,
+    /// The best induced velocity is the grid's largest: the induced power did not fall over the
+    /// speeds flown, so the data say only that v0 is at least this (a lower bound, not a value).
+    pub v0_lower_bound_only: bool,
 }
 
 /// Why the data cannot determine the model.
@@ -138,12 +141,17 @@ pub enum FitError {
     )]
     NoGround,
     #[error(
-        "every airborne sample is at {v_min:.1}..{v_max:.1} m/s: the speed-power curve \
+        "the airborne samples are at {speeds} speed(s) 0.5 m/s apart (between {v_min:.1} and \
+         {v_max:.1} m/s): the speed-power curve \
          (propulsion.induced_velocity_mps, propulsion.drag_area_m2, and the split of the hover \
          power into blade_profile_w and induced_hover_w) is unidentifiable; fly at least three \
          speeds 0.5 m/s apart"
     )]
-    OneSpeed { v_min: f64, v_max: f64 },
+    OneSpeed {
+        speeds: usize,
+        v_min: f64,
+        v_max: f64,
+    },
     #[error(
         "{name} is unidentifiable from these samples (speeds {v_min:.1}..{v_max:.1} m/s): the \
          data leave it undetermined (singular value ratio {ratio:.1e})"
@@ -155,8 +163,8 @@ pub enum FitError {
         v_max: f64,
     },
     #[error(
-        "propulsion.induced_velocity_mps is unidentifiable: the best fit lies at the edge of the \
-         searched {lo}..{hi} m/s (speeds flown {v_min:.1}..{v_max:.1} m/s)"
+        "propulsion.induced_velocity_mps is unidentifiable: the best fit lies at the lower edge \
+         of the searched {lo:.1}..{hi:.1} m/s (speeds flown {v_min:.1}..{v_max:.1} m/s)"
     )]
     V0AtEdge {
         lo: f64,
@@ -179,7 +187,17 @@ pub enum FitError {
 impl PowerFit {
     /// A fit starting from the shipped model (its `U` and `ρ` are kept; its error is reported).
     pub fn new(shipped: PowerModel) -> Self {
-        let grid = v0_grid();
+        Self::with_grid(shipped, v0_grid())
+    }
+
+    /// The same with v0 kept as shipped (`--keep-induced-velocity`): for data whose power does
+    /// not show the induced power's fall with speed (ArduCopter SITL's quad), the others are
+    /// fitted with the shipped v0.
+    pub fn keeping_v0(shipped: PowerModel) -> Self {
+        Self::with_grid(shipped, vec![shipped.induced_velocity_mps])
+    }
+
+    fn with_grid(shipped: PowerModel, grid: Vec<f64>) -> Self {
         let zero = Normal {
             ata: SMatrix::zeros(),
             aty: SVector::zeros(),
@@ -239,7 +257,11 @@ impl PowerFit {
             return Err(FitError::NoGround);
         }
         if self.speed_bins.len() < 3 {
-            return Err(FitError::OneSpeed { v_min, v_max });
+            return Err(FitError::OneSpeed {
+                speeds: self.speed_bins.len(),
+                v_min,
+                v_max,
+            });
         }
         let mut best: Option<(usize, SVector<f64, 4>, f64)> = None;
         let mut first_err = None;
@@ -266,7 +288,8 @@ impl PowerFit {
         let Some((i, theta, sse)) = best else {
             return Err(first_err.expect("a grid point either solves or fails"));
         };
-        if i == 0 || i + 1 == self.grid.len() {
+        let profiled = self.grid.len() > 1;
+        if profiled && i == 0 {
             return Err(FitError::V0AtEdge {
                 lo: self.grid[0],
                 hi: self.grid[self.grid.len() - 1],
@@ -274,8 +297,13 @@ impl PowerFit {
                 v_max,
             });
         }
+        let n = self.samples() as f64;
+        // Below zero by more than rounding (0.1 % of the mean power) is unphysical; a zero
+        // fitted as -0.0007 W (SITL's disarmed pack draws nothing) is zero.
+        let tol = 1e-3 * (self.sum_y / n).abs().max(1.0);
+        let mut theta = theta;
         for (k, name) in NAMES.iter().enumerate() {
-            if theta[k] < 0.0 {
+            if theta[k] <= -tol {
                 return Err(FitError::Negative {
                     name,
                     value: theta[k],
@@ -283,8 +311,8 @@ impl PowerFit {
                     v_max,
                 });
             }
+            theta[k] = theta[k].max(0.0);
         }
-        let n = self.samples() as f64;
         let fitted = PowerModel {
             base_w: theta[0],
             blade_profile_w: theta[1],
@@ -302,6 +330,7 @@ impl PowerFit {
             mean_w: self.sum_y / n,
             v_min,
             v_max,
+            v0_lower_bound_only: profiled && i + 1 == self.grid.len(),
         })
     }
 }
@@ -507,6 +536,21 @@ mod tests {
             .solve()
             .unwrap_err();
         assert!(matches!(e, FitError::Negative { .. }), "{e}");
+    }
+
+    #[test]
+    fn a_kept_v0_fits_the_rest_with_it() {
+        let mut t = truth();
+        t.induced_velocity_mps = shipped().induced_velocity_mps;
+        let mut f = PowerFit::keeping_v0(shipped());
+        flight(t, &SPEEDS, 0.0).into_iter().for_each(|s| f.add(s));
+        let r = f.solve().unwrap();
+        assert_eq!(r.fitted.induced_velocity_mps, 6.3);
+        assert!((r.fitted.base_w - t.base_w).abs() < 1e-6, "{r:?}");
+        assert!(
+            (r.fitted.drag_area_m2 - t.drag_area_m2).abs() < 1e-6,
+            "{r:?}"
+        );
     }
 
     #[test]

@@ -20,9 +20,19 @@ fn pct(x: f64, of: f64) -> f64 {
     }
 }
 
+/// What a v0 at the grid's top means, for the report and the source.
+fn v0_note(r: &FitResult) -> &'static str {
+    if r.v0_lower_bound_only {
+        "; induced_velocity_mps is a lower bound only: the induced power did not fall over the \
+         speeds flown (any larger v0 fits as well)"
+    } else {
+        ""
+    }
+}
+
 /// The fit's provenance, the text of each fitted number's `source`.
 pub fn power_source(cal: &Calibration, r: &FitResult) -> String {
-    format!(
+    let s = format!(
         "companion calibrate: {} run(s), {} power samples ({} on the ground), speeds {:.1}..{:.1} m/s; \
          fit RMS {:.1} W ({:.1} % of the mean measured {:.1} W); the shipped params' RMS {:.1} W ({:.1} %)",
         cal.runs.len(),
@@ -35,7 +45,8 @@ pub fn power_source(cal: &Calibration, r: &FitResult) -> String {
         r.mean_w,
         r.shipped_rms_w,
         pct(r.shipped_rms_w, r.mean_w),
-    )
+    );
+    s + v0_note(r)
 }
 
 fn model_rows(m: &PowerModel) -> [(&'static str, f64); 6] {
@@ -81,6 +92,9 @@ pub fn report(shipped: &Shipped, cal: &Calibration) -> String {
                 model_rows(&shipped.power).iter().zip(model_rows(&r.fitted))
             {
                 let _ = writeln!(s, "  {name:<50} {before:>10.4} -> {after:>10.4}");
+            }
+            if r.v0_lower_bound_only {
+                let _ = writeln!(s, "  note{}", v0_note(r));
             }
             let _ = writeln!(
                 s,
