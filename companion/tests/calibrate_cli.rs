@@ -200,15 +200,43 @@ fn a_generated_run_is_fitted_back_and_the_overlay_loads() {
         c.stdout, shipped.stdout,
         "the overlay changed nothing check shows"
     );
+    // simulate flies with it, and its run replays: the log header holds the params as layered.
+    let sim_runs = tmp.path().join("sim");
     let s = companion(&[
         "simulate",
         "--params",
         out.to_str().unwrap(),
-        "--no-log",
         "--steps",
-        "5",
+        "20",
+        "--runs-dir",
+        sim_runs.to_str().unwrap(),
     ]);
     assert!(s.status.success(), "{}", text(&s));
+    let run = std::fs::read_dir(&sim_runs)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let log = std::fs::read_to_string(run.join("decisions.jsonl")).unwrap();
+    let header = log.lines().next().unwrap();
+    assert!(
+        header.contains("blade_profile_w = 93."),
+        "the header holds the overlaid mission: {header}"
+    );
+    let r = companion(&["replay", run.to_str().unwrap()]);
+    assert!(r.status.success(), "{}", text(&r));
+    // fly's own set-up reads it too.
+    let mut args =
+        companion::fly::FlyArgs::from_cli(["--connect", "udpin:127.0.0.1:14550", "--auto-start"])
+            .unwrap();
+    args.params = Some(out.clone());
+    companion::fly::FlySetup::load(&args).unwrap();
+    std::fs::write(&out, "[\"missions/tracking.toml\".base]\npower_w = \"x\"\n").unwrap();
+    let e = companion::fly::FlySetup::load(&args)
+        .err()
+        .expect("a malformed overlay stops fly's set-up");
+    assert!(format!("{e:#}").contains("base.power_w"), "{e:#}");
 }
 
 #[test]
