@@ -40,8 +40,13 @@ pub struct CalibrateArgs {
     /// Keep `propulsion.induced_velocity_mps` as shipped and fit the rest with it: for a
     /// vehicle whose power does not fall with speed as the induced power does (ArduCopter
     /// SITL's quad), which leaves v0 unidentifiable.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "polynomial")]
     pub keep_induced_velocity: bool,
+    /// Fit a polynomial propulsion model (`model = "polynomial"`, `coefficients_w = [c0, 0, c2,
+    /// c3]`) in place of the rotary-wing one: for a vehicle whose power the rotary-wing curve
+    /// does not describe.
+    #[arg(long)]
+    pub polynomial: bool,
 }
 
 /// Everything learned from the runs.
@@ -58,8 +63,11 @@ pub fn calibrate(
     shipped: &shipped::Shipped,
     runs: Vec<PathBuf>,
     keep_v0: bool,
+    polynomial: bool,
 ) -> anyhow::Result<Calibration> {
-    let mut fit = if keep_v0 {
+    let mut fit = if polynomial {
+        power_fit::PowerFit::polynomial(shipped.power)
+    } else if keep_v0 {
         power_fit::PowerFit::keeping_v0(shipped.power)
     } else {
         power_fit::PowerFit::new(shipped.power)
@@ -99,7 +107,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         .unwrap_or_else(crate::params::default_params_dir);
     let shipped = shipped::Shipped::load(&params).context("loading params")?;
     let runs = runs::discover(&args.runs)?;
-    let cal = calibrate(&shipped, runs, args.keep_induced_velocity)?;
+    let cal = calibrate(&shipped, runs, args.keep_induced_velocity, args.polynomial)?;
     print!("{}", write::report(&shipped, &cal));
     if let Some(out) = &args.out {
         let text = write::overlay(&shipped, &cal, out)?;

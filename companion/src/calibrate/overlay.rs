@@ -11,7 +11,8 @@
 //! hold_s = 612.0
 //! ```
 //!
-//! Tables merge key by key; an array of tables (the mission's `activities`) is addressed by its
+//! Tables merge key by key, except that a table whose `model` differs from the shipped one's
+//! replaces it whole (`[propulsion]` from rotary_wing to polynomial); an array of tables (the mission's `activities`) is addressed by its
 //! elements' `name`; any other value replaces the shipped one. An entry naming a file the params
 //! set does not hold, an array element that does not exist, a table where a value is (or the
 //! reverse), or a number that is not finite stops the load with the overlay's file, the entry
@@ -110,6 +111,12 @@ fn merge_table(dst: &mut Table, src: &Table, at: &str, err: &ErrFn) -> Result<()
         let entry = format!("{at}.{k}");
         check_finite(v, &entry, err)?;
         match (dst.get_mut(k), v) {
+            // A different `model` is a different table (the mission's `[propulsion]`): whole.
+            (Some(Value::Table(d)), Value::Table(s))
+                if s.get("model").is_some_and(|m| Some(m) != d.get("model")) =>
+            {
+                *d = s.clone();
+            }
             (Some(Value::Table(d)), Value::Table(s)) => merge_table(d, s, &entry, err)?,
             (Some(Value::Array(d)), Value::Table(s)) if is_named_array(d) => {
                 merge_named(d, s, &entry, err)?;
@@ -231,6 +238,23 @@ mod tests {
         assert_eq!(t["base"]["source"].as_str(), Some("A"));
         assert_eq!(t["activities"][0]["hold_s"].as_float(), Some(1.0));
         assert_eq!(t["activities"][1]["hold_s"].as_float(), Some(7.0));
+    }
+
+    #[test]
+    fn a_table_of_another_model_replaces_the_shipped_one_whole() {
+        let mut f = ParamsFiles::new("/p");
+        f.insert(
+            "/p/m.toml",
+            "[propulsion]\nmodel = \"rotary_wing\"\ntip_speed_mps = 80.0\n",
+        );
+        apply_text(
+            &mut f,
+            "[\"m.toml\".propulsion]\nmodel = \"polynomial\"\ncoefficients_w = [1.0, 0.0]\n",
+        )
+        .unwrap();
+        let t: Table = f.text(Path::new("/p/m.toml")).unwrap().parse().unwrap();
+        assert_eq!(t["propulsion"]["model"].as_str(), Some("polynomial"));
+        assert!(t["propulsion"].get("tip_speed_mps").is_none(), "{t}");
     }
 
     #[test]

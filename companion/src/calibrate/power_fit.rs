@@ -79,6 +79,24 @@ const NAMES: [&str; 4] = [
     "propulsion.drag_area_m2",
 ];
 
+/// The unknowns of the polynomial model (`--polynomial`): `P = base + c0 + c2 v² + c3 v³` in
+/// the air (no linear term: power is even in the velocity's direction, and the v² and v³ terms
+/// are those of the rotary-wing model's profile and parasitic powers).
+const POLY_NAMES: [&str; 4] = [
+    "base.power_w",
+    "propulsion.coefficients_w[0]",
+    "propulsion.coefficients_w[2]",
+    "propulsion.coefficients_w[3]",
+];
+
+fn poly_columns(v: f64, airborne: bool) -> [f64; 4] {
+    if airborne {
+        [1.0, 1.0, v * v, v * v * v]
+    } else {
+        [1.0, 0.0, 0.0, 0.0]
+    }
+}
+
 /// Candidate induced velocities (m/s): 0.5 to 40, 2 % apart.
 fn v0_grid() -> Vec<f64> {
     let (lo, hi, step) = (0.5f64, 40.0f64, 1.02f64);
@@ -96,6 +114,8 @@ struct Normal {
 /// Sufficient statistics of the fit, fed one sample at a time.
 pub struct PowerFit {
     shipped: PowerModel,
+    /// Fit the polynomial model instead of the rotary-wing one.
+    polynomial: bool,
     grid: Vec<f64>,
     normals: Vec<Normal>,
     yy: f64,
@@ -126,6 +146,9 @@ pub struct FitResult {
     /// The best induced velocity is the grid's largest: the induced power did not fall over the
     /// speeds flown, so the data say only that v0 is at least this (a lower bound, not a value).
     pub v0_lower_bound_only: bool,
+    /// With `--polynomial`: `coefficients_w` (c0, c1 = 0, c2, c3); `fitted` then holds only the
+    /// base power.
+    pub polynomial_w: Option<[f64; 4]>,
 }
 
 /// Why the data cannot determine the model.
@@ -197,6 +220,18 @@ impl PowerFit {
         Self::with_grid(shipped, vec![shipped.induced_velocity_mps])
     }
 
+    /// The polynomial model (`--polynomial`): for vehicles whose power does not follow the
+    /// rotary-wing curve (ArduCopter SITL's quad rises from hover with speed).
+    pub fn polynomial(shipped: PowerModel) -> Self {
+        let mut f = Self::with_grid(shipped, vec![0.0]);
+        f.polynomial = true;
+        f
+    }
+
+    fn names(&self) -> &'static [&'static str; 4] {
+        if self.polynomial { &POLY_NAMES } else { &NAMES }
+    }
+
     fn with_grid(shipped: PowerModel, grid: Vec<f64>) -> Self {
         let zero = Normal {
             ata: SMatrix::zeros(),
@@ -204,6 +239,7 @@ impl PowerFit {
         };
         PowerFit {
             shipped,
+            polynomial: false,
             normals: vec![zero; grid.len()],
             grid,
             yy: 0.0,
@@ -224,7 +260,11 @@ impl PowerFit {
         }
         let y = s.power_w;
         for (v0, n) in self.grid.iter().zip(self.normals.iter_mut()) {
-            let x = SVector::<f64, 4>::from(self.shipped.columns(s.speed_mps, *v0, s.airborne));
+            let x = SVector::<f64, 4>::from(if self.polynomial {
+                poly_columns(s.speed_mps, s.airborne)
+            } else {
+                self.shipped.columns(s.speed_mps, *v0, s.airborne)
+            });
             n.ata += x * x.transpose();
             n.aty += x * y;
         }
@@ -266,7 +306,7 @@ impl PowerFit {
         let mut best: Option<(usize, SVector<f64, 4>, f64)> = None;
         let mut first_err = None;
         for (i, n) in self.normals.iter().enumerate() {
-            match solve_normal(n) {
+            match solve_normal(n, self.names()) {
                 Ok(theta) => {
                     let sse = (self.yy - 2.0 * theta.dot(&n.aty)
                         + (theta.transpose() * n.ata * theta)[(0, 0)])
@@ -288,7 +328,7 @@ impl PowerFit {
         let Some((i, theta, sse)) = best else {
             return Err(first_err.expect("a grid point either solves or fails"));
         };
-        let profiled = self.grid.len() > 1;
+        let profiled = !self.polynomial && self.grid.len() > 1;
         if profiled && i == 0 {
             return Err(FitError::V0AtEdge {
                 lo: self.grid[0],
@@ -302,7 +342,9 @@ impl PowerFit {
         // fitted as -0.0007 W (SITL's disarmed pack draws nothing) is zero.
         let tol = 1e-3 * (self.sum_y / n).abs().max(1.0);
         let mut theta = theta;
-        for (k, name) in NAMES.iter().enumerate() {
+        // The polynomial's c2 and c3 may take either sign; its base and c0 may not.
+        let signed = if self.polynomial { 2 } else { 4 };
+        for (k, name) in self.names().iter().enumerate().take(signed) {
             if theta[k] <= -tol {
                 return Err(FitError::Negative {
                     name,
@@ -312,6 +354,23 @@ impl PowerFit {
                 });
             }
             theta[k] = theta[k].max(0.0);
+        }
+        if self.polynomial {
+            return Ok(FitResult {
+                fitted: PowerModel {
+                    base_w: theta[0],
+                    ..self.shipped
+                },
+                samples: self.samples(),
+                ground_samples: self.n_ground,
+                rms_w: (sse / n).sqrt(),
+                shipped_rms_w: (self.shipped_sse / n).sqrt(),
+                mean_w: self.sum_y / n,
+                v_min,
+                v_max,
+                v0_lower_bound_only: false,
+                polynomial_w: Some([theta[1], 0.0, theta[2], theta[3]]),
+            });
         }
         let fitted = PowerModel {
             base_w: theta[0],
@@ -331,6 +390,7 @@ impl PowerFit {
             v_min,
             v_max,
             v0_lower_bound_only: profiled && i + 1 == self.grid.len(),
+            polynomial_w: None,
         })
     }
 }
@@ -338,13 +398,16 @@ impl PowerFit {
 /// Least squares from normal equations, columns scaled to unit norm first (so the singular
 /// values compare the parameters, not their units); a near-zero singular value names the
 /// parameter that dominates its direction.
-fn solve_normal(n: &Normal) -> Result<SVector<f64, 4>, (&'static str, f64)> {
+fn solve_normal(
+    n: &Normal,
+    names: &'static [&'static str; 4],
+) -> Result<SVector<f64, 4>, (&'static str, f64)> {
     let d = SVector::<f64, 4>::from_fn(|k, _| {
         let a = n.ata[(k, k)];
         if a > 0.0 { 1.0 / a.sqrt() } else { 0.0 }
     });
     if let Some(k) = (0..4).find(|&k| d[k] == 0.0) {
-        return Err((NAMES[k], 0.0));
+        return Err((names[k], 0.0));
     }
     let dm = SMatrix::<f64, 4, 4>::from_diagonal(&d);
     let m = dm * n.ata * dm;
@@ -360,9 +423,9 @@ fn solve_normal(n: &Normal) -> Result<SVector<f64, 4>, (&'static str, f64)> {
         let worst = (0..4)
             .max_by(|&a, &b| row[a].abs().total_cmp(&row[b].abs()))
             .unwrap_or(0);
-        return Err((NAMES[worst], ratio));
+        return Err((names[worst], ratio));
     }
-    let z = svd.solve(&b, smax * 1e-14).map_err(|_| (NAMES[0], ratio))?;
+    let z = svd.solve(&b, smax * 1e-14).map_err(|_| (names[0], ratio))?;
     Ok(dm * z)
 }
 
@@ -551,6 +614,35 @@ mod tests {
             (r.fitted.drag_area_m2 - t.drag_area_m2).abs() < 1e-6,
             "{r:?}"
         );
+    }
+
+    #[test]
+    fn the_polynomial_model_is_fitted_when_asked() {
+        // A power rising from 350 W at hover like ArduCopter SITL's quad: 350 + 0.2 v² + 0.01 v³.
+        let mut f = PowerFit::polynomial(shipped());
+        for i in 0..20 {
+            f.add(Sample {
+                speed_mps: 0.0,
+                power_w: 0.0,
+                airborne: false,
+            });
+            for v in [0.0, 2.0, 5.0, 8.0, 10.0, 12.0] {
+                let p = 350.0 + 0.2 * v * v + 0.01 * v * v * v + noise(i, 0.0);
+                f.add(Sample {
+                    speed_mps: v,
+                    power_w: p,
+                    airborne: true,
+                });
+            }
+        }
+        let r = f.solve().unwrap();
+        let c = r.polynomial_w.unwrap();
+        assert!(
+            (c[0] - 350.0).abs() < 1e-6 && (c[2] - 0.2).abs() < 1e-8 && (c[3] - 0.01).abs() < 1e-9,
+            "{c:?}"
+        );
+        assert_eq!(c[1], 0.0);
+        assert!(r.fitted.base_w.abs() < 1e-9 && r.rms_w < 1e-6, "{r:?}");
     }
 
     #[test]

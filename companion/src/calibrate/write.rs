@@ -88,6 +88,14 @@ pub fn report(shipped: &Shipped, cal: &Calibration) -> String {
                 r.v_max,
                 r.mean_w
             );
+            if let Some(c) = r.polynomial_w {
+                let _ = writeln!(
+                    s,
+                    "  base.power_w {:.4} -> {:.4}\n  propulsion: rotary_wing -> polynomial, coefficients_w [{:.4}, 0, {:.6}, {:.6}] (P = c0 + c2 v² + c3 v³)",
+                    shipped.power.base_w, r.fitted.base_w, c[0], c[2], c[3]
+                );
+                return finish_report(s, shipped, cal);
+            }
             for ((name, before), (_, after)) in
                 model_rows(&shipped.power).iter().zip(model_rows(&r.fitted))
             {
@@ -106,6 +114,11 @@ pub fn report(shipped: &Shipped, cal: &Calibration) -> String {
             let _ = writeln!(s, "  not fitted: {e}");
         }
     }
+    finish_report(s, shipped, cal)
+}
+
+/// The report's durations and BN rows.
+fn finish_report(mut s: String, shipped: &Shipped, cal: &Calibration) -> String {
     let _ = writeln!(s, "\nactivity durations (completed activities):");
     if cal.durations.stats().is_empty() {
         let _ = writeln!(s, "  none: no record says which activity was in force");
@@ -160,6 +173,10 @@ fn round4(x: f64) -> Value {
     Value::Float((x * 1e4).round() / 1e4)
 }
 
+fn round6(x: f64) -> Value {
+    Value::Float((x * 1e6).round() / 1e6)
+}
+
 fn table_at<'a>(t: &'a mut Table, path: &[&str]) -> &'a mut Table {
     let mut cur = t;
     for k in path {
@@ -205,17 +222,29 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
     if let Ok(r) = &cal.power {
         let src = Value::String(power_source(cal, r));
         let p = table_at(&mut t, &[&mf, "propulsion"]);
-        p.insert("blade_profile_w".into(), round4(r.fitted.blade_profile_w));
-        p.insert("induced_hover_w".into(), round4(r.fitted.induced_hover_w));
-        p.insert(
-            "induced_velocity_mps".into(),
-            round4(r.fitted.induced_velocity_mps),
-        );
-        p.insert("drag_area_m2".into(), round4(r.fitted.drag_area_m2));
-        p.insert("source".into(), src.clone());
-        let b = table_at(&mut t, &[&mf, "base"]);
-        b.insert("power_w".into(), round4(r.fitted.base_w));
-        b.insert("source".into(), src);
+        if let Some(c) = r.polynomial_w {
+            // A different model: the overlay's table replaces the shipped one whole.
+            p.insert("model".into(), Value::String("polynomial".into()));
+            let c: Vec<Value> =
+                [round4(c[0]), Value::Float(0.0), round6(c[2]), round6(c[3])].to_vec();
+            p.insert("coefficients_w".into(), Value::Array(c));
+            p.insert("source".into(), src.clone());
+            let b = table_at(&mut t, &[&mf, "base"]);
+            b.insert("power_w".into(), round4(r.fitted.base_w));
+            b.insert("source".into(), src);
+        } else {
+            p.insert("blade_profile_w".into(), round4(r.fitted.blade_profile_w));
+            p.insert("induced_hover_w".into(), round4(r.fitted.induced_hover_w));
+            p.insert(
+                "induced_velocity_mps".into(),
+                round4(r.fitted.induced_velocity_mps),
+            );
+            p.insert("drag_area_m2".into(), round4(r.fitted.drag_area_m2));
+            p.insert("source".into(), src.clone());
+            let b = table_at(&mut t, &[&mf, "base"]);
+            b.insert("power_w".into(), round4(r.fitted.base_w));
+            b.insert("source".into(), src);
+        }
     }
     for (name, d) in cal.durations.stats() {
         let (Some(fastest), Some(hold)) = (shipped.fastest_s.get(name), shipped.hold_s.get(name))
