@@ -697,7 +697,7 @@ impl<'m> Core<'m> {
                 pw.predicted_j,
                 pw.activity_s,
                 pw.ratio.unwrap_or(1.0),
-                crate::guarantee::POWER_DRIFT_TOLERANCE * 100.0,
+                self.model.guarantee.tuning.power_drift_tolerance * 100.0,
                 pw.energy_scale
             )));
         }

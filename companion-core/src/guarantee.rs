@@ -76,6 +76,8 @@ pub struct MissionSpec {
     pub battery_kept_back: Option<f64>,
     /// Tile names of the platform (a failure of one reduces the tiles available).
     pub tile_names: Vec<String>,
+    /// How a measured power drift is judged and learned (`[guarantee]`).
+    pub tuning: Tuning,
 }
 
 /// Resolve `--mission`: a path the params set holds (the shell adds a mission file given by
@@ -204,6 +206,31 @@ pub const POWER_DRIFT_MIN_S: f64 = 10.0;
 pub const PRIOR_WEIGHT_S: f64 = 60.0;
 /// The factor learned from a drift is kept within these bounds.
 pub const ENERGY_SCALE_BOUNDS: (f64, f64) = (0.5, 2.0);
+
+/// The power-drift tuning of a mission: its `[guarantee]` section, else the constants above
+/// (which are its defaults).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tuning {
+    /// A measured power this far from the prediction (fraction of it) is a drift.
+    pub power_drift_tolerance: f64,
+    /// Seconds in an activity before its power is judged.
+    pub power_drift_min_s: f64,
+    /// The params' power model counts as this many seconds of measurement.
+    pub prior_weight_s: f64,
+    /// The learned energy factor is kept within these bounds.
+    pub energy_scale_bounds: (f64, f64),
+}
+
+impl Default for Tuning {
+    fn default() -> Self {
+        Tuning {
+            power_drift_tolerance: POWER_DRIFT_TOLERANCE,
+            power_drift_min_s: POWER_DRIFT_MIN_S,
+            prior_weight_s: PRIOR_WEIGHT_S,
+            energy_scale_bounds: ENERGY_SCALE_BOUNDS,
+        }
+    }
+}
 
 /// What the guarantee keeps across cycles to measure the activity in force.
 #[derive(Debug, Clone, Default)]
@@ -524,15 +551,17 @@ impl Guarantee {
         let predicted_w = self.predicted_power(at);
         let predicted_j = predicted_w * activity_s;
         let ratio = measured_j
-            .filter(|_| activity_s >= POWER_DRIFT_MIN_S && predicted_j > 0.0)
+            .filter(|_| activity_s >= self.spec.tuning.power_drift_min_s && predicted_j > 0.0)
             .map(|m| m / predicted_j);
-        let drift = ratio.is_some_and(|r| (r - 1.0).abs() > POWER_DRIFT_TOLERANCE);
+        let tolerance = self.spec.tuning.power_drift_tolerance;
+        let drift = ratio.is_some_and(|r| (r - 1.0).abs() > tolerance);
         let drift_began = drift && !self.power.drift_said;
         if drift {
             self.power.drift_said = true;
-            let (lo, hi) = ENERGY_SCALE_BOUNDS;
+            let (lo, hi) = self.spec.tuning.energy_scale_bounds;
+            let w = self.spec.tuning.prior_weight_s;
             let r = ratio.unwrap_or(1.0);
-            let k = (PRIOR_WEIGHT_S + activity_s * r) / (PRIOR_WEIGHT_S + activity_s);
+            let k = (w + activity_s * r) / (w + activity_s);
             self.set_energy_scale(at, k.clamp(lo, hi));
         }
         Some(PowerRecord {

@@ -19,7 +19,8 @@ pub struct CheckArgs {
     /// (`wind=strong,target_speed=high,qos=high`; `luminosity_lux=20`).
     #[arg(long)]
     pub evidence: Option<String>,
-    /// The params directory (default: $COMPANION_PARAMS or the workspace's params/).
+    /// The params directory (default: $COMPANION_PARAMS or the workspace's params/) or a params overlay file
+    /// (`companion calibrate --out`, docs/calibrate.md).
     #[arg(long)]
     pub params: Option<PathBuf>,
     /// PANORAMA mission for the pre-flight allocation: a name in params/missions/ (`tracking`,

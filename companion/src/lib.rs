@@ -13,6 +13,8 @@
 //! - `decision_log`: run folders, the decision-log writer and reader, telemetry logs.
 //! - `vocabulary`: the observation and action vocabularies across the params and both shells
 //!   (producers, consumers), checked at load and listed by `check`.
+//! - `calibrate`: `companion calibrate` (power model, durations and BN rows fitted to runs; the
+//!   params overlay `--params FILE` reads).
 //! - `check`: `companion check` (params validation and the compiled models, text or JSON).
 //! - `review`: `companion review` (HTML report, summary, why of a cycle).
 //! - `export`: `companion export` (MCAP or CSV).
@@ -21,6 +23,7 @@
 
 #![allow(missing_docs)] // the shells are documented per module; their items are not an API
 
+pub mod calibrate;
 pub mod check;
 pub mod decision_log;
 pub mod export;

@@ -83,7 +83,8 @@ struct SimulateArgs {
     /// Do not write a run folder.
     #[arg(long)]
     no_log: bool,
-    /// The params directory (default: $COMPANION_PARAMS, else the repository's params/).
+    /// The params directory (default: $COMPANION_PARAMS, else the repository's params/) or a params overlay file
+    /// (`companion calibrate --out`, docs/calibrate.md).
     #[arg(long)]
     params: Option<PathBuf>,
 }
@@ -125,6 +126,10 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Fit the mission's power model, the activities' durations and the health BN rows the
+    /// logs can teach to flown or simulated runs; print the fit error before and after and
+    /// write a params overlay (docs/calibrate.md).
+    Calibrate(companion::calibrate::CalibrateArgs),
     /// Feed a run's logged observations to a fresh core built from the params in its log
     /// header, and report the first cycle whose record differs (exit 0 all equal, 1 a cycle
     /// differs, 2 the log cannot be replayed).
@@ -166,6 +171,7 @@ fn main() -> Result<()> {
             format,
             out,
         } => companion::export::run_cli(&run_or_log, format, out.as_deref()),
+        Command::Calibrate(args) => companion::calibrate::run(&args),
         Command::Replay { run_folder } => {
             std::process::exit(companion::replay::run_cli(&run_folder));
         }

@@ -13,8 +13,18 @@ const MAX_FILES: usize = 1000;
 
 /// Read every `.toml` file below `dir` into a [`ParamsFiles`] for the core to compile. A file
 /// that cannot be read (not a regular file, too large, not UTF-8) is kept with its reason and
-/// fails the load only if a loader needs it; an unlistable `dir` fails here.
+/// fails the load only if a loader needs it; an unlistable `dir` fails here. `dir` may instead
+/// be a params overlay file (`companion calibrate --out`, docs/calibrate.md): its base params
+/// directory is read and the overlay layered on it.
 pub fn read_params_dir(dir: &Path) -> Result<ParamsFiles, SpecError> {
+    if crate::calibrate::overlay::is_overlay(dir) {
+        return crate::calibrate::overlay::read_overlaid(dir, default_params_dir());
+    }
+    read_dir_only(dir)
+}
+
+/// [`read_params_dir`] of a directory (never an overlay: an overlay's base is a directory).
+pub(crate) fn read_dir_only(dir: &Path) -> Result<ParamsFiles, SpecError> {
     let mut files = ParamsFiles::new(dir);
     let mut pending = vec![(dir.to_path_buf(), 0usize)];
     let mut n = 0usize;

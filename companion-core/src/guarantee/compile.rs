@@ -130,6 +130,7 @@ pub(super) fn compile(path: &Path, f: MissionFile) -> Result<MissionSpec, SpecEr
         .as_ref()
         .filter(|b| b.capacity_wh > 0.0)
         .map(|b| (1.0 - b.usable_fraction) + b.reserve_wh / b.capacity_wh);
+    let tuning = c.tuning()?;
     Ok(MissionSpec {
         name: f.mission.name,
         file: path.to_path_buf(),
@@ -143,10 +144,40 @@ pub(super) fn compile(path: &Path, f: MissionFile) -> Result<MissionSpec, SpecEr
         battery_capacity_j,
         battery_kept_back,
         tile_names: f.compute.map(|c| c.tile_names).unwrap_or_default(),
+        tuning,
     })
 }
 
 impl<'f> Compiler<'f> {
+    /// `[guarantee]`, range-checked (issue 23: the drift tuning is the mission's, not the code's).
+    fn tuning(&self) -> Result<super::Tuning, SpecError> {
+        let Some(t) = &self.f.guarantee else {
+            return Ok(super::Tuning::default());
+        };
+        let check = |entry: &str, x: f64, lo: f64, hi: f64| {
+            if x.is_finite() && (lo..=hi).contains(&x) {
+                Ok(())
+            } else {
+                Err(self.err(
+                    format!("guarantee.{entry}"),
+                    format!("{x} is outside [{lo}, {hi}]"),
+                ))
+            }
+        };
+        check("power_drift_tolerance", t.power_drift_tolerance, 0.01, 10.0)?;
+        check("power_drift_min_s", t.power_drift_min_s, 0.0, 3600.0)?;
+        check("prior_weight_s", t.prior_weight_s, 0.0, 86_400.0)?;
+        let [lo, hi] = t.energy_scale_bounds;
+        check("energy_scale_bounds[0]", lo, 0.01, 1.0)?;
+        check("energy_scale_bounds[1]", hi, 1.0, 100.0)?;
+        Ok(super::Tuning {
+            power_drift_tolerance: t.power_drift_tolerance,
+            power_drift_min_s: t.power_drift_min_s,
+            prior_weight_s: t.prior_weight_s,
+            energy_scale_bounds: (lo, hi),
+        })
+    }
+
     fn err(&self, entry: impl Into<String>, reason: impl Into<String>) -> SpecError {
         SpecError::new(self.path, entry, reason)
     }

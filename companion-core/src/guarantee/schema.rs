@@ -25,6 +25,22 @@ pub(super) struct MissionFile {
     #[serde(default)]
     pub(super) constraints: BTreeMap<String, ConstraintClass>,
     pub(super) activities: Vec<ActivityFile>,
+    /// The in-flight power-drift tuning (docs/guarantee.md); defaults when absent.
+    #[serde(default)]
+    pub(super) guarantee: Option<TuningFile>,
+}
+
+/// `[guarantee]`: how a measured power drift is judged and learned.
+#[allow(dead_code)] // `source` documents the data
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct TuningFile {
+    pub(super) power_drift_tolerance: f64,
+    pub(super) power_drift_min_s: f64,
+    pub(super) prior_weight_s: f64,
+    pub(super) energy_scale_bounds: [f64; 2],
+    #[serde(default)]
+    pub(super) source: String,
 }
 
 #[allow(dead_code)] // `source`/`description` fields document the data

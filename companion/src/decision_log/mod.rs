@@ -17,6 +17,7 @@ mod writer;
 pub(crate) use reader::log_files;
 pub use reader::{LogEnd, LogEvent, LogRead, LossMark, ReadError, ReadIssue, read_log};
 pub use stream::{LogItem, LogStream, LossReason, MAX_LINE_BYTES, stream_log};
+pub(crate) use tlog::frame_len;
 pub use tlog::{TlogFrame, TlogWriter, read_tlog};
 pub use writer::{
     DEFAULT_MAX_BYTES, DEFAULT_MAX_LINE_BYTES, DecisionLog, LogCapError, RESERVE_BYTES,
@@ -97,8 +98,21 @@ impl Header {
         }
     }
 
-    /// Attach every `*.toml` file under `dir` (recursively), by path relative to `dir`.
+    /// Attach every `*.toml` file under `dir` (recursively), by path relative to `dir`. When
+    /// `dir` is a params overlay (`--params FILE`), the files as layered, so that `replay`
+    /// rebuilds the model the run flew.
     pub fn with_params_dir(mut self, dir: &Path) -> io::Result<Self> {
+        if crate::calibrate::overlay::is_overlay(dir) {
+            let files = crate::params::read_params_dir(dir).map_err(io::Error::other)?;
+            let base = files.dir().to_path_buf();
+            for (path, text) in files.iter() {
+                let name = path.strip_prefix(&base).unwrap_or(path);
+                let name = name.to_string_lossy().replace('\\', "/");
+                let entry = text.map_or_else(|r| format!("unreadable: {r}"), params_entry_of_text);
+                self.params.insert(name, entry);
+            }
+            return Ok(self);
+        }
         let mut files = Vec::new();
         collect_toml(dir, &mut files)?;
         files.sort();
@@ -149,6 +163,10 @@ fn params_entry_of_file(path: &Path) -> io::Result<String> {
         n += k as u64;
     }
     Ok(format!("fnv1a64:{h:016x} ({n} bytes)"))
+}
+
+fn params_entry_of_text(text: &str) -> String {
+    params_entry(text.as_bytes())
 }
 
 /// Contents as text when small and UTF-8, else a content hash (FNV-1a 64: no crypto needed, it

@@ -112,7 +112,7 @@ pub struct TlogFrame {
 
 /// Length of the MAVLink frame starting at `b[0]`, from its header, or None if `b` does not
 /// start with a frame header.
-fn frame_len(b: &[u8]) -> Option<usize> {
+pub(crate) fn frame_len(b: &[u8]) -> Option<usize> {
     match *b.first()? {
         // v2: STX, len, incompat, compat, seq, sysid, compid, msgid(3), payload, crc(2) [, sig(13)]
         0xFD => {

@@ -29,7 +29,8 @@ pub struct FlyArgs {
     /// Silence after which the autopilot counts as lost (e.g. 3s, 500ms).
     #[arg(long, default_value = "3s", value_parser = parse_duration)]
     pub link_timeout: Duration,
-    /// Params directory (default: $COMPANION_PARAMS or the workspace params/).
+    /// Params directory (default: $COMPANION_PARAMS or the workspace params/) or a params overlay file
+    /// (`companion calibrate --out`, docs/calibrate.md).
     #[arg(long)]
     pub params: Option<PathBuf>,
     /// Stop after this long (e.g. 60s); default: run until Ctrl-C or SIGTERM, flight after

@@ -1,0 +1,136 @@
+//! How long each activity actually ran (docs/calibrate.md): from the records' activity in force
+//! (`guarantee.activity_name`) and their time, one duration per activity completed (left for the
+//! next one) in each run. An activity a run ends in is not counted: it was cut. The time is the
+//! autopilot's clock (observation `vehicle_time_s`, SYSTEM_TIME) when the records have it (a SITL
+//! at `--speedup 3` flies three seconds a companion second), else the record's `time_s`.
+
+use companion_core::record::DecisionRecord;
+use std::collections::BTreeMap;
+
+/// Running mean and spread of one activity's durations.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct DurationStats {
+    pub n: u64,
+    sum: f64,
+    sum_sq: f64,
+}
+
+impl DurationStats {
+    fn add(&mut self, x: f64) {
+        self.n += 1;
+        self.sum += x;
+        self.sum_sq += x * x;
+    }
+
+    pub fn mean(&self) -> f64 {
+        self.sum / self.n as f64
+    }
+
+    /// Sample standard deviation (0 for one run).
+    pub fn sd(&self) -> f64 {
+        if self.n < 2 {
+            return 0.0;
+        }
+        let m = self.mean();
+        ((self.sum_sq - self.n as f64 * m * m) / (self.n - 1) as f64)
+            .max(0.0)
+            .sqrt()
+    }
+}
+
+/// Activity durations over many runs, fed one record at a time.
+#[derive(Default)]
+pub struct Durations {
+    stats: BTreeMap<String, DurationStats>,
+    current: Option<(String, f64)>,
+}
+
+impl Durations {
+    /// A new run begins: the activity in force of the last one was not completed.
+    pub fn start_run(&mut self) {
+        self.current = None;
+    }
+
+    pub fn add(&mut self, r: &DecisionRecord) {
+        let Some(g) = &r.guarantee else { return };
+        let t = r
+            .observations
+            .get("vehicle_time_s")
+            .copied()
+            .unwrap_or(r.time_s);
+        if g.activity_name.is_empty() || !t.is_finite() {
+            return;
+        }
+        match &self.current {
+            Some((name, _)) if *name == g.activity_name => {}
+            Some((name, t0)) => {
+                let d = t - t0;
+                if d >= 0.0 {
+                    self.stats.entry(name.clone()).or_default().add(d);
+                }
+                self.current = Some((g.activity_name.clone(), t));
+            }
+            None => self.current = Some((g.activity_name.clone(), t)),
+        }
+    }
+
+    /// Per activity name, the durations of its completed runs.
+    pub fn stats(&self) -> &BTreeMap<String, DurationStats> {
+        &self.stats
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use companion_core::record::GuaranteeRecord;
+
+    fn rec(t: f64, activity: &str) -> DecisionRecord {
+        DecisionRecord {
+            time_s: t,
+            guarantee: Some(GuaranteeRecord {
+                activity_name: activity.into(),
+                ..Default::default()
+            }),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn completed_activities_are_timed_and_the_cut_one_is_not() {
+        let mut d = Durations::default();
+        for (t, a) in [
+            (0.0, "a"),
+            (5.0, "a"),
+            (10.0, "b"),
+            (40.0, "c"),
+            (45.0, "c"),
+        ] {
+            d.add(&rec(t, a));
+        }
+        d.start_run();
+        for (t, a) in [(0.0, "a"), (14.0, "b"), (20.0, "b")] {
+            d.add(&rec(t, a));
+        }
+        let s = d.stats();
+        assert_eq!(s["a"].n, 2);
+        assert!((s["a"].mean() - 12.0).abs() < 1e-12);
+        assert!((s["a"].sd() - 8f64.sqrt()).abs() < 1e-12);
+        assert_eq!(s["b"].n, 1);
+        assert!((s["b"].mean() - 30.0).abs() < 1e-12);
+        assert!(!s.contains_key("c"), "the run ended in c: not completed");
+    }
+
+    #[test]
+    fn the_autopilots_clock_is_used_when_recorded() {
+        let mut d = Durations::default();
+        for (t, a) in [(0.0, "a"), (10.0, "b"), (11.0, "c")] {
+            let mut r = rec(t, a);
+            // A SITL at --speedup 3.
+            r.observations
+                .insert("vehicle_time_s".into(), 1000.0 + 3.0 * t);
+            d.add(&r);
+        }
+        assert!((d.stats()["a"].mean() - 30.0).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,121 @@
+//! The shipped numbers calibration starts from and reports against: the mission's power model
+//! and activities, the countable BN rows, the mission states.
+
+use super::cpt::ShippedRows;
+use super::power_fit::PowerModel;
+use companion_core::mission::MissionStates;
+use companion_core::spec::SpecError;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use toml::{Table, Value};
+
+pub struct Shipped {
+    /// The params directory (an overlay's base when `--params` named an overlay).
+    pub dir: PathBuf,
+    /// The mission file, relative to `dir` (the overlay's table name).
+    pub mission_file: String,
+    pub power: PowerModel,
+    /// Per activity: its `hold_s` as shipped.
+    pub hold_s: BTreeMap<String, f64>,
+    /// Per activity: the shortest duration estimate of its IAs (s).
+    pub fastest_s: BTreeMap<String, f64>,
+    pub rows: ShippedRows,
+    pub states: MissionStates,
+}
+
+impl Shipped {
+    pub fn load(params: &Path) -> Result<Self, SpecError> {
+        let loaded = crate::params::Params::load(params, None)?;
+        let files = &loaded.files;
+        let dir = files.dir().to_path_buf();
+        let spec = &loaded.model.guarantee;
+        let path = &spec.file;
+        let t: Table = files
+            .text(path)?
+            .parse()
+            .map_err(|e| SpecError::new(path, "-", format!("not TOML: {e}")))?;
+        let power = power_model(path, &t)?;
+        let hold_s = t
+            .get("activities")
+            .and_then(Value::as_array)
+            .into_iter()
+            .flatten()
+            .filter_map(|a| {
+                let name = a.get("name")?.as_str()?.to_string();
+                Some((name, a.get("hold_s").and_then(number).unwrap_or(0.0)))
+            })
+            .collect();
+        let dur = spec
+            .problem
+            .goals
+            .iter()
+            .position(|g| g.name == "duration_s");
+        let fastest_s = spec
+            .problem
+            .activities
+            .iter()
+            .filter_map(|a| {
+                let d = dur?;
+                let min = a
+                    .ias
+                    .iter()
+                    .filter_map(|ia| ia.cost.get(d))
+                    .copied()
+                    .reduce(f64::min)?;
+                Some((a.name.clone(), min))
+            })
+            .collect();
+        let mission_file = path
+            .strip_prefix(&dir)
+            .unwrap_or(path)
+            .to_string_lossy()
+            .replace('\\', "/");
+        Ok(Shipped {
+            rows: ShippedRows::load(files)?,
+            states: MissionStates::load(files)?,
+            dir,
+            mission_file,
+            power,
+            hold_s,
+            fastest_s,
+        })
+    }
+}
+
+fn number(v: &Value) -> Option<f64> {
+    v.as_float().or_else(|| v.as_integer().map(|i| i as f64))
+}
+
+/// The mission's `[propulsion]` (rotary_wing) and `[base]`.
+fn power_model(path: &Path, t: &Table) -> Result<PowerModel, SpecError> {
+    let p = t.get("propulsion").and_then(Value::as_table);
+    let model = p.and_then(|p| p.get("model")).and_then(Value::as_str);
+    if model != Some("rotary_wing") {
+        return Err(SpecError::new(
+            path,
+            "propulsion.model",
+            format!(
+                "calibrate fits the rotary_wing model; this mission's is {}",
+                model.unwrap_or("missing")
+            ),
+        ));
+    }
+    let get = |k: &str| -> Result<f64, SpecError> {
+        p.and_then(|p| p.get(k))
+            .and_then(number)
+            .ok_or_else(|| SpecError::new(path, format!("propulsion.{k}"), "missing number"))
+    };
+    Ok(PowerModel {
+        base_w: t
+            .get("base")
+            .and_then(|b| b.get("power_w"))
+            .and_then(number)
+            .unwrap_or(0.0),
+        blade_profile_w: get("blade_profile_w")?,
+        induced_hover_w: get("induced_hover_w")?,
+        induced_velocity_mps: get("induced_velocity_mps")?,
+        tip_speed_mps: get("tip_speed_mps")?,
+        drag_area_m2: get("drag_area_m2")?,
+        air_density_kgm3: get("air_density_kgm3")?,
+    })
+}

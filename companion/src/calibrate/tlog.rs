@@ -1,0 +1,119 @@
+//! Power samples from a run's `flight.tlog` (the autopilot's own telemetry, at its rate: ~10 Hz
+//! BATTERY_STATUS on ArduPilot), read one entry at a time and decoded as `fly` decodes them
+//! (`companion_link::telemetry::Telemetry`): pack voltage x current from BATTERY_STATUS (until
+//! the first one, SYS_STATUS), speed and altitude from GLOBAL_POSITION_INT, armed from HEARTBEAT.
+
+use super::power_fit::Sample;
+use crate::decision_log::frame_len;
+use companion_link::Msg;
+use companion_link::telemetry::{Telemetry, TelemetryConfig};
+use std::io::{BufReader, Read};
+use std::path::Path;
+use std::time::Duration;
+
+/// The largest tlog entry: 8-byte time stamp and a signed MAVLink 2 frame.
+const MAX_ENTRY: usize = 8 + 10 + 255 + 2 + 13;
+
+/// Call `each` with every power sample of the tlog at `path`; returns the samples given. A cut
+/// last entry (a run killed while writing) ends the read with a warning; an entry that does not
+/// start a MAVLink frame stops it with the file, the byte offset and the reason.
+pub fn for_each_sample(path: &Path, mut each: impl FnMut(Sample)) -> anyhow::Result<u64> {
+    crate::params_files::regular_file(path)
+        .map_err(|r| anyhow::anyhow!("{}: {r}", path.display()))?;
+    let file = std::fs::File::open(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let mut rd = BufReader::new(file);
+    let mut ingest = companion_link::ingest::Ingest::new(None);
+    let mut tel = Telemetry::new(TelemetryConfig::default());
+    let mut autopilot: Option<u32> = None;
+    let mut battery_status_seen = false;
+    let mut buf = [0u8; MAX_ENTRY];
+    let (mut offset, mut n) = (0u64, 0u64);
+    loop {
+        let head = read_upto(&mut rd, &mut buf[..11])?;
+        if head == 0 {
+            break;
+        }
+        let len = (head == 11).then(|| frame_len(&buf[8..11])).flatten();
+        let Some(len) = len else {
+            if head < 11 {
+                tracing::warn!(
+                    "{}: last entry at byte {offset} cut off (skipped)",
+                    path.display()
+                );
+                break;
+            }
+            anyhow::bail!(
+                "{}, byte {offset}: not a tlog entry (8-byte time stamp, then a MAVLink frame starting 0xFD or 0xFE; found 0x{:02X})",
+                path.display(),
+                buf[8]
+            );
+        };
+        let got = read_upto(&mut rd, &mut buf[11..8 + len])?;
+        if got < len - 3 {
+            tracing::warn!(
+                "{}: last entry at byte {offset} cut off (skipped)",
+                path.display()
+            );
+            break;
+        }
+        offset += (8 + len) as u64;
+        let mut msgs: Vec<(u32, Msg)> = Vec::new();
+        ingest.push_each(&buf[8..8 + len], |fr| {
+            msgs.push((fr.header.system_id, fr.msg.clone()))
+        });
+        for (sys, msg) in msgs {
+            if let Msg::HEARTBEAT(h) = &msg
+                && autopilot.is_none()
+                && h.autopilot != companion_link::dialect::MavAutopilot::MAV_AUTOPILOT_INVALID
+            {
+                autopilot = Some(sys);
+            }
+            if autopilot != Some(sys) {
+                continue;
+            }
+            tel.on_message(Duration::ZERO, &msg, |m| m.to_string());
+            let emit = match &msg {
+                Msg::BATTERY_STATUS(b) if b.id == 0 => {
+                    battery_status_seen = true;
+                    true
+                }
+                Msg::SYS_STATUS(_) => !battery_status_seen,
+                _ => false,
+            };
+            if emit && let Some(s) = sample_of(&tel) {
+                each(s);
+                n += 1;
+            }
+        }
+    }
+    Ok(n)
+}
+
+/// Read until `buf` is full or the file ends; the bytes read.
+fn read_upto(rd: &mut impl Read, buf: &mut [u8]) -> anyhow::Result<usize> {
+    let mut got = 0;
+    while got < buf.len() {
+        match rd.read(&mut buf[got..])? {
+            0 => break,
+            k => got += k,
+        }
+    }
+    Ok(got)
+}
+
+fn sample_of(tel: &Telemetry) -> Option<Sample> {
+    let mut r = companion_core::record::DecisionRecord::default();
+    for k in [
+        "battery_v",
+        "battery_current_a",
+        "groundspeed_mps",
+        "altitude_m",
+    ] {
+        if let Some(v) = tel.get(k) {
+            r.observations.insert(k.into(), v);
+        }
+    }
+    r.observations
+        .insert("armed".into(), if tel.armed { 1.0 } else { 0.0 });
+    super::runs::sample_of(&r)
+}

@@ -1,0 +1,324 @@
+//! What `calibrate` prints (the fit error before and after, each number's change) and the
+//! overlay it writes, every fitted number with its source in place of `ASSUMPTION`.
+
+use super::Calibration;
+use super::cpt::{LearnedRow, PRIOR_PSEUDO_COUNTS};
+use super::power_fit::{FitResult, PowerModel};
+use super::shipped::Shipped;
+use std::fmt::Write;
+use std::path::Path;
+use toml::{Table, Value};
+
+/// Fewest completed runs of an activity before its duration is written into the overlay.
+pub const MIN_DURATION_RUNS: u64 = 1;
+
+fn pct(x: f64, of: f64) -> f64 {
+    if of.abs() > 0.0 {
+        100.0 * x / of
+    } else {
+        f64::NAN
+    }
+}
+
+/// What a v0 at the grid's top means, for the report and the source.
+fn v0_note(r: &FitResult) -> &'static str {
+    if r.v0_lower_bound_only {
+        "; induced_velocity_mps is a lower bound only: the induced power did not fall over the \
+         speeds flown (any larger v0 fits as well)"
+    } else {
+        ""
+    }
+}
+
+/// The fit's provenance, the text of each fitted number's `source`.
+pub fn power_source(cal: &Calibration, r: &FitResult) -> String {
+    let s = format!(
+        "companion calibrate: {} run(s), {} power samples ({} on the ground), speeds {:.1}..{:.1} m/s; \
+         fit RMS {:.1} W ({:.1} % of the mean measured {:.1} W); the shipped params' RMS {:.1} W ({:.1} %)",
+        cal.runs.len(),
+        r.samples,
+        r.ground_samples,
+        r.v_min,
+        r.v_max,
+        r.rms_w,
+        pct(r.rms_w, r.mean_w),
+        r.mean_w,
+        r.shipped_rms_w,
+        pct(r.shipped_rms_w, r.mean_w),
+    );
+    s + v0_note(r)
+}
+
+fn model_rows(m: &PowerModel) -> [(&'static str, f64); 6] {
+    [
+        ("base.power_w", m.base_w),
+        (
+            "hover power (blade_profile_w + induced_hover_w)",
+            m.hover_w(),
+        ),
+        ("propulsion.blade_profile_w", m.blade_profile_w),
+        ("propulsion.induced_hover_w", m.induced_hover_w),
+        ("propulsion.induced_velocity_mps", m.induced_velocity_mps),
+        ("propulsion.drag_area_m2", m.drag_area_m2),
+    ]
+}
+
+/// The report: runs, power fit (error before and after, each parameter), durations, CPT rows.
+pub fn report(shipped: &Shipped, cal: &Calibration) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "calibrated from {} run(s), {} records",
+        cal.runs.len(),
+        cal.records
+    );
+    let _ = writeln!(s, "\npower ({}):", shipped.mission_file);
+    match &cal.power {
+        Ok(r) => {
+            let _ = writeln!(
+                s,
+                "  fit error before (shipped params): RMS {:.2} W ({:.1} %)\n  fit error after (fitted):          RMS {:.2} W ({:.1} %)\n  over {} samples ({} on the ground), speeds {:.1}..{:.1} m/s, mean measured power {:.1} W",
+                r.shipped_rms_w,
+                pct(r.shipped_rms_w, r.mean_w),
+                r.rms_w,
+                pct(r.rms_w, r.mean_w),
+                r.samples,
+                r.ground_samples,
+                r.v_min,
+                r.v_max,
+                r.mean_w
+            );
+            if let Some(c) = r.polynomial_w {
+                let _ = writeln!(
+                    s,
+                    "  base.power_w {:.4} -> {:.4}\n  propulsion: rotary_wing -> polynomial, coefficients_w [{:.4}, 0, {:.6}, {:.6}] (P = c0 + c2 v² + c3 v³)",
+                    shipped.power.base_w, r.fitted.base_w, c[0], c[2], c[3]
+                );
+                return finish_report(s, shipped, cal);
+            }
+            for ((name, before), (_, after)) in
+                model_rows(&shipped.power).iter().zip(model_rows(&r.fitted))
+            {
+                let _ = writeln!(s, "  {name:<50} {before:>10.4} -> {after:>10.4}");
+            }
+            if r.v0_lower_bound_only {
+                let _ = writeln!(s, "  note{}", v0_note(r));
+            }
+            let _ = writeln!(
+                s,
+                "  kept as shipped: propulsion.tip_speed_mps {}, propulsion.air_density_kgm3 {}",
+                shipped.power.tip_speed_mps, shipped.power.air_density_kgm3
+            );
+        }
+        Err(e) => {
+            let _ = writeln!(s, "  not fitted: {e}");
+        }
+    }
+    finish_report(s, shipped, cal)
+}
+
+/// The report's durations and BN rows.
+fn finish_report(mut s: String, shipped: &Shipped, cal: &Calibration) -> String {
+    let _ = writeln!(s, "\nactivity durations (completed activities):");
+    if cal.durations.stats().is_empty() {
+        let _ = writeln!(s, "  none: no record says which activity was in force");
+    }
+    for (name, d) in cal.durations.stats() {
+        let fastest = shipped.fastest_s.get(name).copied().unwrap_or(f64::NAN);
+        let _ = writeln!(
+            s,
+            "  {name:<22} flown {:>8.1} s (sd {:.1}, {} run(s)); shipped estimate (fastest IA) {fastest:.1} s",
+            d.mean(),
+            d.sd(),
+            d.n
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\nBN rows learned (Dirichlet prior: the shipped row worth {PRIOR_PSEUDO_COUNTS} trials):"
+    );
+    if cal.rows.is_empty() {
+        let _ = writeln!(
+            s,
+            "  none: no countable trial in the records (docs/calibrate.md)"
+        );
+    }
+    for r in &cal.rows {
+        let _ = writeln!(
+            s,
+            "  {}[{}]: P({}) {:.4} -> {:.4} ({:+.4}) from {}/{} successes",
+            r.node,
+            when_text(r),
+            r.success_state,
+            r.shipped,
+            r.learned,
+            r.learned - r.shipped,
+            r.successes,
+            r.trials
+        );
+    }
+    s
+}
+
+fn when_text(r: &LearnedRow) -> String {
+    r.when
+        .iter()
+        .map(|(p, st)| format!("{p}={st}"))
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+/// Four significant decimals are more than any fit here supports.
+fn round4(x: f64) -> Value {
+    Value::Float((x * 1e4).round() / 1e4)
+}
+
+fn round6(x: f64) -> Value {
+    Value::Float((x * 1e6).round() / 1e6)
+}
+
+fn table_at<'a>(t: &'a mut Table, path: &[&str]) -> &'a mut Table {
+    let mut cur = t;
+    for k in path {
+        cur = cur
+            .entry(k.to_string())
+            .or_insert_with(|| Value::Table(Table::new()))
+            .as_table_mut()
+            .expect("built as tables");
+    }
+    cur
+}
+
+/// The overlay text: `[calibration]` (what made it, the sources of entries that have no
+/// `source` key of their own), then the fitted entries per params file.
+pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Result<String> {
+    let mut t = Table::new();
+    let mut sources = Table::new();
+    let cal_t = table_at(&mut t, &["calibration"]);
+    cal_t.insert(
+        "made_by".into(),
+        Value::String("companion calibrate".into()),
+    );
+    let canon = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
+    let base = canon(&shipped.dir);
+    let out_dir = canon(
+        out.parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new(".")),
+    );
+    let rel = relative(&out_dir, &base);
+    cal_t.insert("params".into(), Value::String(rel));
+    let runs: Vec<Value> = cal
+        .runs
+        .iter()
+        .map(|r| Value::String(r.display().to_string()))
+        .collect();
+    cal_t.insert("runs".into(), Value::Array(runs));
+    cal_t.insert(
+        "prior_pseudo_counts".into(),
+        Value::Float(PRIOR_PSEUDO_COUNTS),
+    );
+    let mf = shipped.mission_file.clone();
+    if let Ok(r) = &cal.power {
+        let src = Value::String(power_source(cal, r));
+        let p = table_at(&mut t, &[&mf, "propulsion"]);
+        if let Some(c) = r.polynomial_w {
+            // A different model: the overlay's table replaces the shipped one whole.
+            p.insert("model".into(), Value::String("polynomial".into()));
+            let c: Vec<Value> =
+                [round4(c[0]), Value::Float(0.0), round6(c[2]), round6(c[3])].to_vec();
+            p.insert("coefficients_w".into(), Value::Array(c));
+            p.insert("source".into(), src.clone());
+            let b = table_at(&mut t, &[&mf, "base"]);
+            b.insert("power_w".into(), round4(r.fitted.base_w));
+            b.insert("source".into(), src);
+        } else {
+            p.insert("blade_profile_w".into(), round4(r.fitted.blade_profile_w));
+            p.insert("induced_hover_w".into(), round4(r.fitted.induced_hover_w));
+            p.insert(
+                "induced_velocity_mps".into(),
+                round4(r.fitted.induced_velocity_mps),
+            );
+            p.insert("drag_area_m2".into(), round4(r.fitted.drag_area_m2));
+            p.insert("source".into(), src.clone());
+            let b = table_at(&mut t, &[&mf, "base"]);
+            b.insert("power_w".into(), round4(r.fitted.base_w));
+            b.insert("source".into(), src);
+        }
+    }
+    for (name, d) in cal.durations.stats() {
+        let (Some(fastest), Some(hold)) = (shipped.fastest_s.get(name), shipped.hold_s.get(name))
+        else {
+            continue;
+        };
+        if d.n < MIN_DURATION_RUNS {
+            continue;
+        }
+        // The hold absorbs the difference, so the fastest IA's estimate becomes the mean flown.
+        let fitted = (hold + d.mean() - fastest).max(0.0);
+        table_at(&mut t, &[&mf, "activities", name]).insert("hold_s".into(), round4(fitted));
+        sources.insert(
+            format!("{mf}:activities.{name}.hold_s"),
+            Value::String(format!(
+                "companion calibrate: flown {:.1} s (sd {:.1}) in {} run(s) against the shipped \
+                 fastest estimate {fastest:.1} s; shipped hold_s {hold}",
+                d.mean(),
+                d.sd(),
+                d.n
+            )),
+        );
+    }
+    let file = super::cpt::APPLICATIONS_FILE;
+    let mut nodes: Vec<&str> = cal.rows.iter().map(|r| r.node.as_str()).collect();
+    nodes.dedup();
+    for node in nodes {
+        let learned: Vec<&LearnedRow> = cal.rows.iter().filter(|r| r.node == node).collect();
+        table_at(&mut t, &[file, "node", node]).insert(
+            "override".into(),
+            shipped.rows.overrides_with(node, &learned),
+        );
+        for r in learned {
+            sources.insert(
+                format!("{file}:node.{node}.override[{}]", when_text(r)),
+                Value::String(format!(
+                    "companion calibrate: {}/{} successes in {} run(s), prior: the shipped row \
+                     P({}) {:.4} worth {PRIOR_PSEUDO_COUNTS} trials",
+                    r.successes,
+                    r.trials,
+                    cal.runs.len(),
+                    r.success_state,
+                    r.shipped
+                )),
+            );
+        }
+    }
+    table_at(&mut t, &["calibration"]).insert("sources".into(), Value::Table(sources));
+    let body = toml::to_string(&t)?;
+    Ok(format!(
+        "# Params overlay written by `companion calibrate` (docs/calibrate.md). Use it with\n\
+         # `companion check|simulate|fly --params {}`.\n\n{body}",
+        out.display()
+    ))
+}
+
+/// `to` relative to `from` when it lies below it, else `to` as is (both absolute).
+fn relative(from: &Path, to: &Path) -> String {
+    let common = from
+        .components()
+        .zip(to.components())
+        .take_while(|(a, b)| a == b)
+        .count();
+    // Sharing only the root: the absolute path survives moving the overlay better.
+    if common <= 1 {
+        return to.display().to_string();
+    }
+    let ups = from.components().count() - common;
+    let mut p = std::path::PathBuf::new();
+    for _ in 0..ups {
+        p.push("..");
+    }
+    for c in to.components().skip(common) {
+        p.push(c);
+    }
+    p.display().to_string().replace('\\', "/")
+}
