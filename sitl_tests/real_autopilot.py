@@ -211,6 +211,7 @@ class GcsObserver:
         self.statustext: List[Tuple[float, str]] = []
         self.battery_pct: Optional[int] = None
         self.battery_consumed_mah: Optional[int] = None
+        self.battery_energy_j: Optional[float] = None            # BATTERY_STATUS.energy_consumed (hJ) in J
         self.battery_power_w: List[Tuple[float, float]] = []    # (t, V x I) of each BATTERY_STATUS with both
         self.ekf_flags = 0
         self.gps_fix: Optional[int] = None
@@ -334,6 +335,7 @@ class GcsObserver:
             elif t == "BATTERY_STATUS":
                 self.battery_pct = m.battery_remaining if m.battery_remaining >= 0 else None
                 self.battery_consumed_mah = m.current_consumed if m.current_consumed >= 0 else None
+                self.battery_energy_j = 100.0 * m.energy_consumed if m.energy_consumed >= 0 else None
                 mv = sum(v for v in m.voltages if v != 65535)
                 if mv > 0 and m.current_battery >= 0:
                     self.battery_power_w.append((now, mv / 1000.0 * m.current_battery / 100.0))

@@ -523,8 +523,11 @@ impl Guarantee {
         let st = &mut self.power;
         if p.pack.armed == Some(false) {
             *st = PowerState::default();
+            let (planned_j, planned_s) = self.planned(at);
             return Some(PowerRecord {
                 predicted_w: self.predicted_power(at),
+                planned_j,
+                planned_s,
                 measured_w,
                 energy_scale: self.energy_scale,
                 ..Default::default()
@@ -564,8 +567,11 @@ impl Guarantee {
             let k = (w + activity_s * r) / (w + activity_s);
             self.set_energy_scale(at, k.clamp(lo, hi));
         }
+        let (planned_j, planned_s) = self.planned(at);
         Some(PowerRecord {
             predicted_w,
+            planned_j,
+            planned_s,
             measured_w,
             activity_s,
             predicted_j,
@@ -580,24 +586,26 @@ impl Guarantee {
     /// The power the allocation in force predicts for activity `at` (W): its energy estimate
     /// over its duration estimate, as compiled (the learned factor not applied).
     fn predicted_power(&self, at: usize) -> f64 {
+        let (e, d) = self.planned(at);
+        if d > 0.0 { e / d } else { 0.0 }
+    }
+
+    /// The allocation in force's estimates for activity `at`, energy (J) and duration (s), as
+    /// compiled (the learned factor not applied); zeros without an energy and a duration goal.
+    fn planned(&self, at: usize) -> (f64, f64) {
         let p = &self.spec.problem;
         let d = p.goals.iter().position(|g| g.name == DURATION);
         let (Some(_), Some(d)) = (self.energy_goal, d) else {
-            return 0.0;
+            return (0.0, 0.0);
         };
         let Some(ia) = p
             .activities
             .get(at)
             .and_then(|a| a.ias.get(self.choice[at]))
         else {
-            return 0.0;
+            return (0.0, 0.0);
         };
-        let base = self.base_energy[at][self.choice[at]];
-        if ia.cost[d] > 0.0 {
-            base / ia.cost[d]
-        } else {
-            0.0
-        }
+        (self.base_energy[at][self.choice[at]], ia.cost[d])
     }
 
     /// Scale the energy estimates of activities `at..` by `k` (those before are flown, measured).

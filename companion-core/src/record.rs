@@ -210,6 +210,11 @@ pub struct PowerRecord {
     /// Predicted power of the activity in force (W): its implementation alternative's energy
     /// estimate over its duration estimate.
     pub predicted_w: f64,
+    /// The whole activity's energy estimate (J) in the allocation in force (before any
+    /// re-allocation, the pre-flight plan's): what `check` prints as the activity's RAS0 cell.
+    pub planned_j: f64,
+    /// The whole activity's duration estimate (s) in the allocation in force.
+    pub planned_s: f64,
     /// Measured power now (W): pack voltage x current, when the autopilot reports both.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub measured_w: Option<f64>,

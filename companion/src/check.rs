@@ -23,6 +23,11 @@ pub struct CheckArgs {
     /// (`companion calibrate --out`, docs/calibrate.md).
     #[arg(long)]
     pub params: Option<PathBuf>,
+    /// A vehicle profile: params/vehicles/NAME.toml, a params overlay made by `companion
+    /// calibrate` from that vehicle's flights (docs/calibrate.md); the default is the paper's
+    /// mission with its stated assumptions.
+    #[arg(long, value_name = "NAME")]
+    pub vehicle: Option<String>,
     /// PANORAMA mission for the pre-flight allocation: a name in params/missions/ (`tracking`,
     /// `patrolling`) or a path.
     #[arg(long)]

@@ -87,6 +87,11 @@ struct SimulateArgs {
     /// (`companion calibrate --out`, docs/calibrate.md).
     #[arg(long)]
     params: Option<PathBuf>,
+    /// A vehicle profile: params/vehicles/NAME.toml, a params overlay made by `companion
+    /// calibrate` from that vehicle's flights (docs/calibrate.md); the default is the paper's
+    /// mission with its stated assumptions.
+    #[arg(long, value_name = "NAME")]
+    vehicle: Option<String>,
 }
 
 #[derive(Subcommand)]
@@ -143,12 +148,19 @@ fn main() -> Result<()> {
     let cli = Cli::parse();
     init_logging(cli.log_level.as_deref())?;
     match cli.command {
-        Command::Simulate(args) => {
+        Command::Simulate(mut args) => {
+            args.params = profile(args.params.take(), args.vehicle.as_deref())?;
             let params = args.params.clone().unwrap_or_else(default_params_dir);
             simulate(&params, args)
         }
-        Command::Check(args) => companion::check::run(&args),
-        Command::Fly(args) => fly(args),
+        Command::Check(mut args) => {
+            args.params = profile(args.params.take(), args.vehicle.as_deref())?;
+            companion::check::run(&args)
+        }
+        Command::Fly(mut args) => {
+            args.params = profile(args.params.take(), args.vehicle.as_deref())?;
+            fly(args)
+        }
         Command::SigningSetup(args) => companion::signing_setup::run(&args),
         Command::Review {
             run_or_log,
@@ -175,6 +187,14 @@ fn main() -> Result<()> {
         Command::Replay { run_folder } => {
             std::process::exit(companion::replay::run_cli(&run_folder));
         }
+    }
+}
+
+/// `--params` with `--vehicle NAME` applied: the profile's overlay in place of the directory.
+fn profile(params: Option<PathBuf>, vehicle: Option<&str>) -> Result<Option<PathBuf>> {
+    match vehicle {
+        None => Ok(params),
+        Some(name) => companion::params::vehicle_profile(params.as_deref(), name).map(Some),
     }
 }
 

@@ -86,6 +86,42 @@ pub fn regular_file(path: &Path) -> Result<(), String> {
     }
 }
 
+/// The folder of vehicle profiles inside a params directory.
+pub const VEHICLES_DIR: &str = "vehicles";
+
+/// The overlay of the vehicle profile `name`: `<params>/vehicles/<name>.toml`, where `<params>`
+/// is `params` (a directory) or the default params directory. An unknown name is refused with
+/// the profiles there; `params` naming an overlay file is refused (a profile is an overlay).
+pub fn vehicle_profile(params: Option<&Path>, name: &str) -> anyhow::Result<PathBuf> {
+    let dir = match params {
+        Some(p) if p.is_file() => anyhow::bail!(
+            "--vehicle {name}: --params {} is an overlay file, and a vehicle profile is one too; give --params a directory",
+            p.display()
+        ),
+        Some(p) => p.to_path_buf(),
+        None => default_params_dir(),
+    };
+    let ok = !name.is_empty()
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
+    let path = dir.join(VEHICLES_DIR).join(format!("{name}.toml"));
+    if ok && path.is_file() {
+        return Ok(path);
+    }
+    let mut known: Vec<String> = std::fs::read_dir(dir.join(VEHICLES_DIR))
+        .into_iter()
+        .flatten()
+        .filter_map(|e| e.ok()?.path().file_stem()?.to_str().map(String::from))
+        .collect();
+    known.sort();
+    anyhow::bail!(
+        "--vehicle {name}: no profile {} (profiles: {})",
+        path.display(),
+        if known.is_empty() { "none".into() } else { known.join(", ") }
+    )
+}
+
 /// The params directory: `$COMPANION_PARAMS`, else `params/` next to the workspace root this
 /// binary was built from, else `./params`.
 pub fn default_params_dir() -> PathBuf {

@@ -2,7 +2,10 @@
 //! (`guarantee.activity_name`) and their time, one duration per activity completed (left for the
 //! next one) in each run. An activity a run ends in is not counted: it was cut. The time is the
 //! autopilot's clock (observation `vehicle_time_s`, SYSTEM_TIME) when the records have it (a SITL
-//! at `--speedup 3` flies three seconds a companion second), else the record's `time_s`.
+//! at `--speedup 3` flies three seconds a companion second), else the record's `time_s`. An
+//! activity's clock starts at arming: records that say the vehicle is disarmed (`armed` 0, the
+//! wait for the autopilot to be ready before take-off) move its start on, as nothing is flown
+//! or drawn then.
 
 use companion_core::record::DecisionRecord;
 use std::collections::BTreeMap;
@@ -61,10 +64,15 @@ impl Durations {
         if g.activity_name.is_empty() || !t.is_finite() {
             return;
         }
-        match &self.current {
-            Some((name, _)) if *name == g.activity_name => {}
+        let disarmed = r.observations.get("armed").is_some_and(|a| *a < 0.5);
+        match &mut self.current {
+            Some((name, t0)) if *name == g.activity_name => {
+                if disarmed {
+                    *t0 = t;
+                }
+            }
             Some((name, t0)) => {
-                let d = t - t0;
+                let d = t - *t0;
                 if d >= 0.0 {
                     self.stats.entry(name.clone()).or_default().add(d);
                 }
@@ -119,6 +127,17 @@ mod tests {
         assert_eq!(s["b"].n, 1);
         assert!((s["b"].mean() - 30.0).abs() < 1e-12);
         assert!(!s.contains_key("c"), "the run ended in c: not completed");
+    }
+
+    #[test]
+    fn the_wait_on_the_ground_before_arming_is_not_flown() {
+        let mut d = Durations::default();
+        for (t, a, armed) in [(0.0, "a", 0.0), (30.0, "a", 0.0), (31.0, "a", 1.0), (41.0, "b", 1.0)] {
+            let mut r = rec(t, a);
+            r.observations.insert("armed".into(), armed);
+            d.add(&r);
+        }
+        assert!((d.stats()["a"].mean() - 11.0).abs() < 1e-12, "{}", d.stats()["a"].mean());
     }
 
     #[test]

@@ -82,13 +82,29 @@ pub fn calibrate(
         // The tlog has the autopilot's telemetry at its own rate; the records, once a cycle.
         let tlog = run.join("flight.tlog");
         let from_tlog = tlog.is_file() && tlog::for_each_sample(&tlog, |s| fit.add(s))? > 0;
+        // Without a current anywhere, the power is the drain of the percentage (runs.rs).
+        let mut with_current = false;
+        let mut drain = runs::PercentageDrain::default();
         records += runs::for_each_record(run, |r| {
-            if !from_tlog && let Some(s) = runs::sample_of(r) {
-                fit.add(s);
+            if !from_tlog {
+                match runs::sample_of(r) {
+                    Some(s) => {
+                        fit.add(s);
+                        with_current = true;
+                    }
+                    None => drain.add(r),
+                }
             }
             durations.add(r);
             counts.add(r, &shipped.states, &shipped.rows, &parents);
         })?;
+        if !from_tlog && !with_current && drain.for_each_sample(|s| fit.add(s)) > 0 {
+            tracing::info!(
+                "{}: no current reported; power from the percentage's drain, {:.1} W",
+                run.display(),
+                drain.power_w().unwrap_or(0.0)
+            );
+        }
     }
     Ok(Calibration {
         runs,

@@ -104,9 +104,125 @@ pub fn sample_of(r: &DecisionRecord) -> Option<Sample> {
     })
 }
 
+/// Power from the drain of the remaining percentage, for an autopilot that reports no current
+/// (PX4 SIH: its BatterySimulator sends current -1 and drains the percentage linearly while
+/// armed, over `SIM_BAT_DRAIN` seconds): the least-squares slope of `battery_pct` against the
+/// autopilot's time over the armed, airborne records, times the pack's energy (the record's
+/// `guarantee.pack.capacity_j`). One power for the whole run, so the samples it gives carry it
+/// at every speed flown (the speed terms come out 0: such a battery does not depend on speed),
+/// and 0 W on the ground (such a battery is not drawn while disarmed).
+#[derive(Default)]
+pub struct PercentageDrain {
+    n: f64,
+    st: f64,
+    sp: f64,
+    stt: f64,
+    stp: f64,
+    capacity_j: Option<f64>,
+    airborne_speeds: Vec<f32>,
+    ground: u64,
+}
+
+/// The fewest airborne records a drain slope is taken from (the percentage is whole numbers).
+const MIN_DRAIN_RECORDS: f64 = 30.0;
+
+impl PercentageDrain {
+    pub fn add(&mut self, r: &DecisionRecord) {
+        let o = &r.observations;
+        let Some(armed) = o.get("armed").map(|a| *a > 0.5) else { return };
+        if !armed {
+            self.ground += 1;
+            return;
+        }
+        let (Some(pct), Some(speed)) = (o.get("battery_pct"), o.get("groundspeed_mps")) else {
+            return;
+        };
+        if o.get("altitude_m").is_some_and(|h| *h <= 1.0) {
+            return;
+        }
+        let t = o.get("vehicle_time_s").copied().unwrap_or(r.time_s);
+        if !(t.is_finite() && pct.is_finite() && speed.is_finite() && *speed >= 0.0) {
+            return;
+        }
+        if let Some(c) = r.guarantee.as_ref().and_then(|g| g.pack.as_ref()).map(|p| p.capacity_j)
+            && c.is_finite()
+            && c > 0.0
+        {
+            self.capacity_j = Some(c);
+        }
+        self.n += 1.0;
+        self.st += t;
+        self.sp += pct;
+        self.stt += t * t;
+        self.stp += t * pct;
+        self.airborne_speeds.push(*speed as f32);
+    }
+
+    /// The drain power (W), when the run gives one.
+    pub fn power_w(&self) -> Option<f64> {
+        let c = self.capacity_j?;
+        if self.n < MIN_DRAIN_RECORDS {
+            return None;
+        }
+        let var = self.stt - self.st * self.st / self.n;
+        if var <= 0.0 {
+            return None;
+        }
+        let slope = (self.stp - self.st * self.sp / self.n) / var;
+        let w = -slope / 100.0 * c;
+        (w.is_finite() && w > 0.0).then_some(w)
+    }
+
+    /// Call `each` with the samples this run gives (none without a drain power).
+    pub fn for_each_sample(&self, mut each: impl FnMut(Sample)) -> u64 {
+        let Some(w) = self.power_w() else { return 0 };
+        for v in &self.airborne_speeds {
+            each(Sample { speed_mps: f64::from(*v), power_w: w, airborne: true });
+        }
+        for _ in 0..self.ground {
+            each(Sample { speed_mps: 0.0, power_w: 0.0, airborne: false });
+        }
+        self.airborne_speeds.len() as u64 + self.ground
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_linear_drain_gives_the_pack_over_the_drain_time() {
+        use companion_core::record::{GuaranteeRecord, PackRecord};
+        // A 266,400 J pack drained 1 % per 36 s (SIM_BAT_DRAIN 3600 s): 74 W.
+        let mut d = PercentageDrain::default();
+        for i in 0..120 {
+            let t = f64::from(i) * 2.0;
+            let mut r = DecisionRecord { time_s: t, ..Default::default() };
+            let o = &mut r.observations;
+            o.insert("armed".into(), 1.0);
+            o.insert("altitude_m".into(), 30.0);
+            o.insert("groundspeed_mps".into(), f64::from(i % 7));
+            // whole percentages, as BATTERY_STATUS gives them
+            o.insert("battery_pct".into(), (100.0 - t / 36.0).ceil());
+            r.guarantee = Some(GuaranteeRecord {
+                pack: Some(PackRecord { capacity_j: 266_400.0, ..Default::default() }),
+                ..Default::default()
+            });
+            d.add(&r);
+        }
+        let w = d.power_w().expect("a drain");
+        assert!((w - 74.0).abs() < 74.0 * 0.03, "{w}");
+        let mut airborne = 0;
+        d.for_each_sample(|s| {
+            assert_eq!(s.power_w, w);
+            airborne += 1;
+        });
+        assert_eq!(airborne, 120);
+        // Too few records: no drain.
+        let mut short = PercentageDrain::default();
+        short.capacity_j = Some(1.0);
+        assert_eq!(short.power_w(), None);
+    }
 
     fn rec(obs: &[(&str, f64)]) -> DecisionRecord {
         DecisionRecord {

@@ -17,6 +17,8 @@ pub struct Shipped {
     pub power: PowerModel,
     /// Per activity: its `hold_s` as shipped.
     pub hold_s: BTreeMap<String, f64>,
+    /// Per activity: its `length_m` as shipped (0 for an activity that does not move).
+    pub length_m: BTreeMap<String, f64>,
     /// Per activity: the shortest duration estimate of its IAs (s).
     pub fastest_s: BTreeMap<String, f64>,
     pub rows: ShippedRows,
@@ -35,16 +37,8 @@ impl Shipped {
             .parse()
             .map_err(|e| SpecError::new(path, "-", format!("not TOML: {e}")))?;
         let power = power_model(path, &t)?;
-        let hold_s = t
-            .get("activities")
-            .and_then(Value::as_array)
-            .into_iter()
-            .flatten()
-            .filter_map(|a| {
-                let name = a.get("name")?.as_str()?.to_string();
-                Some((name, a.get("hold_s").and_then(number).unwrap_or(0.0)))
-            })
-            .collect();
+        let hold_s = activity_numbers(&t, "hold_s");
+        let length_m = activity_numbers(&t, "length_m");
         let dur = spec
             .problem
             .goals
@@ -77,9 +71,23 @@ impl Shipped {
             mission_file,
             power,
             hold_s,
+            length_m,
             fastest_s,
         })
     }
+}
+
+/// Per activity name, its `key` as the mission file ships it (0 when absent).
+fn activity_numbers(t: &Table, key: &str) -> BTreeMap<String, f64> {
+    t.get("activities")
+        .and_then(Value::as_array)
+        .into_iter()
+        .flatten()
+        .filter_map(|a| {
+            let name = a.get("name")?.as_str()?.to_string();
+            Some((name, a.get(key).and_then(number).unwrap_or(0.0)))
+        })
+        .collect()
 }
 
 fn number(v: &Value) -> Option<f64> {

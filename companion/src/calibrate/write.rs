@@ -254,18 +254,30 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
         if d.n < MIN_DURATION_RUNS {
             continue;
         }
-        // The hold absorbs the difference, so the fastest IA's estimate becomes the mean flown.
-        let fitted = (hold + d.mean() - fastest).max(0.0);
-        table_at(&mut t, &[&mf, "activities", name]).insert("hold_s".into(), round4(fitted));
+        let length = shipped.length_m.get(name).copied().unwrap_or(0.0);
+        let fit = fit_duration(*fastest, *hold, length, d.mean());
+        let flown = format!(
+            "companion calibrate: flown {:.1} s (sd {:.1}) in {} run(s) against the shipped \
+             fastest estimate {fastest:.1} s",
+            d.mean(),
+            d.sd(),
+            d.n
+        );
+        let at = table_at(&mut t, &[&mf, "activities", name]);
+        at.insert("hold_s".into(), round4(fit.hold_s));
+        if let Some(l) = fit.length_m {
+            at.insert("length_m".into(), round4(l));
+            sources.insert(
+                format!("{mf}:activities.{name}.length_m"),
+                Value::String(format!(
+                    "{flown}: the route is shorter than shipped ({length} m), scaled so that its \
+                     move time at the fastest IA's speed is what was flown"
+                )),
+            );
+        }
         sources.insert(
             format!("{mf}:activities.{name}.hold_s"),
-            Value::String(format!(
-                "companion calibrate: flown {:.1} s (sd {:.1}) in {} run(s) against the shipped \
-                 fastest estimate {fastest:.1} s; shipped hold_s {hold}",
-                d.mean(),
-                d.sd(),
-                d.n
-            )),
+            Value::String(format!("{flown}; shipped hold_s {hold}")),
         );
     }
     let file = super::cpt::APPLICATIONS_FILE;
@@ -321,4 +333,49 @@ fn relative(from: &Path, to: &Path) -> String {
         p.push(c);
     }
     p.display().to_string().replace('\\', "/")
+}
+
+/// An activity's fitted duration entries: the hold absorbs the difference between the mean flown
+/// time and the fastest IA's estimate; when the activity was flown faster than the estimate even
+/// without a hold, its route is shortened by the rest (the move time of the fastest IA, taken as
+/// its estimate less the hold, scales with the length).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DurationFit {
+    pub hold_s: f64,
+    pub length_m: Option<f64>,
+}
+
+pub fn fit_duration(fastest_s: f64, hold_s: f64, length_m: f64, flown_s: f64) -> DurationFit {
+    let fitted_hold = hold_s + flown_s - fastest_s;
+    if fitted_hold >= 0.0 {
+        return DurationFit { hold_s: fitted_hold, length_m: None };
+    }
+    let t_move = fastest_s - hold_s;
+    if length_m <= 0.0 || t_move <= 0.0 {
+        return DurationFit { hold_s: 0.0, length_m: None };
+    }
+    let left = (t_move + fitted_hold).max(0.0) / t_move;
+    DurationFit { hold_s: 0.0, length_m: Some(length_m * left) }
+}
+
+#[cfg(test)]
+mod duration_fit_tests {
+    use super::fit_duration;
+
+    #[test]
+    fn a_slower_activity_holds_longer_and_a_faster_one_flies_a_shorter_route() {
+        // 60 s estimate (600 m at 10 m/s, no hold), flown in 80 s: a 20 s hold, route kept.
+        let f = fit_duration(60.0, 0.0, 600.0, 80.0);
+        assert_eq!((f.hold_s, f.length_m), (20.0, None));
+        // Flown in 15 s: the 45 s too many come off the route: 600 m x 15/60.
+        let f = fit_duration(60.0, 0.0, 600.0, 15.0);
+        assert_eq!(f.hold_s, 0.0);
+        assert!((f.length_m.unwrap() - 150.0).abs() < 1e-9);
+        // A 10 s hold is used up first: estimate 70 s (60 s moving), flown 40 s -> 600 x 40/60.
+        let f = fit_duration(70.0, 10.0, 600.0, 40.0);
+        assert_eq!(f.hold_s, 0.0);
+        assert!((f.length_m.unwrap() - 400.0).abs() < 1e-9);
+        // An activity that does not move cannot be shortened.
+        assert_eq!(fit_duration(30.0, 30.0, 0.0, 10.0).length_m, None);
+    }
 }

@@ -33,6 +33,11 @@ pub struct FlyArgs {
     /// (`companion calibrate --out`, docs/calibrate.md).
     #[arg(long)]
     pub params: Option<PathBuf>,
+    /// A vehicle profile: params/vehicles/NAME.toml, a params overlay made by `companion
+    /// calibrate` from that vehicle's flights (docs/calibrate.md); the default is the paper's
+    /// mission with its stated assumptions.
+    #[arg(long, value_name = "NAME")]
+    pub vehicle: Option<String>,
     /// Stop after this long (e.g. 60s); default: run until Ctrl-C or SIGTERM, flight after
     /// flight (see --once).
     #[arg(long, value_parser = parse_duration)]
