@@ -3,7 +3,9 @@
 //! stops `fly` also fails `check` with the same file, entry and reason (docs/params.md).
 
 // The file helpers, under the paths callers have always used (`params::read_params_dir`, ...).
-pub use crate::params_files::{add_file, default_params_dir, read_params_dir, regular_file, vehicle_profile};
+pub use crate::params_files::{
+    add_file, default_params_dir, read_params_dir, regular_file, vehicle_profile,
+};
 use crate::sim::WorldSpec;
 use companion_core::decision::Model;
 use companion_core::mission::ActionKind;

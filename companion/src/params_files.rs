@@ -118,7 +118,11 @@ pub fn vehicle_profile(params: Option<&Path>, name: &str) -> anyhow::Result<Path
     anyhow::bail!(
         "--vehicle {name}: no profile {} (profiles: {})",
         path.display(),
-        if known.is_empty() { "none".into() } else { known.join(", ") }
+        if known.is_empty() {
+            "none".into()
+        } else {
+            known.join(", ")
+        }
     )
 }
 

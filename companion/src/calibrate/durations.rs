@@ -132,12 +132,21 @@ mod tests {
     #[test]
     fn the_wait_on_the_ground_before_arming_is_not_flown() {
         let mut d = Durations::default();
-        for (t, a, armed) in [(0.0, "a", 0.0), (30.0, "a", 0.0), (31.0, "a", 1.0), (41.0, "b", 1.0)] {
+        for (t, a, armed) in [
+            (0.0, "a", 0.0),
+            (30.0, "a", 0.0),
+            (31.0, "a", 1.0),
+            (41.0, "b", 1.0),
+        ] {
             let mut r = rec(t, a);
             r.observations.insert("armed".into(), armed);
             d.add(&r);
         }
-        assert!((d.stats()["a"].mean() - 11.0).abs() < 1e-12, "{}", d.stats()["a"].mean());
+        assert!(
+            (d.stats()["a"].mean() - 11.0).abs() < 1e-12,
+            "{}",
+            d.stats()["a"].mean()
+        );
     }
 
     #[test]

@@ -129,7 +129,9 @@ const MIN_DRAIN_RECORDS: f64 = 30.0;
 impl PercentageDrain {
     pub fn add(&mut self, r: &DecisionRecord) {
         let o = &r.observations;
-        let Some(armed) = o.get("armed").map(|a| *a > 0.5) else { return };
+        let Some(armed) = o.get("armed").map(|a| *a > 0.5) else {
+            return;
+        };
         if !armed {
             self.ground += 1;
             return;
@@ -144,7 +146,11 @@ impl PercentageDrain {
         if !(t.is_finite() && pct.is_finite() && speed.is_finite() && *speed >= 0.0) {
             return;
         }
-        if let Some(c) = r.guarantee.as_ref().and_then(|g| g.pack.as_ref()).map(|p| p.capacity_j)
+        if let Some(c) = r
+            .guarantee
+            .as_ref()
+            .and_then(|g| g.pack.as_ref())
+            .map(|p| p.capacity_j)
             && c.is_finite()
             && c > 0.0
         {
@@ -177,10 +183,18 @@ impl PercentageDrain {
     pub fn for_each_sample(&self, mut each: impl FnMut(Sample)) -> u64 {
         let Some(w) = self.power_w() else { return 0 };
         for v in &self.airborne_speeds {
-            each(Sample { speed_mps: f64::from(*v), power_w: w, airborne: true });
+            each(Sample {
+                speed_mps: f64::from(*v),
+                power_w: w,
+                airborne: true,
+            });
         }
         for _ in 0..self.ground {
-            each(Sample { speed_mps: 0.0, power_w: 0.0, airborne: false });
+            each(Sample {
+                speed_mps: 0.0,
+                power_w: 0.0,
+                airborne: false,
+            });
         }
         self.airborne_speeds.len() as u64 + self.ground
     }
@@ -197,7 +211,10 @@ mod tests {
         let mut d = PercentageDrain::default();
         for i in 0..120 {
             let t = f64::from(i) * 2.0;
-            let mut r = DecisionRecord { time_s: t, ..Default::default() };
+            let mut r = DecisionRecord {
+                time_s: t,
+                ..Default::default()
+            };
             let o = &mut r.observations;
             o.insert("armed".into(), 1.0);
             o.insert("altitude_m".into(), 30.0);
@@ -205,7 +222,10 @@ mod tests {
             // whole percentages, as BATTERY_STATUS gives them
             o.insert("battery_pct".into(), (100.0 - t / 36.0).ceil());
             r.guarantee = Some(GuaranteeRecord {
-                pack: Some(PackRecord { capacity_j: 266_400.0, ..Default::default() }),
+                pack: Some(PackRecord {
+                    capacity_j: 266_400.0,
+                    ..Default::default()
+                }),
                 ..Default::default()
             });
             d.add(&r);

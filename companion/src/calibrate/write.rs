@@ -348,14 +348,23 @@ pub struct DurationFit {
 pub fn fit_duration(fastest_s: f64, hold_s: f64, length_m: f64, flown_s: f64) -> DurationFit {
     let fitted_hold = hold_s + flown_s - fastest_s;
     if fitted_hold >= 0.0 {
-        return DurationFit { hold_s: fitted_hold, length_m: None };
+        return DurationFit {
+            hold_s: fitted_hold,
+            length_m: None,
+        };
     }
     let t_move = fastest_s - hold_s;
     if length_m <= 0.0 || t_move <= 0.0 {
-        return DurationFit { hold_s: 0.0, length_m: None };
+        return DurationFit {
+            hold_s: 0.0,
+            length_m: None,
+        };
     }
     let left = (t_move + fitted_hold).max(0.0) / t_move;
-    DurationFit { hold_s: 0.0, length_m: Some(length_m * left) }
+    DurationFit {
+        hold_s: 0.0,
+        length_m: Some(length_m * left),
+    }
 }
 
 #[cfg(test)]

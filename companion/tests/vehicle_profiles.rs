@@ -1,0 +1,119 @@
+//! The vehicle profiles in params/vehicles/ (docs/calibrate.md): `--vehicle NAME` loads each as the
+//! params overlay it is, an unknown name is refused naming the profiles there, and every number a
+//! profile sets carries its source (calibrate's runs, samples and fit error), never an ASSUMPTION.
+
+use companion::params::default_params_dir;
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_companion");
+
+fn companion(args: &[&str]) -> Output {
+    Command::new(BIN)
+        .args(args)
+        .env_remove("COMPANION_PARAMS")
+        .env_remove("RUST_BACKTRACE")
+        .output()
+        .expect("companion runs")
+}
+
+fn profiles() -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(default_params_dir().join("vehicles"))
+        .expect("params/vehicles/")
+        .filter_map(|e| {
+            let p = e.ok()?.path();
+            (p.extension()? == "toml").then(|| p.file_stem()?.to_str().map(String::from))?
+        })
+        .collect();
+    names.sort();
+    names
+}
+
+#[test]
+fn every_profile_loads_with_vehicle_and_changes_the_mission_power() {
+    let names = profiles();
+    assert!(
+        names.contains(&"arducopter-sitl".to_string()) && names.contains(&"px4-sih".to_string())
+    );
+    let plain = companion(&["check", "--json"]);
+    assert!(plain.status.success());
+    let plain: serde_json::Value = serde_json::from_slice(&plain.stdout).unwrap();
+    for name in &names {
+        let o = companion(&["check", "--json", "--vehicle", name]);
+        assert!(
+            o.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        // the overlay reached the mission the guarantee compiles: its costs are not the shipped ones
+        assert_ne!(
+            v["guarantee"], plain["guarantee"],
+            "{name}: the profile changed nothing in the guarantee"
+        );
+    }
+}
+
+#[test]
+fn an_unknown_profile_is_refused_naming_the_ones_there() {
+    let o = companion(&["check", "--vehicle", "no-such-drone"]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("no-such-drone") && err.contains("arducopter-sitl") && err.contains("px4-sih"),
+        "{err}"
+    );
+    // a path is not a name
+    let o = companion(&["check", "--vehicle", "../missions/tracking"]);
+    assert!(!o.status.success());
+    // a profile is an overlay: not on top of another overlay
+    let overlay = default_params_dir().join("vehicles/px4-sih.toml");
+    let o = companion(&[
+        "check",
+        "--params",
+        overlay.to_str().unwrap(),
+        "--vehicle",
+        "px4-sih",
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("overlay file"));
+}
+
+#[test]
+fn every_number_a_profile_sets_has_a_calibrate_source() {
+    for name in profiles() {
+        let path = default_params_dir().join(format!("vehicles/{name}.toml"));
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(!text.contains("ASSUMPTION"), "{name}");
+        let t: toml::Table = text.parse().unwrap();
+        let sources = t["calibration"]["sources"]
+            .as_table()
+            .cloned()
+            .unwrap_or_default();
+        for (file, entries) in &t {
+            if file == "calibration" {
+                continue;
+            }
+            for (table, body) in entries.as_table().unwrap() {
+                walk(&name, file, table, body, &sources);
+            }
+        }
+    }
+}
+
+/// Every table holding a number has its own `source`, or each number has one in
+/// `calibration.sources` under "FILE:PATH.KEY".
+fn walk(name: &str, file: &str, path: &str, v: &toml::Value, sources: &toml::Table) {
+    let Some(t) = v.as_table() else { return };
+    let own = t.contains_key("source");
+    for (k, x) in t {
+        let at = format!("{path}.{k}");
+        match x {
+            toml::Value::Table(_) => walk(name, file, &at, x, sources),
+            toml::Value::Float(_) | toml::Value::Integer(_) | toml::Value::Array(_) => assert!(
+                own || sources.contains_key(&format!("{file}:{at}")),
+                "{name}: {file} {at} has no source"
+            ),
+            _ => {}
+        }
+    }
+}
