@@ -37,6 +37,11 @@ pub struct Core<'m> {
     guarantee: Option<Guarantee>,
     /// Set when the guarantee stage found no allocation meeting the goals.
     guarantee_infeasible: bool,
+    /// Probabilities (`P_V3`) of the versions no feasible alternative of the activity being
+    /// flown carries, capped from the next cycle (guarantee/binding.rs).
+    capped_versions: Vec<String>,
+    /// Scratch: the versions without a feasible alternative, as the guarantee names them.
+    versions_scratch: Vec<String>,
     failed_resources: Vec<String>,
     /// The activity being flown and when (observation time, s) it started.
     activity_started: Option<(usize, f64)>,
@@ -113,6 +118,8 @@ impl<'m> Core<'m> {
             platform: PlatformState::new(&model.resources.platform),
             guarantee: Guarantee::start(model.guarantee.clone()).ok(),
             guarantee_infeasible: false,
+            capped_versions: Vec::new(),
+            versions_scratch: Vec::new(),
             failed_resources: Vec::new(),
             activity_started: None,
             others_tiles: 0,
@@ -238,6 +245,14 @@ impl<'m> Core<'m> {
                 .probabilities
                 .get_mut(&model.mission.guarantee.capped_probability)
             {
+                *p = p.min(cap);
+            }
+        }
+        // PANORAMA -> BFM: a version no feasible alternative carries is improbable, so no MDP
+        // proposes it (docs/guarantee.md "One configuration").
+        for name in &self.capped_versions {
+            let cap = model.mission.guarantee.infeasible_p_battery;
+            if let Some(p) = rec.probabilities.get_mut(name) {
                 *p = p.min(cap);
             }
         }
@@ -470,6 +485,7 @@ impl<'m> Core<'m> {
         let plan = self
             .guarantee
             .as_ref()
+            .filter(|_| model.mission.guarantee.binds)
             .and_then(|g| g.allocated(*model.mission.guarantee.activity_of_state.get(&obs.state)?));
         self.arbiter.arbitrate_resources(
             model,
@@ -774,6 +790,43 @@ impl<'m> Core<'m> {
             }
         }
         record.plan_differs.truncate(n_differs);
+        // One configuration (after `plan_differs`, which compares what ran with the plan this
+        // cycle requested): the plan follows what runs, and the versions no feasible alternative
+        // carries are capped from the next cycle.
+        if coupling.binds {
+            if let Some(res) = &rec.resources {
+                let running: Vec<(&str, &str)> = res
+                    .placements
+                    .iter()
+                    .map(|p| (p.version.as_str(), p.implementation.as_str()))
+                    .collect();
+                g.follow(activity_index, &running, record);
+            }
+            let mut versions = std::mem::take(&mut self.versions_scratch);
+            g.versions_without_alternative(activity_index, &mut versions);
+            let same = versions.len() == self.capped_versions.len()
+                && versions
+                    .iter()
+                    .all(|v| self.capped_versions.iter().any(|c| c.strip_prefix("P_") == Some(v)));
+            if !same {
+                self.capped_versions.clear();
+                for v in &versions {
+                    let name = format!("P_{v}");
+                    if self.model.health.publishes().contains(&name) {
+                        self.capped_versions.push(name);
+                    }
+                }
+                if !self.capped_versions.is_empty() {
+                    rec.events.push(Event::Other(format!(
+                        "guarantee: no alternative carrying {} meets the goals: {} capped at {}",
+                        versions.join(", "),
+                        self.capped_versions.join(", "),
+                        coupling.infeasible_p_battery
+                    )));
+                }
+            }
+            self.versions_scratch = versions;
+        }
         if let Some(r) = &record.reallocation {
             rec.events.push(Event::Reallocation(r.reason.clone()));
         }

@@ -504,7 +504,13 @@ fn guarantee_record_says_where_the_allocation_and_the_placement_differ() {
         planned.contains(&format!("the tracking MDP chose {}", tracking.action)),
         "{planned}"
     );
-    for v in ["P_V3", "P_V4"] {
+    // The plan this cycle requested: the version the plan followed before V3 was chosen.
+    let before = planned
+        .strip_prefix("tracking: allocation plans ")
+        .and_then(|s| s.split('.').next())
+        .unwrap();
+    let before = format!("P_{before}");
+    for v in ["P_V3", before.as_str()] {
         let value = tracking.inputs[v];
         assert!(
             planned.contains(&format!("{v} = {value:.3}")),
