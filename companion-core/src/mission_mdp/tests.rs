@@ -489,7 +489,7 @@ fn base_decision_matches_exhaustive_policy_search() {
             let mut ws = Workspace::new();
             let fh = ws.finite_horizon(&mdp, 100);
             assert_eq!(
-                m.action_name(fh.decision(base as _).unwrap() as usize),
+                m.action_name(fh.decision(base as _).unwrap()),
                 want,
                 "{pol} P_battery {pb}: engine"
             );
@@ -527,7 +527,7 @@ fn detector_health_picks_the_detector_by_exhaustive_policy_search() {
                 let mut ws = Workspace::new();
                 let fh = ws.finite_horizon(&mdp, 100);
                 assert_eq!(
-                    m.action_name(fh.decision(s as _).unwrap() as usize),
+                    m.action_name(fh.decision(s as _).unwrap()),
                     want,
                     "{pol} P_obs {p_obs} {state}: engine"
                 );
