@@ -37,6 +37,11 @@ pub struct Core<'m> {
     guarantee: Option<Guarantee>,
     /// Set when the guarantee stage found no allocation meeting the goals.
     guarantee_infeasible: bool,
+    /// Probabilities (`P_V3`) of the versions no feasible alternative of the activity being
+    /// flown carries, capped from the next cycle (guarantee/binding.rs).
+    capped_versions: Vec<String>,
+    /// Scratch: the versions without a feasible alternative, as the guarantee names them.
+    versions_scratch: Vec<String>,
     failed_resources: Vec<String>,
     /// The activity being flown and when (observation time, s) it started.
     activity_started: Option<(usize, f64)>,
@@ -113,6 +118,8 @@ impl<'m> Core<'m> {
             platform: PlatformState::new(&model.resources.platform),
             guarantee: Guarantee::start(model.guarantee.clone()).ok(),
             guarantee_infeasible: false,
+            capped_versions: Vec::new(),
+            versions_scratch: Vec::new(),
             failed_resources: Vec::new(),
             activity_started: None,
             others_tiles: 0,
@@ -241,6 +248,7 @@ impl<'m> Core<'m> {
                 *p = p.min(cap);
             }
         }
+        self.cap_versions(rec);
 
         // decision: every MDP of the model, solved at its projected state
         let mut sc = std::mem::take(&mut self.scratch);
@@ -470,6 +478,7 @@ impl<'m> Core<'m> {
         let plan = self
             .guarantee
             .as_ref()
+            .filter(|_| model.mission.guarantee.binds)
             .and_then(|g| g.allocated(*model.mission.guarantee.activity_of_state.get(&obs.state)?));
         self.arbiter.arbitrate_resources(
             model,
@@ -603,6 +612,60 @@ impl<'m> Core<'m> {
                 rule: format!("resource policy {policy}: {d}"),
             });
         }
+    }
+
+    /// PANORAMA -> BFM: a version no feasible alternative carries is improbable, so no MDP
+    /// proposes it (docs/guarantee.md "One configuration").
+    fn cap_versions(&self, rec: &mut DecisionRecord) {
+        let cap = self.model.mission.guarantee.infeasible_p_battery;
+        for name in &self.capped_versions {
+            if let Some(p) = rec.probabilities.get_mut(name) {
+                *p = p.min(cap);
+            }
+        }
+    }
+
+    /// One configuration: the plan follows what runs (guarantee/binding.rs), and the versions
+    /// no feasible alternative carries are capped from the next cycle, with an event when that
+    /// set changes.
+    fn bind_plan(&mut self, activity_index: usize, rec: &mut DecisionRecord) {
+        let model = self.model;
+        let (Some(g), Some(record)) = (self.guarantee.as_mut(), rec.guarantee.as_mut()) else {
+            return;
+        };
+        if let Some(res) = &rec.resources {
+            let running: Vec<(&str, &str)> = res
+                .placements
+                .iter()
+                .map(|p| (p.version.as_str(), p.implementation.as_str()))
+                .collect();
+            g.follow(activity_index, &running, record);
+        }
+        let mut versions = std::mem::take(&mut self.versions_scratch);
+        g.versions_without_alternative(activity_index, &mut versions);
+        let same = versions.len() == self.capped_versions.len()
+            && versions
+                .iter()
+                .all(|v| self.capped_versions.iter().any(|c| c.strip_prefix("P_") == Some(v)));
+        if !same {
+            self.capped_versions.clear();
+            let published = model.health.publishes();
+            for v in &versions {
+                let name = format!("P_{v}");
+                if published.contains(&name) {
+                    self.capped_versions.push(name);
+                }
+            }
+            if !self.capped_versions.is_empty() {
+                rec.events.push(Event::Other(format!(
+                    "guarantee: no alternative carrying {} meets the goals: {} capped at {}",
+                    versions.join(", "),
+                    self.capped_versions.join(", "),
+                    model.mission.guarantee.infeasible_p_battery
+                )));
+            }
+        }
+        self.versions_scratch = versions;
     }
 
     fn watch_guarantee(
@@ -774,6 +837,14 @@ impl<'m> Core<'m> {
             }
         }
         record.plan_differs.truncate(n_differs);
+        // One configuration (after `plan_differs`, which compares what ran with the plan this
+        // cycle requested).
+        if coupling.binds {
+            self.bind_plan(activity_index, rec);
+        }
+        let Some(record) = rec.guarantee.as_ref() else {
+            return;
+        };
         if let Some(r) = &record.reallocation {
             rec.events.push(Event::Reallocation(r.reason.clone()));
         }

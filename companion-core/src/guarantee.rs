@@ -9,6 +9,7 @@
 //!
 //! Pure apart from [`load_mission`] (which reads the file): no clock, time comes in [`Progress`].
 
+mod binding;
 mod compile;
 mod schema;
 
@@ -271,6 +272,11 @@ struct WatchScratch {
     zero: Measured,
     m: Measured,
     report: MarginReport,
+    /// The plan with one activity's alternative swapped, and its margins (binding.rs).
+    choice: Vec<usize>,
+    alt: MarginReport,
+    /// Version -> some alternative carrying it is feasible (binding.rs).
+    feasible_versions: Vec<(String, bool)>,
 }
 
 impl Default for WatchScratch {
@@ -290,6 +296,14 @@ impl Default for WatchScratch {
                 margin: Vec::new(),
                 drift: Vec::new(),
             },
+            choice: Vec::new(),
+            alt: MarginReport {
+                estimated_so_far: Vec::new(),
+                remainder: Vec::new(),
+                margin: Vec::new(),
+                drift: Vec::new(),
+            },
+            feasible_versions: Vec::new(),
         }
     }
 }

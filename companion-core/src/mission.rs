@@ -186,6 +186,16 @@ pub struct GuaranteeCoupling {
     /// Resource name (as in the mission file) -> observation that reports it failed (> 0.5).
     #[serde(default)]
     pub failures: BTreeMap<String, String>,
+    /// The plan and what runs are one configuration (docs/guarantee.md "One configuration"):
+    /// the implementations the plan names are requested, the plan follows the versions the
+    /// models run, and a version without a feasible alternative is capped. `false` watches the
+    /// margins only (the plan switched off, for comparison).
+    #[serde(default = "binds_default")]
+    pub binds: bool,
+}
+
+fn binds_default() -> bool {
+    true
 }
 
 /// One shared mission state as params/mission.toml declares it.

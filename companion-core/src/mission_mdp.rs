@@ -58,6 +58,8 @@ pub struct Decision {
     pub action: usize,
     /// Optimal expected total reward from the current state, in the policy's reward units.
     pub value: f64,
+    /// Stages the solver computed (the early stop extrapolates the rest of the horizon).
+    pub iterations: u32,
 }
 
 /// One MDP from params, compiled: the engine model plus the expressions that fill it.
@@ -117,6 +119,8 @@ struct SolvedEntry {
     values: Vec<f64>,
     policy: usize,
     horizon: usize,
+    /// Stages the solve computed.
+    iterations: u32,
     /// Stage-0 action per state (`u32::MAX`: terminal / none) and stage-0 value per state.
     decision: Vec<u32>,
     value: Vec<f64>,
@@ -384,6 +388,7 @@ impl MissionMdp {
                 memo.values.extend_from_slice(&self.values);
                 memo.policy = pi;
                 memo.horizon = horizon;
+                memo.iterations = fh.stats().iterations;
                 self.solved.solves += 1;
                 i
             }
@@ -394,6 +399,7 @@ impl MissionMdp {
         Ok((a != u32::MAX).then(|| Decision {
             action: a as usize,
             value: memo.value[state],
+            iterations: memo.iterations,
         }))
     }
 
@@ -405,7 +411,8 @@ impl MissionMdp {
             action: self.actions[d.action].clone(),
             actions: self.does[d.action].clone(),
             value: d.value,
-            iterations: horizon as u32,
+            iterations: d.iterations,
+            horizon: horizon as u32,
             inputs: self
                 .vars
                 .iter()
@@ -423,7 +430,8 @@ impl MissionMdp {
         out.action.clone_from(&self.actions[d.action]);
         out.actions.clone_from(&self.does[d.action]);
         out.value = d.value;
-        out.iterations = horizon as u32;
+        out.iterations = d.iterations;
+        out.horizon = horizon as u32;
         // Provenance: the named probabilities this solve read, at the values it read. Usually
         // the entry already holds exactly these names: overwrite the values in one ordered walk.
         if out.inputs.len() == self.vars.len() {

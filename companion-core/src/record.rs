@@ -28,8 +28,12 @@ pub struct MdpProposal {
     pub actions: Vec<String>,
     /// Optimal expected value at `state` under the active policy's rewards.
     pub value: f64,
-    /// Solver iterations (horizon for finite-horizon solves).
+    /// Stages the finite-horizon solver computed by backward induction (at most `horizon`: the
+    /// rest extrapolated under its certified early stop), the paper's Table 9 count.
     pub iterations: u32,
+    /// The horizon solved for (params/mission.toml `horizon`, the paper's 100).
+    #[serde(default)]
+    pub horizon: u32,
     /// The named probabilities the solve read, with their values (`P_V3`: 0.91).
     #[serde(default)]
     pub inputs: BTreeMap<String, f64>,
@@ -388,7 +392,7 @@ macro_rules! reuse_clone {
     };
 }
 
-reuse_clone!(MdpProposal { mdp, state, action, actions, value, iterations, reason } maps { inputs });
+reuse_clone!(MdpProposal { mdp, state, action, actions, value, iterations, horizon, reason } maps { inputs });
 reuse_clone!(Conflict { kept, dropped, rule } maps {});
 reuse_clone!(PlacementRecord {
     app, version, implementation, support, tiles, cpu_share, ms_per_frame

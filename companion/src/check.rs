@@ -371,8 +371,17 @@ pub fn report_from(
 /// shown, not sent (JSON escapes them itself).
 pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
     use crate::review::text::escape_controls;
-    let (v, text) =
-        report(args).map_err(|e| anyhow::anyhow!(escape_controls(&format!("{e:#}"), true)))?;
+    // A refused input (a bad `--evidence` value, a params error) is one line on stderr and exit
+    // code 2: the user's mistake, not a fault to trace (main's error path would print a
+    // backtrace under RUST_BACKTRACE=1).
+    let (v, text) = match report(args) {
+        Ok(r) => r,
+        Err(e) => {
+            let line = format!("{e:#}").replace('\n', " ");
+            eprintln!("error: {}", escape_controls(&line, true));
+            std::process::exit(2);
+        }
+    };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {

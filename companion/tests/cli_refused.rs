@@ -313,3 +313,31 @@ fn the_binary_has_no_hidden_test_subcommands() {
         );
     }
 }
+
+/// A bad `check --evidence` value is refused with one line naming the observation and the value,
+/// and no backtrace even when RUST_BACKTRACE asks for one (issue 24 item 6).
+#[test]
+fn check_evidence_bad_value_is_one_line_without_backtrace() {
+    let d = tempfile::tempdir().unwrap();
+    for (arg, want) in [
+        ("cpu_load=medium", ["cpu_load", "medium"]),
+        ("A_cpu_load=huge", ["A_cpu_load", "huge"]),
+        ("no_such_node=1", ["no_such_node", "node"]),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_companion"))
+            .args(["check", "--evidence", arg])
+            .current_dir(d.path())
+            .env_remove("COMPANION_PARAMS")
+            .env("RUST_BACKTRACE", "1")
+            .stdin(Stdio::null())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{arg}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{arg}: {err}");
+        assert!(!err.contains("backtrace"), "{arg}: {err}");
+        for w in want {
+            assert!(err.contains(w), "{arg}: {w:?} not in {err}");
+        }
+    }
+}

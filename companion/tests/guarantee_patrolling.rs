@@ -139,6 +139,27 @@ fn energy_drift_then_laser_fault_table_7() {
     }
     // Table 7 RAS2 starts with M3 L2 in A14 (M5 -> M3: one laser instead of two).
     assert_eq!(g.ras_rows()[2].cells[13].as_deref(), Some("M3 L2"));
+
+    // TRAS3 (the paper's x = 170 m): during the last activity the energy margin is negative
+    // again; the same strategy (sonar instead of laser) finishes the mission: A17 runs M1.
+    let a17 = p.activities[16].ias[g.choice()[16]].cost[e];
+    let before = p.activities[16].ias[g.choice()[16]].name.clone();
+    assert!(!before.starts_with("M1"), "{before}");
+    let rec = g.watch(Progress {
+        activity_index: 16,
+        activity_fraction: 0.5,
+        // Used so far: the goal minus half of A17's estimate, plus 50 J: margin -50 J.
+        energy_used_j: Some(p.goals[e].bound - 0.5 * a17 + 50.0),
+        battery_remaining_pct: None,
+        elapsed_s: 500.0,
+        failed_resources: &failed,
+        pack: Default::default(),
+    });
+    let re = rec.reallocation.expect("TRAS3: re-allocated in A17");
+    assert!(re.reason.contains("energy_j"), "{}", re.reason);
+    assert_eq!(g.ras_rows()[3].label, "RAS3");
+    let a17_after = g.ras_rows()[3].cells[16].as_deref().unwrap();
+    assert!(a17_after.starts_with("M1 "), "RAS3 A17 {a17_after}, was {before}");
     let table = render_ras_table(&s, g.ras_rows());
     println!("{table}");
     assert!(table.contains("RAS2"));

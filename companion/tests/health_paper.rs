@@ -335,3 +335,29 @@ fn evaluate_rejects_bad_evidence_without_side_effects() {
     assert!(m.evaluate(&ev(&[("Nope", "x")])).is_err());
     assert_eq!(m.belief(), before);
 }
+
+/// The MDPs' check point (params/mdp/index.toml `[check_point]`) is the health managers' own
+/// answer in the section 7.1 context: to the paper's two decimals where 7.1 prints a value, to
+/// three where it does not (P_V0, P_track, P_crash, P_fusion; issue 24 item 6).
+#[test]
+fn mdp_check_point_is_the_bns_own_section_7_1_values() {
+    let mut m = model();
+    let p = eval(&mut m, &reference());
+    let text =
+        std::fs::read_to_string(companion::params::default_params_dir().join("mdp/index.toml"))
+            .unwrap();
+    let index: toml::Table = toml::from_str(&text).unwrap();
+    let point = index["check_point"].as_table().unwrap();
+    let own = ["P_V0", "P_track", "P_crash", "P_fusion"];
+    for (name, v) in point {
+        let v = v.as_float().unwrap();
+        let Some(bn) = p.get(name) else {
+            continue; // P_SI / P_SF complements and names no BN publishes
+        };
+        let tol = if own.contains(&name.as_str()) { 5e-4 } else { 5e-3 };
+        assert!((bn - v).abs() <= tol, "{name}: check point {v}, BN {bn:.4}");
+    }
+    for name in own {
+        assert!(point.contains_key(name), "{name} missing from the check point");
+    }
+}

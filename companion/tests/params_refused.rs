@@ -508,7 +508,7 @@ fn projection_naming_an_undeclared_state_is_refused() {
     mission_state_refused(
         r#"states = ["target", "v0", "v1", "v2", "v3", "v4", "v5"]"#,
         r#"states = ["target", "v0", "v1", "v2", "v3", "v4", "v6"]"#,
-        "projection.navigation[3].states",
+        "projection.navigation[2].states",
         "`v6` is not a declared state",
     );
 }

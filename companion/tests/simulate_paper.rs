@@ -254,12 +254,17 @@ fn drift_and_failure_reallocate_and_restore_margins() {
             realloc.margins_after
         );
     }
-    // Without a hazard, no re-allocation before the tracking phase ends.
+    // Without a hazard, no re-allocation for a margin or a failure before the tracking phase
+    // ends (the plan following the version the models run is not one: docs/guarantee.md).
     let r = run("nominal", ModelKind::Bfm, safety(), 1).records;
     let first = r.iter().position(|x| {
         x.guarantee
             .as_ref()
-            .is_some_and(|g| g.reallocation.is_some())
+            .and_then(|g| g.reallocation.as_ref())
+            .is_some_and(|re| {
+                !re.reason.starts_with("the models run")
+                    && !re.reason.starts_with("the planned implementation did not fit")
+            })
     });
     let tracking_start = r.iter().position(|x| x.state == "target").unwrap();
     assert!(

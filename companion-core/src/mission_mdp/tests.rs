@@ -23,7 +23,8 @@ fn load_all() -> MissionMdps {
 }
 
 /// Section 7.1 values (vibration context), written out here independently of index.toml; the
-/// names 7.1 does not give are assumptions (P_V0 degraded by vibrations, P_track = P_V0).
+/// names 7.1 does not give are the health managers' own values in that context (P_V0, P_track,
+/// P_crash, P_fusion: companion/tests/health_paper.rs).
 fn paper_point() -> BTreeMap<String, f64> {
     [
         ("P_sys", 0.9),
@@ -39,9 +40,10 @@ fn paper_point() -> BTreeMap<String, f64> {
         ("P_V3", 0.96),
         ("P_V4", 0.31),
         ("P_V5", 0.47),
-        ("P_V0", 0.2),
-        ("P_track", 0.2),
-        ("P_crash", 0.1),
+        ("P_V0", 0.096),
+        ("P_track", 0.113),
+        ("P_crash", 0.063),
+        ("P_fusion", 0.98),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))
@@ -83,7 +85,7 @@ fn sizes_match_table_9() {
     };
     // Table 9, plus A0 (stay on the ground), an addition (docs/params/mdp.md).
     assert_eq!(size("monolithic"), (20, 22)); // section 5, Table 9
-    assert_eq!(size("navigation"), (9, 8));
+    assert_eq!(size("navigation"), (9, 9));
     assert_eq!(size("tracking"), (12, 10));
     // Table 9 says 9 states; the prose names 10 (documented deviation), 6 actions as in Table 9.
     assert_eq!(size("landing"), (10, 6));
@@ -417,8 +419,51 @@ fn evaluate_stationary(mdp: &mdp_engine::Mdp, pi: &[Option<u32>], horizon: usize
     v
 }
 
+/// Exhaustive search over every stationary deterministic policy of `mdp`, each evaluated over the
+/// 100-step horizon by direct summation from `start`: (best value, the best policy's action in
+/// `start`, number of policies searched).
+fn best_stationary(mdp: &mdp_engine::Mdp, start: usize) -> (f64, u32, usize) {
+    let options: Vec<Vec<u32>> = (0..mdp.n_states())
+        .map(|s| mdp.choices(s as _).map(|c| c.action as u32).collect())
+        .collect();
+    let mut pi: Vec<Option<u32>> = options.iter().map(|o| o.first().copied()).collect();
+    let mut idx = vec![0usize; options.len()];
+    let (mut best, mut best_first, mut count) = (f64::NEG_INFINITY, 0u32, 0);
+    loop {
+        count += 1;
+        let v = evaluate_stationary(mdp, &pi, 100)[start];
+        if v > best {
+            best = v;
+            best_first = pi[start].unwrap();
+        }
+        // Next policy: odometer over every state's available actions.
+        let mut s = 0;
+        loop {
+            if s == options.len() {
+                break;
+            }
+            if options[s].is_empty() {
+                s += 1;
+                continue;
+            }
+            idx[s] += 1;
+            if idx[s] < options[s].len() {
+                pi[s] = Some(options[s][idx[s]]);
+                break;
+            }
+            idx[s] = 0;
+            pi[s] = Some(options[s][0]);
+            s += 1;
+        }
+        if s == options.len() {
+            break;
+        }
+    }
+    (best, best_first, count)
+}
+
 /// Independent answer for the base decision: exhaustive search over every stationary
-/// deterministic policy of the navigation MDP (972 of them), each evaluated over the 100-step
+/// deterministic policy of the navigation MDP (2,160 of them), each evaluated over the 100-step
 /// horizon by direct summation. At a low battery the best policy stays on the ground, at a high
 /// one it takes off, and the engine's finite-horizon decision agrees; its stage-0 value is at
 /// least the best stationary one (a time-dependent policy can only do better: near the end of
@@ -434,43 +479,8 @@ fn base_decision_matches_exhaustive_policy_search() {
             let m = all.get_mut("navigation").unwrap();
             let base = m.state_index("base").unwrap();
             let mdp = m.instantiate(&p, pol).unwrap().clone();
-            let options: Vec<Vec<u32>> = (0..mdp.n_states())
-                .map(|s| mdp.choices(s as _).map(|c| c.action as u32).collect())
-                .collect();
-            let mut pi: Vec<Option<u32>> = options.iter().map(|o| o.first().copied()).collect();
-            let mut idx = vec![0usize; options.len()];
-            let (mut best, mut best_first, mut count) = (f64::NEG_INFINITY, 0u32, 0);
-            loop {
-                count += 1;
-                let v = evaluate_stationary(&mdp, &pi, 100)[base];
-                if v > best {
-                    best = v;
-                    best_first = pi[base].unwrap();
-                }
-                // Next policy: odometer over every state's available actions.
-                let mut s = 0;
-                loop {
-                    if s == options.len() {
-                        break;
-                    }
-                    if options[s].is_empty() {
-                        s += 1;
-                        continue;
-                    }
-                    idx[s] += 1;
-                    if idx[s] < options[s].len() {
-                        pi[s] = Some(options[s][idx[s]]);
-                        break;
-                    }
-                    idx[s] = 0;
-                    pi[s] = Some(options[s][0]);
-                    s += 1;
-                }
-                if s == options.len() {
-                    break;
-                }
-            }
-            assert_eq!(count, 972, "every stationary policy searched");
+            let (best, best_first, count) = best_stationary(&mdp, base);
+            assert_eq!(count, 2160, "every stationary policy searched");
             assert_eq!(
                 m.action_name(best_first as usize),
                 want,
@@ -479,12 +489,49 @@ fn base_decision_matches_exhaustive_policy_search() {
             let mut ws = Workspace::new();
             let fh = ws.finite_horizon(&mdp, 100);
             assert_eq!(
-                m.action_name(fh.decision(base as _).unwrap() as usize),
+                m.action_name(fh.decision(base as _).unwrap()),
                 want,
                 "{pol} P_battery {pb}: engine"
             );
             let engine = fh.value(0, base as _);
             assert!(engine >= best - 1e-9, "{pol} {pb}: {engine} < {best}");
+        }
+    }
+}
+
+/// The detectors' health turns the vehicle (issue 24 item 2), checked by brute force: with the
+/// sensors BN's values for a failed lidar (P_obs 0.145, P_fusion 0.98, as the lidar-failure run
+/// records them) the best of all 2,160 stationary navigation policies detects obstacles by fusion
+/// between the waypoints and over the area, and with a healthy lidar (P_obs 0.79) by lidar; the
+/// engine's decision agrees in each case. No projection is involved: the MDP is asked in its
+/// route states.
+#[test]
+fn detector_health_picks_the_detector_by_exhaustive_policy_search() {
+    let mut all = load_all();
+    for pol in ["safety", "mission"] {
+        for (p_obs, wpi_want, wpf_want) in [(0.145, "A2+A4", "A4"), (0.79, "A2+A11", "A11")] {
+            let mut p = paper_point();
+            p.insert("P_battery".into(), 0.99);
+            p.insert("P_sys".into(), 0.98);
+            p.insert("P_obs".into(), p_obs);
+            let m = all.get_mut("navigation").unwrap();
+            let mdp = m.instantiate(&p, pol).unwrap().clone();
+            for (state, want) in [("wpi", wpi_want), ("wpf", wpf_want)] {
+                let s = m.state_index(state).unwrap();
+                let (_, best_first, _) = best_stationary(&mdp, s);
+                assert_eq!(
+                    m.action_name(best_first as usize),
+                    want,
+                    "{pol} P_obs {p_obs} {state}: exhaustive"
+                );
+                let mut ws = Workspace::new();
+                let fh = ws.finite_horizon(&mdp, 100);
+                assert_eq!(
+                    m.action_name(fh.decision(s as _).unwrap()),
+                    want,
+                    "{pol} P_obs {p_obs} {state}: engine"
+                );
+            }
         }
     }
 }
@@ -532,7 +579,8 @@ fn instantiate_fills_probabilities_and_rewards() {
     let mdp = m.mdp();
     let c = mdp.choices(wpi).find(|c| c.action == act).unwrap();
     let i = c.next.iter().position(|n| *n as usize == wpf).unwrap();
-    assert!((c.prob[i] - (1.0 - 0.1 * 0.9) * 0.8 * 0.9 * 0.4).abs() < 1e-12);
+    // Lidar flight at P_obs 0.9: 0.1 * 0.9 detected, 0.015 * 0.1 missed and hit, the rest flies on.
+    assert!((c.prob[i] - (1.0 - 0.1 * 0.9 - 0.015 * 0.1) * 0.8 * 0.9 * 0.4).abs() < 1e-12);
 }
 
 #[test]
@@ -548,7 +596,14 @@ fn decide_and_proposal() {
     assert_eq!(rec.state, "wpi");
     assert_eq!(rec.action, "A2+A11");
     assert_eq!(rec.actions, ["follow_trajectory", "detect_obstacles_lidar"]);
-    assert_eq!(rec.iterations, 100);
+    // The horizon solved for, and the stages the solver computed (issue 24 item 6: Table 9
+    // compares iteration counts), as an independent solve of the same instance reports them.
+    assert_eq!(rec.horizon, 100);
+    let mdp = m.instantiate(&p, "safety").unwrap().clone();
+    let mut ws2 = Workspace::new();
+    let stages = ws2.finite_horizon(&mdp, 100).stats().iterations;
+    assert_eq!(rec.iterations, stages);
+    assert!(rec.iterations >= 1 && rec.iterations <= 100);
     assert!(rec.value > 0.0);
     let landing = m.state_index("landing").unwrap();
     assert_eq!(m.decide(&mut ws, landing, &p, "safety", 100).unwrap(), None);
@@ -977,6 +1032,7 @@ mod fast_cycle {
                             let want = fh.decision(s).map(|action| Decision {
                                 action,
                                 value: fh.value(0, s),
+                                iterations: fh.stats().iterations,
                             });
                             prop_assert_eq!(got.map(|d| d.action), want.map(|d| d.action));
                             prop_assert_eq!(
@@ -1056,4 +1112,30 @@ mod fast_cycle {
         m.decide(&mut ws, s, &point(4), "safety", 100).unwrap();
         assert_eq!(m.solves(), 6);
     }
+}
+
+/// Proposals record the stages the solver computed beside the horizon: where the certified
+/// early stop settles before the horizon (the landing and tracking MDPs in flight), the two differ.
+#[test]
+fn proposal_records_solver_stages_beside_the_horizon() {
+    let mut all = load_all();
+    let mut p = paper_point();
+    p.insert("P_battery".into(), 0.99);
+    p.insert("P_sys".into(), 0.98);
+    let mut ws = Workspace::new();
+    let mut fewer = 0;
+    for name in ["landing", "tracking"] {
+        let m = all.get_mut(name).unwrap();
+        let s = m.state_index("wp1").unwrap();
+        let d = m.decide(&mut ws, s, &p, "safety", 100).unwrap().unwrap();
+        let rec = m.proposal(s, &d, 100);
+        assert_eq!(rec.horizon, 100, "{name}");
+        let mdp = m.instantiate(&p, "safety").unwrap().clone();
+        let mut ws2 = Workspace::new();
+        assert_eq!(rec.iterations, ws2.finite_horizon(&mdp, 100).stats().iterations, "{name}");
+        if rec.iterations < rec.horizon {
+            fewer += 1;
+        }
+    }
+    assert!(fewer > 0, "no MDP stopped before the horizon");
 }

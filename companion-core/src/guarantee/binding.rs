@@ -1,0 +1,206 @@
+//! The plan and what runs are one configuration (issue 24 item 1; docs/guarantee.md "One
+//! configuration").
+//!
+//! BFM chooses *which* version runs (the tracking MDP, by the QoS its health manager predicts);
+//! PANORAMA chooses *how* (an implementation alternative meeting the energy and duration goals).
+//! Two ways bind them each cycle, after the placement:
+//! - PANORAMA -> BFM: a version none of whose alternatives in the activity being flown meets the
+//!   goals (with the rest of the plan) is infeasible: [`Guarantee::versions_without_alternative`]
+//!   lists it and the core caps its probability, so no MDP proposes it.
+//! - BFM -> PANORAMA: [`Guarantee::follow`] moves the activity's cell of the plan to the most
+//!   capable feasible alternative carrying the versions that run (the models chose another
+//!   version), or to the exact implementations that run (the planned one did not fit): the
+//!   energy and duration estimates are always those of what runs, and the implementation the
+//!   plan names is the one the next cycle requests.
+
+use super::{Guarantee, RasRow};
+use crate::record::{GuaranteeRecord, Reallocation};
+
+/// `(version, implementation)` of an IA token: `V4.F` -> `("V4", Some("F"))`, `lidar` ->
+/// `("lidar", None)`.
+fn token(t: &str) -> (&str, Option<&str>) {
+    match t.split_once('.') {
+        Some((v, i)) => (v, Some(i)),
+        None => (t, None),
+    }
+}
+
+/// True when some alternative of `act` names version `v`.
+fn names(act: &panorama::Activity, v: &str) -> bool {
+    act.ias
+        .iter()
+        .any(|ia| ia.name.split_whitespace().any(|t| token(t).0 == v))
+}
+
+/// Does alternative `i` of `act` carry every running version the activity names, and with the
+/// running implementations?
+fn carries(act: &panorama::Activity, i: usize, running: &[(&str, &str)]) -> (bool, bool) {
+    let mut versions = true;
+    let mut exact = true;
+    for &(v, imp) in running.iter().filter(|(v, _)| names(act, v)) {
+        match act.ias[i].name.split_whitespace().map(token).find(|(tv, _)| *tv == v) {
+            None => {
+                versions = false;
+                exact = false;
+            }
+            Some((_, ti)) => exact &= ti.is_none_or(|ti| ti == imp),
+        }
+    }
+    (versions, exact)
+}
+
+impl Guarantee {
+    /// True when alternative `i` of activity `at`, with the plan for the other activities,
+    /// meets every goal from the progress last watched and uses no failed resource.
+    fn alternative_feasible(&mut self, at: usize, i: usize) -> bool {
+        let p = &self.spec.problem;
+        let sc = &mut self.scratch;
+        if p.activities[at].ias[i]
+            .resources
+            .iter()
+            .any(|r| sc.failed.contains(r))
+        {
+            return false;
+        }
+        sc.choice.clone_from(&self.choice);
+        sc.choice[at] = i;
+        panorama::margins_into(p, &sc.choice, &sc.m, &mut sc.alt);
+        sc.alt
+            .margin
+            .iter()
+            .zip(&p.goals)
+            .all(|(m, g)| panorama::fits(g.bound - m, g.bound))
+    }
+
+    /// The versions (`V3`, `zone_t`: tokens with an implementation) offered by some alternative
+    /// of activity `at` of which no alternative meets the goals, into `out`. Empty when no
+    /// alternative at all is feasible: that is the guarantee's infeasibility, which caps
+    /// `P_battery` instead.
+    pub fn versions_without_alternative(&mut self, at: usize, out: &mut Vec<String>) {
+        out.clear();
+        let n = self.spec.problem.activities.len();
+        if at >= n {
+            return;
+        }
+        let n_ias = self.spec.problem.activities[at].ias.len();
+        let mut feasible = std::mem::take(&mut self.scratch.feasible_versions);
+        feasible.clear();
+        let mut any = false;
+        for i in 0..n_ias {
+            let ok = self.alternative_feasible(at, i);
+            any |= ok;
+            for t in self.spec.problem.activities[at].ias[i].name.split_whitespace() {
+                let (v, imp) = token(t);
+                if imp.is_none() {
+                    continue;
+                }
+                match feasible.iter_mut().find(|(name, _): &&mut (String, bool)| name == v) {
+                    Some(e) => e.1 |= ok,
+                    None => feasible.push((v.to_string(), ok)),
+                }
+            }
+        }
+        if any {
+            out.extend(
+                feasible
+                    .iter()
+                    .filter(|(_, ok)| !ok)
+                    .map(|(v, _)| v.clone()),
+            );
+        }
+        self.scratch.feasible_versions = feasible;
+    }
+
+    /// Bind the plan's cell for activity `at` to what runs (`running`: the placed
+    /// `(version, implementation)` pairs). Keeps the cell when it already carries exactly what
+    /// runs; otherwise moves it to the most capable feasible alternative carrying the running
+    /// versions (when the versions differ) or carrying them with the running implementations
+    /// (when only the implementation differs: the planned one did not fit), and writes the
+    /// re-allocation into `rec` (margins recomputed for what runs). Placements whose version no
+    /// alternative of the activity names (an application the mission file does not allocate)
+    /// are ignored. Returns true when the plan changed.
+    pub fn follow(&mut self, at: usize, running: &[(&str, &str)], rec: &mut GuaranteeRecord) -> bool {
+        if at >= self.spec.problem.activities.len() || rec.infeasible {
+            return false;
+        }
+        let act = &self.spec.problem.activities[at];
+        let cur = self.choice[at];
+        let (cur_versions, cur_exact) = carries(act, cur, running);
+        if cur_exact {
+            return false;
+        }
+        let want_exact = cur_versions;
+        let candidates: Vec<usize> = (0..act.ias.len())
+            .filter(|&i| {
+                let (v, e) = carries(act, i, running);
+                if want_exact { e } else { v }
+            })
+            .collect();
+        let sel = self.spec.selection;
+        let mut best: Option<usize> = None;
+        for i in candidates {
+            if !self.alternative_feasible(at, i) {
+                continue;
+            }
+            let ias = &self.spec.problem.activities[at].ias;
+            if best.is_none_or(|b| sel.score(&ias[i]) > sel.score(&ias[b])) {
+                best = Some(i);
+            }
+        }
+        let Some(b) = best else {
+            return false;
+        };
+        self.choice[at] = b;
+        let p = &self.spec.problem;
+        let n = p.activities.len();
+        let runs = running
+            .iter()
+            .filter(|(v, _)| names(&p.activities[at], v))
+            .map(|(v, i)| format!("{v}.{i}"))
+            .collect::<Vec<_>>()
+            .join(" ");
+        let reason = if want_exact {
+            format!(
+                "the planned implementation did not fit, {runs} runs: the plan follows what runs ({})",
+                p.activities[at].ias[b].name
+            )
+        } else {
+            format!(
+                "the models run {runs}: the plan follows with its most capable feasible alternative ({})",
+                p.activities[at].ias[b].name
+            )
+        };
+        // A re-allocation of this cycle (a negative margin, a failed resource) comes first.
+        let reason = match &rec.reallocation {
+            Some(r) => {
+                // One row for the cycle: the re-allocation's, as the plan now stands.
+                self.rows.pop();
+                format!("{}; then {reason}", r.reason)
+            }
+            None => reason,
+        };
+        let after = panorama::margins(p, &self.choice, &self.scratch.m);
+        super::named_into(&p.goals, &after.margin, &mut rec.margins);
+        self.rows.push(RasRow {
+            label: format!("RAS{}", self.rows.len()),
+            reason: format!("{reason} during {}", p.activities[at].name),
+            from_activity: at,
+            cells: (0..n)
+                .map(|j| (j >= at).then(|| p.activities[j].ias[self.choice[j]].name.clone()))
+                .collect(),
+        });
+        rec.reallocation = Some(Reallocation {
+            reason,
+            allocation: (at..n)
+                .map(|j| {
+                    (
+                        p.activities[j].name.clone(),
+                        p.activities[j].ias[self.choice[j]].name.clone(),
+                    )
+                })
+                .collect(),
+            margins_after: super::named(&p.goals, &after.margin),
+        });
+        true
+    }
+}
