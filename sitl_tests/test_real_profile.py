@@ -30,7 +30,11 @@ def test_real_profile_predicts_the_energy_flown_within_10_percent(arducopter, fl
     # what the autopilot itself says, over the ground-station link
     assert veh.gcs.ever_armed() and not veh.gcs.armed, veh.gcs.summary()
     records = run.records()
-    assert not any((r.get("guarantee") or {}).get("reallocation") for r in records), "a re-allocation changed the plan"
+    # no re-allocation for a margin or a failure (the plan following the versions that run is one by design:
+    # docs/guarantee.md, "One configuration"), so the estimates in force are the pre-flight plan's
+    realloc = [g["reallocation"]["reason"] for g in (r.get("guarantee") or {} for r in records) if g.get("reallocation")]
+    assert not [x for x in realloc if not x.startswith(("the models run", "the planned implementation did not fit"))], \
+        realloc
 
     def drawn(r):
         return r.get("observations", {}).get("energy_consumed_j")
