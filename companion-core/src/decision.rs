@@ -116,7 +116,7 @@ impl<'m> Core<'m> {
             mdps: model.mdps.clone(),
             workspace: Workspace::new(),
             platform: PlatformState::new(&model.resources.platform),
-            guarantee: Guarantee::start(model.guarantee.clone()).ok(),
+            guarantee: Guarantee::start_or_unbounded(model.guarantee.clone()),
             guarantee_infeasible: false,
             capped_versions: Vec::new(),
             versions_scratch: Vec::new(),
@@ -644,9 +644,11 @@ impl<'m> Core<'m> {
         let mut versions = std::mem::take(&mut self.versions_scratch);
         g.versions_without_alternative(activity_index, &mut versions);
         let same = versions.len() == self.capped_versions.len()
-            && versions
-                .iter()
-                .all(|v| self.capped_versions.iter().any(|c| c.strip_prefix("P_") == Some(v)));
+            && versions.iter().all(|v| {
+                self.capped_versions
+                    .iter()
+                    .any(|c| c.strip_prefix("P_") == Some(v))
+            });
         if !same {
             self.capped_versions.clear();
             let published = model.health.publishes();

@@ -358,9 +358,36 @@ impl Guarantee {
     /// Start the mission with RAS0; errs (with the numbers) when the mission cannot be performed.
     pub fn start(spec: MissionSpec) -> Result<Self, Infeasible> {
         let ras0 = Self::pre_flight(&spec)?;
+        Ok(Self::with_ras0(spec, ras0, "pre-flight allocation"))
+    }
+
+    /// [`Guarantee::start`], or, when the params' goals cannot be met before the flight, the
+    /// allocation the paper's algorithm makes with the goals' bounds lifted (the most capable IAs):
+    /// in `fly` the energy goal is reckoned again from the pack the autopilot reports (a profile's
+    /// power against the params' pack is not the vehicle's), and the margins, negative while the
+    /// goals are unmet, are what the launch verdict reads. `None` only when no IA exists.
+    pub fn start_or_unbounded(spec: MissionSpec) -> Option<Self> {
+        match Self::pre_flight(&spec) {
+            Ok(ras0) => Some(Self::with_ras0(spec, ras0, "pre-flight allocation")),
+            Err(_) => {
+                let mut lifted = spec.clone();
+                for g in &mut lifted.problem.goals {
+                    g.bound = f64::MAX;
+                }
+                let ras0 = Self::pre_flight(&lifted).ok()?;
+                Some(Self::with_ras0(
+                    spec,
+                    ras0,
+                    "pre-flight allocation, goals' bounds lifted (unmet with the params' values)",
+                ))
+            }
+        }
+    }
+
+    fn with_ras0(spec: MissionSpec, ras0: Ras0, reason: &str) -> Self {
         let rows = vec![RasRow {
             label: "RAS0".into(),
-            reason: "pre-flight allocation".into(),
+            reason: reason.into(),
             from_activity: 0,
             cells: ras0
                 .choice
@@ -384,7 +411,7 @@ impl Guarantee {
                 .collect(),
             None => Vec::new(),
         };
-        Ok(Self {
+        Self {
             choice: ras0.choice,
             spec,
             failed: Vec::new(),
@@ -395,7 +422,7 @@ impl Guarantee {
             base_energy,
             power: PowerState::default(),
             energy_scale: 1.0,
-        })
+        }
     }
 
     /// The RAS in force: IA index per activity.

@@ -663,3 +663,55 @@ fn measured_power_is_confronted_with_the_prediction_and_a_drift_rescales_the_res
     let pw = at(1100.0, 5_000.0 + 3.0 * p_pred * 1000.0);
     assert_eq!(pw.energy_scale, 2.0, "bounded to 2");
 }
+
+/// A mission the params' pack cannot hold (a vehicle profile's power, say) still gets a guarantee:
+/// `start` refuses it, `start_or_unbounded` starts from the lifted allocation and its margins say
+/// the truth: negative on the params' pack, positive once the autopilot reports a pack that
+/// holds the mission (in `fly` the verdict reads those margins: the ArduCopter profile's flight).
+#[test]
+fn a_mission_the_params_pack_cannot_hold_starts_and_its_margins_follow_the_autopilots_pack() {
+    let mut s = spec();
+    let e = s
+        .problem
+        .goals
+        .iter()
+        .position(|g| g.name == ENERGY)
+        .unwrap();
+    // the params' pack's usable energy: a bound just below the cheapest allocation's total
+    let cheapest: f64 = s
+        .problem
+        .activities
+        .iter()
+        .map(|a| {
+            a.ias
+                .iter()
+                .map(|ia| ia.cost[e])
+                .fold(f64::INFINITY, f64::min)
+        })
+        .sum();
+    s.problem.goals[e].bound = 0.9 * cheapest;
+    assert!(Guarantee::start(s.clone()).is_err());
+    let watch = |pack: PackReading| {
+        let mut g = Guarantee::start_or_unbounded(s.clone()).expect("a guarantee");
+        g.watch(Progress {
+            activity_index: 0,
+            activity_fraction: 0.0,
+            energy_used_j: None,
+            battery_remaining_pct: Some(100.0),
+            elapsed_s: 0.0,
+            failed_resources: &[],
+            pack,
+        })
+    };
+    let params_pack = watch(Default::default());
+    assert!(params_pack.margins["energy_j"] < 0.0, "{params_pack:?}");
+    // a 3S 40 Ah pack reported by the autopilot: 40,000 mAh x 3.6 x 3 x 3.7 V = 1.6 MJ
+    let big = watch(PackReading {
+        capacity_mah: Some(40_000.0),
+        cells: Some(3.0),
+        voltage_v: Some(12.6),
+        ..Default::default()
+    });
+    assert!(big.margins["energy_j"] > 0.0, "{big:?}");
+    assert!(!big.infeasible, "{big:?}");
+}
