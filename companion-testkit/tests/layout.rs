@@ -84,3 +84,62 @@ fn the_core_depends_on_no_io_runtime_cli_or_randomness_crate() {
         "the binary links the testkit"
     );
 }
+
+/// The workspace members' `src/` folders (every crate the workspace builds).
+fn crate_src_dirs() -> Vec<PathBuf> {
+    let manifest = std::fs::read_to_string(root().join("Cargo.toml")).unwrap();
+    let doc: toml::Table = manifest.parse().unwrap();
+    let members = doc["workspace"]["members"].as_array().unwrap();
+    members
+        .iter()
+        .map(|m| root().join(m.as_str().unwrap()).join("src"))
+        .collect()
+}
+
+/// A test file, by this workspace's convention: named `tests.rs` or `*_tests.rs`, or under a
+/// `tests/` folder (a module's tests live beside it: `foo.rs` + `foo/tests.rs`).
+fn is_test_file(p: &Path) -> bool {
+    let name = p.file_name().unwrap().to_string_lossy();
+    name == "tests.rs"
+        || name.ends_with("_tests.rs")
+        || p
+            .strip_prefix(root())
+            .unwrap_or(p)
+            .components()
+            .any(|c| c.as_os_str() == "tests")
+}
+
+/// The shipped (non-test) Rust files under the crates' `src/`.
+fn shipped_rs_files() -> Vec<PathBuf> {
+    let mut files = Vec::new();
+    for dir in crate_src_dirs() {
+        rs_files(&dir, &mut files);
+    }
+    files.retain(|f| !is_test_file(f));
+    files
+}
+
+/// One concern per file (issue 25): a shipped file over 1,000 lines holds several; split it by
+/// concern, and move its inline tests beside it (`foo/tests.rs`).
+#[test]
+fn no_shipped_rust_file_is_over_1000_lines() {
+    const MAX_LINES: usize = 1000;
+    let files = shipped_rs_files();
+    assert!(
+        files
+            .iter()
+            .any(|f| f.ends_with("companion-link/src/vehicle/mod.rs")),
+        "{files:?}"
+    );
+    let long: Vec<String> = files
+        .iter()
+        .filter_map(|f| {
+            let n = std::fs::read_to_string(f).unwrap().lines().count();
+            (n > MAX_LINES).then(|| format!("{} ({n} lines)", f.display()))
+        })
+        .collect();
+    assert!(
+        long.is_empty(),
+        "shipped files over {MAX_LINES} lines: {long:?}"
+    );
+}
