@@ -325,63 +325,9 @@ impl Telemetry {
         let before_battery = self.get("battery_pct");
         let mut events = Vec::new();
         match msg {
-            Msg::HEARTBEAT(h) => {
-                let armed = h
-                    .base_mode
-                    .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
-                if armed != self.armed {
-                    events.push(if armed { Event::Armed } else { Event::Disarmed });
-                    self.armed = armed;
-                }
-                let name = mode_name(h.custom_mode);
-                if self.mode.as_deref() != Some(name.as_str()) {
-                    events.push(Event::Mode(name.clone()));
-                    self.mode = Some(name);
-                }
-                self.custom_mode = h.custom_mode;
-            }
-            Msg::SYS_STATUS(s) => {
-                if s.battery_remaining >= 0 && !self.values.contains_key("battery_status_pct") {
-                    self.set("battery_pct", s.battery_remaining as f64);
-                }
-                if s.voltage_battery != u16::MAX && !self.values.contains_key("battery_status_v") {
-                    self.set("battery_v", s.voltage_battery as f64 / 1000.0);
-                }
-                // cA, -1: not measured.
-                if s.current_battery >= 0 && !self.values.contains_key("battery_status_v") {
-                    self.set("battery_current_a", s.current_battery as f64 / 100.0);
-                }
-            }
-            Msg::BATTERY_STATUS(b) if b.id == 0 => {
-                if b.battery_remaining >= 0 {
-                    self.set("battery_pct", b.battery_remaining as f64);
-                    self.set("battery_status_pct", b.battery_remaining as f64);
-                }
-                if b.energy_consumed >= 0 {
-                    self.set("energy_consumed_j", b.energy_consumed as f64 * 100.0); // hJ -> J
-                }
-                if b.current_consumed >= 0 {
-                    self.set("consumed_mah", b.current_consumed as f64);
-                }
-                // The pack voltage: the sum of the cells given (UINT16_MAX: no such cell; ArduPilot
-                // puts the whole pack in cell 0 when it does not measure cells, PX4 each cell).
-                let mv: u32 = b
-                    .voltages
-                    .iter()
-                    .filter(|v| **v != u16::MAX)
-                    .map(|v| *v as u32)
-                    .sum();
-                if mv > 0 {
-                    self.set("battery_v", mv as f64 / 1000.0);
-                    self.set("battery_status_v", mv as f64 / 1000.0);
-                    // Current and voltage from one message: their product is the power drawn.
-                    if b.current_battery >= 0 {
-                        self.set("battery_current_a", b.current_battery as f64 / 100.0);
-                    } else {
-                        self.values.remove("battery_current_a");
-                    }
-                }
-            }
+            Msg::HEARTBEAT(h) => self.on_heartbeat(h, mode_name, &mut events),
+            Msg::SYS_STATUS(s) => self.on_sys_status(s),
+            Msg::BATTERY_STATUS(b) if b.id == 0 => self.on_battery_status(b),
             Msg::GLOBAL_POSITION_INT(p) if !on_globe(p.lat, p.lon) => {
                 self.reject(format!("GLOBAL_POSITION_INT lat {} lon {}", p.lat, p.lon))
             }
@@ -389,28 +335,7 @@ impl Telemetry {
                 "HOME_POSITION lat {} lon {}",
                 h.latitude, h.longitude
             )),
-            Msg::GLOBAL_POSITION_INT(p) => {
-                let heading_deg = (p.hdg != u16::MAX).then(|| p.hdg as f64 / 100.0);
-                let pos = Position {
-                    lat_e7: p.lat,
-                    lon_e7: p.lon,
-                    alt_rel_m: p.relative_alt as f64 / 1000.0,
-                    alt_amsl_m: p.alt as f64 / 1000.0,
-                    heading_deg,
-                };
-                self.position = Some(pos);
-                self.set("lat_deg", p.lat as f64 * 1e-7);
-                self.set("lon_deg", p.lon as f64 * 1e-7);
-                self.set("altitude_m", pos.alt_rel_m);
-                self.set(
-                    "groundspeed_mps",
-                    ((p.vx as f64).hypot(p.vy as f64)) / 100.0,
-                );
-                if let Some((hl, ho, _)) = self.home {
-                    let (n, e) = offset_m((hl, ho), (p.lat, p.lon));
-                    self.set("distance_home_m", n.hypot(e));
-                }
-            }
+            Msg::GLOBAL_POSITION_INT(p) => self.on_global_position(p),
             Msg::HOME_POSITION(h) => {
                 self.home = Some((h.latitude, h.longitude, h.altitude as f64 / 1000.0))
             }
@@ -463,18 +388,7 @@ impl Telemetry {
                 }
                 self.set("mission_seq", m.seq as f64);
             }
-            Msg::DISTANCE_SENSOR(d) => {
-                // Horizontal sensors only (yaw rotations 0..7); the downward rangefinder is altitude.
-                let horizontal = (d.orientation as u32) <= 7;
-                let valid =
-                    d.current_distance >= d.min_distance && d.current_distance <= d.max_distance;
-                if horizontal && valid {
-                    self.distances
-                        .insert(d.id, (d.current_distance as f64 / 100.0, now));
-                } else if horizontal {
-                    self.distances.remove(&d.id);
-                }
-            }
+            Msg::DISTANCE_SENSOR(d) => self.on_distance_sensor(now, d),
             Msg::OBSTACLE_DISTANCE(o) => {
                 // UINT16_MAX: sector unknown; max_distance + 1: nothing there (MAVLink spec).
                 let nearest = o
@@ -485,19 +399,7 @@ impl Telemetry {
                     .map(|&d| d as f64 / 100.0);
                 self.obstacle_scan = nearest.map(|m| (m, now));
             }
-            Msg::CAMERA_TRACKING_IMAGE_STATUS(c) => {
-                let active = c
-                    .tracking_status
-                    .contains(CameraTrackingStatusFlags::CAMERA_TRACKING_STATUS_FLAGS_ACTIVE)
-                    && !c
-                        .tracking_status
-                        .contains(CameraTrackingStatusFlags::CAMERA_TRACKING_STATUS_FLAGS_ERROR);
-                self.set("target_detected", if active { 1.0 } else { 0.0 });
-                if active && !c.point_x.is_nan() {
-                    self.set("target_x", c.point_x as f64);
-                    self.set("target_y", c.point_y as f64);
-                }
-            }
+            Msg::CAMERA_TRACKING_IMAGE_STATUS(c) => self.on_camera_tracking(c),
             Msg::NAMED_VALUE_FLOAT(n) => {
                 let name = n.name.to_str().unwrap_or("").trim();
                 if !name.is_empty() {
@@ -514,7 +416,143 @@ impl Telemetry {
             }
             _ => {}
         }
-        // Threshold crossings.
+        self.crossings(
+            now,
+            (before_obstacle, before_target, before_battery),
+            &mut events,
+        );
+        events
+    }
+
+    /// HEARTBEAT: armed and mode, an event when either changes.
+    fn on_heartbeat(
+        &mut self,
+        h: &HEARTBEAT_DATA,
+        mode_name: impl Fn(u32) -> String,
+        events: &mut Vec<Event>,
+    ) {
+        let armed = h
+            .base_mode
+            .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+        if armed != self.armed {
+            events.push(if armed { Event::Armed } else { Event::Disarmed });
+            self.armed = armed;
+        }
+        let name = mode_name(h.custom_mode);
+        if self.mode.as_deref() != Some(name.as_str()) {
+            events.push(Event::Mode(name.clone()));
+            self.mode = Some(name);
+        }
+        self.custom_mode = h.custom_mode;
+    }
+
+    /// SYS_STATUS: the battery, unless BATTERY_STATUS gives it.
+    fn on_sys_status(&mut self, s: &SYS_STATUS_DATA) {
+        if s.battery_remaining >= 0 && !self.values.contains_key("battery_status_pct") {
+            self.set("battery_pct", s.battery_remaining as f64);
+        }
+        if s.voltage_battery != u16::MAX && !self.values.contains_key("battery_status_v") {
+            self.set("battery_v", s.voltage_battery as f64 / 1000.0);
+        }
+        // cA, -1: not measured.
+        if s.current_battery >= 0 && !self.values.contains_key("battery_status_v") {
+            self.set("battery_current_a", s.current_battery as f64 / 100.0);
+        }
+    }
+
+    /// BATTERY_STATUS of the first pack: charge, energy, voltage and current.
+    fn on_battery_status(&mut self, b: &BATTERY_STATUS_DATA) {
+        if b.battery_remaining >= 0 {
+            self.set("battery_pct", b.battery_remaining as f64);
+            self.set("battery_status_pct", b.battery_remaining as f64);
+        }
+        if b.energy_consumed >= 0 {
+            self.set("energy_consumed_j", b.energy_consumed as f64 * 100.0); // hJ -> J
+        }
+        if b.current_consumed >= 0 {
+            self.set("consumed_mah", b.current_consumed as f64);
+        }
+        // The pack voltage: the sum of the cells given (UINT16_MAX: no such cell; ArduPilot
+        // puts the whole pack in cell 0 when it does not measure cells, PX4 each cell).
+        let mv: u32 = b
+            .voltages
+            .iter()
+            .filter(|v| **v != u16::MAX)
+            .map(|v| *v as u32)
+            .sum();
+        if mv > 0 {
+            self.set("battery_v", mv as f64 / 1000.0);
+            self.set("battery_status_v", mv as f64 / 1000.0);
+            // Current and voltage from one message: their product is the power drawn.
+            if b.current_battery >= 0 {
+                self.set("battery_current_a", b.current_battery as f64 / 100.0);
+            } else {
+                self.values.remove("battery_current_a");
+            }
+        }
+    }
+
+    /// GLOBAL_POSITION_INT on the globe: position, altitude, speed, distance home.
+    fn on_global_position(&mut self, p: &GLOBAL_POSITION_INT_DATA) {
+        let heading_deg = (p.hdg != u16::MAX).then(|| p.hdg as f64 / 100.0);
+        let pos = Position {
+            lat_e7: p.lat,
+            lon_e7: p.lon,
+            alt_rel_m: p.relative_alt as f64 / 1000.0,
+            alt_amsl_m: p.alt as f64 / 1000.0,
+            heading_deg,
+        };
+        self.position = Some(pos);
+        self.set("lat_deg", p.lat as f64 * 1e-7);
+        self.set("lon_deg", p.lon as f64 * 1e-7);
+        self.set("altitude_m", pos.alt_rel_m);
+        self.set(
+            "groundspeed_mps",
+            ((p.vx as f64).hypot(p.vy as f64)) / 100.0,
+        );
+        if let Some((hl, ho, _)) = self.home {
+            let (n, e) = offset_m((hl, ho), (p.lat, p.lon));
+            self.set("distance_home_m", n.hypot(e));
+        }
+    }
+
+    /// DISTANCE_SENSOR: a horizontal reading in range, kept per sensor.
+    fn on_distance_sensor(&mut self, now: Duration, d: &DISTANCE_SENSOR_DATA) {
+        // Horizontal sensors only (yaw rotations 0..7); the downward rangefinder is altitude.
+        let horizontal = (d.orientation as u32) <= 7;
+        let valid = d.current_distance >= d.min_distance && d.current_distance <= d.max_distance;
+        if horizontal && valid {
+            self.distances
+                .insert(d.id, (d.current_distance as f64 / 100.0, now));
+        } else if horizontal {
+            self.distances.remove(&d.id);
+        }
+    }
+
+    /// CAMERA_TRACKING_IMAGE_STATUS: the target tracked, and where in the image.
+    fn on_camera_tracking(&mut self, c: &CAMERA_TRACKING_IMAGE_STATUS_DATA) {
+        let active = c
+            .tracking_status
+            .contains(CameraTrackingStatusFlags::CAMERA_TRACKING_STATUS_FLAGS_ACTIVE)
+            && !c
+                .tracking_status
+                .contains(CameraTrackingStatusFlags::CAMERA_TRACKING_STATUS_FLAGS_ERROR);
+        self.set("target_detected", if active { 1.0 } else { 0.0 });
+        if active && !c.point_x.is_nan() {
+            self.set("target_x", c.point_x as f64);
+            self.set("target_y", c.point_y as f64);
+        }
+    }
+
+    /// The events of thresholds crossed by this message: obstacle near, target detected or
+    /// lost, battery below a threshold (`before`: obstacle distance, target, battery before it).
+    fn crossings(
+        &self,
+        now: Duration,
+        before: (Option<f64>, Option<f64>, Option<f64>),
+        events: &mut Vec<Event>,
+    ) {
+        let (before_obstacle, before_target, before_battery) = before;
         let near = self.cfg.obstacle_near_m;
         match (before_obstacle, self.obstacle_m(now)) {
             (b, Some(a)) if a < near && b.is_none_or(|b| b >= near) => {
@@ -541,7 +579,6 @@ impl Telemetry {
                 }
             }
         }
-        events
     }
 
     fn set(&mut self, name: &str, v: f64) {

@@ -581,7 +581,6 @@ pub fn schedule_into(
     out: &mut Schedule,
     next: &mut PlatformState,
 ) {
-    let vs = catalogue.variants();
     // Earlier results become spares.
     ws.spare_placements.append(&mut out.placements);
     ws.spare_degraded.append(&mut out.degraded);
@@ -614,14 +613,57 @@ pub fn schedule_into(
         cpu: platform.cpu_budget * f64::from(online) / f64::from(cores) - external,
         cores,
     };
-    let n_ranked = policy.priority.len().max(1);
-    let rank_text = |it: &Item| RankText {
-        policy: &policy.name,
-        app: &requests[it.req].app,
-        rank: it.rank,
-        of: n_ranked,
-    };
 
+    let inp = Inputs {
+        platform,
+        catalogue,
+        policy,
+        requests,
+    };
+    admit(&inp, ws, out);
+    // Resolve: while the set does not fit, the least important application first tries its
+    // degradation path, then gives way.
+    let mut active = std::mem::take(&mut ws.items);
+    resolve(&inp, room, &mut active, ws, out);
+    replace_given_way(&inp, room, &mut active, ws, out);
+    assign_tiles(&inp, st, ws);
+    write_placements(&inp, &active, ws, out);
+    drop_still_out(&inp, room, ws, out);
+    ws.items = active;
+    write_totals(&inp, st, ws, out, online, external);
+}
+
+/// What one run of [`schedule_into`] reads.
+#[derive(Clone, Copy)]
+struct Inputs<'a> {
+    platform: &'a Platform,
+    catalogue: &'a Catalogue,
+    policy: &'a ResourcePolicy,
+    requests: &'a [Request],
+}
+
+impl Inputs<'_> {
+    /// The policy rank of `it`, written into a degradation or drop reason.
+    fn rank_text(&self, it: &Item) -> RankText<'_> {
+        RankText {
+            policy: &self.policy.name,
+            app: &self.requests[it.req].app,
+            rank: it.rank,
+            of: self.policy.priority.len().max(1),
+        }
+    }
+}
+
+/// The requests the catalogue can serve, ranked (each degraded already when no implementation
+/// of its version reaches its rate); the others dropped, with why.
+fn admit(inp: &Inputs, ws: &mut ScheduleWorkspace, out: &mut Schedule) {
+    let Inputs {
+        catalogue,
+        policy,
+        requests,
+        ..
+    } = *inp;
+    let vs = catalogue.variants();
     ws.items.clear();
     for (req, r) in requests.iter().enumerate() {
         if !catalogue.has_version(&r.app, &r.version) {
@@ -708,13 +750,28 @@ pub fn schedule_into(
             },
         );
     }
+}
 
-    // Resolve: while the set does not fit, the least important application first tries its
-    // degradation path, then gives way.
-    let mut active = std::mem::take(&mut ws.items);
+/// Resolve: while the set does not fit, the least important application first tries its
+/// degradation path, then gives way.
+fn resolve(
+    inp: &Inputs,
+    room: Room,
+    active: &mut Vec<Item>,
+    ws: &mut ScheduleWorkspace,
+    out: &mut Schedule,
+) {
+    let Inputs {
+        catalogue,
+        policy,
+        requests,
+        ..
+    } = *inp;
+    let vs = catalogue.variants();
+    let rank_text = |it: &Item| inp.rank_text(it);
     ws.given_way.clear();
     loop {
-        if search(catalogue, requests, &active, room, ws) {
+        if search(catalogue, requests, active, room, ws) {
             break;
         }
         let last = active.pop().expect("the empty set always fits");
@@ -732,7 +789,7 @@ pub fn schedule_into(
                 version: vi,
                 ..last
             });
-            if search(catalogue, requests, &active, room, ws) {
+            if search(catalogue, requests, active, room, ws) {
                 fixed = Some(v);
                 break;
             }
@@ -759,7 +816,23 @@ pub fn schedule_into(
         ws.given_way.push(last);
     }
     ws.choice.clone_from(&ws.chosen);
+}
 
+fn replace_given_way(
+    inp: &Inputs,
+    room: Room,
+    active: &mut Vec<Item>,
+    ws: &mut ScheduleWorkspace,
+    out: &mut Schedule,
+) {
+    let Inputs {
+        catalogue,
+        policy,
+        requests,
+        ..
+    } = *inp;
+    let vs = catalogue.variants();
+    let rank_text = |it: &Item| inp.rank_text(it);
     // Re-place what now fits among those that gave way, most important first: dropping a more
     // important application may have freed room for a less important one.
     ws.still_out.clear();
@@ -776,13 +849,13 @@ pub fn schedule_into(
                 continue;
             }
             let pos = insert_ranked(
-                &mut active,
+                active,
                 Item {
                     version: vi,
                     ..item
                 },
             );
-            if search(catalogue, requests, &active, room, ws) {
+            if search(catalogue, requests, active, room, ws) {
                 if v != requested {
                     let mut d = ws.degradation();
                     set(&mut d.app, app);
@@ -807,7 +880,15 @@ pub fn schedule_into(
             ws.still_out.push(item);
         }
     }
+}
 
+fn assign_tiles(inp: &Inputs, st: &mut PlatformState, ws: &mut ScheduleWorkspace) {
+    let Inputs {
+        platform,
+        catalogue,
+        ..
+    } = *inp;
+    let vs = catalogue.variants();
     // Tiles: keep every part on a healthy tile that already holds it, then configure blank
     // tiles, then overwrite others (lowest index first).
     ws.taken.clear();
@@ -857,7 +938,17 @@ pub fn schedule_into(
         *slot = Some(s);
         ws.assigned.push((k, t, true));
     }
+}
 
+fn write_placements(inp: &Inputs, active: &[Item], ws: &mut ScheduleWorkspace, out: &mut Schedule) {
+    let Inputs {
+        platform,
+        catalogue,
+        requests,
+        ..
+    } = *inp;
+    let vs = catalogue.variants();
+    let cores = platform.cpu_cores;
     // Placements in request order.
     ws.order.clear();
     ws.order.extend(0..active.len());
@@ -901,11 +992,19 @@ pub fn schedule_into(
         p.u_app = f64::from(v.tiles) + p.cpu_share;
         out.placements.push(p);
     }
+}
 
+/// The applications that gave way and found no room again: dropped, with what they lacked.
+fn drop_still_out(inp: &Inputs, room: Room, ws: &mut ScheduleWorkspace, out: &mut Schedule) {
+    let Inputs {
+        catalogue,
+        requests,
+        ..
+    } = *inp;
+    let vs = catalogue.variants();
+    let cores = room.cores;
+    let rank_text = |it: &Item| inp.rank_text(it);
     let placements = &out.placements;
-    let tiles_used: u8 = placements.iter().map(|p| p.tiles.len() as u8).sum();
-    let app_cpu_share: f64 = placements.iter().map(|p| p.cpu_share).sum();
-    let reconfigurations: u32 = placements.iter().map(|p| p.reconfigured.len() as u32).sum();
     for i in 0..ws.still_out.len() {
         let item = ws.still_out[i];
         let app = &requests[item.req].app;
@@ -936,8 +1035,25 @@ pub fn schedule_into(
         let _ = write!(d.reason, "); {}", rank_text(&item));
         out.dropped.push(d);
     }
-    ws.items = active;
+}
 
+/// The totals of the schedule: load, power, tiles, reconfigurations, the summary line.
+fn write_totals(
+    inp: &Inputs,
+    st: &PlatformState,
+    ws: &ScheduleWorkspace,
+    out: &mut Schedule,
+    online: u8,
+    external: f64,
+) {
+    let Inputs {
+        platform, policy, ..
+    } = *inp;
+    let cores = platform.cpu_cores;
+    let placements = &out.placements;
+    let tiles_used: u8 = placements.iter().map(|p| p.tiles.len() as u8).sum();
+    let app_cpu_share: f64 = placements.iter().map(|p| p.cpu_share).sum();
+    let reconfigurations: u32 = placements.iter().map(|p| p.reconfigured.len() as u32).sum();
     let cpu_load = if online == 0 {
         1.0
     } else {

@@ -32,8 +32,8 @@ fn shipped_params_load() {
     assert_eq!(t.actions["return_to_base"], vec![Step::Mode("RTL".into())]);
     // Staying on the ground commands nothing (an addition to the paper's actions).
     assert_eq!(t.actions["stay_on_ground"], Vec::<Step>::new());
-    let r = crate::test_support::disk(Route::load)(&dir.join("missions/tracking_route.toml"))
-        .unwrap();
+    let r =
+        crate::test_support::disk(Route::load)(&dir.join("missions/tracking_route.toml")).unwrap();
     assert!(r.waypoints.len() >= 3);
     let lp = crate::test_support::disk(LinkParams::load)(&dir.join("link.toml")).unwrap();
     assert_eq!(lp.stream_ids().len(), 15);

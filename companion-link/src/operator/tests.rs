@@ -73,13 +73,7 @@ impl Feed {
         }
     }
     /// Feed a heartbeat and let the gate look, at the heartbeat's time.
-    fn at(
-        &mut self,
-        g: &mut OperatorGate,
-        t: f64,
-        mode: u32,
-        armed: bool,
-    ) -> Option<GateEvent> {
+    fn at(&mut self, g: &mut OperatorGate, t: f64, mode: u32, armed: bool) -> Option<GateEvent> {
         self.hb(t, mode, armed);
         g.observe(s(t), &self.view(s(t)))
     }

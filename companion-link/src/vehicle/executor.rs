@@ -421,7 +421,12 @@ impl Vehicle {
         Advance::Again
     }
 
-    pub(super) fn arm_step(&mut self, now: Duration, action: String, out: &mut Vec<Msg>) -> Advance {
+    pub(super) fn arm_step(
+        &mut self,
+        now: Duration,
+        action: String,
+        out: &mut Vec<Msg>,
+    ) -> Advance {
         if self.telemetry.armed {
             self.record_step(action, "ARM".into(), "ALREADY".into());
             self.step_done();
@@ -587,7 +592,12 @@ impl Vehicle {
         }
     }
 
-    pub(super) fn goto_zone_step(&mut self, now: Duration, action: String, out: &mut Vec<Msg>) -> Advance {
+    pub(super) fn goto_zone_step(
+        &mut self,
+        now: Duration,
+        action: String,
+        out: &mut Vec<Msg>,
+    ) -> Advance {
         let zone = (
             self.telemetry.get("zone_north_m"),
             self.telemetry.get("zone_east_m"),

@@ -143,7 +143,6 @@ impl Vehicle {
             "autopilot {sys}/{comp} chosen: the first autopilot heard (no pin); pin it with --autopilot-sysid {sys}{compid}"
         ))
     }
-
 }
 
 /// A vehicle's MAV_TYPE, not a ground station, companion computer or peripheral.

@@ -8,11 +8,6 @@ mod pack;
 #[cfg(test)]
 mod tests;
 
-pub use identity::{AUTOPILOT_COMPONENT, OTHER_COMPONENT_WAIT};
-pub use pack::{PACK_PARAM_ATTEMPTS, PACK_PARAM_RETRY, pack_params};
-use executor::{Job, JobStatus, Purpose, step_name};
-use identity::Choice;
-use pack::PackRequest;
 use super::Msg;
 use super::actions::{ActionTable, Offset, Route, Step};
 use super::command::{
@@ -27,6 +22,11 @@ use super::readiness::Readiness;
 use super::telemetry::{PackParam, Telemetry, TelemetryConfig, displace};
 use companion_core::observations::Observations;
 use companion_core::record::{CommandOutcome, CommandRecord, Event, LinkEvent};
+use executor::{Job, JobStatus, Purpose, step_name};
+use identity::Choice;
+pub use identity::{AUTOPILOT_COMPONENT, OTHER_COMPONENT_WAIT};
+use pack::PackRequest;
+pub use pack::{PACK_PARAM_ATTEMPTS, PACK_PARAM_RETRY, pack_params};
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
@@ -636,5 +636,4 @@ impl Vehicle {
                 .is_none_or(|p| p.alt_rel_m <= self.cfg.ground_altitude_m),
         }
     }
-
 }

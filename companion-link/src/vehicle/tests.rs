@@ -27,8 +27,7 @@ fn hb(mode: u32, armed: bool) -> Frame {
         mavtype: MavType::MAV_TYPE_QUADROTOR,
         autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
         base_mode: if armed {
-            MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED
-                | MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+            MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED | MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
         } else {
             MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
         },
@@ -783,9 +782,7 @@ fn zone_vehicle() -> Vehicle {
 
 fn repositions(out: &[Msg]) -> usize {
     out.iter()
-        .filter(
-            |m| matches!(m, Msg::COMMAND_INT(c) if c.command == MavCmd::MAV_CMD_DO_REPOSITION),
-        )
+        .filter(|m| matches!(m, Msg::COMMAND_INT(c) if c.command == MavCmd::MAV_CMD_DO_REPOSITION))
         .count()
 }
 
@@ -1116,11 +1113,9 @@ fn land_at_the_zone_lands_where_it_is_after_the_arrive_timeout() {
     assert!(commands(&at(&mut v, 30.0, 2.0)).is_empty());
     let out = at(&mut v, 61.5, 2.0);
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
-    assert!(
-        v.take_records()
-            .iter()
-            .any(|r| matches!(&r.result, CommandOutcome::Timeout(Some(why)) if why.contains("landing here")))
-    );
+    assert!(v.take_records().iter().any(
+        |r| matches!(&r.result, CommandOutcome::Timeout(Some(why)) if why.contains("landing here"))
+    ));
 }
 
 #[test]
@@ -1307,12 +1302,8 @@ fn px4_ready(v: &mut Vehicle, t: f64) -> Vec<Msg> {
             mavlink_version: 3,
         }),
         Msg::SYS_STATUS(SYS_STATUS_DATA {
-            onboard_control_sensors_present: MavSysStatusSensor::from_bits_truncate(
-                0x0300_402f,
-            ),
-            onboard_control_sensors_enabled: MavSysStatusSensor::from_bits_truncate(
-                0x0301_402f,
-            ),
+            onboard_control_sensors_present: MavSysStatusSensor::from_bits_truncate(0x0300_402f),
+            onboard_control_sensors_enabled: MavSysStatusSensor::from_bits_truncate(0x0301_402f),
             onboard_control_sensors_health: MavSysStatusSensor::from_bits_truncate(0x1320_c83f),
             ..SYS_STATUS_DATA::DEFAULT
         }),
@@ -1584,9 +1575,9 @@ fn px4_mode_that_never_shows_fails_after_the_attempts_and_another_mode_is_never_
     let r = results(&mut v);
     assert_eq!(sent, 3, "max_mode_attempts = 3 in all: {r:?}");
     assert!(
-        r.iter()
-            .any(|x| x
-                == "SET_MODE AUTO FAILED (accepted 3 times, but the vehicle stays in LOITER)"),
+        r.iter().any(
+            |x| x == "SET_MODE AUTO FAILED (accepted 3 times, but the vehicle stays in LOITER)"
+        ),
         "{r:?}"
     );
     assert_eq!(

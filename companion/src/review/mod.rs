@@ -17,9 +17,9 @@ pub mod text;
 pub mod why;
 
 pub use html::render_html;
-pub use terminal::{render_terminal, render_why};
 pub use records::{distance_m, policy_from_command};
 use records::{is_failsafe, mission_states_of, mode, position, vehicle_f64};
+pub use terminal::{render_terminal, render_why};
 
 use crate::decision_log::{Header, LogItem, LossReason, ReadError, ReadIssue, stream_log};
 use companion_core::mission::{ActionRole, RouteRole};

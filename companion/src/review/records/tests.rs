@@ -16,8 +16,7 @@ fn header_with(mission: Option<String>) -> Header {
 #[test]
 fn review_reads_the_mission_states_from_the_log_header() {
     let shipped =
-        std::fs::read_to_string(crate::params::default_params_dir().join("mission.toml"))
-            .unwrap();
+        std::fs::read_to_string(crate::params::default_params_dir().join("mission.toml")).unwrap();
     let declared = mission_states_of(&header_with(Some(shipped.clone())));
     assert_eq!(declared.phase("v4"), "tracking");
     assert!(declared.has_phase("wpi"));
@@ -34,8 +33,7 @@ fn review_reads_the_mission_states_from_the_log_header() {
 #[test]
 fn review_of_a_log_declaring_states_but_no_route_states_keeps_its_phases() {
     let shipped =
-        std::fs::read_to_string(crate::params::default_params_dir().join("mission.toml"))
-            .unwrap();
+        std::fs::read_to_string(crate::params::default_params_dir().join("mission.toml")).unwrap();
     let table = "[route_states]\non_ground = \"base\"\nfirst_leg = \"wp1\"\n\
         between_waypoints = \"wpi\"\nlast_waypoint = \"wpf\"\ntarget_found = \"target\"\n\
         landing = \"landing\"\n";
