@@ -38,6 +38,15 @@ pub enum Flavor {
 }
 
 impl Flavor {
+    /// The family's name in the record (`LinkEvent::Autopilot.flavor`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Flavor::ArduPilot => "ArduPilot",
+            Flavor::Px4 => "Px4",
+            Flavor::Other => "Other",
+        }
+    }
+
     /// The family a HEARTBEAT's autopilot field names.
     pub fn from_autopilot(a: MavAutopilot) -> Self {
         match a {

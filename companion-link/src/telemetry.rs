@@ -374,7 +374,7 @@ impl Telemetry {
                 self.on_wind([w.wind_x, w.wind_y, w.wind_z], x.hypot(y), from_deg);
             }
             Msg::EXTENDED_SYS_STATE(e) => {
-                let s = format!("{:?}", e.landed_state)
+                let s = crate::mavlink_name(&e.landed_state)
                     .trim_start_matches("MAV_LANDED_STATE_")
                     .to_string();
                 if self.landed_state.as_deref() != Some(s.as_str()) {

@@ -102,8 +102,7 @@ fn is_test_file(p: &Path) -> bool {
     let name = p.file_name().unwrap().to_string_lossy();
     name == "tests.rs"
         || name.ends_with("_tests.rs")
-        || p
-            .strip_prefix(root())
+        || p.strip_prefix(root())
             .unwrap_or(p)
             .components()
             .any(|c| c.as_os_str() == "tests")
@@ -141,5 +140,60 @@ fn no_shipped_rust_file_is_over_1000_lines() {
     assert!(
         long.is_empty(),
         "shipped files over {MAX_LINES} lines: {long:?}"
+    );
+}
+
+/// The modules that build what goes into a decision record (command records, events, link
+/// events, the record itself), relative to the workspace root; a folder stands for every
+/// shipped file in it.
+const RECORD_BUILDERS: &[&str] = &[
+    "companion-link/src/vehicle",
+    "companion-link/src/command.rs",
+    "companion-link/src/mission.rs",
+    "companion-link/src/telemetry.rs",
+    "companion-link/src/operator.rs",
+    "companion-link/src/mission_state.rs",
+    "companion-link/src/readiness.rs",
+    "companion-core/src/record.rs",
+    "companion-core/src/record",
+    "companion/src/fly/cycle.rs",
+    "companion/src/sim.rs",
+];
+
+/// Types from producer to consumer (issue 25): no value reaches a record through its `Debug`
+/// text (`{:?}`, `{x:?}`, `{:#?}`), which is no contract and changes with a derive or a crate
+/// upgrade. MAVLink enums are named with `companion_link::mavlink_name`, our types with their
+/// `Display` or a named field; text from the link is quoted with `companion_link::quoted`.
+#[test]
+fn no_debug_formatting_in_the_modules_that_build_records() {
+    let mut files = Vec::new();
+    for entry in RECORD_BUILDERS {
+        let p = root().join(entry);
+        if p.is_dir() {
+            rs_files(&p, &mut files);
+        } else {
+            assert!(
+                p.is_file(),
+                "{} is gone: update RECORD_BUILDERS",
+                p.display()
+            );
+            files.push(p);
+        }
+    }
+    files.retain(|f| !is_test_file(f));
+    let mut found = Vec::new();
+    for f in &files {
+        let text = std::fs::read_to_string(f).unwrap();
+        // Inline tests (at the end of a file) may print what they like.
+        let shipped = text.split("#[cfg(test)]\nmod tests {").next().unwrap_or("");
+        for (n, line) in shipped.lines().enumerate() {
+            if line.contains(":?}") || line.contains(":#?}") {
+                found.push(format!("{}:{}: {}", f.display(), n + 1, line.trim()));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "Debug formatting into a record: {found:#?}"
     );
 }

@@ -359,7 +359,7 @@ impl Vehicle {
                 self.issued(now, &action, format!("SET_MODE {name}"), spec, out)
             }
             None => {
-                let result = format!("FAILED (no {name} mode for {:?})", self.flavor);
+                let result = format!("FAILED (no {name} mode for {})", self.flavor.name());
                 self.record_step(action, format!("SET_MODE {name}"), result);
                 self.job_failed(now);
                 Advance::Again
@@ -514,7 +514,7 @@ impl Vehicle {
         let Some(params) = modes::command_params(self.flavor, command, params, home_amsl_m) else {
             self.record_step(
                 action,
-                format!("{command:?}"),
+                crate::mavlink_name(&command),
                 "FAILED (no home position yet)".into(),
             );
             self.job_failed(now);
@@ -525,7 +525,7 @@ impl Vehicle {
             self.note_mode(now, "TAKEOFF");
         }
         let spec = CommandSpec::long(command, params);
-        self.issued(now, &action, format!("{command:?}"), spec, out)
+        self.issued(now, &action, crate::mavlink_name(&command), spec, out)
     }
 
     pub(super) fn upload_mission_step(
@@ -828,8 +828,8 @@ impl Vehicle {
                 MissionEvent::Failed { op, error } => {
                     self.records.push(CommandRecord {
                         action,
-                        command: format!("{op:?}"),
-                        result: CommandOutcome::Failed(Some(format!("{error:?}"))),
+                        command: op.command_name(),
+                        result: error.outcome(),
                         attempts: 1,
                         latency_ms: None,
                     });
@@ -950,7 +950,7 @@ pub(super) fn step_name(s: &Step) -> String {
     match s {
         Step::Mode(m) => format!("SET_MODE {m}"),
         Step::Arm => "ARM".into(),
-        Step::Command { command, .. } => format!("{command:?}"),
+        Step::Command { command, .. } => crate::mavlink_name(&command),
         Step::UploadMission => "MISSION_UPLOAD".into(),
         Step::Reposition(_) => "MAV_CMD_DO_REPOSITION".into(),
         Step::GotoZone => "MAV_CMD_DO_REPOSITION (zone)".into(),

@@ -342,7 +342,7 @@ impl Vehicle {
                     LinkEvent::Autopilot {
                         system: sys,
                         component: comp,
-                        flavor: format!("{:?}", self.flavor),
+                        flavor: self.flavor.name().to_string(),
                     },
                     false,
                 );
@@ -486,8 +486,8 @@ impl Vehicle {
             }
             LivenessEvent::Lost => {
                 tracing::warn!(
-                    "link lost: no message from the autopilot for {:?}",
-                    self.cfg.link_timeout
+                    "link lost: no message from the autopilot for {} s",
+                    self.cfg.link_timeout.as_secs_f64()
                 );
                 self.drop_everything(now, "link lost");
                 self.link_event(LinkEvent::Lost, true);

@@ -1009,10 +1009,11 @@ fn a_mission_that_does_not_verify_is_never_flown() {
     );
     assert!(!v.busy());
     let recs = v.take_records();
+    // The typed error's sentence, never its Debug text (`UploadVerified`, `VerifyMismatch(..)`).
     assert!(
-        recs.iter()
-            .any(|r| matches!(&r.result, CommandOutcome::Failed(Some(why))
-                if why.contains("VerifyMismatch") && why.contains("altitude"))),
+        recs.iter().any(|r| r.command == "MISSION_UPLOAD"
+            && matches!(&r.result, CommandOutcome::Failed(Some(why))
+                if why.starts_with("read back differs: item ") && why.contains("altitude"))),
         "{recs:?}"
     );
     assert!(recs.iter().any(

@@ -77,9 +77,9 @@ pub fn categorize(result: &CommandOutcome) -> Category {
         Skipped(_) | Superseded | NotSent(_) | Cancelled(_) => Category::Skipped,
         Denied | Unsupported | TemporarilyRejected | NotReady(_) => Category::Denied,
         Timeout(_) => Category::TimedOut,
-        // A mission transfer stopped by a cancel is a stop, not a failure (the transfer's error,
-        // `Cancelled("why")`, is the detail).
-        Failed(Some(why)) if why.starts_with("Cancelled") => Category::Skipped,
+        // Logs written before the mission error was typed: a transfer stopped by a cancel was
+        // `FAILED (Cancelled("why"))` (its error's Debug text); now it is `CANCELLED (why)`.
+        Failed(Some(why)) if why.starts_with("Cancelled(") => Category::Skipped,
         Failed(_) | Unmapped | Other(_) => Category::Failed,
     }
 }
@@ -149,6 +149,8 @@ mod tests {
             ("NOT_SENT (no link)", Category::Skipped),
             ("CANCELLED (pilot took over)", Category::Skipped),
             ("FAILED (Cancelled(\"link lost\"))", Category::Skipped),
+            ("CANCELLED (link lost)", Category::Skipped),
+            ("TIMEOUT (no answer to MISSION_ITEM_INT)", Category::TimedOut),
             ("DENIED", Category::Denied),
             ("TEMPORARILY_REJECTED", Category::Denied),
             ("NOT_READY (prearm)", Category::Denied),
