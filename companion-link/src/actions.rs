@@ -5,6 +5,7 @@
 
 use super::dialect::MavCmd;
 use super::mission::MissionItem;
+use super::modes::Flavor;
 use super::telemetry::{TelemetryConfig, displace};
 use companion_core::spec::{ParamsFiles, SpecError, check_positive, check_range, read_toml};
 use serde::Deserialize;
@@ -300,6 +301,25 @@ pub struct Route {
 }
 
 impl Route {
+    /// The route as mission items for this autopilot. ArduPilot: [`Route::items`] (seq 0 is home,
+    /// which ArduPilot overwrites). PX4 flies seq 0 and rejects a mission whose take-off is not the
+    /// first item, and reads a take-off item's lat/lon; so for PX4 the take-off (at home) comes first
+    /// and a waypoint over home at the route altitude takes the other slot, which keeps every
+    /// waypoint at the same seq on both autopilots (the mission state counts on it).
+    pub fn mission_items(&self, flavor: Flavor, home: (i32, i32)) -> Vec<MissionItem> {
+        let mut items = self.items(home);
+        if flavor != Flavor::Px4 {
+            return items;
+        }
+        items[0] = MissionItem::waypoint(home.0, home.1, self.altitude_m as f32);
+        if self.takeoff_first && items.len() > 1 {
+            items[1].x = home.0;
+            items[1].y = home.1;
+            items.swap(0, 1);
+        }
+        items
+    }
+
     /// Read and check the route file at `path`.
     pub fn load(files: &ParamsFiles, path: &Path) -> Result<Self, SpecError> {
         let raw: RawRoute = read_toml(files, path)?;
@@ -765,8 +785,7 @@ impl LinkParams {
     }
 
     /// (flavour, message id) of each stream that autopilot flavour does not send.
-    pub fn streams_not_sent(&self) -> Vec<(super::modes::Flavor, u32)> {
-        use super::modes::Flavor;
+    pub fn streams_not_sent(&self) -> Vec<(Flavor, u32)> {
         let ids = |names: &[String]| -> Vec<u32> {
             names
                 .iter()

@@ -1,4 +1,5 @@
 use super::*;
+use crate::dialect::{MavCmd, MavFrame};
 use crate::test_support::default_params_dir;
 
 fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> std::path::PathBuf {
@@ -260,4 +261,57 @@ fn flight_params_are_checked_with_entry() {
         crate::test_support::disk(LinkParams::load)(&p).is_err(),
         "unknown keys are refused"
     );
+}
+
+fn route(takeoff_first: bool) -> Route {
+    Route {
+        waypoints: vec![
+            Waypoint::Relative {
+                north_m: 50.0,
+                east_m: 0.0,
+                alt_m: 20.0,
+            },
+            Waypoint::Relative {
+                north_m: 50.0,
+                east_m: 50.0,
+                alt_m: 20.0,
+            },
+        ],
+        altitude_m: 20.0,
+        search_time_limit_s: None,
+        tracking_time_limit_s: None,
+        takeoff_first,
+    }
+}
+
+/// PX4 has no home item and wants the take-off first; waypoints keep ArduPilot's seq numbers.
+#[test]
+fn px4_mission_has_takeoff_first_no_home_item_and_same_waypoint_seqs() {
+    let home = (473_977_420, 85_455_940);
+    for takeoff_first in [true, false] {
+        let r = route(takeoff_first);
+        let ap = r.mission_items(Flavor::ArduPilot, home);
+        let px4 = r.mission_items(Flavor::Px4, home);
+        assert_eq!(ap, r.items(home));
+        assert_eq!(ap.len(), px4.len());
+        let first_wp = if takeoff_first { 2 } else { 1 };
+        assert_eq!(ap[first_wp..], px4[first_wp..], "waypoints at the same seq");
+        // No item at 0 m AMSL (ArduPilot's home placeholder) and none at lat/lon 0.
+        assert!(px4.iter().all(|i| i.x == home.0 || i.x != 0), "{px4:?}");
+        assert!(
+            px4.iter()
+                .all(|i| i.frame == MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT)
+        );
+        assert!(
+            px4.iter().all(|i| i.x != 0 && i.y != 0 && i.z > 0.0),
+            "{px4:?}"
+        );
+        if takeoff_first {
+            assert_eq!(px4[0].command, MavCmd::MAV_CMD_NAV_TAKEOFF);
+            assert_eq!((px4[0].x, px4[0].y, px4[0].z), (home.0, home.1, 20.0));
+            assert_eq!(px4[1].command, MavCmd::MAV_CMD_NAV_WAYPOINT);
+        } else {
+            assert_eq!(px4[0], MissionItem::waypoint(home.0, home.1, 20.0));
+        }
+    }
 }

@@ -549,7 +549,7 @@ impl Vehicle {
             self.job_failed(now);
             return Advance::Again;
         };
-        let items = modes::mission_items(self.flavor, route, home);
+        let items = route.mission_items(self.flavor, home);
         match self.mission.upload(now, items) {
             Ok(msgs) => {
                 out.extend(msgs);

@@ -150,7 +150,10 @@ mod tests {
             ("CANCELLED (pilot took over)", Category::Skipped),
             ("FAILED (Cancelled(\"link lost\"))", Category::Skipped),
             ("CANCELLED (link lost)", Category::Skipped),
-            ("TIMEOUT (no answer to MISSION_ITEM_INT)", Category::TimedOut),
+            (
+                "TIMEOUT (no answer to MISSION_ITEM_INT)",
+                Category::TimedOut,
+            ),
             ("DENIED", Category::Denied),
             ("TEMPORARILY_REJECTED", Category::Denied),
             ("NOT_READY (prearm)", Category::Denied),
