@@ -197,3 +197,23 @@ fn no_debug_formatting_in_the_modules_that_build_records() {
         "Debug formatting into a record: {found:#?}"
     );
 }
+
+/// The link is sans-IO (issue 25): it is handed bytes and params as data and reads no file;
+/// the shell reads them (the signing key: `fly::link_security::load_signing_key`). Test code
+/// (test files, and the `#[cfg(test)]` part at the end of a file) may use the disk.
+#[test]
+fn no_shipped_file_of_the_link_names_std_fs() {
+    let mut files = Vec::new();
+    rs_files(&root().join("companion-link/src"), &mut files);
+    files.retain(|f| !is_test_file(f));
+    assert!(files.len() > 10, "{files:?}");
+    for f in files {
+        let text = std::fs::read_to_string(&f).unwrap();
+        let shipped = text.split("#[cfg(test)]").next().unwrap_or("");
+        assert!(
+            !shipped.contains("std::fs"),
+            "{} names std::fs",
+            f.display()
+        );
+    }
+}

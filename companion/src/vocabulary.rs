@@ -83,7 +83,7 @@ fn scenarios(p: &Sources) -> Result<Vec<(PathBuf, Scenario)>, SpecError> {
         .files_in(&dir, "toml")
         .into_iter()
         .map(|f| {
-            let s = Scenario::load(&p.files, &f.display().to_string())?;
+            let s = Scenario::load(p.files, &f.display().to_string())?;
             Ok((f, s))
         })
         .collect()
