@@ -376,98 +376,193 @@ fn row_major(scope: &[usize], card: &[usize]) -> Vec<(usize, usize)> {
     out
 }
 
+/// The targets, the evidence and their ancestors (everything else is barren).
+fn ancestral(net: &Network, targets: &[usize], key: &[u8]) -> Vec<bool> {
+    let n = key.len();
+    let mut keep = vec![false; n];
+    let mut stack: Vec<usize> = targets
+        .iter()
+        .copied()
+        .chain((0..n).filter(|&i| key[i] != NONE))
+        .collect();
+    while let Some(i) = stack.pop() {
+        if !keep[i] {
+            keep[i] = true;
+            stack.extend(net.nodes()[i].parents.iter().map(|p| p.0));
+        }
+    }
+    keep
+}
+
+/// One factor per kept node's family over its unobserved vars (all-observed families only
+/// scale P(evidence) and are left out), and one per soft finding.
+fn family_factors(net: &Network, card: &[usize], key: &[u8], keep: &[bool]) -> Vec<Factor> {
+    let free = |i: usize| keep[i] && key[i] != HARD;
+    let mut factors = Vec::new();
+    for i in (0..keep.len()).filter(|&i| keep[i]) {
+        let fam: Vec<usize> = net.nodes()[i]
+            .parents
+            .iter()
+            .map(|p| p.0)
+            .chain([i])
+            .collect();
+        let mut stride = 1;
+        let mut strides = Vec::new();
+        let mut observed = Vec::new();
+        for &v in fam.iter().rev() {
+            if free(v) {
+                strides.push((v, stride));
+            } else {
+                observed.push((v, stride));
+            }
+            stride *= card[v];
+        }
+        // All-observed families are constants (they only scale P(evidence)).
+        if !strides.is_empty() {
+            factors.push(Factor {
+                scope: strides.iter().map(|&(v, _)| v).collect(),
+                dynamic: !observed.is_empty(),
+                heads: if free(i) { vec![i] } else { Vec::new() },
+                strides,
+                observed,
+                src: Src::Cpt(i),
+            });
+        }
+        if key[i] == SOFT {
+            factors.push(Factor {
+                scope: vec![i],
+                strides: vec![(i, 1)],
+                observed: Vec::new(),
+                src: Src::Soft(i),
+                heads: Vec::new(),
+                dynamic: true,
+            });
+        }
+    }
+    factors
+}
+
+/// Connected components of the unobserved vars: the factors and vars of those holding a
+/// target are kept (the vars returned in order).
+fn keep_target_components(
+    factors: &mut Vec<Factor>,
+    n: usize,
+    targets: &[usize],
+    free: &impl Fn(usize) -> bool,
+) -> Vec<usize> {
+    let mut uf: Vec<usize> = (0..n).collect();
+    fn find(uf: &mut [usize], mut x: usize) -> usize {
+        while uf[x] != x {
+            uf[x] = uf[uf[x]];
+            x = uf[x];
+        }
+        x
+    }
+    for f in factors.iter() {
+        for w in f.scope.windows(2) {
+            let (a, b) = (find(&mut uf, w[0]), find(&mut uf, w[1]));
+            uf[a] = b;
+        }
+    }
+    let mut wanted = vec![false; n];
+    for &t in targets {
+        if free(t) {
+            let r = find(&mut uf, t);
+            wanted[r] = true;
+        }
+    }
+    factors.retain(|f| {
+        let r = find(&mut uf, f.scope[0]);
+        wanted[r]
+    });
+    (0..n)
+        .filter(|&i| {
+            free(i) && {
+                let r = find(&mut uf, i);
+                wanted[r]
+            }
+        })
+        .collect()
+}
+
+/// Sums out in advance the non-target vars all of whose factors are constant, while that
+/// makes no table larger than the ones it replaces (the evidence cannot change them); the
+/// largest table built on the way (scratch space the query needs).
+fn sum_out_constants(
+    plan: &mut Plan,
+    factors: &mut Vec<Factor>,
+    vars: &mut Vec<usize>,
+    targets: &[usize],
+    card: &[usize],
+) -> usize {
+    let mut scratch = 0;
+    loop {
+        let mut best: Option<(usize, usize, Vec<usize>)> = None;
+        for &v in vars.iter().filter(|v| !targets.contains(v)) {
+            let inv: Vec<&Factor> = factors.iter().filter(|f| f.scope.contains(&v)).collect();
+            if inv.iter().any(|f| f.dynamic) {
+                continue;
+            }
+            let mut union: Vec<usize> = inv.iter().flat_map(|f| f.scope.clone()).collect();
+            union.sort_unstable();
+            union.dedup();
+            let size: usize = union.iter().map(|&u| card[u]).product();
+            let largest = inv.iter().map(|f| f.size(card)).max().unwrap_or(0);
+            if size <= largest && best.as_ref().is_none_or(|b| size < b.0) {
+                best = Some((size, v, union));
+            }
+        }
+        let Some((size, v, union)) = best else { break };
+        scratch = scratch.max(size);
+        let (inv, rest): (Vec<Factor>, Vec<Factor>) = std::mem::take(factors)
+            .into_iter()
+            .partition(|f| f.scope.contains(&v));
+        *factors = rest;
+        let scope: Vec<usize> = union.iter().copied().filter(|&u| u != v).collect();
+        let len: usize = scope.iter().map(|&u| card[u]).product();
+        let out = Span {
+            off: plan.derived.len(),
+            len,
+        };
+        plan.derived.extend(std::iter::repeat_n(0.0, len));
+        let ins = inv
+            .iter()
+            .map(|f| {
+                let m = strided_map(&union, card, &f.stride_in(&union));
+                (f.src, push(&mut plan.maps, m))
+            })
+            .collect();
+        let out_map = push(&mut plan.maps, index_map(&union, &scope, card));
+        plan.derives.push(DeriveOp {
+            ins,
+            len: size,
+            out,
+            out_map,
+        });
+        let mut heads: Vec<usize> = inv.iter().flat_map(|f| f.heads.clone()).collect();
+        heads.retain(|&h| h != v);
+        vars.retain(|&u| u != v);
+        if !scope.is_empty() {
+            factors.push(Factor {
+                strides: row_major(&scope, card),
+                scope,
+                observed: Vec::new(),
+                src: Src::Derived(out),
+                heads,
+                dynamic: false,
+            });
+        }
+    }
+    scratch
+}
+
 impl Plan {
     fn compile(net: &Network, card: &[usize], targets: &[usize], key: &[u8]) -> Plan {
         let n = card.len();
-        // Ancestral set of the targets and the evidence (everything else is barren).
-        let mut keep = vec![false; n];
-        let mut stack: Vec<usize> = targets
-            .iter()
-            .copied()
-            .chain((0..n).filter(|&i| key[i] != NONE))
-            .collect();
-        while let Some(i) = stack.pop() {
-            if !keep[i] {
-                keep[i] = true;
-                stack.extend(net.nodes()[i].parents.iter().map(|p| p.0));
-            }
-        }
+        let keep = ancestral(net, targets, key);
         let free = |i: usize| keep[i] && key[i] != HARD;
-        let mut factors = Vec::new();
-        for i in (0..n).filter(|&i| keep[i]) {
-            let fam: Vec<usize> = net.nodes()[i]
-                .parents
-                .iter()
-                .map(|p| p.0)
-                .chain([i])
-                .collect();
-            let mut stride = 1;
-            let mut strides = Vec::new();
-            let mut observed = Vec::new();
-            for &v in fam.iter().rev() {
-                if free(v) {
-                    strides.push((v, stride));
-                } else {
-                    observed.push((v, stride));
-                }
-                stride *= card[v];
-            }
-            // All-observed families are constants (they only scale P(evidence)).
-            if !strides.is_empty() {
-                factors.push(Factor {
-                    scope: strides.iter().map(|&(v, _)| v).collect(),
-                    dynamic: !observed.is_empty(),
-                    heads: if free(i) { vec![i] } else { Vec::new() },
-                    strides,
-                    observed,
-                    src: Src::Cpt(i),
-                });
-            }
-            if key[i] == SOFT {
-                factors.push(Factor {
-                    scope: vec![i],
-                    strides: vec![(i, 1)],
-                    observed: Vec::new(),
-                    src: Src::Soft(i),
-                    heads: Vec::new(),
-                    dynamic: true,
-                });
-            }
-        }
-        // Connected components of the unobserved vars; keep those holding a target.
-        let mut uf: Vec<usize> = (0..n).collect();
-        fn find(uf: &mut [usize], mut x: usize) -> usize {
-            while uf[x] != x {
-                uf[x] = uf[uf[x]];
-                x = uf[x];
-            }
-            x
-        }
-        for f in &factors {
-            for w in f.scope.windows(2) {
-                let (a, b) = (find(&mut uf, w[0]), find(&mut uf, w[1]));
-                uf[a] = b;
-            }
-        }
-        let mut wanted = vec![false; n];
-        for &t in targets {
-            if free(t) {
-                let r = find(&mut uf, t);
-                wanted[r] = true;
-            }
-        }
-        factors.retain(|f| {
-            let r = find(&mut uf, f.scope[0]);
-            wanted[r]
-        });
-        let mut vars: Vec<usize> = (0..n)
-            .filter(|&i| {
-                free(i) && {
-                    let r = find(&mut uf, i);
-                    wanted[r]
-                }
-            })
-            .collect();
+        let mut factors = family_factors(net, card, key, &keep);
+        let mut vars = keep_target_components(&mut factors, n, targets, &free);
         let mut plan = Plan {
             key: key.to_vec(),
             maps: Vec::new(),
@@ -484,65 +579,7 @@ impl Plan {
             observed_targets: targets.iter().copied().filter(|&t| !free(t)).collect(),
             version: None,
         };
-        // Sum out in advance the non-target vars all of whose factors are constant, while that
-        // makes no table larger than the ones it replaces (the evidence cannot change them).
-        let mut scratch = 0;
-        loop {
-            let mut best: Option<(usize, usize, Vec<usize>)> = None;
-            for &v in vars.iter().filter(|v| !targets.contains(v)) {
-                let inv: Vec<&Factor> = factors.iter().filter(|f| f.scope.contains(&v)).collect();
-                if inv.iter().any(|f| f.dynamic) {
-                    continue;
-                }
-                let mut union: Vec<usize> = inv.iter().flat_map(|f| f.scope.clone()).collect();
-                union.sort_unstable();
-                union.dedup();
-                let size: usize = union.iter().map(|&u| card[u]).product();
-                let largest = inv.iter().map(|f| f.size(card)).max().unwrap_or(0);
-                if size <= largest && best.as_ref().is_none_or(|b| size < b.0) {
-                    best = Some((size, v, union));
-                }
-            }
-            let Some((size, v, union)) = best else { break };
-            scratch = scratch.max(size);
-            let (inv, rest): (Vec<Factor>, Vec<Factor>) =
-                factors.into_iter().partition(|f| f.scope.contains(&v));
-            factors = rest;
-            let scope: Vec<usize> = union.iter().copied().filter(|&u| u != v).collect();
-            let len: usize = scope.iter().map(|&u| card[u]).product();
-            let out = Span {
-                off: plan.derived.len(),
-                len,
-            };
-            plan.derived.extend(std::iter::repeat_n(0.0, len));
-            let ins = inv
-                .iter()
-                .map(|f| {
-                    let m = strided_map(&union, card, &f.stride_in(&union));
-                    (f.src, push(&mut plan.maps, m))
-                })
-                .collect();
-            let out_map = push(&mut plan.maps, index_map(&union, &scope, card));
-            plan.derives.push(DeriveOp {
-                ins,
-                len: size,
-                out,
-                out_map,
-            });
-            let mut heads: Vec<usize> = inv.iter().flat_map(|f| f.heads.clone()).collect();
-            heads.retain(|&h| h != v);
-            vars.retain(|&u| u != v);
-            if !scope.is_empty() {
-                factors.push(Factor {
-                    strides: row_major(&scope, card),
-                    scope,
-                    observed: Vec::new(),
-                    src: Src::Derived(out),
-                    heads,
-                    dynamic: false,
-                });
-            }
-        }
+        let scratch = sum_out_constants(&mut plan, &mut factors, &mut vars, targets, card);
         let scopes: Vec<Vec<usize>> = factors.iter().map(|f| f.scope.clone()).collect();
         let (_, cl_vars, tree) = junction_tree(card, &vars, &scopes, false);
         let size = |c: usize| -> usize { cl_vars[c].iter().map(|&v| card[v]).product() };

@@ -704,21 +704,13 @@ impl<'m> Core<'m> {
                 .map_or("", String::as_str)
         });
         let failed = &mut sc.failed;
-        let mut len = 0;
-        for name in self
-            .failed_resources
-            .iter()
-            .map(String::as_str)
-            .chain(tile_names)
-        {
-            if len == failed.len() {
-                failed.push(String::new());
-            }
-            failed[len].clear();
-            failed[len].push_str(name);
-            len += 1;
-        }
-        failed.truncate(len);
+        refill(
+            failed,
+            self.failed_resources
+                .iter()
+                .map(String::as_str)
+                .chain(tile_names),
+        );
         // How far into the activity: time spent in it over its estimated duration (capped below
         // 1 so an overrunning activity still counts its remainder as not yet flown).
         let started = match self.activity_started {
@@ -753,18 +745,9 @@ impl<'m> Core<'m> {
             },
             record,
         );
-        // PANORAMA's performance drift: the measured power of the activity beyond the tolerance.
-        if let Some(pw) = record.power.as_ref().filter(|pw| pw.drift_began) {
-            rec.events.push(Event::Other(format!(
-                "performance drift: {} measured {:.0} J against {:.0} J predicted in {:.0} s (x{:.2}, beyond {:.0} %); remaining energy estimates x{:.2}",
-                record.activity_name,
-                pw.measured_j.unwrap_or(0.0),
-                pw.predicted_j,
-                pw.activity_s,
-                pw.ratio.unwrap_or(1.0),
-                self.model.guarantee.tuning.power_drift_tolerance * 100.0,
-                pw.energy_scale
-            )));
+        if let Some(drift) = drift_event(record, self.model.guarantee.tuning.power_drift_tolerance)
+        {
+            rec.events.push(drift);
         }
         // The allocation's application alternatives (`V4.F`, `zone_t.F`) against what was placed.
         let mut n_differs = 0;
@@ -932,6 +915,36 @@ pub fn table(records: &[DecisionRecord], model: &Model) -> String {
         line([&row[0], &row[1], &row[2], &row[3], &row[4]], &mut out);
     }
     out
+}
+
+/// `names` into `into`, reusing its strings (the cycle allocates nothing once warm).
+fn refill<'a>(into: &mut Vec<String>, names: impl Iterator<Item = &'a str>) {
+    let mut len = 0;
+    for name in names {
+        if len == into.len() {
+            into.push(String::new());
+        }
+        into[len].clear();
+        into[len].push_str(name);
+        len += 1;
+    }
+    into.truncate(len);
+}
+
+/// PANORAMA's performance drift: the measured power of the activity beyond the tolerance,
+/// when it began this cycle.
+fn drift_event(record: &crate::record::GuaranteeRecord, tolerance: f64) -> Option<Event> {
+    let pw = record.power.as_ref().filter(|pw| pw.drift_began)?;
+    Some(Event::Other(format!(
+        "performance drift: {} measured {:.0} J against {:.0} J predicted in {:.0} s (x{:.2}, beyond {:.0} %); remaining energy estimates x{:.2}",
+        record.activity_name,
+        pw.measured_j.unwrap_or(0.0),
+        pw.predicted_j,
+        pw.activity_s,
+        pw.ratio.unwrap_or(1.0),
+        tolerance * 100.0,
+        pw.energy_scale
+    )))
 }
 
 #[cfg(test)]

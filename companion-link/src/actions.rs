@@ -5,6 +5,7 @@
 
 use super::dialect::MavCmd;
 use super::mission::MissionItem;
+use super::modes::Flavor;
 use super::telemetry::{TelemetryConfig, displace};
 use companion_core::spec::{ParamsFiles, SpecError, check_positive, check_range, read_toml};
 use serde::Deserialize;
@@ -300,6 +301,25 @@ pub struct Route {
 }
 
 impl Route {
+    /// The route as mission items for this autopilot. ArduPilot: [`Route::items`] (seq 0 is home,
+    /// which ArduPilot overwrites). PX4 flies seq 0 and rejects a mission whose take-off is not the
+    /// first item, and reads a take-off item's lat/lon; so for PX4 the take-off (at home) comes first
+    /// and a waypoint over home at the route altitude takes the other slot, which keeps every
+    /// waypoint at the same seq on both autopilots (the mission state counts on it).
+    pub fn mission_items(&self, flavor: Flavor, home: (i32, i32)) -> Vec<MissionItem> {
+        let mut items = self.items(home);
+        if flavor != Flavor::Px4 {
+            return items;
+        }
+        items[0] = MissionItem::waypoint(home.0, home.1, self.altitude_m as f32);
+        if self.takeoff_first && items.len() > 1 {
+            items[1].x = home.0;
+            items[1].y = home.1;
+            items.swap(0, 1);
+        }
+        items
+    }
+
     /// Read and check the route file at `path`.
     pub fn load(files: &ParamsFiles, path: &Path) -> Result<Self, SpecError> {
         let raw: RawRoute = read_toml(files, path)?;
@@ -765,8 +785,7 @@ impl LinkParams {
     }
 
     /// (flavour, message id) of each stream that autopilot flavour does not send.
-    pub fn streams_not_sent(&self) -> Vec<(super::modes::Flavor, u32)> {
-        use super::modes::Flavor;
+    pub fn streams_not_sent(&self) -> Vec<(Flavor, u32)> {
         let ids = |names: &[String]| -> Vec<u32> {
             names
                 .iter()
@@ -783,268 +802,4 @@ impl LinkParams {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::test_support::default_params_dir;
-
-    fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> std::path::PathBuf {
-        let p = dir.path().join(name);
-        std::fs::write(&p, text).unwrap();
-        p
-    }
-
-    #[test]
-    fn shipped_params_load() {
-        let dir = default_params_dir();
-        let t = crate::test_support::disk(ActionTable::load)(&dir.join("commands.toml")).unwrap();
-        for a in [
-            "take_off",
-            "follow_trajectory",
-            "avoid_obstacle",
-            "land",
-            "replan_and_land",
-            "return_to_base",
-        ] {
-            assert!(t.actions.contains_key(a), "{a} missing");
-        }
-        assert_eq!(t.actions["take_off"][1], Step::Arm);
-        assert!(matches!(
-            t.actions["take_off"][2],
-            Step::Command {
-                command: MavCmd::MAV_CMD_NAV_TAKEOFF,
-                ..
-            }
-        ));
-        assert_eq!(t.actions["return_to_base"], vec![Step::Mode("RTL".into())]);
-        // Staying on the ground commands nothing (an addition to the paper's actions).
-        assert_eq!(t.actions["stay_on_ground"], Vec::<Step>::new());
-        let r = crate::test_support::disk(Route::load)(&dir.join("missions/tracking_route.toml"))
-            .unwrap();
-        assert!(r.waypoints.len() >= 3);
-        let lp = crate::test_support::disk(LinkParams::load)(&dir.join("link.toml")).unwrap();
-        assert_eq!(lp.stream_ids().len(), 15);
-    }
-
-    #[test]
-    fn bad_commands_are_rejected_with_entry() {
-        let d = tempfile::tempdir().unwrap();
-        let cases = [
-            ("[x]\nsteps = []\n", "x.steps", "at least one"),
-            (
-                "[x]\nsteps = [{ mode = \"WARP\" }]\n",
-                "x.steps[0]",
-                "unknown mode",
-            ),
-            (
-                "[x]\nsteps = [{ command = \"MAV_CMD_FLY_TO_MOON\" }]\n",
-                "x.steps[0]",
-                "unknown MAVLink command",
-            ),
-            (
-                "[x]\nsteps = [{ mode = \"RTL\", arm = true }]\n",
-                "x.steps[0]",
-                "exactly one",
-            ),
-            (
-                "[x]\nsteps = [{ arm = false }]\n",
-                "x.steps[0]",
-                "not a step",
-            ),
-            (
-                "[x]\nsteps = [{ command = \"MAV_CMD_NAV_LAND\", params = [1,2,3,4,5,6,7,8] }]\n",
-                "x.steps[0]",
-                "at most 7",
-            ),
-            (
-                "[x]\nsteps = [{ mode = \"RTL\", params = [1] }]\n",
-                "x.steps[0]",
-                "only go with command",
-            ),
-            (
-                "[x]\nnothing = true\nsteps = [{ mode = \"RTL\" }]\n",
-                "x.steps",
-                "must be empty",
-            ),
-        ];
-        for (text, entry, why) in cases {
-            let p = write(&d, "c.toml", text);
-            let e = crate::test_support::disk(ActionTable::load)(&p).expect_err(text);
-            assert_eq!(e.entry, entry, "{text}");
-            assert!(e.reason.contains(why), "{text}: {e}");
-        }
-        let p = write(&d, "c.toml", "[x]\nstepz = []\n");
-        assert!(crate::test_support::disk(ActionTable::load)(&p).is_err());
-    }
-
-    #[test]
-    fn bad_routes_are_rejected_with_entry() {
-        let d = tempfile::tempdir().unwrap();
-        let cases = [
-            (
-                "altitude_m = 20\nwaypoint = []\n",
-                "waypoint",
-                "at least one",
-            ),
-            (
-                "altitude_m = -1\n[[waypoint]]\nnorth_m = 1\neast_m = 1\n",
-                "altitude_m",
-                "positive",
-            ),
-            (
-                "frame = \"polar\"\naltitude_m = 20\n[[waypoint]]\nnorth_m = 1\neast_m = 1\n",
-                "frame",
-                "expected",
-            ),
-            (
-                "altitude_m = 20\n[[waypoint]]\nnorth_m = 1\n",
-                "waypoint[0]",
-                "north_m and east_m",
-            ),
-            (
-                "altitude_m = 20\n[[waypoint]]\nlat_deg = 1\nlon_deg = 1\n",
-                "waypoint[0]",
-                "relative route",
-            ),
-            (
-                "frame = \"absolute\"\naltitude_m = 20\n[[waypoint]]\nlat_deg = 91\nlon_deg = 1\n",
-                "waypoint[0]",
-                "latitude",
-            ),
-            (
-                "altitude_m = 20\n[[waypoint]]\nnorth_m = 1\neast_m = 1\nalt_m = -5\n",
-                "waypoint[0].alt_m",
-                "0..=10000",
-            ),
-            (
-                "altitude_m = 1e300\n[[waypoint]]\nnorth_m = 1\neast_m = 1\n",
-                "altitude_m",
-                "out of range",
-            ),
-            (
-                "altitude_m = 20000\n[[waypoint]]\nnorth_m = 1\neast_m = 1\n",
-                "altitude_m",
-                "at most 10000",
-            ),
-            (
-                "altitude_m = 20\n[[waypoint]]\nnorth_m = 1e9\neast_m = 1\n",
-                "waypoint[0]",
-                "50 km",
-            ),
-        ];
-        let many = |n: usize| {
-            "altitude_m = 20\n".to_string() + &"[[waypoint]]\nnorth_m = 1\neast_m = 1\n".repeat(n)
-        };
-        let (w1001, w70000) = (many(1001), many(70_000));
-        let cases = cases.into_iter().chain([
-            (w1001.as_str(), "waypoint", "at most 1000"),
-            (w70000.as_str(), "-", "a params file is at most"),
-        ]);
-        for (text, entry, why) in cases {
-            let p = write(&d, "r.toml", text);
-            let e = crate::test_support::disk(Route::load)(&p).expect_err(text);
-            assert_eq!(e.entry, entry, "{text}");
-            assert!(e.reason.contains(why), "{text}: {e}");
-        }
-    }
-
-    #[test]
-    fn relative_route_items_start_at_home() {
-        let d = tempfile::tempdir().unwrap();
-        let p = write(
-            &d,
-            "r.toml",
-            "altitude_m = 25\n[[waypoint]]\nnorth_m = 100\neast_m = 0\n[[waypoint]]\nnorth_m = 0\neast_m = 50\nalt_m = 30\n",
-        );
-        let r = crate::test_support::disk(Route::load)(&p).unwrap();
-        let home = (473_977_420, 85_455_940);
-        let items = r.items(home);
-        assert_eq!(items.len(), 4);
-        assert_eq!((items[0].x, items[0].y), home);
-        assert_eq!(items[1].command, MavCmd::MAV_CMD_NAV_TAKEOFF);
-        assert_eq!(items[1].z, 25.0);
-        // 100 m north = 100 / 111319.49 deg = 8983 * 1e-7 deg.
-        assert_eq!(items[2].x - home.0, 8983);
-        assert_eq!(items[2].y, home.1);
-        assert_eq!(items[3].z, 30.0);
-        assert_eq!(items[2].z, 25.0);
-    }
-
-    #[test]
-    fn bad_link_params() {
-        let d = tempfile::tempdir().unwrap();
-        let base = "decision_period_s = 1.0\narm_wait_s = 30\nmax_arm_attempts = 3\n[telemetry]\nobstacle_near_m = 15\nbattery_thresholds_pct = [30]\ndistance_max_age_s = 2\n";
-        let p = write(
-            &d,
-            "l.toml",
-            &format!("{base}[streams]\nNOT_A_MESSAGE = 2\n"),
-        );
-        assert_eq!(
-            crate::test_support::disk(LinkParams::load)(&p)
-                .unwrap_err()
-                .entry,
-            "streams.NOT_A_MESSAGE"
-        );
-        let p = write(&d, "l.toml", &format!("{base}[streams]\nWIND = 0\n"));
-        assert!(
-            crate::test_support::disk(LinkParams::load)(&p)
-                .unwrap_err()
-                .reason
-                .contains("rate")
-        );
-        let p = write(&d, "l.toml", &format!("{base}[streams]\nWIND = 1\n"));
-        assert_eq!(
-            crate::test_support::disk(LinkParams::load)(&p)
-                .unwrap()
-                .stream_ids(),
-            vec![(168, 1.0)]
-        );
-    }
-
-    #[test]
-    fn flight_params_are_checked_with_entry() {
-        let d = tempfile::tempdir().unwrap();
-        let base = "decision_period_s = 1.0\narm_wait_s = 30\nmax_arm_attempts = 3\n[streams]\nWIND = 1\n[telemetry]\nobstacle_near_m = 15\nbattery_thresholds_pct = [30]\ndistance_max_age_s = 2\n";
-        let p = write(&d, "l.toml", base);
-        assert_eq!(
-            crate::test_support::disk(LinkParams::load)(&p)
-                .unwrap()
-                .flight,
-            FlightParams::default()
-        );
-        for (line, entry) in [
-            (
-                "min_event_cycle_interval_s = 0",
-                "flight.min_event_cycle_interval_s",
-            ),
-            (
-                "min_event_cycle_interval_s = 2.0",
-                "flight.min_event_cycle_interval_s",
-            ),
-            (
-                "min_event_cycle_interval_s = nan",
-                "flight.min_event_cycle_interval_s",
-            ),
-            ("landed_confirm_s = -1", "flight.landed_confirm_s"),
-            ("zone_radius_m = inf", "flight.zone_radius_m"),
-            (
-                "zone_arrive_timeout_s = 1e30",
-                "flight.zone_arrive_timeout_s",
-            ),
-            ("statustext_max_per_s = 0", "flight.statustext_max_per_s"),
-        ] {
-            let p = write(&d, "l.toml", &format!("{base}[flight]\n{line}\n"));
-            assert_eq!(
-                crate::test_support::disk(LinkParams::load)(&p)
-                    .unwrap_err()
-                    .entry,
-                entry,
-                "{line}"
-            );
-        }
-        let p = write(&d, "l.toml", &format!("{base}[flight]\nzone_radius = 3\n"));
-        assert!(
-            crate::test_support::disk(LinkParams::load)(&p).is_err(),
-            "unknown keys are refused"
-        );
-    }
-}
+mod tests;

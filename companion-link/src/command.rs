@@ -83,7 +83,7 @@ impl CommandSpec {
     }
     /// `MAV_CMD_NAV_TAKEOFF`, ... (the name the decision log shows).
     pub fn name(&self) -> String {
-        format!("{:?}", self.command)
+        crate::mavlink_name(&self.command)
     }
 }
 
@@ -148,7 +148,7 @@ impl Outcome {
                 MavResult::MAV_RESULT_CANCELLED => CommandOutcome::Cancelled(None),
                 // The rarer answers keep the MAV_RESULT name.
                 other => CommandOutcome::Other(
-                    format!("{other:?}")
+                    crate::mavlink_name(other)
                         .trim_start_matches("MAV_RESULT_")
                         .to_string(),
                 ),
@@ -209,7 +209,7 @@ struct Pending {
 
 /// Submit refused: a command with the same id is already in flight.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{0:?} already in flight")]
+#[error("{} already in flight", crate::mavlink_name(.0))]
 pub struct Busy(pub MavCmd);
 
 /// The command client for one autopilot.

@@ -10,7 +10,6 @@ use mavlink::{
     SigningData,
 };
 use std::io::Read;
-use std::path::Path;
 
 /// What the ingest path accepted and dropped, for the decision log and docs/mavlink.md.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
@@ -271,17 +270,16 @@ pub enum KeyError {
     Format(String, usize),
 }
 
-/// Load a MAVLink 2 signing key: 32 raw bytes, or 64 hex digits (whitespace ignored).
-/// Outgoing frames are signed; incoming unsigned frames are accepted except commands to us.
-pub fn load_signing_key(path: &Path) -> Result<[u8; 32], KeyError> {
-    let name = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| KeyError::Read(name.clone(), e))?;
+/// A MAVLink 2 signing key from the bytes of the key file named `name` (the shell reads it):
+/// 32 raw bytes, or 64 hex digits (whitespace ignored). Outgoing frames are signed; incoming
+/// unsigned frames are accepted except commands to us.
+pub fn parse_signing_key(name: &str, bytes: &[u8]) -> Result<[u8; 32], KeyError> {
     if bytes.len() == 32 {
         let mut k = [0u8; 32];
-        k.copy_from_slice(&bytes);
+        k.copy_from_slice(bytes);
         return Ok(k);
     }
-    let text: String = String::from_utf8_lossy(&bytes).split_whitespace().collect();
+    let text: String = String::from_utf8_lossy(bytes).split_whitespace().collect();
     if text.len() == 64 && text.bytes().all(|b| b.is_ascii_hexdigit()) {
         let mut k = [0u8; 32];
         for (i, chunk) in text.as_bytes().chunks(2).enumerate() {
@@ -290,7 +288,7 @@ pub fn load_signing_key(path: &Path) -> Result<[u8; 32], KeyError> {
         }
         return Ok(k);
     }
-    Err(KeyError::Format(name, bytes.len()))
+    Err(KeyError::Format(name.to_string(), bytes.len()))
 }
 
 /// Signing state for one connection (each needs its own: timestamps are per stream).
@@ -464,22 +462,15 @@ mod tests {
 
     #[test]
     fn key_file_formats() {
-        let dir = tempfile::tempdir().unwrap();
-        let raw = dir.path().join("raw.key");
-        std::fs::write(&raw, [5u8; 32]).unwrap();
-        assert_eq!(load_signing_key(&raw).unwrap(), [5u8; 32]);
-        let hex = dir.path().join("hex.key");
-        std::fs::write(&hex, format!("{}\n", "0a".repeat(32))).unwrap();
-        assert_eq!(load_signing_key(&hex).unwrap(), [10u8; 32]);
-        let short = dir.path().join("short.key");
-        std::fs::write(&short, "abc").unwrap();
+        assert_eq!(parse_signing_key("raw.key", &[5u8; 32]).unwrap(), [5u8; 32]);
+        let hex = format!("{}\n", "0a".repeat(32));
+        assert_eq!(
+            parse_signing_key("hex.key", hex.as_bytes()).unwrap(),
+            [10u8; 32]
+        );
         assert!(matches!(
-            load_signing_key(&short),
+            parse_signing_key("short.key", b"abc"),
             Err(KeyError::Format(_, 3))
-        ));
-        assert!(matches!(
-            load_signing_key(&dir.path().join("missing")),
-            Err(KeyError::Read(..))
         ));
     }
 

@@ -38,6 +38,26 @@ pub use mavlink::dialects::ardupilotmega as dialect;
 /// One decoded MAVLink message.
 pub type Msg = dialect::MavMessage;
 
+/// The MAVLink name of a value of a generated enum (`MAV_CMD_NAV_TAKEOFF`, `MAV_RESULT_DENIED`),
+/// from its serde form `{"type": NAME}`: the form commands.toml is read in (so a name written
+/// to the log reads back), never the `Debug` text.
+pub fn mavlink_name<T: serde::Serialize>(value: &T) -> String {
+    match serde_json::to_value(value) {
+        Ok(serde_json::Value::Object(mut m)) => match m.remove("type") {
+            Some(serde_json::Value::String(name)) => name,
+            _ => "?".to_string(),
+        },
+        _ => "?".to_string(),
+    }
+}
+
+/// Text from the link (a STATUSTEXT) as a quoted string literal with escapes, so a control
+/// character is seen in the record, not sent to a terminal. The one use of `Debug` for a
+/// record: a `str`'s Debug form is exactly that quoting.
+pub fn quoted(text: &str) -> String {
+    format!("{text:?}")
+}
+
 /// MAV_COMP_ID_ONBOARD_COMPUTER: the component id this companion uses.
 pub const OUR_COMPONENT_ID: u8 = 191;
 /// System id used before the autopilot's is learned from its HEARTBEAT (MAVLink default vehicle id).

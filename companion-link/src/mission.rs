@@ -24,6 +24,7 @@
 
 use super::Msg;
 use super::dialect::*;
+use companion_core::record::CommandOutcome;
 use std::time::Duration;
 
 /// One mission item as we store and compare it.
@@ -126,14 +127,16 @@ pub fn compare_from(sent: &[MissionItem], got: &[MissionItem], first: usize) -> 
     for (seq, (a, b)) in sent.iter().zip(got).enumerate().skip(first) {
         if a.command != b.command {
             return Err(format!(
-                "item {seq}: command {:?} came back as {:?}",
-                a.command, b.command
+                "item {seq}: command {} came back as {}",
+                crate::mavlink_name(&a.command),
+                crate::mavlink_name(&b.command)
             ));
         }
         if normalise_frame(a.frame) != normalise_frame(b.frame) {
             return Err(format!(
-                "item {seq}: frame {:?} came back as {:?}",
-                a.frame, b.frame
+                "item {seq}: frame {} came back as {}",
+                crate::mavlink_name(&a.frame),
+                crate::mavlink_name(&b.frame)
             ));
         }
         if (a.x - b.x).abs() > 1 || (a.y - b.y).abs() > 1 {
@@ -181,6 +184,19 @@ pub enum MissionOp {
     SetCurrent(u16),
 }
 
+impl MissionOp {
+    /// The `CommandRecord.command` of the operation: the MAVLink step it starts with, as the
+    /// record of a verified upload names it.
+    pub fn command_name(&self) -> String {
+        match self {
+            MissionOp::UploadVerified => "MISSION_UPLOAD".into(),
+            MissionOp::Download => "MISSION_REQUEST_LIST".into(),
+            MissionOp::Clear => "MISSION_CLEAR_ALL".into(),
+            MissionOp::SetCurrent(seq) => format!("MISSION_SET_CURRENT {seq}"),
+        }
+    }
+}
+
 /// Why a mission operation failed or was refused.
 #[derive(Debug, Clone, PartialEq)]
 pub enum MissionError {
@@ -194,6 +210,29 @@ pub enum MissionError {
     Busy,
     /// Dropped (link lost).
     Cancelled(String),
+}
+
+impl MissionError {
+    /// The `CommandRecord.result` of an operation that failed this way: a cancel is
+    /// `CANCELLED (why)` (a stop, not a failure), no answer `TIMEOUT (step)`, the rest
+    /// `FAILED (why)`.
+    pub fn outcome(&self) -> CommandOutcome {
+        match self {
+            MissionError::Ack(result) => {
+                CommandOutcome::Failed(Some(format!("MISSION_ACK {}", crate::mavlink_name(result))))
+            }
+            MissionError::Timeout(step) => {
+                CommandOutcome::Timeout(Some(format!("no answer to {step}")))
+            }
+            MissionError::VerifyMismatch(first) => {
+                CommandOutcome::Failed(Some(format!("read back differs: {first}")))
+            }
+            MissionError::Busy => {
+                CommandOutcome::Failed(Some("another mission operation is running".into()))
+            }
+            MissionError::Cancelled(why) => CommandOutcome::Cancelled(Some(why.clone())),
+        }
+    }
 }
 
 /// Progress and outcome of a mission operation.
@@ -554,6 +593,24 @@ impl MissionClient {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_mission_error_is_recorded_as_its_outcome_not_its_debug_text() {
+        let said = |e: MissionError| e.outcome().to_string();
+        assert_eq!(
+            said(MissionError::Cancelled("link lost".into())),
+            "CANCELLED (link lost)"
+        );
+        assert_eq!(
+            said(MissionError::Ack(MavMissionResult::MAV_MISSION_DENIED)),
+            "FAILED (MISSION_ACK MAV_MISSION_DENIED)"
+        );
+        assert_eq!(
+            said(MissionError::Timeout("MISSION_ITEM_INT".into())),
+            "TIMEOUT (no answer to MISSION_ITEM_INT)"
+        );
+        assert_eq!(MissionOp::UploadVerified.command_name(), "MISSION_UPLOAD");
+    }
 
     fn ms(v: u64) -> Duration {
         Duration::from_millis(v)

@@ -20,10 +20,8 @@
 //! MAV_CMD_DO_REPOSITION. ArduPilot Copter has no TAKEOFF mode (take-off is NAV_TAKEOFF in
 //! GUIDED), so `TAKEOFF` exists only for PX4.
 
-use super::actions::Route;
 use super::command::CommandSpec;
 use super::dialect::{MavAutopilot, MavCmd, MavFrame};
-use super::mission::MissionItem;
 
 /// Autopilot firmware family, from HEARTBEAT.autopilot: it decides mode numbers and protocol
 /// quirks.
@@ -38,6 +36,15 @@ pub enum Flavor {
 }
 
 impl Flavor {
+    /// The family's name in the record (`LinkEvent::Autopilot.flavor`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Flavor::ArduPilot => "ArduPilot",
+            Flavor::Px4 => "Px4",
+            Flavor::Other => "Other",
+        }
+    }
+
     /// The family a HEARTBEAT's autopilot field names.
     pub fn from_autopilot(a: MavAutopilot) -> Self {
         match a {
@@ -263,25 +270,6 @@ pub fn reposition_frame_alt(
     }
 }
 
-/// The route as mission items for this autopilot. ArduPilot: `Route::items` (seq 0 is home,
-/// which ArduPilot overwrites). PX4 flies seq 0 and rejects a mission whose take-off is not the
-/// first item, and reads a take-off item's lat/lon; so for PX4 the take-off (at home) comes first
-/// and a waypoint over home at the route altitude takes the other slot, which keeps every
-/// waypoint at the same seq on both autopilots (the mission state counts on it).
-pub fn mission_items(flavor: Flavor, route: &Route, home: (i32, i32)) -> Vec<MissionItem> {
-    let mut items = route.items(home);
-    if flavor != Flavor::Px4 {
-        return items;
-    }
-    items[0] = MissionItem::waypoint(home.0, home.1, route.altitude_m as f32);
-    if route.takeoff_first && items.len() > 1 {
-        items[1].x = home.0;
-        items[1].y = home.1;
-        items.swap(0, 1);
-    }
-    items
-}
-
 /// PX4's (main, sub) with the sub mode cleared where PX4 does not use it.
 fn px4_significant(custom_mode: u32) -> (u8, u8) {
     let (main, sub) = px4_main_sub(custom_mode);
@@ -478,60 +466,6 @@ mod tests {
             command_params(Flavor::Px4, MavCmd::MAV_CMD_DO_CHANGE_SPEED, p, Some(488.0)),
             Some(p)
         );
-    }
-
-    fn route(takeoff_first: bool) -> Route {
-        use crate::actions::Waypoint;
-        Route {
-            waypoints: vec![
-                Waypoint::Relative {
-                    north_m: 50.0,
-                    east_m: 0.0,
-                    alt_m: 20.0,
-                },
-                Waypoint::Relative {
-                    north_m: 50.0,
-                    east_m: 50.0,
-                    alt_m: 20.0,
-                },
-            ],
-            altitude_m: 20.0,
-            search_time_limit_s: None,
-            tracking_time_limit_s: None,
-            takeoff_first,
-        }
-    }
-
-    /// PX4 has no home item and wants the take-off first; waypoints keep ArduPilot's seq numbers.
-    #[test]
-    fn px4_mission_has_takeoff_first_no_home_item_and_same_waypoint_seqs() {
-        let home = (473_977_420, 85_455_940);
-        for takeoff_first in [true, false] {
-            let r = route(takeoff_first);
-            let ap = mission_items(Flavor::ArduPilot, &r, home);
-            let px4 = mission_items(Flavor::Px4, &r, home);
-            assert_eq!(ap, r.items(home));
-            assert_eq!(ap.len(), px4.len());
-            let first_wp = if takeoff_first { 2 } else { 1 };
-            assert_eq!(ap[first_wp..], px4[first_wp..], "waypoints at the same seq");
-            // No item at 0 m AMSL (ArduPilot's home placeholder) and none at lat/lon 0.
-            assert!(px4.iter().all(|i| i.x == home.0 || i.x != 0), "{px4:?}");
-            assert!(
-                px4.iter()
-                    .all(|i| i.frame == MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT)
-            );
-            assert!(
-                px4.iter().all(|i| i.x != 0 && i.y != 0 && i.z > 0.0),
-                "{px4:?}"
-            );
-            if takeoff_first {
-                assert_eq!(px4[0].command, MavCmd::MAV_CMD_NAV_TAKEOFF);
-                assert_eq!((px4[0].x, px4[0].y, px4[0].z), (home.0, home.1, 20.0));
-                assert_eq!(px4[1].command, MavCmd::MAV_CMD_NAV_WAYPOINT);
-            } else {
-                assert_eq!(px4[0], MissionItem::waypoint(home.0, home.1, 20.0));
-            }
-        }
     }
 
     /// PX4 takes a DO_REPOSITION COMMAND_INT only in MAV_FRAME_GLOBAL_INT and reads its altitude

@@ -173,7 +173,7 @@ impl Readiness {
             // A PreArm text stands until a healthy prearm report arrives after it.
             let cleared = matches!(self.prearm, Some((true, t)) if t > *at);
             if !cleared && self.prearm.is_some() {
-                why.push(format!("autopilot says {text:?}"));
+                why.push(format!("autopilot says {}", crate::quoted(text)));
             }
         }
         if why.is_empty() { Ok(()) } else { Err(why) }
@@ -206,7 +206,7 @@ impl Readiness {
         if let Some((text, at)) = &self.prearm_text {
             let cleared = matches!(self.prearm, Some((true, t)) if t > *at);
             if !cleared {
-                why.push(format!("autopilot says {text:?}"));
+                why.push(format!("autopilot says {}", crate::quoted(text)));
             }
         }
         if why.is_empty() { Ok(()) } else { Err(why) }

@@ -84,3 +84,136 @@ fn the_core_depends_on_no_io_runtime_cli_or_randomness_crate() {
         "the binary links the testkit"
     );
 }
+
+/// The workspace members' `src/` folders (every crate the workspace builds).
+fn crate_src_dirs() -> Vec<PathBuf> {
+    let manifest = std::fs::read_to_string(root().join("Cargo.toml")).unwrap();
+    let doc: toml::Table = manifest.parse().unwrap();
+    let members = doc["workspace"]["members"].as_array().unwrap();
+    members
+        .iter()
+        .map(|m| root().join(m.as_str().unwrap()).join("src"))
+        .collect()
+}
+
+/// A test file, by this workspace's convention: named `tests.rs` or `*_tests.rs`, or under a
+/// `tests/` folder (a module's tests live beside it: `foo.rs` + `foo/tests.rs`).
+fn is_test_file(p: &Path) -> bool {
+    let name = p.file_name().unwrap().to_string_lossy();
+    name == "tests.rs"
+        || name.ends_with("_tests.rs")
+        || p.strip_prefix(root())
+            .unwrap_or(p)
+            .components()
+            .any(|c| c.as_os_str() == "tests")
+}
+
+/// The shipped (non-test) Rust files under the crates' `src/`.
+fn shipped_rs_files() -> Vec<PathBuf> {
+    let mut files = Vec::new();
+    for dir in crate_src_dirs() {
+        rs_files(&dir, &mut files);
+    }
+    files.retain(|f| !is_test_file(f));
+    files
+}
+
+/// One concern per file (issue 25): a shipped file over 1,000 lines holds several; split it by
+/// concern, and move its inline tests beside it (`foo/tests.rs`).
+#[test]
+fn no_shipped_rust_file_is_over_1000_lines() {
+    const MAX_LINES: usize = 1000;
+    let files = shipped_rs_files();
+    assert!(
+        files
+            .iter()
+            .any(|f| f.ends_with("companion-link/src/vehicle/mod.rs")),
+        "{files:?}"
+    );
+    let long: Vec<String> = files
+        .iter()
+        .filter_map(|f| {
+            let n = std::fs::read_to_string(f).unwrap().lines().count();
+            (n > MAX_LINES).then(|| format!("{} ({n} lines)", f.display()))
+        })
+        .collect();
+    assert!(
+        long.is_empty(),
+        "shipped files over {MAX_LINES} lines: {long:?}"
+    );
+}
+
+/// The modules that build what goes into a decision record (command records, events, link
+/// events, the record itself), relative to the workspace root; a folder stands for every
+/// shipped file in it.
+const RECORD_BUILDERS: &[&str] = &[
+    "companion-link/src/vehicle",
+    "companion-link/src/command.rs",
+    "companion-link/src/mission.rs",
+    "companion-link/src/telemetry.rs",
+    "companion-link/src/operator.rs",
+    "companion-link/src/mission_state.rs",
+    "companion-link/src/readiness.rs",
+    "companion-core/src/record.rs",
+    "companion-core/src/record",
+    "companion/src/fly/cycle.rs",
+    "companion/src/sim.rs",
+];
+
+/// Types from producer to consumer (issue 25): no value reaches a record through its `Debug`
+/// text (`{:?}`, `{x:?}`, `{:#?}`), which is no contract and changes with a derive or a crate
+/// upgrade. MAVLink enums are named with `companion_link::mavlink_name`, our types with their
+/// `Display` or a named field; text from the link is quoted with `companion_link::quoted`.
+#[test]
+fn no_debug_formatting_in_the_modules_that_build_records() {
+    let mut files = Vec::new();
+    for entry in RECORD_BUILDERS {
+        let p = root().join(entry);
+        if p.is_dir() {
+            rs_files(&p, &mut files);
+        } else {
+            assert!(
+                p.is_file(),
+                "{} is gone: update RECORD_BUILDERS",
+                p.display()
+            );
+            files.push(p);
+        }
+    }
+    files.retain(|f| !is_test_file(f));
+    let mut found = Vec::new();
+    for f in &files {
+        let text = std::fs::read_to_string(f).unwrap();
+        // Inline tests (at the end of a file) may print what they like.
+        let shipped = text.split("#[cfg(test)]\nmod tests {").next().unwrap_or("");
+        for (n, line) in shipped.lines().enumerate() {
+            if line.contains(":?}") || line.contains(":#?}") {
+                found.push(format!("{}:{}: {}", f.display(), n + 1, line.trim()));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "Debug formatting into a record: {found:#?}"
+    );
+}
+
+/// The link is sans-IO (issue 25): it is handed bytes and params as data and reads no file;
+/// the shell reads them (the signing key: `fly::link_security::load_signing_key`). Test code
+/// (test files, and the `#[cfg(test)]` part at the end of a file) may use the disk.
+#[test]
+fn no_shipped_file_of_the_link_names_std_fs() {
+    let mut files = Vec::new();
+    rs_files(&root().join("companion-link/src"), &mut files);
+    files.retain(|f| !is_test_file(f));
+    assert!(files.len() > 10, "{files:?}");
+    for f in files {
+        let text = std::fs::read_to_string(&f).unwrap();
+        let shipped = text.split("#[cfg(test)]").next().unwrap_or("");
+        assert!(
+            !shipped.contains("std::fs"),
+            "{} names std::fs",
+            f.display()
+        );
+    }
+}

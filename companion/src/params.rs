@@ -100,7 +100,19 @@ impl Params {
         }
         self.check_mission_projections()?;
         self.check_performance_models()?;
-        crate::vocabulary::check(self)
+        crate::vocabulary::check(&self.vocabulary())
+    }
+
+    /// The loaded files as the vocabulary checks see them.
+    pub fn vocabulary(&self) -> crate::vocabulary::Sources<'_> {
+        crate::vocabulary::Sources {
+            dir: &self.dir,
+            files: &self.files,
+            model: &self.model,
+            world: &self.world,
+            link: &self.link,
+            commands: &self.commands,
+        }
     }
 
     /// `mission.toml`'s projections against the MDPs: each names a loaded MDP and one of its

@@ -589,19 +589,19 @@ mod tests {
         let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
         assert_eq!(mode, 0o600);
         assert_eq!(
-            companion_link::ingest::load_signing_key(&path).unwrap(),
+            crate::fly::link_security::load_signing_key(&path).unwrap(),
             key
         );
         let e = write_new_key(&path, false).unwrap_err().to_string();
         assert!(e.contains("refusing to overwrite"), "{e}");
         assert_eq!(
-            companion_link::ingest::load_signing_key(&path).unwrap(),
+            crate::fly::link_security::load_signing_key(&path).unwrap(),
             key
         );
         let new = write_new_key(&path, true).unwrap();
         assert_ne!(new, key);
         assert_eq!(
-            companion_link::ingest::load_signing_key(&path).unwrap(),
+            crate::fly::link_security::load_signing_key(&path).unwrap(),
             new
         );
         let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;

@@ -9,15 +9,34 @@
 //! params/actions.toml); the checks needing a shell's producers live here, because the core must
 //! not depend on the shells.
 
-use crate::params::Params;
+use crate::sim::WorldSpec;
 use crate::sim::{Scenario, WORLD_OBSERVATIONS};
+use companion_core::decision::Model;
 use companion_core::evidence::{CORE_COMPUTES, CORE_READS};
-use companion_core::spec::SpecError;
+use companion_core::spec::{ParamsFiles, SpecError};
 use companion_core::vocabulary::NamedAction;
+use companion_link::actions::{ActionTable, LinkParams};
 use companion_link::telemetry::TELEMETRY_OBSERVATIONS;
 use serde::Serialize;
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+
+/// What the vocabulary is checked across: the loaded params files (`Params::vocabulary`).
+#[derive(Clone, Copy)]
+pub struct Sources<'a> {
+    /// The params directory (files are named under it in errors).
+    pub dir: &'a Path,
+    /// The files as read.
+    pub files: &'a ParamsFiles,
+    /// The decision core's model.
+    pub model: &'a Model,
+    /// The simulated world.
+    pub world: &'a WorldSpec,
+    /// The MAVLink link settings.
+    pub link: &'a LinkParams,
+    /// Vehicle actions as MAVLink steps.
+    pub commands: &'a ActionTable,
+}
 
 /// The observations the fly shell derives and adds to the telemetry's
 /// (`fly::cycle::complete_observations`): here, with the rest of the vocabulary, so the shell
@@ -58,20 +77,20 @@ fn role(kind: &'static str, name: impl Into<String>) -> Role {
 }
 
 /// Every scenario file of the params set (params/scenarios/*.toml), loaded, with its file.
-fn scenarios(p: &Params) -> Result<Vec<(PathBuf, Scenario)>, SpecError> {
+fn scenarios(p: &Sources) -> Result<Vec<(PathBuf, Scenario)>, SpecError> {
     let dir = p.dir.join("scenarios");
     p.files
         .files_in(&dir, "toml")
         .into_iter()
         .map(|f| {
-            let s = Scenario::load(&p.files, &f.display().to_string())?;
+            let s = Scenario::load(p.files, &f.display().to_string())?;
             Ok((f, s))
         })
         .collect()
 }
 
 /// Consumers of every name something reads, by name.
-fn consumers(p: &Params) -> BTreeMap<String, Vec<Role>> {
+fn consumers(p: &Sources) -> BTreeMap<String, Vec<Role>> {
     let mut out: BTreeMap<String, Vec<Role>> = BTreeMap::new();
     let mut add = |name: &str, r: Role| {
         let v = out.entry(name.to_string()).or_default();
@@ -119,7 +138,7 @@ fn consumers(p: &Params) -> BTreeMap<String, Vec<Role>> {
 }
 
 /// Producers of every name something produces, by name.
-fn producers(p: &Params, scenarios: &[(PathBuf, Scenario)]) -> BTreeMap<String, Vec<Role>> {
+fn producers(p: &Sources, scenarios: &[(PathBuf, Scenario)]) -> BTreeMap<String, Vec<Role>> {
     let mut out: BTreeMap<String, Vec<Role>> = BTreeMap::new();
     let mut add = |name: &str, r: Role| {
         let v = out.entry(name.to_string()).or_default();
@@ -158,7 +177,7 @@ fn producers(p: &Params, scenarios: &[(PathBuf, Scenario)]) -> BTreeMap<String, 
 }
 
 /// Every name something reads, sorted, with its node, producers and consumers.
-pub fn named_observations(p: &Params) -> Result<Vec<NamedObservation>, SpecError> {
+pub fn named_observations(p: &Sources) -> Result<Vec<NamedObservation>, SpecError> {
     let scenarios = scenarios(p)?;
     let producers = producers(p, &scenarios);
     Ok(consumers(p)
@@ -179,7 +198,7 @@ pub fn named_observations(p: &Params) -> Result<Vec<NamedObservation>, SpecError
 
 /// Refuse a world baseline or scenario hazard that sets a name nothing reads, and an observation
 /// of params/observations.toml that neither the world, its scenarios, fly nor the core produces.
-pub fn check_observations(p: &Params) -> Result<(), SpecError> {
+pub fn check_observations(p: &Sources) -> Result<(), SpecError> {
     let scenarios = scenarios(p)?;
     let consumers = consumers(p);
     let unread = |o: &str| {
@@ -269,7 +288,7 @@ pub struct ActionEntry {
 }
 
 /// Every primitive action, in params/actions.toml order.
-pub fn actions(p: &Params) -> Vec<ActionEntry> {
+pub fn actions(p: &Sources) -> Vec<ActionEntry> {
     companion_core::vocabulary::named_actions(&p.model.actions, &p.model.mdps)
         .into_iter()
         .map(|a| ActionEntry {
@@ -288,7 +307,7 @@ pub fn actions(p: &Params) -> Vec<ActionEntry> {
 
 /// Refuse a params/commands.toml entry that is no action some MDP proposes, unless it is marked
 /// shell-only (`flown_for`), and an application action that has MAVLink steps.
-pub fn check_commands(p: &Params) -> Result<(), SpecError> {
+pub fn check_commands(p: &Sources) -> Result<(), SpecError> {
     let file = p.dir.join("commands.toml");
     let all = actions(p);
     for name in p.commands.actions.keys() {
@@ -319,7 +338,7 @@ pub fn check_commands(p: &Params) -> Result<(), SpecError> {
 }
 
 /// Both vocabularies' load checks.
-pub fn check(p: &Params) -> Result<(), SpecError> {
+pub fn check(p: &Sources) -> Result<(), SpecError> {
     check_observations(p)?;
     check_commands(p)
 }

@@ -542,6 +542,9 @@ fn copy_state(dst: &mut PlatformState, src: &PlatformState, ws: &mut ScheduleWor
     dst.external_cpu_load = src.external_cpu_load;
 }
 
+mod output;
+use output::{assign_tiles, drop_still_out, write_placements, write_totals};
+
 /// Decide placements for `requests` on `state` under `policy`. Returns the schedule and the
 /// platform state after it (tile bitstreams updated; faults and loads unchanged).
 pub fn schedule(
@@ -581,7 +584,6 @@ pub fn schedule_into(
     out: &mut Schedule,
     next: &mut PlatformState,
 ) {
-    let vs = catalogue.variants();
     // Earlier results become spares.
     ws.spare_placements.append(&mut out.placements);
     ws.spare_degraded.append(&mut out.degraded);
@@ -614,14 +616,57 @@ pub fn schedule_into(
         cpu: platform.cpu_budget * f64::from(online) / f64::from(cores) - external,
         cores,
     };
-    let n_ranked = policy.priority.len().max(1);
-    let rank_text = |it: &Item| RankText {
-        policy: &policy.name,
-        app: &requests[it.req].app,
-        rank: it.rank,
-        of: n_ranked,
-    };
 
+    let inp = Inputs {
+        platform,
+        catalogue,
+        policy,
+        requests,
+    };
+    admit(&inp, ws, out);
+    // Resolve: while the set does not fit, the least important application first tries its
+    // degradation path, then gives way.
+    let mut active = std::mem::take(&mut ws.items);
+    resolve(&inp, room, &mut active, ws, out);
+    replace_given_way(&inp, room, &mut active, ws, out);
+    assign_tiles(&inp, st, ws);
+    write_placements(&inp, &active, ws, out);
+    drop_still_out(&inp, room, ws, out);
+    ws.items = active;
+    write_totals(&inp, st, ws, out, online, external);
+}
+
+/// What one run of [`schedule_into`] reads.
+#[derive(Clone, Copy)]
+struct Inputs<'a> {
+    platform: &'a Platform,
+    catalogue: &'a Catalogue,
+    policy: &'a ResourcePolicy,
+    requests: &'a [Request],
+}
+
+impl Inputs<'_> {
+    /// The policy rank of `it`, written into a degradation or drop reason.
+    fn rank_text(&self, it: &Item) -> RankText<'_> {
+        RankText {
+            policy: &self.policy.name,
+            app: &self.requests[it.req].app,
+            rank: it.rank,
+            of: self.policy.priority.len().max(1),
+        }
+    }
+}
+
+/// The requests the catalogue can serve, ranked (each degraded already when no implementation
+/// of its version reaches its rate); the others dropped, with why.
+fn admit(inp: &Inputs, ws: &mut ScheduleWorkspace, out: &mut Schedule) {
+    let Inputs {
+        catalogue,
+        policy,
+        requests,
+        ..
+    } = *inp;
+    let vs = catalogue.variants();
     ws.items.clear();
     for (req, r) in requests.iter().enumerate() {
         if !catalogue.has_version(&r.app, &r.version) {
@@ -708,13 +753,28 @@ pub fn schedule_into(
             },
         );
     }
+}
 
-    // Resolve: while the set does not fit, the least important application first tries its
-    // degradation path, then gives way.
-    let mut active = std::mem::take(&mut ws.items);
+/// Resolve: while the set does not fit, the least important application first tries its
+/// degradation path, then gives way.
+fn resolve(
+    inp: &Inputs,
+    room: Room,
+    active: &mut Vec<Item>,
+    ws: &mut ScheduleWorkspace,
+    out: &mut Schedule,
+) {
+    let Inputs {
+        catalogue,
+        policy,
+        requests,
+        ..
+    } = *inp;
+    let vs = catalogue.variants();
+    let rank_text = |it: &Item| inp.rank_text(it);
     ws.given_way.clear();
     loop {
-        if search(catalogue, requests, &active, room, ws) {
+        if search(catalogue, requests, active, room, ws) {
             break;
         }
         let last = active.pop().expect("the empty set always fits");
@@ -732,7 +792,7 @@ pub fn schedule_into(
                 version: vi,
                 ..last
             });
-            if search(catalogue, requests, &active, room, ws) {
+            if search(catalogue, requests, active, room, ws) {
                 fixed = Some(v);
                 break;
             }
@@ -759,7 +819,23 @@ pub fn schedule_into(
         ws.given_way.push(last);
     }
     ws.choice.clone_from(&ws.chosen);
+}
 
+fn replace_given_way(
+    inp: &Inputs,
+    room: Room,
+    active: &mut Vec<Item>,
+    ws: &mut ScheduleWorkspace,
+    out: &mut Schedule,
+) {
+    let Inputs {
+        catalogue,
+        policy,
+        requests,
+        ..
+    } = *inp;
+    let vs = catalogue.variants();
+    let rank_text = |it: &Item| inp.rank_text(it);
     // Re-place what now fits among those that gave way, most important first: dropping a more
     // important application may have freed room for a less important one.
     ws.still_out.clear();
@@ -776,13 +852,13 @@ pub fn schedule_into(
                 continue;
             }
             let pos = insert_ranked(
-                &mut active,
+                active,
                 Item {
                     version: vi,
                     ..item
                 },
             );
-            if search(catalogue, requests, &active, room, ws) {
+            if search(catalogue, requests, active, room, ws) {
                 if v != requested {
                     let mut d = ws.degradation();
                     set(&mut d.app, app);
@@ -807,172 +883,4 @@ pub fn schedule_into(
             ws.still_out.push(item);
         }
     }
-
-    // Tiles: keep every part on a healthy tile that already holds it, then configure blank
-    // tiles, then overwrite others (lowest index first).
-    ws.taken.clear();
-    ws.taken.resize(usize::from(platform.tiles), false);
-    ws.pending.clear();
-    ws.assigned.clear();
-    for (k, &vi) in ws.choice.iter().enumerate() {
-        let v = &vs[vi];
-        for part in 0..v.tiles {
-            let found = ws.healthy.iter().copied().find(|&t| {
-                !ws.taken[usize::from(t)]
-                    && st.tiles[usize::from(t)]
-                        .bitstream
-                        .as_deref()
-                        .is_some_and(|b| is_tag(b, v, part))
-            });
-            match found {
-                Some(t) => {
-                    ws.taken[usize::from(t)] = true;
-                    ws.assigned.push((k, t, false));
-                }
-                None => ws.pending.push((k, vi, part)),
-            }
-        }
-    }
-    for i in 0..ws.pending.len() {
-        let (k, vi, part) = ws.pending[i];
-        let free = |blank: bool| {
-            ws.healthy.iter().copied().find(|&t| {
-                !ws.taken[usize::from(t)] && st.tiles[usize::from(t)].bitstream.is_none() == blank
-            })
-        };
-        let t = free(true)
-            .or_else(|| free(false))
-            .expect("search checked the tile count");
-        ws.taken[usize::from(t)] = true;
-        let v = &vs[vi];
-        let slot = &mut st.tiles[usize::from(t)].bitstream;
-        let mut s = match slot.take() {
-            Some(mut s) => {
-                s.clear();
-                s
-            }
-            None => ws.string(),
-        };
-        let _ = write!(s, "{}/{}/{}#{part}", v.app, v.version, v.implementation);
-        *slot = Some(s);
-        ws.assigned.push((k, t, true));
-    }
-
-    // Placements in request order.
-    ws.order.clear();
-    ws.order.extend(0..active.len());
-    ws.order.sort_unstable_by_key(|&k| active[k].req);
-    for &k in &ws.order {
-        let it = &active[k];
-        let v = &vs[ws.choice[k]];
-        let mut p = ws.spare_placements.pop().unwrap_or(Placement {
-            app: String::new(),
-            version: String::new(),
-            implementation: v.implementation,
-            support: v.support,
-            tiles: Vec::new(),
-            cpu_share: 0.0,
-            ms_per_frame: 0.0,
-            ms: Vec::new(),
-            required_fps: 0.0,
-            u_app: 0.0,
-            reconfigured: Vec::new(),
-        });
-        set(&mut p.app, &requests[it.req].app);
-        set(&mut p.version, &v.version);
-        p.implementation = v.implementation;
-        p.support = v.support;
-        p.tiles.clear();
-        p.reconfigured.clear();
-        for &(kk, t, reconf) in &ws.assigned {
-            if kk == k {
-                p.tiles.push(t);
-                if reconf {
-                    p.reconfigured.push(t);
-                }
-            }
-        }
-        p.tiles.sort_unstable();
-        p.reconfigured.sort_unstable();
-        p.cpu_share = v.cpu_share_at(it.fps, cores);
-        p.ms_per_frame = v.ms_per_frame();
-        p.ms.clone_from(&v.ms);
-        p.required_fps = it.fps;
-        p.u_app = f64::from(v.tiles) + p.cpu_share;
-        out.placements.push(p);
-    }
-
-    let placements = &out.placements;
-    let tiles_used: u8 = placements.iter().map(|p| p.tiles.len() as u8).sum();
-    let app_cpu_share: f64 = placements.iter().map(|p| p.cpu_share).sum();
-    let reconfigurations: u32 = placements.iter().map(|p| p.reconfigured.len() as u32).sum();
-    for i in 0..ws.still_out.len() {
-        let item = ws.still_out[i];
-        let app = &requests[item.req].app;
-        let version = &vs[item.version].version;
-        let others_tiles: u32 = placements
-            .iter()
-            .filter(|p| p.app != *app)
-            .map(|p| p.tiles.len() as u32)
-            .sum();
-        let others_cpu: f64 = placements
-            .iter()
-            .filter(|p| p.app != *app)
-            .map(|p| p.cpu_share)
-            .sum();
-        let mut d = ws.dropped(app, version);
-        d.reason.push_str("insufficient resources (");
-        why_not(
-            &mut d.reason,
-            catalogue,
-            app,
-            version,
-            item.fps,
-            room.tiles.saturating_sub(others_tiles),
-            room.cpu - others_cpu,
-            cores,
-            &mut ws.impls,
-        );
-        let _ = write!(d.reason, "); {}", rank_text(&item));
-        out.dropped.push(d);
-    }
-    ws.items = active;
-
-    let cpu_load = if online == 0 {
-        1.0
-    } else {
-        (app_cpu_share + external) * f64::from(cores) / f64::from(online)
-    };
-    out.summary.clear();
-    if out.placements.is_empty() {
-        out.summary.push('-');
-    } else {
-        let mut first = true;
-        for m in out.placements.iter().flat_map(|p| p.ms.iter()) {
-            if !first {
-                out.summary.push_str(" + ");
-            }
-            first = false;
-            let _ = write!(out.summary, "{}", FmtMs(*m));
-        }
-        out.summary.push_str(" ms");
-    }
-    set(&mut out.policy, &policy.name);
-    out.cpu_load = cpu_load;
-    out.app_cpu_share = app_cpu_share;
-    out.external_cpu_load = external;
-    out.cpu_cores_online = online;
-    out.tiles_used = tiles_used;
-    out.free_tiles = (ws.healthy.len() as u8).saturating_sub(tiles_used);
-    out.failed_tiles.clear();
-    out.failed_tiles.extend(
-        st.tiles
-            .iter()
-            .enumerate()
-            .filter(|(_, t)| t.failed)
-            .map(|(i, _)| i as u8),
-    );
-    out.reconfigurations = reconfigurations;
-    out.reconfiguration_ms = f64::from(reconfigurations) * platform.reconfiguration_ms_per_tile;
-    out.power_w = platform.power_w(tiles_used, app_cpu_share + external);
 }

@@ -169,6 +169,61 @@ fn read_line_bounded(
     }
 }
 
+impl LogStream {
+    /// Opens the next part file as the current one; `Err(what next returns)` when there is none
+    /// left (the end, or an empty log) or it cannot be opened.
+    #[allow(clippy::type_complexity)]
+    fn open_next_part(&mut self) -> Result<(), Option<Result<LogItem, ReadError>>> {
+        if self.next_file == self.files.len() {
+            self.done = true;
+            if self.nonblank_bytes == 0 {
+                return Err(Some(Err(ReadError::Empty {
+                    path: self.path.clone(),
+                })));
+            }
+            return Err(None);
+        }
+        let i = self.next_file;
+        self.next_file += 1;
+        let file = self.files[i].clone();
+        match File::open(&file) {
+            Ok(f) => {
+                self.cur = Some(Part {
+                    reader: BufReader::with_capacity(256 * 1024, f),
+                    file,
+                    line: 0,
+                    first: i == 0,
+                    last: i + 1 == self.files.len(),
+                    saw_header: false,
+                    lines_read: 0,
+                })
+            }
+            Err(source) => {
+                self.done = true;
+                return Err(Some(Err(ReadError::Io { path: file, source })));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A decision record line, its proposals' `inputs` taken out (kept as read, in order).
+fn record_item(mut value: serde_json::Value, issue: impl Fn(String) -> ReadIssue) -> LogItem {
+    let inputs: Vec<Option<serde_json::Value>> = value
+        .get_mut("proposals")
+        .and_then(|p| p.as_array_mut())
+        .map(|ps| {
+            ps.iter_mut()
+                .map(|p| p.as_object_mut().and_then(|o| o.remove("inputs")))
+                .collect()
+        })
+        .unwrap_or_default();
+    match serde_json::from_value::<DecisionRecord>(value) {
+        Ok(r) => LogItem::Record(Box::new(r), inputs),
+        Err(e) => LogItem::Corrupted(issue(format!("not a decision record: {e}"))),
+    }
+}
+
 impl Iterator for LogStream {
     type Item = Result<LogItem, ReadError>;
 
@@ -181,36 +236,10 @@ impl Iterator for LogStream {
             if self.done {
                 return None;
             }
-            if self.cur.is_none() {
-                if self.next_file == self.files.len() {
-                    self.done = true;
-                    if self.nonblank_bytes == 0 {
-                        return Some(Err(ReadError::Empty {
-                            path: self.path.clone(),
-                        }));
-                    }
-                    return None;
-                }
-                let i = self.next_file;
-                self.next_file += 1;
-                let file = self.files[i].clone();
-                match File::open(&file) {
-                    Ok(f) => {
-                        self.cur = Some(Part {
-                            reader: BufReader::with_capacity(256 * 1024, f),
-                            file,
-                            line: 0,
-                            first: i == 0,
-                            last: i + 1 == self.files.len(),
-                            saw_header: false,
-                            lines_read: 0,
-                        })
-                    }
-                    Err(source) => {
-                        self.done = true;
-                        return Some(Err(ReadError::Io { path: file, source }));
-                    }
-                }
+            if self.cur.is_none()
+                && let Err(end) = self.open_next_part()
+            {
+                return end;
             }
             let part = self.cur.as_mut().expect("opened above");
             let (n, newline, too_long) = match read_line_bounded(&mut part.reader, &mut buf) {
@@ -258,7 +287,7 @@ impl Iterator for LogStream {
                     serde_json::from_str::<serde_json::Value>(s)
                         .map_err(|e| format!("not JSON: {e}"))
                 });
-            let mut value = match parsed {
+            let value = match parsed {
                 Ok(v) => v,
                 Err(reason) => {
                     // Cut off: the very last line of the last part, without its newline.
@@ -306,21 +335,7 @@ impl Iterator for LogStream {
                     Err(e) => LogItem::Corrupted(issue(format!("unreadable event: {e}"))),
                 },
                 Some("end") => LogItem::End,
-                None | Some("record") => {
-                    let inputs: Vec<Option<serde_json::Value>> = value
-                        .get_mut("proposals")
-                        .and_then(|p| p.as_array_mut())
-                        .map(|ps| {
-                            ps.iter_mut()
-                                .map(|p| p.as_object_mut().and_then(|o| o.remove("inputs")))
-                                .collect()
-                        })
-                        .unwrap_or_default();
-                    match serde_json::from_value::<DecisionRecord>(value) {
-                        Ok(r) => LogItem::Record(Box::new(r), inputs),
-                        Err(e) => LogItem::Corrupted(issue(format!("not a decision record: {e}"))),
-                    }
-                }
+                None | Some("record") => record_item(value, issue),
                 Some(other) => LogItem::Note(format!(
                     "{}:{lineno}: line of unknown kind {other:?} skipped",
                     part.file.display()

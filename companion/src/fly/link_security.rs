@@ -5,7 +5,7 @@
 use super::FlyArgs;
 use companion_link::Msg;
 use companion_link::dialect::MavSeverity;
-use companion_link::ingest::IngestStats;
+use companion_link::ingest::{self, IngestStats};
 use companion_link::operator::GcsText;
 use companion_link::url::ConnectUrl;
 use companion_link::vehicle::Vehicle;
@@ -157,9 +157,29 @@ impl LinkSecurity {
     }
 }
 
+/// Read the MAVLink 2 signing key file at `path` (`fly --signing-key`, `signing-setup`):
+/// the link parses it, the shell reads it (companion-link reads no files).
+pub fn load_signing_key(path: &std::path::Path) -> Result<[u8; 32], ingest::KeyError> {
+    let name = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|e| ingest::KeyError::Read(name.clone(), e))?;
+    ingest::parse_signing_key(&name, &bytes)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_signing_key_file_is_read_by_the_shell_and_a_missing_one_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let raw = dir.path().join("raw.key");
+        std::fs::write(&raw, [5u8; 32]).unwrap();
+        assert_eq!(load_signing_key(&raw).unwrap(), [5u8; 32]);
+        let missing = dir.path().join("missing");
+        let e = load_signing_key(&missing).unwrap_err();
+        assert!(matches!(e, ingest::KeyError::Read(..)), "{e:?}");
+        assert!(e.to_string().contains("missing: cannot read"), "{e}");
+    }
 
     fn texts_said(args: &[&str], keyed: bool, frames: &[Vec<u8>]) -> Vec<(f64, String)> {
         let args = FlyArgs::from_cli(args.iter().copied()).unwrap();

@@ -2,7 +2,6 @@
 
 use super::{FlyArgs, link_security};
 use companion_link::actions::{ActionTable, LinkParams, Route};
-use companion_link::ingest;
 use companion_link::vehicle::{Vehicle, VehicleConfig};
 use std::time::Duration;
 
@@ -44,7 +43,7 @@ impl FlySetup {
             Some(p) => {
                 crate::params::regular_file(p)
                     .map_err(|reason| anyhow::anyhow!("--signing-key {}: {reason}", p.display()))?;
-                Some(ingest::load_signing_key(p)?)
+                Some(link_security::load_signing_key(p)?)
             }
             None => None,
         };

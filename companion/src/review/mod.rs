@@ -11,15 +11,18 @@
 mod html;
 pub mod outcomes;
 pub mod plot;
+mod records;
 mod terminal;
 pub mod text;
 pub mod why;
 
 pub use html::render_html;
+pub use records::{distance_m, policy_from_command};
+use records::{is_failsafe, mission_states_of, mode, position, vehicle_f64};
 pub use terminal::{render_terminal, render_why};
 
 use crate::decision_log::{Header, LogItem, LossReason, ReadError, ReadIssue, stream_log};
-use companion_core::mission::{ActionRole, MissionStates, RouteRole};
+use companion_core::mission::{ActionRole, RouteRole};
 use companion_core::record::{CommandRecord, DecisionRecord, Event, LinkEvent};
 use companion_core::tracking::TrackingCounter;
 use outcomes::{Category, OutcomeCounts, categorize};
@@ -270,100 +273,6 @@ struct LastRecord {
     operator: Option<String>,
     /// (longitude, latitude).
     position: Option<(f64, f64)>,
-}
-
-/// Metres between two (longitude, latitude) points in degrees (haversine, mean Earth radius:
-/// well under a metre off at the distances of one flight).
-pub fn distance_m(a: (f64, f64), b: (f64, f64)) -> f64 {
-    let (lon1, lat1) = (a.0.to_radians(), a.1.to_radians());
-    let (lon2, lat2) = (b.0.to_radians(), b.1.to_radians());
-    let h = ((lat2 - lat1) / 2.0).sin().powi(2)
-        + lat1.cos() * lat2.cos() * ((lon2 - lon1) / 2.0).sin().powi(2);
-    2.0 * 6_371_008.8 * h.sqrt().min(1.0).asin()
-}
-
-/// A failsafe is named in free text (the autopilot's STATUSTEXT, a mode, a note), so it is
-/// found in the written sentence.
-fn is_failsafe(text: &str) -> bool {
-    text.to_ascii_lowercase().contains("failsafe")
-}
-
-fn mode(r: &DecisionRecord) -> Option<String> {
-    r.vehicle.get("mode").map(|m| match m.as_str() {
-        Some(s) => s.to_string(),
-        None => m.to_string(),
-    })
-}
-
-fn vehicle_f64(r: &DecisionRecord, key: &str) -> Option<f64> {
-    r.vehicle.get(key).and_then(|v| v.as_f64())
-}
-
-/// A position value from the vehicle telemetry or, as fly records them, the observations.
-fn position(r: &DecisionRecord) -> Option<(f64, f64)> {
-    let get = |k: &str| vehicle_f64(r, k).or_else(|| r.observations.get(k).copied());
-    let (lat, lon) = (get("lat_deg")?, get("lon_deg")?);
-    let valid = lat.is_finite()
-        && lon.is_finite()
-        && (-90.0..=90.0).contains(&lat)
-        && (-180.0..=180.0).contains(&lon)
-        && !(lat == 0.0 && lon == 0.0);
-    valid.then_some((lon, lat))
-}
-
-pub fn policy_from_command(cmd: &str) -> Option<String> {
-    let mut it = cmd.split_whitespace();
-    while let Some(w) = it.next() {
-        if w == "--policy" {
-            return it.next().map(str::to_string);
-        }
-        if let Some(p) = w.strip_prefix("--policy=") {
-            return Some(p.to_string());
-        }
-    }
-    None
-}
-
-/// A `[route_states]` table naming the route states of the logs before params/mission.toml
-/// declared them ([`MissionStates::undeclared`]).
-fn route_states_before_declared() -> String {
-    let undeclared = MissionStates::undeclared();
-    let mut table = String::from("\n[route_states]\n");
-    for role in RouteRole::ALL {
-        table.push_str(&format!(
-            "{} = {:?}\n",
-            role.key(),
-            undeclared.route().state(role)
-        ));
-    }
-    table
-}
-
-/// The mission's states as the run's own params declared them (embedded in the log's header).
-/// Logs whose mission.toml declared states and phases but not yet `[route_states]` take the
-/// route names of that time; logs written before the states were declared, or whose header
-/// carries no readable params, are read by the rule of that time
-/// ([`MissionStates::undeclared`]).
-fn mission_states_of(h: &Header) -> MissionStates {
-    let dir = Path::new("params");
-    let mut files = companion_core::spec::ParamsFiles::new(dir);
-    for name in ["mission.toml", "actions.toml"] {
-        if let Some(text) = h.params.get(name) {
-            files.insert(dir.join(name), text.as_str());
-        }
-    }
-    MissionStates::load(&files)
-        .or_else(|e| match h.params.get("mission.toml") {
-            Some(text) if !text.contains("[route_states]") => {
-                files.insert(
-                    dir.join("mission.toml"),
-                    format!("{text}{}", route_states_before_declared()),
-                );
-                MissionStates::load(&files)
-            }
-            _ => Err(e),
-        })
-        .unwrap_or_else(|_| MissionStates::undeclared())
 }
 
 impl Review {
@@ -1019,71 +928,4 @@ pub fn run_with_cycle(
     })?;
     println!("report: {}", text::clean(&path.display().to_string()));
     Ok(Some(path))
-}
-
-#[cfg(test)]
-mod mission_states_tests {
-    use super::*;
-
-    fn header_with(mission: Option<String>) -> Header {
-        let dir = crate::params::default_params_dir();
-        let mut h = Header::new("companion simulate", std::time::SystemTime::UNIX_EPOCH);
-        if let Some(m) = mission {
-            h.params.insert("mission.toml".into(), m);
-            h.params.insert(
-                "actions.toml".into(),
-                std::fs::read_to_string(dir.join("actions.toml")).unwrap(),
-            );
-        }
-        h
-    }
-
-    #[test]
-    fn review_reads_the_mission_states_from_the_log_header() {
-        let shipped =
-            std::fs::read_to_string(crate::params::default_params_dir().join("mission.toml"))
-                .unwrap();
-        let declared = mission_states_of(&header_with(Some(shipped.clone())));
-        assert_eq!(declared.phase("v4"), "tracking");
-        assert!(declared.has_phase("wpi"));
-        // The run's own params decide: a run whose v5 was a landing state is read as such.
-        let changed = shipped.replacen(
-            r#"{ name = "v5", phase = "tracking", action = "track_v5" }"#,
-            r#"{ name = "v5", phase = "landing" }"#,
-            1,
-        );
-        assert_ne!(changed, shipped);
-        assert!(!mission_states_of(&header_with(Some(changed))).is_tracking("v5"));
-    }
-
-    #[test]
-    fn review_of_a_log_declaring_states_but_no_route_states_keeps_its_phases() {
-        let shipped =
-            std::fs::read_to_string(crate::params::default_params_dir().join("mission.toml"))
-                .unwrap();
-        let table = "[route_states]\non_ground = \"base\"\nfirst_leg = \"wp1\"\n\
-            between_waypoints = \"wpi\"\nlast_waypoint = \"wpf\"\ntarget_found = \"target\"\n\
-            landing = \"landing\"\n";
-        assert!(shipped.contains(table), "the shipped table as written here");
-        let before = shipped.replacen(table, "", 1);
-        let read = mission_states_of(&header_with(Some(before)));
-        assert_ne!(read, MissionStates::undeclared(), "not the earlier rule");
-        assert!(read.has_phase("wpi") && read.phase("v4") == "tracking");
-        assert_eq!(read, mission_states_of(&header_with(Some(shipped))));
-    }
-
-    #[test]
-    fn review_of_a_log_without_declared_states_uses_the_earlier_rule() {
-        // No params in the header, or a mission.toml from before `states` existed.
-        let old = MissionStates::undeclared();
-        assert_eq!(mission_states_of(&header_with(None)), old);
-        let pre_states = "horizon = 100\n[rates]\n[guarantee]\nmission = \"tracking\"\n\
-            capped_probability = \"P_battery\"\ninfeasible_p_battery = 0.05\n\
-            progress_goal = \"duration_s\"\nactivity_of_state = {}\n";
-        assert_eq!(
-            mission_states_of(&header_with(Some(pre_states.into()))),
-            old
-        );
-        assert!(old.is_tracking("v7") && !old.is_tracking("wpf"));
-    }
 }

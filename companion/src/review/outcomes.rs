@@ -1,6 +1,6 @@
 //! What became of each vehicle command, in categories an operator reads at a glance. The result
-//! strings are those of `CommandRecord.result` (link/command.rs `Outcome::label`, link/vehicle.rs,
-//! simulate's `SIMULATED`). Only real failures count as failed: a step sent and still awaiting
+//! strings are those of `CommandRecord.result` (companion-link's `command::Outcome::label`,
+//! `vehicle/executor.rs`, `mission::MissionError::outcome`; simulate's `SIMULATED`). Only real failures count as failed: a step sent and still awaiting
 //! its answer, a mode already set, a step skipped because an earlier one failed or the operator
 //! took over are each their own category.
 
@@ -77,9 +77,9 @@ pub fn categorize(result: &CommandOutcome) -> Category {
         Skipped(_) | Superseded | NotSent(_) | Cancelled(_) => Category::Skipped,
         Denied | Unsupported | TemporarilyRejected | NotReady(_) => Category::Denied,
         Timeout(_) => Category::TimedOut,
-        // A mission transfer stopped by a cancel is a stop, not a failure (the transfer's error,
-        // `Cancelled("why")`, is the detail).
-        Failed(Some(why)) if why.starts_with("Cancelled") => Category::Skipped,
+        // Logs written before the mission error was typed: a transfer stopped by a cancel was
+        // `FAILED (Cancelled("why"))` (its error's Debug text); now it is `CANCELLED (why)`.
+        Failed(Some(why)) if why.starts_with("Cancelled(") => Category::Skipped,
         Failed(_) | Unmapped | Other(_) => Category::Failed,
     }
 }
@@ -149,6 +149,11 @@ mod tests {
             ("NOT_SENT (no link)", Category::Skipped),
             ("CANCELLED (pilot took over)", Category::Skipped),
             ("FAILED (Cancelled(\"link lost\"))", Category::Skipped),
+            ("CANCELLED (link lost)", Category::Skipped),
+            (
+                "TIMEOUT (no answer to MISSION_ITEM_INT)",
+                Category::TimedOut,
+            ),
             ("DENIED", Category::Denied),
             ("TEMPORARILY_REJECTED", Category::Denied),
             ("NOT_READY (prearm)", Category::Denied),

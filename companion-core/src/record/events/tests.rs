@@ -1,0 +1,371 @@
+use super::*;
+use proptest::prelude::*;
+
+/// Free text as producers write it: words of letters, digits and the punctuation the
+/// sentences use, never empty.
+fn text() -> impl Strategy<Value = String> {
+    "[A-Za-z0-9_./;,%-]{1,8}( [A-Za-z0-9_./;,%-]{1,8}){0,3}"
+}
+fn word() -> impl Strategy<Value = String> {
+    "[a-z_0-9]{1,12}"
+}
+
+fn outcome() -> impl Strategy<Value = CommandOutcome> {
+    use CommandOutcome::*;
+    prop_oneof![
+        Just(Accepted),
+        any::<usize>().prop_map(|items| AcceptedVerified { items }),
+        Just(Simulated),
+        Just(Sent),
+        Just(InProgress),
+        Just(Pending),
+        text().prop_map(WaitingReady),
+        text().prop_map(NotReady),
+        Just(Already),
+        text().prop_map(Skipped),
+        Just(Superseded),
+        text().prop_map(NotSent),
+        proptest::option::of(text()).prop_map(Cancelled),
+        Just(Unmapped),
+        Just(Denied),
+        Just(TemporarilyRejected),
+        Just(Unsupported),
+        proptest::option::of(text()).prop_map(Timeout),
+        text().prop_map(Arrived),
+        text().prop_map(NotConfirmed),
+        proptest::option::of(text()).prop_map(Failed),
+        "COMMAND_[A-Z_]{1,12}".prop_map(Other),
+    ]
+}
+
+fn link_event() -> impl Strategy<Value = LinkEvent> {
+    use LinkEvent::*;
+    prop_oneof![
+        Just(Connected),
+        Just(Regained),
+        Just(Lost),
+        Just(Rebooted),
+        Just(TransportReconnected),
+        (any::<u8>(), any::<u8>(), "[A-Za-z]{1,10}").prop_map(|(system, component, flavor)| {
+            Autopilot {
+                system,
+                component,
+                flavor,
+            }
+        }),
+        (any::<u8>(), any::<u8>(), text()).prop_map(|(system, component, why)| {
+            OtherAutopilot {
+                system,
+                component,
+                why,
+            }
+        }),
+        text().prop_map(AutopilotText),
+        (word(), outcome()).prop_map(|(name, outcome)| Stream { name, outcome }),
+        any::<usize>().prop_map(|items| MissionUploaded { items }),
+        text().prop_map(MissionTransferCancelled),
+        text().prop_map(TransportConnected),
+        text().prop_map(TransportDisconnected),
+        text().prop_map(OnboardConnected),
+        text().prop_map(OnboardDisconnected),
+        "ingest: [0-9]{1,5} bytes outside valid frames".prop_map(Other),
+    ]
+}
+
+fn event() -> impl Strategy<Value = Event> {
+    use Event::*;
+    prop_oneof![
+        prop_oneof![
+            Just(TargetDetected),
+            Just(TargetLost),
+            Just(ObstacleDetected),
+            Just(ObstacleCleared),
+            Just(ObstacleAvoided),
+            Just(Collision),
+            Just(TZoneFound),
+            Just(EmergencyZoneFound),
+            Just(Landing),
+            Just(BatteryExhausted),
+            Just(NewFlight),
+            Just(Armed),
+            Just(Disarmed),
+            Just(GuaranteeInfeasible),
+        ],
+        "[A-Z_]{1,12}".prop_map(Mode),
+        any::<u16>().prop_map(Waypoint),
+        (-1e6f64..1e6).prop_map(BatteryBelow),
+        link_event()
+            .prop_filter("significant", LinkEvent::is_significant)
+            .prop_map(Link),
+        (word(), outcome()).prop_map(|(action, outcome)| Command { action, outcome }),
+        text().prop_map(HealthError),
+        text().prop_map(ArbitrationError),
+        text().prop_map(ResourcesError),
+        (word(), "[a-z0-9_]{1,10}").prop_map(|(mdp, state)| MdpStateUnknown { mdp, state }),
+        (word(), "probability P_[A-Za-z0-9]{1,6} not provided")
+            .prop_map(|(mdp, error)| MdpError { mdp, error }),
+        text().prop_map(Reallocation),
+        "mission: [a-z ]{1,20}".prop_map(ShellLand),
+        word().prop_map(LandingKept),
+        "tracking V[0-9] -> V[0-9]: insufficient resources".prop_map(Other),
+    ]
+}
+
+fn json<T: Serialize>(v: &T) -> String {
+    serde_json::to_string(v).unwrap()
+}
+
+proptest! {
+    /// Every outcome written reads back as itself, in JSON as a plain string.
+    #[test]
+    fn command_outcome_reads_back_as_written(o in outcome()) {
+        let s = o.to_string();
+        prop_assert_eq!(CommandOutcome::from(s.as_str()), o.clone());
+        prop_assert_eq!(json(&o), json(&s));
+        prop_assert_eq!(serde_json::from_str::<CommandOutcome>(&json(&s)).unwrap(), o);
+    }
+
+    #[test]
+    fn link_event_reads_back_as_written(e in link_event()) {
+        let s = e.to_string();
+        prop_assert_eq!(LinkEvent::from(s.as_str()), e.clone());
+        prop_assert_eq!(json(&e), json(&s));
+        prop_assert_eq!(serde_json::from_str::<LinkEvent>(&json(&s)).unwrap(), e);
+    }
+
+    #[test]
+    fn event_reads_back_as_written(e in event()) {
+        let s = e.to_string();
+        prop_assert_eq!(Event::from(s.as_str()), e.clone());
+        prop_assert!(e == s.as_str());
+        prop_assert_eq!(json(&e), json(&s));
+        prop_assert_eq!(serde_json::from_str::<Event>(&json(&s)).unwrap(), e);
+    }
+
+    /// Any string at all (an older or newer log, free text) reads without failing and
+    /// writes back byte for byte.
+    #[test]
+    fn any_string_writes_back_unchanged(s in ".{0,60}") {
+        prop_assert_eq!(Event::from(s.as_str()).to_string(), s.clone());
+        prop_assert_eq!(LinkEvent::from(s.as_str()).to_string(), s.clone());
+        prop_assert_eq!(CommandOutcome::from(s.as_str()).to_string(), s.clone());
+        prop_assert_eq!(json(&Event::from(s.as_str())), json(&s));
+    }
+}
+
+/// The sentences producers have always written read as their variants, not as `Other`.
+#[test]
+fn known_sentences_read_as_their_variants() {
+    use CommandOutcome as O;
+    for (s, o) in [
+        (
+            "ACCEPTED (verified 4 items)",
+            O::AcceptedVerified { items: 4 },
+        ),
+        (
+            "WAITING_READY (gps; ekf)",
+            O::WaitingReady("gps; ekf".into()),
+        ),
+        ("CANCELLED", O::Cancelled(None)),
+        (
+            "CANCELLED (pilot took control)",
+            O::Cancelled(Some("pilot took control".into())),
+        ),
+        (
+            "FAILED (Cancelled(\"link lost\"))",
+            O::Failed(Some("Cancelled(\"link lost\")".into())),
+        ),
+        ("UNMAPPED (not in commands.toml)", O::Unmapped),
+        (
+            "TIMEOUT (not within 5.0 m of the zone after 60 s; landing here)",
+            O::Timeout(Some(
+                "not within 5.0 m of the zone after 60 s; landing here".into(),
+            )),
+        ),
+        (
+            "ARRIVED (2.1 m from the zone)",
+            O::Arrived("2.1 m from the zone".into()),
+        ),
+        ("COMMAND_LONG_ONLY", O::Other("COMMAND_LONG_ONLY".into())),
+        (
+            "UNMAPPED (something else)",
+            O::Other("UNMAPPED (something else)".into()),
+        ),
+    ] {
+        assert_eq!(O::from(s), o, "{s}");
+    }
+    for (s, e) in [
+        (
+            "command take_off ACCEPTED",
+            Event::Command {
+                action: "take_off".into(),
+                outcome: O::Accepted,
+            },
+        ),
+        (
+            "command mission FAILED",
+            Event::Command {
+                action: "mission".into(),
+                outcome: O::Failed(None),
+            },
+        ),
+        ("battery below 30%", Event::BatteryBelow(30.0)),
+        ("battery below 27.5%", Event::BatteryBelow(27.5)),
+        ("waypoint 3", Event::Waypoint(3)),
+        ("link lost", Event::Link(LinkEvent::Lost)),
+        (
+            "tracking: state `v9` unknown to this MDP",
+            Event::MdpStateUnknown {
+                mdp: "tracking".into(),
+                state: "v9".into(),
+            },
+        ),
+        (
+            "guarantee: no allocation meets the goals",
+            Event::GuaranteeInfeasible,
+        ),
+        (
+            "tracking: probability P_V3 not provided",
+            Event::MdpError {
+                mdp: "tracking".into(),
+                error: "probability P_V3 not provided".into(),
+            },
+        ),
+        (
+            "landing: probability P_appZ = 1.5 not in [0, 1]",
+            Event::MdpError {
+                mdp: "landing".into(),
+                error: "probability P_appZ = 1.5 not in [0, 1]".into(),
+            },
+        ),
+        (
+            "navigation: unknown policy 'fast'",
+            Event::MdpError {
+                mdp: "navigation".into(),
+                error: "unknown policy 'fast'".into(),
+            },
+        ),
+        // Free text with a colon stays free text.
+        (
+            "operator: probability of rain high",
+            Event::Other("operator: probability of rain high".into()),
+        ),
+        (
+            "mission: search time 120 s over, target not found: land",
+            Event::ShellLand("mission: search time 120 s over, target not found".into()),
+        ),
+        (
+            "landing: land_at_zone again (the landing was interrupted or not done)",
+            Event::LandingKept("land_at_zone".into()),
+        ),
+        // As fly has always written it (logs before the variant): read as the variant.
+        (
+            "flight over: landed and disarmed; waiting for the operator",
+            Event::NewFlight,
+        ),
+        ("vibrations", Event::Other("vibrations".into())),
+        ("waypoint 03", Event::Other("waypoint 03".into())),
+        (
+            "battery below 30.0%",
+            Event::Other("battery below 30.0%".into()),
+        ),
+    ] {
+        assert_eq!(Event::from(s), e, "{s}");
+    }
+    for (s, e) in [
+        (
+            "autopilot 1/1 (ArduPilot)",
+            LinkEvent::Autopilot {
+                system: 1,
+                component: 1,
+                flavor: "ArduPilot".into(),
+            },
+        ),
+        (
+            "another autopilot 7/1 heard, ignored (not the chosen one)",
+            LinkEvent::OtherAutopilot {
+                system: 7,
+                component: 1,
+                why: "not the chosen one".into(),
+            },
+        ),
+        (
+            "autopilot: PreArm: GPS",
+            LinkEvent::AutopilotText("PreArm: GPS".into()),
+        ),
+        (
+            "stream GPS_RAW_INT: ACCEPTED",
+            LinkEvent::Stream {
+                name: "GPS_RAW_INT".into(),
+                outcome: O::Accepted,
+            },
+        ),
+        (
+            "mission uploaded (4 items), verifying",
+            LinkEvent::MissionUploaded { items: 4 },
+        ),
+        (
+            "connected tcp:127.0.0.1:5760",
+            LinkEvent::TransportConnected("tcp:127.0.0.1:5760".into()),
+        ),
+        (
+            "onboard disconnected: refused",
+            LinkEvent::OnboardDisconnected("refused".into()),
+        ),
+        (
+            "autopilot 300/1 (PX4)",
+            LinkEvent::Other("autopilot 300/1 (PX4)".into()),
+        ),
+    ] {
+        assert_eq!(LinkEvent::from(s), e, "{s}");
+    }
+}
+
+/// A copy into an event of the same kind keeps its text buffer (the cycle's reused record).
+#[test]
+fn clone_from_keeps_the_buffer_of_the_same_kind() {
+    let src = Event::Other("gps jamming".into());
+    let mut dst = Event::Other(String::with_capacity(64));
+    let before = match &dst {
+        Event::Other(s) => s.as_ptr(),
+        _ => unreachable!(),
+    };
+    dst.clone_from(&src);
+    assert_eq!(dst, src);
+    assert!(matches!(&dst, Event::Other(s) if s.as_ptr() == before));
+    let mut other_kind = Event::TargetLost;
+    other_kind.clone_from(&src);
+    assert_eq!(other_kind, src);
+}
+
+/// `Event == "text"` compares with the written sentence, whole.
+#[test]
+fn event_equals_its_sentence_only() {
+    let e = Event::Mode("AUTO".into());
+    assert!(e == "mode AUTO");
+    assert!(e != "mode AUT");
+    assert!(e != "mode AUTOS");
+    assert!(e != "");
+}
+
+#[test]
+fn a_link_event_flood_is_capped_with_its_count() {
+    let mut evs: Vec<LinkEvent> = (0..11_653)
+        .map(|i| LinkEvent::AutopilotText(format!("flood {}", i % 10_000)))
+        .collect();
+    evs.insert(0, LinkEvent::Lost);
+    coalesce_link_events(&mut evs);
+    assert_eq!(evs.len(), MAX_LINK_EVENTS + 1);
+    assert_eq!(evs[0], LinkEvent::Lost, "first seen stays first");
+    assert_eq!(evs[1], LinkEvent::AutopilotText("flood 0".into()));
+    // 11,654 in; 64 listed; 1,653 repeats; 10,001 distinct of which 9,937 not listed.
+    assert_eq!(
+        evs[MAX_LINK_EVENTS].to_string(),
+        "(11590 more link events since the last cycle: 1653 repeats, 9937 not listed)"
+    );
+    // Under the cap nothing changes: repeats and order are the link's story.
+    let story = vec![LinkEvent::Lost, LinkEvent::Regained, LinkEvent::Lost];
+    let mut few = story.clone();
+    coalesce_link_events(&mut few);
+    assert_eq!(few, story);
+}

@@ -1,0 +1,472 @@
+use super::*;
+
+fn s(v: f64) -> Duration {
+    Duration::from_secs_f64(v)
+}
+
+const GUIDED: u32 = 4;
+const LOITER: u32 = 5;
+const AUTO: u32 = 3;
+const LAND: u32 = 9;
+const STABILIZE: u32 = 0;
+
+/// A simulated autopilot heartbeat stream as the vehicle tracks it: the view after each
+/// heartbeat, with `armed_for` and `mode_for` computed over the frames fed so far (a
+/// contradicting frame resets them, as `Vehicle::on_frame` does).
+struct Feed {
+    cmds: Vec<(String, Duration)>,
+    armed_since: Option<Duration>,
+    armed_hb: u32,
+    mode: u32,
+    mode_since: Duration,
+    airborne: bool,
+    last: Option<(Duration, u32, bool)>,
+}
+
+fn name(mode: u32) -> &'static str {
+    match mode {
+        GUIDED => "GUIDED",
+        LOITER => "LOITER",
+        AUTO => "AUTO",
+        LAND => "LAND",
+        _ => "STABILIZE",
+    }
+}
+
+impl Feed {
+    fn new() -> Self {
+        Self {
+            cmds: Vec::new(),
+            armed_since: None,
+            armed_hb: 0,
+            mode: u32::MAX,
+            mode_since: Duration::ZERO,
+            airborne: false,
+            last: None,
+        }
+    }
+    fn hb(&mut self, t: f64, mode: u32, armed: bool) {
+        let t = s(t);
+        if armed {
+            self.armed_since.get_or_insert(t);
+            self.armed_hb += 1;
+        } else {
+            self.armed_since = None;
+            self.armed_hb = 0;
+        }
+        if mode != self.mode {
+            self.mode = mode;
+            self.mode_since = t;
+        }
+        self.last = Some((t, mode, armed));
+    }
+    fn view(&self, now: Duration) -> VehicleView<'_> {
+        VehicleView {
+            flavor: Flavor::ArduPilot,
+            custom_mode: self.mode,
+            mode: self.last.map(|(_, m, _)| name(m)),
+            armed_heartbeats: self.armed_hb,
+            armed_for: self.armed_since.map(|a| now.saturating_sub(a)),
+            mode_for: now.saturating_sub(self.mode_since),
+            airborne: self.airborne,
+            commanded_modes: &self.cmds,
+        }
+    }
+    /// Feed a heartbeat and let the gate look, at the heartbeat's time.
+    fn at(&mut self, g: &mut OperatorGate, t: f64, mode: u32, armed: bool) -> Option<GateEvent> {
+        self.hb(t, mode, armed);
+        g.observe(s(t), &self.view(s(t)))
+    }
+    /// The gate looks without a new heartbeat (the loop's 100 ms tick).
+    fn look(&self, g: &mut OperatorGate, t: f64) -> Option<GateEvent> {
+        g.observe(s(t), &self.view(s(t)))
+    }
+}
+
+#[test]
+fn arming_is_no_start_without_start_on_arm() {
+    let mut g = OperatorGate::new(false);
+    let mut f = Feed::new();
+    assert_eq!(f.at(&mut g, 0.0, LOITER, false), None);
+    for i in 1..20 {
+        assert_eq!(f.at(&mut g, f64::from(i), LOITER, true), None);
+    }
+    assert_eq!(g.control, Control::Waiting);
+}
+
+#[test]
+fn with_start_on_arm_every_heartbeat_armed_for_two_seconds_requests_a_start_once() {
+    let mut g = OperatorGate::new(false);
+    g.start_on_arm = true;
+    let mut f = Feed::new();
+    assert_eq!(f.at(&mut g, 1.0, STABILIZE, false), None);
+    assert_eq!(f.at(&mut g, 2.0, STABILIZE, true), None);
+    assert_eq!(
+        f.at(&mut g, 3.0, STABILIZE, true),
+        None,
+        "two heartbeats, 1 s"
+    );
+    assert_eq!(
+        f.look(&mut g, 4.0),
+        Some(GateEvent::StartRequested(StartBy::PilotArmed))
+    );
+    assert_eq!(f.look(&mut g, 4.1), None, "one request per arming");
+    let ev = g.refuse(StartBy::PilotArmed, "battery 12%");
+    assert!(matches!(ev, GateEvent::StartRefused(..)));
+    assert_eq!(
+        f.at(&mut g, 5.0, STABILIZE, true),
+        None,
+        "refused: not asked again"
+    );
+    // Disarm and arm again: a new operator action.
+    assert_eq!(f.at(&mut g, 6.0, STABILIZE, false), None);
+    assert_eq!(f.at(&mut g, 7.0, STABILIZE, true), None);
+    assert_eq!(
+        f.at(&mut g, 9.0, STABILIZE, true),
+        Some(GateEvent::StartRequested(StartBy::PilotArmed))
+    );
+}
+
+#[test]
+fn two_back_to_back_spoofed_armed_heartbeats_request_nothing() {
+    let mut g = OperatorGate::new(false);
+    g.start_on_arm = true;
+    let mut f = Feed::new();
+    let mut t = 0.0;
+    for _ in 0..10 {
+        assert_eq!(f.at(&mut g, t, STABILIZE, false), None);
+        // two spoofed frames in one write, then the real disarmed heartbeat a second later
+        assert_eq!(f.at(&mut g, t + 0.3, STABILIZE, true), None);
+        assert_eq!(f.at(&mut g, t + 0.3, STABILIZE, true), None);
+        assert_eq!(f.look(&mut g, t + 0.9), None);
+        t += 1.0;
+    }
+    assert_eq!(g.control, Control::Waiting);
+}
+
+#[test]
+fn guided_switch_of_an_armed_vehicle_requests_a_start_after_two_seconds() {
+    let mut g = OperatorGate::new(false);
+    let mut f = Feed::new();
+    f.at(&mut g, 0.0, LOITER, false);
+    f.at(&mut g, 1.0, LOITER, true);
+    assert_eq!(f.at(&mut g, 2.0, GUIDED, true), None);
+    assert_eq!(f.at(&mut g, 3.0, GUIDED, true), None);
+    assert_eq!(
+        f.at(&mut g, 4.0, GUIDED, true),
+        Some(GateEvent::StartRequested(StartBy::GuidedSwitch))
+    );
+    assert_eq!(f.at(&mut g, 5.0, GUIDED, true), None, "once per switch");
+}
+
+#[test]
+fn a_guided_heartbeat_among_real_loiter_ones_is_no_start_and_no_hand_back() {
+    for taken_over in [false, true] {
+        let mut g = OperatorGate::new(false);
+        if taken_over {
+            g.control = Control::TakenOver {
+                mode: "LOITER".into(),
+            };
+        }
+        let mut f = Feed::new();
+        f.at(&mut g, 0.0, LOITER, true);
+        for i in 1..10 {
+            let t = f64::from(i);
+            assert_eq!(f.at(&mut g, t, LOITER, true), None);
+            assert_eq!(f.at(&mut g, t + 0.5, GUIDED, true), None, "spoofed");
+            assert_eq!(f.look(&mut g, t + 0.9), None);
+        }
+        assert!(!g.commanding());
+    }
+}
+
+#[test]
+fn a_mode_change_on_the_ground_disarmed_is_not_a_takeover() {
+    // ArduCopter SITL: GUIDED accepted, then STABILIZE from the RC mode switch, disarmed.
+    let mut g = OperatorGate::started();
+    let mut f = Feed::new();
+    f.cmds = vec![("GUIDED".to_string(), s(1.0))];
+    assert_eq!(f.at(&mut g, 1.0, STABILIZE, false), None);
+    assert_eq!(f.at(&mut g, 1.5, GUIDED, false), None);
+    assert_eq!(f.at(&mut g, 9.0, STABILIZE, false), None);
+    assert!(g.commanding());
+    // Armed, the same change is the pilot's (suspected at once).
+    assert_eq!(f.at(&mut g, 20.0, GUIDED, true), None);
+    assert_eq!(
+        f.at(&mut g, 30.0, STABILIZE, true),
+        Some(GateEvent::TakeoverSuspected("STABILIZE".into()))
+    );
+}
+
+#[test]
+fn start_command_requests_and_hands_back() {
+    let mut g = OperatorGate::new(false);
+    assert_eq!(
+        g.on_start_command(),
+        Some(GateEvent::StartRequested(StartBy::StartCommand))
+    );
+    assert_eq!(g.control, Control::Waiting, "only a request");
+    assert_eq!(
+        g.grant(StartBy::StartCommand),
+        GateEvent::Started(StartBy::StartCommand)
+    );
+    assert_eq!(g.on_start_command(), None, "already started");
+    g.control = Control::TakenOver {
+        mode: "LOITER".into(),
+    };
+    assert_eq!(
+        g.on_start_command(),
+        Some(GateEvent::HandedBack(StartBy::StartCommand))
+    );
+}
+
+#[test]
+fn a_takeover_stops_at_once_and_is_confirmed_after_two_seconds_of_heartbeats() {
+    let mut g = OperatorGate::started();
+    let mut f = Feed::new();
+    f.airborne = true;
+    f.cmds = vec![
+        ("GUIDED".to_string(), s(1.0)),
+        ("AUTO".to_string(), s(10.0)),
+    ];
+    assert_eq!(f.at(&mut g, 10.5, AUTO, true), None);
+    assert!(g.commanding());
+    assert_eq!(
+        f.at(&mut g, 30.0, LOITER, true),
+        Some(GateEvent::TakeoverSuspected("LOITER".into()))
+    );
+    assert!(!g.commanding(), "commanding stops at once");
+    assert_eq!(f.at(&mut g, 31.0, LOITER, true), None);
+    assert_eq!(
+        f.at(&mut g, 32.0, LOITER, true),
+        Some(GateEvent::TakenOver("LOITER".into()))
+    );
+    // The pilot moves on to LAND: still theirs.
+    assert_eq!(f.at(&mut g, 33.0, LAND, true), None);
+    assert_eq!(
+        g.control,
+        Control::TakenOver {
+            mode: "LAND".into()
+        }
+    );
+    // Switching to GUIDED and staying there hands control back.
+    assert_eq!(f.at(&mut g, 40.0, GUIDED, true), None);
+    assert_eq!(f.at(&mut g, 41.0, GUIDED, true), None);
+    assert_eq!(
+        f.at(&mut g, 42.0, GUIDED, true),
+        Some(GateEvent::HandedBack(StartBy::GuidedSwitch))
+    );
+    assert!(g.commanding());
+}
+
+#[test]
+fn one_spoofed_loiter_heartbeat_is_a_false_alarm_and_commanding_resumes() {
+    let mut g = OperatorGate::started();
+    let mut f = Feed::new();
+    f.airborne = true;
+    f.cmds = vec![("AUTO".to_string(), s(10.0))];
+    assert_eq!(f.at(&mut g, 20.0, AUTO, true), None);
+    assert_eq!(
+        f.at(&mut g, 20.4, LOITER, true),
+        Some(GateEvent::TakeoverSuspected("LOITER".into()))
+    );
+    assert_eq!(f.look(&mut g, 20.9), None);
+    assert_eq!(
+        f.at(&mut g, 21.0, AUTO, true),
+        Some(GateEvent::FalseAlarm("LOITER".into(), "AUTO".into()))
+    );
+    assert!(g.commanding());
+}
+
+#[test]
+fn a_late_heartbeat_of_an_earlier_command_is_not_a_takeover() {
+    let mut g = OperatorGate::started();
+    let mut f = Feed::new();
+    // AUTO commanded at 5 s, GUIDED at 6 s; the heartbeat showing AUTO arrives at 6.5 s.
+    f.cmds = vec![("AUTO".to_string(), s(5.0)), ("GUIDED".to_string(), s(6.0))];
+    f.at(&mut g, 4.0, GUIDED, true);
+    assert_eq!(f.at(&mut g, 6.5, AUTO, true), None);
+    assert_eq!(f.at(&mut g, 7.0, GUIDED, true), None);
+    assert!(g.commanding());
+}
+
+#[test]
+fn a_disarm_before_airborne_voids_the_start_and_nothing_restarts_it() {
+    let mut g = OperatorGate::new(false);
+    g.start_on_arm = true;
+    let mut f = Feed::new();
+    f.at(&mut g, 0.0, STABILIZE, false);
+    f.at(&mut g, 1.0, STABILIZE, true);
+    f.at(&mut g, 2.0, STABILIZE, true);
+    assert_eq!(
+        f.at(&mut g, 3.0, STABILIZE, true),
+        Some(GateEvent::StartRequested(StartBy::PilotArmed))
+    );
+    g.grant(StartBy::PilotArmed);
+    assert_eq!(f.at(&mut g, 4.0, STABILIZE, true), None);
+    // ArduCopter's DISARM_DELAY: disarmed on the ground.
+    assert_eq!(
+        f.at(&mut g, 12.0, STABILIZE, false),
+        Some(GateEvent::StartVoided(VoidReason::Disarmed))
+    );
+    assert_eq!(g.control, Control::Waiting);
+    for i in 13..80 {
+        assert_eq!(f.at(&mut g, f64::from(i), STABILIZE, false), None);
+    }
+    assert!(!g.commanding());
+}
+
+#[test]
+fn a_failed_take_off_voids_only_before_airborne() {
+    let mut g = OperatorGate::started();
+    assert_eq!(
+        g.takeoff_failed(false, "SET_MODE GUIDED: DENIED"),
+        Some(GateEvent::StartVoided(VoidReason::TakeoffFailed(
+            "SET_MODE GUIDED: DENIED".into()
+        )))
+    );
+    assert!(!g.commanding());
+    let mut g = OperatorGate::started();
+    assert_eq!(g.takeoff_failed(true, "x"), None);
+    assert!(g.commanding());
+}
+
+#[test]
+fn auto_start_is_requested_until_granted_then_never_again() {
+    let mut g = OperatorGate::new(true);
+    let mut f = Feed::new();
+    assert_eq!(
+        f.at(&mut g, 0.0, STABILIZE, false),
+        Some(GateEvent::StartRequested(StartBy::AutoStart))
+    );
+    g.refuse(StartBy::AutoStart, "energy short");
+    assert_eq!(
+        f.at(&mut g, 1.0, STABILIZE, false),
+        Some(GateEvent::StartRequested(StartBy::AutoStart))
+    );
+    g.grant(StartBy::AutoStart);
+    g.new_flight();
+    assert_eq!(f.at(&mut g, 2.0, STABILIZE, false), None);
+}
+
+#[test]
+fn armed_before_waiting_is_not_a_start_until_seen_disarmed() {
+    let mut g = OperatorGate::new(false);
+    g.start_on_arm = true;
+    g.new_flight();
+    let mut f = Feed::new();
+    assert_eq!(f.at(&mut g, 1.0, LAND, true), None);
+    assert_eq!(f.at(&mut g, 5.0, LAND, true), None);
+    assert_eq!(f.at(&mut g, 6.0, LAND, false), None);
+    f.at(&mut g, 7.0, LAND, true);
+    assert_eq!(
+        f.at(&mut g, 9.0, LAND, true),
+        Some(GateEvent::StartRequested(StartBy::PilotArmed))
+    );
+}
+
+#[test]
+fn statustext_is_rate_limited_per_text_and_per_second() {
+    let mut t = GcsText::new(Duration::from_secs(10), 2);
+    let sev = MavSeverity::MAV_SEVERITY_INFO;
+    assert_eq!(t.say(s(0.0), sev, "a").len(), 1);
+    assert!(t.say(s(1.0), sev, "a").is_empty(), "same text within 10 s");
+    assert_eq!(t.say(s(1.1), sev, "b").len(), 1);
+    assert_eq!(t.say(s(1.2), sev, "c").len(), 1);
+    assert!(
+        t.say(s(1.3), sev, "d").is_empty(),
+        "third text in one second"
+    );
+    assert_eq!(t.dropped, 1);
+    assert_eq!(t.say(s(2.5), sev, "d").len(), 1);
+    assert_eq!(
+        t.say(s(10.5), sev, "a").len(),
+        1,
+        "after the repeat interval"
+    );
+}
+
+/// (id, chunk_seq, text) of each STATUSTEXT.
+fn parts(msgs: &[Msg]) -> Vec<(u16, u8, String)> {
+    msgs.iter()
+        .map(|m| match m {
+            Msg::STATUSTEXT(st) => (st.id, st.chunk_seq, st.text.to_str().unwrap().to_string()),
+            other => panic!("{other:?}"),
+        })
+        .collect()
+}
+
+/// A receiver's join, as the MAVLink spec describes it: chunks of one non-zero id in
+/// chunk_seq order, complete at the first chunk shorter than 50 bytes.
+fn joined(parts: &[(u16, u8, String)]) -> String {
+    let id = parts[0].0;
+    let mut text = String::new();
+    for (i, (pid, seq, t)) in parts.iter().enumerate() {
+        assert_eq!((*pid, *seq as usize), (id, i), "{parts:?}");
+        text.push_str(t);
+        if t.len() < 50 {
+            assert_eq!(i, parts.len() - 1, "a short chunk ends the text: {parts:?}");
+        }
+    }
+    assert!(
+        parts.last().unwrap().2.len() < 50,
+        "the last chunk ends the text: {parts:?}"
+    );
+    text
+}
+
+#[test]
+fn a_short_text_is_one_statustext_with_id_zero() {
+    let mut t = GcsText::new(Duration::from_secs(10), 2);
+    let sev = MavSeverity::MAV_SEVERITY_NOTICE;
+    let fifty = "y".repeat(50);
+    assert_eq!(
+        parts(&t.say(s(0.0), sev, "Battery 7%: returning home")),
+        vec![(0, 0, "Battery 7%: returning home".to_string())]
+    );
+    assert_eq!(
+        parts(&t.say(s(2.0), sev, &fifty)),
+        vec![(0, 0, fifty.clone())]
+    );
+}
+
+#[test]
+fn a_long_text_goes_out_whole_in_chunks_sharing_a_new_id() {
+    let mut t = GcsText::new(Duration::from_secs(10), 2);
+    let sev = MavSeverity::MAV_SEVERITY_WARNING;
+    let long = "Cannot meet goals: energy short 4.2 kJ, time short 35 s, lidar failed";
+    let first = parts(&t.say(s(0.0), sev, long));
+    assert_eq!(first.len(), 2, "{first:?}");
+    assert_ne!(first[0].0, 0, "chunks carry a non-zero id");
+    assert_eq!(joined(&first), long);
+    // Exactly two chunks' worth: an empty third chunk ends it.
+    let hundred: String = ('a'..='z').cycle().take(100).collect();
+    let second = parts(&t.say(s(2.0), sev, &hundred));
+    assert_eq!(second.len(), 3, "{second:?}");
+    assert_eq!(second[2].2, "");
+    assert_eq!(joined(&second), hundred);
+    assert_ne!(second[0].0, first[0].0, "each long text has its own id");
+    // Longer than the chunks allow: cut, still ended by a short chunk.
+    let huge = "z".repeat(500);
+    let third = parts(&t.say(s(4.0), sev, &huge));
+    assert_eq!(third.len(), MAX_CHUNKS);
+    assert_eq!(joined(&third), "z".repeat(MAX_CHUNKS * 50 - 1));
+}
+
+#[test]
+fn the_chunks_of_one_text_count_once_against_the_rate() {
+    let mut t = GcsText::new(Duration::from_secs(10), 1);
+    let sev = MavSeverity::MAV_SEVERITY_INFO;
+    assert_eq!(t.say(s(0.0), sev, &"q".repeat(120)).len(), 3);
+    assert!(t.say(s(0.5), sev, "next").is_empty());
+    assert_eq!(t.dropped, 1);
+}
+
+#[test]
+fn non_ascii_and_control_characters_never_break_a_chunk() {
+    let mut t = GcsText::new(Duration::from_secs(10), 2);
+    let sev = MavSeverity::MAV_SEVERITY_INFO;
+    let text = format!("{}\n{}", "é".repeat(30), "ü".repeat(40));
+    let got = parts(&t.say(s(0.0), sev, &text));
+    assert_eq!(joined(&got), "?".repeat(70));
+}

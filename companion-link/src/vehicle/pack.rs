@@ -1,0 +1,105 @@
+//! The pack parameters (capacity, cells) read from the autopilot with PARAM_REQUEST_READ.
+
+use super::*;
+
+/// The pack parameters each autopilot family names, read with PARAM_REQUEST_READ: the capacity
+/// (mAh) and, where there is one, the cell count. ArduPilot has no cell-count parameter.
+pub fn pack_params(flavor: Flavor) -> &'static [(&'static str, PackParam)] {
+    match flavor {
+        Flavor::ArduPilot => &[("BATT_CAPACITY", PackParam::CapacityMah)],
+        Flavor::Px4 => &[
+            ("BAT1_CAPACITY", PackParam::CapacityMah),
+            ("BAT1_N_CELLS", PackParam::Cells),
+        ],
+        Flavor::Other => &[],
+    }
+}
+
+/// PARAM_REQUEST_READ of one pack parameter is sent at most this many times ...
+pub const PACK_PARAM_ATTEMPTS: u32 = 5;
+/// ... this far apart, until the autopilot answers (PARAM_VALUE is not acknowledged otherwise).
+pub const PACK_PARAM_RETRY: Duration = Duration::from_secs(2);
+
+/// One pack parameter asked for until the autopilot answers.
+#[derive(Debug, Clone)]
+pub(super) struct PackRequest {
+    name: &'static str,
+    what: PackParam,
+    sent: u32,
+    next_at: Duration,
+    answered: bool,
+}
+
+impl Vehicle {
+    /// Ask (again) for the pack parameters of the chosen autopilot's family.
+    pub(super) fn reset_pack_requests(&mut self) {
+        self.pack_requests = pack_params(self.flavor)
+            .iter()
+            .map(|&(name, what)| PackRequest {
+                name,
+                what,
+                sent: 0,
+                next_at: Duration::ZERO,
+                answered: false,
+            })
+            .collect();
+    }
+
+    /// PARAM_REQUEST_READ of the pack parameters not answered yet, each retried a few times.
+    pub(super) fn request_pack_params(&mut self, now: Duration, out: &mut Vec<Msg>) {
+        let Some((sys, comp)) = self.target else {
+            return;
+        };
+        for r in &mut self.pack_requests {
+            if r.answered || r.sent >= PACK_PARAM_ATTEMPTS || now < r.next_at {
+                continue;
+            }
+            r.sent += 1;
+            r.next_at = now + PACK_PARAM_RETRY;
+            out.push(Msg::PARAM_REQUEST_READ(PARAM_REQUEST_READ_DATA {
+                param_index: -1,
+                target_system: sys,
+                target_component: comp,
+                param_id: r.name.into(),
+            }));
+        }
+    }
+
+    /// A PARAM_VALUE from the autopilot: a pack parameter asked for goes to the telemetry.
+    pub(super) fn on_param_value(&mut self, p: &PARAM_VALUE_DATA) {
+        let id = p.param_id.to_str().unwrap_or("").trim_end_matches('\0');
+        let Some(r) = self.pack_requests.iter_mut().find(|r| r.name == id) else {
+            return;
+        };
+        // PX4 sends integer parameters bytewise in the float (MAV_PROTOCOL_CAPABILITY_PARAM_
+        // ENCODE_BYTEWISE); ArduPilot casts them to float.
+        let int = matches!(
+            p.param_type,
+            MavParamType::MAV_PARAM_TYPE_INT32
+                | MavParamType::MAV_PARAM_TYPE_UINT32
+                | MavParamType::MAV_PARAM_TYPE_INT16
+                | MavParamType::MAV_PARAM_TYPE_UINT16
+                | MavParamType::MAV_PARAM_TYPE_INT8
+                | MavParamType::MAV_PARAM_TYPE_UINT8
+        );
+        let value = if int && self.flavor == Flavor::Px4 {
+            p.param_value.to_bits() as i32 as f64
+        } else {
+            p.param_value as f64
+        };
+        r.answered = true;
+        let (name, what) = (r.name, r.what);
+        self.telemetry.on_pack_param(what, value);
+        if what == PackParam::CapacityMah && value <= 0.0 {
+            self.link_event(
+                LinkEvent::from(
+                    format!(
+                        "autopilot {name} = {value}: the pack's capacity is not set, the guarantee uses params [battery]"
+                    )
+                    .as_str(),
+                ),
+                false,
+            );
+        }
+    }
+}
