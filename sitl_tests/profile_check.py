@@ -1,5 +1,5 @@
 """What the vehicle-profile tests (issue 23 item 5) compare, shared by the ArduCopter and PX4 ones: per activity of
-a flown default mission, the guarantee's estimate in force when the activity began (`guarantee.power.planned_j`,
+a flown default mission, the guarantee's estimate in force when the activity began (`guarantee.planned_j`,
 the pre-flight plan's cell while nothing was re-allocated) against the energy the autopilot reports drawn over it
 (`energy_of`, from the observations the companion copied off the autopilot's BATTERY_STATUS), and the profile's
 power curve against the one `companion calibrate` fits to the new flight."""
@@ -37,10 +37,10 @@ def compare(records: List[Dict[str, Any]], energy_of: Callable[[Dict[str, Any]],
     """[(activity, planned J, drawn J)] over the completed activities; asserts each has both numbers."""
     rows = []
     for name, first, nxt in activity_spans(records):
-        power = (first.get("guarantee") or {}).get("power") or {}
+        planned = (first.get("guarantee") or {}).get("planned_j")
         e0, e1 = energy_of(first), energy_of(nxt)
-        assert power.get("planned_j") is not None and e0 is not None and e1 is not None, (name, power, e0, e1)
-        rows.append((name, power["planned_j"], e1 - e0))
+        assert planned is not None and e0 is not None and e1 is not None, (name, planned, e0, e1)
+        rows.append((name, planned, e1 - e0))
     return rows
 
 

@@ -564,11 +564,8 @@ impl Guarantee {
         let st = &mut self.power;
         if p.pack.armed == Some(false) {
             *st = PowerState::default();
-            let (planned_j, planned_s) = self.planned(at);
             return Some(PowerRecord {
                 predicted_w: self.predicted_power(at),
-                planned_j,
-                planned_s,
                 measured_w,
                 energy_scale: self.energy_scale,
                 ..Default::default()
@@ -608,11 +605,8 @@ impl Guarantee {
             let k = (w + activity_s * r) / (w + activity_s);
             self.set_energy_scale(at, k.clamp(lo, hi));
         }
-        let (planned_j, planned_s) = self.planned(at);
         Some(PowerRecord {
             predicted_w,
-            planned_j,
-            planned_s,
             measured_w,
             activity_s,
             predicted_j,
@@ -750,6 +744,7 @@ impl Guarantee {
         let n = self.spec.problem.activities.len();
         let at = progress.activity_index.min(n.saturating_sub(1));
         rec.power = self.power(at, &progress);
+        (rec.planned_j, rec.planned_s) = self.planned(at);
         let p = &self.spec.problem;
         let fraction = if progress.activity_index >= n {
             1.0

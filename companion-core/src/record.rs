@@ -148,6 +148,11 @@ pub struct GuaranteeRecord {
     /// and in logs written before it existed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pack: Option<PackRecord>,
+    /// The whole activity in force's energy estimate (J) in the allocation in force (before any
+    /// re-allocation, the pre-flight plan's cell), 0 without an energy goal.
+    pub planned_j: f64,
+    /// The whole activity in force's duration estimate (s) in the allocation in force.
+    pub planned_s: f64,
     /// The activity in force: its predicted power against the power and energy measured.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub power: Option<PowerRecord>,
@@ -214,11 +219,6 @@ pub struct PowerRecord {
     /// Predicted power of the activity in force (W): its implementation alternative's energy
     /// estimate over its duration estimate.
     pub predicted_w: f64,
-    /// The whole activity's energy estimate (J) in the allocation in force (before any
-    /// re-allocation, the pre-flight plan's): what `check` prints as the activity's RAS0 cell.
-    pub planned_j: f64,
-    /// The whole activity's duration estimate (s) in the allocation in force.
-    pub planned_s: f64,
     /// Measured power now (W): pack voltage x current, when the autopilot reports both.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub measured_w: Option<f64>,
@@ -403,7 +403,7 @@ reuse_clone!(ResourcesRecord {
 } maps {});
 reuse_clone!(GuaranteeRecord {
     activity, activity_name, reallocation, infeasible, infeasible_reason, failed_resources,
-    plan_differs, energy_source, pack, power
+    plan_differs, energy_source, pack, power, planned_j, planned_s
 } maps { margins, goals, drift });
 reuse_clone!(DecisionRecord {
     cycle, time_s, state, events, proposals, conflicts, actions, resources, guarantee, commands,
