@@ -35,6 +35,10 @@ pub(crate) fn read_dir_only(dir: &Path) -> Result<ParamsFiles, SpecError> {
         paths.sort();
         for p in paths {
             if p.is_dir() {
+                // Vehicle profiles are overlays on this directory (`--vehicle`), not params files.
+                if depth == 0 && p.file_name().is_some_and(|n| n == VEHICLES_DIR) {
+                    continue;
+                }
                 if depth < MAX_DEPTH {
                     pending.push((p, depth + 1));
                 }
