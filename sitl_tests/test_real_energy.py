@@ -110,3 +110,36 @@ def test_real_energy_measured_power_is_in_the_flight_records(arducopter, fly):
     assert recorded > 0.0
     # the activity's measured energy grows (the autopilot's energy_consumed since the activity began)
     assert max(guarantee(r)["power"].get("measured_j", 0.0) for r in airborne) > 0.0
+
+
+def test_real_energy_raised_current_is_a_drift_and_the_vehicle_goes_home(arducopter, fly):
+    """PANORAMA's performance drift on the real autopilot: with the ArduCopter profile (its power ~355 W, a 16 Ah
+    pack holding the whole mission) the vehicle takes off; in flight the current sensor's scale BATT_AMP_PERVLT is
+    doubled, so the autopilot reports twice the current (and energy) it did: the measured power drifts beyond the
+    tolerance, the record says so, the remaining estimates are re-learned (x ~2, bounded) and the mission no longer
+    fits the pack: the ground station sees the vehicle sent home (RTL) or landed, not the search flown on."""
+    veh = arducopter(speedup=1.0, extra_defaults={"BATT_CAPACITY": 16000})
+    gcs = veh.gcs
+    run = fly(veh.autopilot, extra=("--vehicle", "arducopter-sitl"))
+    gcs.wait(lambda: gcs.alt > 10.0, 300, "airborne above 10 m")
+    time.sleep(15.0)
+    scale = gcs.param_get("BATT_AMP_PERVLT")
+    t_raise = time.monotonic()
+    gcs.param_set("BATT_AMP_PERVLT", 2.0 * scale)
+    gcs.wait(lambda: any(m in ("RTL", "LAND") for m in gcs.modes_since(t_raise)), 180,
+             "RTL or LAND after the current was doubled")
+    time.sleep(3.0)
+    run.proc.terminate()
+    run.proc.wait(timeout=30)
+    records = run.records()
+    drifted = [r for r in records if (guarantee(r).get("power") or {}).get("drift_began")]
+    assert drifted, "no drift recorded\n" + run.output()
+    pw = guarantee(drifted[0])["power"]
+    assert pw["ratio"] > 1.25 and pw["energy_scale"] > 1.25, pw
+    assert any("performance drift" in str(e) for e in drifted[0].get("events", [])), drifted[0].get("events")
+    # what followed the drift: the margins went negative and a model's proposal sent the vehicle home or down
+    after = records[records.index(drifted[0]):]
+    home = [r for r in after if set(r.get("actions", [])) & {"return_to_base", "land", "replan_and_land"}]
+    assert home, "no return or landing proposed after the drift"
+    proposed = {a for p in home[0].get("proposals", []) for a in p.get("actions", [])}
+    assert set(home[0]["actions"]) & {"return_to_base", "land", "replan_and_land"} <= proposed, home[0]
