@@ -733,15 +733,7 @@ impl<'m> Core<'m> {
                 battery_remaining_pct: obs.get("battery_pct"),
                 elapsed_s: obs.time_s,
                 failed_resources: failed,
-                pack: crate::guarantee::PackReading {
-                    capacity_mah: obs.get("battery_capacity_mah"),
-                    cells: obs.get("battery_cells"),
-                    voltage_v: obs.get("battery_v"),
-                    current_a: obs.get("battery_current_a"),
-                    consumed_mah: obs.get("consumed_mah"),
-                    vehicle_time_s: obs.get("vehicle_time_s"),
-                    armed: obs.get("armed").map(|a| a > 0.5),
-                },
+                pack: pack_reading(obs),
             },
             record,
         );
@@ -933,6 +925,19 @@ fn refill<'a>(into: &mut Vec<String>, names: impl Iterator<Item = &'a str>) {
 
 /// PANORAMA's performance drift: the measured power of the activity beyond the tolerance,
 /// when it began this cycle.
+/// What the snapshot says of the pack (docs/guarantee.md, "Energy from the autopilot").
+fn pack_reading(obs: &Observations) -> crate::guarantee::PackReading {
+    crate::guarantee::PackReading {
+        capacity_mah: obs.get("battery_capacity_mah"),
+        cells: obs.get("battery_cells"),
+        voltage_v: obs.get("battery_v"),
+        current_a: obs.get("battery_current_a"),
+        consumed_mah: obs.get("consumed_mah"),
+        vehicle_time_s: obs.get("vehicle_time_s"),
+        armed: obs.get("armed").map(|a| a > 0.5),
+    }
+}
+
 fn drift_event(record: &crate::record::GuaranteeRecord, tolerance: f64) -> Option<Event> {
     let pw = record.power.as_ref().filter(|pw| pw.drift_began)?;
     Some(Event::Other(format!(
