@@ -126,7 +126,8 @@ def test_real_energy_raised_current_is_a_drift_and_the_vehicle_goes_home(arducop
     scale = gcs.param_get("BATT_AMP_PERVLT")
     t_raise = time.monotonic()
     gcs.param_set("BATT_AMP_PERVLT", 2.0 * scale)
-    gcs.wait(lambda: any(m in ("RTL", "LAND") for m in gcs.modes_since(t_raise)), 180,
+    # (wait's condition runs under the observer's lock: read its list, not modes_since, which takes the lock)
+    gcs.wait(lambda: any(m in ("RTL", "LAND") for t, m in gcs.modes if t >= t_raise), 180,
              "RTL or LAND after the current was doubled")
     time.sleep(3.0)
     run.proc.terminate()
