@@ -634,12 +634,7 @@ impl<'m> Core<'m> {
             return;
         };
         if let Some(res) = &rec.resources {
-            let running: Vec<(&str, &str)> = res
-                .placements
-                .iter()
-                .map(|p| (p.version.as_str(), p.implementation.as_str()))
-                .collect();
-            g.follow(activity_index, &running, record);
+            g.follow(activity_index, &res.placements, record);
         }
         let mut versions = std::mem::take(&mut self.versions_scratch);
         g.versions_without_alternative(activity_index, &mut versions);

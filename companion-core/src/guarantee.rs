@@ -276,7 +276,7 @@ struct WatchScratch {
     choice: Vec<usize>,
     alt: MarginReport,
     /// Version -> some alternative carrying it is feasible (binding.rs).
-    feasible_versions: Vec<(String, bool)>,
+    feasible_versions: Vec<(String, bool, bool)>,
 }
 
 impl Default for WatchScratch {

@@ -14,7 +14,7 @@
 //!   plan names is the one the next cycle requests.
 
 use super::{Guarantee, RasRow};
-use crate::record::{GuaranteeRecord, Reallocation};
+use crate::record::{GuaranteeRecord, PlacementRecord, Reallocation};
 
 /// `(version, implementation)` of an IA token: `V4.F` -> `("V4", Some("F"))`, `lidar` ->
 /// `("lidar", None)`.
@@ -34,10 +34,11 @@ fn names(act: &panorama::Activity, v: &str) -> bool {
 
 /// Does alternative `i` of `act` carry every running version the activity names, and with the
 /// running implementations?
-fn carries(act: &panorama::Activity, i: usize, running: &[(&str, &str)]) -> (bool, bool) {
+fn carries(act: &panorama::Activity, i: usize, running: &[PlacementRecord]) -> (bool, bool) {
     let mut versions = true;
     let mut exact = true;
-    for &(v, imp) in running.iter().filter(|(v, _)| names(act, v)) {
+    for p in running.iter().filter(|p| names(act, &p.version)) {
+        let (v, imp) = (p.version.as_str(), p.implementation.as_str());
         match act.ias[i]
             .name
             .split_whitespace()
@@ -88,8 +89,13 @@ impl Guarantee {
             return;
         }
         let n_ias = self.spec.problem.activities[at].ias.len();
+        // (name, feasible, offered this time): the names kept between cycles, so a warm cycle
+        // allocates nothing.
         let mut feasible = std::mem::take(&mut self.scratch.feasible_versions);
-        feasible.clear();
+        for e in &mut feasible {
+            e.1 = false;
+            e.2 = false;
+        }
         let mut any = false;
         for i in 0..n_ias {
             let ok = self.alternative_feasible(at, i);
@@ -102,12 +108,12 @@ impl Guarantee {
                 if imp.is_none() {
                     continue;
                 }
-                match feasible
-                    .iter_mut()
-                    .find(|(name, _): &&mut (String, bool)| name == v)
-                {
-                    Some(e) => e.1 |= ok,
-                    None => feasible.push((v.to_string(), ok)),
+                match feasible.iter_mut().find(|e| e.0 == v) {
+                    Some(e) => {
+                        e.1 |= ok;
+                        e.2 = true;
+                    }
+                    None => feasible.push((v.to_string(), ok, true)),
                 }
             }
         }
@@ -115,8 +121,8 @@ impl Guarantee {
             out.extend(
                 feasible
                     .iter()
-                    .filter(|(_, ok)| !ok)
-                    .map(|(v, _)| v.clone()),
+                    .filter(|(_, ok, offered)| *offered && !ok)
+                    .map(|(v, _, _)| v.clone()),
             );
         }
         self.scratch.feasible_versions = feasible;
@@ -133,7 +139,7 @@ impl Guarantee {
     pub fn follow(
         &mut self,
         at: usize,
-        running: &[(&str, &str)],
+        running: &[PlacementRecord],
         rec: &mut GuaranteeRecord,
     ) -> bool {
         if at >= self.spec.problem.activities.len() || rec.infeasible {
@@ -171,8 +177,8 @@ impl Guarantee {
         let n = p.activities.len();
         let runs = running
             .iter()
-            .filter(|(v, _)| names(&p.activities[at], v))
-            .map(|(v, i)| format!("{v}.{i}"))
+            .filter(|r| names(&p.activities[at], &r.version))
+            .map(|r| format!("{}.{}", r.version, r.implementation))
             .collect::<Vec<_>>()
             .join(" ");
         let reason = if want_exact {
