@@ -58,6 +58,18 @@ pub struct Core<'m> {
     /// this cycle (capacity kept).
     room_ids: [Option<crate::evidence::ObservationId>; 3],
     room_extra: Vec<(crate::evidence::ObservationId, f64)>,
+    /// The activation nodes' fit observations the core computes with the scheduler's check.
+    fit_checks: Vec<FitCheck<'m>>,
+}
+
+/// One fit observation (`tracking_V3_fits`, node `F_V3`): whether the scheduler admits some
+/// implementation of `app version` beside the applications in force.
+#[derive(Debug, Clone, Copy)]
+struct FitCheck<'m> {
+    id: crate::evidence::ObservationId,
+    name: &'m str,
+    app: &'m str,
+    version: &'m str,
 }
 
 /// How much work the cycles so far really did (the rest came from the memos).
@@ -128,7 +140,19 @@ impl<'m> Core<'m> {
             scratch: Scratch::default(),
             arbiter: ResourceArbiter::new(),
             room_ids: ROOM.map(|name| model.health.observations.id(name)),
-            room_extra: Vec::with_capacity(ROOM.len()),
+            room_extra: Vec::with_capacity(ROOM.len() + model.health.activations.len()),
+            fit_checks: model
+                .health
+                .fit_observations()
+                .filter_map(|(name, a)| {
+                    Some(FitCheck {
+                        id: model.health.observations.id(name)?,
+                        name,
+                        app: a.app.as_str(),
+                        version: a.version.as_str(),
+                    })
+                })
+                .collect(),
         }
     }
 
@@ -205,6 +229,9 @@ impl<'m> Core<'m> {
             if let (false, Some(id)) = (name.is_empty(), id) {
                 extra.push((id, *v));
             }
+        }
+        for f in &self.fit_checks {
+            extra.push((f.id, self.fits(f, room[2].1)));
         }
         self.health
             .observations
@@ -411,12 +438,35 @@ impl<'m> Core<'m> {
         ]
     }
 
-    /// [`Core::platform_room`] written into the evidence.
+    /// 1.0 when the scheduler admits some implementation of the check's version at `fps` beside
+    /// what the applications in force occupy (`others_*`), else 0.0: fpga_model's own admission
+    /// check ([`fpga_model::Room::admits`]) on the core's platform model, so the resource
+    /// manager's fit agrees with the scheduler to the last digit.
+    fn fits(&self, f: &FitCheck<'_>, fps: f64) -> f64 {
+        let res = &self.model.resources;
+        let room = fpga_model::Room::of(&res.platform, &self.platform);
+        let admitted = room.admits_version(
+            &res.catalogue,
+            f.app,
+            f.version,
+            fps,
+            self.others_tiles,
+            self.others_cpu,
+        );
+        if admitted { 1.0 } else { 0.0 }
+    }
+
+    /// [`Core::platform_room`] and the fit checks written into the evidence.
     fn platform_evidence(&self, obs: &Observations, evidence: &mut BTreeMap<String, String>) {
-        for (name, v) in self.platform_room(obs) {
+        let room = self.platform_room(obs);
+        for (name, v) in room {
             if !name.is_empty() {
                 self.health.observe_into(name, v, evidence);
             }
+        }
+        for f in &self.fit_checks {
+            self.health
+                .observe_into(f.name, self.fits(f, room[2].1), evidence);
         }
     }
 
@@ -644,9 +694,11 @@ impl<'m> Core<'m> {
         let mut versions = std::mem::take(&mut self.versions_scratch);
         g.versions_without_alternative(activity_index, &mut versions);
         let same = versions.len() == self.capped_versions.len()
-            && versions
-                .iter()
-                .all(|v| self.capped_versions.iter().any(|c| c.strip_prefix("P_") == Some(v)));
+            && versions.iter().all(|v| {
+                self.capped_versions
+                    .iter()
+                    .any(|c| c.strip_prefix("P_") == Some(v))
+            });
         if !same {
             self.capped_versions.clear();
             let published = model.health.publishes();
@@ -931,6 +983,9 @@ pub fn table(records: &[DecisionRecord], model: &Model) -> String {
     }
     out
 }
+
+#[cfg(test)]
+mod fit_tests;
 
 #[cfg(test)]
 mod tests {

@@ -36,7 +36,10 @@ fn planned_tracking(r: &DecisionRecord, last: &mut Option<String>) -> Option<Str
     if let Some(re) = r.guarantee.as_ref().and_then(|g| g.reallocation.as_ref())
         && let Some((_, cell)) = re.allocation.iter().find(|(a, _)| a == "tracking_area")
     {
-        *last = cell.split_whitespace().find(|t| t.starts_with('V')).map(String::from);
+        *last = cell
+            .split_whitespace()
+            .find(|t| t.starts_with('V'))
+            .map(String::from);
     }
     last.clone()
 }
@@ -52,7 +55,10 @@ fn the_plan_follows_what_runs_and_switching_it_off_changes_the_run() {
     let first = bound
         .iter()
         .position(|r| {
-            tracking(r).is_some() && r.guarantee.as_ref().is_some_and(|g| g.activity_name == "tracking_area")
+            tracking(r).is_some()
+                && r.guarantee
+                    .as_ref()
+                    .is_some_and(|g| g.activity_name == "tracking_area")
         })
         .expect("tracking runs in the tracking area");
     let mut plan = None;
@@ -67,7 +73,10 @@ fn the_plan_follows_what_runs_and_switching_it_off_changes_the_run() {
         let (Some(running), Some(planned)) = (tracking(r), planned_tracking(r, &mut plan)) else {
             continue;
         };
-        if r.guarantee.as_ref().is_some_and(|g| g.reallocation.is_some() || g.infeasible) {
+        if r.guarantee
+            .as_ref()
+            .is_some_and(|g| g.reallocation.is_some() || g.infeasible)
+        {
             continue; // the plan moved this cycle: placed from the next one
         }
         assert_eq!(running, planned, "cycle {}", r.cycle);

@@ -159,7 +159,10 @@ fn energy_drift_then_laser_fault_table_7() {
     assert!(re.reason.contains("energy_j"), "{}", re.reason);
     assert_eq!(g.ras_rows()[3].label, "RAS3");
     let a17_after = g.ras_rows()[3].cells[16].as_deref().unwrap();
-    assert!(a17_after.starts_with("M1 "), "RAS3 A17 {a17_after}, was {before}");
+    assert!(
+        a17_after.starts_with("M1 "),
+        "RAS3 A17 {a17_after}, was {before}"
+    );
     let table = render_ras_table(&s, g.ras_rows());
     println!("{table}");
     assert!(table.contains("RAS2"));

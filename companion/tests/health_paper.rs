@@ -354,10 +354,17 @@ fn mdp_check_point_is_the_bns_own_section_7_1_values() {
         let Some(bn) = p.get(name) else {
             continue; // P_SI / P_SF complements and names no BN publishes
         };
-        let tol = if own.contains(&name.as_str()) { 5e-4 } else { 5e-3 };
+        let tol = if own.contains(&name.as_str()) {
+            5e-4
+        } else {
+            5e-3
+        };
         assert!((bn - v).abs() <= tol, "{name}: check point {v}, BN {bn:.4}");
     }
     for name in own {
-        assert!(point.contains_key(name), "{name} missing from the check point");
+        assert!(
+            point.contains_key(name),
+            "{name} missing from the check point"
+        );
     }
 }

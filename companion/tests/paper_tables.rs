@@ -304,12 +304,19 @@ fn lidar_failure_runs_fusion_obstacle_detection_and_lowers_p_lidar() {
                 "cycle {}",
                 r.cycle
             );
-            assert!(r.probabilities["P_lidar"] < 0.2 * before, "cycle {}", r.cycle);
+            assert!(
+                r.probabilities["P_lidar"] < 0.2 * before,
+                "cycle {}",
+                r.cycle
+            );
             assert!(p.inputs["P_obs"] < 0.3, "cycle {}: {:?}", r.cycle, p.inputs);
             assert!(p.inputs.contains_key("P_fusion"), "cycle {}", r.cycle);
         }
     }
-    assert!(fusion_cycles > 0, "the navigation MDP never proposed fusion");
+    assert!(
+        fusion_cycles > 0,
+        "the navigation MDP never proposed fusion"
+    );
     for r in &after[1..] {
         if r.actions
             .iter()

@@ -263,7 +263,9 @@ fn drift_and_failure_reallocate_and_restore_margins() {
             .and_then(|g| g.reallocation.as_ref())
             .is_some_and(|re| {
                 !re.reason.starts_with("the models run")
-                    && !re.reason.starts_with("the planned implementation did not fit")
+                    && !re
+                        .reason
+                        .starts_with("the planned implementation did not fit")
             })
     });
     let tracking_start = r.iter().position(|x| x.state == "target").unwrap();

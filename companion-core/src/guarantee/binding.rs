@@ -38,7 +38,12 @@ fn carries(act: &panorama::Activity, i: usize, running: &[(&str, &str)]) -> (boo
     let mut versions = true;
     let mut exact = true;
     for &(v, imp) in running.iter().filter(|(v, _)| names(act, v)) {
-        match act.ias[i].name.split_whitespace().map(token).find(|(tv, _)| *tv == v) {
+        match act.ias[i]
+            .name
+            .split_whitespace()
+            .map(token)
+            .find(|(tv, _)| *tv == v)
+        {
             None => {
                 versions = false;
                 exact = false;
@@ -89,12 +94,18 @@ impl Guarantee {
         for i in 0..n_ias {
             let ok = self.alternative_feasible(at, i);
             any |= ok;
-            for t in self.spec.problem.activities[at].ias[i].name.split_whitespace() {
+            for t in self.spec.problem.activities[at].ias[i]
+                .name
+                .split_whitespace()
+            {
                 let (v, imp) = token(t);
                 if imp.is_none() {
                     continue;
                 }
-                match feasible.iter_mut().find(|(name, _): &&mut (String, bool)| name == v) {
+                match feasible
+                    .iter_mut()
+                    .find(|(name, _): &&mut (String, bool)| name == v)
+                {
                     Some(e) => e.1 |= ok,
                     None => feasible.push((v.to_string(), ok)),
                 }
@@ -119,7 +130,12 @@ impl Guarantee {
     /// re-allocation into `rec` (margins recomputed for what runs). Placements whose version no
     /// alternative of the activity names (an application the mission file does not allocate)
     /// are ignored. Returns true when the plan changed.
-    pub fn follow(&mut self, at: usize, running: &[(&str, &str)], rec: &mut GuaranteeRecord) -> bool {
+    pub fn follow(
+        &mut self,
+        at: usize,
+        running: &[(&str, &str)],
+        rec: &mut GuaranteeRecord,
+    ) -> bool {
         if at >= self.spec.problem.activities.len() || rec.infeasible {
             return false;
         }

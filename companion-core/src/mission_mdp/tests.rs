@@ -1132,7 +1132,11 @@ fn proposal_records_solver_stages_beside_the_horizon() {
         assert_eq!(rec.horizon, 100, "{name}");
         let mdp = m.instantiate(&p, "safety").unwrap().clone();
         let mut ws2 = Workspace::new();
-        assert_eq!(rec.iterations, ws2.finite_horizon(&mdp, 100).stats().iterations, "{name}");
+        assert_eq!(
+            rec.iterations,
+            ws2.finite_horizon(&mdp, 100).stats().iterations,
+            "{name}"
+        );
         if rec.iterations < rec.horizon {
             fewer += 1;
         }
