@@ -58,6 +58,18 @@ pub struct Core<'m> {
     /// this cycle (capacity kept).
     room_ids: [Option<crate::evidence::ObservationId>; 3],
     room_extra: Vec<(crate::evidence::ObservationId, f64)>,
+    /// The activation nodes' fit observations the core computes with the scheduler's check.
+    fit_checks: Vec<FitCheck<'m>>,
+}
+
+/// One fit observation (`tracking_V3_fits`, node `F_V3`): whether the scheduler admits some
+/// implementation of `app version` beside the applications in force.
+#[derive(Debug, Clone, Copy)]
+struct FitCheck<'m> {
+    id: crate::evidence::ObservationId,
+    name: &'m str,
+    app: &'m str,
+    version: &'m str,
 }
 
 /// How much work the cycles so far really did (the rest came from the memos).
@@ -128,7 +140,19 @@ impl<'m> Core<'m> {
             scratch: Scratch::default(),
             arbiter: ResourceArbiter::new(),
             room_ids: ROOM.map(|name| model.health.observations.id(name)),
-            room_extra: Vec::with_capacity(ROOM.len()),
+            room_extra: Vec::with_capacity(ROOM.len() + model.health.activations.len()),
+            fit_checks: model
+                .health
+                .fit_observations()
+                .filter_map(|(name, a)| {
+                    Some(FitCheck {
+                        id: model.health.observations.id(name)?,
+                        name,
+                        app: a.app.as_str(),
+                        version: a.version.as_str(),
+                    })
+                })
+                .collect(),
         }
     }
 
@@ -205,6 +229,9 @@ impl<'m> Core<'m> {
             if let (false, Some(id)) = (name.is_empty(), id) {
                 extra.push((id, *v));
             }
+        }
+        for f in &self.fit_checks {
+            extra.push((f.id, self.fits(f, room[2].1)));
         }
         self.health
             .observations
@@ -411,12 +438,35 @@ impl<'m> Core<'m> {
         ]
     }
 
-    /// [`Core::platform_room`] written into the evidence.
+    /// 1.0 when the scheduler admits some implementation of the check's version at `fps` beside
+    /// what the applications in force occupy (`others_*`), else 0.0: fpga_model's own admission
+    /// check ([`fpga_model::Room::admits`]) on the core's platform model, so the resource
+    /// manager's fit agrees with the scheduler to the last digit.
+    fn fits(&self, f: &FitCheck<'_>, fps: f64) -> f64 {
+        let res = &self.model.resources;
+        let room = fpga_model::Room::of(&res.platform, &self.platform);
+        let admitted = room.admits_version(
+            &res.catalogue,
+            f.app,
+            f.version,
+            fps,
+            self.others_tiles,
+            self.others_cpu,
+        );
+        if admitted { 1.0 } else { 0.0 }
+    }
+
+    /// [`Core::platform_room`] and the fit checks written into the evidence.
     fn platform_evidence(&self, obs: &Observations, evidence: &mut BTreeMap<String, String>) {
-        for (name, v) in self.platform_room(obs) {
+        let room = self.platform_room(obs);
+        for (name, v) in room {
             if !name.is_empty() {
                 self.health.observe_into(name, v, evidence);
             }
+        }
+        for f in &self.fit_checks {
+            self.health
+                .observe_into(f.name, self.fits(f, room[2].1), evidence);
         }
     }
 
@@ -728,11 +778,12 @@ impl<'m> Core<'m> {
                 battery_remaining_pct: obs.get("battery_pct"),
                 elapsed_s: obs.time_s,
                 failed_resources: failed,
-                pack: pack_reading(obs),
+                pack: watch::pack_reading(obs),
             },
             record,
         );
-        if let Some(drift) = drift_event(record, self.model.guarantee.tuning.power_drift_tolerance)
+        if let Some(drift) =
+            watch::drift_event(record, self.model.guarantee.tuning.power_drift_tolerance)
         {
             rec.events.push(drift);
         }
@@ -920,70 +971,10 @@ fn refill<'a>(into: &mut Vec<String>, names: impl Iterator<Item = &'a str>) {
 
 /// PANORAMA's performance drift: the measured power of the activity beyond the tolerance,
 /// when it began this cycle.
-/// What the snapshot says of the pack (docs/guarantee.md, "Energy from the autopilot").
-fn pack_reading(obs: &Observations) -> crate::guarantee::PackReading {
-    crate::guarantee::PackReading {
-        capacity_mah: obs.get("battery_capacity_mah"),
-        cells: obs.get("battery_cells"),
-        voltage_v: obs.get("battery_v"),
-        current_a: obs.get("battery_current_a"),
-        consumed_mah: obs.get("consumed_mah"),
-        vehicle_time_s: obs.get("vehicle_time_s"),
-        armed: obs.get("armed").map(|a| a > 0.5),
-    }
-}
-
-fn drift_event(record: &crate::record::GuaranteeRecord, tolerance: f64) -> Option<Event> {
-    let pw = record.power.as_ref().filter(|pw| pw.drift_began)?;
-    Some(Event::Other(format!(
-        "performance drift: {} measured {:.0} J against {:.0} J predicted in {:.0} s (x{:.2}, beyond {:.0} %); remaining energy estimates x{:.2}",
-        record.activity_name,
-        pw.measured_j.unwrap_or(0.0),
-        pw.predicted_j,
-        pw.activity_s,
-        pw.ratio.unwrap_or(1.0),
-        tolerance * 100.0,
-        pw.energy_scale
-    )))
-}
+mod watch;
 
 #[cfg(test)]
-mod tests {
-    use super::*;
+mod fit_tests;
 
-    /// Absent is not zero: a snapshot without `wind_mps` (the autopilot not estimating) gives
-    /// no wind evidence and the record lists `A_wind` as absent; a zero reading is calm evidence.
-    #[test]
-    fn absent_observation_is_listed_and_gives_no_evidence() {
-        let model = Model::load(&crate::shipped::params()).unwrap();
-        let mut core = Core::new(&model, ModelKind::Bfm, model.policy("safety").unwrap());
-        let mut obs = Observations {
-            state: "base".into(),
-            ..Default::default()
-        };
-        obs.set("battery_pct", 100.0);
-        let (_, rec) = core.step(&obs);
-        assert!(!rec.evidence.contains_key("A_wind"), "{:?}", rec.evidence);
-        assert!(
-            rec.absent_evidence.iter().any(|n| n == "A_wind"),
-            "{:?}",
-            rec.absent_evidence
-        );
-        assert!(!rec.absent_evidence.iter().any(|n| n == "S_battery"));
-        // Core-computed evidence is never absent.
-        assert!(!rec.absent_evidence.iter().any(|n| n == "A_free_tiles"));
-        obs.set("wind_mps", f64::NAN);
-        let (_, rec) = core.step(&obs);
-        assert!(rec.absent_evidence.iter().any(|n| n == "A_wind"));
-        obs.set("wind_mps", 0.0);
-        let (_, rec) = core.step(&obs);
-        assert_eq!(rec.evidence.get("A_wind").map(String::as_str), Some("calm"));
-        assert!(
-            !rec.absent_evidence.iter().any(|n| n == "A_wind"),
-            "{:?}",
-            rec.absent_evidence
-        );
-        let json = serde_json::to_value(&rec).unwrap();
-        assert!(json["absent_evidence"].is_array(), "{json}");
-    }
-}
+#[cfg(test)]
+mod tests;

@@ -112,6 +112,8 @@ pub struct CatalogueActivation {
     pub version: String,
     /// The probability names published from the node (`P_V3`).
     pub published: Vec<String>,
+    /// Its `fit` node (`F_V3`), which the decision core observes with the scheduler's check.
+    pub fit: Option<String>,
 }
 
 #[derive(Debug, Clone, Default)]
@@ -422,6 +424,7 @@ impl HealthModel {
                             app: app.to_string(),
                             version: version.to_string(),
                             published,
+                            fit: n.fit.clone(),
                         });
                     }
                 }
@@ -450,6 +453,20 @@ impl HealthModel {
             observations,
             activations: Vec::new(),
             scratch: Scratch::default(),
+        })
+    }
+
+    /// The observations the decision core computes for the activation nodes' `fit` nodes
+    /// (params/observations.toml entries whose node is one), with the activation they serve.
+    pub fn fit_observations(&self) -> impl Iterator<Item = (&str, &CatalogueActivation)> {
+        self.activations.iter().filter_map(|a| {
+            let fit = a.fit.as_deref()?;
+            let o = self
+                .observations
+                .observations
+                .iter()
+                .find(|o| o.node == fit)?;
+            Some((o.name.as_str(), a))
         })
     }
 

@@ -173,6 +173,9 @@ fn producers(p: &Sources, scenarios: &[(PathBuf, Scenario)]) -> BTreeMap<String,
     for o in CORE_COMPUTES {
         add(o, role("core", "platform model"));
     }
+    for (o, _) in p.model.health.fit_observations() {
+        add(o, role("core", "scheduler admission"));
+    }
     out
 }
 

@@ -118,9 +118,41 @@ fn unknown_state_names() {
     // An activation node naming a variant params/variants.toml does not have.
     expect_err(
         "health/resources.toml",
-        |t| t.replacen("variant = \"tracking/V0\"", "variant = \"tracking/V9\"", 1),
+        |t| {
+            t.replacen(
+                "variant = \"tracking/V0\"\nversion",
+                "variant = \"tracking/V9\"\nversion",
+                1,
+            )
+        },
         "node.R_V0.variant",
         "no variant tracking V9",
+    );
+    // The same for a fit node.
+    expect_err(
+        "health/resources.toml",
+        |t| {
+            t.replacen(
+                "role = \"fit\"\nvariant = \"tracking/V0\"",
+                "role = \"fit\"\nvariant = \"tracking/V9\"",
+                1,
+            )
+        },
+        "node.F_V0.variant",
+        "no variant tracking V9",
+    );
+    // An activation node reading the room both through its fit node and itself.
+    expect_err(
+        "health/resources.toml",
+        |t| {
+            t.replacen(
+                "fit = \"F_V2\"",
+                "fit = \"F_V2\"\ntiles = \"A_free_tiles\"",
+                1,
+            )
+        },
+        "node.R_V2.tiles",
+        "reads the room through it",
     );
 }
 

@@ -25,8 +25,8 @@ pub use catalogue::{Catalogue, Implementation, Support, Variant, VariantsFile};
 pub use platform::{Performance, Platform, PowerModel};
 pub use policy::{PoliciesFile, ResourcePolicy};
 pub use schedule::{
-    Degradation, Dropped, Placement, PlatformState, Request, Schedule, ScheduleWorkspace, Tile,
-    schedule, schedule_into,
+    Degradation, Dropped, Placement, PlatformState, Request, Room, Schedule, ScheduleWorkspace,
+    Tile, schedule, schedule_into,
 };
 
 /// A model input that is inconsistent. `entry` is a dotted path inside the params file it came

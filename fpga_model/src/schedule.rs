@@ -218,11 +218,65 @@ struct Item {
 }
 
 /// What is left for applications: healthy tiles and CPU (fraction of nominal, after external).
-#[derive(Debug, Clone, Copy)]
-struct Room {
-    tiles: u32,
-    cpu: f64,
-    cores: u8,
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Room {
+    /// Healthy tiles.
+    pub tiles: u32,
+    /// CPU budget of the online cores less the external load (fraction of nominal CPU).
+    pub cpu: f64,
+    /// Cores of the platform (CPU shares are fractions of all of them).
+    pub cores: u8,
+}
+
+impl Room {
+    /// The room `state` leaves on `platform`, as [`schedule_into`] computes it (a NaN external
+    /// load counts as the whole CPU).
+    pub fn of(platform: &Platform, state: &PlatformState) -> Room {
+        let cores = platform.cpu_cores;
+        let online = state.cores_online.min(cores);
+        let external = if state.external_cpu_load.is_nan() {
+            1.0
+        } else {
+            state.external_cpu_load.max(0.0)
+        };
+        let healthy = (0..usize::from(platform.tiles))
+            .filter(|&i| state.tiles.get(i).is_none_or(|t| !t.failed))
+            .count();
+        Room {
+            tiles: healthy as u32,
+            cpu: platform.cpu_budget * f64::from(online) / f64::from(cores) - external,
+            cores,
+        }
+    }
+
+    /// The scheduler's admission check: whether `v` at `fps` fits beside placements that already
+    /// use `used_tiles` tiles and `used_cpu` of the CPU. The search makes exactly this check for
+    /// each item after the ones before it, so a version the decision core checks here beside the
+    /// applications in force is one the scheduler can place beside them.
+    pub fn admits(&self, v: &Variant, fps: f64, used_tiles: u32, used_cpu: f64) -> bool {
+        if !v.meets(fps) {
+            return false;
+        }
+        let t = used_tiles + u32::from(v.tiles);
+        let share = v.cpu_share_at(fps, self.cores);
+        let c = used_cpu + share;
+        !(t > self.tiles || (share > 0.0 && c > self.cpu + EPS))
+    }
+
+    /// Whether some implementation of `app version` in `catalogue` is admitted ([`Room::admits`]).
+    pub fn admits_version(
+        &self,
+        catalogue: &Catalogue,
+        app: &str,
+        version: &str,
+        fps: f64,
+        used_tiles: u32,
+        used_cpu: f64,
+    ) -> bool {
+        catalogue.variants().iter().any(|v| {
+            v.app == app && v.version == version && self.admits(v, fps, used_tiles, used_cpu)
+        })
+    }
 }
 
 /// Reusable working memory of [`schedule_into`]: every list the scheduler needs, plus spare
@@ -386,12 +440,12 @@ fn search(
         }
         for &k in &cand[start[i]..start[i + 1]] {
             let v = &vs[k];
-            let t = tiles + u32::from(v.tiles);
-            let share = v.cpu_share_at(items[i].fps, room.cores);
-            let c = cpu + share;
-            if t > room.tiles || (share > 0.0 && c > room.cpu + EPS) {
+            // Candidates already meet the rate; `admits` checks it again, which changes nothing.
+            if !room.admits(v, items[i].fps, tiles, cpu) {
                 continue;
             }
+            let t = tiles + u32::from(v.tiles);
+            let c = cpu + v.cpu_share_at(items[i].fps, room.cores);
             chosen.push(k);
             if dfs(i + 1, vs, cand, start, items, room, t, c, chosen) {
                 return true;
@@ -611,11 +665,8 @@ pub fn schedule_into(
     ws.healthy.clear();
     ws.healthy
         .extend((0..platform.tiles).filter(|&i| !st.tiles[usize::from(i)].failed));
-    let room = Room {
-        tiles: ws.healthy.len() as u32,
-        cpu: platform.cpu_budget * f64::from(online) / f64::from(cores) - external,
-        cores,
-    };
+    let room = Room::of(platform, st);
+    debug_assert_eq!(room.tiles as usize, ws.healthy.len());
 
     let inp = Inputs {
         platform,

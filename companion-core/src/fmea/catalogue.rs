@@ -15,18 +15,22 @@ pub fn fill_from_catalogue(
     cpu_cores: u8,
 ) -> Result<(), SpecError> {
     for (n, node) in spec.node.iter_mut() {
-        let NodeSpec::Activation(node) = node else {
-            continue;
+        let (variant, implementations) = match node {
+            NodeSpec::Activation(a) => {
+                if a.variant.is_some() && !a.implementations.is_empty() {
+                    return Err(err(
+                        file,
+                        format!("node.{n}.implementations"),
+                        "a node naming a `variant` takes its implementations from params/variants.toml",
+                    ));
+                }
+                (&a.variant, &mut a.implementations)
+            }
+            NodeSpec::Fit(f) => (&f.variant, &mut f.implementations),
+            _ => continue,
         };
-        let Some(v) = &node.variant else { continue };
+        let Some(v) = variant else { continue };
         let entry = format!("node.{n}.variant");
-        if !node.implementations.is_empty() {
-            return Err(err(
-                file,
-                format!("node.{n}.implementations"),
-                "a node naming a `variant` takes its implementations from params/variants.toml",
-            ));
-        }
         let Some((app, version)) = v.split_once('/') else {
             return Err(err(file, entry, format!("`{v}` is not `app/version`")));
         };
@@ -38,7 +42,7 @@ pub fn fill_from_catalogue(
                 format!("no variant {app} {version} in params/variants.toml"),
             ));
         }
-        node.implementations = impls
+        *implementations = impls
             .iter()
             .map(|x| Implementation {
                 name: x.implementation.to_string(),

@@ -5,7 +5,7 @@
 use super::nodes::Hm;
 use super::roles::{Role, assign_roles};
 use super::rules::{NodeCtx, row_rule};
-use super::schema::{ActivationNode, FmeaRow, HmFile, ImportNode, MonitorNode, NodeSpec};
+use super::schema::{ActivationNode, FitNode, FmeaRow, HmFile, ImportNode, MonitorNode, NodeSpec};
 use super::{
     CompiledHm, MAX_CLIQUE_ENTRIES, MAX_CPT_ENTRIES, MAX_NODES, MAX_PARENTS, NodeInfo, Publish,
     bn_to_spec, err, parse_publish,
@@ -156,6 +156,7 @@ fn parents_of(hm: &Hm, n: &str, r: Role, spec_n: &NodeSpec) -> Result<Vec<String
         NodeSpec::Qos(q) => error_parents(hm, n, r, q.errors.as_ref(), &mut parents)?,
         NodeSpec::Version(v) => error_parents(hm, n, r, v.errors.as_ref(), &mut parents)?,
         NodeSpec::Activation(a) => activation_parents(hm, n, a, &mut parents)?,
+        NodeSpec::Fit(f) => fit_parents(hm, n, f, &mut parents)?,
         NodeSpec::State(s) => {
             if let Some(prev) = &s.previous {
                 hm.known(prev, format!("node.{n}.previous"))?;
@@ -246,13 +247,41 @@ fn error_parents(
     Ok(())
 }
 
-/// An activation node depends on its version, free tiles, CPU and optionally performance.
+/// An activation node depends on its version and its `fit` node, or on its version, free
+/// tiles, CPU and optionally performance.
 fn activation_parents(
     hm: &Hm,
     n: &str,
     spec_n: &ActivationNode,
     parents: &mut Vec<String>,
 ) -> Result<(), SpecError> {
+    if let Some(fit) = &spec_n.fit {
+        for (key, v) in [
+            ("tiles", &spec_n.tiles),
+            ("cpu", &spec_n.cpu),
+            ("performance", &spec_n.performance),
+        ] {
+            if v.is_some() {
+                return Err(err(
+                    hm.file,
+                    format!("node.{n}.{key}"),
+                    format!("a node with a `fit` parent reads the room through it, not `{key}`"),
+                ));
+            }
+        }
+        let version = spec_n.version.as_ref().ok_or_else(|| {
+            err(
+                hm.file,
+                format!("node.{n}.version"),
+                "an activation node needs `version`",
+            )
+        })?;
+        hm.known(version, format!("node.{n}.version"))?;
+        hm.known(fit, format!("node.{n}.fit"))?;
+        push(parents, version);
+        push(parents, fit);
+        return Ok(());
+    }
     for (key, v) in [
         ("version", &spec_n.version),
         ("tiles", &spec_n.tiles),
@@ -271,6 +300,31 @@ fn activation_parents(
     if let Some(p) = &spec_n.performance {
         hm.known(p, format!("node.{n}.performance"))?;
         push(parents, p);
+    }
+    Ok(())
+}
+
+/// A fit node depends on free tiles, CPU headroom and the required rate.
+fn fit_parents(
+    hm: &Hm,
+    n: &str,
+    spec_n: &FitNode,
+    parents: &mut Vec<String>,
+) -> Result<(), SpecError> {
+    for (key, v) in [
+        ("tiles", &spec_n.tiles),
+        ("cpu", &spec_n.cpu),
+        ("performance", &spec_n.performance),
+    ] {
+        let v = v.as_ref().ok_or_else(|| {
+            err(
+                hm.file,
+                format!("node.{n}.{key}"),
+                format!("a fit node needs `{key}`"),
+            )
+        })?;
+        hm.known(v, format!("node.{n}.{key}"))?;
+        push(parents, v);
     }
     Ok(())
 }

@@ -46,6 +46,7 @@ pub const ROLES: &[&str] = &[
     "resource",
     "performance",
     "activation",
+    "fit",
     "import",
     "state",
 ];

@@ -21,12 +21,13 @@ pub(super) enum Role {
     Resource,
     Performance,
     Activation,
+    Fit,
     Import,
     State,
 }
 
 impl Role {
-    pub(super) const ALL: [Role; 12] = [
+    pub(super) const ALL: [Role; 13] = [
         Role::Qos,
         Role::Error,
         Role::Monitor,
@@ -37,6 +38,7 @@ impl Role {
         Role::Resource,
         Role::Performance,
         Role::Activation,
+        Role::Fit,
         Role::Import,
         Role::State,
     ];
@@ -57,6 +59,7 @@ impl Role {
             Role::Resource => "resource",
             Role::Performance => "performance",
             Role::Activation => "activation",
+            Role::Fit => "fit",
             Role::Import => "import",
             Role::State => "state",
         }
@@ -78,6 +81,7 @@ impl Role {
             Role::MonitorHealth => &["ok", "faulty"],
             Role::Solution | Role::Version => &["deactivate", "activate"],
             Role::Activation => &["ToDeactivate", "ToActivate"],
+            Role::Fit => &["no", "yes"],
             _ => return None,
         })
     }

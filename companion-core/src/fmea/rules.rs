@@ -4,7 +4,8 @@
 use super::nodes::Hm;
 use super::roles::Role;
 use super::schema::{
-    ActivationNode, MonitorNode, NodeSpec, NoisyOrNode, QosNode, StateNode, VersionNode,
+    ActivationNode, FitNode, Implementation, MonitorNode, NodeSpec, NoisyOrNode, QosNode,
+    StateNode, VersionNode,
 };
 use super::{check_prob, err};
 use crate::spec::SpecError;
@@ -50,6 +51,7 @@ pub(super) fn row_rule(c: &NodeCtx, spec: &NodeSpec) -> Result<RowRule, SpecErro
         NodeSpec::Qos(s) => qos(c, s),
         NodeSpec::Version(s) => version(c, s),
         NodeSpec::Activation(s) => activation(c, s),
+        NodeSpec::Fit(s) => fit(c, s),
         NodeSpec::State(_) | NodeSpec::Performance(_) => Err(c.err(
             c.entry("cpt"),
             format!("a {} node needs an explicit `cpt`", spec.role()),
@@ -300,13 +302,34 @@ type FitsRule = Box<dyn Fn(u32, usize, usize) -> bool>;
 fn activation(c: &NodeCtx, s: &ActivationNode) -> Result<RowRule, SpecError> {
     let p_fit = c.prob("p_fit", s.p_fit.unwrap_or(1.0))?;
     let p_nofit = c.prob("p_nofit", s.p_nofit.unwrap_or(0.05))?;
+    let version_on = 1usize; // `activate` is the second state of a version node.
+    if let Some(fit) = &s.fit {
+        // Parents (version, fit): the fit node says whether the version can be placed.
+        let yes = c.hm.states[fit]
+            .iter()
+            .position(|x| x == "yes")
+            .filter(|_| c.hm.states[fit].len() == 2)
+            .ok_or_else(|| {
+                c.err(
+                    c.entry("fit"),
+                    format!("`{fit}` must have the states `no`, `yes`"),
+                )
+            })?;
+        return Ok(Box::new(move |a| {
+            let p = match (a[0] == version_on, a[1] == yes) {
+                (false, _) => 0.0,
+                (true, true) => p_fit,
+                (true, false) => p_nofit,
+            };
+            Ok(vec![1.0 - p, p])
+        }));
+    }
     if s.implementations.is_empty() {
         return Err(c.err(
             c.entry("implementations"),
             "an activation node needs implementations (or a `variant` of params/variants.toml)",
         ));
     }
-    let version_on = 1usize; // `activate` is the second state of a version node.
     let tiles_node = s.tiles.clone().unwrap_or_default();
     let tile_counts: Vec<u32> = c.hm.states[&tiles_node]
         .iter()
@@ -321,7 +344,13 @@ fn activation(c: &NodeCtx, s: &ActivationNode) -> Result<RowRule, SpecError> {
     let numeric = s.implementations.iter().any(|im| im.cpu_per_fps.is_some());
     let has_perf = s.performance.is_some();
     let fits_rule = if numeric {
-        catalogue_fits(c, s)?
+        catalogue_fits(
+            c,
+            s.cpu.as_deref(),
+            s.performance.as_deref(),
+            &s.implementations,
+            Bound::Conservative,
+        )?
     } else {
         hand_written_fits(c, s)?
     };
@@ -336,11 +365,42 @@ fn activation(c: &NodeCtx, s: &ActivationNode) -> Result<RowRule, SpecError> {
     }))
 }
 
-/// Catalogue-compiled: an implementation fits when its tiles are free, it reaches the highest
-/// rate of the required-rate state, and its CPU share at that rate is within the lowest
-/// headroom of the headroom state.
-fn catalogue_fits(c: &NodeCtx, s: &ActivationNode) -> Result<FitsRule, SpecError> {
-    let cpu_node = s.cpu.clone().unwrap_or_default();
+/// Which end of the bins the catalogue check reads.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Bound {
+    /// Lowest headroom and highest rate of the states: fits for every value in them.
+    Conservative,
+    /// Highest headroom and lowest rate of the states: fits for some value in them.
+    Optimistic,
+}
+
+/// Tile counts of the node's states.
+fn tile_counts(c: &NodeCtx, tiles_node: &str) -> Result<Vec<u32>, SpecError> {
+    c.hm.states[tiles_node]
+        .iter()
+        .map(|s| s.parse::<u32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| {
+            c.err(
+                c.entry("tiles"),
+                format!("states of `{tiles_node}` must be tile counts"),
+            )
+        })
+}
+
+/// Catalogue-compiled: an implementation fits when its tiles are free, it reaches the rate of
+/// the required-rate state, and its CPU share at that rate is within the headroom of the
+/// headroom state; `bound` says which end of each state is read (a headroom state is named by
+/// its lower edge and ends at the next one; a rate state is named by its upper edge and starts
+/// at the one before).
+fn catalogue_fits(
+    c: &NodeCtx,
+    cpu_node: Option<&str>,
+    perf_node: Option<&str>,
+    implementations: &[Implementation],
+    bound: Bound,
+) -> Result<FitsRule, SpecError> {
+    let cpu_node = cpu_node.unwrap_or_default();
     let parse = |node: &str, key: &str| -> Result<Vec<f64>, SpecError> {
         c.hm.states[node]
             .iter()
@@ -348,16 +408,26 @@ fn catalogue_fits(c: &NodeCtx, s: &ActivationNode) -> Result<FitsRule, SpecError
             .collect::<Option<Vec<f64>>>()
             .ok_or_else(|| c.err(c.entry(key), format!("states of `{node}` must be numbers")))
     };
-    let headroom = parse(&cpu_node, "cpu")?;
-    let perf_node = s.performance.clone().ok_or_else(|| {
+    let lower_headroom = parse(cpu_node, "cpu")?;
+    let perf_node = perf_node.ok_or_else(|| {
         c.err(
             c.entry("performance"),
-            "a catalogue-compiled activation node needs a required-rate `performance` node",
+            "a catalogue-compiled node needs a required-rate `performance` node",
         )
     })?;
-    let rate = parse(&perf_node, "performance")?;
-    let impls: Vec<(u32, f64, f64)> = s
-        .implementations
+    let upper_rate = parse(perf_node, "performance")?;
+    let (headroom, rate): (Vec<f64>, Vec<f64>) = match bound {
+        Bound::Conservative => (lower_headroom, upper_rate),
+        Bound::Optimistic => (
+            (0..lower_headroom.len())
+                .map(|i| lower_headroom.get(i + 1).copied().unwrap_or(f64::INFINITY))
+                .collect(),
+            (0..upper_rate.len())
+                .map(|i| if i == 0 { 0.0 } else { upper_rate[i - 1] })
+                .collect(),
+        ),
+    };
+    let impls: Vec<(u32, f64, f64)> = implementations
         .iter()
         .map(|im| {
             (
@@ -375,6 +445,36 @@ fn catalogue_fits(c: &NodeCtx, s: &ActivationNode) -> Result<FitsRule, SpecError
                 && max_fps * (1.0 + 1e-9) >= fps
                 && (share <= 0.0 || share <= headroom[cpu] + 1e-9)
         })
+    }))
+}
+
+/// Fit (no/yes) over (tiles, cpu, performance): `yes` when every value in the states fits
+/// (conservative check), `no` when none does (optimistic check fails), `p_unsure` between.
+fn fit(c: &NodeCtx, s: &FitNode) -> Result<RowRule, SpecError> {
+    let p_unsure = c.prob("p_unsure", s.p_unsure.unwrap_or(0.5))?;
+    if s.variant.is_none() || s.implementations.is_empty() {
+        return Err(c.err(
+            c.entry("variant"),
+            "a fit node needs a `variant` of params/variants.toml",
+        ));
+    }
+    if c.hm.states[c.n] != ["no", "yes"] {
+        return Err(c.err(c.entry("states"), "a fit node's states are `no`, `yes`"));
+    }
+    let tiles = tile_counts(c, s.tiles.as_deref().unwrap_or_default())?;
+    let (cpu, perf) = (s.cpu.as_deref(), s.performance.as_deref());
+    let sure = catalogue_fits(c, cpu, perf, &s.implementations, Bound::Conservative)?;
+    let maybe = catalogue_fits(c, cpu, perf, &s.implementations, Bound::Optimistic)?;
+    Ok(Box::new(move |a| {
+        let free = tiles[a[0]];
+        let p = if sure(free, a[1], a[2]) {
+            1.0
+        } else if maybe(free, a[1], a[2]) {
+            p_unsure
+        } else {
+            0.0
+        };
+        Ok(vec![1.0 - p, p])
     }))
 }
 

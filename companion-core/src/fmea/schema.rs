@@ -348,6 +348,9 @@ pub struct ActivationNode {
     pub p_fit: Option<f64>,
     /// P(ToActivate) when the version is active but no implementation fits (default 0.05).
     pub p_nofit: Option<f64>,
+    /// A `fit` node (states `no`, `yes`) saying whether the version fits; given it, the node's
+    /// parents are `version` and `fit` and it takes no `tiles`, `cpu` or `performance`.
+    pub fit: Option<String>,
 }
 
 impl ActivationNode {
@@ -360,7 +363,37 @@ impl ActivationNode {
         "implementations",
         "p_fit",
         "p_nofit",
+        "fit",
     ];
+}
+
+/// A `fit` node: whether a version of the catalogue (`variant`) can be placed beside what runs
+/// now. Its table is the bins' answer (headroom and rate nodes as the catalogue-compiled
+/// activation rule reads them): `yes` when every value in the bins fits, `no` when none does,
+/// `p_unsure` in between; the decision core observes it with the scheduler's own admission check
+/// on its exact numbers, which the bins' answer never contradicts.
+#[derive(Debug, Clone, Default, Deserialize)]
+pub struct FitNode {
+    /// The keys every role takes.
+    #[serde(flatten)]
+    pub common: NodeCommon,
+    /// `app/version` in params/variants.toml (required: the implementations come from it).
+    pub variant: Option<String>,
+    /// Free-FPGA-tiles node; its states must be tile counts.
+    pub tiles: Option<String>,
+    /// CPU-headroom node, states named by their lower edges.
+    pub cpu: Option<String>,
+    /// Required-rate node, states named by their upper edges (fps).
+    pub performance: Option<String>,
+    /// Compiled from the catalogue (never written in the file).
+    #[serde(skip)]
+    pub implementations: Vec<Implementation>,
+    /// P(yes) when the bins cannot tell (default 0.5).
+    pub p_unsure: Option<f64>,
+}
+
+impl FitNode {
+    const KEYS: &[&str] = &["variant", "tiles", "cpu", "performance", "p_unsure"];
 }
 
 /// A `state` node: a level, dynamic (from `previous`) or a root with a prior.
@@ -409,6 +442,8 @@ pub enum NodeSpec {
     Performance(NodeCommon),
     /// Activation of a version (ToActivate/ToDeactivate).
     Activation(ActivationNode),
+    /// Whether a version fits beside what runs now (no/yes).
+    Fit(FitNode),
     /// Node whose prior comes from another manager.
     Import(ImportNode),
     /// Level, static or dynamic.
@@ -429,6 +464,7 @@ impl NodeSpec {
             Role::Resource => NodeSpec::Resource(RootNode::default()),
             Role::Performance => NodeSpec::Performance(NodeCommon::default()),
             Role::Activation => NodeSpec::Activation(ActivationNode::default()),
+            Role::Fit => NodeSpec::Fit(FitNode::default()),
             Role::Import => NodeSpec::Import(ImportNode::default()),
             Role::State => NodeSpec::State(StateNode::default()),
         }
@@ -447,6 +483,7 @@ impl NodeSpec {
             NodeSpec::Resource(_) => Role::Resource,
             NodeSpec::Performance(_) => Role::Performance,
             NodeSpec::Activation(_) => Role::Activation,
+            NodeSpec::Fit(_) => Role::Fit,
             NodeSpec::Import(_) => Role::Import,
             NodeSpec::State(_) => Role::State,
         }
@@ -467,6 +504,7 @@ impl NodeSpec {
             NodeSpec::Version(x) => &x.common,
             NodeSpec::Performance(x) => x,
             NodeSpec::Activation(x) => &x.common,
+            NodeSpec::Fit(x) => &x.common,
             NodeSpec::Import(x) => &x.common,
             NodeSpec::State(x) => &x.common,
         }
@@ -482,6 +520,7 @@ impl NodeSpec {
             NodeSpec::Version(x) => &mut x.common,
             NodeSpec::Performance(x) => x,
             NodeSpec::Activation(x) => &mut x.common,
+            NodeSpec::Fit(x) => &mut x.common,
             NodeSpec::Import(x) => &mut x.common,
             NodeSpec::State(x) => &mut x.common,
         }
@@ -497,6 +536,7 @@ impl NodeSpec {
             Role::Version => VersionNode::KEYS,
             Role::Performance => &[],
             Role::Activation => ActivationNode::KEYS,
+            Role::Fit => FitNode::KEYS,
             Role::Import => ImportNode::KEYS,
             Role::State => StateNode::KEYS,
         }

@@ -151,6 +151,31 @@ fn performance_node_parses_the_common_keys_only() {
 }
 
 #[test]
+fn fit_node_parses_its_keys() {
+    let NodeSpec::Fit(f) = parsed(
+        "fit",
+        r#"variant = "track/V3"
+tiles = "A_free_tiles"
+cpu = "A_cpu_headroom"
+performance = "A_rate"
+p_unsure = 0.25
+"#,
+    ) else {
+        panic!("not fit")
+    };
+    assert_eq!(f.variant.as_deref(), Some("track/V3"));
+    assert_eq!(
+        (
+            f.tiles.as_deref(),
+            f.cpu.as_deref(),
+            f.performance.as_deref()
+        ),
+        (Some("A_free_tiles"), Some("A_cpu_headroom"), Some("A_rate"))
+    );
+    assert_eq!(f.p_unsure, Some(0.25));
+}
+
+#[test]
 fn activation_node_parses_its_keys() {
     let NodeSpec::Activation(a) = parsed(
         "activation",
@@ -162,10 +187,12 @@ performance = "A_speed"
 implementations = [{ name = "HW", tiles = 2, cpu = "high", fast = true }, { name = "SW", cpu_per_fps = 0.25, max_fps = 4 }]
 p_fit = 0.99
 p_nofit = 0.01
+fit = "F_V3"
 "#,
     ) else {
         panic!("not activation")
     };
+    assert_eq!(a.fit.as_deref(), Some("F_V3"));
     assert_eq!(a.variant.as_deref(), Some("track/V3"));
     assert_eq!(a.version.as_deref(), Some("C_V3"));
     assert_eq!(a.tiles.as_deref(), Some("A_free_tiles"));
