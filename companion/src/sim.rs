@@ -318,6 +318,8 @@ pub struct World<'a> {
     battery_wh: f64,
     zone_t_found: bool,
     zone_found: bool,
+    /// The target was lost and has not been detected again: tracking steps re-detect first.
+    reacquiring: bool,
     /// Step at which the last obstacle was avoided: the drone then flies the avoidance waypoint
     /// and has left the route along which the 'T' zone is searched.
     avoided_at: Option<u32>,
@@ -345,6 +347,7 @@ impl<'a> World<'a> {
             battery_wh: spec.vehicle.battery_wh,
             zone_t_found: false,
             zone_found: false,
+            reacquiring: false,
             avoided_at: None,
             entered: BTreeMap::new(),
             active: vec![None; scenario.hazards.len()],
@@ -591,12 +594,23 @@ impl<'a> World<'a> {
             }
         } else if spec.states.is_target_in_sight(p) {
             match spec.states.tracking_target(&acts) {
+                // A lost target is out of the image: the tracker's detector (the D of TLD) must
+                // find it again, with `p_detect` per step (section 7.1's P_detectTarget), before a
+                // step can keep it. Those steps are not tracking time.
+                Some(_) if self.reacquiring => {
+                    if self.rng.random::<f64>() < truth.p_detect {
+                        self.reacquiring = false;
+                        events.push(Event::TargetDetected);
+                    }
+                    None
+                }
                 Some((kept, version)) => {
                     let q = self.qos(version, &values);
                     if self.rng.random::<f64>() < q {
                         Some(kept.to_string())
                     } else {
                         events.push(Event::TargetLost);
+                        self.reacquiring = true;
                         state(RouteRole::TargetFound)
                     }
                 }

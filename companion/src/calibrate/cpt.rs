@@ -188,7 +188,17 @@ impl CptCounts {
         else {
             return;
         };
-        let kept = !events.contains(&Event::TargetLost.to_string().as_str());
+        let lost = events.contains(&Event::TargetLost.to_string().as_str());
+        // A step that re-detects a lost target (`simulate`'s world, docs/simulation.md) neither
+        // keeps nor loses it: not a trial of the version's row. Kept: the step ended tracking.
+        let kept = r
+            .vehicle
+            .get(companion_core::tracking::STATE_AFTER_KEY)
+            .and_then(|v| v.as_str())
+            .map_or(!lost, |after| states.is_tracking(after));
+        if !kept && !lost {
+            return;
+        }
         let c = self.versions.entry((node, row)).or_default();
         c.0 += u64::from(kept);
         c.1 += 1;
