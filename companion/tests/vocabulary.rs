@@ -74,7 +74,7 @@ fn a_declared_observation_nothing_produces_is_refused() {
     expect_err(
         "observations.toml",
         |t| t.replace("name = \"lidar_failed\"", "name = \"lidar_fault\""),
-        "observation[15](lidar_fault)",
+        "observation[21](lidar_fault)",
         "nothing produces it",
     );
 }
@@ -96,7 +96,7 @@ fn an_observation_for_a_node_no_manager_has_is_refused() {
     expect_err(
         "observations.toml",
         |t| t.replace("node = \"A_temperature\"", "node = \"A_humidity\""),
-        "observation[12](temperature_c).node",
+        "observation[18](temperature_c).node",
         "no health manager has a node `A_humidity`",
     );
 }
