@@ -18,7 +18,10 @@ const MAX_FILES: usize = 1000;
 /// directory is read and the overlay layered on it.
 pub fn read_params_dir(dir: &Path) -> Result<ParamsFiles, SpecError> {
     if crate::calibrate::overlay::is_overlay(dir) {
-        return crate::calibrate::overlay::read_overlaid(dir, default_params_dir());
+        let (base, table) = crate::calibrate::overlay::read_overlay(dir, default_params_dir())?;
+        let mut files = read_dir_only(&base)?;
+        crate::calibrate::overlay::apply(&mut files, dir, &table)?;
+        return Ok(files);
     }
     read_dir_only(dir)
 }

@@ -47,8 +47,14 @@ fn vibrations_after(after: u32) -> Scenario {
 /// versions the same 0.98, and every seed the same result.
 #[test]
 fn vibrations_and_high_speed_differ_per_seed() {
-    let vib = tracking_per_seed(&Scenario::load(params(), "vibrations").unwrap(), ModelKind::Bfm);
-    let fast = tracking_per_seed(&Scenario::load(params(), "high-speed").unwrap(), ModelKind::Bfm);
+    let vib = tracking_per_seed(
+        &Scenario::load(params(), "vibrations").unwrap(),
+        ModelKind::Bfm,
+    );
+    let fast = tracking_per_seed(
+        &Scenario::load(params(), "high-speed").unwrap(),
+        ModelKind::Bfm,
+    );
     let differing = vib.iter().zip(&fast).filter(|(a, b)| a != b).count();
     assert!(
         differing * 2 > vib.len(),
@@ -62,8 +68,14 @@ fn vibrations_and_high_speed_differ_per_seed() {
 #[test]
 fn reference_tracking_moves_less_than_the_trigger() {
     let mean = |xs: &[u32]| xs.iter().map(|&x| f64::from(x)).sum::<f64>() / xs.len() as f64;
-    let early = mean(&tracking_per_seed(&vibrations_after(30), ModelKind::Reference));
-    let late = mean(&tracking_per_seed(&vibrations_after(40), ModelKind::Reference));
+    let early = mean(&tracking_per_seed(
+        &vibrations_after(30),
+        ModelKind::Reference,
+    ));
+    let late = mean(&tracking_per_seed(
+        &vibrations_after(40),
+        ModelKind::Reference,
+    ));
     let shift = late - early;
     assert!(
         shift > 0.0 && shift < 9.5,
@@ -91,7 +103,9 @@ fn a_lost_target_is_detected_again_before_it_is_tracked() {
             seen_loss = true;
             // The next cycle starts at the target-found state and does not keep the target: it
             // re-detects it (or the mission ends).
-            let Some(next) = r.records.get(i + 1) else { continue };
+            let Some(next) = r.records.get(i + 1) else {
+                continue;
+            };
             assert_eq!(next.state, "target", "seed {seed} cycle {}", i + 1);
             let state_after = next.vehicle[companion_core::tracking::STATE_AFTER_KEY]
                 .as_str()
@@ -111,10 +125,17 @@ fn a_lost_target_is_detected_again_before_it_is_tracked() {
 #[test]
 fn strong_wind_degrades_tracking_as_the_bn_believes() {
     let world = WorldSpec::load(params()).unwrap();
-    let rule = world.truth.contexts.get("strong_wind").expect("a strong_wind context");
+    let rule = world
+        .truth
+        .contexts
+        .get("strong_wind")
+        .expect("a strong_wind context");
     assert_eq!(rule.observation, "wind_mps");
     let wind = &world.truth.qos["strong_wind"];
     let nominal = &world.truth.qos["nominal"];
     assert!(wind["V0"] < nominal["V0"] - 0.1, "wind {wind:?}");
-    assert!(wind["V3"] > wind["V0"] + 0.1, "stabilisation fixes it: {wind:?}");
+    assert!(
+        wind["V3"] > wind["V0"] + 0.1,
+        "stabilisation fixes it: {wind:?}"
+    );
 }

@@ -31,9 +31,10 @@ pub fn is_overlay(path: &Path) -> bool {
     path.is_file()
 }
 
-/// Read the overlay at `overlay` and its base params directory (its `calibration.params`,
-/// relative to the overlay's folder, else `default_dir`), layered.
-pub fn read_overlaid(overlay: &Path, default_dir: PathBuf) -> Result<ParamsFiles, SpecError> {
+/// The overlay at `overlay`, parsed, and its base params directory (its `calibration.params`,
+/// relative to the overlay's folder, else `default_dir`); the caller reads the base and layers
+/// the overlay on it with [`apply`] (`params_files::read_params_dir`).
+pub fn read_overlay(overlay: &Path, default_dir: PathBuf) -> Result<(PathBuf, Table), SpecError> {
     let table = read_overlay_table(overlay)?;
     let base = match table.get(CALIBRATION_TABLE).and_then(|c| c.get("params")) {
         None => default_dir,
@@ -46,14 +47,16 @@ pub fn read_overlaid(overlay: &Path, default_dir: PathBuf) -> Result<ParamsFiles
             ));
         }
     };
-    let mut files = crate::params_files::read_dir_only(&base)?;
-    apply(&mut files, overlay, &table)?;
-    Ok(files)
+    Ok((base, table))
 }
 
 /// Parse the overlay file (a regular file, at most [`MAX_FILE_BYTES`], TOML).
 pub fn read_overlay_table(overlay: &Path) -> Result<Table, SpecError> {
-    crate::params_files::regular_file(overlay).map_err(|r| SpecError::new(overlay, "-", r))?;
+    match std::fs::metadata(overlay) {
+        Ok(m) if m.is_file() => {}
+        Ok(_) => return Err(SpecError::new(overlay, "-", "is not a regular file")),
+        Err(e) => return Err(SpecError::new(overlay, "-", format!("cannot read: {e}"))),
+    }
     let len = std::fs::metadata(overlay).map(|m| m.len()).unwrap_or(0);
     if len > MAX_FILE_BYTES as u64 {
         return Err(SpecError::new(
