@@ -13,6 +13,7 @@ const KNOWN: &[&str] = &[
     "P_sys",
     "P_battery",
     "P_obs",
+    "P_fusion",
     "P_SI",
     "P_SF",
     "P_appT",

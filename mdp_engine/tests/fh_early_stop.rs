@@ -195,7 +195,9 @@ fn periodic_model_is_solved_in_full() {
 }
 
 /// The paper's models (section 7.1 instantiation): same answers as full induction, and which
-/// of them stop early (all of them: their stage differences settle within about 20 to 70 stages).
+/// of them stop early (all but navigation: their stage differences settle within about 20 to 70
+/// stages; navigation's hover-with-fusion action, issue 24, keeps its differences moving over the
+/// 100 stages, so it computes them all and must still equal full induction).
 #[test]
 fn paper_models_match_full_induction() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/models");
@@ -209,7 +211,10 @@ fn paper_models_match_full_induction() {
         let text = std::fs::read_to_string(dir.join(format!("{name}.json"))).unwrap();
         let m: Mdp = serde_json::from_str(&text).unwrap();
         let computed = check(&m, 100).unwrap_or_else(|e| panic!("{name}: {e}"));
-        assert!(computed < 100, "{name}: no early stop");
+        assert!(
+            computed < 100 || name == "navigation",
+            "{name}: no early stop"
+        );
         eprintln!("{name}: {computed} of 100 stages computed");
     }
 }
