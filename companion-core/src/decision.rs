@@ -201,13 +201,8 @@ impl<'m> Core<'m> {
         (plan, rec)
     }
 
-    /// One decision cycle into the caller's buffers: `plan` and `rec` are overwritten (the result
-    /// equals [`Core::step`]'s whatever they held) and keep their capacity, so a steady stream of
-    /// observations of the same shape allocates nothing once warm (tests/cycle_no_alloc.rs).
-    pub fn step_into(&mut self, obs: &Observations, plan: &mut Plan, rec: &mut DecisionRecord) {
-        mark(Stage::CycleStart);
-        let model = self.model;
-        let policy = self.model.policy_name(self.policy);
+    /// The record's inputs copied in (strings and maps reused), the cycle counted.
+    fn begin_record(&mut self, obs: &Observations, rec: &mut DecisionRecord) {
         rec.cycle = self.cycle;
         rec.time_s = obs.time_s;
         rec.state.clone_from(&obs.state);
@@ -217,6 +212,16 @@ impl<'m> Core<'m> {
         rec.link_events.clear();
         rec.vehicle.clear();
         self.cycle += 1;
+    }
+
+    /// One decision cycle into the caller's buffers: `plan` and `rec` are overwritten (the result
+    /// equals [`Core::step`]'s whatever they held) and keep their capacity, so a steady stream of
+    /// observations of the same shape allocates nothing once warm (tests/cycle_no_alloc.rs).
+    pub fn step_into(&mut self, obs: &Observations, plan: &mut Plan, rec: &mut DecisionRecord) {
+        mark(Stage::CycleStart);
+        let model = self.model;
+        let policy = self.model.policy_name(self.policy);
+        self.begin_record(obs, rec);
         mark(Stage::Record);
 
         // evidence -> health (the platform's room comes from the core's own platform model)

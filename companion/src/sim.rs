@@ -477,6 +477,23 @@ impl<'a> World<'a> {
     }
 
     /// Advance one step under the plan the core chose. Returns events to append to the record.
+    /// The CPU and tile monitors: they report what the OTHER applications occupy (the assessed
+    /// application's own variant is what the resource BN decides about, so its share counts as
+    /// available).
+    fn monitor_resources(&mut self, record: &DecisionRecord) {
+        if let Some(r) = &record.resources {
+            let others = r
+                .placements
+                .iter()
+                .filter(|p| p.app != self.spec.assessed_app);
+            let (cpu, tiles) = others.fold((0.0, 0usize), |(c, t), p| {
+                (c + p.cpu_share, t + p.tiles.len())
+            });
+            self.cpu_load = cpu;
+            self.free_tiles = self.spec.tiles as f64 - tiles as f64;
+        }
+    }
+
     pub fn advance(&mut self, plan: &Plan, record: &DecisionRecord) -> Vec<Event> {
         let mut events = Vec::new();
         let values = self.values();
@@ -503,19 +520,7 @@ impl<'a> World<'a> {
         if !on_ground || has(ActionRole::TakeOff) {
             self.battery_wh -= (prop_w + compute_w) * self.spec.step_s / 3600.0;
         }
-        if let Some(r) = &record.resources {
-            // The monitors report what the OTHER applications occupy: the assessed application's
-            // own variant is what the resource BN decides about, so its share counts as available.
-            let others = r
-                .placements
-                .iter()
-                .filter(|p| p.app != self.spec.assessed_app);
-            let (cpu, tiles) = others.fold((0.0, 0usize), |(c, t), p| {
-                (c + p.cpu_share, t + p.tiles.len())
-            });
-            self.cpu_load = cpu;
-            self.free_tiles = self.spec.tiles as f64 - tiles as f64;
-        }
+        self.monitor_resources(record);
 
         // Obstacles: avoided, or a collision after the grace period.
         if self.obstacle_present(&values) && !on_ground {
