@@ -42,6 +42,9 @@ pub struct Core<'m> {
     capped_versions: Vec<String>,
     /// Scratch: the versions without a feasible alternative, as the guarantee names them.
     versions_scratch: Vec<String>,
+    /// The last cycle's re-allocation event text, kept to be rewritten (a version flipping
+    /// every cycle is a plan-follow every cycle: no allocation for its event once warm).
+    reallocation_event: String,
     failed_resources: Vec<String>,
     /// The activity being flown and when (observation time, s) it started.
     activity_started: Option<(usize, f64)>,
@@ -132,6 +135,7 @@ impl<'m> Core<'m> {
             guarantee_infeasible: false,
             capped_versions: Vec::new(),
             versions_scratch: Vec::new(),
+            reallocation_event: String::new(),
             failed_resources: Vec::new(),
             activity_started: None,
             others_tiles: 0,
@@ -190,7 +194,7 @@ impl<'m> Core<'m> {
     pub fn reallocations(&self) -> usize {
         self.guarantee
             .as_ref()
-            .map_or(0, |g| g.ras_rows().len().saturating_sub(1))
+            .map_or(0, |g| g.reallocations())
     }
 
     /// One decision cycle.
@@ -206,6 +210,14 @@ impl<'m> Core<'m> {
         rec.cycle = self.cycle;
         rec.time_s = obs.time_s;
         rec.state.clone_from(&obs.state);
+        if let Some(Event::Reallocation(s)) = rec
+            .events
+            .iter_mut()
+            .skip(obs.events.len())
+            .find(|e| matches!(e, Event::Reallocation(_)))
+        {
+            self.reallocation_event = std::mem::take(s);
+        }
         rec.events.clone_from(&obs.events);
         crate::record::map_clone_from(&mut rec.observations, &obs.values);
         rec.commands.clear();
@@ -874,7 +886,9 @@ impl<'m> Core<'m> {
             return;
         };
         if let Some(r) = &record.reallocation {
-            rec.events.push(Event::Reallocation(r.reason.clone()));
+            let mut text = std::mem::take(&mut self.reallocation_event);
+            text.clone_from(&r.reason);
+            rec.events.push(Event::Reallocation(text));
         }
         if record.infeasible && !self.guarantee_infeasible {
             rec.events.push(Event::GuaranteeInfeasible);

@@ -15,7 +15,7 @@ mod schema;
 
 use crate::record::{
     CapacitySource, CellsSource, EnergySource, GuaranteeRecord, PackRecord, PowerRecord,
-    Reallocation,
+    Reallocation, ReallocationTrigger,
 };
 use crate::spec::{ParamsFiles, SpecError, read_toml};
 use compile::{check_against_catalogue, compile};
@@ -253,6 +253,9 @@ pub struct Guarantee {
     choice: Vec<usize>,
     failed: Vec<String>,
     rows: Vec<RasRow>,
+    /// Re-allocations so far (RAS0 not counted): the plan following what runs back to an
+    /// allocation already in `rows` counts here but adds no row.
+    reallocations: usize,
     /// Buffers reused by [`Guarantee::watch_into`] (no allocation on a cycle that keeps the RAS).
     scratch: WatchScratch,
     /// The energy goal's index and its bound from the mission file (params' `[battery]`).
@@ -277,6 +280,9 @@ struct WatchScratch {
     alt: MarginReport,
     /// Version -> some alternative carrying it is feasible (binding.rs).
     feasible_versions: Vec<(String, bool, bool)>,
+    /// The last re-allocation record, its strings and maps kept to be rewritten in place by
+    /// the next one (a version flipping every cycle re-allocates every cycle, allocation-free).
+    spare: Option<Reallocation>,
 }
 
 impl Default for WatchScratch {
@@ -304,6 +310,7 @@ impl Default for WatchScratch {
                 drift: Vec::new(),
             },
             feasible_versions: Vec::new(),
+            spare: None,
         }
     }
 }
@@ -416,6 +423,7 @@ impl Guarantee {
             spec,
             failed: Vec::new(),
             rows,
+            reallocations: 0,
             scratch: WatchScratch::default(),
             energy_goal,
             cells_seen: None,
@@ -423,6 +431,61 @@ impl Guarantee {
             power: PowerState::default(),
             energy_scale: 1.0,
         }
+    }
+
+    /// Re-allocations so far (RAS0 not counted), the plan following what runs included.
+    pub fn reallocations(&self) -> usize {
+        self.reallocations
+    }
+
+    /// A RAS row for the plan in force from activity `at` on.
+    fn push_row(&mut self, at: usize, reason: &str) {
+        let p = &self.spec.problem;
+        let n = p.activities.len();
+        self.rows.push(RasRow {
+            label: format!("RAS{}", self.rows.len()),
+            reason: format!("{reason} during {}", p.activities[at].name),
+            from_activity: at,
+            cells: (0..n)
+                .map(|j| (j >= at).then(|| p.activities[j].ias[self.choice[j]].name.clone()))
+                .collect(),
+        });
+    }
+
+    /// The re-allocation of this cycle into `rec`, for the plan in force from activity `at`
+    /// on: its margins in the record's `margins_after`, the text `reason` writes. Rewrites the last record's strings in place (no allocation once warm).
+    fn write_reallocation(
+        &mut self,
+        at: usize,
+        trigger: ReallocationTrigger,
+        rec: &mut GuaranteeRecord,
+        reason: impl FnOnce(&mut String, &Problem),
+    ) {
+        let p = &self.spec.problem;
+        let n = p.activities.len();
+        let sc = &mut self.scratch;
+        let mut out = rec
+            .reallocation
+            .take()
+            .or_else(|| sc.spare.take())
+            .unwrap_or_default();
+        out.trigger = trigger;
+        out.reason.clear();
+        reason(&mut out.reason, p);
+        out.allocation.truncate(n - at);
+        for (k, j) in (at..n).enumerate() {
+            let (a, ia) = (&p.activities[j].name, &p.activities[j].ias[self.choice[j]].name);
+            match out.allocation.get_mut(k) {
+                Some(e) => {
+                    e.0.clone_from(a);
+                    e.1.clone_from(ia);
+                }
+                None => out.allocation.push((a.clone(), ia.clone())),
+            }
+        }
+        panorama::margins_into(p, &self.choice, &sc.m, &mut sc.alt);
+        named_into(&p.goals, &sc.alt.margin, &mut out.margins_after);
+        rec.reallocation = Some(out);
     }
 
     /// The RAS in force: IA index per activity.
@@ -795,7 +858,9 @@ impl Guarantee {
             rec.goals = p.goals.iter().map(|g| (g.name.clone(), g.bound)).collect();
         }
         named_into(&p.goals, &report.drift, &mut rec.drift);
-        rec.reallocation = None;
+        if let Some(r) = rec.reallocation.take() {
+            sc.spare = Some(r);
+        }
         rec.infeasible = false;
         rec.infeasible_reason = None;
         rec.failed_resources.clone_from(&self.failed);
@@ -827,31 +892,15 @@ impl Guarantee {
         });
         match found {
             Ok(c) => {
-                let after = panorama::margins(p, &c, m);
                 self.choice = c;
-                let label = format!("RAS{}", self.rows.len());
-                self.rows.push(RasRow {
-                    label,
-                    reason: format!("{} during {}", reason, p.activities[at].name),
-                    from_activity: at,
-                    cells: (0..n)
-                        .map(|j| {
-                            (j >= at).then(|| p.activities[j].ias[self.choice[j]].name.clone())
-                        })
-                        .collect(),
-                });
-                rec.reallocation = Some(Reallocation {
-                    reason,
-                    allocation: (at..n)
-                        .map(|j| {
-                            (
-                                p.activities[j].name.clone(),
-                                p.activities[j].ias[self.choice[j]].name.clone(),
-                            )
-                        })
-                        .collect(),
-                    margins_after: named(&p.goals, &after.margin),
-                });
+                let trigger = if any_failed {
+                    ReallocationTrigger::Failure
+                } else {
+                    ReallocationTrigger::Margin
+                };
+                self.push_row(at, &reason);
+                self.write_reallocation(at, trigger, rec, |out, _| out.push_str(&reason));
+                self.reallocations += 1;
             }
             Err(e) => {
                 rec.infeasible = true;

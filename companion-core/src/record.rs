@@ -273,12 +273,39 @@ impl EnergySource {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct Reallocation {
+    /// What triggered it, for programs (review, tests); `reason` says it for people. Logs
+    /// written before the field read as [`ReallocationTrigger::Margin`].
+    pub trigger: ReallocationTrigger,
     /// What triggered the re-allocation.
     pub reason: String,
     /// Activity name -> chosen implementation alternative, for the remaining activities.
     pub allocation: Vec<(String, String)>,
     /// Margin per goal after the re-allocation, in the goal's unit.
     pub margins_after: BTreeMap<String, f64>,
+}
+
+/// What made the guarantee change the plan (docs/guarantee.md).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ReallocationTrigger {
+    /// A goal's margin went negative (PANORAMA P3: drift).
+    #[default]
+    Margin,
+    /// A resource the remaining plan uses failed (PANORAMA P3: failure), with or without a
+    /// negative margin.
+    Failure,
+    /// The models run other versions than the plan names: the plan follows them (issue 24's
+    /// binding, BFM -> PANORAMA).
+    FollowsVersions,
+    /// The planned implementation did not fit the platform: the plan follows the placement.
+    FollowsPlacement,
+}
+
+impl ReallocationTrigger {
+    /// True for the plan following what runs (not a re-allocation for a margin or a failure).
+    pub fn is_follow(self) -> bool {
+        matches!(self, Self::FollowsVersions | Self::FollowsPlacement)
+    }
 }
 
 /// A vehicle command and what became of it (fly only; simulate records the intent).

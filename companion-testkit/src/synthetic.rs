@@ -244,6 +244,7 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
     ]);
     let reallocation =
         (obstacle && events.iter().any(|e| e == "obstacle detected")).then(|| Reallocation {
+            trigger: companion_core::record::ReallocationTrigger::Margin,
             reason: "energy margin fell below 15 % of goal".into(),
             allocation: vec![
                 ("track".into(), "tracking/V1".into()),

@@ -16,7 +16,6 @@ const WARM: u64 = 50;
 const COUNTED: u64 = 400;
 
 #[test]
-#[ignore = "since the guarantee binds the plan to what runs (issue 24), the changing stream's version flip is a plan-follow re-allocation every cycle (RAS row, strings); open in issue 27"]
 fn memos_off_cycle_allocates_nothing_once_warm() {
     let params = default_params_dir();
     let model = companion::params::load_model(&params).unwrap();

@@ -268,12 +268,7 @@ fn drift_and_failure_reallocate_and_restore_margins() {
         x.guarantee
             .as_ref()
             .and_then(|g| g.reallocation.as_ref())
-            .is_some_and(|re| {
-                !re.reason.starts_with("the models run")
-                    && !re
-                        .reason
-                        .starts_with("the planned implementation did not fit")
-            })
+            .is_some_and(|re| !re.trigger.is_follow())
     });
     let tracking_start = r.iter().position(|x| x.state == "target").unwrap();
     assert!(

@@ -13,8 +13,9 @@
 //!   energy and duration estimates are always those of what runs, and the implementation the
 //!   plan names is the one the next cycle requests.
 
-use super::{Guarantee, RasRow};
-use crate::record::{GuaranteeRecord, PlacementRecord, Reallocation};
+use super::Guarantee;
+use crate::record::{GuaranteeRecord, PlacementRecord, ReallocationTrigger};
+use std::fmt::Write as _;
 
 /// `(version, implementation)` of an IA token: `V4.F` -> `("V4", Some("F"))`, `lidar` ->
 /// `("lidar", None)`.
@@ -56,6 +57,18 @@ fn carries(act: &panorama::Activity, i: usize, running: &[PlacementRecord]) -> (
 }
 
 impl Guarantee {
+    /// True when a row of the history already holds the plan in force from activity `at` on.
+    fn in_history(&self, at: usize) -> bool {
+        let p = &self.spec.problem;
+        self.rows.iter().any(|row| {
+            row.from_activity <= at
+                && (at..p.activities.len()).all(|j| {
+                    row.cells.get(j).and_then(Option::as_deref)
+                        == Some(p.activities[j].ias[self.choice[j]].name.as_str())
+                })
+        })
+    }
+
     /// True when alternative `i` of activity `at`, with the plan for the other activities,
     /// meets every goal from the progress last watched and uses no failed resource.
     fn alternative_feasible(&mut self, at: usize, i: usize) -> bool {
@@ -152,16 +165,11 @@ impl Guarantee {
             return false;
         }
         let want_exact = cur_versions;
-        let candidates: Vec<usize> = (0..act.ias.len())
-            .filter(|&i| {
-                let (v, e) = carries(act, i, running);
-                if want_exact { e } else { v }
-            })
-            .collect();
         let sel = self.spec.selection;
         let mut best: Option<usize> = None;
-        for i in candidates {
-            if !self.alternative_feasible(at, i) {
+        for i in 0..self.spec.problem.activities[at].ias.len() {
+            let (v, e) = carries(&self.spec.problem.activities[at], i, running);
+            if !(if want_exact { e } else { v }) || !self.alternative_feasible(at, i) {
                 continue;
             }
             let ias = &self.spec.problem.activities[at].ias;
@@ -173,56 +181,57 @@ impl Guarantee {
             return false;
         };
         self.choice[at] = b;
-        let p = &self.spec.problem;
-        let n = p.activities.len();
-        let runs = running
-            .iter()
-            .filter(|r| names(&p.activities[at], &r.version))
-            .map(|r| format!("{}.{}", r.version, r.implementation))
-            .collect::<Vec<_>>()
-            .join(" ");
-        let reason = if want_exact {
-            format!(
-                "the planned implementation did not fit, {runs} runs: the plan follows what runs ({})",
-                p.activities[at].ias[b].name
-            )
-        } else {
-            format!(
-                "the models run {runs}: the plan follows with its most capable feasible alternative ({})",
-                p.activities[at].ias[b].name
-            )
+        // A re-allocation of this cycle (a negative margin, a failed resource) comes first: one
+        // row and one record for the cycle, as the plan now stands (rare: its text allocates).
+        let earlier = rec.reallocation.as_ref().map(|r| (r.trigger, r.reason.clone()));
+        let trigger = match &earlier {
+            Some((t, _)) => *t,
+            None if want_exact => ReallocationTrigger::FollowsPlacement,
+            None => ReallocationTrigger::FollowsVersions,
         };
-        // A re-allocation of this cycle (a negative margin, a failed resource) comes first.
-        let reason = match &rec.reallocation {
-            Some(r) => {
-                // One row for the cycle: the re-allocation's, as the plan now stands.
-                self.rows.pop();
-                format!("{}; then {reason}", r.reason)
+        let write = |out: &mut String, p: &panorama::Problem| {
+            let (act, ia) = (&p.activities[at], &p.activities[at].ias[b].name);
+            if let Some((_, r)) = &earlier {
+                let _ = write!(out, "{r}; then ");
             }
-            None => reason,
+            if want_exact {
+                out.push_str("the planned implementation did not fit, ");
+            } else {
+                out.push_str("the models run ");
+            }
+            let mut first = true;
+            for r in running.iter().filter(|r| names(act, &r.version)) {
+                let sep = if first { "" } else { " " };
+                let _ = write!(out, "{sep}{}.{}", r.version, r.implementation);
+                first = false;
+            }
+            if want_exact {
+                let _ = write!(out, " runs: the plan follows what runs ({ia})");
+            } else {
+                let _ = write!(
+                    out,
+                    ": the plan follows with its most capable feasible alternative ({ia})"
+                );
+            }
         };
-        let after = panorama::margins(p, &self.choice, &self.scratch.m);
-        super::named_into(&p.goals, &after.margin, &mut rec.margins);
-        self.rows.push(RasRow {
-            label: format!("RAS{}", self.rows.len()),
-            reason: format!("{reason} during {}", p.activities[at].name),
-            from_activity: at,
-            cells: (0..n)
-                .map(|j| (j >= at).then(|| p.activities[j].ias[self.choice[j]].name.clone()))
-                .collect(),
-        });
-        rec.reallocation = Some(Reallocation {
-            reason,
-            allocation: (at..n)
-                .map(|j| {
-                    (
-                        p.activities[j].name.clone(),
-                        p.activities[j].ias[self.choice[j]].name.clone(),
-                    )
-                })
-                .collect(),
-            margins_after: super::named(&p.goals, &after.margin),
-        });
+        self.write_reallocation(at, trigger, rec, write);
+        let p = &self.spec.problem;
+        if let Some(r) = &rec.reallocation {
+            super::named_into(&p.goals, &self.scratch.alt.margin, &mut rec.margins);
+            if earlier.is_some() {
+                self.rows.pop();
+                let reason = r.reason.clone();
+                self.push_row(at, &reason);
+            } else {
+                // A version flipping back and forth returns to allocations already in the
+                // history: counted, not added again (the history stays bounded).
+                if !self.in_history(at) {
+                    let reason = r.reason.clone();
+                    self.push_row(at, &reason);
+                }
+                self.reallocations += 1;
+            }
+        }
         true
     }
 }
