@@ -192,9 +192,7 @@ impl<'m> Core<'m> {
 
     /// Number of re-allocations so far (RAS0 not counted).
     pub fn reallocations(&self) -> usize {
-        self.guarantee
-            .as_ref()
-            .map_or(0, |g| g.reallocations())
+        self.guarantee.as_ref().map_or(0, |g| g.reallocations())
     }
 
     /// One decision cycle.

@@ -256,6 +256,8 @@ pub struct Guarantee {
     /// Re-allocations so far (RAS0 not counted): the plan following what runs back to an
     /// allocation already in `rows` counts here but adds no row.
     reallocations: usize,
+    /// The alternatives' names as tokens, per activity (binding.rs).
+    tokens: Vec<binding::ActivityTokens>,
     /// Buffers reused by [`Guarantee::watch_into`] (no allocation on a cycle that keeps the RAS).
     scratch: WatchScratch,
     /// The energy goal's index and its bound from the mission file (params' `[battery]`).
@@ -283,6 +285,8 @@ struct WatchScratch {
     /// The last re-allocation record, its strings and maps kept to be rewritten in place by
     /// the next one (a version flipping every cycle re-allocates every cycle, allocation-free).
     spare: Option<Reallocation>,
+    /// The placements an activity names, as (token id, placement index) (binding.rs).
+    running_ids: Vec<(usize, usize)>,
 }
 
 impl Default for WatchScratch {
@@ -311,6 +315,7 @@ impl Default for WatchScratch {
             },
             feasible_versions: Vec::new(),
             spare: None,
+            running_ids: Vec::new(),
         }
     }
 }
@@ -392,6 +397,7 @@ impl Guarantee {
     }
 
     fn with_ras0(spec: MissionSpec, ras0: Ras0, reason: &str) -> Self {
+        let tokens = binding::ActivityTokens::of(&spec.problem);
         let rows = vec![RasRow {
             label: "RAS0".into(),
             reason: reason.into(),
@@ -424,6 +430,7 @@ impl Guarantee {
             failed: Vec::new(),
             rows,
             reallocations: 0,
+            tokens,
             scratch: WatchScratch::default(),
             energy_goal,
             cells_seen: None,
@@ -474,7 +481,10 @@ impl Guarantee {
         reason(&mut out.reason, p);
         out.allocation.truncate(n - at);
         for (k, j) in (at..n).enumerate() {
-            let (a, ia) = (&p.activities[j].name, &p.activities[j].ias[self.choice[j]].name);
+            let (a, ia) = (
+                &p.activities[j].name,
+                &p.activities[j].ias[self.choice[j]].name,
+            );
             match out.allocation.get_mut(k) {
                 Some(e) => {
                     e.0.clone_from(a);

@@ -26,34 +26,84 @@ fn token(t: &str) -> (&str, Option<&str>) {
     }
 }
 
-/// True when some alternative of `act` names version `v`.
-fn names(act: &panorama::Activity, v: &str) -> bool {
-    act.ias
-        .iter()
-        .any(|ia| ia.name.split_whitespace().any(|t| token(t).0 == v))
+/// An activity's alternatives as tokens, parsed once when the guarantee starts (the binding
+/// asks them for every alternative and placement every cycle: parsing the names there took 85 %
+/// of the cycle).
+#[derive(Debug, Clone)]
+pub(super) struct ActivityTokens {
+    /// Every token any alternative names (`lidar`, `V3`, `zone_t`), in first-seen order.
+    named: Vec<String>,
+    /// Per alternative: `(index into named, implementation)` per token.
+    ias: Vec<Vec<(usize, Option<String>)>>,
 }
 
-/// Does alternative `i` of `act` carry every running version the activity names, and with the
-/// running implementations?
-fn carries(act: &panorama::Activity, i: usize, running: &[PlacementRecord]) -> (bool, bool) {
-    let mut versions = true;
-    let mut exact = true;
-    for p in running.iter().filter(|p| names(act, &p.version)) {
-        let (v, imp) = (p.version.as_str(), p.implementation.as_str());
-        match act.ias[i]
-            .name
-            .split_whitespace()
-            .map(token)
-            .find(|(tv, _)| *tv == v)
-        {
-            None => {
-                versions = false;
-                exact = false;
-            }
-            Some((_, ti)) => exact &= ti.is_none_or(|ti| ti == imp),
-        }
+impl ActivityTokens {
+    pub(super) fn of(p: &panorama::Problem) -> Vec<Self> {
+        p.activities
+            .iter()
+            .map(|act| {
+                let mut named: Vec<String> = Vec::new();
+                let ias = act
+                    .ias
+                    .iter()
+                    .map(|ia| {
+                        ia.name
+                            .split_whitespace()
+                            .map(|t| {
+                                let (v, i) = token(t);
+                                let id = named.iter().position(|n| n == v).unwrap_or_else(|| {
+                                    named.push(v.to_string());
+                                    named.len() - 1
+                                });
+                                (id, i.map(str::to_string))
+                            })
+                            .collect()
+                    })
+                    .collect();
+                Self { named, ias }
+            })
+            .collect()
     }
-    (versions, exact)
+
+    /// The token id of version `v`, when some alternative names it.
+    fn id(&self, v: &str) -> Option<usize> {
+        self.named.iter().position(|n| n == v)
+    }
+
+    /// Does alternative `i` carry every running version the activity names, and with the
+    /// running implementations? `ids`: `(token id, implementation)` of the placements whose
+    /// version the activity names ([`ActivityTokens::running_ids`]), indices into `running`.
+    fn carries(
+        &self,
+        i: usize,
+        ids: &[(usize, usize)],
+        running: &[PlacementRecord],
+    ) -> (bool, bool) {
+        let mut versions = true;
+        let mut exact = true;
+        for (id, k) in ids {
+            let imp = running[*k].implementation.as_str();
+            match self.ias[i].iter().find(|(t, _)| t == id) {
+                None => {
+                    versions = false;
+                    exact = false;
+                }
+                Some((_, ti)) => exact &= ti.as_deref().is_none_or(|ti| ti == imp),
+            }
+        }
+        (versions, exact)
+    }
+
+    /// The placements whose version the activity names, as `(token id, placement index)`.
+    fn running_ids(&self, running: &[PlacementRecord], out: &mut Vec<(usize, usize)>) {
+        out.clear();
+        out.extend(
+            running
+                .iter()
+                .enumerate()
+                .filter_map(|(k, p)| Some((self.id(&p.version)?, k))),
+        );
+    }
 }
 
 impl Guarantee {
@@ -111,22 +161,29 @@ impl Guarantee {
         }
         let mut any = false;
         for i in 0..n_ias {
-            let ok = self.alternative_feasible(at, i);
+            // Feasibility only adds versions: an alternative whose versions are all known
+            // feasible already cannot change the answer (exact; most cycles stop early).
+            let known = any
+                && self.tokens[at].ias[i].iter().all(|(id, imp)| {
+                    imp.is_none()
+                        || feasible
+                            .iter()
+                            .any(|e| e.1 && e.0 == self.tokens[at].named[*id])
+                });
+            let ok = !known && self.alternative_feasible(at, i);
             any |= ok;
-            for t in self.spec.problem.activities[at].ias[i]
-                .name
-                .split_whitespace()
-            {
-                let (v, imp) = token(t);
+            let tok = &self.tokens[at];
+            for (id, imp) in &tok.ias[i] {
                 if imp.is_none() {
                     continue;
                 }
-                match feasible.iter_mut().find(|e| e.0 == v) {
+                let v = &tok.named[*id];
+                match feasible.iter_mut().find(|e| e.0 == *v) {
                     Some(e) => {
                         e.1 |= ok;
                         e.2 = true;
                     }
-                    None => feasible.push((v.to_string(), ok, true)),
+                    None => feasible.push((v.clone(), ok, true)),
                 }
             }
         }
@@ -158,9 +215,22 @@ impl Guarantee {
         if at >= self.spec.problem.activities.len() || rec.infeasible {
             return false;
         }
-        let act = &self.spec.problem.activities[at];
-        let cur = self.choice[at];
-        let (cur_versions, cur_exact) = carries(act, cur, running);
+        let mut ids = std::mem::take(&mut self.scratch.running_ids);
+        self.tokens[at].running_ids(running, &mut ids);
+        let changed = self.follow_ids(at, &ids, running, rec);
+        self.scratch.running_ids = ids;
+        changed
+    }
+
+    /// [`Guarantee::follow`] with the running versions as token ids.
+    fn follow_ids(
+        &mut self,
+        at: usize,
+        ids: &[(usize, usize)],
+        running: &[PlacementRecord],
+        rec: &mut GuaranteeRecord,
+    ) -> bool {
+        let (cur_versions, cur_exact) = self.tokens[at].carries(self.choice[at], ids, running);
         if cur_exact {
             return false;
         }
@@ -168,7 +238,7 @@ impl Guarantee {
         let sel = self.spec.selection;
         let mut best: Option<usize> = None;
         for i in 0..self.spec.problem.activities[at].ias.len() {
-            let (v, e) = carries(&self.spec.problem.activities[at], i, running);
+            let (v, e) = self.tokens[at].carries(i, ids, running);
             if !(if want_exact { e } else { v }) || !self.alternative_feasible(at, i) {
                 continue;
             }
@@ -183,14 +253,20 @@ impl Guarantee {
         self.choice[at] = b;
         // A re-allocation of this cycle (a negative margin, a failed resource) comes first: one
         // row and one record for the cycle, as the plan now stands (rare: its text allocates).
-        let earlier = rec.reallocation.as_ref().map(|r| (r.trigger, r.reason.clone()));
+        let earlier = rec
+            .reallocation
+            .as_ref()
+            .map(|r| (r.trigger, r.reason.clone()));
         let trigger = match &earlier {
             Some((t, _)) => *t,
             None if want_exact => ReallocationTrigger::FollowsPlacement,
             None => ReallocationTrigger::FollowsVersions,
         };
+        // Taken out while the record is written (moved back below: no allocation).
+        let tokens = std::mem::take(&mut self.tokens);
+        let tok = &tokens[at];
         let write = |out: &mut String, p: &panorama::Problem| {
-            let (act, ia) = (&p.activities[at], &p.activities[at].ias[b].name);
+            let ia = &p.activities[at].ias[b].name;
             if let Some((_, r)) = &earlier {
                 let _ = write!(out, "{r}; then ");
             }
@@ -200,7 +276,7 @@ impl Guarantee {
                 out.push_str("the models run ");
             }
             let mut first = true;
-            for r in running.iter().filter(|r| names(act, &r.version)) {
+            for r in running.iter().filter(|r| tok.id(&r.version).is_some()) {
                 let sep = if first { "" } else { " " };
                 let _ = write!(out, "{sep}{}.{}", r.version, r.implementation);
                 first = false;
@@ -215,6 +291,7 @@ impl Guarantee {
             }
         };
         self.write_reallocation(at, trigger, rec, write);
+        self.tokens = tokens;
         let p = &self.spec.problem;
         if let Some(r) = &rec.reallocation {
             super::named_into(&p.goals, &self.scratch.alt.margin, &mut rec.margins);
