@@ -239,3 +239,83 @@ impl crate::sim::Cycle for LearningCore<'_, '_> {
         record.cpt_learned = self.learner.learn_simulated(self.core, record);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::{Params, default_params_dir};
+    use companion_core::decision::ModelKind;
+
+    /// A `fly` record tracking with V3 under the given vibration evidence.
+    fn tracking_v3(vibration: &str) -> DecisionRecord {
+        DecisionRecord {
+            state: "v3".into(),
+            actions: vec!["track_v3".into()],
+            evidence: [("A_vibration".to_string(), vibration.to_string())].into(),
+            ..Default::default()
+        }
+    }
+
+    fn row() -> Vec<(String, String)> {
+        vec![
+            ("U_vibration".into(), "present".into()),
+            ("U_point_lost".into(), "absent".into()),
+            ("U_motion_lost".into(), "absent".into()),
+        ]
+    }
+
+    #[test]
+    fn in_flight_a_tracking_step_is_kept_unless_the_next_cycle_observes_target_lost() {
+        let p = Params::load(&default_params_dir(), None).unwrap();
+        let policy = p.model.policy("safety").unwrap();
+        let mut core = Core::new(&p.model, ModelKind::Bfm, policy);
+        let mut l = OnlineCpt::new(&p.files, p.learning).unwrap();
+        let shipped = core.cpt_row("C_V3", &row()).unwrap()[1];
+        assert!((shipped - 0.9982).abs() < 1e-12, "{shipped}");
+
+        // The first record's outcome is the next cycle's.
+        assert!(
+            l.learn_flown(&mut core, &tracking_v3("high"), &[])
+                .is_empty()
+        );
+        let u = l.learn_flown(&mut core, &tracking_v3("high"), &[Event::TargetLost]);
+        assert_eq!(u.len(), 1, "{u:?}");
+        assert_eq!(
+            (u[0].node.as_str(), u[0].successes, u[0].trials),
+            ("C_V3", 0, 1)
+        );
+        assert_eq!(u[0].when["U_vibration"], "present");
+        let lost_once = 10.0 * shipped / 11.0;
+        assert!((u[0].new - lost_once).abs() < 1e-12, "{u:?}");
+        assert_eq!(core.cpt_row("C_V3", &row()).unwrap()[1], u[0].new);
+
+        let u = l.learn_flown(&mut core, &tracking_v3("high"), &[]);
+        assert_eq!((u[0].successes, u[0].trials), (1, 2), "kept: {u:?}");
+        assert_eq!(u[0].old, lost_once);
+
+        // A new flight starts again from the loaded rows' counts.
+        l.start_run();
+        assert!(
+            l.learn_flown(&mut core, &tracking_v3("high"), &[])
+                .is_empty()
+        );
+    }
+
+    #[test]
+    fn the_bound_is_refused_out_of_range_naming_the_entry() {
+        let mut f = ParamsFiles::new("/p");
+        f.insert("/p/learning.toml", "[cpt]\nmax_change = -0.1\n");
+        let e = LearningParams::load(&f).unwrap_err().to_string();
+        assert!(
+            e.contains("learning.toml") && e.contains("cpt.max_change"),
+            "{e}"
+        );
+        let mut f = ParamsFiles::new("/p");
+        f.insert("/p/learning.toml", "[cpt]\nmax_change = 0.25\n");
+        assert_eq!(LearningParams::load(&f).unwrap().max_change, 0.25);
+        assert_eq!(
+            LearningParams::load(&ParamsFiles::new("/p")).unwrap(),
+            LearningParams::default()
+        );
+    }
+}

@@ -10,6 +10,9 @@
 //! - the shell's additions: `shell_actions`, `commands`, `link_events`, `vehicle`, `utc_us`, and in
 //!   `fly` the events of its own decisions appended last (`...: land`, `landing: ...`).
 //!
+//! - with `--learn-cpt` in the header's command: `cpt_learned`, re-derived from the logged records
+//!   by the same learner (`learn_cpt`), compared, and applied to the replayed core.
+//!
 //! The core does not read the observed events, so it is stepped with none: its record's events
 //! are then exactly the ones it added, and [`split_events`] finds them in the logged list.
 
