@@ -193,21 +193,6 @@ impl<'m> Core<'m> {
             .map_or(0, |g| g.ras_rows().len().saturating_sub(1))
     }
 
-    /// A CPT row of this core's health model (docs/calibrate.md, in-flight learning).
-    pub fn cpt_row(&self, node: &str, when: &[(String, String)]) -> Option<Vec<f64>> {
-        self.health.cpt_row(node, when)
-    }
-
-    /// Set a CPT row of this core's health model, in force from the next cycle (`--learn-cpt`).
-    pub fn set_cpt_row(
-        &mut self,
-        node: &str,
-        when: &[(String, String)],
-        p: &[f64],
-    ) -> Result<(), crate::health::HealthError> {
-        self.health.set_cpt_row(node, when, p)
-    }
-
     /// One decision cycle.
     pub fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
         let mut plan = Plan::default();
@@ -989,6 +974,7 @@ fn refill<'a>(into: &mut Vec<String>, names: impl Iterator<Item = &'a str>) {
     into.truncate(len);
 }
 
+mod learned_rows;
 /// PANORAMA's performance drift: the measured power of the activity beyond the tolerance,
 /// when it began this cycle.
 mod watch;
