@@ -118,6 +118,17 @@ impl OnlineCpt {
         })
     }
 
+    /// The learner `--learn-cpt` asks for (`None` without the flag), from the loaded params.
+    pub fn when(
+        flag: bool,
+        files: &ParamsFiles,
+        learning: LearningParams,
+    ) -> anyhow::Result<Option<Self>> {
+        use anyhow::Context;
+        flag.then(|| Self::new(files, learning).context("--learn-cpt"))
+            .transpose()
+    }
+
     /// A new run (a fresh core, its rows as loaded): forget the counts.
     pub fn start_run(&mut self) {
         self.counts.start_run();
@@ -218,6 +229,23 @@ impl OnlineCpt {
             });
         }
         out
+    }
+}
+
+/// One seeded simulated run of `core`, learning its rows as it goes when `learner` is given.
+pub fn run(
+    world: &crate::sim::WorldSpec,
+    scenario: &crate::sim::Scenario,
+    seed: u64,
+    core: &mut Core,
+    learner: Option<&mut OnlineCpt>,
+) -> crate::sim::RunResult {
+    match learner {
+        Some(learner) => {
+            learner.start_run();
+            crate::sim::run_cycle(world, scenario, seed, LearningCore { core, learner })
+        }
+        None => crate::sim::run(world, scenario, seed, |obs| core.step(obs)),
     }
 }
 

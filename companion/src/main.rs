@@ -250,11 +250,8 @@ fn fly(args: FlyArgs) -> Result<()> {
     let policy: Policy = model
         .policy(&args.policy)
         .map_err(|e| anyhow::anyhow!("--policy: {e}"))?;
-    let learner = args
-        .learn_cpt
-        .then(|| companion::learn_cpt::OnlineCpt::new(&loaded.files, loaded.learning))
-        .transpose()
-        .context("--learn-cpt")?;
+    let learner =
+        companion::learn_cpt::OnlineCpt::when(args.learn_cpt, &loaded.files, loaded.learning)?;
     let decider = CoreDecider {
         core: Core::new(model, ModelKind::Bfm, policy),
         model,
@@ -283,13 +280,8 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
     let policy: Policy = model
         .policy(&args.policy)
         .map_err(|e| anyhow::anyhow!("--policy: {e}"))?;
-    let mut learner = args
-        .learn_cpt
-        .then(|| {
-            companion::learn_cpt::OnlineCpt::new(&loaded.files, loaded.learning)
-                .context("--learn-cpt")
-        })
-        .transpose()?;
+    let mut learner =
+        companion::learn_cpt::OnlineCpt::when(args.learn_cpt, &loaded.files, loaded.learning)?;
     let runs = args.runs.max(1);
     let progress = (!args.json && runs > 1 && std::io::stderr().is_terminal()).then(|| {
         let pb = indicatif::ProgressBar::new(runs as u64 * kinds.len() as u64);
@@ -307,17 +299,8 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         for r in 0..runs {
             let seed = args.seed + r as u64;
             let mut core = Core::new(&model, *kind, policy);
-            let result = match learner.as_mut() {
-                Some(learner) => {
-                    learner.start_run();
-                    let cycle = companion::learn_cpt::LearningCore {
-                        core: &mut core,
-                        learner,
-                    };
-                    sim::run_cycle(&world, &scenario, seed, cycle)
-                }
-                None => sim::run(&world, &scenario, seed, |obs| core.step(obs)),
-            };
+            let result =
+                companion::learn_cpt::run(&world, &scenario, seed, &mut core, learner.as_mut());
             if first_allocations.is_none() {
                 first_allocations = Some((core.reallocations(), core.allocation_table()));
             }
