@@ -986,6 +986,7 @@ fn refill<'a>(into: &mut Vec<String>, names: impl Iterator<Item = &'a str>) {
     into.truncate(len);
 }
 
+mod learned_rows;
 /// PANORAMA's performance drift: the measured power of the activity beyond the tolerance,
 /// when it began this cycle.
 mod watch;

@@ -852,6 +852,8 @@ fn state_of(
     })
 }
 
+mod cpt_rows;
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -76,6 +76,7 @@ pub(crate) mod shipped {
             "health/system.toml",
             include_str!("../../params/health/system.toml"),
         ),
+        ("learning.toml", include_str!("../../params/learning.toml")),
         ("link.toml", include_str!("../../params/link.toml")),
         (
             "mdp/index.toml",

@@ -374,6 +374,35 @@ pub struct DecisionRecord {
     /// simulated world has no wall clock): absent in `simulate` records.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub utc_us: Option<u64>,
+    /// In-flight CPT learning (`--learn-cpt`, docs/calibrate.md): the BN rows this record's
+    /// outcome updated, in force from the next cycle. Absent when learning is off.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub cpt_learned: Vec<CptUpdate>,
+}
+
+/// One CPT row learned in flight: which row, its counts, the value before and after.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct CptUpdate {
+    /// The BN node (`C_V3`, `U_detection_fail`).
+    pub node: String,
+    /// The row: parent -> state.
+    pub when: BTreeMap<String, String>,
+    /// The child's state a success stands for (`activate`, `absent`).
+    pub success_state: String,
+    /// Successes counted this run for the row (this record's trial included).
+    pub successes: u64,
+    /// Trials counted this run for the row (this record's trial included).
+    pub trials: u64,
+    /// P(success state) of the row as loaded (the Dirichlet prior's mean).
+    pub prior: f64,
+    /// P(success state) before this record's trial.
+    pub old: f64,
+    /// P(success state) after it, in force from the next cycle.
+    pub new: f64,
+    /// The Dirichlet mean lay beyond `prior ± max_change` and was held at the bound.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub bounded: bool,
 }
 
 /// What the core asks the shell to do this cycle.
@@ -434,7 +463,7 @@ reuse_clone!(GuaranteeRecord {
 } maps { margins, goals, drift });
 reuse_clone!(DecisionRecord {
     cycle, time_s, state, events, proposals, conflicts, actions, resources, guarantee, commands,
-    link_events, utc_us, shell_actions, absent_evidence
+    link_events, utc_us, shell_actions, absent_evidence, cpt_learned
 } maps { observations, evidence, probabilities, vehicle });
 reuse_clone!(Plan { vehicle_actions, applications } maps {});
 

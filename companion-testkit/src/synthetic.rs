@@ -349,6 +349,7 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
         conflicts,
         actions,
         shell_actions: Vec::new(),
+        cpt_learned: Vec::new(),
         resources: Some(ResourcesRecord {
             placements,
             cpu_load,

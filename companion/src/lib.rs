@@ -28,6 +28,7 @@ pub mod check;
 pub mod decision_log;
 pub mod export;
 pub mod fly;
+pub mod learn_cpt;
 pub mod params;
 pub mod params_files;
 pub mod replay;

@@ -92,6 +92,10 @@ struct SimulateArgs {
     /// mission with its stated assumptions.
     #[arg(long, value_name = "NAME")]
     vehicle: Option<String>,
+    /// Learn the health BN's countable CPT rows from each cycle's outcome as the run goes
+    /// (bounded by params/learning.toml, logged in `cpt_learned`; docs/calibrate.md).
+    #[arg(long)]
+    learn_cpt: bool,
 }
 
 #[derive(Subcommand)]
@@ -203,6 +207,8 @@ struct CoreDecider {
     core: Core<'static>,
     model: &'static Model,
     policy: Policy,
+    /// `--learn-cpt`: the rows learned this flight.
+    learner: Option<companion::learn_cpt::OnlineCpt>,
 }
 
 impl Decider for CoreDecider {
@@ -213,7 +219,11 @@ impl Decider for CoreDecider {
         companion_core::record::Plan,
         companion_core::record::DecisionRecord,
     ) {
-        self.core.step(obs)
+        let (plan, mut rec) = self.core.step(obs);
+        if let Some(learner) = self.learner.as_mut() {
+            rec.cpt_learned = learner.learn_flown(&mut self.core, &rec, &obs.events);
+        }
+        (plan, rec)
     }
 
     fn launch_verdict(
@@ -225,6 +235,9 @@ impl Decider for CoreDecider {
 
     fn new_flight(&mut self) {
         self.core = Core::new(self.model, ModelKind::Bfm, self.policy);
+        if let Some(learner) = self.learner.as_mut() {
+            learner.start_run();
+        }
     }
 }
 
@@ -237,10 +250,13 @@ fn fly(args: FlyArgs) -> Result<()> {
     let policy: Policy = model
         .policy(&args.policy)
         .map_err(|e| anyhow::anyhow!("--policy: {e}"))?;
+    let learner =
+        companion::learn_cpt::OnlineCpt::when(args.learn_cpt, &loaded.files, loaded.learning)?;
     let decider = CoreDecider {
         core: Core::new(model, ModelKind::Bfm, policy),
         model,
         policy,
+        learner,
     };
     companion::fly::run(args, decider)
 }
@@ -264,6 +280,8 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
     let policy: Policy = model
         .policy(&args.policy)
         .map_err(|e| anyhow::anyhow!("--policy: {e}"))?;
+    let mut learner =
+        companion::learn_cpt::OnlineCpt::when(args.learn_cpt, &loaded.files, loaded.learning)?;
     let runs = args.runs.max(1);
     let progress = (!args.json && runs > 1 && std::io::stderr().is_terminal()).then(|| {
         let pb = indicatif::ProgressBar::new(runs as u64 * kinds.len() as u64);
@@ -281,7 +299,8 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         for r in 0..runs {
             let seed = args.seed + r as u64;
             let mut core = Core::new(&model, *kind, policy);
-            let result = sim::run(&world, &scenario, seed, |obs| core.step(obs));
+            let result =
+                companion::learn_cpt::run(&world, &scenario, seed, &mut core, learner.as_mut());
             if first_allocations.is_none() {
                 first_allocations = Some((core.reallocations(), core.allocation_table()));
             }

@@ -32,6 +32,8 @@ pub struct Params {
     /// The route (`--mission FILE`, else [`DEFAULT_ROUTE`]).
     pub route: Route,
     pub route_file: PathBuf,
+    /// In-flight CPT learning's bound (`learning.toml`, optional; `--learn-cpt`).
+    pub learning: crate::learn_cpt::LearningParams,
 }
 
 impl Params {
@@ -50,7 +52,9 @@ impl Params {
         let model = Model::load(&files)?;
         let world = WorldSpec::load(&files)?;
         let (link, commands, route, route_file) = load_fly_files(&files, route)?;
+        let learning = crate::learn_cpt::LearningParams::load(&files)?;
         let p = Params {
+            learning,
             dir,
             files,
             model,

@@ -10,6 +10,9 @@
 //! - the shell's additions: `shell_actions`, `commands`, `link_events`, `vehicle`, `utc_us`, and in
 //!   `fly` the events of its own decisions appended last (`...: land`, `landing: ...`).
 //!
+//! - with `--learn-cpt` in the header's command: `cpt_learned`, re-derived from the logged records
+//!   by the same learner (`learn_cpt`), compared, and applied to the replayed core.
+//!
 //! The core does not read the observed events, so it is stepped with none: its record's events
 //! are then exactly the ones it added, and [`split_events`] finds them in the logged list.
 
@@ -161,8 +164,10 @@ pub fn replay(path: &Path) -> Result<Outcome, Refusal> {
                         if line_no != 1 || k != 0 {
                             return Err(refuse(file, at, "the header is not the first line"));
                         }
-                        let (model, setup) = Run::from_header(&value, file)?;
-                        run = Some(Run::new(model_slot.get_or_init(|| model), setup));
+                        let (model, setup, learner) = Run::from_header(&value, file)?;
+                        let mut r = Run::new(model_slot.get_or_init(|| model), setup);
+                        r.learner = learner;
+                        run = Some(r);
                     }
                     // A rotated part repeats the header: nothing new.
                 }
@@ -224,6 +229,8 @@ struct Run<'m> {
     model: &'m Model,
     setup: Setup,
     core: Core<'m>,
+    /// The run learned its CPT rows (`--learn-cpt`): re-derived here from the logged records.
+    learner: Option<crate::learn_cpt::OnlineCpt>,
 }
 
 impl<'m> Run<'m> {
@@ -232,11 +239,15 @@ impl<'m> Run<'m> {
             model,
             setup,
             core: Core::new(model, setup.kind, setup.policy),
+            learner: None,
         }
     }
 
     /// The model and the run's setup from the header line.
-    fn from_header(value: &Value, file: &Path) -> Result<(Model, Setup), Refusal> {
+    fn from_header(
+        value: &Value,
+        file: &Path,
+    ) -> Result<(Model, Setup, Option<crate::learn_cpt::OnlineCpt>), Refusal> {
         let at = Some(1);
         let header: Header = serde_json::from_value(value.clone())
             .map_err(|e| refuse(file, at, format!("not a log header: {e}")))?;
@@ -290,6 +301,13 @@ impl<'m> Run<'m> {
         let policy: Policy = model
             .policy(policy_name)
             .map_err(|e| refuse(file, at, format!("header policy: {e}")))?;
+        let learner = learns_cpt(&header.command)
+            .then(|| {
+                crate::learn_cpt::LearningParams::load(&files)
+                    .and_then(|p| crate::learn_cpt::OnlineCpt::new(&files, p))
+                    .map_err(|e| refuse(file, at, format!("--learn-cpt: {e}")))
+            })
+            .transpose()?;
         Ok((
             model,
             Setup {
@@ -297,6 +315,7 @@ impl<'m> Run<'m> {
                 policy,
                 source,
             },
+            learner,
         ))
     }
 
@@ -325,6 +344,9 @@ impl<'m> Run<'m> {
         // disarmed, when it starts a fresh core for the next flight: replay restarts its core there.
         if source == Source::Fly && logged.events.contains(&Event::NewFlight) {
             self.core = Core::new(self.model, self.setup.kind, self.setup.policy);
+            if let Some(l) = self.learner.as_mut() {
+                l.start_run();
+            }
         }
         let obs = Observations {
             time_s: logged.time_s,
@@ -352,12 +374,28 @@ impl<'m> Run<'m> {
         if let Some(d) = first_difference(&CORE_FIELDS, value, &replayed_value) {
             return Ok(Some(differs(d.0, d.1, d.2)));
         }
-        if split_events(&logged.events, &replayed.events, source).is_none() {
+        let Some((observed, _, _)) = split_events(&logged.events, &replayed.events, source) else {
             return Ok(Some(differs(
                 "events".into(),
                 json(&logged.events),
                 format!("the observed events followed by {}", json(&replayed.events)),
             )));
+        };
+        // The rows learned from this record's outcome, re-derived from the logged record (its
+        // core fields just replayed equal; its outcome is the world's, or the observed events).
+        let learned = match (self.learner.as_mut(), source) {
+            (None, _) => Vec::new(),
+            (Some(l), Source::Simulate) => l.learn_simulated(&mut self.core, &logged),
+            (Some(l), Source::Fly) => l.learn_flown(&mut self.core, &logged, observed),
+        };
+        // As the record serialises it: no field when nothing was learned.
+        let learned = if learned.is_empty() {
+            serde_json::json!({})
+        } else {
+            serde_json::json!({ "cpt_learned": learned })
+        };
+        if let Some(d) = first_difference(&["cpt_learned"], value, &learned) {
+            return Ok(Some(differs(d.0, d.1, d.2)));
         }
         Ok(None)
     }
@@ -492,6 +530,11 @@ fn source_of(command: &str) -> Option<Source> {
         "fly" => Some(Source::Fly),
         _ => None,
     })
+}
+
+/// The logged command learned CPT rows in flight (`--learn-cpt`).
+fn learns_cpt(command: &str) -> bool {
+    command.split_whitespace().any(|w| w == "--learn-cpt")
 }
 
 /// The model kind `simulate` logged: the first of `--model a,b` (default `bfm`).

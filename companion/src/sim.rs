@@ -659,18 +659,42 @@ impl<'a> World<'a> {
     }
 }
 
+/// The decision cycle a simulated run drives: any `FnMut(&Observations) -> (Plan, DecisionRecord)`,
+/// or a core that also learns from each cycle's outcome (`--learn-cpt`).
+pub trait Cycle {
+    fn decide(&mut self, obs: &Observations) -> (Plan, DecisionRecord);
+    /// The record is complete with the world's outcome (before the next `decide`).
+    fn outcome(&mut self, _record: &mut DecisionRecord) {}
+}
+
+impl<F: FnMut(&Observations) -> (Plan, DecisionRecord)> Cycle for F {
+    fn decide(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
+        self(obs)
+    }
+}
+
 /// Run one seeded mission: `core` is the decision cycle (observations in, plan and record out).
 pub fn run(
     spec: &WorldSpec,
     scenario: &Scenario,
     seed: u64,
-    mut core: impl FnMut(&Observations) -> (Plan, DecisionRecord),
+    core: impl FnMut(&Observations) -> (Plan, DecisionRecord),
+) -> RunResult {
+    run_cycle(spec, scenario, seed, core)
+}
+
+/// [`run`] with a [`Cycle`], which also sees each record completed with the world's outcome.
+pub fn run_cycle(
+    spec: &WorldSpec,
+    scenario: &Scenario,
+    seed: u64,
+    mut core: impl Cycle,
 ) -> RunResult {
     let mut world = World::new(spec, scenario, seed);
     let mut records = Vec::new();
     while !world.finished() {
         let obs = world.observe();
-        let (plan, mut record) = core(&obs);
+        let (plan, mut record) = core.decide(&obs);
         let after = world.advance(&plan, &record);
         record.vehicle.insert(
             "battery_pct".into(),
@@ -683,6 +707,7 @@ pub fn run(
             companion_core::tracking::STATE_AFTER_KEY.into(),
             serde_json::json!(world.phase),
         );
+        core.outcome(&mut record);
         records.push(record);
     }
     RunResult {

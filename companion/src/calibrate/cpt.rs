@@ -105,14 +105,39 @@ impl CptCounts {
         shipped: &ShippedRows,
         parents_of: &BTreeMap<String, Vec<String>>,
     ) {
-        let Some(after) = r
-            .vehicle
-            .get("world_events_after")
-            .and_then(|v| v.as_array())
-        else {
+        let Some((events, state_after)) = simulated_outcome(r) else {
             return;
         };
-        let events: Vec<&str> = after.iter().filter_map(|e| e.as_str()).collect();
+        for t in self.trials(r, &events, state_after, states, shipped, parents_of) {
+            let tally = match COUNTABLE.iter().find(|c| c.node == t.node) {
+                Some(c) => self
+                    .counts
+                    .entry(c.node)
+                    .or_default()
+                    .entry(t.when)
+                    .or_default(),
+                None => self.versions.entry((t.node, t.when)).or_default(),
+            };
+            tally.0 += u64::from(t.success);
+            tally.1 += 1;
+        }
+    }
+
+    /// The trials one record is, given the events that followed its cycle (`simulate`: the
+    /// world's `world_events_after`; `fly`: the next cycle's observed events) and the mission
+    /// state after it when known. Remembers what the run has found (a detected target is not
+    /// tried again), so records are given in order, each once. `calibrate` and the in-flight
+    /// learning (`learn_cpt`) count the same trials.
+    pub fn trials(
+        &mut self,
+        r: &DecisionRecord,
+        events: &[&str],
+        state_after: Option<&str>,
+        states: &MissionStates,
+        shipped: &ShippedRows,
+        parents_of: &BTreeMap<String, Vec<String>>,
+    ) -> Vec<Trial> {
+        let mut out = Vec::new();
         let acts: Vec<&str> = r.actions.iter().map(String::as_str).collect();
         let roles = states.actions();
         let at_last_wp = states.route().is(RouteRole::LastWaypoint, &r.state);
@@ -138,14 +163,13 @@ impl CptCounts {
                 continue; // a parent without evidence: the row is unknown
             };
             let ok = events.contains(&c.success.to_string().as_str());
-            let e = self
-                .counts
-                .entry(c.node)
-                .or_default()
-                .entry(row)
-                .or_default();
-            e.0 += u64::from(ok);
-            e.1 += 1;
+            out.push(Trial {
+                node: c.node.to_string(),
+                when: row,
+                success_state: "absent",
+                success_index: 0,
+                success: ok,
+            });
             if ok {
                 self.done.insert(c.node, true);
             }
@@ -153,63 +177,14 @@ impl CptCounts {
         if events.contains(&Event::ObstacleAvoided.to_string().as_str()) {
             self.avoided = true;
         }
-        self.add_tracking(r, &events, states, shipped);
-    }
-
-    /// A tracking step with version `Vk` is a trial of `C_Vk`'s row at the errors' states: the
-    /// target kept (no `target lost`) is `activate`. The errors are hidden; each is taken in
-    /// the state its shipped noisy-OR row makes more likely under the cycle's context evidence
-    /// (docs/calibrate.md: hard assignment, an approximation).
-    fn add_tracking(
-        &mut self,
-        r: &DecisionRecord,
-        events: &[&str],
-        states: &MissionStates,
-        shipped: &ShippedRows,
-    ) {
-        if !states.is_target_in_sight(&r.state) {
-            return;
-        }
-        let Some((_, version)) = states.tracking_target(&r.actions) else {
-            return;
-        };
-        let node = format!("C_{version}");
-        let Some(errors) = shipped.version_errors(&node) else {
-            return;
-        };
-        let Some(row) = errors
-            .iter()
-            .map(|e| {
-                shipped
-                    .map_error_state(e, &r.evidence)
-                    .map(|s| (e.clone(), s.to_string()))
-            })
-            .collect::<Option<Vec<_>>>()
-        else {
-            return;
-        };
-        let lost = events.contains(&Event::TargetLost.to_string().as_str());
-        // A step that re-detects a lost target (`simulate`'s world, docs/simulation.md) neither
-        // keeps nor loses it: not a trial of the version's row. Kept: the step ended tracking.
-        let kept = r
-            .vehicle
-            .get(companion_core::tracking::STATE_AFTER_KEY)
-            .and_then(|v| v.as_str())
-            .map_or(!lost, |after| states.is_tracking(after));
-        if !kept && !lost {
-            return;
-        }
-        let c = self.versions.entry((node, row)).or_default();
-        c.0 += u64::from(kept);
-        c.1 += 1;
+        out.extend(tracking_trial(r, events, state_after, states, shipped));
+        out
     }
 
     /// The learned rows, each against its shipped row.
     pub fn learn(&self, shipped: &ShippedRows) -> Vec<LearnedRow> {
         let mut out = Vec::new();
-        let learned = |p0: f64, k: u64, n: u64| {
-            (PRIOR_PSEUDO_COUNTS * p0 + k as f64) / (PRIOR_PSEUDO_COUNTS + n as f64)
-        };
+        let learned = dirichlet_mean;
         for (node, rows) in &self.counts {
             for (when, &(k, n)) in rows {
                 let p0 = shipped.p_absent(node, when);
@@ -240,6 +215,76 @@ impl CptCounts {
         }
         out
     }
+}
+
+/// A tracking step with version `Vk` is a trial of `C_Vk`'s row at the errors' states: the
+/// target kept (no `target lost`) is `activate`. The errors are hidden; each is taken in the
+/// state its shipped noisy-OR row makes more likely under the cycle's context evidence
+/// (docs/calibrate.md: hard assignment, an approximation).
+fn tracking_trial(
+    r: &DecisionRecord,
+    events: &[&str],
+    state_after: Option<&str>,
+    states: &MissionStates,
+    shipped: &ShippedRows,
+) -> Option<Trial> {
+    if !states.is_target_in_sight(&r.state) {
+        return None;
+    }
+    let (_, version) = states.tracking_target(&r.actions)?;
+    let node = format!("C_{version}");
+    let errors = shipped.version_errors(&node)?;
+    let row = errors
+        .iter()
+        .map(|e| {
+            shipped
+                .map_error_state(e, &r.evidence)
+                .map(|s| (e.clone(), s.to_string()))
+        })
+        .collect::<Option<Vec<_>>>()?;
+    let lost = events.contains(&Event::TargetLost.to_string().as_str());
+    // A step that re-detects a lost target (`simulate`'s world, docs/simulation.md) neither
+    // keeps nor loses it: not a trial of the version's row. Kept: the step ended tracking.
+    let kept = state_after.map_or(!lost, |after| states.is_tracking(after));
+    if !kept && !lost {
+        return None;
+    }
+    Some(Trial {
+        node,
+        when: row,
+        success_state: "activate",
+        success_index: 1,
+        success: kept,
+    })
+}
+
+/// A `simulate` record's outcome: the world's events after its cycle and the mission state
+/// after it; `None` for a record without them (`fly`).
+pub fn simulated_outcome(r: &DecisionRecord) -> Option<(Vec<&str>, Option<&str>)> {
+    let after = r.vehicle.get("world_events_after")?.as_array()?;
+    let events = after.iter().filter_map(|e| e.as_str()).collect();
+    let state_after = r
+        .vehicle
+        .get(companion_core::tracking::STATE_AFTER_KEY)
+        .and_then(|v| v.as_str());
+    Some((events, state_after))
+}
+
+/// One trial of a countable row: the node, the row (parent -> state), whether it succeeded.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Trial {
+    pub node: String,
+    pub when: Row,
+    /// The child's state a success stands for, and its index in the node's states.
+    pub success_state: &'static str,
+    pub success_index: usize,
+    pub success: bool,
+}
+
+/// The Dirichlet (Beta) posterior mean of a two-state row: the prior `p0` worth
+/// [`PRIOR_PSEUDO_COUNTS`] trials, then `k` successes in `n` trials.
+pub fn dirichlet_mean(p0: f64, k: u64, n: u64) -> f64 {
+    (PRIOR_PSEUDO_COUNTS * p0 + k as f64) / (PRIOR_PSEUDO_COUNTS + n as f64)
 }
 
 /// The shipped error nodes of the applications health file, to read rows from.

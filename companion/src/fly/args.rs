@@ -52,6 +52,12 @@ pub struct FlyArgs {
     /// ground station sends MAV_CMD_MISSION_START to component 191.
     #[arg(long)]
     pub auto_start: bool,
+    /// Learn the health BN's CPT rows whose outcome the telemetry gives (the tracking versions'
+    /// `C_Vk` and `U_detection_fail`, from the onboard tracker's `target_detected`) as the
+    /// flight goes, bounded by params/learning.toml and logged in `cpt_learned`
+    /// (docs/calibrate.md). Off by default.
+    #[arg(long)]
+    pub learn_cpt: bool,
     /// Command only the autopilot with this MAVLink system id (when several speak on the link);
     /// default: the first autopilot heard. Others are reported, never obeyed.
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
