@@ -108,9 +108,9 @@ def nominal_target(ctx: Ctx) -> None:
 
 
 def fly_mission(ap: Any, fly: Any, monitors_factory: Any, scenario: Callable[[Ctx], None] = nominal_target,
-                timeout: float = FLY_TIMEOUT_S) -> Flight:
+                timeout: float = FLY_TIMEOUT_S, extra: tuple = ()) -> Flight:
     mon = monitors_factory(ap)
-    run = fly(ap)
+    run = fly(ap, extra=extra)
     ctx = Ctx(ap, mon, time.monotonic())
     flew = False
     deadline = time.monotonic() + timeout

@@ -65,6 +65,41 @@ def test_standin_flight_replays_equal_in_every_cycle(autopilot_factory, fly, mon
     assert f"cycle {rec['cycle']} differs" in out.stdout and "actions" in out.stdout, out.stdout
 
 
+def test_standin_flight_learning_cpt_rows_replays_equal(autopilot_factory, fly, monitors_factory, tmp_path):
+    """`fly --learn-cpt`: the tracking steps the onboard tracker reports kept update the flown version's
+    C_Vk row in flight (records carry `cpt_learned`, bounded by params/learning.toml), and replay re-derives
+    every update from the log: all cycles equal. A logged count edited by hand is caught."""
+    ap = autopilot_factory()
+    f = fly_mission(ap, fly, monitors_factory, extra=("--learn-cpt",))
+    assert_mission_completed(f)
+    learned = [(r["cycle"], u) for r in f.records if "kind" not in r for u in r.get("cpt_learned", [])]
+    assert learned, "no CPT row learned in a flight that tracked"
+    assert any(u["node"].startswith("C_V") for _, u in learned), learned
+    for _, u in learned:
+        assert 0.0 <= u["new"] <= 1.0 and abs(u["new"] - u["old"]) <= 0.6 + 1e-9, u
+        assert u["trials"] >= u["successes"] >= 0, u
+    # the row keeps moving over the flight: the last update's counts are the most
+    last = learned[-1][1]
+    assert last["trials"] >= learned[0][1]["trials"], learned
+    folder = run_folders(f.run.log_dir)[0]
+    out = replay(folder)
+    n = sum(1 for r in f.records if "kind" not in r)
+    assert out.returncode == 0, f"{out.stdout}\n{out.stderr}"
+    assert f"all {n} cycles equal" in out.stdout, out.stdout
+
+    edited = tmp_path / "edited-learning"
+    shutil.copytree(folder, edited)
+    log = edited / "decisions.jsonl"
+    lines = log.read_text().splitlines()
+    idx = next(i for i, line in enumerate(lines) if json.loads(line).get("cpt_learned"))
+    rec = json.loads(lines[idx])
+    rec["cpt_learned"][0]["trials"] += 7
+    lines[idx] = json.dumps(rec, separators=(",", ":"))
+    log.write_text("\n".join(lines) + "\n")
+    out = replay(edited)
+    assert out.returncode == 1 and "cpt_learned" in out.stdout, f"{out.stdout}\n{out.stderr}"
+
+
 def test_two_flights_in_one_run_replay_equal_with_the_core_restarted_between(autopilot_factory, fly, client,
                                                                                 tmp_path):
     """Without --once, fly starts a fresh core for the next flight: replay restarts its own at the record that
