@@ -280,8 +280,8 @@ struct WatchScratch {
     /// The plan with one activity's alternative swapped, and its margins (binding.rs).
     choice: Vec<usize>,
     alt: MarginReport,
-    /// Version -> some alternative carrying it is feasible (binding.rs).
-    feasible_versions: Vec<(String, bool, bool)>,
+    /// Per token id of the activity: carried by a feasible alternative, offered (binding.rs).
+    version_flags: (Vec<bool>, Vec<bool>),
     /// The last re-allocation record, its strings and maps kept to be rewritten in place by
     /// the next one (a version flipping every cycle re-allocates every cycle, allocation-free).
     spare: Option<Reallocation>,
@@ -313,7 +313,7 @@ impl Default for WatchScratch {
                 margin: Vec::new(),
                 drift: Vec::new(),
             },
-            feasible_versions: Vec::new(),
+            version_flags: (Vec::new(), Vec::new()),
             spare: None,
             running_ids: Vec::new(),
         }

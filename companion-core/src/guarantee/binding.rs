@@ -152,50 +152,40 @@ impl Guarantee {
             return;
         }
         let n_ias = self.spec.problem.activities[at].ias.len();
-        // (name, feasible, offered this time): the names kept between cycles, so a warm cycle
-        // allocates nothing.
-        let mut feasible = std::mem::take(&mut self.scratch.feasible_versions);
-        for e in &mut feasible {
-            e.1 = false;
-            e.2 = false;
-        }
+        let n_tokens = self.tokens[at].named.len();
+        // Per token id: some feasible alternative carries it / some alternative offers it with
+        // an implementation. Kept between cycles, so a warm cycle allocates nothing.
+        let (mut feasible, mut offered) = std::mem::take(&mut self.scratch.version_flags);
+        feasible.clear();
+        feasible.resize(n_tokens, false);
+        offered.clear();
+        offered.resize(n_tokens, false);
         let mut any = false;
         for i in 0..n_ias {
             // Feasibility only adds versions: an alternative whose versions are all known
             // feasible already cannot change the answer (exact; most cycles stop early).
             let known = any
-                && self.tokens[at].ias[i].iter().all(|(id, imp)| {
-                    imp.is_none()
-                        || feasible
-                            .iter()
-                            .any(|e| e.1 && e.0 == self.tokens[at].named[*id])
-                });
+                && self.tokens[at].ias[i]
+                    .iter()
+                    .all(|(id, imp)| imp.is_none() || feasible[*id]);
             let ok = !known && self.alternative_feasible(at, i);
             any |= ok;
-            let tok = &self.tokens[at];
-            for (id, imp) in &tok.ias[i] {
-                if imp.is_none() {
-                    continue;
-                }
-                let v = &tok.named[*id];
-                match feasible.iter_mut().find(|e| e.0 == *v) {
-                    Some(e) => {
-                        e.1 |= ok;
-                        e.2 = true;
-                    }
-                    None => feasible.push((v.clone(), ok, true)),
+            for (id, imp) in &self.tokens[at].ias[i] {
+                if imp.is_some() {
+                    offered[*id] = true;
+                    feasible[*id] |= ok;
                 }
             }
         }
         if any {
+            let named = &self.tokens[at].named;
             out.extend(
-                feasible
-                    .iter()
-                    .filter(|(_, ok, offered)| *offered && !ok)
-                    .map(|(v, _, _)| v.clone()),
+                (0..n_tokens)
+                    .filter(|&id| offered[id] && !feasible[id])
+                    .map(|id| named[id].clone()),
             );
         }
-        self.scratch.feasible_versions = feasible;
+        self.scratch.version_flags = (feasible, offered);
     }
 
     /// Bind the plan's cell for activity `at` to what runs (`running`: the placed
