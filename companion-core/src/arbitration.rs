@@ -4,7 +4,7 @@
 //! actually runs.
 
 pub use crate::conflicts::BehaviourConflicts;
-use crate::mission::{ActionKind, Policy};
+use crate::mission::{ActionCatalogue, ActionKind, Policy};
 use crate::model::Model;
 use crate::observations::Observations;
 use crate::record::{DecisionRecord, Degraded, Dropped, Event, ResourcesRecord};
@@ -23,18 +23,18 @@ const SCHEDULE_MEMO: usize = 8;
 /// (fixed per core), the platform state before it and the requests, so the same inputs give
 /// the same record and the same platform state after.
 #[derive(Default)]
-struct ScheduleMemo<'m> {
+struct ScheduleMemo {
     before: PlatformState,
     /// One [`RequestKey`] per request, in request order.
-    key: Vec<RequestKey<'m>>,
+    key: Vec<RequestKey>,
     after: PlatformState,
     record: ResourcesRecord,
 }
 
 /// Recent resource schedules keyed on their exact inputs, with the scheduler's reusable
 /// inputs, output and working memory (no allocation once warm).
-pub(crate) struct ScheduleCache<'m> {
-    memos: Vec<ScheduleMemo<'m>>,
+pub(crate) struct ScheduleCache {
+    memos: Vec<ScheduleMemo>,
     next: usize,
     enabled: bool,
     runs: u64,
@@ -43,7 +43,7 @@ pub(crate) struct ScheduleCache<'m> {
     out: fpga_model::Schedule,
 }
 
-impl<'m> ScheduleCache<'m> {
+impl ScheduleCache {
     pub(crate) fn new() -> Self {
         ScheduleCache {
             memos: Vec::new(),
@@ -71,11 +71,11 @@ impl<'m> ScheduleCache<'m> {
     /// remembered. Fails when the policy is unknown.
     fn schedule(
         &mut self,
-        resources: &ResourceSpec,
+        (resources, actions): (&ResourceSpec, &ActionCatalogue),
         policy: &str,
         platform: &PlatformState,
-        key: &[RequestKey<'m>],
-    ) -> Result<&ScheduleMemo<'m>, SpecError> {
+        key: &[RequestKey],
+    ) -> Result<&ScheduleMemo, SpecError> {
         let hit = self.enabled.then(|| {
             self.memos
                 .iter()
@@ -83,7 +83,7 @@ impl<'m> ScheduleCache<'m> {
         });
         let i = match hit.flatten() {
             Some(i) => i,
-            None => self.run(resources, policy, platform, key)?,
+            None => self.run((resources, actions), policy, platform, key)?,
         };
         Ok(&self.memos[i])
     }
@@ -91,14 +91,14 @@ impl<'m> ScheduleCache<'m> {
     /// Run the scheduler into a memo slot; returns the slot.
     fn run(
         &mut self,
-        resources: &ResourceSpec,
+        (resources, actions): (&ResourceSpec, &ActionCatalogue),
         policy: &str,
         platform: &PlatformState,
-        key: &[RequestKey<'m>],
+        key: &[RequestKey],
     ) -> Result<usize, SpecError> {
         self.runs += 1;
         resources.policy(policy)?;
-        fill_requests(&mut self.requests, key);
+        fill_requests(&mut self.requests, actions, key);
         // The memo slot is rewritten in place (its buffers kept): with the memos off,
         // the one slot every cycle, so a scheduler run allocates nothing once warm.
         if !self.enabled {
@@ -152,9 +152,12 @@ fn copy_platform(dst: &mut PlatformState, src: &PlatformState) {
 pub(crate) use crate::scratch::RequestKey;
 
 /// The scheduler's requests for `key`, reusing the strings of the previous cycle's requests.
-fn fill_requests(dst: &mut Vec<Request>, key: &[RequestKey<'_>]) {
+fn fill_requests(dst: &mut Vec<Request>, actions: &ActionCatalogue, key: &[RequestKey]) {
     dst.truncate(key.len());
-    for (i, &(app, version, planned, fps)) in key.iter().enumerate() {
+    for (i, &(variant, planned, fps)) in key.iter().enumerate() {
+        let act = actions.by_id(variant);
+        let app = act.app.as_deref().unwrap_or_default();
+        let version = act.version.as_deref().unwrap_or_default();
         if i == dst.len() {
             let mut r = Request::new(app, version, f64::from_bits(fps));
             r.implementation = planned;
@@ -180,14 +183,14 @@ fn same_platform(a: &PlatformState, b: &PlatformState) -> bool {
 }
 
 /// Resource arbitration: the schedules and the degradations in force between cycles.
-pub(crate) struct ResourceArbiter<'m> {
-    pub(crate) schedules: ScheduleCache<'m>,
+pub(crate) struct ResourceArbiter {
+    pub(crate) schedules: ScheduleCache,
     /// Degradations and drops in force after the last cycle.
     last_degraded: Vec<Degraded>,
     last_dropped: Vec<Dropped>,
 }
 
-impl<'m> ResourceArbiter<'m> {
+impl ResourceArbiter {
     pub(crate) fn new() -> Self {
         ResourceArbiter {
             schedules: ScheduleCache::new(),
@@ -203,10 +206,10 @@ impl<'m> ResourceArbiter<'m> {
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn arbitrate_resources(
         &mut self,
-        model: &'m Model,
+        model: &Model,
         policy: Policy,
         platform: &mut PlatformState,
-        sc: &mut Scratch<'m>,
+        sc: &mut Scratch,
         obs: &Observations,
         plan: Option<&str>,
         rec: &mut DecisionRecord,
@@ -214,7 +217,7 @@ impl<'m> ResourceArbiter<'m> {
         request_key(model, sc, obs, plan);
         crate::stage_hook::mark(crate::stage_hook::Stage::Arbitration);
         let scheduled = self.schedules.schedule(
-            &model.resources,
+            (&model.resources, &model.actions),
             model.policy_name(policy),
             platform,
             &sc.key,
@@ -253,17 +256,17 @@ fn planned_implementation(plan: Option<&str>, version: &str) -> Option<Implement
 /// The requests (`sc.key`) of the kept application actions and the actions asking for them
 /// (`sc.owners`): one variant per application, at the rate the observed speed requires, in the
 /// implementation the plan names for that version (if it does).
-fn request_key<'m>(model: &'m Model, sc: &mut Scratch<'m>, obs: &Observations, plan: Option<&str>) {
+fn request_key(model: &Model, sc: &mut Scratch, obs: &Observations, plan: Option<&str>) {
     sc.key.clear();
     sc.owners.clear();
+    let actions = &model.actions;
+    let app_of = |id| actions.by_id(id).app.as_deref();
     for &a in &sc.kept {
-        let Some(act) = model.actions.get(a) else {
-            continue;
-        };
+        let act = actions.by_id(a);
         let (Some(app), Some(version)) = (&act.app, &act.version) else {
             continue;
         };
-        if sc.key.iter().any(|r| r.0 == app) {
+        if sc.key.iter().any(|r| app_of(r.0) == Some(app.as_str())) {
             continue; // one variant per application (target detection shares the tracker)
         }
         let speed = model
@@ -277,35 +280,36 @@ fn request_key<'m>(model: &'m Model, sc: &mut Scratch<'m>, obs: &Observations, p
             .required_fps(app, [0.0, 0.0], [speed, 0.0])
             .unwrap_or(1.0);
         let planned = planned_implementation(plan, version);
-        sc.key.push((app, version, planned, fps.to_bits()));
+        sc.key.push((actions.variant_id(a), planned, fps.to_bits()));
         sc.owners.push(a);
     }
 }
 
 /// Rewrite: an application action stays only if its app is placed, under the placed version.
-fn rewrite_actions<'m>(model: &'m Model, record: &ResourcesRecord, sc: &mut Scratch<'m>) {
+fn rewrite_actions(model: &Model, record: &ResourcesRecord, sc: &mut Scratch) {
     sc.actions.clear();
     for &a in &sc.kept {
-        let act = model.actions.get(a);
-        match act.and_then(|x| x.app.as_deref()) {
+        let act = model.actions.by_id(a);
+        match act.app.as_deref() {
             None => sc.actions.push(a),
             Some(app) => {
                 let placed = record.placements.iter().find(|p| p.app == app);
                 if let Some(p) = placed {
                     // A degraded variant is named by the action that runs it (track_v3 -> track_v1).
-                    let same = act.and_then(|x| x.version.as_deref()) == Some(p.version.as_str());
+                    let same = act.version.as_deref() == Some(p.version.as_str());
                     let id = if same || !sc.owners.contains(&a) {
                         a
                     } else {
                         model
                             .actions
                             .for_variant(app, &p.version, &model.states)
-                            .map_or(a, |x| x.id.as_str())
+                            .and_then(|x| model.actions.id(&x.id))
+                            .unwrap_or(a)
                     };
                     if !sc.actions.contains(&id) {
                         sc.actions.push(id);
                     }
-                } else if act.is_some_and(|x| x.kind == ActionKind::Vehicle) {
+                } else if act.kind == ActionKind::Vehicle {
                     sc.actions.push(a);
                 }
             }

@@ -165,6 +165,19 @@ impl BehaviourConflicts {
         kept: &mut Vec<&'a str>,
         conflicts: &mut Vec<Conflict>,
     ) -> Result<(), InstantiateError> {
+        self.resolve_by(actions, |a| a, policy, kept, conflicts)
+    }
+
+    /// As [`BehaviourConflicts::resolve_into`] over actions of any copyable kind (catalogue ids),
+    /// `name` giving each one's name (what patterns match and conflicts record).
+    pub fn resolve_by<'n, T: Copy>(
+        &self,
+        actions: &[T],
+        name: impl Fn(T) -> &'n str,
+        policy: &str,
+        kept: &mut Vec<T>,
+        conflicts: &mut Vec<Conflict>,
+    ) -> Result<(), InstantiateError> {
         let order = self
             .priority
             .get(policy)
@@ -179,7 +192,8 @@ impl BehaviourConflicts {
         };
         let mut fired = 0;
         for rule in &self.rules {
-            let in_group = |g: usize, a: &str| rule.groups[g].iter().any(|p| pattern_matches(p, a));
+            let in_group =
+                |g: usize, a: &T| rule.groups[g].iter().any(|p| pattern_matches(p, name(*a)));
             let present = |g: usize| kept.iter().any(|a| in_group(g, a));
             if !present(0) || !present(1) {
                 continue;
@@ -196,7 +210,7 @@ impl BehaviourConflicts {
                 if i > 0 {
                     c.kept.push('+');
                 }
-                c.kept.push_str(a);
+                c.kept.push_str(name(*a));
             }
             let mut n = 0;
             for a in kept.iter().filter(|a| in_group(lose, a)) {
@@ -204,7 +218,7 @@ impl BehaviourConflicts {
                     c.dropped.push(String::new());
                 }
                 c.dropped[n].clear();
-                c.dropped[n].push_str(a);
+                c.dropped[n].push_str(name(*a));
                 n += 1;
             }
             c.dropped.truncate(n);

@@ -19,11 +19,13 @@ use crate::stage_hook::{Stage, mark};
 use fpga_model::PlatformState;
 use mdp_engine::Workspace;
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 /// A decision core bound to a model, a model kind and a policy; `step` once per cycle.
-pub struct Core<'m> {
-    /// The loaded params this core decides with.
-    pub model: &'m Model,
+pub struct Core {
+    /// The loaded params this core decides with (shared, never changed: cores of several runs
+    /// may hold the same one).
+    pub model: Arc<Model>,
     /// Which MDPs decide (concurrent, reference or monolithic).
     pub kind: ModelKind,
     /// Decision policy whose rewards and priorities apply.
@@ -51,25 +53,25 @@ pub struct Core<'m> {
     others_cpu: f64,
     /// Number of names the health managers publish (a reused probability map holds exactly these).
     n_published: usize,
-    scratch: Scratch<'m>,
+    scratch: Scratch,
     /// The resource arbitration stage's schedules and degradations in force.
-    arbiter: ResourceArbiter<'m>,
+    arbiter: ResourceArbiter,
     /// The ids of [`ROOM`]'s observations (`None`: params do not observe it), and their values
     /// this cycle (capacity kept).
     room_ids: [Option<crate::evidence::ObservationId>; 3],
     room_extra: Vec<(crate::evidence::ObservationId, f64)>,
     /// The activation nodes' fit observations the core computes with the scheduler's check.
-    fit_checks: Vec<FitCheck<'m>>,
+    fit_checks: Vec<FitCheck>,
 }
 
 /// One fit observation (`tracking_V3_fits`, node `F_V3`): whether the scheduler admits some
 /// implementation of `app version` beside the applications in force.
-#[derive(Debug, Clone, Copy)]
-struct FitCheck<'m> {
+#[derive(Debug, Clone)]
+struct FitCheck {
     id: crate::evidence::ObservationId,
-    name: &'m str,
-    app: &'m str,
-    version: &'m str,
+    name: String,
+    app: String,
+    version: String,
 }
 
 /// How much work the cycles so far really did (the rest came from the memos).
@@ -98,24 +100,23 @@ const BN_QUERY_MEMO: usize = 4;
 const MAX_RESOLVES: usize = 3;
 
 /// `dst = src` element by element, reusing `dst`'s strings.
-fn fill_strings<S: AsRef<str>>(dst: &mut Vec<String>, src: &[S]) {
+fn fill_strings<'a>(dst: &mut Vec<String>, src: impl ExactSizeIterator<Item = &'a str>) {
     dst.truncate(src.len());
-    for (i, a) in src.iter().enumerate() {
+    for (i, a) in src.enumerate() {
         match dst.get_mut(i) {
             Some(d) => {
                 d.clear();
-                d.push_str(a.as_ref());
+                d.push_str(a);
             }
-            None => dst.push(a.as_ref().to_string()),
+            None => dst.push(a.to_string()),
         }
     }
 }
 
-impl<'m> Core<'m> {
+impl Core {
     /// A core at cycle 0 with fresh copies of the model's stateful parts.
-    pub fn new(model: &'m Model, kind: ModelKind, policy: Policy) -> Self {
+    pub fn new(model: Arc<Model>, kind: ModelKind, policy: Policy) -> Self {
         Core {
-            model,
             kind,
             policy,
             cycle: 0,
@@ -147,12 +148,13 @@ impl<'m> Core<'m> {
                 .filter_map(|(name, a)| {
                     Some(FitCheck {
                         id: model.health.observations.id(name)?,
-                        name,
-                        app: a.app.as_str(),
-                        version: a.version.as_str(),
+                        name: name.to_string(),
+                        app: a.app.clone(),
+                        version: a.version.clone(),
                     })
                 })
                 .collect(),
+            model,
         }
     }
 
@@ -219,8 +221,9 @@ impl<'m> Core<'m> {
     /// observations of the same shape allocates nothing once warm (tests/cycle_no_alloc.rs).
     pub fn step_into(&mut self, obs: &Observations, plan: &mut Plan, rec: &mut DecisionRecord) {
         mark(Stage::CycleStart);
-        let model = self.model;
-        let policy = self.model.policy_name(self.policy);
+        let model = Arc::clone(&self.model);
+        let model = &*model;
+        let policy = model.policy_name(self.policy);
         self.begin_record(obs, rec);
         mark(Stage::Record);
 
@@ -307,8 +310,10 @@ impl<'m> Core<'m> {
             ) {
                 Ok(Some(d)) => {
                     for a in shared.primitives(d.action) {
-                        if !sc.merged.contains(&a.as_str()) {
-                            sc.merged.push(a);
+                        if let Some(id) = model.actions.id(a)
+                            && !sc.merged.contains(&id)
+                        {
+                            sc.merged.push(id);
                         }
                     }
                     if n_proposals == rec.proposals.len() {
@@ -349,30 +354,29 @@ impl<'m> Core<'m> {
         }
         self.record_resource_conflicts(&sc, rec);
         self.note_others(rec);
-        fill_strings(&mut rec.actions, &sc.actions);
+        fill_strings(
+            &mut rec.actions,
+            sc.actions.iter().map(|&a| model.actions.name(a)),
+        );
         mark(Stage::Arbitration);
 
         // guarantee: PANORAMA margins on the activity being flown
         self.watch_guarantee(&mut sc, obs, rec);
-        self.scratch = sc;
         mark(Stage::Guarantee);
 
         // plan
         let mut n = 0;
-        for a in &rec.actions {
-            if model
-                .actions
-                .get(a)
-                .is_some_and(|x| x.kind == ActionKind::Vehicle)
-            {
+        for &a in &sc.actions {
+            if model.actions.by_id(a).kind == ActionKind::Vehicle {
                 if n == plan.vehicle_actions.len() {
                     plan.vehicle_actions.push(String::new());
                 }
-                plan.vehicle_actions[n].clone_from(a);
+                plan.vehicle_actions[n].clone_from(&model.actions.by_id(a).id);
                 n += 1;
             }
         }
         plan.vehicle_actions.truncate(n);
+        self.scratch = sc;
         match &rec.resources {
             Some(r) => plan.applications.clone_from(&r.placements),
             None => plan.applications.clear(),
@@ -398,7 +402,7 @@ impl<'m> Core<'m> {
     }
 
     /// The application the resource manager's activation nodes assess (tracking).
-    fn assessed_app(&self) -> Option<&'m str> {
+    fn assessed_app(&self) -> Option<&str> {
         self.model
             .health
             .activations
@@ -409,7 +413,7 @@ impl<'m> Core<'m> {
     /// Required rate of `app` now (section 4.3.2 model, relative speed from the observation
     /// params/mission.toml's `rates` names).
     fn required_fps(&self, app: &str, obs: &Observations) -> f64 {
-        let model = self.model;
+        let model = &*self.model;
         let speed = model
             .mission
             .rates
@@ -447,13 +451,13 @@ impl<'m> Core<'m> {
     /// what the applications in force occupy (`others_*`), else 0.0: fpga_model's own admission
     /// check ([`fpga_model::Room::admits`]) on the core's platform model, so the resource
     /// manager's fit agrees with the scheduler to the last digit.
-    fn fits(&self, f: &FitCheck<'_>, fps: f64) -> f64 {
+    fn fits(&self, f: &FitCheck, fps: f64) -> f64 {
         let res = &self.model.resources;
         let room = fpga_model::Room::of(&res.platform, &self.platform);
         let admitted = room.admits_version(
             &res.catalogue,
-            f.app,
-            f.version,
+            &f.app,
+            &f.version,
             fps,
             self.others_tiles,
             self.others_cpu,
@@ -471,7 +475,7 @@ impl<'m> Core<'m> {
         }
         for f in &self.fit_checks {
             self.health
-                .observe_into(f.name, self.fits(f, room[2].1), evidence);
+                .observe_into(&f.name, self.fits(f, room[2].1), evidence);
         }
     }
 
@@ -480,7 +484,8 @@ impl<'m> Core<'m> {
     /// it (BFM 7.3.2, mission policy: landing search gives way to tracking), so their room
     /// counts as the assessed application's.
     fn note_others(&mut self, rec: &DecisionRecord) {
-        let app = self.assessed_app();
+        let model = Arc::clone(&self.model);
+        let app = model.health.activations.first().map(|a| a.app.as_str());
         let policy = self
             .model
             .resources
@@ -501,29 +506,32 @@ impl<'m> Core<'m> {
     }
 
     /// Behaviour arbitration over the live proposals, then resource arbitration.
-    fn arbitrate(&mut self, sc: &mut Scratch<'m>, obs: &Observations, rec: &mut DecisionRecord) {
-        let model = self.model;
-        let policy = self.model.policy_name(self.policy);
+    fn arbitrate(&mut self, sc: &mut Scratch, obs: &Observations, rec: &mut DecisionRecord) {
+        let model = Arc::clone(&self.model);
+        let model = &*model;
+        let policy = model.policy_name(self.policy);
         sc.merged.clear();
         for (k, pr) in rec.proposals.iter().enumerate() {
             if sc.superseded.contains(&k) {
                 continue;
             }
             for a in &pr.actions {
-                // Names borrowed from the model (the catalogue holds every MDP action).
-                let Some(x) = model.actions.get(a) else {
+                // The catalogue holds every MDP action (checked at load).
+                let Some(id) = model.actions.id(a) else {
                     continue;
                 };
-                if !sc.merged.contains(&x.id.as_str()) {
-                    sc.merged.push(x.id.as_str());
+                if !sc.merged.contains(&id) {
+                    sc.merged.push(id);
                 }
             }
         }
-        if let Err(e) =
-            model
-                .conflicts
-                .resolve_into(&sc.merged, policy, &mut sc.kept, &mut rec.conflicts)
-        {
+        if let Err(e) = model.conflicts.resolve_by(
+            &sc.merged,
+            |a| model.actions.name(a),
+            policy,
+            &mut sc.kept,
+            &mut rec.conflicts,
+        ) {
             rec.conflicts.clear();
             rec.events.push(Event::ArbitrationError(e.to_string()));
             sc.kept.clone_from(&sc.merged);
@@ -552,18 +560,22 @@ impl<'m> Core<'m> {
     /// MDP's choice does not change.
     fn resolve_conflict(
         &mut self,
-        sc: &mut Scratch<'m>,
+        sc: &mut Scratch,
         obs: &Observations,
         rec: &mut DecisionRecord,
     ) -> bool {
-        let model = self.model;
-        let Some(app) = self.assessed_app() else {
+        let model = Arc::clone(&self.model);
+        let model = &*model;
+        let Some(app) = model.health.activations.first().map(|a| a.app.as_str()) else {
             return false;
         };
         let Some(res) = &rec.resources else {
             return false;
         };
-        let requested = sc.key.iter().any(|k| k.0 == app);
+        let requested = sc
+            .key
+            .iter()
+            .any(|k| model.actions.by_id(k.0).app.as_deref() == Some(app));
         if !requested || res.placements.iter().any(|p| p.app == app) {
             return false;
         }
@@ -605,7 +617,7 @@ impl<'m> Core<'m> {
             &mut self.workspace,
             s,
             &rec.probabilities,
-            self.model.policy_name(self.policy),
+            model.policy_name(self.policy),
             model.mission.horizon,
         ) {
             Ok(Some(d)) => d,
@@ -632,9 +644,9 @@ impl<'m> Core<'m> {
     /// Each application the resource policy left out becomes a conflict entry: the rule (policy
     /// rank and reason) and the action that gave way. A re-solve is one too: the earlier
     /// proposal's action gave way to the new one.
-    fn record_resource_conflicts(&self, sc: &Scratch<'m>, rec: &mut DecisionRecord) {
-        let model = self.model;
-        let policy = self.model.policy_name(self.policy);
+    fn record_resource_conflicts(&self, sc: &Scratch, rec: &mut DecisionRecord) {
+        let model = &*self.model;
+        let policy = model.policy_name(self.policy);
         for &k in &sc.superseded {
             let old = &rec.proposals[k];
             let new = rec.proposals[k + 1..]
@@ -655,8 +667,8 @@ impl<'m> Core<'m> {
             let gave_way: Vec<String> = sc
                 .kept
                 .iter()
-                .filter(|a| model.actions.get(a).and_then(|x| x.app.as_deref()) == Some(app))
-                .map(|a| a.to_string())
+                .filter(|&&a| model.actions.by_id(a).app.as_deref() == Some(app))
+                .map(|&a| model.actions.name(a).to_string())
                 .collect();
             if gave_way.is_empty() {
                 continue;
@@ -684,7 +696,7 @@ impl<'m> Core<'m> {
     /// no feasible alternative carries are capped from the next cycle, with an event when that
     /// set changes.
     fn bind_plan(&mut self, activity_index: usize, rec: &mut DecisionRecord) {
-        let model = self.model;
+        let model = Arc::clone(&self.model);
         let (Some(g), Some(record)) = (self.guarantee.as_mut(), rec.guarantee.as_mut()) else {
             return;
         };
@@ -720,12 +732,7 @@ impl<'m> Core<'m> {
         self.versions_scratch = versions;
     }
 
-    fn watch_guarantee(
-        &mut self,
-        sc: &mut Scratch<'m>,
-        obs: &Observations,
-        rec: &mut DecisionRecord,
-    ) {
+    fn watch_guarantee(&mut self, sc: &mut Scratch, obs: &Observations, rec: &mut DecisionRecord) {
         let Some(g) = self.guarantee.as_mut() else {
             rec.guarantee = None;
             return;

@@ -18,10 +18,14 @@ const COUNTED_CYCLES: u64 = 1000;
 /// changes and MDP solves seen while counting (to show the stream really moved).
 fn run(kind: ModelKind, policy: &str, stream: Stream, memos: bool) -> (usize, usize, u64) {
     let params = default_params_dir();
-    let model = companion::params::load_model(&params).unwrap();
+    let model = std::sync::Arc::new(companion::params::load_model(&params).unwrap());
     let base = tracking_snapshot(&model, &params, "complete-1");
     let stream_gen = StreamGen::new(&model, base.clone(), stream);
-    let mut core = Core::new(&model, kind, model.policy(policy).unwrap());
+    let mut core = Core::new(
+        std::sync::Arc::clone(&model),
+        kind,
+        model.policy(policy).unwrap(),
+    );
     core.set_caches(memos);
     let mut obs = base.clone();
     let (mut plan, mut rec) = (Plan::default(), DecisionRecord::default());

@@ -8,6 +8,7 @@ use companion::sim::{self, Scenario};
 use companion_core::decision::{Core, Model, ModelKind, Policy};
 use std::io::IsTerminal;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 #[derive(Parser)]
 #[command(
@@ -200,8 +201,8 @@ fn profile(params: Option<PathBuf>, vehicle: Option<&str>) -> Result<Option<Path
 
 /// The real decision core behind the fly loop.
 struct CoreDecider {
-    core: Core<'static>,
-    model: &'static Model,
+    core: Core,
+    model: Arc<Model>,
     policy: Policy,
 }
 
@@ -220,11 +221,11 @@ impl Decider for CoreDecider {
         &self,
         rec: &companion_core::record::DecisionRecord,
     ) -> Result<(), companion_core::launch::LaunchRefusal> {
-        companion_core::launch::verdict(rec, self.model)
+        companion_core::launch::verdict(rec, &self.model)
     }
 
     fn new_flight(&mut self) {
-        self.core = Core::new(self.model, ModelKind::Bfm, self.policy);
+        self.core = Core::new(Arc::clone(&self.model), ModelKind::Bfm, self.policy);
     }
 }
 
@@ -233,12 +234,12 @@ fn fly(args: FlyArgs) -> Result<()> {
     // Every params file, as `check` loads it, before any run folder or socket.
     let loaded = companion::params::Params::load(&params, args.mission.as_deref())
         .context("loading params")?;
-    let model: &'static Model = Box::leak(Box::new(loaded.model));
+    let model = Arc::new(loaded.model);
     let policy: Policy = model
         .policy(&args.policy)
         .map_err(|e| anyhow::anyhow!("--policy: {e}"))?;
     let decider = CoreDecider {
-        core: Core::new(model, ModelKind::Bfm, policy),
+        core: Core::new(Arc::clone(&model), ModelKind::Bfm, policy),
         model,
         policy,
     };
@@ -260,7 +261,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         .map(|m| m.trim().parse::<ModelKind>())
         .collect::<Result<_, _>>()
         .map_err(|e| anyhow::anyhow!("--model: {e}"))?;
-    let model = loaded.model;
+    let model = Arc::new(loaded.model);
     let policy: Policy = model
         .policy(&args.policy)
         .map_err(|e| anyhow::anyhow!("--policy: {e}"))?;
@@ -280,7 +281,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         let mut steps = Vec::with_capacity(runs as usize);
         for r in 0..runs {
             let seed = args.seed + r as u64;
-            let mut core = Core::new(&model, *kind, policy);
+            let mut core = Core::new(Arc::clone(&model), *kind, policy);
             let result = sim::run(&world, &scenario, seed, |obs| core.step(obs));
             if first_allocations.is_none() {
                 first_allocations = Some((core.reallocations(), core.allocation_table()));
