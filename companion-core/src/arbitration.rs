@@ -10,8 +10,7 @@ use crate::observations::Observations;
 use crate::record::{DecisionRecord, Degraded, Dropped, Event, ResourcesRecord};
 use crate::resources::ResourceSpec;
 use crate::scratch::Scratch;
-use crate::spec::SpecError;
-use fpga_model::{Implementation, PlatformState, Request};
+use fpga_model::{Implementation, PlatformState, Request, ResourcePolicy};
 
 // ---------------------------------------------------------------- resource arbitration
 
@@ -67,15 +66,15 @@ impl ScheduleCache {
         self.runs
     }
 
-    /// The schedule of the requests `key` from `platform` under `policy`: remembered, or run and
-    /// remembered. Fails when the policy is unknown.
+    /// The schedule of the requests `key` from `platform` under `policy` (fixed per core, so
+    /// not in the key): remembered, or run and remembered.
     fn schedule(
         &mut self,
         (resources, actions): (&ResourceSpec, &ActionCatalogue),
-        policy: &str,
+        policy: &ResourcePolicy,
         platform: &PlatformState,
         key: &[RequestKey],
-    ) -> Result<&ScheduleMemo, SpecError> {
+    ) -> &ScheduleMemo {
         let hit = self.enabled.then(|| {
             self.memos
                 .iter()
@@ -83,21 +82,20 @@ impl ScheduleCache {
         });
         let i = match hit.flatten() {
             Some(i) => i,
-            None => self.run((resources, actions), policy, platform, key)?,
+            None => self.run((resources, actions), policy, platform, key),
         };
-        Ok(&self.memos[i])
+        &self.memos[i]
     }
 
     /// Run the scheduler into a memo slot; returns the slot.
     fn run(
         &mut self,
         (resources, actions): (&ResourceSpec, &ActionCatalogue),
-        policy: &str,
+        policy: &ResourcePolicy,
         platform: &PlatformState,
         key: &[RequestKey],
-    ) -> Result<usize, SpecError> {
+    ) -> usize {
         self.runs += 1;
-        resources.policy(policy)?;
         fill_requests(&mut self.requests, actions, key);
         // The memo slot is rewritten in place (its buffers kept): with the memos off,
         // the one slot every cycle, so a scheduler run allocates nothing once warm.
@@ -116,7 +114,7 @@ impl ScheduleCache {
             0
         };
         let m = &mut self.memos[slot];
-        let ok = resources.schedule_into(
+        resources.schedule_with(
             policy,
             platform,
             &self.requests,
@@ -124,12 +122,11 @@ impl ScheduleCache {
             &mut self.out,
             &mut m.after,
         );
-        debug_assert!(ok.is_ok(), "the policy was looked up above");
         copy_platform(&mut m.before, platform);
         m.key.clear();
         m.key.extend_from_slice(key);
         crate::resources::to_record_into(&self.out, &mut m.record);
-        Ok(slot)
+        slot
     }
 }
 
@@ -216,22 +213,14 @@ impl ResourceArbiter {
     ) {
         request_key(model, sc, obs, plan);
         crate::stage_hook::mark(crate::stage_hook::Stage::Arbitration);
-        let scheduled = self.schedules.schedule(
+        // The resource policy was resolved when the model loaded (every policy has one).
+        let m = self.schedules.schedule(
             (&model.resources, &model.actions),
-            model.policy_name(policy),
+            model.resource_policy(policy),
             platform,
             &sc.key,
         );
         crate::stage_hook::mark(crate::stage_hook::Stage::Scheduler);
-        let m = match scheduled {
-            Ok(m) => m,
-            Err(e) => {
-                rec.events.push(Event::ResourcesError(e.to_string()));
-                rec.resources = None;
-                sc.actions.clone_from(&sc.kept);
-                return;
-            }
-        };
         copy_platform(platform, &m.after);
         match &mut rec.resources {
             Some(r) => r.clone_from(&m.record),

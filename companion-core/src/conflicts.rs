@@ -46,7 +46,9 @@ struct Rule {
 #[derive(Debug, Clone)]
 pub struct BehaviourConflicts {
     rules: Vec<Rule>,
-    priority: BTreeMap<String, Vec<String>>,
+    /// Policy name and its order, in name order (the order of [`BehaviourConflicts::policies`],
+    /// so a policy's position is its [`crate::mission::Policy`] index).
+    priority: Vec<(String, Vec<String>)>,
 }
 
 fn pattern_matches(pattern: &str, action: &str) -> bool {
@@ -131,13 +133,21 @@ impl BehaviourConflicts {
         }
         Ok(Self {
             rules,
-            priority: f.priority,
+            priority: f.priority.into_iter().collect(),
         })
     }
 
     /// Names of the policies params/policies.toml ranks actions for.
     pub fn policies(&self) -> impl Iterator<Item = &str> {
-        self.priority.keys().map(String::as_str)
+        self.priority.iter().map(|(name, _)| name.as_str())
+    }
+
+    /// Position of the policy named `policy` among [`BehaviourConflicts::policies`].
+    pub fn policy_position(&self, policy: &str) -> Result<usize, InstantiateError> {
+        self.priority
+            .iter()
+            .position(|(name, _)| name == policy)
+            .ok_or_else(|| InstantiateError::UnknownPolicy(policy.to_string()))
     }
 
     /// Apply every antagonistic rule in file order: when actions of both groups are present,
@@ -165,23 +175,25 @@ impl BehaviourConflicts {
         kept: &mut Vec<&'a str>,
         conflicts: &mut Vec<Conflict>,
     ) -> Result<(), InstantiateError> {
-        self.resolve_by(actions, |a| a, policy, kept, conflicts)
+        let at = self.policy_position(policy)?;
+        self.resolve_by(actions, |a| a, at, kept, conflicts)
     }
 
     /// As [`BehaviourConflicts::resolve_into`] over actions of any copyable kind (catalogue ids),
-    /// `name` giving each one's name (what patterns match and conflicts record).
+    /// `name` giving each one's name (what patterns match and conflicts record), under the
+    /// policy at position `policy` of [`BehaviourConflicts::policies`] (resolved at load).
     pub fn resolve_by<'n, T: Copy>(
         &self,
         actions: &[T],
         name: impl Fn(T) -> &'n str,
-        policy: &str,
+        policy: usize,
         kept: &mut Vec<T>,
         conflicts: &mut Vec<Conflict>,
     ) -> Result<(), InstantiateError> {
-        let order = self
+        let (_, order) = self
             .priority
             .get(policy)
-            .ok_or_else(|| InstantiateError::UnknownPolicy(policy.to_string()))?;
+            .ok_or_else(|| InstantiateError::UnknownPolicy(format!("#{policy}")))?;
         kept.clear();
         kept.extend_from_slice(actions);
         let rank = |group: &[String]| {
@@ -236,10 +248,7 @@ impl BehaviourConflicts {
         actions: &[S],
         policy: &str,
     ) -> Result<(Vec<String>, Vec<Conflict>), InstantiateError> {
-        let order = self
-            .priority
-            .get(policy)
-            .ok_or_else(|| InstantiateError::UnknownPolicy(policy.to_string()))?;
+        let (_, order) = &self.priority[self.policy_position(policy)?];
         let mut kept: Vec<String> = actions.iter().map(|a| a.as_ref().to_string()).collect();
         let mut conflicts = Vec::new();
         let rank = |group: &[String]| {

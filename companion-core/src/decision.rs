@@ -32,6 +32,9 @@ pub struct Core {
     pub policy: Policy,
     cycle: u64,
     mdp_names: Vec<String>,
+    /// Per MDP of `mdp_names`: where the policy's rewards sit in it, resolved in `new` (`None`:
+    /// the MDP has no rewards for the policy, an error each cycle as the name lookup gave).
+    mdp_policy: Vec<Option<usize>>,
     health: HealthModel,
     mdps: MissionMdps,
     workspace: Workspace,
@@ -121,6 +124,14 @@ impl Core {
             policy,
             cycle: 0,
             mdp_names: model.mdp_names(kind),
+            mdp_policy: model
+                .mdp_names(kind)
+                .iter()
+                .map(|name| {
+                    let mdp = model.mdps.get(name)?;
+                    mdp.policy_index(model.policy_name(policy)).ok()
+                })
+                .collect(),
             health: {
                 let mut h = model.health.clone();
                 h.set_query_memo(BN_QUERY_MEMO);
@@ -223,7 +234,6 @@ impl Core {
         mark(Stage::CycleStart);
         let model = Arc::clone(&self.model);
         let model = &*model;
-        let policy = model.policy_name(self.policy);
         self.begin_record(obs, rec);
         mark(Stage::Record);
 
@@ -289,7 +299,7 @@ impl Core {
         let mut sc = std::mem::take(&mut self.scratch);
         sc.merged.clear();
         let mut n_proposals = 0;
-        for name in &self.mdp_names {
+        for (j, name) in self.mdp_names.iter().enumerate() {
             let local = model.mission.project(name, obs);
             let (Some(mdp), Some(shared)) = (self.mdps.get_mut(name), model.mdps.get(name)) else {
                 continue;
@@ -301,13 +311,17 @@ impl Core {
                 });
                 continue;
             };
-            match mdp.decide(
-                &mut self.workspace,
-                s,
-                &rec.probabilities,
-                policy,
-                model.mission.horizon,
-            ) {
+            let decided = match self.mdp_policy[j] {
+                Some(pi) => mdp.decide_resolved(
+                    &mut self.workspace,
+                    s,
+                    &rec.probabilities,
+                    pi,
+                    model.mission.horizon,
+                ),
+                None => Err(unknown_policy(model, self.policy)),
+            };
+            match decided {
                 Ok(Some(d)) => {
                     for a in shared.primitives(d.action) {
                         if let Some(id) = model.actions.id(a)
@@ -486,12 +500,8 @@ impl Core {
     fn note_others(&mut self, rec: &DecisionRecord) {
         let model = Arc::clone(&self.model);
         let app = model.health.activations.first().map(|a| a.app.as_str());
-        let policy = self
-            .model
-            .resources
-            .policy(self.model.policy_name(self.policy))
-            .ok();
-        let rank = |a: &str| policy.map_or(0, |p| p.rank(a));
+        let policy = model.resource_policy(self.policy);
+        let rank = |a: &str| policy.rank(a);
         let limit = app.map_or(usize::MAX, rank);
         let (tiles, cpu) = rec.resources.as_ref().map_or((0, 0.0), |r| {
             r.placements
@@ -509,7 +519,6 @@ impl Core {
     fn arbitrate(&mut self, sc: &mut Scratch, obs: &Observations, rec: &mut DecisionRecord) {
         let model = Arc::clone(&self.model);
         let model = &*model;
-        let policy = model.policy_name(self.policy);
         sc.merged.clear();
         for (k, pr) in rec.proposals.iter().enumerate() {
             if sc.superseded.contains(&k) {
@@ -528,7 +537,8 @@ impl Core {
         if let Err(e) = model.conflicts.resolve_by(
             &sc.merged,
             |a| model.actions.name(a),
-            policy,
+            // Model::policies lists the policies in the conflicts' order: the index is theirs.
+            self.policy.index(),
             &mut sc.kept,
             &mut rec.conflicts,
         ) {
@@ -607,19 +617,28 @@ impl Core {
             return false;
         }
         let name = rec.proposals[k].mdp.clone();
+        let pi = self
+            .mdp_names
+            .iter()
+            .position(|n| *n == name)
+            .and_then(|j| self.mdp_policy[j]);
         let Some(mdp) = self.mdps.get_mut(&name) else {
             return false;
         };
         let Some(s) = mdp.state_index(&rec.proposals[k].state) else {
             return false;
         };
-        let d = match mdp.decide(
-            &mut self.workspace,
-            s,
-            &rec.probabilities,
-            model.policy_name(self.policy),
-            model.mission.horizon,
-        ) {
+        let decided = match pi {
+            Some(pi) => mdp.decide_resolved(
+                &mut self.workspace,
+                s,
+                &rec.probabilities,
+                pi,
+                model.mission.horizon,
+            ),
+            None => Err(unknown_policy(model, self.policy)),
+        };
+        let d = match decided {
             Ok(Some(d)) => d,
             Ok(None) => return false,
             Err(e) => {
@@ -965,6 +984,11 @@ pub fn table(records: &[DecisionRecord], model: &Model) -> String {
         line([&row[0], &row[1], &row[2], &row[3], &row[4]], &mut out);
     }
     out
+}
+
+/// The error an MDP without rewards for `policy` gives (as its name lookup did).
+fn unknown_policy(model: &Model, policy: Policy) -> crate::mission_mdp::InstantiateError {
+    crate::mission_mdp::InstantiateError::UnknownPolicy(model.policy_name(policy).to_string())
 }
 
 /// `names` into `into`, reusing its strings (the cycle allocates nothing once warm).
