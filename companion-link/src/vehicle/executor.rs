@@ -552,16 +552,12 @@ impl Vehicle {
         let items = route.mission_items(self.flavor, home);
         match self.mission.upload(now, items) {
             Ok(msgs) => {
-                out.extend(msgs);
-                let job = self.job.as_mut().expect("job checked above");
-                job.running = Running::Mission;
-                self.records.push(CommandRecord {
+                self.step_sent(
+                    (msgs, out),
+                    Running::Mission,
                     action,
-                    command: "MISSION_UPLOAD".into(),
-                    result: CommandOutcome::Sent,
-                    attempts: 1,
-                    latency_ms: None,
-                });
+                    "MISSION_UPLOAD".into(),
+                );
                 Advance::Wait
             }
             Err(_) => Advance::Wait, // another transfer still running: wait for it
@@ -653,16 +649,12 @@ impl Vehicle {
     ) -> bool {
         match self.commands.submit(now, spec) {
             Ok((ticket, msgs)) => {
-                out.extend(msgs);
-                let job = self.job.as_mut().expect("issue runs inside a job");
-                job.running = Running::Command(ticket);
-                self.records.push(CommandRecord {
-                    action: action.to_string(),
-                    command: name.clone(),
-                    result: CommandOutcome::Sent,
-                    attempts: 1,
-                    latency_ms: None,
-                });
+                self.step_sent(
+                    (msgs, out),
+                    Running::Command(ticket),
+                    action.to_string(),
+                    name.clone(),
+                );
                 self.purposes.insert(
                     ticket,
                     Purpose::Step {
@@ -676,6 +668,27 @@ impl Vehicle {
             // Same command id still in flight (a stream request or a superseded step): next tick.
             Err(_) => false,
         }
+    }
+
+    /// A step's request went out: its messages queued, the job waiting on `running`, and a
+    /// `Sent` record for the step's command.
+    fn step_sent(
+        &mut self,
+        (msgs, out): (Vec<Msg>, &mut Vec<Msg>),
+        running: Running,
+        action: String,
+        command: String,
+    ) {
+        out.extend(msgs);
+        let job = self.job.as_mut().expect("a step runs inside a job");
+        job.running = running;
+        self.records.push(CommandRecord {
+            action,
+            command,
+            result: CommandOutcome::Sent,
+            attempts: 1,
+            latency_ms: None,
+        });
     }
 
     pub(super) fn reposition_spec(&self, o: Offset) -> Option<CommandSpec> {
