@@ -305,10 +305,21 @@ impl Vehicle {
         name: &str,
         out: &mut Vec<Msg>,
     ) -> Advance {
+        let mode = FlightMode::from_name(name);
         // Landing and return never wait.
+        let shown = self
+            .telemetry
+            .mode
+            .as_deref()
+            .and_then(FlightMode::from_name);
         if self.flavor == Flavor::Px4
-            && !matches!(name, "LAND" | "RTL" | "SMART_RTL" | "TAKEOFF")
-            && self.telemetry.mode.as_deref() == Some("TAKEOFF")
+            && !matches!(
+                mode,
+                Some(
+                    FlightMode::Land | FlightMode::Rtl | FlightMode::SmartRtl | FlightMode::Takeoff
+                )
+            )
+            && shown == Some(FlightMode::Takeoff)
         {
             let until = *self
                 .px4_takeoff_wait
@@ -318,7 +329,7 @@ impl Vehicle {
             }
         }
         self.px4_takeoff_wait = None;
-        if name == "AUTO"
+        if mode == Some(FlightMode::Auto)
             && let Some((_, until)) = self.px4_mission_pending
         {
             if now < until {
@@ -335,7 +346,7 @@ impl Vehicle {
             .find(|(_, at)| self.mode_heard_at.is_none_or(|h| *at >= h))
             .is_some_and(|(m, _)| m != name);
         self.note_mode(now, name);
-        if modes::is_in_mode(self.flavor, self.telemetry.custom_mode, name)
+        if mode.is_some_and(|m| modes::is_in_mode(self.flavor, self.telemetry.custom_mode, m))
             && self.telemetry.mode.is_some()
             && !stale
         {
@@ -343,7 +354,7 @@ impl Vehicle {
             self.step_done();
             return Advance::Again;
         }
-        match modes::set_mode_command(self.flavor, name) {
+        match mode.and_then(|m| modes::set_mode_command(self.flavor, m)) {
             Some(spec) => {
                 let shown = self
                     .telemetry
@@ -381,7 +392,10 @@ impl Vehicle {
         since: Duration,
     ) -> Advance {
         let heard_since = self.mode_heard_at.is_some_and(|h| h > since);
-        if heard_since && modes::is_in_mode(self.flavor, self.telemetry.custom_mode, name) {
+        if heard_since
+            && FlightMode::from_name(name)
+                .is_some_and(|m| modes::is_in_mode(self.flavor, self.telemetry.custom_mode, m))
+        {
             self.step_done();
             return Advance::Again;
         }
@@ -440,7 +454,9 @@ impl Vehicle {
                 // fails and the next request sets the mode again.
                 if self.flavor == Flavor::ArduPilot
                     && let Some((want, at)) = self.commanded_modes.last().cloned()
-                    && !modes::is_in_mode(self.flavor, self.telemetry.custom_mode, &want)
+                    && !FlightMode::from_name(&want).is_some_and(|m| {
+                        modes::is_in_mode(self.flavor, self.telemetry.custom_mode, m)
+                    })
                 {
                     if self.mode_heard_at.is_none_or(|h| h <= at) {
                         return Advance::Wait;
