@@ -4,14 +4,13 @@
 //! actually runs.
 
 pub use crate::conflicts::BehaviourConflicts;
-use crate::mission::{ActionKind, Policy};
+use crate::mission::{ActionCatalogue, ActionKind, Policy};
 use crate::model::Model;
 use crate::observations::Observations;
 use crate::record::{DecisionRecord, Degraded, Dropped, Event, ResourcesRecord};
 use crate::resources::ResourceSpec;
 use crate::scratch::Scratch;
-use crate::spec::SpecError;
-use fpga_model::{Implementation, PlatformState, Request};
+use fpga_model::{Implementation, PlatformState, Request, ResourcePolicy};
 
 // ---------------------------------------------------------------- resource arbitration
 
@@ -23,18 +22,18 @@ const SCHEDULE_MEMO: usize = 8;
 /// (fixed per core), the platform state before it and the requests, so the same inputs give
 /// the same record and the same platform state after.
 #[derive(Default)]
-struct ScheduleMemo<'m> {
+struct ScheduleMemo {
     before: PlatformState,
     /// One [`RequestKey`] per request, in request order.
-    key: Vec<RequestKey<'m>>,
+    key: Vec<RequestKey>,
     after: PlatformState,
     record: ResourcesRecord,
 }
 
 /// Recent resource schedules keyed on their exact inputs, with the scheduler's reusable
 /// inputs, output and working memory (no allocation once warm).
-pub(crate) struct ScheduleCache<'m> {
-    memos: Vec<ScheduleMemo<'m>>,
+pub(crate) struct ScheduleCache {
+    memos: Vec<ScheduleMemo>,
     next: usize,
     enabled: bool,
     runs: u64,
@@ -43,7 +42,7 @@ pub(crate) struct ScheduleCache<'m> {
     out: fpga_model::Schedule,
 }
 
-impl<'m> ScheduleCache<'m> {
+impl ScheduleCache {
     pub(crate) fn new() -> Self {
         ScheduleCache {
             memos: Vec::new(),
@@ -67,15 +66,15 @@ impl<'m> ScheduleCache<'m> {
         self.runs
     }
 
-    /// The schedule of the requests `key` from `platform` under `policy`: remembered, or run and
-    /// remembered. Fails when the policy is unknown.
+    /// The schedule of the requests `key` from `platform` under `policy` (fixed per core, so
+    /// not in the key): remembered, or run and remembered.
     fn schedule(
         &mut self,
-        resources: &ResourceSpec,
-        policy: &str,
+        (resources, actions): (&ResourceSpec, &ActionCatalogue),
+        policy: &ResourcePolicy,
         platform: &PlatformState,
-        key: &[RequestKey<'m>],
-    ) -> Result<&ScheduleMemo<'m>, SpecError> {
+        key: &[RequestKey],
+    ) -> &ScheduleMemo {
         let hit = self.enabled.then(|| {
             self.memos
                 .iter()
@@ -83,22 +82,21 @@ impl<'m> ScheduleCache<'m> {
         });
         let i = match hit.flatten() {
             Some(i) => i,
-            None => self.run(resources, policy, platform, key)?,
+            None => self.run((resources, actions), policy, platform, key),
         };
-        Ok(&self.memos[i])
+        &self.memos[i]
     }
 
     /// Run the scheduler into a memo slot; returns the slot.
     fn run(
         &mut self,
-        resources: &ResourceSpec,
-        policy: &str,
+        (resources, actions): (&ResourceSpec, &ActionCatalogue),
+        policy: &ResourcePolicy,
         platform: &PlatformState,
-        key: &[RequestKey<'m>],
-    ) -> Result<usize, SpecError> {
+        key: &[RequestKey],
+    ) -> usize {
         self.runs += 1;
-        resources.policy(policy)?;
-        fill_requests(&mut self.requests, key);
+        fill_requests(&mut self.requests, actions, key);
         // The memo slot is rewritten in place (its buffers kept): with the memos off,
         // the one slot every cycle, so a scheduler run allocates nothing once warm.
         if !self.enabled {
@@ -116,7 +114,7 @@ impl<'m> ScheduleCache<'m> {
             0
         };
         let m = &mut self.memos[slot];
-        let ok = resources.schedule_into(
+        resources.schedule_with(
             policy,
             platform,
             &self.requests,
@@ -124,12 +122,11 @@ impl<'m> ScheduleCache<'m> {
             &mut self.out,
             &mut m.after,
         );
-        debug_assert!(ok.is_ok(), "the policy was looked up above");
         copy_platform(&mut m.before, platform);
         m.key.clear();
         m.key.extend_from_slice(key);
         crate::resources::to_record_into(&self.out, &mut m.record);
-        Ok(slot)
+        slot
     }
 }
 
@@ -152,9 +149,12 @@ fn copy_platform(dst: &mut PlatformState, src: &PlatformState) {
 pub(crate) use crate::scratch::RequestKey;
 
 /// The scheduler's requests for `key`, reusing the strings of the previous cycle's requests.
-fn fill_requests(dst: &mut Vec<Request>, key: &[RequestKey<'_>]) {
+fn fill_requests(dst: &mut Vec<Request>, actions: &ActionCatalogue, key: &[RequestKey]) {
     dst.truncate(key.len());
-    for (i, &(app, version, planned, fps)) in key.iter().enumerate() {
+    for (i, &(variant, planned, fps)) in key.iter().enumerate() {
+        let act = actions.by_id(variant);
+        let app = act.app.as_deref().unwrap_or_default();
+        let version = act.version.as_deref().unwrap_or_default();
         if i == dst.len() {
             let mut r = Request::new(app, version, f64::from_bits(fps));
             r.implementation = planned;
@@ -180,14 +180,14 @@ fn same_platform(a: &PlatformState, b: &PlatformState) -> bool {
 }
 
 /// Resource arbitration: the schedules and the degradations in force between cycles.
-pub(crate) struct ResourceArbiter<'m> {
-    pub(crate) schedules: ScheduleCache<'m>,
+pub(crate) struct ResourceArbiter {
+    pub(crate) schedules: ScheduleCache,
     /// Degradations and drops in force after the last cycle.
     last_degraded: Vec<Degraded>,
     last_dropped: Vec<Dropped>,
 }
 
-impl<'m> ResourceArbiter<'m> {
+impl ResourceArbiter {
     pub(crate) fn new() -> Self {
         ResourceArbiter {
             schedules: ScheduleCache::new(),
@@ -203,32 +203,24 @@ impl<'m> ResourceArbiter<'m> {
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn arbitrate_resources(
         &mut self,
-        model: &'m Model,
+        model: &Model,
         policy: Policy,
         platform: &mut PlatformState,
-        sc: &mut Scratch<'m>,
+        sc: &mut Scratch,
         obs: &Observations,
         plan: Option<&str>,
         rec: &mut DecisionRecord,
     ) {
         request_key(model, sc, obs, plan);
         crate::stage_hook::mark(crate::stage_hook::Stage::Arbitration);
-        let scheduled = self.schedules.schedule(
-            &model.resources,
-            model.policy_name(policy),
+        // The resource policy was resolved when the model loaded (every policy has one).
+        let m = self.schedules.schedule(
+            (&model.resources, &model.actions),
+            model.resource_policy(policy),
             platform,
             &sc.key,
         );
         crate::stage_hook::mark(crate::stage_hook::Stage::Scheduler);
-        let m = match scheduled {
-            Ok(m) => m,
-            Err(e) => {
-                rec.events.push(Event::ResourcesError(e.to_string()));
-                rec.resources = None;
-                sc.actions.clone_from(&sc.kept);
-                return;
-            }
-        };
         copy_platform(platform, &m.after);
         match &mut rec.resources {
             Some(r) => r.clone_from(&m.record),
@@ -253,17 +245,17 @@ fn planned_implementation(plan: Option<&str>, version: &str) -> Option<Implement
 /// The requests (`sc.key`) of the kept application actions and the actions asking for them
 /// (`sc.owners`): one variant per application, at the rate the observed speed requires, in the
 /// implementation the plan names for that version (if it does).
-fn request_key<'m>(model: &'m Model, sc: &mut Scratch<'m>, obs: &Observations, plan: Option<&str>) {
+fn request_key(model: &Model, sc: &mut Scratch, obs: &Observations, plan: Option<&str>) {
     sc.key.clear();
     sc.owners.clear();
+    let actions = &model.actions;
+    let app_of = |id| actions.by_id(id).app.as_deref();
     for &a in &sc.kept {
-        let Some(act) = model.actions.get(a) else {
-            continue;
-        };
+        let act = actions.by_id(a);
         let (Some(app), Some(version)) = (&act.app, &act.version) else {
             continue;
         };
-        if sc.key.iter().any(|r| r.0 == app) {
+        if sc.key.iter().any(|r| app_of(r.0) == Some(app.as_str())) {
             continue; // one variant per application (target detection shares the tracker)
         }
         let speed = model
@@ -277,35 +269,36 @@ fn request_key<'m>(model: &'m Model, sc: &mut Scratch<'m>, obs: &Observations, p
             .required_fps(app, [0.0, 0.0], [speed, 0.0])
             .unwrap_or(1.0);
         let planned = planned_implementation(plan, version);
-        sc.key.push((app, version, planned, fps.to_bits()));
+        sc.key.push((actions.variant_id(a), planned, fps.to_bits()));
         sc.owners.push(a);
     }
 }
 
 /// Rewrite: an application action stays only if its app is placed, under the placed version.
-fn rewrite_actions<'m>(model: &'m Model, record: &ResourcesRecord, sc: &mut Scratch<'m>) {
+fn rewrite_actions(model: &Model, record: &ResourcesRecord, sc: &mut Scratch) {
     sc.actions.clear();
     for &a in &sc.kept {
-        let act = model.actions.get(a);
-        match act.and_then(|x| x.app.as_deref()) {
+        let act = model.actions.by_id(a);
+        match act.app.as_deref() {
             None => sc.actions.push(a),
             Some(app) => {
                 let placed = record.placements.iter().find(|p| p.app == app);
                 if let Some(p) = placed {
                     // A degraded variant is named by the action that runs it (track_v3 -> track_v1).
-                    let same = act.and_then(|x| x.version.as_deref()) == Some(p.version.as_str());
+                    let same = act.version.as_deref() == Some(p.version.as_str());
                     let id = if same || !sc.owners.contains(&a) {
                         a
                     } else {
                         model
                             .actions
                             .for_variant(app, &p.version, &model.states)
-                            .map_or(a, |x| x.id.as_str())
+                            .and_then(|x| model.actions.id(&x.id))
+                            .unwrap_or(a)
                     };
                     if !sc.actions.contains(&id) {
                         sc.actions.push(id);
                     }
-                } else if act.is_some_and(|x| x.kind == ActionKind::Vehicle) {
+                } else if act.kind == ActionKind::Vehicle {
                     sc.actions.push(a);
                 }
             }

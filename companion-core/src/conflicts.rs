@@ -46,7 +46,9 @@ struct Rule {
 #[derive(Debug, Clone)]
 pub struct BehaviourConflicts {
     rules: Vec<Rule>,
-    priority: BTreeMap<String, Vec<String>>,
+    /// Policy name and its order, in name order (the order of [`BehaviourConflicts::policies`],
+    /// so a policy's position is its [`crate::mission::Policy`] index).
+    priority: Vec<(String, Vec<String>)>,
 }
 
 fn pattern_matches(pattern: &str, action: &str) -> bool {
@@ -131,13 +133,21 @@ impl BehaviourConflicts {
         }
         Ok(Self {
             rules,
-            priority: f.priority,
+            priority: f.priority.into_iter().collect(),
         })
     }
 
     /// Names of the policies params/policies.toml ranks actions for.
     pub fn policies(&self) -> impl Iterator<Item = &str> {
-        self.priority.keys().map(String::as_str)
+        self.priority.iter().map(|(name, _)| name.as_str())
+    }
+
+    /// Position of the policy named `policy` among [`BehaviourConflicts::policies`].
+    pub fn policy_position(&self, policy: &str) -> Result<usize, InstantiateError> {
+        self.priority
+            .iter()
+            .position(|(name, _)| name == policy)
+            .ok_or_else(|| InstantiateError::UnknownPolicy(policy.to_string()))
     }
 
     /// Apply every antagonistic rule in file order: when actions of both groups are present,
@@ -165,10 +175,25 @@ impl BehaviourConflicts {
         kept: &mut Vec<&'a str>,
         conflicts: &mut Vec<Conflict>,
     ) -> Result<(), InstantiateError> {
-        let order = self
+        let at = self.policy_position(policy)?;
+        self.resolve_by(actions, |a| a, at, kept, conflicts)
+    }
+
+    /// As [`BehaviourConflicts::resolve_into`] over actions of any copyable kind (catalogue ids),
+    /// `name` giving each one's name (what patterns match and conflicts record), under the
+    /// policy at position `policy` of [`BehaviourConflicts::policies`] (resolved at load).
+    pub fn resolve_by<'n, T: Copy>(
+        &self,
+        actions: &[T],
+        name: impl Fn(T) -> &'n str,
+        policy: usize,
+        kept: &mut Vec<T>,
+        conflicts: &mut Vec<Conflict>,
+    ) -> Result<(), InstantiateError> {
+        let (_, order) = self
             .priority
             .get(policy)
-            .ok_or_else(|| InstantiateError::UnknownPolicy(policy.to_string()))?;
+            .ok_or_else(|| InstantiateError::UnknownPolicy(format!("#{policy}")))?;
         kept.clear();
         kept.extend_from_slice(actions);
         let rank = |group: &[String]| {
@@ -179,7 +204,8 @@ impl BehaviourConflicts {
         };
         let mut fired = 0;
         for rule in &self.rules {
-            let in_group = |g: usize, a: &str| rule.groups[g].iter().any(|p| pattern_matches(p, a));
+            let in_group =
+                |g: usize, a: &T| rule.groups[g].iter().any(|p| pattern_matches(p, name(*a)));
             let present = |g: usize| kept.iter().any(|a| in_group(g, a));
             if !present(0) || !present(1) {
                 continue;
@@ -196,7 +222,7 @@ impl BehaviourConflicts {
                 if i > 0 {
                     c.kept.push('+');
                 }
-                c.kept.push_str(a);
+                c.kept.push_str(name(*a));
             }
             let mut n = 0;
             for a in kept.iter().filter(|a| in_group(lose, a)) {
@@ -204,7 +230,7 @@ impl BehaviourConflicts {
                     c.dropped.push(String::new());
                 }
                 c.dropped[n].clear();
-                c.dropped[n].push_str(a);
+                c.dropped[n].push_str(name(*a));
                 n += 1;
             }
             c.dropped.truncate(n);
@@ -222,10 +248,7 @@ impl BehaviourConflicts {
         actions: &[S],
         policy: &str,
     ) -> Result<(Vec<String>, Vec<Conflict>), InstantiateError> {
-        let order = self
-            .priority
-            .get(policy)
-            .ok_or_else(|| InstantiateError::UnknownPolicy(policy.to_string()))?;
+        let (_, order) = &self.priority[self.policy_position(policy)?];
         let mut kept: Vec<String> = actions.iter().map(|a| a.as_ref().to_string()).collect();
         let mut conflicts = Vec::new();
         let rank = |group: &[String]| {

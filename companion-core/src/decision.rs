@@ -19,17 +19,22 @@ use crate::stage_hook::{Stage, mark};
 use fpga_model::PlatformState;
 use mdp_engine::Workspace;
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 /// A decision core bound to a model, a model kind and a policy; `step` once per cycle.
-pub struct Core<'m> {
-    /// The loaded params this core decides with.
-    pub model: &'m Model,
+pub struct Core {
+    /// The loaded params this core decides with (shared, never changed: cores of several runs
+    /// may hold the same one).
+    pub model: Arc<Model>,
     /// Which MDPs decide (concurrent, reference or monolithic).
     pub kind: ModelKind,
     /// Decision policy whose rewards and priorities apply.
     pub policy: Policy,
     cycle: u64,
     mdp_names: Vec<String>,
+    /// Per MDP of `mdp_names`: where the policy's rewards sit in it, resolved in `new` (`None`:
+    /// the MDP has no rewards for the policy, an error each cycle as the name lookup gave).
+    mdp_policy: Vec<Option<usize>>,
     health: HealthModel,
     mdps: MissionMdps,
     workspace: Workspace,
@@ -54,25 +59,25 @@ pub struct Core<'m> {
     others_cpu: f64,
     /// Number of names the health managers publish (a reused probability map holds exactly these).
     n_published: usize,
-    scratch: Scratch<'m>,
+    scratch: Scratch,
     /// The resource arbitration stage's schedules and degradations in force.
-    arbiter: ResourceArbiter<'m>,
+    arbiter: ResourceArbiter,
     /// The ids of [`ROOM`]'s observations (`None`: params do not observe it), and their values
     /// this cycle (capacity kept).
     room_ids: [Option<crate::evidence::ObservationId>; 3],
     room_extra: Vec<(crate::evidence::ObservationId, f64)>,
     /// The activation nodes' fit observations the core computes with the scheduler's check.
-    fit_checks: Vec<FitCheck<'m>>,
+    fit_checks: Vec<FitCheck>,
 }
 
 /// One fit observation (`tracking_V3_fits`, node `F_V3`): whether the scheduler admits some
 /// implementation of `app version` beside the applications in force.
-#[derive(Debug, Clone, Copy)]
-struct FitCheck<'m> {
+#[derive(Debug, Clone)]
+struct FitCheck {
     id: crate::evidence::ObservationId,
-    name: &'m str,
-    app: &'m str,
-    version: &'m str,
+    name: String,
+    app: String,
+    version: String,
 }
 
 /// How much work the cycles so far really did (the rest came from the memos).
@@ -101,28 +106,35 @@ const BN_QUERY_MEMO: usize = 4;
 const MAX_RESOLVES: usize = 3;
 
 /// `dst = src` element by element, reusing `dst`'s strings.
-fn fill_strings<S: AsRef<str>>(dst: &mut Vec<String>, src: &[S]) {
+fn fill_strings<'a>(dst: &mut Vec<String>, src: impl ExactSizeIterator<Item = &'a str>) {
     dst.truncate(src.len());
-    for (i, a) in src.iter().enumerate() {
+    for (i, a) in src.enumerate() {
         match dst.get_mut(i) {
             Some(d) => {
                 d.clear();
-                d.push_str(a.as_ref());
+                d.push_str(a);
             }
-            None => dst.push(a.as_ref().to_string()),
+            None => dst.push(a.to_string()),
         }
     }
 }
 
-impl<'m> Core<'m> {
+impl Core {
     /// A core at cycle 0 with fresh copies of the model's stateful parts.
-    pub fn new(model: &'m Model, kind: ModelKind, policy: Policy) -> Self {
+    pub fn new(model: Arc<Model>, kind: ModelKind, policy: Policy) -> Self {
         Core {
-            model,
             kind,
             policy,
             cycle: 0,
             mdp_names: model.mdp_names(kind),
+            mdp_policy: model
+                .mdp_names(kind)
+                .iter()
+                .map(|name| {
+                    let mdp = model.mdps.get(name)?;
+                    mdp.policy_index(model.policy_name(policy)).ok()
+                })
+                .collect(),
             health: {
                 let mut h = model.health.clone();
                 h.set_query_memo(BN_QUERY_MEMO);
@@ -151,12 +163,13 @@ impl<'m> Core<'m> {
                 .filter_map(|(name, a)| {
                     Some(FitCheck {
                         id: model.health.observations.id(name)?,
-                        name,
-                        app: a.app.as_str(),
-                        version: a.version.as_str(),
+                        name: name.to_string(),
+                        app: a.app.clone(),
+                        version: a.version.clone(),
                     })
                 })
                 .collect(),
+            model,
         }
     }
 
@@ -229,8 +242,8 @@ impl<'m> Core<'m> {
     /// observations of the same shape allocates nothing once warm (tests/cycle_no_alloc.rs).
     pub fn step_into(&mut self, obs: &Observations, plan: &mut Plan, rec: &mut DecisionRecord) {
         mark(Stage::CycleStart);
-        let model = self.model;
-        let policy = self.model.policy_name(self.policy);
+        let model = Arc::clone(&self.model);
+        let model = &*model;
         self.begin_record(obs, rec);
         mark(Stage::Record);
 
@@ -296,7 +309,7 @@ impl<'m> Core<'m> {
         let mut sc = std::mem::take(&mut self.scratch);
         sc.merged.clear();
         let mut n_proposals = 0;
-        for name in &self.mdp_names {
+        for (j, name) in self.mdp_names.iter().enumerate() {
             let local = model.mission.project(name, obs);
             let (Some(mdp), Some(shared)) = (self.mdps.get_mut(name), model.mdps.get(name)) else {
                 continue;
@@ -308,17 +321,23 @@ impl<'m> Core<'m> {
                 });
                 continue;
             };
-            match mdp.decide(
-                &mut self.workspace,
-                s,
-                &rec.probabilities,
-                policy,
-                model.mission.horizon,
-            ) {
+            let decided = match self.mdp_policy[j] {
+                Some(pi) => mdp.decide_resolved(
+                    &mut self.workspace,
+                    s,
+                    &rec.probabilities,
+                    pi,
+                    model.mission.horizon,
+                ),
+                None => Err(unknown_policy(model, self.policy)),
+            };
+            match decided {
                 Ok(Some(d)) => {
                     for a in shared.primitives(d.action) {
-                        if !sc.merged.contains(&a.as_str()) {
-                            sc.merged.push(a);
+                        if let Some(id) = model.actions.id(a)
+                            && !sc.merged.contains(&id)
+                        {
+                            sc.merged.push(id);
                         }
                     }
                     if n_proposals == rec.proposals.len() {
@@ -359,30 +378,29 @@ impl<'m> Core<'m> {
         }
         self.record_resource_conflicts(&sc, rec);
         self.note_others(rec);
-        fill_strings(&mut rec.actions, &sc.actions);
+        fill_strings(
+            &mut rec.actions,
+            sc.actions.iter().map(|&a| model.actions.name(a)),
+        );
         mark(Stage::Arbitration);
 
         // guarantee: PANORAMA margins on the activity being flown
         self.watch_guarantee(&mut sc, obs, rec);
-        self.scratch = sc;
         mark(Stage::Guarantee);
 
         // plan
         let mut n = 0;
-        for a in &rec.actions {
-            if model
-                .actions
-                .get(a)
-                .is_some_and(|x| x.kind == ActionKind::Vehicle)
-            {
+        for &a in &sc.actions {
+            if model.actions.by_id(a).kind == ActionKind::Vehicle {
                 if n == plan.vehicle_actions.len() {
                     plan.vehicle_actions.push(String::new());
                 }
-                plan.vehicle_actions[n].clone_from(a);
+                plan.vehicle_actions[n].clone_from(&model.actions.by_id(a).id);
                 n += 1;
             }
         }
         plan.vehicle_actions.truncate(n);
+        self.scratch = sc;
         match &rec.resources {
             Some(r) => plan.applications.clone_from(&r.placements),
             None => plan.applications.clear(),
@@ -408,7 +426,7 @@ impl<'m> Core<'m> {
     }
 
     /// The application the resource manager's activation nodes assess (tracking).
-    fn assessed_app(&self) -> Option<&'m str> {
+    fn assessed_app(&self) -> Option<&str> {
         self.model
             .health
             .activations
@@ -419,7 +437,7 @@ impl<'m> Core<'m> {
     /// Required rate of `app` now (section 4.3.2 model, relative speed from the observation
     /// params/mission.toml's `rates` names).
     fn required_fps(&self, app: &str, obs: &Observations) -> f64 {
-        let model = self.model;
+        let model = &*self.model;
         let speed = model
             .mission
             .rates
@@ -457,13 +475,13 @@ impl<'m> Core<'m> {
     /// what the applications in force occupy (`others_*`), else 0.0: fpga_model's own admission
     /// check ([`fpga_model::Room::admits`]) on the core's platform model, so the resource
     /// manager's fit agrees with the scheduler to the last digit.
-    fn fits(&self, f: &FitCheck<'_>, fps: f64) -> f64 {
+    fn fits(&self, f: &FitCheck, fps: f64) -> f64 {
         let res = &self.model.resources;
         let room = fpga_model::Room::of(&res.platform, &self.platform);
         let admitted = room.admits_version(
             &res.catalogue,
-            f.app,
-            f.version,
+            &f.app,
+            &f.version,
             fps,
             self.others_tiles,
             self.others_cpu,
@@ -481,7 +499,7 @@ impl<'m> Core<'m> {
         }
         for f in &self.fit_checks {
             self.health
-                .observe_into(f.name, self.fits(f, room[2].1), evidence);
+                .observe_into(&f.name, self.fits(f, room[2].1), evidence);
         }
     }
 
@@ -490,13 +508,10 @@ impl<'m> Core<'m> {
     /// it (BFM 7.3.2, mission policy: landing search gives way to tracking), so their room
     /// counts as the assessed application's.
     fn note_others(&mut self, rec: &DecisionRecord) {
-        let app = self.assessed_app();
-        let policy = self
-            .model
-            .resources
-            .policy(self.model.policy_name(self.policy))
-            .ok();
-        let rank = |a: &str| policy.map_or(0, |p| p.rank(a));
+        let model = Arc::clone(&self.model);
+        let app = model.health.activations.first().map(|a| a.app.as_str());
+        let policy = model.resource_policy(self.policy);
+        let rank = |a: &str| policy.rank(a);
         let limit = app.map_or(usize::MAX, rank);
         let (tiles, cpu) = rec.resources.as_ref().map_or((0, 0.0), |r| {
             r.placements
@@ -511,29 +526,32 @@ impl<'m> Core<'m> {
     }
 
     /// Behaviour arbitration over the live proposals, then resource arbitration.
-    fn arbitrate(&mut self, sc: &mut Scratch<'m>, obs: &Observations, rec: &mut DecisionRecord) {
-        let model = self.model;
-        let policy = self.model.policy_name(self.policy);
+    fn arbitrate(&mut self, sc: &mut Scratch, obs: &Observations, rec: &mut DecisionRecord) {
+        let model = Arc::clone(&self.model);
+        let model = &*model;
         sc.merged.clear();
         for (k, pr) in rec.proposals.iter().enumerate() {
             if sc.superseded.contains(&k) {
                 continue;
             }
             for a in &pr.actions {
-                // Names borrowed from the model (the catalogue holds every MDP action).
-                let Some(x) = model.actions.get(a) else {
+                // The catalogue holds every MDP action (checked at load).
+                let Some(id) = model.actions.id(a) else {
                     continue;
                 };
-                if !sc.merged.contains(&x.id.as_str()) {
-                    sc.merged.push(x.id.as_str());
+                if !sc.merged.contains(&id) {
+                    sc.merged.push(id);
                 }
             }
         }
-        if let Err(e) =
-            model
-                .conflicts
-                .resolve_into(&sc.merged, policy, &mut sc.kept, &mut rec.conflicts)
-        {
+        if let Err(e) = model.conflicts.resolve_by(
+            &sc.merged,
+            |a| model.actions.name(a),
+            // Model::policies lists the policies in the conflicts' order: the index is theirs.
+            self.policy.index(),
+            &mut sc.kept,
+            &mut rec.conflicts,
+        ) {
             rec.conflicts.clear();
             rec.events.push(Event::ArbitrationError(e.to_string()));
             sc.kept.clone_from(&sc.merged);
@@ -562,18 +580,22 @@ impl<'m> Core<'m> {
     /// MDP's choice does not change.
     fn resolve_conflict(
         &mut self,
-        sc: &mut Scratch<'m>,
+        sc: &mut Scratch,
         obs: &Observations,
         rec: &mut DecisionRecord,
     ) -> bool {
-        let model = self.model;
-        let Some(app) = self.assessed_app() else {
+        let model = Arc::clone(&self.model);
+        let model = &*model;
+        let Some(app) = model.health.activations.first().map(|a| a.app.as_str()) else {
             return false;
         };
         let Some(res) = &rec.resources else {
             return false;
         };
-        let requested = sc.key.iter().any(|k| k.0 == app);
+        let requested = sc
+            .key
+            .iter()
+            .any(|k| model.actions.by_id(k.0).app.as_deref() == Some(app));
         if !requested || res.placements.iter().any(|p| p.app == app) {
             return false;
         }
@@ -605,19 +627,28 @@ impl<'m> Core<'m> {
             return false;
         }
         let name = rec.proposals[k].mdp.clone();
+        let pi = self
+            .mdp_names
+            .iter()
+            .position(|n| *n == name)
+            .and_then(|j| self.mdp_policy[j]);
         let Some(mdp) = self.mdps.get_mut(&name) else {
             return false;
         };
         let Some(s) = mdp.state_index(&rec.proposals[k].state) else {
             return false;
         };
-        let d = match mdp.decide(
-            &mut self.workspace,
-            s,
-            &rec.probabilities,
-            self.model.policy_name(self.policy),
-            model.mission.horizon,
-        ) {
+        let decided = match pi {
+            Some(pi) => mdp.decide_resolved(
+                &mut self.workspace,
+                s,
+                &rec.probabilities,
+                pi,
+                model.mission.horizon,
+            ),
+            None => Err(unknown_policy(model, self.policy)),
+        };
+        let d = match decided {
             Ok(Some(d)) => d,
             Ok(None) => return false,
             Err(e) => {
@@ -642,9 +673,9 @@ impl<'m> Core<'m> {
     /// Each application the resource policy left out becomes a conflict entry: the rule (policy
     /// rank and reason) and the action that gave way. A re-solve is one too: the earlier
     /// proposal's action gave way to the new one.
-    fn record_resource_conflicts(&self, sc: &Scratch<'m>, rec: &mut DecisionRecord) {
-        let model = self.model;
-        let policy = self.model.policy_name(self.policy);
+    fn record_resource_conflicts(&self, sc: &Scratch, rec: &mut DecisionRecord) {
+        let model = &*self.model;
+        let policy = model.policy_name(self.policy);
         for &k in &sc.superseded {
             let old = &rec.proposals[k];
             let new = rec.proposals[k + 1..]
@@ -665,8 +696,8 @@ impl<'m> Core<'m> {
             let gave_way: Vec<String> = sc
                 .kept
                 .iter()
-                .filter(|a| model.actions.get(a).and_then(|x| x.app.as_deref()) == Some(app))
-                .map(|a| a.to_string())
+                .filter(|&&a| model.actions.by_id(a).app.as_deref() == Some(app))
+                .map(|&a| model.actions.name(a).to_string())
                 .collect();
             if gave_way.is_empty() {
                 continue;
@@ -694,7 +725,7 @@ impl<'m> Core<'m> {
     /// no feasible alternative carries are capped from the next cycle, with an event when that
     /// set changes.
     fn bind_plan(&mut self, activity_index: usize, rec: &mut DecisionRecord) {
-        let model = self.model;
+        let model = Arc::clone(&self.model);
         let (Some(g), Some(record)) = (self.guarantee.as_mut(), rec.guarantee.as_mut()) else {
             return;
         };
@@ -730,12 +761,7 @@ impl<'m> Core<'m> {
         self.versions_scratch = versions;
     }
 
-    fn watch_guarantee(
-        &mut self,
-        sc: &mut Scratch<'m>,
-        obs: &Observations,
-        rec: &mut DecisionRecord,
-    ) {
+    fn watch_guarantee(&mut self, sc: &mut Scratch, obs: &Observations, rec: &mut DecisionRecord) {
         let Some(g) = self.guarantee.as_mut() else {
             rec.guarantee = None;
             return;
@@ -895,81 +921,9 @@ impl<'m> Core<'m> {
     }
 }
 
-/// The decision table in the shape of the BFM paper's Tables 4 to 7: consecutive cycles with the
-/// same state and action set are grouped; a row starts on any change or event.
-pub fn table(records: &[DecisionRecord], model: &Model) -> String {
-    // Consecutive cycles with the same action set and no event are one row; its state column
-    // lists the states they passed through (a tracked target lost and re-acquired: `v1/target`).
-    let mut rows: Vec<[String; 5]> = Vec::new();
-    let mut last: Option<&Vec<String>> = None;
-    for r in records {
-        let events = r
-            .events
-            .iter()
-            .map(Event::to_string)
-            .collect::<Vec<_>>()
-            .join("; ");
-        if last == Some(&r.actions) && events.is_empty() {
-            if let Some(row) = rows.last_mut() {
-                let start = row[0].split('-').next().unwrap_or("").to_string();
-                row[0] = format!("{start}-{}", r.cycle);
-                if !row[1].split('/').any(|s| s == r.state) {
-                    row[1] = format!("{}/{}", row[1], r.state);
-                }
-            }
-            continue;
-        }
-        last = Some(&r.actions);
-        let labels: Vec<&str> = r.actions.iter().map(|a| model.actions.label(a)).collect();
-        rows.push([
-            r.cycle.to_string(),
-            r.state.clone(),
-            labels.join(" / "),
-            if events.is_empty() {
-                "no event".into()
-            } else {
-                events
-            },
-            r.resources.as_ref().map_or("-".into(), |x| {
-                if x.summary.is_empty() {
-                    "-".into()
-                } else {
-                    x.summary.clone()
-                }
-            }),
-        ]);
-    }
-    let header = ["step", "state", "set of actions", "events", "resources"];
-    let mut width = header.map(str::len);
-    for row in &rows {
-        for (w, c) in width.iter_mut().zip(row) {
-            *w = (*w).max(c.chars().count());
-        }
-    }
-    let mut out = String::new();
-    let line = |cells: [&str; 5], out: &mut String| {
-        for (i, c) in cells.iter().enumerate() {
-            out.push_str(c);
-            if i < 4 {
-                out.push_str(&" ".repeat(width[i].saturating_sub(c.chars().count())));
-                out.push_str(" | ");
-            }
-        }
-        out.push('\n');
-    };
-    line(header, &mut out);
-    out.push_str(
-        &width
-            .iter()
-            .map(|w| "-".repeat(*w))
-            .collect::<Vec<_>>()
-            .join("-+-"),
-    );
-    out.push('\n');
-    for row in &rows {
-        line([&row[0], &row[1], &row[2], &row[3], &row[4]], &mut out);
-    }
-    out
+/// The error an MDP without rewards for `policy` gives (as its name lookup did).
+fn unknown_policy(model: &Model, policy: Policy) -> crate::mission_mdp::InstantiateError {
+    crate::mission_mdp::InstantiateError::UnknownPolicy(model.policy_name(policy).to_string())
 }
 
 /// `names` into `into`, reusing its strings (the cycle allocates nothing once warm).
@@ -987,6 +941,10 @@ fn refill<'a>(into: &mut Vec<String>, names: impl Iterator<Item = &'a str>) {
 }
 
 mod learned_rows;
+/// The decision table (the paper's Tables 4 to 7) from a run's records.
+mod table;
+pub use table::table;
+
 /// PANORAMA's performance drift: the measured power of the activity beyond the tolerance,
 /// when it began this cycle.
 mod watch;

@@ -235,9 +235,10 @@ mod tests {
     use crate::decision::{Core, ModelKind};
     use crate::observations::Observations;
     use crate::record::{GuaranteeRecord, MdpProposal};
+    use std::sync::Arc;
 
-    fn model() -> Model {
-        Model::load(&crate::shipped::params()).expect("shipped params load")
+    fn model() -> Arc<Model> {
+        Arc::new(Model::load(&crate::shipped::params()).expect("shipped params load"))
     }
 
     /// The on-ground snapshot of a healthy vehicle with `battery_pct` left.
@@ -261,13 +262,13 @@ mod tests {
 
     /// The verdict after `cycles` decision cycles on the ground.
     fn verdict_after(
-        model: &Model,
+        model: &Arc<Model>,
         kind: ModelKind,
         policy: &str,
         pct: f64,
         cycles: usize,
     ) -> (Result<(), LaunchRefusal>, DecisionRecord) {
-        let mut core = Core::new(model, kind, model.policy(policy).unwrap());
+        let mut core = Core::new(Arc::clone(model), kind, model.policy(policy).unwrap());
         let mut rec = DecisionRecord::default();
         for k in 0..cycles {
             let mut o = on_ground(pct);

@@ -267,7 +267,9 @@ impl MissionMdp {
         self.solved.solves
     }
 
-    fn policy_index(&self, policy: &str) -> Result<usize, InstantiateError> {
+    /// Where `policy`'s rewards sit in this MDP: resolved once per core, then handed to
+    /// [`MissionMdp::decide_resolved`] every cycle.
+    pub fn policy_index(&self, policy: &str) -> Result<usize, InstantiateError> {
         self.policies
             .iter()
             .position(|p| p == policy)
@@ -365,6 +367,18 @@ impl MissionMdp {
         horizon: usize,
     ) -> Result<Option<Decision>, InstantiateError> {
         let pi = self.policy_index(policy)?;
+        self.decide_resolved(ws, state, probs, pi, horizon)
+    }
+
+    /// [`MissionMdp::decide`] under the policy at `pi` ([`MissionMdp::policy_index`]).
+    pub fn decide_resolved(
+        &mut self,
+        ws: &mut Workspace,
+        state: usize,
+        probs: &BTreeMap<String, f64>,
+        pi: usize,
+        horizon: usize,
+    ) -> Result<Option<Decision>, InstantiateError> {
         self.load_values_from(probs)?;
         let i = match self.solved.hit(&self.values, pi, horizon) {
             Some(i) => i,

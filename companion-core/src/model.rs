@@ -66,6 +66,9 @@ pub struct Model {
     /// The decision policies params/policies.toml declares (`priority` tables), in file-key
     /// order; a [`Policy`] is an index into it.
     pub policies: Vec<String>,
+    /// Each policy's resource policy (params/resource_policies.toml), resolved at load, in
+    /// [`Model::policies`] order.
+    resource_policies: Vec<fpga_model::ResourcePolicy>,
 }
 
 impl Model {
@@ -86,6 +89,11 @@ impl Model {
     /// The name of a policy of this model.
     pub fn policy_name(&self, policy: Policy) -> &str {
         self.policies.get(policy.index()).map_or("", String::as_str)
+    }
+
+    /// The resource policy a policy of this model arbitrates resources under.
+    pub fn resource_policy(&self, policy: Policy) -> &fpga_model::ResourcePolicy {
+        &self.resource_policies[policy.index()]
     }
 
     /// Compile the whole model from the params files (the shell reads them).
@@ -113,9 +121,10 @@ impl Model {
             ));
         }
         // Every policy arbitrates resources too: its resource policy must exist.
-        for p in &policies {
-            resources.policy(p)?;
-        }
+        let resource_policies = policies
+            .iter()
+            .map(|p| resources.policy(p).cloned())
+            .collect::<Result<Vec<_>, _>>()?;
         let file = params.join("actions.toml");
         for (i, a) in actions.actions.iter().enumerate() {
             if let (Some(app), Some(v)) = (&a.app, &a.version)
@@ -138,6 +147,7 @@ impl Model {
             resources,
             guarantee,
             policies,
+            resource_policies,
         })
     }
 

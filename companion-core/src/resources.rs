@@ -90,6 +90,20 @@ impl ResourceSpec {
         next: &mut PlatformState,
     ) -> Result<(), SpecError> {
         let policy = self.policy(policy)?;
+        self.schedule_with(policy, state, requests, ws, out, next);
+        Ok(())
+    }
+
+    /// [`ResourceSpec::schedule_into`] under a policy resolved beforehand.
+    pub fn schedule_with(
+        &self,
+        policy: &ResourcePolicy,
+        state: &PlatformState,
+        requests: &[Request],
+        ws: &mut ScheduleWorkspace,
+        out: &mut Schedule,
+        next: &mut PlatformState,
+    ) {
         fpga_model::schedule_into(
             &self.platform,
             &self.catalogue,
@@ -100,7 +114,6 @@ impl ResourceSpec {
             out,
             next,
         );
-        Ok(())
     }
 
     /// Required frame rate of `app` from the drone's and the watched thing's velocities (m/s),

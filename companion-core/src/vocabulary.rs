@@ -35,6 +35,34 @@ pub fn action_id(catalogue: &ActionCatalogue, name: &str) -> Option<ActionId> {
         .map(|i| ActionId(i as u16))
 }
 
+impl ActionCatalogue {
+    /// The id of the action named `name` ([`action_id`]).
+    pub fn id(&self, name: &str) -> Option<ActionId> {
+        action_id(self, name)
+    }
+
+    /// The action an id of this catalogue names.
+    pub fn by_id(&self, id: ActionId) -> &crate::mission::Action {
+        &self.actions[id.index()]
+    }
+
+    /// The name of the action an id of this catalogue names (what the record writes).
+    pub fn name(&self, id: ActionId) -> &str {
+        &self.by_id(id).id
+    }
+
+    /// The first action of the catalogue starting the same application variant as `id` (or
+    /// `id` itself): one id per variant, so equal ids mean an equal app and version.
+    pub fn variant_id(&self, id: ActionId) -> ActionId {
+        let a = self.by_id(id);
+        self.actions
+            .iter()
+            .take(id.index())
+            .position(|b| b.app == a.app && b.version == a.version)
+            .map_or(id, |i| ActionId(i as u16))
+    }
+}
+
 /// The application variant an action starts.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 pub struct ActionApplication {

@@ -21,6 +21,7 @@
 //! at altitude (spoofed or corrupt) neither starts the landing nor ends the flight.
 
 use super::actions::Route;
+use super::modes::FlightMode;
 use companion_core::mission::{ActionRole, MissionStates, RouteRole};
 use companion_core::observations::Observations;
 
@@ -175,17 +176,17 @@ impl MissionState {
         let seq = obs.get("mission_seq").map(|s| s as u16);
         let speed = obs.get("groundspeed_mps").unwrap_or(f64::INFINITY);
         let detected = obs.get("target_detected").unwrap_or(0.0) > self.detection_threshold;
-        let mode = extra.mode.unwrap_or("");
+        let mode = extra.mode.and_then(FlightMode::from_name);
         if armed && alt >= self.airborne_m {
             self.flown = true;
         }
-        if self.flown && mode == "AUTO" {
+        if self.flown && mode == Some(FlightMode::Auto) {
             self.auto_seen = true;
         }
-        if self.flown && matches!(mode, "LAND" | "RTL") {
+        if self.flown && matches!(mode, Some(FlightMode::Land | FlightMode::Rtl)) {
             self.landing = true;
             if self.landing_action.is_none() {
-                let role = if mode == "RTL" {
+                let role = if mode == Some(FlightMode::Rtl) {
                     ActionRole::ReturnToBase
                 } else {
                     ActionRole::Land

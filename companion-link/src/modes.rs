@@ -122,56 +122,239 @@ pub fn px4_main_sub(custom_mode: u32) -> (u8, u8) {
     ((custom_mode >> 16) as u8, (custom_mode >> 24) as u8)
 }
 
-/// Our mode names (ArduPilot's where one exists), with the ArduPilot Copter number
-/// (ArduCopter/mode.h `Mode::Number`) and the PX4 (main, sub) that serves the same purpose.
-/// `(name, ArduPilot Copter mode number, PX4 (main, sub) mode)`.
-type ModeRow = (&'static str, Option<u32>, Option<(u8, u8)>);
+/// A flight mode by purpose, named as ArduPilot names it (PX4-only modes by PX4's): what
+/// params (`commands.toml` mode steps), the link and the shell speak of. Each autopilot flavour
+/// serves it with its own number: [`FlightMode::ardupilot`] (ArduCopter's `Mode::Number`) and
+/// [`FlightMode::px4`] (PX4's main and sub mode); `None` where that autopilot has no such mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FlightMode {
+    /// `STABILIZE`.
+    Stabilize,
+    /// `ACRO`.
+    Acro,
+    /// `ALT_HOLD`.
+    AltHold,
+    /// `AUTO`.
+    Auto,
+    /// `GUIDED`.
+    Guided,
+    /// `LOITER`.
+    Loiter,
+    /// `RTL`.
+    Rtl,
+    /// `CIRCLE`.
+    Circle,
+    /// `LAND`.
+    Land,
+    /// `DRIFT`.
+    Drift,
+    /// `SPORT`.
+    Sport,
+    /// `FLIP`.
+    Flip,
+    /// `AUTOTUNE`.
+    Autotune,
+    /// `POSHOLD`.
+    PosHold,
+    /// `BRAKE`.
+    Brake,
+    /// `THROW`.
+    Throw,
+    /// `AVOID_ADSB`.
+    AvoidAdsb,
+    /// `GUIDED_NOGPS`.
+    GuidedNoGps,
+    /// `SMART_RTL`.
+    SmartRtl,
+    /// `FLOWHOLD`.
+    FlowHold,
+    /// `FOLLOW`.
+    Follow,
+    /// `ZIGZAG`.
+    ZigZag,
+    /// `SYSTEMID`.
+    SystemId,
+    /// `AUTOROTATE`.
+    Autorotate,
+    /// `AUTO_RTL`.
+    AutoRtl,
+    /// `TURTLE`.
+    Turtle,
+    /// `MANUAL`.
+    Manual,
+    /// `TAKEOFF`.
+    Takeoff,
+    /// `PRECLAND`.
+    PrecLand,
+    /// `OFFBOARD`.
+    Offboard,
+}
+
+/// An ArduPilot Copter custom mode: the number in HEARTBEAT.custom_mode and DO_SET_MODE param2.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ArduCopterMode(pub u32);
+
+/// A PX4 custom mode: main mode and sub mode (`union px4_custom_mode`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Px4Mode {
+    /// `PX4_CUSTOM_MAIN_MODE` ([`px4_main`]).
+    pub main: u8,
+    /// The sub mode ([`px4_auto`], [`px4_posctl`]; 0 for the other main modes).
+    pub sub: u8,
+}
+
+impl Px4Mode {
+    /// The mode a heartbeat's `custom_mode` shows, the sub mode cleared where PX4 does not use it.
+    pub fn from_custom_mode(custom_mode: u32) -> Self {
+        let (main, sub) = px4_significant(custom_mode);
+        Px4Mode { main, sub }
+    }
+}
+
+/// `(mode, ArduPilot Copter mode number, PX4 (main, sub) mode)`.
+type ModeRow = (FlightMode, &'static str, Option<u32>, Option<(u8, u8)>);
 
 const MODES: &[ModeRow] = &[
-    ("STABILIZE", Some(0), Some((px4_main::STABILIZED, 0))),
-    ("ACRO", Some(1), Some((px4_main::ACRO, 0))),
-    ("ALT_HOLD", Some(2), Some((px4_main::ALTCTL, 0))),
-    ("AUTO", Some(3), Some((px4_main::AUTO, px4_auto::MISSION))),
-    ("GUIDED", Some(4), Some((px4_main::AUTO, px4_auto::LOITER))),
-    ("LOITER", Some(5), Some((px4_main::AUTO, px4_auto::LOITER))),
-    ("RTL", Some(6), Some((px4_main::AUTO, px4_auto::RTL))),
     (
+        FlightMode::Stabilize,
+        "STABILIZE",
+        Some(0),
+        Some((px4_main::STABILIZED, 0)),
+    ),
+    (FlightMode::Acro, "ACRO", Some(1), Some((px4_main::ACRO, 0))),
+    (
+        FlightMode::AltHold,
+        "ALT_HOLD",
+        Some(2),
+        Some((px4_main::ALTCTL, 0)),
+    ),
+    (
+        FlightMode::Auto,
+        "AUTO",
+        Some(3),
+        Some((px4_main::AUTO, px4_auto::MISSION)),
+    ),
+    (
+        FlightMode::Guided,
+        "GUIDED",
+        Some(4),
+        Some((px4_main::AUTO, px4_auto::LOITER)),
+    ),
+    (
+        FlightMode::Loiter,
+        "LOITER",
+        Some(5),
+        Some((px4_main::AUTO, px4_auto::LOITER)),
+    ),
+    (
+        FlightMode::Rtl,
+        "RTL",
+        Some(6),
+        Some((px4_main::AUTO, px4_auto::RTL)),
+    ),
+    (
+        FlightMode::Circle,
         "CIRCLE",
         Some(7),
         Some((px4_main::POSCTL, px4_posctl::ORBIT)),
     ),
-    ("LAND", Some(9), Some((px4_main::AUTO, px4_auto::LAND))),
-    ("DRIFT", Some(11), None),
-    ("SPORT", Some(13), None),
-    ("FLIP", Some(14), None),
-    ("AUTOTUNE", Some(15), None),
     (
+        FlightMode::Land,
+        "LAND",
+        Some(9),
+        Some((px4_main::AUTO, px4_auto::LAND)),
+    ),
+    (FlightMode::Drift, "DRIFT", Some(11), None),
+    (FlightMode::Sport, "SPORT", Some(13), None),
+    (FlightMode::Flip, "FLIP", Some(14), None),
+    (FlightMode::Autotune, "AUTOTUNE", Some(15), None),
+    (
+        FlightMode::PosHold,
         "POSHOLD",
         Some(16),
         Some((px4_main::POSCTL, px4_posctl::POSCTL)),
     ),
-    ("BRAKE", Some(17), Some((px4_main::AUTO, px4_auto::LOITER))),
-    ("THROW", Some(18), None),
-    ("AVOID_ADSB", Some(19), None),
-    ("GUIDED_NOGPS", Some(20), None),
-    ("SMART_RTL", Some(21), Some((px4_main::AUTO, px4_auto::RTL))),
-    ("FLOWHOLD", Some(22), None),
     (
+        FlightMode::Brake,
+        "BRAKE",
+        Some(17),
+        Some((px4_main::AUTO, px4_auto::LOITER)),
+    ),
+    (FlightMode::Throw, "THROW", Some(18), None),
+    (FlightMode::AvoidAdsb, "AVOID_ADSB", Some(19), None),
+    (FlightMode::GuidedNoGps, "GUIDED_NOGPS", Some(20), None),
+    (
+        FlightMode::SmartRtl,
+        "SMART_RTL",
+        Some(21),
+        Some((px4_main::AUTO, px4_auto::RTL)),
+    ),
+    (FlightMode::FlowHold, "FLOWHOLD", Some(22), None),
+    (
+        FlightMode::Follow,
         "FOLLOW",
         Some(23),
         Some((px4_main::AUTO, px4_auto::FOLLOW_TARGET)),
     ),
-    ("ZIGZAG", Some(24), None),
-    ("SYSTEMID", Some(25), None),
-    ("AUTOROTATE", Some(26), None),
-    ("AUTO_RTL", Some(27), None),
-    ("TURTLE", Some(28), None),
-    // PX4 only.
-    ("MANUAL", None, Some((px4_main::MANUAL, 0))),
-    ("TAKEOFF", None, Some((px4_main::AUTO, px4_auto::TAKEOFF))),
-    ("PRECLAND", None, Some((px4_main::AUTO, px4_auto::PRECLAND))),
-    ("OFFBOARD", None, Some((px4_main::OFFBOARD, 0))),
+    (FlightMode::ZigZag, "ZIGZAG", Some(24), None),
+    (FlightMode::SystemId, "SYSTEMID", Some(25), None),
+    (FlightMode::Autorotate, "AUTOROTATE", Some(26), None),
+    (FlightMode::AutoRtl, "AUTO_RTL", Some(27), None),
+    (FlightMode::Turtle, "TURTLE", Some(28), None),
+    (
+        FlightMode::Manual,
+        "MANUAL",
+        None,
+        Some((px4_main::MANUAL, 0)),
+    ),
+    (
+        FlightMode::Takeoff,
+        "TAKEOFF",
+        None,
+        Some((px4_main::AUTO, px4_auto::TAKEOFF)),
+    ),
+    (
+        FlightMode::PrecLand,
+        "PRECLAND",
+        None,
+        Some((px4_main::AUTO, px4_auto::PRECLAND)),
+    ),
+    (
+        FlightMode::Offboard,
+        "OFFBOARD",
+        None,
+        Some((px4_main::OFFBOARD, 0)),
+    ),
 ];
+
+impl FlightMode {
+    fn row(self) -> &'static ModeRow {
+        MODES
+            .iter()
+            .find(|m| m.0 == self)
+            .expect("every mode has a row")
+    }
+
+    /// The mode's name (ArduPilot's, or PX4's for a PX4-only mode), as params and records write it.
+    pub fn name(self) -> &'static str {
+        self.row().1
+    }
+
+    /// The mode named `name`, if any autopilot we know has it.
+    pub fn from_name(name: &str) -> Option<Self> {
+        MODES.iter().find(|m| m.1 == name).map(|m| m.0)
+    }
+
+    /// ArduPilot Copter's number for this mode.
+    pub fn ardupilot(self) -> Option<ArduCopterMode> {
+        self.row().2.map(ArduCopterMode)
+    }
+
+    /// PX4's (main, sub) mode serving the same purpose.
+    pub fn px4(self) -> Option<Px4Mode> {
+        self.row().3.map(|(main, sub)| Px4Mode { main, sub })
+    }
+}
 
 /// PX4 (main, sub) -> the name its heartbeat is reported as. For main modes other than AUTO and
 /// POSCTL the sub mode is not looked at.
@@ -199,18 +382,17 @@ const PX4_NAMES: &[(u8, u8, &str)] = &[
 
 /// Whether any autopilot we know has a mode of this name (for validating params).
 pub fn is_known_mode(name: &str) -> bool {
-    MODES.iter().any(|m| m.0 == name)
+    FlightMode::from_name(name).is_some()
 }
 
-/// The DO_SET_MODE command for a mode name, or None when this autopilot has no such mode.
-pub fn set_mode_command(flavor: Flavor, name: &str) -> Option<CommandSpec> {
-    let &(_, ap, px4) = MODES.iter().find(|m| m.0 == name)?;
+/// The DO_SET_MODE command for a mode, or None when this autopilot has no such mode.
+pub fn set_mode_command(flavor: Flavor, mode: FlightMode) -> Option<CommandSpec> {
     // param1: MAV_MODE_FLAG_CUSTOM_MODE_ENABLED (1); both autopilots read param2 (and PX4 param3)
     // only with it set.
     let params = match flavor {
-        Flavor::ArduPilot => [1.0, ap? as f32, 0.0, 0.0, 0.0, 0.0, 0.0],
+        Flavor::ArduPilot => [1.0, mode.ardupilot()?.0 as f32, 0.0, 0.0, 0.0, 0.0, 0.0],
         Flavor::Px4 => {
-            let (main, sub) = px4?;
+            let Px4Mode { main, sub } = mode.px4()?;
             [1.0, f32::from(main), f32::from(sub), 0.0, 0.0, 0.0, 0.0]
         }
         Flavor::Other => return None,
@@ -285,8 +467,8 @@ pub fn mode_name(flavor: Flavor, custom_mode: u32) -> String {
     match flavor {
         Flavor::ArduPilot => MODES
             .iter()
-            .find(|m| m.1 == Some(custom_mode))
-            .map(|m| m.0.to_string())
+            .find(|m| m.2 == Some(custom_mode))
+            .map(|m| m.1.to_string())
             .unwrap_or_else(|| format!("MODE_{custom_mode}")),
         Flavor::Px4 => {
             let (main, sub) = px4_significant(custom_mode);
@@ -301,13 +483,10 @@ pub fn mode_name(flavor: Flavor, custom_mode: u32) -> String {
 }
 
 /// Whether the vehicle's reported mode already is `name` (so a mode step can be skipped).
-pub fn is_in_mode(flavor: Flavor, custom_mode: u32, name: &str) -> bool {
-    let Some(&(_, ap, px4)) = MODES.iter().find(|m| m.0 == name) else {
-        return false;
-    };
+pub fn is_in_mode(flavor: Flavor, custom_mode: u32, mode: FlightMode) -> bool {
     match flavor {
-        Flavor::ArduPilot => ap == Some(custom_mode),
-        Flavor::Px4 => px4 == Some(px4_significant(custom_mode)),
+        Flavor::ArduPilot => mode.ardupilot() == Some(ArduCopterMode(custom_mode)),
+        Flavor::Px4 => mode.px4() == Some(Px4Mode::from_custom_mode(custom_mode)),
         Flavor::Other => false,
     }
 }
@@ -315,6 +494,28 @@ pub fn is_in_mode(flavor: Flavor, custom_mode: u32, name: &str) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn m(name: &str) -> FlightMode {
+        FlightMode::from_name(name).expect(name)
+    }
+
+    /// Every mode's name finds it again, and no two modes share a name.
+    #[test]
+    fn flight_mode_names_round_trip() {
+        for &(mode, name, _, _) in MODES {
+            assert_eq!(mode.name(), name);
+            assert_eq!(FlightMode::from_name(name), Some(mode), "{name}");
+        }
+        assert_eq!(FlightMode::Auto.ardupilot(), Some(ArduCopterMode(3)));
+        assert_eq!(
+            FlightMode::Land.px4(),
+            Some(Px4Mode {
+                main: px4_main::AUTO,
+                sub: px4_auto::LAND
+            })
+        );
+        assert_eq!(FlightMode::Takeoff.ardupilot(), None);
+    }
 
     fn params(c: &CommandSpec) -> [f32; 7] {
         match c.body {
@@ -357,7 +558,7 @@ mod tests {
             ("TURTLE", 28),
         ];
         for (name, n) in copied {
-            let c = set_mode_command(Flavor::ArduPilot, name).unwrap();
+            let c = set_mode_command(Flavor::ArduPilot, m(name)).unwrap();
             assert_eq!(c.command, MavCmd::MAV_CMD_DO_SET_MODE);
             assert_eq!(
                 params(&c),
@@ -365,13 +566,13 @@ mod tests {
                 "{name}"
             );
             assert_eq!(mode_name(Flavor::ArduPilot, n), name);
-            assert!(is_in_mode(Flavor::ArduPilot, n, name));
+            assert!(is_in_mode(Flavor::ArduPilot, n, m(name)));
         }
         // 8, 10 and 12 are unused in mode.h.
         assert_eq!(mode_name(Flavor::ArduPilot, 8), "MODE_8");
-        assert!(set_mode_command(Flavor::ArduPilot, "WARP").is_none());
+        assert!(FlightMode::from_name("WARP").is_none());
         // No TAKEOFF mode on Copter (NAV_TAKEOFF in GUIDED is how it takes off).
-        assert!(set_mode_command(Flavor::ArduPilot, "TAKEOFF").is_none());
+        assert!(set_mode_command(Flavor::ArduPilot, m("TAKEOFF")).is_none());
         assert!(is_known_mode("TAKEOFF") && !is_known_mode("WARP"));
     }
 
@@ -400,8 +601,8 @@ mod tests {
             // The union's memory layout: reserved u16, then main, then sub (little-endian).
             assert_eq!(value.to_le_bytes(), [0, 0, main, sub], "{name}");
             assert_eq!(mode_name(Flavor::Px4, value), name);
-            assert!(is_in_mode(Flavor::Px4, value, name), "{name}");
-            let c = set_mode_command(Flavor::Px4, name).unwrap();
+            assert!(is_in_mode(Flavor::Px4, value, m(name)), "{name}");
+            let c = set_mode_command(Flavor::Px4, m(name)).unwrap();
             assert_eq!(
                 params(&c),
                 [1.0, f32::from(main), f32::from(sub), 0.0, 0.0, 0.0, 0.0],
@@ -410,16 +611,20 @@ mod tests {
         }
         // GUIDED and BRAKE fly as AUTO.LOITER (Hold) on PX4; a Hold heartbeat satisfies both.
         for name in ["GUIDED", "BRAKE"] {
-            let c = set_mode_command(Flavor::Px4, name).unwrap();
+            let c = set_mode_command(Flavor::Px4, m(name)).unwrap();
             assert_eq!(params(&c)[..3], [1.0, 4.0, 3.0]);
-            assert!(is_in_mode(Flavor::Px4, 50_593_792, name));
+            assert!(is_in_mode(Flavor::Px4, 50_593_792, m(name)));
         }
         // Sub mode ignored outside AUTO and POSCTL; significant inside.
         assert_eq!(mode_name(Flavor::Px4, px4_custom_mode(2, 7)), "ALT_HOLD");
-        assert!(!is_in_mode(Flavor::Px4, px4_custom_mode(3, 1), "POSHOLD"));
-        assert!(!is_in_mode(Flavor::Px4, px4_custom_mode(4, 6), "RTL"));
+        assert!(!is_in_mode(
+            Flavor::Px4,
+            px4_custom_mode(3, 1),
+            m("POSHOLD")
+        ));
+        assert!(!is_in_mode(Flavor::Px4, px4_custom_mode(4, 6), m("RTL")));
         // Copter-only modes have no PX4 command; unknown PX4 numbers decode to a readable name.
-        assert!(set_mode_command(Flavor::Px4, "DRIFT").is_none());
+        assert!(set_mode_command(Flavor::Px4, m("DRIFT")).is_none());
         assert_eq!(mode_name(Flavor::Px4, px4_custom_mode(4, 7)), "PX4_4_7");
     }
 
@@ -437,7 +642,7 @@ mod tests {
             Flavor::from_autopilot(MavAutopilot::MAV_AUTOPILOT_GENERIC),
             Flavor::Other
         );
-        assert!(set_mode_command(Flavor::Other, "AUTO").is_none());
+        assert!(set_mode_command(Flavor::Other, m("AUTO")).is_none());
     }
 
     /// PX4 reads NAV_TAKEOFF param7 as AMSL and finite param5/6 as where to go: the take-off

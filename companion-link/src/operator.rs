@@ -20,7 +20,7 @@
 
 use super::Msg;
 use super::dialect::*;
-use super::modes::{self, Flavor};
+use super::modes::{self, Flavor, FlightMode};
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
@@ -321,8 +321,8 @@ impl OperatorGate {
         let changed = self.last_custom_mode != Some(v.custom_mode);
         let first_mode = self.last_custom_mode.is_none();
         self.last_custom_mode = Some(v.custom_mode);
-        let in_guided =
-            v.flavor == Flavor::ArduPilot && modes::is_in_mode(v.flavor, v.custom_mode, "GUIDED");
+        let in_guided = v.flavor == Flavor::ArduPilot
+            && modes::is_in_mode(v.flavor, v.custom_mode, FlightMode::Guided);
         if !in_guided || !v.armed() {
             self.guided_entered = false;
         } else if changed && !first_mode && !self.is_own_mode(now, v) {
@@ -417,13 +417,15 @@ impl OperatorGate {
         let latest = v.commanded_modes.last();
         let candidates = recent.chain(latest);
         for (name, _) in candidates {
-            if modes::is_in_mode(v.flavor, v.custom_mode, name) {
+            if FlightMode::from_name(name)
+                .is_some_and(|m| modes::is_in_mode(v.flavor, v.custom_mode, m))
+            {
                 return true;
             }
         }
         v.flavor == Flavor::Px4
             && !v.commanded_modes.is_empty()
-            && modes::is_in_mode(v.flavor, v.custom_mode, "LOITER")
+            && modes::is_in_mode(v.flavor, v.custom_mode, FlightMode::Loiter)
     }
 }
 

@@ -18,7 +18,7 @@ use std::hint::black_box;
 
 fn cycle(c: &mut Criterion) {
     let params = default_params_dir();
-    let model = companion::params::load_model(&params).unwrap();
+    let model = std::sync::Arc::new(companion::params::load_model(&params).unwrap());
     let base = tracking_snapshot(&model, &params, "complete-1");
     for (name, kind, stream, caches) in [
         ("cycle_concurrent", ModelKind::Bfm, Stream::Steady, true),
@@ -42,7 +42,11 @@ fn cycle(c: &mut Criterion) {
         ),
     ] {
         let stream_gen = StreamGen::new(&model, base.clone(), stream);
-        let mut core = Core::new(&model, kind, model.policy("safety").unwrap());
+        let mut core = Core::new(
+            std::sync::Arc::clone(&model),
+            kind,
+            model.policy("safety").unwrap(),
+        );
         core.set_caches(caches);
         let mut obs = base.clone();
         let (mut plan, mut rec) = (Plan::default(), DecisionRecord::default());

@@ -134,7 +134,7 @@ fn main() {
         .map(|a| a.split(',').map(str::to_string).collect())
         .unwrap_or_default();
     let params = default_params_dir();
-    let model = companion::params::load_model(&params).expect("params load");
+    let model = std::sync::Arc::new(companion::params::load_model(&params).expect("params load"));
     let base = tracking_snapshot(&model, &params, "complete-1");
     let mut out = Vec::new();
     let cases: Vec<_> = [
@@ -148,7 +148,11 @@ fn main() {
     .collect();
     let warm_core = |kind, stream, caches| {
         let stream_gen = StreamGen::new(&model, base.clone(), stream);
-        let mut core = Core::new(&model, kind, model.policy("safety").unwrap());
+        let mut core = Core::new(
+            std::sync::Arc::clone(&model),
+            kind,
+            model.policy("safety").unwrap(),
+        );
         core.set_caches(caches);
         let mut obs = base.clone();
         let (mut plan, mut rec) = (Plan::default(), DecisionRecord::default());

@@ -74,9 +74,9 @@ fn rss_kib() -> Option<u64> {
     line.split_whitespace().nth(1)?.parse().ok()
 }
 
-struct CoreDecider<'m>(Core<'m>);
+struct CoreDecider(Core);
 
-impl Decider for CoreDecider<'_> {
+impl Decider for CoreDecider {
     fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
         self.0.step(obs)
     }
@@ -84,7 +84,7 @@ impl Decider for CoreDecider<'_> {
         &self,
         rec: &DecisionRecord,
     ) -> Result<(), companion_core::launch::LaunchRefusal> {
-        companion_core::launch::verdict(rec, self.0.model)
+        companion_core::launch::verdict(rec, &self.0.model)
     }
 }
 
@@ -163,7 +163,7 @@ fn view(phase: &str, wp1_seq: u16, last_seq: u16, landed: bool) -> VehicleView {
 /// the autopilot's battery is swapped), while the loaded params model and the process live on.
 struct Session<'m> {
     start: Duration,
-    decider: CoreDecider<'m>,
+    decider: CoreDecider,
     vehicle: Vehicle,
     shell: Shell,
     ingest: Ingest,
@@ -189,7 +189,7 @@ struct Session<'m> {
 
 impl<'m> Session<'m> {
     fn new(
-        model: &'m Model,
+        model: &std::sync::Arc<Model>,
         setup: &FlySetup,
         spec: &'m WorldSpec,
         scenario: &'m Scenario,
@@ -202,7 +202,7 @@ impl<'m> Session<'m> {
         Self {
             start,
             decider: CoreDecider(Core::new(
-                model,
+                std::sync::Arc::clone(model),
                 ModelKind::Bfm,
                 model.policy("safety").unwrap(),
             )),
@@ -257,7 +257,7 @@ fn main() -> anyhow::Result<()> {
     let o = opts()?;
     let wall0 = Instant::now();
     let files = companion::params::read_params_dir(&o.params)?;
-    let model = Model::load(&files)?;
+    let model = std::sync::Arc::new(Model::load(&files)?);
     let mut args = FlyArgs::from_cli(["--connect", "udpin:0.0.0.0:14550", "--auto-start"])?;
     args.params = Some(o.params.clone());
     let setup = FlySetup::load(&args)?;

@@ -23,6 +23,7 @@ use companion_link::ingest::{self, Encoder, Ingest, IngestStats};
 use companion_link::mission_state::MissionState;
 use companion_link::vehicle::{Vehicle, VehicleConfig};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Duration;
 
 /// The signing key the ingest target uses when an input turns signing on. Fixed, so that the
@@ -37,7 +38,7 @@ pub const MAX_CYCLES: usize = 8;
 
 /// What `companion fly` loads before any socket opens, loaded once per fuzzing process.
 pub struct IngestFixture {
-    pub model: Model,
+    pub model: Arc<Model>,
     /// What `companion fly` loads besides the model (link, actions, route, take-off altitude).
     pub setup: FlySetup,
 }
@@ -46,7 +47,7 @@ impl IngestFixture {
     /// Load from a params directory the way `companion fly --params DIR` does.
     pub fn load(params: &Path) -> anyhow::Result<Self> {
         Ok(Self {
-            model: companion::params::load_model(params)?,
+            model: Arc::new(companion::params::load_model(params)?),
             setup: FlySetup::load(&fly_args(params))?,
         })
     }
@@ -245,7 +246,7 @@ pub fn ingest_one(fx: &IngestFixture, data: &[u8]) -> IngestOutcome {
         .model
         .policy(input.policy)
         .expect("a policy of the shipped params");
-    let mut core = Core::new(&fx.model, ModelKind::Bfm, policy);
+    let mut core = Core::new(Arc::clone(&fx.model), ModelKind::Bfm, policy);
     let mut out = IngestOutcome::default();
     let (mut pushed, mut returned) = (0u64, 0u64);
     let (mut ob_pushed, mut ob_returned) = (0u64, 0u64);
@@ -439,7 +440,7 @@ pub fn params_one(fx: &ParamsFixture, data: &[u8]) -> ParamsOutcome {
             }
             out.errors.push((what, e));
         };
-        let model = Model::load(files);
+        let model = Model::load(files).map(Arc::new);
         record("model", model.as_ref().err().cloned());
         let world = companion::sim::WorldSpec::load(files);
         record("world", world.as_ref().err().cloned());
@@ -469,7 +470,7 @@ pub fn params_one(fx: &ParamsFixture, data: &[u8]) -> ParamsOutcome {
             scen.steps = scen.steps.min(PARAMS_SIM_STEPS);
             for name in &model.policies {
                 let policy = model.policy(name).expect("a policy of this model");
-                let mut core = Core::new(model, ModelKind::Bfm, policy);
+                let mut core = Core::new(Arc::clone(model), ModelKind::Bfm, policy);
                 let run = companion::sim::run(world, &scen, 1, |o| core.step(o));
                 out.cycles += run.records.len();
             }

@@ -6,15 +6,20 @@ use companion::sim::{Scenario, World, WorldSpec};
 use companion_core::decision::{Core, Model, ModelKind};
 use companion_core::observations::Observations;
 use std::path::Path;
+use std::sync::Arc;
 
 /// The first tracking-phase snapshot (`v0`..`v5`) of `scenario` (seed 1) flown by a safety-first
 /// BFM core from take-off.
-pub fn tracking_snapshot(model: &Model, params: &Path, scenario: &str) -> Observations {
+pub fn tracking_snapshot(model: &Arc<Model>, params: &Path, scenario: &str) -> Observations {
     let files = companion::params::read_params_dir(params).expect("params");
     let spec = WorldSpec::load(&files).expect("world params");
     let scenario = Scenario::load(&files, scenario).expect("scenario");
     let mut world = World::new(&spec, &scenario, 1);
-    let mut core = Core::new(model, ModelKind::Bfm, model.policy("safety").unwrap());
+    let mut core = Core::new(
+        Arc::clone(model),
+        ModelKind::Bfm,
+        model.policy("safety").unwrap(),
+    );
     loop {
         let obs = world.observe();
         if obs.state.starts_with('v') {

@@ -8,14 +8,17 @@ use companion::sim::{self, Scenario, WorldSpec};
 use companion_core::decision::{Core, Model, ModelKind, Policy};
 use companion_core::observations::Observations;
 use companion_core::record::{DecisionRecord, Plan};
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
 
-fn model() -> &'static Model {
-    static M: OnceLock<Model> = OnceLock::new();
-    M.get_or_init(|| {
-        companion::params::load_model(&companion::params::default_params_dir())
-            .expect("params load")
-    })
+/// The shipped model, loaded once per test binary and shared (each core holds its `Arc`).
+fn model() -> Arc<Model> {
+    static M: OnceLock<Arc<Model>> = OnceLock::new();
+    Arc::clone(M.get_or_init(|| {
+        Arc::new(
+            companion::params::load_model(&companion::params::default_params_dir())
+                .expect("params load"),
+        )
+    }))
 }
 
 /// The policies by name (params/policies.toml).
@@ -124,13 +127,13 @@ fn cached_step_equals_uncached_step() {
 fn memos_hit_on_a_settled_stream_and_miss_when_evidence_flips() {
     use companion_testkit::streams::{Stream, StreamGen, tracking_snapshot};
     let params = default_params_dir();
-    let base = tracking_snapshot(model(), &params, "complete-1");
+    let base = tracking_snapshot(&model(), &params, "complete-1");
     for (stream, memos, solves_per_cycle) in [
         (Stream::Steady, true, 0),
         (Stream::Changing, true, 0),
         (Stream::Changing, false, 3),
     ] {
-        let stream_gen = StreamGen::new(model(), base.clone(), stream);
+        let stream_gen = StreamGen::new(&model(), base.clone(), stream);
         let mut core = Core::new(model(), ModelKind::Bfm, safety());
         core.set_caches(memos);
         let mut obs = base.clone();

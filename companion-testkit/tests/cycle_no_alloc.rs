@@ -18,10 +18,14 @@ const COUNTED_CYCLES: u64 = 1000;
 /// changes and MDP solves seen while counting (to show the stream really moved).
 fn run(kind: ModelKind, policy: &str, stream: Stream, memos: bool) -> (usize, usize, u64) {
     let params = default_params_dir();
-    let model = companion::params::load_model(&params).unwrap();
+    let model = std::sync::Arc::new(companion::params::load_model(&params).unwrap());
     let base = tracking_snapshot(&model, &params, "complete-1");
     let stream_gen = StreamGen::new(&model, base.clone(), stream);
-    let mut core = Core::new(&model, kind, model.policy(policy).unwrap());
+    let mut core = Core::new(
+        std::sync::Arc::clone(&model),
+        kind,
+        model.policy(policy).unwrap(),
+    );
     core.set_caches(memos);
     let mut obs = base.clone();
     let (mut plan, mut rec) = (Plan::default(), DecisionRecord::default());
@@ -90,10 +94,14 @@ fn monolithic_model_allocates_nothing_either() {
 #[test]
 fn a_flipping_version_reallocates_every_cycle_but_the_history_stays_bounded() {
     let params = default_params_dir();
-    let model = companion::params::load_model(&params).unwrap();
+    let model = std::sync::Arc::new(companion::params::load_model(&params).unwrap());
     let base = tracking_snapshot(&model, &params, "complete-1");
     let stream_gen = StreamGen::new(&model, base.clone(), Stream::Changing);
-    let mut core = Core::new(&model, ModelKind::Bfm, model.policy("safety").unwrap());
+    let mut core = Core::new(
+        std::sync::Arc::clone(&model),
+        ModelKind::Bfm,
+        model.policy("safety").unwrap(),
+    );
     let mut obs = base.clone();
     let (mut plan, mut rec) = (Plan::default(), DecisionRecord::default());
     let mut follows = 0;
@@ -105,7 +113,10 @@ fn a_flipping_version_reallocates_every_cycle_but_the_history_stays_bounded() {
             follows += 1;
         }
     }
-    assert!(follows > 300, "the plan followed {follows} times in 400 cycles");
+    assert!(
+        follows > 300,
+        "the plan followed {follows} times in 400 cycles"
+    );
     assert!(core.reallocations() >= follows, "{}", core.reallocations());
     let table = core.allocation_table().unwrap();
     let rows = table

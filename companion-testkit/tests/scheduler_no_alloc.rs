@@ -18,11 +18,11 @@ const COUNTED: u64 = 400;
 #[test]
 fn memos_off_cycle_allocates_nothing_once_warm() {
     let params = default_params_dir();
-    let model = companion::params::load_model(&params).unwrap();
+    let model = std::sync::Arc::new(companion::params::load_model(&params).unwrap());
     let base = tracking_snapshot(&model, &params, "complete-1");
     for policy in model.policies.iter().map(|p| model.policy(p).unwrap()) {
         let stream = StreamGen::new(&model, base.clone(), Stream::Changing);
-        let mut core = Core::new(&model, ModelKind::Bfm, policy);
+        let mut core = Core::new(std::sync::Arc::clone(&model), ModelKind::Bfm, policy);
         core.set_caches(false);
         let mut obs = base.clone();
         let (mut plan, mut rec) = (Plan::default(), DecisionRecord::default());

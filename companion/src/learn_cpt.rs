@@ -250,12 +250,12 @@ pub fn run(
 }
 
 /// A core that learns from each simulated cycle's outcome ([`crate::sim::Cycle`]).
-pub struct LearningCore<'c, 'm> {
-    pub core: &'c mut Core<'m>,
+pub struct LearningCore<'c> {
+    pub core: &'c mut Core,
     pub learner: &'c mut OnlineCpt,
 }
 
-impl crate::sim::Cycle for LearningCore<'_, '_> {
+impl crate::sim::Cycle for LearningCore<'_> {
     fn decide(
         &mut self,
         obs: &companion_core::observations::Observations,
@@ -296,8 +296,8 @@ mod tests {
     fn in_flight_a_tracking_step_is_kept_unless_the_next_cycle_observes_target_lost() {
         let p = Params::load(&default_params_dir(), None).unwrap();
         let policy = p.model.policy("safety").unwrap();
-        let mut core = Core::new(&p.model, ModelKind::Bfm, policy);
         let mut l = OnlineCpt::new(&p.files, p.learning).unwrap();
+        let mut core = Core::new(std::sync::Arc::new(p.model), ModelKind::Bfm, policy);
         let shipped = core.cpt_row("C_V3", &row()).unwrap()[1];
         assert!((shipped - 0.9982).abs() < 1e-12, "{shipped}");
 

@@ -8,6 +8,7 @@ use companion::sim::{self, Scenario};
 use companion_core::decision::{Core, Model, ModelKind, Policy};
 use std::io::IsTerminal;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 #[derive(Parser)]
 #[command(
@@ -204,8 +205,8 @@ fn profile(params: Option<PathBuf>, vehicle: Option<&str>) -> Result<Option<Path
 
 /// The real decision core behind the fly loop.
 struct CoreDecider {
-    core: Core<'static>,
-    model: &'static Model,
+    core: Core,
+    model: Arc<Model>,
     policy: Policy,
     /// `--learn-cpt`: the rows learned this flight.
     learner: Option<companion::learn_cpt::OnlineCpt>,
@@ -230,11 +231,11 @@ impl Decider for CoreDecider {
         &self,
         rec: &companion_core::record::DecisionRecord,
     ) -> Result<(), companion_core::launch::LaunchRefusal> {
-        companion_core::launch::verdict(rec, self.model)
+        companion_core::launch::verdict(rec, &self.model)
     }
 
     fn new_flight(&mut self) {
-        self.core = Core::new(self.model, ModelKind::Bfm, self.policy);
+        self.core = Core::new(Arc::clone(&self.model), ModelKind::Bfm, self.policy);
         if let Some(learner) = self.learner.as_mut() {
             learner.start_run();
         }
@@ -246,14 +247,14 @@ fn fly(args: FlyArgs) -> Result<()> {
     // Every params file, as `check` loads it, before any run folder or socket.
     let loaded = companion::params::Params::load(&params, args.mission.as_deref())
         .context("loading params")?;
-    let model: &'static Model = Box::leak(Box::new(loaded.model));
+    let model = Arc::new(loaded.model);
     let policy: Policy = model
         .policy(&args.policy)
         .map_err(|e| anyhow::anyhow!("--policy: {e}"))?;
     let learner =
         companion::learn_cpt::OnlineCpt::when(args.learn_cpt, &loaded.files, loaded.learning)?;
     let decider = CoreDecider {
-        core: Core::new(model, ModelKind::Bfm, policy),
+        core: Core::new(Arc::clone(&model), ModelKind::Bfm, policy),
         model,
         policy,
         learner,
@@ -276,7 +277,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         .map(|m| m.trim().parse::<ModelKind>())
         .collect::<Result<_, _>>()
         .map_err(|e| anyhow::anyhow!("--model: {e}"))?;
-    let model = loaded.model;
+    let model = Arc::new(loaded.model);
     let policy: Policy = model
         .policy(&args.policy)
         .map_err(|e| anyhow::anyhow!("--policy: {e}"))?;
@@ -298,7 +299,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         let mut steps = Vec::with_capacity(runs as usize);
         for r in 0..runs {
             let seed = args.seed + r as u64;
-            let mut core = Core::new(&model, *kind, policy);
+            let mut core = Core::new(Arc::clone(&model), *kind, policy);
             let result =
                 companion::learn_cpt::run(&world, &scenario, seed, &mut core, learner.as_mut());
             if first_allocations.is_none() {

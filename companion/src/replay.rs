@@ -25,6 +25,7 @@ use companion_core::spec::ParamsFiles;
 use serde_json::Value;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// Record fields the core computes from its inputs and its own state (compared exactly, in this
 /// order; `events` and `cycle` are compared apart).
@@ -115,8 +116,6 @@ pub fn replay(path: &Path) -> Result<Outcome, Refusal> {
         .map_err(|e| refuse(path, None, e.to_string()))?
         .files()
         .to_vec();
-    // The model rebuilt from the header, alive for the whole replay (the core borrows it).
-    let model_slot = std::cell::OnceCell::new();
     let mut run: Option<Run> = None;
     let mut equal = 0u64;
     let n_files = files.len();
@@ -165,7 +164,7 @@ pub fn replay(path: &Path) -> Result<Outcome, Refusal> {
                             return Err(refuse(file, at, "the header is not the first line"));
                         }
                         let (model, setup, learner) = Run::from_header(&value, file)?;
-                        let mut r = Run::new(model_slot.get_or_init(|| model), setup);
+                        let mut r = Run::new(Arc::new(model), setup);
                         r.learner = learner;
                         run = Some(r);
                     }
@@ -225,20 +224,20 @@ struct Setup {
 }
 
 /// The model rebuilt from a header, and the core being replayed.
-struct Run<'m> {
-    model: &'m Model,
+struct Run {
+    model: Arc<Model>,
     setup: Setup,
-    core: Core<'m>,
+    core: Core,
     /// The run learned its CPT rows (`--learn-cpt`): re-derived here from the logged records.
     learner: Option<crate::learn_cpt::OnlineCpt>,
 }
 
-impl<'m> Run<'m> {
-    fn new(model: &'m Model, setup: Setup) -> Self {
+impl Run {
+    fn new(model: Arc<Model>, setup: Setup) -> Self {
         Run {
+            core: Core::new(Arc::clone(&model), setup.kind, setup.policy),
             model,
             setup,
-            core: Core::new(model, setup.kind, setup.policy),
             learner: None,
         }
     }
@@ -343,7 +342,7 @@ impl<'m> Run<'m> {
         // `fly` queues Event::NewFlight for the first cycle after a flight ended landed and
         // disarmed, when it starts a fresh core for the next flight: replay restarts its core there.
         if source == Source::Fly && logged.events.contains(&Event::NewFlight) {
-            self.core = Core::new(self.model, self.setup.kind, self.setup.policy);
+            self.core = Core::new(Arc::clone(&self.model), self.setup.kind, self.setup.policy);
             if let Some(l) = self.learner.as_mut() {
                 l.start_run();
             }

@@ -109,8 +109,8 @@ fn simulate_with_renamed_actions_decides_the_same_records_under_the_new_names() 
     let (old_files, new_files) = (shipped(), renamed_params());
     assert!(!unrenamed_json(&Default::default()).contains(PREFIX));
     let (old_model, new_model) = (
-        Model::load(&old_files).unwrap(),
-        Model::load(&new_files).unwrap(),
+        std::sync::Arc::new(Model::load(&old_files).unwrap()),
+        std::sync::Arc::new(Model::load(&new_files).unwrap()),
     );
     let (old_world, new_world) = (
         WorldSpec::load(&old_files).unwrap(),
@@ -127,9 +127,13 @@ fn simulate_with_renamed_actions_decides_the_same_records_under_the_new_names() 
     ];
     for (scenario, kind, policy) in cases {
         let case = format!("{scenario}/{policy}/{}", kind.name());
-        let run = |files: &ParamsFiles, model: &Model, world: &WorldSpec| {
+        let run = |files: &ParamsFiles, model: &std::sync::Arc<Model>, world: &WorldSpec| {
             let s = Scenario::load(files, scenario).unwrap();
-            let mut core = Core::new(model, kind, model.policy(policy).unwrap());
+            let mut core = Core::new(
+                std::sync::Arc::clone(model),
+                kind,
+                model.policy(policy).unwrap(),
+            );
             sim::run(world, &s, 1, |obs| core.step(obs))
         };
         let old = run(&old_files, &old_model, &old_world);

@@ -12,11 +12,15 @@ use companion_core::record::DecisionRecord;
 use std::path::Path;
 
 fn run(params: &Path, scenario: &str) -> Vec<DecisionRecord> {
-    let model = companion::params::load_model(params).expect("params load");
+    let model = std::sync::Arc::new(companion::params::load_model(params).expect("params load"));
     let files = companion::params::read_params_dir(params).unwrap();
     let world = WorldSpec::load(&files).unwrap();
     let scenario = Scenario::load(&files, scenario).unwrap();
-    let mut core = Core::new(&model, ModelKind::Bfm, model.policy("safety").unwrap());
+    let mut core = Core::new(
+        std::sync::Arc::clone(&model),
+        ModelKind::Bfm,
+        model.policy("safety").unwrap(),
+    );
     sim::run(&world, &scenario, 1, |obs| core.step(obs)).records
 }
 

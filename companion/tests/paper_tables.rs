@@ -11,14 +11,17 @@ use companion_core::observations::Observations;
 use companion_core::record::DecisionRecord;
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
 
-fn model() -> &'static Model {
-    static M: OnceLock<Model> = OnceLock::new();
-    M.get_or_init(|| {
-        companion::params::load_model(&companion::params::default_params_dir())
-            .expect("params load")
-    })
+/// The shipped model, loaded once per test binary and shared (each core holds its `Arc`).
+fn model() -> Arc<Model> {
+    static M: OnceLock<Arc<Model>> = OnceLock::new();
+    Arc::clone(M.get_or_init(|| {
+        Arc::new(
+            companion::params::load_model(&companion::params::default_params_dir())
+                .expect("params load"),
+        )
+    }))
 }
 
 /// The policies by name (params/policies.toml).
@@ -283,7 +286,8 @@ fn lidar_failure_runs_fusion_obstacle_detection_and_lowers_p_lidar() {
     let before = recs[0].probabilities["P_lidar"];
     let after = from_event(&recs, "lidar failed");
     assert!(after[0].probabilities["P_lidar"] < 0.2 * before);
-    let nav = model().mdps.get("navigation").unwrap();
+    let model = model();
+    let nav = model.mdps.get("navigation").unwrap();
     let mut fusion_cycles = 0;
     for r in after {
         let p = r.proposals.iter().find(|p| p.mdp == "navigation").unwrap();

@@ -104,8 +104,8 @@ fn renamed_params_name_no_route_state_by_its_old_name() {
 fn simulate_with_renamed_route_states_decides_the_same_records_under_the_new_names() {
     let (old_files, new_files) = (shipped(), renamed_params());
     let (old_model, new_model) = (
-        Model::load(&old_files).unwrap(),
-        Model::load(&new_files).unwrap(),
+        std::sync::Arc::new(Model::load(&old_files).unwrap()),
+        std::sync::Arc::new(Model::load(&new_files).unwrap()),
     );
     let (old_world, new_world) = (
         WorldSpec::load(&old_files).unwrap(),
@@ -120,9 +120,13 @@ fn simulate_with_renamed_route_states_decides_the_same_records_under_the_new_nam
     ];
     for (scenario, kind, policy) in cases {
         let case = format!("{scenario}/{policy}/{}", kind.name());
-        let run = |files: &ParamsFiles, model: &Model, world: &WorldSpec| {
+        let run = |files: &ParamsFiles, model: &std::sync::Arc<Model>, world: &WorldSpec| {
             let s = Scenario::load(files, scenario).unwrap();
-            let mut core = Core::new(model, kind, model.policy(policy).unwrap());
+            let mut core = Core::new(
+                std::sync::Arc::clone(model),
+                kind,
+                model.policy(policy).unwrap(),
+            );
             sim::run(world, &s, 1, |obs| core.step(obs))
         };
         let old = run(&old_files, &old_model, &old_world);

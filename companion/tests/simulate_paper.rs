@@ -4,16 +4,19 @@
 use companion::sim::{self, RunResult, Scenario, WorldSpec};
 use companion_core::decision::{Core, Model, ModelKind, Policy};
 use companion_core::record::DecisionRecord;
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
 
 const SEEDS: u64 = 30;
 
-fn model() -> &'static Model {
-    static M: OnceLock<Model> = OnceLock::new();
-    M.get_or_init(|| {
-        companion::params::load_model(&companion::params::default_params_dir())
-            .expect("params load")
-    })
+/// The shipped model, loaded once per test binary and shared (each core holds its `Arc`).
+fn model() -> Arc<Model> {
+    static M: OnceLock<Arc<Model>> = OnceLock::new();
+    Arc::clone(M.get_or_init(|| {
+        Arc::new(
+            companion::params::load_model(&companion::params::default_params_dir())
+                .expect("params load"),
+        )
+    }))
 }
 
 /// The policies by name (params/policies.toml).

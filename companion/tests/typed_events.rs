@@ -23,7 +23,7 @@ pub fn assert_reads_back(r: &DecisionRecord) {
 fn every_simulated_event_reads_back_as_the_variant_written() {
     let dir = companion::params::default_params_dir();
     let files = companion::params::read_params_dir(&dir).unwrap();
-    let model = companion::params::load_model(&dir).unwrap();
+    let model = std::sync::Arc::new(companion::params::load_model(&dir).unwrap());
     let world = WorldSpec::load(&files).unwrap();
     let mut scenarios: Vec<String> = std::fs::read_dir(dir.join("scenarios"))
         .unwrap()
@@ -43,7 +43,7 @@ fn every_simulated_event_reads_back_as_the_variant_written() {
             model.policy("mission").unwrap(),
         ] {
             for kind in [ModelKind::Bfm, ModelKind::Reference, ModelKind::Monolithic] {
-                let mut core = Core::new(&model, kind, policy);
+                let mut core = Core::new(std::sync::Arc::clone(&model), kind, policy);
                 let run = sim::run(&world, &scenario, 1, |obs| core.step(obs));
                 for r in &run.records {
                     assert_reads_back(r);

@@ -5,7 +5,7 @@ use companion::sim::{self, Scenario, WorldSpec};
 use companion_core::decision::{Core, Model, ModelKind};
 use companion_core::record::Event;
 use companion_core::spec::ParamsFiles;
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
 
 const SEEDS: u64 = 40;
 
@@ -16,11 +16,12 @@ fn params() -> &'static ParamsFiles {
     })
 }
 
-fn model() -> &'static Model {
-    static M: OnceLock<Model> = OnceLock::new();
-    M.get_or_init(|| {
-        companion::params::load_model(&companion::params::default_params_dir()).unwrap()
-    })
+/// The shipped model, loaded once per test binary and shared (each core holds its `Arc`).
+fn model() -> Arc<Model> {
+    static M: OnceLock<Arc<Model>> = OnceLock::new();
+    Arc::clone(M.get_or_init(|| {
+        Arc::new(companion::params::load_model(&companion::params::default_params_dir()).unwrap())
+    }))
 }
 
 fn tracking_per_seed(scenario: &Scenario, kind: ModelKind) -> Vec<u32> {

@@ -333,6 +333,21 @@ impl ScheduleWorkspace {
         d
     }
 
+    /// A degradation of `app` from one version to another (a spare's strings reused), its
+    /// reason written from `reason`.
+    fn degraded(
+        &mut self,
+        (app, from, to): (&str, &str, &str),
+        reason: std::fmt::Arguments<'_>,
+    ) -> Degradation {
+        let mut d = self.degradation();
+        set(&mut d.app, app);
+        set(&mut d.from, from);
+        set(&mut d.to, to);
+        let _ = d.reason.write_fmt(reason);
+        d
+    }
+
     fn dropped(&mut self, app: &str, version: &str) -> Dropped {
         let mut d = self.spare_dropped.pop().unwrap_or(Dropped {
             app: String::new(),
@@ -850,19 +865,17 @@ fn resolve(
             active.pop();
         }
         if let Some(v) = fixed {
-            let mut d = ws.degradation();
-            set(&mut d.app, app);
-            set(&mut d.from, from);
-            set(&mut d.to, v);
-            let _ = write!(
-                d.reason,
-                "insufficient resources to execute {} {} at {:.1} fps ({} healthy tiles, cpu headroom {:.3}); {}",
-                app,
-                from,
-                last.fps,
-                room.tiles,
-                room.cpu.max(0.0),
-                rank_text(&last)
+            let d = ws.degraded(
+                (app, from, v),
+                format_args!(
+                    "insufficient resources to execute {} {} at {:.1} fps ({} healthy tiles, cpu headroom {:.3}); {}",
+                    app,
+                    from,
+                    last.fps,
+                    room.tiles,
+                    room.cpu.max(0.0),
+                    rank_text(&last)
+                ),
             );
             out.degraded.push(d);
             break;
@@ -911,16 +924,14 @@ fn replace_given_way(
             );
             if search(catalogue, requests, active, room, ws) {
                 if v != requested {
-                    let mut d = ws.degradation();
-                    set(&mut d.app, app);
-                    set(&mut d.from, requested);
-                    set(&mut d.to, v);
-                    let _ = write!(
-                        d.reason,
-                        "insufficient resources to execute {} {}; {}",
-                        app,
-                        requested,
-                        rank_text(&item)
+                    let d = ws.degraded(
+                        (app, requested, v),
+                        format_args!(
+                            "insufficient resources to execute {} {}; {}",
+                            app,
+                            requested,
+                            rank_text(&item)
+                        ),
                     );
                     out.degraded.push(d);
                 }

@@ -4,11 +4,14 @@
 use super::*;
 use fpga_model::{PlatformState, Request, Schedule};
 use proptest::prelude::*;
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
 
-fn model() -> &'static Model {
-    static MODEL: OnceLock<Model> = OnceLock::new();
-    MODEL.get_or_init(|| Model::load(&crate::shipped::params()).expect("shipped params load"))
+/// The shipped model, loaded once per test binary and shared (each core holds its `Arc`).
+fn model() -> Arc<Model> {
+    static MODEL: OnceLock<Arc<Model>> = OnceLock::new();
+    Arc::clone(MODEL.get_or_init(|| {
+        Arc::new(Model::load(&crate::shipped::params()).expect("shipped params load"))
+    }))
 }
 
 /// The applications the policy ranks above tracking, as the simulated missions request them.
@@ -43,7 +46,11 @@ fn published(
     version: &str,
 ) -> Published {
     let model = model();
-    let mut core = Core::new(model, ModelKind::Bfm, model.policy("safety").unwrap());
+    let mut core = Core::new(
+        Arc::clone(&model),
+        ModelKind::Bfm,
+        model.policy("safety").unwrap(),
+    );
     core.platform = state.clone();
     core.others_tiles = placed.placements.iter().map(|p| p.tiles.len() as u32).sum();
     core.others_cpu = placed.placements.iter().map(|p| p.cpu_share).sum();

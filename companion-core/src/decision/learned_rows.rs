@@ -3,7 +3,7 @@
 
 use super::Core;
 
-impl Core<'_> {
+impl Core {
     /// A CPT row of this core's health model (docs/calibrate.md, in-flight learning).
     pub fn cpt_row(&self, node: &str, when: &[(String, String)]) -> Option<Vec<f64>> {
         self.health.cpt_row(node, when)

@@ -4,8 +4,12 @@ use super::*;
 /// no wind evidence and the record lists `A_wind` as absent; a zero reading is calm evidence.
 #[test]
 fn absent_observation_is_listed_and_gives_no_evidence() {
-    let model = Model::load(&crate::shipped::params()).unwrap();
-    let mut core = Core::new(&model, ModelKind::Bfm, model.policy("safety").unwrap());
+    let model = Arc::new(Model::load(&crate::shipped::params()).unwrap());
+    let mut core = Core::new(
+        Arc::clone(&model),
+        ModelKind::Bfm,
+        model.policy("safety").unwrap(),
+    );
     let mut obs = Observations {
         state: "base".into(),
         ..Default::default()

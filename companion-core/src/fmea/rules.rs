@@ -331,16 +331,7 @@ fn activation(c: &NodeCtx, s: &ActivationNode) -> Result<RowRule, SpecError> {
         ));
     }
     let tiles_node = s.tiles.clone().unwrap_or_default();
-    let tile_counts: Vec<u32> = c.hm.states[&tiles_node]
-        .iter()
-        .map(|s| s.parse::<u32>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| {
-            c.err(
-                c.entry("tiles"),
-                format!("states of `{tiles_node}` must be tile counts"),
-            )
-        })?;
+    let counts = tile_counts(c, &tiles_node)?;
     let numeric = s.implementations.iter().any(|im| im.cpu_per_fps.is_some());
     let has_perf = s.performance.is_some();
     let fits_rule = if numeric {
@@ -359,7 +350,7 @@ fn activation(c: &NodeCtx, s: &ActivationNode) -> Result<RowRule, SpecError> {
             return Ok(vec![1.0, 0.0]);
         }
         let perf = if has_perf { a[3] } else { 0 };
-        let fits = fits_rule(tile_counts[a[1]], a[2], perf);
+        let fits = fits_rule(counts[a[1]], a[2], perf);
         let p = if fits { p_fit } else { p_nofit };
         Ok(vec![1.0 - p, p])
     }))

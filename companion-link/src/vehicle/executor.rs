@@ -305,10 +305,21 @@ impl Vehicle {
         name: &str,
         out: &mut Vec<Msg>,
     ) -> Advance {
+        let mode = FlightMode::from_name(name);
         // Landing and return never wait.
+        let shown = self
+            .telemetry
+            .mode
+            .as_deref()
+            .and_then(FlightMode::from_name);
         if self.flavor == Flavor::Px4
-            && !matches!(name, "LAND" | "RTL" | "SMART_RTL" | "TAKEOFF")
-            && self.telemetry.mode.as_deref() == Some("TAKEOFF")
+            && !matches!(
+                mode,
+                Some(
+                    FlightMode::Land | FlightMode::Rtl | FlightMode::SmartRtl | FlightMode::Takeoff
+                )
+            )
+            && shown == Some(FlightMode::Takeoff)
         {
             let until = *self
                 .px4_takeoff_wait
@@ -318,7 +329,7 @@ impl Vehicle {
             }
         }
         self.px4_takeoff_wait = None;
-        if name == "AUTO"
+        if mode == Some(FlightMode::Auto)
             && let Some((_, until)) = self.px4_mission_pending
         {
             if now < until {
@@ -335,7 +346,7 @@ impl Vehicle {
             .find(|(_, at)| self.mode_heard_at.is_none_or(|h| *at >= h))
             .is_some_and(|(m, _)| m != name);
         self.note_mode(now, name);
-        if modes::is_in_mode(self.flavor, self.telemetry.custom_mode, name)
+        if mode.is_some_and(|m| modes::is_in_mode(self.flavor, self.telemetry.custom_mode, m))
             && self.telemetry.mode.is_some()
             && !stale
         {
@@ -343,7 +354,7 @@ impl Vehicle {
             self.step_done();
             return Advance::Again;
         }
-        match modes::set_mode_command(self.flavor, name) {
+        match mode.and_then(|m| modes::set_mode_command(self.flavor, m)) {
             Some(spec) => {
                 let shown = self
                     .telemetry
@@ -381,7 +392,10 @@ impl Vehicle {
         since: Duration,
     ) -> Advance {
         let heard_since = self.mode_heard_at.is_some_and(|h| h > since);
-        if heard_since && modes::is_in_mode(self.flavor, self.telemetry.custom_mode, name) {
+        if heard_since
+            && FlightMode::from_name(name)
+                .is_some_and(|m| modes::is_in_mode(self.flavor, self.telemetry.custom_mode, m))
+        {
             self.step_done();
             return Advance::Again;
         }
@@ -440,7 +454,9 @@ impl Vehicle {
                 // fails and the next request sets the mode again.
                 if self.flavor == Flavor::ArduPilot
                     && let Some((want, at)) = self.commanded_modes.last().cloned()
-                    && !modes::is_in_mode(self.flavor, self.telemetry.custom_mode, &want)
+                    && !FlightMode::from_name(&want).is_some_and(|m| {
+                        modes::is_in_mode(self.flavor, self.telemetry.custom_mode, m)
+                    })
                 {
                     if self.mode_heard_at.is_none_or(|h| h <= at) {
                         return Advance::Wait;
@@ -552,16 +568,12 @@ impl Vehicle {
         let items = route.mission_items(self.flavor, home);
         match self.mission.upload(now, items) {
             Ok(msgs) => {
-                out.extend(msgs);
-                let job = self.job.as_mut().expect("job checked above");
-                job.running = Running::Mission;
-                self.records.push(CommandRecord {
+                self.step_sent(
+                    (msgs, out),
+                    Running::Mission,
                     action,
-                    command: "MISSION_UPLOAD".into(),
-                    result: CommandOutcome::Sent,
-                    attempts: 1,
-                    latency_ms: None,
-                });
+                    "MISSION_UPLOAD".into(),
+                );
                 Advance::Wait
             }
             Err(_) => Advance::Wait, // another transfer still running: wait for it
@@ -653,16 +665,12 @@ impl Vehicle {
     ) -> bool {
         match self.commands.submit(now, spec) {
             Ok((ticket, msgs)) => {
-                out.extend(msgs);
-                let job = self.job.as_mut().expect("issue runs inside a job");
-                job.running = Running::Command(ticket);
-                self.records.push(CommandRecord {
-                    action: action.to_string(),
-                    command: name.clone(),
-                    result: CommandOutcome::Sent,
-                    attempts: 1,
-                    latency_ms: None,
-                });
+                self.step_sent(
+                    (msgs, out),
+                    Running::Command(ticket),
+                    action.to_string(),
+                    name.clone(),
+                );
                 self.purposes.insert(
                     ticket,
                     Purpose::Step {
@@ -676,6 +684,27 @@ impl Vehicle {
             // Same command id still in flight (a stream request or a superseded step): next tick.
             Err(_) => false,
         }
+    }
+
+    /// A step's request went out: its messages queued, the job waiting on `running`, and a
+    /// `Sent` record for the step's command.
+    fn step_sent(
+        &mut self,
+        (msgs, out): (Vec<Msg>, &mut Vec<Msg>),
+        running: Running,
+        action: String,
+        command: String,
+    ) {
+        out.extend(msgs);
+        let job = self.job.as_mut().expect("a step runs inside a job");
+        job.running = running;
+        self.records.push(CommandRecord {
+            action,
+            command,
+            result: CommandOutcome::Sent,
+            attempts: 1,
+            latency_ms: None,
+        });
     }
 
     pub(super) fn reposition_spec(&self, o: Offset) -> Option<CommandSpec> {

@@ -17,7 +17,7 @@ use super::dialect::*;
 use super::ingest::Frame;
 use super::liveness::{Liveness, LivenessEvent};
 use super::mission::{MissionClient, MissionConfig, MissionEvent, MissionOp};
-use super::modes::{self, Flavor};
+use super::modes::{self, Flavor, FlightMode};
 use super::readiness::Readiness;
 use super::telemetry::{PackParam, Telemetry, TelemetryConfig, displace};
 use companion_core::observations::Observations;

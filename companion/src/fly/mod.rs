@@ -56,12 +56,12 @@ pub trait Decider {
 }
 
 /// The real core is a decider as it is (fuzzing and the soak drive it without a wrapper).
-impl Decider for companion_core::decision::Core<'_> {
+impl Decider for companion_core::decision::Core {
     fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
         companion_core::decision::Core::step(self, obs)
     }
     fn launch_verdict(&self, rec: &DecisionRecord) -> Result<(), LaunchRefusal> {
-        companion_core::launch::verdict(rec, self.model)
+        companion_core::launch::verdict(rec, &self.model)
     }
 }
 
