@@ -138,6 +138,23 @@ fn decisions_follow_tables_4_to_7() {
             "A2+A11",
             "{pol}"
         );
+        // After a lidar failure (P_obs 0.15, the BN's value) both turn to fusion on the way, from
+        // a full battery to P_battery 0.7 (docs/params/mdp.md "Which detector").
+        for pb in [0.7, 0.8, 0.99] {
+            let mut failed = p.clone();
+            failed.insert("P_obs".into(), 0.15);
+            failed.insert("P_battery".into(), pb);
+            assert_eq!(
+                decide(&mut all, "navigation", "wpi", &failed, pol),
+                "A2+A4",
+                "{pol} {pb}"
+            );
+            assert_eq!(
+                decide(&mut all, "monolithic", "wpi", &failed, pol),
+                "A2+A4+A5",
+                "{pol} {pb}"
+            );
+        }
         assert_eq!(decide(&mut all, "landing", "wpi", &p, pol), "A5", "{pol}");
         assert_eq!(decide(&mut all, "tracking", "wpi", &p, pol), "A2", "{pol}");
         assert_eq!(
