@@ -84,7 +84,8 @@ fn sizes_match_table_9() {
         (m.n_states(), m.n_actions())
     };
     // Table 9, plus A0 (stay on the ground), an addition (docs/params/mdp.md).
-    assert_eq!(size("monolithic"), (20, 22)); // section 5, Table 9
+    // section 5 / Table 9 (20 x 21) plus A0 and the concurrent models' action sets (issue 24 item 5)
+    assert_eq!(size("monolithic"), (24, 47));
     assert_eq!(size("navigation"), (9, 9));
     assert_eq!(size("tracking"), (12, 10));
     // Table 9 says 9 states; the prose names 10 (documented deviation), 6 actions as in Table 9.
@@ -137,6 +138,23 @@ fn decisions_follow_tables_4_to_7() {
             "A2+A11",
             "{pol}"
         );
+        // After a lidar failure (P_obs 0.15, the BN's value) both turn to fusion on the way, from
+        // a full battery to P_battery 0.7 (docs/params/mdp.md "Which detector").
+        for pb in [0.7, 0.8, 0.99] {
+            let mut failed = p.clone();
+            failed.insert("P_obs".into(), 0.15);
+            failed.insert("P_battery".into(), pb);
+            assert_eq!(
+                decide(&mut all, "navigation", "wpi", &failed, pol),
+                "A2+A4",
+                "{pol} {pb}"
+            );
+            assert_eq!(
+                decide(&mut all, "monolithic", "wpi", &failed, pol),
+                "A2+A4+A5",
+                "{pol} {pb}"
+            );
+        }
         assert_eq!(decide(&mut all, "landing", "wpi", &p, pol), "A5", "{pol}");
         assert_eq!(decide(&mut all, "tracking", "wpi", &p, pol), "A2", "{pol}");
         assert_eq!(
