@@ -195,9 +195,11 @@ fn periodic_model_is_solved_in_full() {
 }
 
 /// The paper's models (section 7.1 instantiation): same answers as full induction, and which
-/// of them stop early (all but navigation: their stage differences settle within about 20 to 70
-/// stages; navigation's hover-with-fusion action, issue 24, keeps its differences moving over the
-/// 100 stages, so it computes them all and must still equal full induction).
+/// of them stop early (all but navigation and the monolithic model: their stage differences
+/// settle within about 20 to 70 stages; navigation's hover-with-fusion action, issue 24, which
+/// the monolithic model has since it takes navigation's actions (issue 24 item 5), keeps their
+/// differences moving over the 100 stages, so they compute them all and must still equal full
+/// induction).
 #[test]
 fn paper_models_match_full_induction() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/models");
@@ -212,7 +214,7 @@ fn paper_models_match_full_induction() {
         let m: Mdp = serde_json::from_str(&text).unwrap();
         let computed = check(&m, 100).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert!(
-            computed < 100 || name == "navigation",
+            computed < 100 || name == "navigation" || name == "monolithic",
             "{name}: no early stop"
         );
         eprintln!("{name}: {computed} of 100 stages computed");
