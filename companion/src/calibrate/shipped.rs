@@ -3,6 +3,7 @@
 
 use super::cpt::ShippedRows;
 use super::power_fit::PowerModel;
+use companion_core::guarantee::Guarantee;
 use companion_core::mission::MissionStates;
 use companion_core::spec::SpecError;
 use std::collections::BTreeMap;
@@ -19,8 +20,9 @@ pub struct Shipped {
     pub hold_s: BTreeMap<String, f64>,
     /// Per activity: its `length_m` as shipped (0 for an activity that does not move).
     pub length_m: BTreeMap<String, f64>,
-    /// Per activity: the shortest duration estimate of its IAs (s).
-    pub fastest_s: BTreeMap<String, f64>,
+    /// Per activity: the duration estimate (s) of the IA these params plan it with (the
+    /// pre-flight allocation's), and that IA's name.
+    pub estimate_s: BTreeMap<String, (f64, String)>,
     pub rows: ShippedRows,
     pub states: MissionStates,
 }
@@ -44,19 +46,27 @@ impl Shipped {
             .goals
             .iter()
             .position(|g| g.name == "duration_s");
-        let fastest_s = spec
+        // The IA each activity is planned with: the pre-flight allocation of these params (the
+        // lifted one when their goals cannot be met, as `fly` starts), else the fastest IA.
+        let allocation = Guarantee::start_or_unbounded(spec.clone()).map(|g| g.choice().to_vec());
+        let estimate_s = spec
             .problem
             .activities
             .iter()
-            .filter_map(|a| {
+            .enumerate()
+            .filter_map(|(j, a)| {
                 let d = dur?;
-                let min = a
-                    .ias
-                    .iter()
-                    .filter_map(|ia| ia.cost.get(d))
-                    .copied()
-                    .reduce(f64::min)?;
-                Some((a.name.clone(), min))
+                let planned = allocation
+                    .as_ref()
+                    .and_then(|c| a.ias.get(c[j]))
+                    .and_then(|ia| Some((ia.cost.get(d).copied()?, ia.name.clone())));
+                let fastest = || {
+                    a.ias
+                        .iter()
+                        .filter_map(|ia| Some((ia.cost.get(d).copied()?, ia.name.clone())))
+                        .reduce(|x, y| if y.0 < x.0 { y } else { x })
+                };
+                Some((a.name.clone(), planned.or_else(fastest)?))
             })
             .collect();
         let mission_file = path
@@ -72,7 +82,7 @@ impl Shipped {
             power,
             hold_s,
             length_m,
-            fastest_s,
+            estimate_s,
         })
     }
 }

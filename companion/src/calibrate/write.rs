@@ -124,10 +124,13 @@ fn finish_report(mut s: String, shipped: &Shipped, cal: &Calibration) -> String 
         let _ = writeln!(s, "  none: no record says which activity was in force");
     }
     for (name, d) in cal.durations.stats() {
-        let fastest = shipped.fastest_s.get(name).copied().unwrap_or(f64::NAN);
+        let (est, ia) = shipped
+            .estimate_s
+            .get(name)
+            .map_or((f64::NAN, "-"), |(e, ia)| (*e, ia.as_str()));
         let _ = writeln!(
             s,
-            "  {name:<22} flown {:>8.1} s (sd {:.1}, {} run(s)); shipped estimate (fastest IA) {fastest:.1} s",
+            "  {name:<22} flown {:>8.1} s (sd {:.1}, {} run(s)); shipped estimate {est:.1} s (allocated IA {ia})",
             d.mean(),
             d.sd(),
             d.n
@@ -247,7 +250,8 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
         }
     }
     for (name, d) in cal.durations.stats() {
-        let (Some(fastest), Some(hold)) = (shipped.fastest_s.get(name), shipped.hold_s.get(name))
+        let (Some((estimate, ia)), Some(hold)) =
+            (shipped.estimate_s.get(name), shipped.hold_s.get(name))
         else {
             continue;
         };
@@ -255,10 +259,10 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
             continue;
         }
         let length = shipped.length_m.get(name).copied().unwrap_or(0.0);
-        let fit = fit_duration(*fastest, *hold, length, d.mean());
+        let fit = fit_duration(*estimate, *hold, length, d.mean());
         let flown = format!(
             "companion calibrate: flown {:.1} s (sd {:.1}) in {} run(s) against the shipped \
-             fastest estimate {fastest:.1} s",
+             estimate {estimate:.1} s of the allocated IA ({ia})",
             d.mean(),
             d.sd(),
             d.n
@@ -271,7 +275,7 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
                 format!("{mf}:activities.{name}.length_m"),
                 Value::String(format!(
                     "{flown}: the route is shorter than shipped ({length} m), scaled so that its \
-                     move time at the fastest IA's speed is what was flown"
+                     move time at the allocated IA's speed is what was flown"
                 )),
             );
         }
@@ -336,24 +340,24 @@ fn relative(from: &Path, to: &Path) -> String {
 }
 
 /// An activity's fitted duration entries: the hold absorbs the difference between the mean flown
-/// time and the fastest IA's estimate; when the activity was flown faster than the estimate even
-/// without a hold, its route is shortened by the rest (the move time of the fastest IA, taken as
-/// its estimate less the hold, scales with the length).
+/// time and the allocated IA's estimate; when the activity was flown faster than the estimate even
+/// without a hold, its route is shortened by the rest (the move time of that IA, taken as its
+/// estimate less the hold, scales with the length).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DurationFit {
     pub hold_s: f64,
     pub length_m: Option<f64>,
 }
 
-pub fn fit_duration(fastest_s: f64, hold_s: f64, length_m: f64, flown_s: f64) -> DurationFit {
-    let fitted_hold = hold_s + flown_s - fastest_s;
+pub fn fit_duration(estimate_s: f64, hold_s: f64, length_m: f64, flown_s: f64) -> DurationFit {
+    let fitted_hold = hold_s + flown_s - estimate_s;
     if fitted_hold >= 0.0 {
         return DurationFit {
             hold_s: fitted_hold,
             length_m: None,
         };
     }
-    let t_move = fastest_s - hold_s;
+    let t_move = estimate_s - hold_s;
     if length_m <= 0.0 || t_move <= 0.0 {
         return DurationFit {
             hold_s: 0.0,
