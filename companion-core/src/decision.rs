@@ -45,6 +45,8 @@ pub struct Core {
     /// Probabilities (`P_V3`) of the versions no feasible alternative of the activity being
     /// flown carries, capped from the next cycle (guarantee/binding.rs).
     capped_versions: Vec<String>,
+    /// The versions (`V3`) whose probabilities are in `capped_versions`.
+    capped_for: Vec<String>,
     /// Scratch: the versions without a feasible alternative, as the guarantee names them.
     versions_scratch: Vec<String>,
     /// The last cycle's re-allocation event text, kept to be rewritten (a version flipping
@@ -146,6 +148,7 @@ impl Core {
             guarantee: Guarantee::start_or_unbounded(model.guarantee.clone()),
             guarantee_infeasible: false,
             capped_versions: Vec::new(),
+            capped_for: Vec::new(),
             versions_scratch: Vec::new(),
             reallocation_event: String::new(),
             failed_resources: Vec::new(),
@@ -734,19 +737,15 @@ impl Core {
         }
         let mut versions = std::mem::take(&mut self.versions_scratch);
         g.versions_without_alternative(activity_index, &mut versions);
-        let same = versions.len() == self.capped_versions.len()
-            && versions.iter().all(|v| {
-                self.capped_versions
-                    .iter()
-                    .any(|c| c.strip_prefix("P_") == Some(v))
-            });
-        if !same {
+        // The versions capped last time, compared as the guarantee names them; their
+        // probabilities are the ones their activation nodes publish (the list the health layer
+        // builds from params/variants.toml), not a name made from the version's.
+        if versions != self.capped_for {
+            self.capped_for.clone_from(&versions);
             self.capped_versions.clear();
-            let published = model.health.publishes();
-            for v in &versions {
-                let name = format!("P_{v}");
-                if published.contains(&name) {
-                    self.capped_versions.push(name);
+            for a in &model.health.activations {
+                if versions.contains(&a.version) {
+                    self.capped_versions.extend(a.published.iter().cloned());
                 }
             }
             if !self.capped_versions.is_empty() {

@@ -113,3 +113,77 @@ fn the_plan_follows_what_runs_and_switching_it_off_changes_the_run() {
         "{differ} tracking cycles place another implementation with the plan off"
     );
 }
+
+/// PANORAMA -> BFM: a version none of whose alternatives can meet the goals is improbable. In a
+/// params copy where every V2 implementation needs the lidar, the lidar failure leaves no
+/// feasible alternative carrying V2: from the tracking area on, P_V2 (the probability V2's
+/// activation node publishes) is capped, the event says so once, and no MDP proposes V2 (until
+/// the guarantee as a whole is infeasible and caps P_battery instead). The
+/// shipped params cap nothing in the same run.
+#[test]
+fn a_version_without_a_feasible_alternative_is_capped_and_not_proposed() {
+    let shipped = companion::params::default_params_dir();
+    let cap_event = |r: &DecisionRecord| {
+        r.events
+            .iter()
+            .filter(|e| e.to_string().contains("no alternative carrying"))
+            .count()
+    };
+    let plain = run(&shipped, "lidar-failure");
+    assert_eq!(plain.iter().map(cap_event).sum::<usize>(), 0);
+
+    let dir = tempfile::tempdir().unwrap();
+    common::copy_dir(&shipped, dir.path());
+    let mission = dir.path().join("missions/tracking.toml");
+    let text = std::fs::read_to_string(&mission).unwrap();
+    let mut copy = text.clone();
+    for v in ["V2.S", "V2.M", "V2.F"] {
+        copy = copy.replacen(
+            &format!("{{ name = \"{v}\","),
+            &format!("{{ name = \"{v}\", resources = [\"lidar\"],"),
+            1,
+        );
+    }
+    assert_eq!(
+        copy.matches("resources = [\"lidar\"], variant = \"tracking/V2")
+            .count(),
+        3
+    );
+    std::fs::write(&mission, copy).unwrap();
+    let capped = run(dir.path(), "lidar-failure");
+    let cap = companion::params::load_model(dir.path())
+        .unwrap()
+        .mission
+        .guarantee
+        .infeasible_p_battery;
+    let first = capped
+        .iter()
+        .position(|r| cap_event(r) > 0)
+        .expect("the cap is announced");
+    let event = capped[first]
+        .events
+        .iter()
+        .map(ToString::to_string)
+        .find(|e| e.contains("no alternative carrying"))
+        .unwrap();
+    assert!(event.contains("V2") && event.contains("P_V2"), "{event}");
+    // Until the guarantee itself becomes infeasible (then no alternative at all is feasible and
+    // P_battery is capped instead: docs/guarantee.md), or the tracking area is left.
+    let mut checked = 0;
+    for r in capped[first + 1..].iter().take_while(|r| {
+        r.guarantee
+            .as_ref()
+            .is_some_and(|g| g.activity_name == "tracking_area" && !g.infeasible)
+    }) {
+        assert_eq!(cap_event(r), 0, "cycle {}: announced again", r.cycle);
+        let p = r.probabilities["P_V2"];
+        assert!(p <= cap, "cycle {}: P_V2 {p}", r.cycle);
+        assert!(
+            !r.actions.iter().any(|a| a == "track_v2"),
+            "cycle {}",
+            r.cycle
+        );
+        checked += 1;
+    }
+    assert!(checked > 10, "{checked} capped tracking cycles");
+}
