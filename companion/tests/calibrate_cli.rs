@@ -4,30 +4,12 @@
 
 mod common;
 use common::copy_dir;
+use common::{companion, text};
 use companion::decision_log::Header;
 use companion::params::default_params_dir;
 use companion_core::record::{DecisionRecord, GuaranteeRecord};
 use std::io::Write;
 use std::path::Path;
-use std::process::{Command, Output};
-
-const BIN: &str = env!("CARGO_BIN_EXE_companion");
-
-fn companion(args: &[&str]) -> Output {
-    Command::new(BIN)
-        .args(args)
-        .env_remove("COMPANION_PARAMS")
-        .output()
-        .expect("companion runs")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
 
 /// The vehicle the generated run flies, unlike the shipped params (base 8 W, P0 60 W, Pi 140 W,
 /// v0 6.3 m/s, CdA 0.05 m², U 80 m/s, ρ 1.225).

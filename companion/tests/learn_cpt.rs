@@ -6,30 +6,13 @@
 
 mod common;
 use common::copy_dir;
+use common::{companion, text};
 use companion::params::default_params_dir;
 use serde_json::Value;
 use std::path::Path;
-use std::process::{Command, Output};
 
-const BIN: &str = env!("CARGO_BIN_EXE_companion");
 const TRUE_ROW: f64 = 0.30;
 const SHIPPED_ROW: f64 = 0.9982;
-
-fn companion(args: &[&str]) -> Output {
-    Command::new(BIN)
-        .args(args)
-        .env_remove("COMPANION_PARAMS")
-        .output()
-        .expect("companion runs")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
 
 /// A params copy whose world keeps the target with V3 under vibrations in 30 % of the steps,
 /// with a scenario shaking the drone from the start of tracking.

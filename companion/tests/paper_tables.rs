@@ -3,26 +3,16 @@
 //! outcome typed into params), and every action that runs was proposed by an MDP in the same
 //! decision record.
 
+mod common;
+use common::shipped_model as model;
 use companion::params::default_params_dir;
 use companion::sim::{self, Scenario, WorldSpec};
-use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion_core::decision::{Core, ModelKind, Policy};
 use companion_core::health::HealthModel;
 use companion_core::observations::Observations;
 use companion_core::record::DecisionRecord;
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::sync::{Arc, OnceLock};
-
-/// The shipped model, loaded once per test binary and shared (each core holds its `Arc`).
-fn model() -> Arc<Model> {
-    static M: OnceLock<Arc<Model>> = OnceLock::new();
-    Arc::clone(M.get_or_init(|| {
-        Arc::new(
-            companion::params::load_model(&companion::params::default_params_dir())
-                .expect("params load"),
-        )
-    }))
-}
 
 /// The policies by name (params/policies.toml).
 fn safety() -> Policy {

@@ -1,23 +1,13 @@
 //! The BFM paper's experiments, reproduced as orderings over many seeds (the paper reports single
 //! Matlab runs; we assert what its Tables 3, 4-7 and 8 say, not its exact step counts).
 
+mod common;
+use common::shipped_model as model;
 use companion::sim::{self, RunResult, Scenario, WorldSpec};
-use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion_core::decision::{Core, ModelKind, Policy};
 use companion_core::record::DecisionRecord;
-use std::sync::{Arc, OnceLock};
 
 const SEEDS: u64 = 30;
-
-/// The shipped model, loaded once per test binary and shared (each core holds its `Arc`).
-fn model() -> Arc<Model> {
-    static M: OnceLock<Arc<Model>> = OnceLock::new();
-    Arc::clone(M.get_or_init(|| {
-        Arc::new(
-            companion::params::load_model(&companion::params::default_params_dir())
-                .expect("params load"),
-        )
-    }))
-}
 
 /// The policies by name (params/policies.toml).
 fn safety() -> Policy {

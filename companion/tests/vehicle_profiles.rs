@@ -2,19 +2,9 @@
 //! params overlay it is, an unknown name is refused naming the profiles there, and every number a
 //! profile sets carries its source (calibrate's runs, samples and fit error), never an ASSUMPTION.
 
+mod common;
+use common::companion;
 use companion::params::default_params_dir;
-use std::process::{Command, Output};
-
-const BIN: &str = env!("CARGO_BIN_EXE_companion");
-
-fn companion(args: &[&str]) -> Output {
-    Command::new(BIN)
-        .args(args)
-        .env_remove("COMPANION_PARAMS")
-        .env_remove("RUST_BACKTRACE")
-        .output()
-        .expect("companion runs")
-}
 
 fn profiles() -> Vec<String> {
     let mut names: Vec<String> = std::fs::read_dir(default_params_dir().join("vehicles"))

@@ -1,11 +1,13 @@
 //! Issue 24 item 4: the simulated world makes Table 3's hazards differ by what they do to the
 //! target, not by the scenario's trigger step (docs/simulation.md).
 
+mod common;
+use common::shipped_model as model;
 use companion::sim::{self, Scenario, WorldSpec};
-use companion_core::decision::{Core, Model, ModelKind};
+use companion_core::decision::{Core, ModelKind};
 use companion_core::record::Event;
 use companion_core::spec::ParamsFiles;
-use std::sync::{Arc, OnceLock};
+use std::sync::OnceLock;
 
 const SEEDS: u64 = 40;
 
@@ -14,14 +16,6 @@ fn params() -> &'static ParamsFiles {
     P.get_or_init(|| {
         companion::params::read_params_dir(&companion::params::default_params_dir()).unwrap()
     })
-}
-
-/// The shipped model, loaded once per test binary and shared (each core holds its `Arc`).
-fn model() -> Arc<Model> {
-    static M: OnceLock<Arc<Model>> = OnceLock::new();
-    Arc::clone(M.get_or_init(|| {
-        Arc::new(companion::params::load_model(&companion::params::default_params_dir()).unwrap())
-    }))
 }
 
 fn tracking_per_seed(scenario: &Scenario, kind: ModelKind) -> Vec<u32> {

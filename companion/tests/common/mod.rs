@@ -1,6 +1,41 @@
-//! Helpers shared by the companion crate's integration tests.
+//! Helpers shared by the companion crate's integration tests (each test binary uses some).
+#![allow(dead_code)]
 
+use companion_core::decision::Model;
 use std::path::Path;
+use std::process::{Command, Output};
+use std::sync::{Arc, OnceLock};
+
+/// The shipped model, loaded once per test binary and shared (each core holds its `Arc`).
+pub(crate) fn shipped_model() -> Arc<Model> {
+    static M: OnceLock<Arc<Model>> = OnceLock::new();
+    Arc::clone(M.get_or_init(|| {
+        Arc::new(
+            companion::params::load_model(&companion::params::default_params_dir())
+                .expect("params load"),
+        )
+    }))
+}
+
+/// `companion ARGS` run to completion, on its built-in params unless the args name others (the
+/// environment's `COMPANION_PARAMS` and `RUST_BACKTRACE` removed: messages as users see them).
+pub(crate) fn companion(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_companion"))
+        .args(args)
+        .env_remove("COMPANION_PARAMS")
+        .env_remove("RUST_BACKTRACE")
+        .output()
+        .expect("companion runs")
+}
+
+/// Its stdout and stderr, as text.
+pub(crate) fn text(o: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
 
 /// Copy the folder `from` (a params set) to `to`, recursively.
 pub(crate) fn copy_dir(from: &Path, to: &Path) {
