@@ -85,7 +85,7 @@ fn sizes_match_table_9() {
     };
     // Table 9, plus A0 (stay on the ground), an addition (docs/params/mdp.md).
     // section 5 / Table 9 (20 x 21) plus A0 and the concurrent models' action sets (issue 24 item 5)
-    assert_eq!(size("monolithic"), (24, 47));
+    assert_eq!(size("monolithic"), (27, 49));
     assert_eq!(size("navigation"), (9, 9));
     assert_eq!(size("tracking"), (12, 10));
     // Table 9 says 9 states; the prose names 10 (documented deviation), 6 actions as in Table 9.
