@@ -28,8 +28,8 @@ use companion_core::observations::Observations;
 /// Inputs that are not observations (telemetry the estimator needs besides `Observations`).
 #[derive(Debug, Clone, Default)]
 pub struct Extra<'a> {
-    /// Flight mode name (`AUTO`, `LAND`, `RTL`, ...).
-    pub mode: Option<&'a str>,
+    /// The flight mode the autopilot reports, when it is one the companion speaks of.
+    pub mode: Option<FlightMode>,
     /// EXTENDED_SYS_STATE landed state (`ON_GROUND`, `IN_AIR`, `TAKEOFF`, `LANDING`), once
     /// reported.
     pub landed_state: Option<&'a str>,
@@ -176,7 +176,7 @@ impl MissionState {
         let seq = obs.get("mission_seq").map(|s| s as u16);
         let speed = obs.get("groundspeed_mps").unwrap_or(f64::INFINITY);
         let detected = obs.get("target_detected").unwrap_or(0.0) > self.detection_threshold;
-        let mode = extra.mode.and_then(FlightMode::from_name);
+        let mode = extra.mode;
         if armed && alt >= self.airborne_m {
             self.flown = true;
         }
@@ -382,7 +382,7 @@ mod tests {
         let mut m = MissionState::new(&route(), 10.0, states());
         let none = Extra::default();
         let auto = Extra {
-            mode: Some("AUTO"),
+            mode: Some(FlightMode::Auto),
             ..Extra::default()
         };
         assert_eq!((m.wp1_seq, m.last_seq), (2, 5));
@@ -446,7 +446,7 @@ mod tests {
     fn one_disarmed_heartbeat_at_altitude_neither_lands_nor_ends_the_flight() {
         let mut m = MissionState::new(&route(), 10.0, states());
         let auto = Extra {
-            mode: Some("AUTO"),
+            mode: Some(FlightMode::Auto),
             landed_state: Some("IN_AIR"),
             ..Extra::default()
         };
@@ -465,12 +465,12 @@ mod tests {
     fn the_flight_ends_only_after_ground_and_disarm_hold_for_the_confirm_time() {
         let mut m = MissionState::new(&route(), 10.0, states());
         let in_air = Extra {
-            mode: Some("LAND"),
+            mode: Some(FlightMode::Land),
             landed_state: Some("IN_AIR"),
             ..Extra::default()
         };
         let on_ground = Extra {
-            mode: Some("LAND"),
+            mode: Some(FlightMode::Land),
             landed_state: Some("ON_GROUND"),
             ..Extra::default()
         };
@@ -534,7 +534,7 @@ mod tests {
         let flying = [("armed", 1.0), ("altitude_m", 15.0), ("mission_seq", 2.0)];
         assert_eq!(m.update(&obs(1.0, &flying), &Extra::default()), "wp1");
         let rtl = Extra {
-            mode: Some("RTL"),
+            mode: Some(FlightMode::Rtl),
             ..Extra::default()
         };
         assert_eq!(m.update(&obs(2.0, &flying), &rtl), "landing");
@@ -573,7 +573,7 @@ mod tests {
         );
         assert_eq!((old.state(), new.state()), ("base", "r_base"));
         let auto = Extra {
-            mode: Some("AUTO"),
+            mode: Some(FlightMode::Auto),
             ..Extra::default()
         };
         let fly = |t: f64, seq: f64, spd: f64, det: f64| {

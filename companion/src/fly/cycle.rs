@@ -11,6 +11,7 @@ use companion_core::record::{CommandOutcome, DecisionRecord, Event, LinkEvent, P
 use companion_link::Msg;
 use companion_link::ingest::Encoder;
 use companion_link::mission_state::{self, Extra, MissionState};
+use companion_link::modes::ReportedMode;
 use companion_link::vehicle::Vehicle;
 use std::time::Duration;
 
@@ -89,7 +90,7 @@ pub fn decide<D: Decider>(
     coalesce_events(&mut events);
     let mut obs = vehicle.observations(now(), events.clone());
     let extra = Extra {
-        mode: vehicle.telemetry.mode.as_deref(),
+        mode: vehicle.telemetry.mode.and_then(ReportedMode::known),
         landed_state: vehicle.telemetry.landed_state.as_deref(),
         down_for_s: Some(vehicle.down_for(now()).map_or(0.0, |d| d.as_secs_f64())),
     };
