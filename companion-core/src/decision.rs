@@ -389,17 +389,13 @@ impl Core {
         mark(Stage::Guarantee);
 
         // plan
-        let mut n = 0;
-        for &a in &sc.actions {
-            if model.actions.by_id(a).kind == ActionKind::Vehicle {
-                if n == plan.vehicle_actions.len() {
-                    plan.vehicle_actions.push(String::new());
-                }
-                plan.vehicle_actions[n].clone_from(&model.actions.by_id(a).id);
-                n += 1;
-            }
-        }
-        plan.vehicle_actions.truncate(n);
+        plan.vehicle_actions.clear();
+        plan.vehicle_actions.extend(
+            sc.actions
+                .iter()
+                .copied()
+                .filter(|&a| model.actions.by_id(a).kind == ActionKind::Vehicle),
+        );
         self.scratch = sc;
         match &rec.resources {
             Some(r) => plan.applications.clone_from(&r.placements),

@@ -334,12 +334,15 @@ pub fn mission_clock(obs: &Observations) -> f64 {
 /// several (its behaviour arbitration leaves e.g. `return_to_base` with `follow_trajectory`), the
 /// first in `precedence` (params/link.toml `vehicle_action_precedence`) wins; actions not listed
 /// come after, in plan order.
-pub fn select_vehicle_action(actions: &[String], precedence: &[String]) -> Option<String> {
+/// Actions and precedence are ids in the fly shell (the precedence resolved once), names in tests.
+pub fn select_vehicle_action<'a, A: PartialEq>(
+    actions: &'a [A],
+    precedence: &[A],
+) -> Option<&'a A> {
     precedence
         .iter()
-        .find(|p| actions.contains(p))
+        .find_map(|p| actions.iter().find(|a| *a == p))
         .or_else(|| actions.first())
-        .cloned()
 }
 
 #[cfg(test)]
@@ -625,17 +628,19 @@ mod tests {
             .to_vec();
         let a = |xs: &[&str]| xs.iter().map(|s| s.to_string()).collect::<Vec<_>>();
         assert_eq!(
-            select_vehicle_action(&a(&["follow_trajectory", "return_to_base"]), &p).as_deref(),
+            select_vehicle_action(&a(&["follow_trajectory", "return_to_base"]), &p)
+                .map(String::as_str),
             Some("return_to_base")
         );
         assert_eq!(
-            select_vehicle_action(&a(&["follow_trajectory", "avoid_obstacle"]), &p).as_deref(),
+            select_vehicle_action(&a(&["follow_trajectory", "avoid_obstacle"]), &p)
+                .map(String::as_str),
             Some("avoid_obstacle")
         );
         assert_eq!(
-            select_vehicle_action(&a(&["take_off"]), &p).as_deref(),
+            select_vehicle_action(&a(&["take_off"]), &p).map(String::as_str),
             Some("take_off")
         );
-        assert_eq!(select_vehicle_action(&[], &p), None);
+        assert_eq!(select_vehicle_action(&[], &p), None::<&String>);
     }
 }

@@ -98,7 +98,14 @@ pub fn decide<D: Decider>(
     complete_observations(&mut obs, &shell.mission);
     let (plan, mut rec) = decider.step(&obs);
     shell.mission.after_plan(&rec.actions);
-    let mut chosen = mission_state::select_vehicle_action(&plan.vehicle_actions, &shell.precedence);
+    let catalogue = decider.actions();
+    let precedence = shell.precedence_ids.get_or_insert_with(|| {
+        let ids = shell.precedence.iter().filter_map(|p| catalogue.id(p));
+        ids.collect()
+    });
+    // The record and the commands table speak names: the chosen id is named here.
+    let mut chosen = mission_state::select_vehicle_action(&plan.vehicle_actions, precedence)
+        .map(|&a| catalogue.name(a).to_string());
     let mut shell_events = Vec::new();
     if let Some(why) = shell.mission.mission_end(&obs) {
         // The mission's end, not the core's decision: recorded as an event with the action.
