@@ -16,6 +16,7 @@ use crate::observations::Observations;
 use crate::record::{DecisionRecord, Event, Plan};
 use crate::scratch::Scratch;
 use crate::stage_hook::{Stage, mark};
+use crate::vocabulary::ActionId;
 use fpga_model::PlatformState;
 use mdp_engine::Workspace;
 use std::collections::BTreeMap;
@@ -35,6 +36,9 @@ pub struct Core {
     /// Per MDP of `mdp_names`: where the policy's rewards sit in it, resolved in `new` (`None`:
     /// the MDP has no rewards for the policy, an error each cycle as the name lookup gave).
     mdp_policy: Vec<Option<usize>>,
+    /// Per MDP of `mdp_names`, per MDP action: the catalogue ids of its primitives (`does`),
+    /// resolved in `new` so the cycle merges proposals without looking names up.
+    mdp_primitives: Vec<Vec<Vec<ActionId>>>,
     health: HealthModel,
     mdps: MissionMdps,
     workspace: Workspace,
@@ -70,6 +74,20 @@ pub struct Core {
     room_extra: Vec<(crate::evidence::ObservationId, f64)>,
     /// The activation nodes' fit observations the core computes with the scheduler's check.
     fit_checks: Vec<FitCheck>,
+}
+
+/// Per action of MDP `name`, the catalogue ids of the primitives it stands for (every one is in
+/// the catalogue: checked at load; one that were not would be left out, as the name lookup did).
+fn primitive_ids(model: &Model, name: &str) -> Vec<Vec<ActionId>> {
+    let Some(mdp) = model.mdps.get(name) else {
+        return Vec::new();
+    };
+    (0..mdp.action_names().len())
+        .map(|a| {
+            let does = mdp.primitives(a).iter();
+            does.filter_map(|p| model.actions.id(p)).collect()
+        })
+        .collect()
 }
 
 /// One fit observation (`tracking_V3_fits`, node `F_V3`): whether the scheduler admits some
@@ -136,6 +154,11 @@ impl Core {
                     let mdp = model.mdps.get(name)?;
                     mdp.policy_index(model.policy_name(policy)).ok()
                 })
+                .collect(),
+            mdp_primitives: model
+                .mdp_names(kind)
+                .iter()
+                .map(|name| primitive_ids(&model, name))
                 .collect(),
             health: {
                 let mut h = model.health.clone();
@@ -314,7 +337,7 @@ impl Core {
         let mut n_proposals = 0;
         for (j, name) in self.mdp_names.iter().enumerate() {
             let local = model.mission.project(name, obs);
-            let (Some(mdp), Some(shared)) = (self.mdps.get_mut(name), model.mdps.get(name)) else {
+            let (Some(mdp), Some(_)) = (self.mdps.get_mut(name), model.mdps.get(name)) else {
                 continue;
             };
             let Some(s) = mdp.state_index(local) else {
@@ -336,10 +359,8 @@ impl Core {
             };
             match decided {
                 Ok(Some(d)) => {
-                    for a in shared.primitives(d.action) {
-                        if let Some(id) = model.actions.id(a)
-                            && !sc.merged.contains(&id)
-                        {
+                    for &id in &self.mdp_primitives[j][d.action] {
+                        if !sc.merged.contains(&id) {
                             sc.merged.push(id);
                         }
                     }
@@ -392,17 +413,13 @@ impl Core {
         mark(Stage::Guarantee);
 
         // plan
-        let mut n = 0;
-        for &a in &sc.actions {
-            if model.actions.by_id(a).kind == ActionKind::Vehicle {
-                if n == plan.vehicle_actions.len() {
-                    plan.vehicle_actions.push(String::new());
-                }
-                plan.vehicle_actions[n].clone_from(&model.actions.by_id(a).id);
-                n += 1;
-            }
-        }
-        plan.vehicle_actions.truncate(n);
+        plan.vehicle_actions.clear();
+        plan.vehicle_actions.extend(
+            sc.actions
+                .iter()
+                .copied()
+                .filter(|&a| model.actions.by_id(a).kind == ActionKind::Vehicle),
+        );
         self.scratch = sc;
         match &rec.resources {
             Some(r) => plan.applications.clone_from(&r.placements),

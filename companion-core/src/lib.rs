@@ -26,6 +26,7 @@
 //! - `tracking`: tracking time, shared by the world, the review and the tables.
 //! - `stage_hook`: an optional observer of the cycle's stage boundaries (benchmarks' breakdown).
 
+pub mod action_id;
 pub mod action_role;
 pub mod arbitration;
 pub mod conflicts;

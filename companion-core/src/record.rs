@@ -1,6 +1,7 @@
 //! The decision record: one per decision cycle, every stage in order. This is the schema of the
 //! decision log (docs/decision-log.md); bump [`SCHEMA_VERSION`] on any incompatible change.
 
+use crate::action_id::ActionId;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -406,14 +407,33 @@ pub struct CptUpdate {
 }
 
 /// What the core asks the shell to do this cycle.
-#[derive(Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[derive(Debug, Default, PartialEq)]
 pub struct Plan {
-    /// Primitive vehicle actions (`take_off`, `follow_trajectory`, `avoid_obstacle`, `land`,
-    /// `replan_and_land`, `return_to_base`), mapped to MAVLink by params/commands.toml.
-    pub vehicle_actions: Vec<String>,
+    /// Primitive vehicle actions (roles take-off, follow route, avoid obstacle, land, ...), by
+    /// id in the deciding core's catalogue; the shell maps them to MAVLink by params/commands.toml.
+    pub vehicle_actions: Vec<ActionId>,
     /// Application variants to run on the modeled platform.
     pub applications: Vec<PlacementRecord>,
+}
+
+impl Plan {
+    /// The plan as JSON writes it: actions by name (`name_of` is the deciding catalogue's
+    /// [`crate::mission::ActionCatalogue::name`]).
+    pub fn named<'a>(&'a self, name_of: impl Fn(ActionId) -> &'a str) -> NamedPlan<'a> {
+        NamedPlan {
+            vehicle_actions: self.vehicle_actions.iter().map(|&a| name_of(a)).collect(),
+            applications: &self.applications,
+        }
+    }
+}
+
+/// A [`Plan`] with its actions resolved to names, for writing.
+#[derive(Debug, Serialize)]
+pub struct NamedPlan<'a> {
+    /// The vehicle actions' names.
+    pub vehicle_actions: Vec<&'a str>,
+    /// Application variants to run on the modeled platform.
+    pub applications: &'a [PlacementRecord],
 }
 
 // ---------------------------------------------------------------- buffer reuse

@@ -10,17 +10,7 @@ use crate::spec::SpecError;
 use serde::Serialize;
 use std::path::Path;
 
-/// A primitive action of params/actions.toml, interned at load: its position in
-/// [`ActionCatalogue::actions`]. Only [`action_id`] makes one.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub struct ActionId(u16);
-
-impl ActionId {
-    /// Position of the action in its catalogue's `actions`.
-    pub fn index(self) -> usize {
-        usize::from(self.0)
-    }
-}
+pub use crate::action_id::ActionId;
 
 /// Most actions params/actions.toml may declare (ids are `u16`).
 pub const MAX_ACTIONS: usize = u16::MAX as usize;
@@ -32,7 +22,7 @@ pub fn action_id(catalogue: &ActionCatalogue, name: &str) -> Option<ActionId> {
         .iter()
         .take(MAX_ACTIONS)
         .position(|a| a.id == name)
-        .map(|i| ActionId(i as u16))
+        .map(|i| ActionId::from_index(i as u16))
 }
 
 impl ActionCatalogue {
@@ -59,7 +49,7 @@ impl ActionCatalogue {
             .iter()
             .take(id.index())
             .position(|b| b.app == a.app && b.version == a.version)
-            .map_or(id, |i| ActionId(i as u16))
+            .map_or(id, |i| ActionId::from_index(i as u16))
     }
 }
 

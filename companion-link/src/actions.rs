@@ -5,7 +5,7 @@
 
 use super::dialect::MavCmd;
 use super::mission::MissionItem;
-use super::modes::Flavor;
+use super::modes::{Flavor, FlightMode};
 use super::telemetry::{TelemetryConfig, displace};
 use companion_core::spec::{ParamsFiles, SpecError, check_positive, check_range, read_toml};
 use serde::Deserialize;
@@ -43,8 +43,8 @@ pub struct Offset {
 /// A step the executor runs.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Step {
-    /// Switch flight mode by name (GUIDED, AUTO, LOITER, RTL, LAND, BRAKE).
-    Mode(String),
+    /// Switch flight mode (GUIDED, AUTO, LOITER, RTL, LAND, BRAKE, ...).
+    Mode(FlightMode),
     /// Arm, once the autopilot reports ready.
     Arm,
     /// A COMMAND_LONG with these seven params.
@@ -149,10 +149,10 @@ impl ActionTable {
                     return Err(SpecError::new(path, entry, "params only go with command"));
                 }
                 let step = if let Some(m) = &s.mode {
-                    if !super::modes::is_known_mode(m) {
+                    let Some(mode) = FlightMode::from_name(m) else {
                         return Err(SpecError::new(path, entry, format!("unknown mode {m:?}")));
-                    }
-                    Step::Mode(m.clone())
+                    };
+                    Step::Mode(mode)
                 } else if let Some(arm) = s.arm {
                     if !arm {
                         return Err(SpecError::new(
@@ -562,13 +562,13 @@ pub enum Handoff {
 }
 
 impl Handoff {
-    /// The flight mode the hand-off sets (the names params/commands.toml uses), if any.
-    pub fn mode(self) -> Option<&'static str> {
+    /// The flight mode the hand-off sets, if any.
+    pub fn mode(self) -> Option<FlightMode> {
         match self {
             Handoff::None => None,
-            Handoff::Hold => Some("LOITER"),
-            Handoff::Rtl => Some("RTL"),
-            Handoff::Land => Some("LAND"),
+            Handoff::Hold => Some(FlightMode::Loiter),
+            Handoff::Rtl => Some(FlightMode::Rtl),
+            Handoff::Land => Some(FlightMode::Land),
         }
     }
 

@@ -28,8 +28,8 @@ use companion_core::observations::Observations;
 /// Inputs that are not observations (telemetry the estimator needs besides `Observations`).
 #[derive(Debug, Clone, Default)]
 pub struct Extra<'a> {
-    /// Flight mode name (`AUTO`, `LAND`, `RTL`, ...).
-    pub mode: Option<&'a str>,
+    /// The flight mode the autopilot reports, when it is one the companion speaks of.
+    pub mode: Option<FlightMode>,
     /// EXTENDED_SYS_STATE landed state (`ON_GROUND`, `IN_AIR`, `TAKEOFF`, `LANDING`), once
     /// reported.
     pub landed_state: Option<&'a str>,
@@ -176,7 +176,7 @@ impl MissionState {
         let seq = obs.get("mission_seq").map(|s| s as u16);
         let speed = obs.get("groundspeed_mps").unwrap_or(f64::INFINITY);
         let detected = obs.get("target_detected").unwrap_or(0.0) > self.detection_threshold;
-        let mode = extra.mode.and_then(FlightMode::from_name);
+        let mode = extra.mode;
         if armed && alt >= self.airborne_m {
             self.flown = true;
         }
@@ -334,12 +334,15 @@ pub fn mission_clock(obs: &Observations) -> f64 {
 /// several (its behaviour arbitration leaves e.g. `return_to_base` with `follow_trajectory`), the
 /// first in `precedence` (params/link.toml `vehicle_action_precedence`) wins; actions not listed
 /// come after, in plan order.
-pub fn select_vehicle_action(actions: &[String], precedence: &[String]) -> Option<String> {
+/// Actions and precedence are ids in the fly shell (the precedence resolved once), names in tests.
+pub fn select_vehicle_action<'a, A: PartialEq>(
+    actions: &'a [A],
+    precedence: &[A],
+) -> Option<&'a A> {
     precedence
         .iter()
-        .find(|p| actions.contains(p))
+        .find_map(|p| actions.iter().find(|a| *a == p))
         .or_else(|| actions.first())
-        .cloned()
 }
 
 #[cfg(test)]
@@ -382,7 +385,7 @@ mod tests {
         let mut m = MissionState::new(&route(), 10.0, states());
         let none = Extra::default();
         let auto = Extra {
-            mode: Some("AUTO"),
+            mode: Some(FlightMode::Auto),
             ..Extra::default()
         };
         assert_eq!((m.wp1_seq, m.last_seq), (2, 5));
@@ -446,7 +449,7 @@ mod tests {
     fn one_disarmed_heartbeat_at_altitude_neither_lands_nor_ends_the_flight() {
         let mut m = MissionState::new(&route(), 10.0, states());
         let auto = Extra {
-            mode: Some("AUTO"),
+            mode: Some(FlightMode::Auto),
             landed_state: Some("IN_AIR"),
             ..Extra::default()
         };
@@ -465,12 +468,12 @@ mod tests {
     fn the_flight_ends_only_after_ground_and_disarm_hold_for_the_confirm_time() {
         let mut m = MissionState::new(&route(), 10.0, states());
         let in_air = Extra {
-            mode: Some("LAND"),
+            mode: Some(FlightMode::Land),
             landed_state: Some("IN_AIR"),
             ..Extra::default()
         };
         let on_ground = Extra {
-            mode: Some("LAND"),
+            mode: Some(FlightMode::Land),
             landed_state: Some("ON_GROUND"),
             ..Extra::default()
         };
@@ -534,7 +537,7 @@ mod tests {
         let flying = [("armed", 1.0), ("altitude_m", 15.0), ("mission_seq", 2.0)];
         assert_eq!(m.update(&obs(1.0, &flying), &Extra::default()), "wp1");
         let rtl = Extra {
-            mode: Some("RTL"),
+            mode: Some(FlightMode::Rtl),
             ..Extra::default()
         };
         assert_eq!(m.update(&obs(2.0, &flying), &rtl), "landing");
@@ -573,7 +576,7 @@ mod tests {
         );
         assert_eq!((old.state(), new.state()), ("base", "r_base"));
         let auto = Extra {
-            mode: Some("AUTO"),
+            mode: Some(FlightMode::Auto),
             ..Extra::default()
         };
         let fly = |t: f64, seq: f64, spd: f64, det: f64| {
@@ -625,17 +628,19 @@ mod tests {
             .to_vec();
         let a = |xs: &[&str]| xs.iter().map(|s| s.to_string()).collect::<Vec<_>>();
         assert_eq!(
-            select_vehicle_action(&a(&["follow_trajectory", "return_to_base"]), &p).as_deref(),
+            select_vehicle_action(&a(&["follow_trajectory", "return_to_base"]), &p)
+                .map(String::as_str),
             Some("return_to_base")
         );
         assert_eq!(
-            select_vehicle_action(&a(&["follow_trajectory", "avoid_obstacle"]), &p).as_deref(),
+            select_vehicle_action(&a(&["follow_trajectory", "avoid_obstacle"]), &p)
+                .map(String::as_str),
             Some("avoid_obstacle")
         );
         assert_eq!(
-            select_vehicle_action(&a(&["take_off"]), &p).as_deref(),
+            select_vehicle_action(&a(&["take_off"]), &p).map(String::as_str),
             Some("take_off")
         );
-        assert_eq!(select_vehicle_action(&[], &p), None);
+        assert_eq!(select_vehicle_action(&[], &p), None::<&String>);
     }
 }

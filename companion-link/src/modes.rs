@@ -380,6 +380,77 @@ const PX4_NAMES: &[(u8, u8, &str)] = &[
     (px4_main::TERMINATION, 0, "TERMINATION"),
 ];
 
+impl std::fmt::Display for FlightMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The mode an autopilot's heartbeat reports, decoded once where the heartbeat is read: a
+/// [`FlightMode`] the companion speaks of, or a number no such mode stands for (an autopilot's
+/// mode this build does not know is a value, never an error). Its name is what records write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReportedMode {
+    /// A mode params and the shell name.
+    Known(FlightMode),
+    /// A PX4 (main, sub) with no [`FlightMode`]: AUTO.READY, POSCTL.SLOW, VTOL take-off,
+    /// Rattitude, Termination, or numbers PX4 has not defined.
+    Px4(Px4Mode),
+    /// ArduPilot's (or another autopilot's) `custom_mode` with no mode we know.
+    Number(u32),
+}
+
+impl ReportedMode {
+    /// The mode a heartbeat's `custom_mode` stands for on this autopilot.
+    pub fn decode(flavor: Flavor, custom_mode: u32) -> Self {
+        match flavor {
+            Flavor::ArduPilot => MODES
+                .iter()
+                .find(|m| m.2 == Some(custom_mode))
+                .map_or(ReportedMode::Number(custom_mode), |m| {
+                    ReportedMode::Known(m.0)
+                }),
+            Flavor::Px4 => {
+                let mode = Px4Mode::from_custom_mode(custom_mode);
+                px4_name(mode)
+                    .and_then(FlightMode::from_name)
+                    .map_or(ReportedMode::Px4(mode), ReportedMode::Known)
+            }
+            Flavor::Other => ReportedMode::Number(custom_mode),
+        }
+    }
+
+    /// The flight mode, when the report is one the companion speaks of.
+    pub fn known(self) -> Option<FlightMode> {
+        match self {
+            ReportedMode::Known(m) => Some(m),
+            _ => None,
+        }
+    }
+}
+
+impl std::fmt::Display for ReportedMode {
+    /// The name (`MODE_<n>` / `PX4_<main>_<sub>` for numbers without one).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            ReportedMode::Known(m) => f.write_str(m.name()),
+            ReportedMode::Px4(p) => match px4_name(p) {
+                Some(n) => f.write_str(n),
+                None => write!(f, "PX4_{}_{}", p.main, p.sub),
+            },
+            ReportedMode::Number(n) => write!(f, "MODE_{n}"),
+        }
+    }
+}
+
+/// The name PX4's heartbeat (main, sub) is reported as, when it has one.
+fn px4_name(mode: Px4Mode) -> Option<&'static str> {
+    PX4_NAMES
+        .iter()
+        .find(|n| n.0 == mode.main && n.1 == mode.sub)
+        .map(|n| n.2)
+}
+
 /// Whether any autopilot we know has a mode of this name (for validating params).
 pub fn is_known_mode(name: &str) -> bool {
     FlightMode::from_name(name).is_some()
@@ -464,22 +535,7 @@ fn px4_significant(custom_mode: u32) -> (u8, u8) {
 /// The mode name a heartbeat's `custom_mode` stands for (`MODE_<n>` / `PX4_<main>_<sub>` when
 /// unknown).
 pub fn mode_name(flavor: Flavor, custom_mode: u32) -> String {
-    match flavor {
-        Flavor::ArduPilot => MODES
-            .iter()
-            .find(|m| m.2 == Some(custom_mode))
-            .map(|m| m.1.to_string())
-            .unwrap_or_else(|| format!("MODE_{custom_mode}")),
-        Flavor::Px4 => {
-            let (main, sub) = px4_significant(custom_mode);
-            PX4_NAMES
-                .iter()
-                .find(|n| n.0 == main && n.1 == sub)
-                .map(|n| n.2.to_string())
-                .unwrap_or_else(|| format!("PX4_{main}_{sub}"))
-        }
-        Flavor::Other => format!("MODE_{custom_mode}"),
-    }
+    ReportedMode::decode(flavor, custom_mode).to_string()
 }
 
 /// Whether the vehicle's reported mode already is `name` (so a mode step can be skipped).
@@ -626,6 +682,40 @@ mod tests {
         // Copter-only modes have no PX4 command; unknown PX4 numbers decode to a readable name.
         assert!(set_mode_command(Flavor::Px4, m("DRIFT")).is_none());
         assert_eq!(mode_name(Flavor::Px4, px4_custom_mode(4, 7)), "PX4_4_7");
+    }
+
+    /// A heartbeat's mode is decoded once into a value: modes the companion speaks of are
+    /// `Known`, anything else (unused ArduCopter numbers, PX4 modes without a FlightMode, numbers
+    /// PX4 never defined, any other autopilot) is a value with its record name, never a panic.
+    #[test]
+    fn reported_modes_decode_to_values_with_their_record_names() {
+        use ReportedMode::*;
+        let px4 = |main, sub| ReportedMode::decode(Flavor::Px4, px4_custom_mode(main, sub));
+        assert_eq!(
+            ReportedMode::decode(Flavor::ArduPilot, 9),
+            Known(FlightMode::Land)
+        );
+        assert_eq!(ReportedMode::decode(Flavor::ArduPilot, 8), Number(8));
+        assert_eq!(
+            ReportedMode::decode(Flavor::ArduPilot, 8).to_string(),
+            "MODE_8"
+        );
+        assert_eq!(ReportedMode::decode(Flavor::Other, 3).to_string(), "MODE_3");
+        assert_eq!(px4(4, 3), Known(FlightMode::Loiter), "PX4 Hold");
+        let slow = px4(px4_main::POSCTL, px4_posctl::SLOW);
+        assert_eq!(slow.known(), None);
+        assert_eq!(slow.to_string(), "POSHOLD_SLOW");
+        assert_eq!(px4(4, 7).to_string(), "PX4_4_7");
+        assert_eq!(
+            px4(2, 7),
+            Known(FlightMode::AltHold),
+            "sub ignored outside AUTO/POSCTL"
+        );
+        for v in [0, 1, u32::MAX, 0xdead_beef, px4_custom_mode(255, 255)] {
+            for f in [Flavor::ArduPilot, Flavor::Px4, Flavor::Other] {
+                assert_eq!(ReportedMode::decode(f, v).to_string(), mode_name(f, v));
+            }
+        }
     }
 
     #[test]

@@ -20,7 +20,7 @@
 
 use super::Msg;
 use super::dialect::*;
-use super::modes::{self, Flavor, FlightMode};
+use super::modes::{self, Flavor, FlightMode, ReportedMode};
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
@@ -167,8 +167,8 @@ pub struct VehicleView<'a> {
     pub flavor: Flavor,
     /// The heartbeat's custom mode and its name, once known.
     pub custom_mode: u32,
-    /// Name of `custom_mode` for this autopilot, if known.
-    pub mode: Option<&'a str>,
+    /// `custom_mode` decoded for this autopilot, once a heartbeat was heard.
+    pub mode: Option<ReportedMode>,
     /// Consecutive autopilot heartbeats that reported the vehicle armed (0 when disarmed).
     pub armed_heartbeats: u32,
     /// Every autopilot heartbeat has reported the vehicle armed for this long (None when the
@@ -179,7 +179,7 @@ pub struct VehicleView<'a> {
     /// The vehicle has been airborne in this flight (the mission estimator's word).
     pub airborne: bool,
     /// Modes the companion commanded, with the time it sent each (newest last).
-    pub commanded_modes: &'a [(String, Duration)],
+    pub commanded_modes: &'a [(FlightMode, Duration)],
 }
 
 impl VehicleView<'_> {
@@ -368,7 +368,7 @@ impl OperatorGate {
                 if self.is_own_mode(now, v) {
                     return None;
                 }
-                let name = v.mode.unwrap_or("?").to_string();
+                let name = v.mode.map_or_else(|| "?".into(), |m| m.to_string());
                 self.control = Control::Unconfirmed {
                     mode: name.clone(),
                     since: now,
@@ -381,11 +381,11 @@ impl OperatorGate {
                     self.control = Control::Started;
                     return Some(GateEvent::FalseAlarm(
                         mode,
-                        v.mode.unwrap_or("?").to_string(),
+                        v.mode.map_or_else(|| "?".into(), |m| m.to_string()),
                     ));
                 }
                 if v.mode_for >= self.confirm {
-                    let name = v.mode.unwrap_or("?").to_string();
+                    let name = v.mode.map_or_else(|| "?".into(), |m| m.to_string());
                     self.control = Control::TakenOver { mode: name.clone() };
                     return Some(GateEvent::TakenOver(name));
                 }
@@ -399,7 +399,7 @@ impl OperatorGate {
                     return Some(GateEvent::HandedBack(StartBy::GuidedSwitch));
                 }
                 if changed && let Control::TakenOver { mode } = &mut self.control {
-                    *mode = v.mode.unwrap_or("?").to_string();
+                    *mode = v.mode.map_or_else(|| "?".into(), |m| m.to_string());
                 }
                 None
             }
@@ -416,10 +416,8 @@ impl OperatorGate {
             .filter(|(_, at)| now.saturating_sub(*at) <= self.grace);
         let latest = v.commanded_modes.last();
         let candidates = recent.chain(latest);
-        for (name, _) in candidates {
-            if FlightMode::from_name(name)
-                .is_some_and(|m| modes::is_in_mode(v.flavor, v.custom_mode, m))
-            {
+        for &(mode, _) in candidates {
+            if modes::is_in_mode(v.flavor, v.custom_mode, mode) {
                 return true;
             }
         }

@@ -6,6 +6,7 @@
 
 use super::Msg;
 use super::dialect::*;
+use super::modes::{Flavor, ReportedMode};
 use companion_core::observations::Observations;
 use companion_core::record::Event;
 use serde::Deserialize;
@@ -255,8 +256,8 @@ pub struct Telemetry {
     pub position: Option<Position>,
     /// HOME_POSITION (lat e7, lon e7, amsl m).
     pub home: Option<(i32, i32, f64)>,
-    /// Name of the current flight mode, as the caller's mode naming gives it.
-    pub mode: Option<String>,
+    /// The current flight mode, decoded for the autopilot's flavour.
+    pub mode: Option<ReportedMode>,
     /// HEARTBEAT.custom_mode as last heard.
     pub custom_mode: u32,
     /// Whether the last HEARTBEAT said armed.
@@ -314,18 +315,13 @@ impl Telemetry {
     }
 
     /// Update from one message. Returns significant events (`obstacle detected`, ...).
-    pub fn on_message(
-        &mut self,
-        now: Duration,
-        msg: &Msg,
-        mode_name: impl Fn(u32) -> String,
-    ) -> Vec<Event> {
+    pub fn on_message(&mut self, now: Duration, msg: &Msg, flavor: Flavor) -> Vec<Event> {
         let before_obstacle = self.obstacle_m(now);
         let before_target = self.get("target_detected");
         let before_battery = self.get("battery_pct");
         let mut events = Vec::new();
         match msg {
-            Msg::HEARTBEAT(h) => self.on_heartbeat(h, mode_name, &mut events),
+            Msg::HEARTBEAT(h) => self.on_heartbeat(h, flavor, &mut events),
             Msg::SYS_STATUS(s) => self.on_sys_status(s),
             Msg::BATTERY_STATUS(b) if b.id == 0 => self.on_battery_status(b),
             Msg::GLOBAL_POSITION_INT(p) if !on_globe(p.lat, p.lon) => {
@@ -425,12 +421,7 @@ impl Telemetry {
     }
 
     /// HEARTBEAT: armed and mode, an event when either changes.
-    fn on_heartbeat(
-        &mut self,
-        h: &HEARTBEAT_DATA,
-        mode_name: impl Fn(u32) -> String,
-        events: &mut Vec<Event>,
-    ) {
+    fn on_heartbeat(&mut self, h: &HEARTBEAT_DATA, flavor: Flavor, events: &mut Vec<Event>) {
         let armed = h
             .base_mode
             .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
@@ -438,10 +429,10 @@ impl Telemetry {
             events.push(if armed { Event::Armed } else { Event::Disarmed });
             self.armed = armed;
         }
-        let name = mode_name(h.custom_mode);
-        if self.mode.as_deref() != Some(name.as_str()) {
-            events.push(Event::Mode(name.clone()));
-            self.mode = Some(name);
+        let mode = ReportedMode::decode(flavor, h.custom_mode);
+        if self.mode != Some(mode) {
+            events.push(Event::Mode(mode.to_string()));
+            self.mode = Some(mode);
         }
         self.custom_mode = h.custom_mode;
     }
@@ -685,7 +676,7 @@ impl Telemetry {
     pub fn vehicle(&self) -> BTreeMap<String, serde_json::Value> {
         let mut v = BTreeMap::new();
         if let Some(m) = &self.mode {
-            v.insert("mode".into(), serde_json::Value::from(m.clone()));
+            v.insert("mode".into(), serde_json::Value::from(m.to_string()));
         }
         v.insert("armed".into(), serde_json::Value::from(self.armed));
         if let Some(p) = &self.position {

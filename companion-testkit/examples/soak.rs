@@ -80,6 +80,9 @@ impl Decider for CoreDecider {
     fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
         self.0.step(obs)
     }
+    fn actions(&self) -> &companion_core::mission::ActionCatalogue {
+        &self.0.model.actions
+    }
     fn launch_verdict(
         &self,
         rec: &DecisionRecord,
@@ -388,8 +391,10 @@ fn main() -> anyhow::Result<()> {
                     fly::finish_record(d, &mut s.shell, &mut s.vehicle, cycles, &mut Vec::new());
                 let _ = sink.write(&rec);
                 *states.entry(rec.state.clone()).or_default() += 1;
-                for a in &plan.vehicle_actions {
-                    *actions.entry(a.clone()).or_default() += 1;
+                for &a in &plan.vehicle_actions {
+                    *actions
+                        .entry(model.actions.name(a).to_string())
+                        .or_default() += 1;
                 }
                 if let Some(a) = rec
                     .actions

@@ -4,6 +4,7 @@
 
 use companion::fly::{Decider, FlyArgs, FlySetup};
 use companion_core::launch::LaunchRefusal;
+use companion_core::mission::{Action, ActionCatalogue, ActionKind, ActionRoles};
 use companion_core::observations::Observations;
 use companion_core::record::{DecisionRecord, Plan};
 
@@ -41,6 +42,34 @@ pub struct ScriptedDecider {
     pub policy: String,
     phase: Script,
     avoid_until: f64,
+    /// The script's own five actions (the plan's ids index it).
+    actions: ActionCatalogue,
+}
+
+/// The actions the script plays, by the shipped names the link's commands table maps.
+const SCRIPT_ACTIONS: [&str; 5] = [
+    "take_off",
+    "follow_trajectory",
+    "avoid_obstacle",
+    "land",
+    "return_to_base",
+];
+
+/// A catalogue of the script's actions only (vehicle actions; roles by the pre-roles rule).
+fn script_catalogue() -> ActionCatalogue {
+    let action = |(i, id): (usize, &str)| Action {
+        id: id.to_string(),
+        paper: format!("S{i}"),
+        kind: ActionKind::Vehicle,
+        label: id.to_string(),
+        app: None,
+        version: None,
+        role: None,
+    };
+    ActionCatalogue {
+        actions: SCRIPT_ACTIONS.into_iter().enumerate().map(action).collect(),
+        roles: ActionRoles::undeclared(),
+    }
 }
 
 impl ScriptedDecider {
@@ -52,6 +81,7 @@ impl ScriptedDecider {
             policy: policy.to_string(),
             phase: Script::OnGround,
             avoid_until: 0.0,
+            actions: script_catalogue(),
         }
     }
 
@@ -64,6 +94,10 @@ impl ScriptedDecider {
 }
 
 impl Decider for ScriptedDecider {
+    fn actions(&self) -> &ActionCatalogue {
+        &self.actions
+    }
+
     /// The script agrees to a start when it proposes to take off (it has no guarantee).
     fn launch_verdict(&self, rec: &DecisionRecord) -> Result<(), LaunchRefusal> {
         if rec.actions.iter().any(|a| a == "take_off") {
@@ -116,8 +150,12 @@ impl Decider for ScriptedDecider {
                 Script::Landing => "land",
             }
         };
+        let id = self
+            .actions
+            .id(action)
+            .expect("the script plays only its own actions");
         let plan = Plan {
-            vehicle_actions: vec![action.to_string()],
+            vehicle_actions: vec![id],
             applications: vec![],
         };
         let rec = DecisionRecord {
@@ -151,8 +189,10 @@ mod tests {
     #[test]
     fn scripted_decider_flies_the_tracking_pattern() {
         let mut d = ScriptedDecider::new(10.0, 6, "safety");
-        let act =
-            |d: &mut ScriptedDecider, o: Observations| d.step(&o).0.vehicle_actions[0].clone();
+        let act = |d: &mut ScriptedDecider, o: Observations| {
+            let id = d.step(&o).0.vehicle_actions[0];
+            d.actions.name(id).to_string()
+        };
         assert_eq!(
             act(&mut d, obs(0.0, &[("altitude_m", 0.0)], &[])),
             "take_off"

@@ -458,6 +458,7 @@ fn mission_ack(mission_type: MavMissionType) -> Msg {
 mod tests {
     use super::*;
     use companion_link::ingest::{Encoder, Ingest};
+    use companion_link::modes::{Flavor, ReportedMode};
     use companion_link::telemetry::{Telemetry, TelemetryConfig};
     use std::time::Duration;
 
@@ -511,7 +512,7 @@ mod tests {
             enc.component_id = c;
             for f in ing.push(&enc.encode(&m)) {
                 frames += 1;
-                tel.on_message(Duration::from_secs(1), &f.msg, |m| m.to_string());
+                tel.on_message(Duration::from_secs(1), &f.msg, Flavor::Other);
             }
         }
         assert_eq!(frames, 100);
@@ -527,7 +528,7 @@ mod tests {
         assert_eq!(tel.get("mission_seq"), Some(3.0));
         assert_eq!(tel.get("energy_consumed_j"), Some(12_300.0));
         assert!(tel.armed);
-        assert_eq!(tel.mode.as_deref(), Some("3"));
+        assert_eq!(tel.mode, Some(ReportedMode::Number(3)));
     }
 
     #[test]

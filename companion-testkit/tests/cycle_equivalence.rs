@@ -30,10 +30,12 @@ fn mission() -> Policy {
     model().policy("mission").unwrap()
 }
 
+/// The plan (actions by name, as every core of the shipped model names them) and the record.
 fn json(plan: &Plan, rec: &DecisionRecord) -> String {
+    let m = model();
     format!(
         "{}\n{}",
-        serde_json::to_string(plan).unwrap(),
+        serde_json::to_string(&plan.named(|a| m.actions.name(a))).unwrap(),
         serde_json::to_string(rec).unwrap()
     )
 }

@@ -227,6 +227,10 @@ impl Decider for CoreDecider {
         (plan, rec)
     }
 
+    fn actions(&self) -> &companion_core::mission::ActionCatalogue {
+        &self.model.actions
+    }
+
     fn launch_verdict(
         &self,
         rec: &companion_core::record::DecisionRecord,

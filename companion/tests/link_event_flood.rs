@@ -8,16 +8,27 @@ use companion::decision_log::{
 };
 use companion::fly::{self, Decider, FlyArgs, FlySetup, Shell};
 use companion::params::default_params_dir;
+use companion_core::mission::ActionCatalogue;
 use companion_core::observations::Observations;
 use companion_core::record::{DecisionRecord, LinkEvent, MAX_LINK_EVENTS, Plan};
 use std::time::Duration;
 
 /// Plans nothing: the flood, not the core, is under test.
-struct Idle;
+struct Idle(ActionCatalogue);
+
+impl Idle {
+    fn new() -> Self {
+        let files = companion::params::read_params_dir(&default_params_dir()).unwrap();
+        Idle(ActionCatalogue::load(&files).unwrap())
+    }
+}
 
 impl Decider for Idle {
     fn step(&mut self, _: &Observations) -> (Plan, DecisionRecord) {
         (Plan::default(), DecisionRecord::default())
+    }
+    fn actions(&self) -> &ActionCatalogue {
+        &self.0
     }
     fn launch_verdict(
         &self,
@@ -63,9 +74,10 @@ fn a_statustext_flood_loses_no_decision_record() {
     )
     .unwrap();
     let cycles = 12u64;
+    let mut idle = Idle::new();
     for c in 0..cycles {
         let now = Duration::from_secs(c);
-        let d = fly::decide(&mut Idle, &mut shell, &mut vehicle, || now);
+        let d = fly::decide(&mut idle, &mut shell, &mut vehicle, || now);
         let mut transport = flood(c);
         let rec = fly::finish_record(d, &mut shell, &mut vehicle, c, &mut transport);
         assert!(log.record(rec));

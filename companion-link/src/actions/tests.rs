@@ -30,7 +30,10 @@ fn shipped_params_load() {
             ..
         }
     ));
-    assert_eq!(t.actions["return_to_base"], vec![Step::Mode("RTL".into())]);
+    assert_eq!(
+        t.actions["return_to_base"],
+        vec![Step::Mode(FlightMode::Rtl)]
+    );
     // Staying on the ground commands nothing (an addition to the paper's actions).
     assert_eq!(t.actions["stay_on_ground"], Vec::<Step>::new());
     let r =

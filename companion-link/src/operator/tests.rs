@@ -14,23 +14,13 @@ const STABILIZE: u32 = 0;
 /// heartbeat, with `armed_for` and `mode_for` computed over the frames fed so far (a
 /// contradicting frame resets them, as `Vehicle::on_frame` does).
 struct Feed {
-    cmds: Vec<(String, Duration)>,
+    cmds: Vec<(FlightMode, Duration)>,
     armed_since: Option<Duration>,
     armed_hb: u32,
     mode: u32,
     mode_since: Duration,
     airborne: bool,
     last: Option<(Duration, u32, bool)>,
-}
-
-fn name(mode: u32) -> &'static str {
-    match mode {
-        GUIDED => "GUIDED",
-        LOITER => "LOITER",
-        AUTO => "AUTO",
-        LAND => "LAND",
-        _ => "STABILIZE",
-    }
 }
 
 impl Feed {
@@ -64,7 +54,9 @@ impl Feed {
         VehicleView {
             flavor: Flavor::ArduPilot,
             custom_mode: self.mode,
-            mode: self.last.map(|(_, m, _)| name(m)),
+            mode: self
+                .last
+                .map(|(_, m, _)| ReportedMode::decode(Flavor::ArduPilot, m)),
             armed_heartbeats: self.armed_hb,
             armed_for: self.armed_since.map(|a| now.saturating_sub(a)),
             mode_for: now.saturating_sub(self.mode_since),
@@ -185,7 +177,7 @@ fn a_mode_change_on_the_ground_disarmed_is_not_a_takeover() {
     // ArduCopter SITL: GUIDED accepted, then STABILIZE from the RC mode switch, disarmed.
     let mut g = OperatorGate::started();
     let mut f = Feed::new();
-    f.cmds = vec![("GUIDED".to_string(), s(1.0))];
+    f.cmds = vec![(FlightMode::Guided, s(1.0))];
     assert_eq!(f.at(&mut g, 1.0, STABILIZE, false), None);
     assert_eq!(f.at(&mut g, 1.5, GUIDED, false), None);
     assert_eq!(f.at(&mut g, 9.0, STABILIZE, false), None);
@@ -225,10 +217,7 @@ fn a_takeover_stops_at_once_and_is_confirmed_after_two_seconds_of_heartbeats() {
     let mut g = OperatorGate::started();
     let mut f = Feed::new();
     f.airborne = true;
-    f.cmds = vec![
-        ("GUIDED".to_string(), s(1.0)),
-        ("AUTO".to_string(), s(10.0)),
-    ];
+    f.cmds = vec![(FlightMode::Guided, s(1.0)), (FlightMode::Auto, s(10.0))];
     assert_eq!(f.at(&mut g, 10.5, AUTO, true), None);
     assert!(g.commanding());
     assert_eq!(
@@ -264,7 +253,7 @@ fn one_spoofed_loiter_heartbeat_is_a_false_alarm_and_commanding_resumes() {
     let mut g = OperatorGate::started();
     let mut f = Feed::new();
     f.airborne = true;
-    f.cmds = vec![("AUTO".to_string(), s(10.0))];
+    f.cmds = vec![(FlightMode::Auto, s(10.0))];
     assert_eq!(f.at(&mut g, 20.0, AUTO, true), None);
     assert_eq!(
         f.at(&mut g, 20.4, LOITER, true),
@@ -283,7 +272,7 @@ fn a_late_heartbeat_of_an_earlier_command_is_not_a_takeover() {
     let mut g = OperatorGate::started();
     let mut f = Feed::new();
     // AUTO commanded at 5 s, GUIDED at 6 s; the heartbeat showing AUTO arrives at 6.5 s.
-    f.cmds = vec![("AUTO".to_string(), s(5.0)), ("GUIDED".to_string(), s(6.0))];
+    f.cmds = vec![(FlightMode::Auto, s(5.0)), (FlightMode::Guided, s(6.0))];
     f.at(&mut g, 4.0, GUIDED, true);
     assert_eq!(f.at(&mut g, 6.5, AUTO, true), None);
     assert_eq!(f.at(&mut g, 7.0, GUIDED, true), None);

@@ -3,9 +3,8 @@ use super::*;
 fn s(v: f64) -> Duration {
     Duration::from_secs_f64(v)
 }
-fn name(n: u32) -> String {
-    format!("M{n}")
-}
+/// Heartbeats decode as ArduPilot's (custom mode 3 is AUTO, 4 GUIDED).
+const AP: Flavor = Flavor::ArduPilot;
 
 fn dist(id: u8, cm: u16, orientation: MavSensorOrientation) -> Msg {
     Msg::DISTANCE_SENSOR(DISTANCE_SENSOR_DATA {
@@ -73,7 +72,7 @@ fn telemetry_observations_lists_every_name_the_autopilot_messages_produce() {
         dist(0, 1200, MavSensorOrientation::MAV_SENSOR_ROTATION_NONE),
     ];
     for m in &msgs {
-        t.on_message(s(0.0), m, name);
+        t.on_message(s(0.0), m, AP);
     }
     t.on_pack_param(PackParam::CapacityMah, 5000.0);
     t.on_pack_param(PackParam::Cells, 4.0);
@@ -95,7 +94,7 @@ fn obstacle_events_from_forward_sensor_only() {
         t.on_message(
             s(0.0),
             &dist(1, 500, MavSensorOrientation::MAV_SENSOR_ROTATION_PITCH_270),
-            name
+            AP
         )
         .is_empty(),
         "downward rangefinder is altitude"
@@ -104,7 +103,7 @@ fn obstacle_events_from_forward_sensor_only() {
         t.on_message(
             s(0.1),
             &dist(0, 3000, MavSensorOrientation::MAV_SENSOR_ROTATION_NONE),
-            name
+            AP
         ),
         Vec::<Event>::new()
     );
@@ -112,7 +111,7 @@ fn obstacle_events_from_forward_sensor_only() {
         t.on_message(
             s(0.2),
             &dist(0, 1200, MavSensorOrientation::MAV_SENSOR_ROTATION_NONE),
-            name
+            AP
         ),
         vec![Event::ObstacleDetected]
     );
@@ -121,7 +120,7 @@ fn obstacle_events_from_forward_sensor_only() {
         t.on_message(
             s(0.3),
             &dist(0, 1100, MavSensorOrientation::MAV_SENSOR_ROTATION_NONE),
-            name
+            AP
         )
         .is_empty(),
         "still near: no new event"
@@ -130,7 +129,7 @@ fn obstacle_events_from_forward_sensor_only() {
         t.on_message(
             s(0.4),
             &dist(0, 2500, MavSensorOrientation::MAV_SENSOR_ROTATION_NONE),
-            name
+            AP
         ),
         vec!["obstacle cleared"]
     );
@@ -138,7 +137,7 @@ fn obstacle_events_from_forward_sensor_only() {
     t.on_message(
         s(0.5),
         &dist(0, 800, MavSensorOrientation::MAV_SENSOR_ROTATION_NONE),
-        name,
+        AP,
     );
     assert_eq!(t.observations(s(3.0), vec![]).get("obstacle_m"), None);
 }
@@ -157,10 +156,7 @@ fn obstacle_distance_scan_ignores_unknown_and_empty_sectors() {
         increment: 5,
         ..OBSTACLE_DISTANCE_DATA::DEFAULT
     });
-    assert_eq!(
-        t.on_message(s(0.0), &m, name),
-        vec![Event::ObstacleDetected]
-    );
+    assert_eq!(t.on_message(s(0.0), &m, AP), vec![Event::ObstacleDetected]);
     assert_eq!(t.obstacle_m(s(0.0)), Some(9.0));
 }
 
@@ -168,16 +164,16 @@ fn obstacle_distance_scan_ignores_unknown_and_empty_sectors() {
 fn onboard_monitors_map_names_and_target_events() {
     let mut t = Telemetry::new(TelemetryConfig::default());
     assert_eq!(
-        t.on_message(s(0.0), &nvf("tgt_det", 1.0), name),
+        t.on_message(s(0.0), &nvf("tgt_det", 1.0), AP),
         vec![Event::TargetDetected]
     );
-    t.on_message(s(0.0), &nvf("lum", 350.0), name);
-    t.on_message(s(0.0), &nvf("mystery", 2.0), name);
+    t.on_message(s(0.0), &nvf("lum", 350.0), AP);
+    t.on_message(s(0.0), &nvf("mystery", 2.0), AP);
     let o = t.observations(s(0.0), vec![]);
     assert_eq!(o.get("luminosity_lux"), Some(350.0));
     assert_eq!(o.get("onboard.mystery"), Some(2.0));
     assert_eq!(
-        t.on_message(s(1.0), &nvf("tgt_det", 0.0), name),
+        t.on_message(s(1.0), &nvf("tgt_det", 0.0), AP),
         vec!["target lost"]
     );
     let track = |flags| {
@@ -192,7 +188,7 @@ fn onboard_monitors_map_names_and_target_events() {
         t.on_message(
             s(2.0),
             &track(CameraTrackingStatusFlags::CAMERA_TRACKING_STATUS_FLAGS_ACTIVE),
-            name
+            AP
         ),
         vec![Event::TargetDetected]
     );
@@ -208,7 +204,7 @@ fn battery_status_gives_pack_voltage_and_current_over_sys_status() {
         battery_remaining: 50,
         ..SYS_STATUS_DATA::DEFAULT
     });
-    t.on_message(s(0.0), &sys, name);
+    t.on_message(s(0.0), &sys, AP);
     assert_eq!(t.get("battery_v"), Some(12.0));
     assert_eq!(t.get("battery_current_a"), Some(5.0));
     // PX4 style: four cells of 3.9 V, 12.34 A.
@@ -220,11 +216,11 @@ fn battery_status_gives_pack_voltage_and_current_over_sys_status() {
         battery_remaining: 50,
         ..BATTERY_STATUS_DATA::DEFAULT
     });
-    t.on_message(s(1.0), &bat, name);
+    t.on_message(s(1.0), &bat, AP);
     assert_eq!(t.get("battery_v"), Some(15.6));
     assert_eq!(t.get("battery_current_a"), Some(12.34));
     // SYS_STATUS no longer overrides BATTERY_STATUS's reading.
-    t.on_message(s(2.0), &sys, name);
+    t.on_message(s(2.0), &sys, AP);
     assert_eq!(t.get("battery_v"), Some(15.6));
     assert_eq!(t.get("battery_current_a"), Some(12.34));
     assert_eq!(t.observations(s(2.0), vec![]).get("battery_status_v"), None);
@@ -248,14 +244,14 @@ fn battery_thresholds_fire_once_on_the_way_down() {
             ..BATTERY_STATUS_DATA::DEFAULT
         })
     };
-    assert!(t.on_message(s(0.0), &bat(55), name).is_empty());
+    assert!(t.on_message(s(0.0), &bat(55), AP).is_empty());
     assert_eq!(
-        t.on_message(s(1.0), &bat(49), name),
+        t.on_message(s(1.0), &bat(49), AP),
         vec![Event::BatteryBelow(50.0)]
     );
-    assert!(t.on_message(s(2.0), &bat(49), name).is_empty());
+    assert!(t.on_message(s(2.0), &bat(49), AP).is_empty());
     assert_eq!(
-        t.on_message(s(3.0), &bat(15), name),
+        t.on_message(s(3.0), &bat(15), AP),
         vec![Event::BatteryBelow(30.0), Event::BatteryBelow(20.0)]
     );
     assert_eq!(t.get("energy_consumed_j"), Some(36_000.0));
@@ -266,7 +262,7 @@ fn battery_thresholds_fire_once_on_the_way_down() {
             battery_remaining: 90,
             ..SYS_STATUS_DATA::DEFAULT
         }),
-        name,
+        AP,
     );
     assert_eq!(t.get("battery_pct"), Some(15.0));
 }
@@ -287,13 +283,13 @@ fn mode_and_arming_changes_are_events() {
         })
     };
     assert_eq!(
-        t.on_message(s(0.0), &hb(4, false), name),
-        vec![Event::Mode("M4".into())]
+        t.on_message(s(0.0), &hb(4, false), AP),
+        vec![Event::Mode("GUIDED".into())]
     );
-    assert!(t.on_message(s(1.0), &hb(4, false), name).is_empty());
+    assert!(t.on_message(s(1.0), &hb(4, false), AP).is_empty());
     assert_eq!(
-        t.on_message(s(2.0), &hb(3, true), name),
-        vec![Event::Armed, Event::Mode("M3".into())]
+        t.on_message(s(2.0), &hb(3, true), AP),
+        vec![Event::Armed, Event::Mode("AUTO".into())]
     );
 }
 
@@ -311,25 +307,25 @@ fn wind(speed: f32, direction: f32) -> Msg {
 fn all_zero_wind_is_no_estimate_until_the_autopilot_estimates() {
     let mut t = Telemetry::new(TelemetryConfig::default());
     for k in 0..50 {
-        t.on_message(s(k as f64 * 0.2), &wind(0.0, 0.0), name);
+        t.on_message(s(k as f64 * 0.2), &wind(0.0, 0.0), AP);
     }
     let o = t.observations(s(10.0), vec![]);
     assert_eq!(o.get("wind_mps"), None);
     assert_eq!(o.get("wind_dir_deg"), None);
     assert!(!t.wind_estimating());
-    t.on_message(s(10.2), &wind(0.4, 185.0), name);
+    t.on_message(s(10.2), &wind(0.4, 185.0), AP);
     assert!(t.wind_estimating());
     assert_eq!(
         t.observations(s(10.2), vec![]).get("wind_mps"),
         Some(0.4f32 as f64)
     );
-    t.on_message(s(10.4), &wind(0.0, 0.0), name);
+    t.on_message(s(10.4), &wind(0.0, 0.0), AP);
     assert_eq!(t.observations(s(10.4), vec![]).get("wind_mps"), Some(0.0));
     // ArduCopter SITL without wind states: speed 0, direction -180 (atan2 of zeros) in
     // every message. The direction of a zero vector is no sign of estimation.
     let mut t = Telemetry::new(TelemetryConfig::default());
     for k in 0..10 {
-        t.on_message(s(k as f64), &wind(0.0, -180.0), name);
+        t.on_message(s(k as f64), &wind(0.0, -180.0), AP);
     }
     assert_eq!(t.observations(s(10.0), vec![]).get("wind_mps"), None);
     assert!(!t.wind_estimating());
@@ -347,16 +343,16 @@ fn wind_cov_gives_speed_and_direction() {
         })
     };
     let mut t = Telemetry::new(TelemetryConfig::default());
-    t.on_message(s(0.0), &cov(f32::NAN, f32::NAN), name);
-    t.on_message(s(0.1), &cov(0.0, 0.0), name);
+    t.on_message(s(0.0), &cov(f32::NAN, f32::NAN), AP);
+    t.on_message(s(0.1), &cov(0.0, 0.0), AP);
     assert_eq!(t.observations(s(0.1), vec![]).get("wind_mps"), None);
     // Air moving 3 m/s north and 4 m/s east: 5 m/s from the south-west (233.13 deg).
-    t.on_message(s(0.2), &cov(3.0, 4.0), name);
+    t.on_message(s(0.2), &cov(3.0, 4.0), AP);
     let o = t.observations(s(0.2), vec![]);
     assert!((o.get("wind_mps").unwrap() - 5.0).abs() < 1e-9);
     assert!((o.get("wind_dir_deg").unwrap() - 233.130_102).abs() < 1e-4);
     // Wind from the north (air moving south): 0 deg.
-    t.on_message(s(0.3), &cov(-2.0, 0.0), name);
+    t.on_message(s(0.3), &cov(-2.0, 0.0), AP);
     assert!(
         t.observations(s(0.3), vec![])
             .get("wind_dir_deg")
@@ -377,7 +373,7 @@ fn position_vibration_wind_gps() {
             altitude: 488_000,
             ..HOME_POSITION_DATA::DEFAULT
         }),
-        name,
+        AP,
     );
     // 0.0009 deg north = 100.19 m.
     t.on_message(
@@ -391,7 +387,7 @@ fn position_vibration_wind_gps() {
             hdg: 9000,
             ..GLOBAL_POSITION_INT_DATA::DEFAULT
         }),
-        name,
+        AP,
     );
     t.on_message(
         s(0.0),
@@ -401,7 +397,7 @@ fn position_vibration_wind_gps() {
             vibration_z: 7.0,
             ..VIBRATION_DATA::DEFAULT
         }),
-        name,
+        AP,
     );
     t.on_message(
         s(0.0),
@@ -410,7 +406,7 @@ fn position_vibration_wind_gps() {
             speed: 6.5,
             speed_z: 0.0,
         }),
-        name,
+        AP,
     );
     t.on_message(
         s(0.0),
@@ -419,7 +415,7 @@ fn position_vibration_wind_gps() {
             satellites_visible: 11,
             ..GPS_RAW_INT_DATA::DEFAULT
         }),
-        name,
+        AP,
     );
     let o = t.observations(s(0.0), vec![]);
     assert_eq!(o.get("altitude_m"), Some(20.0));
@@ -440,10 +436,10 @@ fn monitor_values_outside_their_range_are_refused_and_counted() {
     cfg.onboard.insert("zone_n".into(), "zone_north_m".into());
     cfg.ranges.insert("zone_north_m".into(), [-1000.0, 1000.0]);
     let mut t = Telemetry::new(cfg);
-    t.on_message(s(0.0), &nvf("zone_n", 40.0), name);
-    t.on_message(s(0.1), &nvf("zone_n", -2.0e7), name);
-    t.on_message(s(0.2), &nvf("zone_n", f32::NAN), name);
-    t.on_message(s(0.3), &nvf("other", f32::INFINITY), name);
+    t.on_message(s(0.0), &nvf("zone_n", 40.0), AP);
+    t.on_message(s(0.1), &nvf("zone_n", -2.0e7), AP);
+    t.on_message(s(0.2), &nvf("zone_n", f32::NAN), AP);
+    t.on_message(s(0.3), &nvf("other", f32::INFINITY), AP);
     assert_eq!(
         t.get("zone_north_m"),
         Some(40.0),
@@ -462,13 +458,13 @@ fn unmapped_names_are_capped_and_the_rest_counted() {
     };
     let mut t = Telemetry::new(cfg);
     for i in 0..1000 {
-        t.on_message(s(0.0), &nvf(&format!("n{i}"), 1.0), name);
+        t.on_message(s(0.0), &nvf(&format!("n{i}"), 1.0), AP);
     }
     // Control characters never become an observation name.
-    t.on_message(s(0.5), &nvf("a\x1b[2J", 1.0), name);
+    t.on_message(s(0.5), &nvf("a\x1b[2J", 1.0), AP);
     // Names already kept still update; mapped names always pass.
-    t.on_message(s(1.0), &nvf("n0", 7.0), name);
-    t.on_message(s(1.0), &nvf("lum", 300.0), name);
+    t.on_message(s(1.0), &nvf("n0", 7.0), AP);
+    t.on_message(s(1.0), &nvf("lum", 300.0), AP);
     let o = t.observations(s(1.0), vec![]);
     let onboard = o
         .values
@@ -491,9 +487,9 @@ fn positions_off_the_globe_are_refused() {
             ..GLOBAL_POSITION_INT_DATA::DEFAULT
         })
     };
-    t.on_message(s(0.0), &pos(473_977_420, 85_455_940), name);
-    t.on_message(s(0.1), &pos(950_000_000, 85_455_940), name);
-    t.on_message(s(0.2), &pos(473_977_420, -1_813_000_000), name);
+    t.on_message(s(0.0), &pos(473_977_420, 85_455_940), AP);
+    t.on_message(s(0.1), &pos(950_000_000, 85_455_940), AP);
+    t.on_message(s(0.2), &pos(473_977_420, -1_813_000_000), AP);
     assert_eq!(t.position.unwrap().lat_e7, 473_977_420);
     assert_eq!(t.get("lon_deg"), Some(85_455_940.0 * 1e-7));
     assert_eq!(t.rejected.out_of_range, 2);

@@ -208,15 +208,15 @@ impl Vehicle {
                     let (target, since) = (*target, *since);
                     self.arrive_step(now, action, target, since)
                 }
-                (Running::ConfirmMode { since }, Step::Mode(name)) => {
+                (Running::ConfirmMode { since }, Step::Mode(mode)) => {
                     let (from, since) = (job.mode_from, *since);
-                    self.confirm_mode_step(now, action, name, from, since)
+                    self.confirm_mode_step(now, action, *mode, from, since)
                 }
                 (Running::ConfirmMode { .. }, _) => {
                     job.running = Running::Idle;
                     Advance::Again
                 }
-                (Running::Idle, Step::Mode(name)) => self.mode_step(now, action, name, &mut out),
+                (Running::Idle, Step::Mode(mode)) => self.mode_step(now, action, *mode, &mut out),
                 (Running::Idle | Running::WaitReady { .. }, Step::Arm) => {
                     self.arm_step(now, action, &mut out)
                 }
@@ -302,22 +302,15 @@ impl Vehicle {
         &mut self,
         now: Duration,
         action: String,
-        name: &str,
+        mode: FlightMode,
         out: &mut Vec<Msg>,
     ) -> Advance {
-        let mode = FlightMode::from_name(name);
         // Landing and return never wait.
-        let shown = self
-            .telemetry
-            .mode
-            .as_deref()
-            .and_then(FlightMode::from_name);
+        let shown = self.telemetry.mode.and_then(ReportedMode::known);
         if self.flavor == Flavor::Px4
             && !matches!(
                 mode,
-                Some(
-                    FlightMode::Land | FlightMode::Rtl | FlightMode::SmartRtl | FlightMode::Takeoff
-                )
+                FlightMode::Land | FlightMode::Rtl | FlightMode::SmartRtl | FlightMode::Takeoff
             )
             && shown == Some(FlightMode::Takeoff)
         {
@@ -329,7 +322,7 @@ impl Vehicle {
             }
         }
         self.px4_takeoff_wait = None;
-        if mode == Some(FlightMode::Auto)
+        if mode == FlightMode::Auto
             && let Some((_, until)) = self.px4_mission_pending
         {
             if now < until {
@@ -344,17 +337,17 @@ impl Vehicle {
             .iter()
             .rev()
             .find(|(_, at)| self.mode_heard_at.is_none_or(|h| *at >= h))
-            .is_some_and(|(m, _)| m != name);
-        self.note_mode(now, name);
-        if mode.is_some_and(|m| modes::is_in_mode(self.flavor, self.telemetry.custom_mode, m))
+            .is_some_and(|(m, _)| *m != mode);
+        self.note_mode(now, mode);
+        if modes::is_in_mode(self.flavor, self.telemetry.custom_mode, mode)
             && self.telemetry.mode.is_some()
             && !stale
         {
-            self.record_step(action, format!("SET_MODE {name}"), "ALREADY".into());
+            self.record_step(action, format!("SET_MODE {mode}"), "ALREADY".into());
             self.step_done();
             return Advance::Again;
         }
-        match mode.and_then(|m| modes::set_mode_command(self.flavor, m)) {
+        match modes::set_mode_command(self.flavor, mode) {
             Some(spec) => {
                 let shown = self
                     .telemetry
@@ -367,11 +360,11 @@ impl Vehicle {
                     }
                     j.mode_attempts += 1;
                 }
-                self.issued(now, &action, format!("SET_MODE {name}"), spec, out)
+                self.issued(now, &action, format!("SET_MODE {mode}"), spec, out)
             }
             None => {
-                let result = format!("FAILED (no {name} mode for {})", self.flavor.name());
-                self.record_step(action, format!("SET_MODE {name}"), result);
+                let result = format!("FAILED (no {mode} mode for {})", self.flavor.name());
+                self.record_step(action, format!("SET_MODE {mode}"), result);
                 self.job_failed(now);
                 Advance::Again
             }
@@ -387,22 +380,22 @@ impl Vehicle {
         &mut self,
         now: Duration,
         action: String,
-        name: &str,
+        name: FlightMode,
         from: Option<u32>,
         since: Duration,
     ) -> Advance {
         let heard_since = self.mode_heard_at.is_some_and(|h| h > since);
-        if heard_since
-            && FlightMode::from_name(name)
-                .is_some_and(|m| modes::is_in_mode(self.flavor, self.telemetry.custom_mode, m))
-        {
+        if heard_since && modes::is_in_mode(self.flavor, self.telemetry.custom_mode, name) {
             self.step_done();
             return Advance::Again;
         }
         if now.saturating_sub(since) < self.cfg.mode_confirm {
             return Advance::Wait;
         }
-        let shown = self.telemetry.mode.clone().unwrap_or_else(|| "?".into());
+        let shown = self
+            .telemetry
+            .mode
+            .map_or_else(|| "?".into(), |m| m.to_string());
         let unchanged = heard_since && from == Some(self.telemetry.custom_mode);
         let attempts = self.job.as_ref().map_or(0, |j| j.mode_attempts);
         let waited = self.cfg.mode_confirm.as_secs_f64();
@@ -453,15 +446,16 @@ impl Vehicle {
                 // newer than the mode command; if it shows another mode, this take-off
                 // fails and the next request sets the mode again.
                 if self.flavor == Flavor::ArduPilot
-                    && let Some((want, at)) = self.commanded_modes.last().cloned()
-                    && !FlightMode::from_name(&want).is_some_and(|m| {
-                        modes::is_in_mode(self.flavor, self.telemetry.custom_mode, m)
-                    })
+                    && let Some((want, at)) = self.commanded_modes.last().copied()
+                    && !modes::is_in_mode(self.flavor, self.telemetry.custom_mode, want)
                 {
                     if self.mode_heard_at.is_none_or(|h| h <= at) {
                         return Advance::Wait;
                     }
-                    let now_mode = self.telemetry.mode.clone().unwrap_or_else(|| "?".into());
+                    let now_mode = self
+                        .telemetry
+                        .mode
+                        .map_or_else(|| "?".into(), |m| m.to_string());
                     self.record_step(
                         action,
                         "ARM".into(),
@@ -538,7 +532,7 @@ impl Vehicle {
         };
         if command == MavCmd::MAV_CMD_NAV_TAKEOFF && self.flavor == Flavor::Px4 {
             // PX4 flies a take-off command in its TAKEOFF mode.
-            self.note_mode(now, "TAKEOFF");
+            self.note_mode(now, FlightMode::Takeoff);
         }
         let spec = CommandSpec::long(command, params);
         self.issued(now, &action, crate::mavlink_name(&command), spec, out)
@@ -886,8 +880,8 @@ impl Vehicle {
             || matches!(&self.last, Some((k, JobStatus::Done | JobStatus::Running)) if k == action)
     }
 
-    pub(super) fn note_mode(&mut self, now: Duration, name: &str) {
-        self.commanded_modes.push((name.to_string(), now));
+    pub(super) fn note_mode(&mut self, now: Duration, mode: FlightMode) {
+        self.commanded_modes.push((mode, now));
         if self.commanded_modes.len() > 8 {
             self.commanded_modes.remove(0);
         }
@@ -896,7 +890,7 @@ impl Vehicle {
     /// MAV_CMD_DO_REPOSITION with the change-mode flag: ArduPilot enters GUIDED, PX4 holds in
     /// LOITER (our GUIDED on PX4).
     pub(super) fn note_reposition(&mut self, now: Duration) {
-        self.note_mode(now, "GUIDED");
+        self.note_mode(now, FlightMode::Guided);
     }
 
     /// When the last action failed (its key and the time), if it did and nothing ran since.
@@ -910,26 +904,26 @@ impl Vehicle {
     /// The companion stops: whatever it was doing ends now (recorded CANCELLED) and the vehicle
     /// is put in `mode` (`LOITER`, `RTL`, `LAND`) for the autopilot to fly on its own. The
     /// step is acknowledged (or fails) like any other; [`Vehicle::handoff_status`] tells.
-    pub fn hand_off(&mut self, now: Duration, mode: &str) -> Vec<Msg> {
+    pub fn hand_off(&mut self, now: Duration, mode: FlightMode) -> Vec<Msg> {
         self.stop_actions(now, "companion stopping");
         let key = format!("handoff:{mode}");
         self.job = Some(Job {
             key: key.clone(),
-            steps: VecDeque::from([(key.clone(), Step::Mode(mode.to_string()))]),
+            steps: VecDeque::from([(key.clone(), Step::Mode(mode))]),
             running: Running::Idle,
             arm_attempts: 0,
             mode_attempts: 0,
             mode_from: None,
         });
         self.last = Some((key, JobStatus::Running));
-        self.handoff = Some(mode.to_string());
+        self.handoff = Some(mode);
         self.advance_job(now)
     }
 
     /// The hand-off's outcome: None while it runs (or none was issued), Some(true) when the
     /// autopilot accepted the mode, Some(false) when the step failed.
     pub fn handoff_status(&self) -> Option<bool> {
-        let mode = self.handoff.as_deref()?;
+        let mode = self.handoff?.name();
         match &self.last {
             Some((k, JobStatus::Done)) if k.strip_prefix("handoff:") == Some(mode) => Some(true),
             Some((k, JobStatus::Failed(_))) if k.strip_prefix("handoff:") == Some(mode) => {

@@ -17,7 +17,7 @@ use super::dialect::*;
 use super::ingest::Frame;
 use super::liveness::{Liveness, LivenessEvent};
 use super::mission::{MissionClient, MissionConfig, MissionEvent, MissionOp};
-use super::modes::{self, Flavor, FlightMode};
+use super::modes::{self, Flavor, FlightMode, ReportedMode};
 use super::readiness::Readiness;
 use super::telemetry::{PackParam, Telemetry, TelemetryConfig, displace};
 use companion_core::observations::Observations;
@@ -162,7 +162,7 @@ pub struct Vehicle {
     /// Modes this companion commanded (or made the autopilot enter, as a reposition enters
     /// GUIDED), with when; the newest last, a few kept. The operator gate tells its own mode
     /// changes from a pilot's with them.
-    pub commanded_modes: Vec<(String, Duration)>,
+    pub commanded_modes: Vec<(FlightMode, Duration)>,
     /// Commands addressed to this companion (component 191) since the last
     /// [`Vehicle::take_commands_to_us`].
     commands_to_us: Vec<CommandToUs>,
@@ -177,7 +177,7 @@ pub struct Vehicle {
     /// any contradicting frame resets it.
     down_since: Option<Duration>,
     /// The hand-off job's mode, once [`Vehicle::hand_off`] issued it.
-    handoff: Option<String>,
+    handoff: Option<FlightMode>,
     /// Where the running zone reposition goes.
     zone_target: Option<(i32, i32)>,
     /// When the autopilot last reported its mode (its heartbeat).
@@ -368,9 +368,7 @@ impl Vehicle {
             out.extend(self.on_liveness(now, ev));
         }
         let flavor = self.flavor;
-        let ev = self
-            .telemetry
-            .on_message(now, &f.msg, |m| modes::mode_name(flavor, m));
+        let ev = self.telemetry.on_message(now, &f.msg, flavor);
         self.events.extend(ev);
         match &f.msg {
             Msg::HEARTBEAT(h) => {
@@ -458,9 +456,7 @@ impl Vehicle {
                 return Vec::new();
             }
             let flavor = self.flavor;
-            let ev = self
-                .telemetry
-                .on_message(now, &f.msg, |m| modes::mode_name(flavor, m));
+            let ev = self.telemetry.on_message(now, &f.msg, flavor);
             self.events.extend(ev);
         }
         Vec::new()

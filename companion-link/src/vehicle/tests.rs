@@ -77,7 +77,7 @@ fn table() -> ActionTable {
     t.actions.insert(
         "take_off".into(),
         vec![
-            Step::Mode("GUIDED".into()),
+            Step::Mode(FlightMode::Guided),
             Step::Arm,
             Step::Command {
                 command: MavCmd::MAV_CMD_NAV_TAKEOFF,
@@ -86,7 +86,7 @@ fn table() -> ActionTable {
         ],
     );
     t.actions
-        .insert("return_to_base".into(), vec![Step::Mode("RTL".into())]);
+        .insert("return_to_base".into(), vec![Step::Mode(FlightMode::Rtl)]);
     t
 }
 
@@ -573,7 +573,10 @@ fn autopilot_sysid_chooses_and_others_are_reported_not_obeyed() {
         v.on_frame(s(t as f64), &from(7, 1, hb(4, true)));
     }
     assert!(!v.telemetry.armed, "armed came only from the impostor");
-    assert_eq!(v.telemetry.mode.as_deref(), Some("STABILIZE"));
+    assert_eq!(
+        v.telemetry.mode,
+        Some(ReportedMode::Known(FlightMode::Stabilize))
+    );
     let evs = v.take_link_events();
     let reports: Vec<_> = evs
         .iter()
@@ -752,7 +755,7 @@ fn zone_vehicle() -> Vehicle {
     let mut t = table();
     t.actions.insert(
         "replan_and_land".into(),
-        vec![Step::GotoZone, Step::Mode("LAND".into())],
+        vec![Step::GotoZone, Step::Mode(FlightMode::Land)],
     );
     let mut cfg = VehicleConfig::default();
     cfg.telemetry.onboard.extend([
@@ -870,7 +873,7 @@ fn route_vehicle() -> Vehicle {
     let mut t = table();
     t.actions.insert(
         "follow_trajectory".into(),
-        vec![Step::UploadMission, Step::Mode("AUTO".into())],
+        vec![Step::UploadMission, Step::Mode(FlightMode::Auto)],
     );
     t.actions.insert(
         "avoid_obstacle".into(),
@@ -1025,7 +1028,7 @@ fn zone_route_vehicle() -> Vehicle {
     let mut v = route_vehicle();
     v.actions.actions.insert(
         "land".into(),
-        vec![Step::GotoZone, Step::Mode("LAND".into())],
+        vec![Step::GotoZone, Step::Mode(FlightMode::Land)],
     );
     v.cfg.zone_radius_m = 3.0;
     v.cfg.zone_arrive_timeout = Duration::from_secs(60);
@@ -1136,7 +1139,7 @@ fn stop_actions_cancels_the_running_action_and_nothing_is_resent() {
     // Asked again later (control handed back), the same action runs afresh.
     let out = v.request_actions(s(6.0), &["return_to_base".into()]);
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
-    assert_eq!(v.commanded_modes.last().map(|m| m.0.as_str()), Some("RTL"));
+    assert_eq!(v.commanded_modes.last().map(|m| m.0), Some(FlightMode::Rtl));
 }
 
 #[test]
@@ -1219,7 +1222,7 @@ fn a_mode_reported_before_our_last_mode_command_is_not_already_set() {
     let mut v = route_vehicle();
     v.actions
         .actions
-        .insert("land".into(), vec![Step::Mode("LAND".into())]);
+        .insert("land".into(), vec![Step::Mode(FlightMode::Land)]);
     v.on_frame(s(1.0), &hb(9, true)); // LAND
     // A sidestep: GUIDED accepted, the heartbeat still says LAND.
     v.request_actions(s(1.1), &["avoid_obstacle".into()]);
@@ -1370,7 +1373,7 @@ fn px4_auto_waits_until_px4_reports_the_uploaded_mission() {
     let mut t = table();
     t.actions.insert(
         "follow_trajectory".into(),
-        vec![Step::UploadMission, Step::Mode("AUTO".into())],
+        vec![Step::UploadMission, Step::Mode(FlightMode::Auto)],
     );
     let route = Route {
         waypoints: vec![Waypoint::Relative {
@@ -1472,7 +1475,7 @@ fn px4_heartbeat(main: u8, sub: u8) -> Frame {
 fn px4_mode_change_waits_out_the_takeoff_but_return_does_not() {
     let mut t = table();
     t.actions
-        .insert("hold".into(), vec![Step::Mode("LOITER".into())]);
+        .insert("hold".into(), vec![Step::Mode(FlightMode::Loiter)]);
     let mut v = Vehicle::new(VehicleConfig::default(), t, None);
     px4_ready(&mut v, 0.0);
     v.on_frame(s(1.0), &px4_heartbeat(4, 2)); // AUTO.TAKEOFF
@@ -1486,7 +1489,7 @@ fn px4_mode_change_waits_out_the_takeoff_but_return_does_not() {
     let mut v = Vehicle::new(VehicleConfig::default(), table(), None);
     v.actions
         .actions
-        .insert("hold".into(), vec![Step::Mode("AUTO".into())]);
+        .insert("hold".into(), vec![Step::Mode(FlightMode::Auto)]);
     px4_ready(&mut v, 0.0);
     v.on_frame(s(1.0), &px4_heartbeat(4, 2));
     assert!(commands(&v.request_actions(s(1.1), &["hold".into()])).is_empty());
@@ -1509,7 +1512,7 @@ fn px4_go() -> Vehicle {
     let mut t = table();
     t.actions.insert(
         "go".into(),
-        vec![Step::Mode("AUTO".into()), Step::Mode("LAND".into())],
+        vec![Step::Mode(FlightMode::Auto), Step::Mode(FlightMode::Land)],
     );
     let mut v = Vehicle::new(VehicleConfig::default(), t, None);
     px4_ready(&mut v, 0.0);
@@ -1607,7 +1610,7 @@ fn ardupilot_accepted_mode_is_the_mode() {
     let mut t = table();
     t.actions.insert(
         "go".into(),
-        vec![Step::Mode("AUTO".into()), Step::Mode("LAND".into())],
+        vec![Step::Mode(FlightMode::Auto), Step::Mode(FlightMode::Land)],
     );
     let mut v = Vehicle::new(VehicleConfig::default(), t, None);
     v.on_frame(s(0.0), &hb(5, true)); // LOITER

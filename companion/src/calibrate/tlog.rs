@@ -71,7 +71,7 @@ pub fn for_each_sample(path: &Path, mut each: impl FnMut(Sample)) -> anyhow::Res
             if autopilot != Some(sys) {
                 continue;
             }
-            tel.on_message(Duration::ZERO, &msg, |m| m.to_string());
+            tel.on_message(Duration::ZERO, &msg, companion_link::modes::Flavor::Other);
             let emit = match &msg {
                 Msg::BATTERY_STATUS(b) if b.id == 0 => {
                     battery_status_seen = true;

@@ -11,6 +11,7 @@ use companion_core::record::{CommandOutcome, DecisionRecord, Event, LinkEvent, P
 use companion_link::Msg;
 use companion_link::ingest::Encoder;
 use companion_link::mission_state::{self, Extra, MissionState};
+use companion_link::modes::ReportedMode;
 use companion_link::vehicle::Vehicle;
 use std::time::Duration;
 
@@ -89,7 +90,7 @@ pub fn decide<D: Decider>(
     coalesce_events(&mut events);
     let mut obs = vehicle.observations(now(), events.clone());
     let extra = Extra {
-        mode: vehicle.telemetry.mode.as_deref(),
+        mode: vehicle.telemetry.mode.and_then(ReportedMode::known),
         landed_state: vehicle.telemetry.landed_state.as_deref(),
         down_for_s: Some(vehicle.down_for(now()).map_or(0.0, |d| d.as_secs_f64())),
     };
@@ -97,7 +98,14 @@ pub fn decide<D: Decider>(
     complete_observations(&mut obs, &shell.mission);
     let (plan, mut rec) = decider.step(&obs);
     shell.mission.after_plan(&rec.actions);
-    let mut chosen = mission_state::select_vehicle_action(&plan.vehicle_actions, &shell.precedence);
+    let catalogue = decider.actions();
+    let precedence = shell.precedence_ids.get_or_insert_with(|| {
+        let ids = shell.precedence.iter().filter_map(|p| catalogue.id(p));
+        ids.collect()
+    });
+    // The record and the commands table speak names: the chosen id is named here.
+    let mut chosen = mission_state::select_vehicle_action(&plan.vehicle_actions, precedence)
+        .map(|&a| catalogue.name(a).to_string());
     let mut shell_events = Vec::new();
     if let Some(why) = shell.mission.mission_end(&obs) {
         // The mission's end, not the core's decision: recorded as an event with the action.

@@ -196,7 +196,7 @@ pub fn observe(
     let view = VehicleView {
         flavor: vehicle.flavor,
         custom_mode: vehicle.telemetry.custom_mode,
-        mode: vehicle.telemetry.mode.as_deref(),
+        mode: vehicle.telemetry.mode,
         armed_heartbeats: vehicle.armed_heartbeats,
         armed_for: vehicle.armed_for(now),
         mode_for: vehicle.mode_for(now),
@@ -307,7 +307,10 @@ pub fn begin_stop(
     );
     let was = shell.operator.control.label();
     shell.operator.control = operator::Control::Stopping;
-    let mode = vehicle.telemetry.mode.clone().unwrap_or_else(|| "?".into());
+    let mode = vehicle
+        .telemetry
+        .mode
+        .map_or_else(|| "?".into(), |m| m.to_string());
     let alt = vehicle.telemetry.position.map(|p| p.alt_rel_m);
     let at = alt.map_or(String::new(), |a| format!(" at {a:.0} m"));
     let mut commanded = false;

@@ -37,6 +37,7 @@ pub use shell::Shell;
 
 use anyhow::Context;
 use companion_core::launch::LaunchRefusal;
+use companion_core::mission::ActionCatalogue;
 use companion_core::observations::Observations;
 use companion_core::record::{DecisionRecord, Plan};
 use companion_link::Msg;
@@ -48,6 +49,8 @@ use std::io::Write;
 /// The decision core as the shell sees it: one observation snapshot in, one plan and its record out.
 pub trait Decider {
     fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord);
+    /// The catalogue the plan's action ids index (names for the record, the commands table).
+    fn actions(&self) -> &ActionCatalogue;
     /// Do the models agree to a start, judged from this record (the launch verdict,
     /// [`companion_core::launch::verdict`])?
     fn launch_verdict(&self, rec: &DecisionRecord) -> Result<(), LaunchRefusal>;
@@ -59,6 +62,9 @@ pub trait Decider {
 impl Decider for companion_core::decision::Core {
     fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
         companion_core::decision::Core::step(self, obs)
+    }
+    fn actions(&self) -> &ActionCatalogue {
+        &self.model.actions
     }
     fn launch_verdict(&self, rec: &DecisionRecord) -> Result<(), LaunchRefusal> {
         companion_core::launch::verdict(rec, &self.model)

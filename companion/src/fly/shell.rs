@@ -5,6 +5,7 @@ use super::{FlySetup, NOTICE, WARNING, words};
 use companion_core::launch::LaunchRefusal;
 use companion_core::mission::RouteRole;
 use companion_core::record::{DecisionRecord, Event, LinkEvent};
+use companion_core::vocabulary::ActionId;
 use companion_link::ingest;
 use companion_link::mission_state::MissionState;
 use companion_link::operator::{GcsText, OperatorGate};
@@ -16,6 +17,8 @@ pub struct Shell {
     /// The mission state a new flight starts from.
     pub(super) fresh_mission: MissionState,
     pub(super) precedence: Vec<String>,
+    /// `precedence` as ids of the decider's catalogue, resolved on the first cycle.
+    pub(super) precedence_ids: Option<Vec<ActionId>>,
     /// Events of the shell itself (the mission's end, the operator) for the next record.
     pub(super) pending_events: Vec<Event>,
     /// Who commands: the companion only once the operator started the mission. `Shell::new`
@@ -56,6 +59,7 @@ impl Shell {
             fresh_mission: mission.clone(),
             mission,
             precedence: setup.link.vehicle_action_precedence.clone(),
+            precedence_ids: None,
             pending_events: Vec::new(),
             operator: OperatorGate::started(),
             texts: GcsText::new(
