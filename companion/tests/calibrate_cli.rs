@@ -4,12 +4,19 @@
 
 mod common;
 use common::copy_dir;
-use common::{companion, text};
+use common::text;
 use companion::decision_log::Header;
 use companion::params::default_params_dir;
 use companion_core::record::{DecisionRecord, GuaranteeRecord};
 use std::io::Write;
 use std::path::Path;
+
+/// The binary under test (named here: scripts/arm.sh skips tests that start it under qemu).
+const BIN: &str = env!("CARGO_BIN_EXE_companion");
+
+fn companion(args: &[&str]) -> std::process::Output {
+    common::run_companion(BIN, args)
+}
 
 /// The vehicle the generated run flies, unlike the shipped params (base 8 W, P0 60 W, Pi 140 W,
 /// v0 6.3 m/s, CdA 0.05 m², U 80 m/s, ρ 1.225).

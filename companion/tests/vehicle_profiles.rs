@@ -3,7 +3,14 @@
 //! profile sets carries its source (calibrate's runs, samples and fit error), never an ASSUMPTION.
 
 mod common;
-use common::companion;
+
+/// The binary under test (named here: scripts/arm.sh skips tests that start it under qemu).
+const BIN: &str = env!("CARGO_BIN_EXE_companion");
+
+fn companion(args: &[&str]) -> std::process::Output {
+    common::run_companion(BIN, args)
+}
+
 use companion::params::default_params_dir;
 
 fn profiles() -> Vec<String> {

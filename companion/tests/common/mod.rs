@@ -17,10 +17,12 @@ pub(crate) fn shipped_model() -> Arc<Model> {
     }))
 }
 
-/// `companion ARGS` run to completion, on its built-in params unless the args name others (the
-/// environment's `COMPANION_PARAMS` and `RUST_BACKTRACE` removed: messages as users see them).
-pub(crate) fn companion(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_companion"))
+/// `BIN ARGS` run to completion (BIN: the test's `env!("CARGO_BIN_EXE_companion")`, named in the
+/// test file itself so that scripts/arm.sh sees which tests start the binary), on its built-in
+/// params unless the args name others (the environment's `COMPANION_PARAMS` and `RUST_BACKTRACE`
+/// removed: messages as users see them).
+pub(crate) fn run_companion(bin: &str, args: &[&str]) -> Output {
+    Command::new(bin)
         .args(args)
         .env_remove("COMPANION_PARAMS")
         .env_remove("RUST_BACKTRACE")
