@@ -347,16 +347,15 @@ impl Core {
                 });
                 continue;
             };
-            let decided = match self.mdp_policy[j] {
-                Some(pi) => mdp.decide_resolved(
-                    &mut self.workspace,
-                    s,
-                    &rec.probabilities,
-                    pi,
-                    model.mission.horizon,
-                ),
-                None => Err(unknown_policy(model, self.policy)),
-            };
+            let decided = decide(
+                mdp,
+                &mut self.workspace,
+                s,
+                &rec.probabilities,
+                self.mdp_policy[j],
+                model,
+                self.policy,
+            );
             match decided {
                 Ok(Some(d)) => {
                     for &id in &self.mdp_primitives[j][d.action] {
@@ -658,16 +657,15 @@ impl Core {
         let Some(s) = mdp.state_index(&rec.proposals[k].state) else {
             return false;
         };
-        let decided = match pi {
-            Some(pi) => mdp.decide_resolved(
-                &mut self.workspace,
-                s,
-                &rec.probabilities,
-                pi,
-                model.mission.horizon,
-            ),
-            None => Err(unknown_policy(model, self.policy)),
-        };
+        let decided = decide(
+            mdp,
+            &mut self.workspace,
+            s,
+            &rec.probabilities,
+            pi,
+            model,
+            self.policy,
+        );
         let d = match decided {
             Ok(Some(d)) => d,
             Ok(None) => return false,
@@ -938,8 +936,23 @@ impl Core {
 }
 
 /// The error an MDP without rewards for `policy` gives (as its name lookup did).
-fn unknown_policy(model: &Model, policy: Policy) -> crate::mission_mdp::InstantiateError {
-    crate::mission_mdp::InstantiateError::UnknownPolicy(model.policy_name(policy).to_string())
+/// One MDP's decision at state `s` under its reward slot `pi` (resolved at load; `None`: the
+/// policy has no slot in this MDP, an error the record names).
+fn decide(
+    mdp: &mut crate::mission_mdp::MissionMdp,
+    ws: &mut Workspace,
+    s: usize,
+    probs: &BTreeMap<String, f64>,
+    pi: Option<usize>,
+    model: &Model,
+    policy: Policy,
+) -> Result<Option<crate::mission_mdp::Decision>, crate::mission_mdp::InstantiateError> {
+    match pi {
+        Some(pi) => mdp.decide_resolved(ws, s, probs, pi, model.mission.horizon),
+        None => Err(crate::mission_mdp::InstantiateError::UnknownPolicy(
+            model.policy_name(policy).to_string(),
+        )),
+    }
 }
 
 /// `names` into `into`, reusing its strings (the cycle allocates nothing once warm).
