@@ -4,7 +4,8 @@
 # pymavlink into the project's own .venv), nothing already there is upgraded. Then the Rust tests, the
 # SITL tests against the stand-in, the real-autopilot tests (when an ArduCopter SITL or PX4 SITL is found:
 # ARDUCOPTER_BIN/SITL_DEFAULTS and PX4_SITL_DIR, or ../shared/sitl/ beside the checkout), and the armv7 build.
-# One progress line per stage with its elapsed time.
+# One progress line per stage with its elapsed time. The armv7 stage runs beside the real-autopilot
+# stage (niced: the flights keep their CPU), and reports after it.
 #
 #   SKIP_ARM=1        skip the armv7 cross-build and qemu run
 #   SKIP_REAL_SITL=1  skip the real-autopilot stage
@@ -23,7 +24,8 @@ done_() { echo "== [$stage_n/$STAGES] $stage_name ... ${1:-ok} in $(fmt $((SECON
 # The real-SITL scripts run in process groups of their own (setsid): stopped with this script.
 ardu_pid=""
 px4_pid=""
-stop_bg() { for p in $ardu_pid $px4_pid; do kill -TERM -- "-$p" 2>/dev/null || true; done; }
+arm_pid=""
+stop_bg() { for p in $ardu_pid $px4_pid $arm_pid; do kill -TERM -- "-$p" 2>/dev/null || true; done; }
 trap 'rc=$?; stop_bg; [ $rc -ne 0 ] && echo "== [$stage_n/$STAGES] $stage_name ... FAILED (exit $rc) after $(fmt $((SECONDS - stage_t)))"; exit $rc' EXIT
 
 SUDO=""
@@ -96,7 +98,15 @@ done_
 # ---- 6: real autopilots, ArduCopter and PX4 side by side -------------------------------------------
 # Each script runs its vehicles in its own network namespace (ports cannot collide) and each vehicle
 # uses a few % of a core, so the two run at once; their output goes to a log each, printed after.
-begin "real autopilots: ArduCopter and PX4 SITL tests (side by side)"
+# The armv7 cross-build and its qemu run (stage 7) start here, in the background at nice 19: the
+# flights below leave most of both cores idle, and nice keeps the vehicles' and the companion's CPU
+# theirs. Stage 7 waits for it and prints its log.
+arm_log=$(mktemp "${TMPDIR:-/tmp}/arm-log.XXXXXX")
+if [ "${SKIP_ARM:-0}" != 1 ]; then
+  setsid nice -n 19 ./scripts/arm.sh >"$arm_log" 2>&1 &
+  arm_pid=$!
+fi
+begin "real autopilots: ArduCopter and PX4 SITL tests (side by side; the armv7 stage beside them)"
 ardu_summary="ArduCopter: not run"
 px4_summary="PX4: not run"
 ARDUCOPTER_BIN=${ARDUCOPTER_BIN:-$ROOT/../shared/sitl/ardupilot/arducopter}
@@ -139,6 +149,7 @@ while alive "$ardu_pid" || alive "$px4_pid"; do
     running=""
     if alive "$ardu_pid"; then running="$running ArduCopter"; fi
     if alive "$px4_pid"; then running="$running PX4"; fi
+    if alive "$arm_pid"; then running="$running (armv7 stage running)"; fi
     echo "   ... $(fmt $((SECONDS - stage_t))): still flying:$running"
   fi
 done
@@ -165,12 +176,15 @@ done_ "ok ($ardu_summary; $px4_summary)"
 # ---- 7: the board ------------------------------------------------------------------------------------
 # armv7 (the SoCKit's Cortex-A9) release binary, engine and companion tests under qemu-user
 # (docs/deploy-arm.md).
-begin "arm: scripts/arm.sh (armv7 cross-build, tests under qemu)"
+begin "arm: scripts/arm.sh (armv7 cross-build, tests under qemu; started with stage 6)"
 if [ "${SKIP_ARM:-0}" = 1 ]; then
   done_ "skipped (SKIP_ARM=1)"
 else
-  ./scripts/arm.sh
-  done_
+  set +e; wait "$arm_pid"; rc=$?; set -e
+  arm_pid=""
+  cat "$arm_log"; rm -f "$arm_log"
+  [ "$rc" -eq 0 ] || exit "$rc"
+  done_ "ok (waited $(fmt $((SECONDS - stage_t))) after stage 6)"
 fi
 
 echo "== real autopilots: $ardu_summary; $px4_summary"
