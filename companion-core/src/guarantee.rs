@@ -277,8 +277,9 @@ struct WatchScratch {
     zero: Measured,
     m: Measured,
     report: MarginReport,
-    /// The plan with one activity's alternative swapped, and its margins (binding.rs).
-    choice: Vec<usize>,
+    /// Which alternatives of one activity meet the goals with the rest of the plan (binding.rs).
+    swap: panorama::SwapCheck,
+    /// The margins of the plan after a re-allocation (binding.rs).
     alt: MarginReport,
     /// Per token id of the activity: carried by a feasible alternative, offered (binding.rs).
     version_flags: (Vec<bool>, Vec<bool>),
@@ -306,7 +307,7 @@ impl Default for WatchScratch {
                 margin: Vec::new(),
                 drift: Vec::new(),
             },
-            choice: Vec::new(),
+            swap: panorama::SwapCheck::default(),
             alt: MarginReport {
                 estimated_so_far: Vec::new(),
                 remainder: Vec::new(),

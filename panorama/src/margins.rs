@@ -75,6 +75,85 @@ pub fn margins_into(p: &Problem, choice: &[usize], m: &Measured, r: &mut MarginR
     }
 }
 
+/// Whether activity `at` flown with its alternative `i` instead of `choice[at]` keeps every goal,
+/// as [`margins_into`] on the swapped choice and [`crate::fits`] on each margin would say, bit for
+/// bit, but fast when asked of many alternatives of one activity.
+///
+/// Why it can be fast and still exact: with the rest of the plan and the measurements fixed, a
+/// goal's margin depends on the alternative only through its cost `c`, through
+/// `bound - (measured + ((1 - f)·c + c_next + ...))`, and IEEE rounding is monotone, so "the goal
+/// holds" is monotone in `c`: it holds for every cost up to some threshold and for none above.
+/// The check remembers, per goal, the largest cost seen to hold and the smallest seen to fail, and
+/// evaluates (in [`margins_into`]'s own order of operations) only costs between the two.
+///
+/// Valid for one problem, plan, measurement and `at`: [`SwapCheck::reset`] before asking about
+/// another.
+#[derive(Debug, Clone, Default)]
+pub struct SwapCheck {
+    /// Per goal: the largest cost known to hold, the smallest known to fail.
+    known: Vec<(f64, f64)>,
+}
+
+impl SwapCheck {
+    /// Forget what was learnt (a new plan, measurement or activity).
+    pub fn reset(&mut self, goals: usize) {
+        self.known.clear();
+        self.known.resize(goals, (f64::NEG_INFINITY, f64::INFINITY));
+    }
+
+    /// Does alternative `i` of activity `at`, with `choice` for the other activities, meet every
+    /// goal from measurement `m`? (Resources are the caller's business.)
+    pub fn fits(&mut self, p: &Problem, choice: &[usize], m: &Measured, at: usize, i: usize) -> bool {
+        if self.known.len() != p.goals.len() {
+            self.reset(p.goals.len());
+        }
+        for g in 0..p.goals.len() {
+            let c = p.activities[at].ias[i].cost[g];
+            let (ok_max, bad_min) = self.known[g];
+            let holds = if c <= ok_max {
+                true
+            } else if c >= bad_min {
+                false
+            } else {
+                let holds = goal_holds(p, choice, m, g, at, c);
+                // A NaN anywhere breaks the monotonicity: remember nothing from it.
+                if !c.is_nan() {
+                    if holds {
+                        self.known[g].0 = c;
+                    } else {
+                        self.known[g].1 = c;
+                    }
+                }
+                holds
+            };
+            if !holds {
+                return false;
+            }
+        }
+        true
+    }
+}
+
+/// Goal `g`'s margin for `choice` with activity `at` costing `c`, judged by [`crate::fits`]: the
+/// operations of [`margins_into`] (`split`'s `after`, then `bound - (measured + after)`) in the same
+/// order, so the same bits.
+fn goal_holds(p: &Problem, choice: &[usize], m: &Measured, g: usize, at: usize, c: f64) -> bool {
+    let f = m.fraction.clamp(0.0, 1.0);
+    let mut after = 0.0;
+    for (j, (a, &k)) in p.activities.iter().zip(choice).enumerate() {
+        let cj = if j == at { c } else { a.ias[k].cost[g] };
+        match j.cmp(&m.activity) {
+            std::cmp::Ordering::Less => {}
+            std::cmp::Ordering::Equal => after += (1.0 - f) * cj,
+            std::cmp::Ordering::Greater => after += cj,
+        }
+    }
+    let bound = p.goals[g].bound;
+    let measured = m.so_far.get(g).copied().unwrap_or(0.0);
+    let margin = bound - (measured + after);
+    crate::fits(bound - margin, bound)
+}
+
 /// The reduced mission scenario from the current activity: goals lowered by what was measured,
 /// the current activity's costs scaled by its unflown fraction, IAs using a failed resource
 /// removed. Returns the problem and, per reduced activity, the original IA index of each IA.
