@@ -281,6 +281,9 @@ struct WatchScratch {
     swap: panorama::SwapCheck,
     /// The margins of the plan after a re-allocation (binding.rs).
     alt: MarginReport,
+    /// The reduced mission a re-allocation searches, kept (asked every cycle while the
+    /// guarantee cannot be met).
+    reallocator: panorama::Reallocator,
     /// Per token id of the activity: carried by a feasible alternative, offered (binding.rs).
     version_flags: (Vec<bool>, Vec<bool>),
     /// The last re-allocation record, its strings and maps kept to be rewritten in place by
@@ -308,6 +311,7 @@ impl Default for WatchScratch {
                 drift: Vec::new(),
             },
             swap: panorama::SwapCheck::default(),
+            reallocator: panorama::Reallocator::default(),
             alt: MarginReport {
                 estimated_so_far: Vec::new(),
                 remainder: Vec::new(),
@@ -886,14 +890,16 @@ impl Guarantee {
             return;
         }
         let mut reason = reallocation_reason(p, &self.choice, at, failed, &report.margin);
-        let found = panorama::reallocate_or_exact(
-            p,
-            &self.choice,
-            m,
-            failed,
-            self.spec.selection,
-            EXACT_FALLBACK_NODES,
-        )
+        let found = sc
+            .reallocator
+            .reallocate_or_exact(
+                p,
+                &self.choice,
+                &sc.m,
+                &sc.failed,
+                self.spec.selection,
+                EXACT_FALLBACK_NODES,
+            )
         .map(|(c, exact)| {
             if exact {
                 // The paper's greedy can miss a feasible allocation when goals interact.

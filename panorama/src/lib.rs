@@ -32,7 +32,7 @@ mod combine;
 mod margins;
 pub use combine::{CoreConstraint, Task, Tio, combine};
 pub use margins::{
-    MarginReport, Measured, SwapCheck, margins, margins_into, reallocate, reallocate_or_exact,
+    MarginReport, Measured, Reallocator, SwapCheck, margins, margins_into, reallocate, reallocate_or_exact,
     reduced_problem,
 };
 

@@ -230,6 +230,126 @@ fn start_of_rest(m: &Measured) -> Measured {
     }
 }
 
+/// [`reallocate_or_exact`] with its reduced mission kept between calls and rebuilt in place:
+/// while the guarantee cannot be met, the watch asks every cycle, and building the reduced
+/// mission afresh (every IA's name, costs and resources cloned, twice) was most of a cycle.
+#[derive(Debug, Clone)]
+pub struct Reallocator {
+    reduced: Problem,
+    map: Vec<Vec<usize>>,
+}
+
+impl Default for Reallocator {
+    fn default() -> Self {
+        Self {
+            reduced: Problem {
+                goals: Vec::new(),
+                activities: Vec::new(),
+            },
+            map: Vec::new(),
+        }
+    }
+}
+
+impl Reallocator {
+    /// As [`reallocate_or_exact`]: the same choice, flag and error.
+    pub fn reallocate_or_exact(
+        &mut self,
+        p: &Problem,
+        choice: &[usize],
+        m: &Measured,
+        failed: &[String],
+        sel: Selection,
+        max_nodes: u64,
+    ) -> Result<(Vec<usize>, bool), Infeasible> {
+        reduced_problem_into(p, m, failed, &mut self.reduced, &mut self.map);
+        let rp = &self.reduced;
+        let from = p.activities.len() - rp.activities.len();
+        let expand = |reduced: &[usize]| {
+            let mut out = choice.to_vec();
+            for (k, &i) in reduced.iter().enumerate() {
+                out[from + k] = self.map[k][i];
+            }
+            out
+        };
+        let e = match allocate(rp, sel) {
+            Ok(a) => return Ok((expand(&a.choice), false)),
+            Err(e) => e,
+        };
+        match exact(rp, sel, max_nodes) {
+            Exact::Optimal(a) | Exact::Aborted(Some(a)) => Ok((expand(&a.choice), true)),
+            _ => Err(e),
+        }
+    }
+}
+
+/// [`reduced_problem`] into `out` and `map`, their strings and vectors reused.
+fn reduced_problem_into(
+    p: &Problem,
+    m: &Measured,
+    failed: &[String],
+    out: &mut Problem,
+    map: &mut Vec<Vec<usize>>,
+) {
+    // `start_of_rest` without its copy of the measurements.
+    let (from, fraction) = if m.fraction >= 1.0 {
+        (m.activity + 1, 0.0)
+    } else {
+        (m.activity, m.fraction)
+    };
+    let f = fraction.clamp(0.0, 1.0);
+    out.goals.truncate(p.goals.len());
+    for (g, goal) in p.goals.iter().enumerate() {
+        let bound = goal.bound - m.so_far.get(g).copied().unwrap_or(0.0);
+        match out.goals.get_mut(g) {
+            Some(dst) => {
+                dst.name.clone_from(&goal.name);
+                dst.bound = bound;
+            }
+            None => out.goals.push(Goal {
+                name: goal.name.clone(),
+                bound,
+            }),
+        }
+    }
+    let rest = p.activities.len().saturating_sub(from);
+    out.activities.truncate(rest);
+    map.truncate(rest);
+    for (k, (j, a)) in p.activities.iter().enumerate().skip(from).enumerate() {
+        if k == out.activities.len() {
+            out.activities.push(Activity {
+                name: String::new(),
+                ias: Vec::new(),
+            });
+            map.push(Vec::new());
+        }
+        let dst = &mut out.activities[k];
+        dst.name.clone_from(&a.name);
+        let keep = &mut map[k];
+        keep.clear();
+        let scale = if j == from { 1.0 - f } else { 1.0 };
+        let mut n = 0;
+        for (i, ia) in a.ias.iter().enumerate() {
+            if ia.resources.iter().any(|r| failed.contains(r)) {
+                continue;
+            }
+            keep.push(i);
+            if n == dst.ias.len() {
+                dst.ias.push(ia.clone());
+            } else {
+                let d = &mut dst.ias[n];
+                d.name.clone_from(&ia.name);
+                d.cost.clone_from(&ia.cost);
+                d.capability = ia.capability;
+                d.resources.clone_from(&ia.resources);
+            }
+            dst.ias[n].cost.iter_mut().for_each(|c| *c *= scale);
+            n += 1;
+        }
+        dst.ias.truncate(n);
+    }
+}
+
 /// [`reallocate`], and when the paper's algorithm finds nothing, a bounded [`exact`] search on the
 /// same reduced mission (its greedy reduction per goal can cut away what a later goal needs).
 /// Returns the choice and whether the exact search produced it; the paper's [`Infeasible`] when

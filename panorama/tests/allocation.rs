@@ -480,3 +480,39 @@ proptest! {
         }
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    /// The kept reallocator answers as `reallocate_or_exact`, call after call on one instance
+    /// (its reduced mission rebuilt in place over missions of other sizes, failed resources and
+    /// fractions, a finished activity included).
+    #[test]
+    fn reallocator_equals_reallocate_or_exact(
+        cases in prop::collection::vec(
+            (arb_problem(2), 0usize..5, prop::sample::select(vec![0.0f64, 0.3, 1.0]), 0.0f64..20.0, any::<bool>()),
+            1..6,
+        ),
+    ) {
+        let mut r = Reallocator::default();
+        for (mut p, at, frac, extra, fail) in cases {
+            // A resource on every other IA, failed or not.
+            for a in &mut p.activities {
+                for (i, ia) in a.ias.iter_mut().enumerate() {
+                    if i % 2 == 1 {
+                        ia.resources = vec!["lidar".into()];
+                    }
+                }
+            }
+            let failed: Vec<String> = if fail { vec!["lidar".into()] } else { vec![] };
+            let choice = vec![0; p.activities.len()];
+            let at = at % p.activities.len();
+            let m = Measured { activity: at, fraction: frac, so_far: vec![extra; p.goals.len()] };
+            for sel in [Selection::MostCapable, Selection::HighestCost(0)] {
+                let want = reallocate_or_exact(&p, &choice, &m, &failed, sel, 10_000);
+                let got = r.reallocate_or_exact(&p, &choice, &m, &failed, sel, 10_000);
+                prop_assert_eq!(got, want);
+            }
+        }
+    }
+}
