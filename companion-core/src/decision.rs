@@ -72,6 +72,8 @@ pub struct Core {
     /// this cycle (capacity kept).
     room_ids: [Option<crate::evidence::ObservationId>; 3],
     room_extra: Vec<(crate::evidence::ObservationId, f64)>,
+    /// The cycle's evidence by observation (its state index), kept between cycles.
+    evidence_states: crate::evidence::EvidenceStates,
     /// The activation nodes' fit observations the core computes with the scheduler's check.
     fit_checks: Vec<FitCheck>,
 }
@@ -183,6 +185,7 @@ impl Core {
             arbiter: ResourceArbiter::new(),
             room_ids: ROOM.map(|name| model.health.observations.id(name)),
             room_extra: Vec::with_capacity(ROOM.len() + model.health.activations.len()),
+            evidence_states: Default::default(),
             fit_checks: model
                 .health
                 .fit_observations()
@@ -287,14 +290,20 @@ impl Core {
         for f in &self.fit_checks {
             extra.push((f.id, self.fits(f, room[2].1)));
         }
-        self.health
-            .observations
-            .evidence_with_ids_into(obs, &extra, &mut rec.evidence);
+        self.health.observations.evidence_states_into(
+            obs,
+            &extra,
+            &mut self.evidence_states,
+            &mut rec.evidence,
+        );
         self.room_extra = extra;
         // Absent is not zero: the nodes no observation fed this cycle, listed (strings reused).
+        // One observation per node (checked at load): a node is absent when its observation
+        // gave no state.
         let mut n_absent = 0;
-        for o in &self.health.observations.observations {
-            if !rec.evidence.contains_key(o.node.as_str()) {
+        let fed = &self.evidence_states.state;
+        for (o, fed) in self.health.observations.observations.iter().zip(fed) {
+            if fed.is_none() {
                 if n_absent == rec.absent_evidence.len() {
                     rec.absent_evidence.push(String::new());
                 }
@@ -304,9 +313,10 @@ impl Core {
         }
         rec.absent_evidence.truncate(n_absent);
         mark(Stage::Evidence);
+        // The evidence just written, by observation: no name lookups (same probabilities).
         match self
             .health
-            .evaluate_into(&rec.evidence, &mut rec.probabilities)
+            .evaluate_states_into(&self.evidence_states, &mut rec.probabilities)
         {
             Ok(()) => {
                 if rec.probabilities.len() != self.n_published {

@@ -78,12 +78,24 @@ pub struct ObservationSpec {
 impl ObservationSpec {
     /// The state a value falls in.
     pub fn state(&self, value: f64) -> Option<&str> {
+        self.state_index(value).map(|i| self.states[i].as_str())
+    }
+
+    /// The index in `states` of the state a value falls in.
+    pub fn state_index(&self, value: f64) -> Option<usize> {
         if !value.is_finite() {
             return None;
         }
-        let i = self.thresholds.iter().filter(|&&t| t <= value).count();
-        Some(&self.states[i])
+        Some(self.thresholds.iter().filter(|&&t| t <= value).count())
     }
+}
+
+/// A cycle's evidence by observation: the state index each observation's value fell in (None:
+/// no value, or not finite), indexed by [`ObservationId`]. The core keeps one between cycles.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct EvidenceStates {
+    /// Per observation id.
+    pub state: Vec<Option<u16>>,
 }
 
 /// The validated observation mapping.
@@ -95,6 +107,8 @@ pub struct ObservationMap {
     pub observations: Vec<ObservationSpec>,
     /// The ids sorted by name: name lookups at load, and the ordered pass over a snapshot.
     by_name: Vec<ObservationId>,
+    /// The ids sorted by node name: the order of the evidence map's keys.
+    by_node: Vec<ObservationId>,
 }
 
 impl ObservationMap {
@@ -176,10 +190,15 @@ impl ObservationMap {
             .into_values()
             .map(|i| ObservationId(i as u16))
             .collect();
+        let by_node = nodes
+            .into_values()
+            .map(|i| ObservationId(i as u16))
+            .collect();
         Ok(Self {
             file: file.to_path_buf(),
             observations,
             by_name,
+            by_node,
         })
     }
 
@@ -189,6 +208,11 @@ impl ObservationMap {
             .binary_search_by(|id| self.observations[id.index()].name.as_str().cmp(name))
             .ok()
             .map(|k| self.by_name[k])
+    }
+
+    /// Every observation's id, in the order of their nodes' names (the evidence map's order).
+    pub fn by_node(&self) -> impl Iterator<Item = ObservationId> + '_ {
+        self.by_node.iter().copied()
     }
 
     /// The observation an id of this map names.
@@ -286,34 +310,60 @@ impl ObservationMap {
         extra: &[(ObservationId, f64)],
         out: &mut BTreeMap<String, String>,
     ) {
+        let mut states = EvidenceStates::default();
+        self.evidence_states_into(obs, extra, &mut states, out);
+    }
+
+    /// As [`ObservationMap::evidence_with_ids_into`], also giving each observation's state
+    /// index in `states` (kept by the caller: nothing is allocated once warm). When the same
+    /// nodes get evidence as last time, `out`'s entries are rewritten in place, walked in key
+    /// order beside the observations sorted by node (no lookups).
+    pub fn evidence_states_into(
+        &self,
+        obs: &Observations,
+        extra: &[(ObservationId, f64)],
+        states: &mut EvidenceStates,
+        out: &mut BTreeMap<String, String>,
+    ) {
+        let st = &mut states.state;
+        st.clear();
+        st.resize(self.observations.len(), None);
         let mut n = 0;
-        let mut same = true;
         self.values_by_id(obs, extra, |id, v| {
-            let o = self.spec(id);
-            if !same {
+            st[id.index()] = self.spec(id).state_index(v).map(|i| i as u16);
+            n += usize::from(st[id.index()].is_some());
+        });
+        if n == out.len() {
+            let mut present = self
+                .by_node
+                .iter()
+                .filter_map(|&id| Some((id, st[id.index()]?)));
+            let same = out.iter_mut().all(|(node, state)| match present.next() {
+                Some((id, s)) => {
+                    let o = self.spec(id);
+                    let s = o.states[usize::from(s)].as_str();
+                    if *node != o.node {
+                        return false;
+                    }
+                    if state != s {
+                        state.clear();
+                        state.push_str(s);
+                    }
+                    true
+                }
+                None => false,
+            });
+            if same {
                 return;
             }
-            if let Some(s) = o.state(v) {
-                n += 1;
-                match out.get_mut(o.node.as_str()) {
-                    Some(e) => {
-                        e.clear();
-                        e.push_str(s);
-                    }
-                    None => same = false,
-                }
-            }
-        });
-        if same && n == out.len() {
-            return;
         }
         out.clear();
-        self.values_by_id(obs, extra, |id, v| {
-            let o = self.spec(id);
-            if let Some(s) = o.state(v) {
-                out.insert(o.node.clone(), s.to_string());
+        for (i, s) in st.iter().enumerate() {
+            if let Some(s) = s {
+                let o = &self.observations[i];
+                out.insert(o.node.clone(), o.states[usize::from(*s)].clone());
             }
-        });
+        }
     }
 }
 

@@ -277,9 +277,13 @@ struct WatchScratch {
     zero: Measured,
     m: Measured,
     report: MarginReport,
-    /// The plan with one activity's alternative swapped, and its margins (binding.rs).
-    choice: Vec<usize>,
+    /// Which alternatives of one activity meet the goals with the rest of the plan (binding.rs).
+    swap: panorama::SwapCheck,
+    /// The margins of the plan after a re-allocation (binding.rs).
     alt: MarginReport,
+    /// The reduced mission a re-allocation searches, kept (asked every cycle while the
+    /// guarantee cannot be met).
+    reallocator: panorama::Reallocator,
     /// Per token id of the activity: carried by a feasible alternative, offered (binding.rs).
     version_flags: (Vec<bool>, Vec<bool>),
     /// The last re-allocation record, its strings and maps kept to be rewritten in place by
@@ -306,7 +310,8 @@ impl Default for WatchScratch {
                 margin: Vec::new(),
                 drift: Vec::new(),
             },
-            choice: Vec::new(),
+            swap: panorama::SwapCheck::default(),
+            reallocator: panorama::Reallocator::default(),
             alt: MarginReport {
                 estimated_so_far: Vec::new(),
                 remainder: Vec::new(),
@@ -885,14 +890,16 @@ impl Guarantee {
             return;
         }
         let mut reason = reallocation_reason(p, &self.choice, at, failed, &report.margin);
-        let found = panorama::reallocate_or_exact(
-            p,
-            &self.choice,
-            m,
-            failed,
-            self.spec.selection,
-            EXACT_FALLBACK_NODES,
-        )
+        let found = sc
+            .reallocator
+            .reallocate_or_exact(
+                p,
+                &self.choice,
+                &sc.m,
+                &sc.failed,
+                self.spec.selection,
+                EXACT_FALLBACK_NODES,
+            )
         .map(|(c, exact)| {
             if exact {
                 // The paper's greedy can miss a feasible allocation when goals interact.

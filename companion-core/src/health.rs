@@ -97,6 +97,9 @@ pub struct HealthModel {
     pub activations: Vec<CatalogueActivation>,
     /// Buffers reused by [`HealthModel::evaluate_into`] so a warm evaluation allocates nothing.
     scratch: Scratch,
+    /// Per observation id, per state index of it: the (manager, node, state) it sets in every
+    /// manager holding its node, resolved at load ([`HealthModel::evaluate_states_into`]).
+    observation_hits: Vec<Vec<Vec<(usize, NodeId, usize)>>>,
 }
 
 /// An activation node compiled from params/variants.toml (`variant = "app/version"`).
@@ -448,11 +451,33 @@ impl HealthModel {
         check_publishers(&hms)?;
         check_observations(&hms, &observations)?;
         let managers = build_managers(&hms, &index, &order);
+        // Checked above: every observation's node and states exist where the node does.
+        let observation_hits = observations
+            .observations
+            .iter()
+            .map(|o| {
+                o.states
+                    .iter()
+                    .map(|state| {
+                        managers
+                            .iter()
+                            .enumerate()
+                            .filter_map(|(mi, m)| {
+                                let net = m.engine.network();
+                                let id = net.id(&o.node)?;
+                                Some((mi, id, net.state(id, state).ok()?))
+                            })
+                            .collect()
+                    })
+                    .collect()
+            })
+            .collect();
         Ok(HealthModel {
             managers,
             observations,
             activations: Vec::new(),
             scratch: Scratch::default(),
+            observation_hits,
         })
     }
 
@@ -560,6 +585,30 @@ impl HealthModel {
         self.evaluate_impl(evidence, out, false)
     }
 
+    /// As [`HealthModel::evaluate_into`], with the evidence given by observation
+    /// ([`ObservationMap::evidence_states_into`]'s state indices) instead of by node and state
+    /// name: the same evidence, set in the same (node name) order, so the same probabilities bit
+    /// for bit, without a name lookup.
+    pub fn evaluate_states_into(
+        &mut self,
+        states: &crate::evidence::EvidenceStates,
+        out: &mut BTreeMap<String, f64>,
+    ) -> Result<(), HealthError> {
+        let per = &mut self.scratch.per;
+        per.resize_with(self.managers.len(), Evidence::new);
+        per.iter_mut().for_each(Evidence::clear);
+        for id in self.observations.by_node() {
+            let Some(Some(s)) = states.state.get(id.index()) else {
+                continue;
+            };
+            for &(mi, node, st) in &self.observation_hits[id.index()][usize::from(*s)] {
+                per[mi].set_state(node, st);
+            }
+        }
+        crate::stage_hook::mark(crate::stage_hook::Stage::Evidence);
+        self.propagate_into(out, false)
+    }
+
     /// Evaluate one manager again under `evidence` (its imported priors as the last evaluation
     /// left them) and update its published probabilities in `out`. The dynamic managers do not
     /// advance: the decision core uses it within a cycle, when a placement changed what the
@@ -642,6 +691,17 @@ impl HealthModel {
             }
         }
         crate::stage_hook::mark(crate::stage_hook::Stage::Evidence);
+        self.propagate_into(out, all)
+    }
+
+    /// The managers under the evidence in `scratch.per`: imports, queries (or their memo),
+    /// published probabilities into `out`, carried beliefs advanced.
+    fn propagate_into(
+        &mut self,
+        out: &mut BTreeMap<String, f64>,
+        all: bool,
+    ) -> Result<(), HealthError> {
+        let per = &self.scratch.per;
         let n = self.managers.len();
         let (last, fresh, full) = (
             &mut self.scratch.last,

@@ -62,6 +62,9 @@ pub struct ActionCatalogue {
     pub actions: Vec<Action>,
     /// The role each action plays, checked.
     pub roles: ActionRoles,
+    /// Per action, the first action starting the same application variant (itself when it is
+    /// the first or starts none): `variant_id`, asked every cycle, computed once.
+    variant_of: Vec<crate::action_id::ActionId>,
 }
 
 #[derive(Deserialize)]
@@ -106,10 +109,32 @@ impl ActionCatalogue {
             .map(|a| (a.id.as_str(), a.role.as_deref()))
             .collect();
         let roles = ActionRoles::compile(&file, &declared)?;
-        Ok(Self {
-            actions: f.action,
+        Ok(Self::new(f.action, roles))
+    }
+
+    /// A catalogue of `actions` (at most [`crate::vocabulary::MAX_ACTIONS`]) with their roles.
+    pub fn new(actions: Vec<Action>, roles: ActionRoles) -> Self {
+        let variant_of = (0..actions.len().min(crate::vocabulary::MAX_ACTIONS))
+            .map(|i| {
+                let a = &actions[i];
+                let first = actions[..i]
+                    .iter()
+                    .position(|b| b.app == a.app && b.version == a.version)
+                    .unwrap_or(i);
+                crate::action_id::ActionId::from_index(first as u16)
+            })
+            .collect();
+        Self {
+            actions,
             roles,
-        })
+            variant_of,
+        }
+    }
+
+    /// The first action of the catalogue starting the same application variant as `id` (or
+    /// `id` itself): one id per variant, so equal ids mean an equal app and version.
+    pub fn variant_id(&self, id: crate::action_id::ActionId) -> crate::action_id::ActionId {
+        self.variant_of[id.index()]
     }
 
     /// The action with this id.

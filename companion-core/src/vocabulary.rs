@@ -40,17 +40,6 @@ impl ActionCatalogue {
     pub fn name(&self, id: ActionId) -> &str {
         &self.by_id(id).id
     }
-
-    /// The first action of the catalogue starting the same application variant as `id` (or
-    /// `id` itself): one id per variant, so equal ids mean an equal app and version.
-    pub fn variant_id(&self, id: ActionId) -> ActionId {
-        let a = self.by_id(id);
-        self.actions
-            .iter()
-            .take(id.index())
-            .position(|b| b.app == a.app && b.version == a.version)
-            .map_or(id, |i| ActionId::from_index(i as u16))
-    }
 }
 
 /// The application variant an action starts.

@@ -66,10 +66,10 @@ fn script_catalogue() -> ActionCatalogue {
         version: None,
         role: None,
     };
-    ActionCatalogue {
-        actions: SCRIPT_ACTIONS.into_iter().enumerate().map(action).collect(),
-        roles: ActionRoles::undeclared(),
-    }
+    ActionCatalogue::new(
+        SCRIPT_ACTIONS.into_iter().enumerate().map(action).collect(),
+        ActionRoles::undeclared(),
+    )
 }
 
 impl ScriptedDecider {

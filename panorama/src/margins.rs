@@ -75,6 +75,85 @@ pub fn margins_into(p: &Problem, choice: &[usize], m: &Measured, r: &mut MarginR
     }
 }
 
+/// Whether activity `at` flown with its alternative `i` instead of `choice[at]` keeps every goal,
+/// as [`margins_into`] on the swapped choice and [`crate::fits`] on each margin would say, bit for
+/// bit, but fast when asked of many alternatives of one activity.
+///
+/// Why it can be fast and still exact: with the rest of the plan and the measurements fixed, a
+/// goal's margin depends on the alternative only through its cost `c`, through
+/// `bound - (measured + ((1 - f)·c + c_next + ...))`, and IEEE rounding is monotone, so "the goal
+/// holds" is monotone in `c`: it holds for every cost up to some threshold and for none above.
+/// The check remembers, per goal, the largest cost seen to hold and the smallest seen to fail, and
+/// evaluates (in [`margins_into`]'s own order of operations) only costs between the two.
+///
+/// Valid for one problem, plan, measurement and `at`: [`SwapCheck::reset`] before asking about
+/// another.
+#[derive(Debug, Clone, Default)]
+pub struct SwapCheck {
+    /// Per goal: the largest cost known to hold, the smallest known to fail.
+    known: Vec<(f64, f64)>,
+}
+
+impl SwapCheck {
+    /// Forget what was learnt (a new plan, measurement or activity).
+    pub fn reset(&mut self, goals: usize) {
+        self.known.clear();
+        self.known.resize(goals, (f64::NEG_INFINITY, f64::INFINITY));
+    }
+
+    /// Does alternative `i` of activity `at`, with `choice` for the other activities, meet every
+    /// goal from measurement `m`? (Resources are the caller's business.)
+    pub fn fits(&mut self, p: &Problem, choice: &[usize], m: &Measured, at: usize, i: usize) -> bool {
+        if self.known.len() != p.goals.len() {
+            self.reset(p.goals.len());
+        }
+        for g in 0..p.goals.len() {
+            let c = p.activities[at].ias[i].cost[g];
+            let (ok_max, bad_min) = self.known[g];
+            let holds = if c <= ok_max {
+                true
+            } else if c >= bad_min {
+                false
+            } else {
+                let holds = goal_holds(p, choice, m, g, at, c);
+                // A NaN anywhere breaks the monotonicity: remember nothing from it.
+                if !c.is_nan() {
+                    if holds {
+                        self.known[g].0 = c;
+                    } else {
+                        self.known[g].1 = c;
+                    }
+                }
+                holds
+            };
+            if !holds {
+                return false;
+            }
+        }
+        true
+    }
+}
+
+/// Goal `g`'s margin for `choice` with activity `at` costing `c`, judged by [`crate::fits`]: the
+/// operations of [`margins_into`] (`split`'s `after`, then `bound - (measured + after)`) in the same
+/// order, so the same bits.
+fn goal_holds(p: &Problem, choice: &[usize], m: &Measured, g: usize, at: usize, c: f64) -> bool {
+    let f = m.fraction.clamp(0.0, 1.0);
+    let mut after = 0.0;
+    for (j, (a, &k)) in p.activities.iter().zip(choice).enumerate() {
+        let cj = if j == at { c } else { a.ias[k].cost[g] };
+        match j.cmp(&m.activity) {
+            std::cmp::Ordering::Less => {}
+            std::cmp::Ordering::Equal => after += (1.0 - f) * cj,
+            std::cmp::Ordering::Greater => after += cj,
+        }
+    }
+    let bound = p.goals[g].bound;
+    let measured = m.so_far.get(g).copied().unwrap_or(0.0);
+    let margin = bound - (measured + after);
+    crate::fits(bound - margin, bound)
+}
+
 /// The reduced mission scenario from the current activity: goals lowered by what was measured,
 /// the current activity's costs scaled by its unflown fraction, IAs using a failed resource
 /// removed. Returns the problem and, per reduced activity, the original IA index of each IA.
@@ -148,6 +227,126 @@ fn start_of_rest(m: &Measured) -> Measured {
         }
     } else {
         m.clone()
+    }
+}
+
+/// [`reallocate_or_exact`] with its reduced mission kept between calls and rebuilt in place:
+/// while the guarantee cannot be met, the watch asks every cycle, and building the reduced
+/// mission afresh (every IA's name, costs and resources cloned, twice) was most of a cycle.
+#[derive(Debug, Clone)]
+pub struct Reallocator {
+    reduced: Problem,
+    map: Vec<Vec<usize>>,
+}
+
+impl Default for Reallocator {
+    fn default() -> Self {
+        Self {
+            reduced: Problem {
+                goals: Vec::new(),
+                activities: Vec::new(),
+            },
+            map: Vec::new(),
+        }
+    }
+}
+
+impl Reallocator {
+    /// As [`reallocate_or_exact`]: the same choice, flag and error.
+    pub fn reallocate_or_exact(
+        &mut self,
+        p: &Problem,
+        choice: &[usize],
+        m: &Measured,
+        failed: &[String],
+        sel: Selection,
+        max_nodes: u64,
+    ) -> Result<(Vec<usize>, bool), Infeasible> {
+        reduced_problem_into(p, m, failed, &mut self.reduced, &mut self.map);
+        let rp = &self.reduced;
+        let from = p.activities.len() - rp.activities.len();
+        let expand = |reduced: &[usize]| {
+            let mut out = choice.to_vec();
+            for (k, &i) in reduced.iter().enumerate() {
+                out[from + k] = self.map[k][i];
+            }
+            out
+        };
+        let e = match allocate(rp, sel) {
+            Ok(a) => return Ok((expand(&a.choice), false)),
+            Err(e) => e,
+        };
+        match exact(rp, sel, max_nodes) {
+            Exact::Optimal(a) | Exact::Aborted(Some(a)) => Ok((expand(&a.choice), true)),
+            _ => Err(e),
+        }
+    }
+}
+
+/// [`reduced_problem`] into `out` and `map`, their strings and vectors reused.
+fn reduced_problem_into(
+    p: &Problem,
+    m: &Measured,
+    failed: &[String],
+    out: &mut Problem,
+    map: &mut Vec<Vec<usize>>,
+) {
+    // `start_of_rest` without its copy of the measurements.
+    let (from, fraction) = if m.fraction >= 1.0 {
+        (m.activity + 1, 0.0)
+    } else {
+        (m.activity, m.fraction)
+    };
+    let f = fraction.clamp(0.0, 1.0);
+    out.goals.truncate(p.goals.len());
+    for (g, goal) in p.goals.iter().enumerate() {
+        let bound = goal.bound - m.so_far.get(g).copied().unwrap_or(0.0);
+        match out.goals.get_mut(g) {
+            Some(dst) => {
+                dst.name.clone_from(&goal.name);
+                dst.bound = bound;
+            }
+            None => out.goals.push(Goal {
+                name: goal.name.clone(),
+                bound,
+            }),
+        }
+    }
+    let rest = p.activities.len().saturating_sub(from);
+    out.activities.truncate(rest);
+    map.truncate(rest);
+    for (k, (j, a)) in p.activities.iter().enumerate().skip(from).enumerate() {
+        if k == out.activities.len() {
+            out.activities.push(Activity {
+                name: String::new(),
+                ias: Vec::new(),
+            });
+            map.push(Vec::new());
+        }
+        let dst = &mut out.activities[k];
+        dst.name.clone_from(&a.name);
+        let keep = &mut map[k];
+        keep.clear();
+        let scale = if j == from { 1.0 - f } else { 1.0 };
+        let mut n = 0;
+        for (i, ia) in a.ias.iter().enumerate() {
+            if ia.resources.iter().any(|r| failed.contains(r)) {
+                continue;
+            }
+            keep.push(i);
+            if n == dst.ias.len() {
+                dst.ias.push(ia.clone());
+            } else {
+                let d = &mut dst.ias[n];
+                d.name.clone_from(&ia.name);
+                d.cost.clone_from(&ia.cost);
+                d.capability = ia.capability;
+                d.resources.clone_from(&ia.resources);
+            }
+            dst.ias[n].cost.iter_mut().for_each(|c| *c *= scale);
+            n += 1;
+        }
+        dst.ias.truncate(n);
     }
 }
 

@@ -414,3 +414,105 @@ proptest! {
         }
     }
 }
+
+/// What [`SwapCheck`] must equal: the margins of the swapped plan, each judged by `fits`.
+fn swapped_fits(p: &Problem, choice: &[usize], m: &Measured, at: usize, i: usize) -> bool {
+    let mut c = choice.to_vec();
+    c[at] = i;
+    let r = margins(p, &c, m);
+    r.margin
+        .iter()
+        .zip(&p.goals)
+        .all(|(x, g)| fits(g.bound - x, g.bound))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(500))]
+
+    /// The swap check answers as the full margins do, bit for bit, whatever order the
+    /// alternatives are asked in, costs with fractions (rounding) and on the threshold, the
+    /// swapped activity before, at or after the one being flown.
+    #[test]
+    fn swap_check_equals_the_full_margins(
+        p in arb_problem(3),
+        denom in prop::sample::select(vec![1.0f64, 3.0, 7.0, 10.0]),
+        at in 0usize..5,
+        flown in 0usize..5,
+        frac in prop::sample::select(vec![0.0f64, 0.1, 0.25, 1.0 / 3.0, 0.5, 0.9, 1.0]),
+        so_far in prop::collection::vec(0u32..40, 3),
+        order_seed in any::<u64>(),
+        choice_seed in any::<u64>(),
+    ) {
+        let mut p = p;
+        for a in &mut p.activities {
+            for ia in &mut a.ias {
+                ia.cost.iter_mut().for_each(|c| *c /= denom);
+            }
+        }
+        let n = p.activities.len();
+        let (at, flown) = (at % n, flown % n);
+        let choice: Vec<usize> = p
+            .activities
+            .iter()
+            .enumerate()
+            .map(|(j, a)| ((choice_seed >> (4 * j)) as usize) % a.ias.len())
+            .collect();
+        let m = Measured {
+            activity: flown,
+            fraction: frac,
+            so_far: so_far.iter().take(p.goals.len()).map(|&x| x as f64 / denom).collect(),
+        };
+        let k = p.activities[at].ias.len();
+        let mut order: Vec<usize> = (0..k).collect();
+        order.rotate_left((order_seed as usize) % k);
+        if order_seed & 1 == 1 {
+            order.reverse();
+        }
+        let mut check = SwapCheck::default();
+        check.reset(p.goals.len());
+        // Every alternative twice: the second answers come from what the first ones learnt.
+        for &i in order.iter().chain(&order) {
+            prop_assert_eq!(
+                check.fits(&p, &choice, &m, at, i),
+                swapped_fits(&p, &choice, &m, at, i),
+                "alternative {} of activity {}", i, at
+            );
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    /// The kept reallocator answers as `reallocate_or_exact`, call after call on one instance
+    /// (its reduced mission rebuilt in place over missions of other sizes, failed resources and
+    /// fractions, a finished activity included).
+    #[test]
+    fn reallocator_equals_reallocate_or_exact(
+        cases in prop::collection::vec(
+            (arb_problem(2), 0usize..5, prop::sample::select(vec![0.0f64, 0.3, 1.0]), 0.0f64..20.0, any::<bool>()),
+            1..6,
+        ),
+    ) {
+        let mut r = Reallocator::default();
+        for (mut p, at, frac, extra, fail) in cases {
+            // A resource on every other IA, failed or not.
+            for a in &mut p.activities {
+                for (i, ia) in a.ias.iter_mut().enumerate() {
+                    if i % 2 == 1 {
+                        ia.resources = vec!["lidar".into()];
+                    }
+                }
+            }
+            let failed: Vec<String> = if fail { vec!["lidar".into()] } else { vec![] };
+            let choice = vec![0; p.activities.len()];
+            let at = at % p.activities.len();
+            let m = Measured { activity: at, fraction: frac, so_far: vec![extra; p.goals.len()] };
+            for sel in [Selection::MostCapable, Selection::HighestCost(0)] {
+                let want = reallocate_or_exact(&p, &choice, &m, &failed, sel, 10_000);
+                let got = r.reallocate_or_exact(&p, &choice, &m, &failed, sel, 10_000);
+                prop_assert_eq!(got, want);
+            }
+        }
+    }
+}

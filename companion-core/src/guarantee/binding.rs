@@ -35,6 +35,10 @@ pub(super) struct ActivityTokens {
     named: Vec<String>,
     /// Per alternative: `(index into named, implementation)` per token.
     ias: Vec<Vec<(usize, Option<String>)>>,
+    /// Per alternative, the token ids it offers with an implementation, as bits (when the
+    /// activity names fewer than 128 tokens; the top bit marks "some alternative is feasible"): the binding's per-cycle check is then a few word
+    /// operations per alternative.
+    versions: Option<Vec<u128>>,
 }
 
 impl ActivityTokens {
@@ -59,8 +63,22 @@ impl ActivityTokens {
                             })
                             .collect()
                     })
-                    .collect();
-                Self { named, ias }
+                    .collect::<Vec<Vec<(usize, Option<String>)>>>();
+                let versions = (named.len() < 128).then(|| {
+                    ias.iter()
+                        .map(|tokens| {
+                            tokens
+                                .iter()
+                                .filter(|(_, imp)| imp.is_some())
+                                .fold(0u128, |bits, (id, _)| bits | 1 << id)
+                        })
+                        .collect()
+                });
+                Self {
+                    named,
+                    ias,
+                    versions,
+                }
             })
             .collect()
     }
@@ -131,14 +149,10 @@ impl Guarantee {
         {
             return false;
         }
-        sc.choice.clone_from(&self.choice);
-        sc.choice[at] = i;
-        panorama::margins_into(p, &sc.choice, &sc.m, &mut sc.alt);
-        sc.alt
-            .margin
-            .iter()
-            .zip(&p.goals)
-            .all(|(m, g)| panorama::fits(g.bound - m, g.bound))
+        // The margins of the plan with this alternative swapped in, goal by goal; the check
+        // remembers per goal which costs hold (exact: see `panorama::SwapCheck`). The callers
+        // reset it when they start asking about an activity.
+        sc.swap.fits(p, &self.choice, &sc.m, at, i)
     }
 
     /// The versions (`V3`, `zone_t`: tokens with an implementation) offered by some alternative
@@ -153,6 +167,30 @@ impl Guarantee {
         }
         let n_ias = self.spec.problem.activities[at].ias.len();
         let n_tokens = self.tokens[at].named.len();
+        self.scratch.swap.reset(self.spec.problem.goals.len());
+        if self.tokens[at].versions.is_some() {
+            // Bits per token id: the same walk as below, a word per alternative.
+            let (mut feasible, mut offered) = (0u128, 0u128);
+            for i in 0..n_ias {
+                let bits = self.tokens[at].versions.as_ref().map_or(0, |v| v[i]);
+                offered |= bits;
+                // Feasibility only adds versions: an alternative whose versions are all known
+                // feasible already cannot change the answer (exact; most cycles stop early).
+                let known = feasible != 0 && bits & !feasible == 0;
+                if !known && self.alternative_feasible(at, i) {
+                    feasible |= bits | 1 << 127; // the top bit: some alternative is feasible
+                }
+            }
+            if feasible != 0 {
+                let named = &self.tokens[at].named;
+                out.extend(
+                    (0..n_tokens)
+                        .filter(|&id| offered >> id & 1 == 1 && feasible >> id & 1 == 0)
+                        .map(|id| named[id].clone()),
+                );
+            }
+            return;
+        }
         // Per token id: some feasible alternative carries it / some alternative offers it with
         // an implementation. Kept between cycles, so a warm cycle allocates nothing.
         let (mut feasible, mut offered) = std::mem::take(&mut self.scratch.version_flags);
@@ -227,6 +265,7 @@ impl Guarantee {
         let want_exact = cur_versions;
         let sel = self.spec.selection;
         let mut best: Option<usize> = None;
+        self.scratch.swap.reset(self.spec.problem.goals.len());
         for i in 0..self.spec.problem.activities[at].ias.len() {
             let (v, e) = self.tokens[at].carries(i, ids, running);
             if !(if want_exact { e } else { v }) || !self.alternative_feasible(at, i) {
