@@ -1,0 +1,134 @@
+//! The health model's tests (moved beside it: one concern per file).
+use super::*;
+
+/// Evidence maps over every observable node's states, varied so that values and patterns
+/// both change between evaluations.
+fn evidence_sequence(m: &HealthModel) -> Vec<BTreeMap<String, String>> {
+    let obs: Vec<(String, Vec<String>)> = m
+        .observations
+        .evidence(&Observations::default())
+        .keys()
+        .chain(m.managers.iter().flat_map(|mg| {
+            mg.nodes
+                .iter()
+                .filter(|n| n.name.starts_with("A_") || n.name.starts_with("S_"))
+                .map(|n| &n.name)
+        }))
+        .filter_map(|name| {
+            let mg = m
+                .managers
+                .iter()
+                .find(|mg| mg.engine.network().id(name).is_some())?;
+            let net = mg.engine.network();
+            Some((name.clone(), net.node(net.id(name)?).states.clone()))
+        })
+        .collect();
+    (0..40)
+        .map(|k: usize| {
+            obs.iter()
+                .enumerate()
+                .filter(|(i, _)| !(k * 7 + i * 3).is_multiple_of(5))
+                .map(|(i, (n, st))| (n.clone(), st[(k + i) % st.len()].clone()))
+                .collect()
+        })
+        .collect()
+}
+
+#[test]
+fn targeted_cycle_matches_full_propagation() {
+    let params = crate::shipped::params();
+    let mut fast = HealthModel::load(&params).unwrap();
+    let mut full = HealthModel::load(&params).unwrap();
+    let seq = evidence_sequence(&fast);
+    let mut out = BTreeMap::new();
+    for ev in &seq {
+        // Independent answer: every manager propagated in full on a copy of its engine,
+        // before the evaluation advances the carried beliefs.
+        let mut want = BTreeMap::new();
+        for m in &full.managers {
+            let mut e = m.engine.clone();
+            let net = e.network().clone();
+            let mut evd = Evidence::new();
+            for (k, v) in ev {
+                if let Some(id) = net.id(k) {
+                    evd.set_state(id, net.state(id, v).unwrap());
+                }
+            }
+            // Imported priors come from the managers evaluated before (same order).
+            for &(local, src_m, src) in &m.imports {
+                let p: Vec<f64> = want_marginal(&full, src_m, src, ev);
+                let s: f64 = p.iter().sum();
+                let p: Vec<f64> = p.iter().map(|x| x / s).collect();
+                e.set_cpt(local, &p).unwrap();
+            }
+            e.propagate(&evd).unwrap();
+            for &(k, id, s, c) in &m.published {
+                let p = e.marginal(id)[s];
+                want.insert(m.publish[k].name.clone(), if c { 1.0 - p } else { p });
+            }
+        }
+        fast.evaluate_into(ev, &mut out).unwrap();
+        let slow = full.evaluate(ev).unwrap();
+        // The cycle's numbers and the report's are the same, bit for bit.
+        assert_eq!(out, slow);
+        for (name, w) in &want {
+            assert!(
+                (out[name] - w).abs() < 1e-12,
+                "{name}: {} vs {w}",
+                out[name]
+            );
+        }
+    }
+}
+
+/// A rejected evidence map (unknown state, unknown node) leaves nothing behind: the cached
+/// name resolution of an entry that failed is not reused, and the results afterwards are
+/// those of a model that never saw the bad maps.
+#[test]
+fn rejected_evidence_changes_nothing() {
+    let params = crate::shipped::params();
+    let mut a = HealthModel::load(&params).unwrap();
+    let mut b = HealthModel::load(&params).unwrap();
+    let seq = evidence_sequence(&a);
+    let (ev0, ev1) = (&seq[0], &seq[1]);
+    let (first, _) = ev0.iter().next().unwrap();
+    let mut bad_state = ev0.clone();
+    bad_state.insert(first.clone(), "no_such_state".into());
+    let mut bad_node = ev0.clone();
+    bad_node.insert("no_such_node".into(), "x".into());
+    let (mut oa, mut ob) = (BTreeMap::new(), BTreeMap::new());
+    a.evaluate_into(ev0, &mut oa).unwrap();
+    b.evaluate_into(ev0, &mut ob).unwrap();
+    assert!(matches!(
+        a.evaluate_into(&bad_state, &mut oa),
+        Err(HealthError::UnknownState { .. })
+    ));
+    assert!(matches!(
+        a.evaluate_into(&bad_node, &mut oa),
+        Err(HealthError::UnknownNode(_))
+    ));
+    for ev in [ev0, ev1, ev0] {
+        a.evaluate_into(ev, &mut oa).unwrap();
+        b.evaluate_into(ev, &mut ob).unwrap();
+        assert_eq!(oa, ob);
+    }
+}
+
+/// Marginal of `src` in manager `j` under `ev` by a full propagation on a copy.
+fn want_marginal(
+    m: &HealthModel,
+    j: usize,
+    src: NodeId,
+    ev: &BTreeMap<String, String>,
+) -> Vec<f64> {
+    let mut e = m.managers[j].engine.clone();
+    let net = e.network().clone();
+    let mut evd = Evidence::new();
+    for (k, v) in ev {
+        if let Some(id) = net.id(k) {
+            evd.set_state(id, net.state(id, v).unwrap());
+        }
+    }
+    e.propagate(&evd).unwrap();
+    e.marginal(src).to_vec()
+}
