@@ -133,7 +133,7 @@ pub struct Vehicle {
     pub route: Option<Route>,
     purposes: BTreeMap<u64, Purpose>,
     job: Option<Job>,
-    last: Option<(String, JobStatus)>,
+    last: Option<(executor::JobKey, JobStatus)>,
     stream_queue: VecDeque<(u32, f32)>,
     /// Significant events since the last `take_events` (trigger a decision cycle).
     events: Vec<Event>,
