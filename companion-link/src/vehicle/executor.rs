@@ -22,62 +22,6 @@ pub(super) enum Advance {
     Wait,
 }
 
-#[derive(Debug, Clone, PartialEq)]
-pub(super) enum Running {
-    /// Nothing issued for the current step yet.
-    Idle,
-    Command(u64),
-    Mission,
-    WaitReady {
-        since: Duration,
-    },
-    /// The zone reposition was accepted: flying there (lat, lon in degrees * 1e7).
-    Arrive {
-        target: (i32, i32),
-        since: Duration,
-    },
-    /// PX4 accepted SET_MODE at `since`: waiting for a HEARTBEAT that shows the mode.
-    ConfirmMode {
-        since: Duration,
-    },
-}
-
-#[derive(Debug, Clone)]
-pub(super) struct Job {
-    /// What was asked for; the same request again leaves the job alone.
-    pub(super) key: JobKey,
-    pub(super) steps: VecDeque<(String, Step)>,
-    pub(super) running: Running,
-    pub(super) arm_attempts: u32,
-    /// SET_MODE sent for the current mode step (PX4 confirmation resends).
-    pub(super) mode_attempts: u32,
-    /// The custom mode reported when the current step's SET_MODE was first issued.
-    pub(super) mode_from: Option<u32>,
-}
-
-/// What a job was started for.
-#[derive(Debug, Clone, PartialEq)]
-pub(super) enum JobKey {
-    /// The decision's request (one entry, or several flown one after the other).
-    Request(Vec<Flown>),
-    /// The hand-off when the companion stops: this mode.
-    Handoff(FlightMode),
-}
-
-impl JobKey {
-    /// Whether the job was started for exactly `request`.
-    fn is(&self, request: &[Flown]) -> bool {
-        matches!(self, JobKey::Request(k) if k == request)
-    }
-}
-
-#[derive(Debug, Clone, PartialEq)]
-pub(super) enum JobStatus {
-    Running,
-    Done,
-    Failed(Duration),
-}
-
 impl Vehicle {
     /// The decision core asked for these vehicle actions.
     /// The same action already running or done is not restarted; a different one replaces it.
