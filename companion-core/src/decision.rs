@@ -344,6 +344,7 @@ impl Core {
         // decision: every MDP of the model, solved at its projected state
         let mut sc = std::mem::take(&mut self.scratch);
         sc.merged.clear();
+        sc.proposed.clear();
         let mut n_proposals = 0;
         for (j, name) in self.mdp_names.iter().enumerate() {
             let local = model.mission.project(name, obs);
@@ -376,6 +377,7 @@ impl Core {
                     if n_proposals == rec.proposals.len() {
                         rec.proposals.push(Default::default());
                     }
+                    sc.proposed.push((j, d.action));
                     mdp.proposal_into(
                         s,
                         &d,
@@ -559,15 +561,13 @@ impl Core {
         let model = Arc::clone(&self.model);
         let model = &*model;
         sc.merged.clear();
-        for (k, pr) in rec.proposals.iter().enumerate() {
+        // Each live proposal's primitives, by the ids resolved when the core started (the
+        // proposal's `actions` are the same primitives by name, for the record).
+        for (k, &(j, a)) in sc.proposed.iter().enumerate() {
             if sc.superseded.contains(&k) {
                 continue;
             }
-            for a in &pr.actions {
-                // The catalogue holds every MDP action (checked at load).
-                let Some(id) = model.actions.id(a) else {
-                    continue;
-                };
+            for &id in &self.mdp_primitives[j][a] {
                 if !sc.merged.contains(&id) {
                     sc.merged.push(id);
                 }
@@ -656,11 +656,8 @@ impl Core {
             return false;
         }
         let name = rec.proposals[k].mdp.clone();
-        let pi = self
-            .mdp_names
-            .iter()
-            .position(|n| *n == name)
-            .and_then(|j| self.mdp_policy[j]);
+        let j = sc.proposed[k].0;
+        let pi = self.mdp_policy[j];
         let Some(mdp) = self.mdps.get_mut(&name) else {
             return false;
         };
@@ -694,6 +691,7 @@ impl Core {
         }
         p.reason = format!("re-solved: {why}");
         rec.proposals.push(p);
+        sc.proposed.push((j, d.action));
         sc.superseded.push(k);
         true
     }

@@ -20,6 +20,10 @@ pub(crate) struct Scratch {
     pub(crate) actions: Vec<ActionId>,
     /// Proposals replaced by a re-solve of the same MDP within the cycle.
     pub(crate) superseded: Vec<usize>,
+    /// Per proposal of the record (same index): the MDP (its index in the core's MDP list) and
+    /// the MDP action chosen, whose primitives' ids the core resolved at start
+    /// (`Core::mdp_primitives`), so arbitration merges ids without looking names up.
+    pub(crate) proposed: Vec<(usize, usize)>,
     /// The resource requests, one key each.
     pub(crate) key: Vec<RequestKey>,
     pub(crate) failed: Vec<String>,

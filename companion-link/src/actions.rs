@@ -7,7 +7,9 @@ use super::dialect::MavCmd;
 use super::mission::MissionItem;
 use super::modes::{Flavor, FlightMode};
 use super::telemetry::{TelemetryConfig, displace};
+use companion_core::mission::{ActionCatalogue, ActionKind};
 use companion_core::spec::{ParamsFiles, SpecError, check_positive, check_range, read_toml};
+use companion_core::vocabulary::ActionId;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -78,13 +80,37 @@ struct RawAction {
     nothing: bool,
 }
 
-/// Vehicle action name -> steps.
+/// What the vehicle is asked to fly: an action's own steps, or the shell-only entry of
+/// params/commands.toml flown in its place (`flown_for`, the route's resume).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Flown {
+    /// The action's own entry.
+    Action(ActionId),
+    /// The shell-only entry flown in place of the action.
+    InPlaceOf(ActionId),
+}
+
+impl Flown {
+    /// The catalogue action this is flown for.
+    pub fn action(self) -> ActionId {
+        match self {
+            Flown::Action(a) | Flown::InPlaceOf(a) => a,
+        }
+    }
+}
+
+/// params/commands.toml resolved against the action catalogue (params/actions.toml): the steps
+/// of each vehicle action by [`ActionId`], and the shell-only entries by the action they are
+/// flown for. Names are kept only to write records.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct ActionTable {
-    /// Every vehicle action of params/commands.toml and its steps, in order.
-    pub actions: BTreeMap<String, Vec<Step>>,
-    /// Shell-only entries (`flown_for = "ACTION"`): entry name -> the action it is flown for.
-    pub flown_for: BTreeMap<String, String>,
+    /// The catalogue's action names, by id (what a record writes for an action).
+    names: Vec<String>,
+    /// Each vehicle action's steps, in order.
+    steps: BTreeMap<ActionId, Vec<Step>>,
+    /// Shell-only entries (`flown_for = "ACTION"`), by the action they are flown for: the
+    /// entry's name and its steps.
+    flown_for: BTreeMap<ActionId, (String, Vec<Step>)>,
 }
 
 fn parse_cmd(name: &str) -> Option<MavCmd> {
@@ -93,8 +119,69 @@ fn parse_cmd(name: &str) -> Option<MavCmd> {
 }
 
 impl ActionTable {
-    /// Read and check params/commands.toml at `path`.
-    pub fn load(files: &ParamsFiles, path: &Path) -> Result<Self, SpecError> {
+    /// An empty table naming the actions of `catalogue` (entries come with [`ActionTable::insert`]).
+    pub fn new(catalogue: &ActionCatalogue) -> Self {
+        Self {
+            names: catalogue.actions.iter().map(|a| a.id.clone()).collect(),
+            ..Self::default()
+        }
+    }
+
+    /// Give `flown` these steps; a shell-only entry ([`Flown::InPlaceOf`]) is named `name`.
+    pub fn insert(&mut self, flown: Flown, name: &str, steps: Vec<Step>) {
+        match flown {
+            Flown::Action(a) => {
+                self.steps.insert(a, steps);
+            }
+            Flown::InPlaceOf(a) => {
+                self.flown_for.insert(a, (name.to_string(), steps));
+            }
+        }
+    }
+
+    /// The steps of `flown`; None when params/commands.toml gives it none.
+    pub fn steps(&self, flown: Flown) -> Option<&[Step]> {
+        match flown {
+            Flown::Action(a) => self.steps.get(&a).map(Vec::as_slice),
+            Flown::InPlaceOf(a) => self.flown_for.get(&a).map(|(_, s)| s.as_slice()),
+        }
+    }
+
+    /// The name a record writes for `flown`: the action's, or the shell-only entry's.
+    pub fn name(&self, flown: Flown) -> &str {
+        if let Flown::InPlaceOf(a) = flown
+            && let Some((name, _)) = self.flown_for.get(&a)
+        {
+            return name;
+        }
+        let action = self.names.get(flown.action().index());
+        action.map_or("-", String::as_str)
+    }
+
+    /// The shell-only entry flown in place of `action`, if params/commands.toml has one.
+    pub fn in_place_of(&self, action: ActionId) -> Option<Flown> {
+        self.flown_for
+            .contains_key(&action)
+            .then_some(Flown::InPlaceOf(action))
+    }
+
+    /// Every entry's name, sorted (the file's entries as `check` lists them).
+    pub fn entry_names(&self) -> Vec<&str> {
+        let own = self.steps.keys().map(|&a| self.name(Flown::Action(a)));
+        let shell = self.flown_for.values().map(|(n, _)| n.as_str());
+        let mut names: Vec<&str> = own.chain(shell).collect();
+        names.sort_unstable();
+        names
+    }
+
+    /// Read and check params/commands.toml at `path`: every entry is a vehicle action of
+    /// `catalogue` (params/actions.toml) or a shell-only entry flown for one
+    /// (`flown_for = "ACTION"`, at most one per action).
+    pub fn load(
+        files: &ParamsFiles,
+        path: &Path,
+        catalogue: &ActionCatalogue,
+    ) -> Result<Self, SpecError> {
         let raw: BTreeMap<String, RawAction> = read_toml(files, path)?;
         if raw.is_empty() {
             return Err(SpecError::new(
@@ -103,117 +190,171 @@ impl ActionTable {
                 "no vehicle actions: the file must map each vehicle action to its steps",
             ));
         }
-        let mut actions = BTreeMap::new();
+        let mut entries = BTreeMap::new();
         let mut flown_for = BTreeMap::new();
         for (name, a) in raw {
             let _ = a.description;
-            if let Some(f) = a.flown_for {
-                flown_for.insert(name.clone(), f);
+            if let Some(f) = &a.flown_for {
+                flown_for.insert(name.clone(), f.clone());
             }
-            if a.nothing && !a.steps.is_empty() {
-                return Err(SpecError::new(
-                    path,
-                    format!("{name}.steps"),
-                    "`nothing = true` commands nothing: its steps must be empty",
-                ));
-            }
-            if a.steps.is_empty() && !a.nothing {
-                return Err(SpecError::new(
-                    path,
-                    format!("{name}.steps"),
-                    "an action needs at least one step (or `nothing = true`)",
-                ));
-            }
-            let mut steps = Vec::new();
-            for (i, s) in a.steps.iter().enumerate() {
-                let entry = format!("{name}.steps[{i}]");
-                let set = [
-                    s.mode.is_some(),
-                    s.arm.is_some(),
-                    s.command.is_some(),
-                    s.upload_mission.is_some(),
-                    s.reposition.is_some(),
-                    s.goto_zone.is_some(),
-                ]
-                .iter()
-                .filter(|b| **b)
-                .count();
-                if set != 1 {
-                    return Err(SpecError::new(
-                        path,
-                        entry,
-                        "a step has exactly one of mode, arm, command, upload_mission, reposition, goto_zone",
-                    ));
-                }
-                if s.params.is_some() && s.command.is_none() {
-                    return Err(SpecError::new(path, entry, "params only go with command"));
-                }
-                let step = if let Some(m) = &s.mode {
-                    let Some(mode) = FlightMode::from_name(m) else {
-                        return Err(SpecError::new(path, entry, format!("unknown mode {m:?}")));
-                    };
-                    Step::Mode(mode)
-                } else if let Some(arm) = s.arm {
-                    if !arm {
-                        return Err(SpecError::new(
-                            path,
-                            entry,
-                            "arm = false is not a step (disarming is the autopilot's job)",
-                        ));
-                    }
-                    Step::Arm
-                } else if let Some(c) = &s.command {
-                    let command = parse_cmd(c).ok_or_else(|| {
-                        SpecError::new(path, &entry, format!("unknown MAVLink command {c:?}"))
-                    })?;
-                    let p = s.params.clone().unwrap_or_default();
-                    if p.len() > 7 {
-                        return Err(SpecError::new(
-                            path,
-                            entry,
-                            format!("{} params; a command has at most 7", p.len()),
-                        ));
-                    }
-                    if p.iter().any(|v| !v.is_finite()) {
-                        return Err(SpecError::new(path, entry, "params must be finite numbers"));
-                    }
-                    let mut params = [0.0f32; 7];
-                    params[..p.len()].copy_from_slice(&p);
-                    Step::Command { command, params }
-                } else if s.upload_mission == Some(true) {
-                    Step::UploadMission
-                } else if let Some(o) = s.reposition {
-                    if ![o.forward_m, o.right_m, o.up_m]
-                        .iter()
-                        .all(|v| v.is_finite())
-                    {
-                        return Err(SpecError::new(path, entry, "offsets must be finite"));
-                    }
-                    Step::Reposition(o)
-                } else if s.goto_zone == Some(true) {
-                    Step::GotoZone
-                } else {
-                    return Err(SpecError::new(
-                        path,
-                        entry,
-                        "upload_mission / goto_zone must be true",
-                    ));
-                };
-                steps.push(step);
-            }
-            actions.insert(name, steps);
+            let steps = entry_steps(path, &name, &a)?;
+            entries.insert(name, steps);
         }
-        for (name, f) in &flown_for {
-            if !actions.contains_key(f) || flown_for.contains_key(f) {
+        let own: Vec<String> = entries
+            .keys()
+            .filter(|n| !flown_for.contains_key(*n))
+            .cloned()
+            .collect();
+        let mut table = Self::new(catalogue);
+        for (name, steps) in entries {
+            let Some(of) = flown_for.get(&name) else {
+                let id = own_entry(path, &name, catalogue)?;
+                table.steps.insert(id, steps);
+                continue;
+            };
+            // Flown for an entry of this file that is a catalogue action's own.
+            let Some(id) = catalogue.id(of).filter(|_| own.contains(of)) else {
                 return Err(SpecError::new(
                     path,
                     format!("{name}.flown_for"),
-                    format!("`{f}` is not an entry of this file that an MDP action maps to"),
+                    format!("`{of}` is not an entry of this file that an MDP action maps to"),
+                ));
+            };
+            if let Some((other, _)) = table.flown_for.get(&id) {
+                return Err(SpecError::new(
+                    path,
+                    format!("{name}.flown_for"),
+                    format!(
+                        "`{other}` is already flown for `{of}`: one shell-only entry per action"
+                    ),
                 ));
             }
+            table.flown_for.insert(id, (name, steps));
         }
-        Ok(Self { actions, flown_for })
+        Ok(table)
     }
+}
+
+/// The catalogue action an entry without `flown_for` is the steps of: it must be a vehicle
+/// action of params/actions.toml.
+fn own_entry(path: &Path, name: &str, catalogue: &ActionCatalogue) -> Result<ActionId, SpecError> {
+    let Some(id) = catalogue.id(name) else {
+        return Err(SpecError::new(
+            path,
+            name,
+            "not an action of params/actions.toml, so no MDP proposes it (a shell-only \
+             entry says so with `flown_for = \"ACTION\"`)",
+        ));
+    };
+    if catalogue.by_id(id).kind != ActionKind::Vehicle {
+        return Err(SpecError::new(
+            path,
+            name,
+            "an application action (params/actions.toml): it runs on the platform, not \
+             as MAVLink steps",
+        ));
+    }
+    Ok(id)
+}
+
+/// The steps of entry `name`, checked.
+fn entry_steps(path: &Path, name: &str, a: &RawAction) -> Result<Vec<Step>, SpecError> {
+    if a.nothing && !a.steps.is_empty() {
+        return Err(SpecError::new(
+            path,
+            format!("{name}.steps"),
+            "`nothing = true` commands nothing: its steps must be empty",
+        ));
+    }
+    if a.steps.is_empty() && !a.nothing {
+        return Err(SpecError::new(
+            path,
+            format!("{name}.steps"),
+            "an action needs at least one step (or `nothing = true`)",
+        ));
+    }
+    a.steps
+        .iter()
+        .enumerate()
+        .map(|(i, s)| step(path, format!("{name}.steps[{i}]"), s))
+        .collect()
+}
+
+/// One step of an entry, checked (`entry` names it in errors).
+fn step(path: &Path, entry: String, s: &RawStep) -> Result<Step, SpecError> {
+    let set = [
+        s.mode.is_some(),
+        s.arm.is_some(),
+        s.command.is_some(),
+        s.upload_mission.is_some(),
+        s.reposition.is_some(),
+        s.goto_zone.is_some(),
+    ]
+    .iter()
+    .filter(|b| **b)
+    .count();
+    if set != 1 {
+        return Err(SpecError::new(
+            path,
+            entry,
+            "a step has exactly one of mode, arm, command, upload_mission, reposition, goto_zone",
+        ));
+    }
+    if s.params.is_some() && s.command.is_none() {
+        return Err(SpecError::new(path, entry, "params only go with command"));
+    }
+    let step = if let Some(m) = &s.mode {
+        let Some(mode) = FlightMode::from_name(m) else {
+            return Err(SpecError::new(path, entry, format!("unknown mode {m:?}")));
+        };
+        Step::Mode(mode)
+    } else if let Some(arm) = s.arm {
+        if !arm {
+            return Err(SpecError::new(
+                path,
+                entry,
+                "arm = false is not a step (disarming is the autopilot's job)",
+            ));
+        }
+        Step::Arm
+    } else if let Some(c) = &s.command {
+        let command = parse_cmd(c).ok_or_else(|| {
+            SpecError::new(path, &entry, format!("unknown MAVLink command {c:?}"))
+        })?;
+        let p = s.params.clone().unwrap_or_default();
+        if p.len() > 7 {
+            return Err(SpecError::new(
+                path,
+                entry,
+                format!("{} params; a command has at most 7", p.len()),
+            ));
+        }
+        if p.iter().any(|v| !v.is_finite()) {
+            return Err(SpecError::new(path, entry, "params must be finite numbers"));
+        }
+        let mut params = [0.0f32; 7];
+        params[..p.len()].copy_from_slice(&p);
+        Step::Command { command, params }
+    } else if s.upload_mission == Some(true) {
+        Step::UploadMission
+    } else if let Some(o) = s.reposition {
+        if ![o.forward_m, o.right_m, o.up_m]
+            .iter()
+            .all(|v| v.is_finite())
+        {
+            return Err(SpecError::new(path, entry, "offsets must be finite"));
+        }
+        Step::Reposition(o)
+    } else if s.goto_zone == Some(true) {
+        Step::GotoZone
+    } else {
+        return Err(SpecError::new(
+            path,
+            entry,
+            "upload_mission / goto_zone must be true",
+        ));
+    };
+    Ok(step)
 }
 
 /// A route, relative to home (default) or absolute.

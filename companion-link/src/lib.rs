@@ -74,6 +74,27 @@ pub(crate) mod test_support {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../params")
     }
 
+    /// The shipped action catalogue (params/actions.toml).
+    pub(crate) fn catalogue() -> companion_core::mission::ActionCatalogue {
+        let dir = default_params_dir();
+        let mut files = ParamsFiles::new(&dir);
+        let p = dir.join("actions.toml");
+        files.insert(p.clone(), std::fs::read_to_string(&p).unwrap());
+        companion_core::mission::ActionCatalogue::load(&files).unwrap()
+    }
+
+    /// params/commands.toml-like file `path` from disk, resolved against [`catalogue`].
+    pub(crate) fn commands(
+        path: &Path,
+    ) -> Result<crate::actions::ActionTable, companion_core::spec::SpecError> {
+        let mut files = ParamsFiles::new(path.parent().unwrap_or(Path::new(".")));
+        match std::fs::read(path) {
+            Ok(b) => files.insert_bytes(path, &b),
+            Err(e) => files.insert_unreadable(path, format!("cannot read: {e}")),
+        }
+        crate::actions::ActionTable::load(&files, path, &catalogue())
+    }
+
     /// A loader of one file from disk: `disk(LinkParams::load)(&path)`.
     pub(crate) fn disk<T>(load: fn(&ParamsFiles, &Path) -> T) -> impl Fn(&Path) -> T {
         move |path: &Path| {

@@ -22,8 +22,9 @@
 
 use super::actions::Route;
 use super::modes::FlightMode;
-use companion_core::mission::{ActionRole, MissionStates, RouteRole};
+use companion_core::mission::{ActionCatalogue, ActionRole, MissionStates, RouteRole};
 use companion_core::observations::Observations;
+use companion_core::vocabulary::ActionId;
 
 /// Inputs that are not observations (telemetry the estimator needs besides `Observations`).
 #[derive(Debug, Clone, Default)]
@@ -77,15 +78,29 @@ pub struct MissionState {
     /// Since when (shell clock) and in how many cycles the vehicle has reported itself on the
     /// ground and disarmed without a break.
     ground_since: Option<(f64, u32)>,
-    landing_action: Option<String>,
+    landing_action: Option<ActionId>,
     /// The mission's states and phases (params/mission.toml).
     states: MissionStates,
+    /// The action catalogue the shell's ids index (params/actions.toml).
+    actions: ActionCatalogue,
+    /// The role of each action of `actions`, by id.
+    roles: Vec<Option<ActionRole>>,
 }
 
 impl MissionState {
     /// Mission-state estimator for `route`; armed at or above 0.8 * `takeoff_alt_m` (m above
-    /// home) counts as airborne.
-    pub fn new(route: &Route, takeoff_alt_m: f64, states: MissionStates) -> Self {
+    /// home) counts as airborne. Actions are ids of `actions`.
+    pub fn new(
+        route: &Route,
+        takeoff_alt_m: f64,
+        states: MissionStates,
+        actions: &ActionCatalogue,
+    ) -> Self {
+        let roles = actions
+            .actions
+            .iter()
+            .map(|a| states.actions().role_of(&a.id))
+            .collect();
         let first = if route.takeoff_first { 2 } else { 1 };
         let last = route.waypoints.len() as u16 + first - 1;
         Self {
@@ -110,6 +125,8 @@ impl MissionState {
             ground_since: None,
             landing_action: None,
             states,
+            actions: actions.clone(),
+            roles,
         }
     }
 
@@ -118,21 +135,42 @@ impl MissionState {
         &self.states
     }
 
-    /// The landing action the shell keeps flying in the landing phase (`land`,
-    /// `replan_and_land`, `return_to_base`): the last one chosen, or the one matching the
-    /// landing mode the vehicle entered. None before the landing phase.
-    pub fn landing_action(&self) -> Option<&str> {
+    /// The landing action the shell keeps flying in the landing phase (the roles land, replan
+    /// and land, return to base): the last one chosen, or the one matching the landing mode the
+    /// vehicle entered. None before the landing phase.
+    pub fn landing_action(&self) -> Option<ActionId> {
         if self.landing && !self.finished {
-            self.landing_action.as_deref()
+            self.landing_action
         } else {
             None
         }
     }
 
-    /// Whether action `id` ends the flight (its role in params/actions.toml: land, replan and
-    /// land, return to base).
-    pub fn is_landing_action(&self, id: &str) -> bool {
-        self.states.actions().ends_flight(id)
+    /// The role action `id` plays (params/actions.toml).
+    pub fn role(&self, id: ActionId) -> Option<ActionRole> {
+        self.roles.get(id.index()).copied().flatten()
+    }
+
+    /// Whether action `id` ends the flight ([`ActionRole::ends_flight`]: land, replan and land,
+    /// return to base).
+    pub fn is_landing_action(&self, id: ActionId) -> bool {
+        self.role(id).is_some_and(ActionRole::ends_flight)
+    }
+
+    /// The action playing `role` (the first in file order for a role several play).
+    pub fn action(&self, role: ActionRole) -> Option<ActionId> {
+        let at = self.roles.iter().position(|r| *r == Some(role))?;
+        Some(self.actions.id(&self.actions.actions[at].id)?)
+    }
+
+    /// The action catalogue whose ids this estimator speaks.
+    pub fn actions(&self) -> &ActionCatalogue {
+        &self.actions
+    }
+
+    /// The name of action `id`, for a record.
+    pub fn name(&self, id: ActionId) -> &str {
+        self.actions.name(id)
     }
 
     /// On the ground and disarmed now: EXTENDED_SYS_STATE says ON_GROUND (when the autopilot
@@ -191,7 +229,7 @@ impl MissionState {
                 } else {
                     ActionRole::Land
                 };
-                self.landing_action = Some(self.states.actions().action(role).into());
+                self.landing_action = self.action(role);
             }
         }
         let t = obs.time_s;
@@ -268,7 +306,7 @@ impl MissionState {
             && let Some(a) = self.states.actions().first_ending(actions)
         {
             self.landing = true;
-            self.landing_action = Some(a.clone());
+            self.landing_action = self.actions.id(a);
         }
     }
 
@@ -361,6 +399,15 @@ mod tests {
         MissionStates::load(&files).unwrap()
     }
 
+    fn catalogue() -> ActionCatalogue {
+        crate::test_support::catalogue()
+    }
+
+    /// The landing action's name.
+    fn landing(m: &MissionState) -> Option<&str> {
+        m.landing_action().map(|a| m.name(a))
+    }
+
     fn route() -> Route {
         crate::test_support::disk(Route::load)(
             &crate::test_support::default_params_dir().join("missions/tracking_route.toml"),
@@ -382,7 +429,7 @@ mod tests {
     #[test]
     fn follows_the_simulation_phases_on_the_default_route() {
         // Default route: seq 0 home, 1 take-off, 2 wp1, 3 and 4 intermediate, 5 wpf.
-        let mut m = MissionState::new(&route(), 10.0, states());
+        let mut m = MissionState::new(&route(), 10.0, states(), &catalogue());
         let none = Extra::default();
         let auto = Extra {
             mode: Some(FlightMode::Auto),
@@ -431,14 +478,14 @@ mod tests {
         );
         m.after_plan(&["land".into()]);
         assert_eq!(m.update(&obs(30.0, &fly(5.0, 0.0, 1.0)), &auto), "landing");
-        assert_eq!(m.landing_action(), Some("land"));
+        assert_eq!(landing(&m), Some("land"));
         assert!(!m.finished());
         let down = [("armed", 0.0), ("altitude_m", 0.1)];
         assert_eq!(m.update(&obs(40.0, &down), &none), "landing");
         assert!(!m.finished(), "on the ground for one cycle only");
         assert_eq!(m.update(&obs(43.0, &down), &none), "landing");
         assert!(m.finished());
-        assert_eq!(m.landing_action(), None);
+        assert_eq!(landing(&m), None);
     }
 
     fn flying() -> [(&'static str, f64); 3] {
@@ -447,7 +494,7 @@ mod tests {
 
     #[test]
     fn one_disarmed_heartbeat_at_altitude_neither_lands_nor_ends_the_flight() {
-        let mut m = MissionState::new(&route(), 10.0, states());
+        let mut m = MissionState::new(&route(), 10.0, states(), &catalogue());
         let auto = Extra {
             mode: Some(FlightMode::Auto),
             landed_state: Some("IN_AIR"),
@@ -460,13 +507,13 @@ mod tests {
             assert_eq!(m.update(&obs(t, &spoofed), &auto), "wpi");
             assert!(!m.finished());
         }
-        assert_eq!(m.landing_action(), None);
+        assert_eq!(landing(&m), None);
         assert_eq!(m.update(&obs(7.0, &flying()), &auto), "wpi");
     }
 
     #[test]
     fn the_flight_ends_only_after_ground_and_disarm_hold_for_the_confirm_time() {
-        let mut m = MissionState::new(&route(), 10.0, states());
+        let mut m = MissionState::new(&route(), 10.0, states(), &catalogue());
         let in_air = Extra {
             mode: Some(FlightMode::Land),
             landed_state: Some("IN_AIR"),
@@ -478,11 +525,7 @@ mod tests {
             ..Extra::default()
         };
         m.update(&obs(1.0, &flying()), &in_air);
-        assert_eq!(
-            m.landing_action(),
-            Some("land"),
-            "LAND mode is the landing phase"
-        );
+        assert_eq!(landing(&m), Some("land"), "LAND mode is the landing phase");
         let down = [("armed", 0.0), ("altitude_m", 0.0)];
         // Disarmed but the autopilot says in the air: not over.
         m.update(&obs(2.0, &down), &in_air);
@@ -500,7 +543,7 @@ mod tests {
         m.update(&obs(15.0, &down), &on_ground);
         assert!(m.finished());
         // Without a landed state, the altitude decides.
-        let mut m = MissionState::new(&route(), 10.0, states());
+        let mut m = MissionState::new(&route(), 10.0, states(), &catalogue());
         m.update(&obs(1.0, &flying()), &Extra::default());
         let high = [("armed", 0.0), ("altitude_m", 15.0)];
         m.update(&obs(2.0, &high), &Extra::default());
@@ -515,7 +558,7 @@ mod tests {
     fn landed_snapshots_end_the_flight_only_when_every_frame_agreed_for_the_confirm_time() {
         // Spoofed "disarmed on the ground" frames make every snapshot look landed, but the
         // autopilot's own armed heartbeats in between keep the frame window short.
-        let mut m = MissionState::new(&route(), 10.0, states());
+        let mut m = MissionState::new(&route(), 10.0, states(), &catalogue());
         m.update(&obs(1.0, &flying()), &Extra::default());
         let down = [("armed", 0.0), ("altitude_m", 0.0)];
         let spoofed = |d: f64| Extra {
@@ -533,7 +576,7 @@ mod tests {
 
     #[test]
     fn autopilot_landing_modes_and_disarm_mean_landing() {
-        let mut m = MissionState::new(&route(), 10.0, states());
+        let mut m = MissionState::new(&route(), 10.0, states(), &catalogue());
         let flying = [("armed", 1.0), ("altitude_m", 15.0), ("mission_seq", 2.0)];
         assert_eq!(m.update(&obs(1.0, &flying), &Extra::default()), "wp1");
         let rtl = Extra {
@@ -541,9 +584,9 @@ mod tests {
             ..Extra::default()
         };
         assert_eq!(m.update(&obs(2.0, &flying), &rtl), "landing");
-        assert_eq!(m.landing_action(), Some("return_to_base"));
+        assert_eq!(landing(&m), Some("return_to_base"));
         // a disarmed vehicle that never flew is at base, not landing
-        let mut m = MissionState::new(&route(), 10.0, states());
+        let mut m = MissionState::new(&route(), 10.0, states(), &catalogue());
         assert_eq!(m.update(&obs(1.0, &[("armed", 0.0)]), &rtl), "base");
         assert!(!m.finished());
     }
@@ -571,8 +614,8 @@ mod tests {
         let renamed = renamed_states();
         assert!(!renamed.has_state("wpf") && renamed.has_state("r_wpf"));
         let (mut old, mut new) = (
-            MissionState::new(&route(), 10.0, states()),
-            MissionState::new(&route(), 10.0, renamed),
+            MissionState::new(&route(), 10.0, states(), &catalogue()),
+            MissionState::new(&route(), 10.0, renamed, &catalogue()),
         );
         assert_eq!((old.state(), new.state()), ("base", "r_base"));
         let auto = Extra {
@@ -618,7 +661,7 @@ mod tests {
             old.after_plan(&plan);
             new.after_plan(&plan);
         }
-        assert_eq!(new.landing_action(), Some("land"));
+        assert_eq!(landing(&new), Some("land"));
     }
 
     #[test]

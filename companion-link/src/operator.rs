@@ -36,15 +36,15 @@ pub enum Control {
     /// the confirmation window shows a mode not the companion's, or withdrawn (a false alarm)
     /// when one shows the companion's own mode again.
     Unconfirmed {
-        /// Name of the mode the autopilot reported.
-        mode: String,
+        /// The mode the autopilot reported.
+        mode: ReportedMode,
         /// When it was first reported.
         since: Duration,
     },
     /// A mode the companion did not command (`mode`): the pilot or the autopilot flies.
     TakenOver {
-        /// Name of the mode the autopilot reported.
-        mode: String,
+        /// The mode the autopilot reported.
+        mode: ReportedMode,
     },
     /// The companion is stopping (a signal, the end of `--duration`, a fatal error): it handed
     /// the vehicle to the autopilot and commands nothing more.
@@ -112,14 +112,14 @@ pub enum GateEvent {
     /// A granted start was voided before the vehicle was airborne: back to waiting, and no arming
     /// without a new operator action.
     StartVoided(VoidReason),
-    /// A mode the companion did not command (its name): commanding stopped at once, the
-    /// takeover waits for confirmation.
-    TakeoverSuspected(String),
+    /// A mode the companion did not command: commanding stopped at once, the takeover waits
+    /// for confirmation.
+    TakeoverSuspected(ReportedMode),
     /// The takeover is confirmed: the pilot or the autopilot flies in this mode.
-    TakenOver(String),
+    TakenOver(ReportedMode),
     /// The suspected takeover's mode (first) was not confirmed: the autopilot shows the
     /// companion's own mode (second) again, and the companion resumes.
-    FalseAlarm(String, String),
+    FalseAlarm(ReportedMode, ReportedMode),
     /// Control came back to the companion after a take-over.
     HandedBack(StartBy),
 }
@@ -311,9 +311,9 @@ impl OperatorGate {
     /// One look at the vehicle: start requests (GUIDED, arming with `--start-on-arm`,
     /// `--auto-start`), a disarm that voids a start, a takeover and its confirmation, a hand-back.
     pub fn observe(&mut self, now: Duration, v: &VehicleView) -> Option<GateEvent> {
-        if v.mode.is_none() {
+        let Some(reported) = v.mode else {
             return None; // no heartbeat yet
-        }
+        };
         if !v.armed() {
             self.seen_disarmed = true;
             self.arm_used = false;
@@ -368,26 +368,20 @@ impl OperatorGate {
                 if self.is_own_mode(now, v) {
                     return None;
                 }
-                let name = v.mode.map_or_else(|| "?".into(), |m| m.to_string());
                 self.control = Control::Unconfirmed {
-                    mode: name.clone(),
+                    mode: reported,
                     since: now,
                 };
-                Some(GateEvent::TakeoverSuspected(name))
+                Some(GateEvent::TakeoverSuspected(reported))
             }
-            Control::Unconfirmed { mode, .. } => {
-                let mode = mode.clone();
+            &Control::Unconfirmed { mode, .. } => {
                 if self.is_own_mode(now, v) {
                     self.control = Control::Started;
-                    return Some(GateEvent::FalseAlarm(
-                        mode,
-                        v.mode.map_or_else(|| "?".into(), |m| m.to_string()),
-                    ));
+                    return Some(GateEvent::FalseAlarm(mode, reported));
                 }
                 if v.mode_for >= self.confirm {
-                    let name = v.mode.map_or_else(|| "?".into(), |m| m.to_string());
-                    self.control = Control::TakenOver { mode: name.clone() };
-                    return Some(GateEvent::TakenOver(name));
+                    self.control = Control::TakenOver { mode: reported };
+                    return Some(GateEvent::TakenOver(reported));
                 }
                 None
             }
@@ -399,7 +393,7 @@ impl OperatorGate {
                     return Some(GateEvent::HandedBack(StartBy::GuidedSwitch));
                 }
                 if changed && let Control::TakenOver { mode } = &mut self.control {
-                    *mode = v.mode.map_or_else(|| "?".into(), |m| m.to_string());
+                    *mode = reported;
                 }
                 None
             }

@@ -218,7 +218,7 @@ fn cycle(
     n: u64,
 ) -> (Option<String>, Vec<Msg>) {
     let decided = fly::decide(core, shell, vehicle, || now);
-    let chosen = decided.chosen.clone();
+    let chosen = decided.chosen.map(|f| vehicle.actions.name(f).to_string());
     let msgs = decided.msgs.clone();
     let rec = fly::finish_record(decided, shell, vehicle, n, &mut Vec::new());
     serde_json::to_string(&rec).expect("a decision record serialises");
@@ -455,7 +455,12 @@ pub fn params_one(fx: &ParamsFixture, data: &[u8]) -> ParamsOutcome {
             // What `fly` does next with these numbers (Durations, the mission-state estimator).
             let _ = vehicle_config(&setup.link, Duration::from_secs(3));
             let _ = Duration::from_secs_f64(setup.link.decision_period_s);
-            let _ = MissionState::new(&setup.route, setup.takeoff_alt_m, setup.states.clone());
+            let _ = MissionState::new(
+                &setup.route,
+                setup.takeoff_alt_m,
+                setup.states.clone(),
+                &setup.catalogue,
+            );
             let _ = setup.route.items((0, 0));
         }
         let args = companion::check::CheckArgs {

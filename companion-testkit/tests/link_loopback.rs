@@ -3,7 +3,7 @@
 //! commands `take_off` needs, injects garbage bytes between frames, and drops the TCP connection
 //! once the vehicle is airborne to check reconnect + stream re-request without command replay.
 
-use companion::fly::{FlyArgs, run_with};
+use companion::fly::{FlyArgs, RecordSink, run_until, run_with};
 use companion_core::record::DecisionRecord;
 use companion_core::record::{Event, LinkEvent};
 use companion_link::dialect::*;
@@ -179,6 +179,20 @@ async fn autopilot(listener: TcpListener, log: Arc<Mutex<PeerLog>>) {
     }
 }
 
+/// The failure bound of the TCP flight: what it checks happens within ~3 s on an idle machine.
+const FLIGHT_BOUND: Duration = Duration::from_secs(60);
+
+/// Decision records the test reads while the flight runs.
+#[derive(Clone, Default)]
+struct SharedRecords(Arc<Mutex<Vec<DecisionRecord>>>);
+
+impl RecordSink for SharedRecords {
+    fn write(&mut self, rec: &DecisionRecord) -> std::io::Result<()> {
+        self.0.lock().unwrap().push(rec.clone());
+        Ok(())
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
     let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
@@ -195,7 +209,8 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
     let monitor = tokio::spawn(async move {
         let s = tokio::net::UdpSocket::bind("127.0.0.1:0").await.unwrap();
         let mut seq = 0u8;
-        for i in 0..50u32 {
+        // Until the flight ends (the task is aborted then), however long that takes.
+        for i in 0u32.. {
             let det = if i < 10 { 0.0 } else { 1.0 };
             let m = Msg::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA {
                 time_boot_ms: i * 100,
@@ -213,16 +228,43 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
         format!("tcp:127.0.0.1:{port}"),
         "--onboard".into(),
         format!("udpin:127.0.0.1:{onboard_port}"),
-        "--duration".into(),
-        "6s".into(),
         "--auto-start".into(),
     ])
     .unwrap();
     let decider = ScriptedDecider::new(20.0, 6, "safety");
-    let mut records: Vec<DecisionRecord> = Vec::new();
-    let report = run_with(args, decider, &mut records).await.unwrap();
+    // The flight ends once everything checked below has happened (taken off, reconnected with
+    // the streams asked for again, the detection seen), or after FLIGHT_BOUND, the failure
+    // bound: never after a fixed time that a loaded machine may not reach it in.
+    let shared = SharedRecords::default();
+    let (seen_records, seen_log) = (shared.0.clone(), log.clone());
+    let done = async move {
+        let happened = || {
+            let records = seen_records.lock().unwrap();
+            let log = seen_log.lock().unwrap();
+            let reconnected = log
+                .commands
+                .iter()
+                .any(|c| c.0 == 2 && c.1 == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL);
+            let took_off = records.iter().flat_map(|r| &r.commands).any(|c| {
+                c.action == "take_off"
+                    && c.command == "MAV_CMD_NAV_TAKEOFF"
+                    && c.result == "ACCEPTED"
+            });
+            let detected = records
+                .iter()
+                .any(|r| r.events.contains(&Event::TargetDetected));
+            reconnected && took_off && detected
+        };
+        let deadline = tokio::time::Instant::now() + FLIGHT_BOUND;
+        while !happened() && tokio::time::Instant::now() < deadline {
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    };
+    let mut sink = shared.clone();
+    let report = run_until(args, decider, &mut sink, done).await.unwrap();
     peer.abort();
     monitor.abort();
+    let records = std::mem::take(&mut *shared.0.lock().unwrap());
 
     let log = log.lock().unwrap();
     // Identity: our heartbeat is an onboard controller, component 191, not an autopilot.
@@ -273,9 +315,10 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
         .flat_map(|r| r.events.iter().map(|e| e.to_string()))
         .collect();
     assert!(
-        said.iter()
-            .any(|e| e.contains("companion stopping (--duration elapsed)")
-                && e.contains("hand-off RTL")),
+        said.iter().any(
+            |e| e.contains("companion stopping (stop requested by the caller)")
+                && e.contains("hand-off RTL")
+        ),
         "{said:?}"
     );
     assert_eq!(

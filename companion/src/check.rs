@@ -66,18 +66,17 @@ pub const SECTIONS: &[(&str, SectionFn)] = &[
 /// What `fly` loads besides the model: the link settings, the vehicle actions' MAVLink steps and
 /// the route.
 pub fn fly_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
-    let (link, commands, route, route_file) =
-        crate::params::load_fly_files(cx.params, cx.args.route.as_deref())?;
-    let actions: Vec<&String> = commands.actions.keys().collect();
+    let (link, commands, route, route_file) = crate::params::load_fly_files(
+        cx.params,
+        cx.args.route.as_deref(),
+        &cx.loaded.model.actions,
+    )?;
+    let actions = commands.entry_names();
     let text = format!(
         "\nfly: decision period {} s, {} streams; vehicle actions: {}\n  route {}: {} waypoints at {} m\n",
         link.decision_period_s,
         link.streams.len(),
-        actions
-            .iter()
-            .map(|a| a.as_str())
-            .collect::<Vec<_>>()
-            .join(", "),
+        actions.join(", "),
         route_file.display(),
         route.waypoints.len(),
         route.altitude_m

@@ -10,7 +10,7 @@ use crate::sim::WorldSpec;
 use companion_core::decision::Model;
 use companion_core::mission::ActionKind;
 use companion_core::spec::{ParamsFiles, SpecError};
-use companion_link::actions::{ActionTable, LinkParams, Route};
+use companion_link::actions::{ActionTable, Flown, LinkParams, Route};
 use std::path::{Path, PathBuf};
 
 /// The route `fly` follows when `--mission` names none, relative to the params directory.
@@ -51,7 +51,7 @@ impl Params {
         let dir = files.dir().to_path_buf();
         let model = Model::load(&files)?;
         let world = WorldSpec::load(&files)?;
-        let (link, commands, route, route_file) = load_fly_files(&files, route)?;
+        let (link, commands, route, route_file) = load_fly_files(&files, route, &model.actions)?;
         let learning = crate::learn_cpt::LearningParams::load(&files)?;
         let p = Params {
             learning,
@@ -82,7 +82,11 @@ impl Params {
             .map(|a| a.id.as_str())
             .collect();
         for a in &vehicle {
-            if !self.commands.actions.contains_key(*a) {
+            let steps = self.model.actions.id(a);
+            if steps
+                .and_then(|id| self.commands.steps(Flown::Action(id)))
+                .is_none()
+            {
                 return Err(SpecError::new(
                     &commands,
                     *a,
@@ -198,15 +202,16 @@ impl Params {
     }
 }
 
-/// The files `fly` reads besides the model: `link.toml`, `commands.toml` and the route
-/// (`route`, else [`DEFAULT_ROUTE`]).
+/// The files `fly` reads besides the model: `link.toml`, `commands.toml` (resolved against the
+/// action catalogue `actions`) and the route (`route`, else [`DEFAULT_ROUTE`]).
 pub fn load_fly_files(
     files: &ParamsFiles,
     route: Option<&Path>,
+    actions: &companion_core::mission::ActionCatalogue,
 ) -> Result<(LinkParams, ActionTable, Route, PathBuf), SpecError> {
     let dir = files.dir();
     let link = LinkParams::load(files, &dir.join("link.toml"))?;
-    let commands = ActionTable::load(files, &dir.join("commands.toml"))?;
+    let commands = ActionTable::load(files, &dir.join("commands.toml"), actions)?;
     let route_file = route.map_or_else(|| dir.join(DEFAULT_ROUTE), Path::to_path_buf);
     let route = Route::load(files, &route_file)?;
     Ok((link, commands, route, route_file))

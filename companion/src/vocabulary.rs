@@ -15,7 +15,7 @@ use companion_core::decision::Model;
 use companion_core::evidence::{CORE_COMPUTES, CORE_READS};
 use companion_core::spec::{ParamsFiles, SpecError};
 use companion_core::vocabulary::NamedAction;
-use companion_link::actions::{ActionTable, LinkParams};
+use companion_link::actions::{ActionTable, Flown, LinkParams};
 use companion_link::telemetry::TELEMETRY_OBSERVATIONS;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -294,54 +294,23 @@ pub struct ActionEntry {
 pub fn actions(p: &Sources) -> Vec<ActionEntry> {
     companion_core::vocabulary::named_actions(&p.model.actions, &p.model.mdps)
         .into_iter()
-        .map(|a| ActionEntry {
-            vehicle_steps: p.commands.actions.contains_key(&a.name),
-            flown_as: p
-                .commands
-                .flown_for
-                .iter()
-                .filter(|(_, f)| **f == a.name)
-                .map(|(e, _)| e.clone())
-                .collect(),
-            action: a,
+        .map(|a| {
+            let id = p.model.actions.id(&a.name);
+            ActionEntry {
+                vehicle_steps: id.is_some_and(|id| p.commands.steps(Flown::Action(id)).is_some()),
+                flown_as: id
+                    .and_then(|id| p.commands.in_place_of(id))
+                    .map(|f| p.commands.name(f).to_string())
+                    .into_iter()
+                    .collect(),
+                action: a,
+            }
         })
         .collect()
 }
 
-/// Refuse a params/commands.toml entry that is no action some MDP proposes, unless it is marked
-/// shell-only (`flown_for`), and an application action that has MAVLink steps.
-pub fn check_commands(p: &Sources) -> Result<(), SpecError> {
-    let file = p.dir.join("commands.toml");
-    let all = actions(p);
-    for name in p.commands.actions.keys() {
-        if p.commands.flown_for.contains_key(name) {
-            continue;
-        }
-        match all.iter().find(|a| a.action.name == *name) {
-            None => {
-                return Err(SpecError::new(
-                    &file,
-                    name.as_str(),
-                    "not an action of params/actions.toml, so no MDP proposes it (a shell-only \
-                     entry says so with `flown_for = \"ACTION\"`)",
-                ));
-            }
-            Some(a) if a.action.kind != "vehicle" => {
-                return Err(SpecError::new(
-                    &file,
-                    name.as_str(),
-                    "an application action (params/actions.toml): it runs on the platform, not \
-                     as MAVLink steps",
-                ));
-            }
-            Some(_) => {}
-        }
-    }
-    Ok(())
-}
-
-/// Both vocabularies' load checks.
+/// The vocabulary's load check (the commands' entries are checked against the action catalogue
+/// when params/commands.toml loads: `ActionTable::load`).
 pub fn check(p: &Sources) -> Result<(), SpecError> {
-    check_observations(p)?;
-    check_commands(p)
+    check_observations(p)
 }

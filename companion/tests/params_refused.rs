@@ -178,14 +178,31 @@ fn empty_commands_toml_is_refused() {
 #[test]
 fn commands_toml_missing_a_vehicle_action_is_refused() {
     let d = params_copy();
+    // The entry removed (a renamed one is refused sooner, as naming no action).
     edit(d.path(), "commands.toml", |t| {
-        t.replace("[return_to_base]", "[return_to_base_renamed]")
+        let at = t.find("[return_to_base]").unwrap();
+        let end = t[at..].find("]\n\n").map_or(t.len(), |e| at + e + 3);
+        format!("{}{}", &t[..at], &t[end..])
     });
     refused_by_cross_check(
         d.path(),
         "commands.toml",
         "return_to_base",
         "no MAVLink steps",
+    );
+}
+
+#[test]
+fn commands_toml_entry_naming_no_action_is_refused() {
+    let d = params_copy();
+    edit(d.path(), "commands.toml", |t| {
+        t.replace("[return_to_base]", "[return_to_base_renamed]")
+    });
+    refused_everywhere(
+        d.path(),
+        "commands.toml",
+        "return_to_base_renamed",
+        "not an action of params/actions.toml",
     );
 }
 

@@ -344,3 +344,18 @@ fn json_says_which_evidence_is_absent_when_not_fed() {
         params.model.health.observations.observations.len()
     );
 }
+
+#[test]
+fn a_second_shell_only_entry_for_one_action_is_refused() {
+    // Two entries flown for follow_trajectory: the shell could fly only one of them.
+    expect_err(
+        "commands.toml",
+        |t| {
+            format!(
+                "{t}\n[follow_trajectory_again]\nflown_for = \"follow_trajectory\"\nsteps = [{{ mode = \"AUTO\" }}]\n"
+            )
+        },
+        "follow_trajectory_resume.flown_for",
+        "`follow_trajectory_again` is already flown for `follow_trajectory`",
+    );
+}

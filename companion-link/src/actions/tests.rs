@@ -8,10 +8,15 @@ fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> std::path::PathBuf 
     p
 }
 
+/// The steps of the shipped action named `name`.
+fn own<'a>(t: &'a ActionTable, name: &str) -> Option<&'a [Step]> {
+    t.steps(Flown::Action(crate::test_support::catalogue().id(name)?))
+}
+
 #[test]
 fn shipped_params_load() {
     let dir = default_params_dir();
-    let t = crate::test_support::disk(ActionTable::load)(&dir.join("commands.toml")).unwrap();
+    let t = crate::test_support::commands(&dir.join("commands.toml")).unwrap();
     for a in [
         "take_off",
         "follow_trajectory",
@@ -20,22 +25,22 @@ fn shipped_params_load() {
         "replan_and_land",
         "return_to_base",
     ] {
-        assert!(t.actions.contains_key(a), "{a} missing");
+        assert!(own(&t, a).is_some(), "{a} missing");
     }
-    assert_eq!(t.actions["take_off"][1], Step::Arm);
+    assert_eq!(own(&t, "take_off").unwrap()[1], Step::Arm);
     assert!(matches!(
-        t.actions["take_off"][2],
+        own(&t, "take_off").unwrap()[2],
         Step::Command {
             command: MavCmd::MAV_CMD_NAV_TAKEOFF,
             ..
         }
     ));
     assert_eq!(
-        t.actions["return_to_base"],
+        own(&t, "return_to_base").unwrap(),
         vec![Step::Mode(FlightMode::Rtl)]
     );
     // Staying on the ground commands nothing (an addition to the paper's actions).
-    assert_eq!(t.actions["stay_on_ground"], Vec::<Step>::new());
+    assert_eq!(own(&t, "stay_on_ground").unwrap(), Vec::<Step>::new());
     let r =
         crate::test_support::disk(Route::load)(&dir.join("missions/tracking_route.toml")).unwrap();
     assert!(r.waypoints.len() >= 3);
@@ -86,12 +91,12 @@ fn bad_commands_are_rejected_with_entry() {
     ];
     for (text, entry, why) in cases {
         let p = write(&d, "c.toml", text);
-        let e = crate::test_support::disk(ActionTable::load)(&p).expect_err(text);
+        let e = crate::test_support::commands(&p).expect_err(text);
         assert_eq!(e.entry, entry, "{text}");
         assert!(e.reason.contains(why), "{text}: {e}");
     }
     let p = write(&d, "c.toml", "[x]\nstepz = []\n");
-    assert!(crate::test_support::disk(ActionTable::load)(&p).is_err());
+    assert!(crate::test_support::commands(&p).is_err());
 }
 
 #[test]
@@ -317,4 +322,69 @@ fn px4_mission_has_takeoff_first_no_home_item_and_same_waypoint_seqs() {
             assert_eq!(px4[0], MissionItem::waypoint(home.0, home.1, 20.0));
         }
     }
+}
+
+/// Entries are checked against the action catalogue when the file loads: an entry is a vehicle
+/// action's own or one shell-only entry flown for one, else the load names file, entry, reason.
+#[test]
+fn entries_are_resolved_against_the_action_catalogue() {
+    let d = tempfile::tempdir().unwrap();
+    let land = "[land]\nsteps = [{ mode = \"LAND\" }]\n";
+    let resume = |name: &str, of: &str| {
+        format!("[{name}]\nflown_for = \"{of}\"\nsteps = [{{ mode = \"AUTO\" }}]\n")
+    };
+    let cases = [
+        (
+            format!("{land}[landd]\nsteps = [{{ mode = \"LAND\" }}]\n"),
+            "landd",
+            "not an action of params/actions.toml",
+        ),
+        (
+            format!("{land}[track_v3]\nsteps = [{{ mode = \"GUIDED\" }}]\n"),
+            "track_v3",
+            "an application action",
+        ),
+        (
+            format!("{land}{}", resume("again", "nowhere")),
+            "again.flown_for",
+            "`nowhere` is not an entry of this file",
+        ),
+        (
+            // A catalogue action, but without an entry of its own here.
+            format!("{land}{}", resume("again", "return_to_base")),
+            "again.flown_for",
+            "`return_to_base` is not an entry of this file",
+        ),
+        (
+            format!(
+                "{land}{}{}",
+                resume("again", "land"),
+                resume("later", "land")
+            ),
+            "later.flown_for",
+            "`again` is already flown for `land`",
+        ),
+    ];
+    for (text, entry, why) in cases {
+        let p = write(&d, "commands.toml", &text);
+        let e = crate::test_support::commands(&p).expect_err(&text);
+        assert_eq!(e.entry, entry, "{text}");
+        assert!(e.reason.contains(why), "{text}: {e}");
+        assert!(e.file.ends_with("commands.toml"), "{e}");
+    }
+}
+
+/// The shell-only entry is found by the action it is flown for and named by its own name; the
+/// action's own entry by the catalogue's name.
+#[test]
+fn a_shell_only_entry_is_flown_in_place_of_its_action() {
+    let t = crate::test_support::commands(&default_params_dir().join("commands.toml")).unwrap();
+    let cat = crate::test_support::catalogue();
+    let follow = cat.id("follow_trajectory").unwrap();
+    let resume = t.in_place_of(follow).expect("the shipped resume entry");
+    assert_eq!(resume, Flown::InPlaceOf(follow));
+    assert_eq!(t.name(resume), "follow_trajectory_resume");
+    assert_eq!(t.name(Flown::Action(follow)), "follow_trajectory");
+    assert_ne!(t.steps(resume), t.steps(Flown::Action(follow)));
+    assert_eq!(t.in_place_of(cat.id("land").unwrap()), None);
 }

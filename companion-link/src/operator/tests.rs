@@ -1,5 +1,28 @@
 use super::*;
 
+/// The reported mode named `name` (an ArduPilot mode).
+fn mode(name: &str) -> ReportedMode {
+    ReportedMode::Known(FlightMode::from_name(name).expect(name))
+}
+
+/// The record's event text names the mode as the autopilot reported it.
+#[test]
+fn takeover_events_name_the_reported_mode() {
+    assert_eq!(
+        GateEvent::TakenOver(mode("LOITER")).describe(),
+        "operator: mode LOITER was not commanded by the companion: the pilot or the autopilot has control; the companion stops commanding"
+    );
+    assert_eq!(
+        GateEvent::FalseAlarm(mode("LOITER"), mode("AUTO")).describe(),
+        "operator: takeover not confirmed: LOITER was reported, then the autopilot showed the companion's AUTO again; commanding resumed (false alarm)"
+    );
+    let unknown = ReportedMode::decode(Flavor::ArduPilot, 99);
+    assert_eq!(
+        GateEvent::TakeoverSuspected(unknown).describe(),
+        "operator: mode MODE_99 was not commanded by the companion: commanding stopped until every heartbeat confirms it or shows the companion's mode again"
+    );
+}
+
 fn s(v: f64) -> Duration {
     Duration::from_secs_f64(v)
 }
@@ -157,7 +180,7 @@ fn a_guided_heartbeat_among_real_loiter_ones_is_no_start_and_no_hand_back() {
         let mut g = OperatorGate::new(false);
         if taken_over {
             g.control = Control::TakenOver {
-                mode: "LOITER".into(),
+                mode: mode("LOITER"),
             };
         }
         let mut f = Feed::new();
@@ -186,7 +209,7 @@ fn a_mode_change_on_the_ground_disarmed_is_not_a_takeover() {
     assert_eq!(f.at(&mut g, 20.0, GUIDED, true), None);
     assert_eq!(
         f.at(&mut g, 30.0, STABILIZE, true),
-        Some(GateEvent::TakeoverSuspected("STABILIZE".into()))
+        Some(GateEvent::TakeoverSuspected(mode("STABILIZE")))
     );
 }
 
@@ -204,7 +227,7 @@ fn start_command_requests_and_hands_back() {
     );
     assert_eq!(g.on_start_command(), None, "already started");
     g.control = Control::TakenOver {
-        mode: "LOITER".into(),
+        mode: mode("LOITER"),
     };
     assert_eq!(
         g.on_start_command(),
@@ -222,22 +245,17 @@ fn a_takeover_stops_at_once_and_is_confirmed_after_two_seconds_of_heartbeats() {
     assert!(g.commanding());
     assert_eq!(
         f.at(&mut g, 30.0, LOITER, true),
-        Some(GateEvent::TakeoverSuspected("LOITER".into()))
+        Some(GateEvent::TakeoverSuspected(mode("LOITER")))
     );
     assert!(!g.commanding(), "commanding stops at once");
     assert_eq!(f.at(&mut g, 31.0, LOITER, true), None);
     assert_eq!(
         f.at(&mut g, 32.0, LOITER, true),
-        Some(GateEvent::TakenOver("LOITER".into()))
+        Some(GateEvent::TakenOver(mode("LOITER")))
     );
     // The pilot moves on to LAND: still theirs.
     assert_eq!(f.at(&mut g, 33.0, LAND, true), None);
-    assert_eq!(
-        g.control,
-        Control::TakenOver {
-            mode: "LAND".into()
-        }
-    );
+    assert_eq!(g.control, Control::TakenOver { mode: mode("LAND") });
     // Switching to GUIDED and staying there hands control back.
     assert_eq!(f.at(&mut g, 40.0, GUIDED, true), None);
     assert_eq!(f.at(&mut g, 41.0, GUIDED, true), None);
@@ -257,12 +275,12 @@ fn one_spoofed_loiter_heartbeat_is_a_false_alarm_and_commanding_resumes() {
     assert_eq!(f.at(&mut g, 20.0, AUTO, true), None);
     assert_eq!(
         f.at(&mut g, 20.4, LOITER, true),
-        Some(GateEvent::TakeoverSuspected("LOITER".into()))
+        Some(GateEvent::TakeoverSuspected(mode("LOITER")))
     );
     assert_eq!(f.look(&mut g, 20.9), None);
     assert_eq!(
         f.at(&mut g, 21.0, AUTO, true),
-        Some(GateEvent::FalseAlarm("LOITER".into(), "AUTO".into()))
+        Some(GateEvent::FalseAlarm(mode("LOITER"), mode("AUTO")))
     );
     assert!(g.commanding());
 }

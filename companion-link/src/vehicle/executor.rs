@@ -2,6 +2,7 @@
 //! commands, mission upload, repositions), one job at a time, and their records.
 
 use super::*;
+use crate::actions::Flown;
 
 /// What a command ticket is for.
 #[derive(Debug, Clone)]
@@ -21,60 +22,20 @@ pub(super) enum Advance {
     Wait,
 }
 
-#[derive(Debug, Clone, PartialEq)]
-pub(super) enum Running {
-    /// Nothing issued for the current step yet.
-    Idle,
-    Command(u64),
-    Mission,
-    WaitReady {
-        since: Duration,
-    },
-    /// The zone reposition was accepted: flying there (lat, lon in degrees * 1e7).
-    Arrive {
-        target: (i32, i32),
-        since: Duration,
-    },
-    /// PX4 accepted SET_MODE at `since`: waiting for a HEARTBEAT that shows the mode.
-    ConfirmMode {
-        since: Duration,
-    },
-}
-
-#[derive(Debug, Clone)]
-pub(super) struct Job {
-    pub(super) key: String,
-    pub(super) steps: VecDeque<(String, Step)>,
-    pub(super) running: Running,
-    pub(super) arm_attempts: u32,
-    /// SET_MODE sent for the current mode step (PX4 confirmation resends).
-    pub(super) mode_attempts: u32,
-    /// The custom mode reported when the current step's SET_MODE was first issued.
-    pub(super) mode_from: Option<u32>,
-}
-
-#[derive(Debug, Clone, PartialEq)]
-pub(super) enum JobStatus {
-    Running,
-    Done,
-    Failed(Duration),
-}
-
 impl Vehicle {
     /// The decision core asked for these vehicle actions.
     /// The same action already running or done is not restarted; a different one replaces it.
-    pub fn request_actions(&mut self, now: Duration, actions: &[String]) -> Vec<Msg> {
+    pub fn request_actions(&mut self, now: Duration, actions: &[Flown]) -> Vec<Msg> {
         if actions.is_empty() {
             return Vec::new();
         }
-        let key = actions.join("+");
         if let Some(job) = &self.job
-            && job.key == key
+            && job.key.is(actions)
         {
             return Vec::new();
         }
         if let Some((k, status)) = &self.last
-            && *k == key
+            && k.is(actions)
         {
             match status {
                 JobStatus::Done | JobStatus::Running => return Vec::new(),
@@ -83,9 +44,9 @@ impl Vehicle {
             }
         }
         if !self.liveness.alive() || self.target.is_none() {
-            for a in actions {
+            for &a in actions {
                 self.records.push(CommandRecord {
-                    action: a.clone(),
+                    action: self.actions.name(a).to_string(),
                     command: "-".into(),
                     result: CommandOutcome::NotSent("no link".into()),
                     attempts: 0,
@@ -94,15 +55,18 @@ impl Vehicle {
             }
             return Vec::new();
         }
+        let key = JobKey::Request(actions.to_vec());
+        // The steps carry the action's name for their records, resolved once per job.
         let mut steps = VecDeque::new();
         let mut unmapped = false;
-        for a in actions {
-            match self.actions.actions.get(a) {
-                Some(s) => steps.extend(s.iter().cloned().map(|st| (a.clone(), st))),
+        for &a in actions {
+            let name = self.actions.name(a).to_string();
+            match self.actions.steps(a) {
+                Some(s) => steps.extend(s.iter().cloned().map(|st| (name.clone(), st))),
                 None => {
                     unmapped = true;
                     self.records.push(CommandRecord {
-                        action: a.clone(),
+                        action: name,
                         command: "-".into(),
                         result: CommandOutcome::Unmapped,
                         attempts: 0,
@@ -197,7 +161,7 @@ impl Vehicle {
         loop {
             let Some(job) = &mut self.job else { return out };
             let Some((action, step)) = job.steps.front().cloned() else {
-                let key = job.key.clone();
+                let key = std::mem::replace(&mut job.key, JobKey::Request(Vec::new()));
                 self.job = None;
                 self.last = Some((key, JobStatus::Done));
                 return out;
@@ -875,9 +839,10 @@ impl Vehicle {
     }
 
     /// `action` is being flown or was flown to the end (asking for it again does nothing).
-    pub fn settled(&self, action: &str) -> bool {
-        matches!(&self.job, Some(j) if j.key == action)
-            || matches!(&self.last, Some((k, JobStatus::Done | JobStatus::Running)) if k == action)
+    pub fn settled(&self, action: Flown) -> bool {
+        let only = std::slice::from_ref(&action);
+        matches!(&self.job, Some(j) if j.key.is(only))
+            || matches!(&self.last, Some((k, JobStatus::Done | JobStatus::Running)) if k.is(only))
     }
 
     pub(super) fn note_mode(&mut self, now: Duration, mode: FlightMode) {
@@ -894,10 +859,21 @@ impl Vehicle {
     }
 
     /// When the last action failed (its key and the time), if it did and nothing ran since.
-    pub fn failed_action(&self) -> Option<(&str, Duration)> {
+    pub fn failed_action(&self) -> Option<(String, Duration)> {
         match &self.last {
-            Some((k, JobStatus::Failed(at))) => Some((k.as_str(), *at)),
+            Some((k, JobStatus::Failed(at))) => Some((self.job_name(k), *at)),
             _ => None,
+        }
+    }
+
+    /// The name a job goes by (`take_off`, `a+b` for several entries, `handoff:RTL`).
+    fn job_name(&self, key: &JobKey) -> String {
+        match key {
+            JobKey::Request(r) => {
+                let names: Vec<&str> = r.iter().map(|&f| self.actions.name(f)).collect();
+                names.join("+")
+            }
+            JobKey::Handoff(mode) => format!("handoff:{mode}"),
         }
     }
 
@@ -906,10 +882,10 @@ impl Vehicle {
     /// step is acknowledged (or fails) like any other; [`Vehicle::handoff_status`] tells.
     pub fn hand_off(&mut self, now: Duration, mode: FlightMode) -> Vec<Msg> {
         self.stop_actions(now, "companion stopping");
-        let key = format!("handoff:{mode}");
+        let key = JobKey::Handoff(mode);
         self.job = Some(Job {
+            steps: VecDeque::from([(self.job_name(&key), Step::Mode(mode))]),
             key: key.clone(),
-            steps: VecDeque::from([(key.clone(), Step::Mode(mode))]),
             running: Running::Idle,
             arm_attempts: 0,
             mode_attempts: 0,
@@ -923,12 +899,10 @@ impl Vehicle {
     /// The hand-off's outcome: None while it runs (or none was issued), Some(true) when the
     /// autopilot accepted the mode, Some(false) when the step failed.
     pub fn handoff_status(&self) -> Option<bool> {
-        let mode = self.handoff?.name();
+        let ours = JobKey::Handoff(self.handoff?);
         match &self.last {
-            Some((k, JobStatus::Done)) if k.strip_prefix("handoff:") == Some(mode) => Some(true),
-            Some((k, JobStatus::Failed(_))) if k.strip_prefix("handoff:") == Some(mode) => {
-                Some(false)
-            }
+            Some((k, JobStatus::Done)) if *k == ours => Some(true),
+            Some((k, JobStatus::Failed(_))) if *k == ours => Some(false),
             _ => None,
         }
     }

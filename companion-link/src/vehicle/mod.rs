@@ -4,6 +4,7 @@
 
 mod executor;
 mod identity;
+mod job;
 mod pack;
 #[cfg(test)]
 mod tests;
@@ -22,9 +23,10 @@ use super::readiness::Readiness;
 use super::telemetry::{PackParam, Telemetry, TelemetryConfig, displace};
 use companion_core::observations::Observations;
 use companion_core::record::{CommandOutcome, CommandRecord, Event, LinkEvent};
-use executor::{Job, JobStatus, Purpose, step_name};
+use executor::{Purpose, step_name};
 use identity::Choice;
 pub use identity::{AUTOPILOT_COMPONENT, OTHER_COMPONENT_WAIT};
+use job::{Job, JobKey, JobStatus, Running};
 use pack::PackRequest;
 pub use pack::{PACK_PARAM_ATTEMPTS, PACK_PARAM_RETRY, pack_params};
 use std::collections::{BTreeMap, VecDeque};
@@ -133,7 +135,7 @@ pub struct Vehicle {
     pub route: Option<Route>,
     purposes: BTreeMap<u64, Purpose>,
     job: Option<Job>,
-    last: Option<(String, JobStatus)>,
+    last: Option<(JobKey, JobStatus)>,
     stream_queue: VecDeque<(u32, f32)>,
     /// Significant events since the last `take_events` (trigger a decision cycle).
     events: Vec<Event>,

@@ -1,6 +1,9 @@
 //! Tests of the vehicle link: choice, streams, liveness, the executor.
 
 use super::*;
+use crate::actions::Flown;
+use companion_core::action_role::ActionRoles;
+use companion_core::mission::{Action, ActionCatalogue, ActionKind};
 use mavlink::{MavHeader, MavlinkVersion};
 
 fn s(v: f64) -> Duration {
@@ -72,10 +75,48 @@ fn ack(command: MavCmd, result: MavResult) -> Frame {
     }))
 }
 
+/// The actions these tests fly: the shipped names and two of their own.
+const TEST_ACTIONS: [&str; 12] = [
+    "stay_on_ground",
+    "take_off",
+    "follow_trajectory",
+    "avoid_obstacle",
+    "land",
+    "replan_and_land",
+    "return_to_base",
+    "track_v3",
+    "hold",
+    "go",
+    "search_zone_t",
+    "detect_target",
+];
+
+fn test_catalogue() -> ActionCatalogue {
+    let action = |name: &str| Action {
+        id: name.to_string(),
+        paper: String::new(),
+        kind: ActionKind::Vehicle,
+        label: name.to_string(),
+        app: None,
+        version: None,
+        role: None,
+    };
+    ActionCatalogue {
+        actions: TEST_ACTIONS.map(action).to_vec(),
+        roles: ActionRoles::undeclared(),
+    }
+}
+
+/// The action `name` of [`TEST_ACTIONS`], flown by its own entry.
+fn a(name: &str) -> Flown {
+    Flown::Action(test_catalogue().id(name).expect(name))
+}
+
 fn table() -> ActionTable {
-    let mut t = ActionTable::default();
-    t.actions.insert(
-        "take_off".into(),
+    let mut t = ActionTable::new(&test_catalogue());
+    t.insert(
+        a("take_off"),
+        "take_off",
         vec![
             Step::Mode(FlightMode::Guided),
             Step::Arm,
@@ -85,8 +126,11 @@ fn table() -> ActionTable {
             },
         ],
     );
-    t.actions
-        .insert("return_to_base".into(), vec![Step::Mode(FlightMode::Rtl)]);
+    t.insert(
+        a("return_to_base"),
+        "return_to_base",
+        vec![Step::Mode(FlightMode::Rtl)],
+    );
     t
 }
 
@@ -137,7 +181,7 @@ fn arms_only_once_the_vehicle_reports_the_mode_it_was_set_to() {
     for f in ready_frames() {
         v.on_frame(s(0.1), &f);
     }
-    let out = v.request_actions(s(0.2), &["take_off".into()]);
+    let out = v.request_actions(s(0.2), &[a("take_off")]);
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
     // The ack comes before any heartbeat shows the new mode: no ARM yet.
     let out = v.on_frame(
@@ -158,7 +202,7 @@ fn arms_only_once_the_vehicle_reports_the_mode_it_was_set_to() {
                 if why.starts_with("vehicle in STABILIZE, not GUIDED"))
     }));
     // Asked again after the retry delay: GUIDED is set again, and with GUIDED reported it arms.
-    let out = v.request_actions(s(7.0), &["take_off".into()]);
+    let out = v.request_actions(s(7.0), &[a("take_off")]);
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
     v.on_frame(
         s(7.1),
@@ -174,7 +218,7 @@ fn arms_only_once_the_vehicle_reports_the_mode_it_was_set_to() {
 #[test]
 fn take_off_after_staying_on_the_ground_starts_again() {
     let mut t = table();
-    t.actions.insert("stay_on_ground".into(), Vec::new());
+    t.insert(a("stay_on_ground"), "stay_on_ground", Vec::new());
     let mut v = Vehicle::new(
         VehicleConfig {
             streams: vec![(168, 1.0)],
@@ -187,13 +231,13 @@ fn take_off_after_staying_on_the_ground_starts_again() {
     for f in ready_frames() {
         v.on_frame(s(0.1), &f);
     }
-    let out = v.request_actions(s(0.2), &["take_off".into()]);
+    let out = v.request_actions(s(0.2), &[a("take_off")]);
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
     v.on_frame(
         s(0.25),
         &ack(MavCmd::MAV_CMD_DO_SET_MODE, MavResult::MAV_RESULT_ACCEPTED),
     );
-    let out = v.request_actions(s(0.3), &["stay_on_ground".into()]);
+    let out = v.request_actions(s(0.3), &[a("stay_on_ground")]);
     assert!(out.is_empty(), "staying commands nothing");
     assert!(
         v.take_records()
@@ -206,7 +250,7 @@ fn take_off_after_staying_on_the_ground_starts_again() {
         commands(&out).is_empty(),
         "armed while staying on the ground"
     );
-    let mut out = v.request_actions(s(1.3), &["take_off".into()]);
+    let mut out = v.request_actions(s(1.3), &[a("take_off")]);
     out.extend(v.on_frame(s(1.4), &hb(4, false)));
     out.extend(v.tick(s(1.5)));
     let sent = commands(&out);
@@ -222,7 +266,7 @@ fn take_off_waits_for_readiness_before_arming() {
     let mut v = vehicle();
     connected(&mut v, 0);
     v.on_frame(s(0.1), &not_ready());
-    let out = v.request_actions(s(0.2), &["take_off".into()]);
+    let out = v.request_actions(s(0.2), &[a("take_off")]);
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
     v.stamp_latency(s(0.15), s(0.2));
     let recs = v.take_records();
@@ -261,7 +305,7 @@ fn take_off_waits_for_readiness_before_arming() {
     );
     assert!(!v.busy());
     // Asking again for the finished action does nothing.
-    assert!(v.request_actions(s(7.0), &["take_off".into()]).is_empty());
+    assert!(v.request_actions(s(7.0), &[a("take_off")]).is_empty());
 }
 
 #[test]
@@ -271,7 +315,7 @@ fn failed_arm_is_retried_only_after_a_fresh_ready_report() {
     for f in ready_frames() {
         v.on_frame(s(0.1), &f);
     }
-    let out = v.request_actions(s(0.2), &["take_off".into()]);
+    let out = v.request_actions(s(0.2), &[a("take_off")]);
     assert_eq!(
         commands(&out),
         vec![MavCmd::MAV_CMD_COMPONENT_ARM_DISARM],
@@ -309,7 +353,7 @@ fn arm_gives_up_when_never_ready() {
     let mut v = vehicle();
     connected(&mut v, 4);
     v.on_frame(s(0.1), &not_ready());
-    v.request_actions(s(0.2), &["take_off".into()]);
+    v.request_actions(s(0.2), &[a("take_off")]);
     for t in 1..=61 {
         v.on_frame(s(t as f64), &hb(4, false));
         assert!(commands(&v.tick(s(t as f64 + 0.5))).is_empty());
@@ -326,7 +370,7 @@ fn arm_gives_up_when_never_ready() {
 fn link_loss_drops_commands_and_resume_does_not_replay() {
     let mut v = vehicle();
     connected(&mut v, 0);
-    let out = v.request_actions(s(1.0), &["return_to_base".into()]);
+    let out = v.request_actions(s(1.0), &[a("return_to_base")]);
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
     // Silence: the autopilot is gone.
     assert!(
@@ -348,7 +392,7 @@ fn link_loss_drops_commands_and_resume_does_not_replay() {
     for t in [5.0, 10.0, 20.0] {
         assert!(v.tick(s(t)).is_empty(), "nothing sent while lost");
     }
-    assert!(v.request_actions(s(20.0), &["take_off".into()]).is_empty());
+    assert!(v.request_actions(s(20.0), &[a("take_off")]).is_empty());
     assert!(
         v.take_records()
             .iter()
@@ -369,7 +413,7 @@ fn link_loss_drops_commands_and_resume_does_not_replay() {
     v.on_frame(s(23.0), &hb(0, false));
     assert!(commands(&v.tick(s(24.0))).is_empty());
     // A fresh decision may command again.
-    let out = v.request_actions(s(25.0), &["return_to_base".into()]);
+    let out = v.request_actions(s(25.0), &[a("return_to_base")]);
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
 }
 
@@ -598,7 +642,7 @@ fn autopilot_sysid_chooses_and_others_are_reported_not_obeyed() {
         "{evs:?}"
     );
     // Its acks do not finish our commands either.
-    let out = v.request_actions(s(5.0), &["return_to_base".into()]);
+    let out = v.request_actions(s(5.0), &[a("return_to_base")]);
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
     v.on_frame(
         s(5.1),
@@ -753,8 +797,9 @@ fn nvf(name: &str, value: f32) -> Msg {
 
 fn zone_vehicle() -> Vehicle {
     let mut t = table();
-    t.actions.insert(
-        "replan_and_land".into(),
+    t.insert(
+        a("replan_and_land"),
+        "replan_and_land",
         vec![Step::GotoZone, Step::Mode(FlightMode::Land)],
     );
     let mut cfg = VehicleConfig::default();
@@ -798,7 +843,7 @@ fn landing_zone_from_an_unknown_sysid_produces_no_reposition() {
     v.on_frame(s(0.1), &from(1, 77, frame(nvf("zone_e", 40.0))));
     assert_eq!(v.telemetry.get("zone_north_m"), None);
     assert_eq!(v.telemetry.get("zone_east_m"), None);
-    let out = v.request_actions(s(0.2), &["replan_and_land".into()]);
+    let out = v.request_actions(s(0.2), &[a("replan_and_land")]);
     assert_eq!(repositions(&out), 0, "{out:?}");
     assert!(v.take_link_events().iter().any(|e| {
         e.to_string()
@@ -810,7 +855,7 @@ fn landing_zone_from_an_unknown_sysid_produces_no_reposition() {
     v.on_frame(s(0.1), &from(1, 100, frame(nvf("zone_e", -5_000_000.0))));
     assert_eq!(v.telemetry.get("zone_east_m"), None, "out of range");
     v.on_frame(s(0.1), &from(1, 100, frame(nvf("zone_e", 40.0))));
-    let out = v.request_actions(s(0.2), &["replan_and_land".into()]);
+    let out = v.request_actions(s(0.2), &[a("replan_and_land")]);
     assert_eq!(repositions(&out), 1);
     match &out[0] {
         Msg::COMMAND_INT(c) => {
@@ -851,7 +896,7 @@ fn foreign_distance_sensor_raises_no_obstacle() {
 fn unmapped_actions_are_recorded_not_sent() {
     let mut v = vehicle();
     connected(&mut v, 0);
-    assert!(v.request_actions(s(1.0), &["track_v3".into()]).is_empty());
+    assert!(v.request_actions(s(1.0), &[a("track_v3")]).is_empty());
     assert_eq!(v.take_records()[0].result, CommandOutcome::Unmapped);
 }
 
@@ -871,12 +916,14 @@ fn other_components_do_not_keep_the_link_alive() {
 fn route_vehicle() -> Vehicle {
     use crate::actions::{Route, Waypoint};
     let mut t = table();
-    t.actions.insert(
-        "follow_trajectory".into(),
+    t.insert(
+        a("follow_trajectory"),
+        "follow_trajectory",
         vec![Step::UploadMission, Step::Mode(FlightMode::Auto)],
     );
-    t.actions.insert(
-        "avoid_obstacle".into(),
+    t.insert(
+        a("avoid_obstacle"),
+        "avoid_obstacle",
         vec![Step::Reposition(Offset {
             forward_m: 0.0,
             right_m: 8.0,
@@ -979,7 +1026,7 @@ fn serve_upload(v: &mut Vehicle, first: Vec<Msg>, stored_alt: f32) -> Vec<Msg> {
 #[test]
 fn follow_trajectory_uploads_verifies_then_switches_to_auto() {
     let mut v = route_vehicle();
-    let out = v.request_actions(s(1.0), &["follow_trajectory".into()]);
+    let out = v.request_actions(s(1.0), &[a("follow_trajectory")]);
     let out = serve_upload(&mut v, out, 20.0);
     assert!(
         matches!(out[0], Msg::MISSION_ACK(_)),
@@ -1004,7 +1051,7 @@ fn follow_trajectory_uploads_verifies_then_switches_to_auto() {
 #[test]
 fn a_mission_that_does_not_verify_is_never_flown() {
     let mut v = route_vehicle();
-    let out = v.request_actions(s(1.0), &["follow_trajectory".into()]);
+    let out = v.request_actions(s(1.0), &[a("follow_trajectory")]);
     let out = serve_upload(&mut v, out, 35.0);
     assert!(
         commands(&out).is_empty(),
@@ -1026,8 +1073,9 @@ fn a_mission_that_does_not_verify_is_never_flown() {
 
 fn zone_route_vehicle() -> Vehicle {
     let mut v = route_vehicle();
-    v.actions.actions.insert(
-        "land".into(),
+    v.actions.insert(
+        a("land"),
+        "land",
         vec![Step::GotoZone, Step::Mode(FlightMode::Land)],
     );
     v.cfg.zone_radius_m = 3.0;
@@ -1065,7 +1113,7 @@ fn at(v: &mut Vehicle, t: f64, north_m: f64) -> Vec<Msg> {
 #[test]
 fn land_at_the_zone_flies_within_the_radius_before_land() {
     let mut v = zone_route_vehicle();
-    let out = v.request_actions(s(1.0), &["land".into()]);
+    let out = v.request_actions(s(1.0), &[a("land")]);
     let target = match &out[..] {
         [Msg::COMMAND_INT(c)] if c.command == MavCmd::MAV_CMD_DO_REPOSITION => (c.x, c.y),
         other => panic!("{other:?}"),
@@ -1106,7 +1154,7 @@ fn land_at_the_zone_flies_within_the_radius_before_land() {
 #[test]
 fn land_at_the_zone_lands_where_it_is_after_the_arrive_timeout() {
     let mut v = zone_route_vehicle();
-    v.request_actions(s(1.0), &["land".into()]);
+    v.request_actions(s(1.0), &[a("land")]);
     v.on_frame(
         s(1.1),
         &ack(
@@ -1126,7 +1174,7 @@ fn land_at_the_zone_lands_where_it_is_after_the_arrive_timeout() {
 fn stop_actions_cancels_the_running_action_and_nothing_is_resent() {
     let mut v = vehicle();
     connected(&mut v, 0);
-    let out = v.request_actions(s(1.0), &["return_to_base".into()]);
+    let out = v.request_actions(s(1.0), &[a("return_to_base")]);
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
     v.stop_actions(s(1.2), "pilot took control");
     assert!(!v.busy());
@@ -1137,7 +1185,7 @@ fn stop_actions_cancels_the_running_action_and_nothing_is_resent() {
         assert!(commands(&v.tick(s(t + 0.5))).is_empty(), "no resend at {t}");
     }
     // Asked again later (control handed back), the same action runs afresh.
-    let out = v.request_actions(s(6.0), &["return_to_base".into()]);
+    let out = v.request_actions(s(6.0), &[a("return_to_base")]);
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
     assert_eq!(v.commanded_modes.last().map(|m| m.0), Some(FlightMode::Rtl));
 }
@@ -1221,11 +1269,10 @@ fn the_end_of_flight_window_resets_on_any_frame_that_says_airborne() {
 fn a_mode_reported_before_our_last_mode_command_is_not_already_set() {
     let mut v = route_vehicle();
     v.actions
-        .actions
-        .insert("land".into(), vec![Step::Mode(FlightMode::Land)]);
+        .insert(a("land"), "land", vec![Step::Mode(FlightMode::Land)]);
     v.on_frame(s(1.0), &hb(9, true)); // LAND
     // A sidestep: GUIDED accepted, the heartbeat still says LAND.
-    v.request_actions(s(1.1), &["avoid_obstacle".into()]);
+    v.request_actions(s(1.1), &[a("avoid_obstacle")]);
     v.on_frame(
         s(1.2),
         &ack(
@@ -1233,7 +1280,7 @@ fn a_mode_reported_before_our_last_mode_command_is_not_already_set() {
             MavResult::MAV_RESULT_ACCEPTED,
         ),
     );
-    let out = v.request_actions(s(1.3), &["land".into()]);
+    let out = v.request_actions(s(1.3), &[a("land")]);
     assert_eq!(
         commands(&out),
         vec![MavCmd::MAV_CMD_DO_SET_MODE],
@@ -1246,13 +1293,13 @@ fn a_mode_reported_before_our_last_mode_command_is_not_already_set() {
     );
     v.on_frame(s(2.5), &hb(9, true));
     v.take_records();
-    v.request_actions(s(2.6), &["return_to_base".into()]);
+    v.request_actions(s(2.6), &[a("return_to_base")]);
     v.on_frame(
         s(2.7),
         &ack(MavCmd::MAV_CMD_DO_SET_MODE, MavResult::MAV_RESULT_ACCEPTED),
     );
     v.on_frame(s(3.5), &hb(6, true)); // RTL
-    let out = v.request_actions(s(3.6), &["land".into()]);
+    let out = v.request_actions(s(3.6), &[a("land")]);
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
 }
 
@@ -1271,7 +1318,7 @@ fn armed_heartbeats_count_consecutive_reports() {
 fn sidestep_is_to_the_right_of_the_heading() {
     let mut v = route_vehicle();
     // Heading east (90 deg): 8 m to the right is 8 m south.
-    let out = v.request_actions(s(1.0), &["avoid_obstacle".into()]);
+    let out = v.request_actions(s(1.0), &[a("avoid_obstacle")]);
     match &out[0] {
         Msg::COMMAND_INT(c) => {
             assert_eq!(c.command, MavCmd::MAV_CMD_DO_REPOSITION);
@@ -1332,7 +1379,7 @@ fn px4_arms_on_its_own_evidence_and_takes_off_to_amsl_altitude() {
     let mut v = Vehicle::new(VehicleConfig::default(), table(), None);
     px4_ready(&mut v, 0.0);
     assert_eq!((v.flavor, v.target), (Flavor::Px4, Some((2, 1))));
-    let out = v.request_actions(s(0.5), &["take_off".into()]);
+    let out = v.request_actions(s(0.5), &[a("take_off")]);
     // Hold already stands for GUIDED on PX4; ready without any EKF_STATUS_REPORT.
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_COMPONENT_ARM_DISARM]);
     let mut ack_arm = px4_frame(Msg::COMMAND_ACK(COMMAND_ACK_DATA {
@@ -1363,7 +1410,7 @@ fn px4_not_ready_while_prearm_health_bit_is_clear() {
             ..SYS_STATUS_DATA::DEFAULT
         })),
     );
-    let out = v.request_actions(s(0.5), &["take_off".into()]);
+    let out = v.request_actions(s(0.5), &[a("take_off")]);
     assert!(commands(&out).is_empty(), "{out:?}");
 }
 
@@ -1371,8 +1418,9 @@ fn px4_not_ready_while_prearm_health_bit_is_clear() {
 fn px4_auto_waits_until_px4_reports_the_uploaded_mission() {
     use crate::actions::{Route, Waypoint};
     let mut t = table();
-    t.actions.insert(
-        "follow_trajectory".into(),
+    t.insert(
+        a("follow_trajectory"),
+        "follow_trajectory",
         vec![Step::UploadMission, Step::Mode(FlightMode::Auto)],
     );
     let route = Route {
@@ -1388,7 +1436,7 @@ fn px4_auto_waits_until_px4_reports_the_uploaded_mission() {
     };
     let mut v = Vehicle::new(VehicleConfig::default(), t, Some(route));
     px4_ready(&mut v, 0.0);
-    let out = v.request_actions(s(1.0), &["follow_trajectory".into()]);
+    let out = v.request_actions(s(1.0), &[a("follow_trajectory")]);
     assert!(
         matches!(&out[0], Msg::MISSION_COUNT(c) if c.count == 3),
         "{out:?}"
@@ -1474,25 +1522,23 @@ fn px4_heartbeat(main: u8, sub: u8) -> Frame {
 #[test]
 fn px4_mode_change_waits_out_the_takeoff_but_return_does_not() {
     let mut t = table();
-    t.actions
-        .insert("hold".into(), vec![Step::Mode(FlightMode::Loiter)]);
+    t.insert(a("hold"), "hold", vec![Step::Mode(FlightMode::Loiter)]);
     let mut v = Vehicle::new(VehicleConfig::default(), t, None);
     px4_ready(&mut v, 0.0);
     v.on_frame(s(1.0), &px4_heartbeat(4, 2)); // AUTO.TAKEOFF
-    assert!(commands(&v.request_actions(s(1.1), &["hold".into()])).is_empty());
+    assert!(commands(&v.request_actions(s(1.1), &[a("hold")])).is_empty());
     assert!(commands(&v.on_frame(s(2.0), &px4_heartbeat(4, 2))).is_empty());
     assert!(commands(&v.tick(s(2.5))).is_empty(), "still taking off");
     // Returning home is never held back.
-    let out = v.request_actions(s(2.6), &["return_to_base".into()]);
+    let out = v.request_actions(s(2.6), &[a("return_to_base")]);
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
     // Hold again, once PX4 has ended the take-off: sent at once.
     let mut v = Vehicle::new(VehicleConfig::default(), table(), None);
     v.actions
-        .actions
-        .insert("hold".into(), vec![Step::Mode(FlightMode::Auto)]);
+        .insert(a("hold"), "hold", vec![Step::Mode(FlightMode::Auto)]);
     px4_ready(&mut v, 0.0);
     v.on_frame(s(1.0), &px4_heartbeat(4, 2));
-    assert!(commands(&v.request_actions(s(1.1), &["hold".into()])).is_empty());
+    assert!(commands(&v.request_actions(s(1.1), &[a("hold")])).is_empty());
     let out = v.on_frame(s(3.0), &px4_heartbeat(4, 3)); // PX4 switched itself to Hold
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
 }
@@ -1510,8 +1556,9 @@ fn px4_ack(command: MavCmd, result: MavResult) -> Frame {
 /// A PX4 vehicle in Hold with an action "go": AUTO, then LAND (to see when AUTO counts done).
 fn px4_go() -> Vehicle {
     let mut t = table();
-    t.actions.insert(
-        "go".into(),
+    t.insert(
+        a("go"),
+        "go",
         vec![Step::Mode(FlightMode::Auto), Step::Mode(FlightMode::Land)],
     );
     let mut v = Vehicle::new(VehicleConfig::default(), t, None);
@@ -1532,7 +1579,7 @@ fn results(v: &mut Vehicle) -> Vec<String> {
 #[test]
 fn px4_accepted_mode_counts_only_when_a_heartbeat_shows_it_and_is_sent_again_if_not() {
     let mut v = px4_go();
-    let out = v.request_actions(s(1.0), &["go".into()]);
+    let out = v.request_actions(s(1.0), &[a("go")]);
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
     let ok = MavResult::MAV_RESULT_ACCEPTED;
     let out = v.on_frame(s(1.1), &px4_ack(MavCmd::MAV_CMD_DO_SET_MODE, ok));
@@ -1568,7 +1615,7 @@ fn px4_accepted_mode_counts_only_when_a_heartbeat_shows_it_and_is_sent_again_if_
 fn px4_mode_that_never_shows_fails_after_the_attempts_and_another_mode_is_never_overridden() {
     let ok = MavResult::MAV_RESULT_ACCEPTED;
     let mut v = px4_go();
-    let mut sent = commands(&v.request_actions(s(1.0), &["go".into()])).len();
+    let mut sent = commands(&v.request_actions(s(1.0), &[a("go")])).len();
     let mut t = 1.0;
     for _ in 0..6 {
         v.on_frame(s(t + 0.1), &px4_ack(MavCmd::MAV_CMD_DO_SET_MODE, ok));
@@ -1591,7 +1638,7 @@ fn px4_mode_that_never_shows_fails_after_the_attempts_and_another_mode_is_never_
 
     // The pilot switches to Position right after AUTO is accepted: never overridden.
     let mut v = px4_go();
-    v.request_actions(s(1.0), &["go".into()]);
+    v.request_actions(s(1.0), &[a("go")]);
     v.on_frame(s(1.1), &px4_ack(MavCmd::MAV_CMD_DO_SET_MODE, ok));
     v.on_frame(s(2.0), &px4_heartbeat(3, 0)); // POSCTL
     assert!(commands(&v.tick(s(4.5))).is_empty());
@@ -1608,13 +1655,14 @@ fn px4_mode_that_never_shows_fails_after_the_attempts_and_another_mode_is_never_
 fn ardupilot_accepted_mode_is_the_mode() {
     // ArduPilot acknowledges DO_SET_MODE after set_mode() succeeded: no wait.
     let mut t = table();
-    t.actions.insert(
-        "go".into(),
+    t.insert(
+        a("go"),
+        "go",
         vec![Step::Mode(FlightMode::Auto), Step::Mode(FlightMode::Land)],
     );
     let mut v = Vehicle::new(VehicleConfig::default(), t, None);
     v.on_frame(s(0.0), &hb(5, true)); // LOITER
-    let out = v.request_actions(s(1.0), &["go".into()]);
+    let out = v.request_actions(s(1.0), &[a("go")]);
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
     let out = v.on_frame(
         s(1.1),

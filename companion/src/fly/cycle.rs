@@ -9,6 +9,7 @@ use companion_core::action_role::ActionRole;
 use companion_core::observations::Observations;
 use companion_core::record::{CommandOutcome, DecisionRecord, Event, LinkEvent, Plan};
 use companion_link::Msg;
+use companion_link::actions::Flown;
 use companion_link::ingest::Encoder;
 use companion_link::mission_state::{self, Extra, MissionState};
 use companion_link::modes::ReportedMode;
@@ -35,14 +36,9 @@ pub(super) async fn run_cycle_at<D: Decider, S: RecordSink>(
     report.cycles += 1;
     // The action flown, under its own name (a shell-only entry such as the route's resume is
     // told as the action it is flown for).
-    let flown = decided.chosen.as_deref().map(|c| {
-        vehicle
-            .actions
-            .flown_for
-            .get(c)
-            .map_or(c, String::as_str)
-            .to_string()
-    });
+    let flown = decided
+        .chosen
+        .map(|c| vehicle.actions.name(Flown::Action(c.action())).to_string());
     let rec = finish_record(decided, shell, vehicle, report.cycles, transport_events);
     if !shell.operator.commanding() {
         shell.launch = decider.launch_verdict(&rec);
@@ -103,43 +99,53 @@ pub fn decide<D: Decider>(
         let ids = shell.precedence.iter().filter_map(|p| catalogue.id(p));
         ids.collect()
     });
-    // The record and the commands table speak names: the chosen id is named here.
+    let ours = shell.mission.actions();
+    let shell_ids = shell.shell_ids.get_or_insert_with(|| {
+        let ids = catalogue.actions.iter().map(|a| ours.id(&a.id));
+        ids.collect()
+    });
+    // The chosen action as an id of the shell's catalogue, which the commands table and the
+    // mission estimate index; names are resolved only for the record and the messages.
     let mut chosen = mission_state::select_vehicle_action(&plan.vehicle_actions, precedence)
-        .map(|&a| catalogue.name(a).to_string());
+        .and_then(|&a| {
+            let ours = shell_ids.get(a.index()).copied().flatten();
+            if ours.is_none() {
+                tracing::warn!(
+                    "the decider's action `{}` is not in params/actions.toml: not flown",
+                    catalogue.name(a)
+                );
+            }
+            ours
+        });
     let mut shell_events = Vec::new();
     if let Some(why) = shell.mission.mission_end(&obs) {
         // The mission's end, not the core's decision: recorded as an event with the action.
         shell_events.push(Event::ShellLand(why.to_string()));
-        let land = shell
-            .mission
-            .states()
-            .actions()
-            .action(ActionRole::Land)
-            .to_string();
-        rec.shell_actions.push(land.clone());
-        shell.mission.after_plan(std::slice::from_ref(&land));
-        chosen = Some(land);
+        if let Some(land) = shell.mission.action(ActionRole::Land) {
+            let name = shell.mission.name(land).to_string();
+            rec.shell_actions.push(name.clone());
+            shell.mission.after_plan(std::slice::from_ref(&name));
+            chosen = Some(land);
+        }
     }
     // The landing phase: the MDPs see `landing` as terminal and plan nothing there, so the shell
     // keeps flying the landing chosen until the vehicle is down, resuming it after an avoidance
     // sidestep and sending it again after a refusal or a timeout.
     if shell.operator.commanding()
-        && let Some(landing) = shell.mission.landing_action().map(str::to_string)
+        && let Some(landing) = shell.mission.landing_action()
     {
-        let keep = chosen.as_deref().is_some_and(|a| {
-            shell
-                .mission
-                .states()
-                .actions()
-                .is(a, ActionRole::AvoidObstacle)
-                || shell.mission.is_landing_action(a)
+        let mission = &shell.mission;
+        let keep = chosen.is_some_and(|a| {
+            mission.role(a) == Some(ActionRole::AvoidObstacle) || mission.is_landing_action(a)
         });
         if !keep {
-            if !vehicle.settled(&landing) {
-                shell_events.push(Event::LandingKept(landing.clone()));
+            let name = mission.name(landing);
+            if !vehicle.settled(Flown::Action(landing)) {
+                shell_events.push(Event::LandingKept(name.to_string()));
             }
-            if !rec.actions.contains(&landing) && !rec.shell_actions.contains(&landing) {
-                rec.shell_actions.push(landing.clone());
+            let planned = |names: &[String]| names.iter().any(|a| a == name);
+            if !planned(&rec.actions) && !planned(&rec.shell_actions) {
+                rec.shell_actions.push(name.to_string());
             }
             chosen = Some(landing);
         }
@@ -147,21 +153,22 @@ pub fn decide<D: Decider>(
     // Once the route is on the vehicle, an action with a shell-only entry flown for it
     // (`flown_for` in params/commands.toml: follow_trajectory -> resume in AUTO) is flown as that
     // entry, so the route is resumed where it was left, not uploaded again.
+    let mut flown = chosen.map(Flown::Action);
     if shell.mission.route_on_vehicle()
-        && let Some(action) = chosen.as_deref()
-        && let Some((resume, _)) = vehicle.actions.flown_for.iter().find(|(_, f)| *f == action)
+        && let Some(action) = chosen
+        && let Some(resume) = vehicle.actions.in_place_of(action)
     {
-        chosen = Some(resume.clone());
+        flown = Some(resume);
     }
     // No motion until the operator starts the mission, none while the pilot has control.
     let msgs = if shell.operator.commanding() {
-        vehicle.request_actions(now(), chosen.as_slice())
+        vehicle.request_actions(now(), flown.as_slice())
     } else {
         Vec::new()
     };
     Decided {
         msgs,
-        chosen,
+        chosen: flown,
         plan,
         rec,
         obs,
@@ -189,8 +196,9 @@ fn coalesce_events(events: &mut Vec<Event>) {
 pub struct Decided {
     /// Commands for the chosen vehicle action, to send now.
     pub msgs: Vec<Msg>,
-    /// The vehicle action chosen this cycle (after the mission's end and the route's resume).
-    pub chosen: Option<String>,
+    /// The vehicle action chosen this cycle (after the mission's end and the route's resume),
+    /// as an entry of the vehicle's commands table (`vehicle.actions.name` names it).
+    pub chosen: Option<Flown>,
     pub plan: Plan,
     rec: DecisionRecord,
     obs: Observations,

@@ -194,6 +194,21 @@ pub async fn run_with<D: Decider, S: RecordSink>(
     run_with_tlog(args, decider, sink, None).await
 }
 
+/// [`run_with`], also ending, as `--duration` does (the stop and its hand-off), when `stop`
+/// completes: a test ends the flight once what it checks has happened instead of after a fixed
+/// time.
+pub async fn run_until<D: Decider, S: RecordSink>(
+    args: FlyArgs,
+    decider: D,
+    sink: &mut S,
+    stop: impl std::future::Future<Output = ()>,
+) -> anyhow::Result<FlyReport> {
+    let setup = FlySetup::load(&args)?;
+    RunLoop::new(args, setup, decider, sink, None)
+        .run_until(stop)
+        .await
+}
+
 /// [`run_with`], also writing every frame sent and received to `tlog`.
 pub async fn run_with_tlog<D: Decider, S: RecordSink>(
     args: FlyArgs,

@@ -123,14 +123,26 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
     }
 
     /// Run until `--duration`, a signal, `--once`'s landing or an error; then the stop.
-    pub(super) async fn run(mut self) -> anyhow::Result<FlyReport> {
-        let outcome = self.turns().await;
+    pub(super) async fn run(self) -> anyhow::Result<FlyReport> {
+        self.run_until(std::future::pending()).await
+    }
+
+    /// [`RunLoop::run`], also ending when `stop` completes (a caller's own stop condition).
+    pub(super) async fn run_until(
+        mut self,
+        stop: impl std::future::Future<Output = ()>,
+    ) -> anyhow::Result<FlyReport> {
+        let outcome = self.turns(stop).await;
         self.stop(outcome).await
     }
 
     /// The loop's turns: wait for the next event, handle it, answer the operator, send, and
     /// run a decision cycle when one is due.
-    async fn turns(&mut self) -> anyhow::Result<StopReason> {
+    async fn turns(
+        &mut self,
+        stop: impl std::future::Future<Output = ()>,
+    ) -> anyhow::Result<StopReason> {
+        tokio::pin!(stop);
         let mut heartbeat = tokio::time::interval(Duration::from_secs(1));
         let mut tick = tokio::time::interval(Duration::from_millis(100));
         let mut periodic =
@@ -165,6 +177,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
                 _ = &mut ctrl_c => return Ok("SIGINT"),
                 _ = &mut terminate => return Ok("SIGTERM"),
                 _ = sleep_until_opt(stop_at) => return Ok("--duration elapsed"),
+                _ = &mut stop => return Ok("stop requested by the caller"),
             }
             wake |= self.on_operator(&mut out);
             let t = self.now();

@@ -1,7 +1,8 @@
 //! Everything `fly` loads from params before any socket opens.
 
 use super::{FlyArgs, link_security};
-use companion_link::actions::{ActionTable, LinkParams, Route};
+use companion_core::mission::ActionCatalogue;
+use companion_link::actions::{ActionTable, Flown, LinkParams, Route};
 use companion_link::vehicle::{Vehicle, VehicleConfig};
 use std::time::Duration;
 
@@ -15,6 +16,8 @@ pub struct FlySetup {
     pub takeoff_alt_m: f64,
     /// The mission's states and phases (params/mission.toml) the mission estimator moves through.
     pub states: companion_core::mission::MissionStates,
+    /// The action catalogue (params/actions.toml) whose ids the shell's actions are.
+    pub catalogue: ActionCatalogue,
 }
 
 impl FlySetup {
@@ -37,8 +40,9 @@ impl FlySetup {
         args: &FlyArgs,
     ) -> anyhow::Result<Self> {
         link_security::check_args(args)?;
+        let catalogue = ActionCatalogue::load(files)?;
         let (link, actions, route, _) =
-            crate::params::load_fly_files(files, args.mission.as_deref())?;
+            crate::params::load_fly_files(files, args.mission.as_deref(), &catalogue)?;
         let key = match &args.signing_key {
             Some(p) => {
                 crate::params::regular_file(p)
@@ -48,12 +52,11 @@ impl FlySetup {
             None => None,
         };
         let states = companion_core::mission::MissionStates::load(files)?;
-        let take_off = states
+        let take_off = catalogue.id(states
             .actions()
-            .action(companion_core::action_role::ActionRole::TakeOff);
-        let takeoff_alt_m = actions
-            .actions
-            .get(take_off)
+            .action(companion_core::action_role::ActionRole::TakeOff));
+        let takeoff_alt_m = take_off
+            .and_then(|id| actions.steps(Flown::Action(id)))
             .and_then(|steps| {
                 steps.iter().find_map(|st| match st {
                     companion_link::actions::Step::Command { command, params }
@@ -73,6 +76,7 @@ impl FlySetup {
             key,
             takeoff_alt_m,
             states,
+            catalogue,
         })
     }
 

@@ -19,6 +19,10 @@ pub struct Shell {
     pub(super) precedence: Vec<String>,
     /// `precedence` as ids of the decider's catalogue, resolved on the first cycle.
     pub(super) precedence_ids: Option<Vec<ActionId>>,
+    /// Per action of the decider's catalogue (by its id), the same action's id in the shell's
+    /// (params/actions.toml, which the commands table and the mission estimate index), resolved
+    /// on the first cycle: a scripted decider has a catalogue of its own.
+    pub(super) shell_ids: Option<Vec<Option<ActionId>>>,
     /// Events of the shell itself (the mission's end, the operator) for the next record.
     pub(super) pending_events: Vec<Event>,
     /// Who commands: the companion only once the operator started the mission. `Shell::new`
@@ -50,8 +54,12 @@ pub struct Shell {
 
 impl Shell {
     pub fn new(setup: &FlySetup) -> Self {
-        let mut mission =
-            MissionState::new(&setup.route, setup.takeoff_alt_m, setup.states.clone());
+        let mut mission = MissionState::new(
+            &setup.route,
+            setup.takeoff_alt_m,
+            setup.states.clone(),
+            &setup.catalogue,
+        );
         let f = &setup.link.flight;
         mission.landed_confirm_s = f.landed_confirm_s;
         mission.ground_altitude_m = f.ground_altitude_m;
@@ -60,6 +68,7 @@ impl Shell {
             mission,
             precedence: setup.link.vehicle_action_precedence.clone(),
             precedence_ids: None,
+            shell_ids: None,
             pending_events: Vec::new(),
             operator: OperatorGate::started(),
             texts: GcsText::new(
