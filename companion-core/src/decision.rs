@@ -36,6 +36,10 @@ pub struct Core {
     /// Per MDP of `mdp_names`: where the policy's rewards sit in it, resolved in `new` (`None`:
     /// the MDP has no rewards for the policy, an error each cycle as the name lookup gave).
     mdp_policy: Vec<Option<usize>>,
+    /// Per MDP of `mdp_names`, the slot of each probability it reads among the published ones
+    /// (`HealthModel::slot_names`), and the cycle's probabilities by slot.
+    mdp_slots: Vec<Vec<Option<usize>>>,
+    prob_values: Vec<f64>,
     /// Per MDP of `mdp_names`, per MDP action: the catalogue ids of its primitives (`does`),
     /// resolved in `new` so the cycle merges proposals without looking names up.
     mdp_primitives: Vec<Vec<Vec<ActionId>>>,
@@ -157,6 +161,18 @@ impl Core {
                     mdp.policy_index(model.policy_name(policy)).ok()
                 })
                 .collect(),
+            mdp_slots: model
+                .mdp_names(kind)
+                .iter()
+                .map(|name| {
+                    model
+                        .mdps
+                        .get(name)
+                        .map(|m| m.slots_in(model.health.slot_names()))
+                        .unwrap_or_default()
+                })
+                .collect(),
+            prob_values: Vec::new(),
             mdp_primitives: model
                 .mdp_names(kind)
                 .iter()
@@ -340,6 +356,12 @@ impl Core {
             }
         }
         self.cap_versions(rec);
+        // The probabilities by slot for the MDPs, when the map holds exactly the published ones
+        // (every cycle the health layer succeeded): one walk instead of a merge by name per MDP.
+        self.prob_values.clear();
+        if rec.probabilities.len() == self.health.slot_names().len() {
+            self.prob_values.extend(rec.probabilities.values());
+        }
 
         // decision: every MDP of the model, solved at its projected state
         let mut sc = std::mem::take(&mut self.scratch);
@@ -358,15 +380,26 @@ impl Core {
                 });
                 continue;
             };
-            let decided = decide(
-                mdp,
-                &mut self.workspace,
-                s,
-                &rec.probabilities,
-                self.mdp_policy[j],
-                model,
-                self.policy,
-            );
+            let decided = match self.mdp_policy[j] {
+                Some(pi) => mdp.decide_slots(
+                    &mut self.workspace,
+                    s,
+                    &rec.probabilities,
+                    &self.prob_values,
+                    &self.mdp_slots[j],
+                    pi,
+                    model.mission.horizon,
+                ),
+                None => decide(
+                    mdp,
+                    &mut self.workspace,
+                    s,
+                    &rec.probabilities,
+                    None,
+                    model,
+                    self.policy,
+                ),
+            };
             match decided {
                 Ok(Some(d)) => {
                     for &id in &self.mdp_primitives[j][d.action] {

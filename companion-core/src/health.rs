@@ -100,6 +100,11 @@ pub struct HealthModel {
     /// Per observation id, per state index of it: the (manager, node, state) it sets in every
     /// manager holding its node, resolved at load ([`HealthModel::evaluate_states_into`]).
     observation_hits: Vec<Vec<Vec<(usize, NodeId, usize)>>>,
+    /// Every published probability's name, sorted (the order of the published map's keys); a
+    /// slot is an index into it.
+    slot_names: Vec<String>,
+    /// Per manager, per entry of its `published`: its slot.
+    publish_slots: Vec<Vec<usize>>,
 }
 
 /// An activation node compiled from params/variants.toml (`variant = "app/version"`).
@@ -137,6 +142,8 @@ struct Scratch {
     /// the evidence map's order: an entry whose node and state names are unchanged reuses its
     /// resolution instead of name lookups in every manager's network (a cycle-time hot spot).
     resolved: Vec<Resolved>,
+    /// The published probabilities by slot ([`HealthModel::slot_names`]).
+    published: Vec<f64>,
 }
 
 /// One evidence entry (`node = state`) resolved in every manager that has the node.
@@ -472,12 +479,32 @@ impl HealthModel {
                     .collect()
             })
             .collect();
+        let mut slot_names: Vec<String> = managers
+            .iter()
+            .flat_map(|m| m.published.iter().map(|p| m.publish[p.0].name.clone()))
+            .collect();
+        slot_names.sort();
+        slot_names.dedup();
+        let publish_slots = managers
+            .iter()
+            .map(|m| {
+                m.published
+                    .iter()
+                    .map(|p| {
+                        let name = m.publish[p.0].name.as_str();
+                        slot_names.binary_search_by(|n| n.as_str().cmp(name)).unwrap_or(0)
+                    })
+                    .collect()
+            })
+            .collect();
         Ok(HealthModel {
             managers,
             observations,
             activations: Vec::new(),
             scratch: Scratch::default(),
             observation_hits,
+            slot_names,
+            publish_slots,
         })
     }
 
@@ -504,6 +531,12 @@ impl HealthModel {
             .collect();
         v.sort();
         v
+    }
+
+    /// The published probabilities' names, sorted: the keys of the map the cycle fills, in order
+    /// (a slot is an index into it).
+    pub fn slot_names(&self) -> &[String] {
+        &self.slot_names
     }
 
     /// The manager named `name`, if loaded.
@@ -749,18 +782,15 @@ impl HealthModel {
                 fresh[i] = true;
                 full[i] = all;
             }
-            for &(k, id, s, complement) in &m.published {
+            let values = &mut self.scratch.published;
+            values.resize(self.slot_names.len(), 0.0);
+            for (j, &(_, id, s, complement)) in m.published.iter().enumerate() {
                 let p = m.engine.marginal(id)[s];
-                let p = if complement { 1.0 - p } else { p };
-                match out.get_mut(m.publish[k].name.as_str()) {
-                    Some(x) => *x = p,
-                    None => {
-                        out.insert(m.publish[k].name.clone(), p);
-                    }
-                }
+                values[self.publish_slots[i][j]] = if complement { 1.0 - p } else { p };
             }
             crate::stage_hook::mark(crate::stage_hook::Stage::HealthManager(&m.name));
         }
+        write_published(&self.slot_names, &self.scratch.published, out);
         for (i, m) in self.managers.iter_mut().enumerate() {
             for &(from, to) in &m.carry {
                 let b = &mut self.scratch.belief;
@@ -895,6 +925,26 @@ impl HealthModel {
             .find(|n| n.name == key)
             .or_else(|| all().find(|n| n.name.eq_ignore_ascii_case(key)))
             .or_else(|| all().find(|n| strip(&n.name) == key.to_ascii_lowercase()))
+    }
+}
+
+/// The published probabilities (`values` by slot, `names` sorted) into `out`: when `out` holds
+/// exactly those names (every warm cycle) one walk beside them; otherwise each name updated or
+/// inserted, other entries left as they were.
+fn write_published(names: &[String], values: &[f64], out: &mut BTreeMap<String, f64>) {
+    if out.len() == names.len() && out.keys().zip(names).all(|(k, n)| k == n) {
+        for (v, x) in out.values_mut().zip(values) {
+            *v = *x;
+        }
+        return;
+    }
+    for (name, x) in names.iter().zip(values) {
+        match out.get_mut(name.as_str()) {
+            Some(v) => *v = *x,
+            None => {
+                out.insert(name.clone(), *x);
+            }
+        }
     }
 }
 

@@ -370,6 +370,46 @@ impl MissionMdp {
         self.decide_resolved(ws, state, probs, pi, horizon)
     }
 
+    /// The slot of each probability this MDP reads in `slot_names` (sorted names; None: not
+    /// there), for [`MissionMdp::decide_slots`].
+    pub fn slots_in(&self, slot_names: &[String]) -> Vec<Option<usize>> {
+        self.vars
+            .iter()
+            .map(|v| slot_names.binary_search(v).ok())
+            .collect()
+    }
+
+    /// [`MissionMdp::decide_resolved`] with the probabilities read by slot from `values` (the
+    /// map `probs`'s values in key order, its keys the `slot_names` `slots` came from): the same
+    /// values without a name compared. Any probability missing or out of range: the map's path,
+    /// so the same error.
+    #[allow(clippy::too_many_arguments)] // decide_resolved's, and the slots beside the map
+    pub fn decide_slots(
+        &mut self,
+        ws: &mut Workspace,
+        state: usize,
+        probs: &BTreeMap<String, f64>,
+        values: &[f64],
+        slots: &[Option<usize>],
+        pi: usize,
+        horizon: usize,
+    ) -> Result<Option<Decision>, InstantiateError> {
+        let mut ok = slots.len() == self.vars.len();
+        for (k, slot) in slots.iter().enumerate() {
+            match slot.and_then(|s| values.get(s)) {
+                Some(&v) if ok && (0.0..=1.0).contains(&v) => self.values[k] = v,
+                _ => {
+                    ok = false;
+                    break;
+                }
+            }
+        }
+        if !ok {
+            self.load_values_from(probs)?;
+        }
+        self.decide_loaded(ws, state, pi, horizon)
+    }
+
     /// [`MissionMdp::decide`] under the policy at `pi` ([`MissionMdp::policy_index`]).
     pub fn decide_resolved(
         &mut self,
@@ -380,6 +420,17 @@ impl MissionMdp {
         horizon: usize,
     ) -> Result<Option<Decision>, InstantiateError> {
         self.load_values_from(probs)?;
+        self.decide_loaded(ws, state, pi, horizon)
+    }
+
+    /// The decision with `self.values` loaded: the memo, else a solve.
+    fn decide_loaded(
+        &mut self,
+        ws: &mut Workspace,
+        state: usize,
+        pi: usize,
+        horizon: usize,
+    ) -> Result<Option<Decision>, InstantiateError> {
         let i = match self.solved.hit(&self.values, pi, horizon) {
             Some(i) => i,
             None => {
