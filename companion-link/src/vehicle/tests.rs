@@ -101,10 +101,7 @@ fn test_catalogue() -> ActionCatalogue {
         version: None,
         role: None,
     };
-    ActionCatalogue {
-        actions: TEST_ACTIONS.map(action).to_vec(),
-        roles: ActionRoles::undeclared(),
-    }
+    ActionCatalogue::new(TEST_ACTIONS.map(action).to_vec(), ActionRoles::undeclared())
 }
 
 /// The action `name` of [`TEST_ACTIONS`], flown by its own entry.
