@@ -112,9 +112,9 @@ impl ActionCatalogue {
         Ok(Self::new(f.action, roles))
     }
 
-    /// A catalogue of `actions` (at most [`crate::vocabulary::MAX_ACTIONS`]) with their roles.
+    /// A catalogue of `actions` with their roles (ids are `u16`: at most 65,535 actions get one).
     pub fn new(actions: Vec<Action>, roles: ActionRoles) -> Self {
-        let variant_of = (0..actions.len().min(crate::vocabulary::MAX_ACTIONS))
+        let variant_of = (0..actions.len().min(usize::from(u16::MAX)))
             .map(|i| {
                 let a = &actions[i];
                 let first = actions[..i]
