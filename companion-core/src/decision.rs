@@ -293,42 +293,7 @@ impl Core {
         mark(Stage::Record);
 
         // evidence -> health (the platform's room comes from the core's own platform model)
-        self.update_platform(obs);
-        let room = self.platform_room(obs);
-        // As `evidence_with_into(obs, &room, ..)`, with the names' ids resolved once in `new`.
-        let mut extra = std::mem::take(&mut self.room_extra);
-        extra.clear();
-        for ((name, v), id) in room.iter().zip(self.room_ids) {
-            if let (false, Some(id)) = (name.is_empty(), id) {
-                extra.push((id, *v));
-            }
-        }
-        for f in &self.fit_checks {
-            extra.push((f.id, self.fits(f, room[2].1)));
-        }
-        self.health.observations.evidence_states_into(
-            obs,
-            &extra,
-            &mut self.evidence_states,
-            &mut rec.evidence,
-        );
-        self.room_extra = extra;
-        // Absent is not zero: the nodes no observation fed this cycle, listed (strings reused).
-        // One observation per node (checked at load): a node is absent when its observation
-        // gave no state.
-        let mut n_absent = 0;
-        let fed = &self.evidence_states.state;
-        for (o, fed) in self.health.observations.observations.iter().zip(fed) {
-            if fed.is_none() {
-                if n_absent == rec.absent_evidence.len() {
-                    rec.absent_evidence.push(String::new());
-                }
-                rec.absent_evidence[n_absent].clone_from(&o.node);
-                n_absent += 1;
-            }
-        }
-        rec.absent_evidence.truncate(n_absent);
-        mark(Stage::Evidence);
+        self.evidence_into(obs, rec);
         // The evidence just written, by observation: no name lookups (same probabilities).
         match self
             .health
@@ -470,6 +435,47 @@ impl Core {
             None => plan.applications.clear(),
         }
         mark(Stage::Record);
+    }
+
+    /// The cycle's evidence into the record: the snapshot's and the core's own values (the
+    /// platform's room, the fit checks) by observation, and the nodes left without evidence.
+    fn evidence_into(&mut self, obs: &Observations, rec: &mut DecisionRecord) {
+        self.update_platform(obs);
+        let room = self.platform_room(obs);
+        // As `evidence_with_into(obs, &room, ..)`, with the names' ids resolved once in `new`.
+        let mut extra = std::mem::take(&mut self.room_extra);
+        extra.clear();
+        for ((name, v), id) in room.iter().zip(self.room_ids) {
+            if let (false, Some(id)) = (name.is_empty(), id) {
+                extra.push((id, *v));
+            }
+        }
+        for f in &self.fit_checks {
+            extra.push((f.id, self.fits(f, room[2].1)));
+        }
+        self.health.observations.evidence_states_into(
+            obs,
+            &extra,
+            &mut self.evidence_states,
+            &mut rec.evidence,
+        );
+        self.room_extra = extra;
+        // Absent is not zero: the nodes no observation fed this cycle, listed (strings reused).
+        // One observation per node (checked at load): a node is absent when its observation
+        // gave no state.
+        let mut n_absent = 0;
+        let fed = &self.evidence_states.state;
+        for (o, fed) in self.health.observations.observations.iter().zip(fed) {
+            if fed.is_none() {
+                if n_absent == rec.absent_evidence.len() {
+                    rec.absent_evidence.push(String::new());
+                }
+                rec.absent_evidence[n_absent].clone_from(&o.node);
+                n_absent += 1;
+            }
+        }
+        rec.absent_evidence.truncate(n_absent);
+        mark(Stage::Evidence);
     }
 
     /// Behaviour arbitration over the live proposals, then resource arbitration.
