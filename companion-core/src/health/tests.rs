@@ -132,3 +132,49 @@ fn want_marginal(
     e.propagate(&evd).unwrap();
     e.marginal(src).to_vec()
 }
+
+/// The cycle's path (evidence by observation state index, probabilities by slot) against the
+/// name path (`evaluate_into` on the evidence map): the same published probabilities, bit for
+/// bit, cycle after cycle (the carried beliefs and memos evolve alike), over values that move
+/// every observation across its thresholds, leave some out, and give some non-finite values.
+#[test]
+fn evidence_by_state_index_equals_evidence_by_name() {
+    let params = crate::shipped::params();
+    let mut by_name = HealthModel::load(&params).unwrap();
+    let mut by_index = HealthModel::load(&params).unwrap();
+    let observations = by_name.observations.clone();
+    let mut seed: u64 = 0x9e37_79b9_7f4a_7c15;
+    let mut next = move || {
+        seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+        seed >> 33
+    };
+    let (mut states, mut evidence) = (crate::evidence::EvidenceStates::default(), BTreeMap::new());
+    let (mut want, mut got) = (BTreeMap::new(), BTreeMap::new());
+    let mut non_empty = 0;
+    for cycle in 0..300 {
+        let mut obs = Observations::default();
+        for o in &observations.observations {
+            let v = match next() % 8 {
+                0 => continue, // absent
+                1 => f64::NAN, // no evidence either
+                k => {
+                    // On, just below or above a threshold, or beyond the last one.
+                    let t = o.thresholds.get((k as usize) % (o.thresholds.len() + 1));
+                    t.map_or(1e6, |t| t + [0.0, -1e-9, 1e-9][(next() % 3) as usize])
+                }
+            };
+            obs.set(&o.name, v);
+        }
+        observations.evidence_states_into(&obs, &[], &mut states, &mut evidence);
+        non_empty += usize::from(!evidence.is_empty());
+        let a = by_name.evaluate_into(&evidence, &mut want);
+        let b = by_index.evaluate_states_into(&states, &mut got);
+        assert_eq!(a.is_ok(), b.is_ok(), "cycle {cycle}");
+        assert_eq!(want.len(), got.len(), "cycle {cycle}");
+        for ((kw, vw), (kg, vg)) in want.iter().zip(&got) {
+            assert_eq!(kw, kg, "cycle {cycle}");
+            assert_eq!(vw.to_bits(), vg.to_bits(), "cycle {cycle}: {kw}");
+        }
+    }
+    assert!(non_empty > 250, "the values gave evidence in {non_empty} of 300 cycles");
+}

@@ -1161,3 +1161,50 @@ fn proposal_records_solver_stages_beside_the_horizon() {
     }
     assert!(fewer > 0, "no MDP stopped before the horizon");
 }
+
+/// Reading the probabilities by slot (the cycle's path) decides as reading them by name: the
+/// same decision, value and iterations in every state of every concurrent MDP and the monolithic
+/// one, over random probabilities; and the same error when one is missing or out of range.
+#[test]
+fn decide_by_slot_equals_decide_by_name() {
+    let mut by_name = load_all();
+    let mut by_slot = load_all();
+    let mut names: Vec<String> = KNOWN.iter().map(|s| s.to_string()).collect();
+    names.sort();
+    let mut seed: u64 = 7;
+    let mut next = move || {
+        seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mdps: Vec<String> = by_name
+        .concurrent()
+        .iter()
+        .cloned()
+        .chain(by_name.monolithic().map(str::to_string))
+        .collect();
+    assert!(mdps.len() >= 4, "{mdps:?}");
+    let (mut ws_a, mut ws_b) = (Workspace::new(), Workspace::new());
+    for round in 0..30 {
+        let mut probs: BTreeMap<String, f64> =
+            names.iter().map(|n| (n.clone(), next())).collect();
+        // Now and then a probability missing or out of range: both paths must refuse alike.
+        let broken = match round % 10 {
+            3 => probs.remove(&names[round % names.len()]).map(|_| ()),
+            7 => probs.insert(names[round % names.len()].clone(), 1.5).map(|_| ()),
+            _ => None,
+        };
+        let values: Vec<f64> = probs.values().copied().collect();
+        for name in &mdps {
+            let a = by_name.get_mut(name).unwrap();
+            let b = by_slot.get_mut(name).unwrap();
+            let pi = a.policy_index("safety").unwrap();
+            // The cycle takes the values by slot only when the map holds every published name.
+            let slots = b.slots_in(if probs.len() == names.len() { &names } else { &[] });
+            for s in 0..a.states().len() {
+                let want = a.decide_resolved(&mut ws_a, s, &probs, pi, 100);
+                let got = b.decide_slots(&mut ws_b, s, &probs, &values, &slots, pi, 100);
+                assert_eq!(got, want, "round {round} {name} state {s} (broken: {broken:?})");
+            }
+        }
+    }
+}
