@@ -901,9 +901,9 @@ fn refill<'a>(into: &mut Vec<String>, names: impl Iterator<Item = &'a str>) {
     into.truncate(len);
 }
 
+mod learned_rows;
 /// The platform model's room beside the other applications: what the resource evidence reads.
 mod platform_room;
-mod learned_rows;
 /// The decision table (the paper's Tables 4 to 7) from a run's records.
 mod table;
 pub use table::table;

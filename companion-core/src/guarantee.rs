@@ -900,13 +900,13 @@ impl Guarantee {
                 self.spec.selection,
                 EXACT_FALLBACK_NODES,
             )
-        .map(|(c, exact)| {
-            if exact {
-                // The paper's greedy can miss a feasible allocation when goals interact.
-                reason.push_str(" (exact search: the paper's algorithm found none)");
-            }
-            c
-        });
+            .map(|(c, exact)| {
+                if exact {
+                    // The paper's greedy can miss a feasible allocation when goals interact.
+                    reason.push_str(" (exact search: the paper's algorithm found none)");
+                }
+                c
+            });
         match found {
             Ok(c) => {
                 self.choice = c;

@@ -492,7 +492,9 @@ impl HealthModel {
                     .iter()
                     .map(|p| {
                         let name = m.publish[p.0].name.as_str();
-                        slot_names.binary_search_by(|n| n.as_str().cmp(name)).unwrap_or(0)
+                        slot_names
+                            .binary_search_by(|n| n.as_str().cmp(name))
+                            .unwrap_or(0)
                     })
                     .collect()
             })

@@ -32,8 +32,8 @@ mod combine;
 mod margins;
 pub use combine::{CoreConstraint, Task, Tio, combine};
 pub use margins::{
-    MarginReport, Measured, Reallocator, SwapCheck, margins, margins_into, reallocate, reallocate_or_exact,
-    reduced_problem,
+    MarginReport, Measured, Reallocator, SwapCheck, margins, margins_into, reallocate,
+    reallocate_or_exact, reduced_problem,
 };
 
 /// An end-oriented goal: the mission total of indicator `name` must stay `<= bound`.

@@ -103,7 +103,14 @@ impl SwapCheck {
 
     /// Does alternative `i` of activity `at`, with `choice` for the other activities, meet every
     /// goal from measurement `m`? (Resources are the caller's business.)
-    pub fn fits(&mut self, p: &Problem, choice: &[usize], m: &Measured, at: usize, i: usize) -> bool {
+    pub fn fits(
+        &mut self,
+        p: &Problem,
+        choice: &[usize],
+        m: &Measured,
+        at: usize,
+        i: usize,
+    ) -> bool {
         if self.known.len() != p.goals.len() {
             self.reset(p.goals.len());
         }

@@ -90,7 +90,11 @@ impl Core {
     }
 
     /// [`Core::platform_room`] and the fit checks written into the evidence.
-    pub(super) fn platform_evidence(&self, obs: &Observations, evidence: &mut BTreeMap<String, String>) {
+    pub(super) fn platform_evidence(
+        &self,
+        obs: &Observations,
+        evidence: &mut BTreeMap<String, String>,
+    ) {
         let room = self.platform_room(obs);
         for (name, v) in room {
             if !name.is_empty() {

@@ -176,5 +176,8 @@ fn evidence_by_state_index_equals_evidence_by_name() {
             assert_eq!(vw.to_bits(), vg.to_bits(), "cycle {cycle}: {kw}");
         }
     }
-    assert!(non_empty > 250, "the values gave evidence in {non_empty} of 300 cycles");
+    assert!(
+        non_empty > 250,
+        "the values gave evidence in {non_empty} of 300 cycles"
+    );
 }

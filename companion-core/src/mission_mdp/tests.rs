@@ -1173,7 +1173,9 @@ fn decide_by_slot_equals_decide_by_name() {
     names.sort();
     let mut seed: u64 = 7;
     let mut next = move || {
-        seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1442695040888963407);
+        seed = seed
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1442695040888963407);
         (seed >> 11) as f64 / (1u64 << 53) as f64
     };
     let mdps: Vec<String> = by_name
@@ -1185,12 +1187,13 @@ fn decide_by_slot_equals_decide_by_name() {
     assert!(mdps.len() >= 4, "{mdps:?}");
     let (mut ws_a, mut ws_b) = (Workspace::new(), Workspace::new());
     for round in 0..30 {
-        let mut probs: BTreeMap<String, f64> =
-            names.iter().map(|n| (n.clone(), next())).collect();
+        let mut probs: BTreeMap<String, f64> = names.iter().map(|n| (n.clone(), next())).collect();
         // Now and then a probability missing or out of range: both paths must refuse alike.
         let broken = match round % 10 {
             3 => probs.remove(&names[round % names.len()]).map(|_| ()),
-            7 => probs.insert(names[round % names.len()].clone(), 1.5).map(|_| ()),
+            7 => probs
+                .insert(names[round % names.len()].clone(), 1.5)
+                .map(|_| ()),
             _ => None,
         };
         let values: Vec<f64> = probs.values().copied().collect();
@@ -1199,11 +1202,18 @@ fn decide_by_slot_equals_decide_by_name() {
             let b = by_slot.get_mut(name).unwrap();
             let pi = a.policy_index("safety").unwrap();
             // The cycle takes the values by slot only when the map holds every published name.
-            let slots = b.slots_in(if probs.len() == names.len() { &names } else { &[] });
+            let slots = b.slots_in(if probs.len() == names.len() {
+                &names
+            } else {
+                &[]
+            });
             for s in 0..a.states().len() {
                 let want = a.decide_resolved(&mut ws_a, s, &probs, pi, 100);
                 let got = b.decide_slots(&mut ws_b, s, &probs, &values, &slots, pi, 100);
-                assert_eq!(got, want, "round {round} {name} state {s} (broken: {broken:?})");
+                assert_eq!(
+                    got, want,
+                    "round {round} {name} state {s} (broken: {broken:?})"
+                );
             }
         }
     }
