@@ -259,7 +259,8 @@ impl Default for Reallocator {
 }
 
 impl Reallocator {
-    /// As [`reallocate_or_exact`]: the same choice, flag and error.
+    /// [`reallocate_or_exact`] (which makes a fresh one per call): the paper's algorithm on the
+    /// reduced mission, then the bounded exact search when it finds nothing.
     pub fn reallocate_or_exact(
         &mut self,
         p: &Problem,
@@ -369,19 +370,5 @@ pub fn reallocate_or_exact(
     sel: Selection,
     max_nodes: u64,
 ) -> Result<(Vec<usize>, bool), Infeasible> {
-    let e = match reallocate(p, choice, m, failed, sel) {
-        Ok(c) => return Ok((c, false)),
-        Err(e) => e,
-    };
-    let (rp, map) = reduced_problem(p, m, failed);
-    let a = match exact(&rp, sel, max_nodes) {
-        Exact::Optimal(a) | Exact::Aborted(Some(a)) => a,
-        _ => return Err(e),
-    };
-    let from = p.activities.len() - rp.activities.len();
-    let mut out = choice.to_vec();
-    for (k, &i) in a.choice.iter().enumerate() {
-        out[from + k] = map[k][i];
-    }
-    Ok((out, true))
+    Reallocator::default().reallocate_or_exact(p, choice, m, failed, sel, max_nodes)
 }
