@@ -6,7 +6,7 @@
 pub use crate::conflicts::BehaviourConflicts;
 use crate::mission::{ActionCatalogue, ActionKind, Policy};
 use crate::model::Model;
-use crate::observations::Observations;
+use crate::readings::{Readings, Slot};
 use crate::record::{DecisionRecord, Degraded, Dropped, Event, ResourcesRecord};
 use crate::resources::ResourceSpec;
 use crate::scratch::Scratch;
@@ -207,11 +207,11 @@ impl ResourceArbiter {
         policy: Policy,
         platform: &mut PlatformState,
         sc: &mut Scratch,
-        obs: &Observations,
-        plan: Option<&str>,
+        rates: (&[RequiredRate], &Readings),
+        plan: Option<&[PlannedVariant]>,
         rec: &mut DecisionRecord,
     ) {
-        request_key(model, sc, obs, plan);
+        request_key(model, sc, rates, plan);
         crate::stage_hook::mark(crate::stage_hook::Stage::Arbitration);
         // The resource policy was resolved when the model loaded (every policy has one).
         let m = self.schedules.schedule(
@@ -235,17 +235,85 @@ impl ResourceArbiter {
     }
 }
 
-/// The implementation an IA name (`gps_vision fusion V4.F`) plans for `version`: `F` for `V4`.
-fn planned_implementation(plan: Option<&str>, version: &str) -> Option<Implementation> {
-    crate::guarantee::ia_variants(plan?)
-        .find(|(v, _)| *v == version)
-        .and_then(|(_, imp)| imp.parse().ok())
+/// The frame rate an application needs now (section 4.3.2 model: the relative speed from the
+/// observation params/mission.toml's `rates` names, the formula from params/platform.toml),
+/// resolved once per application: 1 fps when params give it no performance need.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct RequiredRate {
+    speed: Option<Slot>,
+    performance: Option<fpga_model::Performance>,
+}
+
+impl RequiredRate {
+    /// The rate `app` needs (none: no application, 1 fps).
+    pub(crate) fn of(model: &Model, app: Option<&str>, readings: &mut Readings) -> Self {
+        let Some(app) = app else {
+            return Self::default();
+        };
+        RequiredRate {
+            speed: model.mission.rates.get(app).map(|obs| readings.slot(obs)),
+            performance: model.resources.platform.performance.get(app).cloned(),
+        }
+    }
+
+    /// The rate with the speed read this cycle (0 m/s when not observed).
+    pub(crate) fn fps(&self, readings: &Readings) -> f64 {
+        let speed = self.speed.and_then(|s| readings.get(s)).unwrap_or(0.0);
+        self.performance
+            .as_ref()
+            .map_or(1.0, |p| p.required_fps([0.0, 0.0], [speed, 0.0]))
+    }
+}
+
+/// One application alternative an IA name carries ([`crate::guarantee::ia_variants`]), parsed
+/// once when the core starts: `V4.F` in `gps_vision fusion V4.F`.
+#[derive(Debug, Clone)]
+pub(crate) struct PlannedVariant {
+    /// `V4`.
+    pub(crate) version: String,
+    /// `F`, as the name writes it.
+    pub(crate) implementation: String,
+    /// `F` parsed (`None`: not an implementation's name).
+    pub(crate) parsed: Option<Implementation>,
+    /// The application of the catalogue's first variant of this version (`tracking`).
+    pub(crate) app: Option<String>,
+}
+
+/// The [`PlannedVariant`]s of an IA name, in the name's order.
+pub(crate) fn planned_variants(ia: &str, catalogue: &fpga_model::Catalogue) -> Vec<PlannedVariant> {
+    crate::guarantee::ia_variants(ia)
+        .map(|(version, imp)| PlannedVariant {
+            version: version.to_string(),
+            implementation: imp.to_string(),
+            parsed: imp.parse().ok(),
+            app: (catalogue.variants().iter())
+                .find(|v| v.version == version)
+                .map(|v| v.app.clone()),
+        })
+        .collect()
+}
+
+/// The implementation the IA in force plans for `version`: `F` for `V4` (the first token
+/// naming the version decides, as in the IA's name).
+fn planned_implementation(
+    plan: Option<&[PlannedVariant]>,
+    version: &str,
+) -> Option<Implementation> {
+    plan?
+        .iter()
+        .find(|p| p.version == version)
+        .and_then(|p| p.parsed)
 }
 
 /// The requests (`sc.key`) of the kept application actions and the actions asking for them
 /// (`sc.owners`): one variant per application, at the rate the observed speed requires, in the
 /// implementation the plan names for that version (if it does).
-fn request_key(model: &Model, sc: &mut Scratch, obs: &Observations, plan: Option<&str>) {
+fn request_key(
+    model: &Model,
+    sc: &mut Scratch,
+    (rates, readings): (&[RequiredRate], &Readings),
+    plan: Option<&[PlannedVariant]>,
+) {
     sc.key.clear();
     sc.owners.clear();
     let actions = &model.actions;
@@ -258,16 +326,7 @@ fn request_key(model: &Model, sc: &mut Scratch, obs: &Observations, plan: Option
         if sc.key.iter().any(|r| app_of(r.0) == Some(app.as_str())) {
             continue; // one variant per application (target detection shares the tracker)
         }
-        let speed = model
-            .mission
-            .rates
-            .get(app.as_str())
-            .and_then(|obs_name| obs.get(obs_name))
-            .unwrap_or(0.0);
-        let fps = model
-            .resources
-            .required_fps(app, [0.0, 0.0], [speed, 0.0])
-            .unwrap_or(1.0);
+        let fps = rates.get(a.index()).map_or(1.0, |r| r.fps(readings));
         let planned = planned_implementation(plan, version);
         sc.key.push((actions.variant_id(a), planned, fps.to_bits()));
         sc.owners.push(a);

@@ -5,7 +5,7 @@
 //! core carries between cycles (its own fields) and one [`Observations`] snapshot. No clock, file,
 //! socket or randomness.
 
-use crate::arbitration::ResourceArbiter;
+use crate::arbitration::{ResourceArbiter, planned_variants};
 use crate::guarantee::{Guarantee, Progress};
 use crate::health::HealthModel;
 use crate::mission::ActionKind;
@@ -13,6 +13,7 @@ pub use crate::mission::Policy;
 use crate::mission_mdp::MissionMdps;
 pub use crate::model::{Model, ModelKind};
 use crate::observations::Observations;
+use crate::readings::Readings;
 use crate::record::{DecisionRecord, Event, Plan};
 use crate::scratch::Scratch;
 use crate::stage_hook::{Stage, mark};
@@ -80,6 +81,11 @@ pub struct Core {
     evidence_states: crate::evidence::EvidenceStates,
     /// The activation nodes' fit observations the core computes with the scheduler's check.
     fit_checks: Vec<FitCheck>,
+    /// The snapshot's values this cycle by slot, and the slots each stage reads.
+    readings: Readings,
+    read_slots: ReadSlots,
+    /// Per activity of the guarantee's mission, per alternative: the implementations it names.
+    planned: Vec<Vec<Vec<crate::arbitration::PlannedVariant>>>,
 }
 
 /// Per action of MDP `name`, the catalogue ids of the primitives it stands for (every one is in
@@ -102,8 +108,9 @@ fn primitive_ids(model: &Model, name: &str) -> Vec<Vec<ActionId>> {
 struct FitCheck {
     id: crate::evidence::ObservationId,
     name: String,
-    app: String,
-    version: String,
+    /// The catalogue's variants of the activation's `app version` (its implementations), by
+    /// index.
+    variants: Vec<usize>,
 }
 
 /// How much work the cycles so far really did (the rest came from the memos).
@@ -148,6 +155,21 @@ fn fill_strings<'a>(dst: &mut Vec<String>, src: impl ExactSizeIterator<Item = &'
 impl Core {
     /// A core at cycle 0 with fresh copies of the model's stateful parts.
     pub fn new(model: Arc<Model>, kind: ModelKind, policy: Policy) -> Self {
+        let (readings, read_slots) = ReadSlots::resolve(&model, &model.mdp_names(kind));
+        let guarantee = Guarantee::start_or_unbounded(model.guarantee.clone());
+        let planned = guarantee.as_ref().map_or_else(Vec::new, |g| {
+            let activities = &g.spec.problem.activities;
+            let cat = &model.resources.catalogue;
+            activities
+                .iter()
+                .map(|a| {
+                    a.ias
+                        .iter()
+                        .map(|ia| planned_variants(&ia.name, cat))
+                        .collect()
+                })
+                .collect()
+        });
         Core {
             kind,
             policy,
@@ -186,7 +208,7 @@ impl Core {
             mdps: model.mdps.clone(),
             workspace: Workspace::new(),
             platform: PlatformState::new(&model.resources.platform),
-            guarantee: Guarantee::start_or_unbounded(model.guarantee.clone()),
+            guarantee,
             guarantee_infeasible: false,
             capped_versions: Vec::new(),
             capped_for: Vec::new(),
@@ -209,11 +231,17 @@ impl Core {
                     Some(FitCheck {
                         id: model.health.observations.id(name)?,
                         name: name.to_string(),
-                        app: a.app.clone(),
-                        version: a.version.clone(),
+                        variants: (model.resources.catalogue.variants().iter())
+                            .enumerate()
+                            .filter(|(_, v)| v.app == a.app && v.version == a.version)
+                            .map(|(i, _)| i)
+                            .collect(),
                     })
                 })
                 .collect(),
+            readings,
+            read_slots,
+            planned,
             model,
         }
     }
@@ -290,10 +318,11 @@ impl Core {
         let model = Arc::clone(&self.model);
         let model = &*model;
         self.begin_record(obs, rec);
+        self.readings.read(obs);
         mark(Stage::Record);
 
         // evidence -> health (the platform's room comes from the core's own platform model)
-        self.evidence_into(obs, rec);
+        self.evidence_into(rec);
         // The evidence just written, by observation: no name lookups (same probabilities).
         match self
             .health
@@ -334,7 +363,13 @@ impl Core {
         sc.proposed.clear();
         let mut n_proposals = 0;
         for (j, name) in self.mdp_names.iter().enumerate() {
-            let local = model.mission.project(name, obs);
+            let local = read_slots::project(
+                model,
+                name,
+                &self.read_slots.projection[j],
+                &self.readings,
+                &obs.state,
+            );
             let (Some(mdp), Some(_)) = (self.mdps.get_mut(name), model.mdps.get(name)) else {
                 continue;
             };
@@ -402,7 +437,7 @@ impl Core {
         // the resource manager sees the room this cycle's placements leave, the MDP that chose
         // the application is solved again, and its new proposal is what runs.
         for _ in 0..MAX_RESOLVES {
-            let resolved = self.resolve_conflict(&mut sc, obs, rec);
+            let resolved = self.resolve_conflict(&mut sc, rec);
             mark(Stage::Resolve);
             if !resolved {
                 break;
@@ -439,9 +474,9 @@ impl Core {
 
     /// The cycle's evidence into the record: the snapshot's and the core's own values (the
     /// platform's room, the fit checks) by observation, and the nodes left without evidence.
-    fn evidence_into(&mut self, obs: &Observations, rec: &mut DecisionRecord) {
-        self.update_platform(obs);
-        let room = self.platform_room(obs);
+    fn evidence_into(&mut self, rec: &mut DecisionRecord) {
+        self.update_platform();
+        let room = self.platform_room();
         // As `evidence_with_into(obs, &room, ..)`, with the names' ids resolved once in `new`.
         let mut extra = std::mem::take(&mut self.room_extra);
         extra.clear();
@@ -453,8 +488,8 @@ impl Core {
         for f in &self.fit_checks {
             extra.push((f.id, self.fits(f, room[2].1)));
         }
-        self.health.observations.evidence_states_into(
-            obs,
+        self.health.observations.evidence_states_from_into(
+            self.readings.values(),
             &extra,
             &mut self.evidence_states,
             &mut rec.evidence,
@@ -513,13 +548,17 @@ impl Core {
             .guarantee
             .as_ref()
             .filter(|_| model.mission.guarantee.binds)
-            .and_then(|g| g.allocated(*model.mission.guarantee.activity_of_state.get(&obs.state)?));
+            .and_then(|g| {
+                let activity = *model.mission.guarantee.activity_of_state.get(&obs.state)?;
+                let ia = g.allocated_index(activity)?;
+                self.planned.get(activity)?.get(ia).map(Vec::as_slice)
+            });
         self.arbiter.arbitrate_resources(
             model,
             self.policy,
             &mut self.platform,
             sc,
-            obs,
+            (&self.read_slots.rates, &self.readings),
             plan,
             rec,
         );
@@ -529,12 +568,7 @@ impl Core {
     /// manager on the room this cycle's placements leave, solve the MDP that chose the
     /// application again and record its new proposal. False when there is nothing to do or the
     /// MDP's choice does not change.
-    fn resolve_conflict(
-        &mut self,
-        sc: &mut Scratch,
-        obs: &Observations,
-        rec: &mut DecisionRecord,
-    ) -> bool {
+    fn resolve_conflict(&mut self, sc: &mut Scratch, rec: &mut DecisionRecord) -> bool {
         let model = Arc::clone(&self.model);
         let model = &*model;
         let Some(app) = model.health.activations.first().map(|a| a.app.as_str()) else {
@@ -570,7 +604,7 @@ impl Core {
         };
         // The room beside what was placed this cycle.
         self.note_others(rec);
-        self.platform_evidence(obs, &mut rec.evidence);
+        self.platform_evidence(&mut rec.evidence);
         let manager = &model.health.activations[0].manager;
         if let Err(e) =
             self.health
@@ -717,15 +751,15 @@ impl Core {
             rec.guarantee = None;
             return;
         };
-        for (resource, observation) in &coupling.failures {
-            if obs.get(observation).is_some_and(|v| v > 0.5)
+        for (resource, slot) in &self.read_slots.failures {
+            if self.readings.get(*slot).is_some_and(|v| v > 0.5)
                 && !self.failed_resources.contains(resource)
             {
                 self.failed_resources.push(resource.clone());
             }
         }
-        let failed_tiles = obs
-            .get(crate::evidence::FAILED_TILES)
+        let failed_tiles = (self.readings)
+            .get(self.read_slots.failed_tiles)
             .unwrap_or(0.0)
             .max(0.0) as usize;
         let n_tiles = self.platform.tiles.len();
@@ -761,11 +795,11 @@ impl Core {
             Progress {
                 activity_index,
                 activity_fraction: fraction,
-                energy_used_j: obs.get("energy_consumed_j"),
-                battery_remaining_pct: obs.get("battery_pct"),
+                energy_used_j: self.readings.get(self.read_slots.energy_consumed_j),
+                battery_remaining_pct: self.readings.get(self.read_slots.battery_pct),
                 elapsed_s: obs.time_s,
                 failed_resources: failed,
-                pack: watch::pack_reading(obs),
+                pack: self.read_slots.pack(&self.readings),
             },
             record,
         );
@@ -776,15 +810,12 @@ impl Core {
         }
         // The allocation's application alternatives (`V4.F`, `zone_t.F`) against what was placed.
         let mut n_differs = 0;
-        if let (Some(cell), Some(res)) = (g.allocated(activity_index), &rec.resources) {
-            let cat = &self.model.resources.catalogue;
-            for (version, imp) in crate::guarantee::ia_variants(cell) {
-                let Some(app) = cat
-                    .variants()
-                    .iter()
-                    .find(|v| v.version == version)
-                    .map(|v| v.app.as_str())
-                else {
+        let cell = g.allocated_index(activity_index);
+        let planned = cell.and_then(|i| self.planned.get(activity_index)?.get(i));
+        if let (Some(planned), Some(res)) = (planned, &rec.resources) {
+            for pv in planned {
+                let (version, imp) = (pv.version.as_str(), pv.implementation.as_str());
+                let Some(app) = pv.app.as_deref() else {
                     continue;
                 };
                 let Some(p) = res.placements.iter().find(|p| p.app == app) else {
@@ -904,6 +935,8 @@ fn refill<'a>(into: &mut Vec<String>, names: impl Iterator<Item = &'a str>) {
 mod learned_rows;
 /// The platform model's room beside the other applications: what the resource evidence reads.
 mod platform_room;
+mod read_slots;
+use read_slots::ReadSlots;
 /// The decision table (the paper's Tables 4 to 7) from a run's records.
 mod table;
 pub use table::table;

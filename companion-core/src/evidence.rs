@@ -333,6 +333,39 @@ impl ObservationMap {
             st[id.index()] = self.spec(id).state_index(v).map(|i| i as u16);
             n += usize::from(st[id.index()].is_some());
         });
+        self.write_states(st, n, out);
+    }
+
+    /// As [`ObservationMap::evidence_states_into`], with the snapshot's values already read by
+    /// observation id (`values[id.index()]`, e.g. the first slots of a
+    /// [`crate::readings::Readings`] started with [`ObservationMap::names`]).
+    pub fn evidence_states_from_into(
+        &self,
+        values: &[Option<f64>],
+        extra: &[(ObservationId, f64)],
+        states: &mut EvidenceStates,
+        out: &mut BTreeMap<String, String>,
+    ) {
+        let st = &mut states.state;
+        st.clear();
+        let mut n = 0;
+        for (k, o) in self.observations.iter().enumerate() {
+            let id = ObservationId(k as u16);
+            let value = extra
+                .iter()
+                .find(|(x, _)| *x == id)
+                .map(|&(_, v)| v)
+                .or(values.get(k).copied().flatten());
+            let s = value.and_then(|v| o.state_index(v)).map(|i| i as u16);
+            n += usize::from(s.is_some());
+            st.push(s);
+        }
+        self.write_states(st, n, out);
+    }
+
+    /// The evidence map from the states by observation (`n` of them given): rewritten in place
+    /// when it holds the same nodes, else rebuilt.
+    fn write_states(&self, st: &[Option<u16>], n: usize, out: &mut BTreeMap<String, String>) {
         if n == out.len() {
             let mut present = self
                 .by_node

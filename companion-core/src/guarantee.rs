@@ -534,6 +534,18 @@ impl Guarantee {
         Some(ia.name.as_str())
     }
 
+    /// Index of the alternative in force for `activity` ([`Guarantee::allocated`]'s).
+    pub fn allocated_index(&self, activity: usize) -> Option<usize> {
+        let i = *self.choice.get(activity)?;
+        self.spec
+            .problem
+            .activities
+            .get(activity)?
+            .ias
+            .get(i)
+            .map(|_| i)
+    }
+
     /// Every RAS computed so far, pre-flight first.
     pub fn ras_rows(&self) -> &[RasRow] {
         &self.rows

@@ -22,6 +22,7 @@
 //! - `decision`: the [`decision::Model`] and the per-cycle [`decision::Core`].
 //! - `launch`: the launch verdict, whether the models agree to a start ([`launch::verdict`]).
 //! - `probabilities`: the named probabilities, their publishers and consumers (checked at load).
+//! - `readings`: the snapshot's values the cycle reads, by slot (names resolved once).
 //! - `record`: the decision record written for every cycle.
 //! - `tracking`: tracking time, shared by the world, the review and the tables.
 //! - `stage_hook`: an optional observer of the cycle's stage boundaries (benchmarks' breakdown).
@@ -41,6 +42,7 @@ pub mod mission_mdp;
 pub mod model;
 pub mod observations;
 pub mod probabilities;
+pub mod readings;
 pub mod record;
 pub mod report;
 pub mod resources;

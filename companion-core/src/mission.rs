@@ -181,12 +181,18 @@ pub struct ProjectionRule {
 
 impl ProjectionRule {
     fn matches(&self, obs: &Observations) -> bool {
-        if !self.states.is_empty() && !self.states.contains(&obs.state) {
+        let value = self.observation.as_deref().and_then(|name| obs.get(name));
+        self.matches_reading(&obs.state, value)
+    }
+
+    /// Does the rule match in shared state `state`, its observation reading `value`?
+    pub fn matches_reading(&self, state: &str, value: Option<f64>) -> bool {
+        if !self.states.is_empty() && !self.states.iter().any(|s| s == state) {
             return false;
         }
         match &self.observation {
             None => true,
-            Some(name) => obs.get(name).is_some_and(|v| {
+            Some(_) => value.is_some_and(|v| {
                 self.below.is_none_or(|b| v < b) && self.above.is_none_or(|a| v > a)
             }),
         }
@@ -723,6 +729,11 @@ impl MissionFile {
             ));
         }
         Ok(m)
+    }
+
+    /// MDP `mdp`'s projection rules, first match first (none: the shared state is its state).
+    pub fn projection_rules(&self, mdp: &str) -> &[ProjectionRule] {
+        self.projection.get(mdp).map_or(&[], Vec::as_slice)
     }
 
     /// The state MDP `mdp` is in, given the shared state and observations.

@@ -62,7 +62,8 @@ fn published(
     obs.set("vibration_mps2", vibration);
     obs.set("battery_pct", 90.0);
     let mut evidence = core.health.evidence(&obs);
-    core.platform_evidence(&obs, &mut evidence);
+    core.readings.read(&obs);
+    core.platform_evidence(&mut evidence);
     let mut probs = BTreeMap::new();
     core.health
         .evaluate_into(&evidence, &mut probs)

@@ -2,16 +2,15 @@
 //! application needs): the evidence the resource manager reads each cycle.
 
 use super::{Core, FitCheck, ROOM};
-use crate::observations::Observations;
 use crate::record::DecisionRecord;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
 impl Core {
     /// Faults and monitor readings the shell reports, applied to the platform model.
-    pub(super) fn update_platform(&mut self, obs: &Observations) {
-        let failed = obs
-            .get(crate::evidence::FAILED_TILES)
+    pub(super) fn update_platform(&mut self) {
+        let failed = (self.readings)
+            .get(self.read_slots.failed_tiles)
             .unwrap_or(0.0)
             .max(0.0) as usize;
         // The last `failed` tiles are out of service (which ones fail does not matter to the model).
@@ -19,8 +18,8 @@ impl Core {
         for (i, t) in self.platform.tiles.iter_mut().enumerate() {
             t.failed = i >= n.saturating_sub(failed);
         }
-        self.platform.external_cpu_load = obs
-            .get(crate::evidence::EXTERNAL_CPU_LOAD)
+        self.platform.external_cpu_load = (self.readings)
+            .get(self.read_slots.external_cpu_load)
             .unwrap_or(0.0)
             .max(0.0);
     }
@@ -34,29 +33,13 @@ impl Core {
             .map(|a| a.app.as_str())
     }
 
-    /// Required rate of `app` now (section 4.3.2 model, relative speed from the observation
-    /// params/mission.toml's `rates` names).
-    pub(super) fn required_fps(&self, app: &str, obs: &Observations) -> f64 {
-        let model = &*self.model;
-        let speed = model
-            .mission
-            .rates
-            .get(app)
-            .and_then(|obs_name| obs.get(obs_name))
-            .unwrap_or(0.0);
-        model
-            .resources
-            .required_fps(app, [0.0, 0.0], [speed, 0.0])
-            .unwrap_or(1.0)
-    }
-
     /// Observations of the resource manager from the platform model: healthy tiles and CPU
     /// headroom left beside the applications it must run beside (`others_*`), and the rate the
     /// assessed application needs now. Empty when no activation node assesses an application.
-    pub(super) fn platform_room(&self, obs: &Observations) -> [(&'static str, f64); 3] {
-        let Some(app) = self.assessed_app() else {
+    pub(super) fn platform_room(&self) -> [(&'static str, f64); 3] {
+        if self.assessed_app().is_none() {
             return [("", f64::NAN); 3];
-        };
+        }
         let p = &self.model.resources.platform;
         let healthy = self.platform.tiles.iter().filter(|t| !t.failed).count() as u32;
         let free = healthy.saturating_sub(self.others_tiles);
@@ -67,7 +50,8 @@ impl Core {
         [
             (ROOM[0], f64::from(free)),
             (ROOM[1], headroom.max(0.0)),
-            (ROOM[2], self.required_fps(app, obs)),
+            // The required rate of the assessed application now (section 4.3.2 model).
+            (ROOM[2], self.read_slots.assessed_rate.fps(&self.readings)),
         ]
     }
 
@@ -78,24 +62,18 @@ impl Core {
     pub(super) fn fits(&self, f: &FitCheck, fps: f64) -> f64 {
         let res = &self.model.resources;
         let room = fpga_model::Room::of(&res.platform, &self.platform);
-        let admitted = room.admits_version(
-            &res.catalogue,
-            &f.app,
-            &f.version,
-            fps,
-            self.others_tiles,
-            self.others_cpu,
-        );
+        // `Room::admits_version` over the variants of `app version` found once in `new`.
+        let variants = res.catalogue.variants();
+        let admitted = f
+            .variants
+            .iter()
+            .any(|&i| room.admits(&variants[i], fps, self.others_tiles, self.others_cpu));
         if admitted { 1.0 } else { 0.0 }
     }
 
     /// [`Core::platform_room`] and the fit checks written into the evidence.
-    pub(super) fn platform_evidence(
-        &self,
-        obs: &Observations,
-        evidence: &mut BTreeMap<String, String>,
-    ) {
-        let room = self.platform_room(obs);
+    pub(super) fn platform_evidence(&self, evidence: &mut BTreeMap<String, String>) {
+        let room = self.platform_room();
         for (name, v) in room {
             if !name.is_empty() {
                 self.health.observe_into(name, v, evidence);

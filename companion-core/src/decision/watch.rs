@@ -1,21 +1,6 @@
-//! What the guarantee stage reads of the snapshot and says of a drift (decision.rs's
-//! `watch_guarantee`).
+//! What the guarantee stage says of a drift (decision.rs's `watch_guarantee`).
 
-use crate::observations::Observations;
 use crate::record::Event;
-
-/// What the snapshot says of the pack (docs/guarantee.md, "Energy from the autopilot").
-pub(super) fn pack_reading(obs: &Observations) -> crate::guarantee::PackReading {
-    crate::guarantee::PackReading {
-        capacity_mah: obs.get("battery_capacity_mah"),
-        cells: obs.get("battery_cells"),
-        voltage_v: obs.get("battery_v"),
-        current_a: obs.get("battery_current_a"),
-        consumed_mah: obs.get("consumed_mah"),
-        vehicle_time_s: obs.get("vehicle_time_s"),
-        armed: obs.get("armed").map(|a| a > 0.5),
-    }
-}
 
 pub(super) fn drift_event(
     record: &crate::record::GuaranteeRecord,

@@ -39,6 +39,8 @@ pub(super) struct ActivityTokens {
     /// activity names fewer than 128 tokens; the top bit marks "some alternative is feasible"): the binding's per-cycle check is then a few word
     /// operations per alternative.
     versions: Option<Vec<u128>>,
+    /// The union of `versions`: every token some alternative offers with an implementation.
+    all_versions: u128,
 }
 
 impl ActivityTokens {
@@ -74,10 +76,12 @@ impl ActivityTokens {
                         })
                         .collect()
                 });
+                let all_versions = versions.iter().flatten().fold(0, |a, b| a | b);
                 Self {
                     named,
                     ias,
                     versions,
+                    all_versions,
                 }
             })
             .collect()
@@ -171,6 +175,7 @@ impl Guarantee {
         if self.tokens[at].versions.is_some() {
             // Bits per token id: the same walk as below, a word per alternative.
             let (mut feasible, mut offered) = (0u128, 0u128);
+            let all = self.tokens[at].all_versions;
             for i in 0..n_ias {
                 let bits = self.tokens[at].versions.as_ref().map_or(0, |v| v[i]);
                 offered |= bits;
@@ -179,6 +184,12 @@ impl Guarantee {
                 let known = feasible != 0 && bits & !feasible == 0;
                 if !known && self.alternative_feasible(at, i) {
                     feasible |= bits | 1 << 127; // the top bit: some alternative is feasible
+                }
+                // Every version any alternative offers is known feasible: the rest can only
+                // offer those again (exact: the answer is already empty).
+                if feasible != 0 && all & !feasible == 0 {
+                    offered = all;
+                    break;
                 }
             }
             if feasible != 0 {
