@@ -19,6 +19,10 @@ pub struct Readings {
     by_name: Vec<u32>,
     /// The last snapshot's value per slot (`None`: absent from it).
     values: Vec<Option<f64>>,
+    /// The last snapshot's names in its order, with the slot each one fed: a snapshot of the
+    /// same names (compared name by name, the steady case) is read down this list instead of
+    /// the walk. Emptied when a slot is added.
+    layout: Vec<(String, Option<u32>)>,
 }
 
 impl Readings {
@@ -44,12 +48,16 @@ impl Readings {
             .partition_point(|&j| self.names[j as usize].as_str() < name);
         self.by_name.insert(at, k);
         self.values.push(None);
+        self.layout.clear();
         Slot(k)
     }
 
     /// Read `obs`: every slot's value from the snapshot (`None` when absent), in one pass over
     /// both sorted lists.
     pub fn read(&mut self, obs: &Observations) {
+        if self.read_as_last(obs) {
+            return;
+        }
         let mut snapshot = obs.values.iter().peekable();
         for &k in &self.by_name {
             let name = self.names[k as usize].as_str();
@@ -67,6 +75,46 @@ impl Readings {
                 }
             }
             self.values[k as usize] = value;
+        }
+        self.remember_layout(obs);
+    }
+
+    /// When `obs` holds the last snapshot's names: its values written down the remembered
+    /// layout (the slots it does not feed stay absent, as the last walk left them).
+    fn read_as_last(&mut self, obs: &Observations) -> bool {
+        if obs.values.len() != self.layout.len()
+            || !obs
+                .values
+                .keys()
+                .zip(&self.layout)
+                .all(|(n, (m, _))| n == m)
+        {
+            return false;
+        }
+        for (v, (_, slot)) in obs.values.values().zip(&self.layout) {
+            if let Some(k) = slot {
+                self.values[*k as usize] = Some(*v);
+            }
+        }
+        true
+    }
+
+    /// The snapshot's names and the slot each fed (strings reused).
+    fn remember_layout(&mut self, obs: &Observations) {
+        self.layout.truncate(obs.values.len());
+        for (i, name) in obs.values.keys().enumerate() {
+            let slot = self
+                .by_name
+                .binary_search_by(|&k| self.names[k as usize].as_str().cmp(name))
+                .ok()
+                .map(|j| self.by_name[j]);
+            match self.layout.get_mut(i) {
+                Some((n, s)) => {
+                    n.clone_from(name);
+                    *s = slot;
+                }
+                None => self.layout.push((name.clone(), slot)),
+            }
         }
     }
 
@@ -121,6 +169,41 @@ mod tests {
             // A second snapshot overwrites the first: absent now is None, not last cycle's.
             r.read(&Observations::default());
             prop_assert!(r.values().iter().all(Option::is_none));
+        }
+
+        /// A stream of snapshots, some with the last one's names (read down the remembered
+        /// layout), some with others, slots added between reads: every read gives what each
+        /// snapshot holds, as a fresh reading reads it.
+        #[test]
+        fn a_stream_of_snapshots_reads_as_each_alone(
+            asked in proptest::collection::vec("[a-d]{1,2}", 0..12),
+            added in proptest::collection::vec("[a-d]{1,2}", 0..4),
+            shapes in proptest::collection::vec(
+                proptest::collection::btree_map("[a-d]{1,2}", -5.0f64..5.0, 0..12), 1..4),
+            stream in proptest::collection::vec((0usize..4, -5.0f64..5.0, 0usize..6), 1..20),
+        ) {
+            let mut r = Readings::default();
+            asked.iter().for_each(|n| { r.slot(n); });
+            for (k, &(shape, shift, add)) in stream.iter().enumerate() {
+                if let Some(n) = added.get(add).filter(|_| k % 5 == 4) {
+                    r.slot(n);
+                }
+                // The shape's names with values moved by `shift`: same names, new values.
+                let values = shapes[shape % shapes.len()]
+                    .iter()
+                    .map(|(n, v)| (n.clone(), v + shift))
+                    .collect();
+                let obs = Observations { values, ..Default::default() };
+                r.read(&obs);
+                let mut fresh = r.clone();
+                fresh.layout.clear();
+                fresh.read(&obs);
+                prop_assert_eq!(r.values(), fresh.values());
+                for k in 0..r.values().len() {
+                    let slot = Slot(k as u32);
+                    prop_assert_eq!(r.get(slot), obs.get(r.name(slot)));
+                }
+            }
         }
     }
 }
