@@ -128,6 +128,9 @@ pub struct CatalogueActivation {
 struct Scratch {
     /// Evidence per manager, cleared (capacity kept) each evaluation.
     per: Vec<Evidence>,
+    /// The states by observation `per` was built from by [`HealthModel::evaluate_states_into`]
+    /// (`None`: built by name): the same states build the same evidence, so it is kept.
+    per_states: Option<Vec<Option<u16>>>,
     /// A carried belief being normalised.
     belief: Vec<f64>,
     /// Per manager: the evidence of its last propagation, and whether its marginals are still
@@ -630,14 +633,21 @@ impl HealthModel {
         out: &mut BTreeMap<String, f64>,
     ) -> Result<(), HealthError> {
         let per = &mut self.scratch.per;
-        per.resize_with(self.managers.len(), Evidence::new);
-        per.iter_mut().for_each(Evidence::clear);
-        for id in self.observations.by_node() {
-            let Some(Some(s)) = states.state.get(id.index()) else {
-                continue;
-            };
-            for &(mi, node, st) in &self.observation_hits[id.index()][usize::from(*s)] {
-                per[mi].set_state(node, st);
+        let same = (self.scratch.per_states.as_ref()).is_some_and(|s| *s == states.state);
+        if !same || per.len() != self.managers.len() {
+            per.resize_with(self.managers.len(), Evidence::new);
+            per.iter_mut().for_each(Evidence::clear);
+            for id in self.observations.by_node() {
+                let Some(Some(s)) = states.state.get(id.index()) else {
+                    continue;
+                };
+                for &(mi, node, st) in &self.observation_hits[id.index()][usize::from(*s)] {
+                    per[mi].set_state(node, st);
+                }
+            }
+            match &mut self.scratch.per_states {
+                Some(s) => s.clone_from(&states.state),
+                None => self.scratch.per_states = Some(states.state.clone()),
             }
         }
         crate::stage_hook::mark(crate::stage_hook::Stage::Evidence);
@@ -698,6 +708,7 @@ impl HealthModel {
     ) -> Result<(), HealthError> {
         // Resolve everything first so a bad entry changes no state.
         let per = &mut self.scratch.per;
+        self.scratch.per_states = None;
         per.resize_with(self.managers.len(), Evidence::new);
         per.iter_mut().for_each(Evidence::clear);
         let resolved = &mut self.scratch.resolved;

@@ -21,8 +21,9 @@ pub struct Readings {
     values: Vec<Option<f64>>,
     /// The last snapshot's names in its order, with the slot each one fed: a snapshot of the
     /// same names (compared name by name, the steady case) is read down this list instead of
-    /// the walk. Emptied when a slot is added.
+    /// the walk. Not used once a slot is added (`layout_valid`).
     layout: Vec<(String, Option<u32>)>,
+    layout_valid: bool,
 }
 
 impl Readings {
@@ -48,7 +49,7 @@ impl Readings {
             .partition_point(|&j| self.names[j as usize].as_str() < name);
         self.by_name.insert(at, k);
         self.values.push(None);
-        self.layout.clear();
+        self.layout_valid = false;
         Slot(k)
     }
 
@@ -82,7 +83,8 @@ impl Readings {
     /// When `obs` holds the last snapshot's names: its values written down the remembered
     /// layout (the slots it does not feed stay absent, as the last walk left them).
     fn read_as_last(&mut self, obs: &Observations) -> bool {
-        if obs.values.len() != self.layout.len()
+        if !self.layout_valid
+            || obs.values.len() != self.layout.len()
             || !obs
                 .values
                 .keys()
@@ -116,6 +118,7 @@ impl Readings {
                 None => self.layout.push((name.clone(), slot)),
             }
         }
+        self.layout_valid = true;
     }
 
     /// The value read at `slot`.
@@ -196,7 +199,7 @@ mod tests {
                 let obs = Observations { values, ..Default::default() };
                 r.read(&obs);
                 let mut fresh = r.clone();
-                fresh.layout.clear();
+                fresh.layout_valid = false;
                 fresh.read(&obs);
                 prop_assert_eq!(r.values(), fresh.values());
                 for k in 0..r.values().len() {

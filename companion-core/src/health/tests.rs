@@ -181,3 +181,64 @@ fn evidence_by_state_index_equals_evidence_by_name() {
         "the values gave evidence in {non_empty} of 300 cycles"
     );
 }
+
+/// The evidence built from states is kept while the states repeat, and only then: a by-name
+/// evaluation in between (other evidence) is not mistaken for it. Cycle `k`'s snapshot repeats
+/// cycle `k - 2`'s when `k % 3 == 2`, and cycle `k % 3 == 1` evaluates by name; every cycle's
+/// probabilities equal a by-name reference's, bit for bit.
+#[test]
+fn evidence_kept_for_repeated_states_is_dropped_by_a_name_evaluation() {
+    let params = crate::shipped::params();
+    let mut reference = HealthModel::load(&params).unwrap();
+    let mut mixed = HealthModel::load(&params).unwrap();
+    let observations = reference.observations.clone();
+    let mut seed: u64 = 0x2545_f491_4f6c_dd1d;
+    let mut next = move || {
+        seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+        seed >> 33
+    };
+    let (mut states, mut evidence) = (crate::evidence::EvidenceStates::default(), BTreeMap::new());
+    let (mut want, mut got) = (BTreeMap::new(), BTreeMap::new());
+    let mut snapshots: Vec<Observations> = Vec::new();
+    let (mut differ, mut ok) = (0, 0);
+    for cycle in 0..120 {
+        let obs = if cycle % 3 == 2 {
+            snapshots[cycle - 2].clone()
+        } else {
+            let mut obs = Observations::default();
+            for o in &observations.observations {
+                let k = (next() as usize) % (o.thresholds.len() + 2);
+                if let Some(t) = o.thresholds.get(k) {
+                    obs.set(&o.name, *t);
+                } else if k == o.thresholds.len() {
+                    obs.set(&o.name, -1e6);
+                }
+            }
+            obs
+        };
+        snapshots.push(obs.clone());
+        observations.evidence_states_into(&obs, &[], &mut states, &mut evidence);
+        if cycle % 3 == 1 && snapshots[cycle - 1] != obs {
+            differ += 1;
+        }
+        let a = reference.evaluate_into(&evidence, &mut want);
+        let b = if cycle % 3 == 1 {
+            mixed.evaluate_into(&evidence, &mut got)
+        } else {
+            mixed.evaluate_states_into(&states, &mut got)
+        };
+        // Some random evidence is impossible in a network: then both say so.
+        assert_eq!(a.is_ok(), b.is_ok(), "cycle {cycle}");
+        ok += usize::from(a.is_ok());
+        assert_eq!(want.len(), got.len(), "cycle {cycle}");
+        for ((kw, vw), (kg, vg)) in want.iter().zip(&got) {
+            assert_eq!(kw, kg, "cycle {cycle}");
+            assert_eq!(vw.to_bits(), vg.to_bits(), "cycle {cycle}: {kw}");
+        }
+    }
+    assert!(
+        differ > 30,
+        "the name evaluations saw other evidence in {differ} of 40 cycles"
+    );
+    assert!(ok > 60, "{ok} of 120 evaluations succeeded");
+}
