@@ -293,9 +293,19 @@ def bench_solve(block):
     """The companion's solves for one model, timed in-process by bench_solve."""
     with open(os.path.join(OUT, "plan.json"), "w") as f:
         json.dump({"cases": block}, f)
-    return {c["name"]: c for c in json.loads(run_cargo(
-        [os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "examples", "bench_solve"),
-         os.path.join(OUT, "plan.json")]))["cases"]}
+    out = {}
+    for c in json.loads(run_cargo(
+            [os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "examples", "bench_solve"),
+             os.path.join(OUT, "plan.json")]))["cases"]:
+        # `NAME#k`: round k of a case run in alternating rounds (see SPLIT_ROUNDS), merged.
+        name = c["name"].split("#")[0]
+        if name in out:
+            out[name]["times_ns"] += c["times_ns"]
+            out[name]["rounds_agree"] &= (c["values"] == out[name]["values"]
+                                          and c["policy"] == out[name]["policy"])
+        else:
+            out[name] = dict(c, name=name, rounds_agree=True)
+    return out
 
 
 def mdp_peers(versions, notes):
@@ -324,6 +334,10 @@ def mdp_peers(versions, notes):
 
 # Threads of the two timed finite-horizon runs on the 10,000-state model: one, and both cores.
 THREAD_SPLIT = (1, 2)
+# The two run one solve at a time, alternating (1 2, 2 1, 1 2, ...) for this many rounds per
+# block: a stretch of a busy machine (the second core taken by something else) then hits both
+# sides alike, not one side's five solves in a row.
+SPLIT_ROUNDS = 5
 
 
 def mdp_cases(B, max_states, cases, notes, versions):
@@ -340,9 +354,11 @@ def mdp_cases(B, max_states, cases, notes, versions):
         if big:
             # Both cores against one on the same model in the same run (the plain `fh` case
             # is the engine's default: split, the model being far above its threshold).
-            for threads in THREAD_SPLIT:
-                plan.append({"name": f"{name}/fh/{threads}t", "path": p, "solver": "fh",
-                             "horizon": HORIZON, "reps": 5, "budget_s": B, "threads": threads})
+            for r in range(SPLIT_ROUNDS):
+                for threads in THREAD_SPLIT[::1 if r % 2 == 0 else -1]:
+                    plan.append({"name": f"{name}/fh/{threads}t#{r}", "path": p, "solver": "fh",
+                                 "horizon": HORIZON, "reps": 1, "budget_s": B,
+                                 "threads": threads})
     tb, stormpy = mdp_peers(versions, notes)
     for name, p in models.items():
         mdp_model_cases(name, p, [c for c in plan if c["path"] == p], tb, stormpy, B, cases, notes)
@@ -495,7 +511,8 @@ def mdp_model_cases(name, p, block, tb, stormpy, B, cases, notes):
     if all(k in rust for k in split):
         (one, two) = (cmed[k][0] for k in split)
         same = all(rust[k]["values"] == rust[f"{name}/fh"]["values"]
-                   and rust[k]["policy"] == rust[f"{name}/fh"]["policy"] for k in split)
+                   and rust[k]["policy"] == rust[f"{name}/fh"]["policy"]
+                   and rust[k]["rounds_agree"] and second[k]["rounds_agree"] for k in split)
         notes.append(f"{name}/fh: {THREAD_SPLIT[1]} threads {fmt_ns(two)} median, 1 thread "
                      f"{fmt_ns(one)} in the same run: {two / one:.2f}x (target <= 0.55x); stage-0 "
                      f"values and decisions {'identical' if same else 'DIFFER'} (JSON floats, "

@@ -27,6 +27,8 @@ fn main() {
     let mut out = Vec::new();
     let mut models: std::collections::HashMap<String, Mdp> = Default::default();
     let mut ws = Workspace::new();
+    #[cfg(feature = "parallel")]
+    let mut pools: std::collections::HashMap<usize, rayon::ThreadPool> = Default::default();
     for case in plan["cases"].as_array().expect("cases") {
         let name = case["name"].as_str().expect("name").to_string();
         let mpath = case["path"].as_str().expect("path").to_string();
@@ -43,7 +45,6 @@ fn main() {
         };
         let reps = case["reps"].as_u64().unwrap_or(100) as usize;
         let budget = case["budget_s"].as_f64().unwrap_or(1.0);
-        let n = mdp.n_states();
         let threads = case["threads"].as_u64().unwrap_or(0) as usize;
         ws.set_parallel_min_transitions(match threads {
             0 => mdp_engine::PARALLEL_MIN_TRANSITIONS,
@@ -51,13 +52,17 @@ fn main() {
             _ => 0,
         });
         // Only a split case runs in a pool of its own: the others time on this thread, as
-        // before the split existed (a pool's idle workers would share the cores with it).
+        // before the split existed (a pool's idle workers would share the cores with it). One
+        // pool per thread count for the whole plan, as the companion keeps one: a pool built
+        // per case left the last one's threads winding down on the cores while the next timed.
         #[cfg(feature = "parallel")]
         let pool = (threads >= 2).then(|| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .expect("thread pool")
+            &*pools.entry(threads).or_insert_with(|| {
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .expect("thread pool")
+            })
         });
         #[cfg(feature = "parallel")]
         let in_pool = |f: &mut (dyn FnMut() + Send)| match &pool {
@@ -66,36 +71,13 @@ fn main() {
         };
         #[cfg(not(feature = "parallel"))]
         let in_pool = |f: &mut (dyn FnMut() + Send)| f();
-        // One solve untimed: sizes the workspace (the warm state the companion runs in) and
-        // gives the answer for the agreement check.
-        let (values, policy, iterations): (Vec<f64>, Vec<i64>, u32) = match solver {
-            "fh" => {
-                let s = ws.finite_horizon(mdp, horizon);
-                (
-                    s.values_at(0).to_vec(),
-                    (0..n)
-                        .map(|i| s.decision(i).map_or(-1, |a| a as i64))
-                        .collect(),
-                    s.stats().iterations,
-                )
-            }
-            "vi" | "pi" => {
-                let s = if solver == "vi" {
-                    ws.value_iteration(mdp, &cfg)
-                } else {
-                    ws.policy_iteration(mdp, &cfg)
-                }
-                .expect("solve");
-                (
-                    s.values().to_vec(),
-                    (0..n)
-                        .map(|i| s.action(i).map_or(-1, |a| a as i64))
-                        .collect(),
-                    s.stats.iterations,
-                )
-            }
-            other => panic!("unknown solver {other}"),
-        };
+        // One solve untimed, in the pool that times it: sizes the workspace and wakes the
+        // pool's threads (the warm state the companion runs in: its pool lives as long as it
+        // does; a fresh pool's first split solve took up to twice as long), and gives the
+        // answer for the agreement check.
+        let mut untimed = None;
+        in_pool(&mut || untimed = Some(untimed_solve(&mut ws, mdp, solver, horizon, &cfg)));
+        let (values, policy, iterations) = untimed.expect("the untimed solve ran");
         let mut times = Vec::with_capacity(reps);
         let mut spent = 0.0;
         in_pool(&mut || {
@@ -135,4 +117,43 @@ fn main() {
         }));
     }
     println!("{}", json!({ "cases": out }));
+}
+
+/// One solve's answer: stage-0 (or converged) values, decisions (-1: none) and iterations.
+fn untimed_solve(
+    ws: &mut Workspace,
+    mdp: &Mdp,
+    solver: &str,
+    horizon: usize,
+    cfg: &Config,
+) -> (Vec<f64>, Vec<i64>, u32) {
+    let n = mdp.n_states();
+    match solver {
+        "fh" => {
+            let s = ws.finite_horizon(mdp, horizon);
+            (
+                s.values_at(0).to_vec(),
+                (0..n)
+                    .map(|i| s.decision(i).map_or(-1, |a| a as i64))
+                    .collect(),
+                s.stats().iterations,
+            )
+        }
+        "vi" | "pi" => {
+            let s = if solver == "vi" {
+                ws.value_iteration(mdp, cfg)
+            } else {
+                ws.policy_iteration(mdp, cfg)
+            }
+            .expect("solve");
+            (
+                s.values().to_vec(),
+                (0..n)
+                    .map(|i| s.action(i).map_or(-1, |a| a as i64))
+                    .collect(),
+                s.stats.iterations,
+            )
+        }
+        other => panic!("unknown solver {other}"),
+    }
 }
