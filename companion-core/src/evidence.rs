@@ -453,4 +453,49 @@ mod tests {
         m.evidence_with_into(&obs, &many, &mut again);
         assert_eq!(again, out);
     }
+
+    /// The core's path (the snapshot read into slots first, `Readings`) gives the evidence the
+    /// snapshot path gives, states and map alike, over random snapshots: values on, just off
+    /// and beyond thresholds, absent, NaN, undeclared names, and caller values replacing some.
+    #[test]
+    fn evidence_from_read_values_equals_evidence_from_the_snapshot() {
+        let m = map();
+        let mut readings = crate::readings::Readings::starting_with(
+            m.observations.iter().map(|o| o.name.as_str()),
+        );
+        let mut seed: u64 = 0x8f1b_bcdc_bf6d_4e2a;
+        let mut next = move || {
+            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            seed >> 33
+        };
+        let (mut want_states, mut got_states) =
+            (EvidenceStates::default(), EvidenceStates::default());
+        let (mut want, mut got) = (BTreeMap::new(), BTreeMap::new());
+        for cycle in 0..300 {
+            let mut obs = Observations::default();
+            for o in &m.observations {
+                let v = match next() % 6 {
+                    0 => continue,
+                    1 => f64::NAN,
+                    k => o
+                        .thresholds
+                        .get(k as usize % (o.thresholds.len() + 1))
+                        .map_or(1e9, |t| t + [0.0, -1e-9, 1e-9][(next() % 3) as usize]),
+                };
+                obs.set(&o.name, v);
+            }
+            obs.set("zz_undeclared", 1.0);
+            let extra: Vec<(ObservationId, f64)> = (0..next() % 3)
+                .map(|_| {
+                    let id = ObservationId((next() as usize % m.observations.len()) as u16);
+                    (id, (next() % 5) as f64)
+                })
+                .collect();
+            m.evidence_states_into(&obs, &extra, &mut want_states, &mut want);
+            readings.read(&obs);
+            m.evidence_states_from_into(readings.values(), &extra, &mut got_states, &mut got);
+            assert_eq!(want_states, got_states, "cycle {cycle}");
+            assert_eq!(want, got, "cycle {cycle}");
+        }
+    }
 }
