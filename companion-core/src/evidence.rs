@@ -276,22 +276,9 @@ impl ObservationMap {
         extra: &[(ObservationId, f64)],
         mut f: impl FnMut(ObservationId, f64),
     ) {
-        let mut snapshot = obs.values.iter().peekable();
-        for &id in &self.by_name {
-            let name = self.observations[id.index()].name.as_str();
-            let mut from_snapshot = None;
-            while let Some((k, v)) = snapshot.peek() {
-                match k.as_str().cmp(name) {
-                    std::cmp::Ordering::Less => {
-                        snapshot.next();
-                    }
-                    std::cmp::Ordering::Equal => {
-                        from_snapshot = Some(**v);
-                        break;
-                    }
-                    std::cmp::Ordering::Greater => break,
-                }
-            }
+        let sorted = (self.by_name.iter()).map(|id| self.observations[id.index()].name.as_str());
+        obs.each_sorted(sorted, |k, from_snapshot| {
+            let id = self.by_name[k];
             let value = extra
                 .iter()
                 .find(|(x, _)| *x == id)
@@ -300,7 +287,7 @@ impl ObservationMap {
             if let Some(v) = value {
                 f(id, v);
             }
-        }
+        });
     }
 
     /// As [`ObservationMap::evidence_with_into`], with the caller's values given by id.

@@ -26,6 +26,32 @@ impl Observations {
     pub fn get(&self, name: &str) -> Option<f64> {
         self.values.get(name).copied()
     }
+    /// The value of each of `names` (given in sorted order), in one pass over both sorted lists:
+    /// `f(k, value)` for the `k`-th name (`None`: absent from the snapshot).
+    pub fn each_sorted<'a>(
+        &self,
+        names: impl IntoIterator<Item = &'a str>,
+        mut f: impl FnMut(usize, Option<f64>),
+    ) {
+        let mut snapshot = self.values.iter().peekable();
+        for (k, name) in names.into_iter().enumerate() {
+            let mut value = None;
+            while let Some((n, v)) = snapshot.peek() {
+                match n.as_str().cmp(name) {
+                    std::cmp::Ordering::Less => {
+                        snapshot.next();
+                    }
+                    std::cmp::Ordering::Equal => {
+                        value = Some(**v);
+                        break;
+                    }
+                    std::cmp::Ordering::Greater => break,
+                }
+            }
+            f(k, value);
+        }
+    }
+
     /// Set (or replace) the observation named `name`.
     pub fn set(&mut self, name: &str, value: f64) {
         self.values.insert(name.to_string(), value);

@@ -59,24 +59,11 @@ impl Readings {
         if self.read_as_last(obs) {
             return;
         }
-        let mut snapshot = obs.values.iter().peekable();
-        for &k in &self.by_name {
-            let name = self.names[k as usize].as_str();
-            let mut value = None;
-            while let Some((n, v)) = snapshot.peek() {
-                match n.as_str().cmp(name) {
-                    std::cmp::Ordering::Less => {
-                        snapshot.next();
-                    }
-                    std::cmp::Ordering::Equal => {
-                        value = Some(**v);
-                        break;
-                    }
-                    std::cmp::Ordering::Greater => break,
-                }
-            }
-            self.values[k as usize] = value;
-        }
+        let (names, values) = (&self.names, &mut self.values);
+        let sorted = self.by_name.iter().map(|&k| names[k as usize].as_str());
+        obs.each_sorted(sorted, |j, value| {
+            values[self.by_name[j] as usize] = value;
+        });
         self.remember_layout(obs);
     }
 

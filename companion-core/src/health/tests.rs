@@ -133,6 +133,23 @@ fn want_marginal(
     e.marginal(src).to_vec()
 }
 
+/// A small deterministic generator (Knuth's MMIX LCG, high bits) for the random cycles below.
+fn lcg(mut seed: u64) -> impl FnMut() -> u64 {
+    move || {
+        seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+        seed >> 33
+    }
+}
+
+/// The same names with the same probabilities, bit for bit.
+fn assert_same_bits(want: &BTreeMap<String, f64>, got: &BTreeMap<String, f64>, cycle: usize) {
+    assert_eq!(want.len(), got.len(), "cycle {cycle}");
+    for ((kw, vw), (kg, vg)) in want.iter().zip(got) {
+        assert_eq!(kw, kg, "cycle {cycle}");
+        assert_eq!(vw.to_bits(), vg.to_bits(), "cycle {cycle}: {kw}");
+    }
+}
+
 /// The cycle's path (evidence by observation state index, probabilities by slot) against the
 /// name path (`evaluate_into` on the evidence map): the same published probabilities, bit for
 /// bit, cycle after cycle (the carried beliefs and memos evolve alike), over values that move
@@ -143,11 +160,7 @@ fn evidence_by_state_index_equals_evidence_by_name() {
     let mut by_name = HealthModel::load(&params).unwrap();
     let mut by_index = HealthModel::load(&params).unwrap();
     let observations = by_name.observations.clone();
-    let mut seed: u64 = 0x9e37_79b9_7f4a_7c15;
-    let mut next = move || {
-        seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
-        seed >> 33
-    };
+    let mut next = lcg(0x9e37_79b9_7f4a_7c15);
     let (mut states, mut evidence) = (crate::evidence::EvidenceStates::default(), BTreeMap::new());
     let (mut want, mut got) = (BTreeMap::new(), BTreeMap::new());
     let mut non_empty = 0;
@@ -170,11 +183,7 @@ fn evidence_by_state_index_equals_evidence_by_name() {
         let a = by_name.evaluate_into(&evidence, &mut want);
         let b = by_index.evaluate_states_into(&states, &mut got);
         assert_eq!(a.is_ok(), b.is_ok(), "cycle {cycle}");
-        assert_eq!(want.len(), got.len(), "cycle {cycle}");
-        for ((kw, vw), (kg, vg)) in want.iter().zip(&got) {
-            assert_eq!(kw, kg, "cycle {cycle}");
-            assert_eq!(vw.to_bits(), vg.to_bits(), "cycle {cycle}: {kw}");
-        }
+        assert_same_bits(&want, &got, cycle);
     }
     assert!(
         non_empty > 250,
@@ -192,11 +201,7 @@ fn evidence_kept_for_repeated_states_is_dropped_by_a_name_evaluation() {
     let mut reference = HealthModel::load(&params).unwrap();
     let mut mixed = HealthModel::load(&params).unwrap();
     let observations = reference.observations.clone();
-    let mut seed: u64 = 0x2545_f491_4f6c_dd1d;
-    let mut next = move || {
-        seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
-        seed >> 33
-    };
+    let mut next = lcg(0x2545_f491_4f6c_dd1d);
     let (mut states, mut evidence) = (crate::evidence::EvidenceStates::default(), BTreeMap::new());
     let (mut want, mut got) = (BTreeMap::new(), BTreeMap::new());
     let mut snapshots: Vec<Observations> = Vec::new();
@@ -230,11 +235,7 @@ fn evidence_kept_for_repeated_states_is_dropped_by_a_name_evaluation() {
         // Some random evidence is impossible in a network: then both say so.
         assert_eq!(a.is_ok(), b.is_ok(), "cycle {cycle}");
         ok += usize::from(a.is_ok());
-        assert_eq!(want.len(), got.len(), "cycle {cycle}");
-        for ((kw, vw), (kg, vg)) in want.iter().zip(&got) {
-            assert_eq!(kw, kg, "cycle {cycle}");
-            assert_eq!(vw.to_bits(), vg.to_bits(), "cycle {cycle}: {kw}");
-        }
+        assert_same_bits(&want, &got, cycle);
     }
     assert!(
         differ > 30,
