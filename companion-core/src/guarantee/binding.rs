@@ -41,6 +41,9 @@ pub(super) struct ActivityTokens {
     versions: Option<Vec<u128>>,
     /// The union of `versions`: every token some alternative offers with an implementation.
     all_versions: u128,
+    /// Per alternative, every token id it names (with an implementation or not), as bits (with
+    /// `versions`): whether it carries the running versions is then one word operation.
+    named_bits: Option<Vec<u128>>,
 }
 
 impl ActivityTokens {
@@ -77,11 +80,17 @@ impl ActivityTokens {
                         .collect()
                 });
                 let all_versions = versions.iter().flatten().fold(0, |a, b| a | b);
+                let named_bits = versions.is_some().then(|| {
+                    ias.iter()
+                        .map(|tokens| tokens.iter().fold(0u128, |bits, (id, _)| bits | 1 << id))
+                        .collect()
+                });
                 Self {
                     named,
                     ias,
                     versions,
                     all_versions,
+                    named_bits,
                 }
             })
             .collect()
@@ -277,7 +286,18 @@ impl Guarantee {
         let sel = self.spec.selection;
         let mut best: Option<usize> = None;
         self.scratch.swap.reset(self.spec.problem.goals.len());
+        // The running versions' token ids as bits: an alternative not naming all of them carries
+        // neither the versions nor the implementations (`carries` would say (false, false)).
+        // (Bits only when the activity names fewer than 128 tokens: every id fits.)
+        let running_bits = (self.tokens[at].named_bits.as_ref())
+            .map(|_| ids.iter().fold(0u128, |bits, &(id, _)| bits | 1 << id));
         for i in 0..self.spec.problem.activities[at].ias.len() {
+            let named = self.tokens[at].named_bits.as_ref().map(|b| b[i]);
+            if let (Some(running), Some(named)) = (running_bits, named)
+                && running & !named != 0
+            {
+                continue;
+            }
             let (v, e) = self.tokens[at].carries(i, ids, running);
             if !(if want_exact { e } else { v }) || !self.alternative_feasible(at, i) {
                 continue;
