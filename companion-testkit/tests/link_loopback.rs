@@ -292,8 +292,17 @@ async fn fly_takes_off_over_tcp_reconnects_and_never_replays() {
             // (params/link.toml [flight] handoff = "rtl"), a new command, not a replay.
             (2, MavCmd::MAV_CMD_DO_SET_MODE, 0)
         ],
-        "{:?}",
-        log.commands
+        "{:?}\ncommand records: {:?}\nactions per cycle: {:?}",
+        log.commands,
+        records
+            .iter()
+            .flat_map(|r| &r.commands)
+            .map(|c| format!("{} {} {}", c.action, c.command, c.result))
+            .collect::<Vec<_>>(),
+        records
+            .iter()
+            .map(|r| format!("{}:{}:{}", r.cycle, r.state, r.actions.join("+")))
+            .collect::<Vec<_>>()
     );
     // Streams requested in both sessions: the 15 of params/link.toml less the 3 ArduPilot does
     // not send ([streams_not_sent_by] ardupilot: 230, 330, 253) after connect, again after the

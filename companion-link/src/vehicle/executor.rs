@@ -413,7 +413,11 @@ impl Vehicle {
                     && let Some((want, at)) = self.commanded_modes.last().copied()
                     && !modes::is_in_mode(self.flavor, self.telemetry.custom_mode, want)
                 {
-                    if self.mode_heard_at.is_none_or(|h| h <= at) {
+                    // The mode is shown by a heartbeat sent after the autopilot handled the
+                    // command: on an ordered link, one heard after its ACK (a heartbeat heard
+                    // between our send and the ACK may predate the change).
+                    let shown_after = self.mode_acked_at.filter(|&a| a >= at).unwrap_or(at);
+                    if self.mode_heard_at.is_none_or(|h| h <= shown_after) {
                         return Advance::Wait;
                     }
                     let now_mode = self
@@ -749,6 +753,11 @@ impl Vehicle {
                                 if px4 && matches!(j.steps.front(), Some((_, Step::Mode(_)))) =>
                             {
                                 j.running = Running::ConfirmMode { since: now };
+                                self.mode_acked_at = Some(now);
+                            }
+                            (Some(j), _) if matches!(j.steps.front(), Some((_, Step::Mode(_)))) => {
+                                self.mode_acked_at = Some(now);
+                                self.step_done();
                             }
                             _ => self.step_done(),
                         },

@@ -184,6 +184,10 @@ pub struct Vehicle {
     zone_target: Option<(i32, i32)>,
     /// When the autopilot last reported its mode (its heartbeat).
     mode_heard_at: Option<Duration>,
+    /// When the autopilot last accepted a mode step of a job (its COMMAND_ACK): only a
+    /// heartbeat heard after that can show the new mode (one sent before the autopilot handled
+    /// the command may arrive after we sent it, still showing the old mode).
+    mode_acked_at: Option<Duration>,
     /// PX4 only: after an upload, (item count, give-up time) until MISSION_CURRENT reports the
     /// new mission's total. PX4's navigator loads an uploaded mission asynchronously; AUTO
     /// requested before that flies the old (empty) one, "finishes" it at once and falls back to
@@ -236,6 +240,7 @@ impl Vehicle {
             handoff: None,
             zone_target: None,
             mode_heard_at: None,
+            mode_acked_at: None,
             px4_mission_pending: None,
             px4_takeoff_wait: None,
             pack_requests: Vec::new(),
