@@ -160,7 +160,7 @@ impl MissionState {
     /// The action playing `role` (the first in file order for a role several play).
     pub fn action(&self, role: ActionRole) -> Option<ActionId> {
         let at = self.roles.iter().position(|r| *r == Some(role))?;
-        Some(self.actions.id(&self.actions.actions[at].id)?)
+        self.actions.id(&self.actions.actions[at].id)
     }
 
     /// The action catalogue whose ids this estimator speaks.
