@@ -170,9 +170,8 @@ fn connected(v: &mut Vehicle, mode: u32) {
     assert!(v.take_events().contains(&Event::Link(LinkEvent::Connected)));
 }
 
-#[test]
-fn arms_only_once_the_vehicle_reports_the_mode_it_was_set_to() {
-    // ArduCopter SITL: GUIDED accepted, then STABILIZE from its RC mode switch.
+/// A vehicle connected in STABILIZE and reporting ready, asked to take off at 0.2 s: GUIDED sent.
+fn take_off_asked_when_ready() -> Vehicle {
     let mut v = vehicle();
     connected(&mut v, 0);
     for f in ready_frames() {
@@ -180,6 +179,13 @@ fn arms_only_once_the_vehicle_reports_the_mode_it_was_set_to() {
     }
     let out = v.request_actions(s(0.2), &[a("take_off")]);
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+    v
+}
+
+#[test]
+fn arms_only_once_the_vehicle_reports_the_mode_it_was_set_to() {
+    // ArduCopter SITL: GUIDED accepted, then STABILIZE from its RC mode switch.
+    let mut v = take_off_asked_when_ready();
     // The ack comes before any heartbeat shows the new mode: no ARM yet.
     let out = v.on_frame(
         s(0.3),
@@ -215,13 +221,7 @@ fn arms_only_once_the_vehicle_reports_the_mode_it_was_set_to() {
 /// about one flight in fifteen: the take-off failed "vehicle in STABILIZE, not GUIDED").
 #[test]
 fn a_heartbeat_from_before_the_mode_ack_does_not_fail_the_take_off() {
-    let mut v = vehicle();
-    connected(&mut v, 0);
-    for f in ready_frames() {
-        v.on_frame(s(0.1), &f);
-    }
-    let out = v.request_actions(s(0.2), &[a("take_off")]);
-    assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+    let mut v = take_off_asked_when_ready();
     // In flight when we sent SET_MODE: the old mode (STABILIZE, 0).
     let out = v.on_frame(s(0.25), &hb(0, false));
     assert!(commands(&out).is_empty());
