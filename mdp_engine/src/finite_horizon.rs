@@ -1,9 +1,11 @@
 //! Finite-horizon undiscounted backward induction with its certified early stop.
 
 use crate::kernels::{backup_stage, backup_stage_screened};
+use crate::lockstep::{Alone, Lockstep, SharedRows};
 use crate::model::{Mdp, NONE, beat_bar};
 use crate::solution::FiniteHorizonSolution;
 use crate::workspace::Workspace;
+use std::ops::Range;
 
 /// Relative bound for the finite-horizon early stop: the extrapolated stages may differ from full
 /// backward induction by at most this times `max(1, |V_0|)` in value, and a kept action may be
@@ -65,7 +67,8 @@ impl FhCertificate {
     }
 }
 
-/// The early-stop screen `(max_s |vb - 2 vb1 + vb2|, max(1, max_s |vb|))` as a separate pass.
+/// The early-stop screen `(max_s |vb - 2 vb1 + vb2|, max(1, max_s |vb|))` as a separate pass
+/// (over the states the slices hold).
 fn screen(vb: &[f64], vb1: &[f64], vb2: &[f64]) -> (f64, f64) {
     let (mut delta, mut scale) = (0.0f64, 1.0f64);
     for ((a, b), c) in vb.iter().zip(vb1).zip(vb2) {
@@ -75,51 +78,26 @@ fn screen(vb: &[f64], vb1: &[f64], vb2: &[f64]) -> (f64, f64) {
     (delta, scale)
 }
 
-/// [`backup_stage`] from `vb` (`V_b`) that also measures the [`FhCertificate`] of `g = vb -
-/// vb1`, with `pol_b` the decision rule of stage `b`; split across threads when `par` (every
-/// measure is a maximum or minimum, so the split changes no bit).
-fn backup_certified(
-    mdp: &Mdp,
-    vb: &[f64],
-    vb1: &[f64],
-    pol_b: &[u32],
-    cur: &mut [f64],
-    pol: &mut [u32],
-    par: bool,
-) -> FhCertificate {
-    let range = |s0: usize, cur: &mut [f64], pol: &mut [u32]| {
-        certified_range(mdp, vb, vb1, pol_b, s0, cur, pol)
+/// What the threads of a stage combine: the screen for the next stage and, on a certified
+/// backup, the certificate's measures (maxima and minima: the same bits however split).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct StageReduction {
+    screen: (f64, f64),
+    cert: Partial,
+}
+
+impl StageReduction {
+    const EMPTY: StageReduction = StageReduction {
+        screen: (0.0, 1.0),
+        cert: Partial::EMPTY,
     };
-    let init = Partial {
-        cert: FhCertificate {
-            eps_up: 0.0,
-            eps_lo: 0.0,
-            eps_star: 0.0,
-            span: 0.0,
-            vmax: 0.0,
-            gmax: 0.0,
-        },
-        gmin: f64::INFINITY,
-        gmaxs: f64::NEG_INFINITY,
-    };
-    #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
-    let p = if par {
-        crate::kernels::par_chunks(cur, pol, range, Partial::merge, init)
-    } else {
-        Partial::merge(init, range(0, cur, pol))
-    };
-    #[cfg(not(all(feature = "parallel", not(target_arch = "arm"))))]
-    let p = {
-        let _ = par;
-        Partial::merge(init, range(0, cur, pol))
-    };
-    let mut cert = p.cert;
-    cert.span = if p.gmaxs >= p.gmin {
-        p.gmaxs - p.gmin
-    } else {
-        0.0
-    };
-    cert
+
+    fn merge(a: StageReduction, b: StageReduction) -> StageReduction {
+        StageReduction {
+            screen: (a.screen.0.max(b.screen.0), a.screen.1.max(b.screen.1)),
+            cert: Partial::merge(a.cert, b.cert),
+        }
+    }
 }
 
 /// A certificate's measures over some of the states (`span` not yet: from `gmin`, `gmaxs`).
@@ -131,6 +109,30 @@ struct Partial {
 }
 
 impl Partial {
+    const EMPTY: Partial = Partial {
+        cert: FhCertificate {
+            eps_up: 0.0,
+            eps_lo: 0.0,
+            eps_star: 0.0,
+            span: 0.0,
+            vmax: 0.0,
+            gmax: 0.0,
+        },
+        gmin: f64::INFINITY,
+        gmaxs: f64::NEG_INFINITY,
+    };
+
+    /// The certificate of every state's measures.
+    fn certificate(self) -> FhCertificate {
+        let mut cert = self.cert;
+        cert.span = if self.gmaxs >= self.gmin {
+            self.gmaxs - self.gmin
+        } else {
+            0.0
+        };
+        cert
+    }
+
     fn merge(a: Partial, b: Partial) -> Partial {
         let (x, y) = (a.cert, b.cert);
         Partial {
@@ -148,7 +150,9 @@ impl Partial {
     }
 }
 
-/// [`backup_certified`] over the states `s0 .. s0 + cur.len()` (`cur`, `pol` hold just those).
+/// One backup from `vb` (`V_b`) over the states `s0 .. s0 + cur.len()` (`cur`, `pol` hold just
+/// those) that also measures there the [`FhCertificate`] of `g = vb - vb1`, with `pol_b` the
+/// decision rule of stage `b` (every state).
 fn certified_range(
     mdp: &Mdp,
     vb: &[f64],
@@ -213,24 +217,162 @@ fn certified_range(
     Partial { cert, gmin, gmaxs }
 }
 
-/// Fill stages `0..t` by the certified extrapolation from base `b = t + 1`: `V_{t'} = V_b + (b -
-/// t') g` and the decision rule of stage `t`.
-fn fill_extrapolated(vals: &mut [f64], pol: &mut [u32], n: usize, t: usize, b: usize) {
-    if n == 0 {
-        return;
+/// The finite-horizon tables as the threads of a solve share them: `(H + 1) x n` values and `H x
+/// n` actions, stage-major, under the lockstep rule of [`SharedRows`].
+struct FhTables<'a> {
+    vals: SharedRows<'a, f64>,
+    pol: SharedRows<'a, u32>,
+    n: usize,
+    horizon: usize,
+}
+
+impl<'a> FhTables<'a> {
+    fn new(vals: &'a mut [f64], pol: &'a mut [u32], n: usize, horizon: usize) -> Self {
+        FhTables {
+            vals: SharedRows::new(vals, n, horizon + 1),
+            pol: SharedRows::new(pol, n, horizon),
+            n,
+            horizon,
+        }
     }
-    let (lo, hi) = vals.split_at_mut(b * n);
-    let (vb, vb1) = hi[..2 * n].split_at(n);
-    for (tp, out) in lo[..t * n].chunks_exact_mut(n).enumerate() {
+
+    /// Stage `t`'s values, every state.
+    ///
+    /// # Safety
+    /// Stage `t` was completed before this thread's last combine (or before the solve started).
+    unsafe fn values(&self, t: usize) -> &[f64] {
+        // SAFETY: no thread writes a completed stage.
+        unsafe { self.vals.row(t) }
+    }
+
+    /// Stage `t`'s decision rule, every state.
+    ///
+    /// # Safety
+    /// As [`FhTables::values`].
+    unsafe fn actions(&self, t: usize) -> &[u32] {
+        // SAFETY: as in `values`.
+        unsafe { self.pol.row(t) }
+    }
+
+    /// Stage `t`'s values and actions at the states `r`, to write.
+    ///
+    /// # Safety
+    /// `r` is this thread's range (no other thread's overlaps it) and no thread reads stage `t`
+    /// until the next combine.
+    #[allow(clippy::mut_from_ref)]
+    unsafe fn stage_mut(&self, t: usize, r: &Range<usize>) -> (&mut [f64], &mut [u32]) {
+        // SAFETY: by the caller's contract.
+        unsafe { (self.vals.row_mut(t, r), self.pol.row_mut(t, r)) }
+    }
+}
+
+/// Where a backward induction ended: the stages computed, the early stop's bound, and the stage
+/// `t` whose earlier stages are to be extrapolated from base `t + 1` (None: all computed).
+#[derive(Debug, Clone, Copy)]
+struct FhOutcome {
+    computed: u32,
+    bound: f64,
+    stopped_at: Option<usize>,
+}
+
+/// Backward induction over `lock`'s states of every stage (all of them alone, one range in a
+/// team), stage `H` already zero; every thread of a team takes the same decisions, from the
+/// combined reductions. After an early stop, fills this thread's states of the extrapolated
+/// stages.
+fn backward_induction(
+    mdp: &Mdp,
+    tables: &FhTables<'_>,
+    lock: &mut impl Lockstep<StageReduction>,
+) -> FhOutcome {
+    let (n, horizon) = (tables.n, tables.horizon);
+    let r = lock.states(n);
+    let mut out = FhOutcome {
+        computed: 0,
+        bound: 0.0,
+        stopped_at: None,
+    };
+    // The second difference at which the last certificate attempt failed: retry only once it
+    // has at least halved, so a model that never settles costs no more than a few attempts.
+    let mut retry_below = f64::INFINITY;
+    // Screen for the stage about to be computed (from the three stages after it), filled
+    // by the previous backup.
+    let mut screen_next: Option<(f64, f64)> = None;
+    let mut t = horizon;
+    while t > 0 {
+        t -= 1;
+        out.computed += 1;
+        // SAFETY (every table view below): stages after `t` were completed before the last
+        // combine (stage H before the solve); `r` is this thread's range of stage `t`, which
+        // no one reads until the combine that ends this stage.
+        let (cur, pol_t) = unsafe { tables.stage_mut(t, &r) };
+        // Candidate for a certificate at base b = t + 1: needs V_{b+1} (so b + 1 <= H) and
+        // the decision rule pi_b (b <= H - 1), and a cheap sign that g has settled:
+        // delta = max |d_b - d_{b+1}| (needs V_{b+2}).
+        let b = t + 1;
+        if let Some((delta, scale)) = screen_next.take() {
+            let kk = b as f64;
+            let tol = FH_STOP_TOLERANCE * scale;
+            if delta < retry_below && kk * (kk + 1.0) * 0.5 * delta <= 16.0 * tol {
+                let (vb, vb1, pol_b) =
+                    unsafe { (tables.values(b), tables.values(b + 1), tables.actions(b)) };
+                let cert = certified_range(mdp, vb, vb1, pol_b, r.start, cur, pol_t);
+                // The screen for the stage after, should the certificate fail.
+                let scr = screen(cur, &vb[r.clone()], &vb1[r.clone()]);
+                let all = lock.combine(StageReduction { screen: scr, cert }, StageReduction::merge);
+                let cert = all.cert.certificate();
+                match cert.stop_bound(b) {
+                    Some(e) if e.action <= FH_STOP_TOLERANCE * cert.scale(b) => {
+                        out.bound = e.value;
+                        out.stopped_at = Some(t);
+                        break;
+                    }
+                    _ => retry_below = delta * 0.5,
+                }
+                if t > 0 {
+                    screen_next = Some(all.screen);
+                }
+                continue;
+            }
+        }
+        let next = unsafe { tables.values(t + 1) };
+        // The stage after this one (t - 1, base t) is a certificate candidate when t + 2 <= H.
+        if t > 0 && t + 2 <= horizon {
+            let next2 = unsafe { tables.values(t + 2) };
+            let scr = backup_stage_screened(mdp, next, next2, r.start, cur, pol_t);
+            let cert = Partial::EMPTY;
+            let all = lock.combine(StageReduction { screen: scr, cert }, StageReduction::merge);
+            screen_next = Some(all.screen);
+        } else {
+            backup_stage(mdp, next, r.start, cur, pol_t);
+            lock.combine(StageReduction::EMPTY, StageReduction::merge);
+        }
+    }
+    if let Some(t) = out.stopped_at {
+        fill_extrapolated(tables, t, &r);
+    }
+    out
+}
+
+/// Fill this thread's states `r` of stages `0..t` by the certified extrapolation from base `b =
+/// t + 1`: `V_{t'} = V_b + (b - t') g` and the decision rule of stage `t`.
+fn fill_extrapolated(tables: &FhTables<'_>, t: usize, r: &Range<usize>) {
+    let b = t + 1;
+    // SAFETY: stages b, b + 1 are complete, stage t's states `r` are this thread's and
+    // complete; stages before t are written only here, by each thread at its own states.
+    let (vb, vb1) = unsafe {
+        (
+            &tables.values(b)[r.clone()],
+            &tables.values(b + 1)[r.clone()],
+        )
+    };
+    let row = unsafe { &tables.actions(t)[r.clone()] };
+    for tp in 0..t {
         let k = (b - tp) as f64;
+        let (out, pol) = unsafe { tables.stage_mut(tp, r) };
         for ((o, v), v1) in out.iter_mut().zip(vb).zip(vb1) {
             *o = v + k * (v - v1);
         }
-    }
-    let (head, row) = pol.split_at_mut(t * n);
-    let row = &row[..n];
-    for out in head.chunks_exact_mut(n) {
-        out.copy_from_slice(row);
+        pol.copy_from_slice(row);
     }
 }
 
@@ -247,76 +389,37 @@ impl Workspace {
     /// rule (actions), and [`FiniteHorizonSolution::stats`] reports the stages actually computed
     /// and the bound (`residual`). Models whose stage differences never settle (periodic ones) are
     /// solved in full.
+    ///
+    /// **Threads.** A model above the split threshold is solved by a team of every thread of
+    /// the current rayon pool, each on its own range of states, in lockstep stage by stage (see
+    /// the `lockstep` module); alone when the pool has one thread or another team is running.
     pub fn finite_horizon(&mut self, mdp: &Mdp, horizon: usize) -> FiniteHorizonSolution<'_> {
         let n = mdp.n_states();
         self.reserve(n, horizon, false);
         self.horizon = horizon;
         let par = crate::kernels::split(mdp, self.par_min_transitions);
-        let (vals, pol) = (&mut self.fh_values, &mut self.fh_policy);
-        vals[horizon * n..(horizon + 1) * n].fill(0.0);
-        let mut computed = 0u32;
-        let mut bound = 0.0;
-        // The second difference at which the last certificate attempt failed: retry only once it
-        // has at least halved, so a model that never settles costs no more than a few attempts.
-        let mut retry_below = f64::INFINITY;
-        // Screen for the stage about to be computed (from the three stages after it), filled
-        // by the previous backup.
-        let mut screen_next: Option<(f64, f64)> = None;
-        let mut t = horizon;
-        while t > 0 {
-            t -= 1;
-            computed += 1;
-            // Candidate for a certificate at base b = t + 1: needs V_{b+1} (so b + 1 <= H) and
-            // the decision rule pi_b (b <= H - 1), and a cheap sign that g has settled:
-            // delta = max |d_b - d_{b+1}| (needs V_{b+2}).
-            let b = t + 1;
-            if let Some((delta, scale)) = screen_next.take() {
-                let kk = b as f64;
-                let tol = FH_STOP_TOLERANCE * scale;
-                if delta < retry_below && kk * (kk + 1.0) * 0.5 * delta <= 16.0 * tol {
-                    let (cur, rest) = vals[t * n..(t + 3) * n].split_at_mut(n);
-                    let (vb, vb1) = rest.split_at(n);
-                    let (pol_t, pol_b) = pol[t * n..(t + 2) * n].split_at_mut(n);
-                    let cert = backup_certified(mdp, vb, vb1, pol_b, cur, pol_t, par);
-                    match cert.stop_bound(b) {
-                        Some(e) if e.action <= FH_STOP_TOLERANCE * cert.scale(b) => {
-                            bound = e.value;
-                            fill_extrapolated(vals, pol, n, t, b);
-                            break;
-                        }
-                        _ => retry_below = delta * 0.5,
-                    }
-                    if t > 0 {
-                        let (cur, rest) = vals[t * n..(t + 3) * n].split_at(n);
-                        let (vb, vb1) = rest.split_at(n);
-                        screen_next = Some(screen(cur, vb, vb1));
-                    }
-                    continue;
-                }
-            }
-            // The stage after this one (t - 1, base t) is a certificate candidate when t + 2 <= H.
-            if t > 0 && t + 2 <= horizon {
-                let (cur, rest) = vals[t * n..(t + 3) * n].split_at_mut(n);
-                let (next, next2) = rest.split_at(n);
-                screen_next = Some(backup_stage_screened(
-                    mdp,
-                    next,
-                    next2,
-                    cur,
-                    &mut pol[t * n..(t + 1) * n],
-                    par,
-                ));
-            } else {
-                let (cur, next) = vals[t * n..(t + 2) * n].split_at_mut(n);
-                backup_stage(mdp, next, cur, &mut pol[t * n..(t + 1) * n], par);
-            }
-        }
+        self.fh_values[horizon * n..(horizon + 1) * n].fill(0.0);
+        let tables = FhTables::new(&mut self.fh_values, &mut self.fh_policy, n, horizon);
+        #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
+        let teamed = if par && horizon > 0 {
+            crate::lockstep::run_team(StageReduction::EMPTY, |member| {
+                backward_induction(mdp, &tables, member)
+            })
+        } else {
+            None
+        };
+        #[cfg(not(all(feature = "parallel", not(target_arch = "arm"))))]
+        let teamed = {
+            let _ = par;
+            None
+        };
+        let out = teamed.unwrap_or_else(|| backward_induction(mdp, &tables, &mut Alone));
         FiniteHorizonSolution {
             ws: self,
             n,
             horizon,
-            computed,
-            bound,
+            computed: out.computed,
+            bound: out.bound,
         }
     }
 }

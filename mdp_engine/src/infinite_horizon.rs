@@ -2,6 +2,7 @@
 //! modified policy iteration, with their settings and the final greedy extraction.
 
 use crate::kernels::vi_sweep;
+use crate::lockstep::{Alone, Lockstep, SharedRows};
 use crate::model::{Mdp, NONE, beats};
 use crate::solution::{Solution, Stats};
 use crate::workspace::Workspace;
@@ -75,42 +76,30 @@ impl Workspace {
     pub fn value_iteration(&mut self, mdp: &Mdp, cfg: &Config) -> Result<Solution<'_>, SolveError> {
         check_gamma(cfg.gamma)?;
         let n = mdp.n_states();
-        let gamma = cfg.gamma;
         self.reserve(n, 0, false);
         self.v[..n].fill(0.0);
         let par = crate::kernels::split(mdp, self.par_min_transitions);
-        let mut iterations = 0;
-        let mut converged = false;
-        while iterations < cfg.max_iterations {
-            // Terminal states take part with d = 0 (their value stays 0).
-            let (mut dmin, mut dmax) = if n == 0 {
-                (0.0f64, 0.0f64)
-            } else {
-                (f64::INFINITY, f64::NEG_INFINITY)
-            };
-            let (lo_d, hi_d) = vi_sweep(mdp, gamma, &self.v[..n], &mut self.v2[..n], par);
-            dmin = dmin.min(lo_d);
-            dmax = dmax.max(hi_d);
+        let bufs = [
+            SharedRows::new(&mut self.v[..n], n, 1),
+            SharedRows::new(&mut self.v2[..n], n, 1),
+        ];
+        #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
+        let teamed = if par {
+            let init = (f64::INFINITY, f64::NEG_INFINITY);
+            crate::lockstep::run_team(init, |member| value_sweeps(mdp, cfg, &bufs, member))
+        } else {
+            None
+        };
+        #[cfg(not(all(feature = "parallel", not(target_arch = "arm"))))]
+        let teamed = {
+            let _ = par;
+            None
+        };
+        let (iterations, converged) =
+            teamed.unwrap_or_else(|| value_sweeps(mdp, cfg, &bufs, &mut Alone));
+        // Sweep i wrote buffer (i + 1) % 2: an odd count left the values in `v2`.
+        if iterations % 2 == 1 {
             std::mem::swap(&mut self.v, &mut self.v2);
-            iterations += 1;
-            let (span, sup) = (dmax - dmin, dmax.max(-dmin));
-            if !span.is_finite() {
-                break;
-            }
-            if gamma < 1.0 && span <= 2.0 * cfg.tolerance {
-                let shift = gamma / (1.0 - gamma) * 0.5 * (dmin + dmax);
-                for s in 0..n {
-                    if !mdp.is_terminal(s) {
-                        self.v[s] += shift;
-                    }
-                }
-                converged = true;
-                break;
-            }
-            if sup < cfg.tolerance {
-                converged = true;
-                break;
-            }
         }
         Ok(self.finish(mdp, cfg.gamma, iterations, converged))
     }
@@ -277,6 +266,50 @@ impl Workspace {
             },
         }
     }
+}
+
+/// The sweeps of [`Workspace::value_iteration`] over `lock`'s states (all of them alone, one
+/// range in a team), sweep `i` from `bufs[i % 2]` into `bufs[(i + 1) % 2]`, `bufs[0]` zero at
+/// the start; every thread of a team stops at the same sweep, from the combined differences.
+/// Returns the sweeps done and whether they converged.
+fn value_sweeps(
+    mdp: &Mdp,
+    cfg: &Config,
+    bufs: &[SharedRows<'_, f64>; 2],
+    lock: &mut impl Lockstep<(f64, f64)>,
+) -> (u32, bool) {
+    let (n, gamma) = (mdp.n_states(), cfg.gamma);
+    let r = lock.states(n);
+    let mut iterations = 0;
+    while iterations < cfg.max_iterations {
+        let k = iterations as usize % 2;
+        // SAFETY: this sweep reads buffer k, complete since the last combine (or zero from the
+        // start), and writes this thread's states of the other, which no one reads until the
+        // combine below.
+        let (cur, nxt) = unsafe { (bufs[k].row(0), bufs[1 - k].row_mut(0, &r)) };
+        let mine = vi_sweep(mdp, gamma, cur, r.start, nxt);
+        let (lo_d, hi_d) = lock.combine(mine, |a, b| (a.0.min(b.0), a.1.max(b.1)));
+        // Terminal states take part with d = 0 (their value stays 0).
+        let (dmin, dmax) = if n == 0 { (0.0, 0.0) } else { (lo_d, hi_d) };
+        iterations += 1;
+        let (span, sup) = (dmax - dmin, dmax.max(-dmin));
+        if !span.is_finite() {
+            return (iterations, false);
+        }
+        if gamma < 1.0 && span <= 2.0 * cfg.tolerance {
+            let shift = gamma / (1.0 - gamma) * 0.5 * (dmin + dmax);
+            for (s, v) in r.clone().zip(nxt.iter_mut()) {
+                if !mdp.is_terminal(s) {
+                    *v += shift;
+                }
+            }
+            return (iterations, true);
+        }
+        if sup < cfg.tolerance {
+            return (iterations, true);
+        }
+    }
+    (iterations, false)
 }
 
 fn check_gamma(g: f64) -> Result<(), SolveError> {

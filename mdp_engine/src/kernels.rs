@@ -165,34 +165,16 @@ pub(crate) fn split(mdp: &Mdp, min_transitions: usize) -> bool {
 }
 
 /// Default [`Workspace::set_parallel_min_transitions`]: models with fewer transitions sweep on
-/// one thread (a fork-join per stage costs microseconds; the paper's models take under ten
-/// microseconds per solve). Measured on the benches' random models (10 actions, 5 successors,
-/// finite horizon 100, median of one run at a moment both cores were idle, 2026-11-26): two
-/// threads against one took 1.04x at 200 states (10,000 transitions), 0.80x at 400 (20,000),
-/// 0.68x at 1,000 (50,000), 0.61x at 10,000 (500,000); the split pays from about 20,000.
+/// one thread (a team meets once per stage or sweep, a fraction of a microsecond across cores,
+/// and starts once per solve; the paper's models take under ten microseconds per solve).
+/// Measured on the benches' random models (10 actions, 5 successors; finite horizon 100, value
+/// iteration gamma 0.95; medians of one run alternating one and two threads, 2026-11-26): two
+/// threads against one took, finite horizon and value iteration, 0.82x and 2.1x at 100 states
+/// (5,000 transitions), 0.67x and 0.64x at 200 (10,000), 0.60x and 0.61x at 400, 0.50x and
+/// 0.60x at 1,000, 0.48x and 0.52x at 10,000; the split pays from about 10,000.
 ///
 /// [`Workspace::set_parallel_min_transitions`]: crate::Workspace::set_parallel_min_transitions
-pub const PARALLEL_MIN_TRANSITIONS: usize = 20_000;
-
-/// `f(s0, cur_chunk, pol_chunk)` over chunks of the states (`cur` and `pol` chunked alike), on
-/// rayon's pool, the results combined by `fold` (componentwise min/max, exact whatever the order,
-/// so the split gives the same bits as one pass).
-#[cfg(all(feature = "parallel", not(target_arch = "arm")))]
-pub(crate) fn par_chunks<R: Send + Sync + Copy>(
-    cur: &mut [f64],
-    pol: &mut [u32],
-    f: impl Fn(usize, &mut [f64], &mut [u32]) -> R + Sync,
-    fold: fn(R, R) -> R,
-    init: R,
-) -> R {
-    use rayon::prelude::*;
-    let size = chunk_size(cur.len());
-    cur.par_chunks_mut(size)
-        .zip(pol.par_chunks_mut(size))
-        .enumerate()
-        .map(|(k, (c, p))| f(k * size, c, p))
-        .reduce(|| init, fold)
-}
+pub const PARALLEL_MIN_TRANSITIONS: usize = 10_000;
 
 /// States per chunk: four chunks per thread, so uneven rows balance out.
 #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
@@ -224,114 +206,48 @@ pub(crate) fn par_states<T: Send, R: Send + Sync + Copy>(
     }
 }
 
-#[cfg(all(feature = "parallel", not(target_arch = "arm")))]
-fn max_both(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
-    (a.0.max(b.0), a.1.max(b.1))
-}
-
-/// [`backup_stage_impl`] without the screen, split across threads when `par` (that path out of
-/// line, so the one-thread sweep of a small model inlines as before).
+/// [`backup_stage_impl`] without the screen, over the states `s0 .. s0 + cur.len()` (all of
+/// them, or one thread's range).
 #[inline(always)]
-pub(crate) fn backup_stage(mdp: &Mdp, next: &[f64], cur: &mut [f64], pol: &mut [u32], par: bool) {
-    #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
-    if par {
-        backup_stage_par(mdp, next, cur, pol);
-        return;
-    }
-    let _ = par;
+pub(crate) fn backup_stage(mdp: &Mdp, next: &[f64], s0: usize, cur: &mut [f64], pol: &mut [u32]) {
     by_successors!(
         mdp,
         backup_stage_impl::<false>,
-        (mdp, next, &[], 0, cur, pol)
+        (mdp, next, &[], s0, cur, pol)
     );
 }
 
-#[cfg(all(feature = "parallel", not(target_arch = "arm")))]
-#[inline(never)]
-fn backup_stage_par(mdp: &Mdp, next: &[f64], cur: &mut [f64], pol: &mut [u32]) {
-    par_chunks(
-        cur,
-        pol,
-        |s0, c, p| by_successors!(mdp, backup_stage_impl::<false>, (mdp, next, &[], s0, c, p)),
-        max_both,
-        (0.0, 1.0),
-    );
-}
-
-/// [`backup_stage_impl`] with the screen from `next2`, split across threads when `par` (the
-/// screen's maxima are exact, so equal to one pass's).
+/// [`backup_stage_impl`] with the screen from `next2`, over the states `s0 .. s0 + cur.len()`
+/// (the screen's maxima over those states; exact, so a team's combined screen is one pass's).
 #[inline(always)]
 pub(crate) fn backup_stage_screened(
     mdp: &Mdp,
     next: &[f64],
     next2: &[f64],
+    s0: usize,
     cur: &mut [f64],
     pol: &mut [u32],
-    par: bool,
 ) -> (f64, f64) {
-    #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
-    if par {
-        return backup_stage_screened_par(mdp, next, next2, cur, pol);
-    }
-    let _ = par;
     by_successors!(
         mdp,
         backup_stage_impl::<true>,
-        (mdp, next, next2, 0, cur, pol)
+        (mdp, next, next2, s0, cur, pol)
     )
 }
 
-#[cfg(all(feature = "parallel", not(target_arch = "arm")))]
-#[inline(never)]
-fn backup_stage_screened_par(
-    mdp: &Mdp,
-    next: &[f64],
-    next2: &[f64],
-    cur: &mut [f64],
-    pol: &mut [u32],
-) -> (f64, f64) {
-    par_chunks(
-        cur,
-        pol,
-        |s0, c, p| by_successors!(mdp, backup_stage_impl::<true>, (mdp, next, next2, s0, c, p)),
-        max_both,
-        (0.0, 1.0),
-    )
-}
-
-/// One value-iteration sweep `nxt = T cur` (terminal states 0), returning `(min d, max d)` of `d =
-/// nxt - cur` (infinities when there is no state). The same cursor walk and unchecked reads as
+/// One value-iteration sweep `nxt = T cur` (terminal states 0) over the states `s0 .. s0 +
+/// nxt.len()` (all of them, or one thread's range), returning `(min d, max d)` of `d = nxt - cur`
+/// there (infinities when there is no state). The same cursor walk and unchecked reads as
 /// [`backup_stage_impl`] (same invariants), with `q = R + gamma * (sum p v)` in transition order.
-/// Split across threads when `par` (min and max are exact, so equal to one pass's; that path
-/// out of line).
 #[inline(always)]
 pub(crate) fn vi_sweep(
     mdp: &Mdp,
     gamma: f64,
     cur: &[f64],
+    s0: usize,
     nxt: &mut [f64],
-    par: bool,
 ) -> (f64, f64) {
-    #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
-    if par {
-        return vi_sweep_par(mdp, gamma, cur, nxt);
-    }
-    let _ = par;
-    by_successors!(mdp, vi_sweep_impl, (mdp, gamma, cur, 0, nxt))
-}
-
-#[cfg(all(feature = "parallel", not(target_arch = "arm")))]
-#[inline(never)]
-fn vi_sweep_par(mdp: &Mdp, gamma: f64, cur: &[f64], nxt: &mut [f64]) -> (f64, f64) {
-    use rayon::prelude::*;
-    let size = chunk_size(nxt.len());
-    nxt.par_chunks_mut(size)
-        .enumerate()
-        .map(|(k, c)| by_successors!(mdp, vi_sweep_impl, (mdp, gamma, cur, k * size, c)))
-        .reduce(
-            || (f64::INFINITY, f64::NEG_INFINITY),
-            |a, b| (a.0.min(b.0), a.1.max(b.1)),
-        )
+    by_successors!(mdp, vi_sweep_impl, (mdp, gamma, cur, s0, nxt))
 }
 
 /// [`vi_sweep`] for models whose choices all have `K` transitions (`K = 0`: any count).

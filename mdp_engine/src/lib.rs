@@ -17,11 +17,13 @@
 //!   certified stop) and modified policy iteration.
 //!
 //! **Threads.** With the `parallel` feature (default on) the finite-horizon and value-iteration
-//! sweeps of a model with at least [`PARALLEL_MIN_TRANSITIONS`] transitions are split across
-//! rayon's threads by states ([`Workspace::set_parallel_min_transitions`]); each state's backup
-//! is the same sum in the same order and the sweeps' reductions are minima and maxima, so the
-//! values, decisions and statistics are bit-identical to one thread. On 32-bit ARM (the A9
-//! build) the split is compiled out whatever the features: the flight build stays one thread.
+//! solves of a model with at least [`PARALLEL_MIN_TRANSITIONS`] transitions run as a team of
+//! the current rayon pool's threads, each on a fixed range of states, in lockstep stage by
+//! stage (sweep by sweep) ([`Workspace::set_parallel_min_transitions`]; one team at a time in
+//! the process, a solve that finds one running sweeps alone); each state's backup is the same
+//! sum in the same order and the stages' reductions are minima and maxima, so the values,
+//! decisions and statistics are bit-identical to one thread. On 32-bit ARM (the A9 build) the
+//! split is compiled out whatever the features: the flight build stays one thread.
 //!
 //! **Tie-breaking** is deterministic everywhere: a later action (higher action index) replaces the
 //! current best only if its Q-value is larger by more than [`TIE_TOLERANCE`] relative to the best
@@ -43,7 +45,9 @@
 //! * `builder`: [`MdpBuilder`], which collects choices in any order and lays out an [`Mdp`].
 //! * `workspace`: [`Workspace`], the preallocated solver buffers.
 //! * `kernels`: the hot unchecked sweeps (finite-horizon backup, value-iteration sweep), one
-//!   kernel per fixed successor count.
+//!   kernel per fixed successor count, over all states or one thread's range.
+//! * `lockstep`: a thread alone or a team of a rayon pool's threads sweeping stage by stage, and
+//!   the rows they share.
 //! * `finite_horizon`: [`Workspace::finite_horizon`], backward induction with the certified early
 //!   stop ([`FH_STOP_TOLERANCE`]).
 //! * `infinite_horizon`: [`Config`], [`SolveError`], and value, policy and modified policy
@@ -60,6 +64,7 @@ mod finite_horizon;
 mod infinite_horizon;
 mod kernels;
 mod linalg;
+mod lockstep;
 mod model;
 mod solution;
 mod workspace;

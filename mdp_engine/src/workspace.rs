@@ -59,10 +59,10 @@ impl Workspace {
         }
     }
 
-    /// Split the finite-horizon and value-iteration sweeps of models with at least
-    /// `min_transitions` transitions across rayon's threads (default
-    /// [`PARALLEL_MIN_TRANSITIONS`]; `usize::MAX`: always one thread; 0: split whenever the
-    /// model has a few chunks' worth of states). The values and decisions are bit-identical
+    /// Split the finite-horizon and value-iteration solves of models with at least
+    /// `min_transitions` transitions across the current rayon pool's threads, as a team in
+    /// lockstep (default [`PARALLEL_MIN_TRANSITIONS`]; `usize::MAX`: always one thread; 0:
+    /// split every model of two states or more). The values and decisions are bit-identical
     /// either way: every state's backup is the same sum in the same order, and the sweep's
     /// reductions are minima and maxima. Without the `parallel` feature, and on 32-bit ARM, one
     /// thread whatever this says.

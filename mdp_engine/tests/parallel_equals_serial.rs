@@ -1,8 +1,8 @@
 //! The sweeps split across threads (`Workspace::set_parallel_min_transitions(0)`) against one
 //! thread (`usize::MAX`) on the same random models: finite horizon (every stage's values bit for
 //! bit, every stage's action, the stages computed and the early stop's bound) and value
-//! iteration (values bit for bit, policy, sweeps). Models of 2 to 300 states, so chunk edges
-//! fall everywhere, with terminal states and mixed successor counts (the general kernel) or a
+//! iteration (values bit for bit, policy, sweeps), the split in a pool of two threads. Models of
+//! 2 to 300 states, so the threads' range edges fall everywhere, with terminal states and mixed successor counts (the general kernel) or a
 //! fixed count (the unrolled ones).
 
 use mdp_engine::{Config, Mdp, MdpBuilder, Workspace};
@@ -37,6 +37,17 @@ fn model(n: usize, m: usize, k_fixed: Option<usize>, terminals: usize, seed: u64
     b.build().expect("valid")
 }
 
+/// The split runs as a team of a pool's threads: two of them, whatever the machine's cores.
+fn two_threads() -> &'static rayon::ThreadPool {
+    static POOL: std::sync::OnceLock<rayon::ThreadPool> = std::sync::OnceLock::new();
+    POOL.get_or_init(|| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .expect("thread pool")
+    })
+}
+
 fn workspaces() -> (Workspace, Workspace) {
     let (mut one, mut split) = (Workspace::new(), Workspace::new());
     one.set_parallel_min_transitions(usize::MAX);
@@ -54,7 +65,8 @@ proptest! {
     ) {
         let mdp = model(n, m, fixed, terminals, seed);
         let (mut one, mut split) = workspaces();
-        let (a, b) = (one.finite_horizon(&mdp, h), split.finite_horizon(&mdp, h));
+        let a = one.finite_horizon(&mdp, h);
+        let b = two_threads().install(|| split.finite_horizon(&mdp, h));
         prop_assert_eq!(a.stats().iterations, b.stats().iterations);
         prop_assert_eq!(a.stats().residual.to_bits(), b.stats().residual.to_bits());
         for t in 0..h {
@@ -66,7 +78,7 @@ proptest! {
         let cfg = Config { gamma, tolerance: 1e-9, ..Config::default() };
         let va = one.value_iteration(&mdp, &cfg).unwrap();
         let (vals, pol, it) = (va.values().to_vec(), va.policy(), va.stats.iterations);
-        let vb = split.value_iteration(&mdp, &cfg).unwrap();
+        let vb = two_threads().install(|| split.value_iteration(&mdp, &cfg)).unwrap();
         prop_assert_eq!(it, vb.stats.iterations);
         prop_assert_eq!(pol, vb.policy());
         for (x, y) in vals.iter().zip(vb.values()) {
