@@ -1,7 +1,7 @@
 //! Finite-horizon undiscounted backward induction with its certified early stop.
 
 use crate::kernels::{backup_stage, backup_stage_screened};
-use crate::lockstep::{Alone, Lockstep, SharedRows};
+use crate::lockstep::{Lockstep, SharedRows, Sweeps, run_sweeps};
 use crate::model::{Mdp, NONE, beat_bar};
 use crate::solution::FiniteHorizonSolution;
 use crate::workspace::Workspace;
@@ -275,6 +275,20 @@ struct FhOutcome {
     stopped_at: Option<usize>,
 }
 
+/// Backward induction on the tables, stage `H` already zero.
+struct BackwardInduction<'a> {
+    mdp: &'a Mdp,
+    tables: FhTables<'a>,
+}
+
+impl Sweeps<StageReduction> for BackwardInduction<'_> {
+    type Out = FhOutcome;
+
+    fn run(&self, lock: &mut impl Lockstep<StageReduction>) -> FhOutcome {
+        backward_induction(self.mdp, &self.tables, lock)
+    }
+}
+
 /// Backward induction over `lock`'s states of every stage (all of them alone, one range in a
 /// team), stage `H` already zero; every thread of a team takes the same decisions, from the
 /// combined reductions. After an early stop, fills this thread's states of the extrapolated
@@ -400,20 +414,8 @@ impl Workspace {
         let par = crate::kernels::split(mdp, self.par_min_transitions);
         self.fh_values[horizon * n..(horizon + 1) * n].fill(0.0);
         let tables = FhTables::new(&mut self.fh_values, &mut self.fh_policy, n, horizon);
-        #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
-        let teamed = if par && horizon > 0 {
-            crate::lockstep::run_team(StageReduction::EMPTY, |member| {
-                backward_induction(mdp, &tables, member)
-            })
-        } else {
-            None
-        };
-        #[cfg(not(all(feature = "parallel", not(target_arch = "arm"))))]
-        let teamed = {
-            let _ = par;
-            None
-        };
-        let out = teamed.unwrap_or_else(|| backward_induction(mdp, &tables, &mut Alone));
+        let induction = BackwardInduction { mdp, tables };
+        let out = run_sweeps(par && horizon > 0, StageReduction::EMPTY, &induction);
         FiniteHorizonSolution {
             ws: self,
             n,

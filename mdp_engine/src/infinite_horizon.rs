@@ -2,7 +2,7 @@
 //! modified policy iteration, with their settings and the final greedy extraction.
 
 use crate::kernels::vi_sweep;
-use crate::lockstep::{Alone, Lockstep, SharedRows};
+use crate::lockstep::{Lockstep, SharedRows, Sweeps, run_sweeps};
 use crate::model::{Mdp, NONE, beats};
 use crate::solution::{Solution, Stats};
 use crate::workspace::Workspace;
@@ -83,20 +83,8 @@ impl Workspace {
             SharedRows::new(&mut self.v[..n], n, 1),
             SharedRows::new(&mut self.v2[..n], n, 1),
         ];
-        #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
-        let teamed = if par {
-            let init = (f64::INFINITY, f64::NEG_INFINITY);
-            crate::lockstep::run_team(init, |member| value_sweeps(mdp, cfg, &bufs, member))
-        } else {
-            None
-        };
-        #[cfg(not(all(feature = "parallel", not(target_arch = "arm"))))]
-        let teamed = {
-            let _ = par;
-            None
-        };
-        let (iterations, converged) =
-            teamed.unwrap_or_else(|| value_sweeps(mdp, cfg, &bufs, &mut Alone));
+        let init = (f64::INFINITY, f64::NEG_INFINITY);
+        let (iterations, converged) = run_sweeps(par, init, &ValueSweeps { mdp, cfg, bufs });
         // Sweep i wrote buffer (i + 1) % 2: an odd count left the values in `v2`.
         if iterations % 2 == 1 {
             std::mem::swap(&mut self.v, &mut self.v2);
@@ -265,6 +253,21 @@ impl Workspace {
                 converged,
             },
         }
+    }
+}
+
+/// The sweeps of [`Workspace::value_iteration`] (see [`value_sweeps`]).
+struct ValueSweeps<'a> {
+    mdp: &'a Mdp,
+    cfg: &'a Config,
+    bufs: [SharedRows<'a, f64>; 2],
+}
+
+impl Sweeps<(f64, f64)> for ValueSweeps<'_> {
+    type Out = (u32, bool);
+
+    fn run(&self, lock: &mut impl Lockstep<(f64, f64)>) -> (u32, bool) {
+        value_sweeps(self.mdp, self.cfg, &self.bufs, lock)
     }
 }
 

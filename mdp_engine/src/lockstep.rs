@@ -84,8 +84,27 @@ impl<R> Lockstep<R> for Alone {
     }
 }
 
-#[cfg(all(feature = "parallel", not(target_arch = "arm")))]
-pub(crate) use team::run_team;
+/// A solve's stages, run by one thread or by each thread of a team.
+pub(crate) trait Sweeps<R>: Sync {
+    /// What the solve returns (every thread of a team returns the same).
+    type Out: Send;
+    /// The solve over `lock`'s states.
+    fn run(&self, lock: &mut impl Lockstep<R>) -> Self::Out;
+}
+
+/// `sweeps` as a team of the current rayon pool's threads when `split` (and a team can run:
+/// see [`team::run_team`]), else alone; `init` fills the team's reduction slots.
+pub(crate) fn run_sweeps<R: Copy + Send, S: Sweeps<R>>(split: bool, init: R, sweeps: &S) -> S::Out {
+    #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
+    if split && let Some(out) = team::run_team(init, |member| sweeps.run(member)) {
+        return out;
+    }
+    let _ = (split, init);
+    sweeps.run(&mut Alone)
+}
+
+#[cfg(all(test, feature = "parallel", not(target_arch = "arm")))]
+use team::run_team;
 
 #[cfg(all(feature = "parallel", not(target_arch = "arm")))]
 mod team {
