@@ -11,6 +11,7 @@
 
 mod binding;
 mod compile;
+mod reason;
 mod schema;
 
 use crate::record::{
@@ -21,7 +22,7 @@ use crate::spec::{ParamsFiles, SpecError, read_toml};
 use compile::{check_against_catalogue, compile};
 use panorama::{Goal, Infeasible, MarginReport, Measured, Problem, Selection};
 use schema::MissionFile;
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// Indicator names the cost model produces; goals may name only these.
@@ -291,6 +292,10 @@ struct WatchScratch {
     spare: Option<Reallocation>,
     /// The placements an activity names, as (token id, placement index) (binding.rs).
     running_ids: Vec<(usize, usize)>,
+    /// Why the plan must change, and the last record's `infeasible_reason`: kept to be
+    /// rewritten, as the watch says "cannot" every cycle until the goals are met again.
+    reason: String,
+    spare_reason: String,
 }
 
 impl Default for WatchScratch {
@@ -321,6 +326,8 @@ impl Default for WatchScratch {
             version_flags: (Vec::new(), Vec::new()),
             spare: None,
             running_ids: Vec::new(),
+            reason: String::new(),
+            spare_reason: String::new(),
         }
     }
 }
@@ -889,7 +896,9 @@ impl Guarantee {
             sc.spare = Some(r);
         }
         rec.infeasible = false;
-        rec.infeasible_reason = None;
+        if let Some(r) = rec.infeasible_reason.take() {
+            sc.spare_reason = r;
+        }
         rec.failed_resources.clone_from(&self.failed);
         if progress.activity_index >= n {
             return; // mission over: margins are final, nothing left to re-allocate
@@ -901,7 +910,8 @@ impl Guarantee {
         if !any_failed && !report.margin.iter().any(|x| *x < 0.0) {
             return;
         }
-        let mut reason = reallocation_reason(p, &self.choice, at, failed, &report.margin);
+        let mut reason = std::mem::take(&mut sc.reason);
+        reason::reallocation_reason_into(p, &self.choice, at, failed, &report.margin, &mut reason);
         let found = sc
             .reallocator
             .reallocate_or_exact(
@@ -933,58 +943,19 @@ impl Guarantee {
             }
             Err(e) => {
                 rec.infeasible = true;
-                rec.infeasible_reason = Some(format!(
+                let mut out = std::mem::take(&mut sc.spare_reason);
+                out.clear();
+                use std::fmt::Write;
+                // Writing into a String cannot fail.
+                let _ = write!(
+                    out,
                     "{reason}: no allocation of the remaining activities: {e}"
-                ));
+                );
+                rec.infeasible_reason = Some(out);
             }
         }
+        self.scratch.reason = reason;
     }
-}
-
-/// Why the allocation in force must change from activity `at`: its negative margins and the
-/// failed resources its remaining IAs use (`FPGA tile` for a lost tile slot).
-fn reallocation_reason(
-    p: &panorama::Problem,
-    choice: &[usize],
-    at: usize,
-    failed: &[String],
-    margin: &[f64],
-) -> String {
-    let n = p.activities.len();
-    let uses_failed: Vec<String> = (at..n)
-        .flat_map(|j| p.activities[j].ias[choice[j]].resources.iter())
-        .filter(|r| failed.contains(r))
-        .cloned()
-        .collect::<BTreeSet<_>>()
-        .into_iter()
-        .collect();
-    let negative: Vec<String> = p
-        .goals
-        .iter()
-        .zip(margin)
-        .filter(|(_, x)| **x < 0.0)
-        .map(|(g, x)| format!("{} margin {x:.1}", g.name))
-        .collect();
-    let mut why = Vec::new();
-    if !negative.is_empty() {
-        why.push(format!("negative {}", negative.join(", ")));
-    }
-    if !uses_failed.is_empty() {
-        let shown: Vec<String> = uses_failed
-            .iter()
-            .map(|r| {
-                if r.starts_with("tile_slot:") {
-                    "FPGA tile".to_string()
-                } else {
-                    r.clone()
-                }
-            })
-            .collect::<BTreeSet<_>>()
-            .into_iter()
-            .collect();
-        why.push(format!("failed resource in plan: {}", shown.join(", ")));
-    }
-    why.join("; ")
 }
 
 /// The application alternatives an IA name carries, as (version, implementation): `V4.F` and

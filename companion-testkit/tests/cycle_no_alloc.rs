@@ -88,6 +88,43 @@ fn monolithic_model_allocates_nothing_either() {
     assert_eq!(allocs, 0);
 }
 
+/// Past the duration goal (the tracking hold outlasting it, 2,000 s of cycles at 0.1 s), the
+/// guarantee cannot re-allocate and says so every cycle, searching again each time: the
+/// reduced mission, both searches and the reason text reuse their buffers, so that allocates
+/// nothing either (18 allocations per cycle before).
+#[test]
+fn a_guarantee_that_cannot_be_met_says_so_every_cycle_allocating_nothing() {
+    let params = default_params_dir();
+    let model = std::sync::Arc::new(companion::params::load_model(&params).unwrap());
+    let base = tracking_snapshot(&model, &params, "complete-1");
+    let stream_gen = StreamGen::new(&model, base.clone(), Stream::Steady);
+    let mut core = Core::new(
+        std::sync::Arc::clone(&model),
+        ModelKind::Bfm,
+        model.policy("safety").unwrap(),
+    );
+    let mut obs = base.clone();
+    let (mut plan, mut rec) = (Plan::default(), DecisionRecord::default());
+    let first = 25_000;
+    for k in first..first + WARM {
+        stream_gen.advance(&mut obs, k);
+        core.step_into(&obs, &mut plan, &mut rec);
+    }
+    let mut allocs = 0;
+    for k in first + WARM..first + WARM + COUNTED_CYCLES {
+        stream_gen.advance(&mut obs, k);
+        allocs += allocations(|| core.step_into(&obs, &mut plan, &mut rec));
+        let g = rec.guarantee.as_ref().expect("a guarantee record");
+        assert!(g.infeasible, "cycle {k}: the guarantee is met again");
+        let reason = g.infeasible_reason.as_deref().unwrap_or_default();
+        assert!(
+            reason.contains("margin") && reason.contains("no allocation"),
+            "cycle {k}: {reason}"
+        );
+    }
+    assert_eq!(allocs, 0, "{allocs} allocations in {COUNTED_CYCLES} cycles");
+}
+
 /// A version flipping every cycle makes the plan follow it every cycle (issue 24's binding): each
 /// cycle's record says so, with its typed trigger, but the RAS history only holds the distinct
 /// allocations (it grew by a row per cycle before, without bound on a long flight).

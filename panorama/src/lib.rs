@@ -19,8 +19,10 @@
 //! # Layout
 //!
 //! * `lib.rs`: the problem ([`Goal`], [`Ia`], [`Activity`], [`Problem`], [`Selection`]), the
-//!   allocation ([`allocate`], [`Allocation`], [`Infeasible`]) and its yardsticks ([`exact`],
-//!   [`exhaustive`], [`nga`]).
+//!   allocation's result ([`Allocation`], [`Infeasible`]) and the yardsticks [`exhaustive`] and
+//!   [`nga`].
+//! * `search`: the allocation ([`allocate`]) and the exact search ([`exact`]), on buffers a
+//!   [`Reallocator`] keeps between calls.
 //! * `combine`: implementation alternatives from task implementation options and core-oriented
 //!   constraints ([`combine`], [`Tio`], [`Task`], [`CoreConstraint`]).
 //! * `margins`: online performance management: [`margins`], drift, and the reduced mission
@@ -30,11 +32,13 @@ use serde::{Deserialize, Serialize};
 
 mod combine;
 mod margins;
+mod search;
 pub use combine::{CoreConstraint, Task, Tio, combine};
 pub use margins::{
     MarginReport, Measured, Reallocator, SwapCheck, margins, margins_into, reallocate,
     reallocate_or_exact, reduced_problem,
 };
+pub use search::{Exact, allocate, exact};
 
 /// An end-oriented goal: the mission total of indicator `name` must stay `<= bound`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -167,22 +171,22 @@ impl Problem {
     /// Totals per goal of a full choice, summed in activity order.
     pub fn totals(&self, choice: &[usize]) -> Vec<f64> {
         (0..self.goals.len())
-            .map(|g| {
-                self.activities
-                    .iter()
-                    .zip(choice)
-                    .map(|(a, &i)| a.ias[i].cost[g])
-                    .sum()
-            })
+            .map(|g| self.total(choice, g))
             .collect()
     }
 
     /// True when every goal holds for `choice`.
     pub fn feasible(&self, choice: &[usize]) -> bool {
-        self.totals(choice)
+        (0..self.goals.len()).all(|g| fits(self.total(choice, g), self.goals[g].bound))
+    }
+
+    /// Total of goal `g` for a full choice, summed in activity order (as [`Problem::totals`]).
+    fn total(&self, choice: &[usize], g: usize) -> f64 {
+        self.activities
             .iter()
-            .zip(&self.goals)
-            .all(|(t, g)| fits(*t, g.bound))
+            .zip(choice)
+            .map(|(a, &i)| a.ias[i].cost[g])
+            .sum()
     }
 
     /// Summed selection score of `choice`.
@@ -194,7 +198,7 @@ impl Problem {
             .sum()
     }
 
-    fn allocation(
+    pub(crate) fn allocation(
         &self,
         choice: Vec<usize>,
         sel: Selection,
@@ -208,266 +212,13 @@ impl Problem {
         }
     }
 
-    fn check_nonempty(&self) -> Result<(), Infeasible> {
+    pub(crate) fn check_nonempty(&self) -> Result<(), Infeasible> {
         match self.activities.iter().find(|a| a.ias.is_empty()) {
             Some(a) => Err(Infeasible::NoAlternative {
                 activity: a.name.clone(),
             }),
             None => Ok(()),
         }
-    }
-}
-
-/// The paper's resource allocation algorithm (section 7.2.2, Fig. 7), iterated over the goals in
-/// the user's order (lexicographic-like), then the [`Selection`] rule among the remaining IAs.
-///
-/// Per goal: sort each activity's candidates by cost (ascending; "highest" = last); start with the
-/// highest everywhere; while the total exceeds the bound, walk activities from the last backwards,
-/// choosing by binary search the highest IA of that activity that satisfies the goal with the
-/// others fixed, or its lowest IA if none does. The candidate set of each activity is then cut to
-/// the IAs no costlier than its pivot, so every combination of remaining candidates satisfies the
-/// goal; later goals only shrink the sets, hence the final per-activity choice satisfies them all.
-pub fn allocate(problem: &Problem, sel: Selection) -> Result<Allocation, Infeasible> {
-    problem.check_nonempty()?;
-    let n = problem.activities.len();
-    let mut cands: Vec<Vec<usize>> = problem
-        .activities
-        .iter()
-        .map(|a| (0..a.ias.len()).collect())
-        .collect();
-    for (g, goal) in problem.goals.iter().enumerate() {
-        let cost = |j: usize, i: usize| problem.activities[j].ias[i].cost[g];
-        // Sort ascending by cost; ties by score then index so "highest" is deterministic.
-        for (j, c) in cands.iter_mut().enumerate() {
-            c.sort_by(|&a, &b| {
-                cost(j, a)
-                    .total_cmp(&cost(j, b))
-                    .then(
-                        sel.score(&problem.activities[j].ias[a])
-                            .total_cmp(&sel.score(&problem.activities[j].ias[b])),
-                    )
-                    .then(a.cmp(&b))
-            });
-        }
-        let mut pos: Vec<usize> = cands.iter().map(|c| c.len() - 1).collect();
-        let total = |pos: &[usize]| -> f64 { (0..n).map(|j| cost(j, cands[j][pos[j]])).sum() };
-        if !fits(total(&pos), goal.bound) {
-            for j in (0..n).rev() {
-                pos[j] = 0;
-                let others: f64 = (0..n)
-                    .filter(|&k| k != j)
-                    .map(|k| cost(k, cands[k][pos[k]]))
-                    .sum();
-                if !fits(others + cost(j, cands[j][0]), goal.bound) {
-                    continue; // even this activity's lowest IA is not enough: go to the previous one
-                }
-                // Dichotomy: largest k with others + cost(k) <= bound (cost ascending in k).
-                let (mut lo, mut hi) = (0usize, cands[j].len() - 1);
-                while lo < hi {
-                    let mid = (lo + hi).div_ceil(2);
-                    if fits(others + cost(j, cands[j][mid]), goal.bound) {
-                        lo = mid;
-                    } else {
-                        hi = mid - 1;
-                    }
-                }
-                pos[j] = lo;
-                break;
-            }
-            let t = total(&pos);
-            if !fits(t, goal.bound) {
-                return Err(Infeasible::Goal {
-                    goal: goal.name.clone(),
-                    minimum: t,
-                    bound: goal.bound,
-                    excess: t - goal.bound,
-                });
-            }
-        }
-        // Reduction: keep the IAs under the pivot line (ties with the pivot included).
-        for j in 0..n {
-            let pivot = cost(j, cands[j][pos[j]]);
-            cands[j].retain(|&i| cost(j, i) <= pivot);
-        }
-    }
-    let choice: Vec<usize> = cands
-        .iter()
-        .enumerate()
-        .map(|(j, c)| best_of(&problem.activities[j], c, sel))
-        .collect();
-    Ok(problem.allocation(choice, sel, cands))
-}
-
-/// The candidate with the highest score; ties go to the lower first-goal cost, then lower index.
-fn best_of(a: &Activity, c: &[usize], sel: Selection) -> usize {
-    let first = |i: usize| a.ias[i].cost.first().copied().unwrap_or(0.0);
-    *c.iter()
-        .min_by(|&&x, &&y| {
-            sel.score(&a.ias[y])
-                .total_cmp(&sel.score(&a.ias[x]))
-                .then(first(x).total_cmp(&first(y)))
-                .then(x.cmp(&y))
-        })
-        .expect("non-empty candidate set")
-}
-
-/// Outcome of the exact search.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub enum Exact {
-    /// A feasible allocation with the maximum summed score.
-    Optimal(Allocation),
-    /// No allocation satisfies every goal.
-    Infeasible,
-    /// The node budget ran out; the best allocation found so far, if any.
-    Aborted(Option<Allocation>),
-}
-
-/// Exact maximisation of the summed [`Selection`] score subject to every goal, by depth-first
-/// branch-and-bound: IAs dominated within their activity (no better score, no lower cost on any
-/// goal) are dropped; a branch is cut when some goal cannot be met even with the cheapest
-/// remaining IAs, or when its score cannot beat the incumbent (bounded by the best remaining scores
-/// and, for `HighestCost(g)`, by the goal's bound itself). `max_nodes` caps the search.
-pub fn exact(problem: &Problem, sel: Selection, max_nodes: u64) -> Exact {
-    if problem.check_nonempty().is_err() {
-        return Exact::Infeasible;
-    }
-    let n = problem.activities.len();
-    let ng = problem.goals.len();
-    // Non-dominated IAs per activity, best score first.
-    let opts: Vec<Vec<usize>> = problem
-        .activities
-        .iter()
-        .map(|a| {
-            let dominated = |x: usize| {
-                (0..a.ias.len()).any(|y| {
-                    y != x && {
-                        let (ix, iy) = (&a.ias[x], &a.ias[y]);
-                        let ge = sel.score(iy) >= sel.score(ix)
-                            && (0..ng).all(|g| iy.cost[g] <= ix.cost[g]);
-                        let strict = sel.score(iy) > sel.score(ix)
-                            || (0..ng).any(|g| iy.cost[g] < ix.cost[g]);
-                        ge && (strict || y < x)
-                    }
-                })
-            };
-            let mut v: Vec<usize> = (0..a.ias.len()).filter(|&x| !dominated(x)).collect();
-            v.sort_by(|&x, &y| {
-                sel.score(&a.ias[y])
-                    .total_cmp(&sel.score(&a.ias[x]))
-                    .then(x.cmp(&y))
-            });
-            v
-        })
-        .collect();
-    // Suffix bounds: min cost per goal and max score over activities j..n.
-    let mut min_rest = vec![vec![0.0; ng]; n + 1];
-    let mut max_rest = vec![0.0; n + 1];
-    for j in (0..n).rev() {
-        let a = &problem.activities[j];
-        #[allow(clippy::needless_range_loop)] // reads row j + 1 while writing row j
-        for g in 0..ng {
-            let m = opts[j]
-                .iter()
-                .map(|&i| a.ias[i].cost[g])
-                .fold(f64::INFINITY, f64::min);
-            min_rest[j][g] = min_rest[j + 1][g] + m;
-        }
-        max_rest[j] = max_rest[j + 1]
-            + opts[j]
-                .iter()
-                .map(|&i| sel.score(&a.ias[i]))
-                .fold(f64::NEG_INFINITY, f64::max);
-    }
-    if (0..ng).any(|g| !fits(min_rest[0][g], problem.goals[g].bound)) {
-        return Exact::Infeasible;
-    }
-    struct S<'a> {
-        p: &'a Problem,
-        sel: Selection,
-        opts: Vec<Vec<usize>>,
-        min_rest: Vec<Vec<f64>>,
-        max_rest: Vec<f64>,
-        cur: Vec<usize>,
-        best: Option<(f64, Vec<usize>)>,
-        nodes: u64,
-        max_nodes: u64,
-    }
-    impl S<'_> {
-        fn cap(&self) -> f64 {
-            match self.sel {
-                Selection::HighestCost(g) => self.p.goals.get(g).map_or(f64::INFINITY, |x| x.bound),
-                Selection::MostCapable => f64::INFINITY,
-            }
-        }
-        fn dfs(&mut self, j: usize, costs: &mut Vec<f64>, score: f64) -> bool {
-            self.nodes += 1;
-            if self.nodes > self.max_nodes {
-                return false;
-            }
-            let n = self.p.activities.len();
-            if j == n {
-                if self.best.as_ref().is_none_or(|(b, _)| score > *b) {
-                    self.best = Some((score, self.cur.clone()));
-                }
-                return true;
-            }
-            let cap = self.cap();
-            for k in 0..self.opts[j].len() {
-                let i = self.opts[j][k];
-                let ia = &self.p.activities[j].ias[i];
-                let s = score + self.sel.score(ia);
-                let ub = (s + self.max_rest[j + 1]).min(cap + 1e-9 * cap.abs().max(1.0));
-                if let Some((b, _)) = &self.best
-                    && ub <= *b
-                {
-                    continue;
-                }
-                let ok = (0..costs.len()).all(|g| {
-                    fits(
-                        costs[g] + ia.cost[g] + self.min_rest[j + 1][g],
-                        self.p.goals[g].bound,
-                    )
-                });
-                if !ok {
-                    continue;
-                }
-                for (g, c) in costs.iter_mut().enumerate() {
-                    *c += ia.cost[g];
-                }
-                self.cur[j] = i;
-                let go = self.dfs(j + 1, costs, s);
-                for (g, c) in costs.iter_mut().enumerate() {
-                    *c -= ia.cost[g];
-                }
-                if !go {
-                    return false;
-                }
-            }
-            true
-        }
-    }
-    let mut s = S {
-        p: problem,
-        sel,
-        opts,
-        min_rest,
-        max_rest,
-        cur: vec![0; n],
-        best: None,
-        nodes: 0,
-        max_nodes,
-    };
-    let done = s.dfs(0, &mut vec![0.0; ng], 0.0);
-    // Re-check with in-order sums (the incremental sums may differ in the last bits).
-    let best = s
-        .best
-        .take()
-        .map(|(_, c)| problem.allocation(c, sel, Vec::new()))
-        .filter(|a| problem.feasible(&a.choice));
-    match (done, best) {
-        (true, Some(a)) => Exact::Optimal(a),
-        (true, None) => Exact::Infeasible,
-        (false, b) => Exact::Aborted(b),
     }
 }
 

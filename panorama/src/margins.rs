@@ -1,6 +1,7 @@
 //! Online performance management (paper section 7.3): margins, drift and the reduced mission.
 
-use crate::{Activity, Exact, Goal, Infeasible, Problem, Selection, allocate, exact};
+use crate::search::Search;
+use crate::{Activity, Goal, Infeasible, Problem, Selection, allocate};
 use serde::{Deserialize, Serialize};
 
 /// What has been measured so far: the activity being flown (index into the problem), the fraction
@@ -237,13 +238,17 @@ fn start_of_rest(m: &Measured) -> Measured {
     }
 }
 
-/// [`reallocate_or_exact`] with its reduced mission kept between calls and rebuilt in place:
-/// while the guarantee cannot be met, the watch asks every cycle, and building the reduced
-/// mission afresh (every IA's name, costs and resources cloned, twice) was most of a cycle.
+/// [`reallocate_or_exact`] with its reduced mission and the searches' buffers kept between calls,
+/// rebuilt in place: while the guarantee cannot be met, the watch asks every cycle, and building
+/// the reduced mission afresh (every IA's name, costs and resources cloned, twice) was most of a
+/// cycle. A call that finds nothing allocates nothing once the buffers have their size.
 #[derive(Debug, Clone)]
 pub struct Reallocator {
     reduced: Problem,
     map: Vec<Vec<usize>>,
+    search: Search,
+    /// The last call's reason for finding nothing, its strings rewritten in place.
+    failure: Infeasible,
 }
 
 impl Default for Reallocator {
@@ -254,13 +259,18 @@ impl Default for Reallocator {
                 activities: Vec::new(),
             },
             map: Vec::new(),
+            search: Search::default(),
+            failure: Infeasible::NoAlternative {
+                activity: String::new(),
+            },
         }
     }
 }
 
 impl Reallocator {
     /// [`reallocate_or_exact`] (which makes a fresh one per call): the paper's algorithm on the
-    /// reduced mission, then the bounded exact search when it finds nothing.
+    /// reduced mission, then the bounded exact search when it finds nothing. The reason for
+    /// finding nothing is borrowed from the reallocator (kept to be rewritten by the next call).
     pub fn reallocate_or_exact(
         &mut self,
         p: &Problem,
@@ -269,7 +279,7 @@ impl Reallocator {
         failed: &[String],
         sel: Selection,
         max_nodes: u64,
-    ) -> Result<(Vec<usize>, bool), Infeasible> {
+    ) -> Result<(Vec<usize>, bool), &Infeasible> {
         reduced_problem_into(p, m, failed, &mut self.reduced, &mut self.map);
         let rp = &self.reduced;
         let from = p.activities.len() - rp.activities.len();
@@ -280,14 +290,16 @@ impl Reallocator {
             }
             out
         };
-        let e = match allocate(rp, sel) {
-            Ok(a) => return Ok((expand(&a.choice), false)),
-            Err(e) => e,
+        let failure = match self.search.allocate(rp, sel) {
+            Ok(()) => return Ok((expand(&self.search.choice), false)),
+            Err(f) => f,
         };
-        match exact(rp, sel, max_nodes) {
-            Exact::Optimal(a) | Exact::Aborted(Some(a)) => Ok((expand(&a.choice), true)),
-            _ => Err(e),
+        // Optimal, or the budget ran out with an allocation in hand: either is one.
+        if self.search.exact(rp, sel, max_nodes).found {
+            return Ok((expand(&self.search.best), true));
         }
+        failure.write_into(rp, &mut self.failure);
+        Err(&self.failure)
     }
 }
 
@@ -370,5 +382,7 @@ pub fn reallocate_or_exact(
     sel: Selection,
     max_nodes: u64,
 ) -> Result<(Vec<usize>, bool), Infeasible> {
-    Reallocator::default().reallocate_or_exact(p, choice, m, failed, sel, max_nodes)
+    Reallocator::default()
+        .reallocate_or_exact(p, choice, m, failed, sel, max_nodes)
+        .map_err(Infeasible::clone)
 }
