@@ -5,6 +5,7 @@
 
 use companion::params::default_params_dir;
 use companion_core::decision::{Core, ModelKind};
+use companion_core::observations::Observations;
 use companion_core::record::{DecisionRecord, Plan};
 use companion_testkit::streams::{Stream, StreamGen, tracking_snapshot};
 #[path = "support/counting_alloc.rs"]
@@ -14,20 +15,26 @@ use counting_alloc::allocations;
 const WARM: u64 = 50;
 const COUNTED_CYCLES: u64 = 1000;
 
-/// Allocations over `COUNTED_CYCLES` cycles after `WARM` warm-up cycles, and the evidence
-/// changes and MDP solves seen while counting (to show the stream really moved).
-fn run(kind: ModelKind, policy: &str, stream: Stream, memos: bool) -> (usize, usize, u64) {
+/// A core on the default params, its stream of `stream` observations from the tracking
+/// snapshot of `complete-1`, and that snapshot to advance.
+fn tracking_core(kind: ModelKind, policy: &str, stream: Stream) -> (Core, StreamGen, Observations) {
     let params = default_params_dir();
     let model = std::sync::Arc::new(companion::params::load_model(&params).unwrap());
     let base = tracking_snapshot(&model, &params, "complete-1");
     let stream_gen = StreamGen::new(&model, base.clone(), stream);
-    let mut core = Core::new(
+    let core = Core::new(
         std::sync::Arc::clone(&model),
         kind,
         model.policy(policy).unwrap(),
     );
+    (core, stream_gen, base)
+}
+
+/// Allocations over `COUNTED_CYCLES` cycles after `WARM` warm-up cycles, and the evidence
+/// changes and MDP solves seen while counting (to show the stream really moved).
+fn run(kind: ModelKind, policy: &str, stream: Stream, memos: bool) -> (usize, usize, u64) {
+    let (mut core, stream_gen, mut obs) = tracking_core(kind, policy, stream);
     core.set_caches(memos);
-    let mut obs = base.clone();
     let (mut plan, mut rec) = (Plan::default(), DecisionRecord::default());
     for k in 0..WARM {
         stream_gen.advance(&mut obs, k);
@@ -94,16 +101,7 @@ fn monolithic_model_allocates_nothing_either() {
 /// nothing either (18 allocations per cycle before).
 #[test]
 fn a_guarantee_that_cannot_be_met_says_so_every_cycle_allocating_nothing() {
-    let params = default_params_dir();
-    let model = std::sync::Arc::new(companion::params::load_model(&params).unwrap());
-    let base = tracking_snapshot(&model, &params, "complete-1");
-    let stream_gen = StreamGen::new(&model, base.clone(), Stream::Steady);
-    let mut core = Core::new(
-        std::sync::Arc::clone(&model),
-        ModelKind::Bfm,
-        model.policy("safety").unwrap(),
-    );
-    let mut obs = base.clone();
+    let (mut core, stream_gen, mut obs) = tracking_core(ModelKind::Bfm, "safety", Stream::Steady);
     let (mut plan, mut rec) = (Plan::default(), DecisionRecord::default());
     let first = 25_000;
     for k in first..first + WARM {
@@ -130,16 +128,7 @@ fn a_guarantee_that_cannot_be_met_says_so_every_cycle_allocating_nothing() {
 /// allocations (it grew by a row per cycle before, without bound on a long flight).
 #[test]
 fn a_flipping_version_reallocates_every_cycle_but_the_history_stays_bounded() {
-    let params = default_params_dir();
-    let model = std::sync::Arc::new(companion::params::load_model(&params).unwrap());
-    let base = tracking_snapshot(&model, &params, "complete-1");
-    let stream_gen = StreamGen::new(&model, base.clone(), Stream::Changing);
-    let mut core = Core::new(
-        std::sync::Arc::clone(&model),
-        ModelKind::Bfm,
-        model.policy("safety").unwrap(),
-    );
-    let mut obs = base.clone();
+    let (mut core, stream_gen, mut obs) = tracking_core(ModelKind::Bfm, "safety", Stream::Changing);
     let (mut plan, mut rec) = (Plan::default(), DecisionRecord::default());
     let mut follows = 0;
     for k in 0..400 {

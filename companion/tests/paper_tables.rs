@@ -292,8 +292,8 @@ fn lidar_failure_runs_fusion_obstacle_detection_and_lowers_p_lidar() {
             // Lidar detection was on offer in that state: fusion won by value.
             let s = nav.state_index(&p.state).unwrap();
             assert!(
-                nav.mdp().choices(s as _).any(|c| nav
-                    .primitives(c.action as usize)
+                nav.mdp().choices(s).any(|c| nav
+                    .primitives(c.action)
                     .iter()
                     .any(|x| x == "detect_obstacles_lidar")),
                 "cycle {}",

@@ -239,8 +239,10 @@ mod tests {
         });
         assert_eq!(airborne, 120);
         // Too few records: no drain.
-        let mut short = PercentageDrain::default();
-        short.capacity_j = Some(1.0);
+        let short = PercentageDrain {
+            capacity_j: Some(1.0),
+            ..Default::default()
+        };
         assert_eq!(short.power_w(), None);
     }
 

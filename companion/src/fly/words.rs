@@ -93,10 +93,10 @@ fn reason(
                 .to_string(),
             );
         }
-        if ends_flight(now) {
-            if let Some(why) = ending_reason(m, rec) {
-                return Some(why);
-            }
+        if ends_flight(now)
+            && let Some(why) = ending_reason(m, rec)
+        {
+            return Some(why);
         }
         if now.motion_role == Some(ActionRole::AvoidObstacle)
             && let Some(d) = rec.observations.get("obstacle_m")
