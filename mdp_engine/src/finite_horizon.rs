@@ -81,7 +81,7 @@ fn screen(vb: &[f64], vb1: &[f64], vb2: &[f64]) -> (f64, f64) {
 /// What the threads of a stage combine: the screen for the next stage and, on a certified
 /// backup, the certificate's measures (maxima and minima: the same bits however split).
 #[derive(Debug, Clone, Copy)]
-pub(crate) struct StageReduction {
+struct StageReduction {
     screen: (f64, f64),
     cert: Partial,
 }
@@ -284,87 +284,80 @@ struct BackwardInduction<'a> {
 impl Sweeps<StageReduction> for BackwardInduction<'_> {
     type Out = FhOutcome;
 
+    /// Backward induction over `lock`'s states of every stage (all of them alone, one range in
+    /// a team); every thread of a team takes the same decisions, from the combined reductions.
+    /// After an early stop, fills this thread's states of the extrapolated stages.
     fn run(&self, lock: &mut impl Lockstep<StageReduction>) -> FhOutcome {
-        backward_induction(self.mdp, &self.tables, lock)
-    }
-}
-
-/// Backward induction over `lock`'s states of every stage (all of them alone, one range in a
-/// team), stage `H` already zero; every thread of a team takes the same decisions, from the
-/// combined reductions. After an early stop, fills this thread's states of the extrapolated
-/// stages.
-fn backward_induction(
-    mdp: &Mdp,
-    tables: &FhTables<'_>,
-    lock: &mut impl Lockstep<StageReduction>,
-) -> FhOutcome {
-    let (n, horizon) = (tables.n, tables.horizon);
-    let r = lock.states(n);
-    let mut out = FhOutcome {
-        computed: 0,
-        bound: 0.0,
-        stopped_at: None,
-    };
-    // The second difference at which the last certificate attempt failed: retry only once it
-    // has at least halved, so a model that never settles costs no more than a few attempts.
-    let mut retry_below = f64::INFINITY;
-    // Screen for the stage about to be computed (from the three stages after it), filled
-    // by the previous backup.
-    let mut screen_next: Option<(f64, f64)> = None;
-    let mut t = horizon;
-    while t > 0 {
-        t -= 1;
-        out.computed += 1;
-        // SAFETY (every table view below): stages after `t` were completed before the last
-        // combine (stage H before the solve); `r` is this thread's range of stage `t`, which
-        // no one reads until the combine that ends this stage.
-        let (cur, pol_t) = unsafe { tables.stage_mut(t, &r) };
-        // Candidate for a certificate at base b = t + 1: needs V_{b+1} (so b + 1 <= H) and
-        // the decision rule pi_b (b <= H - 1), and a cheap sign that g has settled:
-        // delta = max |d_b - d_{b+1}| (needs V_{b+2}).
-        let b = t + 1;
-        if let Some((delta, scale)) = screen_next.take() {
-            let kk = b as f64;
-            let tol = FH_STOP_TOLERANCE * scale;
-            if delta < retry_below && kk * (kk + 1.0) * 0.5 * delta <= 16.0 * tol {
-                let (vb, vb1, pol_b) =
-                    unsafe { (tables.values(b), tables.values(b + 1), tables.actions(b)) };
-                let cert = certified_range(mdp, vb, vb1, pol_b, r.start, cur, pol_t);
-                // The screen for the stage after, should the certificate fail.
-                let scr = screen(cur, &vb[r.clone()], &vb1[r.clone()]);
-                let all = lock.combine(StageReduction { screen: scr, cert }, StageReduction::merge);
-                let cert = all.cert.certificate();
-                match cert.stop_bound(b) {
-                    Some(e) if e.action <= FH_STOP_TOLERANCE * cert.scale(b) => {
-                        out.bound = e.value;
-                        out.stopped_at = Some(t);
-                        break;
+        let (mdp, tables) = (self.mdp, &self.tables);
+        let (n, horizon) = (tables.n, tables.horizon);
+        let r = lock.states(n);
+        let mut out = FhOutcome {
+            computed: 0,
+            bound: 0.0,
+            stopped_at: None,
+        };
+        // The second difference at which the last certificate attempt failed: retry only once it
+        // has at least halved, so a model that never settles costs no more than a few attempts.
+        let mut retry_below = f64::INFINITY;
+        // Screen for the stage about to be computed (from the three stages after it), filled
+        // by the previous backup.
+        let mut screen_next: Option<(f64, f64)> = None;
+        let mut t = horizon;
+        while t > 0 {
+            t -= 1;
+            out.computed += 1;
+            // SAFETY (every table view below): stages after `t` were completed before the last
+            // combine (stage H before the solve); `r` is this thread's range of stage `t`, which
+            // no one reads until the combine that ends this stage.
+            let (cur, pol_t) = unsafe { tables.stage_mut(t, &r) };
+            // Candidate for a certificate at base b = t + 1: needs V_{b+1} (so b + 1 <= H) and
+            // the decision rule pi_b (b <= H - 1), and a cheap sign that g has settled:
+            // delta = max |d_b - d_{b+1}| (needs V_{b+2}).
+            let b = t + 1;
+            if let Some((delta, scale)) = screen_next.take() {
+                let kk = b as f64;
+                let tol = FH_STOP_TOLERANCE * scale;
+                if delta < retry_below && kk * (kk + 1.0) * 0.5 * delta <= 16.0 * tol {
+                    let (vb, vb1, pol_b) =
+                        unsafe { (tables.values(b), tables.values(b + 1), tables.actions(b)) };
+                    let cert = certified_range(mdp, vb, vb1, pol_b, r.start, cur, pol_t);
+                    // The screen for the stage after, should the certificate fail.
+                    let scr = screen(cur, &vb[r.clone()], &vb1[r.clone()]);
+                    let all =
+                        lock.combine(StageReduction { screen: scr, cert }, StageReduction::merge);
+                    let cert = all.cert.certificate();
+                    match cert.stop_bound(b) {
+                        Some(e) if e.action <= FH_STOP_TOLERANCE * cert.scale(b) => {
+                            out.bound = e.value;
+                            out.stopped_at = Some(t);
+                            break;
+                        }
+                        _ => retry_below = delta * 0.5,
                     }
-                    _ => retry_below = delta * 0.5,
+                    if t > 0 {
+                        screen_next = Some(all.screen);
+                    }
+                    continue;
                 }
-                if t > 0 {
-                    screen_next = Some(all.screen);
-                }
-                continue;
+            }
+            let next = unsafe { tables.values(t + 1) };
+            // The stage after this one (t - 1, base t) is a certificate candidate when t + 2 <= H.
+            if t > 0 && t + 2 <= horizon {
+                let next2 = unsafe { tables.values(t + 2) };
+                let scr = backup_stage_screened(mdp, next, next2, r.start, cur, pol_t);
+                let cert = Partial::EMPTY;
+                let all = lock.combine(StageReduction { screen: scr, cert }, StageReduction::merge);
+                screen_next = Some(all.screen);
+            } else {
+                backup_stage(mdp, next, r.start, cur, pol_t);
+                lock.combine(StageReduction::EMPTY, StageReduction::merge);
             }
         }
-        let next = unsafe { tables.values(t + 1) };
-        // The stage after this one (t - 1, base t) is a certificate candidate when t + 2 <= H.
-        if t > 0 && t + 2 <= horizon {
-            let next2 = unsafe { tables.values(t + 2) };
-            let scr = backup_stage_screened(mdp, next, next2, r.start, cur, pol_t);
-            let cert = Partial::EMPTY;
-            let all = lock.combine(StageReduction { screen: scr, cert }, StageReduction::merge);
-            screen_next = Some(all.screen);
-        } else {
-            backup_stage(mdp, next, r.start, cur, pol_t);
-            lock.combine(StageReduction::EMPTY, StageReduction::merge);
+        if let Some(t) = out.stopped_at {
+            fill_extrapolated(tables, t, &r);
         }
+        out
     }
-    if let Some(t) = out.stopped_at {
-        fill_extrapolated(tables, t, &r);
-    }
-    out
 }
 
 /// Fill this thread's states `r` of stages `0..t` by the certified extrapolation from base `b =

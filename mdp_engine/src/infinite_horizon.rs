@@ -256,7 +256,8 @@ impl Workspace {
     }
 }
 
-/// The sweeps of [`Workspace::value_iteration`] (see [`value_sweeps`]).
+/// The sweeps of [`Workspace::value_iteration`], sweep `i` from `bufs[i % 2]` into `bufs[(i + 1)
+/// % 2]`, `bufs[0]` zero at the start.
 struct ValueSweeps<'a> {
     mdp: &'a Mdp,
     cfg: &'a Config,
@@ -266,53 +267,44 @@ struct ValueSweeps<'a> {
 impl Sweeps<(f64, f64)> for ValueSweeps<'_> {
     type Out = (u32, bool);
 
+    /// The sweeps over `lock`'s states (all of them alone, one range in a team); every thread
+    /// of a team stops at the same sweep, from the combined differences. Returns the sweeps done
+    /// and whether they converged.
     fn run(&self, lock: &mut impl Lockstep<(f64, f64)>) -> (u32, bool) {
-        value_sweeps(self.mdp, self.cfg, &self.bufs, lock)
-    }
-}
-
-/// The sweeps of [`Workspace::value_iteration`] over `lock`'s states (all of them alone, one
-/// range in a team), sweep `i` from `bufs[i % 2]` into `bufs[(i + 1) % 2]`, `bufs[0]` zero at
-/// the start; every thread of a team stops at the same sweep, from the combined differences.
-/// Returns the sweeps done and whether they converged.
-fn value_sweeps(
-    mdp: &Mdp,
-    cfg: &Config,
-    bufs: &[SharedRows<'_, f64>; 2],
-    lock: &mut impl Lockstep<(f64, f64)>,
-) -> (u32, bool) {
-    let (n, gamma) = (mdp.n_states(), cfg.gamma);
-    let r = lock.states(n);
-    let mut iterations = 0;
-    while iterations < cfg.max_iterations {
-        let k = iterations as usize % 2;
-        // SAFETY: this sweep reads buffer k, complete since the last combine (or zero from the
-        // start), and writes this thread's states of the other, which no one reads until the
-        // combine below.
-        let (cur, nxt) = unsafe { (bufs[k].row(0), bufs[1 - k].row_mut(0, &r)) };
-        let mine = vi_sweep(mdp, gamma, cur, r.start, nxt);
-        let (lo_d, hi_d) = lock.combine(mine, |a, b| (a.0.min(b.0), a.1.max(b.1)));
-        // Terminal states take part with d = 0 (their value stays 0).
-        let (dmin, dmax) = if n == 0 { (0.0, 0.0) } else { (lo_d, hi_d) };
-        iterations += 1;
-        let (span, sup) = (dmax - dmin, dmax.max(-dmin));
-        if !span.is_finite() {
-            return (iterations, false);
-        }
-        if gamma < 1.0 && span <= 2.0 * cfg.tolerance {
-            let shift = gamma / (1.0 - gamma) * 0.5 * (dmin + dmax);
-            for (s, v) in r.clone().zip(nxt.iter_mut()) {
-                if !mdp.is_terminal(s) {
-                    *v += shift;
-                }
+        let (mdp, cfg, bufs) = (self.mdp, self.cfg, &self.bufs);
+        let (n, gamma) = (mdp.n_states(), cfg.gamma);
+        let r = lock.states(n);
+        let mut iterations = 0;
+        while iterations < cfg.max_iterations {
+            let k = iterations as usize % 2;
+            // SAFETY: this sweep reads buffer k, complete since the last combine (or zero from the
+            // start), and writes this thread's states of the other, which no one reads until the
+            // combine below.
+            let (cur, nxt) = unsafe { (bufs[k].row(0), bufs[1 - k].row_mut(0, &r)) };
+            let mine = vi_sweep(mdp, gamma, cur, r.start, nxt);
+            let (lo_d, hi_d) = lock.combine(mine, |a, b| (a.0.min(b.0), a.1.max(b.1)));
+            // Terminal states take part with d = 0 (their value stays 0).
+            let (dmin, dmax) = if n == 0 { (0.0, 0.0) } else { (lo_d, hi_d) };
+            iterations += 1;
+            let (span, sup) = (dmax - dmin, dmax.max(-dmin));
+            if !span.is_finite() {
+                return (iterations, false);
             }
-            return (iterations, true);
+            if gamma < 1.0 && span <= 2.0 * cfg.tolerance {
+                let shift = gamma / (1.0 - gamma) * 0.5 * (dmin + dmax);
+                for (s, v) in r.clone().zip(nxt.iter_mut()) {
+                    if !mdp.is_terminal(s) {
+                        *v += shift;
+                    }
+                }
+                return (iterations, true);
+            }
+            if sup < cfg.tolerance {
+                return (iterations, true);
+            }
         }
-        if sup < cfg.tolerance {
-            return (iterations, true);
-        }
+        (iterations, false)
     }
-    (iterations, false)
 }
 
 fn check_gamma(g: f64) -> Result<(), SolveError> {
