@@ -69,4 +69,7 @@ def recalibrate(exe: str, run_dir: Path, out: Path) -> Dict[str, Any]:
     p = subprocess.run([exe, "calibrate", str(run_dir), "--polynomial", "--out", str(out)], capture_output=True,
                        text=True, timeout=300)
     assert p.returncode == 0, p.stdout + p.stderr
-    return tomllib.loads(out.read_text())
+    refit = tomllib.loads(out.read_text())
+    # calibrate writes the overlay without [propulsion] when the power fit fails; its report says why
+    assert "propulsion" in refit.get(MISSION, {}), "no power fit in the overlay:\n" + p.stdout + p.stderr
+    return refit

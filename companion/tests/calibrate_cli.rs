@@ -407,23 +407,29 @@ fn a_changed_tracking_row_is_recovered_and_changes_the_version_flown() {
     );
 }
 
-/// A tlog entry: time stamp, then one MAVLink 2 frame from `sys`.
-fn tlog_entry(out: &mut Vec<u8>, t_us: u64, sys: u8, msg: &companion_link::Msg) {
+/// A tlog entry: time stamp, then one MAVLink 2 frame from `(sys, comp)`.
+fn tlog_entry(out: &mut Vec<u8>, t_us: u64, (sys, comp): (u8, u8), msg: &companion_link::Msg) {
     out.extend_from_slice(&t_us.to_be_bytes());
     let h = mavlink::MavHeader {
         system_id: sys.into(),
-        component_id: 1,
+        component_id: comp,
         sequence: 0,
     };
     mavlink::write_v2_msg(out, h, msg).unwrap();
 }
 
-/// The tlog of a flight of [`FLIGHT`]'s speeds at 5 Hz: the autopilot (system 1) says armed,
-/// position and pack; the companion's own frames (system 255, a pack reading of 1 kW) are not
-/// the vehicle's and must not count.
+/// The tlog of a flight of [`FLIGHT`]'s speeds at 5 Hz: the autopilot (1/1) says armed,
+/// position and pack; a ground station's frames (255/190) and the companion's own (1/191: the
+/// autopilot's system, as a companion is; `fly` logs the frames it sends), each with a disarmed
+/// heartbeat and a pack reading of 1 kW, are not the vehicle's and must not count. The
+/// companion's heartbeat falls between the autopilot's and its pack reading, as it does in a
+/// real tlog about one second in two.
 fn write_tlog(path: &Path) {
     use companion_link::Msg;
     use companion_link::dialect::*;
+    const AUTOPILOT: (u8, u8) = (1, 1);
+    const COMPANION: (u8, u8) = (1, 191);
+    const GCS: (u8, u8) = (255, 190);
     let hb = |armed: bool, autopilot| {
         Msg::HEARTBEAT(HEARTBEAT_DATA {
             autopilot,
@@ -462,16 +468,15 @@ fn write_tlog(path: &Path) {
     let mut out = Vec::new();
     let mut t = 1_000_000u64;
     let mut step = |out: &mut Vec<u8>, armed: bool, v: f64, alt: f64, p: f64| {
-        tlog_entry(out, t, 255, &hb(false, MavAutopilot::MAV_AUTOPILOT_INVALID));
-        tlog_entry(out, t, 255, &bat(1000.0));
-        tlog_entry(
-            out,
-            t,
-            1,
-            &hb(armed, MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA),
-        );
-        tlog_entry(out, t, 1, &pos(v, alt));
-        tlog_entry(out, t, 1, &bat(p));
+        let invalid = MavAutopilot::MAV_AUTOPILOT_INVALID;
+        tlog_entry(out, t, GCS, &hb(false, invalid));
+        tlog_entry(out, t, GCS, &bat(1000.0));
+        let ardupilot = MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA;
+        tlog_entry(out, t, AUTOPILOT, &hb(armed, ardupilot));
+        tlog_entry(out, t, AUTOPILOT, &pos(v, alt));
+        tlog_entry(out, t, COMPANION, &hb(false, invalid));
+        tlog_entry(out, t, COMPANION, &bat(1000.0));
+        tlog_entry(out, t, AUTOPILOT, &bat(p));
         t += 200_000;
     };
     for _ in 0..100 {

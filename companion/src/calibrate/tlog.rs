@@ -2,6 +2,8 @@
 //! BATTERY_STATUS on ArduPilot), read one entry at a time and decoded as `fly` decodes them
 //! (`companion_link::telemetry::Telemetry`): pack voltage x current from BATTERY_STATUS (until
 //! the first one, SYS_STATUS), speed and altitude from GLOBAL_POSITION_INT, armed from HEARTBEAT.
+//! Only the autopilot's frames count, known by system *and* component: a companion shares the
+//! autopilot's system id, and the tlog holds its own disarmed-looking heartbeats too.
 
 use super::power_fit::Sample;
 use crate::decision_log::frame_len;
@@ -24,7 +26,7 @@ pub fn for_each_sample(path: &Path, mut each: impl FnMut(Sample)) -> anyhow::Res
     let mut rd = BufReader::new(file);
     let mut ingest = companion_link::ingest::Ingest::new(None);
     let mut tel = Telemetry::new(TelemetryConfig::default());
-    let mut autopilot: Option<u32> = None;
+    let mut autopilot: Option<(u32, u8)> = None;
     let mut battery_status_seen = false;
     let mut buf = [0u8; MAX_ENTRY];
     let (mut offset, mut n) = (0u64, 0u64);
@@ -57,18 +59,21 @@ pub fn for_each_sample(path: &Path, mut each: impl FnMut(Sample)) -> anyhow::Res
             break;
         }
         offset += (8 + len) as u64;
-        let mut msgs: Vec<(u32, Msg)> = Vec::new();
+        let mut msgs: Vec<((u32, u8), Msg)> = Vec::new();
         ingest.push_each(&buf[8..8 + len], |fr| {
-            msgs.push((fr.header.system_id, fr.msg.clone()))
+            msgs.push((
+                (fr.header.system_id, fr.header.component_id),
+                fr.msg.clone(),
+            ))
         });
-        for (sys, msg) in msgs {
+        for (sender, msg) in msgs {
             if let Msg::HEARTBEAT(h) = &msg
                 && autopilot.is_none()
                 && h.autopilot != companion_link::dialect::MavAutopilot::MAV_AUTOPILOT_INVALID
             {
-                autopilot = Some(sys);
+                autopilot = Some(sender);
             }
-            if autopilot != Some(sys) {
+            if autopilot != Some(sender) {
                 continue;
             }
             tel.on_message(Duration::ZERO, &msg, companion_link::modes::Flavor::Other);
