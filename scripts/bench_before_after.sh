@@ -10,6 +10,9 @@
 #   --criterion LIST  criterion benches to run besides the examples, comma-separated bench target
 #                     names (default health,ingest; `none` for none; all of them:
 #                     cycle,health,ingest,solve,schedule)
+#   --same-models     both sides' bench_solve solve NEW's exported MDP models (the JSON format is
+#                     the same since b5c24f9): when the models changed between the revisions,
+#                     solve/* then compares the code alone (default: each side its own models)
 #
 # What runs: the release timing examples bench/compare uses, `bench_cycle` (the decision cycle:
 # steady, changing, worst, monolithic), `bench_solve` (every paper model exported under
@@ -36,6 +39,7 @@ cd "$(dirname "$0")/.."
 ROOT=$PWD
 ROUNDS=6
 QUICK=0
+SAME_MODELS=0
 CRITERION=health,ingest
 POS=()
 while [ $# -gt 0 ]; do
@@ -43,7 +47,8 @@ while [ $# -gt 0 ]; do
     --quick) QUICK=1; ROUNDS=2 ;;
     --rounds) ROUNDS=$2; shift ;;
     --criterion) CRITERION=$2; shift ;;
-    -h|--help) sed -n '2,30p' "$0"; exit 0 ;;
+    --same-models) SAME_MODELS=1 ;;
+    -h|--help) sed -n '2,36p' "$0"; exit 0 ;;
     -*) echo "unknown option $1" >&2; exit 2 ;;
     *) POS+=("$1") ;;
   esac
@@ -96,10 +101,11 @@ build_side new "$NEW_REV"
 t_built=$(date +%s)
 log "built in $((t_built - t_start)) s; running $ROUNDS rounds ..."
 
-python3 - "$WORK" "$ROUNDS" "$QUICK" "$CRITERION" <<'EOF'
+python3 - "$WORK" "$ROUNDS" "$QUICK" "$CRITERION" "$SAME_MODELS" <<'EOF'
 import glob, json, os, re, shlex, statistics, subprocess, sys, tempfile, time
 
 work, rounds, quick, criterion = sys.argv[1], int(sys.argv[2]), sys.argv[3] == "1", sys.argv[4]
+same_models = sys.argv[5] == "1"
 criterion = [c for c in criterion.split(",") if c]
 
 def side_env(side):
@@ -147,7 +153,7 @@ def exported_models(src):
     return sorted(found, key=os.path.basename)
 
 for side, s in sides.items():
-    models = exported_models(s["src"])
+    models = exported_models(sides["new"]["src"] if same_models else s["src"])
     if not models:
         raise SystemExit(f"{side}: no exported MDP models (benches/models/*.json) in {s['src']}")
     budget = 0.05 if quick else 0.15
@@ -160,8 +166,13 @@ for side, s in sides.items():
     s["bn"] = os.path.join(s["dir"], "health_bn.json")
     run(side, [exe(side, "example:export_health_bn"), s["env"]["COMPANION_PARAMS"], s["bn"], "20"])
     s["models"] = {os.path.basename(p): open(p, "rb").read() for p in models}
-if sides["base"]["models"] != sides["new"]["models"]:
-    print("warning: the exported MDP models differ between the revisions", file=sys.stderr)
+if same_models:
+    own = {os.path.basename(p): open(p, "rb").read() for p in exported_models(sides["base"]["src"])}
+    if own != sides["base"]["models"]:
+        print("note: --same-models: the base solves the new revision's MDP models, not its own", file=sys.stderr)
+elif sides["base"]["models"] != sides["new"]["models"]:
+    print("warning: the exported MDP models differ between the revisions (--same-models compares the "
+          "solvers on one set)", file=sys.stderr)
 def bn_export(path):
     # The export names each manager's params file by its absolute path: not part of the model.
     d = json.load(open(path))
