@@ -51,13 +51,6 @@ impl Vehicle {
         ))
     }
 
-    /// A HEARTBEAT that can choose the autopilot: from a flight controller (an autopilot type,
-    /// not INVALID) of a vehicle (not a GCS, companion, gimbal, camera or other peripheral).
-    /// `--autopilot-sysid` narrows the choice further in `on_frame`.
-    pub(super) fn is_autopilot_heartbeat(h: &HEARTBEAT_DATA) -> bool {
-        h.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID && is_vehicle_type(h.mavtype)
-    }
-
     /// An autopilot other than the chosen one (or than the one `--autopilot-sysid` asks for)
     /// speaks: reported once per identity, never obeyed.
     pub(super) fn other_autopilot(&mut self, sys: u8, comp: u8) {
@@ -143,6 +136,14 @@ impl Vehicle {
             "autopilot {sys}/{comp} chosen: the first autopilot heard (no pin); pin it with --autopilot-sysid {sys}{compid}"
         ))
     }
+}
+
+/// A HEARTBEAT that can choose the autopilot: from a flight controller (an autopilot type,
+/// not INVALID) of a vehicle (not a GCS, companion, gimbal, camera or other peripheral).
+/// `--autopilot-sysid` narrows the choice further in `Vehicle::on_frame`; `calibrate` reads a
+/// tlog's autopilot by it too.
+pub fn is_autopilot_heartbeat(h: &HEARTBEAT_DATA) -> bool {
+    h.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID && is_vehicle_type(h.mavtype)
 }
 
 /// A vehicle's MAV_TYPE, not a ground station, companion computer or peripheral.

@@ -25,7 +25,7 @@ use companion_core::observations::Observations;
 use companion_core::record::{CommandOutcome, CommandRecord, Event, LinkEvent};
 use executor::{Purpose, step_name};
 use identity::Choice;
-pub use identity::{AUTOPILOT_COMPONENT, OTHER_COMPONENT_WAIT};
+pub use identity::{AUTOPILOT_COMPONENT, OTHER_COMPONENT_WAIT, is_autopilot_heartbeat};
 use job::{Job, JobKey, JobStatus, Running};
 use pack::PackRequest;
 pub use pack::{PACK_PARAM_ATTEMPTS, PACK_PARAM_RETRY, pack_params};
@@ -331,7 +331,7 @@ impl Vehicle {
         let sys = f.header.system_id.min(255) as u8;
         let comp = f.header.component_id;
         if let Msg::HEARTBEAT(h) = &f.msg
-            && Self::is_autopilot_heartbeat(h)
+            && is_autopilot_heartbeat(h)
             && self.target != Some((sys, comp))
         {
             let choice = self.choice(now, sys, comp);

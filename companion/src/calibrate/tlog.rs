@@ -2,8 +2,9 @@
 //! BATTERY_STATUS on ArduPilot), read one entry at a time and decoded as `fly` decodes them
 //! (`companion_link::telemetry::Telemetry`): pack voltage x current from BATTERY_STATUS (until
 //! the first one, SYS_STATUS), speed and altitude from GLOBAL_POSITION_INT, armed from HEARTBEAT.
-//! Only the autopilot's frames count, known by system *and* component: a companion shares the
-//! autopilot's system id, and the tlog holds its own disarmed-looking heartbeats too.
+//! Only the autopilot's frames count: the system *and* component of the first HEARTBEAT `fly`
+//! would take for an autopilot (`companion_link::vehicle::is_autopilot_heartbeat`). A companion
+//! shares the autopilot's system id, and the tlog holds its own disarmed-looking heartbeats too.
 
 use super::power_fit::Sample;
 use crate::decision_log::frame_len;
@@ -69,7 +70,7 @@ pub fn for_each_sample(path: &Path, mut each: impl FnMut(Sample)) -> anyhow::Res
         for (sender, msg) in msgs {
             if let Msg::HEARTBEAT(h) = &msg
                 && autopilot.is_none()
-                && h.autopilot != companion_link::dialect::MavAutopilot::MAV_AUTOPILOT_INVALID
+                && companion_link::vehicle::is_autopilot_heartbeat(h)
             {
                 autopilot = Some(sender);
             }
