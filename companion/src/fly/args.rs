@@ -82,9 +82,10 @@ pub struct FlyArgs {
     /// `[flight] operator_confirm_s`). Off by default: arming for a manual flight is not a start.
     #[arg(long)]
     pub start_on_arm: bool,
-    /// A ground station's MAVLink system id whose MAV_CMD_MISSION_START is taken even before it
-    /// sent a GCS HEARTBEAT (repeat for several). Systems heard sending a GCS HEARTBEAT count
-    /// too; an autopilot component never does.
+    /// The operator's ground station: its MAVLink system id (repeat for several). When given,
+    /// only these may start a mission (even before their GCS HEARTBEAT); a GCS HEARTBEAT from
+    /// another system is reported, never obeyed. Without it, systems heard sending a GCS
+    /// HEARTBEAT count; an autopilot component never does.
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
     pub gcs_sysid: Vec<u8>,
 }
