@@ -23,7 +23,8 @@ pub struct FlyArgs {
     /// unsigned commands addressed to us.
     #[arg(long)]
     pub signing_key: Option<PathBuf>,
-    /// Second MAVLink connection carrying onboard monitors (NAMED_VALUE_FLOAT, ...).
+    /// Second MAVLink connection carrying onboard monitors (NAMED_VALUE_FLOAT, ...); on a serial
+    /// port or a loopback address it is a dedicated onboard link (--learn-cpt may learn from it).
     #[arg(long, value_parser = url::parse)]
     pub onboard: Option<ConnectUrl>,
     /// Silence after which the autopilot counts as lost (e.g. 3s, 500ms).
@@ -55,7 +56,9 @@ pub struct FlyArgs {
     /// Learn the health BN's CPT rows whose outcome the telemetry gives (the tracking versions'
     /// `C_Vk` and `U_detection_fail`, from the onboard tracker's `target_detected`) as the
     /// flight goes, bounded by params/learning.toml and logged in `cpt_learned`
-    /// (docs/calibrate.md). Off by default.
+    /// (docs/calibrate.md). Off by default. Needs a signed link (--signing-key) or a dedicated
+    /// onboard link carrying the tracker (--onboard on a serial port or a loopback address,
+    /// whose reports are then the only ones read); refused at start otherwise.
     #[arg(long)]
     pub learn_cpt: bool,
     /// Command only the autopilot with this MAVLink system id (when several speak on the link);
