@@ -107,3 +107,16 @@ def test_signing_setup_pinned_with_an_impostor_beside_the_autopilot_is_refused(a
     assert p.returncode not in (None, 0), out + err
     assert "another autopilot, 7/1" in err, err
     assert setups_sent(rl) == [], f"SETUP_SIGNING sent to {setups_sent(rl)}"
+
+
+def test_signing_setup_pinned_alone_sends_the_key_only_to_the_pinned_autopilot(autopilot_factory, relay, tmp_path):
+    """The stand-in has no MAVLink signing, so the set-up ends unverified; what matters here is where the key went:
+    every SETUP_SIGNING the relay saw was addressed to the pinned 1/1."""
+    ap = autopilot_factory()
+    rl = relay(int(ap.standin.url.rsplit(":", 1)[1]))
+    key = tmp_path / "signing.key"
+    p = signing_setup(rl.url, key, "--autopilot-sysid", "1", "--autopilot-compid", "1")
+    out, err = p.communicate(timeout=60)
+    assert p.returncode not in (None, 0), out + err
+    assert "its frames stay unsigned" in err, err
+    assert setups_sent(rl) and set(setups_sent(rl)) == {(1, 1)}, setups_sent(rl)
