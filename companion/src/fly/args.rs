@@ -27,6 +27,11 @@ pub struct FlyArgs {
     /// port or a loopback address it is a dedicated onboard link (--learn-cpt may learn from it).
     #[arg(long, value_parser = url::parse)]
     pub onboard: Option<ConnectUrl>,
+    /// The operator declares the --onboard link a private onboard wire (e.g. a direct Ethernet
+    /// cable to the tracker, nothing else on it): a dedicated onboard link for --learn-cpt even
+    /// on a network address.
+    #[arg(long, requires = "onboard")]
+    pub onboard_private: bool,
     /// Silence after which the autopilot counts as lost (e.g. 3s, 500ms).
     #[arg(long, default_value = "3s", value_parser = parse_duration)]
     pub link_timeout: Duration,

@@ -54,9 +54,11 @@ pub fn check_args(args: &FlyArgs) -> anyhow::Result<LearningSource> {
         return Ok(LearningSource::Any);
     }
     match &args.onboard {
-        Some(u) if is_dedicated_onboard(u) => Ok(LearningSource::OnboardOnly),
+        Some(u) if is_dedicated_onboard(u) || args.onboard_private => {
+            Ok(LearningSource::OnboardOnly)
+        }
         Some(u) => anyhow::bail!(
-            "--learn-cpt: the links are unsigned and --onboard {} is reachable from a network: anyone there could send the tracker's reports and choose where the learned rows go; learn with a signed link (--signing-key, made with `companion signing-setup`) or a dedicated onboard link (--onboard on a serial port or a loopback address)",
+            "--learn-cpt: the links are unsigned and --onboard {} is reachable from a network: anyone there could send the tracker's reports and choose where the learned rows go; learn with a signed link (--signing-key, made with `companion signing-setup`) or a dedicated onboard link (--onboard on a serial port or a loopback address, or --onboard-private when that network is a private wire to the tracker alone)",
             crate::review::text::escape_controls(&u.to_string(), false)
         ),
         None => anyhow::bail!(
@@ -332,6 +334,15 @@ mod tests {
             "{e}"
         );
         assert_eq!(check(&["--signing-key", "k"]), Ok(LearningSource::Any));
+        // The operator declares the network link a private wire.
+        assert_eq!(
+            check(&["--onboard", "udpin:0.0.0.0:14560", "--onboard-private"]),
+            Ok(LearningSource::OnboardOnly)
+        );
+        assert!(
+            FlyArgs::from_cli(["--connect", "udpin:0.0.0.0:14550", "--onboard-private"]).is_err(),
+            "--onboard-private needs --onboard"
+        );
         for onboard in [
             "serial:/dev/ttyUSB1:921600",
             "udpin:127.0.0.1:14560",
