@@ -8,6 +8,7 @@ the core's output for the logged observations.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shutil
@@ -19,6 +20,7 @@ import pytest
 
 from standin_autopilot import mavlink
 from test_companion_fly import assert_mission_completed, fly_mission
+from test_learn_cpt_trust import free_udp_port
 from test_operator_and_landing import COMPANION, short_route, stop, wait
 
 NEW_FLIGHT_EVENT = "flight over: landed and disarmed; waiting for the operator"
@@ -68,9 +70,11 @@ def test_standin_flight_replays_equal_in_every_cycle(autopilot_factory, fly, mon
 def test_standin_flight_learning_cpt_rows_replays_equal(autopilot_factory, fly, monitors_factory, tmp_path):
     """`fly --learn-cpt`: the tracking steps the onboard tracker reports kept update the flown version's
     C_Vk row in flight (records carry `cpt_learned`, bounded by params/learning.toml), and replay re-derives
-    every update from the log: all cycles equal. A logged count edited by hand is caught."""
-    ap = autopilot_factory()
-    f = fly_mission(ap, fly, monitors_factory, extra=("--learn-cpt",))
+    every update from the log: all cycles equal. A logged count edited by hand is caught. The tracker speaks on
+    a dedicated onboard link (loopback): on the unsigned autopilot link alone --learn-cpt is refused."""
+    port = free_udp_port()
+    ap = dataclasses.replace(autopilot_factory(), monitor_url=f"udpout:127.0.0.1:{port}")
+    f = fly_mission(ap, fly, monitors_factory, extra=("--learn-cpt", "--onboard", f"udpin:127.0.0.1:{port}"))
     assert_mission_completed(f)
     learned = [(r["cycle"], u) for r in f.records if "kind" not in r for u in r.get("cpt_learned", [])]
     assert learned, "no CPT row learned in a flight that tracked"

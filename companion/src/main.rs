@@ -162,11 +162,12 @@ fn main() -> Result<()> {
             args.params = profile(args.params.take(), args.vehicle.as_deref())?;
             companion::check::run(&args)
         }
+        // Names the operator gave (--vehicle, paths, URLs) reach the terminal escaped.
         Command::Fly(mut args) => {
-            args.params = profile(args.params.take(), args.vehicle.as_deref())?;
-            fly(args)
+            args.params = profile(args.params.take(), args.vehicle.as_deref()).map_err(escaped)?;
+            fly(args).map_err(escaped)
         }
-        Command::SigningSetup(args) => companion::signing_setup::run(&args),
+        Command::SigningSetup(args) => companion::signing_setup::run(&args).map_err(escaped),
         Command::Review {
             run_or_log,
             out,
@@ -193,6 +194,15 @@ fn main() -> Result<()> {
             std::process::exit(companion::replay::run_cli(&run_folder));
         }
     }
+}
+
+/// An error whose text may hold names from the command line or the disk, with every control
+/// character escaped: shown, never obeyed by the terminal.
+fn escaped(e: anyhow::Error) -> anyhow::Error {
+    anyhow::anyhow!(companion::review::text::escape_controls(
+        &format!("{e:#}"),
+        false
+    ))
 }
 
 /// `--params` with `--vehicle NAME` applied: the profile's overlay in place of the directory.

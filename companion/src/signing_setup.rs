@@ -6,15 +6,21 @@
 //! `GCS_Signing.cpp` `load_signing_key`), and it answers a signed COMMAND_LONG
 //! (MAV_CMD_REQUEST_MESSAGE) with a COMMAND_ACK that verifies with the key. Anything short of
 //! both is a failure, said with what was seen, and a non-zero exit.
+//!
+//! The secret goes only where the operator names (issue 40 item 5): the autopilot's system AND
+//! component are both required, the pinned autopilot is listened to for [`LISTEN`] first, and any
+//! other autopilot heard on the link before the proof ends the set-up, the key unsent if it was
+//! heard first.
 
 use crate::fly::transport::{self, Inbound, UdpPeer};
+use crate::review::text::escape_controls;
 use anyhow::Context;
 use companion_link::Msg;
 use companion_link::actions::ActionTable;
 use companion_link::dialect::*;
 use companion_link::ingest::{self, Encoder, Frame, Ingest};
 use companion_link::url::{self, ConnectUrl};
-use companion_link::vehicle::{Vehicle, VehicleConfig};
+use companion_link::vehicle::{Vehicle, VehicleConfig, is_autopilot_heartbeat};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -31,12 +37,13 @@ pub struct SigningSetupArgs {
     /// Write a new key over an existing key file (the old key stops working with the autopilot).
     #[arg(long)]
     pub force: bool,
-    /// Provision only the autopilot with this system id (default: the first autopilot heard).
+    /// The autopilot to provision: its MAVLink system id (required, with --autopilot-compid:
+    /// the key goes only to the autopilot named, never to the first one heard).
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
     pub autopilot_sysid: Option<u8>,
-    /// With --autopilot-sysid: the autopilot's component id.
-    #[arg(long, default_value_t = 1, requires = "autopilot_sysid", value_parser = clap::value_parser!(u8).range(1..))]
-    pub autopilot_compid: u8,
+    /// The autopilot's component id (required; 1 is MAV_COMP_ID_AUTOPILOT1, ArduPilot's and PX4's).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
+    pub autopilot_compid: Option<u8>,
     /// Give up when no autopilot HEARTBEAT arrives within this long.
     #[arg(long, default_value = "30s", value_parser = companion_link::liveness::parse_duration)]
     pub timeout: Duration,
@@ -49,6 +56,9 @@ const SETUP_ATTEMPTS: u32 = 5;
 /// The signed REQUEST_MESSAGE is sent again while unanswered, this often and this many times.
 const VERIFY_RETRY: Duration = Duration::from_secs(1);
 const VERIFY_ATTEMPTS: u32 = 5;
+/// The pinned autopilot is listened to this long (two 1 Hz heartbeats) before the key is sent:
+/// another autopilot answering on the link in that time stops the set-up with the key unsent.
+pub const LISTEN: Duration = Duration::from_secs(2);
 /// The message the signed verification command asks for.
 const AUTOPILOT_VERSION_ID: f32 = 148.0;
 
@@ -112,6 +122,8 @@ pub fn write_new_key(path: &Path, force: bool) -> anyhow::Result<[u8; 32]> {
 #[derive(Debug, Clone, PartialEq)]
 enum Phase {
     WaitAutopilot,
+    /// The pinned autopilot heard (first at): listening for others before the key goes out.
+    Listen(Duration),
     /// SETUP_SIGNING sent (attempts, last at): waiting for the autopilot's frames to be signed.
     Setup(u32, Duration),
     /// The signed REQUEST_MESSAGE sent (attempts, last at): waiting for its signed ACK.
@@ -123,7 +135,9 @@ enum Phase {
 pub struct Provisioner {
     key: [u8; 32],
     initial_timestamp: u64,
-    /// The autopilot is chosen by the same rules as `fly` (pin, component 1 first).
+    /// The pinned autopilot (system, component): the only one the key goes to.
+    pin: (u8, u8),
+    /// Tracks the pinned autopilot's state (armed) as `fly` does.
     vehicle: Vehicle,
     keyed: Ingest,
     plain: Encoder,
@@ -136,21 +150,22 @@ pub struct Provisioner {
 }
 
 impl Provisioner {
-    /// `initial_timestamp`: SETUP_SIGNING's, in [`signing_timestamp`] units; `heartbeat_timeout`:
-    /// how long to wait for the autopilot.
+    /// `initial_timestamp`: SETUP_SIGNING's, in [`signing_timestamp`] units; `autopilot`: the
+    /// pinned system and component; `heartbeat_timeout`: how long to wait for it.
     pub fn new(
         key: [u8; 32],
         initial_timestamp: u64,
-        autopilot: Option<(u8, u8)>,
+        autopilot: (u8, u8),
         heartbeat_timeout: Duration,
     ) -> Self {
         let cfg = VehicleConfig {
-            autopilot_sysid: autopilot.map(|a| a.0),
-            autopilot_compid: autopilot.map_or(1, |a| a.1),
+            autopilot_sysid: Some(autopilot.0),
+            autopilot_compid: autopilot.1,
             ..VehicleConfig::default()
         };
         Self {
             key,
+            pin: autopilot,
             initial_timestamp,
             vehicle: Vehicle::new(cfg, ActionTable::default(), None),
             keyed: Ingest::new(Some(ingest::signing_data(key))),
@@ -169,11 +184,6 @@ impl Provisioner {
         self.vehicle.target
     }
 
-    /// When the autopilot was chosen without a pin: which, and how to pin it.
-    pub fn identity_note(&self) -> Option<String> {
-        self.vehicle.identity_note()
-    }
-
     /// Ok(what was proven) or Err(why not), once finished.
     pub fn outcome(&self) -> Option<&Result<String, String>> {
         match &self.phase {
@@ -183,7 +193,7 @@ impl Provisioner {
     }
 
     fn setup_signing(&mut self, now: Duration, attempt: u32) -> Vec<Vec<u8>> {
-        let (sys, comp) = self.vehicle.target.unwrap_or((1, 1));
+        let (sys, comp) = self.pin;
         self.phase = Phase::Setup(attempt, now);
         let msg = Msg::SETUP_SIGNING(SETUP_SIGNING_DATA {
             initial_timestamp: self.initial_timestamp,
@@ -196,7 +206,7 @@ impl Provisioner {
     }
 
     fn request(&mut self, now: Duration, attempt: u32) -> Vec<Vec<u8>> {
-        let (sys, comp) = self.vehicle.target.unwrap_or((1, 1));
+        let (sys, comp) = self.pin;
         self.phase = Phase::Verify(attempt, now);
         let msg = Msg::COMMAND_LONG(COMMAND_LONG_DATA {
             target_system: sys,
@@ -211,22 +221,39 @@ impl Provisioner {
 
     /// A frame from the link (parsed without a key: signed or not, not yet verified).
     pub fn on_frame(&mut self, now: Duration, f: &Frame) -> Vec<Vec<u8>> {
+        if self.outcome().is_some() {
+            return Vec::new();
+        }
         let _ = self.vehicle.on_frame(now, f);
+        let src = (f.header.system_id.min(255) as u8, f.header.component_id);
+        if let Msg::HEARTBEAT(h) = &f.msg
+            && is_autopilot_heartbeat(h)
+            && src != self.pin
+        {
+            self.another_autopilot(src);
+            return Vec::new();
+        }
         let Some(target) = self.vehicle.target else {
             return Vec::new();
         };
         self.plain.system_id = target.0;
         self.signed.system_id = target.0;
-        let from_target = (f.header.system_id.min(255) as u8, f.header.component_id) == target;
+        let from_target = src == target;
+        if matches!(self.phase, Phase::WaitAutopilot | Phase::Listen(_))
+            && self.vehicle.readiness.armed
+        {
+            self.phase = Phase::Done(Err(format!(
+                "autopilot {}/{} is armed: a key is set up on the ground, disarmed, not in flight",
+                target.0, target.1
+            )));
+            return Vec::new();
+        }
         match self.phase.clone() {
             Phase::WaitAutopilot => {
-                if self.vehicle.readiness.armed {
-                    self.phase = Phase::Done(Err(format!(
-                        "autopilot {}/{} is armed: a key is set up on the ground, disarmed, not in flight",
-                        target.0, target.1
-                    )));
-                    return Vec::new();
-                }
+                self.phase = Phase::Listen(now);
+                Vec::new()
+            }
+            Phase::Listen(since) if now.saturating_sub(since) >= LISTEN => {
                 self.setup_signing(now, 1)
             }
             Phase::Setup(..) | Phase::Verify(..) if from_target => {
@@ -258,18 +285,32 @@ impl Provisioner {
         }
     }
 
-    /// Resends and give-ups.
+    /// Another autopilot answers on the link: the set-up ends; the key was never sent when it is
+    /// heard before the listening time is over.
+    fn another_autopilot(&mut self, (sys, comp): (u8, u8)) {
+        let (ps, pc) = self.pin;
+        let sent = match self.phase {
+            Phase::WaitAutopilot | Phase::Listen(_) => "the key was not sent".to_string(),
+            _ => format!(
+                "the key went to {ps}/{pc} alone (addressed to it, in clear on this link), not verified"
+            ),
+        };
+        self.phase = Phase::Done(Err(format!(
+            "another autopilot, {sys}/{comp}, answers on this link besides the pinned {ps}/{pc}: {sent}; set the key up on a link where only that autopilot speaks (its USB or a direct serial wire)"
+        )));
+    }
+
+    /// Resends and give-ups; the key goes out once the pinned autopilot was listened to
+    /// for [`LISTEN`] alone.
     pub fn tick(&mut self, now: Duration) -> Vec<Vec<u8>> {
         match self.phase.clone() {
+            Phase::Listen(since) if now.saturating_sub(since) >= LISTEN => {
+                self.setup_signing(now, 1)
+            }
             Phase::WaitAutopilot if now >= self.wait_until => {
                 self.phase = Phase::Done(Err(format!(
-                    "no autopilot HEARTBEAT within {:?}{}",
-                    self.wait_until,
-                    if self.vehicle.other_autopilot_heartbeats > 0 {
-                        "; other autopilots were heard, see --autopilot-sysid"
-                    } else {
-                        ""
-                    }
+                    "no HEARTBEAT from the pinned autopilot {}/{} within {:?}",
+                    self.pin.0, self.pin.1, self.wait_until,
                 )));
                 Vec::new()
             }
@@ -310,43 +351,64 @@ impl Provisioner {
     }
 }
 
-/// The subcommand: write the key, provision it, prove it; Ok only when proven.
-pub fn run(args: &SigningSetupArgs) -> anyhow::Result<()> {
-    let key = write_new_key(&args.key, args.force)?;
-    println!(
-        "signing-setup: new key written to {} (mode 0600)",
-        args.key.display()
-    );
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .context("starting the tokio runtime")?;
-    let outcome = rt.block_on(provision(args, key));
-    match outcome {
-        Ok(done) => {
-            println!("signing-setup: verified: {done}");
-            println!(
-                "signing-setup: fly with --signing-key {} (and --require-signing to refuse an unsigned link)",
-                args.key.display()
-            );
-            Ok(())
-        }
-        Err(why) => anyhow::bail!(
-            "signing-setup on {}: NOT verified: {why} (the key stays in {})",
-            args.connect,
-            args.key.display()
+/// The pinned autopilot of the command line, or why there is none: both ids are required.
+pub fn pin(args: &SigningSetupArgs) -> anyhow::Result<(u8, u8)> {
+    match (args.autopilot_sysid, args.autopilot_compid) {
+        (Some(sys), Some(comp)) => Ok((sys, comp)),
+        (sys, comp) => anyhow::bail!(
+            "signing-setup needs the autopilot named: {} missing; the secret key goes only to the system and component you give (e.g. --autopilot-sysid 1 --autopilot-compid 1), never to whichever autopilot speaks first; nothing was written or sent",
+            match (sys, comp) {
+                (None, None) => "--autopilot-sysid and --autopilot-compid",
+                (None, _) => "--autopilot-sysid",
+                _ => "--autopilot-compid",
+            }
         ),
     }
 }
 
-async fn provision(args: &SigningSetupArgs, key: [u8; 32]) -> Result<String, String> {
-    let pin = args.autopilot_sysid.map(|s| (s, args.autopilot_compid));
+/// The subcommand: write the key, provision it, prove it; Ok only when proven.
+pub fn run(args: &SigningSetupArgs) -> anyhow::Result<()> {
+    let pin = pin(args)?;
+    // The file name is the operator's: shown escaped, never sent to the terminal raw.
+    let shown = escape_controls(&args.key.display().to_string(), false);
+    let key = write_new_key(&args.key, args.force)
+        .map_err(|e| anyhow::anyhow!(escape_controls(&format!("{e:#}"), false)))?;
+    println!("signing-setup: new key written to {shown} (mode 0600)");
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the tokio runtime")?;
+    let outcome = rt.block_on(provision(args, pin, key));
+    match outcome {
+        Ok(done) => {
+            println!("signing-setup: verified: {done}");
+            println!(
+                "signing-setup: fly with --signing-key {shown} --autopilot-sysid {} --autopilot-compid {} (and --require-signing to refuse an unsigned link)",
+                pin.0, pin.1
+            );
+            Ok(())
+        }
+        Err(why) => anyhow::bail!(
+            "signing-setup on {}: NOT verified: {why} (the key stays in {shown})",
+            escape_controls(&args.connect.to_string(), false)
+        ),
+    }
+}
+
+async fn provision(
+    args: &SigningSetupArgs,
+    pin: (u8, u8),
+    key: [u8; 32],
+) -> Result<String, String> {
     let ts = signing_timestamp(std::time::SystemTime::now());
     let mut p = Provisioner::new(key, ts, pin, args.timeout);
     let mut link = transport::spawn(args.connect.clone(), Duration::from_secs(1));
     let mut plain = Ingest::new(None);
     let mut peer = UdpPeer::default();
-    let mut said_choice = false;
+    eprintln!(
+        "signing-setup: waiting for autopilot {}/{} (pinned); any other autopilot heard stops the set-up",
+        pin.0, pin.1
+    );
     let start = Instant::now();
     let mut tick = tokio::time::interval(Duration::from_millis(100));
     loop {
@@ -376,13 +438,6 @@ async fn provision(args: &SigningSetupArgs, key: [u8; 32]) -> Result<String, Str
                 None => return Err("the transport task stopped".into()),
             },
             _ = tick.tick() => out.extend(p.tick(start.elapsed())),
-        }
-        if !said_choice && let Some(t) = p.target() {
-            said_choice = true;
-            match p.identity_note() {
-                Some(note) => eprintln!("signing-setup: {note}"),
-                None => eprintln!("signing-setup: autopilot {}/{} (pinned)", t.0, t.1),
-            }
         }
         for bytes in out {
             let _ = link.outbound.send(bytes).await;
@@ -444,10 +499,42 @@ mod tests {
         Duration::from_secs_f64(t)
     }
 
+    /// The pinned 1/1 heard alone for LISTEN: the first SETUP_SIGNING sent.
+    fn heard(mut p: Provisioner) -> Provisioner {
+        assert!(
+            p.on_frame(s(0.0), &autopilot(1, 1, &hb(false), None))
+                .is_empty()
+        );
+        let out = sent(&p.tick(LISTEN));
+        assert!(matches!(&out[..], [f] if matches!(f.msg, Msg::SETUP_SIGNING(_))));
+        p
+    }
+
+    /// Every SETUP_SIGNING in `out`, with its target.
+    fn setups(out: &[Vec<u8>]) -> Vec<(u8, u8)> {
+        sent(out)
+            .iter()
+            .filter_map(|f| match &f.msg {
+                Msg::SETUP_SIGNING(m) => Some((m.target_system, m.target_component)),
+                _ => None,
+            })
+            .collect()
+    }
+
     #[test]
     fn provisions_then_proves_the_key_by_a_signed_exchange() {
-        let mut p = Provisioner::new(KEY, 123_456, None, s(30.0));
-        let out = sent(&p.on_frame(s(0.0), &autopilot(1, 1, &hb(false), None)));
+        let mut p = Provisioner::new(KEY, 123_456, (1, 1), s(30.0));
+        // The pinned autopilot is listened to first: nothing goes out before LISTEN.
+        assert!(
+            p.on_frame(s(0.0), &autopilot(1, 1, &hb(false), None))
+                .is_empty()
+        );
+        assert!(
+            p.on_frame(s(1.0), &autopilot(1, 1, &hb(false), None))
+                .is_empty()
+        );
+        assert!(p.tick(s(1.9)).is_empty());
+        let out = sent(&p.tick(s(2.0)));
         assert_eq!(out.len(), 1);
         assert!(
             !out[0].signed,
@@ -463,13 +550,13 @@ mod tests {
         }
         // Still unsigned: sent again after the retry interval, not before.
         assert!(
-            p.on_frame(s(0.5), &autopilot(1, 1, &hb(false), None))
+            p.on_frame(s(2.5), &autopilot(1, 1, &hb(false), None))
                 .is_empty()
         );
-        assert!(p.tick(s(1.0)).is_empty());
-        assert_eq!(sent(&p.tick(s(1.6))).len(), 1);
+        assert!(p.tick(s(3.0)).is_empty());
+        assert_eq!(sent(&p.tick(s(3.6))).len(), 1);
         // Signed with our key: the verification command goes out, signed.
-        let out = sent(&p.on_frame(s(2.0), &autopilot(1, 1, &hb(false), Some(KEY))));
+        let out = sent(&p.on_frame(s(4.0), &autopilot(1, 1, &hb(false), Some(KEY))));
         assert_eq!(out.len(), 1);
         assert!(out[0].signed);
         assert!(
@@ -485,16 +572,15 @@ mod tests {
             None,
             "a signed heartbeat alone does not prove it obeys us"
         );
-        p.on_frame(s(2.5), &autopilot(1, 1, &ack(), Some(KEY)));
+        p.on_frame(s(4.5), &autopilot(1, 1, &ack(), Some(KEY)));
         let done = p.outcome().unwrap().as_ref().unwrap();
         assert!(done.contains("autopilot 1/1 holds the key"), "{done}");
     }
 
     #[test]
     fn another_key_on_the_autopilot_is_a_clear_failure() {
-        let mut p = Provisioner::new(KEY, 1, None, s(30.0));
-        p.on_frame(s(0.0), &autopilot(1, 1, &hb(false), None));
-        let mut t = 0.0;
+        let mut p = heard(Provisioner::new(KEY, 1, (1, 1), s(30.0)));
+        let mut t = LISTEN.as_secs_f64();
         while p.outcome().is_none() && t < 20.0 {
             t += 0.5;
             p.on_frame(s(t), &autopilot(1, 1, &hb(false), Some([9; 32])));
@@ -506,7 +592,7 @@ mod tests {
 
     #[test]
     fn an_autopilot_that_ignores_setup_signing_is_a_clear_failure() {
-        let mut p = Provisioner::new(KEY, 1, None, s(30.0));
+        let mut p = Provisioner::new(KEY, 1, (1, 1), s(30.0));
         let mut t = 0.0;
         let mut setups = 0;
         while p.outcome().is_none() && t < 20.0 {
@@ -524,9 +610,8 @@ mod tests {
 
     #[test]
     fn a_signed_heartbeat_without_an_answer_is_not_verified() {
-        let mut p = Provisioner::new(KEY, 1, None, s(30.0));
-        p.on_frame(s(0.0), &autopilot(1, 1, &hb(false), None));
-        let mut t = 0.0;
+        let mut p = heard(Provisioner::new(KEY, 1, (1, 1), s(30.0)));
+        let mut t = LISTEN.as_secs_f64();
         while p.outcome().is_none() && t < 20.0 {
             t += 0.5;
             p.on_frame(s(t), &autopilot(1, 1, &hb(false), Some(KEY)));
@@ -538,7 +623,7 @@ mod tests {
 
     #[test]
     fn an_armed_autopilot_is_not_provisioned() {
-        let mut p = Provisioner::new(KEY, 1, None, s(30.0));
+        let mut p = Provisioner::new(KEY, 1, (1, 1), s(30.0));
         assert!(
             p.on_frame(s(0.0), &autopilot(1, 1, &hb(true), None))
                 .is_empty()
@@ -548,20 +633,113 @@ mod tests {
     }
 
     #[test]
-    fn the_pin_provisions_only_the_named_component() {
-        let mut p = Provisioner::new(KEY, 1, Some((1, 1)), s(30.0));
+    fn an_impostor_heard_first_gets_nothing_and_the_set_up_is_refused() {
+        // 7/1 (another system) and 1/2 (another component of the pinned system) alike.
+        for impostor in [(7, 1), (1, 2)] {
+            let mut p = Provisioner::new(KEY, 1, (1, 1), s(30.0));
+            let mut out = p.on_frame(s(0.0), &autopilot(impostor.0, impostor.1, &hb(false), None));
+            for i in 1..20 {
+                let t = f64::from(i) * 0.5;
+                out.extend(p.on_frame(s(t), &autopilot(1, 1, &hb(false), None)));
+                out.extend(p.tick(s(t)));
+            }
+            assert_eq!(setups(&out), vec![], "{impostor:?}");
+            let why = p.outcome().unwrap().as_ref().unwrap_err();
+            assert!(
+                why.contains(&format!("another autopilot, {}/{}", impostor.0, impostor.1))
+                    && why.contains("the key was not sent"),
+                "{why}"
+            );
+        }
+    }
+
+    #[test]
+    fn an_impostor_heard_while_listening_stops_the_set_up_before_the_key_goes_out() {
+        let mut p = Provisioner::new(KEY, 1, (1, 1), s(30.0));
+        let mut out = p.on_frame(s(0.0), &autopilot(1, 1, &hb(false), None));
+        out.extend(p.on_frame(s(1.5), &autopilot(7, 1, &hb(false), None)));
+        for i in 4..40 {
+            let t = f64::from(i) * 0.5;
+            out.extend(p.on_frame(s(t), &autopilot(1, 1, &hb(false), Some(KEY))));
+            out.extend(p.tick(s(t)));
+        }
+        assert_eq!(setups(&out), vec![]);
+        assert!(sent(&out).is_empty(), "nothing at all is sent");
+        let why = p.outcome().unwrap().as_ref().unwrap_err();
         assert!(
-            p.on_frame(s(0.0), &autopilot(1, 2, &hb(false), None))
-                .is_empty()
+            why.contains("7/1") && why.contains("the key was not sent"),
+            "{why}"
         );
-        let out = sent(&p.on_frame(s(0.5), &autopilot(1, 1, &hb(false), None)));
-        assert!(matches!(&out[0].msg, Msg::SETUP_SIGNING(m) if m.target_component == 1));
-        assert_eq!(p.identity_note(), None);
+    }
+
+    #[test]
+    fn an_impostor_heard_after_the_key_went_out_leaves_it_unverified() {
+        let mut p = heard(Provisioner::new(KEY, 1, (1, 1), s(30.0)));
+        let _ = p.on_frame(s(2.5), &autopilot(1, 1, &hb(false), Some(KEY)));
+        let out = p.on_frame(s(2.6), &autopilot(7, 1, &hb(false), None));
+        assert!(out.is_empty());
+        // The pinned autopilot's answer after that proves nothing: the set-up is over.
+        p.on_frame(s(2.7), &autopilot(1, 1, &ack(), Some(KEY)));
+        let why = p.outcome().unwrap().as_ref().unwrap_err();
+        assert!(
+            why.contains("7/1") && why.contains("went to 1/1 alone"),
+            "{why}"
+        );
+    }
+
+    #[test]
+    fn the_signed_answer_must_come_from_the_pinned_component() {
+        let mut p = heard(Provisioner::new(KEY, 1, (1, 1), s(30.0)));
+        let out = sent(&p.on_frame(s(2.5), &autopilot(1, 1, &hb(false), Some(KEY))));
+        assert!(
+            matches!(&out[..], [f] if matches!(&f.msg, Msg::COMMAND_LONG(c)
+            if (c.target_system, c.target_component) == (1, 1)))
+        );
+        // A signed ACK from another component (not an autopilot heartbeat) verifies nothing.
+        p.on_frame(s(2.6), &autopilot(1, 100, &ack(), Some(KEY)));
+        assert_eq!(p.outcome(), None);
+        p.on_frame(s(2.7), &autopilot(1, 1, &ack(), Some(KEY)));
+        assert!(p.outcome().unwrap().is_ok());
+    }
+
+    #[test]
+    fn the_pin_is_required_both_ids() {
+        let parse = |extra: &[&str]| {
+            #[derive(clap::Parser)]
+            struct Cli {
+                #[command(flatten)]
+                args: SigningSetupArgs,
+            }
+            use clap::Parser;
+            let argv = ["x", "--connect", "udpin:127.0.0.1:1", "--key", "k"]
+                .iter()
+                .chain(extra);
+            Cli::try_parse_from(argv).unwrap().args
+        };
+        for (extra, missing) in [
+            (&[][..], "--autopilot-sysid and --autopilot-compid"),
+            (
+                &["--autopilot-sysid", "1"][..],
+                "--autopilot-compid missing",
+            ),
+            (
+                &["--autopilot-compid", "1"][..],
+                "--autopilot-sysid missing",
+            ),
+        ] {
+            let e = pin(&parse(extra)).unwrap_err().to_string();
+            assert!(
+                e.contains(missing) && e.contains("nothing was written"),
+                "{e}"
+            );
+        }
+        let both = parse(&["--autopilot-sysid", "3", "--autopilot-compid", "1"]);
+        assert_eq!(pin(&both).unwrap(), (3, 1));
     }
 
     #[test]
     fn no_autopilot_within_the_timeout_fails() {
-        let mut p = Provisioner::new(KEY, 1, None, s(3.0));
+        let mut p = Provisioner::new(KEY, 1, (1, 1), s(3.0));
         p.tick(s(2.9));
         assert_eq!(p.outcome(), None);
         p.tick(s(3.0));
@@ -570,7 +748,7 @@ mod tests {
                 .unwrap()
                 .as_ref()
                 .unwrap_err()
-                .contains("no autopilot HEARTBEAT")
+                .contains("no HEARTBEAT from the pinned autopilot 1/1")
         );
     }
 

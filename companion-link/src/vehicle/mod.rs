@@ -72,6 +72,19 @@ pub struct VehicleConfig {
     /// Without EXTENDED_SYS_STATE: disarmed at or below this altitude above home (m) is on the
     /// ground (params/link.toml `[flight] ground_altitude_m`).
     pub ground_altitude_m: f64,
+    /// The tracker's reports (NAMED_VALUE_FLOAT, CAMERA_TRACKING_IMAGE_STATUS) are taken only
+    /// from the `--onboard` link ([`Vehicle::on_monitor_frame`]); on the autopilot link they are
+    /// counted as refused, whoever sends them (`fly --learn-cpt` learning from a dedicated
+    /// onboard link while the autopilot link is unsigned).
+    pub tracker_onboard_only: bool,
+}
+
+/// A tracker's report, which in-flight learning reads (`target_detected`).
+fn is_tracker_report(msg: &Msg) -> bool {
+    matches!(
+        msg,
+        Msg::NAMED_VALUE_FLOAT(_) | Msg::CAMERA_TRACKING_IMAGE_STATUS(_)
+    )
 }
 
 impl Default for VehicleConfig {
@@ -93,6 +106,7 @@ impl Default for VehicleConfig {
             mode_confirm: Duration::from_secs(3),
             max_mode_attempts: 3,
             ground_altitude_m: 1.0,
+            tracker_onboard_only: false,
         }
     }
 }
@@ -361,6 +375,17 @@ impl Vehicle {
             }
         }
         let from_autopilot = self.target == Some((sys, comp));
+        if self.cfg.tracker_onboard_only && is_tracker_report(&f.msg) {
+            if self.foreign_monitor_frames == 0 {
+                tracing::warn!(
+                    sys,
+                    comp,
+                    "a tracker report on the autopilot link ignored: taken only from the --onboard link"
+                );
+            }
+            self.foreign_monitor_frames += 1;
+            return Vec::new();
+        }
         if !from_autopilot {
             // Onboard monitors speak on the same link from their own components.
             return self.on_monitor_frame(now, f);

@@ -1803,3 +1803,41 @@ fn px4_pack_parameters_are_decoded_bytewise_and_an_unset_capacity_is_said() {
         "{said:?}"
     );
 }
+
+/// `tracker_onboard_only` (fly --learn-cpt with a dedicated onboard link on an unsigned
+/// autopilot link): the tracker's reports on the autopilot link are refused from the allowed
+/// tracker 1/100 and from the autopilot's own ids alike; the same report from the onboard link
+/// counts; the autopilot's rangefinder still does.
+#[test]
+fn tracker_reports_only_from_the_onboard_link_when_asked() {
+    let mut v = Vehicle::new(
+        VehicleConfig {
+            tracker_onboard_only: true,
+            ..VehicleConfig::default()
+        },
+        table(),
+        None,
+    );
+    v.on_frame(s(0.0), &hb(4, false));
+    assert_eq!(v.target, Some((1, 1)));
+    v.on_frame(s(0.1), &from(1, 100, frame(nvf("tgt_det", 1.0))));
+    v.on_frame(s(0.2), &frame(nvf("tgt_det", 1.0)));
+    assert_eq!(v.telemetry.get("target_detected"), None);
+    assert_eq!(v.foreign_monitor_frames, 2);
+    v.on_monitor_frame(s(0.3), &from(1, 100, frame(nvf("tgt_det", 1.0))));
+    assert_eq!(v.telemetry.get("target_detected"), Some(1.0));
+    let near = frame(Msg::DISTANCE_SENSOR(DISTANCE_SENSOR_DATA {
+        min_distance: 20,
+        max_distance: 4000,
+        current_distance: 300,
+        orientation: MavSensorOrientation::MAV_SENSOR_ROTATION_NONE,
+        ..DISTANCE_SENSOR_DATA::DEFAULT
+    }));
+    v.on_frame(s(0.4), &near);
+    assert!(v.take_events().contains(&Event::ObstacleDetected));
+    // Without the setting, the allowed tracker on the autopilot link counts (as before).
+    let mut v = vehicle();
+    v.on_frame(s(0.0), &hb(4, false));
+    v.on_frame(s(0.1), &from(1, 100, frame(nvf("tgt_det", 1.0))));
+    assert_eq!(v.telemetry.get("target_detected"), Some(1.0));
+}

@@ -678,7 +678,10 @@ impl WriterThread {
                     eprintln!(
                         "warning: decision log {} reached its cap of {} bytes: further \
                          records are counted, not written",
-                        self.dir.display(),
+                        crate::review::text::escape_controls(
+                            &self.dir.display().to_string(),
+                            false
+                        ),
                         self.opts.max_bytes
                     );
                 }
@@ -722,7 +725,10 @@ impl WriterThread {
                     eprintln!(
                         "warning: decision log {}: write failed ({e}): this and every later \
                          record are counted as lost",
-                        self.dir.display()
+                        crate::review::text::escape_controls(
+                            &self.dir.display().to_string(),
+                            false
+                        )
                     );
                     // Space for the loss line that says so.
                     self.reserve.release();

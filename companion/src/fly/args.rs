@@ -23,9 +23,15 @@ pub struct FlyArgs {
     /// unsigned commands addressed to us.
     #[arg(long)]
     pub signing_key: Option<PathBuf>,
-    /// Second MAVLink connection carrying onboard monitors (NAMED_VALUE_FLOAT, ...).
+    /// Second MAVLink connection carrying onboard monitors (NAMED_VALUE_FLOAT, ...); on a serial
+    /// port or a loopback address it is a dedicated onboard link (--learn-cpt may learn from it).
     #[arg(long, value_parser = url::parse)]
     pub onboard: Option<ConnectUrl>,
+    /// The operator declares the --onboard link a private onboard wire (e.g. a direct Ethernet
+    /// cable to the tracker, nothing else on it): a dedicated onboard link for --learn-cpt even
+    /// on a network address.
+    #[arg(long, requires = "onboard")]
+    pub onboard_private: bool,
     /// Silence after which the autopilot counts as lost (e.g. 3s, 500ms).
     #[arg(long, default_value = "3s", value_parser = parse_duration)]
     pub link_timeout: Duration,
@@ -55,7 +61,9 @@ pub struct FlyArgs {
     /// Learn the health BN's CPT rows whose outcome the telemetry gives (the tracking versions'
     /// `C_Vk` and `U_detection_fail`, from the onboard tracker's `target_detected`) as the
     /// flight goes, bounded by params/learning.toml and logged in `cpt_learned`
-    /// (docs/calibrate.md). Off by default.
+    /// (docs/calibrate.md). Off by default. Needs a signed link (--signing-key) or a dedicated
+    /// onboard link carrying the tracker (--onboard on a serial port or a loopback address,
+    /// whose reports are then the only ones read); refused at start otherwise.
     #[arg(long)]
     pub learn_cpt: bool,
     /// Command only the autopilot with this MAVLink system id (when several speak on the link);
@@ -82,9 +90,10 @@ pub struct FlyArgs {
     /// `[flight] operator_confirm_s`). Off by default: arming for a manual flight is not a start.
     #[arg(long)]
     pub start_on_arm: bool,
-    /// A ground station's MAVLink system id whose MAV_CMD_MISSION_START is taken even before it
-    /// sent a GCS HEARTBEAT (repeat for several). Systems heard sending a GCS HEARTBEAT count
-    /// too; an autopilot component never does.
+    /// The operator's ground station: its MAVLink system id (repeat for several). When given,
+    /// only these may start a mission (even before their GCS HEARTBEAT); a GCS HEARTBEAT from
+    /// another system is reported, never obeyed. Without it, systems heard sending a GCS
+    /// HEARTBEAT count; an autopilot component never does.
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
     pub gcs_sysid: Vec<u8>,
 }

@@ -15,30 +15,69 @@ use std::time::Duration;
 
 const CRITICAL: MavSeverity = MavSeverity::MAV_SEVERITY_CRITICAL;
 
-/// Ground stations the companion takes a start from: systems heard sending a GCS HEARTBEAT on
-/// the autopilot link, and those `--gcs-sysid` names.
+/// Ground stations the companion takes a start from: those `--gcs-sysid` names when it names
+/// any (a GCS HEARTBEAT from another system is reported, never obeyed); else the systems heard
+/// sending a GCS HEARTBEAT on the autopilot link.
 #[derive(Debug, Default, Clone)]
 pub struct GroundStations {
     /// `--gcs-sysid`.
     pub pinned: BTreeSet<u8>,
-    /// Heard sending a HEARTBEAT with MAV_TYPE_GCS.
+    /// Heard sending a HEARTBEAT with MAV_TYPE_GCS (without `--gcs-sysid`), at most
+    /// [`MAX_STATIONS`].
     pub heard: BTreeSet<u8>,
+    /// With `--gcs-sysid`: other systems heard sending a GCS HEARTBEAT, reported once each.
+    pub unnamed: BTreeSet<u8>,
 }
 
+/// At most this many ground stations kept (and reported): a flood of invented systems cannot
+/// grow the sets.
+const MAX_STATIONS: usize = 16;
+
 impl GroundStations {
-    /// A frame from the autopilot link: a GCS HEARTBEAT makes its system a ground station
-    /// (at most 16 kept: a flood of invented systems cannot grow it).
-    pub fn on_frame(&mut self, f: &companion_link::ingest::Frame) {
-        if let Msg::HEARTBEAT(h) = &f.msg
-            && h.mavtype == companion_link::dialect::MavType::MAV_TYPE_GCS
-            && self.heard.len() < 16
-        {
-            self.heard.insert(f.header.system_id.min(255) as u8);
+    /// A frame from the autopilot link: a GCS HEARTBEAT makes its system a ground station, or,
+    /// when `--gcs-sysid` names others, is reported: the line for the journal and the record,
+    /// once per system.
+    pub fn on_frame(&mut self, f: &companion_link::ingest::Frame) -> Option<String> {
+        let Msg::HEARTBEAT(h) = &f.msg else {
+            return None;
+        };
+        if h.mavtype != companion_link::dialect::MavType::MAV_TYPE_GCS {
+            return None;
         }
+        let sys = f.header.system_id.min(255) as u8;
+        if self.pinned.is_empty() {
+            if self.heard.len() < MAX_STATIONS {
+                self.heard.insert(sys);
+            }
+            return None;
+        }
+        if self.pinned.contains(&sys)
+            || self.unnamed.len() >= MAX_STATIONS
+            || !self.unnamed.insert(sys)
+        {
+            return None;
+        }
+        Some(format!(
+            "operator: a ground station {sys}/{} is heard (GCS HEARTBEAT) but --gcs-sysid names {}: its commands are refused, never obeyed",
+            f.header.component_id,
+            self.named()
+        ))
     }
 
-    fn knows(&self, system: u8) -> bool {
-        self.pinned.contains(&system) || self.heard.contains(&system)
+    /// The `--gcs-sysid` list, in words.
+    fn named(&self) -> String {
+        let ids: Vec<String> = self.pinned.iter().map(u8::to_string).collect();
+        ids.join(", ")
+    }
+
+    /// Whether `system` is one of the operator's ground stations (its heartbeats count for the
+    /// ground-station watch, its start is taken).
+    pub fn counts(&self, system: u8) -> bool {
+        if self.pinned.is_empty() {
+            self.heard.contains(&system)
+        } else {
+            self.pinned.contains(&system)
+        }
     }
 }
 
@@ -77,10 +116,18 @@ fn command_refusal(
             "Start refused: sender is not a ground station",
         ));
     }
-    if cmd.command == operator::START_COMMAND && !gcs.knows(sys) {
+    if cmd.command == operator::START_COMMAND && !gcs.counts(sys) {
+        let why = if gcs.pinned.is_empty() {
+            format!("system {sys} sent no GCS HEARTBEAT and is not named by --gcs-sysid")
+        } else {
+            format!(
+                "system {sys} is not a ground station --gcs-sysid names ({}): only those may start",
+                gcs.named()
+            )
+        };
         return Some((
             MavResult::MAV_RESULT_DENIED,
-            format!("system {sys} sent no GCS HEARTBEAT and is not named by --gcs-sysid"),
+            why,
             "Start refused: sender is not a ground station",
         ));
     }
@@ -454,7 +501,9 @@ mod tests {
         f: &Frame,
     ) -> Vec<MavResult> {
         let now = Duration::from_secs_f64(t);
-        gcs.on_frame(f);
+        if let Some(line) = gcs.on_frame(f) {
+            shell.pending_events.push(Event::from(line));
+        }
         v.on_frame(now, f);
         let mut out = Vec::new();
         for cmd in v.take_commands_to_us() {
@@ -499,6 +548,58 @@ mod tests {
         let acks = feed(&mut shell, &mut v, &mut gcs, 0.6, &start_from(77, 190));
         assert_eq!(acks, vec![MavResult::MAV_RESULT_ACCEPTED]);
         assert_eq!(shell.operator.control, Control::Started);
+    }
+
+    #[test]
+    fn with_gcs_sysid_only_the_named_stations_start_and_another_is_reported() {
+        let (mut shell, mut v) = setup();
+        let mut gcs = GroundStations {
+            pinned: [255].into(),
+            ..Default::default()
+        };
+        shell.launch = Ok(());
+        feed(&mut shell, &mut v, &mut gcs, 0.0, &autopilot_heartbeat());
+        feed(&mut shell, &mut v, &mut gcs, 0.1, &gcs_heartbeat(255));
+        assert!(shell.pending_events.is_empty());
+        // A forged GCS heartbeat from 77, then its start: reported once, refused.
+        feed(&mut shell, &mut v, &mut gcs, 0.2, &gcs_heartbeat(77));
+        feed(&mut shell, &mut v, &mut gcs, 0.3, &gcs_heartbeat(77));
+        let reported: Vec<String> = shell
+            .pending_events
+            .iter()
+            .map(|e| e.to_string())
+            .filter(|e| e.contains("ground station 77/190 is heard"))
+            .collect();
+        assert_eq!(reported.len(), 1, "{:?}", shell.pending_events);
+        assert!(!gcs.counts(77));
+        let acks = feed(&mut shell, &mut v, &mut gcs, 0.5, &start_from(77, 190));
+        assert_eq!(acks, vec![MavResult::MAV_RESULT_DENIED]);
+        assert_eq!(shell.operator.control, Control::Waiting);
+        assert!(shell.pending_events.iter().any(|e| {
+            e.to_string()
+                .contains("system 77 is not a ground station --gcs-sysid names (255)")
+        }));
+        // The named station starts.
+        let acks = feed(&mut shell, &mut v, &mut gcs, 0.6, &start_from(255, 190));
+        assert_eq!(acks, vec![MavResult::MAV_RESULT_ACCEPTED]);
+        assert_eq!(shell.operator.control, Control::Started);
+    }
+
+    #[test]
+    fn a_flood_of_invented_ground_stations_is_bounded() {
+        let mut gcs = GroundStations::default();
+        for sys in 1..=200 {
+            gcs.on_frame(&gcs_heartbeat(sys));
+        }
+        assert_eq!(gcs.heard.len(), MAX_STATIONS);
+        let mut named = GroundStations {
+            pinned: [255].into(),
+            ..Default::default()
+        };
+        let said = (1..=200)
+            .filter(|&sys| named.on_frame(&gcs_heartbeat(sys)).is_some())
+            .count();
+        assert_eq!(said, MAX_STATIONS);
     }
 
     #[test]

@@ -16,14 +16,55 @@ pub fn is_network_link(url: &ConnectUrl) -> bool {
     !matches!(url, ConnectUrl::Serial { .. })
 }
 
-/// `--require-signing` without `--signing-key` is refused before anything opens.
-pub fn check_args(args: &FlyArgs) -> anyhow::Result<()> {
+/// Whether an `--onboard` link is a dedicated onboard wire: a serial port, or a socket on the
+/// loopback (a tracker on the companion computer itself). Nothing on a network can send on it.
+pub fn is_dedicated_onboard(url: &ConnectUrl) -> bool {
+    let addr = match url {
+        ConnectUrl::Serial { .. } => return true,
+        ConnectUrl::UdpIn { bind } | ConnectUrl::TcpIn { bind } => bind,
+        ConnectUrl::UdpOut { peer } | ConnectUrl::TcpOut { peer } => peer,
+    };
+    let host = addr.rsplit_once(':').map_or(addr.as_str(), |(h, _)| h);
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    host.eq_ignore_ascii_case("localhost")
+        || host
+            .parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.is_loopback())
+}
+
+/// Where `--learn-cpt` may learn from, decided before anything opens.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LearningSource {
+    /// No learning, or every frame signed (`--signing-key`: unsigned frames are refused).
+    Any,
+    /// The tracker's reports only from the dedicated `--onboard` link (the autopilot link is
+    /// unsigned: anyone reaching it could send the tracker's `tgt_det`).
+    OnboardOnly,
+}
+
+/// `--require-signing` without `--signing-key`, and `--learn-cpt` with neither a key nor a
+/// dedicated onboard link, are refused before anything opens.
+pub fn check_args(args: &FlyArgs) -> anyhow::Result<LearningSource> {
     if args.require_signing && args.signing_key.is_none() {
         anyhow::bail!(
             "--require-signing: no --signing-key given; make and provision one with `companion signing-setup --connect URL --key FILE`, then pass --signing-key FILE"
         );
     }
-    Ok(())
+    if !args.learn_cpt || args.signing_key.is_some() {
+        return Ok(LearningSource::Any);
+    }
+    match &args.onboard {
+        Some(u) if is_dedicated_onboard(u) || args.onboard_private => {
+            Ok(LearningSource::OnboardOnly)
+        }
+        Some(u) => anyhow::bail!(
+            "--learn-cpt: the links are unsigned and --onboard {} is reachable from a network: anyone there could send the tracker's reports and choose where the learned rows go; learn with a signed link (--signing-key, made with `companion signing-setup`) or a dedicated onboard link (--onboard on a serial port or a loopback address, or --onboard-private when that network is a private wire to the tracker alone)",
+            crate::review::text::escape_controls(&u.to_string(), false)
+        ),
+        None => anyhow::bail!(
+            "--learn-cpt: the autopilot link is unsigned and there is no dedicated onboard link: anyone who can put frames on the link could send the tracker's reports and choose where the learned rows go; learn with a signed link (--signing-key, made with `companion signing-setup`) or a dedicated onboard link carrying the tracker (--onboard on a serial port or a loopback address)"
+        ),
+    }
 }
 
 /// The ground-station texts (50 characters at most: STATUSTEXT's field).
@@ -267,6 +308,56 @@ mod tests {
         ])
         .unwrap();
         assert!(check_args(&ok).is_ok());
+    }
+
+    #[test]
+    fn learn_cpt_needs_a_signed_link_or_a_dedicated_onboard_link() {
+        let check = |extra: &[&str]| {
+            let args = FlyArgs::from_cli(
+                ["--connect", "udpin:0.0.0.0:14550", "--learn-cpt"]
+                    .iter()
+                    .chain(extra),
+            )
+            .unwrap();
+            check_args(&args).map_err(|e| e.to_string())
+        };
+        let e = check(&[]).unwrap_err();
+        assert!(
+            e.starts_with("--learn-cpt: the autopilot link is unsigned")
+                && e.contains("--signing-key")
+                && e.contains("--onboard"),
+            "{e}"
+        );
+        let e = check(&["--onboard", "udpin:0.0.0.0:14560"]).unwrap_err();
+        assert!(
+            e.contains("--onboard udpin:0.0.0.0:14560 is reachable"),
+            "{e}"
+        );
+        assert_eq!(check(&["--signing-key", "k"]), Ok(LearningSource::Any));
+        // The operator declares the network link a private wire.
+        assert_eq!(
+            check(&["--onboard", "udpin:0.0.0.0:14560", "--onboard-private"]),
+            Ok(LearningSource::OnboardOnly)
+        );
+        assert!(
+            FlyArgs::from_cli(["--connect", "udpin:0.0.0.0:14550", "--onboard-private"]).is_err(),
+            "--onboard-private needs --onboard"
+        );
+        for onboard in [
+            "serial:/dev/ttyUSB1:921600",
+            "udpin:127.0.0.1:14560",
+            "tcp:localhost:5763",
+            "udpin:[::1]:14560",
+        ] {
+            assert_eq!(
+                check(&["--onboard", onboard]),
+                Ok(LearningSource::OnboardOnly),
+                "{onboard}"
+            );
+        }
+        // Without --learn-cpt nothing changes.
+        let plain = FlyArgs::from_cli(["--connect", "udpin:0.0.0.0:14550"]).unwrap();
+        assert_eq!(check_args(&plain).unwrap(), LearningSource::Any);
     }
 
     #[test]

@@ -159,7 +159,11 @@ pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
     let mut log = dlog::start_run(&args.log_dir, now, header, opts.clone())
         .with_context(|| format!("starting a run folder in {}", args.log_dir.display()))?;
     let dir = log.dir().to_path_buf();
-    println!("run folder: {}", dir.display());
+    // The folder's name comes from --log-dir: shown escaped.
+    println!(
+        "run folder: {}",
+        crate::review::text::escape_controls(&dir.display().to_string(), false)
+    );
     tracing::info!("run folder {}", dir.display());
     let tlog = TlogWriter::create(&dir.join("flight.tlog"))
         .with_context(|| format!("creating {}", dir.join("flight.tlog").display()))?

@@ -264,8 +264,14 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         if let Some(w) = self.tlog.as_mut() {
             w.received(f);
         }
-        self.gcs.on_frame(t, f);
-        self.stations.on_frame(f);
+        if let Some(line) = self.stations.on_frame(f) {
+            tracing::warn!("{line}");
+            self.shell.pending_events.push(Event::from(line));
+        }
+        // Only the operator's ground stations count for the ground-station watch.
+        if self.stations.counts(f.header.system_id.min(255) as u8) {
+            self.gcs.on_frame(t, f);
+        }
         out.extend(self.vehicle.on_frame(t, f));
     }
 

@@ -18,6 +18,8 @@ pub struct FlySetup {
     pub states: companion_core::mission::MissionStates,
     /// The action catalogue (params/actions.toml) whose ids the shell's actions are.
     pub catalogue: ActionCatalogue,
+    /// Where `--learn-cpt` may take the tracker's reports from.
+    pub learning: link_security::LearningSource,
 }
 
 impl FlySetup {
@@ -39,7 +41,7 @@ impl FlySetup {
         files: &companion_core::spec::ParamsFiles,
         args: &FlyArgs,
     ) -> anyhow::Result<Self> {
-        link_security::check_args(args)?;
+        let learning = link_security::check_args(args)?;
         let catalogue = ActionCatalogue::load(files)?;
         let (link, actions, route, _) =
             crate::params::load_fly_files(files, args.mission.as_deref(), &catalogue)?;
@@ -77,6 +79,7 @@ impl FlySetup {
             takeoff_alt_m,
             states,
             catalogue,
+            learning,
         })
     }
 
@@ -95,6 +98,7 @@ impl FlySetup {
             mode_confirm: Duration::from_secs_f64(self.link.flight.mode_confirm_s),
             max_mode_attempts: self.link.flight.max_mode_attempts,
             ground_altitude_m: self.link.flight.ground_altitude_m,
+            tracker_onboard_only: self.learning == link_security::LearningSource::OnboardOnly,
             ..VehicleConfig::default()
         };
         Vehicle::new(cfg, self.actions.clone(), Some(self.route.clone()))
