@@ -28,6 +28,9 @@ pub(super) struct MissionFile {
     /// The in-flight power-drift tuning (docs/guarantee.md); defaults when absent.
     #[serde(default)]
     pub(super) guarantee: Option<TuningFile>,
+    /// What no airframe of the mission can be (docs/calibrate.md); none for a ground robot.
+    #[serde(default)]
+    pub(super) power_bounds: Option<super::power_bounds::PowerBoundsFile>,
 }
 
 /// `[guarantee]`: how a measured power drift is judged and learned.
