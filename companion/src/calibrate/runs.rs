@@ -42,6 +42,58 @@ pub fn discover(args: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
     Ok(out)
 }
 
+/// The SHA-256 of a run's contents: its decision log (every rotation part) and its
+/// `flight.tlog`, whatever names, symlinks or copies lead to them. Two runs with the same hash
+/// are one run.
+pub fn content_hash(dir: &Path) -> anyhow::Result<[u8; 32]> {
+    use sha2::Digest;
+    let mut h = sha2::Sha256::new();
+    let mut files = crate::decision_log::log_files(dir)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?;
+    let tlog = dir.join("flight.tlog");
+    if tlog.is_file() {
+        files.push(tlog);
+    }
+    for f in files {
+        crate::params_files::regular_file(&f)
+            .map_err(|r| anyhow::anyhow!("{}: {r}", f.display()))?;
+        let mut rd =
+            std::fs::File::open(&f).map_err(|e| anyhow::anyhow!("{}: {e}", f.display()))?;
+        // The file's name is not hashed (a renamed copy is the same run); its length is, so
+        // that the files' boundaries count.
+        let (mut buf, mut n) = (vec![0u8; 1 << 16], 0u64);
+        loop {
+            let k = std::io::Read::read(&mut rd, &mut buf)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", f.display()))?;
+            if k == 0 {
+                break;
+            }
+            h.update(&buf[..k]);
+            n += k as u64;
+        }
+        h.update(n.to_le_bytes());
+    }
+    Ok(h.finalize().into())
+}
+
+/// `runs` with each content once (the first name kept, in order), and the names left out with
+/// the name of the run they repeat.
+pub fn once_each(runs: Vec<PathBuf>) -> anyhow::Result<(Vec<PathBuf>, Vec<(PathBuf, PathBuf)>)> {
+    let mut seen: std::collections::HashMap<[u8; 32], PathBuf> = Default::default();
+    let (mut kept, mut repeats) = (Vec::new(), Vec::new());
+    for r in runs {
+        let h = content_hash(&r)?;
+        match seen.get(&h) {
+            Some(first) => repeats.push((r, first.clone())),
+            None => {
+                seen.insert(h, r.clone());
+                kept.push(r);
+            }
+        }
+    }
+    Ok((kept, repeats))
+}
+
 /// Call `each` with every record of the run folder `dir`, in order. A corrupted line stops with
 /// its file, line and reason; a last line cut off (a run killed while writing) is skipped with
 /// a warning.
