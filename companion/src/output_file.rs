@@ -59,7 +59,11 @@ pub fn same_file(a: &Path, a_meta: &std::fs::Metadata, b: &Path) -> bool {
 /// Refuse `out` when its file name holds control characters, when it exists and is not a
 /// regular file, or when it is one of `inputs`. The metadata of an existing `out` is returned
 /// for further checks of the caller's.
-pub fn check(out: &Path, inputs: &[PathBuf]) -> Result<Option<std::fs::Metadata>, Refused> {
+pub fn check(
+    out: &Path,
+    inputs: &[PathBuf],
+    command: &str,
+) -> Result<Option<std::fs::Metadata>, Refused> {
     let refuse = |reason: String| Refused {
         path: out.to_path_buf(),
         shown: shown(out),
@@ -93,7 +97,7 @@ pub fn check(out: &Path, inputs: &[PathBuf]) -> Result<Option<std::fs::Metadata>
     }
     if let Some(f) = inputs.iter().find(|f| same_file(out, &meta, f)) {
         return Err(refuse(format!(
-            "is {} itself (the same file: name, symlink or hard link), an input of this command: \
+            "is {} itself (the same file: name, symlink or hard link), an input of this {command}: \
              refusing to overwrite it",
             shown(f)
         )));
@@ -128,10 +132,16 @@ pub fn persist(tmp: tempfile::NamedTempFile, out: &Path, mode: u32) -> std::io::
     Ok(())
 }
 
-/// [`check`] `out` against `inputs`, then write `bytes` to it through a temporary file beside
-/// it, with permissions `mode`.
-pub fn write(out: &Path, inputs: &[PathBuf], bytes: &[u8], mode: u32) -> anyhow::Result<()> {
-    check(out, inputs)?;
+/// [`check`] `out` against the inputs of `command`, then write `bytes` to it through a
+/// temporary file beside it, with permissions `mode`.
+pub fn write(
+    out: &Path,
+    inputs: &[PathBuf],
+    command: &str,
+    bytes: &[u8],
+    mode: u32,
+) -> anyhow::Result<()> {
+    check(out, inputs, command)?;
     let written = (|| {
         let mut tmp = temp_beside(out)?;
         std::io::Write::write_all(&mut tmp, bytes)?;
@@ -155,13 +165,13 @@ mod tests {
         let hard = d.path().join("hard");
         std::fs::hard_link(&input, &hard).unwrap();
         for out in [&input, &sym, &hard] {
-            let e = write(out, &inputs, b"x", 0o644).unwrap_err();
-            assert!(e.to_string().contains("an input of this command"), "{e}");
+            let e = write(out, &inputs, "test", b"x", 0o644).unwrap_err();
+            assert!(e.to_string().contains("an input of this test"), "{e}");
         }
-        let e = write(&d.path().join("a\nb"), &inputs, b"x", 0o644).unwrap_err();
+        let e = write(&d.path().join("a\nb"), &inputs, "test", b"x", 0o644).unwrap_err();
         assert!(e.to_string().contains("control characters"), "{e}");
         assert!(!e.to_string().contains('\n'), "{e}");
-        let e = write(d.path(), &inputs, b"x", 0o644).unwrap_err();
+        let e = write(d.path(), &inputs, "test", b"x", 0o644).unwrap_err();
         assert!(e.to_string().contains("a directory"), "{e}");
         assert_eq!(std::fs::read(&input).unwrap(), b"input");
         // A symlink to another file is replaced, its target kept.
@@ -169,7 +179,7 @@ mod tests {
         std::fs::write(&other, "other").unwrap();
         let link = d.path().join("link");
         std::os::unix::fs::symlink(&other, &link).unwrap();
-        write(&link, &inputs, b"new", 0o644).unwrap();
+        write(&link, &inputs, "test", b"new", 0o644).unwrap();
         assert_eq!(std::fs::read(&link).unwrap(), b"new");
         assert_eq!(std::fs::read(&other).unwrap(), b"other");
         assert!(!std::fs::symlink_metadata(&link).unwrap().is_symlink());

@@ -159,7 +159,8 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     // Refused before the runs are read: a FIFO as --out never blocks, an input is never
     // touched.
     if let Some(out) = &args.out {
-        crate::output_file::check(out, &inputs).map_err(|e| anyhow::anyhow!("--out {e}"))?;
+        crate::output_file::check(out, &inputs, "calibration")
+            .map_err(|e| anyhow::anyhow!("--out {e}"))?;
     }
     let pin = args.autopilot_sysid.map(|s| (s, args.autopilot_compid));
     let cal = calibrate(
@@ -182,7 +183,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     }
     if let Some(out) = &args.out {
         let text = write::overlay(&shipped, &cal, out)?;
-        crate::output_file::write(out, &inputs, text.as_bytes(), 0o644)
+        crate::output_file::write(out, &inputs, "calibration", text.as_bytes(), 0o644)
             .map_err(|e| anyhow::anyhow!("--out {e}"))?;
         println!("overlay written: {}", crate::output_file::shown(out));
     }
