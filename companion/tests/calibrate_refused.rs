@@ -299,3 +299,69 @@ fn an_impostor_system_heard_first_is_refused_or_pinned_out() {
     assert!((c[0] - 354.0).abs() < 1.0, "{c:?}: {t}");
     assert!(t.contains("7/1 ("), "{t}");
 }
+
+/// An overlay whose curve no airframe flies (zero power everywhere, a hover of 1e9 W, a base
+/// above hover) stops check, simulate and fly's set-up with the overlay, the entry and why.
+#[test]
+fn an_overlay_no_airframe_flies_is_refused_by_check_simulate_and_fly() {
+    let tmp = tempfile::tempdir().unwrap();
+    let params = companion::params::default_params_dir();
+    let cases = [
+        (
+            "[\"missions/tracking.toml\".propulsion]\nmodel = \"polynomial\"\ncoefficients_w = [0.0, 0.0, 0.0, 0.0]\n",
+            "missions/tracking.toml.propulsion",
+            "hover power 0.0000 W",
+        ),
+        (
+            "[\"missions/tracking.toml\".propulsion]\nmodel = \"polynomial\"\ncoefficients_w = [1e9]\n",
+            "missions/tracking.toml.propulsion",
+            "outside",
+        ),
+        (
+            "[\"missions/tracking.toml\".base]\npower_w = 500.0\n",
+            "missions/tracking.toml.base.power_w",
+            "not below the hover power",
+        ),
+    ];
+    for (i, (body, entry, why)) in cases.into_iter().enumerate() {
+        let overlay = tmp.path().join(format!("o{i}.toml"));
+        let text_of = format!(
+            "[calibration]\nparams = {:?}\n{body}",
+            params.display().to_string()
+        );
+        std::fs::write(&overlay, text_of).unwrap();
+        let o = overlay.to_str().unwrap();
+        let runs = tmp.path().join("runs");
+        for args in [
+            vec!["check", "--params", o],
+            vec![
+                "simulate",
+                "--params",
+                o,
+                "--steps",
+                "2",
+                "--runs-dir",
+                runs.to_str().unwrap(),
+            ],
+        ] {
+            let r = companion(&args);
+            let t = text(&r);
+            assert!(!r.status.success(), "{args:?} accepted: {t}");
+            assert!(
+                t.contains(o) && t.contains(entry) && t.contains(why),
+                "{args:?}: {t}"
+            );
+        }
+        let mut args = companion::fly::FlyArgs::from_cli([
+            "--connect",
+            "udpin:127.0.0.1:14550",
+            "--auto-start",
+        ])
+        .unwrap();
+        args.params = Some(overlay.clone());
+        let e = companion::fly::FlySetup::load(&args)
+            .err()
+            .expect("fly's set-up refuses it");
+        assert!(format!("{e:#}").contains(entry), "{e:#}");
+    }
+}
