@@ -7,22 +7,9 @@
 //! Every number carries its source beside it (`[power_bounds.sources]`, one entry per number):
 //! a bound nobody can trace is no bound.
 
-use super::schema::{ActivityFile, MissionFile};
+use super::schema::{ActivityFile, MissionFile, PowerBoundsFile};
 use crate::spec::SpecError;
-use serde::Deserialize;
-use std::collections::BTreeMap;
 use std::path::Path;
-
-/// `[power_bounds]` as the file spells it.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct PowerBoundsFile {
-    mass_kg: f64,
-    hover_w_per_kg: [f64; 2],
-    min_power_of_hover: f64,
-    max_fit_rms_fraction: f64,
-    sources: BTreeMap<String, String>,
-}
 
 /// The numbers of [`PowerBoundsFile`], checked.
 #[derive(Debug, Clone, Copy, PartialEq)]
