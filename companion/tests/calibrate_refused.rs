@@ -116,7 +116,8 @@ fn coefficients(out: &Path) -> Vec<f64> {
 fn absurd_and_vanishing_power_is_refused_and_nothing_written() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("o.toml");
-    let cases: [(&str, &dyn Fn(f64) -> f64, &str); 3] = [
+    type Case<'a> = (&'a str, &'a dyn Fn(f64) -> f64, &'a str);
+    let cases: [Case; 3] = [
         ("giga", &|_| 1e9, "hover power"),
         ("zero", &|_| 1e-4, "hover power"),
         // 354 W at hover, falling as v³: -254 W at 12 m/s, the mission's fastest (transit).

@@ -147,7 +147,7 @@ fn calibrate_never_writes_over_its_runs_or_params() {
     let mission = companion::params::default_params_dir().join("missions/tracking.toml");
     refused(
         &[os("calibrate"), os(&run), os("--out"), os(&mission)],
-        &[mission.clone()],
+        std::slice::from_ref(&mission),
         "an input of this",
     );
     // Nothing left behind but the files made here.

@@ -76,9 +76,12 @@ pub fn content_hash(dir: &Path) -> anyhow::Result<[u8; 32]> {
     Ok(h.finalize().into())
 }
 
+/// Run names left out as repeats, each with the run it repeats.
+pub type Repeats = Vec<(PathBuf, PathBuf)>;
+
 /// `runs` with each content once (the first name kept, in order), and the names left out with
 /// the name of the run they repeat.
-pub fn once_each(runs: Vec<PathBuf>) -> anyhow::Result<(Vec<PathBuf>, Vec<(PathBuf, PathBuf)>)> {
+pub fn once_each(runs: Vec<PathBuf>) -> anyhow::Result<(Vec<PathBuf>, Repeats)> {
     let mut seen: std::collections::HashMap<[u8; 32], PathBuf> = Default::default();
     let (mut kept, mut repeats) = (Vec::new(), Vec::new());
     for r in runs {
