@@ -366,3 +366,29 @@ fn an_overlay_no_airframe_flies_is_refused_by_check_simulate_and_fly() {
         assert!(format!("{e:#}").contains(entry), "{e:#}");
     }
 }
+
+/// Run-folder names reach the terminal escaped, in the report and in an error.
+#[cfg(unix)]
+#[test]
+fn run_folder_names_with_escape_sequences_are_shown_escaped() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run\x1b]0;owned\x07\x1b[2J");
+    write_run(&run, 0.0, Some(&sitl_power), &seconds);
+    let out = tmp.path().join("o.toml");
+    let o = calibrate(&[&run], &out, &[]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(!t.contains('\x1b') && !t.contains('\x07'), "{t:?}");
+    assert!(t.contains("run\\u{1b}]0;owned\\u{7}"), "{t}");
+    // The overlay holds the name as a TOML string: it reads back as the very name.
+    let back: toml::Table = std::fs::read_to_string(&out).unwrap().parse().unwrap();
+    let runs = back["calibration"]["runs"].as_array().unwrap();
+    assert_eq!(runs[0].as_str(), Some(run.to_str().unwrap()));
+    // A name that is no run folder: the error escaped too.
+    let bad = tmp.path().join("none\x1b[31m");
+    std::fs::create_dir(&bad).unwrap();
+    let o = calibrate(&[&bad], &out, &[]);
+    let t = text(&o);
+    assert!(!o.status.success());
+    assert!(!t.contains('\x1b') && t.contains("none\\u{1b}[31m"), "{t:?}");
+}

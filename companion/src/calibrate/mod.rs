@@ -137,8 +137,19 @@ pub fn calibrate(
     })
 }
 
-/// The subcommand.
+/// The subcommand. Its error is one line of text with every control character escaped: it
+/// names run folders and files, which are data (a folder named with an escape sequence is shown,
+/// not obeyed).
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+    run_escaped(args).map_err(|e| {
+        anyhow::anyhow!(crate::review::text::escape_controls(
+            &format!("{e:#}"),
+            false
+        ))
+    })
+}
+
+fn run_escaped(args: &CalibrateArgs) -> anyhow::Result<()> {
     let params = args
         .params
         .clone()

@@ -23,7 +23,7 @@ pub fn discover(args: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
         let entries = std::fs::read_dir(a).map_err(|e| {
             anyhow::anyhow!(
                 "{}: not a run folder and cannot be listed: {e}",
-                a.display()
+                crate::output_file::shown(a)
             )
         })?;
         let mut runs: Vec<PathBuf> = entries
@@ -33,7 +33,7 @@ pub fn discover(args: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
         if runs.is_empty() {
             anyhow::bail!(
                 "{}: neither a run folder ({LOG_STEM}.jsonl) nor a folder of run folders",
-                a.display()
+                crate::output_file::shown(a)
             );
         }
         runs.sort();
@@ -49,22 +49,22 @@ pub fn content_hash(dir: &Path) -> anyhow::Result<[u8; 32]> {
     use sha2::Digest;
     let mut h = sha2::Sha256::new();
     let mut files = crate::decision_log::log_files(dir)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?;
+        .map_err(|e| anyhow::anyhow!("{}: {e}", crate::output_file::shown(dir)))?;
     let tlog = dir.join("flight.tlog");
     if tlog.is_file() {
         files.push(tlog);
     }
     for f in files {
         crate::params_files::regular_file(&f)
-            .map_err(|r| anyhow::anyhow!("{}: {r}", f.display()))?;
-        let mut rd =
-            std::fs::File::open(&f).map_err(|e| anyhow::anyhow!("{}: {e}", f.display()))?;
+            .map_err(|r| anyhow::anyhow!("{}: {r}", crate::output_file::shown(&f)))?;
+        let mut rd = std::fs::File::open(&f)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", crate::output_file::shown(&f)))?;
         // The file's name is not hashed (a renamed copy is the same run); its length is, so
         // that the files' boundaries count.
         let (mut buf, mut n) = (vec![0u8; 1 << 16], 0u64);
         loop {
             let k = std::io::Read::read(&mut rd, &mut buf)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", f.display()))?;
+                .map_err(|e| anyhow::anyhow!("{}: {e}", crate::output_file::shown(&f)))?;
             if k == 0 {
                 break;
             }
@@ -101,21 +101,27 @@ pub fn once_each(runs: Vec<PathBuf>) -> anyhow::Result<(Vec<PathBuf>, Repeats)> 
 /// its file, line and reason; a last line cut off (a run killed while writing) is skipped with
 /// a warning.
 pub fn for_each_record(dir: &Path, mut each: impl FnMut(&DecisionRecord)) -> anyhow::Result<u64> {
-    let stream = stream_log(dir).map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?;
+    let stream =
+        stream_log(dir).map_err(|e| anyhow::anyhow!("{}: {e}", crate::output_file::shown(dir)))?;
     let mut n = 0;
     for item in stream {
-        let item = item.map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?;
+        let item = item.map_err(|e| anyhow::anyhow!("{}: {e}", crate::output_file::shown(dir)))?;
         match item {
             LogItem::Record(r, _) => {
                 each(&r);
                 n += 1;
             }
             LogItem::Corrupted(i) => {
-                anyhow::bail!("{}, line {}: {}", i.file.display(), i.line, i.reason)
+                anyhow::bail!(
+                    "{}, line {}: {}",
+                    crate::output_file::shown(&i.file),
+                    i.line,
+                    i.reason
+                )
             }
             LogItem::Truncated(i) => tracing::warn!(
                 "{}, line {}: {} (skipped)",
-                i.file.display(),
+                crate::output_file::shown(&i.file),
                 i.line,
                 i.reason
             ),

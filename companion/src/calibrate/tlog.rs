@@ -77,8 +77,9 @@ pub fn for_each_sample(
     mut each: impl FnMut(Sample),
 ) -> anyhow::Result<TlogRead> {
     crate::params_files::regular_file(path)
-        .map_err(|r| anyhow::anyhow!("{}: {r}", path.display()))?;
-    let file = std::fs::File::open(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        .map_err(|r| anyhow::anyhow!("{}: {r}", crate::output_file::shown(path)))?;
+    let file = std::fs::File::open(path)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", crate::output_file::shown(path)))?;
     let mut rd = BufReader::new(file);
     let mut ingest = companion_link::ingest::Ingest::new(None);
     let mut tel = Telemetry::new(TelemetryConfig::default());
@@ -101,13 +102,13 @@ pub fn for_each_sample(
             if head < 11 {
                 tracing::warn!(
                     "{}: last entry at byte {offset} cut off (skipped)",
-                    path.display()
+                    crate::output_file::shown(path)
                 );
                 break;
             }
             anyhow::bail!(
                 "{}, byte {offset}: not a tlog entry (8-byte time stamp, then a MAVLink frame starting 0xFD or 0xFE; found 0x{:02X})",
-                path.display(),
+                crate::output_file::shown(path),
                 buf[8]
             );
         };
@@ -115,7 +116,7 @@ pub fn for_each_sample(
         if got < len - 3 {
             tracing::warn!(
                 "{}: last entry at byte {offset} cut off (skipped)",
-                path.display()
+                crate::output_file::shown(path)
             );
             break;
         }
