@@ -390,5 +390,8 @@ fn run_folder_names_with_escape_sequences_are_shown_escaped() {
     let o = calibrate(&[&bad], &out, &[]);
     let t = text(&o);
     assert!(!o.status.success());
-    assert!(!t.contains('\x1b') && t.contains("none\\u{1b}[31m"), "{t:?}");
+    assert!(
+        !t.contains('\x1b') && t.contains("none\\u{1b}[31m"),
+        "{t:?}"
+    );
 }

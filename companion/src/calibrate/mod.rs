@@ -141,7 +141,7 @@ pub fn calibrate(
 /// names run folders and files, which are data (a folder named with an escape sequence is shown,
 /// not obeyed).
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
-    run_escaped(args).map_err(|e| {
+    calibrate_and_write(args).map_err(|e| {
         anyhow::anyhow!(crate::review::text::escape_controls(
             &format!("{e:#}"),
             false
@@ -149,7 +149,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     })
 }
 
-fn run_escaped(args: &CalibrateArgs) -> anyhow::Result<()> {
+fn calibrate_and_write(args: &CalibrateArgs) -> anyhow::Result<()> {
     let params = args
         .params
         .clone()
@@ -188,7 +188,7 @@ fn run_escaped(args: &CalibrateArgs) -> anyhow::Result<()> {
             println!("refused: {r}");
         }
         anyhow::bail!(
-            "calibrate: {} value(s) no airframe of this mission can have (above); nothing written",
+            "calibrate: refused for the {} reason(s) above; nothing written",
             refused.len()
         );
     }
