@@ -299,6 +299,21 @@ fn an_impostor_system_heard_first_is_refused_or_pinned_out() {
     let c = coefficients(&out);
     assert!((c[0] - 354.0).abs() < 1.0, "{c:?}: {t}");
     assert!(t.contains("7/1 ("), "{t}");
+    // A run fly flew pinned: its header's command line pins calibrate the same way.
+    let log = run.join("decisions.jsonl");
+    let body = std::fs::read_to_string(&log).unwrap();
+    let h = Header::new(
+        "companion fly --connect udpin:0.0.0.0:14550 --autopilot-sysid 1",
+        std::time::SystemTime::UNIX_EPOCH,
+    );
+    let rest = body.split_once('\n').unwrap().1;
+    std::fs::write(&log, serde_json::to_string(&h).unwrap() + "\n" + rest).unwrap();
+    std::fs::remove_file(&out).unwrap();
+    let o = calibrate(&[&run], &out, &[]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!((coefficients(&out)[0] - 354.0).abs() < 1.0, "{t}");
+    assert!(t.contains("from autopilot 1/1 (pinned)"), "{t}");
 }
 
 /// An overlay whose curve no airframe flies (zero power everywhere, a hover of 1e9 W, a base

@@ -48,7 +48,8 @@ pub struct CalibrateArgs {
     #[arg(long)]
     pub polynomial: bool,
     /// Count the tlog's frames of this autopilot system only (as `fly --autopilot-sysid`);
-    /// default: the autopilot `fly` would choose (component 1 first).
+    /// default: the pin the run's `fly` was given (its log header's command line), else the
+    /// autopilot `fly` would choose (component 1 first).
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
     pub autopilot_sysid: Option<u8>,
     /// With --autopilot-sysid: the autopilot's component id.
@@ -98,6 +99,8 @@ pub fn calibrate(
         let tlog = run.join("flight.tlog");
         let mut from_tlog = false;
         if tlog.is_file() {
+            // calibrate's own pin, else the one fly flew this run with, else fly's rule.
+            let pin = pin.or_else(|| runs::fly_pin(run));
             let read = tlog::for_each_sample(&tlog, pin, |s| fit.add(s))?;
             from_tlog = read.samples > 0;
             tlogs.push((run.clone(), read));

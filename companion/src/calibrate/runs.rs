@@ -97,6 +97,30 @@ pub fn once_each(runs: Vec<PathBuf>) -> anyhow::Result<(Vec<PathBuf>, Repeats)> 
     Ok((kept, repeats))
 }
 
+/// The autopilot `fly` was pinned to in this run (`--autopilot-sysid N [--autopilot-compid M]`
+/// on the command line its log header records), if it was.
+pub fn fly_pin(dir: &Path) -> Option<(u8, u8)> {
+    let first = stream_log(dir).ok()?.next()?.ok()?;
+    let LogItem::Header(h) = first else {
+        return None;
+    };
+    let words: Vec<&str> = h.command.split_whitespace().collect();
+    let value = |flag: &str| -> Option<u8> {
+        let eq = format!("{flag}=");
+        words
+            .iter()
+            .enumerate()
+            .find_map(|(i, w)| match w.strip_prefix(&eq) {
+                Some(v) => v.parse().ok(),
+                None if *w == flag => words.get(i + 1)?.parse().ok(),
+                None => None,
+            })
+    };
+    let sys = value("--autopilot-sysid").filter(|s| *s > 0)?;
+    let comp = value("--autopilot-compid").unwrap_or(companion_link::vehicle::AUTOPILOT_COMPONENT);
+    Some((sys, comp))
+}
+
 /// Call `each` with every record of the run folder `dir`, in order. A corrupted line stops with
 /// its file, line and reason; a last line cut off (a run killed while writing) is skipped with
 /// a warning.
@@ -264,6 +288,27 @@ impl PercentageDrain {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_pin_fly_flew_with_is_read_from_the_header() {
+        let d = tempfile::tempdir().unwrap();
+        let pin_of = |command: &str| {
+            let h = crate::decision_log::Header::new(command, std::time::SystemTime::UNIX_EPOCH);
+            std::fs::write(
+                d.path().join("decisions.jsonl"),
+                serde_json::to_string(&h).unwrap() + "\n",
+            )
+            .unwrap();
+            fly_pin(d.path())
+        };
+        assert_eq!(pin_of("companion fly --connect x"), None);
+        assert_eq!(pin_of("companion fly --autopilot-sysid 1"), Some((1, 1)));
+        assert_eq!(
+            pin_of("companion fly --autopilot-sysid=3 --autopilot-compid 2"),
+            Some((3, 2))
+        );
+        assert_eq!(pin_of("companion fly --autopilot-sysid x"), None);
+    }
 
     #[test]
     fn a_linear_drain_gives_the_pack_over_the_drain_time() {

@@ -29,6 +29,8 @@ pub type Pin = Option<(u8, u8)>;
 pub struct TlogRead {
     pub samples: u64,
     pub autopilot: Option<(u8, u8)>,
+    /// The pin it was chosen by (calibrate's or the run's `fly`'s), if any.
+    pub pin: Pin,
     /// Other autopilots (system, component) and how many of their frames were left out.
     pub impostors: std::collections::BTreeMap<(u8, u8), u64>,
 }
@@ -158,6 +160,7 @@ pub fn for_each_sample(
         }
     }
     read.autopilot = chooser.chosen;
+    read.pin = pin;
     if let Some(a) = read.autopilot {
         read.impostors.remove(&a);
     }

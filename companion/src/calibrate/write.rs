@@ -83,11 +83,16 @@ fn runs_report(s: &mut String, cal: &Calibration) {
         );
     }
     for (r, t) in &cal.tlogs {
-        let who = t
-            .autopilot
-            .map_or("no autopilot chosen".to_string(), |(a, c)| {
-                format!("autopilot {a}/{c}")
-            });
+        let how = if t.pin.is_some() {
+            " (pinned)"
+        } else {
+            " (fly's choice: component 1 first; pin with --autopilot-sysid)"
+        };
+        let who = match (t.autopilot, t.pin) {
+            (Some((a, c)), _) => format!("autopilot {a}/{c}{how}"),
+            (None, Some((a, c))) => format!("no frame of the pinned autopilot {a}/{c}"),
+            (None, None) => "no autopilot heard".to_string(),
+        };
         let _ = write!(
             s,
             "  {}/flight.tlog: {} power samples from {who}",
