@@ -410,3 +410,20 @@ fn run_folder_names_with_escape_sequences_are_shown_escaped() {
         "{t:?}"
     );
 }
+
+/// A fit whose error exceeds the mission's `max_fit_rms_fraction` is refused, nothing written:
+/// half the readings 50 % high, half 50 % low, is no curve of the vehicle's.
+#[test]
+fn a_fit_whose_error_exceeds_the_stated_bound_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    let k = std::cell::Cell::new(0u32);
+    let scattered = |v: f64| {
+        k.set(k.get() + 1);
+        sitl_power(v) * if k.get() % 2 == 0 { 1.5 } else { 0.5 }
+    };
+    write_run(&run, 0.0, Some(&scattered), &seconds);
+    let out = tmp.path().join("o.toml");
+    let o = calibrate(&[&run], &out, &[]);
+    refused(&o, &out, "max_fit_rms_fraction 0.2");
+}
