@@ -420,7 +420,7 @@ fn a_fit_whose_error_exceeds_the_stated_bound_is_refused() {
     let k = std::cell::Cell::new(0u32);
     let scattered = |v: f64| {
         k.set(k.get() + 1);
-        sitl_power(v) * if k.get() % 2 == 0 { 1.5 } else { 0.5 }
+        sitl_power(v) * if k.get().is_multiple_of(2) { 1.5 } else { 0.5 }
     };
     write_run(&run, 0.0, Some(&scattered), &seconds);
     let out = tmp.path().join("o.toml");
