@@ -11,6 +11,7 @@
 
 mod binding;
 mod compile;
+pub mod power_bounds;
 mod reason;
 mod schema;
 
@@ -80,6 +81,10 @@ pub struct MissionSpec {
     pub tile_names: Vec<String>,
     /// How a measured power drift is judged and learned (`[guarantee]`).
     pub tuning: Tuning,
+    /// `[power_bounds]`, when the mission states them.
+    pub power_bounds: Option<power_bounds::PowerBounds>,
+    /// The fastest the mission flies (m/s): its activities' speed caps and hold speeds.
+    pub fastest_mps: f64,
 }
 
 /// Resolve `--mission`: a path the params set holds (the shell adds a mission file given by

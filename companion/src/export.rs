@@ -19,6 +19,7 @@
 //! named (at most [`MAX_SKIPPED_SHOWN`]); an input with no readable record is an error.
 
 use crate::decision_log::{LogItem, ReadError, ReadIssue, log_files, read_tlog, stream_log};
+use crate::output_file;
 use crate::review::text::escape_controls;
 use companion_core::record::DecisionRecord;
 use std::collections::{BTreeMap, BTreeSet};
@@ -185,32 +186,6 @@ impl ExportStats {
     }
 }
 
-#[cfg(unix)]
-fn file_id(m: &std::fs::Metadata) -> Option<(u64, u64)> {
-    use std::os::unix::fs::MetadataExt;
-    Some((m.dev(), m.ino()))
-}
-
-#[cfg(not(unix))]
-fn file_id(_: &std::fs::Metadata) -> Option<(u64, u64)> {
-    None
-}
-
-/// The same file (device and inode; canonical paths where there are no inodes), whatever the
-/// names, symlinks or hard links that lead to it.
-fn same_file(a: &Path, a_meta: &std::fs::Metadata, b: &Path) -> bool {
-    let Ok(b_meta) = std::fs::metadata(b) else {
-        return false;
-    };
-    match (file_id(a_meta), file_id(&b_meta)) {
-        (Some(x), Some(y)) => x == y,
-        _ => match (a.canonicalize(), b.canonicalize()) {
-            (Ok(x), Ok(y)) => x == y,
-            _ => false,
-        },
-    }
-}
-
 /// The run folder of a run folder or log file (a log file's own folder).
 fn run_dir_of(input: &Path) -> PathBuf {
     if input.is_dir() {
@@ -239,29 +214,13 @@ pub fn check_out(input: &Path, out: &Path, format: Format) -> Result<(), ExportE
         path: out.to_path_buf(),
         reason,
     };
-    let out_meta = match std::fs::metadata(out) {
-        Ok(m) => m,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
-        Err(e) => return Err(refuse(format!("cannot inspect it: {e}"))),
-    };
-    if !out_meta.is_file() {
-        let what = if out_meta.is_dir() {
-            "a directory"
-        } else {
-            "not a regular file (a FIFO, device or socket)"
-        };
-        return Err(refuse(format!("{what}: an export is written to a file")));
-    }
     let mut inputs = log_files(input).unwrap_or_default();
     inputs.push(tlog_of(input));
-    for f in &inputs {
-        if same_file(out, &out_meta, f) {
-            return Err(refuse(format!(
-                "is {} itself, an input of this export: refusing to overwrite it",
-                escape_controls(&f.display().to_string(), false)
-            )));
-        }
-    }
+    let Some(out_meta) =
+        output_file::check(out, &inputs, "export").map_err(|e| refuse(e.reason))?
+    else {
+        return Ok(());
+    };
     let ext = match format {
         Format::Mcap => "mcap",
         Format::Csv => "csv",
@@ -270,7 +229,8 @@ pub fn check_out(input: &Path, out: &Path, format: Format) -> Result<(), ExportE
     if let Ok(entries) = std::fs::read_dir(&run_dir) {
         for e in entries.flatten() {
             let p = e.path();
-            if same_file(out, &out_meta, &p) && p.extension().is_none_or(|x| x != ext) {
+            if output_file::same_file(out, &out_meta, &p) && p.extension().is_none_or(|x| x != ext)
+            {
                 return Err(refuse(format!(
                     "is {}, a file of the run folder: an export may only replace an earlier \
                      .{ext} export there",
@@ -279,38 +239,6 @@ pub fn check_out(input: &Path, out: &Path, format: Format) -> Result<(), ExportE
             }
         }
     }
-    Ok(())
-}
-
-/// A temporary file beside `out` (same filesystem, so the final rename is atomic).
-fn temp_beside(out: &Path) -> Result<tempfile::NamedTempFile, ExportError> {
-    let dir = match out.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    tempfile::Builder::new()
-        .prefix(".export-")
-        .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(|source| ExportError::Write {
-            path: out.to_path_buf(),
-            source,
-        })
-}
-
-/// Rename the finished temporary file over `out`, readable like any file the user writes.
-fn persist(tmp: tempfile::NamedTempFile, out: &Path) -> Result<(), ExportError> {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        let _ = tmp
-            .as_file()
-            .set_permissions(std::fs::Permissions::from_mode(0o644));
-    }
-    tmp.persist(out).map_err(|e| ExportError::Write {
-        path: out.to_path_buf(),
-        source: e.error,
-    })?;
     Ok(())
 }
 
@@ -405,7 +333,7 @@ pub fn export_mcap(input: &Path, path: &Path) -> Result<ExportStats, ExportError
     };
     check_out(input, path, Format::Mcap)?;
     let items = stream_log(input)?;
-    let tmp = temp_beside(path)?;
+    let tmp = output_file::temp_beside(path).map_err(werr)?;
     let file = tmp.reopen().map_err(werr)?;
     let mut w = mcap::Writer::new(BufWriter::new(file)).map_err(merr)?;
     let mut stats = ExportStats::default();
@@ -512,7 +440,7 @@ pub fn export_mcap(input: &Path, path: &Path) -> Result<ExportStats, ExportError
     }
     w.finish().map_err(merr)?;
     drop(w);
-    persist(tmp, path)?;
+    output_file::persist(tmp, path, 0o644).map_err(werr)?;
     Ok(stats)
 }
 
@@ -618,7 +546,7 @@ pub fn export_csv(input: &Path, path: &Path) -> Result<ExportStats, ExportError>
         .enumerate()
         .map(|(i, k)| (k.as_str(), i))
         .collect();
-    let tmp = temp_beside(path)?;
+    let tmp = output_file::temp_beside(path).map_err(werr)?;
     let mut w = BufWriter::new(tmp.reopen().map_err(werr)?);
     let head: Vec<String> = order.iter().map(|c| csv_field(c)).collect();
     writeln!(w, "{}", head.join(",")).map_err(werr)?;
@@ -638,7 +566,7 @@ pub fn export_csv(input: &Path, path: &Path) -> Result<ExportStats, ExportError>
     }
     w.flush().map_err(werr)?;
     drop(w);
-    persist(tmp, path)?;
+    output_file::persist(tmp, path, 0o644).map_err(werr)?;
     stats.columns = order.len();
     Ok(stats)
 }

@@ -29,6 +29,7 @@ pub mod decision_log;
 pub mod export;
 pub mod fly;
 pub mod learn_cpt;
+pub mod output_file;
 pub mod params;
 pub mod params_files;
 pub mod replay;

@@ -21,6 +21,7 @@ pub fn read_params_dir(dir: &Path) -> Result<ParamsFiles, SpecError> {
         let (base, table) = crate::calibrate::overlay::read_overlay(dir, default_params_dir())?;
         let mut files = read_dir_only(&base)?;
         crate::calibrate::overlay::apply(&mut files, dir, &table)?;
+        crate::calibrate::overlay::check_power(&files, dir, &table)?;
         return Ok(files);
     }
     read_dir_only(dir)

@@ -76,17 +76,19 @@ pub fn signing_timestamp(now: std::time::SystemTime) -> u64 {
 pub fn write_new_key(path: &Path, force: bool) -> anyhow::Result<[u8; 32]> {
     use rand::TryRngCore;
     use std::io::Write;
-    use std::os::unix::fs::OpenOptionsExt;
+    // The shared output rules (output_file): no FIFO or device, no control characters in the
+    // name; then the key's own: an existing key is kept unless --force.
+    crate::output_file::check(path, &[], "signing-setup")
+        .map_err(|e| anyhow::anyhow!("--key {e}"))?;
+    let shown = crate::output_file::shown(path);
     match std::fs::symlink_metadata(path) {
         Ok(m) if !force => anyhow::bail!(
-            "--key {}: a {} is already there; refusing to overwrite a key (--force writes a new one, and the old one stops working with the autopilot)",
-            path.display(),
+            "--key {shown}: a {} is already there; refusing to overwrite a key (--force writes a new one, and the old one stops working with the autopilot)",
             if m.is_file() { "file" } else { "non-file" }
         ),
-        Ok(m) if !m.is_file() => anyhow::bail!(
-            "--key {}: not a regular file; refusing to replace it",
-            path.display()
-        ),
+        Ok(m) if !m.is_file() => {
+            anyhow::bail!("--key {shown}: not a regular file; refusing to replace it")
+        }
         _ => {}
     }
     let mut key = [0u8; 32];
@@ -94,28 +96,13 @@ pub fn write_new_key(path: &Path, force: bool) -> anyhow::Result<[u8; 32]> {
         .try_fill_bytes(&mut key)
         .context("reading the system's random source for the key")?;
     let hex: String = key.iter().map(|b| format!("{b:02x}")).collect();
-    let name = path
-        .file_name()
-        .with_context(|| format!("--key {}: not a file name", path.display()))?;
-    let tmp = path.with_file_name(format!(
-        ".{}.{}.tmp",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
+    // A temporary file beside the key (created 0600), renamed over it only when whole.
     let written = (|| -> std::io::Result<()> {
-        let mut f = std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .mode(0o600)
-            .open(&tmp)?;
-        f.write_all(format!("{hex}\n").as_bytes())?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
+        let mut tmp = crate::output_file::temp_beside(path)?;
+        tmp.write_all(format!("{hex}\n").as_bytes())?;
+        crate::output_file::persist(tmp, path, 0o600)
     })();
-    if let Err(e) = written {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(e).with_context(|| format!("writing the key to {}", path.display()));
-    }
+    written.with_context(|| format!("writing the key to {shown}"))?;
     Ok(key)
 }
 

@@ -362,11 +362,11 @@ fn negative_energy_is_rejected() {
     assert!(e.reason.contains("negative"), "{e}");
     let e = rejected(&text().replace("reserve_wh = 7.4", "reserve_wh = 70.0"));
     assert_eq!(e.entry, "goals.energy_j.bound");
-    // A propulsion fit that goes negative at the flown speed.
+    // A propulsion fit that goes negative at the flown speed: no airframe's ([power_bounds]).
     let p = text().replace("blade_profile_w = 60.0", "blade_profile_w = -600.0");
     let e = rejected(&p);
-    assert!(e.entry.starts_with("activities["), "{e}");
-    assert!(e.reason.contains("negative"), "{e}");
+    assert_eq!(e.entry, "propulsion", "{e}");
+    assert!(e.reason.contains("hover power -460"), "{e}");
 }
 
 #[test]

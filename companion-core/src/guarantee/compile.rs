@@ -101,6 +101,15 @@ pub(super) fn compile(path: &Path, f: MissionFile) -> Result<MissionSpec, SpecEr
     let goals = c.goals()?;
     let selection = c.selection(&goals)?;
     c.check_powers()?;
+    let power_bounds = f.power_bounds.as_ref().map(|b| b.check(path)).transpose()?;
+    let fastest_mps = super::power_bounds::fastest(&f);
+    super::power_bounds::check_power_curve(
+        power_bounds.as_ref(),
+        |v| f.propulsion.power(v),
+        f.base.power_w,
+        fastest_mps,
+    )
+    .map_err(|u| c.err(u.entry, u.reason))?;
     let tasks = c.tasks()?;
     c.check_constraints(&tasks)?;
     if f.activities.is_empty() {
@@ -145,6 +154,8 @@ pub(super) fn compile(path: &Path, f: MissionFile) -> Result<MissionSpec, SpecEr
         battery_kept_back,
         tile_names: f.compute.map(|c| c.tile_names).unwrap_or_default(),
         tuning,
+        power_bounds,
+        fastest_mps,
     })
 }
 

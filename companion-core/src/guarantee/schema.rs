@@ -28,6 +28,20 @@ pub(super) struct MissionFile {
     /// The in-flight power-drift tuning (docs/guarantee.md); defaults when absent.
     #[serde(default)]
     pub(super) guarantee: Option<TuningFile>,
+    /// What no airframe of the mission can be (docs/calibrate.md); none for a ground robot.
+    #[serde(default)]
+    pub(super) power_bounds: Option<PowerBoundsFile>,
+}
+
+/// `[power_bounds]`: what no airframe of the mission can be (checked in power_bounds.rs).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct PowerBoundsFile {
+    pub(super) mass_kg: f64,
+    pub(super) hover_w_per_kg: [f64; 2],
+    pub(super) min_power_of_hover: f64,
+    pub(super) max_fit_rms_fraction: f64,
+    pub(super) sources: BTreeMap<String, String>,
 }
 
 /// `[guarantee]`: how a measured power drift is judged and learned.

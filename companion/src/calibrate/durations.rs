@@ -45,6 +45,9 @@ impl DurationStats {
 #[derive(Default)]
 pub struct Durations {
     stats: BTreeMap<String, DurationStats>,
+    /// Completed activities that lasted zero or less (the clock stood or went back): per name,
+    /// how many and the shortest. No duration is fitted from records like these.
+    non_positive: BTreeMap<String, (u64, f64)>,
     current: Option<(String, f64)>,
 }
 
@@ -73,8 +76,12 @@ impl Durations {
             }
             Some((name, t0)) => {
                 let d = t - *t0;
-                if d >= 0.0 {
+                if d > 0.0 {
                     self.stats.entry(name.clone()).or_default().add(d);
+                } else {
+                    let e = self.non_positive.entry(name.clone()).or_insert((0, d));
+                    e.0 += 1;
+                    e.1 = e.1.min(d);
                 }
                 self.current = Some((g.activity_name.clone(), t));
             }
@@ -86,11 +93,27 @@ impl Durations {
     pub fn stats(&self) -> &BTreeMap<String, DurationStats> {
         &self.stats
     }
+
+    /// Per activity name, its completed runs of zero or negative length (count, shortest).
+    pub fn non_positive(&self) -> &BTreeMap<String, (u64, f64)> {
+        &self.non_positive
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn zero_and_negative_durations_are_kept_apart() {
+        let mut d = Durations::default();
+        for (t, a) in [(5.0, "a"), (5.0, "b"), (3.0, "c"), (4.0, "d")] {
+            d.add(&rec(t, a));
+        }
+        assert_eq!(d.stats().keys().collect::<Vec<_>>(), ["c"]);
+        assert_eq!(d.non_positive()["a"], (1, 0.0));
+        assert_eq!(d.non_positive()["b"], (1, -2.0));
+    }
     use companion_core::record::GuaranteeRecord;
 
     fn rec(t: f64, activity: &str) -> DecisionRecord {

@@ -47,11 +47,23 @@ pub struct CalibrateArgs {
     /// does not describe.
     #[arg(long)]
     pub polynomial: bool,
+    /// Count the tlog's frames of this autopilot system only (as `fly --autopilot-sysid`);
+    /// default: the pin the run's `fly` was given (its log header's command line), else the
+    /// autopilot `fly` would choose (component 1 first).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
+    pub autopilot_sysid: Option<u8>,
+    /// With --autopilot-sysid: the autopilot's component id.
+    #[arg(long, default_value_t = 1, requires = "autopilot_sysid", value_parser = clap::value_parser!(u8).range(1..))]
+    pub autopilot_compid: u8,
 }
 
 /// Everything learned from the runs.
 pub struct Calibration {
     pub runs: Vec<PathBuf>,
+    /// Run names left out as repeats of a run already counted (same content), with that run.
+    pub repeats: Vec<(PathBuf, PathBuf)>,
+    /// Per run with a tlog: the autopilot its samples are from and the impostors left out.
+    pub tlogs: Vec<(PathBuf, tlog::TlogRead)>,
     pub records: u64,
     pub power: Result<power_fit::FitResult, power_fit::FitError>,
     pub durations: durations::Durations,
@@ -62,9 +74,13 @@ pub struct Calibration {
 pub fn calibrate(
     shipped: &shipped::Shipped,
     runs: Vec<PathBuf>,
+    pin: tlog::Pin,
     keep_v0: bool,
     polynomial: bool,
 ) -> anyhow::Result<Calibration> {
+    // Each run once, by content: names, symlinks or copies of one run are one run.
+    let (runs, repeats) = runs::once_each(runs)?;
+    let mut tlogs = Vec::new();
     let mut fit = if polynomial {
         power_fit::PowerFit::polynomial(shipped.power)
     } else if keep_v0 {
@@ -81,7 +97,14 @@ pub fn calibrate(
         counts.start_run();
         // The tlog has the autopilot's telemetry at its own rate; the records, once a cycle.
         let tlog = run.join("flight.tlog");
-        let from_tlog = tlog.is_file() && tlog::for_each_sample(&tlog, |s| fit.add(s))? > 0;
+        let mut from_tlog = false;
+        if tlog.is_file() {
+            // calibrate's own pin, else the one fly flew this run with, else fly's rule.
+            let pin = pin.or_else(|| runs::fly_pin(run));
+            let read = tlog::for_each_sample(&tlog, pin, |s| fit.add(s))?;
+            from_tlog = read.samples > 0;
+            tlogs.push((run.clone(), read));
+        }
         // Without a current anywhere, the power is the drain of the percentage (runs.rs).
         let mut with_current = false;
         let mut drain = runs::PercentageDrain::default();
@@ -101,13 +124,15 @@ pub fn calibrate(
         if !from_tlog && !with_current && drain.for_each_sample(|s| fit.add(s)) > 0 {
             tracing::info!(
                 "{}: no current reported; power from the percentage's drain, {:.1} W",
-                run.display(),
+                crate::output_file::shown(run),
                 drain.power_w().unwrap_or(0.0)
             );
         }
     }
     Ok(Calibration {
         runs,
+        repeats,
+        tlogs,
         records,
         power: fit.solve(),
         durations,
@@ -115,20 +140,66 @@ pub fn calibrate(
     })
 }
 
-/// The subcommand.
+/// The subcommand. Its error is one line of text with every control character escaped: it
+/// names run folders and files, which are data (a folder named with an escape sequence is shown,
+/// not obeyed).
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+    calibrate_and_write(args).map_err(|e| {
+        anyhow::anyhow!(crate::review::text::escape_controls(
+            &format!("{e:#}"),
+            false
+        ))
+    })
+}
+
+fn calibrate_and_write(args: &CalibrateArgs) -> anyhow::Result<()> {
     let params = args
         .params
         .clone()
         .unwrap_or_else(crate::params::default_params_dir);
     let shipped = shipped::Shipped::load(&params).context("loading params")?;
     let runs = runs::discover(&args.runs)?;
-    let cal = calibrate(&shipped, runs, args.keep_induced_velocity, args.polynomial)?;
+    // Everything read is an input the overlay may not replace: the runs' logs and tlogs (every
+    // name given, repeats included) and the params (an overlay given with --params, the files
+    // of its base).
+    let mut inputs = shipped.inputs.clone();
+    if overlay::is_overlay(&params) {
+        inputs.push(params.clone());
+    }
+    for r in &runs {
+        inputs.extend(crate::decision_log::log_files(r).unwrap_or_default());
+        inputs.push(r.join("flight.tlog"));
+    }
+    // Refused before the runs are read: a FIFO as --out never blocks, an input is never
+    // touched.
+    if let Some(out) = &args.out {
+        crate::output_file::check(out, &inputs, "calibration")
+            .map_err(|e| anyhow::anyhow!("--out {e}"))?;
+    }
+    let pin = args.autopilot_sysid.map(|s| (s, args.autopilot_compid));
+    let cal = calibrate(
+        &shipped,
+        runs,
+        pin,
+        args.keep_induced_velocity,
+        args.polynomial,
+    )?;
     print!("{}", write::report(&shipped, &cal));
+    let refused = write::refusals(&shipped, &cal);
+    if !refused.is_empty() {
+        for r in &refused {
+            println!("refused: {r}");
+        }
+        anyhow::bail!(
+            "calibrate: refused for the {} reason(s) above; nothing written",
+            refused.len()
+        );
+    }
     if let Some(out) = &args.out {
         let text = write::overlay(&shipped, &cal, out)?;
-        std::fs::write(out, text).with_context(|| format!("writing {}", out.display()))?;
-        println!("overlay written: {}", out.display());
+        crate::output_file::write(out, &inputs, "calibration", text.as_bytes(), 0o644)
+            .map_err(|e| anyhow::anyhow!("--out {e}"))?;
+        println!("overlay written: {}", crate::output_file::shown(out));
     }
     Ok(())
 }

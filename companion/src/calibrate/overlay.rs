@@ -107,6 +107,30 @@ pub fn apply(
     Ok(())
 }
 
+/// The missions `overlay` changed, checked against their `[power_bounds]` (and, without any, for
+/// a power above zero at every speed flown): an overlay's curve no airframe flies (zero power
+/// everywhere, a hover of 1e9 W) is refused naming the overlay, the entry and the reason.
+pub fn check_power(
+    files: &ParamsFiles,
+    overlay_file: &Path,
+    overlay: &Table,
+) -> Result<(), SpecError> {
+    for name in overlay.keys().filter(|n| *n != CALIBRATION_TABLE) {
+        let path = files.dir().join(name);
+        let Ok(text) = files.text(&path) else {
+            continue;
+        };
+        if let Some(u) = companion_core::guarantee::power_bounds::check_mission_text(&path, text) {
+            return Err(SpecError::new(
+                overlay_file,
+                format!("{name}.{}", u.entry),
+                u.reason,
+            ));
+        }
+    }
+    Ok(())
+}
+
 type ErrFn<'a> = dyn Fn(&str, String) -> SpecError + 'a;
 
 fn merge_table(dst: &mut Table, src: &Table, at: &str, err: &ErrFn) -> Result<(), SpecError> {

@@ -23,7 +23,7 @@ pub fn discover(args: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
         let entries = std::fs::read_dir(a).map_err(|e| {
             anyhow::anyhow!(
                 "{}: not a run folder and cannot be listed: {e}",
-                a.display()
+                crate::output_file::shown(a)
             )
         })?;
         let mut runs: Vec<PathBuf> = entries
@@ -33,7 +33,7 @@ pub fn discover(args: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
         if runs.is_empty() {
             anyhow::bail!(
                 "{}: neither a run folder ({LOG_STEM}.jsonl) nor a folder of run folders",
-                a.display()
+                crate::output_file::shown(a)
             );
         }
         runs.sort();
@@ -42,25 +42,110 @@ pub fn discover(args: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
     Ok(out)
 }
 
+/// The SHA-256 of a run's contents: its decision log (every rotation part) and its
+/// `flight.tlog`, whatever names, symlinks or copies lead to them. Two runs with the same hash
+/// are one run.
+pub fn content_hash(dir: &Path) -> anyhow::Result<[u8; 32]> {
+    use sha2::Digest;
+    let mut h = sha2::Sha256::new();
+    let mut files = crate::decision_log::log_files(dir)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", crate::output_file::shown(dir)))?;
+    let tlog = dir.join("flight.tlog");
+    if tlog.is_file() {
+        files.push(tlog);
+    }
+    for f in files {
+        crate::params_files::regular_file(&f)
+            .map_err(|r| anyhow::anyhow!("{}: {r}", crate::output_file::shown(&f)))?;
+        let mut rd = std::fs::File::open(&f)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", crate::output_file::shown(&f)))?;
+        // The file's name is not hashed (a renamed copy is the same run); its length is, so
+        // that the files' boundaries count.
+        let (mut buf, mut n) = (vec![0u8; 1 << 16], 0u64);
+        loop {
+            let k = std::io::Read::read(&mut rd, &mut buf)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", crate::output_file::shown(&f)))?;
+            if k == 0 {
+                break;
+            }
+            h.update(&buf[..k]);
+            n += k as u64;
+        }
+        h.update(n.to_le_bytes());
+    }
+    Ok(h.finalize().into())
+}
+
+/// Run names left out as repeats, each with the run it repeats.
+pub type Repeats = Vec<(PathBuf, PathBuf)>;
+
+/// `runs` with each content once (the first name kept, in order), and the names left out with
+/// the name of the run they repeat.
+pub fn once_each(runs: Vec<PathBuf>) -> anyhow::Result<(Vec<PathBuf>, Repeats)> {
+    let mut seen: std::collections::HashMap<[u8; 32], PathBuf> = Default::default();
+    let (mut kept, mut repeats) = (Vec::new(), Vec::new());
+    for r in runs {
+        let h = content_hash(&r)?;
+        match seen.get(&h) {
+            Some(first) => repeats.push((r, first.clone())),
+            None => {
+                seen.insert(h, r.clone());
+                kept.push(r);
+            }
+        }
+    }
+    Ok((kept, repeats))
+}
+
+/// The autopilot `fly` was pinned to in this run (`--autopilot-sysid N [--autopilot-compid M]`
+/// on the command line its log header records), if it was.
+pub fn fly_pin(dir: &Path) -> Option<(u8, u8)> {
+    let first = stream_log(dir).ok()?.next()?.ok()?;
+    let LogItem::Header(h) = first else {
+        return None;
+    };
+    let words: Vec<&str> = h.command.split_whitespace().collect();
+    let value = |flag: &str| -> Option<u8> {
+        let eq = format!("{flag}=");
+        words
+            .iter()
+            .enumerate()
+            .find_map(|(i, w)| match w.strip_prefix(&eq) {
+                Some(v) => v.parse().ok(),
+                None if *w == flag => words.get(i + 1)?.parse().ok(),
+                None => None,
+            })
+    };
+    let sys = value("--autopilot-sysid").filter(|s| *s > 0)?;
+    let comp = value("--autopilot-compid").unwrap_or(companion_link::vehicle::AUTOPILOT_COMPONENT);
+    Some((sys, comp))
+}
+
 /// Call `each` with every record of the run folder `dir`, in order. A corrupted line stops with
 /// its file, line and reason; a last line cut off (a run killed while writing) is skipped with
 /// a warning.
 pub fn for_each_record(dir: &Path, mut each: impl FnMut(&DecisionRecord)) -> anyhow::Result<u64> {
-    let stream = stream_log(dir).map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?;
+    let stream =
+        stream_log(dir).map_err(|e| anyhow::anyhow!("{}: {e}", crate::output_file::shown(dir)))?;
     let mut n = 0;
     for item in stream {
-        let item = item.map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?;
+        let item = item.map_err(|e| anyhow::anyhow!("{}: {e}", crate::output_file::shown(dir)))?;
         match item {
             LogItem::Record(r, _) => {
                 each(&r);
                 n += 1;
             }
             LogItem::Corrupted(i) => {
-                anyhow::bail!("{}, line {}: {}", i.file.display(), i.line, i.reason)
+                anyhow::bail!(
+                    "{}, line {}: {}",
+                    crate::output_file::shown(&i.file),
+                    i.line,
+                    i.reason
+                )
             }
             LogItem::Truncated(i) => tracing::warn!(
                 "{}, line {}: {} (skipped)",
-                i.file.display(),
+                crate::output_file::shown(&i.file),
                 i.line,
                 i.reason
             ),
@@ -203,6 +288,27 @@ impl PercentageDrain {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_pin_fly_flew_with_is_read_from_the_header() {
+        let d = tempfile::tempdir().unwrap();
+        let pin_of = |command: &str| {
+            let h = crate::decision_log::Header::new(command, std::time::SystemTime::UNIX_EPOCH);
+            std::fs::write(
+                d.path().join("decisions.jsonl"),
+                serde_json::to_string(&h).unwrap() + "\n",
+            )
+            .unwrap();
+            fly_pin(d.path())
+        };
+        assert_eq!(pin_of("companion fly --connect x"), None);
+        assert_eq!(pin_of("companion fly --autopilot-sysid 1"), Some((1, 1)));
+        assert_eq!(
+            pin_of("companion fly --autopilot-sysid=3 --autopilot-compid 2"),
+            Some((3, 2))
+        );
+        assert_eq!(pin_of("companion fly --autopilot-sysid x"), None);
+    }
 
     #[test]
     fn a_linear_drain_gives_the_pack_over_the_drain_time() {

@@ -25,6 +25,11 @@ pub struct Shipped {
     pub estimate_s: BTreeMap<String, (f64, String)>,
     pub rows: ShippedRows,
     pub states: MissionStates,
+    /// The mission's `[power_bounds]` and the fastest it flies (m/s): what a fit is judged by.
+    pub bounds: Option<companion_core::guarantee::power_bounds::PowerBounds>,
+    pub fastest_mps: f64,
+    /// The params files read (inputs an output may not replace).
+    pub inputs: Vec<PathBuf>,
 }
 
 impl Shipped {
@@ -75,6 +80,9 @@ impl Shipped {
             .to_string_lossy()
             .replace('\\', "/");
         Ok(Shipped {
+            bounds: spec.power_bounds,
+            fastest_mps: spec.fastest_mps,
+            inputs: files.iter().map(|(p, _)| p.to_path_buf()).collect(),
             rows: ShippedRows::load(files)?,
             states: MissionStates::load(files)?,
             dir,

@@ -2,9 +2,13 @@
 //! BATTERY_STATUS on ArduPilot), read one entry at a time and decoded as `fly` decodes them
 //! (`companion_link::telemetry::Telemetry`): pack voltage x current from BATTERY_STATUS (until
 //! the first one, SYS_STATUS), speed and altitude from GLOBAL_POSITION_INT, armed from HEARTBEAT.
-//! Only the autopilot's frames count: the system *and* component of the first HEARTBEAT `fly`
-//! would take for an autopilot (`companion_link::vehicle::is_autopilot_heartbeat`). A companion
-//! shares the autopilot's system id, and the tlog holds its own disarmed-looking heartbeats too.
+//! Only the autopilot's frames count: the system *and* component `fly` would choose from the
+//! same HEARTBEATs (`companion_link::vehicle::is_autopilot_heartbeat`): the pin when given
+//! (`calibrate --autopilot-sysid/--autopilot-compid`, as `fly`'s), else component 1 at once and
+//! another component only once it has spoken alone for `OTHER_COMPONENT_WAIT` of the tlog's
+//! time. Every other autopilot is an impostor: its frames are counted out and reported. A
+//! companion shares the autopilot's system id, and the tlog holds its own disarmed-looking
+//! heartbeats too.
 
 use super::power_fit::Sample;
 use crate::decision_log::frame_len;
@@ -17,17 +21,76 @@ use std::time::Duration;
 /// The largest tlog entry: 8-byte time stamp and a signed MAVLink 2 frame.
 const MAX_ENTRY: usize = 8 + 10 + 255 + 2 + 13;
 
-/// Call `each` with every power sample of the tlog at `path`; returns the samples given. A cut
+/// The autopilot `fly` obeys: a pin, or none (fly's choice rule).
+pub type Pin = Option<(u8, u8)>;
+
+/// What a tlog gave: its samples, the autopilot they are from, the impostors counted out.
+#[derive(Debug, Default, Clone, PartialEq)]
+pub struct TlogRead {
+    pub samples: u64,
+    pub autopilot: Option<(u8, u8)>,
+    /// The pin it was chosen by (calibrate's or the run's `fly`'s), if any.
+    pub pin: Pin,
+    /// Other autopilots (system, component) and how many of their frames were left out.
+    pub impostors: std::collections::BTreeMap<(u8, u8), u64>,
+}
+
+/// `fly`'s choice of the autopilot over a tlog (companion_link's `Vehicle::choice`).
+struct Chooser {
+    pin: Pin,
+    chosen: Option<(u8, u8)>,
+    candidate: Option<((u8, u8), u64)>,
+}
+
+impl Chooser {
+    /// The sender's HEARTBEAT at `t_us` (tlog time): whether it makes the sender the autopilot.
+    fn heartbeat(&mut self, sender: (u8, u8), t_us: u64) {
+        if self.chosen.is_some() {
+            return;
+        }
+        if let Some(p) = self.pin {
+            if sender == p {
+                self.chosen = Some(sender);
+            }
+            return;
+        }
+        if sender.1 == companion_link::vehicle::AUTOPILOT_COMPONENT {
+            self.chosen = Some(sender);
+            return;
+        }
+        let wait = companion_link::vehicle::OTHER_COMPONENT_WAIT.as_micros() as u64;
+        match self.candidate {
+            None => self.candidate = Some((sender, t_us)),
+            Some((id, since)) if id == sender && t_us.saturating_sub(since) >= wait => {
+                self.chosen = Some(sender);
+            }
+            _ => {}
+        }
+    }
+}
+
+/// Call `each` with every power sample of the tlog at `path` from the autopilot `fly` would
+/// obey (`pin`, else its choice rule); returns what was read. A cut
 /// last entry (a run killed while writing) ends the read with a warning; an entry that does not
 /// start a MAVLink frame stops it with the file, the byte offset and the reason.
-pub fn for_each_sample(path: &Path, mut each: impl FnMut(Sample)) -> anyhow::Result<u64> {
+pub fn for_each_sample(
+    path: &Path,
+    pin: Pin,
+    mut each: impl FnMut(Sample),
+) -> anyhow::Result<TlogRead> {
     crate::params_files::regular_file(path)
-        .map_err(|r| anyhow::anyhow!("{}: {r}", path.display()))?;
-    let file = std::fs::File::open(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        .map_err(|r| anyhow::anyhow!("{}: {r}", crate::output_file::shown(path)))?;
+    let file = std::fs::File::open(path)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", crate::output_file::shown(path)))?;
     let mut rd = BufReader::new(file);
     let mut ingest = companion_link::ingest::Ingest::new(None);
     let mut tel = Telemetry::new(TelemetryConfig::default());
-    let mut autopilot: Option<(u32, u8)> = None;
+    let mut chooser = Chooser {
+        pin,
+        chosen: None,
+        candidate: None,
+    };
+    let mut read = TlogRead::default();
     let mut battery_status_seen = false;
     let mut buf = [0u8; MAX_ENTRY];
     let (mut offset, mut n) = (0u64, 0u64);
@@ -41,13 +104,13 @@ pub fn for_each_sample(path: &Path, mut each: impl FnMut(Sample)) -> anyhow::Res
             if head < 11 {
                 tracing::warn!(
                     "{}: last entry at byte {offset} cut off (skipped)",
-                    path.display()
+                    crate::output_file::shown(path)
                 );
                 break;
             }
             anyhow::bail!(
                 "{}, byte {offset}: not a tlog entry (8-byte time stamp, then a MAVLink frame starting 0xFD or 0xFE; found 0x{:02X})",
-                path.display(),
+                crate::output_file::shown(path),
                 buf[8]
             );
         };
@@ -55,26 +118,30 @@ pub fn for_each_sample(path: &Path, mut each: impl FnMut(Sample)) -> anyhow::Res
         if got < len - 3 {
             tracing::warn!(
                 "{}: last entry at byte {offset} cut off (skipped)",
-                path.display()
+                crate::output_file::shown(path)
             );
             break;
         }
         offset += (8 + len) as u64;
-        let mut msgs: Vec<((u32, u8), Msg)> = Vec::new();
+        let t_us = u64::from_be_bytes(buf[..8].try_into().expect("8 bytes"));
+        let mut msgs: Vec<((u8, u8), Msg)> = Vec::new();
         ingest.push_each(&buf[8..8 + len], |fr| {
             msgs.push((
-                (fr.header.system_id, fr.header.component_id),
+                (fr.header.system_id as u8, fr.header.component_id),
                 fr.msg.clone(),
             ))
         });
         for (sender, msg) in msgs {
-            if let Msg::HEARTBEAT(h) = &msg
-                && autopilot.is_none()
-                && companion_link::vehicle::is_autopilot_heartbeat(h)
-            {
-                autopilot = Some(sender);
+            let autopilot_hb = matches!(&msg, Msg::HEARTBEAT(h)
+                if companion_link::vehicle::is_autopilot_heartbeat(h));
+            if autopilot_hb {
+                chooser.heartbeat(sender, t_us);
             }
-            if autopilot != Some(sender) {
+            if chooser.chosen != Some(sender) {
+                // Another autopilot's frames (an impostor, or one heard before the choice).
+                if autopilot_hb || read.impostors.contains_key(&sender) {
+                    *read.impostors.entry(sender).or_default() += 1;
+                }
                 continue;
             }
             tel.on_message(Duration::ZERO, &msg, companion_link::modes::Flavor::Other);
@@ -92,7 +159,13 @@ pub fn for_each_sample(path: &Path, mut each: impl FnMut(Sample)) -> anyhow::Res
             }
         }
     }
-    Ok(n)
+    read.autopilot = chooser.chosen;
+    read.pin = pin;
+    if let Some(a) = read.autopilot {
+        read.impostors.remove(&a);
+    }
+    read.samples = n;
+    Ok(read)
 }
 
 /// Read until `buf` is full or the file ends; the bytes read.

@@ -5,6 +5,7 @@ use super::Calibration;
 use super::cpt::{LearnedRow, PRIOR_PSEUDO_COUNTS};
 use super::power_fit::{FitResult, PowerModel};
 use super::shipped::Shipped;
+use crate::review::text::escape_controls;
 use std::fmt::Write;
 use std::path::Path;
 use toml::{Table, Value};
@@ -63,6 +64,103 @@ fn model_rows(m: &PowerModel) -> [(&'static str, f64); 6] {
     ]
 }
 
+/// The runs read (each once, by content), the repeats left out, each tlog's autopilot and the
+/// impostors left out; every name escaped for the terminal.
+fn runs_report(s: &mut String, cal: &Calibration) {
+    let _ = writeln!(
+        s,
+        "runs (each counted once, by the SHA-256 of its decision log and flight.tlog):"
+    );
+    for r in &cal.runs {
+        let _ = writeln!(s, "  {}", shown(r));
+    }
+    for (r, first) in &cal.repeats {
+        let _ = writeln!(
+            s,
+            "  {}: the same content as {}: counted once",
+            shown(r),
+            shown(first)
+        );
+    }
+    for (r, t) in &cal.tlogs {
+        let how = if t.pin.is_some() {
+            " (pinned)"
+        } else {
+            " (fly's choice: component 1 first; pin with --autopilot-sysid)"
+        };
+        let who = match (t.autopilot, t.pin) {
+            (Some((a, c)), _) => format!("autopilot {a}/{c}{how}"),
+            (None, Some((a, c))) => format!("no frame of the pinned autopilot {a}/{c}"),
+            (None, None) => "no autopilot heard".to_string(),
+        };
+        let _ = write!(
+            s,
+            "  {}/flight.tlog: {} power samples from {who}",
+            shown(r),
+            t.samples
+        );
+        if !t.impostors.is_empty() {
+            let others: Vec<String> = t
+                .impostors
+                .iter()
+                .map(|((a, c), n)| format!("{a}/{c} ({n} frames)"))
+                .collect();
+            let _ = write!(
+                s,
+                "; other autopilots left out (fly would not obey them): {}",
+                others.join(", ")
+            );
+        }
+        let _ = writeln!(s);
+    }
+}
+
+fn shown(p: &Path) -> String {
+    crate::output_file::shown(p)
+}
+
+/// What the fit says that no airframe of this mission can be (the mission's `[power_bounds]`)
+/// and durations of zero or negative length: each a reason; any refuses the whole overlay.
+pub fn refusals(shipped: &Shipped, cal: &Calibration) -> Vec<String> {
+    use companion_core::guarantee::power_bounds::check_power_curve;
+    let mut out = Vec::new();
+    let mf = &shipped.mission_file;
+    if let Ok(r) = &cal.power {
+        match &shipped.bounds {
+            None => out.push(format!(
+                "{mf}: no [power_bounds]: a fit cannot be judged against what no airframe can be                  (docs/calibrate.md)"
+            )),
+            Some(b) => {
+                let propulsion = |v: f64| match r.polynomial_w {
+                    Some(c) => c[0] + c[2] * v * v + c[3] * v * v * v,
+                    None => r.fitted.power(v, true) - r.fitted.base_w,
+                };
+                let v_max = shipped.fastest_mps.max(r.v_max);
+                if let Err(u) = check_power_curve(Some(b), propulsion, r.fitted.base_w, v_max) {
+                    out.push(format!("fitted {mf} {}: {}", u.entry, u.reason));
+                }
+                let frac = r.rms_w / r.mean_w;
+                if !(frac.is_finite() && r.mean_w > 0.0 && frac <= b.max_fit_rms_fraction) {
+                    out.push(format!(
+                        "fit RMS {:.2} W against a mean measured {:.2} W ({:.1} %): above                          [power_bounds] max_fit_rms_fraction {} of {mf}; the model does not                          describe these runs",
+                        r.rms_w,
+                        r.mean_w,
+                        100.0 * frac,
+                        b.max_fit_rms_fraction
+                    ));
+                }
+            }
+        }
+    }
+    for (name, (n, shortest)) in cal.durations.non_positive() {
+        out.push(format!(
+            "activity {}: {n} completed run(s) of zero or negative length (shortest {shortest} s):              the records' clock stood or went back, no duration is fitted from them",
+            escape_controls(name, false)
+        ));
+    }
+    out
+}
+
 /// The report: runs, power fit (error before and after, each parameter), durations, CPT rows.
 pub fn report(shipped: &Shipped, cal: &Calibration) -> String {
     let mut s = String::new();
@@ -72,6 +170,7 @@ pub fn report(shipped: &Shipped, cal: &Calibration) -> String {
         cal.runs.len(),
         cal.records
     );
+    runs_report(&mut s, cal);
     let _ = writeln!(s, "\npower ({}):", shipped.mission_file);
     match &cal.power {
         Ok(r) => {
@@ -128,6 +227,7 @@ fn finish_report(mut s: String, shipped: &Shipped, cal: &Calibration) -> String 
             .estimate_s
             .get(name)
             .map_or((f64::NAN, "-"), |(e, ia)| (*e, ia.as_str()));
+        let name = escape_controls(name, false);
         let _ = writeln!(
             s,
             "  {name:<22} flown {:>8.1} s (sd {:.1}, {} run(s)); shipped estimate {est:.1} s (allocated IA {ia})",
@@ -310,10 +410,11 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
     }
     table_at(&mut t, &["calibration"]).insert("sources".into(), Value::Table(sources));
     let body = toml::to_string(&t)?;
+    // The name as a TOML string (escaped by the serializer): data, never TOML text.
+    let name = Value::String(out.display().to_string()).to_string();
     Ok(format!(
         "# Params overlay written by `companion calibrate` (docs/calibrate.md). Use it with\n\
-         # `companion check|simulate|fly --params {}`.\n\n{body}",
-        out.display()
+         # `companion check|simulate|fly --params {name}`.\n\n{body}"
     ))
 }
 

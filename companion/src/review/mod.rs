@@ -55,6 +55,9 @@ pub enum ReviewError {
     },
     #[error("cycle {cycle} is not in this log (cycles {first}..={last})")]
     NoSuchCycle { cycle: u64, first: u64, last: u64 },
+    /// The report's file is refused or cannot be written (`output_file`); escaped already.
+    #[error("report not written: {reason}")]
+    Refused { reason: String },
 }
 
 /// Final margin of one PANORAMA goal.
@@ -921,10 +924,18 @@ pub fn run_with_cycle(
     let path = out
         .map(Path::to_path_buf)
         .unwrap_or_else(|| default_report_path(input));
+    // The log (every part) and the tlog are inputs the report may not replace.
+    let mut inputs = crate::decision_log::log_files(input).unwrap_or_default();
+    inputs.push(if input.is_dir() {
+        input.join("flight.tlog")
+    } else {
+        input.with_file_name("flight.tlog")
+    });
     let html = render_html(&rev);
-    std::fs::write(&path, html).map_err(|source| ReviewError::Write {
-        path: path.clone(),
-        source,
+    crate::output_file::write(&path, &inputs, "review", html.as_bytes(), 0o644).map_err(|e| {
+        ReviewError::Refused {
+            reason: e.to_string(),
+        }
     })?;
     println!("report: {}", text::clean(&path.display().to_string()));
     Ok(Some(path))
