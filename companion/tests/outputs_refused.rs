@@ -217,6 +217,11 @@ fn signing_setup_refuses_a_fifo_or_a_control_name_for_its_key() {
                 os("udpin:127.0.0.1:14598"),
                 os("--timeout"),
                 os("1s"),
+                // Pinned (an unpinned set-up is refused before its key is looked at).
+                os("--autopilot-sysid"),
+                os("1"),
+                os("--autopilot-compid"),
+                os("1"),
                 os("--key"),
                 os(key),
             ];
