@@ -495,7 +495,8 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             self.await_handoff().await;
             stop::end_stop(&mut self.shell, &self.vehicle, true);
         }
-        if stopped.up {
+        // A last record: the vehicle is (or may be) up, or a start in progress ended.
+        if stopped.up || (stopped.was_commanding && !self.shell.finished()) {
             let t = self.now();
             if let Err(e) = self.run_cycle(t).await {
                 tracing::error!("the stop's record was not written: {e:#}");

@@ -23,6 +23,9 @@ pub struct Stopped {
     pub commanded: bool,
     /// The vehicle counted as armed or in the air (a last record is written).
     pub up: bool,
+    /// The companion was commanding (started, or a takeover not confirmed): a start in progress
+    /// ends, and a last record says how.
+    pub was_commanding: bool,
 }
 
 /// What the companion tells the ground station and the vehicle when it stops (`why`: the
@@ -45,7 +48,6 @@ pub fn begin_stop(
     let reading = vehicle.stop_reading(now, landed_confirm);
     let verdict = stop_verdict(&shell.operator.control, &reading);
     let was = shell.operator.control.label();
-    shell.operator.control = Control::Stopping;
     let mode = vehicle
         .telemetry
         .mode
@@ -55,7 +57,12 @@ pub fn begin_stop(
     let mut stopped = Stopped {
         commanded: false,
         up: verdict != StopVerdict::Down,
+        was_commanding: matches!(
+            shell.operator.control,
+            Control::Started | Control::Unconfirmed { .. }
+        ),
     };
+    shell.operator.control = Control::Stopping;
     let (severity, text, line) = match &verdict {
         StopVerdict::HandOff(up) => {
             let up = up.join("; ");

@@ -144,7 +144,8 @@ fn a_stop_after_its_arm_was_accepted_hands_off_before_any_armed_heartbeat() {
         stopped,
         Stopped {
             commanded: true,
-            up: true
+            up: true,
+            was_commanding: true
         }
     );
     assert_eq!(texts(&out), vec!["Companion stopping: RTL, take over"]);
@@ -175,7 +176,7 @@ fn a_stop_after_its_arm_was_refused_says_so_and_commands_nothing() {
         ),
     );
     let (out, stopped) = begin_stop(&mut shell, &mut v, Handoff::Rtl, "SIGTERM", s(1.3), CONFIRM);
-    assert_eq!(stopped, Stopped::default());
+    assert!(!stopped.commanded && !stopped.up && stopped.was_commanding);
     assert_eq!(texts(&out), vec!["Companion stopping"]);
     assert!(commands(&out).is_empty(), "{out:?}");
     let said: Vec<String> = shell.pending_events.iter().map(|e| e.to_string()).collect();
@@ -196,7 +197,8 @@ fn a_stop_with_handoff_none_says_the_vehicle_continues() {
         stopped,
         Stopped {
             commanded: false,
-            up: true
+            up: true,
+            was_commanding: true
         }
     );
     assert_eq!(
