@@ -126,10 +126,11 @@ pub enum StopVerdict {
     /// The companion commands (or launched) a vehicle that is up: hand it to the autopilot.
     /// Why it counts as up, in words.
     HandOff(Vec<String>),
-    /// The vehicle is up but the pilot flies it (a confirmed takeover), or the companion never
-    /// started: change nothing. Why it counts as up.
+    /// The last heartbeat said armed but the pilot flies the vehicle (a confirmed takeover),
+    /// or the companion never started: change nothing. Why it counts as up.
     NotCommanding(Vec<String>),
-    /// Disarmed on the ground, and nothing of the companion's can have armed it.
+    /// Disarmed on the ground, and nothing of the companion's can have armed it; or not the
+    /// companion's, and the last heartbeat said disarmed.
     Down,
 }
 
@@ -153,8 +154,11 @@ pub fn stop_verdict(control: &Control, reading: &StopReading) -> StopVerdict {
     };
     if ours {
         StopVerdict::HandOff(why)
-    } else {
+    } else if reading.armed_now {
+        // Nothing is commanded either way: the words follow the last heartbeat.
         StopVerdict::NotCommanding(why)
+    } else {
+        StopVerdict::Down
     }
 }
 

@@ -169,8 +169,10 @@ fn an_accepted_take_off_hands_off_before_any_heartbeat_says_armed() {
     let taken = Control::TakenOver {
         mode: ReportedMode::Known(FlightMode::Loiter),
     };
+    assert!(!hands_off(&verdict(&v, &taken, 1.5)));
+    v.on_frame(s(1.6), &hb(GUIDED, true));
     assert!(matches!(
-        verdict(&v, &taken, 1.5),
+        verdict(&v, &taken, 1.7),
         StopVerdict::NotCommanding(_)
     ));
 }
@@ -186,14 +188,16 @@ fn one_armed_heartbeat_is_enough_for_the_stop() {
         verdict(&v, &Control::Started, 1.1),
         StopVerdict::HandOff(vec!["the autopilot reported it armed".into()])
     );
+    // Not started, nothing launched: the vehicle is not the companion's to hand off.
+    assert!(matches!(
+        verdict(&v, &Control::Waiting, 1.1),
+        StopVerdict::NotCommanding(_)
+    ));
     // A later disarmed heartbeat does not clear it until the ground is confirmed.
     v.on_frame(s(1.5), &hb(GUIDED, false));
     assert!(hands_off(&verdict(&v, &Control::Started, 2.0)));
-    // Not started, nothing launched: the vehicle is not the companion's to hand off.
-    assert!(matches!(
-        verdict(&v, &Control::Waiting, 2.0),
-        StopVerdict::NotCommanding(_)
-    ));
+    // Not the companion's to hand off: its words follow the last heartbeat.
+    assert_eq!(verdict(&v, &Control::Waiting, 2.0), StopVerdict::Down);
     // Every frame agreed for landed_confirm_s: down.
     assert_eq!(verdict(&v, &Control::Started, 4.6), StopVerdict::Down);
 }
