@@ -625,11 +625,11 @@ impl Vehicle {
         spec: CommandSpec,
         out: &mut Vec<Msg>,
     ) -> bool {
-        let launch = LaunchCommand::of(&spec);
+        let launch = LaunchCommand::of(&spec).map(|c| (c, spec.command));
         match self.commands.submit(now, spec) {
             Ok((ticket, msgs)) => {
-                if let Some(c) = launch {
-                    self.launch_sent(now, ticket, c);
+                if let Some(l) = launch {
+                    self.launch_sent(now, ticket, l);
                 }
                 self.step_sent(
                     (msgs, out),

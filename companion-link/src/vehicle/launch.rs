@@ -71,6 +71,7 @@ pub struct Launch {
     /// When it was first sent.
     pub sent_at: Duration,
     ticket: u64,
+    mav_cmd: MavCmd,
 }
 
 /// What an autopilot frame said that puts the vehicle up.
@@ -164,12 +165,18 @@ pub fn stop_verdict(control: &Control, reading: &StopReading) -> StopVerdict {
 
 impl Vehicle {
     /// A step's command went out as `ticket`: remembered when it is a launch command.
-    pub(super) fn launch_sent(&mut self, now: Duration, ticket: u64, command: LaunchCommand) {
+    pub(super) fn launch_sent(
+        &mut self,
+        now: Duration,
+        ticket: u64,
+        (command, mav_cmd): (LaunchCommand, MavCmd),
+    ) {
         self.launch = Some(Launch {
             command,
             outcome: LaunchOutcome::Awaiting,
             sent_at: now,
             ticket,
+            mav_cmd,
         });
     }
 
@@ -226,20 +233,13 @@ impl Vehicle {
             .launch
             .as_ref()
             .filter(|l| l.outcome == LaunchOutcome::Awaiting)
-            .map(|l| l.ticket)
-            .and_then(|t| self.purposes.remove(&t).map(|p| (t, p)));
+            .map(|l| (l.ticket, l.mav_cmd))
+            .and_then(|(t, c)| self.purposes.remove(&t).map(|p| (t, c, p)));
+        // `stop_actions` cancels the commands of the steps it knows of: not this one.
         self.stop_actions(now, why);
-        if let Some((ticket, purpose)) = kept {
+        if let Some((ticket, command, purpose)) = kept {
             self.purposes.insert(ticket, purpose);
-            for c in [
-                MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-                MavCmd::MAV_CMD_NAV_TAKEOFF,
-                MavCmd::MAV_CMD_NAV_TAKEOFF_LOCAL,
-                MavCmd::MAV_CMD_NAV_VTOL_TAKEOFF,
-                MavCmd::MAV_CMD_MISSION_START,
-            ] {
-                self.commands.no_resend(c);
-            }
+            self.commands.no_resend(command);
         }
     }
 }

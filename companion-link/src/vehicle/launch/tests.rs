@@ -246,3 +246,51 @@ fn a_flight_landed_and_confirmed_down_is_not_handed_off() {
     w.on_frame(s(30.0), &hb(GUIDED, false));
     assert!(hands_off(&verdict(&w, &Control::Started, 30.0)));
 }
+
+#[test]
+fn a_take_off_in_flight_at_the_stop_is_never_resent_and_counts_unanswered() {
+    let mut v = arm_sent();
+    let out = v.on_frame(
+        s(1.2),
+        &ack(
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            MavResult::MAV_RESULT_ACCEPTED,
+        ),
+    );
+    assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_NAV_TAKEOFF]);
+    v.stop_commanding(s(1.3), "companion stopping");
+    assert!(
+        v.launch_awaiting(),
+        "the take-off in flight is kept for its answer"
+    );
+    let mut sent = Vec::new();
+    for t in [2.0, 2.8, 3.5, 4.5, 6.0] {
+        sent.extend(commands(&v.tick(s(t))));
+    }
+    assert!(sent.is_empty(), "resent during the stop: {sent:?}");
+    assert_eq!(
+        verdict(&v, &Control::Started, 6.1),
+        StopVerdict::HandOff(vec!["its take-off unanswered (no answer)".into()])
+    );
+}
+
+#[test]
+fn launch_commands_are_arm_and_take_off_only() {
+    let long = |c: MavCmd, p1: f32| CommandSpec::long(c, [p1, 0., 0., 0., 0., 0., 0.]);
+    let of = |c: MavCmd, p1: f32| LaunchCommand::of(&long(c, p1));
+    assert_eq!(
+        of(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 1.0),
+        Some(LaunchCommand::Arm)
+    );
+    assert_eq!(of(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 0.0), None);
+    assert_eq!(
+        of(MavCmd::MAV_CMD_NAV_TAKEOFF, 0.0),
+        Some(LaunchCommand::TakeOff)
+    );
+    assert_eq!(
+        of(MavCmd::MAV_CMD_MISSION_START, 0.0),
+        Some(LaunchCommand::TakeOff)
+    );
+    assert_eq!(of(MavCmd::MAV_CMD_DO_SET_MODE, 1.0), None);
+    assert_eq!(of(MavCmd::MAV_CMD_DO_REPOSITION, -1.0), None);
+}
