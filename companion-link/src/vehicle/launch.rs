@@ -61,7 +61,7 @@ pub enum LaunchOutcome {
     Unanswered(String),
 }
 
-/// The companion's last launch command.
+/// The companion's last launch command of one kind.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Launch {
     /// Which.
@@ -86,8 +86,9 @@ pub enum UpEvidence {
 /// The stop's reading of the vehicle.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StopReading {
-    /// The companion's last launch command since the vehicle was last confirmed down.
-    pub launch: Option<Launch>,
+    /// The companion's last ARM and last take-off since the vehicle was last confirmed down, in
+    /// the order sent.
+    pub launches: Vec<Launch>,
     /// The last frame since then that said armed or airborne.
     pub up: Option<UpEvidence>,
     /// The last heartbeat said armed.
@@ -98,7 +99,7 @@ impl StopReading {
     /// Why the vehicle counts as up, in words (empty: it does not).
     pub fn reasons(&self) -> Vec<String> {
         let mut why = Vec::new();
-        if let Some(l) = &self.launch {
+        for l in &self.launches {
             let c = l.command.name();
             match &l.outcome {
                 LaunchOutcome::Refused(_) => {}
@@ -145,9 +146,9 @@ pub fn stop_verdict(control: &Control, reading: &StopReading) -> StopVerdict {
         return StopVerdict::Down;
     }
     let launched = reading
-        .launch
-        .as_ref()
-        .is_some_and(|l| !matches!(l.outcome, LaunchOutcome::Refused(_)));
+        .launches
+        .iter()
+        .any(|l| !matches!(l.outcome, LaunchOutcome::Refused(_)));
     let ours = match control {
         Control::Started | Control::Unconfirmed { .. } | Control::Stopping => true,
         Control::Waiting => launched,
@@ -171,7 +172,8 @@ impl Vehicle {
         ticket: u64,
         (command, mav_cmd): (LaunchCommand, MavCmd),
     ) {
-        self.launch = Some(Launch {
+        self.launches.retain(|l| l.command != command);
+        self.launches.push(Launch {
             command,
             outcome: LaunchOutcome::Awaiting,
             sent_at: now,
@@ -182,7 +184,7 @@ impl Vehicle {
 
     /// A command ended: the launch command's answer, if it was that.
     pub(super) fn launch_finished(&mut self, ticket: u64, outcome: &Outcome) {
-        let Some(l) = self.launch.as_mut().filter(|l| l.ticket == ticket) else {
+        let Some(l) = self.launches.iter_mut().find(|l| l.ticket == ticket) else {
             return;
         };
         l.outcome = match outcome {
@@ -198,11 +200,11 @@ impl Vehicle {
         self.up_seen = Some((what, now));
     }
 
-    /// The launch command still waits for its answer.
+    /// A launch command still waits for its answer.
     pub fn launch_awaiting(&self) -> bool {
-        self.launch
-            .as_ref()
-            .is_some_and(|l| l.outcome == LaunchOutcome::Awaiting)
+        self.launches
+            .iter()
+            .any(|l| l.outcome == LaunchOutcome::Awaiting)
     }
 
     /// The stop's conservative reading at `now`: what the companion launched and what any
@@ -214,7 +216,12 @@ impl Vehicle {
             .filter(|&d| now.saturating_sub(d) >= landed_confirm);
         let since_down = |t: Duration| down_since.is_none_or(|d| t > d);
         StopReading {
-            launch: self.launch.clone().filter(|l| since_down(l.sent_at)),
+            launches: self
+                .launches
+                .iter()
+                .filter(|l| since_down(l.sent_at))
+                .cloned()
+                .collect(),
             // Every frame that says up resets `down_since`: one seen is newer than it.
             up: self
                 .up_seen
@@ -225,19 +232,23 @@ impl Vehicle {
     }
 
     /// The companion stops: the running action, its queued steps and every command in flight
-    /// end now (recorded CANCELLED), except the launch command still waiting for its answer,
+    /// end now (recorded CANCELLED), except a launch command still waiting for its answer,
     /// which is kept (never resent) so that the stop can hear whether the vehicle armed or took
     /// off ([`Vehicle::launch_awaiting`]).
     pub fn stop_commanding(&mut self, now: Duration, why: &str) {
-        let kept = self
-            .launch
-            .as_ref()
+        let awaiting: Vec<(u64, MavCmd)> = self
+            .launches
+            .iter()
             .filter(|l| l.outcome == LaunchOutcome::Awaiting)
             .map(|l| (l.ticket, l.mav_cmd))
-            .and_then(|(t, c)| self.purposes.remove(&t).map(|p| (t, c, p)));
-        // `stop_actions` cancels the commands of the steps it knows of: not this one.
+            .collect();
+        let kept: Vec<_> = awaiting
+            .into_iter()
+            .filter_map(|(t, c)| self.purposes.remove(&t).map(|p| (t, c, p)))
+            .collect();
+        // `stop_actions` cancels the commands of the steps it knows of: not these.
         self.stop_actions(now, why);
-        if let Some((ticket, command, purpose)) = kept {
+        for (ticket, command, purpose) in kept {
             self.purposes.insert(ticket, purpose);
             self.commands.no_resend(command);
         }

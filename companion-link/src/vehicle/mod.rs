@@ -204,8 +204,9 @@ pub struct Vehicle {
     px4_takeoff_wait: Option<Duration>,
     /// The pack parameters asked for (the chosen autopilot's family's [`pack_params`]).
     pack_requests: Vec<PackRequest>,
-    /// The companion's last ARM or take-off command and its answer so far (the stop reads it).
-    launch: Option<Launch>,
+    /// The companion's last ARM and last take-off command, and their answers so far (the stop
+    /// reads them).
+    launches: Vec<Launch>,
     /// The last autopilot frame that said armed or in the air: what, and when.
     up_seen: Option<(UpEvidence, Duration)>,
 }
@@ -252,7 +253,7 @@ impl Vehicle {
             px4_mission_pending: None,
             px4_takeoff_wait: None,
             pack_requests: Vec::new(),
-            launch: None,
+            launches: Vec::new(),
             up_seen: None,
         }
     }

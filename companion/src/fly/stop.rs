@@ -96,15 +96,17 @@ pub fn begin_stop(
             ),
         ),
         StopVerdict::Down => {
-            let refused = match &reading.launch {
-                Some(l) => match &l.outcome {
-                    LaunchOutcome::Refused(r) => {
-                        format!(" (the autopilot refused its {}: {r})", l.command.name())
-                    }
-                    _ => String::new(),
-                },
-                None => String::new(),
-            };
+            let refused: String = reading
+                .launches
+                .iter()
+                .filter_map(|l| match &l.outcome {
+                    LaunchOutcome::Refused(r) => Some(format!(
+                        " (the autopilot refused its {}: {r})",
+                        l.command.name()
+                    )),
+                    _ => None,
+                })
+                .collect();
             (
                 NOTICE,
                 "Companion stopping".into(),

@@ -161,7 +161,10 @@ fn an_accepted_take_off_hands_off_before_any_heartbeat_says_armed() {
     assert!(!v.launch_awaiting());
     assert_eq!(
         verdict(&v, &Control::Started, 1.5),
-        StopVerdict::HandOff(vec!["its take-off accepted".into()])
+        StopVerdict::HandOff(vec![
+            "its ARM accepted".into(),
+            "its take-off accepted".into()
+        ])
     );
     // A start the gate voided (a disarmed heartbeat, spoofed or stale) does not hide it.
     assert!(hands_off(&verdict(&v, &Control::Waiting, 1.5)));
@@ -270,7 +273,10 @@ fn a_take_off_in_flight_at_the_stop_is_never_resent_and_counts_unanswered() {
     assert!(sent.is_empty(), "resent during the stop: {sent:?}");
     assert_eq!(
         verdict(&v, &Control::Started, 6.1),
-        StopVerdict::HandOff(vec!["its take-off unanswered (no answer)".into()])
+        StopVerdict::HandOff(vec![
+            "its ARM accepted".into(),
+            "its take-off unanswered (no answer)".into()
+        ])
     );
 }
 
@@ -293,4 +299,26 @@ fn launch_commands_are_arm_and_take_off_only() {
     );
     assert_eq!(of(MavCmd::MAV_CMD_DO_SET_MODE, 1.0), None);
     assert_eq!(of(MavCmd::MAV_CMD_DO_REPOSITION, -1.0), None);
+}
+
+#[test]
+fn an_arm_accepted_before_a_refused_take_off_still_hands_off() {
+    let mut v = arm_sent();
+    v.on_frame(
+        s(1.2),
+        &ack(
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            MavResult::MAV_RESULT_ACCEPTED,
+        ),
+    );
+    v.on_frame(
+        s(1.3),
+        &ack(MavCmd::MAV_CMD_NAV_TAKEOFF, MavResult::MAV_RESULT_FAILED),
+    );
+    v.stop_commanding(s(1.4), "companion stopping");
+    // The gate voids the start (the take-off failed): the armed vehicle is still the companion's.
+    assert_eq!(
+        verdict(&v, &Control::Waiting, 1.5),
+        StopVerdict::HandOff(vec!["its ARM accepted".into()])
+    );
 }
