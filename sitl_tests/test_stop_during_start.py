@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import signal
 import time
-from typing import Any, List, Optional
+from typing import Any, List
 
 import pytest
 
@@ -52,9 +52,9 @@ def arm_commands(sa: Any) -> List[Any]:
 
 def start(step: str, autopilot_factory: Any, fly: Any, relay: Any, client: Any):
     """The stand-in, a ground station on it, and `fly --auto-start` at `step` of the start."""
-    # WAITING_READY: the position estimate is ready only after 12 s simulated (3 s wall), long after the companion
-    # asked to arm.
-    ap = autopilot_factory(ekf_ready_s=12.0 if step == "arm_waiting_ready" else 8.0)
+    # WAITING_READY: the position estimate is ready only after 24 s simulated (6 s wall at the default speedup), long
+    # after the companion asked to arm, even on a busy machine.
+    ap = autopilot_factory(ekf_ready_s=24.0 if step == "arm_waiting_ready" else 8.0)
     sa = ap.standin
     gcs = client(sa.url)
     if step == "arm_pending":
@@ -85,7 +85,7 @@ def stop_with(run: Any, signals: List[int]) -> float:
     return t0
 
 
-def left_safe(sa: Any, run: Any, t_signal: float) -> dict:
+def left_safe(sa: Any, run: Any) -> dict:
     """The companion exits 0; from then on the vehicle is never armed in GUIDED, and it ends disarmed on the ground
     or in the hand-off mode. Returns the stand-in's state at the end."""
     rc = run.wait_exit(20)
@@ -113,7 +113,7 @@ def last_events(run: Any) -> List[str]:
     return [e for r in records[-3:] for e in r.get("events", [])]
 
 
-def check_words(step: str, state: dict, gcs: GcsClient, run: Any, t_signal: float) -> None:
+def check_words(step: str, gcs: GcsClient, run: Any, t_signal: float) -> None:
     events = last_events(run)
     if step == "arm_waiting_ready":
         assert any("the vehicle is disarmed" in e for e in events), events
@@ -134,8 +134,8 @@ def test_a_stop_at_each_step_of_the_start_leaves_the_vehicle_down_or_handed_off(
         step, sig, autopilot_factory, fly, relay, client):
     sa, gcs, run = start(step, autopilot_factory, fly, relay, client)
     t_signal = stop_with(run, [sig])
-    state = left_safe(sa, run, t_signal)
-    check_words(step, state, gcs, run, t_signal)
+    left_safe(sa, run)
+    check_words(step, gcs, run, t_signal)
     if step == "arm_waiting_ready":
         # The autopilot becomes ready after the stop: the companion armed nothing, before or after.
         sa.wait_for(lambda: sa.state()["position_ok"], timeout=30, what="the position estimate")
@@ -152,5 +152,5 @@ def test_a_stop_at_each_step_of_the_start_leaves_the_vehicle_down_or_handed_off(
 def test_two_signals_within_100_ms_still_hand_off(step, signals, autopilot_factory, fly, relay, client):
     sa, gcs, run = start(step, autopilot_factory, fly, relay, client)
     t_signal = stop_with(run, list(signals))
-    state = left_safe(sa, run, t_signal)
-    check_words(step, state, gcs, run, t_signal)
+    left_safe(sa, run)
+    check_words(step, gcs, run, t_signal)
