@@ -493,7 +493,9 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         self.send(&msgs).await;
         if stopped.commanded {
             self.await_handoff().await;
-            stop::end_stop(&mut self.shell, &self.vehicle, true);
+            let t = self.now();
+            let msgs = stop::end_stop(&mut self.shell, &self.vehicle, true, t);
+            self.send(&msgs).await;
         }
         // A last record: the vehicle is (or may be) up, or a start in progress ended.
         if stopped.up || (stopped.was_commanding && !self.shell.finished()) {

@@ -126,18 +126,30 @@ pub fn begin_stop(
     (msgs, stopped)
 }
 
-/// The hand-off's outcome, for the record once it is known (or the wait ended).
-pub fn end_stop(shell: &mut Shell, vehicle: &Vehicle, commanded: bool) {
+/// The hand-off's outcome, for the record once it is known (or the wait ended); a refused or
+/// unanswered hand-off is also said to the ground station (the pilot must take over). Returns
+/// the messages to send.
+pub fn end_stop(shell: &mut Shell, vehicle: &Vehicle, commanded: bool, now: Duration) -> Vec<Msg> {
     if !commanded {
-        return;
+        return Vec::new();
     }
-    let line = match vehicle.handoff_status() {
-        Some(true) => "companion stopping: the autopilot accepted the hand-off mode".to_string(),
-        Some(false) => "companion stopping: the hand-off mode failed (see commands); the pilot must take over".to_string(),
-        None => "companion stopping: no answer to the hand-off mode before exit; the pilot must take over".to_string(),
+    let (line, gcs) = match vehicle.handoff_status() {
+        Some(true) => (
+            "companion stopping: the autopilot accepted the hand-off mode",
+            None,
+        ),
+        Some(false) => (
+            "companion stopping: the hand-off mode failed (see commands); the pilot must take over",
+            Some("Companion: hand-off refused, take over"),
+        ),
+        None => (
+            "companion stopping: no answer to the hand-off mode before exit; the pilot must take over",
+            Some("Companion: hand-off unanswered, take over"),
+        ),
     };
     tracing::warn!("{line}");
     shell.pending_events.push(Event::from(line));
+    gcs.map_or_else(Vec::new, |text| shell.texts.say(now, CRITICAL, text))
 }
 
 #[cfg(test)]

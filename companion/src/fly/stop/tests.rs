@@ -221,3 +221,40 @@ fn a_pilot_who_took_over_is_left_flying() {
     assert_eq!(texts(&out), vec!["Companion stopping: not commanding"]);
     assert!(commands(&out).is_empty());
 }
+
+#[test]
+fn a_refused_or_unanswered_hand_off_is_said_to_the_ground_station() {
+    for (answer, said) in [
+        (
+            Some(MavResult::MAV_RESULT_FAILED),
+            "Companion: hand-off refused, take over",
+        ),
+        (None, "Companion: hand-off unanswered, take over"),
+    ] {
+        let (mut shell, mut v) = arm_sent();
+        v.on_frame(s(1.1), &hb(true));
+        v.stop_commanding(s(1.2), "companion stopping");
+        let (_, stopped) = begin_stop(&mut shell, &mut v, Handoff::Rtl, "SIGINT", s(1.3), CONFIRM);
+        assert!(stopped.commanded);
+        if let Some(result) = answer {
+            v.on_frame(s(1.4), &ack(MavCmd::MAV_CMD_DO_SET_MODE, result));
+        }
+        let out = end_stop(&mut shell, &v, true, s(6.0));
+        assert_eq!(texts(&out), vec![said]);
+    }
+    // Accepted: the record says so; the ground station already has the stop's words.
+    let (mut shell, mut v) = arm_sent();
+    v.on_frame(s(1.1), &hb(true));
+    let (_, stopped) = begin_stop(&mut shell, &mut v, Handoff::Rtl, "SIGINT", s(1.3), CONFIRM);
+    assert!(stopped.commanded);
+    v.on_frame(
+        s(1.4),
+        &ack(MavCmd::MAV_CMD_DO_SET_MODE, MavResult::MAV_RESULT_ACCEPTED),
+    );
+    assert!(end_stop(&mut shell, &v, true, s(1.5)).is_empty());
+    assert!(
+        shell.pending_events.iter().any(
+            |e| e.to_string() == "companion stopping: the autopilot accepted the hand-off mode"
+        )
+    );
+}
