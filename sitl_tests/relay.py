@@ -9,6 +9,9 @@ garbage, and which keeps a timestamped list of every MAVLink message the compani
 * `inject_garbage(n)` / `garbage_every(period)`: random bytes, and a frame with a broken CRC, to the companion.
 * `inject_unsigned(msg)`: a well-formed unsigned frame to the companion, impersonating the autopilot.
 * `sent`: (monotonic time, message, delivered) of everything the companion sent, parsed with pymavlink.
+* `delay_down(seconds)`: a slow link towards the companion: every byte from the autopilot arrives this much later
+  (in order); what the companion sends goes through at once. A busy radio, where the autopilot's answers and its
+  heartbeats are still on their way while the companion acts.
 """
 from __future__ import annotations
 
@@ -48,6 +51,8 @@ class Relay:
         self._parser = mavlink.MAVLink(None)
         self._parser.robust_parsing = True
         self.sent: List[Tuple[float, Any, bool]] = []
+        self._down_delay = 0.0
+        self._down_queue: List[Tuple[float, bytes]] = []      # (deliver at, bytes) towards the companion
         self._t = threading.Thread(target=self._run, daemon=True, name="relay")
 
     def start(self) -> "Relay":
@@ -67,6 +72,10 @@ class Relay:
             self._blackout_until = start + seconds
             self.blackouts.append((start, start + seconds))
         return start, start + seconds
+
+    def delay_down(self, seconds: float) -> None:
+        with self._lock:
+            self._down_delay = max(0.0, seconds)
 
     def in_blackout(self) -> bool:
         return time.monotonic() < self._blackout_until
@@ -120,6 +129,7 @@ class Relay:
     def _drop_pair(self) -> None:
         with self._lock:
             pair, self._pair = self._pair, None
+            self._down_queue.clear()
         if pair:
             for s in pair:
                 try:
@@ -127,6 +137,18 @@ class Relay:
                 except OSError:
                     pass
                 s.close()
+
+    def _flush_down(self, to: socket.socket, now: float) -> bool:
+        """Deliver the delayed bytes now due, in order; False when the companion's socket failed."""
+        while True:
+            with self._lock:
+                if not self._down_queue or self._down_queue[0][0] > now:
+                    return True
+                _, data = self._down_queue.pop(0)
+            try:
+                to.sendall(data)
+            except OSError:
+                return False
 
     def _record(self, data: bytes, delivered: bool) -> None:
         now = time.monotonic()
@@ -150,6 +172,9 @@ class Relay:
             except (OSError, ValueError):
                 continue
             now = time.monotonic()
+            if pair and not self._flush_down(pair[0], now):
+                self._drop_pair()
+                continue
             if pair and self._garbage_period and now >= self._next_garbage and not self.in_blackout():
                 self._next_garbage = now + self._garbage_period
                 self.inject_garbage(self._rng.randrange(8, 80))
@@ -182,7 +207,10 @@ class Relay:
                 deliver = not self.in_blackout()
                 if s is pair[0]:
                     self._record(data, deliver)
-                if deliver:
+                if deliver and s is pair[1] and (self._down_delay > 0 or self._down_queue):
+                    with self._lock:
+                        self._down_queue.append((now + self._down_delay, data))
+                elif deliver:
                     try:
                         other.sendall(data)
                     except OSError:

@@ -426,6 +426,14 @@ impl CommandClient {
         (out, events)
     }
 
+    /// `command`, if in flight, is sent no more: its current attempt is its last (a timeout or
+    /// a temporary rejection ends it).
+    pub fn no_resend(&mut self, command: MavCmd) {
+        if let Some(p) = self.pending.get_mut(&(command as u32)) {
+            p.spec.no_blind_retry = true;
+        }
+    }
+
     /// Drop the commands whose ticket `pred` selects: each ends Failed(Cancelled); nothing of
     /// them is resent later.
     pub fn cancel_tickets(

@@ -625,8 +625,12 @@ impl Vehicle {
         spec: CommandSpec,
         out: &mut Vec<Msg>,
     ) -> bool {
+        let launch = LaunchCommand::of(&spec).map(|c| (c, spec.command));
         match self.commands.submit(now, spec) {
             Ok((ticket, msgs)) => {
+                if let Some(l) = launch {
+                    self.launch_sent(now, ticket, l);
+                }
                 self.step_sent(
                     (msgs, out),
                     Running::Command(ticket),
@@ -705,6 +709,7 @@ impl Vehicle {
             else {
                 continue;
             };
+            self.launch_finished(ticket, &outcome);
             match self.purposes.remove(&ticket) {
                 Some(Purpose::Stream(id)) => {
                     let name = <Msg as mavlink::Message>::default_message_from_id(id)

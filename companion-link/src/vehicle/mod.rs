@@ -5,6 +5,7 @@
 mod executor;
 mod identity;
 mod job;
+mod launch;
 mod pack;
 #[cfg(test)]
 mod tests;
@@ -27,6 +28,9 @@ use executor::{Purpose, step_name};
 use identity::Choice;
 pub use identity::{AUTOPILOT_COMPONENT, OTHER_COMPONENT_WAIT, is_autopilot_heartbeat};
 use job::{Job, JobKey, JobStatus, Running};
+pub use launch::{
+    Launch, LaunchCommand, LaunchOutcome, StopReading, StopVerdict, UpEvidence, stop_verdict,
+};
 use pack::PackRequest;
 pub use pack::{PACK_PARAM_ATTEMPTS, PACK_PARAM_RETRY, pack_params};
 use std::collections::{BTreeMap, VecDeque};
@@ -214,6 +218,11 @@ pub struct Vehicle {
     px4_takeoff_wait: Option<Duration>,
     /// The pack parameters asked for (the chosen autopilot's family's [`pack_params`]).
     pack_requests: Vec<PackRequest>,
+    /// The companion's last ARM and last take-off command, and their answers so far (the stop
+    /// reads them).
+    launches: Vec<Launch>,
+    /// The last autopilot frame that said armed or in the air: what, and when.
+    up_seen: Option<(UpEvidence, Duration)>,
 }
 
 impl Vehicle {
@@ -258,6 +267,8 @@ impl Vehicle {
             px4_mission_pending: None,
             px4_takeoff_wait: None,
             pack_requests: Vec::new(),
+            launches: Vec::new(),
+            up_seen: None,
         }
     }
 
@@ -416,6 +427,7 @@ impl Vehicle {
                 if self.readiness.armed {
                     self.armed_since.get_or_insert(now);
                     self.down_since = None;
+                    self.note_up(now, UpEvidence::Armed);
                 } else {
                     self.armed_since = None;
                     if self.low_now() {
@@ -433,6 +445,7 @@ impl Vehicle {
             // Frames that say "in the air" reset the end-of-flight window.
             Msg::GLOBAL_POSITION_INT(_) | Msg::EXTENDED_SYS_STATE(_) if !self.low_now() => {
                 self.down_since = None;
+                self.note_up(now, UpEvidence::Airborne);
             }
             Msg::EKF_STATUS_REPORT(e) => self.readiness.on_ekf(now, e),
             Msg::ESTIMATOR_STATUS(e) => self.readiness.on_estimator(now, e),

@@ -6,11 +6,11 @@ use companion_core::action_role::ActionRoles;
 use companion_core::mission::{Action, ActionCatalogue, ActionKind};
 use mavlink::{MavHeader, MavlinkVersion};
 
-fn s(v: f64) -> Duration {
+pub(super) fn s(v: f64) -> Duration {
     Duration::from_secs_f64(v)
 }
 
-fn frame(msg: Msg) -> Frame {
+pub(super) fn frame(msg: Msg) -> Frame {
     Frame {
         header: MavHeader {
             system_id: 1,
@@ -24,7 +24,7 @@ fn frame(msg: Msg) -> Frame {
     }
 }
 
-fn hb(mode: u32, armed: bool) -> Frame {
+pub(super) fn hb(mode: u32, armed: bool) -> Frame {
     frame(Msg::HEARTBEAT(HEARTBEAT_DATA {
         custom_mode: mode,
         mavtype: MavType::MAV_TYPE_QUADROTOR,
@@ -39,7 +39,7 @@ fn hb(mode: u32, armed: bool) -> Frame {
     }))
 }
 
-fn ready_frames() -> Vec<Frame> {
+pub(super) fn ready_frames() -> Vec<Frame> {
     let bit = MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK;
     vec![
         frame(Msg::SYS_STATUS(SYS_STATUS_DATA {
@@ -67,7 +67,7 @@ fn not_ready() -> Frame {
     }))
 }
 
-fn ack(command: MavCmd, result: MavResult) -> Frame {
+pub(super) fn ack(command: MavCmd, result: MavResult) -> Frame {
     frame(Msg::COMMAND_ACK(COMMAND_ACK_DATA {
         command,
         result,
@@ -105,7 +105,7 @@ fn test_catalogue() -> ActionCatalogue {
 }
 
 /// The action `name` of [`TEST_ACTIONS`], flown by its own entry.
-fn a(name: &str) -> Flown {
+pub(super) fn a(name: &str) -> Flown {
     Flown::Action(test_catalogue().id(name).expect(name))
 }
 
@@ -131,7 +131,7 @@ fn table() -> ActionTable {
     t
 }
 
-fn vehicle() -> Vehicle {
+pub(super) fn vehicle() -> Vehicle {
     let cfg = VehicleConfig {
         streams: vec![(168, 1.0)],
         ..VehicleConfig::default()
@@ -139,7 +139,7 @@ fn vehicle() -> Vehicle {
     Vehicle::new(cfg, table(), None)
 }
 
-fn commands(out: &[Msg]) -> Vec<MavCmd> {
+pub(super) fn commands(out: &[Msg]) -> Vec<MavCmd> {
     out.iter()
         .filter_map(|m| {
             if let Msg::COMMAND_LONG(c) = m {
@@ -152,7 +152,7 @@ fn commands(out: &[Msg]) -> Vec<MavCmd> {
 }
 
 /// Connect, let the stream request complete.
-fn connected(v: &mut Vehicle, mode: u32) {
+pub(super) fn connected(v: &mut Vehicle, mode: u32) {
     let out = v.on_frame(s(0.0), &hb(mode, false));
     assert_eq!(v.target, Some((1, 1)));
     assert_eq!(
@@ -171,7 +171,7 @@ fn connected(v: &mut Vehicle, mode: u32) {
 }
 
 /// A vehicle connected in STABILIZE and reporting ready, asked to take off at 0.2 s: GUIDED sent.
-fn take_off_asked_when_ready() -> Vehicle {
+pub(super) fn take_off_asked_when_ready() -> Vehicle {
     let mut v = vehicle();
     connected(&mut v, 0);
     for f in ready_frames() {

@@ -13,8 +13,6 @@ use companion_link::vehicle::{AUTOPILOT_COMPONENT, CommandToUs, Vehicle};
 use std::collections::BTreeSet;
 use std::time::Duration;
 
-const CRITICAL: MavSeverity = MavSeverity::MAV_SEVERITY_CRITICAL;
-
 /// Ground stations the companion takes a start from: those `--gcs-sysid` names when it names
 /// any (a GCS HEARTBEAT from another system is reported, never obeyed); else the systems heard
 /// sending a GCS HEARTBEAT on the autopilot link.
@@ -330,97 +328,6 @@ pub fn on_gate_event(
     if let Some((severity, gcs)) = said {
         out.extend(shell.texts.say(now, severity, &gcs));
     }
-}
-
-/// What the companion tells the ground station and the vehicle when it stops (`why`: the
-/// signal, the end of `--duration`, the error): the hand-off from params/link.toml when it
-/// commands an armed vehicle, else only the words. Returns the messages to send and whether a
-/// hand-off mode was commanded.
-pub fn begin_stop(
-    shell: &mut Shell,
-    vehicle: &mut Vehicle,
-    handoff: companion_link::actions::Handoff,
-    why: &str,
-    now: Duration,
-) -> (Vec<Msg>, bool) {
-    let mut out = Vec::new();
-    if vehicle.target.is_none() {
-        return (out, false);
-    }
-    let armed = vehicle.readiness.armed;
-    let commanding = matches!(
-        shell.operator.control,
-        operator::Control::Started | operator::Control::Unconfirmed { .. }
-    );
-    let was = shell.operator.control.label();
-    shell.operator.control = operator::Control::Stopping;
-    let mode = vehicle
-        .telemetry
-        .mode
-        .map_or_else(|| "?".into(), |m| m.to_string());
-    let alt = vehicle.telemetry.position.map(|p| p.alt_rel_m);
-    let at = alt.map_or(String::new(), |a| format!(" at {a:.0} m"));
-    let mut commanded = false;
-    let (severity, text, line) = if armed && commanding {
-        match handoff.mode() {
-            Some(m) => {
-                out.extend(vehicle.hand_off(now, m));
-                commanded = true;
-                (
-                    CRITICAL,
-                    format!("Companion stopping: {}, take over", handoff.pilot_words()),
-                    format!(
-                        "companion stopping ({why}) while commanding the armed vehicle{at} in {mode}: hand-off {m} (params/link.toml [flight] handoff)"
-                    ),
-                )
-            }
-            None => (
-                CRITICAL,
-                "Companion stopping: vehicle continues, take over".into(),
-                format!(
-                    "companion stopping ({why}) while commanding the armed vehicle{at} in {mode}: no hand-off (handoff = none), the vehicle goes on in {mode}"
-                ),
-            ),
-        }
-    } else if armed {
-        (
-            CRITICAL,
-            "Companion stopping: not commanding".into(),
-            format!(
-                "companion stopping ({why}); the vehicle is armed{at} in {mode} and the companion was not commanding it ({was})"
-            ),
-        )
-    } else {
-        (
-            NOTICE,
-            "Companion stopping".into(),
-            format!("companion stopping ({why}); the vehicle is disarmed"),
-        )
-    };
-    if severity == CRITICAL {
-        tracing::warn!("{line}");
-    } else {
-        tracing::info!("{line}");
-    }
-    shell.pending_events.push(Event::from(line));
-    // The stop's words go first, ahead of the mode command.
-    let mut msgs = shell.texts.say(now, severity, &text);
-    msgs.extend(out);
-    (msgs, commanded)
-}
-
-/// The hand-off's outcome, for the record once it is known (or the wait ended).
-pub fn end_stop(shell: &mut Shell, vehicle: &Vehicle, commanded: bool) {
-    if !commanded {
-        return;
-    }
-    let line = match vehicle.handoff_status() {
-        Some(true) => "companion stopping: the autopilot accepted the hand-off mode".to_string(),
-        Some(false) => "companion stopping: the hand-off mode failed (see commands); the pilot must take over".to_string(),
-        None => "companion stopping: no answer to the hand-off mode before exit; the pilot must take over".to_string(),
-    };
-    tracing::warn!("{line}");
-    shell.pending_events.push(Event::from(line));
 }
 
 #[cfg(test)]

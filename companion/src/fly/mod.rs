@@ -26,6 +26,7 @@ pub mod link_security;
 mod run_loop;
 mod setup;
 mod shell;
+pub mod stop;
 pub mod transport;
 pub mod words;
 

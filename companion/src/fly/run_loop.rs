@@ -8,7 +8,7 @@ use super::shell::Shell;
 use super::transport::{self, Inbound, TransportHandle};
 use super::{
     Decider, FlyArgs, FlyReport, FlySetup, INFO, NOTICE, RecordSink, Tlog, WARNING, gate,
-    link_security, send,
+    link_security, send, stop,
 };
 use companion_core::record::{Event, LinkEvent};
 use companion_link::Msg;
@@ -28,6 +28,10 @@ const RETRY: Duration = Duration::from_secs(1);
 /// How long the stop waits for the autopilot's answer to the hand-off mode (within systemd's
 /// TimeoutStopSec in deploy/companion.service, and the 5 s a pilot can be asked to wait).
 const HANDOFF_WAIT: Duration = Duration::from_millis(4500);
+
+/// Beyond the ACK timeout, how long the stop waits for the answer to the companion's last ARM
+/// or take-off (an answer sent just before the timeout is still on its way).
+const LAUNCH_WAIT_MARGIN: Duration = Duration::from_millis(500);
 
 /// The fly loop's state: everything one `fly` run owns.
 pub(super) struct RunLoop<'s, D, S> {
@@ -469,29 +473,38 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         None
     }
 
-    /// The stop: said to the ground station; an armed vehicle the companion commands is handed
-    /// to the autopilot (params/link.toml `[flight] handoff`), its answer awaited a moment, and a
-    /// last record says so. Then the loop's report, or its error.
+    /// The stop: what the companion was doing ends (its pending steps cancelled), the answer to
+    /// its own last ARM or take-off still in flight is awaited a moment, then it is said to the
+    /// ground station, and a vehicle the companion commands or launched that is (or may be)
+    /// armed or in the air is handed to the autopilot (params/link.toml `[flight] handoff`), its
+    /// answer awaited a moment, and a last record says so. Then the loop's report, or its error.
     async fn stop(mut self, outcome: anyhow::Result<StopReason>) -> anyhow::Result<FlyReport> {
         let why = match &outcome {
             Ok(why) => (*why).to_string(),
             Err(e) => format!("error: {e:#}"),
         };
-        let armed = self.vehicle.target.is_some() && self.vehicle.readiness.armed;
         let t = self.now();
-        let (msgs, commanded) = gate::begin_stop(
+        self.vehicle.stop_commanding(t, "companion stopping");
+        self.await_launch(&why).await;
+        let t = self.now();
+        let landed_confirm = Duration::from_secs_f64(self.setup.link.flight.landed_confirm_s);
+        let (msgs, stopped) = stop::begin_stop(
             &mut self.shell,
             &mut self.vehicle,
             self.setup.link.flight.handoff,
             &why,
             t,
+            landed_confirm,
         );
         self.send(&msgs).await;
-        if commanded {
+        if stopped.commanded {
             self.await_handoff().await;
-            gate::end_stop(&mut self.shell, &self.vehicle, true);
+            let t = self.now();
+            let msgs = stop::end_stop(&mut self.shell, &self.vehicle, true, t);
+            self.send(&msgs).await;
         }
-        if armed {
+        // A last record: the vehicle is (or may be) up, or a start in progress ended.
+        if stopped.up || (stopped.was_commanding && !self.shell.finished()) {
             let t = self.now();
             if let Err(e) = self.run_cycle(t).await {
                 tracing::error!("the stop's record was not written: {e:#}");
@@ -508,12 +521,34 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         Ok(self.report)
     }
 
+    /// The answer to the companion's own ARM or take-off still in flight when it stops, for at
+    /// most the command's ACK timeout and [`LAUNCH_WAIT_MARGIN`]: whether the vehicle armed or
+    /// took off decides the hand-off. Never resent meanwhile.
+    async fn await_launch(&mut self, why: &str) {
+        if !self.vehicle.launch_awaiting() {
+            return;
+        }
+        let wait = self.vehicle.cfg.command.ack_timeout + LAUNCH_WAIT_MARGIN;
+        tracing::info!(
+            "companion stopping ({why}): waiting up to {:.1} s for the answer to its last ARM or take-off",
+            wait.as_secs_f64()
+        );
+        self.await_link_until(wait, |v| !v.launch_awaiting()).await;
+    }
+
     /// The autopilot's answer to the hand-off mode, for at most [`HANDOFF_WAIT`]: the link and
     /// the protocol tick go on meanwhile (the step is resent, acknowledged or fails as any other).
     async fn await_handoff(&mut self) {
-        let deadline = Instant::now() + HANDOFF_WAIT;
+        self.await_link_until(HANDOFF_WAIT, |v| v.handoff_status().is_some())
+            .await;
+    }
+
+    /// Only the autopilot link and the protocol tick, until `done` or `wait` has passed (the
+    /// stop's waits: no decision cycle, no operator).
+    async fn await_link_until(&mut self, wait: Duration, done: impl Fn(&Vehicle) -> bool) {
+        let deadline = Instant::now() + wait;
         let mut tick = tokio::time::interval(Duration::from_millis(100));
-        while self.vehicle.handoff_status().is_none() {
+        while !done(&self.vehicle) {
             let mut out = Vec::new();
             tokio::select! {
                 m = self.link.inbound.recv() => match m {
