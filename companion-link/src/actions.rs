@@ -439,7 +439,37 @@ pub struct Route {
     pub tracking_time_limit_s: Option<f64>,
     /// Upload a NAV_TAKEOFF before the waypoints, so AUTO also works from the ground.
     pub takeoff_first: bool,
+    /// How the uploaded mission ends (params/link.toml `[flight] handoff`; RTL unless it says
+    /// land).
+    pub end: RouteEnd,
 }
+
+/// The uploaded mission's last item, after the search loiter: what the autopilot does on its
+/// own when the companion no longer commands (dead, hung, restarted), so the vehicle never
+/// hovers at the last waypoint until the battery fails.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RouteEnd {
+    /// MAV_CMD_NAV_RETURN_TO_LAUNCH: home, then land (the autopilot's own RTL).
+    ReturnToLaunch,
+    /// MAV_CMD_NAV_LAND at the last waypoint.
+    Land,
+}
+
+impl RouteEnd {
+    /// The mission's end for the stop's hand-off: `land` lands, every other hand-off returns
+    /// (`hold` and `none` say what a stop does, not how a flight ends: a mission that holds
+    /// would hover until the battery failsafe).
+    pub fn for_handoff(handoff: Handoff) -> Self {
+        match handoff {
+            Handoff::Land => RouteEnd::Land,
+            Handoff::None | Handoff::Hold | Handoff::Rtl => RouteEnd::ReturnToLaunch,
+        }
+    }
+}
+
+/// ArduPilot keeps NAV_LOITER_TIME's seconds in 16 bits (AP_Mission `p1`): a longer search is
+/// uploaded as this many seconds.
+pub const MAX_LOITER_TIME_S: f64 = 65_535.0;
 
 impl Route {
     /// The route as mission items for this autopilot. ArduPilot: [`Route::items`] (seq 0 is home,
@@ -573,10 +603,15 @@ impl Route {
             search_time_limit_s: raw.search_time_limit_s,
             tracking_time_limit_s: raw.tracking_time_limit_s,
             takeoff_first: raw.takeoff_first,
+            end: RouteEnd::ReturnToLaunch,
         })
     }
 
-    /// Mission items for upload: seq 0 home, then an optional takeoff, then the waypoints.
+    /// Mission items for upload: seq 0 home, then an optional takeoff, then the waypoints, then
+    /// the mission's own end: a NAV_LOITER_TIME at the last waypoint for `search_time_limit_s`
+    /// (the search, when the route has a limit) and NAV_RETURN_TO_LAUNCH or NAV_LAND
+    /// ([`RouteEnd`]). The companion ends the mission itself while it runs (its search and
+    /// tracking limits, a landing decision); these items end it when nobody commands.
     pub fn items(&self, home: (i32, i32)) -> Vec<MissionItem> {
         use super::dialect::MavFrame;
         let mut items = vec![MissionItem {
@@ -607,7 +642,30 @@ impl Route {
             };
             items.push(MissionItem::waypoint(x, y, alt as f32));
         }
+        let (x, y, z) = items.last().map_or((0, 0, 0.0), |w| (w.x, w.y, w.z));
+        if let Some(limit) = self.search_time_limit_s {
+            items.push(MissionItem {
+                command: MavCmd::MAV_CMD_NAV_LOITER_TIME,
+                params: [limit.min(MAX_LOITER_TIME_S) as f32, 0.0, 0.0, 0.0],
+                ..MissionItem::waypoint(x, y, z)
+            });
+        }
+        items.push(match self.end {
+            RouteEnd::ReturnToLaunch => MissionItem {
+                command: MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH,
+                ..MissionItem::waypoint(0, 0, 0.0)
+            },
+            RouteEnd::Land => MissionItem {
+                command: MavCmd::MAV_CMD_NAV_LAND,
+                ..MissionItem::waypoint(x, y, 0.0)
+            },
+        });
         items
+    }
+
+    /// Mission seq of the last waypoint (`wpf`): the items after it are the mission's end.
+    pub fn last_waypoint_seq(&self) -> u16 {
+        (self.waypoints.len() + usize::from(self.takeoff_first)) as u16
     }
 }
 
