@@ -4,6 +4,7 @@
 //! side is [`super::gate`].
 
 use super::cycle::run_cycle_at;
+use super::restart;
 use super::shell::Shell;
 use super::transport::{self, Inbound, TransportHandle};
 use super::{
@@ -62,6 +63,9 @@ pub(super) struct RunLoop<'s, D, S> {
     was_alive: bool,
     announced_auto_start: bool,
     gcs: GcsWatch,
+    /// What the vehicle was doing when the companion started (a flight in progress is handed
+    /// off, never waited on).
+    start_look: restart::StartLook,
 }
 
 impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
@@ -108,6 +112,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             was_alive: false,
             announced_auto_start: false,
             gcs: GcsWatch::default(),
+            start_look: restart::StartLook::default(),
             args,
             setup,
             decider,
@@ -355,8 +360,19 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         if self.vehicle.target.is_none() {
             return wake;
         }
+        // A vehicle found flying when the companion started: said and handed off, before the
+        // gate may take any start (an --auto-start of this run included).
+        wake |= self.start_look.look(
+            &mut self.shell,
+            &mut self.vehicle,
+            self.setup.link.flight.handoff,
+            t,
+            out,
+        );
         // A pilot's arming, GUIDED or mode change; a start voided.
-        wake |= gate::observe(&mut self.shell, &mut self.vehicle, t, out);
+        if self.start_look.found != restart::AtStart::Undecided {
+            wake |= gate::observe(&mut self.shell, &mut self.vehicle, t, out);
+        }
         let alive = self.vehicle.liveness.alive();
         if alive != self.was_alive {
             if alive {
@@ -375,7 +391,9 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
                     "companion: AUTO-START, arms without operator",
                 ));
             }
-            if self.shell.operator.control == Control::Waiting {
+            if self.shell.operator.control == Control::Waiting
+                && self.start_look.may_wait_for_operator()
+            {
                 out.extend(self.shell.texts.say(
                     t,
                     INFO,
