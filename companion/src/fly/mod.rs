@@ -18,7 +18,8 @@
 //! loop, one method per event source, and the stop), `cycle` (one decision cycle), `shell` (what
 //! is kept between cycles), `gate` (the operator gate's shell side), `words` (texts for the
 //! ground station), `link_security` (signing warnings), `transport` (bytes in and out),
-//! `restart` (started next to a vehicle already flying: said, handed off, never waited on).
+//! `restart` (started next to a vehicle already flying: said, handed off, never waited on),
+//! `watchdog` (systemd's READY=1, WATCHDOG=1 from the loop, STOPPING=1).
 
 mod args;
 mod cycle;
@@ -29,6 +30,7 @@ mod run_loop;
 mod setup;
 mod shell;
 pub mod transport;
+mod watchdog;
 pub mod words;
 
 pub use crate::vocabulary::DERIVED_OBSERVATIONS;

@@ -4,13 +4,13 @@
 //! side is [`super::gate`].
 
 use super::cycle::run_cycle_at;
-use super::restart;
 use super::shell::Shell;
 use super::transport::{self, Inbound, TransportHandle};
 use super::{
     Decider, FlyArgs, FlyReport, FlySetup, INFO, NOTICE, RecordSink, Tlog, WARNING, gate,
     link_security, send,
 };
+use super::{restart, watchdog};
 use companion_core::record::{Event, LinkEvent};
 use companion_link::Msg;
 use companion_link::ingest::{self, Encoder, Ingest};
@@ -66,6 +66,9 @@ pub(super) struct RunLoop<'s, D, S> {
     /// What the vehicle was doing when the companion started (a flight in progress is handed
     /// off, never waited on).
     start_look: restart::StartLook,
+    /// systemd's watchdog (a no-op outside systemd), and when the last decision cycle ended.
+    watchdog: watchdog::Watchdog,
+    last_cycle_done: Option<Duration>,
 }
 
 impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
@@ -113,6 +116,8 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             announced_auto_start: false,
             gcs: GcsWatch::default(),
             start_look: restart::StartLook::default(),
+            watchdog: watchdog::Watchdog::from_env(setup.link.decision_period_s),
+            last_cycle_done: None,
             args,
             setup,
             decider,
@@ -159,6 +164,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         tokio::pin!(ctrl_c);
         let terminate = terminate_signal();
         tokio::pin!(terminate);
+        self.watchdog.ready();
         loop {
             let mut out: Vec<Msg> = Vec::new();
             let mut trigger: Option<Duration> = None;
@@ -195,6 +201,9 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             self.send(&out).await;
             self.vehicle.stamp_latency(trigger.unwrap_or(t), self.now());
             self.maybe_cycle(trigger, wake).await?;
+            // The turn ended: systemd hears the loop is alive (its cycles too).
+            let (t, known) = (self.now(), self.vehicle.target.is_some());
+            self.watchdog.turn(t, known, self.last_cycle_done);
             if self.shell.finished()
                 && let Some(why) = self.flight_over().await
             {
@@ -444,7 +453,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
     /// One decision cycle triggered at `t`, its commands sent and its record written.
     async fn run_cycle(&mut self, t: Duration) -> anyhow::Result<()> {
         let start = self.start;
-        run_cycle_at(
+        let done = run_cycle_at(
             &mut self.decider,
             &mut self.shell,
             &mut self.vehicle,
@@ -457,7 +466,11 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             &mut self.report,
             &mut self.transport_events,
         )
-        .await
+        .await;
+        if done.is_ok() {
+            self.last_cycle_done = Some(self.now());
+        }
+        done
     }
 
     /// Flew, landed and disarmed: the flight is over (one last cycle recorded it). Wait for the
@@ -485,6 +498,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
     /// to the autopilot (params/link.toml `[flight] handoff`), its answer awaited a moment, and a
     /// last record says so. Then the loop's report, or its error.
     async fn stop(mut self, outcome: anyhow::Result<StopReason>) -> anyhow::Result<FlyReport> {
+        self.watchdog.stopping();
         let why = match &outcome {
             Ok(why) => (*why).to_string(),
             Err(e) => format!("error: {e:#}"),
