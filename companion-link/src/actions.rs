@@ -439,14 +439,12 @@ pub struct Route {
     pub tracking_time_limit_s: Option<f64>,
     /// Upload a NAV_TAKEOFF before the waypoints, so AUTO also works from the ground.
     pub takeoff_first: bool,
-    /// How the uploaded mission ends (params/link.toml `[flight] handoff`; RTL unless it says
-    /// land).
+    /// How the uploaded mission ends (RTL unless params/link.toml `[flight] handoff` is land).
     pub end: RouteEnd,
 }
 
-/// The uploaded mission's last item, after the search loiter: what the autopilot does on its
-/// own when the companion no longer commands (dead, hung, restarted), so the vehicle never
-/// hovers at the last waypoint until the battery fails.
+/// The uploaded mission's last item, after the search loiter: what the autopilot does alone when
+/// nobody commands (the companion dead, hung, restarting), never a hover until the battery fails.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RouteEnd {
     /// MAV_CMD_NAV_RETURN_TO_LAUNCH: home, then land (the autopilot's own RTL).
@@ -456,9 +454,8 @@ pub enum RouteEnd {
 }
 
 impl RouteEnd {
-    /// The mission's end for the stop's hand-off: `land` lands, every other hand-off returns
-    /// (`hold` and `none` say what a stop does, not how a flight ends: a mission that holds
-    /// would hover until the battery failsafe).
+    /// `land` lands; every other hand-off returns (`hold` and `none` say what a stop does: a
+    /// mission that holds would hover until the battery failsafe).
     pub fn for_handoff(handoff: Handoff) -> Self {
         match handoff {
             Handoff::Land => RouteEnd::Land,
@@ -467,8 +464,7 @@ impl RouteEnd {
     }
 }
 
-/// ArduPilot keeps NAV_LOITER_TIME's seconds in 16 bits (AP_Mission `p1`): a longer search is
-/// uploaded as this many seconds.
+/// Most NAV_LOITER_TIME seconds: ArduPilot keeps them in 16 bits (AP_Mission `p1`).
 pub const MAX_LOITER_TIME_S: f64 = 65_535.0;
 
 impl Route {
@@ -607,11 +603,9 @@ impl Route {
         })
     }
 
-    /// Mission items for upload: seq 0 home, then an optional takeoff, then the waypoints, then
-    /// the mission's own end: a NAV_LOITER_TIME at the last waypoint for `search_time_limit_s`
-    /// (the search, when the route has a limit) and NAV_RETURN_TO_LAUNCH or NAV_LAND
-    /// ([`RouteEnd`]). The companion ends the mission itself while it runs (its search and
-    /// tracking limits, a landing decision); these items end it when nobody commands.
+    /// Mission items for upload: seq 0 home, an optional takeoff, the waypoints, then the
+    /// mission's own end for when nobody commands: NAV_LOITER_TIME at the last waypoint for
+    /// `search_time_limit_s` (when set), and NAV_RETURN_TO_LAUNCH or NAV_LAND ([`RouteEnd`]).
     pub fn items(&self, home: (i32, i32)) -> Vec<MissionItem> {
         use super::dialect::MavFrame;
         let mut items = vec![MissionItem {
