@@ -65,10 +65,12 @@ impl Seen {
         }
     }
 
-    /// In the air by the landed state, else by the altitude; None without either.
+    /// In the air by the landed state, else by the altitude; None without either (an
+    /// UNDEFINED landed state says nothing).
     fn airborne(&self, ground_altitude_m: f64) -> Option<bool> {
-        match (self.landed_state.as_deref(), self.alt_rel_m) {
-            (Some(s), _) => Some(s != "ON_GROUND" && s != "UNDEFINED"),
+        let landed_state = self.landed_state.as_deref().filter(|s| *s != "UNDEFINED");
+        match (landed_state, self.alt_rel_m) {
+            (Some(s), _) => Some(s != "ON_GROUND"),
             (None, Some(alt)) => Some(alt > ground_altitude_m),
             (None, None) => None,
         }
@@ -381,8 +383,15 @@ mod tests {
         let (mut shell, mut v) = setup(false);
         let mut look = StartLook::default();
         turn(&mut look, &mut shell, &mut v, 0.0, &[heartbeat(true, 4)]);
-        turn(&mut look, &mut shell, &mut v, 4.0, &[heartbeat(true, 4)]);
-        assert_eq!(look.found, AtStart::Undecided);
+        let undefined = landed(MavLandedState::MAV_LANDED_STATE_UNDEFINED);
+        turn(
+            &mut look,
+            &mut shell,
+            &mut v,
+            4.0,
+            &[heartbeat(true, 4), undefined],
+        );
+        assert_eq!(look.found, AtStart::Undecided, "UNDEFINED says nothing");
         let (_, modes) = turn(&mut look, &mut shell, &mut v, 5.0, &[heartbeat(true, 4)]);
         assert_eq!(look.found, AtStart::InFlight);
         assert_eq!(modes, vec![6.0]);
@@ -392,8 +401,9 @@ mod tests {
             landed(MavLandedState::MAV_LANDED_STATE_ON_GROUND),
         ];
         turn(&mut look, &mut shell, &mut v, 6.0, &down);
+        turn(&mut look, &mut shell, &mut v, 7.0, &down);
         assert_eq!(shell.operator.control, Control::FlightInProgress);
-        let (texts, _) = turn(&mut look, &mut shell, &mut v, 10.0, &down);
+        let (texts, _) = turn(&mut look, &mut shell, &mut v, 10.5, &down);
         assert_eq!(shell.operator.control, Control::Waiting);
         assert_eq!(texts, vec!["companion: landed; waiting for the operator"]);
     }
