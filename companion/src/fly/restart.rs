@@ -14,9 +14,10 @@ use super::{Shell, WARNING};
 use companion_core::record::Event;
 use companion_link::Msg;
 use companion_link::actions::Handoff;
+use companion_link::dialect::MavResult;
 use companion_link::modes::{Flavor, FlightMode, ReportedMode};
-use companion_link::operator::Control;
-use companion_link::vehicle::Vehicle;
+use companion_link::operator::{self, Control};
+use companion_link::vehicle::{CommandToUs, Vehicle};
 use std::time::Duration;
 
 /// How long an armed vehicle may go without a landed state or a position before the start
@@ -218,6 +219,35 @@ impl StartLook {
     }
 }
 
+/// A MISSION_START while the start has not yet found where an armed vehicle is (a few seconds at
+/// most): refused for now with TEMPORARILY_REJECTED (said in the record and to the ground
+/// station), never granted: the launch verdict alone would take an armed vehicle at 3 m for one
+/// on the ground. True: the gate's record has news.
+pub(super) fn refuse_start_until_known(
+    shell: &mut Shell,
+    cmd: &CommandToUs,
+    now: Duration,
+    out: &mut Vec<Msg>,
+) -> bool {
+    let (sys, comp) = cmd.from;
+    let line = format!(
+        "operator: MAV_CMD_MISSION_START from {sys}/{comp} refused: the vehicle is armed and not yet known to be on the ground"
+    );
+    tracing::warn!("{line}");
+    shell.pending_events.push(Event::from(line));
+    out.extend(
+        shell
+            .texts
+            .say(now, WARNING, "Start refused: vehicle armed, state unknown"),
+    );
+    out.push(operator::ack(
+        cmd.command,
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED,
+        cmd.from,
+    ));
+    true
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -406,5 +436,31 @@ mod tests {
         let (texts, _) = turn(&mut look, &mut shell, &mut v, 10.5, &down);
         assert_eq!(shell.operator.control, Control::Waiting);
         assert_eq!(texts, vec!["companion: landed; waiting for the operator"]);
+    }
+
+    /// A MISSION_START before the start knows where the armed vehicle is: refused for now,
+    /// said, recorded; never passed to the gate.
+    #[test]
+    fn a_start_before_the_vehicle_is_placed_is_refused_for_now() {
+        let (mut shell, _) = setup(false);
+        shell.launch = Ok(()); // the models would agree
+        let cmd = CommandToUs {
+            command: MavCmd::MAV_CMD_MISSION_START,
+            from: (255, 190),
+            at: s(1.0),
+            before_autopilot: false,
+        };
+        let mut out = Vec::new();
+        assert!(refuse_start_until_known(&mut shell, &cmd, s(1.0), &mut out));
+        assert!(out.iter().any(|m| matches!(m, Msg::COMMAND_ACK(a)
+            if a.result == MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+                && (a.target_system, a.target_component) == (255, 190))));
+        assert_eq!(shell.operator.control, Control::Waiting);
+        assert!(
+            shell
+                .pending_events
+                .iter()
+                .any(|e| e.to_string().contains("not yet known to be on the ground"))
+        );
     }
 }

@@ -356,7 +356,25 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
     fn on_operator(&mut self, out: &mut Vec<Msg>) -> bool {
         let t = self.now();
         let mut wake = false;
+        // A vehicle found flying when the companion started: said and handed off, before the
+        // gate may take any start (an --auto-start of this run included).
+        if self.vehicle.target.is_some() {
+            wake |= self.start_look.look(
+                &mut self.shell,
+                &mut self.vehicle,
+                self.setup.link.flight.handoff,
+                t,
+                out,
+            );
+        }
+        let undecided =
+            self.vehicle.target.is_some() && self.start_look.found == restart::AtStart::Undecided;
         for cmd in self.vehicle.take_commands_to_us() {
+            if undecided && cmd.command == companion_link::operator::START_COMMAND {
+                // Armed, and not yet known to be on the ground: no start, whatever the models say.
+                wake |= restart::refuse_start_until_known(&mut self.shell, &cmd, t, out);
+                continue;
+            }
             wake |= gate::answer_command(
                 &mut self.shell,
                 &mut self.vehicle,
@@ -369,15 +387,6 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         if self.vehicle.target.is_none() {
             return wake;
         }
-        // A vehicle found flying when the companion started: said and handed off, before the
-        // gate may take any start (an --auto-start of this run included).
-        wake |= self.start_look.look(
-            &mut self.shell,
-            &mut self.vehicle,
-            self.setup.link.flight.handoff,
-            t,
-            out,
-        );
         // A pilot's arming, GUIDED or mode change; a start voided.
         if self.start_look.found != restart::AtStart::Undecided {
             wake |= gate::observe(&mut self.shell, &mut self.vehicle, t, out);
