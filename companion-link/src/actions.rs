@@ -14,6 +14,9 @@ use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
 
+mod route_end;
+pub use route_end::{MAX_LOITER_TIME_S, RouteEnd};
+
 /// One step of an action, as written in commands.toml (exactly one key per step).
 #[derive(Debug, Clone, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -443,16 +446,6 @@ pub struct Route {
     pub end: RouteEnd,
 }
 
-/// The uploaded mission's last item, after the search loiter: what the autopilot does alone when
-/// nobody commands (the companion dead, hung, restarting), never a hover until the battery fails.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum RouteEnd {
-    /// MAV_CMD_NAV_RETURN_TO_LAUNCH: home, then land (the autopilot's own RTL).
-    ReturnToLaunch,
-    /// MAV_CMD_NAV_LAND at the last waypoint.
-    Land,
-}
-
 impl RouteEnd {
     /// `land` lands; every other hand-off returns (`hold` and `none` say what a stop does: a
     /// mission that holds would hover until the battery failsafe).
@@ -463,9 +456,6 @@ impl RouteEnd {
         }
     }
 }
-
-/// Most NAV_LOITER_TIME seconds: ArduPilot keeps them in 16 bits (AP_Mission `p1`).
-pub const MAX_LOITER_TIME_S: f64 = 65_535.0;
 
 impl Route {
     /// The route as mission items for this autopilot. ArduPilot: [`Route::items`] (seq 0 is home,
@@ -484,6 +474,7 @@ impl Route {
             items[1].y = home.1;
             items.swap(0, 1);
         }
+        route_end::px4_frames(&mut items);
         items
     }
 
@@ -636,24 +627,12 @@ impl Route {
             };
             items.push(MissionItem::waypoint(x, y, alt as f32));
         }
-        let (x, y, z) = items.last().map_or((0, 0, 0.0), |w| (w.x, w.y, w.z));
-        if let Some(limit) = self.search_time_limit_s {
-            items.push(MissionItem {
-                command: MavCmd::MAV_CMD_NAV_LOITER_TIME,
-                params: [limit.min(MAX_LOITER_TIME_S) as f32, 0.0, 0.0, 0.0],
-                ..MissionItem::waypoint(x, y, z)
-            });
-        }
-        items.push(match self.end {
-            RouteEnd::ReturnToLaunch => MissionItem {
-                command: MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH,
-                ..MissionItem::waypoint(0, 0, 0.0)
-            },
-            RouteEnd::Land => MissionItem {
-                command: MavCmd::MAV_CMD_NAV_LAND,
-                ..MissionItem::waypoint(x, y, 0.0)
-            },
-        });
+        let wpf = items.last().cloned();
+        items.extend(route_end::end_items(
+            self.end,
+            self.search_time_limit_s,
+            wpf,
+        ));
         items
     }
 

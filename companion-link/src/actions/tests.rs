@@ -309,13 +309,24 @@ fn px4_mission_has_takeoff_first_no_home_item_and_same_waypoint_seqs() {
         assert_eq!(ap, r.items(home));
         assert_eq!(ap.len(), px4.len());
         let first_wp = if takeoff_first { 2 } else { 1 };
-        assert_eq!(ap[first_wp..], px4[first_wp..], "waypoints at the same seq");
+        let last = ap.len() - 1;
+        assert_eq!(
+            ap[first_wp..last],
+            px4[first_wp..last],
+            "waypoints at the same seq"
+        );
         // No item at 0 m AMSL (ArduPilot's home placeholder) and none at lat/lon 0, but the
         // mission's end (RTL, which has no position).
         let (route_items, end) = px4.split_at(px4.len() - 1);
         assert_eq!(end[0].command, MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH);
+        assert_eq!(
+            end[0].frame,
+            MavFrame::MAV_FRAME_MISSION,
+            "PX4: else UNSUPPORTED"
+        );
         assert!(
-            px4.iter()
+            route_items
+                .iter()
                 .all(|i| i.frame == MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT)
         );
         assert!(
