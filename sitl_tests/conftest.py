@@ -157,16 +157,17 @@ class FlightRun:
 
 @pytest.fixture
 def fly(tmp_path):
-    """Factory: fly(autopilot, mission=None, extra=(), auto_start=True, once=True) -> FlightRun of `companion fly`
-    (killed at teardown)."""
+    """Factory: fly(autopilot, mission=None, extra=(), auto_start=True, once=True, log_dir=None) -> FlightRun of
+    `companion fly` (killed at teardown)."""
     runs: List[FlightRun] = []
 
     def start(ap: Autopilot, mission: Optional[Path] = None, extra: tuple = (), auto_start: bool = True,
-              once: bool = True) -> FlightRun:
+              once: bool = True, log_dir: Optional[Path] = None) -> FlightRun:
         exe = os.environ["COMPANION_BIN"]
         n = len(runs)
-        log_dir = tmp_path / f"companion-log-{n}"
-        log_dir.mkdir()
+        if log_dir is None:      # a restart passes the earlier run's, as systemd's unit does
+            log_dir = tmp_path / f"companion-log-{n}"
+            log_dir.mkdir()
         key_file = None
         if ap.signing_key is not None:
             key_file = tmp_path / f"signing-{n}.key"

@@ -209,6 +209,7 @@ class GcsObserver:
         self.landed_states: List[Tuple[float, int]] = []
         self.reached: List[Tuple[float, int]] = []              # (t, seq) of MISSION_ITEM_REACHED
         self.statustext: List[Tuple[float, str]] = []
+        self.statustext_from: List[Tuple[float, int, int, str]] = []  # (t, system, component, text)
         self.battery_pct: Optional[int] = None
         self.battery_consumed_mah: Optional[int] = None
         self.battery_energy_j: Optional[float] = None            # BATTERY_STATUS.energy_consumed (hJ) in J
@@ -332,6 +333,7 @@ class GcsObserver:
                 self.reached.append((now, m.seq))
             elif t == "STATUSTEXT":
                 self.statustext.append((now, m.text))
+                self.statustext_from.append((now, m.get_srcSystem(), m.get_srcComponent(), m.text))
             elif t == "BATTERY_STATUS":
                 self.battery_pct = m.battery_remaining if m.battery_remaining >= 0 else None
                 self.battery_consumed_mah = m.current_consumed if m.current_consumed >= 0 else None
@@ -385,6 +387,11 @@ class GcsObserver:
     def reached_seqs(self) -> List[int]:
         with self._lock:
             return [s for _, s in self.reached]
+
+    def texts_from(self, component: int, since: float = 0.0) -> List[str]:
+        """STATUSTEXTs a component sent (routed here by the autopilot), after `since`."""
+        with self._lock:
+            return [s for t, _, c, s in self.statustext_from if c == component and t >= since]
 
     def texts(self) -> List[str]:
         with self._lock:

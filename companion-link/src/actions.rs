@@ -14,6 +14,9 @@ use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
 
+mod route_end;
+pub use route_end::{MAX_LOITER_TIME_S, RouteEnd};
+
 /// One step of an action, as written in commands.toml (exactly one key per step).
 #[derive(Debug, Clone, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -439,6 +442,19 @@ pub struct Route {
     pub tracking_time_limit_s: Option<f64>,
     /// Upload a NAV_TAKEOFF before the waypoints, so AUTO also works from the ground.
     pub takeoff_first: bool,
+    /// How the uploaded mission ends (RTL unless params/link.toml `[flight] handoff` is land).
+    pub end: RouteEnd,
+}
+
+impl RouteEnd {
+    /// `land` lands; every other hand-off returns (`hold` and `none` say what a stop does: a
+    /// mission that holds would hover until the battery failsafe).
+    pub fn for_handoff(handoff: Handoff) -> Self {
+        match handoff {
+            Handoff::Land => RouteEnd::Land,
+            Handoff::None | Handoff::Hold | Handoff::Rtl => RouteEnd::ReturnToLaunch,
+        }
+    }
 }
 
 impl Route {
@@ -458,6 +474,7 @@ impl Route {
             items[1].y = home.1;
             items.swap(0, 1);
         }
+        route_end::px4_frames(&mut items);
         items
     }
 
@@ -573,10 +590,13 @@ impl Route {
             search_time_limit_s: raw.search_time_limit_s,
             tracking_time_limit_s: raw.tracking_time_limit_s,
             takeoff_first: raw.takeoff_first,
+            end: RouteEnd::ReturnToLaunch,
         })
     }
 
-    /// Mission items for upload: seq 0 home, then an optional takeoff, then the waypoints.
+    /// Mission items for upload: seq 0 home, an optional takeoff, the waypoints, then the
+    /// mission's own end for when nobody commands: NAV_LOITER_TIME at the last waypoint for
+    /// `search_time_limit_s` (when set), and NAV_RETURN_TO_LAUNCH or NAV_LAND ([`RouteEnd`]).
     pub fn items(&self, home: (i32, i32)) -> Vec<MissionItem> {
         use super::dialect::MavFrame;
         let mut items = vec![MissionItem {
@@ -607,7 +627,18 @@ impl Route {
             };
             items.push(MissionItem::waypoint(x, y, alt as f32));
         }
+        let wpf = items.last().cloned();
+        items.extend(route_end::end_items(
+            self.end,
+            self.search_time_limit_s,
+            wpf,
+        ));
         items
+    }
+
+    /// Mission seq of the last waypoint (`wpf`): the items after it are the mission's end.
+    pub fn last_waypoint_seq(&self) -> u16 {
+        (self.waypoints.len() + usize::from(self.takeoff_first)) as u16
     }
 }
 

@@ -110,6 +110,13 @@ fn normalise_frame(f: MavFrame) -> MavFrame {
     }
 }
 
+/// An item whose command flies to no position of its own: ArduPilot stores none for it and
+/// answers it in MAV_FRAME_GLOBAL at 0/0/0 whatever was sent (seen on ArduCopter 4.7 SITL), so only
+/// the command is compared.
+fn positionless(command: MavCmd) -> bool {
+    command == MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH
+}
+
 /// First difference between what we uploaded and what came back, seq 0 (home) excluded.
 pub fn compare(sent: &[MissionItem], got: &[MissionItem]) -> Result<(), String> {
     compare_from(sent, got, 1)
@@ -131,6 +138,9 @@ pub fn compare_from(sent: &[MissionItem], got: &[MissionItem], first: usize) -> 
                 crate::mavlink_name(&a.command),
                 crate::mavlink_name(&b.command)
             ));
+        }
+        if positionless(a.command) {
+            continue;
         }
         if normalise_frame(a.frame) != normalise_frame(b.frame) {
             return Err(format!(
@@ -746,6 +756,24 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
+    }
+
+    /// ArduPilot answers a NAV_RETURN_TO_LAUNCH item in MAV_FRAME_GLOBAL at 0/0/0, whatever was
+    /// sent: only its command counts; a changed command still fails.
+    #[test]
+    fn an_rtl_item_is_compared_by_its_command_only() {
+        let rtl = |frame, z| MissionItem {
+            command: MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH,
+            frame,
+            ..MissionItem::waypoint(0, 0, z)
+        };
+        let mut sent = items();
+        sent.push(rtl(MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT, 0.0));
+        let mut got = sent.clone();
+        got[3] = rtl(MavFrame::MAV_FRAME_GLOBAL, 0.0);
+        assert_eq!(compare(&sent, &got), Ok(()));
+        got[3].command = MavCmd::MAV_CMD_NAV_LAND;
+        assert!(compare(&sent, &got).is_err_and(|d| d.contains("item 3")));
     }
 
     #[test]

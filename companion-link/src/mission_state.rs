@@ -102,7 +102,9 @@ impl MissionState {
             .map(|a| states.actions().role_of(&a.id))
             .collect();
         let first = if route.takeoff_first { 2 } else { 1 };
-        let last = route.waypoints.len() as u16 + first - 1;
+        // The mission's own end (search loiter, RTL or LAND) follows wpf: past it the vehicle is
+        // still at or beyond the last waypoint (`seq >= last_seq`).
+        let last = route.last_waypoint_seq();
         Self {
             wp1_seq: first,
             last_seq: last.max(first),
@@ -486,6 +488,39 @@ mod tests {
         assert_eq!(m.update(&obs(43.0, &down), &none), "landing");
         assert!(m.finished());
         assert_eq!(landing(&m), None);
+    }
+
+    /// The uploaded mission goes on past wpf (the search loiter at wpf, then RTL or LAND): the
+    /// loiter item flown at wpf is arriving there, the end items are still past it, and they
+    /// count no waypoint.
+    #[test]
+    fn the_missions_own_end_after_wpf_is_still_the_tracking_area() {
+        let r = route();
+        let mut m = MissionState::new(&r, 10.0, states(), &catalogue());
+        let items = r.items((473_977_420, 85_455_940));
+        assert_eq!(m.last_seq, 5);
+        assert_eq!(
+            items[6].command,
+            crate::dialect::MavCmd::MAV_CMD_NAV_LOITER_TIME
+        );
+        let auto = Extra {
+            mode: Some(FlightMode::Auto),
+            ..Extra::default()
+        };
+        let fly = |seq: f64, spd: f64| {
+            [
+                ("armed", 1.0),
+                ("altitude_m", 20.0),
+                ("mission_seq", seq),
+                ("groundspeed_mps", spd),
+            ]
+        };
+        assert_eq!(m.update(&obs(1.0, &fly(4.0, 5.0)), &auto), "wpi");
+        // ArduCopter makes the loiter current as it reaches wpf, still moving: not arrived yet.
+        assert_eq!(m.update(&obs(2.0, &fly(6.0, 4.0)), &auto), "wpi");
+        assert_eq!(m.update(&obs(3.0, &fly(6.0, 0.1)), &auto), "wpf");
+        assert_eq!(m.waypoints_remaining(&obs(3.0, &fly(6.0, 0.1))), 0.0);
+        assert_eq!(m.update(&obs(4.0, &fly(7.0, 6.0)), &auto), "wpf");
     }
 
     fn flying() -> [(&'static str, f64); 3] {

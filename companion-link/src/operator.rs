@@ -49,6 +49,10 @@ pub enum Control {
     /// The companion is stopping (a signal, the end of `--duration`, a fatal error): it handed
     /// the vehicle to the autopilot and commands nothing more.
     Stopping,
+    /// The companion started (or restarted) next to a vehicle already armed and in the air: it
+    /// said so, handed the vehicle to the autopilot when it flew in a companion's mode, and
+    /// commands nothing and takes no start until the vehicle is landed and disarmed.
+    FlightInProgress,
 }
 
 impl Control {
@@ -61,6 +65,7 @@ impl Control {
             Control::Unconfirmed { .. } => "takeover_unconfirmed",
             Control::TakenOver { .. } => "taken_over",
             Control::Stopping => "stopping",
+            Control::FlightInProgress => "flight_in_progress",
         }
     }
 }
@@ -304,7 +309,7 @@ impl OperatorGate {
                 self.control = Control::Started;
                 Some(GateEvent::HandedBack(StartBy::StartCommand))
             }
-            Control::Started | Control::Stopping => None,
+            Control::Started | Control::Stopping | Control::FlightInProgress => None,
         }
     }
 
@@ -385,7 +390,7 @@ impl OperatorGate {
                 }
                 None
             }
-            Control::Stopping => None,
+            Control::Stopping | Control::FlightInProgress => None,
             Control::TakenOver { .. } => {
                 if guided_held {
                     self.guided_entered = false;

@@ -88,7 +88,7 @@ impl ScriptedDecider {
     /// Built from the route the fly arguments name.
     pub fn from_args(args: &FlyArgs) -> anyhow::Result<Self> {
         let setup = FlySetup::load(args)?;
-        let last = setup.route.items((0, 0)).len().saturating_sub(1) as u16;
+        let last = setup.route.last_waypoint_seq();
         Ok(Self::new(setup.route.altitude_m, last, &args.policy))
     }
 }

@@ -213,7 +213,8 @@ pub fn load_fly_files(
     let link = LinkParams::load(files, &dir.join("link.toml"))?;
     let commands = ActionTable::load(files, &dir.join("commands.toml"), actions)?;
     let route_file = route.map_or_else(|| dir.join(DEFAULT_ROUTE), Path::to_path_buf);
-    let route = Route::load(files, &route_file)?;
+    let mut route = Route::load(files, &route_file)?;
+    route.end = companion_link::actions::RouteEnd::for_handoff(link.flight.handoff);
     Ok((link, commands, route, route_file))
 }
 

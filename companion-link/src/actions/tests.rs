@@ -181,7 +181,12 @@ fn relative_route_items_start_at_home() {
     let r = crate::test_support::disk(Route::load)(&p).unwrap();
     let home = (473_977_420, 85_455_940);
     let items = r.items(home);
-    assert_eq!(items.len(), 4);
+    assert_eq!(
+        items.len(),
+        5,
+        "home, take-off, two waypoints, RTL: {items:?}"
+    );
+    assert_eq!(items[4].command, MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH);
     assert_eq!((items[0].x, items[0].y), home);
     assert_eq!(items[1].command, MavCmd::MAV_CMD_NAV_TAKEOFF);
     assert_eq!(items[1].z, 25.0);
@@ -289,6 +294,7 @@ fn route(takeoff_first: bool) -> Route {
         search_time_limit_s: None,
         tracking_time_limit_s: None,
         takeoff_first,
+        end: crate::actions::RouteEnd::ReturnToLaunch,
     }
 }
 
@@ -303,15 +309,30 @@ fn px4_mission_has_takeoff_first_no_home_item_and_same_waypoint_seqs() {
         assert_eq!(ap, r.items(home));
         assert_eq!(ap.len(), px4.len());
         let first_wp = if takeoff_first { 2 } else { 1 };
-        assert_eq!(ap[first_wp..], px4[first_wp..], "waypoints at the same seq");
-        // No item at 0 m AMSL (ArduPilot's home placeholder) and none at lat/lon 0.
-        assert!(px4.iter().all(|i| i.x == home.0 || i.x != 0), "{px4:?}");
+        let last = ap.len() - 1;
+        assert_eq!(
+            ap[first_wp..last],
+            px4[first_wp..last],
+            "waypoints at the same seq"
+        );
+        // No item at 0 m AMSL (ArduPilot's home placeholder) and none at lat/lon 0, but the
+        // mission's end (RTL, which has no position).
+        let (route_items, end) = px4.split_at(px4.len() - 1);
+        assert_eq!(end[0].command, MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH);
+        assert_eq!(
+            end[0].frame,
+            MavFrame::MAV_FRAME_MISSION,
+            "PX4: else UNSUPPORTED"
+        );
         assert!(
-            px4.iter()
+            route_items
+                .iter()
                 .all(|i| i.frame == MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT)
         );
         assert!(
-            px4.iter().all(|i| i.x != 0 && i.y != 0 && i.z > 0.0),
+            route_items
+                .iter()
+                .all(|i| i.x != 0 && i.y != 0 && i.z > 0.0),
             "{px4:?}"
         );
         if takeoff_first {
@@ -387,4 +408,48 @@ fn a_shell_only_entry_is_flown_in_place_of_its_action() {
     assert_eq!(t.name(Flown::Action(follow)), "follow_trajectory");
     assert_ne!(t.steps(resume), t.steps(Flown::Action(follow)));
     assert_eq!(t.in_place_of(cat.id("land").unwrap()), None);
+}
+
+/// Safe without the companion: after the last waypoint the mission loiters there for the search
+/// time limit, then ends by itself in RTL or LAND as params/link.toml's hand-off says, so a dead
+/// companion never leaves the vehicle hovering at wpf. The waypoints keep their seq numbers.
+#[test]
+fn the_uploaded_mission_ends_with_the_search_loiter_then_rtl_or_land() {
+    let home = (473_977_420, 85_455_940);
+    let mut r = route(true);
+    r.search_time_limit_s = Some(300.0);
+    let wpf_seq = usize::from(r.last_waypoint_seq());
+    assert_eq!(wpf_seq, 3, "home, take-off, wp1, wpf");
+    for flavor in [Flavor::ArduPilot, Flavor::Px4] {
+        let items = r.mission_items(flavor, home);
+        assert_eq!(items.len(), wpf_seq + 3, "{flavor:?}: {items:?}");
+        let (wpf, loiter, end) = (&items[wpf_seq], &items[wpf_seq + 1], &items[wpf_seq + 2]);
+        assert_eq!(wpf.command, MavCmd::MAV_CMD_NAV_WAYPOINT);
+        assert_eq!(loiter.command, MavCmd::MAV_CMD_NAV_LOITER_TIME);
+        assert_eq!(
+            loiter.params[0], 300.0,
+            "loiter seconds = search_time_limit_s"
+        );
+        assert_eq!(
+            (loiter.x, loiter.y, loiter.z),
+            (wpf.x, wpf.y, wpf.z),
+            "at wpf"
+        );
+        assert_eq!(end.command, MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH);
+    }
+    r.end = RouteEnd::Land;
+    let items = r.items(home);
+    let (wpf, end) = (&items[wpf_seq], items.last().unwrap());
+    assert_eq!(end.command, MavCmd::MAV_CMD_NAV_LAND);
+    assert_eq!((end.x, end.y, end.z), (wpf.x, wpf.y, 0.0), "lands at wpf");
+    // Without a search limit the mission ends at wpf at once; a search longer than ArduPilot's
+    // 16-bit loiter seconds is cut to them, never wrapped.
+    r.search_time_limit_s = None;
+    assert_eq!(r.items(home).len(), wpf_seq + 2);
+    r.search_time_limit_s = Some(86_400.0);
+    assert_eq!(r.items(home)[wpf_seq + 1].params[0], 65_535.0);
+    assert_eq!(RouteEnd::for_handoff(Handoff::Land), RouteEnd::Land);
+    for h in [Handoff::Rtl, Handoff::Hold, Handoff::None] {
+        assert_eq!(RouteEnd::for_handoff(h), RouteEnd::ReturnToLaunch);
+    }
 }

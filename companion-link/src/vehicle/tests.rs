@@ -969,6 +969,7 @@ fn route_vehicle() -> Vehicle {
         search_time_limit_s: None,
         tracking_time_limit_s: None,
         takeoff_first: false,
+        end: crate::actions::RouteEnd::ReturnToLaunch,
     };
     let cfg = VehicleConfig {
         streams: vec![],
@@ -1040,7 +1041,7 @@ fn serve_upload(v: &mut Vehicle, first: Vec<Msg>, stored_alt: f32) -> Vec<Msg> {
         })),
     );
     for (i, mut it) in items.into_iter().enumerate() {
-        if i > 0 {
+        if i > 0 && it.command == MavCmd::MAV_CMD_NAV_WAYPOINT {
             it.z = stored_alt;
         }
         assert!(
@@ -1073,7 +1074,8 @@ fn follow_trajectory_uploads_verifies_then_switches_to_auto() {
     assert!(
         v.take_records()
             .iter()
-            .any(|r| r.result == CommandOutcome::AcceptedVerified { items: 2 })
+            .any(|r| r.result == CommandOutcome::AcceptedVerified { items: 3 }),
+        "home, the waypoint, the mission's own end (RTL)"
     );
 }
 
@@ -1462,16 +1464,17 @@ fn px4_auto_waits_until_px4_reports_the_uploaded_mission() {
         search_time_limit_s: None,
         tracking_time_limit_s: None,
         takeoff_first: true,
+        end: crate::actions::RouteEnd::ReturnToLaunch,
     };
     let mut v = Vehicle::new(VehicleConfig::default(), t, Some(route));
     px4_ready(&mut v, 0.0);
     let out = v.request_actions(s(1.0), &[a("follow_trajectory")]);
     assert!(
-        matches!(&out[0], Msg::MISSION_COUNT(c) if c.count == 3),
+        matches!(&out[0], Msg::MISSION_COUNT(c) if c.count == 4),
         "{out:?}"
     );
     let mut sent = Vec::new();
-    for seq in 0..3 {
+    for seq in 0..4 {
         let out = v.on_frame(
             s(1.0),
             &px4_frame(Msg::MISSION_REQUEST_INT(MISSION_REQUEST_INT_DATA {
@@ -1500,7 +1503,7 @@ fn px4_auto_waits_until_px4_reports_the_uploaded_mission() {
     let mut out = v.on_frame(
         s(1.2),
         &px4_frame(Msg::MISSION_COUNT(MISSION_COUNT_DATA {
-            count: 3,
+            count: 4,
             ..MISSION_COUNT_DATA::DEFAULT
         })),
     );
@@ -1519,7 +1522,7 @@ fn px4_auto_waits_until_px4_reports_the_uploaded_mission() {
     });
     assert!(commands(&v.on_frame(s(2.1), &px4_frame(stale))).is_empty());
     let loaded = Msg::MISSION_CURRENT(MISSION_CURRENT_DATA {
-        total: 3,
+        total: 4,
         ..MISSION_CURRENT_DATA::DEFAULT
     });
     let out = v.on_frame(s(2.5), &px4_frame(loaded));

@@ -173,7 +173,11 @@ pub fn answer_command(
                 changed = true;
                 MavResult::MAV_RESULT_ACCEPTED
             }
-            None if shell.operator.control == operator::Control::Stopping => {
+            None if matches!(
+                shell.operator.control,
+                operator::Control::Stopping | operator::Control::FlightInProgress
+            ) =>
+            {
                 MavResult::MAV_RESULT_DENIED
             }
             None => MavResult::MAV_RESULT_ACCEPTED, // already started

@@ -17,17 +17,21 @@
 //! Files: `args` (the command line), `setup` (params loaded before any socket), `run_loop` (the
 //! loop, one method per event source, and the stop), `cycle` (one decision cycle), `shell` (what
 //! is kept between cycles), `gate` (the operator gate's shell side), `words` (texts for the
-//! ground station), `link_security` (signing warnings), `transport` (bytes in and out).
+//! ground station), `link_security` (signing warnings), `transport` (bytes in and out),
+//! `restart` (started next to a vehicle already flying: said, handed off, never waited on),
+//! `watchdog` (systemd's READY=1, WATCHDOG=1 from the loop, STOPPING=1).
 
 mod args;
 mod cycle;
 pub mod gate;
 pub mod link_security;
+mod restart;
 mod run_loop;
 mod setup;
 mod shell;
 pub mod stop;
 pub mod transport;
+mod watchdog;
 pub mod words;
 
 pub use crate::vocabulary::DERIVED_OBSERVATIONS;

@@ -10,6 +10,7 @@ use super::{
     Decider, FlyArgs, FlyReport, FlySetup, INFO, NOTICE, RecordSink, Tlog, WARNING, gate,
     link_security, send, stop,
 };
+use super::{restart, watchdog};
 use companion_core::record::{Event, LinkEvent};
 use companion_link::Msg;
 use companion_link::ingest::{self, Encoder, Ingest};
@@ -66,6 +67,12 @@ pub(super) struct RunLoop<'s, D, S> {
     was_alive: bool,
     announced_auto_start: bool,
     gcs: GcsWatch,
+    /// What the vehicle was doing when the companion started (a flight in progress is handed
+    /// off, never waited on).
+    start_look: restart::StartLook,
+    /// systemd's watchdog (a no-op outside systemd), and when the last decision cycle ended.
+    watchdog: watchdog::Watchdog,
+    last_cycle_done: Option<Duration>,
 }
 
 impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
@@ -112,6 +119,9 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             was_alive: false,
             announced_auto_start: false,
             gcs: GcsWatch::default(),
+            start_look: restart::StartLook::default(),
+            watchdog: watchdog::Watchdog::from_env(setup.link.decision_period_s),
+            last_cycle_done: None,
             args,
             setup,
             decider,
@@ -158,6 +168,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         tokio::pin!(ctrl_c);
         let terminate = terminate_signal();
         tokio::pin!(terminate);
+        self.watchdog.ready();
         loop {
             let mut out: Vec<Msg> = Vec::new();
             let mut trigger: Option<Duration> = None;
@@ -194,6 +205,9 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             self.send(&out).await;
             self.vehicle.stamp_latency(trigger.unwrap_or(t), self.now());
             self.maybe_cycle(trigger, wake).await?;
+            // The turn ended: systemd hears the loop is alive (its cycles too).
+            let (t, known) = (self.now(), self.vehicle.target.is_some());
+            self.watchdog.turn(t, known, self.last_cycle_done);
             if self.shell.finished()
                 && let Some(why) = self.flight_over().await
             {
@@ -352,7 +366,25 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
     fn on_operator(&mut self, out: &mut Vec<Msg>) -> bool {
         let t = self.now();
         let mut wake = false;
+        // A vehicle found flying when the companion started: said and handed off, before the
+        // gate may take any start (an --auto-start of this run included).
+        if self.vehicle.target.is_some() {
+            wake |= self.start_look.look(
+                &mut self.shell,
+                &mut self.vehicle,
+                self.setup.link.flight.handoff,
+                t,
+                out,
+            );
+        }
+        let undecided =
+            self.vehicle.target.is_some() && self.start_look.found == restart::AtStart::Undecided;
         for cmd in self.vehicle.take_commands_to_us() {
+            if undecided && cmd.command == companion_link::operator::START_COMMAND {
+                // Armed, and not yet known to be on the ground: no start, whatever the models say.
+                wake |= restart::refuse_start_until_known(&mut self.shell, &cmd, t, out);
+                continue;
+            }
             wake |= gate::answer_command(
                 &mut self.shell,
                 &mut self.vehicle,
@@ -366,7 +398,9 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             return wake;
         }
         // A pilot's arming, GUIDED or mode change; a start voided.
-        wake |= gate::observe(&mut self.shell, &mut self.vehicle, t, out);
+        if self.start_look.found != restart::AtStart::Undecided {
+            wake |= gate::observe(&mut self.shell, &mut self.vehicle, t, out);
+        }
         let alive = self.vehicle.liveness.alive();
         if alive != self.was_alive {
             if alive {
@@ -385,7 +419,9 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
                     "companion: AUTO-START, arms without operator",
                 ));
             }
-            if self.shell.operator.control == Control::Waiting {
+            if self.shell.operator.control == Control::Waiting
+                && self.start_look.may_wait_for_operator()
+            {
                 out.extend(self.shell.texts.say(
                     t,
                     INFO,
@@ -436,7 +472,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
     /// One decision cycle triggered at `t`, its commands sent and its record written.
     async fn run_cycle(&mut self, t: Duration) -> anyhow::Result<()> {
         let start = self.start;
-        run_cycle_at(
+        let done = run_cycle_at(
             &mut self.decider,
             &mut self.shell,
             &mut self.vehicle,
@@ -449,7 +485,11 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             &mut self.report,
             &mut self.transport_events,
         )
-        .await
+        .await;
+        if done.is_ok() {
+            self.last_cycle_done = Some(self.now());
+        }
+        done
     }
 
     /// Flew, landed and disarmed: the flight is over (one last cycle recorded it). Wait for the
@@ -479,6 +519,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
     /// armed or in the air is handed to the autopilot (params/link.toml `[flight] handoff`), its
     /// answer awaited a moment, and a last record says so. Then the loop's report, or its error.
     async fn stop(mut self, outcome: anyhow::Result<StopReason>) -> anyhow::Result<FlyReport> {
+        self.watchdog.stopping();
         let why = match &outcome {
             Ok(why) => (*why).to_string(),
             Err(e) => format!("error: {e:#}"),
