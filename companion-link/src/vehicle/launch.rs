@@ -151,7 +151,9 @@ pub fn stop_verdict(control: &Control, reading: &StopReading) -> StopVerdict {
         .any(|l| !matches!(l.outcome, LaunchOutcome::Refused(_)));
     let ours = match control {
         Control::Started | Control::Unconfirmed { .. } | Control::Stopping => true,
-        Control::Waiting => launched,
+        // A flight found in progress was handed off (or left to its pilot) at start; the
+        // companion launched nothing since, so only its own launch would make it ours.
+        Control::Waiting | Control::FlightInProgress => launched,
         Control::TakenOver { .. } => false,
     };
     if ours {
