@@ -28,6 +28,29 @@ pub(super) struct MissionFile {
     /// The in-flight power-drift tuning (docs/guarantee.md); defaults when absent.
     #[serde(default)]
     pub(super) guarantee: Option<TuningFile>,
+    /// How activities derived from a route are planned (`check --mission FILE --zones FILE`).
+    #[serde(default)]
+    pub(super) derive: Option<DeriveFile>,
+}
+
+/// `[derive]`: what the route and zones cannot give (route_plan, docs/guarantee.md).
+#[allow(dead_code)] // `source` documents the data
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct DeriveFile {
+    /// Horizontal speed until a DO_CHANGE_SPEED item (the autopilot's WPNAV_SPEED /
+    /// MPC_XY_CRUISE replace it once read over MAVLink).
+    pub(super) cruise_speed_mps: f64,
+    pub(super) climb_speed_mps: f64,
+    pub(super) descent_speed_mps: f64,
+    /// Speed while tracking (the target's), 0 to hover.
+    #[serde(default)]
+    pub(super) tracking_speed_mps: f64,
+    /// The tasks each kind of derived activity runs: `take_off`, `leg`, `loiter`, `search`,
+    /// `tracking`, `return`, `land`.
+    pub(super) tasks: BTreeMap<String, Vec<String>>,
+    #[serde(default)]
+    pub(super) source: String,
 }
 
 /// `[guarantee]`: how a measured power drift is judged and learned.

@@ -406,3 +406,87 @@ proptest::proptest! {
         }
     }
 }
+
+#[test]
+fn derived_activities_replace_the_typed_ones_in_the_shipped_mission_and_allocate() {
+    let params = crate::shipped::params();
+    let settings = crate::guarantee::derive_settings(&params, "tracking").unwrap();
+    assert_eq!(settings.cruise_speed_mps, 10.0);
+    let zones = parse_zones(
+        Path::new("z.geojson"),
+        &square_zone(0.001, 0.002, -0.001, 0.001, "gps_degraded"),
+    )
+    .unwrap();
+    let mut r = route(
+        (0.0, 0.0),
+        vec![
+            Item {
+                index: 0,
+                kind: ItemKind::TakeOff { alt_m: 20.0 },
+            },
+            wp(1, 0.0, 0.003, 20.0),
+        ],
+    );
+    r.search_time_limit_s = Some(300.0);
+    r.tracking_time_limit_s = Some(20.0);
+    let acts = derive_activities(&r, &zones, &settings);
+    let spec = crate::guarantee::derived_mission(
+        &params,
+        "tracking",
+        &acts,
+        &[(Path::new("z.geojson"), &zones)],
+    )
+    .unwrap();
+    let names: Vec<&str> = spec
+        .problem
+        .activities
+        .iter()
+        .map(|a| a.name.as_str())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "take_off",
+            "leghome-1.1",
+            "leghome-1.2",
+            "leghome-1.3",
+            "search",
+            "tracking",
+            "land"
+        ]
+    );
+    // In the GPS-degraded piece only the vision localisation is left (the class's rule).
+    let typed = crate::guarantee::load_mission(&params, "tracking").unwrap();
+    assert!(spec.problem.activities[2].ias.len() < spec.problem.activities[1].ias.len());
+    let pre = crate::guarantee::Guarantee::pre_flight(&spec)
+        .expect("the short route fits the shipped pack");
+    let typed_pre = crate::guarantee::Guarantee::pre_flight(&typed).unwrap();
+    assert!(
+        pre.totals["energy_j"] < typed_pre.totals["energy_j"],
+        "{:?} vs {:?}",
+        pre.totals,
+        typed_pre.totals
+    );
+}
+
+#[test]
+fn a_zone_naming_no_constraint_class_of_the_mission_is_refused_with_the_zone() {
+    let params = crate::shipped::params();
+    let zones = parse_zones(
+        Path::new("z.geojson"),
+        &square_zone(0.001, 0.002, -0.001, 0.001, "fog"),
+    )
+    .unwrap();
+    let r = route((0.0, 0.0), vec![wp(1, 0.0, 0.003, 20.0)]);
+    let acts = derive_activities(&r, &zones, &SETTINGS);
+    let e = crate::guarantee::derived_mission(
+        &params,
+        "tracking",
+        &acts,
+        &[(Path::new("z.geojson"), &zones)],
+    )
+    .unwrap_err();
+    assert_eq!(e.file, Path::new("z.geojson"));
+    assert_eq!(e.entry, "features[0].constraints");
+    assert!(e.reason.contains("`fog` is no constraint class"), "{e}");
+}
