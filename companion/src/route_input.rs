@@ -17,7 +17,8 @@ use companion_core::spec::ParamsFiles;
 use companion_link::actions::{Route, Waypoint};
 use std::path::{Path, PathBuf};
 
-/// The PANORAMA mission derived activities are planned against (its tasks, TIOs, goals).
+/// The PANORAMA mission derived activities are planned against (its tasks, TIOs, goals) unless
+/// `--mission` names another.
 pub const DERIVE_MISSION: &str = "tracking";
 
 /// What `check` derived.
@@ -132,7 +133,13 @@ pub fn derive(
         return Ok(None);
     }
     let home = home.map(parse_home).transpose()?;
-    let settings = companion_core::guarantee::derive_settings(files, DERIVE_MISSION)?;
+    // A PANORAMA mission given with `--zones` is the one planned; a route file in `--mission`
+    // leaves the default.
+    let panorama = match kind {
+        None => mission.unwrap_or(DERIVE_MISSION),
+        Some(_) => DERIVE_MISSION,
+    };
+    let settings = companion_core::guarantee::derive_settings(files, panorama)?;
     let zones: Vec<Zone> = match zones_file {
         Some(z) => companion_core::route_plan::parse_zones(z, files.text(z)?)?,
         None => Vec::new(),
@@ -174,8 +181,7 @@ pub fn derive(
     if let Some(z) = zones_file {
         sets.push((z, zones.as_slice()));
     }
-    let spec =
-        companion_core::guarantee::derived_mission(files, DERIVE_MISSION, &activities, &sets)?;
+    let spec = companion_core::guarantee::derived_mission(files, panorama, &activities, &sets)?;
     Ok(Some(Derived {
         route_file: file,
         zones_file: zones_file.map(Path::to_path_buf),

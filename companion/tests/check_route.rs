@@ -244,3 +244,22 @@ fn broken_mission_and_zone_files_are_refused_with_file_item_and_reason() {
         assert!(!err.contains("panicked"), "{err}");
     }
 }
+
+#[test]
+fn zones_with_a_panorama_mission_plan_that_mission_and_need_its_derive_table() {
+    let d = tempfile::tempdir().unwrap();
+    let zones = write(d.path(), "z.geojson", ZONES);
+    let (code, _, err) = check(&[
+        "--mission",
+        "patrolling",
+        "--zones",
+        &zones,
+        "--home",
+        "0,0",
+    ]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("patrolling.toml") && err.contains("no [derive] table"),
+        "{err}"
+    );
+}
