@@ -12,6 +12,7 @@
 mod binding;
 mod compile;
 pub mod power_bounds;
+mod derived;
 mod reason;
 mod schema;
 
@@ -21,6 +22,7 @@ use crate::record::{
 };
 use crate::spec::{ParamsFiles, SpecError, read_toml};
 use compile::{check_against_catalogue, compile};
+pub use derived::{derive_settings, derived_mission};
 use panorama::{Goal, Infeasible, MarginReport, Measured, Problem, Selection};
 use schema::MissionFile;
 use std::collections::BTreeMap;

@@ -46,6 +46,7 @@ pub mod readings;
 pub mod record;
 pub mod report;
 pub mod resources;
+pub mod route_plan;
 pub(crate) mod scratch;
 pub mod spec;
 pub mod stage_hook;

@@ -14,6 +14,7 @@
 #![allow(missing_docs)] // test support, never published
 
 pub mod fuzzing;
+pub mod route_gen;
 pub mod scripted;
 pub mod sim_link;
 pub mod streams;

@@ -29,9 +29,18 @@ pub struct CheckArgs {
     #[arg(long, value_name = "NAME")]
     pub vehicle: Option<String>,
     /// PANORAMA mission for the pre-flight allocation: a name in params/missions/ (`tracking`,
-    /// `patrolling`) or a path.
+    /// `patrolling`) or a path; or a route to derive the activities from, told by content: a
+    /// QGroundControl `.plan`, a WPL 110 file or a route TOML (docs/guarantee.md).
     #[arg(long)]
     pub mission: Option<String>,
+    /// Zones: a GeoJSON FeatureCollection of Polygon / MultiPolygon features whose
+    /// `properties.constraints` name constraint classes of the mission; the route's legs are split
+    /// where they enter or leave one.
+    #[arg(long, value_name = "FILE.geojson")]
+    pub zones: Option<PathBuf>,
+    /// Home as LAT,LON (degrees), to place a route given relative to home among the zones.
+    #[arg(long, value_name = "LAT,LON")]
+    pub home: Option<String>,
     /// The route file `fly --mission FILE` would fly (default params/missions/tracking_route.toml).
     #[arg(long)]
     pub route: Option<PathBuf>,
@@ -43,6 +52,8 @@ pub struct CheckContext<'a> {
     pub args: &'a CheckArgs,
     /// Everything loaded and cross-checked from `params`.
     pub loaded: &'a crate::params::Params,
+    /// Activities derived from `--mission FILE` / `--zones FILE`, when given.
+    pub derived: Option<&'a crate::route_input::Derived>,
 }
 
 /// A section: its JSON value and its human text.
@@ -298,6 +309,14 @@ pub fn resource_policies_section(cx: &CheckContext) -> anyhow::Result<(Value, St
 
 /// PANORAMA: activities, RAS0 (Table 6 shape), NGA and initial margins of `--mission`.
 pub fn guarantee_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
+    if let Some(d) = cx.derived {
+        let v = companion_core::report::guarantee::check_json_spec(&d.spec);
+        let text = format!(
+            "\n{}",
+            companion_core::report::guarantee::check_text_spec(&d.spec)
+        );
+        return Ok((v["guarantee"].clone(), text));
+    }
     let mission = cx.args.mission.as_deref().unwrap_or("tracking");
     let v = companion_core::report::guarantee::check_json(cx.params, mission)?;
     let text = format!(
@@ -341,6 +360,9 @@ pub fn report(args: &CheckArgs) -> anyhow::Result<(Value, String)> {
     {
         crate::params::add_file(&mut files, m);
     }
+    if let Some(z) = args.zones.as_deref() {
+        crate::params::add_file(&mut files, z);
+    }
     report_from(files, args)
 }
 
@@ -350,13 +372,25 @@ pub fn report_from(
     args: &CheckArgs,
 ) -> anyhow::Result<(Value, String)> {
     let loaded = crate::params::Params::from_files(files, args.route.as_deref())?;
+    let derived = crate::route_input::derive(
+        &loaded.files,
+        args.mission.as_deref(),
+        args.zones.as_deref(),
+        args.route.as_deref(),
+        args.home.as_deref(),
+    )?;
     let cx = CheckContext {
         params: &loaded.files,
         args,
         loaded: &loaded,
+        derived: derived.as_ref(),
     };
     let mut obj = serde_json::Map::new();
     let mut text = String::new();
+    if let Some(d) = &derived {
+        obj.insert("activities".into(), crate::route_input::activities_json(d));
+        text.push_str(&crate::route_input::activities_text(d));
+    }
     for (key, f) in SECTIONS {
         let (v, t) = f(&cx).with_context(|| format!("check {key}"))?;
         obj.insert(key.to_string(), v);

@@ -34,6 +34,7 @@ pub mod params;
 pub mod params_files;
 pub mod replay;
 pub mod review;
+pub mod route_input;
 pub mod signing_setup;
 pub mod sim;
 pub mod vocabulary;

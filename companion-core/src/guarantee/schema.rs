@@ -31,6 +31,9 @@ pub(super) struct MissionFile {
     /// What no airframe of the mission can be (docs/calibrate.md); none for a ground robot.
     #[serde(default)]
     pub(super) power_bounds: Option<PowerBoundsFile>,
+    /// How activities derived from a route are planned (`check --mission FILE --zones FILE`).
+    #[serde(default)]
+    pub(super) derive: Option<DeriveFile>,
 }
 
 /// `[power_bounds]`: what no airframe of the mission can be (checked in power_bounds.rs).
@@ -42,6 +45,26 @@ pub(super) struct PowerBoundsFile {
     pub(super) min_power_of_hover: f64,
     pub(super) max_fit_rms_fraction: f64,
     pub(super) sources: BTreeMap<String, String>,
+}
+
+/// `[derive]`: what the route and zones cannot give (route_plan, docs/guarantee.md).
+#[allow(dead_code)] // `source` documents the data
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct DeriveFile {
+    /// Horizontal speed until a DO_CHANGE_SPEED item (the autopilot's WPNAV_SPEED /
+    /// MPC_XY_CRUISE replace it once read over MAVLink).
+    pub(super) cruise_speed_mps: f64,
+    pub(super) climb_speed_mps: f64,
+    pub(super) descent_speed_mps: f64,
+    /// Speed while tracking (the target's), 0 to hover.
+    #[serde(default)]
+    pub(super) tracking_speed_mps: f64,
+    /// The tasks each kind of derived activity runs: `take_off`, `leg`, `loiter`, `search`,
+    /// `tracking`, `return`, `land`.
+    pub(super) tasks: BTreeMap<String, Vec<String>>,
+    #[serde(default)]
+    pub(super) source: String,
 }
 
 /// `[guarantee]`: how a measured power drift is judged and learned.
