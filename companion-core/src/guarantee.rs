@@ -11,8 +11,8 @@
 
 mod binding;
 mod compile;
-pub mod power_bounds;
 mod derived;
+pub mod power_bounds;
 mod reason;
 mod schema;
 
