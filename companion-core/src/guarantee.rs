@@ -104,9 +104,18 @@ pub fn mission_path(params: &ParamsFiles, mission: &str) -> PathBuf {
 
 /// Load and validate a mission by name or path.
 pub fn load_mission(params: &ParamsFiles, mission: &str) -> Result<MissionSpec, SpecError> {
-    let params_dir = params.dir();
     let path = mission_path(params, mission);
     let file: MissionFile = read_toml(params, &path)?;
+    compile_against_catalogue(params, &path, file)
+}
+
+/// A mission file checked against params' variant catalogue (on its platform), then compiled.
+fn compile_against_catalogue(
+    params: &ParamsFiles,
+    path: &Path,
+    file: MissionFile,
+) -> Result<MissionSpec, SpecError> {
+    let params_dir = params.dir();
     let platform =
         crate::resources::load_platform(params, &params_dir.join(crate::resources::PLATFORM_FILE))?;
     let catalogue = crate::resources::load_variants(
@@ -114,8 +123,8 @@ pub fn load_mission(params: &ParamsFiles, mission: &str) -> Result<MissionSpec, 
         &params_dir.join(crate::resources::VARIANTS_FILE),
         &platform,
     )?;
-    check_against_catalogue(&path, &file, &catalogue)?;
-    compile(&path, file)
+    check_against_catalogue(path, &file, &catalogue)?;
+    compile(path, file)
 }
 
 /// Parse a mission from TOML text (`path` only names it in errors).

@@ -4,7 +4,7 @@
 //! its kind.
 
 use super::schema::{ActivityFile, DeriveFile, MissionFile};
-use super::{MissionSpec, check_against_catalogue, compile, mission_path};
+use super::{MissionSpec, compile_against_catalogue, mission_path};
 use crate::route_plan::{ActivityKind, DeriveSettings, DerivedActivity, Zone};
 use crate::spec::{ParamsFiles, SpecError, read_toml};
 use std::path::Path;
@@ -135,14 +135,5 @@ pub fn derived_mission(
         });
     }
     file.activities = out;
-    let params_dir = params.dir();
-    let platform =
-        crate::resources::load_platform(params, &params_dir.join(crate::resources::PLATFORM_FILE))?;
-    let catalogue = crate::resources::load_variants(
-        params,
-        &params_dir.join(crate::resources::VARIANTS_FILE),
-        &platform,
-    )?;
-    check_against_catalogue(&path, &file, &catalogue)?;
-    compile(&path, file)
+    compile_against_catalogue(params, &path, file)
 }
