@@ -219,6 +219,8 @@ class GcsObserver:
         self.params: Dict[str, Tuple[float, float]] = {}
         self.acks: List[Tuple[float, int, int]] = []            # (t, command, result)
         self.acks_by: List[Tuple[float, int, int, int]] = []    # (t, source component, command, result)
+        # (t, system, component, name, value, time_boot_ms) of each NAMED_VALUE_FLOAT / NAMED_VALUE_INT
+        self.named_values: List[Tuple[float, int, int, str, float, int]] = []
         self.connects = 0
         self.signing_key: Optional[bytes] = None
         self._t = threading.Thread(target=self._run, daemon=True, name="gcs-observer")
@@ -348,6 +350,10 @@ class GcsObserver:
             elif t == "PARAM_VALUE":
                 pid = m.param_id if isinstance(m.param_id, str) else m.param_id.decode(errors="replace")
                 self.params[pid.rstrip("\x00")] = (m.param_value, now)
+            elif t in ("NAMED_VALUE_FLOAT", "NAMED_VALUE_INT"):
+                name = m.name if isinstance(m.name, str) else m.name.decode(errors="replace")
+                self.named_values.append((now, m.get_srcSystem(), m.get_srcComponent(), name.rstrip("\x00"),
+                                          m.value, m.time_boot_ms))
             elif t == "COMMAND_ACK":
                 self.acks.append((now, m.command, m.result))
                 self.acks_by.append((now, m.get_srcComponent(), m.command, m.result))

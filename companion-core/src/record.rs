@@ -375,6 +375,10 @@ pub struct DecisionRecord {
     /// simulated world has no wall clock): absent in `simulate` records.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub utc_us: Option<u64>,
+    /// How long the decision itself took (ms, wall clock: the snapshot, the core's step and the
+    /// commands, not the sending): `fly` only, a shell measurement like `utc_us`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub decide_ms: Option<f64>,
     /// In-flight CPT learning (`--learn-cpt`, docs/calibrate.md): the BN rows this record's
     /// outcome updated, in force from the next cycle. Absent when learning is off.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -483,7 +487,7 @@ reuse_clone!(GuaranteeRecord {
 } maps { margins, goals, drift });
 reuse_clone!(DecisionRecord {
     cycle, time_s, state, events, proposals, conflicts, actions, resources, guarantee, commands,
-    link_events, utc_us, shell_actions, absent_evidence, cpt_learned
+    link_events, utc_us, decide_ms, shell_actions, absent_evidence, cpt_learned
 } maps { observations, evidence, probabilities, vehicle });
 reuse_clone!(Plan { vehicle_actions, applications } maps {});
 

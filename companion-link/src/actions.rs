@@ -669,6 +669,9 @@ pub struct LinkParams {
     /// zone, STATUSTEXT limits (`[flight]`, defaults when absent).
     #[serde(default)]
     pub flight: FlightParams,
+    /// Values a ground station plots (`[ground_values]`; off when absent).
+    #[serde(default)]
+    pub ground_values: crate::ground_values::GroundValuesParams,
 }
 
 /// `params/link.toml` `[streams_not_sent_by]`: message names of `[streams]` per autopilot
@@ -894,6 +897,7 @@ impl LinkParams {
             ));
         }
         p.flight.check(path, p.decision_period_s)?;
+        p.ground_values.check(path)?;
         for (flavour, names) in [
             ("ardupilot", &p.streams_not_sent_by.ardupilot),
             ("px4", &p.streams_not_sent_by.px4),

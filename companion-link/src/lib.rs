@@ -22,6 +22,7 @@
 
 pub mod actions;
 pub mod command;
+pub mod ground_values;
 pub mod ingest;
 pub mod liveness;
 pub mod mission;

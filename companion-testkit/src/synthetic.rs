@@ -390,6 +390,7 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
         link_events,
         vehicle,
         utc_us: None,
+        decide_ms: None,
     }
 }
 

@@ -30,7 +30,9 @@ pub(super) async fn run_cycle_at<D: Decider, S: RecordSink>(
     report: &mut FlyReport,
     transport_events: &mut Vec<LinkEvent>,
 ) -> anyhow::Result<()> {
+    let started = std::time::Instant::now();
     let decided = decide(decider, shell, vehicle, &now);
+    let decide_ms = started.elapsed().as_secs_f64() * 1e3;
     send(encoder, vehicle, tx, tlog, &decided.msgs).await;
     vehicle.stamp_latency(trigger_at, now());
     report.cycles += 1;
@@ -39,7 +41,8 @@ pub(super) async fn run_cycle_at<D: Decider, S: RecordSink>(
     let flown = decided
         .chosen
         .map(|c| vehicle.actions.name(Flown::Action(c.action())).to_string());
-    let rec = finish_record(decided, shell, vehicle, report.cycles, transport_events);
+    let mut rec = finish_record(decided, shell, vehicle, report.cycles, transport_events);
+    rec.decide_ms = Some(decide_ms);
     if !shell.operator.commanding() {
         shell.launch = decider.launch_verdict(&rec);
     }
@@ -66,6 +69,8 @@ pub(super) async fn run_cycle_at<D: Decider, S: RecordSink>(
         }
         texts.extend(shell.texts.say(now(), severity, &text));
     }
+    // The plotted values ride the same queue as the texts, after them.
+    texts.extend(shell.ground_values.due(&rec, now()));
     send(encoder, vehicle, tx, tlog, &texts).await;
     sink.write(&rec).context("writing the decision record")?;
     Ok(())

@@ -30,6 +30,8 @@ pub struct Shell {
     pub operator: OperatorGate,
     /// STATUSTEXT to the ground station, rate-limited.
     pub texts: GcsText,
+    /// The values a ground station plots, and when the next are due.
+    pub(super) ground_values: companion_link::ground_values::GroundValues,
     /// The last cycle's action set, to tell a change of behaviour.
     pub(super) last_actions: Vec<String>,
     /// The last behaviour told to the ground station (motion and tracking version), and the
@@ -74,6 +76,10 @@ impl Shell {
             texts: GcsText::new(
                 Duration::from_secs_f64(f.statustext_repeat_s),
                 f.statustext_max_per_s,
+            ),
+            ground_values: companion_link::ground_values::GroundValues::new(
+                &setup.link.ground_values,
+                (setup.catalogue.actions.iter()).map(|a| (a.id.as_str(), a.paper.as_str())),
             ),
             last_actions: Vec::new(),
             last_told: Default::default(),
