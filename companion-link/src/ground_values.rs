@@ -41,7 +41,7 @@ impl Default for GroundValuesParams {
 }
 
 /// Above this a 57,600-baud radio would spend more than a tenth of its bytes on plotted values
-/// (10 values x 30 bytes x 2 Hz = 600 B/s of 5,760 B/s).
+/// (9 values x 30 bytes x 2 Hz = 540 B/s of 5,760 B/s).
 pub const MAX_RATE_HZ: f64 = 2.0;
 
 impl GroundValuesParams {
