@@ -91,7 +91,7 @@ const TEST_ACTIONS: [&str; 12] = [
     "detect_target",
 ];
 
-fn test_catalogue() -> ActionCatalogue {
+pub(super) fn test_catalogue() -> ActionCatalogue {
     let action = |name: &str| Action {
         id: name.to_string(),
         paper: String::new(),
@@ -1364,7 +1364,7 @@ fn sidestep_is_to_the_right_of_the_heading() {
     }
 }
 
-fn px4_frame(msg: Msg) -> Frame {
+pub(super) fn px4_frame(msg: Msg) -> Frame {
     let mut f = frame(msg);
     f.header.system_id = 2; // PX4 instance 1: MAV_SYS_ID 2
     f
@@ -1372,7 +1372,7 @@ fn px4_frame(msg: Msg) -> Frame {
 
 /// PX4 SITL's own evidence (no EKF_STATUS_REPORT): STANDBY heartbeat in Hold, the prearm bit
 /// in SYS_STATUS health only, ESTIMATOR_STATUS 1023, home at 488 m AMSL.
-fn px4_ready(v: &mut Vehicle, t: f64) -> Vec<Msg> {
+pub(super) fn px4_ready(v: &mut Vehicle, t: f64) -> Vec<Msg> {
     let mut out = Vec::new();
     for msg in [
         Msg::HEARTBEAT(HEARTBEAT_DATA {
@@ -1707,7 +1707,7 @@ fn ardupilot_accepted_mode_is_the_mode() {
     );
 }
 
-fn param_requests(out: &[Msg]) -> Vec<String> {
+pub(super) fn param_requests(out: &[Msg]) -> Vec<String> {
     out.iter()
         .filter_map(|m| match m {
             Msg::PARAM_REQUEST_READ(p) => Some(p.param_id.to_str().unwrap_or("").to_string()),
@@ -1716,7 +1716,7 @@ fn param_requests(out: &[Msg]) -> Vec<String> {
         .collect()
 }
 
-fn param_value(name: &str, value: f32, param_type: MavParamType) -> Msg {
+pub(super) fn param_value(name: &str, value: f32, param_type: MavParamType) -> Msg {
     Msg::PARAM_VALUE(PARAM_VALUE_DATA {
         param_value: value,
         param_id: name.into(),
@@ -1733,6 +1733,7 @@ fn ardupilot_pack_capacity_is_read_retried_until_answered_and_observed() {
         asked.extend(param_requests(&v.on_frame(s(t as f64), &hb(0, false))));
     }
     // Asked, re-asked every PACK_PARAM_RETRY while unanswered, never more than the attempts.
+    asked.retain(|n| n == "BATT_CAPACITY");
     assert_eq!(asked, vec!["BATT_CAPACITY"; PACK_PARAM_ATTEMPTS as usize]);
     // A parameter nobody asked for changes nothing.
     v.on_frame(
@@ -1768,14 +1769,20 @@ fn ardupilot_pack_capacity_is_read_retried_until_answered_and_observed() {
     let out: Vec<Msg> = (1..6)
         .flat_map(|t| v.on_frame(s(t as f64), &hb(0, false)))
         .collect();
-    assert!(param_requests(&out).is_empty(), "answered: not asked again");
+    assert!(
+        !param_requests(&out).iter().any(|n| n == "BATT_CAPACITY"),
+        "answered: not asked again"
+    );
 }
 
 #[test]
 fn px4_pack_parameters_are_decoded_bytewise_and_an_unset_capacity_is_said() {
     let mut v = vehicle();
     let out = px4_ready(&mut v, 0.0);
-    assert_eq!(param_requests(&out), vec!["BAT1_CAPACITY", "BAT1_N_CELLS"]);
+    assert_eq!(
+        param_requests(&out)[..2],
+        ["BAT1_CAPACITY".to_string(), "BAT1_N_CELLS".to_string()]
+    );
     // PX4 SIH: capacity -1 (a float parameter), 4 cells (an int32, sent bytewise).
     v.on_frame(
         s(1.0),

@@ -1,0 +1,119 @@
+//! `fly --mission autopilot`, the shell's side: the autopilot's mission, once the link has
+//! downloaded it ([`companion_link::vehicle::AutopilotMission`]), is planned
+//! ([`crate::autopilot_mission::plan`]) and handed to the decider's guarantee; until a plan
+//! stands, no start is granted. A mission changed by a ground station is re-planned the same
+//! way; each plan, change and refusal is said to the ground station and recorded.
+
+use super::{Decider, NOTICE, Shell, WARNING};
+use companion_core::launch::LaunchRefusal;
+use companion_core::record::Event;
+use companion_core::route_plan::ItemKind;
+use companion_core::spec::ParamsFiles;
+use companion_link::Msg;
+use companion_link::vehicle::{AutopilotMission, Vehicle};
+use std::time::Duration;
+
+/// Why no start is granted before the first download.
+pub(super) const NOT_DOWNLOADED: &str = "the autopilot's mission is not downloaded yet";
+
+/// What the shell needs to plan the autopilot's mission.
+pub(super) struct AutopilotPlan {
+    /// The params the activities' tasks, goals and speeds come from.
+    pub(super) files: ParamsFiles,
+}
+
+impl AutopilotPlan {
+    /// Planning from `files`; the start stays refused until the first plan stands.
+    pub(super) fn new(files: ParamsFiles, shell: &mut Shell) -> Self {
+        shell.mission_unplanned = Some(NOT_DOWNLOADED.to_string());
+        Self { files }
+    }
+
+    /// The mission loaded or changed on the autopilot: planned, the decider's guarantee
+    /// replaced, the mission estimate's waypoints set, the ground station told.
+    pub(super) fn on_mission<D: Decider>(
+        &self,
+        update: AutopilotMission,
+        vehicle: &Vehicle,
+        decider: &mut D,
+        shell: &mut Shell,
+        now: Duration,
+    ) -> Vec<Msg> {
+        let (items, changed) = match update {
+            AutopilotMission::Loaded(i) => (i, false),
+            AutopilotMission::Changed(i) => (i, true),
+        };
+        let planned: Vec<_> = items
+            .iter()
+            .enumerate()
+            .map(|(k, i)| i.planned(k))
+            .collect();
+        let home = vehicle
+            .telemetry
+            .home
+            .map(|(lat, lon, alt)| (f64::from(lat) / 1e7, f64::from(lon) / 1e7, alt));
+        let obs = vehicle.observations(now, Vec::new());
+        let result = crate::autopilot_mission::speeds(&self.files, &obs).and_then(|(s, fb)| {
+            let home_at_seq0 = vehicle.mission.home_at_seq0;
+            let d = crate::autopilot_mission::plan(&self.files, &planned, home_at_seq0, home, &s)?;
+            Ok((d, fb))
+        });
+        let (text, severity) = match result {
+            Ok((d, fallback)) => {
+                let summary = crate::autopilot_mission::summary(&d, &fallback);
+                let route = crate::autopilot_mission::autopilot_mission(
+                    &planned,
+                    vehicle.mission.home_at_seq0,
+                    home,
+                    1.0,
+                );
+                if let Ok(route) = route {
+                    set_waypoints(shell, &route.items);
+                }
+                let feasible = decider.replace_mission(d.spec);
+                shell.mission_unplanned =
+                    (!feasible).then(|| "no allocation meets the goals".to_string());
+                let what = if changed {
+                    "mission changed, re-planned"
+                } else {
+                    "mission planned"
+                };
+                (format!("companion: {what}: {summary}"), NOTICE)
+            }
+            Err(e) => {
+                let why = format!("{e:#}");
+                shell.mission_unplanned = Some(why.clone());
+                (format!("companion: mission refused: {why}"), WARNING)
+            }
+        };
+        tracing::info!("{text}");
+        shell.pending_events.push(Event::from(text.as_str()));
+        shell.texts.say(now, severity, &text)
+    }
+}
+
+/// The mission estimate follows the autopilot's mission: its first and last waypoint
+/// (or loiter) by sequence number.
+fn set_waypoints(shell: &mut Shell, items: &[companion_core::route_plan::Item]) {
+    let nav: Vec<u16> = items
+        .iter()
+        .filter(|i| matches!(i.kind, ItemKind::Waypoint(_) | ItemKind::Loiter { .. }))
+        .map(|i| i.index as u16)
+        .collect();
+    if let (Some(&first), Some(&last)) = (nav.first(), nav.last()) {
+        for m in [&mut shell.mission, &mut shell.fresh_mission] {
+            m.wp1_seq = first;
+            m.last_seq = last.max(first);
+        }
+    }
+}
+
+/// The launch verdict while a mission is not planned: refused, saying why.
+pub(super) fn unplanned_refusal(shell: &Shell) -> Option<LaunchRefusal> {
+    shell
+        .mission_unplanned
+        .as_ref()
+        .map(|reason| LaunchRefusal::MissionNotPlanned {
+            reason: reason.clone(),
+        })
+}
