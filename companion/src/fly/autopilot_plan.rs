@@ -10,6 +10,7 @@ use companion_core::record::Event;
 use companion_core::route_plan::ItemKind;
 use companion_core::spec::ParamsFiles;
 use companion_link::Msg;
+use companion_link::dialect::MavSeverity;
 use companion_link::vehicle::{AutopilotMission, Vehicle};
 use std::time::Duration;
 
@@ -20,25 +21,44 @@ pub(super) const NOT_DOWNLOADED: &str = "the autopilot's mission is not download
 pub(super) struct AutopilotPlan {
     /// The params the activities' tasks, goals and speeds come from.
     pub(super) files: ParamsFiles,
+    /// What the ground station must still be told (held back by the STATUSTEXT rate cap, said
+    /// as soon as it allows: a plan, a change or a refusal is never lost).
+    unsaid: Option<(MavSeverity, String)>,
 }
 
 impl AutopilotPlan {
     /// Planning from `files`; the start stays refused until the first plan stands.
     pub(super) fn new(files: ParamsFiles, shell: &mut Shell) -> Self {
         shell.mission_unplanned = Some(NOT_DOWNLOADED.to_string());
-        Self { files }
+        Self {
+            files,
+            unsaid: None,
+        }
+    }
+
+    /// Tell the ground station what is still unsaid, unless the rate cap holds it back again.
+    pub(super) fn say(&mut self, shell: &mut Shell, now: Duration) -> Vec<Msg> {
+        let Some((severity, text)) = &self.unsaid else {
+            return Vec::new();
+        };
+        let dropped = shell.texts.dropped;
+        let out = shell.texts.say(now, *severity, text);
+        if shell.texts.dropped == dropped {
+            self.unsaid = None;
+        }
+        out
     }
 
     /// The mission loaded or changed on the autopilot: planned, the decider's guarantee
     /// replaced, the mission estimate's waypoints set, the ground station told.
     pub(super) fn on_mission<D: Decider>(
-        &self,
+        &mut self,
         update: AutopilotMission,
         vehicle: &Vehicle,
         decider: &mut D,
         shell: &mut Shell,
         now: Duration,
-    ) -> Vec<Msg> {
+    ) {
         let (items, changed) = match update {
             AutopilotMission::Loaded(i) => (i, false),
             AutopilotMission::Changed(i) => (i, true),
@@ -88,12 +108,13 @@ impl AutopilotPlan {
         };
         tracing::info!("{text}");
         shell.pending_events.push(Event::from(text.as_str()));
-        shell.texts.say(now, severity, &text)
+        self.unsaid = Some((severity, text));
     }
 }
 
 /// The mission estimate follows the autopilot's mission: its first and last waypoint
-/// (or loiter) by sequence number.
+/// (or loiter) by sequence number, and no search or tracking limit of the route file (the plan
+/// holds none: the mission's own items end it).
 fn set_waypoints(shell: &mut Shell, items: &[companion_core::route_plan::Item]) {
     let nav: Vec<u16> = items
         .iter()
@@ -104,6 +125,8 @@ fn set_waypoints(shell: &mut Shell, items: &[companion_core::route_plan::Item]) 
         for m in [&mut shell.mission, &mut shell.fresh_mission] {
             m.wp1_seq = first;
             m.last_seq = last.max(first);
+            m.search_time_limit_s = None;
+            m.tracking_time_limit_s = None;
         }
     }
 }

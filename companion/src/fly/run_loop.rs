@@ -202,18 +202,13 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
                 _ = &mut stop => return Ok("stop requested by the caller"),
             }
             wake |= self.on_operator(&mut out);
-            if let (Some(plan), Some(m)) =
-                (&self.autopilot_plan, self.vehicle.take_autopilot_mission())
-            {
-                let t = self.now();
-                out.extend(plan.on_mission(
-                    m,
-                    &self.vehicle,
-                    &mut self.decider,
-                    &mut self.shell,
-                    t,
-                ));
-                wake = true;
+            let t = self.now();
+            if let Some(plan) = self.autopilot_plan.as_mut() {
+                if let Some(m) = self.vehicle.take_autopilot_mission() {
+                    plan.on_mission(m, &self.vehicle, &mut self.decider, &mut self.shell, t);
+                    wake = true;
+                }
+                out.extend(plan.say(&mut self.shell, t));
             }
             let t = self.now();
             out.extend(self.link_security.check(
