@@ -7,11 +7,7 @@ mod identity;
 mod job;
 mod launch;
 mod mission_watch;
-#[cfg(test)]
-mod mission_watch_tests;
 mod pack;
-#[cfg(test)]
-mod speed_tests;
 #[cfg(test)]
 mod tests;
 

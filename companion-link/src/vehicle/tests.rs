@@ -6,6 +6,9 @@ use companion_core::action_role::ActionRoles;
 use companion_core::mission::{Action, ActionCatalogue, ActionKind};
 use mavlink::{MavHeader, MavlinkVersion};
 
+mod mission_watch;
+mod speeds;
+
 pub(super) fn s(v: f64) -> Duration {
     Duration::from_secs_f64(v)
 }
@@ -91,7 +94,7 @@ const TEST_ACTIONS: [&str; 12] = [
     "detect_target",
 ];
 
-pub(super) fn test_catalogue() -> ActionCatalogue {
+fn test_catalogue() -> ActionCatalogue {
     let action = |name: &str| Action {
         id: name.to_string(),
         paper: String::new(),
@@ -1364,7 +1367,7 @@ fn sidestep_is_to_the_right_of_the_heading() {
     }
 }
 
-pub(super) fn px4_frame(msg: Msg) -> Frame {
+fn px4_frame(msg: Msg) -> Frame {
     let mut f = frame(msg);
     f.header.system_id = 2; // PX4 instance 1: MAV_SYS_ID 2
     f
@@ -1372,7 +1375,7 @@ pub(super) fn px4_frame(msg: Msg) -> Frame {
 
 /// PX4 SITL's own evidence (no EKF_STATUS_REPORT): STANDBY heartbeat in Hold, the prearm bit
 /// in SYS_STATUS health only, ESTIMATOR_STATUS 1023, home at 488 m AMSL.
-pub(super) fn px4_ready(v: &mut Vehicle, t: f64) -> Vec<Msg> {
+fn px4_ready(v: &mut Vehicle, t: f64) -> Vec<Msg> {
     let mut out = Vec::new();
     for msg in [
         Msg::HEARTBEAT(HEARTBEAT_DATA {
@@ -1707,7 +1710,7 @@ fn ardupilot_accepted_mode_is_the_mode() {
     );
 }
 
-pub(super) fn param_requests(out: &[Msg]) -> Vec<String> {
+fn param_requests(out: &[Msg]) -> Vec<String> {
     out.iter()
         .filter_map(|m| match m {
             Msg::PARAM_REQUEST_READ(p) => Some(p.param_id.to_str().unwrap_or("").to_string()),
@@ -1716,7 +1719,7 @@ pub(super) fn param_requests(out: &[Msg]) -> Vec<String> {
         .collect()
 }
 
-pub(super) fn param_value(name: &str, value: f32, param_type: MavParamType) -> Msg {
+fn param_value(name: &str, value: f32, param_type: MavParamType) -> Msg {
     Msg::PARAM_VALUE(PARAM_VALUE_DATA {
         param_value: value,
         param_id: name.into(),

@@ -1,7 +1,6 @@
 //! The autopilot's own mission: downloaded, watched for a ground station's upload, flown
 //! without an upload of ours.
 
-use super::tests::{a, frame, hb, px4_frame, s, test_catalogue};
 use super::*;
 use crate::mission::MissionItem;
 

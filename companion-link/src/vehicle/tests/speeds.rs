@@ -1,6 +1,5 @@
 //! The mission speeds read from the autopilot's parameters.
 
-use super::tests::{frame, hb, param_requests, param_value, px4_frame, px4_ready, s, vehicle};
 use super::*;
 
 #[test]
