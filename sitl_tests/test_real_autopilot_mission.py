@@ -50,6 +50,16 @@ def upload_when_ready(gcs: Any, items: List[Tuple[int, int, float, float, float,
     assert result == mavlink.MAV_MISSION_ACCEPTED, f"MISSION_ACK {result}" + gcs.summary()
 
 
+# GcsObserver.wait calls its condition holding the observer's lock (not re-entrant): conditions read its
+# lists directly, never through the query methods that take the lock again.
+def said_by_companion(gcs: Any, what: str, since: float = 0.0) -> bool:
+    return any(what in s for t, _, c, s in gcs.statustext_from if c == COMPANION and t >= since)
+
+
+def reached(gcs: Any) -> set:
+    return {s for _, s in gcs.reached}
+
+
 def events(records: List[Dict[str, Any]]) -> List[str]:
     return [e for r in records for e in r.get("events", [])]
 
@@ -60,18 +70,18 @@ def test_real_the_uploaded_mission_is_planned_flown_and_a_change_in_flight_re_pl
     wpnav = gcs.param_get("WPNAV_SPEED")
     upload_when_ready(gcs, mission((0.0, 60.0)))
     run = fly(veh.autopilot, mission=Path("autopilot"))   # --auto-start --once
-    gcs.wait(lambda: any("mission planned" in s for s in gcs.texts_from(COMPANION)), 60,
+    gcs.wait(lambda: said_by_companion(gcs, "mission planned"), 60,
              "the companion's STATUSTEXT that it planned the uploaded mission")
     planned = [s for s in gcs.texts_from(COMPANION) if "mission planned" in s][0]
     assert "5 activities" in planned or "activities" in planned, planned
     assert "params speeds" not in planned, f"WPNAV_SPEED etc. not read from the autopilot: {planned}"
-    gcs.wait(lambda: gcs.mode == "AUTO" and 2 in gcs.reached_seqs(), 240, "the first waypoint reached in AUTO")
+    gcs.wait(lambda: gcs.mode == "AUTO" and 2 in reached(gcs), 240, "the first waypoint reached in AUTO")
     # A ground station uploads a new mission of the same length in flight: the last waypoint moved.
     upload_when_ready(gcs, mission((0.0, 120.0)))
     t_up = time.monotonic()
-    gcs.wait(lambda: any("mission changed" in s for s in gcs.texts_from(COMPANION, since=t_up)), 5.0,
+    gcs.wait(lambda: said_by_companion(gcs, "mission changed", since=t_up), 5.0,
              "the companion's STATUSTEXT that the mission changed, within 5 s of the upload")
-    gcs.wait(lambda: {3, 4} <= set(gcs.reached_seqs()), 240, "the waypoints of the new mission reached")
+    gcs.wait(lambda: {3, 4} <= reached(gcs), 240, "the waypoints of the new mission reached")
     gcs.wait(lambda: not gcs.armed and gcs.landed, 240, "the mission's RTL landed the vehicle")
     rc = run.wait_exit(60)
     assert rc == 0, f"exit {rc}\n" + run.output()
