@@ -97,3 +97,76 @@ pub fn summary(d: &Derived, fallback: &[&str]) -> String {
         length
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use companion_core::route_plan::AutopilotItem;
+
+    fn files() -> ParamsFiles {
+        crate::params::read_params_dir(&crate::params::default_params_dir()).unwrap()
+    }
+
+    /// ArduPilot's answer: home, take-off to 20 m, a waypoint 0.002 deg east, RTL.
+    fn items(second: u64) -> Vec<AutopilotItem> {
+        let it = |seq, command, frame, lat, lon, alt| AutopilotItem {
+            seq,
+            command,
+            frame,
+            params: [0.0, 0.0, 0.0, 0.0, lat, lon, alt],
+        };
+        vec![
+            it(0, 16, 0, -35.363261, 149.165230, 584.0),
+            it(1, 22, 3, 0.0, 0.0, 20.0),
+            it(2, second, 3, -35.363261, 149.167230, 20.0),
+            it(3, 20, 3, 0.0, 0.0, 0.0),
+        ]
+    }
+
+    #[test]
+    fn the_autopilots_speeds_replace_params_and_a_missing_one_is_named() {
+        let files = files();
+        let params = companion_core::guarantee::derive_settings(&files, DERIVE_MISSION).unwrap();
+        let mut obs = Observations::default();
+        let (s, fallback) = speeds(&files, &obs).unwrap();
+        assert_eq!(s, params);
+        assert_eq!(
+            fallback,
+            ["cruise_speed_mps", "climb_speed_mps", "descent_speed_mps"]
+        );
+        obs.values.insert("cruise_speed_mps".into(), 7.5);
+        obs.values.insert("descent_speed_mps".into(), 0.9);
+        let (s, fallback) = speeds(&files, &obs).unwrap();
+        assert_eq!((s.cruise_speed_mps, s.descent_speed_mps), (7.5, 0.9));
+        assert_eq!(s.climb_speed_mps, params.climb_speed_mps);
+        assert_eq!(fallback, ["climb_speed_mps"]);
+    }
+
+    #[test]
+    fn the_mission_is_planned_at_the_autopilots_speed_or_refused_naming_the_item() {
+        let files = files();
+        let mut obs = Observations::default();
+        obs.values.insert("cruise_speed_mps".into(), 4.0);
+        let (s, fallback) = speeds(&files, &obs).unwrap();
+        let d = plan(&files, &items(16), true, None, &s).unwrap();
+        let names: Vec<&str> = d.activities.iter().map(|a| a.name.as_str()).collect();
+        assert_eq!(names, ["take_off", "leghome-2", "return", "land"]);
+        assert_eq!(d.activities[1].speed_mps, 4.0, "WPNAV_SPEED, not [derive]");
+        assert_eq!(
+            d.spec.problem.activities.len(),
+            4,
+            "the guarantee plans them"
+        );
+        let said = summary(&d, &fallback);
+        assert!(said.starts_with("4 activities"), "{said}");
+        assert!(
+            said.contains("params speeds: climb_speed_mps descent_speed_mps"),
+            "{said}"
+        );
+        let e = plan(&files, &items(17), true, None, &s).unwrap_err();
+        assert!(
+            format!("{e:#}").starts_with("autopilot mission: item 2: LOITER_UNLIM"),
+            "{e:#}"
+        );
+    }
+}

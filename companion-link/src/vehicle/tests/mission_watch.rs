@@ -227,3 +227,42 @@ fn the_route_step_uploads_nothing_and_waits_for_the_downloaded_mission() {
         "{recs:?}"
     );
 }
+
+#[test]
+fn the_companions_own_verified_upload_is_no_change() {
+    let mut v = watching();
+    v.on_frame(s(0.0), &hb(0, false));
+    answer(&mut v, 0.1, &mission(20.0), false);
+    v.take_autopilot_mission();
+    // An upload of ours (the protocol client drives it; the watch sees only its verified read-back).
+    let ours = mission(42.0);
+    let out = v.mission.upload(s(1.0), ours.clone()).unwrap();
+    assert!(matches!(out[0], Msg::MISSION_COUNT(_)));
+    for seq in 0..ours.len() as u16 {
+        v.on_frame(
+            s(1.1),
+            &frame(Msg::MISSION_REQUEST_INT(MISSION_REQUEST_INT_DATA {
+                seq,
+                ..MISSION_REQUEST_INT_DATA::DEFAULT
+            })),
+        );
+    }
+    v.on_frame(
+        s(1.2),
+        &frame(Msg::MISSION_ACK(MISSION_ACK_DATA {
+            mavtype: MavMissionResult::MAV_MISSION_ACCEPTED,
+            ..MISSION_ACK_DATA::DEFAULT
+        })),
+    );
+    answer(&mut v, 1.3, &ours, false); // the verifying download
+    assert_eq!(v.take_autopilot_mission(), None);
+    // The next periodic download finds what we uploaded: still no change.
+    let out = v.on_frame(s(1.3) + MISSION_POLL, &hb(0, false));
+    assert!(requests(&out).0);
+    answer(&mut v, 4.0, &ours, false);
+    assert_eq!(
+        v.take_autopilot_mission(),
+        None,
+        "our own upload is not a change"
+    );
+}
