@@ -9,8 +9,10 @@
 //!   length leaves as it was. So a changed `total` asks for a download at once, and otherwise the
 //!   mission is downloaded again every `poll` and compared item by item.
 //! - PX4 (mavlink_mission.cpp): MISSION_CURRENT's `mission_id` (MAVLink 2 extension) is a
-//!   checksum of the stored mission, changed by any upload; when an autopilot reports one, a
-//!   changed id asks for a download and no periodic download is needed.
+//!   checksum of the stored mission, changed by any upload (PX4 SIH: `total` 65535 and
+//!   `mission_id` 0 with no mission; after a ground station's upload of 2 items, `total` 2 and a
+//!   non-zero `mission_id`). Once an autopilot reports a non-zero id, a changed id asks for a
+//!   download and no periodic download is needed.
 //!
 //! Whatever asked, a change is what the download shows: items that differ from the last
 //! download (ArduPilot's home at seq 0, which moves when the vehicle arms, excluded) or from the
