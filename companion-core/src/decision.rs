@@ -255,8 +255,10 @@ impl Core {
     /// Plan `spec` from now on in place of the mission the guarantee watched (the autopilot's
     /// mission, downloaded again after a ground station changed it): its pre-flight allocation
     /// is made afresh and the activity being flown forgotten; the health and decision state stay.
-    /// `false` when the new mission has no allocation meeting its goals (the guarantee stage is
-    /// then off, as for an infeasible mission at start, and the launch verdict says so).
+    /// `false` when the new mission has no allocation at all (no implementation alternative: the
+    /// guarantee stage is then off); one whose goals cannot be met is allocated with their bounds
+    /// lifted and its margins, negative, refuse the launch, as at start
+    /// ([`Guarantee::start_or_unbounded`]).
     pub fn replace_mission(&mut self, spec: crate::guarantee::MissionSpec) -> bool {
         self.guarantee = Guarantee::start_or_unbounded(spec);
         self.planned = planned_of(self.guarantee.as_ref(), &self.model);

@@ -405,6 +405,25 @@ proptest::proptest! {
             proptest::prop_assert!(acts.iter().all(|a| a.length_m.is_finite() && a.length_m >= 0.0 && a.hold_s >= 0.0));
         }
     }
+
+    /// What an autopilot answers is the network's: any numbers, any command and frame (f32 NaN and
+    /// infinities included), refused or planned, never a panic or a negative length.
+    #[test]
+    fn any_autopilot_mission_is_refused_or_planned_never_a_panic(
+        raw in proptest::collection::vec((0u64..300, 0u64..12, proptest::collection::vec(proptest::num::f32::ANY, 7)), 0..6),
+        home_at_seq0 in proptest::bool::ANY,
+    ) {
+        let items: Vec<AutopilotItem> = raw.iter().enumerate().map(|(seq, (command, frame, p))| AutopilotItem {
+            seq,
+            command: *command,
+            frame: *frame,
+            params: std::array::from_fn(|k| f64::from(p[k])),
+        }).collect();
+        if let Ok(r) = parse_autopilot_mission(&items, home_at_seq0, None, 4.0) {
+            let acts = derive_activities(&r, &[], &SETTINGS);
+            proptest::prop_assert!(acts.iter().all(|a| a.length_m.is_finite() && a.length_m >= 0.0 && a.hold_s >= 0.0));
+        }
+    }
 }
 
 #[test]

@@ -92,7 +92,7 @@ impl AutopilotPlan {
                 }
                 let feasible = decider.replace_mission(d.spec);
                 shell.mission_unplanned =
-                    (!feasible).then(|| "no allocation meets the goals".to_string());
+                    (!feasible).then(|| "the guarantee finds no allocation for it".to_string());
                 let what = if changed {
                     "mission changed, re-planned"
                 } else {

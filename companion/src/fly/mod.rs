@@ -63,8 +63,8 @@ pub trait Decider {
     /// A new flight begins (the last one ended landed and disarmed): forget the last one.
     fn new_flight(&mut self) {}
     /// Guarantee `spec` from now on (`fly --mission autopilot`: the autopilot's mission as
-    /// planned, again after it changed), this flight and the next ones; `false` when no
-    /// allocation meets its goals or the decider plans no mission.
+    /// planned, again after it changed), this flight and the next ones; `false` when it has no
+    /// allocation at all or the decider plans no mission.
     fn replace_mission(&mut self, _spec: companion_core::guarantee::MissionSpec) -> bool {
         false
     }
