@@ -58,6 +58,11 @@ def test_the_uploaded_mission_is_planned_flown_as_is_and_a_change_re_planned(aut
     run = fly(ap, mission=Path("autopilot"))            # --auto-start --once
     wait(lambda: any("mission planned" in t for t in texts(gcs)), 30,
          "the STATUSTEXT that the uploaded mission is planned", run)
+    # A ground station changes the cruise speed (the stand-in's WPNAV_SPEED is 500 cm/s): re-planned at it.
+    t_set = time.monotonic()
+    gcs.param_set("WPNAV_SPEED", 700)
+    wait(lambda: any("re-planned at the autopilot's speeds" in t for t in texts(gcs, since=t_set)), 5.0,
+         "the STATUSTEXT that the mission was re-planned at the new WPNAV_SPEED", run)
     wait(lambda: sa.state()["mode"] == "AUTO" and sa.state()["mission_current"] >= 2, 120,
          "the uploaded mission flown in AUTO", run)
     t_up = time.monotonic()
@@ -70,6 +75,9 @@ def test_the_uploaded_mission_is_planned_flown_as_is_and_a_change_re_planned(aut
     said = [str(e) for e in events(run.records())]
     assert any("mission planned" in e for e in said), said[-20:]
     assert any("mission changed, re-planned" in e for e in said), said[-20:]
+    cruise = [r["observations"]["cruise_speed_mps"] for r in run.records()
+              if "cruise_speed_mps" in r.get("observations", {})]
+    assert cruise and cruise[-1] == 7.0, cruise[-3:]
 
 
 def test_an_item_the_companion_cannot_plan_refuses_the_start_naming_it(autopilot_factory, fly, client):

@@ -6,7 +6,6 @@
 //! planned on the PANORAMA mission [`crate::route_input::DERIVE_MISSION`].
 
 use crate::route_input::{DERIVE_MISSION, Derived};
-use companion_core::observations::Observations;
 use companion_core::route_plan::{AutopilotItem, DeriveSettings, PlannedRoute};
 use companion_core::spec::ParamsFiles;
 use std::path::PathBuf;
@@ -31,26 +30,34 @@ pub fn autopilot_mission(
     )?)
 }
 
-/// The speeds a route does not give: the autopilot's parameters as observed
-/// (`cruise_speed_mps`, `climb_speed_mps`, `descent_speed_mps`), each one it has not reported
-/// from params `[derive]`; the names of those taken from params.
+/// The params fallback of the speeds: [`DERIVE_MISSION`]'s `[derive]` (read once, at start).
+pub fn params_speeds(files: &ParamsFiles) -> anyhow::Result<DeriveSettings> {
+    Ok(companion_core::guarantee::derive_settings(
+        files,
+        DERIVE_MISSION,
+    )?)
+}
+
+/// The speeds a route does not give: the autopilot's parameters as `reported` (observations
+/// `cruise_speed_mps`, `climb_speed_mps`, `descent_speed_mps`), each one it has not reported
+/// from `params`; the names of those taken from params.
 pub fn speeds(
-    files: &ParamsFiles,
-    obs: &Observations,
-) -> anyhow::Result<(DeriveSettings, Vec<&'static str>)> {
-    let mut s = companion_core::guarantee::derive_settings(files, DERIVE_MISSION)?;
+    params: &DeriveSettings,
+    reported: impl Fn(&str) -> Option<f64>,
+) -> (DeriveSettings, Vec<&'static str>) {
+    let mut s = *params;
     let mut fallback = Vec::new();
     for (name, v) in [
         ("cruise_speed_mps", &mut s.cruise_speed_mps),
         ("climb_speed_mps", &mut s.climb_speed_mps),
         ("descent_speed_mps", &mut s.descent_speed_mps),
     ] {
-        match obs.values.get(name) {
-            Some(&x) if x.is_finite() && x > 0.0 => *v = x,
+        match reported(name) {
+            Some(x) if x.is_finite() && x > 0.0 => *v = x,
             _ => fallback.push(name),
         }
     }
-    Ok((s, fallback))
+    (s, fallback)
 }
 
 /// The autopilot's mission derived into activities and planned ([`Derived`]: its `spec` is the
@@ -125,18 +132,18 @@ mod tests {
 
     #[test]
     fn the_autopilots_speeds_replace_params_and_a_missing_one_is_named() {
-        let files = files();
-        let params = companion_core::guarantee::derive_settings(&files, DERIVE_MISSION).unwrap();
-        let mut obs = Observations::default();
-        let (s, fallback) = speeds(&files, &obs).unwrap();
+        let params = params_speeds(&files()).unwrap();
+        let mut obs = std::collections::BTreeMap::new();
+        let (s, fallback) = speeds(&params, |n| obs.get(n).copied());
         assert_eq!(s, params);
         assert_eq!(
             fallback,
             ["cruise_speed_mps", "climb_speed_mps", "descent_speed_mps"]
         );
-        obs.values.insert("cruise_speed_mps".into(), 7.5);
-        obs.values.insert("descent_speed_mps".into(), 0.9);
-        let (s, fallback) = speeds(&files, &obs).unwrap();
+        obs.insert("cruise_speed_mps", 7.5);
+        obs.insert("descent_speed_mps", 0.9);
+        obs.insert("climb_speed_mps", f64::NAN);
+        let (s, fallback) = speeds(&params, |n| obs.get(n).copied());
         assert_eq!((s.cruise_speed_mps, s.descent_speed_mps), (7.5, 0.9));
         assert_eq!(s.climb_speed_mps, params.climb_speed_mps);
         assert_eq!(fallback, ["climb_speed_mps"]);
@@ -145,9 +152,8 @@ mod tests {
     #[test]
     fn the_mission_is_planned_at_the_autopilots_speed_or_refused_naming_the_item() {
         let files = files();
-        let mut obs = Observations::default();
-        obs.values.insert("cruise_speed_mps".into(), 4.0);
-        let (s, fallback) = speeds(&files, &obs).unwrap();
+        let cruise = |n: &str| (n == "cruise_speed_mps").then_some(4.0);
+        let (s, fallback) = speeds(&params_speeds(&files).unwrap(), cruise);
         let d = plan(&files, &items(16), true, None, &s).unwrap();
         let names: Vec<&str> = d.activities.iter().map(|a| a.name.as_str()).collect();
         assert_eq!(names, ["take_off", "leghome-2", "return", "land"]);

@@ -94,9 +94,9 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         let mut vehicle = setup.vehicle(args.link_timeout);
         vehicle.cfg.autopilot_sysid = args.autopilot_sysid;
         vehicle.cfg.autopilot_compid = args.autopilot_compid;
-        let autopilot_plan = args.flies_autopilot_mission().then(|| {
+        let autopilot_plan = setup.autopilot_speeds.map(|speeds| {
             vehicle.watch_autopilot_mission();
-            super::autopilot_plan::AutopilotPlan::new(setup.files.clone(), &mut shell)
+            super::autopilot_plan::AutopilotPlan::new(setup.files.clone(), speeds, &mut shell)
         });
         let signing = || setup.key.map(ingest::signing_data);
         tracing::info!(url = %args.connect, "connecting to the autopilot");
@@ -205,9 +205,10 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             let t = self.now();
             if let Some(plan) = self.autopilot_plan.as_mut() {
                 if let Some(m) = self.vehicle.take_autopilot_mission() {
-                    plan.on_mission(m, &self.vehicle, &mut self.decider, &mut self.shell, t);
+                    plan.on_mission(m, &self.vehicle, &mut self.decider, &mut self.shell);
                     wake = true;
                 }
+                plan.recheck(&self.vehicle, &mut self.decider, &mut self.shell);
                 out.extend(plan.say(&mut self.shell, t));
             }
             let t = self.now();

@@ -22,6 +22,8 @@ pub struct FlySetup {
     pub learning: link_security::LearningSource,
     /// The params as read (`fly --mission autopilot` plans the autopilot's mission on them).
     pub files: companion_core::spec::ParamsFiles,
+    /// `fly --mission autopilot`: the speeds' params fallback (`[derive]`), checked at start.
+    pub autopilot_speeds: Option<companion_core::route_plan::DeriveSettings>,
 }
 
 impl FlySetup {
@@ -83,6 +85,10 @@ impl FlySetup {
             catalogue,
             learning,
             files: files.clone(),
+            autopilot_speeds: args
+                .flies_autopilot_mission()
+                .then(|| crate::autopilot_mission::params_speeds(files))
+                .transpose()?,
         })
     }
 
