@@ -192,6 +192,7 @@ class GcsObserver:
         self.acks: List[tuple] = []
         # (time, lat_e7, lon_e7, relative alt m, mode) of every GLOBAL_POSITION_INT while armed
         self.track: List[tuple] = []
+        self._mission_msgs: List[Any] = []     # MISSION_REQUEST(_INT)/MISSION_ACK addressed to this GCS
         self._stop = False
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
@@ -238,6 +239,28 @@ class GcsObserver:
                     self.battery_pct = m.battery_remaining
                 elif t == "COMMAND_ACK":
                     self.acks.append((time.time(), m.get_srcComponent(), m.command, m.result))
+                elif t in ("MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK") and m.target_system == 255:
+                    self._mission_msgs.append(m)
+
+    def upload_mission(self, items: List[tuple], timeout: float = 15.0) -> int:
+        """Upload a mission as a ground station does: MISSION_COUNT, then each item PX4 asks for as
+        MISSION_ITEM_INT; `items` are (frame, command, param1, lat, lon, alt), seq 0 the first item flown
+        (PX4 keeps no home item). Returns PX4's MISSION_ACK result."""
+        with self.lock:
+            self._mission_msgs.clear()
+        self.conn.mav.mission_count_send(self.sysid, 1, len(items), 0)
+        deadline = time.time() + timeout
+        while time.time() < deadline:
+            with self.lock:
+                msgs, self._mission_msgs = self._mission_msgs, []
+            for m in msgs:
+                if m.get_type() == "MISSION_ACK":
+                    return m.type
+                frame, cmd, p1, lat, lon, alt = items[m.seq]
+                self.conn.mav.mission_item_int_send(self.sysid, 1, m.seq, frame, cmd, 0, 1, p1, 0, 0, 0,
+                                                    int(lat * 1e7), int(lon * 1e7), alt, 0)
+            time.sleep(0.02)
+        raise AssertionError(f"PX4 instance {self.instance}: no MISSION_ACK to the upload; {self.summary()}")
 
     def wait(self, what: str, cond, timeout: float) -> None:
         deadline = time.time() + timeout

@@ -223,6 +223,7 @@ class GcsObserver:
         self.named_values: List[Tuple[float, int, int, str, float, int]] = []
         self.connects = 0
         self.signing_key: Optional[bytes] = None
+        self._mission_msgs: List[Any] = []                      # MISSION_REQUEST(_INT)/ACK addressed to us
         self._t = threading.Thread(target=self._run, daemon=True, name="gcs-observer")
 
     # ---- life ----
@@ -354,6 +355,8 @@ class GcsObserver:
                 name = m.name if isinstance(m.name, str) else m.name.decode(errors="replace")
                 self.named_values.append((now, m.get_srcSystem(), m.get_srcComponent(), name.rstrip("\x00"),
                                           m.value, m.time_boot_ms))
+            elif t in ("MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK") and m.target_system == self.sysid:
+                self._mission_msgs.append(m)
             elif t == "COMMAND_ACK":
                 self.acks.append((now, m.command, m.result))
                 self.acks_by.append((now, m.get_srcComponent(), m.command, m.result))
@@ -452,6 +455,26 @@ class GcsObserver:
                 return got[0]
             time.sleep(0.05)
         return None
+
+    def upload_mission(self, items: List[Tuple[int, int, float, float, float, float]], timeout: float = 15.0) -> int:
+        """Upload a mission as a ground station does (MISSION_COUNT, then each item the autopilot asks for with
+        MISSION_REQUEST(_INT), as MISSION_ITEM_INT); `items` are (frame, command, param1, lat, lon, alt), item 0
+        ArduPilot's home placeholder. Returns the autopilot's MISSION_ACK result."""
+        with self._lock:
+            self._mission_msgs.clear()
+        self.conn.mav.mission_count_send(1, 1, len(items), mavlink.MAV_MISSION_TYPE_MISSION)
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            with self._lock:
+                msgs, self._mission_msgs = self._mission_msgs, []
+            for m in msgs:
+                if m.get_type() == "MISSION_ACK":
+                    return m.type
+                frame, cmd, p1, lat, lon, alt = items[m.seq]
+                self.conn.mav.mission_item_int_send(1, 1, m.seq, frame, cmd, 0, 1, p1, 0, 0, 0, int(lat * 1e7),
+                                                    int(lon * 1e7), alt, mavlink.MAV_MISSION_TYPE_MISSION)
+            time.sleep(0.02)
+        raise AssertionError(f"mission upload: no MISSION_ACK within {timeout}s{self.summary()}")
 
     def setup_signing(self, key: bytes) -> None:
         """SETUP_SIGNING on the ground-station port (ArduPilot stores the key and then requires signed frames on

@@ -88,6 +88,24 @@ pub struct Core {
     planned: Vec<Vec<Vec<crate::arbitration::PlannedVariant>>>,
 }
 
+/// Per activity of the guarantee's mission, per alternative: the implementations it names.
+fn planned_of(
+    guarantee: Option<&Guarantee>,
+    model: &Model,
+) -> Vec<Vec<Vec<crate::arbitration::PlannedVariant>>> {
+    guarantee.map_or_else(Vec::new, |g| {
+        let cat = &model.resources.catalogue;
+        (g.spec.problem.activities.iter())
+            .map(|a| {
+                a.ias
+                    .iter()
+                    .map(|ia| planned_variants(&ia.name, cat))
+                    .collect()
+            })
+            .collect()
+    })
+}
+
 /// Per action of MDP `name`, the catalogue ids of the primitives it stands for (every one is in
 /// the catalogue: checked at load; one that were not would be left out, as the name lookup did).
 fn primitive_ids(model: &Model, name: &str) -> Vec<Vec<ActionId>> {
@@ -157,19 +175,7 @@ impl Core {
     pub fn new(model: Arc<Model>, kind: ModelKind, policy: Policy) -> Self {
         let (readings, read_slots) = ReadSlots::resolve(&model, &model.mdp_names(kind));
         let guarantee = Guarantee::start_or_unbounded(model.guarantee.clone());
-        let planned = guarantee.as_ref().map_or_else(Vec::new, |g| {
-            let activities = &g.spec.problem.activities;
-            let cat = &model.resources.catalogue;
-            activities
-                .iter()
-                .map(|a| {
-                    a.ias
-                        .iter()
-                        .map(|ia| planned_variants(&ia.name, cat))
-                        .collect()
-                })
-                .collect()
-        });
+        let planned = planned_of(guarantee.as_ref(), &model);
         Core {
             kind,
             policy,
@@ -244,6 +250,23 @@ impl Core {
             planned,
             model,
         }
+    }
+
+    /// Plan `spec` from now on in place of the mission the guarantee watched (the autopilot's
+    /// mission, downloaded again after a ground station changed it): its pre-flight allocation
+    /// is made afresh and the activity being flown forgotten; the health and decision state stay.
+    /// `false` when the new mission has no allocation at all (no implementation alternative: the
+    /// guarantee stage is then off); one whose goals cannot be met is allocated with their bounds
+    /// lifted and its margins, negative, refuse the launch, as at start
+    /// ([`Guarantee::start_or_unbounded`]).
+    pub fn replace_mission(&mut self, spec: crate::guarantee::MissionSpec) -> bool {
+        self.guarantee = Guarantee::start_or_unbounded(spec);
+        self.planned = planned_of(self.guarantee.as_ref(), &self.model);
+        self.guarantee_infeasible = false;
+        self.capped_versions.clear();
+        self.capped_for.clear();
+        self.activity_started = None;
+        self.guarantee.is_some()
     }
 
     /// Work done by the cycles stepped so far.

@@ -30,6 +30,13 @@ pub enum LaunchRefusal {
         /// The mission's on-ground state (params/mission.toml `route_states.on_ground`).
         on_ground: String,
     },
+    /// The mission to fly is not planned yet, or could not be (`fly --mission autopilot` before
+    /// the autopilot's mission is downloaded, or when an item of it cannot be planned).
+    #[error("the mission is not planned: {reason}")]
+    MissionNotPlanned {
+        /// Why: not downloaded yet, or the refusal naming the item.
+        reason: String,
+    },
     /// No performance guarantee runs: the mission's goals cannot be met even by the pre-flight
     /// allocation with a full pack.
     #[error(
@@ -109,6 +116,7 @@ impl LaunchRefusal {
         let text = match self {
             LaunchRefusal::NotOnGround { .. } => "Start refused: not on the ground".to_string(),
             LaunchRefusal::NoGuarantee => "Start refused: mission cannot be met".to_string(),
+            LaunchRefusal::MissionNotPlanned { .. } => "Start refused: mission not planned".into(),
             LaunchRefusal::BatteryLow { pct, short_j, .. } => {
                 format!("Start refused: battery {pct:.0}%, {} short", kj(*short_j))
             }
@@ -443,6 +451,9 @@ mod tests {
                 on_ground: long.clone(),
             },
             LaunchRefusal::NoGuarantee,
+            LaunchRefusal::MissionNotPlanned {
+                reason: long.clone(),
+            },
             LaunchRefusal::BatteryLow {
                 pct: 1e300,
                 short_j: 1e300,

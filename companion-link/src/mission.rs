@@ -57,6 +57,26 @@ impl MissionItem {
         }
     }
 
+    /// The item at `seq` as the route planner reads an autopilot's mission: MAV_CMD and
+    /// MAV_FRAME numbers, params, latitude and longitude in degrees.
+    pub fn planned(&self, seq: usize) -> companion_core::route_plan::AutopilotItem {
+        let p = |v: f32| f64::from(v);
+        companion_core::route_plan::AutopilotItem {
+            seq,
+            command: self.command as u64,
+            frame: self.frame as u64,
+            params: [
+                p(self.params[0]),
+                p(self.params[1]),
+                p(self.params[2]),
+                p(self.params[3]),
+                f64::from(self.x) / 1e7,
+                f64::from(self.y) / 1e7,
+                p(self.z),
+            ],
+        }
+    }
+
     fn to_msg(&self, seq: u16, target: (u8, u8)) -> Msg {
         Msg::MISSION_ITEM_INT(MISSION_ITEM_INT_DATA {
             param1: self.params[0],

@@ -116,12 +116,15 @@ pub const DEFAULT_ONBOARD: [(&str, &str); 6] = [
 /// Observations the telemetry produces from the autopilot's own messages (besides the onboard
 /// monitors' names, params/link.toml `[telemetry.onboard]`): what `fly` can observe, checked
 /// against what params/observations.toml declares. A test keeps it in step with `on_message`.
-pub const TELEMETRY_OBSERVATIONS: [&str; 25] = [
+pub const TELEMETRY_OBSERVATIONS: [&str; 28] = [
     "battery_pct",
     "battery_v",
     "battery_current_a",
     "battery_capacity_mah",
     "battery_cells",
+    "cruise_speed_mps",
+    "climb_speed_mps",
+    "descent_speed_mps",
     "energy_consumed_j",
     "consumed_mah",
     "lat_deg",
@@ -152,6 +155,31 @@ pub enum PackParam {
     /// Cells in series.
     Cells,
 }
+
+/// Which mission speed an autopilot parameter gave ([`Telemetry::on_speed_param`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SpeedParam {
+    /// Horizontal speed between waypoints: observation `cruise_speed_mps`.
+    Cruise,
+    /// Climb speed: `climb_speed_mps`.
+    Climb,
+    /// Descent speed: `descent_speed_mps`.
+    Descent,
+}
+
+impl SpeedParam {
+    /// The observation it is reported as.
+    pub fn observation(self) -> &'static str {
+        match self {
+            SpeedParam::Cruise => "cruise_speed_mps",
+            SpeedParam::Climb => "climb_speed_mps",
+            SpeedParam::Descent => "descent_speed_mps",
+        }
+    }
+}
+
+/// Fastest mission speed believed (m/s), the bound `[derive]` speeds have in params.
+pub const MAX_MISSION_SPEED_MPS: f64 = 100.0;
 
 /// Largest pack capacity believed (mAh): a 1,000 Ah pack is no drone's.
 pub const MAX_PACK_CAPACITY_MAH: f64 = 1.0e6;
@@ -595,6 +623,17 @@ impl Telemetry {
             self.set(name, value);
         } else {
             self.reject(format!("{name} = {value}"));
+        }
+    }
+
+    /// A mission speed from the autopilot's parameters, in m/s (the caller decoded the
+    /// PARAM_VALUE and converted the unit); a value outside 0..100 m/s is refused and counted.
+    pub fn on_speed_param(&mut self, what: SpeedParam, mps: f64) {
+        let name = what.observation();
+        if mps.is_finite() && mps > 0.0 && mps <= MAX_MISSION_SPEED_MPS {
+            self.set(name, mps);
+        } else {
+            self.reject(format!("{name} = {mps}"));
         }
     }
 

@@ -23,6 +23,7 @@
 
 #![allow(missing_docs)] // the shells are documented per module; their items are not an API
 
+pub mod autopilot_mission;
 pub mod calibrate;
 pub mod check;
 pub mod decision_log;

@@ -220,6 +220,8 @@ struct CoreDecider {
     policy: Policy,
     /// `--learn-cpt`: the rows learned this flight.
     learner: Option<companion::learn_cpt::OnlineCpt>,
+    /// The mission planned in place of the model's (`fly --mission autopilot`), for every flight.
+    mission: Option<companion_core::guarantee::MissionSpec>,
 }
 
 impl Decider for CoreDecider {
@@ -248,8 +250,16 @@ impl Decider for CoreDecider {
         companion_core::launch::verdict(rec, &self.model)
     }
 
+    fn replace_mission(&mut self, spec: companion_core::guarantee::MissionSpec) -> bool {
+        self.mission = Some(spec.clone());
+        self.core.replace_mission(spec)
+    }
+
     fn new_flight(&mut self) {
         self.core = Core::new(Arc::clone(&self.model), ModelKind::Bfm, self.policy);
+        if let Some(spec) = &self.mission {
+            self.core.replace_mission(spec.clone());
+        }
         if let Some(learner) = self.learner.as_mut() {
             learner.start_run();
         }
@@ -259,8 +269,8 @@ impl Decider for CoreDecider {
 fn fly(args: FlyArgs) -> Result<()> {
     let params = args.params.clone().unwrap_or_else(default_params_dir);
     // Every params file, as `check` loads it, before any run folder or socket.
-    let loaded = companion::params::Params::load(&params, args.mission.as_deref())
-        .context("loading params")?;
+    let loaded =
+        companion::params::Params::load(&params, args.route_file()).context("loading params")?;
     let model = Arc::new(loaded.model);
     let policy: Policy = model
         .policy(&args.policy)
@@ -272,6 +282,7 @@ fn fly(args: FlyArgs) -> Result<()> {
         model,
         policy,
         learner,
+        mission: None,
     };
     companion::fly::run(args, decider)
 }

@@ -40,7 +40,10 @@ class MessageHandlers:
         name = name.rstrip("\x00")
         known = self._set_param(name, float(m.param_value), source=f"link{link.ident}")
         if known:
-            self._send_param(link, name)
+            # GCS_Param.cpp handle_param_set -> gcs().send_parameter_value(): the new value goes out on every
+            # channel, so a companion on another port hears a ground station's change (seen on ArduCopter 4.7 SITL)
+            for each in list(self.links):
+                self._send_param(each, name)
         # unknown names get no PARAM_VALUE back, as in GCS_MAVLINK::handle_param_set (GCS_Param.cpp)
 
     def _h_PARAM_REQUEST_READ(self, link: Link, m: Any) -> None:

@@ -11,7 +11,10 @@ mod sources;
 mod zones;
 
 pub use derive::{ActivityKind, DeriveSettings, DerivedActivity, derive_activities};
-pub use sources::{DEFAULT_LOITER_RADIUS_M, MissionSourceKind, detect_kind, parse_plan, parse_wpl};
+pub use sources::{
+    AUTOPILOT_MISSION, AutopilotItem, DEFAULT_LOITER_RADIUS_M, MissionSourceKind, detect_kind,
+    parse_autopilot_mission, parse_plan, parse_wpl,
+};
 pub use zones::{Zone, parse_zones};
 
 use std::path::PathBuf;

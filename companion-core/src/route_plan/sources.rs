@@ -406,3 +406,72 @@ pub fn parse_wpl(
         zones: Vec::new(),
     })
 }
+
+/// What the `file` of an autopilot mission's refusal names: it came from no file.
+pub const AUTOPILOT_MISSION: &str = "autopilot mission";
+
+/// One mission item as the autopilot holds it (downloaded over MAVLink), in the numbers the
+/// `.plan` and WPL files use: MAV_CMD, MAV_FRAME, param1..4, latitude and longitude (degrees),
+/// altitude (m, as the frame says).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AutopilotItem {
+    /// Sequence number on the autopilot.
+    pub seq: usize,
+    /// MAV_CMD number.
+    pub command: u64,
+    /// MAV_FRAME number.
+    pub frame: u64,
+    /// param1..4, latitude (deg), longitude (deg), altitude (m).
+    pub params: [f64; 7],
+}
+
+/// The autopilot's mission as a route, by the same rules and refusals as a `.plan` or WPL file
+/// (one `mav_item` for all three). `home_at_seq0`: ArduPilot answers its home at seq 0 (not
+/// flown; its altitude is the AMSL reference of absolute frames); PX4 keeps none, so `home`
+/// (lat, lon, AMSL alt: the autopilot's HOME_POSITION, when known) stands in. A refusal reads
+/// `autopilot mission: item N: reason`. `loiter_speed_mps` times LOITER_TURNS.
+pub fn parse_autopilot_mission(
+    items: &[AutopilotItem],
+    home_at_seq0: bool,
+    home: Option<(f64, f64, f64)>,
+    loiter_speed_mps: f64,
+) -> Result<PlannedRoute, SpecError> {
+    let path = Path::new(AUTOPILOT_MISSION);
+    let mut home = home;
+    let mut out = Vec::with_capacity(items.len());
+    for it in items {
+        let entry = format!("item {}", it.seq);
+        let p = it.params;
+        if home_at_seq0 && it.seq == 0 {
+            // ArduPilot answers 0/0 before it has a home (no GPS fix yet): none then.
+            let set = p[4] != 0.0 || p[5] != 0.0;
+            if set && !(p[4].abs() <= 90.0 && p[5].abs() <= 180.0 && p[6].is_finite()) {
+                return Err(SpecError::new(
+                    path,
+                    entry,
+                    "home is not a latitude and longitude",
+                ));
+            }
+            if set {
+                home = Some((p[4], p[5], p[6]));
+            }
+            continue;
+        }
+        let kind = mav_item(it.command, it.frame, p, home.map(|h| h.2), loiter_speed_mps)
+            .map_err(|r| SpecError::new(path, entry, r))?;
+        if let Some(kind) = kind {
+            out.push(Item {
+                index: it.seq,
+                kind,
+            });
+        }
+    }
+    Ok(PlannedRoute {
+        file: path.to_path_buf(),
+        home: home.map(|h| (h.0, h.1)),
+        items: out,
+        search_time_limit_s: None,
+        tracking_time_limit_s: None,
+        zones: Vec::new(),
+    })
+}

@@ -405,6 +405,25 @@ proptest::proptest! {
             proptest::prop_assert!(acts.iter().all(|a| a.length_m.is_finite() && a.length_m >= 0.0 && a.hold_s >= 0.0));
         }
     }
+
+    /// What an autopilot answers is the network's: any numbers, any command and frame (f32 NaN and
+    /// infinities included), refused or planned, never a panic or a negative length.
+    #[test]
+    fn any_autopilot_mission_is_refused_or_planned_never_a_panic(
+        raw in proptest::collection::vec((0u64..300, 0u64..12, proptest::collection::vec(proptest::num::f32::ANY, 7)), 0..6),
+        home_at_seq0 in proptest::bool::ANY,
+    ) {
+        let items: Vec<AutopilotItem> = raw.iter().enumerate().map(|(seq, (command, frame, p))| AutopilotItem {
+            seq,
+            command: *command,
+            frame: *frame,
+            params: std::array::from_fn(|k| f64::from(p[k])),
+        }).collect();
+        if let Ok(r) = parse_autopilot_mission(&items, home_at_seq0, None, 4.0) {
+            let acts = derive_activities(&r, &[], &SETTINGS);
+            proptest::prop_assert!(acts.iter().all(|a| a.length_m.is_finite() && a.length_m >= 0.0 && a.hold_s >= 0.0));
+        }
+    }
 }
 
 #[test]
@@ -489,4 +508,79 @@ fn a_zone_naming_no_constraint_class_of_the_mission_is_refused_with_the_zone() {
     assert_eq!(e.file, Path::new("z.geojson"));
     assert_eq!(e.entry, "features[0].constraints");
     assert!(e.reason.contains("`fog` is no constraint class"), "{e}");
+}
+
+/// WPL's mission as ArduPilot answers a download: its home at seq 0 in the absolute frame.
+fn autopilot_items_of_wpl() -> Vec<AutopilotItem> {
+    WPL.lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<f64> = l.split('\t').map(|x| x.parse().unwrap()).collect();
+            AutopilotItem {
+                seq: f[0] as usize,
+                command: f[3] as u64,
+                frame: f[2] as u64,
+                params: [f[4], f[5], f[6], f[7], f[8], f[9], f[10]],
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn an_autopilot_mission_plans_as_the_same_wpl_file() {
+    let mut items = autopilot_items_of_wpl();
+    // ArduPilot's home has a real position once it has a fix.
+    items[0].params[4] = -35.363261;
+    items[0].params[5] = 149.165230;
+    items[2].params[4] = -35.363261;
+    items[2].params[5] = 149.167230;
+    let r = parse_autopilot_mission(&items, true, None, 4.0).unwrap();
+    assert_eq!(r.home, Some((-35.363261, 149.165230)));
+    assert_eq!(r.file, Path::new(AUTOPILOT_MISSION));
+    let idx: Vec<usize> = r.items.iter().map(|i| i.index).collect();
+    assert_eq!(idx, [1, 2, 3], "home is not flown");
+    let acts = derive_activities(&r, &[], &SETTINGS);
+    let names: Vec<&str> = acts.iter().map(|a| a.name.as_str()).collect();
+    assert_eq!(names, ["take_off", "leghome-2", "land"]);
+    let d = haversine_m(-35.363261, 149.165230, -35.363261, 149.167230);
+    assert!(
+        (acts[1].length_m - d).abs() / d < 0.01,
+        "{}",
+        acts[1].length_m
+    );
+}
+
+#[test]
+fn a_px4_mission_has_no_home_item_and_takes_the_reported_home() {
+    let mut items = autopilot_items_of_wpl();
+    items.remove(0);
+    for (k, it) in items.iter_mut().enumerate() {
+        it.seq = k;
+    }
+    // An absolute waypoint needs home's altitude: none reported, refused with the item.
+    items[1].frame = 0;
+    items[1].params[6] = 65.0;
+    let e = parse_autopilot_mission(&items, false, None, 4.0).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "autopilot mission: item 1: an absolute (AMSL) altitude and no home altitude"
+    );
+    let r = parse_autopilot_mission(&items, false, Some((0.0, 0.0, 50.0)), 4.0).unwrap();
+    assert_eq!(r.items[0].index, 0, "PX4's seq 0 is flown");
+    assert!(matches!(r.items[1].kind, ItemKind::Waypoint(p) if p.alt_m == 15.0));
+}
+
+#[test]
+fn an_unplannable_autopilot_item_is_refused_with_its_seq_and_reason() {
+    let mut items = autopilot_items_of_wpl();
+    items[2].command = 17; // LOITER_UNLIM
+    let e = parse_autopilot_mission(&items, true, None, 4.0).unwrap_err();
+    let said = e.to_string();
+    assert!(
+        said.starts_with("autopilot mission: item 2: LOITER_UNLIM"),
+        "{said}"
+    );
+    items[2].command = 203; // DO_DIGICAM_CONTROL
+    let e = parse_autopilot_mission(&items, true, None, 4.0).unwrap_err();
+    assert!(e.to_string().contains("item 2: command 203"), "{e}");
 }

@@ -76,6 +76,9 @@ fn telemetry_observations_lists_every_name_the_autopilot_messages_produce() {
     }
     t.on_pack_param(PackParam::CapacityMah, 5000.0);
     t.on_pack_param(PackParam::Cells, 4.0);
+    for what in [SpeedParam::Cruise, SpeedParam::Climb, SpeedParam::Descent] {
+        t.on_speed_param(what, 5.0);
+    }
     let mut produced: Vec<String> = t.observations(s(0.0), vec![]).values.into_keys().collect();
     // BATTERY_STATUS's copy of the percentage is internal (removed from the snapshot).
     produced.sort();

@@ -158,6 +158,7 @@ impl Vehicle {
     /// Run steps until one has to wait.
     pub(super) fn advance_job(&mut self, now: Duration) -> Vec<Msg> {
         let mut out = Vec::new();
+        let keep_mission = self.flies_autopilot_mission();
         loop {
             let Some(job) = &mut self.job else { return out };
             let Some((action, step)) = job.steps.front().cloned() else {
@@ -186,6 +187,9 @@ impl Vehicle {
                 }
                 (Running::Idle, Step::Command { command, params }) => {
                     self.command_step(now, action, *command, *params, &mut out)
+                }
+                (Running::Idle, Step::UploadMission) if keep_mission => {
+                    self.keep_autopilot_mission_step(now, action)
                 }
                 (Running::Idle, Step::UploadMission) => {
                     self.upload_mission_step(now, action, &mut out)
@@ -800,6 +804,15 @@ impl Vehicle {
                 .unwrap_or_default();
             let in_job = matches!(&self.job, Some(j) if j.running == Running::Mission);
             match ev {
+                // Only the mission watch downloads on its own.
+                MissionEvent::Done {
+                    op: MissionOp::Download,
+                    items,
+                } => self.watch_downloaded(Some(items), ""),
+                MissionEvent::Failed {
+                    op: MissionOp::Download,
+                    error,
+                } => self.watch_downloaded(None, &error.outcome().to_string()),
                 MissionEvent::Uploaded { count } => self.link_event(
                     LinkEvent::MissionUploaded {
                         items: count as usize,
@@ -817,6 +830,7 @@ impl Vehicle {
                         attempts: 1,
                         latency_ms: None,
                     });
+                    self.watch_uploaded(&items);
                     if self.flavor == Flavor::Px4 {
                         self.px4_mission_pending =
                             Some((items.len() as u16, now + Duration::from_secs(5)));

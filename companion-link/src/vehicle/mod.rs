@@ -6,6 +6,7 @@ mod executor;
 mod identity;
 mod job;
 mod launch;
+mod mission_watch;
 mod pack;
 #[cfg(test)]
 mod tests;
@@ -31,8 +32,10 @@ use job::{Job, JobKey, JobStatus, Running};
 pub use launch::{
     Launch, LaunchCommand, LaunchOutcome, StopReading, StopVerdict, UpEvidence, stop_verdict,
 };
+use mission_watch::MissionWatch;
+pub use mission_watch::{AutopilotMission, MISSION_POLL};
 use pack::PackRequest;
-pub use pack::{PACK_PARAM_ATTEMPTS, PACK_PARAM_RETRY, pack_params};
+pub use pack::{PACK_PARAM_ATTEMPTS, PACK_PARAM_RETRY, ParamUse, pack_params, speed_params};
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
@@ -223,6 +226,8 @@ pub struct Vehicle {
     launches: Vec<Launch>,
     /// The last autopilot frame that said armed or in the air: what, and when.
     up_seen: Option<(UpEvidence, Duration)>,
+    /// The autopilot's own mission, when it is the one flown (`fly --mission autopilot`).
+    watch: MissionWatch,
 }
 
 impl Vehicle {
@@ -269,6 +274,7 @@ impl Vehicle {
             pack_requests: Vec::new(),
             launches: Vec::new(),
             up_seen: None,
+            watch: MissionWatch::default(),
         }
     }
 
@@ -369,6 +375,7 @@ impl Vehicle {
                 self.commands.set_target(sys, comp);
                 self.mission.set_target(sys, comp);
                 self.reset_pack_requests();
+                self.reset_mission_watch();
                 tracing::info!(sys, comp, flavor = ?self.flavor, "autopilot chosen");
                 self.link_event(
                     LinkEvent::Autopilot {
@@ -453,6 +460,7 @@ impl Vehicle {
                 if matches!(self.px4_mission_pending, Some((n, _)) if n == m.total) {
                     self.px4_mission_pending = None;
                 }
+                self.watch_mission_current(m);
             }
             Msg::STATUSTEXT(t) => {
                 let text = t.text.to_str().unwrap_or("").to_string();
@@ -514,6 +522,7 @@ impl Vehicle {
                     self.readiness.reset();
                     self.reset_pack_requests();
                     self.drop_everything(now, "autopilot rebooted");
+                    self.reset_mission_watch();
                 }
                 let link = match ev {
                     LivenessEvent::Connected => LinkEvent::Connected,
@@ -615,6 +624,7 @@ impl Vehicle {
             }
         }
         self.request_pack_params(now, &mut out);
+        self.pump_mission_watch(now, &mut out);
         out.extend(self.advance_job(now));
         out
     }

@@ -1,6 +1,47 @@
-//! The pack parameters (capacity, cells) read from the autopilot with PARAM_REQUEST_READ.
+//! The autopilot parameters the plan needs, read with PARAM_REQUEST_READ: the pack's (capacity,
+//! cells) and how fast the autopilot flies a mission (cruise, climb, descent speed).
 
 use super::*;
+use crate::telemetry::SpeedParam;
+
+/// What a parameter read from the autopilot is for.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ParamUse {
+    /// A pack parameter.
+    Pack(PackParam),
+    /// A mission speed; the parameter times `to_mps` is m/s.
+    Speed {
+        /// Which speed.
+        what: SpeedParam,
+        /// Unit factor to m/s (ArduCopter's are cm/s).
+        to_mps: f64,
+    },
+}
+
+/// The mission speeds each autopilot family flies at: ArduCopter `WPNAV_SPEED`,
+/// `WPNAV_SPEED_UP`, `WPNAV_SPEED_DN` (cm/s); PX4 `MPC_XY_CRUISE` and the auto modes' vertical
+/// speeds `MPC_Z_V_AUTO_UP`/`_DN` (m/s; `MPC_Z_VEL_MAX_*` only caps them). A mission's
+/// DO_CHANGE_SPEED overrides the cruise speed on both.
+pub fn speed_params(flavor: Flavor) -> &'static [(&'static str, ParamUse)] {
+    const fn speed(what: SpeedParam, to_mps: f64) -> ParamUse {
+        ParamUse::Speed { what, to_mps }
+    }
+    const ARDUPILOT: [(&str, ParamUse); 3] = [
+        ("WPNAV_SPEED", speed(SpeedParam::Cruise, 0.01)),
+        ("WPNAV_SPEED_UP", speed(SpeedParam::Climb, 0.01)),
+        ("WPNAV_SPEED_DN", speed(SpeedParam::Descent, 0.01)),
+    ];
+    const PX4: [(&str, ParamUse); 3] = [
+        ("MPC_XY_CRUISE", speed(SpeedParam::Cruise, 1.0)),
+        ("MPC_Z_V_AUTO_UP", speed(SpeedParam::Climb, 1.0)),
+        ("MPC_Z_V_AUTO_DN", speed(SpeedParam::Descent, 1.0)),
+    ];
+    match flavor {
+        Flavor::ArduPilot => &ARDUPILOT,
+        Flavor::Px4 => &PX4,
+        Flavor::Other => &[],
+    }
+}
 
 /// The pack parameters each autopilot family names, read with PARAM_REQUEST_READ: the capacity
 /// (mAh) and, where there is one, the cell count. ArduPilot has no cell-count parameter.
@@ -24,18 +65,21 @@ pub const PACK_PARAM_RETRY: Duration = Duration::from_secs(2);
 #[derive(Debug, Clone)]
 pub(super) struct PackRequest {
     name: &'static str,
-    what: PackParam,
+    what: ParamUse,
     sent: u32,
     next_at: Duration,
     answered: bool,
 }
 
 impl Vehicle {
-    /// Ask (again) for the pack parameters of the chosen autopilot's family.
+    /// Ask (again) for the pack and speed parameters of the chosen autopilot's family.
     pub(super) fn reset_pack_requests(&mut self) {
-        self.pack_requests = pack_params(self.flavor)
+        let pack = pack_params(self.flavor)
             .iter()
-            .map(|&(name, what)| PackRequest {
+            .map(|&(name, what)| (name, ParamUse::Pack(what)));
+        self.pack_requests = pack
+            .chain(speed_params(self.flavor).iter().copied())
+            .map(|(name, what)| PackRequest {
                 name,
                 what,
                 sent: 0,
@@ -65,7 +109,8 @@ impl Vehicle {
         }
     }
 
-    /// A PARAM_VALUE from the autopilot: a pack parameter asked for goes to the telemetry.
+    /// A PARAM_VALUE from the autopilot: a parameter asked for goes to the telemetry (also the
+    /// PARAM_VALUE the autopilot broadcasts after anyone's PARAM_SET: the value in force).
     pub(super) fn on_param_value(&mut self, p: &PARAM_VALUE_DATA) {
         let id = p.param_id.to_str().unwrap_or("").trim_end_matches('\0');
         let Some(r) = self.pack_requests.iter_mut().find(|r| r.name == id) else {
@@ -88,7 +133,13 @@ impl Vehicle {
             p.param_value as f64
         };
         r.answered = true;
-        let (name, what) = (r.name, r.what);
+        let (name, what) = match r.what {
+            ParamUse::Pack(what) => (r.name, what),
+            ParamUse::Speed { what, to_mps } => {
+                self.telemetry.on_speed_param(what, value * to_mps);
+                return;
+            }
+        };
         self.telemetry.on_pack_param(what, value);
         if what == PackParam::CapacityMah && value <= 0.0 {
             self.link_event(

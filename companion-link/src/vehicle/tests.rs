@@ -6,6 +6,9 @@ use companion_core::action_role::ActionRoles;
 use companion_core::mission::{Action, ActionCatalogue, ActionKind};
 use mavlink::{MavHeader, MavlinkVersion};
 
+mod mission_watch;
+mod speeds;
+
 pub(super) fn s(v: f64) -> Duration {
     Duration::from_secs_f64(v)
 }
@@ -1733,6 +1736,7 @@ fn ardupilot_pack_capacity_is_read_retried_until_answered_and_observed() {
         asked.extend(param_requests(&v.on_frame(s(t as f64), &hb(0, false))));
     }
     // Asked, re-asked every PACK_PARAM_RETRY while unanswered, never more than the attempts.
+    asked.retain(|n| n == "BATT_CAPACITY");
     assert_eq!(asked, vec!["BATT_CAPACITY"; PACK_PARAM_ATTEMPTS as usize]);
     // A parameter nobody asked for changes nothing.
     v.on_frame(
@@ -1768,14 +1772,20 @@ fn ardupilot_pack_capacity_is_read_retried_until_answered_and_observed() {
     let out: Vec<Msg> = (1..6)
         .flat_map(|t| v.on_frame(s(t as f64), &hb(0, false)))
         .collect();
-    assert!(param_requests(&out).is_empty(), "answered: not asked again");
+    assert!(
+        !param_requests(&out).iter().any(|n| n == "BATT_CAPACITY"),
+        "answered: not asked again"
+    );
 }
 
 #[test]
 fn px4_pack_parameters_are_decoded_bytewise_and_an_unset_capacity_is_said() {
     let mut v = vehicle();
     let out = px4_ready(&mut v, 0.0);
-    assert_eq!(param_requests(&out), vec!["BAT1_CAPACITY", "BAT1_N_CELLS"]);
+    assert_eq!(
+        param_requests(&out)[..2],
+        ["BAT1_CAPACITY".to_string(), "BAT1_N_CELLS".to_string()]
+    );
     // PX4 SIH: capacity -1 (a float parameter), 4 cells (an int32, sent bytewise).
     v.on_frame(
         s(1.0),

@@ -12,7 +12,9 @@ pub struct FlyArgs {
     /// tcp:HOST:PORT, tcpin:ADDR:PORT.
     #[arg(long, value_parser = url::parse)]
     pub connect: ConnectUrl,
-    /// Route for follow_trajectory (default params/missions/tracking_route.toml).
+    /// Route for follow_trajectory (default params/missions/tracking_route.toml), or
+    /// `autopilot`: fly the mission on the vehicle as a ground station uploaded it (nothing
+    /// uploaded; planned once downloaded, re-planned when it changes; docs/mavlink.md).
     #[arg(long)]
     pub mission: Option<PathBuf>,
     /// Arbitration policy: a policy of params/policies.toml, safety (safety-first) or mission
@@ -99,6 +101,21 @@ pub struct FlyArgs {
 }
 
 impl FlyArgs {
+    /// `--mission autopilot`: the autopilot's own mission is flown.
+    pub fn flies_autopilot_mission(&self) -> bool {
+        self.mission
+            .as_deref()
+            .is_some_and(|m| m == std::path::Path::new(crate::autopilot_mission::AUTOPILOT))
+    }
+
+    /// The route file `--mission` names (none for `autopilot`: the default route stays loaded
+    /// for the take-off altitude only).
+    pub fn route_file(&self) -> Option<&std::path::Path> {
+        self.mission
+            .as_deref()
+            .filter(|_| !self.flies_autopilot_mission())
+    }
+
     /// The arguments `companion fly ARGS...` gives, the command line's defaults for the rest
     /// (for tests and tools that build a fly setup without a process).
     pub fn from_cli<I: IntoIterator<Item = S>, S: Into<std::ffi::OsString> + Clone>(

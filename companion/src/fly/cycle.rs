@@ -44,7 +44,10 @@ pub(super) async fn run_cycle_at<D: Decider, S: RecordSink>(
     let mut rec = finish_record(decided, shell, vehicle, report.cycles, transport_events);
     rec.decide_ms = Some(decide_ms);
     if !shell.operator.commanding() {
-        shell.launch = decider.launch_verdict(&rec);
+        shell.launch = match super::autopilot_plan::unplanned_refusal(shell) {
+            Some(refusal) => Err(refusal),
+            None => decider.launch_verdict(&rec),
+        };
     }
     tracing::debug!(
         cycle = rec.cycle,

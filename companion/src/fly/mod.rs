@@ -22,6 +22,7 @@
 //! `watchdog` (systemd's READY=1, WATCHDOG=1 from the loop, STOPPING=1).
 
 mod args;
+mod autopilot_plan;
 mod cycle;
 pub mod gate;
 pub mod link_security;
@@ -61,6 +62,12 @@ pub trait Decider {
     fn launch_verdict(&self, rec: &DecisionRecord) -> Result<(), LaunchRefusal>;
     /// A new flight begins (the last one ended landed and disarmed): forget the last one.
     fn new_flight(&mut self) {}
+    /// Guarantee `spec` from now on (`fly --mission autopilot`: the autopilot's mission as
+    /// planned, again after it changed), this flight and the next ones; `false` when it has no
+    /// allocation at all or the decider plans no mission.
+    fn replace_mission(&mut self, _spec: companion_core::guarantee::MissionSpec) -> bool {
+        false
+    }
 }
 
 /// The real core is a decider as it is (fuzzing and the soak drive it without a wrapper).
@@ -73,6 +80,9 @@ impl Decider for companion_core::decision::Core {
     }
     fn launch_verdict(&self, rec: &DecisionRecord) -> Result<(), LaunchRefusal> {
         companion_core::launch::verdict(rec, &self.model)
+    }
+    fn replace_mission(&mut self, spec: companion_core::guarantee::MissionSpec) -> bool {
+        companion_core::decision::Core::replace_mission(self, spec)
     }
 }
 

@@ -73,6 +73,8 @@ pub(super) struct RunLoop<'s, D, S> {
     /// systemd's watchdog (a no-op outside systemd), and when the last decision cycle ended.
     watchdog: watchdog::Watchdog,
     last_cycle_done: Option<Duration>,
+    /// `--mission autopilot`: the autopilot's mission is planned as it is downloaded.
+    autopilot_plan: Option<super::autopilot_plan::AutopilotPlan>,
 }
 
 impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
@@ -92,6 +94,10 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         let mut vehicle = setup.vehicle(args.link_timeout);
         vehicle.cfg.autopilot_sysid = args.autopilot_sysid;
         vehicle.cfg.autopilot_compid = args.autopilot_compid;
+        let autopilot_plan = setup.autopilot_speeds.map(|speeds| {
+            vehicle.watch_autopilot_mission();
+            super::autopilot_plan::AutopilotPlan::new(setup.files.clone(), speeds, &mut shell)
+        });
         let signing = || setup.key.map(ingest::signing_data);
         tracing::info!(url = %args.connect, "connecting to the autopilot");
         Self {
@@ -122,6 +128,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             start_look: restart::StartLook::default(),
             watchdog: watchdog::Watchdog::from_env(setup.link.decision_period_s),
             last_cycle_done: None,
+            autopilot_plan,
             args,
             setup,
             decider,
@@ -195,6 +202,15 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
                 _ = &mut stop => return Ok("stop requested by the caller"),
             }
             wake |= self.on_operator(&mut out);
+            let t = self.now();
+            if let Some(plan) = self.autopilot_plan.as_mut() {
+                if let Some(m) = self.vehicle.take_autopilot_mission() {
+                    plan.on_mission(m, &self.vehicle, &mut self.decider, &mut self.shell);
+                    wake = true;
+                }
+                plan.recheck(&self.vehicle, &mut self.decider, &mut self.shell);
+                out.extend(plan.say(&mut self.shell, t));
+            }
             let t = self.now();
             out.extend(self.link_security.check(
                 t,

@@ -20,6 +20,10 @@ pub struct FlySetup {
     pub catalogue: ActionCatalogue,
     /// Where `--learn-cpt` may take the tracker's reports from.
     pub learning: link_security::LearningSource,
+    /// The params as read (`fly --mission autopilot` plans the autopilot's mission on them).
+    pub files: companion_core::spec::ParamsFiles,
+    /// `fly --mission autopilot`: the speeds' params fallback (`[derive]`), checked at start.
+    pub autopilot_speeds: Option<companion_core::route_plan::DeriveSettings>,
 }
 
 impl FlySetup {
@@ -30,7 +34,7 @@ impl FlySetup {
             .unwrap_or_else(crate::params::default_params_dir);
         // The same loader `check` and `simulate` use (crate::params), so they cannot drift.
         let mut files = crate::params::read_params_dir(&dir)?;
-        if let Some(r) = args.mission.as_deref() {
+        if let Some(r) = args.route_file() {
             crate::params::add_file(&mut files, r);
         }
         Self::from_files(&files, args)
@@ -44,7 +48,7 @@ impl FlySetup {
         let learning = link_security::check_args(args)?;
         let catalogue = ActionCatalogue::load(files)?;
         let (link, actions, route, _) =
-            crate::params::load_fly_files(files, args.mission.as_deref(), &catalogue)?;
+            crate::params::load_fly_files(files, args.route_file(), &catalogue)?;
         let key = match &args.signing_key {
             Some(p) => {
                 crate::params::regular_file(p)
@@ -80,6 +84,11 @@ impl FlySetup {
             states,
             catalogue,
             learning,
+            files: files.clone(),
+            autopilot_speeds: args
+                .flies_autopilot_mission()
+                .then(|| crate::autopilot_mission::params_speeds(files))
+                .transpose()?,
         })
     }
 

@@ -52,6 +52,8 @@ pub struct Shell {
     pub(super) refusal_told: Option<String>,
     /// A command addressed to us older than this is refused.
     pub(super) command_max_age: Duration,
+    /// `fly --mission autopilot`: why the mission is not planned (no start is granted then).
+    pub(super) mission_unplanned: Option<String>,
 }
 
 impl Shell {
@@ -94,6 +96,7 @@ impl Shell {
             granted_at: None,
             refusal_told: None,
             command_max_age: Duration::from_secs_f64(f.command_max_age_s),
+            mission_unplanned: None,
         }
     }
 

@@ -1,0 +1,188 @@
+//! `fly --mission autopilot`, the shell's side: the autopilot's mission, once the link has
+//! downloaded it ([`companion_link::vehicle::AutopilotMission`]), is planned
+//! ([`crate::autopilot_mission::plan`]) and handed to the decider's guarantee; until a plan
+//! stands, no start is granted. A mission changed by a ground station is re-planned the same
+//! way; each plan, change and refusal is said to the ground station and recorded.
+
+use super::{Decider, NOTICE, Shell, WARNING};
+use companion_core::launch::LaunchRefusal;
+use companion_core::record::Event;
+use companion_core::route_plan::{DeriveSettings, ItemKind};
+use companion_core::spec::ParamsFiles;
+use companion_link::Msg;
+use companion_link::dialect::MavSeverity;
+use companion_link::mission::MissionItem;
+use companion_link::vehicle::{AutopilotMission, Vehicle};
+use std::time::Duration;
+
+/// Why no start is granted before the first download.
+pub(super) const NOT_DOWNLOADED: &str = "the autopilot's mission is not downloaded yet";
+
+/// What the shell needs to plan the autopilot's mission, and what the last plan was made from.
+pub(super) struct AutopilotPlan {
+    /// The params the activities' tasks and goals come from.
+    files: ParamsFiles,
+    /// The speeds' params fallback (`[derive]`, read at start).
+    params_speeds: DeriveSettings,
+    /// The mission last planned (or refused), the speeds and whether a home was known then: a
+    /// speed the autopilot reports later (its PARAM_VALUE after the download, a ground station's
+    /// PARAM_SET) or PX4's home arriving re-plans it.
+    last: Option<(Vec<MissionItem>, DeriveSettings, bool)>,
+    /// What the ground station must still be told (held back by the STATUSTEXT rate cap, said
+    /// as soon as it allows: a plan, a change or a refusal is never lost).
+    unsaid: Option<(MavSeverity, String)>,
+}
+
+impl AutopilotPlan {
+    /// Planning from `files`; the start stays refused until the first plan stands.
+    pub(super) fn new(
+        files: ParamsFiles,
+        params_speeds: DeriveSettings,
+        shell: &mut Shell,
+    ) -> Self {
+        shell.mission_unplanned = Some(NOT_DOWNLOADED.to_string());
+        Self {
+            files,
+            params_speeds,
+            last: None,
+            unsaid: None,
+        }
+    }
+
+    /// Tell the ground station what is still unsaid, unless the rate cap holds it back again.
+    pub(super) fn say(&mut self, shell: &mut Shell, now: Duration) -> Vec<Msg> {
+        let Some((severity, text)) = &self.unsaid else {
+            return Vec::new();
+        };
+        let dropped = shell.texts.dropped;
+        let out = shell.texts.say(now, *severity, text);
+        if shell.texts.dropped == dropped {
+            self.unsaid = None;
+        }
+        out
+    }
+
+    /// The mission loaded or changed on the autopilot: planned.
+    pub(super) fn on_mission<D: Decider>(
+        &mut self,
+        update: AutopilotMission,
+        vehicle: &Vehicle,
+        decider: &mut D,
+        shell: &mut Shell,
+    ) {
+        let (items, what) = match update {
+            AutopilotMission::Loaded(i) => (i, "mission planned"),
+            AutopilotMission::Changed(i) => (i, "mission changed, re-planned"),
+        };
+        self.plan(items, what, vehicle, decider, shell);
+    }
+
+    /// Every turn: the same mission planned again when the autopilot now reports a speed other
+    /// than the one planned with, or (PX4) its home arrived after the plan.
+    pub(super) fn recheck<D: Decider>(
+        &mut self,
+        vehicle: &Vehicle,
+        decider: &mut D,
+        shell: &mut Shell,
+    ) {
+        let Some((_, used, had_home)) = &self.last else {
+            return;
+        };
+        let (now, _) =
+            crate::autopilot_mission::speeds(&self.params_speeds, |n| vehicle.telemetry.get(n));
+        let home_came = !had_home && vehicle.telemetry.home.is_some();
+        if now == *used && !home_came {
+            return;
+        }
+        let what = if now == *used {
+            "mission re-planned from the autopilot's home"
+        } else {
+            "mission re-planned at the autopilot's speeds"
+        };
+        if let Some((items, _, _)) = self.last.take() {
+            self.plan(items, what, vehicle, decider, shell);
+        }
+    }
+
+    /// Plan `items`, replace the decider's guarantee, set the mission estimate's waypoints, and
+    /// tell the ground station and the record (`what`: planned, changed, re-planned).
+    fn plan<D: Decider>(
+        &mut self,
+        items: Vec<MissionItem>,
+        what: &str,
+        vehicle: &Vehicle,
+        decider: &mut D,
+        shell: &mut Shell,
+    ) {
+        let planned: Vec<_> = items
+            .iter()
+            .enumerate()
+            .map(|(k, i)| i.planned(k))
+            .collect();
+        let home = vehicle
+            .telemetry
+            .home
+            .map(|(lat, lon, alt)| (f64::from(lat) / 1e7, f64::from(lon) / 1e7, alt));
+        let (speeds, fallback) =
+            crate::autopilot_mission::speeds(&self.params_speeds, |n| vehicle.telemetry.get(n));
+        let home_at_seq0 = vehicle.mission.home_at_seq0;
+        let result =
+            crate::autopilot_mission::plan(&self.files, &planned, home_at_seq0, home, &speeds);
+        let (text, severity) = match result {
+            Ok(d) => {
+                let summary = crate::autopilot_mission::summary(&d, &fallback);
+                let route = crate::autopilot_mission::autopilot_mission(
+                    &planned,
+                    home_at_seq0,
+                    home,
+                    speeds.cruise_speed_mps,
+                );
+                if let Ok(route) = route {
+                    set_waypoints(shell, &route.items);
+                }
+                let feasible = decider.replace_mission(d.spec);
+                shell.mission_unplanned =
+                    (!feasible).then(|| "the guarantee finds no allocation for it".to_string());
+                (format!("companion: {what}: {summary}"), NOTICE)
+            }
+            Err(e) => {
+                let why = format!("{e:#}");
+                shell.mission_unplanned = Some(why.clone());
+                (format!("companion: mission refused: {why}"), WARNING)
+            }
+        };
+        tracing::info!("{text}");
+        shell.pending_events.push(Event::from(text.as_str()));
+        self.unsaid = Some((severity, text));
+        self.last = Some((items, speeds, home_at_seq0 || home.is_some()));
+    }
+}
+
+/// The mission estimate follows the autopilot's mission: its first and last waypoint
+/// (or loiter) by sequence number, and no search or tracking limit of the route file (the plan
+/// holds none: the mission's own items end it).
+fn set_waypoints(shell: &mut Shell, items: &[companion_core::route_plan::Item]) {
+    let nav: Vec<u16> = items
+        .iter()
+        .filter(|i| matches!(i.kind, ItemKind::Waypoint(_) | ItemKind::Loiter { .. }))
+        .map(|i| i.index as u16)
+        .collect();
+    if let (Some(&first), Some(&last)) = (nav.first(), nav.last()) {
+        for m in [&mut shell.mission, &mut shell.fresh_mission] {
+            m.wp1_seq = first;
+            m.last_seq = last.max(first);
+            m.search_time_limit_s = None;
+            m.tracking_time_limit_s = None;
+        }
+    }
+}
+
+/// The launch verdict while a mission is not planned: refused, saying why.
+pub(super) fn unplanned_refusal(shell: &Shell) -> Option<LaunchRefusal> {
+    shell
+        .mission_unplanned
+        .as_ref()
+        .map(|reason| LaunchRefusal::MissionNotPlanned {
+            reason: reason.clone(),
+        })
+}

@@ -1,0 +1,99 @@
+"""`companion fly --mission autopilot` on the stand-in autopilot (its mission protocol is ArduPilot's: item 0 home,
+MissionItemProtocol's download; sitl_tests/standin/mission.py): the mission a ground station uploaded is planned
+before any start and flown without an upload of the companion's; a changed mission is re-planned within 5 s
+(said to the ground station and recorded); an item the companion cannot plan refuses the start, naming it.
+The same on real ArduCopter: test_real_autopilot_mission.py."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any, List
+
+import pytest
+
+from helpers import offset, wp
+from standin import mavlink
+from standin.vocabulary import HOME_ALT_AMSL, HOME_LAT, HOME_LON
+from test_operator_and_landing import COMPANION, events, wait
+
+pytestmark = [pytest.mark.companion_fly]
+
+REL = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
+
+
+def mission(last_east_m: float, loiter_unlim: bool = False) -> List[dict]:
+    home = wp(HOME_LAT, HOME_LON, HOME_ALT_AMSL, frame=mavlink.MAV_FRAME_GLOBAL)
+    nav = mavlink.MAV_CMD_NAV_LOITER_UNLIM if loiter_unlim else mavlink.MAV_CMD_NAV_WAYPOINT
+    return [home,
+            wp(0, 0, 20.0, command=mavlink.MAV_CMD_NAV_TAKEOFF, frame=REL),
+            wp(*offset(HOME_LAT, HOME_LON, 150.0, 0.0), 20.0, command=nav, frame=REL),
+            wp(*offset(HOME_LAT, HOME_LON, 150.0, last_east_m), 20.0, frame=REL),
+            wp(0, 0, 0, command=mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, frame=REL)]
+
+
+def texts(gcs: Any, since: float = 0.0) -> List[str]:
+    """The companion's STATUSTEXTs, chunks joined (MAVLink 2: one non-zero `id`, `chunk_seq` 0, 1, ...)."""
+    out: List[str] = []
+    open_id = None
+    for m in gcs.since(since, "STATUSTEXT"):
+        if m.get_srcComponent() != COMPANION:
+            continue
+        if m.id != 0 and m.id == open_id and m.chunk_seq > 0:
+            out[-1] += m.text
+        else:
+            out.append(m.text)
+        open_id = m.id if m.id != 0 else None
+    return out
+
+
+def companion_uploads(sa: Any) -> List[Any]:
+    return [e for e in sa.received("MISSION_COUNT", include_dropped=True) if e.data["src"][1] == COMPANION]
+
+
+def test_the_uploaded_mission_is_planned_flown_as_is_and_a_change_re_planned(autopilot_factory, fly, client):
+    ap = autopilot_factory()
+    sa = ap.standin
+    gcs = client(sa.url)
+    assert gcs.upload_mission(mission(150.0)).type == mavlink.MAV_MISSION_ACCEPTED
+    run = fly(ap, mission=Path("autopilot"))            # --auto-start --once
+    wait(lambda: any("mission planned" in t for t in texts(gcs)), 30,
+         "the STATUSTEXT that the uploaded mission is planned", run)
+    # A ground station changes the cruise speed (the stand-in's WPNAV_SPEED is 500 cm/s): re-planned at it.
+    t_set = time.monotonic()
+    gcs.param_set("WPNAV_SPEED", 700)
+    wait(lambda: any("re-planned at the autopilot's speeds" in t for t in texts(gcs, since=t_set)), 5.0,
+         "the STATUSTEXT that the mission was re-planned at the new WPNAV_SPEED", run)
+    wait(lambda: sa.state()["mode"] == "AUTO" and sa.state()["mission_current"] >= 2, 120,
+         "the uploaded mission flown in AUTO", run)
+    t_up = time.monotonic()
+    assert gcs.upload_mission(mission(250.0)).type == mavlink.MAV_MISSION_ACCEPTED
+    wait(lambda: any("mission changed" in t for t in texts(gcs, since=t_up)), 5.0,
+         "the STATUSTEXT that the mission changed, within 5 s of the upload", run)
+    wait(lambda: run.proc.poll() is not None, 180, "the flight to end (--once)")
+    assert run.proc.returncode == 0, run.output()
+    assert not companion_uploads(sa), "the companion uploaded a mission of its own"
+    said = [str(e) for e in events(run.records())]
+    assert any("mission planned" in e for e in said), said[-20:]
+    assert any("mission changed, re-planned" in e for e in said), said[-20:]
+    cruise = [r["observations"]["cruise_speed_mps"] for r in run.records()
+              if "cruise_speed_mps" in r.get("observations", {})]
+    assert cruise and cruise[-1] == 7.0, cruise[-3:]
+
+
+def test_an_item_the_companion_cannot_plan_refuses_the_start_naming_it(autopilot_factory, fly, client):
+    ap = autopilot_factory()
+    sa = ap.standin
+    gcs = client(sa.url)
+    assert gcs.upload_mission(mission(150.0, loiter_unlim=True)).type == mavlink.MAV_MISSION_ACCEPTED
+    run = fly(ap, mission=Path("autopilot"))
+    wait(lambda: any("mission refused: autopilot mission: item 2: LOITER_UNLIM" in t for t in texts(gcs)), 30,
+         "the STATUSTEXT naming the refused item", run)
+    wait(lambda: sa.state()["position_ok"], 30, "the stand-in ready to arm", run)
+    time.sleep(3.0)
+    assert not sa.rec.of("arm"), "armed on a mission it could not plan"
+    assert not companion_uploads(sa)
+    run.proc.terminate()
+    run.proc.wait(timeout=15)
+    said = [str(e) for e in events(run.records())]
+    assert any("autopilot mission: item 2: LOITER_UNLIM" in e for e in said), said[-20:]
+    assert any("the mission is not planned" in e for e in said), said[-20:]
