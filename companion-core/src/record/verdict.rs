@@ -74,37 +74,42 @@ pub struct Lowered {
 
 impl Verdict {
     /// The verdict in two lines: planned against available (at most [`PLAN_LINE_MAX`]
-    /// characters: `plan 143 kJ, have 98.9 kJ at 100%`) and the time and what fits (at most
-    /// [`FIT_LINE_MAX`]: `Time 1012 s of 1800 s; fits: search 180 s or tracking 40 s`, the time
-    /// left out when both do not fit in one line). The same words in `check`, the STATUSTEXT and
-    /// the journal.
+    /// characters: `plan 143 kJ, have 98.9 kJ at 100%`, or the time when only the time does not
+    /// fit: `plan 2012 s, have 1800 s`) and the other goal and what fits (at most
+    /// [`FIT_LINE_MAX`]: `Time 1012 s of 1800 s; fits: search 180 s`, the other goal left out
+    /// when both do not fit in one line). The same words in `check`, the STATUSTEXT and the
+    /// journal.
     pub fn words(&self) -> [String; 2] {
-        let plan = match (self.planned_energy_j, self.available_energy_j) {
-            (Some(p), Some(a)) => {
+        let energy = self.planned_energy_j.zip(self.available_energy_j);
+        let time = self.planned_duration_s.zip(self.available_duration_s);
+        // The first line is the goal that does not fit: the energy, unless only the time fails.
+        let time_only = time.is_some_and(|(p, a)| p > a) && energy.is_none_or(|(p, a)| p <= a);
+        let (plan, other) = match (energy, time) {
+            (Some((pe, ae)), Some((pd, ad))) if time_only => (
+                format!("plan {}, have {}", secs(pd), secs(ad)),
+                Some(format!("energy {} of {}", kj(pe), kj(ae))),
+            ),
+            (Some((p, a)), time) => {
                 let at = self
                     .battery_pct
                     .map_or(String::new(), |b| format!(" at {b:.0}%"));
                 let full = format!("plan {}, have {}{at}", kj(p), kj(a));
-                if full.len() <= PLAN_LINE_MAX {
+                let plan = if full.len() <= PLAN_LINE_MAX {
                     full
                 } else {
                     format!("plan {}, have {}", kj(p), kj(a))
-                }
+                };
+                (
+                    plan,
+                    time.map(|(p, a)| format!("time {} of {}", secs(p), secs(a))),
+                )
             }
-            _ => match (self.planned_duration_s, self.available_duration_s) {
-                (Some(p), Some(a)) => format!("plan {}, have {}", secs(p), secs(a)),
-                _ => "no energy or time goal".to_string(),
-            },
+            (None, Some((p, a))) => (format!("plan {}, have {}", secs(p), secs(a)), None),
+            (None, None) => ("no energy or time goal".to_string(), None),
         };
         let what = self.what_fits();
-        let time = match (self.planned_duration_s, self.available_duration_s) {
-            (Some(p), Some(a)) if self.planned_energy_j.is_some() => {
-                Some(format!("time {} of {}", secs(p), secs(a)))
-            }
-            _ => None,
-        };
-        let fit = match time {
-            Some(t) if t.len() + 2 + what.len() <= FIT_LINE_MAX => format!("{t}; {what}"),
+        let fit = match other {
+            Some(o) if o.len() + 2 + what.len() <= FIT_LINE_MAX => format!("{o}; {what}"),
             _ => what,
         };
         [
@@ -232,6 +237,24 @@ mod tests {
             ..refused()
         };
         assert_eq!(route_fits.words()[1], "Fits: no search, no tracking");
+    }
+
+    /// Only the time is short: the first line says the time, the second the energy.
+    #[test]
+    fn a_refusal_for_time_alone_leads_with_the_time() {
+        let v = Verdict {
+            planned_energy_j: Some(60_000.0),
+            planned_duration_s: Some(2012.0),
+            longest_tracking_s: None,
+            ..refused()
+        };
+        assert_eq!(
+            v.words(),
+            [
+                "plan 2012 s, have 1800 s".to_string(),
+                "Energy 60.0 kJ of 98.9 kJ; fits: search 180 s".to_string()
+            ]
+        );
     }
 
     #[test]
