@@ -15,6 +15,8 @@ mod derived;
 pub mod power_bounds;
 mod reason;
 mod schema;
+mod tuning;
+mod verdict;
 
 use crate::record::{
     CapacitySource, CellsSource, EnergySource, GuaranteeRecord, PackRecord, PowerRecord,
@@ -27,6 +29,10 @@ use panorama::{Goal, Infeasible, MarginReport, Measured, Problem, Selection};
 use schema::MissionFile;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+pub use tuning::{
+    ENERGY_SCALE_BOUNDS, POWER_DRIFT_MIN_S, POWER_DRIFT_TOLERANCE, PRIOR_WEIGHT_S, Tuning,
+};
+pub use verdict::{HoldKind, judge};
 
 /// Indicator names the cost model produces; goals may name only these.
 pub const ENERGY: &str = "energy_j";
@@ -55,6 +61,13 @@ pub struct ActivityInfo {
     pub ia_speed: Vec<Option<f64>>,
     /// IA count before the core-oriented constraints (the objective's n_IA in Table 5).
     pub n_ia_unconstrained: usize,
+    /// The activity's hold as compiled (s).
+    pub hold_s: f64,
+    /// Whether the hold is the mission's search or tracking time (`hold_kind`).
+    pub hold_kind: Option<HoldKind>,
+    /// Per IA: the energy one more second of hold costs (J/s): the hold's propulsion power and
+    /// the payload's. Each IA's energy estimate is affine in the hold, with this slope.
+    pub ia_hold_w: Vec<f64>,
 }
 
 /// A loaded, validated mission: the generic problem plus what the text and JSON views need.
@@ -213,43 +226,6 @@ pub const NOMINAL_CELL_V: f64 = 3.7;
 /// Highest voltage a cell is taken to hold (V) when the cells are counted from the pack voltage:
 /// a charged LiPo is 4.2 V, so `ceil(V / 4.25)` counts a 3S pack anywhere from 8.5 to 12.75 V.
 pub const MAX_CELL_V: f64 = 4.25;
-/// A measured power this far from the prediction (as a fraction of it) is a performance drift.
-pub const POWER_DRIFT_TOLERANCE: f64 = 0.25;
-/// An activity's power is judged only after this long in it (s): take-off and mode changes draw
-/// short peaks that are no drift.
-pub const POWER_DRIFT_MIN_S: f64 = 10.0;
-/// The params' power model counts as this many seconds of measurement when a drift is learned:
-/// the factor is `(W x 1 + t x ratio) / (W + t)` after `t` seconds in the drifting activity, so a
-/// short transient (a climb) moves it little and a sustained drift moves it most of the way.
-pub const PRIOR_WEIGHT_S: f64 = 60.0;
-/// The factor learned from a drift is kept within these bounds.
-pub const ENERGY_SCALE_BOUNDS: (f64, f64) = (0.5, 2.0);
-
-/// The power-drift tuning of a mission: its `[guarantee]` section, else the constants above
-/// (which are its defaults).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Tuning {
-    /// A measured power this far from the prediction (fraction of it) is a drift.
-    pub power_drift_tolerance: f64,
-    /// Seconds in an activity before its power is judged.
-    pub power_drift_min_s: f64,
-    /// The params' power model counts as this many seconds of measurement.
-    pub prior_weight_s: f64,
-    /// The learned energy factor is kept within these bounds.
-    pub energy_scale_bounds: (f64, f64),
-}
-
-impl Default for Tuning {
-    fn default() -> Self {
-        Tuning {
-            power_drift_tolerance: POWER_DRIFT_TOLERANCE,
-            power_drift_min_s: POWER_DRIFT_MIN_S,
-            prior_weight_s: PRIOR_WEIGHT_S,
-            energy_scale_bounds: ENERGY_SCALE_BOUNDS,
-        }
-    }
-}
-
 /// What the guarantee keeps across cycles to measure the activity in force.
 #[derive(Debug, Clone, Default)]
 struct PowerState {
@@ -916,6 +892,7 @@ impl Guarantee {
             sc.spare_reason = r;
         }
         rec.failed_resources.clone_from(&self.failed);
+        rec.verdict = None;
         if progress.activity_index >= n {
             return; // mission over: margins are final, nothing left to re-allocate
         }
@@ -968,6 +945,15 @@ impl Guarantee {
                     "{reason}: no allocation of the remaining activities: {e}"
                 );
                 rec.infeasible_reason = Some(out);
+                // Before the flight (on the ground, the first activity): what the start refusal
+                // tells the operator, from what the pack holds and the time spent.
+                if at == 0 && progress.pack.armed != Some(true) {
+                    rec.verdict = Some(judge(
+                        &self.spec,
+                        &self.scratch.m.so_far,
+                        progress.battery_remaining_pct,
+                    ));
+                }
             }
         }
         self.scratch.reason = reason;

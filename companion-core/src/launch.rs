@@ -8,7 +8,7 @@
 use crate::decision::Model;
 use crate::guarantee::{DURATION, ENERGY};
 use crate::mission::{ActionRole, RouteRole};
-use crate::record::{DecisionRecord, EnergySource};
+use crate::record::{DecisionRecord, EnergySource, Verdict};
 use serde::Serialize;
 
 /// The named probability the verdict quotes when a model stays (the battery belief).
@@ -46,7 +46,8 @@ pub enum LaunchRefusal {
     /// The energy the battery holds, by the autopilot's remaining percentage, is short of what
     /// the mission needs.
     #[error(
-        "the battery reports {pct:.0} %: the energy it holds is {short_j:.0} J short of the mission's estimate plus the reserve (guarantee energy margin -{short_j:.0} J){reason}"
+        "the battery reports {pct:.0} %: the energy it holds is {short_j:.0} J short of the mission's estimate plus the reserve (guarantee energy margin -{short_j:.0} J){reason}{}",
+        verdict_words(verdict.as_deref())
     )]
     BatteryLow {
         /// Remaining battery percentage the autopilot reported.
@@ -56,11 +57,15 @@ pub enum LaunchRefusal {
         /// The guarantee's reason, when it gave one (`: ...`), else empty.
         #[serde(skip_serializing_if = "String::is_empty")]
         reason: String,
+        /// Planned against available and what would fit, when the guarantee judged it.
+        #[serde(skip_serializing_if = "Option::is_none")]
+        verdict: Option<Box<Verdict>>,
     },
     /// The energy goal cannot be met (the energy used came from the autopilot's consumed energy,
     /// or no percentage was reported).
     #[error(
-        "energy short by {short_j:.0} J: the guarantee's energy margin is -{short_j:.0} J (energy used from: {energy_from}){reason}"
+        "energy short by {short_j:.0} J: the guarantee's energy margin is -{short_j:.0} J (energy used from: {energy_from}){reason}{}",
+        verdict_words(verdict.as_deref())
     )]
     EnergyShort {
         /// How much energy is missing (J): minus the energy margin.
@@ -70,10 +75,14 @@ pub enum LaunchRefusal {
         /// The guarantee's reason, when it gave one (`: ...`), else empty.
         #[serde(skip_serializing_if = "String::is_empty")]
         reason: String,
+        /// Planned against available and what would fit, when the guarantee judged it.
+        #[serde(skip_serializing_if = "Option::is_none")]
+        verdict: Option<Box<Verdict>>,
     },
     /// The mission does not fit its time limit.
     #[error(
-        "mission time short by {short_s:.0} s: the guarantee's duration margin is -{short_s:.0} s{reason}"
+        "mission time short by {short_s:.0} s: the guarantee's duration margin is -{short_s:.0} s{reason}{}",
+        verdict_words(verdict.as_deref())
     )]
     DurationShort {
         /// How much time is missing (s): minus the duration margin.
@@ -81,6 +90,9 @@ pub enum LaunchRefusal {
         /// The guarantee's reason, when it gave one (`: ...`), else empty.
         #[serde(skip_serializing_if = "String::is_empty")]
         reason: String,
+        /// Planned against available and what would fit, when the guarantee judged it.
+        #[serde(skip_serializing_if = "Option::is_none")]
+        verdict: Option<Box<Verdict>>,
     },
     /// The guarantee found no allocation meeting the goals for another reason (a failed
     /// resource every alternative needs).
@@ -137,6 +149,41 @@ impl LaunchRefusal {
     pub fn description(&self) -> String {
         self.to_string()
     }
+
+    /// The guarantee's verdict behind the refusal, when it judged one.
+    pub fn guarantee_verdict(&self) -> Option<&Verdict> {
+        match self {
+            LaunchRefusal::BatteryLow { verdict, .. }
+            | LaunchRefusal::EnergyShort { verdict, .. }
+            | LaunchRefusal::DurationShort { verdict, .. } => verdict.as_deref(),
+            _ => None,
+        }
+    }
+
+    /// The STATUSTEXTs that tell the refusal, each at most [`PILOT_TEXT_MAX`] characters: with
+    /// the guarantee's verdict, `Start refused: plan 143 kJ, have 98.9 kJ at 100%` then what
+    /// fits (`Time 1012 s of 1800 s; fits: search 180 s`, [`Verdict::words`]); else
+    /// [`LaunchRefusal::pilot_text`] alone.
+    pub fn pilot_texts(&self) -> Vec<String> {
+        match self.guarantee_verdict() {
+            Some(v) => {
+                let [plan, fit] = v.words();
+                vec![
+                    clip(format!("Start refused: {plan}"), PILOT_TEXT_MAX),
+                    clip(fit, PILOT_TEXT_MAX),
+                ]
+            }
+            None => vec![self.pilot_text()],
+        }
+    }
+}
+
+/// `; plan ...; ...` (the verdict's words) or empty.
+fn verdict_words(v: Option<&Verdict>) -> String {
+    v.map_or(String::new(), |v| {
+        let [plan, fit] = v.words();
+        format!("; {plan}; {fit}")
+    })
 }
 
 /// Joules as kJ with one decimal (`4.2 kJ`).
@@ -174,6 +221,7 @@ pub fn verdict(record: &DecisionRecord, model: &Model) -> Result<(), LaunchRefus
         .as_ref()
         .ok_or(LaunchRefusal::NoGuarantee)?;
     let reason = with_reason(g.infeasible_reason.as_ref());
+    let verdict = g.verdict.clone().map(Box::new);
     let margin = |goal: &str| g.margins.get(goal).copied().filter(|m| *m < 0.0);
     if let Some(m) = margin(ENERGY) {
         let pct = record
@@ -186,6 +234,7 @@ pub fn verdict(record: &DecisionRecord, model: &Model) -> Result<(), LaunchRefus
                 pct,
                 short_j: -m,
                 reason,
+                verdict,
             },
             None => LaunchRefusal::EnergyShort {
                 short_j: -m,
@@ -194,6 +243,7 @@ pub fn verdict(record: &DecisionRecord, model: &Model) -> Result<(), LaunchRefus
                     .and_then(|v| v.as_str().map(str::to_owned))
                     .unwrap_or_default(),
                 reason,
+                verdict,
             },
         });
     }
@@ -201,6 +251,7 @@ pub fn verdict(record: &DecisionRecord, model: &Model) -> Result<(), LaunchRefus
         return Err(LaunchRefusal::DurationShort {
             short_s: -m,
             reason,
+            verdict,
         });
     }
     if g.infeasible {
@@ -330,6 +381,30 @@ mod tests {
             let text = v.as_ref().unwrap_err().pilot_text();
             assert!(text.starts_with("Start refused: battery 12%, "), "{text}");
             assert!(text.ends_with(" kJ short"), "{text}");
+            // The guarantee's verdict rides with the refusal: 12 % is under the reserve, so
+            // nothing is available and not even the route without tracking fits.
+            let g = rec.guarantee.as_ref().unwrap();
+            let verdict = g
+                .verdict
+                .as_ref()
+                .expect("the refused cycle's record holds a verdict");
+            assert_eq!(v.as_ref().unwrap_err().guarantee_verdict(), Some(verdict));
+            assert!(!verdict.fits);
+            assert_eq!(verdict.battery_pct, Some(12.0));
+            let pack = 74.0 * 3600.0;
+            let available = verdict.available_energy_j.unwrap();
+            assert!(
+                (available - (0.12 * pack - 0.25 * pack)).abs() < 1e-6,
+                "{available}"
+            );
+            assert_eq!(verdict.longest_tracking_s, None);
+            assert!(verdict.route_energy_j.unwrap() > 0.0);
+            let texts = v.as_ref().unwrap_err().pilot_texts();
+            assert_eq!(texts.len(), 2, "{texts:?}");
+            assert!(texts[0].starts_with("Start refused: plan "), "{texts:?}");
+            assert!(texts[0].ends_with(" kJ, have 0.0 kJ at 12%"), "{texts:?}");
+            assert!(texts[1].contains("othing fits: route alone "), "{texts:?}");
+            assert!(texts.iter().all(|t| t.len() <= PILOT_TEXT_MAX), "{texts:?}");
             // Later cycles: still refused, and the MDPs now choose to stay.
             let (v, rec) = verdict_after(&m, ModelKind::Bfm, pol, 12.0, 4);
             assert!(matches!(v, Err(LaunchRefusal::BatteryLow { .. })), "{v:?}");
@@ -458,15 +533,18 @@ mod tests {
                 pct: 1e300,
                 short_j: 1e300,
                 reason: long.clone(),
+                verdict: None,
             },
             LaunchRefusal::EnergyShort {
                 short_j: f64::MAX,
                 energy_from: long.clone(),
                 reason: long.clone(),
+                verdict: None,
             },
             LaunchRefusal::DurationShort {
                 short_s: 1e300,
                 reason: long.clone(),
+                verdict: None,
             },
             LaunchRefusal::GoalsUnmet {
                 reason: long.clone(),

@@ -7,10 +7,12 @@ use std::collections::BTreeMap;
 
 mod events;
 mod resources;
+mod verdict;
 pub use events::{
     CommandOutcome, Event, LinkEvent, MAX_LINK_EVENTS, coalesce_link_events, dedupe_capped,
 };
 pub use resources::{Degraded, Dropped};
+pub use verdict::{FIT_LINE_MAX, Lowered, PLAN_LINE_MAX, Verdict};
 
 /// Version of the decision-log schema, written in each log's header.
 pub const SCHEMA_VERSION: u32 = 1;
@@ -157,6 +159,10 @@ pub struct GuaranteeRecord {
     /// The activity in force: its predicted power against the power and energy measured.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub power: Option<PowerRecord>,
+    /// Before the flight, when no allocation meets the goals: planned against available and
+    /// what would fit (docs/guarantee.md, "The verdict"); the start refusal words it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verdict: Option<Verdict>,
 }
 
 /// The pack behind the energy goal (docs/guarantee.md, "Energy from the autopilot").
@@ -483,7 +489,7 @@ reuse_clone!(ResourcesRecord {
 } maps {});
 reuse_clone!(GuaranteeRecord {
     activity, activity_name, reallocation, infeasible, infeasible_reason, failed_resources,
-    plan_differs, energy_source, pack, power, planned_j, planned_s
+    plan_differs, energy_source, pack, power, planned_j, planned_s, verdict
 } maps { margins, goals, drift });
 reuse_clone!(DecisionRecord {
     cycle, time_s, state, events, proposals, conflicts, actions, resources, guarantee, commands,

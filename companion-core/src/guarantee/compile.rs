@@ -79,8 +79,9 @@ fn tile_slot(k: usize) -> String {
 /// The tasks by name, each compiled to PANORAMA's task with its file entry kept for costing.
 type Tasks<'f> = BTreeMap<&'f str, (Task, &'f TaskFile)>;
 
-/// One implementation alternative of an activity: the generic IA, its TIO names, its speed.
-type CostedIa = (Ia, Vec<String>, Option<f64>);
+/// One implementation alternative of an activity: the generic IA, its TIO names, its speed,
+/// and the energy a second more of hold costs (J/s).
+type CostedIa = (Ia, Vec<String>, Option<f64>, f64);
 
 /// A mission file being compiled; `path` names it in errors.
 struct Compiler<'f> {
@@ -479,16 +480,18 @@ impl<'f> Compiler<'f> {
         let mut ias = Vec::new();
         let mut ia_tios = Vec::new();
         let mut ia_speed = Vec::new();
+        let mut ia_hold_w = Vec::new();
         for combo in combos {
             let tios: Vec<&TioFile> = combo
                 .iter()
                 .enumerate()
                 .map(|(k, &i)| &tfs[k].tios[i])
                 .collect();
-            if let Some((ia, names, speed)) = self.ia(&e, a, &tios, goals)? {
+            if let Some((ia, names, speed, hold_w)) = self.ia(&e, a, &tios, goals)? {
                 ias.push(ia);
                 ia_tios.push(names);
                 ia_speed.push(speed);
+                ia_hold_w.push(hold_w);
             }
         }
         if ias.is_empty() {
@@ -515,6 +518,9 @@ impl<'f> Compiler<'f> {
                 ia_tios,
                 ia_speed,
                 n_ia_unconstrained: n_all,
+                hold_s: a.hold_s,
+                hold_kind: a.hold_kind,
+                ia_hold_w,
             },
         ))
     }
@@ -600,10 +606,13 @@ impl<'f> Compiler<'f> {
             capability: tios.iter().map(|t| t.capability).sum(),
             resources: resources.into_iter().collect(),
         };
+        // d(energy)/d(hold_s): the hold's propulsion and the payload over the longer duration.
+        let hold_w = f.propulsion.power(a.hold_speed_mps) + payload_w;
         Ok(Some((
             ia,
             tios.iter().map(|t| t.name.clone()).collect(),
             speed,
+            hold_w,
         )))
     }
 }

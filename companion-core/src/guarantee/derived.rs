@@ -130,6 +130,11 @@ pub fn derived_mission(
                 0.0
             },
             constraints: a.constraints.clone(),
+            hold_kind: match a.kind {
+                ActivityKind::Search => Some(super::HoldKind::Search),
+                ActivityKind::Tracking => Some(super::HoldKind::Tracking),
+                _ => None,
+            },
             x_start_m: None,
             x_end_m: None,
         });

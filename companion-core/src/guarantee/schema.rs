@@ -258,6 +258,10 @@ pub(super) struct ActivityFile {
     pub(super) hold_speed_mps: f64,
     #[serde(default)]
     pub(super) constraints: Vec<String>,
+    /// The hold is the mission's search or tracking time (`"search"`, `"tracking"`): the verdict
+    /// finds the longest one the pack holds.
+    #[serde(default)]
+    pub(super) hold_kind: Option<super::HoldKind>,
     #[serde(default)]
     pub(super) x_start_m: Option<f64>,
     #[serde(default)]

@@ -1,7 +1,8 @@
 //! PANORAMA views: the allocation table (Tables 6 and 7) and `companion check`'s guarantee
 //! section.
 
-use crate::guarantee::{Guarantee, MissionSpec, RasRow, load_mission, named};
+use crate::guarantee::{Guarantee, MissionSpec, RasRow, judge, load_mission, named};
+use crate::record::Verdict;
 use crate::spec::{ParamsFiles, SpecError};
 use panorama::Infeasible;
 use std::collections::BTreeMap;
@@ -171,7 +172,15 @@ pub fn check_json_spec(spec: &MissionSpec) -> serde_json::Value {
         "infeasible": infeasible,
         "nga": nga_json(panorama::nga(p)),
         "margins": margins,
+        "verdict": check_verdict(spec),
     }})
+}
+
+/// The verdict `check` gives: the whole mission on a full pack (the params' `[battery]`), no
+/// time spent.
+fn check_verdict(spec: &MissionSpec) -> Verdict {
+    let spent = vec![0.0; spec.problem.goals.len()];
+    judge(spec, &spent, spec.battery_capacity_j.map(|_| 100.0))
 }
 
 /// `companion check --mission NAME` for people: activities, RAS0 as PANORAMA Table 6, NGA and the
@@ -239,5 +248,11 @@ pub fn check_text_spec(spec: &MissionSpec) -> String {
         }
         Err(e) => out.push_str(&format!("\nINFEASIBLE: {e}\n")),
     }
+    let v = check_verdict(spec);
+    let [plan, fit] = v.words();
+    out.push_str(&format!(
+        "\nverdict: {}: {plan}; {fit}\n",
+        if v.fits { "fits" } else { "does not fit" }
+    ));
     out
 }

@@ -216,17 +216,22 @@ pub fn request_start(
                 return Err(refusal); // asked again once the first record is in
             }
             let ev = shell.operator.refuse(by, &refusal.description());
-            let text = if no_decision_yet {
-                "Start refused: not ready yet, send again".to_string()
+            let texts = if no_decision_yet {
+                vec!["Start refused: not ready yet, send again".to_string()]
             } else {
-                refusal.pilot_text()
+                // With the guarantee's verdict: planned against available, then what fits.
+                refusal.pilot_texts()
             };
-            if by != StartBy::AutoStart || shell.refusal_told.as_deref() != Some(&text) {
+            // Said once per first line: the verdict's time left changes every second.
+            let first = texts.first().cloned().unwrap_or_default();
+            if by != StartBy::AutoStart || shell.refusal_told.as_deref() != Some(&first) {
                 let line = ev.describe();
                 tracing::warn!("{line}");
                 shell.pending_events.push(Event::from(line));
-                out.extend(shell.texts.say(now, WARNING, &text));
-                shell.refusal_told = Some(text);
+                for text in &texts {
+                    out.extend(shell.texts.say(now, WARNING, text));
+                }
+                shell.refusal_told = Some(first);
             }
             Err(refusal)
         }
@@ -540,6 +545,7 @@ mod tests {
             pct: 12.0,
             short_j: 9_600.0,
             reason: String::new(),
+            verdict: None,
         });
         feed(&mut shell, &mut v, &mut gcs, 0.0, &autopilot_heartbeat());
         feed(&mut shell, &mut v, &mut gcs, 0.1, &gcs_heartbeat(255));
@@ -569,6 +575,59 @@ mod tests {
                 .pending_events
                 .iter()
                 .any(|e| e.to_string().starts_with("operator: start refused"))
+        );
+    }
+
+    /// With the guarantee's verdict the refusal is two STATUSTEXTs: planned against available,
+    /// then what fits (the verdict's own words), each within one STATUSTEXT.
+    #[test]
+    fn a_refusal_with_the_verdict_names_planned_available_and_what_fits() {
+        let (mut shell, mut v) = setup();
+        let verdict = companion_core::record::Verdict {
+            planned_energy_j: Some(143_012.0),
+            available_energy_j: Some(98_900.0),
+            battery_pct: Some(100.0),
+            planned_duration_s: Some(1012.0),
+            available_duration_s: Some(1800.0),
+            planned_search_s: Some(300.0),
+            longest_search_s: Some(180.0),
+            ..Default::default()
+        };
+        shell.launch = Err(LaunchRefusal::BatteryLow {
+            pct: 100.0,
+            short_j: 44_112.0,
+            reason: String::new(),
+            verdict: Some(Box::new(verdict)),
+        });
+        let mut out = Vec::new();
+        let r = request_start(
+            &mut shell,
+            &mut v,
+            StartBy::StartCommand,
+            Duration::from_secs(1),
+            &mut out,
+        );
+        assert!(r.is_err());
+        let texts: Vec<String> = out
+            .iter()
+            .filter_map(|m| match m {
+                Msg::STATUSTEXT(t) => Some(t.text.to_str().unwrap_or("").to_string()),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(
+            texts,
+            [
+                "Start refused: plan 143 kJ, have 98.9 kJ at 100%",
+                "Time 1012 s of 1800 s; fits: search 180 s"
+            ]
+        );
+        let journal: Vec<String> = shell.pending_events.iter().map(|e| e.to_string()).collect();
+        assert!(
+            journal
+                .iter()
+                .any(|e| e.contains("plan 143 kJ, have 98.9 kJ at 100%; Time 1012 s of 1800 s")),
+            "{journal:?}"
         );
     }
 
