@@ -324,3 +324,41 @@ fn too_few_legs_write_nothing_about_legs_and_legs_faster_than_commanded_are_refu
     );
     assert!(!out.exists(), "nothing written");
 }
+
+#[test]
+fn a_profiles_leg_numbers_out_of_range_are_refused_naming_the_entry() {
+    let tmp = tempfile::tempdir().unwrap();
+    let params = companion::params::default_params_dir();
+    for (entry, value) in [
+        ("speed_fraction", "1.5"),
+        ("speed_fraction", "0.0"),
+        ("waypoint_overhead_s", "-1.0"),
+        ("waypoint_overhead_s", "nan"),
+    ] {
+        let overlay = tmp.path().join("o.toml");
+        std::fs::write(
+            &overlay,
+            format!(
+                "[calibration]\nparams = {:?}\n[\"{M}\".derive]\n{entry} = {value}\n",
+                params.to_str().unwrap()
+            ),
+        )
+        .unwrap();
+        let o = companion(&[
+            "check",
+            "--params",
+            overlay.to_str().unwrap(),
+            "--mission",
+            params
+                .join("missions/tracking_route.toml")
+                .to_str()
+                .unwrap(),
+        ]);
+        let e = text(&o);
+        assert!(!o.status.success(), "{entry} = {value}: {e}");
+        assert!(
+            e.contains(&format!("derive.{entry}")),
+            "{entry} = {value}: {e}"
+        );
+    }
+}

@@ -21,6 +21,7 @@ pub mod power_fit;
 pub mod runs;
 pub mod shipped;
 pub mod tlog;
+mod toml_table;
 pub mod write;
 mod write_legs;
 

@@ -5,6 +5,7 @@ use super::Calibration;
 use super::cpt::{LearnedRow, PRIOR_PSEUDO_COUNTS};
 use super::power_fit::{FitResult, PowerModel};
 use super::shipped::Shipped;
+use super::toml_table::{round4, round6, table_at};
 use crate::review::text::escape_controls;
 use std::fmt::Write;
 use std::path::Path;
@@ -271,27 +272,6 @@ fn when_text(r: &LearnedRow) -> String {
         .map(|(p, st)| format!("{p}={st}"))
         .collect::<Vec<_>>()
         .join(",")
-}
-
-/// Four significant decimals are more than any fit here supports.
-pub(super) fn round4(x: f64) -> Value {
-    Value::Float((x * 1e4).round() / 1e4)
-}
-
-fn round6(x: f64) -> Value {
-    Value::Float((x * 1e6).round() / 1e6)
-}
-
-pub(super) fn table_at<'a>(t: &'a mut Table, path: &[&str]) -> &'a mut Table {
-    let mut cur = t;
-    for k in path {
-        cur = cur
-            .entry(k.to_string())
-            .or_insert_with(|| Value::Table(Table::new()))
-            .as_table_mut()
-            .expect("built as tables");
-    }
-    cur
 }
 
 /// The overlay text: `[calibration]` (what made it, the sources of entries that have no

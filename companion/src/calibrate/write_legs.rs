@@ -5,7 +5,7 @@
 
 use super::Calibration;
 use super::legs::{LegFitError, LegModel, SpeedSource, Vertical, fit_legs, rate};
-use super::write::{round4, table_at};
+use super::toml_table::{round4, table_at};
 use std::fmt::Write;
 use toml::{Table, Value};
 
