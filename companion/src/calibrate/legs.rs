@@ -8,8 +8,8 @@
 //! MISSION_ITEM_INT (the mission on the autopilot, as the companion's check downloads it),
 //! MISSION_CURRENT, MISSION_ITEM_REACHED and PARAM_VALUE (`WPNAV_SPEED`, `MPC_XY_CRUISE`).
 //!
-//! - **A leg**: from one MISSION_ITEM_REACHED (or, later, the MISSION_CURRENT that names the leg's
-//!   waypoint) to the MISSION_ITEM_REACHED of a NAV_WAYPOINT at least [`MIN_LEG_M`] away, armed,
+//! - **A leg**: from one MISSION_ITEM_REACHED (or the MISSION_CURRENT naming the leg's waypoint,
+//!   when it comes more than the stream's lag later: a hold at the last waypoint) to the MISSION_ITEM_REACHED of a NAV_WAYPOINT at least [`MIN_LEG_M`] away, armed,
 //!   in one flight mode throughout. Its length is measured as the derivation counts it
 //!   (`route_plan::leg_length_m`: geodesic plus climb) between the positions at the two events; its
 //!   commanded speed is the mission's last DO_CHANGE_SPEED before it, else the autopilot's cruise
@@ -34,6 +34,9 @@ pub const MIN_LEG_M: f64 = 10.0;
 pub const MIN_LEGS: usize = 3;
 /// Altitude within this of the last waypoint's is still at cruise altitude (m).
 pub const ALT_TOLERANCE_M: f64 = 1.0;
+/// A MISSION_CURRENT this long (s) after the last MISSION_ITEM_REACHED says the vehicle held
+/// there; sooner, it is the stream's lag (ArduCopter: up to 1 s).
+const CURRENT_STREAM_SLACK_S: f64 = 2.0;
 /// A climb or descent of less than this is no take-off or landing (m).
 const MIN_VERTICAL_M: f64 = 2.0;
 /// MAV_CMD_NAV_WAYPOINT, MAV_CMD_DO_CHANGE_SPEED.
@@ -241,10 +244,12 @@ impl LegFlights {
         let Some((mut t0, mut start)) = from else {
             return;
         };
-        // The leg began when its waypoint became current, if that was after the last event.
+        // The leg began when its waypoint became current, if that was well after the last event
+        // (a hold there). MISSION_CURRENT is a ~1 Hz stream: ArduCopter's reports the next item up
+        // to a second after the last one's MISSION_ITEM_REACHED, which must not shorten the leg.
         if let Some((s, since, Some(p))) = self.run.current
             && s == seq
-            && since > t0
+            && since > t0 + CURRENT_STREAM_SLACK_S
         {
             (t0, start) = (since, p);
         }

@@ -108,6 +108,12 @@ fn current(seq: u16) -> Msg {
 /// 2 m/s, flies legs at `v` m/s with `overhead` s per waypoint, and lands at 1 m/s; the mission
 /// as the autopilot holds it (`items`). PX4 repeats MISSION_ITEM_REACHED: `repeat` times.
 fn flight(v: f64, overhead: f64, items: &[Msg], repeat: usize) -> Vec<Msg> {
+    flight_held(v, overhead, items, repeat, 0.0)
+}
+
+/// [`flight`], holding `hold` s at each waypoint after its MISSION_ITEM_REACHED before the next
+/// becomes current.
+fn flight_held(v: f64, overhead: f64, items: &[Msg], repeat: usize, hold: f64) -> Vec<Msg> {
     let mut s = Sim::new();
     s.send(Msg::MISSION_COUNT(MISSION_COUNT_DATA::DEFAULT));
     for i in items {
@@ -122,6 +128,9 @@ fn flight(v: f64, overhead: f64, items: &[Msg], repeat: usize) -> Vec<Msg> {
     let legs = [(50.0, 0.0), (150.0, 0.0), (0.0, 100.0), (-150.0, 0.0)];
     for (k, (dn, de)) in legs.iter().enumerate() {
         let seq = 2 + k as u16;
+        if k > 0 {
+            s.wait(hold);
+        }
         s.send(current(seq));
         s.go(*dn, *de, 0.0, f64::hypot(*dn, *de) / v);
         s.wait(overhead);
@@ -285,4 +294,39 @@ fn rates_weigh_each_flight_by_its_time() {
     assert!((r - 1.0).abs() < 1e-12);
     assert!((rms - 10.0).abs() < 1e-9);
     assert_eq!(rate(&[]), None);
+}
+
+#[test]
+fn the_streams_late_mission_current_does_not_shorten_a_leg_and_a_hold_is_no_leg_time() {
+    // ArduCopter's MISSION_CURRENT comes up to a second after the MISSION_ITEM_REACHED: move each
+    // four positions (0.8 s) later; the legs keep their time.
+    let mut msgs = flight(10.0, 3.0, &mission(None), 1);
+    let mut i = 0;
+    while i < msgs.len() {
+        if matches!(msgs[i], Msg::MISSION_CURRENT(_)) {
+            let m = msgs.remove(i);
+            let mut at = i;
+            let mut seen = 0;
+            while at < msgs.len() && seen < 4 {
+                if matches!(msgs[at], Msg::GLOBAL_POSITION_INT(_)) {
+                    seen += 1;
+                }
+                at += 1;
+            }
+            msgs.insert(at, m);
+            i = at + 1;
+        } else {
+            i += 1;
+        }
+    }
+    let f = read(&msgs, 10.0);
+    for (l, want) in f.legs.iter().zip([8.0, 18.0, 13.0, 18.0]) {
+        assert!((l.duration_s - want).abs() < 0.25, "{:?}", f.legs);
+    }
+    // A 10 s hold at each waypoint before the next leg: the leg starts when it becomes current.
+    let f = read(&flight_held(10.0, 3.0, &mission(None), 1, 10.0), 10.0);
+    assert_eq!(f.legs.len(), 4);
+    for (l, want) in f.legs.iter().zip([8.0, 18.0, 13.0, 18.0]) {
+        assert!((l.duration_s - want).abs() < 0.25, "{:?}", f.legs);
+    }
 }
