@@ -37,6 +37,9 @@ pub const ALT_TOLERANCE_M: f64 = 1.0;
 /// A MISSION_CURRENT this long (s) after the last MISSION_ITEM_REACHED says the vehicle held
 /// there; sooner, it is the stream's lag (ArduCopter: up to 1 s).
 const CURRENT_STREAM_SLACK_S: f64 = 2.0;
+/// Disarmed below this altitude above home is landed (m): PX4 SIH's estimate read 1.3 m after one
+/// landing (baro drift); a disarm higher up (a failsafe) is no descent.
+const LANDED_ALT_M: f64 = 2.5;
 /// A climb or descent of less than this is no take-off or landing (m).
 const MIN_VERTICAL_M: f64 = 2.0;
 /// MAV_CMD_NAV_WAYPOINT, MAV_CMD_DO_CHANGE_SPEED.
@@ -216,7 +219,7 @@ impl LegFlights {
                 if let (Some(f), Some(p)) = (self.run.flight.take(), self.run.pos)
                     && let Some((t0, h)) = f.at_cruise
                     && h >= MIN_VERTICAL_M
-                    && p.alt_m < ALT_TOLERANCE_M
+                    && p.alt_m < LANDED_ALT_M
                     && t > t0
                 {
                     self.descents.push(Vertical {

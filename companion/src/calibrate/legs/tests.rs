@@ -330,3 +330,32 @@ fn the_streams_late_mission_current_does_not_shorten_a_leg_and_a_hold_is_no_leg_
         assert!((l.duration_s - want).abs() < 0.25, "{:?}", f.legs);
     }
 }
+
+#[test]
+fn a_landing_whose_altitude_estimate_drifted_counts_and_a_disarm_in_the_air_does_not() {
+    // Landed with the estimate at 1.3 m (PX4 SIH after one landing): a descent.
+    let mut s = Sim::new();
+    s.out.extend(mission(None));
+    s.arm(true);
+    s.go(0.0, 0.0, 20.0, 10.0);
+    s.send(reached(1));
+    s.send(current(2));
+    s.go(100.0, 0.0, 0.0, 10.0);
+    s.send(reached(2));
+    s.go(0.0, 0.0, -18.7, 20.0);
+    s.arm(false);
+    let f = read(&s.out, 10.0);
+    assert_eq!(f.descents.len(), 1, "{f:?}");
+    // Disarmed at 10 m (a failsafe): no landing.
+    let mut s = Sim::new();
+    s.out.extend(mission(None));
+    s.arm(true);
+    s.go(0.0, 0.0, 20.0, 10.0);
+    s.send(reached(1));
+    s.send(current(2));
+    s.go(100.0, 0.0, 0.0, 10.0);
+    s.send(reached(2));
+    s.go(0.0, 0.0, -10.0, 10.0);
+    s.arm(false);
+    assert!(read(&s.out, 10.0).descents.is_empty());
+}
