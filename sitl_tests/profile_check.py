@@ -2,9 +2,11 @@
 a flown default mission, the guarantee's estimate in force when the activity began (`guarantee.planned_j`,
 the pre-flight plan's cell while nothing was re-allocated) against the energy the autopilot reports drawn over it
 (`energy_of`, from the observations the companion copied off the autopilot's BATTERY_STATUS), and the profile's
-power curve against the one `companion calibrate` fits to the new flight."""
+power curve and its leg, climb and descent numbers (`[derive]`) against the ones `companion calibrate` fits to the new
+flight, and that the refit overlay holds only the vehicle (no route length, activity hold or machine path)."""
 from __future__ import annotations
 
+import re
 import subprocess
 import tomllib
 from pathlib import Path
@@ -65,11 +67,59 @@ def stated_rms_w(overlay: Dict[str, Any]) -> float:
     return float(src.split("fit RMS ")[1].split(" W")[0])
 
 
-def recalibrate(exe: str, run_dir: Path, out: Path) -> Dict[str, Any]:
-    p = subprocess.run([exe, "calibrate", str(run_dir), "--polynomial", "--out", str(out)], capture_output=True,
-                       text=True, timeout=300)
+def recalibrate(exe: str, run_dir: Path, out: Path, extra: Tuple[str, ...] = ()) -> Dict[str, Any]:
+    p = subprocess.run([exe, "calibrate", str(run_dir), "--polynomial", "--out", str(out), *extra],
+                       capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stdout + p.stderr
     refit = tomllib.loads(out.read_text())
     # calibrate writes the overlay without [propulsion] when the power fit fails; its report says why
     assert "propulsion" in refit.get(MISSION, {}), "no power fit in the overlay:\n" + p.stdout + p.stderr
     return refit
+
+
+def assert_only_the_vehicle(text: str, run_dir: Path) -> None:
+    """The overlay calibrate wrote holds no route length, activity hold or activities table, and names its runs by
+    content id, not by the run folder's path on this machine."""
+    t = tomllib.loads(text)
+    assert "activities" not in t.get(MISSION, {}), text
+    assert "length_m" not in text and "hold_s" not in text and "activities" not in text, text
+    assert str(run_dir) not in text, text
+    for run in t["calibration"]["runs"]:
+        assert re.fullmatch(r"sha256:[0-9a-f]{64}", run), run
+
+
+# The telemetry's resolution for a single flight's climb or descent (s): 5 Hz positions, and the companion's
+# take-off command lands within a second of the arming it follows. A stated RMS of two like flights can be ~0.
+VERTICAL_FLOOR_S = 1.0
+
+
+def derive_numbers(overlay: Dict[str, Any]) -> Tuple[Dict[str, float], Dict[str, str]]:
+    """The overlay's [derive] vehicle numbers and their sources (calibration.sources)."""
+    d = overlay[MISSION]["derive"]
+    sources = overlay["calibration"]["sources"]
+    keys = ("waypoint_overhead_s", "climb_speed_mps", "descent_speed_mps")
+    for k in keys:
+        assert k in d and f"{MISSION}:derive.{k}" in sources, (k, d, sources)
+    return {k: d[k] for k in keys if k in d} | ({"speed_fraction": d["speed_fraction"]} if "speed_fraction" in d
+                                                else {}), \
+        {k: sources[f"{MISSION}:derive.{k}"] for k in keys}
+
+
+def check_vehicle_numbers(shipped: Dict[str, Any], refit: Dict[str, Any]) -> None:
+    """The leg model, climb and descent refitted to a new flight agree with the profile's within the fit error the
+    profile states: the time per waypoint within its legs' RMS; the new flight's climb (and descent) took as long as
+    the profile predicts for its height, within twice the profile's stated RMS of a flight's time (a 95 % band),
+    at least the telemetry's resolution."""
+    (ship, src), (new, new_src) = derive_numbers(shipped), derive_numbers(refit)
+    rms = float(re.search(r"fit RMS ([0-9.]+) s", src["waypoint_overhead_s"]).group(1))
+    assert abs(new["waypoint_overhead_s"] - ship["waypoint_overhead_s"]) <= rms, (ship, new, rms)
+    # the commanded speed reached (or not) alike
+    assert ("speed_fraction" in ship) == ("speed_fraction" in new), (ship, new)
+    if "speed_fraction" in ship:
+        assert abs(new["speed_fraction"] - ship["speed_fraction"]) <= 0.05, (ship, new)
+    for k in ("climb_speed_mps", "descent_speed_mps"):
+        e = float(re.search(r"against it ([0-9.]+) s", src[k]).group(1))
+        h = float(re.search(r"([0-9.]+) m on average", new_src[k]).group(1))
+        flown, predicted = h / new[k], h / ship[k]
+        tol = max(2.0 * e, VERTICAL_FLOOR_S)
+        assert abs(flown - predicted) <= tol, (k, h, flown, predicted, tol)

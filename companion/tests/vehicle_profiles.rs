@@ -114,3 +114,67 @@ fn walk(name: &str, file: &str, path: &str, v: &toml::Value, sources: &toml::Tab
         }
     }
 }
+
+/// A profile holds only the vehicle (issue 36): no route length, no activity hold, no
+/// `activities` table (numbers of one route's flights, wrong for any other route the vehicle
+/// flies), and no absolute path (a path on the machine that made it: nobody else can re-derive
+/// it); its runs are named by their content id.
+#[test]
+fn no_profile_holds_a_route_number_an_activity_hold_or_a_machine_path() {
+    let names = profiles();
+    assert!(!names.is_empty());
+    for name in names {
+        let path = default_params_dir().join(format!("vehicles/{name}.toml"));
+        let t: toml::Table = std::fs::read_to_string(&path).unwrap().parse().unwrap();
+        let mut bad = Vec::new();
+        route_numbers(&toml::Value::Table(t.clone()), &name, &mut bad);
+        assert!(bad.is_empty(), "{name}: {bad:#?}");
+        for run in t["calibration"]["runs"]
+            .as_array()
+            .expect("calibration.runs")
+        {
+            let id = run.as_str().unwrap_or_default();
+            let hex = id.strip_prefix("sha256:").unwrap_or_default();
+            assert!(
+                hex.len() == 64 && hex.chars().all(|c| c.is_ascii_hexdigit()),
+                "{name}: run {run} is no content id"
+            );
+        }
+    }
+}
+
+/// Every key, table and string of `v` that is a route's number or a machine path, by where.
+fn route_numbers(v: &toml::Value, at: &str, bad: &mut Vec<String>) {
+    let absolute = |s: &str| {
+        let b = s.as_bytes();
+        s.starts_with('/')
+            || s.starts_with('\\')
+            || s.starts_with('~')
+            || (b.len() > 2
+                && b[0].is_ascii_alphabetic()
+                && b[1] == b':'
+                && matches!(b[2], b'/' | b'\\'))
+    };
+    match v {
+        toml::Value::Table(t) => {
+            for (k, x) in t {
+                let here = format!("{at}.{k}");
+                if matches!(k.as_str(), "length_m" | "hold_s" | "activities") {
+                    bad.push(format!("{here}: a route's, not the vehicle's"));
+                }
+                // The sources' keys name entries: `FILE:activities.NAME.hold_s` is one too.
+                if k.contains(":activities.") || k.ends_with(".length_m") || k.ends_with(".hold_s")
+                {
+                    bad.push(format!("{here}: a source of a route's number"));
+                }
+                route_numbers(x, &here, bad);
+            }
+        }
+        toml::Value::Array(a) => a
+            .iter()
+            .enumerate()
+            .for_each(|(i, x)| route_numbers(x, &format!("{at}[{i}]"), bad)),
+        toml::Value::String(s) if absolute(s) => bad.push(format!("{at} = {s:?}: a machine path")),
+        _ => {}
+    }
+}

@@ -44,6 +44,25 @@ fn read(
             "expected 0..100 m/s",
         ));
     }
+    if !(derive.waypoint_overhead_s.is_finite()
+        && (0.0..=600.0).contains(&derive.waypoint_overhead_s))
+    {
+        return Err(SpecError::new(
+            &path,
+            "derive.waypoint_overhead_s",
+            format!("{}: expected 0..600 s", derive.waypoint_overhead_s),
+        ));
+    }
+    if !(derive.speed_fraction.is_finite()
+        && derive.speed_fraction > 0.0
+        && derive.speed_fraction <= 1.0)
+    {
+        return Err(SpecError::new(
+            &path,
+            "derive.speed_fraction",
+            format!("{}: expected above 0, at most 1", derive.speed_fraction),
+        ));
+    }
     Ok((path, file, derive))
 }
 
@@ -55,6 +74,8 @@ pub fn derive_settings(params: &ParamsFiles, mission: &str) -> Result<DeriveSett
         cruise_speed_mps: d.cruise_speed_mps,
         climb_speed_mps: d.climb_speed_mps,
         descent_speed_mps: d.descent_speed_mps,
+        waypoint_overhead_s: d.waypoint_overhead_s,
+        speed_fraction: d.speed_fraction,
     })
 }
 

@@ -60,11 +60,23 @@ pub(super) struct DeriveFile {
     /// Speed while tracking (the target's), 0 to hover.
     #[serde(default)]
     pub(super) tracking_speed_mps: f64,
+    /// The vehicle's time per waypoint besides the leg's length at its speed (s); a vehicle
+    /// profile's (`calibrate`), 0 without one.
+    #[serde(default)]
+    pub(super) waypoint_overhead_s: f64,
+    /// The fraction of the commanded speed the vehicle reaches on a leg; a vehicle profile's
+    /// (`calibrate`), 1 without one.
+    #[serde(default = "one")]
+    pub(super) speed_fraction: f64,
     /// The tasks each kind of derived activity runs: `take_off`, `leg`, `loiter`, `search`,
     /// `tracking`, `return`, `land`.
     pub(super) tasks: BTreeMap<String, Vec<String>>,
     #[serde(default)]
     pub(super) source: String,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 /// `[guarantee]`: how a measured power drift is judged and learned.

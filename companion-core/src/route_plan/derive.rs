@@ -14,6 +14,13 @@ pub struct DeriveSettings {
     pub climb_speed_mps: f64,
     /// Landing descent speed (m/s).
     pub descent_speed_mps: f64,
+    /// Time a waypoint costs besides its length at the leg's speed (s): accelerating, braking
+    /// and turning; the vehicle profile's, fitted by `calibrate` (0: none). Each leg (and the
+    /// return) holds it once, on its last piece.
+    pub waypoint_overhead_s: f64,
+    /// Fraction of the commanded horizontal speed the vehicle reaches on a leg (1: it flies the
+    /// commanded speed); the vehicle profile's, fitted by `calibrate`.
+    pub speed_fraction: f64,
 }
 
 /// What part of the flight an activity is.
@@ -64,6 +71,9 @@ struct Walk<'a> {
     here: Position,
     here_label: String,
     speed: f64,
+    /// The vehicle profile's leg numbers (`DeriveSettings`).
+    overhead_s: f64,
+    speed_fraction: f64,
 }
 
 /// Derive the activities of `route` across `zones` (the zones file's and the route's own).
@@ -89,6 +99,8 @@ pub fn derive_activities(
         here: home,
         here_label: "home".into(),
         speed: s.cruise_speed_mps,
+        overhead_s: s.waypoint_overhead_s,
+        speed_fraction: s.speed_fraction,
     };
     let mut landed = false;
     for item in &route.items {
@@ -253,21 +265,18 @@ impl Walk<'_> {
     /// The leg from here to `to`, split where it crosses a zone's boundary.
     fn legs(&mut self, to: Position, to_label: String, kind: ActivityKind) {
         let from = self.here;
-        let ground = Geodesic.distance(
-            Point::new(from.lon_deg, from.lat_deg),
-            Point::new(to.lon_deg, to.lat_deg),
-        );
-        let climb = (to.alt_m - from.alt_m).abs();
+        let full = leg_length_m(from, to);
         let pieces = split_leg(from, to, self.zones);
         let kept: Vec<_> = pieces
             .iter()
-            .filter(|p| (ground + climb) * (p.1 - p.0) >= MIN_LENGTH_M)
+            .filter(|p| full * (p.1 - p.0) >= MIN_LENGTH_M)
             .collect();
         let base = match kind {
             ActivityKind::Return => "return".to_string(),
             _ => format!("leg{}-{}", self.here_label, to_label),
         };
         let n = kept.len();
+        let speed = self.speed * self.speed_fraction;
         for (k, (t0, t1, inside)) in kept.into_iter().enumerate() {
             let (constraints, words) = zone_words(inside);
             let (name, part) = if n > 1 {
@@ -278,13 +287,25 @@ impl Walk<'_> {
             } else {
                 (base.clone(), String::new())
             };
-            let length = (ground + climb) * (t1 - t0);
+            let length = full * (t1 - t0);
             let source = format!("leg {}->{}{part}{words}", self.here_label, to_label);
-            self.push(name, kind, length, 0.0, self.speed, constraints, source);
+            // The waypoint's overhead is spent where the leg ends (braking, turning).
+            let hold = if k + 1 == n { self.overhead_s } else { 0.0 };
+            self.push(name, kind, length, hold, speed, constraints, source);
         }
         self.here = to;
         self.here_label = to_label;
     }
+}
+
+/// A leg's length as the derivation counts it: the geodesic distance (WGS84) plus the altitude
+/// change. `calibrate` measures the legs flown with it too.
+pub fn leg_length_m(from: Position, to: Position) -> f64 {
+    let ground = Geodesic.distance(
+        Point::new(from.lon_deg, from.lat_deg),
+        Point::new(to.lon_deg, to.lat_deg),
+    );
+    ground + (to.alt_m - from.alt_m).abs()
 }
 
 /// Sorted, unique constraint names of the zones and the source's words (`, zones a, b`).

@@ -5,6 +5,8 @@ const SETTINGS: DeriveSettings = DeriveSettings {
     cruise_speed_mps: 10.0,
     climb_speed_mps: 2.5,
     descent_speed_mps: 1.5,
+    waypoint_overhead_s: 0.0,
+    speed_fraction: 1.0,
 };
 
 /// Great-circle distance on a sphere of the mean Earth radius, by hand (independent of `geo`).
@@ -117,6 +119,64 @@ fn a_square_zone_crossed_by_a_straight_leg_splits_it_at_its_edges() {
     assert_eq!(legs[1].source, "leg home->1 (part 2 of 3), in zone sq");
     // The landing at the end of the leg is outside the zone.
     assert!(acts.last().unwrap().constraints.is_empty());
+}
+
+#[test]
+fn the_vehicles_waypoint_overhead_and_speed_fraction_reach_every_leg_once() {
+    // A leg split in three by a zone, then an RTL: the overhead is held once per leg (on the piece
+    // that ends at the waypoint) and once by the return; take-off, landing and the search are not legs.
+    let zones = parse_zones(
+        Path::new("z.geojson"),
+        &square_zone(0.001, 0.002, -0.001, 0.001, "gps_degraded"),
+    )
+    .unwrap();
+    let mut r = route(
+        (0.0, 0.0),
+        vec![
+            Item {
+                index: 0,
+                kind: ItemKind::TakeOff { alt_m: 20.0 },
+            },
+            wp(1, 0.0, 0.003, 20.0),
+            Item {
+                index: 2,
+                kind: ItemKind::ReturnToLaunch,
+            },
+        ],
+    );
+    r.search_time_limit_s = Some(30.0);
+    let vehicle = DeriveSettings {
+        waypoint_overhead_s: 4.5,
+        speed_fraction: 0.8,
+        ..SETTINGS
+    };
+    let acts = derive_activities(&r, &zones, &vehicle);
+    let holds: Vec<(&str, f64, f64)> = acts
+        .iter()
+        .map(|a| (a.name.as_str(), a.hold_s, a.speed_mps))
+        .collect();
+    assert_eq!(
+        holds,
+        [
+            ("take_off", 0.0, 2.5),
+            ("leghome-1.1", 0.0, 8.0),
+            ("leghome-1.2", 0.0, 8.0),
+            ("leghome-1.3", 4.5, 8.0),
+            ("search", 30.0, 0.0),
+            ("return.1", 0.0, 8.0),
+            ("return.2", 0.0, 8.0),
+            ("return.3", 4.5, 8.0),
+            ("land", 0.0, 1.5),
+        ]
+    );
+    // The defaults (no profile) plan as before: no hold on a leg, the commanded speed.
+    let plain = derive_activities(&r, &zones, &SETTINGS);
+    assert!(
+        plain
+            .iter()
+            .filter(|a| matches!(a.kind, ActivityKind::Leg | ActivityKind::Return))
+            .all(|a| a.hold_s == 0.0 && a.speed_mps == 10.0)
+    );
 }
 
 #[test]

@@ -1,10 +1,12 @@
-//! `companion calibrate RUN... [--out FILE]`: fit the mission's power model, the activities'
-//! durations and the health BN rows the logs can teach to flown or simulated runs, and write a
-//! params overlay (docs/calibrate.md).
+//! `companion calibrate RUN... [--out FILE]`: fit the vehicle to flown or simulated runs (its
+//! power model, how it flies a leg, climbs and descends) and the health BN rows the logs can
+//! teach, and write a params overlay (docs/calibrate.md). Never a route's length or an activity's
+//! hold: those are the route's, derived from it (`companion_core::route_plan`).
 //!
 //! - `runs`: run folders found and streamed, a power sample per `fly` record;
 //! - `power_fit`: the rotary-wing and base power fit (nalgebra SVD least squares);
-//! - `durations`: how long each activity ran;
+//! - `legs`: legs, climbs and descents from the tlog, and the leg model;
+//! - `durations`: how long each activity ran (reported, not written);
 //! - `cpt`: CPT rows counted with a Dirichlet prior from the shipped rows;
 //! - `tlog`: power samples from a run's `flight.tlog`, when it has one;
 //! - `shipped`: the shipped numbers the fit starts from;
@@ -13,12 +15,15 @@
 
 pub mod cpt;
 pub mod durations;
+pub mod legs;
 pub mod overlay;
 pub mod power_fit;
 pub mod runs;
 pub mod shipped;
 pub mod tlog;
+mod toml_table;
 pub mod write;
+mod write_legs;
 
 use anyhow::Context;
 use std::path::PathBuf;
@@ -55,6 +60,18 @@ pub struct CalibrateArgs {
     /// With --autopilot-sysid: the autopilot's component id.
     #[arg(long, default_value_t = 1, requires = "autopilot_sysid", value_parser = clap::value_parser!(u8).range(1..))]
     pub autopilot_compid: u8,
+    /// The autopilot's cruise speed (m/s) in runs whose tlog does not say it (no WPNAV_SPEED /
+    /// MPC_XY_CRUISE PARAM_VALUE, no DO_CHANGE_SPEED item): the commanded speed legs are fitted
+    /// against. Default: the mission's `[derive] cruise_speed_mps`.
+    #[arg(long, value_parser = positive_speed)]
+    pub cruise_speed_mps: Option<f64>,
+}
+
+fn positive_speed(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 && v <= 100.0 => Ok(v),
+        _ => Err(format!("{s:?}: a speed above 0 and at most 100 m/s")),
+    }
 }
 
 /// Everything learned from the runs.
@@ -67,6 +84,7 @@ pub struct Calibration {
     pub records: u64,
     pub power: Result<power_fit::FitResult, power_fit::FitError>,
     pub durations: durations::Durations,
+    pub legs: legs::LegFlights,
     pub rows: Vec<cpt::LearnedRow>,
 }
 
@@ -77,6 +95,7 @@ pub fn calibrate(
     pin: tlog::Pin,
     keep_v0: bool,
     polynomial: bool,
+    cruise: Option<(f64, String)>,
 ) -> anyhow::Result<Calibration> {
     // Each run once, by content: names, symlinks or copies of one run are one run.
     let (runs, repeats) = runs::once_each(runs)?;
@@ -89,11 +108,13 @@ pub fn calibrate(
         power_fit::PowerFit::new(shipped.power)
     };
     let mut durations = durations::Durations::default();
+    let mut leg_flights = legs::LegFlights::new(cruise);
     let mut counts = cpt::CptCounts::default();
     let parents = shipped.rows.parents();
     let mut records = 0;
     for run in &runs {
         durations.start_run();
+        leg_flights.start_run();
         counts.start_run();
         // The tlog has the autopilot's telemetry at its own rate; the records, once a cycle.
         let tlog = run.join("flight.tlog");
@@ -101,7 +122,8 @@ pub fn calibrate(
         if tlog.is_file() {
             // calibrate's own pin, else the one fly flew this run with, else fly's rule.
             let pin = pin.or_else(|| runs::fly_pin(run));
-            let read = tlog::for_each_sample(&tlog, pin, |s| fit.add(s))?;
+            let read =
+                tlog::for_each_sample(&tlog, pin, |s| fit.add(s), |m| leg_flights.on_message(m))?;
             from_tlog = read.samples > 0;
             tlogs.push((run.clone(), read));
         }
@@ -136,6 +158,7 @@ pub fn calibrate(
         records,
         power: fit.solve(),
         durations,
+        legs: leg_flights,
         rows: counts.learn(&shipped.rows),
     })
 }
@@ -177,12 +200,22 @@ fn calibrate_and_write(args: &CalibrateArgs) -> anyhow::Result<()> {
             .map_err(|e| anyhow::anyhow!("--out {e}"))?;
     }
     let pin = args.autopilot_sysid.map(|s| (s, args.autopilot_compid));
+    let cruise = match args.cruise_speed_mps {
+        Some(v) => Some((v, "--cruise-speed-mps".to_string())),
+        None => shipped.cruise_mps.map(|v| {
+            (
+                v,
+                format!("{} [derive].cruise_speed_mps", shipped.mission_file),
+            )
+        }),
+    };
     let cal = calibrate(
         &shipped,
         runs,
         pin,
         args.keep_induced_velocity,
         args.polynomial,
+        cruise,
     )?;
     print!("{}", write::report(&shipped, &cal));
     let refused = write::refusals(&shipped, &cal);

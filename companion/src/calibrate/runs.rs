@@ -76,6 +76,16 @@ pub fn content_hash(dir: &Path) -> anyhow::Result<[u8; 32]> {
     Ok(h.finalize().into())
 }
 
+/// A run's content id as an overlay names it: `sha256:` and [`content_hash`] in hex.
+pub fn content_id(dir: &Path) -> anyhow::Result<String> {
+    let h = content_hash(dir)?;
+    Ok(h.iter().fold(String::from("sha256:"), |mut s, b| {
+        use std::fmt::Write;
+        let _ = write!(s, "{b:02x}");
+        s
+    }))
+}
+
 /// Run names left out as repeats, each with the run it repeats.
 pub type Repeats = Vec<(PathBuf, PathBuf)>;
 

@@ -16,10 +16,6 @@ pub struct Shipped {
     /// The mission file, relative to `dir` (the overlay's table name).
     pub mission_file: String,
     pub power: PowerModel,
-    /// Per activity: its `hold_s` as shipped.
-    pub hold_s: BTreeMap<String, f64>,
-    /// Per activity: its `length_m` as shipped (0 for an activity that does not move).
-    pub length_m: BTreeMap<String, f64>,
     /// Per activity: the duration estimate (s) of the IA these params plan it with (the
     /// pre-flight allocation's), and that IA's name.
     pub estimate_s: BTreeMap<String, (f64, String)>,
@@ -28,6 +24,9 @@ pub struct Shipped {
     /// The mission's `[power_bounds]` and the fastest it flies (m/s): what a fit is judged by.
     pub bounds: Option<companion_core::guarantee::power_bounds::PowerBounds>,
     pub fastest_mps: f64,
+    /// The mission's `[derive] cruise_speed_mps` (the commanded speed of legs whose run does not
+    /// say it), when it has a `[derive]`.
+    pub cruise_mps: Option<f64>,
     /// The params files read (inputs an output may not replace).
     pub inputs: Vec<PathBuf>,
 }
@@ -44,8 +43,6 @@ impl Shipped {
             .parse()
             .map_err(|e| SpecError::new(path, "-", format!("not TOML: {e}")))?;
         let power = power_model(path, &t)?;
-        let hold_s = activity_numbers(&t, "hold_s");
-        let length_m = activity_numbers(&t, "length_m");
         let dur = spec
             .problem
             .goals
@@ -79,7 +76,11 @@ impl Shipped {
             .unwrap_or(path)
             .to_string_lossy()
             .replace('\\', "/");
+        let cruise_mps = companion_core::guarantee::derive_settings(files, &path.to_string_lossy())
+            .ok()
+            .map(|d| d.cruise_speed_mps);
         Ok(Shipped {
+            cruise_mps,
             bounds: spec.power_bounds,
             fastest_mps: spec.fastest_mps,
             inputs: files.iter().map(|(p, _)| p.to_path_buf()).collect(),
@@ -88,24 +89,9 @@ impl Shipped {
             dir,
             mission_file,
             power,
-            hold_s,
-            length_m,
             estimate_s,
         })
     }
-}
-
-/// Per activity name, its `key` as the mission file ships it (0 when absent).
-fn activity_numbers(t: &Table, key: &str) -> BTreeMap<String, f64> {
-    t.get("activities")
-        .and_then(Value::as_array)
-        .into_iter()
-        .flatten()
-        .filter_map(|a| {
-            let name = a.get("name")?.as_str()?.to_string();
-            Some((name, a.get(key).and_then(number).unwrap_or(0.0)))
-        })
-        .collect()
 }
 
 fn number(v: &Value) -> Option<f64> {

@@ -1,4 +1,4 @@
-//! Power samples from a run's `flight.tlog` (the autopilot's own telemetry, at its rate: ~10 Hz
+//! Power samples (and, to `legs`, every message) of the autopilot from a run's `flight.tlog` (the autopilot's own telemetry, at its rate: ~10 Hz
 //! BATTERY_STATUS on ArduPilot), read one entry at a time and decoded as `fly` decodes them
 //! (`companion_link::telemetry::Telemetry`): pack voltage x current from BATTERY_STATUS (until
 //! the first one, SYS_STATUS), speed and altitude from GLOBAL_POSITION_INT, armed from HEARTBEAT.
@@ -77,6 +77,7 @@ pub fn for_each_sample(
     path: &Path,
     pin: Pin,
     mut each: impl FnMut(Sample),
+    mut each_msg: impl FnMut(&Msg),
 ) -> anyhow::Result<TlogRead> {
     crate::params_files::regular_file(path)
         .map_err(|r| anyhow::anyhow!("{}: {r}", crate::output_file::shown(path)))?;
@@ -144,6 +145,7 @@ pub fn for_each_sample(
                 }
                 continue;
             }
+            each_msg(&msg);
             tel.on_message(Duration::ZERO, &msg, companion_link::modes::Flavor::Other);
             let emit = match &msg {
                 Msg::BATTERY_STATUS(b) if b.id == 0 => {

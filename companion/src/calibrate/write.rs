@@ -5,13 +5,11 @@ use super::Calibration;
 use super::cpt::{LearnedRow, PRIOR_PSEUDO_COUNTS};
 use super::power_fit::{FitResult, PowerModel};
 use super::shipped::Shipped;
+use super::toml_table::{round4, round6, table_at};
 use crate::review::text::escape_controls;
 use std::fmt::Write;
 use std::path::Path;
 use toml::{Table, Value};
-
-/// Fewest completed runs of an activity before its duration is written into the overlay.
-pub const MIN_DURATION_RUNS: u64 = 1;
 
 fn pct(x: f64, of: f64) -> f64 {
     if of.abs() > 0.0 {
@@ -152,6 +150,7 @@ pub fn refusals(shipped: &Shipped, cal: &Calibration) -> Vec<String> {
             }
         }
     }
+    out.extend(super::write_legs::refusals(cal));
     for (name, (n, shortest)) in cal.durations.non_positive() {
         out.push(format!(
             "activity {}: {n} completed run(s) of zero or negative length (shortest {shortest} s):              the records' clock stood or went back, no duration is fitted from them",
@@ -218,7 +217,11 @@ pub fn report(shipped: &Shipped, cal: &Calibration) -> String {
 
 /// The report's durations and BN rows.
 fn finish_report(mut s: String, shipped: &Shipped, cal: &Calibration) -> String {
-    let _ = writeln!(s, "\nactivity durations (completed activities):");
+    super::write_legs::report(&mut s, cal);
+    let _ = writeln!(
+        s,
+        "\nactivity durations (completed activities; reported, not written: a route's, not the vehicle's):"
+    );
     if cal.durations.stats().is_empty() {
         let _ = writeln!(s, "  none: no record says which activity was in force");
     }
@@ -271,27 +274,6 @@ fn when_text(r: &LearnedRow) -> String {
         .join(",")
 }
 
-/// Four significant decimals are more than any fit here supports.
-fn round4(x: f64) -> Value {
-    Value::Float((x * 1e4).round() / 1e4)
-}
-
-fn round6(x: f64) -> Value {
-    Value::Float((x * 1e6).round() / 1e6)
-}
-
-fn table_at<'a>(t: &'a mut Table, path: &[&str]) -> &'a mut Table {
-    let mut cur = t;
-    for k in path {
-        cur = cur
-            .entry(k.to_string())
-            .or_insert_with(|| Value::Table(Table::new()))
-            .as_table_mut()
-            .expect("built as tables");
-    }
-    cur
-}
-
 /// The overlay text: `[calibration]` (what made it, the sources of entries that have no
 /// `source` key of their own), then the fitted entries per params file.
 pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Result<String> {
@@ -311,11 +293,11 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
     );
     let rel = relative(&out_dir, &base);
     cal_t.insert("params".into(), Value::String(rel));
-    let runs: Vec<Value> = cal
-        .runs
-        .iter()
-        .map(|r| Value::String(r.display().to_string()))
-        .collect();
+    // A run by its content, never by a path on the machine that made the overlay.
+    let mut runs = Vec::new();
+    for r in &cal.runs {
+        runs.push(Value::String(super::runs::content_id(r)?));
+    }
     cal_t.insert("runs".into(), Value::Array(runs));
     cal_t.insert(
         "prior_pseudo_counts".into(),
@@ -349,41 +331,7 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
             b.insert("source".into(), src);
         }
     }
-    for (name, d) in cal.durations.stats() {
-        let (Some((estimate, ia)), Some(hold)) =
-            (shipped.estimate_s.get(name), shipped.hold_s.get(name))
-        else {
-            continue;
-        };
-        if d.n < MIN_DURATION_RUNS {
-            continue;
-        }
-        let length = shipped.length_m.get(name).copied().unwrap_or(0.0);
-        let fit = fit_duration(*estimate, *hold, length, d.mean());
-        let flown = format!(
-            "companion calibrate: flown {:.1} s (sd {:.1}) in {} run(s) against the shipped \
-             estimate {estimate:.1} s of the allocated IA ({ia})",
-            d.mean(),
-            d.sd(),
-            d.n
-        );
-        let at = table_at(&mut t, &[&mf, "activities", name]);
-        at.insert("hold_s".into(), round4(fit.hold_s));
-        if let Some(l) = fit.length_m {
-            at.insert("length_m".into(), round4(l));
-            sources.insert(
-                format!("{mf}:activities.{name}.length_m"),
-                Value::String(format!(
-                    "{flown}: the route is shorter than shipped ({length} m), scaled so that its \
-                     move time at the allocated IA's speed is what was flown"
-                )),
-            );
-        }
-        sources.insert(
-            format!("{mf}:activities.{name}.hold_s"),
-            Value::String(format!("{flown}; shipped hold_s {hold}")),
-        );
-    }
+    super::write_legs::overlay(&mut t, &mut sources, &mf, cal);
     let file = super::cpt::APPLICATIONS_FILE;
     let mut nodes: Vec<&str> = cal.rows.iter().map(|r| r.node.as_str()).collect();
     nodes.dedup();
@@ -438,58 +386,4 @@ fn relative(from: &Path, to: &Path) -> String {
         p.push(c);
     }
     p.display().to_string().replace('\\', "/")
-}
-
-/// An activity's fitted duration entries: the hold absorbs the difference between the mean flown
-/// time and the allocated IA's estimate; when the activity was flown faster than the estimate even
-/// without a hold, its route is shortened by the rest (the move time of that IA, taken as its
-/// estimate less the hold, scales with the length).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct DurationFit {
-    pub hold_s: f64,
-    pub length_m: Option<f64>,
-}
-
-pub fn fit_duration(estimate_s: f64, hold_s: f64, length_m: f64, flown_s: f64) -> DurationFit {
-    let fitted_hold = hold_s + flown_s - estimate_s;
-    if fitted_hold >= 0.0 {
-        return DurationFit {
-            hold_s: fitted_hold,
-            length_m: None,
-        };
-    }
-    let t_move = estimate_s - hold_s;
-    if length_m <= 0.0 || t_move <= 0.0 {
-        return DurationFit {
-            hold_s: 0.0,
-            length_m: None,
-        };
-    }
-    let left = (t_move + fitted_hold).max(0.0) / t_move;
-    DurationFit {
-        hold_s: 0.0,
-        length_m: Some(length_m * left),
-    }
-}
-
-#[cfg(test)]
-mod duration_fit_tests {
-    use super::fit_duration;
-
-    #[test]
-    fn a_slower_activity_holds_longer_and_a_faster_one_flies_a_shorter_route() {
-        // 60 s estimate (600 m at 10 m/s, no hold), flown in 80 s: a 20 s hold, route kept.
-        let f = fit_duration(60.0, 0.0, 600.0, 80.0);
-        assert_eq!((f.hold_s, f.length_m), (20.0, None));
-        // Flown in 15 s: the 45 s too many come off the route: 600 m x 15/60.
-        let f = fit_duration(60.0, 0.0, 600.0, 15.0);
-        assert_eq!(f.hold_s, 0.0);
-        assert!((f.length_m.unwrap() - 150.0).abs() < 1e-9);
-        // A 10 s hold is used up first: estimate 70 s (60 s moving), flown 40 s -> 600 x 40/60.
-        let f = fit_duration(70.0, 10.0, 600.0, 40.0);
-        assert_eq!(f.hold_s, 0.0);
-        assert!((f.length_m.unwrap() - 400.0).abs() < 1e-9);
-        // An activity that does not move cannot be shortened.
-        assert_eq!(fit_duration(30.0, 30.0, 0.0, 10.0).length_m, None);
-    }
 }
