@@ -12,7 +12,7 @@ mod zones;
 
 pub use derive::{ActivityKind, DeriveSettings, DerivedActivity, derive_activities};
 pub use sources::{DEFAULT_LOITER_RADIUS_M, MissionSourceKind, detect_kind, parse_plan, parse_wpl};
-pub use zones::{Zone, parse_zones};
+pub use zones::{HOME_RELATIVE, Zone, parse_zones, parse_zones_at, zones_home_relative};
 
 use std::path::PathBuf;
 
