@@ -97,6 +97,20 @@ struct SimulateArgs {
     /// (bounded by params/learning.toml, logged in `cpt_learned`; docs/calibrate.md).
     #[arg(long)]
     learn_cpt: bool,
+    /// The plan the guarantee judges (docs/guarantee.md): a route told by content (a
+    /// QGroundControl `.plan`, a WPL 110 file or a route TOML) to derive the activities from, or
+    /// a PANORAMA mission (`tracking`: its typed activities, the legacy plan). Default: the
+    /// activities derived from params/missions/tracking_route.toml and tracking_zones.geojson.
+    #[arg(long)]
+    mission: Option<String>,
+    /// Zones: a GeoJSON FeatureCollection whose features' `properties.constraints` name
+    /// constraint classes; the route's legs are split where they enter or leave one.
+    #[arg(long, value_name = "FILE.geojson")]
+    zones: Option<PathBuf>,
+    /// Home as LAT,LON (degrees), to place a route or zones given relative to home among
+    /// absolute ones.
+    #[arg(long, value_name = "LAT,LON")]
+    home: Option<String>,
 }
 
 #[derive(Subcommand)]
@@ -279,7 +293,14 @@ fn fly(args: FlyArgs) -> Result<()> {
 fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
     // An unparsable COMPANION_LOG_MAX_BYTES stops the start, before any work.
     let log_opts = companion::decision_log::WriterOptions::from_env()?;
-    let loaded = companion::params::Params::load(params, None).context("loading params")?;
+    let (loaded, plan) = companion::route_input::load_with_plan(
+        params,
+        args.mission.as_deref(),
+        args.zones.as_deref(),
+        None,
+        args.home.as_deref(),
+    )
+    .context("loading params")?;
     let world = loaded.world;
     let mut scenario = Scenario::load(&loaded.files, &args.scenario)?;
     if let Some(s) = args.steps {
@@ -346,6 +367,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         header.model = Some(first_kind.to_string());
         header.seed = Some(args.seed);
         header.step_s = Some(world.step_s);
+        header.plan = Some(plan.clone());
         let log = companion::decision_log::start_run(&args.runs_dir, now, header, log_opts)
             .with_context(|| format!("starting a run folder in {}", args.runs_dir.display()))?;
         let dir = log.dir().to_path_buf();
@@ -387,6 +409,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
             "models": kinds.iter().map(|k| k.name()).collect::<Vec<_>>(),
             "tracking_steps": tracking,
             "first_run": { "model": first_kind, "outcome": first.outcome, "tracking_steps": first.tracking_steps, "battery_pct_end": first.battery_pct_end },
+            "plan": companion::route_input::PlanSummary { derived: Vec::new(), ..plan },
             "decisions": first.records,
         });
         println!("{}", serde_json::to_string(&out)?);
@@ -402,6 +425,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         args.seed,
         scenario.steps
     );
+    println!("{}", companion::route_input::summary_line(&plan));
     println!();
     print!(
         "{}",
