@@ -270,11 +270,21 @@ impl Decider for CoreDecider {
     }
 }
 
-fn fly(args: FlyArgs) -> Result<()> {
+fn fly(mut args: FlyArgs) -> Result<()> {
     let params = args.params.clone().unwrap_or_else(default_params_dir);
-    // Every params file, as `check` loads it, before any run folder or socket.
-    let loaded = companion::params::Params::load(&params, args.mission.as_deref())
-        .context("loading params")?;
+    // Every params file, as `check` loads it, before any run folder or socket; the plan judged
+    // is the route's (docs/guarantee.md).
+    let (loaded, plan) = companion::route_input::load_with_plan(
+        &params,
+        None,
+        args.zones.as_deref(),
+        args.mission.as_deref(),
+        args.home.as_deref(),
+    )
+    .context("loading params")?;
+    println!("{}", companion::route_input::summary_line(&plan));
+    tracing::info!("{}", companion::route_input::summary_line(&plan));
+    args.plan = Some(plan);
     let model = Arc::new(loaded.model);
     let policy: Policy = model
         .policy(&args.policy)

@@ -138,10 +138,11 @@ pub fn add_plan_files(
     zones: Option<&Path>,
     route: Option<&Path>,
 ) {
-    for f in [mission.map(Path::new), zones, route].into_iter().flatten() {
-        if f.is_file() {
-            crate::params::add_file(files, f);
-        }
+    // A mission name (`tracking`) is no file; a path that is there but not a regular file (a
+    // FIFO) is added, so the loader names it.
+    let mission = mission.map(Path::new).filter(|m| m.exists());
+    for f in [mission, zones, route].into_iter().flatten() {
+        crate::params::add_file(files, f);
     }
     let default_zones = files.dir().join(DEFAULT_ZONES);
     if default_zones.is_file() {

@@ -42,6 +42,12 @@ impl Position {
     }
 }
 
+/// Geodesic distance (m, WGS84) between two (lat, lon) points in degrees.
+pub fn distance_m(a: (f64, f64), b: (f64, f64)) -> f64 {
+    use geo::{Distance, Geodesic, Point};
+    Geodesic.distance(Point::new(a.1, a.0), Point::new(b.1, b.0))
+}
+
 /// One plannable mission item.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum ItemKind {

@@ -20,6 +20,8 @@ pub struct FlySetup {
     pub catalogue: ActionCatalogue,
     /// Where `--learn-cpt` may take the tracker's reports from.
     pub learning: link_security::LearningSource,
+    /// The derived plan against the route flown (`route_activity`); `None` for the typed plan.
+    pub route_progress: Option<super::route_progress::RouteProgress>,
 }
 
 impl FlySetup {
@@ -71,7 +73,10 @@ impl FlySetup {
                 })
             })
             .unwrap_or(route.altitude_m);
+        let route_progress = (args.plan.as_ref())
+            .and_then(|p| super::route_progress::RouteProgress::new(p, &route, states.clone()));
         Ok(Self {
+            route_progress,
             link,
             actions,
             route,
