@@ -300,25 +300,34 @@ fn fly(mut args: FlyArgs) -> Result<()> {
     companion::fly::run(args, decider)
 }
 
-fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
-    // An unparsable COMPANION_LOG_MAX_BYTES stops the start, before any work.
-    let log_opts = companion::decision_log::WriterOptions::from_env()?;
-    let (loaded, plan) = companion::route_input::load_with_plan(
+/// The params and the plan `simulate` judges (`--mission`, `--zones`, `--home`, as `check`).
+fn simulate_plan(
+    params: &std::path::Path,
+    args: &SimulateArgs,
+) -> Result<(
+    companion::params::Params,
+    companion::route_input::PlanSummary,
+)> {
+    companion::route_input::load_with_plan(
         params,
         args.mission.as_deref(),
         args.zones.as_deref(),
         None,
         args.home.as_deref(),
     )
-    .context("loading params")?;
+    .context("loading params")
+}
+
+fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
+    // An unparsable COMPANION_LOG_MAX_BYTES stops the start, before any work.
+    let log_opts = companion::decision_log::WriterOptions::from_env()?;
+    let (loaded, plan) = simulate_plan(params, &args)?;
     let world = loaded.world;
     let mut scenario = Scenario::load(&loaded.files, &args.scenario)?;
     if let Some(s) = args.steps {
         scenario.steps = s;
     }
-    let kinds: Vec<ModelKind> = args
-        .model
-        .split(',')
+    let kinds: Vec<ModelKind> = (args.model.split(','))
         .map(|m| m.trim().parse::<ModelKind>())
         .collect::<Result<_, _>>()
         .map_err(|e| anyhow::anyhow!("--model: {e}"))?;
