@@ -47,7 +47,8 @@ def test_real_default_pack_start_is_judged_on_the_derived_plan(arducopter, fly):
     t0 = time.monotonic()
     result = gcs.command_long(mavlink.MAV_CMD_MISSION_START, component=COMPANION, timeout=10.0)
     if result == mavlink.MAV_RESULT_ACCEPTED:
-        gcs.wait(lambda: gcs.ever_armed(), 90, "the vehicle armed after an accepted start")
+        # (gcs.wait holds the observer's lock: read its armed times directly)
+        gcs.wait(lambda: any(a for _, a in gcs.armed_times), 90, "the vehicle armed after an accepted start")
         run.proc.terminate()
         run.proc.wait(timeout=30)
         assert g["margins"]["energy_j"] >= 0.0, g
