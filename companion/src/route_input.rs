@@ -257,6 +257,23 @@ pub fn load_with_plan(
 ) -> anyhow::Result<(crate::params::Params, PlanSummary)> {
     let mut files = crate::params::read_params_dir(dir)?;
     add_plan_files(&mut files, mission, zones, route);
+    if let Some(r) = route
+        && let Ok(text) = files.text(r)
+    {
+        let kind = companion_core::route_plan::detect_kind(r, text);
+        if let Ok(k @ (MissionSourceKind::QgcPlan | MissionSourceKind::Wpl110)) = kind {
+            let what = match k {
+                MissionSourceKind::QgcPlan => "a QGroundControl .plan",
+                _ => "a WPL 110 file",
+            };
+            anyhow::bail!(
+                "{}: {what}: `fly` uploads only a route TOML yet (params/missions/\
+                 tracking_route.toml's format); `check --mission FILE` and `simulate --mission \
+                 FILE` plan it (docs/guarantee.md)",
+                r.display()
+            );
+        }
+    }
     let mut loaded = crate::params::Params::from_files(files, route)?;
     let derived = derive(&loaded.files, mission, zones, route, home)?;
     let plan = apply(&mut loaded.model, derived.as_ref());

@@ -129,3 +129,33 @@ fn simulate_takes_a_plan_file_and_zones_and_the_typed_plan_by_name() {
     assert!(v["plan"]["route_file"].is_null());
     assert!(walked(&v).contains(&"tracking_area".to_string()));
 }
+
+/// `fly --mission FILE.plan|.waypoints` is refused before any socket or run folder, naming the
+/// file and what plans it today (fly uploads only its route TOML).
+#[test]
+fn fly_refuses_a_plan_or_wpl_mission_before_any_socket() {
+    let d = tempfile::tempdir().unwrap();
+    for (name, text) in [
+        ("m.plan", PLAN),
+        (
+            "m.txt",
+            "QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t0\t0\t0\t1\n",
+        ),
+    ] {
+        let f = d.path().join(name);
+        std::fs::write(&f, text).unwrap();
+        let runs = d.path().join("runs");
+        let out = Command::new(env!("CARGO_BIN_EXE_companion"))
+            .args(["fly", "--connect", "tcp:127.0.0.1:1", "--mission"])
+            .arg(&f)
+            .arg("--log-dir")
+            .arg(&runs)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success());
+        assert!(err.contains(f.to_str().unwrap()), "{err}");
+        assert!(err.contains("uploads only a route TOML"), "{err}");
+        assert!(!runs.exists(), "no run folder");
+    }
+}
