@@ -274,9 +274,12 @@ fn fly(mut args: FlyArgs) -> Result<()> {
     let params = args.params.clone().unwrap_or_else(default_params_dir);
     // Every params file, as `check` loads it, before any run folder or socket; the plan judged
     // is the route's (docs/guarantee.md).
+    let legacy = args
+        .legacy_plan
+        .then_some(companion::route_input::DERIVE_MISSION);
     let (loaded, plan) = companion::route_input::load_with_plan(
         &params,
-        None,
+        legacy,
         args.zones.as_deref(),
         args.mission.as_deref(),
         args.home.as_deref(),

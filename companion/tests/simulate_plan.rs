@@ -159,3 +159,47 @@ fn fly_refuses_a_plan_or_wpl_mission_before_any_socket() {
         assert!(!runs.exists(), "no run folder");
     }
 }
+
+/// `fly` says which plan it judges before any socket (stdout) and in the run folder's header:
+/// the derived default, or the typed activities with `--legacy-plan`.
+#[test]
+fn fly_prints_and_logs_the_plan_it_judges() {
+    let d = tempfile::tempdir().unwrap();
+    for (legacy, want) in [(false, "activities derived from"), (true, "(legacy plan)")] {
+        let runs = d.path().join(format!("runs-{legacy}"));
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_companion"));
+        cmd.env("COMPANION_PARAMS", companion::params::default_params_dir())
+            .args([
+                "fly",
+                "--connect",
+                "tcp:127.0.0.1:1",
+                "--connect-timeout",
+                "1s",
+            ])
+            .arg("--log-dir")
+            .arg(&runs);
+        if legacy {
+            cmd.arg("--legacy-plan");
+        }
+        let out = cmd.output().unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            stdout
+                .lines()
+                .any(|l| l.starts_with("plan: ") && l.contains(want)),
+            "{stdout}"
+        );
+        let log = std::fs::read_dir(&runs)
+            .unwrap()
+            .next()
+            .unwrap()
+            .unwrap()
+            .path();
+        let text = std::fs::read_to_string(log.join("decisions.jsonl")).unwrap();
+        let header: Value = serde_json::from_str(text.lines().next().unwrap()).unwrap();
+        let plan = &header["plan"];
+        assert_eq!(plan["route_file"].is_null(), legacy, "{plan}");
+        assert_eq!(plan.get("derived").is_none(), legacy, "{plan}");
+        assert!(plan["planned_energy_j"].as_f64().unwrap() > 0.0, "{plan}");
+    }
+}

@@ -101,6 +101,11 @@ pub struct FlyArgs {
     /// for the default route: params/missions/tracking_zones.geojson; docs/guarantee.md).
     #[arg(long, value_name = "FILE.geojson")]
     pub zones: Option<PathBuf>,
+    /// Judge the PANORAMA mission's typed `[[activities]]` (params/missions/tracking.toml's
+    /// 1.35 km profile: the legacy plan, which the shipped vehicle profiles were fitted on)
+    /// instead of the activities derived from the route flown and the zones.
+    #[arg(long, conflicts_with = "zones")]
+    pub legacy_plan: bool,
     /// Home as LAT,LON (degrees), to place a route relative to home among absolute zones.
     #[arg(long, value_name = "LAT,LON")]
     pub home: Option<String>,
