@@ -410,3 +410,80 @@ pub fn activities_text(d: &Derived) -> String {
     }
     t
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shipped() -> ParamsFiles {
+        let mut files =
+            crate::params::read_params_dir(&crate::params::default_params_dir()).unwrap();
+        add_plan_files(&mut files, None, None, None);
+        files
+    }
+
+    /// The default plan is the shipped route with the shipped zones; a PANORAMA mission named
+    /// without zones is the typed plan; another route gets no zones unasked.
+    #[test]
+    fn the_default_plan_is_the_shipped_route_and_zones_and_a_named_mission_is_typed() {
+        let mut files = shipped();
+        let d = derive(&files, None, None, None, None).unwrap().unwrap();
+        assert!(d.zones_file.unwrap().ends_with(DEFAULT_ZONES));
+        let degraded: Vec<&str> = (d.activities.iter())
+            .filter(|a| a.constraints == ["gps_degraded"])
+            .map(|a| a.name.as_str())
+            .collect();
+        assert_eq!(degraded, ["leg1-2.2", "leg3-4.2"]);
+        assert!(
+            derive(&files, Some("tracking"), None, None, None)
+                .unwrap()
+                .is_none()
+        );
+        let other = files.dir().join("other_route.toml");
+        let text = files
+            .text(&files.dir().join(crate::params::DEFAULT_ROUTE))
+            .unwrap()
+            .to_string();
+        files.insert(&other, text.as_str());
+        let d = derive(&files, None, None, Some(&other), None)
+            .unwrap()
+            .unwrap();
+        assert!(d.zones_file.is_none());
+        assert!(d.activities.iter().all(|a| a.constraints.is_empty()));
+    }
+
+    /// An absolute route TOML starts from its first position (not from a stand-in home at 0, 0),
+    /// and home-relative zones with it need a home.
+    #[test]
+    fn an_absolute_route_starts_at_its_first_position_and_relative_zones_need_home() {
+        let mut files = shipped();
+        let r = files.dir().join("abs_route.toml");
+        files.insert(
+            &r,
+            "frame = \"absolute\"\naltitude_m = 20.0\ntakeoff_first = true\n\
+             [[waypoint]]\nlat_deg = -35.363261\nlon_deg = 149.165230\n\
+             [[waypoint]]\nlat_deg = -35.362261\nlon_deg = 149.165230\n",
+        );
+        let d = derive(&files, None, None, Some(&r), None).unwrap().unwrap();
+        let moved: f64 = d.activities.iter().map(|a| a.length_m).sum();
+        // climb 20 + ~111 m north + descent 20: not the 16,000 km from 0, 0
+        assert!((140.0..160.0).contains(&moved), "{:#?}", d.activities);
+        let zones = files.dir().join(DEFAULT_ZONES);
+        let e = derive(&files, None, Some(&zones), Some(&r), None).unwrap_err();
+        let e = format!("{e:#}");
+        assert!(
+            e.contains("tracking_zones.geojson") && e.contains("need home"),
+            "{e}"
+        );
+        assert!(
+            derive(
+                &files,
+                None,
+                Some(&zones),
+                Some(&r),
+                Some("-35.363261,149.165230")
+            )
+            .is_ok()
+        );
+    }
+}
