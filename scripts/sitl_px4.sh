@@ -90,7 +90,8 @@ ONCE=""
 # params' assumptions. SIH's battery drains over SIM_BAT_DRAIN whatever the vehicle does: the profile was made at 1800 s.
 VEHICLE=()
 PROFILE=${PX4_VEHICLE-px4-sih}
-[ -n "$PROFILE" ] && VEHICLE=(--vehicle "$PROFILE")
+# The profile was fitted on the typed activities (test_px4_profile.py compares them): the legacy plan, explicitly.
+[ -n "$PROFILE" ] && VEHICLE=(--vehicle "$PROFILE" --legacy-plan)
 echo "== companion fly --connect udpin:127.0.0.1:$PORT --auto-start $ONCE ${VEHICLE[*]} (default mission)"
 set +e
 timeout "${PX4_FLY_TIMEOUT:-900}" "$COMPANION_BIN" fly --connect "udpin:127.0.0.1:$PORT" --auto-start $ONCE \

@@ -572,7 +572,9 @@ impl Core {
             .as_ref()
             .filter(|_| model.mission.guarantee.binds)
             .and_then(|g| {
-                let activity = *model.mission.guarantee.activity_of_state.get(&obs.state)?;
+                let n = g.spec.problem.activities.len();
+                let (slots, r) = (&self.read_slots, &self.readings);
+                let activity = read_slots::activity_index(model, slots, r, &obs.state, n)?;
                 let ia = g.allocated_index(activity)?;
                 self.planned.get(activity)?.get(ia).map(Vec::as_slice)
             });
@@ -770,7 +772,10 @@ impl Core {
             return;
         };
         let coupling = &self.model.mission.guarantee;
-        let Some(&activity_index) = coupling.activity_of_state.get(&obs.state) else {
+        let n = g.spec.problem.activities.len();
+        let (slots, r) = (&self.read_slots, &self.readings);
+        let Some(activity_index) = read_slots::activity_index(&self.model, slots, r, &obs.state, n)
+        else {
             rec.guarantee = None;
             return;
         };

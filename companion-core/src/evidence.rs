@@ -37,8 +37,14 @@ impl ObservationId {
 pub const MAX_OBSERVATIONS: usize = u16::MAX as usize;
 
 /// Observations the decision core reads itself, besides the evidence mapping: the platform
-/// model's inputs (failed tiles, CPU load from other processes), reported by the shell.
-pub const CORE_READS: [&str; 2] = [FAILED_TILES, EXTERNAL_CPU_LOAD];
+/// model's inputs (failed tiles, CPU load from other processes) and the activity of the route
+/// being flown, reported by the shell.
+pub const CORE_READS: [&str; 3] = [FAILED_TILES, EXTERNAL_CPU_LOAD, ROUTE_ACTIVITY];
+/// Index (flight order, 0-based) of the guarantee's activity being flown, from the route's
+/// progress (fly: the mission item and the position; simulate: the world's phase). Present, it
+/// is the activity the guarantee watches; absent or not an activity's index, the core falls back
+/// to params/mission.toml's `guarantee.activity_of_state`.
+pub const ROUTE_ACTIVITY: &str = "route_activity";
 /// Tiles out of service (count), an input of the core's platform model.
 pub const FAILED_TILES: &str = "failed_tiles";
 /// CPU share taken by processes outside the companion, an input of the core's platform model.

@@ -73,6 +73,7 @@ pub fn plan(
     let activities = companion_core::route_plan::derive_activities(&planned, &[], settings);
     let spec = companion_core::guarantee::derived_mission(files, DERIVE_MISSION, &activities, &[])?;
     Ok(Derived {
+        panorama: DERIVE_MISSION.to_string(),
         route_file: PathBuf::from(companion_core::route_plan::AUTOPILOT_MISSION),
         zones_file: None,
         activities,

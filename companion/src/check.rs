@@ -7,7 +7,7 @@
 use anyhow::Context;
 use companion_core::health::HealthModel;
 use serde_json::{Value, json};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct CheckArgs {
@@ -348,21 +348,14 @@ pub fn report(args: &CheckArgs) -> anyhow::Result<(Value, String)> {
     // Everything `fly` and `simulate` load, cross-checks included, before any section: a file
     // either of them would refuse fails here with its file, entry and reason.
     let mut files = crate::params::read_params_dir(&params)?;
-    if let Some(r) = args.route.as_deref() {
-        crate::params::add_file(&mut files, r);
-    }
-    // `--mission` may name a mission file outside the params directory.
-    if let Some(m) = args
-        .mission
-        .as_deref()
-        .map(Path::new)
-        .filter(|m| m.is_file())
-    {
-        crate::params::add_file(&mut files, m);
-    }
-    if let Some(z) = args.zones.as_deref() {
-        crate::params::add_file(&mut files, z);
-    }
+    // `--mission`, `--zones`, `--route` may name files outside the params directory; the
+    // default zones are not `.toml`.
+    crate::route_input::add_plan_files(
+        &mut files,
+        args.mission.as_deref(),
+        args.zones.as_deref(),
+        args.route.as_deref(),
+    );
     report_from(files, args)
 }
 
@@ -387,6 +380,26 @@ pub fn report_from(
     };
     let mut obj = serde_json::Map::new();
     let mut text = String::new();
+    let typed = match &derived {
+        Some(_) => None,
+        None => Some(companion_core::guarantee::load_mission(
+            &loaded.files,
+            args.mission
+                .as_deref()
+                .unwrap_or(crate::route_input::DERIVE_MISSION),
+        )?),
+    };
+    let plan = crate::route_input::summary(
+        derived.as_ref(),
+        typed.as_ref().unwrap_or(&loaded.model.guarantee),
+    );
+    text.push_str(&format!("\n{}\n", crate::route_input::summary_line(&plan)));
+    let mut plan_json = serde_json::to_value(&plan)?;
+    if let Some(o) = plan_json.as_object_mut() {
+        // `activities` below lists them.
+        o.remove("derived");
+    }
+    obj.insert("plan".into(), plan_json);
     if let Some(d) = &derived {
         obj.insert("activities".into(), crate::route_input::activities_json(d));
         text.push_str(&crate::route_input::activities_text(d));

@@ -38,4 +38,5 @@ pub mod review;
 pub mod route_input;
 pub mod signing_setup;
 pub mod sim;
+pub mod sim_plan;
 pub mod vocabulary;

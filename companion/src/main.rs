@@ -97,6 +97,20 @@ struct SimulateArgs {
     /// (bounded by params/learning.toml, logged in `cpt_learned`; docs/calibrate.md).
     #[arg(long)]
     learn_cpt: bool,
+    /// The plan the guarantee judges (docs/guarantee.md): a route told by content (a
+    /// QGroundControl `.plan`, a WPL 110 file or a route TOML) to derive the activities from, or
+    /// a PANORAMA mission (`tracking`: its typed activities, the legacy plan). Default: the
+    /// activities derived from params/missions/tracking_route.toml and tracking_zones.geojson.
+    #[arg(long)]
+    mission: Option<String>,
+    /// Zones: a GeoJSON FeatureCollection whose features' `properties.constraints` name
+    /// constraint classes; the route's legs are split where they enter or leave one.
+    #[arg(long, value_name = "FILE.geojson")]
+    zones: Option<PathBuf>,
+    /// Home as LAT,LON (degrees), to place a route or zones given relative to home among
+    /// absolute ones.
+    #[arg(long, value_name = "LAT,LON")]
+    home: Option<String>,
 }
 
 #[derive(Subcommand)]
@@ -266,11 +280,24 @@ impl Decider for CoreDecider {
     }
 }
 
-fn fly(args: FlyArgs) -> Result<()> {
+fn fly(mut args: FlyArgs) -> Result<()> {
     let params = args.params.clone().unwrap_or_else(default_params_dir);
-    // Every params file, as `check` loads it, before any run folder or socket.
-    let loaded =
-        companion::params::Params::load(&params, args.route_file()).context("loading params")?;
+    // Every params file, as `check` loads it, before any run folder or socket; the plan judged
+    // is the route's (docs/guarantee.md).
+    let legacy = args
+        .legacy_plan
+        .then_some(companion::route_input::DERIVE_MISSION);
+    let (loaded, plan) = companion::route_input::load_with_plan(
+        &params,
+        legacy,
+        args.zones.as_deref(),
+        args.route_file(),
+        args.home.as_deref(),
+    )
+    .context("loading params")?;
+    println!("{}", companion::route_input::summary_line(&plan));
+    tracing::info!("{}", companion::route_input::summary_line(&plan));
+    args.plan = Some(plan);
     let model = Arc::new(loaded.model);
     let policy: Policy = model
         .policy(&args.policy)
@@ -287,18 +314,34 @@ fn fly(args: FlyArgs) -> Result<()> {
     companion::fly::run(args, decider)
 }
 
+/// The params and the plan `simulate` judges (`--mission`, `--zones`, `--home`, as `check`).
+fn simulate_plan(
+    params: &std::path::Path,
+    args: &SimulateArgs,
+) -> Result<(
+    companion::params::Params,
+    companion::route_input::PlanSummary,
+)> {
+    companion::route_input::load_with_plan(
+        params,
+        args.mission.as_deref(),
+        args.zones.as_deref(),
+        None,
+        args.home.as_deref(),
+    )
+    .context("loading params")
+}
+
 fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
     // An unparsable COMPANION_LOG_MAX_BYTES stops the start, before any work.
     let log_opts = companion::decision_log::WriterOptions::from_env()?;
-    let loaded = companion::params::Params::load(params, None).context("loading params")?;
+    let (loaded, plan) = simulate_plan(params, &args)?;
     let world = loaded.world;
     let mut scenario = Scenario::load(&loaded.files, &args.scenario)?;
     if let Some(s) = args.steps {
         scenario.steps = s;
     }
-    let kinds: Vec<ModelKind> = args
-        .model
-        .split(',')
+    let kinds: Vec<ModelKind> = (args.model.split(','))
         .map(|m| m.trim().parse::<ModelKind>())
         .collect::<Result<_, _>>()
         .map_err(|e| anyhow::anyhow!("--model: {e}"))?;
@@ -357,6 +400,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         header.model = Some(first_kind.to_string());
         header.seed = Some(args.seed);
         header.step_s = Some(world.step_s);
+        header.plan = Some(plan.clone());
         let log = companion::decision_log::start_run(&args.runs_dir, now, header, log_opts)
             .with_context(|| format!("starting a run folder in {}", args.runs_dir.display()))?;
         let dir = log.dir().to_path_buf();
@@ -398,6 +442,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
             "models": kinds.iter().map(|k| k.name()).collect::<Vec<_>>(),
             "tracking_steps": tracking,
             "first_run": { "model": first_kind, "outcome": first.outcome, "tracking_steps": first.tracking_steps, "battery_pct_end": first.battery_pct_end },
+            "plan": companion::route_input::PlanSummary { derived: Vec::new(), ..plan },
             "decisions": first.records,
         });
         println!("{}", serde_json::to_string(&out)?);
@@ -413,6 +458,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         args.seed,
         scenario.steps
     );
+    println!("{}", companion::route_input::summary_line(&plan));
     println!();
     print!(
         "{}",

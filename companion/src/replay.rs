@@ -289,13 +289,23 @@ impl Run {
             return Err(refuse(file, at, "the header holds no params"));
         }
         let files = params_files(&header, file)?;
-        let model = Model::load(&files).map_err(|e| {
+        let mut model = Model::load(&files).map_err(|e| {
             refuse(
                 file,
                 at,
                 format!("the model cannot be rebuilt from the header's params: {e}"),
             )
         })?;
+        // The plan the run judged: its derived activities on the header's PANORAMA mission.
+        if let Some(plan) = header.plan.as_ref().filter(|p| !p.derived.is_empty()) {
+            model.guarantee = companion_core::guarantee::derived_mission(
+                &files,
+                &plan.mission,
+                &plan.derived,
+                &[],
+            )
+            .map_err(|e| refuse(file, at, format!("the header's plan: {e}")))?;
+        }
         // Policy names are the params' own: resolved against the model the header rebuilds.
         let policy: Policy = model
             .policy(policy_name)

@@ -1,12 +1,16 @@
-//! The route and zones `check` plans on (PANORAMA P1, `companion_core::route_plan`): the shell's
-//! part is reading the files and loading the route TOML with its own loader; parsing, geometry and
-//! the allocation are the core's.
+//! The route and zones `check`, `simulate` and `fly` plan on (PANORAMA P1,
+//! `companion_core::route_plan`): the shell's part is reading the files and loading the route
+//! TOML with its own loader; parsing, geometry and the allocation are the core's.
 //!
-//! `--mission FILE` is told by content: a QGroundControl `.plan`, a WPL 110 file or the project's
-//! route TOML is the route to derive activities from; a PANORAMA mission TOML (or a name) stays
-//! the PANORAMA mission, as before. `--zones FILE.geojson` alone derives from the route `fly`
-//! would fly (`--route`, default params/missions/tracking_route.toml). Neither given: nothing is
-//! derived and `check` plans the mission's typed activities, as before.
+//! The plan judged is the route's (docs/guarantee.md):
+//! - nothing given: the activities derived from the route `fly` flies (`--route` / fly's
+//!   `--mission`, default params/missions/tracking_route.toml) and, for the default route, the
+//!   shipped zones (params/missions/tracking_zones.geojson);
+//! - `--mission FILE` told by content: a QGroundControl `.plan`, a WPL 110 file or the project's
+//!   route TOML is the route (zones only from `--zones` and a `.plan`'s own tagged fence);
+//! - `--zones FILE.geojson`: the zones, on the route given or the default one;
+//! - `--mission NAME` (a PANORAMA mission, `tracking`, `patrolling` or its file) without
+//!   `--zones`: that mission's typed `[[activities]]`, the legacy plan, chosen explicitly.
 
 use anyhow::Context;
 use companion_core::guarantee::MissionSpec;
@@ -21,9 +25,15 @@ use std::path::{Path, PathBuf};
 /// `--mission` names another.
 pub const DERIVE_MISSION: &str = "tracking";
 
-/// What `check` derived.
+/// The zones of the default route, relative to the params directory (home-relative: they sit on
+/// the route wherever the autopilot's home is).
+pub const DEFAULT_ZONES: &str = "missions/tracking_zones.geojson";
+
+/// What `check`, `simulate` and `fly` derived.
 #[derive(Debug, Clone)]
 pub struct Derived {
+    /// The PANORAMA mission the activities are planned against (tasks, TIOs, goals).
+    pub panorama: String,
     /// The route's file.
     pub route_file: PathBuf,
     /// The zones file, when given.
@@ -119,8 +129,30 @@ pub fn planned_from_route(
     })
 }
 
-/// Derive the activities and the PANORAMA mission on them, when `--mission` is a route file or
-/// `--zones` is given; `None` otherwise (the typed mission, unchanged).
+/// Add the files the plan reads to `files`: `--mission FILE` (when a file), `--zones`, `--route`,
+/// and the default zones (params/missions/tracking_zones.geojson: not a `.toml`, so not read
+/// with the params directory) when it exists.
+pub fn add_plan_files(
+    files: &mut ParamsFiles,
+    mission: Option<&str>,
+    zones: Option<&Path>,
+    route: Option<&Path>,
+) {
+    // A mission name (`tracking`) is no file; a path that is there but not a regular file (a
+    // FIFO) is added, so the loader names it.
+    let mission = mission.map(Path::new).filter(|m| m.exists());
+    for f in [mission, zones, route].into_iter().flatten() {
+        crate::params::add_file(files, f);
+    }
+    let default_zones = files.dir().join(DEFAULT_ZONES);
+    if default_zones.is_file() {
+        crate::params::add_file(files, &default_zones);
+    }
+}
+
+/// Derive the activities and the PANORAMA mission on them: the plan `check`, `simulate` and
+/// `fly` judge (the module's rules); `None` only for a PANORAMA mission named without `--zones`
+/// (its typed activities, the legacy plan).
 pub fn derive(
     files: &ParamsFiles,
     mission: Option<&str>,
@@ -129,9 +161,20 @@ pub fn derive(
     home: Option<&str>,
 ) -> anyhow::Result<Option<Derived>> {
     let kind = mission_route_kind(files, mission)?;
-    if kind.is_none() && zones_file.is_none() {
+    if kind.is_none() && mission.is_some() && zones_file.is_none() {
         return Ok(None);
     }
+    // The shipped zones belong to the shipped route: only the default route gets them unasked.
+    let default_zones = files.dir().join(DEFAULT_ZONES);
+    let default_route = files.dir().join(crate::params::DEFAULT_ROUTE);
+    let is_default_route = route_file.is_none_or(|r| same_file(r, &default_route));
+    let zones_file = match (zones_file, kind) {
+        (Some(z), _) => Some(z),
+        (None, None) if is_default_route && files.contains(&default_zones) => {
+            Some(default_zones.as_path())
+        }
+        _ => None,
+    };
     let home = home.map(parse_home).transpose()?;
     // A PANORAMA mission given with `--zones` is the one planned; a route file in `--mission`
     // leaves the default.
@@ -140,41 +183,48 @@ pub fn derive(
         Some(_) => DERIVE_MISSION,
     };
     let settings = companion_core::guarantee::derive_settings(files, panorama)?;
-    let zones: Vec<Zone> = match zones_file {
-        Some(z) => companion_core::route_plan::parse_zones(z, files.text(z)?)?,
-        None => Vec::new(),
+    // Home-relative zones are placed from the route's home: `--home`, a `.plan`'s planned home
+    // or WPL seq 0; a route TOML relative to home and home-relative zones need none (both are
+    // placed from the same point, so the geometry is the same anywhere: 0, 0 stands in).
+    let relative_zones = match zones_file {
+        Some(z) => companion_core::route_plan::zones_home_relative(files.text(z)?),
+        None => false,
     };
     let (file, planned) = match (kind, mission) {
         (Some(MissionSourceKind::QgcPlan), Some(m)) => {
             let p = Path::new(m);
-            (
-                p.to_path_buf(),
-                companion_core::route_plan::parse_plan(
-                    p,
-                    files.text(p)?,
-                    settings.cruise_speed_mps,
-                )?,
-            )
+            let plan = companion_core::route_plan::parse_plan(
+                p,
+                files.text(p)?,
+                settings.cruise_speed_mps,
+            )?;
+            (p.to_path_buf(), plan)
         }
         (Some(MissionSourceKind::Wpl110), Some(m)) => {
             let p = Path::new(m);
-            (
-                p.to_path_buf(),
-                companion_core::route_plan::parse_wpl(
-                    p,
-                    files.text(p)?,
-                    settings.cruise_speed_mps,
-                )?,
-            )
+            let plan = companion_core::route_plan::parse_wpl(
+                p,
+                files.text(p)?,
+                settings.cruise_speed_mps,
+            )?;
+            (p.to_path_buf(), plan)
         }
-        (Some(_), Some(m)) => route_toml(files, Path::new(m), home, !zones.is_empty())?,
+        (Some(_), Some(m)) => {
+            let free = zones_file.is_none() || relative_zones;
+            route_toml(files, Path::new(m), home, free)?
+        }
         _ => {
             let p = route_file.map_or_else(
                 || files.dir().join(crate::params::DEFAULT_ROUTE),
                 Path::to_path_buf,
             );
-            route_toml(files, &p, home, !zones.is_empty())?
+            route_toml(files, &p, home, zones_file.is_none() || relative_zones)?
         }
+    };
+    let zones_home = home.or(planned.home);
+    let zones: Vec<Zone> = match zones_file {
+        Some(z) => companion_core::route_plan::parse_zones_at(z, files.text(z)?, zones_home)?,
+        None => Vec::new(),
     };
     let activities = companion_core::route_plan::derive_activities(&planned, &zones, &settings);
     let mut sets: Vec<(&Path, &[Zone])> = vec![(file.as_path(), planned.zones.as_slice())];
@@ -183,6 +233,7 @@ pub fn derive(
     }
     let spec = companion_core::guarantee::derived_mission(files, panorama, &activities, &sets)?;
     Ok(Some(Derived {
+        panorama: panorama.to_string(),
         route_file: file,
         zones_file: zones_file.map(Path::to_path_buf),
         activities,
@@ -190,16 +241,145 @@ pub fn derive(
     }))
 }
 
+fn same_file(a: &Path, b: &Path) -> bool {
+    a == b || matches!((a.canonicalize(), b.canonicalize()), (Ok(x), Ok(y)) if x == y)
+}
+
+/// Params loaded and cross-checked as `check`, `simulate` and `fly` load them, with the plan
+/// they judge in place of the typed PANORAMA mission (the module's rules): `mission` a route
+/// file or a PANORAMA mission (`check`, `simulate`), `route` the route `fly` flies.
+pub fn load_with_plan(
+    dir: &Path,
+    mission: Option<&str>,
+    zones: Option<&Path>,
+    route: Option<&Path>,
+    home: Option<&str>,
+) -> anyhow::Result<(crate::params::Params, PlanSummary)> {
+    let mut files = crate::params::read_params_dir(dir)?;
+    add_plan_files(&mut files, mission, zones, route);
+    if let Some(r) = route
+        && let Ok(text) = files.text(r)
+    {
+        let kind = companion_core::route_plan::detect_kind(r, text);
+        if let Ok(k @ (MissionSourceKind::QgcPlan | MissionSourceKind::Wpl110)) = kind {
+            let what = match k {
+                MissionSourceKind::QgcPlan => "a QGroundControl .plan",
+                _ => "a WPL 110 file",
+            };
+            anyhow::bail!(
+                "{}: {what}: `fly` uploads only a route TOML yet (params/missions/\
+                 tracking_route.toml's format); `check --mission FILE` and `simulate --mission \
+                 FILE` plan it (docs/guarantee.md)",
+                r.display()
+            );
+        }
+    }
+    let mut loaded = crate::params::Params::from_files(files, route)?;
+    let derived = derive(&loaded.files, mission, zones, route, home)?;
+    let plan = apply(&mut loaded.model, derived.as_ref());
+    // The simulated world reports where it is on the derived plan (`crate::sim_plan`).
+    loaded.world.plan =
+        derived.map_or_else(Vec::new, |d| d.activities.iter().map(|a| a.kind).collect());
+    Ok((loaded, plan))
+}
+
+/// A route TOML as mission items; `home_free`: where home is does not change its geometry
+/// (no zones, or zones placed from home too), so a relative route needs no `--home`.
 fn route_toml(
     files: &ParamsFiles,
     p: &Path,
     home: Option<(f64, f64)>,
-    zones: bool,
+    home_free: bool,
 ) -> anyhow::Result<(PathBuf, PlannedRoute)> {
     let route = Route::load(files, p)?;
-    // Without zones a relative route's lengths do not depend on where home is.
-    let home = home.or((!zones).then_some((0.0, 0.0)));
+    // An absolute route's home is its first position (no stand-in at 0, 0).
+    let relative = (route.waypoints.iter()).any(|w| matches!(w, Waypoint::Relative { .. }));
+    let home = home.or((home_free && relative).then_some((0.0, 0.0)));
     Ok((p.to_path_buf(), planned_from_route(&route, p, home)?))
+}
+
+/// Which plan `check`, `simulate` and `fly` judge, for people and the log header: where it came
+/// from, how many activities, and the pre-flight allocation's planned energy and duration (with
+/// the goals' bounds lifted when they cannot be met, as the flight starts: the plan's own
+/// numbers, whatever the pack).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PlanSummary {
+    /// The PANORAMA mission planned against (tasks, TIOs, goals).
+    pub mission: String,
+    /// The route the activities were derived from; `None`: the mission's typed `[[activities]]`
+    /// (the legacy plan, chosen with `--mission NAME`).
+    pub route_file: Option<String>,
+    /// The zones file, when any.
+    pub zones_file: Option<String>,
+    /// Number of activities.
+    pub activities: usize,
+    /// Planned energy (J), when the mission has an energy goal.
+    pub planned_energy_j: Option<f64>,
+    /// Planned duration (s), when the mission has a duration goal.
+    pub planned_duration_s: Option<f64>,
+    /// The derived activities (replay re-compiles the mission from them); empty when typed.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub derived: Vec<DerivedActivity>,
+}
+
+/// The plan judged: `derived` when there is one, else `spec` (the typed mission).
+pub fn summary(derived: Option<&Derived>, spec: &MissionSpec) -> PlanSummary {
+    let spec = derived.map_or(spec, |d| &d.spec);
+    let mut lifted = spec.clone();
+    for g in &mut lifted.problem.goals {
+        g.bound = f64::MAX;
+    }
+    let totals = companion_core::guarantee::Guarantee::pre_flight(&lifted)
+        .map(|r| r.totals)
+        .unwrap_or_default();
+    PlanSummary {
+        mission: derived.map_or_else(|| spec.name.clone(), |d| d.panorama.clone()),
+        route_file: derived.map(|d| d.route_file.display().to_string()),
+        zones_file: derived.and_then(|d| Some(d.zones_file.as_ref()?.display().to_string())),
+        activities: spec.problem.activities.len(),
+        planned_energy_j: totals.get("energy_j").copied(),
+        planned_duration_s: totals.get("duration_s").copied(),
+        derived: derived.map(|d| d.activities.clone()).unwrap_or_default(),
+    }
+}
+
+/// One line for people: `plan: 9 activities derived from ROUTE and the zones of ZONES (mission
+/// tracking): planned 61.2 kJ over 512 s`.
+pub fn summary_line(s: &PlanSummary) -> String {
+    use std::fmt::Write;
+    let mut t = format!("plan: {} activities ", s.activities);
+    match &s.route_file {
+        Some(r) => {
+            let _ = write!(t, "derived from {r}");
+            if let Some(z) = &s.zones_file {
+                let _ = write!(t, " and the zones of {z}");
+            }
+            let _ = write!(t, " (mission {})", s.mission);
+        }
+        None => {
+            let _ = write!(t, "typed in mission {} (legacy plan)", s.mission);
+        }
+    }
+    let _ = write!(t, ": planned");
+    if let Some(e) = s.planned_energy_j {
+        let _ = write!(t, " {:.1} kJ", e / 1000.0);
+    }
+    if let Some(d) = s.planned_duration_s {
+        let _ = write!(t, " over {d:.0} s");
+    }
+    t
+}
+
+/// The plan `check`, `simulate` and `fly` judge, in place of the model's typed PANORAMA mission
+/// (`None`: the typed mission stays). Returns what was planned.
+pub fn apply(
+    model: &mut companion_core::decision::Model,
+    derived: Option<&Derived>,
+) -> PlanSummary {
+    if let Some(d) = derived {
+        model.guarantee = d.spec.clone();
+    }
+    summary(derived, &model.guarantee)
 }
 
 /// `check --json`'s `activities`: each with `name`, `length_m`, `hold_s`, `constraints`, `source`
@@ -229,4 +409,81 @@ pub fn activities_text(d: &Derived) -> String {
         );
     }
     t
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shipped() -> ParamsFiles {
+        let mut files =
+            crate::params::read_params_dir(&crate::params::default_params_dir()).unwrap();
+        add_plan_files(&mut files, None, None, None);
+        files
+    }
+
+    /// The default plan is the shipped route with the shipped zones; a PANORAMA mission named
+    /// without zones is the typed plan; another route gets no zones unasked.
+    #[test]
+    fn the_default_plan_is_the_shipped_route_and_zones_and_a_named_mission_is_typed() {
+        let mut files = shipped();
+        let d = derive(&files, None, None, None, None).unwrap().unwrap();
+        assert!(d.zones_file.unwrap().ends_with(DEFAULT_ZONES));
+        let degraded: Vec<&str> = (d.activities.iter())
+            .filter(|a| a.constraints == ["gps_degraded"])
+            .map(|a| a.name.as_str())
+            .collect();
+        assert_eq!(degraded, ["leg1-2.2", "leg3-4.2"]);
+        assert!(
+            derive(&files, Some("tracking"), None, None, None)
+                .unwrap()
+                .is_none()
+        );
+        let other = files.dir().join("other_route.toml");
+        let text = files
+            .text(&files.dir().join(crate::params::DEFAULT_ROUTE))
+            .unwrap()
+            .to_string();
+        files.insert(&other, text.as_str());
+        let d = derive(&files, None, None, Some(&other), None)
+            .unwrap()
+            .unwrap();
+        assert!(d.zones_file.is_none());
+        assert!(d.activities.iter().all(|a| a.constraints.is_empty()));
+    }
+
+    /// An absolute route TOML starts from its first position (not from a stand-in home at 0, 0),
+    /// and home-relative zones with it need a home.
+    #[test]
+    fn an_absolute_route_starts_at_its_first_position_and_relative_zones_need_home() {
+        let mut files = shipped();
+        let r = files.dir().join("abs_route.toml");
+        files.insert(
+            &r,
+            "frame = \"absolute\"\naltitude_m = 20.0\ntakeoff_first = true\n\
+             [[waypoint]]\nlat_deg = -35.363261\nlon_deg = 149.165230\n\
+             [[waypoint]]\nlat_deg = -35.362261\nlon_deg = 149.165230\n",
+        );
+        let d = derive(&files, None, None, Some(&r), None).unwrap().unwrap();
+        let moved: f64 = d.activities.iter().map(|a| a.length_m).sum();
+        // climb 20 + ~111 m north + descent 20: not the 16,000 km from 0, 0
+        assert!((140.0..160.0).contains(&moved), "{:#?}", d.activities);
+        let zones = files.dir().join(DEFAULT_ZONES);
+        let e = derive(&files, None, Some(&zones), Some(&r), None).unwrap_err();
+        let e = format!("{e:#}");
+        assert!(
+            e.contains("tracking_zones.geojson") && e.contains("need home"),
+            "{e}"
+        );
+        assert!(
+            derive(
+                &files,
+                None,
+                Some(&zones),
+                Some(&r),
+                Some("-35.363261,149.165230")
+            )
+            .is_ok()
+        );
+    }
 }

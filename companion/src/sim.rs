@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 /// The observations the world itself computes (`computes`, in [`World::observe`]) and the ones it
 /// reads from its baseline and hazards (`reads`, besides `truth.contexts`): the world's side of
 /// the observation vocabulary checked at load (companion/src/vocabulary.rs).
-pub const WORLD_OBSERVATIONS: [(&str, &str); 14] = [
+pub const WORLD_OBSERVATIONS: [(&str, &str); 15] = [
     ("battery_pct", "computes"),
     ("cpu_load", "computes"),
     ("free_tiles", "computes"),
@@ -29,6 +29,7 @@ pub const WORLD_OBSERVATIONS: [(&str, &str); 14] = [
     ("avoidance_wp", "computes"),
     ("zone_t_lost", "computes"),
     ("waypoints_remaining", "computes"),
+    (companion_core::evidence::ROUTE_ACTIVITY, "computes"),
     ("obstacle_m", "reads"),
     ("external_cpu_load", "reads"),
     ("failed_tiles", "reads"),
@@ -54,6 +55,10 @@ pub struct WorldSpec {
     /// The mission's states and phases (params/mission.toml), which the world moves through.
     #[serde(skip)]
     pub states: MissionStates,
+    /// The kinds of the derived plan's activities, in flight order: the world reports
+    /// `route_activity` on them (`crate::sim_plan`); empty for the typed plan.
+    #[serde(skip)]
+    pub plan: Vec<companion_core::route_plan::ActivityKind>,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -449,6 +454,14 @@ impl<'a> World<'a> {
             _ => 0.0,
         };
         values.insert("waypoints_remaining".into(), remaining);
+        let role = self.spec.states.route().role_of(&self.phase);
+        let tracking = self.spec.states.is_tracking(&self.phase);
+        let n = self.spec.route.waypoints;
+        let at =
+            crate::sim_plan::activity_of_phase(&self.spec.plan, role, tracking, self.waypoint, n);
+        if let Some(a) = at.filter(|_| !self.spec.plan.is_empty()) {
+            values.insert(companion_core::evidence::ROUTE_ACTIVITY.into(), a as f64);
+        }
         Observations {
             time_s: self.step as f64 * self.spec.step_s,
             state: self.phase.clone(),

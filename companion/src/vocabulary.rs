@@ -41,7 +41,11 @@ pub struct Sources<'a> {
 /// The observations the fly shell derives and adds to the telemetry's
 /// (`fly::cycle::complete_observations`): here, with the rest of the vocabulary, so the shell
 /// reads the list and the vocabulary check imports nothing of the shell.
-pub const DERIVED_OBSERVATIONS: [&str; 2] = ["drone_speed_mps", "waypoints_remaining"];
+pub const DERIVED_OBSERVATIONS: [&str; 3] = [
+    "drone_speed_mps",
+    "waypoints_remaining",
+    companion_core::evidence::ROUTE_ACTIVITY,
+];
 /// One producer or consumer of an observation.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Serialize)]
 pub struct Role {

@@ -1,7 +1,7 @@
 //! `companion check --mission FILE --zones FILE`: activities derived from an operator's route
 //! (QGroundControl `.plan`, WPL 110, the route TOML; told by content) and GeoJSON zones, printed
 //! with their source and planned by the pre-flight allocation; broken files refused with file,
-//! item and reason; the default (no route, no zones) unchanged.
+//! item and reason; the default (no route, no zones) the shipped route and zones.
 
 use std::path::Path;
 use std::process::Command;
@@ -152,25 +152,76 @@ fn the_route_toml_with_zones_and_home_splits_the_default_route() {
     assert!(err.contains("needs --home LAT,LON"), "{err}");
 }
 
+/// The default plan is the route flown: the activities derived from
+/// params/missions/tracking_route.toml and the shipped home-relative zones (no --home needed);
+/// the typed activities are the legacy plan, chosen by naming the PANORAMA mission.
 #[test]
-fn without_route_or_zones_check_plans_the_typed_mission_as_before() {
+fn without_route_or_zones_check_plans_the_default_route_and_zones() {
     let (code, out, err) = check(&["--json"]);
     assert_eq!(code, Some(0), "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
-    assert!(v.get("activities").is_none());
-    let planned: Vec<&str> = v["guarantee"]["activities"]
-        .as_array()
-        .unwrap()
+    let derived: Vec<&str> = (v["activities"].as_array().expect("derived activities"))
         .iter()
         .map(|a| a["name"].as_str().unwrap())
         .collect();
+    assert_eq!(derived.first(), Some(&"take_off"));
+    assert_eq!(derived.last(), Some(&"land"));
+    // The shipped canyon splits the two north-south legs.
+    let degraded: Vec<&str> = (v["activities"].as_array().unwrap().iter())
+        .filter(|a| a["constraints"] == serde_json::json!(["gps_degraded"]))
+        .map(|a| a["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(degraded, ["leg1-2.2", "leg3-4.2"]);
+    let planned: Vec<&str> = (v["guarantee"]["activities"].as_array().unwrap().iter())
+        .map(|a| a["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        planned, derived,
+        "the allocation plans the derived activities"
+    );
+    let plan = &v["plan"];
+    assert!(
+        plan["route_file"]
+            .as_str()
+            .unwrap()
+            .ends_with("tracking_route.toml"),
+        "{plan}"
+    );
+    assert!(
+        plan["zones_file"]
+            .as_str()
+            .unwrap()
+            .ends_with("tracking_zones.geojson"),
+        "{plan}"
+    );
+    assert_eq!(plan["activities"], derived.len());
+    let e = plan["planned_energy_j"].as_f64().unwrap();
+    let energy = v["guarantee"]["ras0"]["totals"]["energy_j"]
+        .as_f64()
+        .unwrap();
+    assert!((e - energy).abs() < 1e-6 * energy, "{plan}");
+    let (_, text, _) = check(&[]);
+    assert!(
+        text.contains(&format!("plan: {} activities derived from", derived.len())),
+        "{text}"
+    );
+    // The typed activities, chosen explicitly: the legacy plan.
+    let (code, out, err) = check(&["--json", "--mission", "tracking"]);
+    assert_eq!(code, Some(0), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!(v.get("activities").is_none());
+    let planned: Vec<&str> = (v["guarantee"]["activities"].as_array().unwrap().iter())
+        .map(|a| a["name"].as_str().unwrap())
+        .collect();
     assert_eq!(planned[..2], ["take_off", "transit"]);
+    assert!(v["plan"]["route_file"].is_null());
     // A PANORAMA mission given by name stays one.
     let (code, out, err) = check(&["--json", "--mission", "patrolling"]);
     assert_eq!(code, Some(0), "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert!(v.get("activities").is_none());
     assert_eq!(v["guarantee"]["mission"], "patrolling");
+    assert_eq!(v["plan"]["mission"], "patrolling");
 }
 
 #[test]

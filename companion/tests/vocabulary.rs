@@ -284,7 +284,10 @@ fn json_lists_each_action_with_its_mdps_and_mapping() {
 /// snapshot holds beyond the baseline and the hazards in force.
 #[test]
 fn the_world_computes_what_it_declares() {
-    let params = Params::load(&default_params_dir(), None).unwrap();
+    // On the default (derived) plan: the world reports `route_activity` too.
+    let (params, _) =
+        companion::route_input::load_with_plan(&default_params_dir(), None, None, None, None)
+            .unwrap();
     let sc = companion::sim::Scenario::load(&params.files, "nominal").unwrap();
     let mut w = companion::sim::World::new(&params.world, &sc, 1);
     let obs = w.observe();

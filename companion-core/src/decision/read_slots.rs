@@ -25,6 +25,8 @@ pub(super) struct ReadSlots {
     pub(super) external_cpu_load: Slot,
     pub(super) energy_consumed_j: Slot,
     pub(super) battery_pct: Slot,
+    /// [`crate::evidence::ROUTE_ACTIVITY`].
+    pub(super) route_activity: Slot,
     pack: [Slot; 7],
     /// The guarantee's resources and the observation reporting each failed, in params order.
     pub(super) failures: Vec<(String, Slot)>,
@@ -47,6 +49,7 @@ impl ReadSlots {
             external_cpu_load: r.slot(crate::evidence::EXTERNAL_CPU_LOAD),
             energy_consumed_j: r.slot("energy_consumed_j"),
             battery_pct: r.slot("battery_pct"),
+            route_activity: r.slot(crate::evidence::ROUTE_ACTIVITY),
             pack: PACK.map(|name| r.slot(name)),
             failures: model
                 .mission
@@ -96,6 +99,30 @@ impl ReadSlots {
             vehicle_time_s: vehicle_time,
             armed: armed.map(|a| a > 0.5),
         }
+    }
+}
+
+/// The guarantee's activity being flown: the shell's [`crate::evidence::ROUTE_ACTIVITY`] when it
+/// is the index of one of the `n` activities, else the activity params/mission.toml gives the
+/// shared mission state (`guarantee.activity_of_state`), else none.
+pub(super) fn activity_index(
+    model: &Model,
+    slots: &ReadSlots,
+    r: &Readings,
+    state: &str,
+    n: usize,
+) -> Option<usize> {
+    let routed = r
+        .get(slots.route_activity)
+        .filter(|v| v.is_finite() && *v >= 0.0 && v.fract() == 0.0 && *v < n as f64);
+    match routed {
+        Some(v) => Some(v as usize),
+        None => model
+            .mission
+            .guarantee
+            .activity_of_state
+            .get(state)
+            .copied(),
     }
 }
 

@@ -24,7 +24,7 @@ pub struct DeriveSettings {
 }
 
 /// What part of the flight an activity is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ActivityKind {
     /// The take-off climb.
@@ -44,7 +44,7 @@ pub enum ActivityKind {
 }
 
 /// One derived activity.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DerivedActivity {
     /// Unique in the mission (`leg3-4.2`, `take_off`, `search`, ...).
     pub name: String,

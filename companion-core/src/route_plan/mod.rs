@@ -15,7 +15,7 @@ pub use sources::{
     AUTOPILOT_MISSION, AutopilotItem, DEFAULT_LOITER_RADIUS_M, MissionSourceKind, detect_kind,
     parse_autopilot_mission, parse_plan, parse_wpl,
 };
-pub use zones::{Zone, parse_zones};
+pub use zones::{HOME_RELATIVE, Zone, parse_zones, parse_zones_at, zones_home_relative};
 
 use std::path::PathBuf;
 
@@ -43,6 +43,12 @@ impl Position {
             alt_m,
         }
     }
+}
+
+/// Geodesic distance (m, WGS84) between two (lat, lon) points in degrees.
+pub fn distance_m(a: (f64, f64), b: (f64, f64)) -> f64 {
+    use geo::{Distance, Geodesic, Point};
+    Geodesic.distance(Point::new(a.1, a.0), Point::new(b.1, b.0))
 }
 
 /// One plannable mission item.

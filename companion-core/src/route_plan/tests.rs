@@ -644,3 +644,46 @@ fn an_unplannable_autopilot_item_is_refused_with_its_seq_and_reason() {
     let e = parse_autopilot_mission(&items, true, None, 4.0).unwrap_err();
     assert!(e.to_string().contains("item 2: command 203"), "{e}");
 }
+
+/// A home-relative zones file (`"frame": "home_relative"`, `[east_m, north_m]`) sits on the same
+/// route wherever home is: the same split at SITL's home and at PX4 SIH's; without a home it is
+/// refused naming the file; an unknown frame or a position beyond 100 km is refused.
+#[test]
+fn a_home_relative_zone_splits_the_same_leg_wherever_home_is() {
+    let text = r#"{"type": "FeatureCollection", "frame": "home_relative", "features": [
+        {"type": "Feature", "properties": {"constraints": ["gps_degraded"]},
+         "geometry": {"type": "Polygon", "coordinates":
+           [[[-50, 100], [50, 100], [50, 200], [-50, 200], [-50, 100]]]}}]}"#;
+    let p = Path::new("rel.geojson");
+    assert!(zones_home_relative(text));
+    for home in [(-35.363261, 149.165230), (47.397742, 8.545594)] {
+        let zones = parse_zones_at(p, text, Some(home)).unwrap();
+        // Due north 300 m: out 100 m, in 100 m, out 100 m.
+        let r = route(
+            home,
+            vec![Item {
+                index: 1,
+                kind: ItemKind::Waypoint(Position::offset(home, 300.0, 0.0, 0.0)),
+            }],
+        );
+        let acts = derive_activities(&r, &zones, &SETTINGS);
+        let legs: Vec<_> = (acts.iter())
+            .filter(|a| a.kind == ActivityKind::Leg)
+            .collect();
+        assert_eq!(legs.len(), 3, "{acts:#?}");
+        for l in &legs {
+            assert!((l.length_m - 100.0).abs() < 0.5, "{l:?}");
+        }
+        assert_eq!(legs[1].constraints, ["gps_degraded"]);
+    }
+    let e = parse_zones(p, text).unwrap_err().to_string();
+    assert!(e.contains("rel.geojson") && e.contains("need home"), "{e}");
+    let e = parse_zones_at(p, &text.replace("home_relative", "utm"), Some((0.0, 0.0)))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("frame") && e.contains("home_relative"), "{e}");
+    let e = parse_zones_at(p, &text.replace("[50, 200]", "[50, 2e6]"), Some((0.0, 0.0)))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("features[0]") && e.contains("100 km"), "{e}");
+}

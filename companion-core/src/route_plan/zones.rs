@@ -39,9 +39,38 @@ impl Zone {
     }
 }
 
+/// The FeatureCollection member that says its coordinates are metres from home
+/// (`"frame": "home_relative"`, positions `[east_m, north_m]`), as a route TOML's
+/// `frame = "relative"`: the same zones then sit on the same route wherever home is.
+pub const HOME_RELATIVE: &str = "home_relative";
+
+/// Positions of a home-relative zones file beyond this (m) from home are refused (a typo of a
+/// latitude/longitude for metres, or a file not meant to be relative).
+const MAX_RELATIVE_M: f64 = 100_000.0;
+
+/// True when the zones file says `"frame": "home_relative"` (whatever else it holds; the parse
+/// names any error).
+pub fn zones_home_relative(text: &str) -> bool {
+    serde_json::from_str::<serde_json::Value>(text)
+        .ok()
+        .and_then(|v| v.get("frame")?.as_str().map(|f| f == HOME_RELATIVE))
+        .unwrap_or(false)
+}
+
 /// Parse a zones file: a GeoJSON FeatureCollection of Polygon / MultiPolygon features, each with
-/// a non-empty `properties.constraints` list of strings. `path` names the file in errors.
+/// a non-empty `properties.constraints` list of strings. `path` names the file in errors. A
+/// home-relative file (`"frame": "home_relative"`) is refused here: [`parse_zones_at`] places it.
 pub fn parse_zones(path: &Path, text: &str) -> Result<Vec<Zone>, SpecError> {
+    parse_zones_at(path, text, None)
+}
+
+/// [`parse_zones`], placing a home-relative file's `[east_m, north_m]` positions from `home`
+/// (lat, lon degrees; geodesic, WGS84).
+pub fn parse_zones_at(
+    path: &Path,
+    text: &str,
+    home: Option<(f64, f64)>,
+) -> Result<Vec<Zone>, SpecError> {
     let gj: geojson::GeoJson = text
         .parse()
         .map_err(|e: geojson::Error| SpecError::new(path, "-", format!("not GeoJSON: {e}")))?;
@@ -51,6 +80,33 @@ pub fn parse_zones(path: &Path, text: &str) -> Result<Vec<Zone>, SpecError> {
             "-",
             "expected a FeatureCollection of Polygon / MultiPolygon features",
         ));
+    };
+    let frame = fc
+        .foreign_members
+        .as_ref()
+        .and_then(|m| m.get("frame"))
+        .map(|f| match f.as_str() {
+            Some(HOME_RELATIVE) => Ok(()),
+            _ => Err(SpecError::new(
+                path,
+                "frame",
+                format!(
+                    "{f}: the one frame is \"{HOME_RELATIVE}\" (omit it for longitude/latitude)"
+                ),
+            )),
+        })
+        .transpose()?;
+    let place = match (frame, home) {
+        (None, _) => None,
+        (Some(()), Some(h)) => Some(h),
+        (Some(()), None) => {
+            return Err(SpecError::new(
+                path,
+                "frame",
+                "zones relative to home need home: a route relative to home, --home LAT,LON, \
+                 or the autopilot's home",
+            ));
+        }
     };
     let mut zones = Vec::with_capacity(fc.features.len());
     for (i, f) in fc.features.iter().enumerate() {
@@ -68,6 +124,10 @@ pub fn parse_zones(path: &Path, text: &str) -> Result<Vec<Zone>, SpecError> {
                 MultiPolygon::try_from(geometry).map_err(|e| err(e.to_string()))?
             }
             _ => return Err(err("geometry is not a Polygon or MultiPolygon".into())),
+        };
+        let area = match place {
+            Some(home) => placed(&area, home).map_err(err)?,
+            None => area,
         };
         check_area(&area).map_err(err)?;
         let props = f.properties.as_ref();
@@ -92,6 +152,30 @@ pub fn parse_zones(path: &Path, text: &str) -> Result<Vec<Zone>, SpecError> {
         zones.push(zone);
     }
     Ok(zones)
+}
+
+/// A home-relative area (x east, y north, metres) on the globe around `home`.
+fn placed(area: &MultiPolygon<f64>, home: (f64, f64)) -> Result<MultiPolygon<f64>, String> {
+    use geo::CoordsIter;
+    if let Some(c) = area
+        .coords_iter()
+        .find(|c| !(c.x.is_finite() && c.y.is_finite() && c.x.hypot(c.y) <= MAX_RELATIVE_M))
+    {
+        return Err(format!(
+            "position [{}, {}]: a home-relative position is [east_m, north_m] within {} km of home",
+            c.x,
+            c.y,
+            MAX_RELATIVE_M / 1000.0
+        ));
+    }
+    use geo::MapCoords;
+    Ok(area.map_coords(|c| {
+        let p = super::Position::offset(home, c.y, c.x, 0.0);
+        geo::Coord {
+            x: p.lon_deg,
+            y: p.lat_deg,
+        }
+    }))
 }
 
 /// A `constraints` value: a non-empty array of non-empty strings.

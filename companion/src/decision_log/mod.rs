@@ -77,6 +77,11 @@ pub struct Header {
     /// Rotation part number: 0 for `decisions.jsonl`, k for `decisions.k.jsonl`.
     #[serde(default)]
     pub part: u32,
+    /// The plan the guarantee judged (route, zones, activities, planned energy and duration);
+    /// with derived activities, `replay` compiles the mission from them. Absent in logs of
+    /// builds before it (the typed mission).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plan: Option<crate::route_input::PlanSummary>,
 }
 
 impl Header {
@@ -95,6 +100,7 @@ impl Header {
             seed: None,
             step_s: None,
             part: 0,
+            plan: None,
         }
     }
 

@@ -98,6 +98,23 @@ pub struct FlyArgs {
     /// HEARTBEAT count; an autopilot component never does.
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
     pub gcs_sysid: Vec<u8>,
+    /// Zones: a GeoJSON FeatureCollection whose features' `properties.constraints` name
+    /// constraint classes; the route's legs are split where they enter or leave one (default
+    /// for the default route: params/missions/tracking_zones.geojson; docs/guarantee.md).
+    #[arg(long, value_name = "FILE.geojson")]
+    pub zones: Option<PathBuf>,
+    /// Judge the PANORAMA mission's typed `[[activities]]` (params/missions/tracking.toml's
+    /// 1.35 km profile: the legacy plan, which the shipped vehicle profiles were fitted on)
+    /// instead of the activities derived from the route flown and the zones.
+    #[arg(long, conflicts_with = "zones")]
+    pub legacy_plan: bool,
+    /// Home as LAT,LON (degrees), to place a route relative to home among absolute zones.
+    #[arg(long, value_name = "LAT,LON")]
+    pub home: Option<String>,
+    /// The plan the guarantee judges, as `companion fly` derived it before any socket (the
+    /// shell names the activity flown from it); `None`: the typed mission.
+    #[arg(skip)]
+    pub plan: Option<crate::route_input::PlanSummary>,
 }
 
 impl FlyArgs {

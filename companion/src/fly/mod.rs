@@ -27,6 +27,7 @@ mod cycle;
 pub mod gate;
 pub mod link_security;
 mod restart;
+pub mod route_progress;
 mod run_loop;
 mod setup;
 mod shell;
@@ -169,6 +170,7 @@ pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
         .with_params_dir(&params)
         .with_context(|| format!("reading {} for the log header", params.display()))?;
     header.policy = Some(args.policy.clone());
+    header.plan = args.plan.clone();
     header.model = Some(companion_core::decision::ModelKind::Bfm.name().to_string());
     let opts = WriterOptions::from_env()?;
     let mut log = dlog::start_run(&args.log_dir, now, header, opts.clone())

@@ -24,6 +24,8 @@ pub struct FlySetup {
     pub files: companion_core::spec::ParamsFiles,
     /// `fly --mission autopilot`: the speeds' params fallback (`[derive]`), checked at start.
     pub autopilot_speeds: Option<companion_core::route_plan::DeriveSettings>,
+    /// The derived plan against the route flown (`route_activity`); `None` for the typed plan.
+    pub route_progress: Option<super::route_progress::RouteProgress>,
 }
 
 impl FlySetup {
@@ -75,7 +77,13 @@ impl FlySetup {
                 })
             })
             .unwrap_or(route.altitude_m);
+        // The route progress follows the companion's own route; an autopilot mission's activities
+        // are not those of the route loaded (docs/guarantee.md, "Not yet").
+        let route_progress = (args.plan.as_ref())
+            .filter(|_| !args.flies_autopilot_mission())
+            .and_then(|p| super::route_progress::RouteProgress::new(p, &route, states.clone()));
         Ok(Self {
+            route_progress,
             link,
             actions,
             route,

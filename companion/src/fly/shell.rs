@@ -14,6 +14,8 @@ use std::time::Duration;
 /// What the shell keeps between cycles besides the protocol state (one per flight).
 pub struct Shell {
     pub(super) mission: MissionState,
+    /// The derived plan against the route flown: names `route_activity` each cycle.
+    pub(super) route_progress: Option<super::route_progress::RouteProgress>,
     /// The mission state a new flight starts from.
     pub(super) fresh_mission: MissionState,
     pub(super) precedence: Vec<String>,
@@ -68,6 +70,7 @@ impl Shell {
         mission.landed_confirm_s = f.landed_confirm_s;
         mission.ground_altitude_m = f.ground_altitude_m;
         Self {
+            route_progress: setup.route_progress.clone(),
             fresh_mission: mission.clone(),
             mission,
             precedence: setup.link.vehicle_action_precedence.clone(),
