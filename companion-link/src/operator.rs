@@ -542,6 +542,33 @@ impl GcsText {
     }
 }
 
+impl GcsText {
+    /// Texts that belong together (a refusal, then what would fit): they count once against
+    /// `max_per_s`, as one text's chunks do, so the cap never sends the first without the rest.
+    /// None when the first is held back (repeated, or the cap reached).
+    pub fn say_together(
+        &mut self,
+        now: Duration,
+        severity: MavSeverity,
+        texts: &[String],
+    ) -> Vec<Msg> {
+        let mut out = Vec::new();
+        for (k, text) in texts.iter().enumerate() {
+            // The group holds one place in the window: the first's.
+            let held = if k > 0 { self.window.pop_back() } else { None };
+            let msgs = self.say(now, severity, text);
+            if msgs.is_empty() {
+                if k == 0 {
+                    return out;
+                }
+                self.window.extend(held);
+            }
+            out.extend(msgs);
+        }
+        out
+    }
+}
+
 /// Most STATUSTEXT chunks one text is sent in (ArduPilot queues up to about this many).
 pub const MAX_CHUNKS: usize = 4;
 

@@ -49,7 +49,13 @@ east_m = 100.0
 }
 
 fn verdict_of(route: &str) -> serde_json::Value {
-    let (code, out, err) = check(&["--json", "--mission", route]);
+    verdict_with(route, &[])
+}
+
+fn verdict_with(route: &str, extra: &[&str]) -> serde_json::Value {
+    let mut args = vec!["--json", "--mission", route];
+    args.extend_from_slice(extra);
+    let (code, out, err) = check(&args);
     assert_eq!(code, Some(0), "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     v["guarantee"].clone()
@@ -83,11 +89,29 @@ fn a_mission_that_does_not_fit_names_planned_available_and_the_longest_search() 
         longest > 0.0 && longest < 900.0 && longest.fract() == 0.0,
         "{longest}"
     );
-    // That search fits; a second more does not.
+    // That search fits, with room: the edge is further. Without the headroom (an overlay
+    // setting `fit_headroom = 0`) the named search is the edge itself: it fits, a second more
+    // does not.
     let at = verdict_of(&route(d.path(), longest));
     assert_eq!(at["verdict"]["fits"], true, "{}", at["verdict"]);
     assert!(at["ras0"].is_object());
-    let over = verdict_of(&route(d.path(), longest + 1.0));
+    let overlay = d.path().join("no-headroom.toml");
+    std::fs::write(
+        &overlay,
+        "[\"missions/tracking.toml\".guarantee]\nfit_headroom = 0.0\n",
+    )
+    .unwrap();
+    let params = ["--params", overlay.to_str().unwrap()];
+    let edge = verdict_with(&long, &params)["verdict"]["longest_search_s"]
+        .as_f64()
+        .expect("a shorter search fits at the edge");
+    assert!(
+        edge > longest,
+        "the edge {edge} s is beyond the named {longest} s"
+    );
+    let at_edge = verdict_with(&route(d.path(), edge), &params);
+    assert_eq!(at_edge["verdict"]["fits"], true, "{}", at_edge["verdict"]);
+    let over = verdict_with(&route(d.path(), edge + 1.0), &params);
     assert_eq!(over["verdict"]["fits"], false, "{}", over["verdict"]);
     // The text says the same in words.
     let (code, text, err) = check(&["--mission", &long]);

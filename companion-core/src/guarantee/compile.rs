@@ -182,11 +182,13 @@ impl<'f> Compiler<'f> {
         let [lo, hi] = t.energy_scale_bounds;
         check("energy_scale_bounds[0]", lo, 0.01, 1.0)?;
         check("energy_scale_bounds[1]", hi, 1.0, 100.0)?;
+        check("fit_headroom", t.fit_headroom, 0.0, 0.5)?;
         Ok(super::Tuning {
             power_drift_tolerance: t.power_drift_tolerance,
             power_drift_min_s: t.power_drift_min_s,
             prior_weight_s: t.prior_weight_s,
             energy_scale_bounds: (lo, hi),
+            fit_headroom: t.fit_headroom,
         })
     }
 

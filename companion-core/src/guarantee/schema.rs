@@ -79,6 +79,10 @@ fn one() -> f64 {
     1.0
 }
 
+fn fit_headroom() -> f64 {
+    super::tuning::FIT_HEADROOM
+}
+
 /// `[guarantee]`: how a measured power drift is judged and learned.
 #[allow(dead_code)] // `source` documents the data
 #[derive(Debug, Clone, Deserialize)]
@@ -88,6 +92,8 @@ pub(super) struct TuningFile {
     pub(super) power_drift_min_s: f64,
     pub(super) prior_weight_s: f64,
     pub(super) energy_scale_bounds: [f64; 2],
+    #[serde(default = "fit_headroom")]
+    pub(super) fit_headroom: f64,
     #[serde(default)]
     pub(super) source: String,
 }

@@ -12,6 +12,11 @@ pub const POWER_DRIFT_MIN_S: f64 = 10.0;
 pub const PRIOR_WEIGHT_S: f64 = 60.0;
 /// The factor learned from a drift is kept within these bounds.
 pub const ENERGY_SCALE_BOUNDS: (f64, f64) = (0.5, 2.0);
+/// What a refusal names as fitting (the longest search or tracking hold) fits within this
+/// fraction less than the available energy and time, not at the edge: in flight the margin is
+/// judged from readings with their own steps and noise, and a plan named at the edge is cut at
+/// the first one (docs/guarantee.md, "The verdict").
+pub const FIT_HEADROOM: f64 = 0.05;
 
 /// The power-drift tuning of a mission: its `[guarantee]` section, else the constants above
 /// (which are its defaults).
@@ -25,6 +30,8 @@ pub struct Tuning {
     pub prior_weight_s: f64,
     /// The learned energy factor is kept within these bounds.
     pub energy_scale_bounds: (f64, f64),
+    /// A hold a refusal names fits within this fraction below the available energy and time.
+    pub fit_headroom: f64,
 }
 
 impl Default for Tuning {
@@ -34,6 +41,7 @@ impl Default for Tuning {
             power_drift_min_s: POWER_DRIFT_MIN_S,
             prior_weight_s: PRIOR_WEIGHT_S,
             energy_scale_bounds: ENERGY_SCALE_BOUNDS,
+            fit_headroom: FIT_HEADROOM,
         }
     }
 }

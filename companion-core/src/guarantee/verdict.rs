@@ -72,8 +72,13 @@ pub fn judge(spec: &MissionSpec, spent: &[f64], battery_pct: Option<f64>) -> Ver
     let lowest = lowest_totals(&p);
     v.planned_energy_j = at(&lowest, e);
     v.planned_duration_s = at(&lowest, d);
-    v.longest_search_s = longest_hold(spec, &p, HoldKind::Search);
-    v.longest_tracking_s = longest_hold(spec, &p, HoldKind::Tracking);
+    // What is named as fitting fits with the headroom, not at the edge (tuning.rs, FIT_HEADROOM).
+    let mut room = p.clone();
+    for g in &mut room.goals {
+        g.bound -= g.bound.abs() * spec.tuning.fit_headroom;
+    }
+    v.longest_search_s = longest_hold(spec, &room, HoldKind::Search);
+    v.longest_tracking_s = longest_hold(spec, &room, HoldKind::Tracking);
     if v.longest_search_s.is_none() && v.longest_tracking_s.is_none() {
         let route = with_holds(
             spec,

@@ -477,3 +477,34 @@ fn non_ascii_and_control_characters_never_break_a_chunk() {
     let got = parts(&t.say(s(0.0), sev, &text));
     assert_eq!(joined(&got), "?".repeat(70));
 }
+
+/// A refusal and what would fit go out together, counted once: the cap never sends the first
+/// without the second (on real SITL the "link UNSIGNED" warning took the second place in the
+/// second and the "fits: search" line was dropped).
+#[test]
+fn texts_that_belong_together_count_once_against_the_cap() {
+    let mut t = GcsText::new(Duration::from_secs(10), 2);
+    let sev = MavSeverity::MAV_SEVERITY_WARNING;
+    assert_eq!(t.say(s(0.0), sev, "link UNSIGNED").len(), 1);
+    let pair = [
+        "Start refused: plan".to_string(),
+        "fits: search 79 s".to_string(),
+    ];
+    assert_eq!(
+        t.say_together(s(0.1), sev, &pair).len(),
+        2,
+        "both, one place"
+    );
+    assert!(
+        t.say(s(0.2), sev, "other").is_empty(),
+        "the second's place is the pair's"
+    );
+    assert!(
+        t.say_together(s(0.3), sev, &pair).is_empty(),
+        "the first repeated: none"
+    );
+    // With the cap full, the first is held back and so is the rest.
+    let other = ["x".to_string(), "y".to_string()];
+    assert!(t.say_together(s(0.4), sev, &other).is_empty());
+    assert_eq!(t.say_together(s(1.5), sev, &other).len(), 2);
+}

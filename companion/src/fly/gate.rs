@@ -228,9 +228,7 @@ pub fn request_start(
                 let line = ev.describe();
                 tracing::warn!("{line}");
                 shell.pending_events.push(Event::from(line));
-                for text in &texts {
-                    out.extend(shell.texts.say(now, WARNING, text));
-                }
+                out.extend(shell.texts.say_together(now, WARNING, &texts));
                 shell.refusal_told = Some(first);
             }
             Err(refusal)

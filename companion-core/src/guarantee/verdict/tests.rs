@@ -103,6 +103,12 @@ fn longest_by_scan(
             HoldKind::Search => mission(cap_wh, limit_s, h, track_s),
             HoldKind::Tracking => mission(cap_wh, limit_s, search_s, h),
         };
+        // What is named fits with the headroom below the goals (tuning.rs, FIT_HEADROOM).
+        let mut spec = spec;
+        let room = spec.tuning.fit_headroom;
+        for g in &mut spec.problem.goals {
+            g.bound -= g.bound.abs() * room;
+        }
         if fits_exhaustively(&spec) {
             best = Some(h);
         }
