@@ -78,3 +78,14 @@ def test_a_refused_start_names_planned_available_and_what_fits(autopilot_factory
     # The journal's refusal says the same words.
     assert any(e.startswith("operator: start refused") and head.removeprefix("Start refused: ") in e
                for e in events(run.records())), [e for e in events(run.records()) if "refused" in e]
+    # After the flight, `review --summary`'s outcome line says the start was refused and why (issue 37 item 4),
+    # with the verdict's words: not "log ends on the ground in state base".
+    import os
+    import subprocess
+    folder = next(p for p in run.log_dir.iterdir() if p.is_dir())
+    out = subprocess.run([os.environ["COMPANION_BIN"], "review", str(folder), "--summary"], capture_output=True,
+                         text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    outcome = [line for line in out.stdout.splitlines() if "never armed" in line]
+    assert outcome and "start refused: " in outcome[0] and head.removeprefix("Start refused: ") in outcome[0], \
+        out.stdout[:2000]

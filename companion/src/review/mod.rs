@@ -257,6 +257,9 @@ pub struct Review {
     home: Option<(f64, f64)>,
     /// Some record said the vehicle was armed.
     ever_armed: bool,
+    /// The last start refusal of the log, in the operator's words (the gate's event, with the
+    /// guarantee's verdict when the refused cycle has one).
+    refused: Option<String>,
     /// The previous record's `vehicle.armed`.
     prev_armed: Option<bool>,
     /// (action, command) -> in-progress results not yet followed by an outcome.
@@ -711,6 +714,20 @@ impl Review {
 
     /// What the outcome is judged from: a crash, and the last record.
     fn outcome_inputs(&mut self, r: &DecisionRecord, armed: Option<bool>) {
+        // The gate's refusal event (fly/gate.rs: `operator: start refused (BY): WHY; still
+        // waiting ...`), and the guarantee's typed verdict when the models refused on energy.
+        for e in &r.events {
+            let text = e.to_string();
+            if let Some(rest) = text.strip_prefix("operator: start refused") {
+                let why = rest.split_once(": ").map_or(rest, |(_, w)| w);
+                let why = why.split("; still waiting").next().unwrap_or(why).trim();
+                let verdict = (r.guarantee.as_ref())
+                    .and_then(|g| g.verdict.as_ref())
+                    .filter(|v| !v.fits)
+                    .map(|v| format!(" ({})", v.words().join("; ")));
+                self.refused = Some(format!("{why}{}", verdict.unwrap_or_default()));
+            }
+        }
         // Outcome inputs.
         if self.crash.is_none() && (r.state == "crash" || r.state == "collision") {
             self.crash = Some((r.state.clone(), r.cycle));
@@ -762,7 +779,9 @@ impl Review {
             (_, None) => "no decision records".to_string(),
             (Some((state, cycle)), _) => format!("crashed ({state} at cycle {cycle})"),
             // Fly logs say whether the vehicle is armed: the end is told from that.
-            (None, Some(l)) if l.armed.is_some() => flight_end(l, home, ever_armed),
+            (None, Some(l)) if l.armed.is_some() => {
+                flight_end(l, home, ever_armed, self.refused.as_deref())
+            }
             (None, Some(l)) if l.landing => match l.altitude {
                 Some(a) if a > 0.5 => format!("landing (log ends at {a:.1} m)"),
                 _ => "landed".into(),
@@ -813,7 +832,12 @@ impl Review {
 
 /// How a fly log ends, from its last record: taken over (by which mode), landed and disarmed
 /// (where, how far from home) or still armed (altitude, mode).
-fn flight_end(l: &LastRecord, home: Option<(f64, f64)>, ever_armed: bool) -> String {
+fn flight_end(
+    l: &LastRecord,
+    home: Option<(f64, f64)>,
+    ever_armed: bool,
+    refused: Option<&str>,
+) -> String {
     let mode = l.mode.as_deref().unwrap_or("unknown");
     let taken = if l.operator.as_deref() == Some("taken_over") {
         format!("taken over by the pilot (mode {mode}); ")
@@ -836,10 +860,13 @@ fn flight_end(l: &LastRecord, home: Option<(f64, f64)>, ever_armed: bool) -> Str
     match l.armed {
         Some(true) => format!("{taken}log ended with the vehicle armed{alt} in {mode}{at}"),
         _ if ever_armed => format!("{taken}landed and disarmed{at}"),
-        _ => format!(
-            "{taken}never armed: log ends on the ground in state {}",
-            l.state
-        ),
+        _ => match refused {
+            Some(why) => format!("{taken}never armed: start refused: {why}"),
+            None => format!(
+                "{taken}never armed: log ends on the ground in state {}",
+                l.state
+            ),
+        },
     }
 }
 
