@@ -5,6 +5,9 @@
 
 use std::path::{Path, PathBuf};
 
+#[path = "support/shipped_code.rs"]
+mod shipped_code;
+
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
@@ -36,14 +39,14 @@ fn action_ids() -> Vec<String> {
         .collect()
 }
 
-/// The shipped part of a source file: up to its `#[cfg(test)]` module (the crates keep their
-/// unit tests last), comment lines blanked (line numbers kept). None for a test-only file.
-fn shipped_code(path: &Path, text: &str) -> Option<String> {
+/// The shipped part of a source file: every `#[cfg(test)]` item blanked wherever it sits
+/// (`support/shipped_code.rs`), comment lines blanked (line numbers kept). None for a test-only file.
+fn shipped_lines(path: &Path, text: &str) -> Option<String> {
     let name = path.file_name()?.to_str()?;
     if name == "tests.rs" || path.components().any(|c| c.as_os_str() == "tests") {
         return None;
     }
-    let code = text.split("#[cfg(test)]").next().unwrap_or("");
+    let code = shipped_code::shipped(text);
     Some(
         code.lines()
             .map(|l| {
@@ -76,7 +79,7 @@ fn literals(dirs: &[&str], ids: &[String]) -> Vec<String> {
                 continue;
             }
             let text = std::fs::read_to_string(&f).unwrap();
-            let Some(code) = shipped_code(&f, &text) else {
+            let Some(code) = shipped_lines(&f, &text) else {
                 continue;
             };
             for (n, line) in code.lines().enumerate() {
@@ -110,9 +113,18 @@ fn no_action_name_literal_in_the_shells_code() {
 fn the_search_finds_a_literal_and_skips_tests_and_comments() {
     let f = Path::new("companion/src/x.rs");
     let code = "let a = \"take_off\";\n// \"take_off\"\n#[cfg(test)]\nmod tests { \"take_off\" }";
-    let shipped = shipped_code(f, code).unwrap();
-    assert_eq!(shipped, "let a = \"take_off\";\n");
-    assert!(shipped_code(Path::new("companion/src/tests.rs"), code).is_none());
+    let shipped = shipped_lines(f, code).unwrap();
+    assert!(
+        shipped.starts_with("let a = \"take_off\";\n"),
+        "{shipped:?}"
+    );
+    assert_eq!(shipped.matches("take_off").count(), 1, "{shipped:?}");
+    assert_eq!(
+        shipped.lines().count(),
+        code.lines().count(),
+        "line numbers kept"
+    );
+    assert!(shipped_lines(Path::new("companion/src/tests.rs"), code).is_none());
     // No file is excepted any more.
     assert!(NOT_YET.is_empty());
 }

@@ -6,6 +6,9 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
+#[path = "support/shipped_code.rs"]
+mod shipped_code;
+
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
@@ -40,10 +43,10 @@ fn modules(src: &Path) -> BTreeMap<String, PathBuf> {
     out
 }
 
-/// The shipped code of a file (up to its test module), comment lines dropped.
+/// The shipped code of a file (its `#[cfg(test)]` items blanked), comment lines dropped.
 fn code(path: &Path) -> String {
     let text = std::fs::read_to_string(path).unwrap();
-    let shipped = text.split("#[cfg(test)]").next().unwrap_or("");
+    let shipped = shipped_code::shipped(&text);
     shipped
         .lines()
         .filter(|l| !l.trim_start().starts_with("//"))

@@ -4,6 +4,9 @@
 
 use std::path::{Path, PathBuf};
 
+#[path = "support/shipped_code.rs"]
+mod shipped_code;
+
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
@@ -184,8 +187,8 @@ fn no_debug_formatting_in_the_modules_that_build_records() {
     let mut found = Vec::new();
     for f in &files {
         let text = std::fs::read_to_string(f).unwrap();
-        // Inline tests (at the end of a file) may print what they like.
-        let shipped = text.split("#[cfg(test)]\nmod tests {").next().unwrap_or("");
+        // Inline tests (`#[cfg(test)]` items) may print what they like.
+        let shipped = shipped_code::shipped(&text);
         for (n, line) in shipped.lines().enumerate() {
             if line.contains(":?}") || line.contains(":#?}") {
                 found.push(format!("{}:{}: {}", f.display(), n + 1, line.trim()));
@@ -200,7 +203,7 @@ fn no_debug_formatting_in_the_modules_that_build_records() {
 
 /// The link is sans-IO (issue 25): it is handed bytes and params as data and reads no file;
 /// the shell reads them (the signing key: `fly::link_security::load_signing_key`). Test code
-/// (test files, and the `#[cfg(test)]` part at the end of a file) may use the disk.
+/// (test files, and `#[cfg(test)]` items wherever they sit) may use the disk.
 #[test]
 fn no_shipped_file_of_the_link_names_std_fs() {
     let mut files = Vec::new();
@@ -209,11 +212,64 @@ fn no_shipped_file_of_the_link_names_std_fs() {
     assert!(files.len() > 10, "{files:?}");
     for f in files {
         let text = std::fs::read_to_string(&f).unwrap();
-        let shipped = text.split("#[cfg(test)]").next().unwrap_or("");
+        let shipped = shipped_code::shipped(&text);
         assert!(
             !shipped.contains("std::fs"),
             "{} names std::fs",
             f.display()
         );
     }
+}
+
+/// The guards read the whole file (issue 39 item 4): a `#[cfg(test)]` item is blanked where it
+/// sits, and what follows it is still read. Each case here is one the old cut (everything after
+/// the first `#[cfg(test)]`) or a naive brace count gets wrong.
+#[test]
+fn shipped_code_blanks_only_the_test_items() {
+    let keep = |src: &str, wanted: &[&str], gone: &[&str]| {
+        let out = shipped_code::shipped(src);
+        assert_eq!(out.lines().count(), src.lines().count(), "{out:?}");
+        for w in wanted {
+            assert!(out.contains(w), "{w} lost in {out:?}");
+        }
+        for g in gone {
+            assert!(!out.contains(g), "{g} kept in {out:?}");
+        }
+    };
+    // An out-of-line test module near the top: the rest of the file is shipped.
+    keep(
+        "mod a;\n#[cfg(test)]\nmod tests;\npub fn after() { \"std::fs\" }\n",
+        &["mod a;", "pub fn after()", "std::fs"],
+        &["mod tests"],
+    );
+    // A test module in the middle, with braces in strings, chars and comments inside it.
+    keep(
+        "fn a() {}\n#[cfg(test)]\nmod tests {\n  fn t() { let s = \"}\"; let c = '}'; /* } */ // }\n  }\n}\nfn b() {}\n",
+        &["fn a()", "fn b()"],
+        &["fn t()", "mod tests"],
+    );
+    // A raw string and a lifetime inside the test item.
+    keep(
+        "#[cfg(test)]\nfn t<'a>(x: &'a str) { let r = r#\"}}\"#; }\nfn shipped() {}\n",
+        &["fn shipped()"],
+        &["fn t", "r#"],
+    );
+    // A gated `use` and an attribute after the cfg.
+    keep(
+        "#[cfg(test)]\nuse std::fs;\n#[cfg(test)]\n#[allow(dead_code)]\nmod m { }\nuse std::io;\n",
+        &["use std::io;"],
+        &["std::fs", "mod m", "allow"],
+    );
+    // The text `#[cfg(test)]` in a string or comment gates nothing.
+    keep(
+        "const S: &str = \"#[cfg(test)]\";\n// #[cfg(test)]\nfn real() {}\n",
+        &["fn real()", "const S"],
+        &[],
+    );
+    // Escaped quotes in chars and strings.
+    keep(
+        "let q = '\\''; let s = \"\\\"}\";\n#[cfg(test)]\nmod t { }\nfn z() {}\n",
+        &["fn z()", "let q"],
+        &["mod t"],
+    );
 }

@@ -16,7 +16,7 @@ pub const ENERGY_SCALE_BOUNDS: (f64, f64) = (0.5, 2.0);
 /// fraction less than the available energy and time, not at the edge: in flight the margin is
 /// judged from readings with their own steps and noise, and a plan named at the edge is cut at
 /// the first one (docs/guarantee.md, "The verdict").
-pub const FIT_HEADROOM: f64 = 0.05;
+pub(crate) const FIT_HEADROOM: f64 = 0.05;
 
 /// The power-drift tuning of a mission: its `[guarantee]` section, else the constants above
 /// (which are its defaults).
