@@ -4,19 +4,11 @@
 //! item and reason; the default (no route, no zones) the shipped route and zones.
 
 use std::path::Path;
-use std::process::Command;
+
+mod common;
 
 fn check(args: &[&str]) -> (Option<i32>, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_companion"))
-        .arg("check")
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
+    common::check_run(env!("CARGO_BIN_EXE_companion"), args)
 }
 
 fn write(dir: &Path, name: &str, text: &str) -> String {

@@ -5,19 +5,11 @@
 //! arithmetic.
 
 use std::path::Path;
-use std::process::Command;
+
+mod common;
 
 fn check(args: &[&str]) -> (Option<i32>, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_companion"))
-        .arg("check")
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
+    common::check_run(env!("CARGO_BIN_EXE_companion"), args)
 }
 
 /// The shipped default route (params/missions/tracking_route.toml) with `search_s` of search.

@@ -1,18 +1,9 @@
 //! `companion check` end to end: human and JSON output, evidence showing the paper's figures.
-
-use std::process::Command;
+mod common;
 
 fn check(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_companion"))
-        .arg("check")
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
+    let (code, out, err) = common::check_run(env!("CARGO_BIN_EXE_companion"), args);
+    (code == Some(0), out, err)
 }
 
 #[test]

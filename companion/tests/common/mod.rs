@@ -52,3 +52,15 @@ pub(crate) fn copy_dir(from: &Path, to: &Path) {
         }
     }
 }
+
+/// `companion check ARGS` (BIN as for `run_companion`): exit code, stdout, stderr.
+pub(crate) fn check_run(bin: &str, args: &[&str]) -> (Option<i32>, String, String) {
+    let mut all = vec!["check"];
+    all.extend_from_slice(args);
+    let out = run_companion(bin, &all);
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
+}
