@@ -1,4 +1,5 @@
 //! `companion check` end to end: human and JSON output, evidence showing the paper's figures.
+
 mod common;
 
 fn check(args: &[&str]) -> (bool, String, String) {
