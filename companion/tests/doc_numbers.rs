@@ -5,6 +5,11 @@
 //! doc uses. `scripts/doc_numbers.sh` prints every number (run with `--nocapture`).
 
 mod common;
+// The optimality-gap measurement of docs/guarantee.md, as `cargo run -p panorama --example gap`
+// runs it.
+#[path = "../../panorama/examples/gap.rs"]
+#[allow(dead_code)]
+mod gap;
 use common::shipped_model;
 use companion::sim::{self, Scenario, WorldSpec};
 use companion_core::decision::{Core, Model, ModelKind};
@@ -129,8 +134,38 @@ fn mean_tracking(scenario: &str, policy: &str, runs: u64, binds: bool) -> f64 {
     sim::mean_ci95(&xs).0
 }
 
+/// A value of the optimality-gap table (`cargo run -p panorama --example gap`: seed 2024, 2000
+/// instances per family), computed once: `row` as `g1_cost`, `g1_indep`, `g2_cost`, `g2_indep`.
+fn gap_value(row: &str, column: &str) -> f64 {
+    static ROWS: std::sync::OnceLock<Vec<gap::GapRow>> = std::sync::OnceLock::new();
+    let rows = ROWS.get_or_init(|| gap::rows(2024, 2000));
+    let r = rows
+        .iter()
+        .find(|r| {
+            row == format!(
+                "g{}_{}",
+                r.goals,
+                if r.correlated { "cost" } else { "indep" }
+            )
+        })
+        .unwrap_or_else(|| panic!("no gap family {row}"));
+    match column {
+        "solved" => r.solved as f64,
+        "optimal" => r.optimal_pct,
+        "mean" => r.mean,
+        "p95" => r.p95,
+        "max" => r.max,
+        "missed" => r.missed as f64,
+        _ => panic!("no gap column {column}"),
+    }
+}
+
 /// The recipe of each marker name.
 fn compute(name: &str) -> Option<f64> {
+    if let Some(rest) = name.strip_prefix("gap.") {
+        let (row, column) = rest.split_once('.')?;
+        return Some(gap_value(row, column));
+    }
     let v = match name {
         "mdp.navigation_wpf.safety" => {
             switch_point("navigation", "wpf", "A11", "P_battery", "safety")
@@ -233,5 +268,10 @@ fn every_marked_number_in_the_docs_is_what_the_code_gives() {
     for r in RECIPES {
         assert!(values.contains_key(r), "recipe {r} is marked in no doc");
     }
+    let gap_cells = values.keys().filter(|n| n.starts_with("gap.")).count();
+    assert_eq!(
+        gap_cells, 24,
+        "the gap table's 4 rows x 6 columns are marked"
+    );
     assert!(wrong.is_empty(), "{}", wrong.join("\n"));
 }

@@ -71,18 +71,31 @@ fn instance(r: &mut SplitMix, goals: usize, correlated: bool) -> Problem {
     Problem { goals, activities }
 }
 
-fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let seed = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(2024);
-    let n: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(2000);
-    println!(
-        "seed {seed}, {n} instances per row; gap = (optimum - RAS0) / optimum of the summed score"
-    );
-    println!(
-        "{:<28} {:>8} {:>9} {:>10} {:>9} {:>9} {:>11}",
-        "family", "solved", "optimal%", "mean gap%", "p95 gap%", "max gap%", "missed sol."
-    );
+/// One family's measurement (a row of the table in docs/guarantee.md, "the optimality gap").
+pub(crate) struct GapRow {
+    /// Goals per instance (1 or 2).
+    pub(crate) goals: usize,
+    /// Capability correlated with cost (else independent).
+    pub(crate) correlated: bool,
+    /// Instances the exact search solved (the gaps measured).
+    pub(crate) solved: usize,
+    /// Share of them where RAS0 is optimal (%).
+    pub(crate) optimal_pct: f64,
+    /// Mean gap (% of the optimum).
+    pub(crate) mean: f64,
+    /// 95th percentile of the gap (%).
+    pub(crate) p95: f64,
+    /// Largest gap (%).
+    pub(crate) max: f64,
+    /// Instances with a solution that RAS0 did not find.
+    pub(crate) missed: usize,
+}
+
+/// The four families on one seeded stream, `n` instances each, in the table's order
+/// (docs numbers: companion/tests/doc_numbers.rs reads this file).
+pub(crate) fn rows(seed: u64, n: usize) -> Vec<GapRow> {
     let mut r = SplitMix(seed);
+    let mut out = Vec::new();
     for goals in [1, 2] {
         for correlated in [true, false] {
             let mut gaps = Vec::new();
@@ -105,26 +118,46 @@ fn main() {
                 }
             }
             gaps.sort_by(f64::total_cmp);
-            let mean = gaps.iter().sum::<f64>() / gaps.len().max(1) as f64;
-            let p95 = gaps.get(gaps.len() * 95 / 100).copied().unwrap_or(0.0);
-            let max = gaps.last().copied().unwrap_or(0.0);
-            let family = format!(
-                "{goals} goal(s), {}",
-                if correlated {
-                    "capability~cost"
-                } else {
-                    "independent"
-                }
-            );
-            println!(
-                "{family:<28} {:>8} {:>9.1} {:>10.2} {:>9.2} {:>9.2} {:>11}",
-                gaps.len(),
-                100.0 * optimal as f64 / gaps.len().max(1) as f64,
-                mean,
-                p95,
-                max,
-                missed
-            );
+            out.push(GapRow {
+                goals,
+                correlated,
+                solved: gaps.len(),
+                optimal_pct: 100.0 * optimal as f64 / gaps.len().max(1) as f64,
+                mean: gaps.iter().sum::<f64>() / gaps.len().max(1) as f64,
+                p95: gaps.get(gaps.len() * 95 / 100).copied().unwrap_or(0.0),
+                max: gaps.last().copied().unwrap_or(0.0),
+                missed,
+            });
         }
+    }
+    out
+}
+
+#[allow(dead_code)] // the entry point of the example, not of the doc-numbers test including it
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let seed = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(2024);
+    let n: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(2000);
+    println!(
+        "seed {seed}, {n} instances per row; gap = (optimum - RAS0) / optimum of the summed score"
+    );
+    println!(
+        "{:<28} {:>8} {:>9} {:>10} {:>9} {:>9} {:>11}",
+        "family", "solved", "optimal%", "mean gap%", "p95 gap%", "max gap%", "missed sol."
+    );
+    for row in rows(seed, n) {
+        let family = format!(
+            "{} goal(s), {}",
+            row.goals,
+            if row.correlated {
+                "capability~cost"
+            } else {
+                "independent"
+            }
+        );
+        println!(
+            "{family:<28} {:>8} {:>9.1} {:>10.2} {:>9.2} {:>9.2} {:>11}",
+            row.solved, row.optimal_pct, row.mean, row.p95, row.max, row.missed
+        );
     }
 }
