@@ -6,8 +6,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-#[path = "support/shipped_code.rs"]
-mod shipped_code;
+#[path = "support/module_map.rs"]
+mod module_map;
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -19,74 +19,15 @@ fn root() -> PathBuf {
 /// here only with the reason it cannot be split yet.
 const KNOWN: [(&str, &[&str]); 0] = [];
 
-/// Module path (`fmea::compile`) -> source file, for the crate's `src/`.
-fn modules(src: &Path) -> BTreeMap<String, PathBuf> {
-    fn walk(dir: &Path, src: &Path, out: &mut BTreeMap<String, PathBuf>) {
-        for e in std::fs::read_dir(dir).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                walk(&p, src, out);
-            } else if p.extension().is_some_and(|x| x == "rs") {
-                let rel = p.strip_prefix(src).unwrap().with_extension("");
-                let mut name = rel.to_string_lossy().replace(['/', '\\'], "::");
-                if let Some(parent) = name.strip_suffix("::mod") {
-                    name = parent.to_string();
-                }
-                if name != "lib" && name != "main" {
-                    out.insert(name, p);
-                }
-            }
-        }
-    }
-    let mut out = BTreeMap::new();
-    walk(src, src, &mut out);
-    out
-}
-
-/// The shipped code of a file (its `#[cfg(test)]` items blanked), comment lines dropped.
-fn code(path: &Path) -> String {
-    let text = std::fs::read_to_string(path).unwrap();
-    let shipped = shipped_code::shipped(&text);
-    shipped
-        .lines()
-        .filter(|l| !l.trim_start().starts_with("//"))
-        .collect::<Vec<_>>()
-        .join("\n")
-}
-
 /// Which modules each module names by `crate::` or `super::` paths (the longest known prefix).
 fn edges(mods: &BTreeMap<String, PathBuf>) -> BTreeMap<String, BTreeSet<String>> {
-    let mut out = BTreeMap::new();
-    for (m, path) in mods {
-        let text = code(path);
-        let parent: Vec<&str> = m.split("::").collect();
-        let parent = parent[..parent.len() - 1].join("::");
-        let mut to = BTreeSet::new();
-        for (prefix, base) in [("crate::", String::new()), ("super::", parent.clone())] {
-            for (i, _) in text.match_indices(prefix) {
-                let rest = &text[i + prefix.len()..];
-                let path: String = rest
-                    .chars()
-                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_' || *c == ':')
-                    .collect();
-                let parts: Vec<&str> = path.split("::").filter(|p| !p.is_empty()).collect();
-                let found = (1..=parts.len()).rev().find_map(|k| {
-                    let name = parts[..k].join("::");
-                    let full = if base.is_empty() {
-                        name
-                    } else {
-                        format!("{base}::{name}")
-                    };
-                    mods.contains_key(&full).then_some(full)
-                });
-                if let Some(f) = found.filter(|f| f != m) {
-                    to.insert(f);
-                }
-            }
-        }
-        out.insert(m.clone(), to);
-    }
-    out
+    mods.iter()
+        .map(|(m, path)| {
+            let text = module_map::code(path);
+            let to = module_map::imports(mods, m, &text, &[]);
+            (m.clone(), to.into_iter().map(|(_, t)| t).collect())
+        })
+        .collect()
 }
 
 /// The circles: every set of two or more modules each reachable from the others.
@@ -128,7 +69,7 @@ fn circles(edges: &BTreeMap<String, BTreeSet<String>>) -> Vec<Vec<String>> {
 #[test]
 fn no_import_circle_among_the_files_of_a_crate() {
     for krate in ["companion-core", "companion-link", "companion"] {
-        let mods = modules(&root().join(krate).join("src"));
+        let mods = module_map::modules(&root().join(krate).join("src"));
         assert!(mods.len() > 5, "{krate}: {mods:?}");
         let found = circles(&edges(&mods));
         let known: Vec<Vec<String>> = KNOWN
