@@ -19,6 +19,7 @@
 //! - `review`: `companion review` (HTML report, summary, why of a cycle).
 //! - `export`: `companion export` (MCAP or CSV).
 //! - `replay`: `companion replay` (a run's log fed back through a fresh core).
+//! - `text`: text leaving the process: HTML-escaped, or cleaned or escaped for a terminal.
 //! - `signing_setup`: `companion signing-setup` (a MAVLink 2 signing key made, provisioned, proven).
 
 #![allow(missing_docs)] // the shells are documented per module; their items are not an API
@@ -39,4 +40,5 @@ pub mod route_input;
 pub mod signing_setup;
 pub mod sim;
 pub mod sim_plan;
+pub mod text;
 pub mod vocabulary;

@@ -12,7 +12,7 @@
 //! - the bytes go to a temporary file in the same folder (`tempfile`), renamed over the output
 //!   only when whole: a symlink at the output is replaced, its target left alone.
 
-use crate::review::text::escape_controls;
+use crate::text::escape_controls;
 use std::path::{Path, PathBuf};
 
 /// An output refused before anything was written: the name (escaped) and why.

@@ -63,7 +63,7 @@ impl TlogWriter {
                 eprintln!(
                     "warning: {} reached its cap of {} bytes: further frames are counted, not \
                      written",
-                    crate::review::text::escape_controls(&self.path.display().to_string(), false),
+                    crate::text::escape_controls(&self.path.display().to_string(), false),
                     self.max_bytes
                 );
             }

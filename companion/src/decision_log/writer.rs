@@ -678,10 +678,7 @@ impl WriterThread {
                     eprintln!(
                         "warning: decision log {} reached its cap of {} bytes: further \
                          records are counted, not written",
-                        crate::review::text::escape_controls(
-                            &self.dir.display().to_string(),
-                            false
-                        ),
+                        crate::text::escape_controls(&self.dir.display().to_string(), false),
                         self.opts.max_bytes
                     );
                 }
@@ -725,10 +722,7 @@ impl WriterThread {
                     eprintln!(
                         "warning: decision log {}: write failed ({e}): this and every later \
                          record are counted as lost",
-                        crate::review::text::escape_controls(
-                            &self.dir.display().to_string(),
-                            false
-                        )
+                        crate::text::escape_controls(&self.dir.display().to_string(), false)
                     );
                     // Space for the loss line that says so.
                     self.reserve.release();

@@ -13,7 +13,8 @@ pub mod outcomes;
 pub mod plot;
 mod records;
 mod terminal;
-pub mod text;
+// The text helpers live on the ground floor (`crate::text`); kept here by their old path.
+pub use crate::text;
 pub mod why;
 
 pub use html::render_html;
