@@ -11,6 +11,7 @@
 //! - `sim`: the seeded discrete-step world and its scenarios (`simulate`).
 //! - `fly`: the MAVLink flight shell (`fly`) and its byte transports (serial, UDP, TCP).
 //! - `decision_log`: run folders, the decision-log writer and reader, telemetry logs.
+//! - `params_overlay`: the params overlay `calibrate` writes and `--params FILE` reads.
 //! - `vocabulary`: the observation and action vocabularies across the params and both shells
 //!   (producers, consumers), checked at load and listed by `check`.
 //! - `calibrate`: `companion calibrate` (power model, durations and BN rows fitted to runs; the
@@ -34,6 +35,7 @@ pub mod learn_cpt;
 pub mod output_file;
 pub mod params;
 pub mod params_files;
+pub mod params_overlay;
 pub mod replay;
 pub mod review;
 pub mod route_input;

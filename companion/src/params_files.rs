@@ -17,11 +17,11 @@ const MAX_FILES: usize = 1000;
 /// be a params overlay file (`companion calibrate --out`, docs/calibrate.md): its base params
 /// directory is read and the overlay layered on it.
 pub fn read_params_dir(dir: &Path) -> Result<ParamsFiles, SpecError> {
-    if crate::calibrate::overlay::is_overlay(dir) {
-        let (base, table) = crate::calibrate::overlay::read_overlay(dir, default_params_dir())?;
+    if crate::params_overlay::is_overlay(dir) {
+        let (base, table) = crate::params_overlay::read_overlay(dir, default_params_dir())?;
         let mut files = read_dir_only(&base)?;
-        crate::calibrate::overlay::apply(&mut files, dir, &table)?;
-        crate::calibrate::overlay::check_power(&files, dir, &table)?;
+        crate::params_overlay::apply(&mut files, dir, &table)?;
+        crate::params_overlay::check_power(&files, dir, &table)?;
         return Ok(files);
     }
     read_dir_only(dir)

@@ -108,7 +108,7 @@ impl Header {
     /// `dir` is a params overlay (`--params FILE`), the files as layered, so that `replay`
     /// rebuilds the model the run flew.
     pub fn with_params_dir(mut self, dir: &Path) -> io::Result<Self> {
-        if crate::calibrate::overlay::is_overlay(dir) {
+        if crate::params_overlay::is_overlay(dir) {
             let files = crate::params::read_params_dir(dir).map_err(io::Error::other)?;
             let base = files.dir().to_path_buf();
             for (path, text) in files.iter() {
