@@ -11,6 +11,7 @@
 //! - `sim`: the seeded discrete-step world and its scenarios (`simulate`).
 //! - `fly`: the MAVLink flight shell (`fly`) and its byte transports (serial, UDP, TCP).
 //! - `decision_log`: run folders, the decision-log writer and reader, telemetry logs.
+//! - `learning_params`: params/learning.toml, the bound of in-flight CPT learning.
 //! - `params_overlay`: the params overlay `calibrate` writes and `--params FILE` reads.
 //! - `vocabulary`: the observation and action vocabularies across the params and both shells
 //!   (producers, consumers), checked at load and listed by `check`.
@@ -32,6 +33,7 @@ pub mod decision_log;
 pub mod export;
 pub mod fly;
 pub mod learn_cpt;
+pub mod learning_params;
 pub mod output_file;
 pub mod params;
 pub mod params_files;

@@ -33,7 +33,7 @@ pub struct Params {
     pub route: Route,
     pub route_file: PathBuf,
     /// In-flight CPT learning's bound (`learning.toml`, optional; `--learn-cpt`).
-    pub learning: crate::learn_cpt::LearningParams,
+    pub learning: crate::learning_params::LearningParams,
 }
 
 impl Params {
@@ -52,7 +52,7 @@ impl Params {
         let model = Model::load(&files)?;
         let world = WorldSpec::load(&files)?;
         let (link, commands, route, route_file) = load_fly_files(&files, route, &model.actions)?;
-        let learning = crate::learn_cpt::LearningParams::load(&files)?;
+        let learning = crate::learning_params::LearningParams::load(&files)?;
         let p = Params {
             learning,
             dir,
