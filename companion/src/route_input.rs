@@ -21,6 +21,10 @@ use companion_core::spec::ParamsFiles;
 use companion_link::actions::{Route, Waypoint};
 use std::path::{Path, PathBuf};
 
+// The plan summary is the log header's record (`crate::decision_log`, floor 2); kept here by
+// its old path.
+pub use crate::decision_log::PlanSummary;
+
 /// The PANORAMA mission derived activities are planned against (its tasks, TIOs, goals) unless
 /// `--mission` names another.
 pub const DERIVE_MISSION: &str = "tracking";
@@ -296,30 +300,6 @@ fn route_toml(
     let relative = (route.waypoints.iter()).any(|w| matches!(w, Waypoint::Relative { .. }));
     let home = home.or((home_free && relative).then_some((0.0, 0.0)));
     Ok((p.to_path_buf(), planned_from_route(&route, p, home)?))
-}
-
-/// Which plan `check`, `simulate` and `fly` judge, for people and the log header: where it came
-/// from, how many activities, and the pre-flight allocation's planned energy and duration (with
-/// the goals' bounds lifted when they cannot be met, as the flight starts: the plan's own
-/// numbers, whatever the pack).
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct PlanSummary {
-    /// The PANORAMA mission planned against (tasks, TIOs, goals).
-    pub mission: String,
-    /// The route the activities were derived from; `None`: the mission's typed `[[activities]]`
-    /// (the legacy plan, chosen with `--mission NAME`).
-    pub route_file: Option<String>,
-    /// The zones file, when any.
-    pub zones_file: Option<String>,
-    /// Number of activities.
-    pub activities: usize,
-    /// Planned energy (J), when the mission has an energy goal.
-    pub planned_energy_j: Option<f64>,
-    /// Planned duration (s), when the mission has a duration goal.
-    pub planned_duration_s: Option<f64>,
-    /// The derived activities (replay re-compiles the mission from them); empty when typed.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub derived: Vec<DerivedActivity>,
 }
 
 /// The plan judged: `derived` when there is one, else `spec` (the typed mission).

@@ -81,7 +81,31 @@ pub struct Header {
     /// with derived activities, `replay` compiles the mission from them. Absent in logs of
     /// builds before it (the typed mission).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub plan: Option<crate::route_input::PlanSummary>,
+    pub plan: Option<PlanSummary>,
+}
+
+/// Which plan `check`, `simulate` and `fly` judge, for people and the log header: where it came
+/// from, how many activities, and the pre-flight allocation's planned energy and duration (with
+/// the goals' bounds lifted when they cannot be met, as the flight starts: the plan's own
+/// numbers, whatever the pack).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PlanSummary {
+    /// The PANORAMA mission planned against (tasks, TIOs, goals).
+    pub mission: String,
+    /// The route the activities were derived from; `None`: the mission's typed `[[activities]]`
+    /// (the legacy plan, chosen with `--mission NAME`).
+    pub route_file: Option<String>,
+    /// The zones file, when any.
+    pub zones_file: Option<String>,
+    /// Number of activities.
+    pub activities: usize,
+    /// Planned energy (J), when the mission has an energy goal.
+    pub planned_energy_j: Option<f64>,
+    /// Planned duration (s), when the mission has a duration goal.
+    pub planned_duration_s: Option<f64>,
+    /// The derived activities (replay re-compiles the mission from them); empty when typed.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub derived: Vec<companion_core::route_plan::DerivedActivity>,
 }
 
 impl Header {
