@@ -9,6 +9,7 @@
 //! - `params`: reads a params directory into [`companion_core::spec::ParamsFiles`] and loads it
 //!   whole (the model, the world, the link files), for `check`, `simulate` and `fly` alike.
 //! - `sim`: the seeded discrete-step world and its scenarios (`simulate`).
+//! - `world_spec`: the simulated world's params (world.toml, scenarios), loaded with the params.
 //! - `fly`: the MAVLink flight shell (`fly`) and its byte transports (serial, UDP, TCP).
 //! - `decision_log`: run folders, the decision-log writer and reader, telemetry logs.
 //! - `learning_params`: params/learning.toml, the bound of in-flight CPT learning.
@@ -46,3 +47,4 @@ pub mod sim;
 pub mod sim_plan;
 pub mod text;
 pub mod vocabulary;
+pub mod world_spec;

@@ -6,7 +6,7 @@
 pub use crate::params_files::{
     add_file, default_params_dir, read_params_dir, regular_file, vehicle_profile,
 };
-use crate::sim::WorldSpec;
+use crate::world_spec::WorldSpec;
 use companion_core::decision::Model;
 use companion_core::mission::ActionKind;
 use companion_core::spec::{ParamsFiles, SpecError};

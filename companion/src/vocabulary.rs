@@ -9,8 +9,8 @@
 //! params/actions.toml); the checks needing a shell's producers live here, because the core must
 //! not depend on the shells.
 
-use crate::sim::WorldSpec;
-use crate::sim::{Scenario, WORLD_OBSERVATIONS};
+use crate::world_spec::WorldSpec;
+use crate::world_spec::{Scenario, WORLD_OBSERVATIONS};
 use companion_core::decision::Model;
 use companion_core::evidence::{CORE_COMPUTES, CORE_READS};
 use companion_core::spec::{ParamsFiles, SpecError};
