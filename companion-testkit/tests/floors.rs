@@ -56,7 +56,10 @@ fn violations(
     let mut out = Vec::new();
     for (m, text) in texts {
         let Some(&own) = floor_of.get(&top(m)) else {
-            out.push(format!("`{}` is on no floor", top(m)));
+            out.push(format!(
+                "`{}` is on no floor (give it one in the table)",
+                top(m)
+            ));
             continue;
         };
         for (line, to) in module_map::imports(mods, m, text, extra) {
@@ -162,6 +165,6 @@ fn an_import_up_a_floor_is_found_through_crate_super_and_group_paths() {
     let texts = BTreeMap::from([("other".to_string(), String::new())]);
     assert_eq!(
         violations(&mods, &texts, &floor_of, &[]),
-        ["`other` is on no floor"]
+        ["`other` is on no floor (give it one in the table)"]
     );
 }
