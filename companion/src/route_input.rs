@@ -320,6 +320,25 @@ pub struct PlanSummary {
     /// The derived activities (replay re-compiles the mission from them); empty when typed.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub derived: Vec<DerivedActivity>,
+    /// Per activity, in flight order: the pre-flight allocation's IA and its planned energy and
+    /// duration (what a flight is compared against, activity by activity).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub planned: Vec<PlannedActivity>,
+}
+
+/// One activity's cell of the pre-flight allocation.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PlannedActivity {
+    /// The activity's name.
+    pub name: String,
+    /// The IA allocated (its TIO names).
+    pub ia: String,
+    /// Planned energy (J), when the mission has an energy goal.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub energy_j: Option<f64>,
+    /// Planned duration (s), when the mission has a duration goal.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub duration_s: Option<f64>,
 }
 
 /// The plan judged: `derived` when there is one, else `spec` (the typed mission).
@@ -329,9 +348,26 @@ pub fn summary(derived: Option<&Derived>, spec: &MissionSpec) -> PlanSummary {
     for g in &mut lifted.problem.goals {
         g.bound = f64::MAX;
     }
-    let totals = companion_core::guarantee::Guarantee::pre_flight(&lifted)
-        .map(|r| r.totals)
-        .unwrap_or_default();
+    let ras0 = companion_core::guarantee::Guarantee::pre_flight(&lifted).ok();
+    let goal = |name: &str| (spec.problem.goals.iter()).position(|g| g.name == name);
+    let (energy, duration) = (
+        goal(companion_core::guarantee::ENERGY),
+        goal(companion_core::guarantee::DURATION),
+    );
+    let planned = ras0.as_ref().map_or_else(Vec::new, |r| {
+        (spec.problem.activities.iter().zip(&r.choice))
+            .map(|(a, &i)| {
+                let ia = &a.ias[i];
+                PlannedActivity {
+                    name: a.name.clone(),
+                    ia: ia.name.clone(),
+                    energy_j: energy.map(|g| ia.cost[g]),
+                    duration_s: duration.map(|g| ia.cost[g]),
+                }
+            })
+            .collect()
+    });
+    let totals = ras0.map(|r| r.totals).unwrap_or_default();
     PlanSummary {
         mission: derived.map_or_else(|| spec.name.clone(), |d| d.panorama.clone()),
         route_file: derived.map(|d| d.route_file.display().to_string()),
@@ -340,6 +376,7 @@ pub fn summary(derived: Option<&Derived>, spec: &MissionSpec) -> PlanSummary {
         planned_energy_j: totals.get("energy_j").copied(),
         planned_duration_s: totals.get("duration_s").copied(),
         derived: derived.map(|d| d.activities.clone()).unwrap_or_default(),
+        planned,
     }
 }
 
