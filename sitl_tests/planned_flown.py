@@ -110,7 +110,6 @@ def compare(plan: Dict[str, Any], records: List[Dict[str, Any]], flight: Flight,
     for n in flown_names:
         assert n in cells, (n, list(cells))
     missing = [n for n in cells if n not in flown_names and n not in not_flown]
-    assert not missing, f"planned activities never flown: {missing} (flown: {flown_names})"
     rows = []
     for n, t0, t1 in windows:
         rows.append(Row(n, cells[n]["energy_j"], flight.energy(t0, t1), cells[n]["duration_s"], t1 - t0))
@@ -126,11 +125,15 @@ def compare(plan: Dict[str, Any], records: List[Dict[str, Any]], flight: Flight,
         if n in cells:
             lines.append(f"{n:<26} {cells[n]['energy_j'] / 1000:8.1f} {'-':>8} {'':>6} "
                          f"{cells[n]['duration_s']:7.1f}   not flown: {why}")
+    for n in missing:
+        lines.append(f"{n:<26} {cells[n]['energy_j'] / 1000:8.1f} {'-':>8} {'':>6} "
+                     f"{cells[n]['duration_s']:7.1f}   NEVER FLOWN")
+    print("\n".join(lines))
+    assert not missing, f"planned activities never flown: {missing} (flown: {flown_names})"
     return mission, [r for r in rows if r.flown_s > LONG_ACTIVITY_S], lines
 
 
 def assert_within(mission: Row, long_rows: List[Row], lines: List[str]) -> None:
     table = "\n".join(lines)
-    print(table)
     bad = [r.what for r in [mission] + long_rows if not r.within()]
     assert not bad, f"planned more than {TOLERANCE:.0%} off the flight for {bad}:\n{table}"
