@@ -160,6 +160,19 @@ pub fn derive(
     route_file: Option<&Path>,
     home: Option<&str>,
 ) -> anyhow::Result<Option<Derived>> {
+    derive_at_cruise(files, mission, zones_file, route_file, home, None)
+}
+
+/// [`derive`] with the cruise speed the autopilot reports (`fly`: WPNAV_SPEED, MPC_XY_CRUISE)
+/// in place of params' `[derive].cruise_speed_mps`; `None`: params'.
+pub fn derive_at_cruise(
+    files: &ParamsFiles,
+    mission: Option<&str>,
+    zones_file: Option<&Path>,
+    route_file: Option<&Path>,
+    home: Option<&str>,
+    cruise_speed_mps: Option<f64>,
+) -> anyhow::Result<Option<Derived>> {
     let kind = mission_route_kind(files, mission)?;
     if kind.is_none() && mission.is_some() && zones_file.is_none() {
         return Ok(None);
@@ -182,7 +195,10 @@ pub fn derive(
         None => mission.unwrap_or(DERIVE_MISSION),
         Some(_) => DERIVE_MISSION,
     };
-    let settings = companion_core::guarantee::derive_settings(files, panorama)?;
+    let mut settings = companion_core::guarantee::derive_settings(files, panorama)?;
+    if let Some(v) = cruise_speed_mps {
+        settings.cruise_speed_mps = v;
+    }
     // Home-relative zones are placed from the route's home: `--home`, a `.plan`'s planned home
     // or WPL seq 0; a route TOML relative to home and home-relative zones need none (both are
     // placed from the same point, so the geometry is the same anywhere: 0, 0 stands in).

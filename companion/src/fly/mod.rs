@@ -23,6 +23,7 @@
 
 mod args;
 mod autopilot_plan;
+mod route_replan;
 mod cycle;
 pub mod gate;
 pub mod link_security;
