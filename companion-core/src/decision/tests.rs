@@ -129,5 +129,9 @@ fn activity_progress_runs_on_the_autopilots_clock() {
     let (n0, _) = at(200.0, None);
     let (n1, _) = at(210.0, None);
     let want = 10.0 / duration * planned;
-    assert!((n1 - n0 - want).abs() < 1e-6 * planned, "{} vs {want}", n1 - n0);
+    assert!(
+        (n1 - n0 - want).abs() < 1e-6 * planned,
+        "{} vs {want}",
+        n1 - n0
+    );
 }

@@ -23,12 +23,12 @@
 
 mod args;
 mod autopilot_plan;
-mod route_replan;
 mod cycle;
 pub mod gate;
 pub mod link_security;
 mod restart;
 pub mod route_progress;
+mod route_replan;
 mod run_loop;
 mod setup;
 mod shell;

@@ -45,12 +45,10 @@ impl RouteReplan {
             args.zones.as_deref(),
             args.route_file(),
         );
-        let planned_cruise = companion_core::guarantee::derive_settings(
-            &files,
-            crate::route_input::DERIVE_MISSION,
-        )
-        .ok()?
-        .cruise_speed_mps;
+        let planned_cruise =
+            companion_core::guarantee::derive_settings(&files, crate::route_input::DERIVE_MISSION)
+                .ok()?
+                .cruise_speed_mps;
         Some(Self {
             files,
             zones: args.zones.clone(),
