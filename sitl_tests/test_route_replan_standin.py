@@ -20,7 +20,7 @@ def test_the_default_route_is_re_planned_at_the_autopilots_cruise_speed(autopilo
     ap = autopilot_factory()
     gcs = client(ap.standin.url)
     run = fly(ap, auto_start=False)
-    said = "route re-planned at the autopilot's cruise 5.0 m/s (params 10.0)"
+    said = "route re-planned at the autopilot's cruise 5 m/s (params 10)"
     wait(lambda: any(said in t for t in texts(gcs)), 30, "the STATUSTEXT of the re-plan at WPNAV_SPEED", run)
     wait(lambda: any(said in str(e) for e in events(run.records())), 30, "the record's event of the re-plan", run)
     run.proc.terminate()

@@ -38,6 +38,15 @@ impl RouteReplan {
         if args.flies_autopilot_mission() || plan.route_file.is_none() {
             return None;
         }
+        // A route TOML only: its legs all fly at the cruise speed (a `.plan`'s DO_CHANGE_SPEED
+        // items keep theirs, which `replay`'s re-plan does not tell apart).
+        if let Some(r) = args.route_file() {
+            let text = files.text(r).ok()?;
+            let kind = companion_core::route_plan::detect_kind(r, text).ok()?;
+            if kind != companion_core::route_plan::MissionSourceKind::RouteToml {
+                return None;
+            }
+        }
         let mut files = files.clone();
         crate::route_input::add_plan_files(
             &mut files,
@@ -94,9 +103,10 @@ impl RouteReplan {
                     (Some(e), Some(t)) if feasible => format!("{:.1} kJ {t:.0} s", e / 1000.0),
                     _ => "no allocation meets the goals".to_string(),
                 };
+                // The speed as read (replay plans again from these words).
                 format!(
-                    "companion: route re-planned at the autopilot's cruise {cruise:.1} m/s \
-                     (params {was:.1}): {plan}"
+                    "{}{cruise} m/s (params {was}): {plan}",
+                    crate::replay::ROUTE_REPLANNED
                 )
             }
             Ok(None) => return,
