@@ -214,6 +214,9 @@ class GcsObserver:
         self.battery_consumed_mah: Optional[int] = None
         self.battery_energy_j: Optional[float] = None            # BATTERY_STATUS.energy_consumed (hJ) in J
         self.battery_power_w: List[Tuple[float, float]] = []    # (t, V x I) of each BATTERY_STATUS with both
+        # (t, the autopilot's time since boot in s) of each GLOBAL_POSITION_INT: maps the observer's wall clock to the
+        # vehicle's, which runs SITL_SPEEDUP times faster (energy and durations are the vehicle's)
+        self.boot_at: List[Tuple[float, float]] = []
         self.ekf_flags = 0
         self.gps_fix: Optional[int] = None
         self.params: Dict[str, Tuple[float, float]] = {}
@@ -326,6 +329,8 @@ class GcsObserver:
                     self._streams_asked = True
                     self._request_streams()
             elif t == "GLOBAL_POSITION_INT":
+                if m.get_srcComponent() == mavlink.MAV_COMP_ID_AUTOPILOT1:
+                    self.boot_at.append((now, m.time_boot_ms / 1000.0))
                 self.alt = m.relative_alt / 1000.0
                 self.max_alt = max(self.max_alt, self.alt)
             elif t == "EXTENDED_SYS_STATE":
@@ -383,6 +388,16 @@ class GcsObserver:
     def modes_flown(self) -> List[str]:
         with self._lock:
             return [m for _, m in self.modes]
+
+    def vehicle_time(self, t: float) -> Optional[float]:
+        """The autopilot's time since boot (s) at the observer's wall time `t`, interpolated between the
+        GLOBAL_POSITION_INTs around it (None before the first or after the last)."""
+        with self._lock:
+            pts = list(self.boot_at)
+        for (t0, b0), (t1, b1) in zip(pts, pts[1:]):
+            if t0 <= t <= t1:
+                return b0 if t1 == t0 else b0 + (b1 - b0) * (t - t0) / (t1 - t0)
+        return None
 
     def ever_armed(self) -> bool:
         with self._lock:

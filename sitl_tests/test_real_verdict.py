@@ -113,8 +113,8 @@ def test_real_the_search_the_refusal_names_is_flown_and_lands_above_the_reserve(
     pct = gcs.battery_pct
     assert pct is not None and pct > 25, f"the flight ended at {pct} %, at or below the quarter kept back" \
         + gcs.summary()
-    # The search ran to the limit named (the shell's search clock runs from the first waypoint, as the route's
-    # search_time_limit_s says), not cut short by the in-flight guarantee.
+    # The search ran to the limit named (the shell's search clock runs from the arrival at the last waypoint, where
+    # the plan holds the route's search_time_limit_s), not cut short by the in-flight guarantee.
     with gcs._lock:
         said = [s for t, _, c, s in gcs.statustext_from if c == COMPANION and t >= t_start]
     assert any(s.startswith("Search time over") for s in said), " | ".join(said)

@@ -62,8 +62,9 @@ pub struct Core {
     /// every cycle is a plan-follow every cycle: no allocation for its event once warm).
     reallocation_event: String,
     failed_resources: Vec<String>,
-    /// The activity being flown and when (observation time, s) it started.
-    activity_started: Option<(usize, f64)>,
+    /// The activity being flown, when it started (s) and on which clock (true: the autopilot's
+    /// `vehicle_time_s`, false: the observation time).
+    activity_started: Option<(usize, f64, bool)>,
     /// What the applications other than the one the resource manager assesses occupied after
     /// the last schedule (tiles, CPU share): the room the resource manager sees before solving.
     others_tiles: u32,
@@ -806,18 +807,22 @@ impl Core {
                 .chain(tile_names),
         );
         // How far into the activity: time spent in it over its estimated duration (capped below
-        // 1 so an overrunning activity still counts its remainder as not yet flown).
+        // 1 so an overrunning activity still counts its remainder as not yet flown). The time is
+        // the autopilot's when it reports it, as the plan's durations are the vehicle's (a SITL
+        // faster than real time flies an activity in a third of the wall clock's seconds).
+        let vehicle_now = self.read_slots.pack(&self.readings).vehicle_time_s;
+        let (now, on_vehicle) = vehicle_now.map_or((obs.time_s, false), |t| (t, true));
         let started = match self.activity_started {
-            Some((a, t)) if a == activity_index => t,
+            Some((a, t, v)) if a == activity_index && v == on_vehicle => t,
             _ => {
-                self.activity_started = Some((activity_index, obs.time_s));
-                obs.time_s
+                self.activity_started = Some((activity_index, now, on_vehicle));
+                now
             }
         };
         let fraction = g
             .estimated(activity_index, &coupling.progress_goal)
             .filter(|d| *d > 0.0)
-            .map_or(0.0, |d| ((obs.time_s - started) / d).min(0.95));
+            .map_or(0.0, |d| ((now - started) / d).clamp(0.0, 0.95));
         let record = rec.guarantee.get_or_insert_with(Default::default);
         g.watch_into(
             Progress {

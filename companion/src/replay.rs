@@ -166,6 +166,7 @@ pub fn replay(path: &Path) -> Result<Outcome, Refusal> {
                         let (model, setup, learner) = Run::from_header(&value, file)?;
                         let mut r = Run::new(Arc::new(model), setup);
                         r.learner = learner;
+                        r.route_plan = Run::route_plan(&value, file);
                         run = Some(r);
                     }
                     // A rotated part repeats the header: nothing new.
@@ -230,6 +231,53 @@ struct Run {
     core: Core,
     /// The run learned its CPT rows (`--learn-cpt`): re-derived here from the logged records.
     learner: Option<crate::learn_cpt::OnlineCpt>,
+    /// The header's route plan, to plan again where `fly` re-planned its route at the
+    /// autopilot's cruise speed (`fly/route_replan.rs`).
+    route_plan: Option<RoutePlan>,
+    /// The mission the run's core plans since such a re-plan (a new flight's core takes it).
+    mission: Option<companion_core::guarantee::MissionSpec>,
+}
+
+/// The plan of the companion's own route as the header gives it.
+struct RoutePlan {
+    files: ParamsFiles,
+    mission: String,
+    derived: Vec<companion_core::route_plan::DerivedActivity>,
+}
+
+/// The event `fly` records when it re-plans its route at the autopilot's cruise speed.
+pub const ROUTE_REPLANNED: &str = "companion: route re-planned at the autopilot's cruise ";
+
+impl RoutePlan {
+    /// The route's activities at cruise speed `cruise` (m/s): its legs and return at `cruise`
+    /// through the profile's speed fraction, as `fly` derives a route TOML (which has no
+    /// DO_CHANGE_SPEED), and the PANORAMA mission on them.
+    fn at_cruise(&self, cruise: f64) -> anyhow::Result<companion_core::guarantee::MissionSpec> {
+        use companion_core::route_plan::ActivityKind;
+        let fraction =
+            companion_core::guarantee::derive_settings(&self.files, &self.mission)?.speed_fraction;
+        let mut acts = self.derived.clone();
+        for a in &mut acts {
+            if matches!(a.kind, ActivityKind::Leg | ActivityKind::Return) {
+                a.speed_mps = cruise * fraction;
+            }
+        }
+        Ok(companion_core::guarantee::derived_mission(
+            &self.files,
+            &self.mission,
+            &acts,
+            &[],
+        )?)
+    }
+}
+
+/// The cruise speed of a route re-plan among a record's events.
+fn replanned_cruise(events: &[Event]) -> Option<f64> {
+    events.iter().find_map(|e| {
+        let text = e.to_string();
+        let rest = text.strip_prefix(ROUTE_REPLANNED)?;
+        rest.split(" m/s").next()?.parse().ok()
+    })
 }
 
 impl Run {
@@ -239,7 +287,21 @@ impl Run {
             model,
             setup,
             learner: None,
+            route_plan: None,
+            mission: None,
         }
+    }
+
+    /// The header's plan when it is derived from the companion's own route.
+    fn route_plan(value: &Value, file: &Path) -> Option<RoutePlan> {
+        let header: Header = serde_json::from_value(value.clone()).ok()?;
+        let plan = header.plan.as_ref().filter(|p| !p.derived.is_empty())?;
+        plan.route_file.as_ref()?;
+        Some(RoutePlan {
+            files: params_files(&header, file).ok()?,
+            mission: plan.mission.clone(),
+            derived: plan.derived.clone(),
+        })
     }
 
     /// The model and the run's setup from the header line.
@@ -351,8 +413,26 @@ impl Run {
         let source = self.setup.source;
         // `fly` queues Event::NewFlight for the first cycle after a flight ended landed and
         // disarmed, when it starts a fresh core for the next flight: replay restarts its core there.
+        // `fly` re-planned its route at the autopilot's cruise speed before this cycle.
+        if source == Source::Fly
+            && let Some(cruise) = replanned_cruise(&logged.events)
+            && let Some(plan) = &self.route_plan
+        {
+            let spec = plan.at_cruise(cruise).map_err(|e| {
+                refuse(
+                    file,
+                    at,
+                    format!("the route re-planned at {cruise} m/s: {e:#}"),
+                )
+            })?;
+            self.mission = Some(spec.clone());
+            self.core.replace_mission(spec);
+        }
         if source == Source::Fly && logged.events.contains(&Event::NewFlight) {
             self.core = Core::new(Arc::clone(&self.model), self.setup.kind, self.setup.policy);
+            if let Some(spec) = &self.mission {
+                self.core.replace_mission(spec.clone());
+            }
             if let Some(l) = self.learner.as_mut() {
                 l.start_run();
             }

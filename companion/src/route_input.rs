@@ -23,7 +23,7 @@ use std::path::{Path, PathBuf};
 
 // The plan summary is the log header's record (`crate::decision_log`, floor 2); kept here by
 // its old path.
-pub use crate::decision_log::PlanSummary;
+pub use crate::decision_log::{PlanSummary, PlannedActivity};
 
 /// The PANORAMA mission derived activities are planned against (its tasks, TIOs, goals) unless
 /// `--mission` names another.
@@ -164,6 +164,19 @@ pub fn derive(
     route_file: Option<&Path>,
     home: Option<&str>,
 ) -> anyhow::Result<Option<Derived>> {
+    derive_at_cruise(files, mission, zones_file, route_file, home, None)
+}
+
+/// [`derive`] with the cruise speed the autopilot reports (`fly`: WPNAV_SPEED, MPC_XY_CRUISE)
+/// in place of params' `[derive].cruise_speed_mps`; `None`: params'.
+pub fn derive_at_cruise(
+    files: &ParamsFiles,
+    mission: Option<&str>,
+    zones_file: Option<&Path>,
+    route_file: Option<&Path>,
+    home: Option<&str>,
+    cruise_speed_mps: Option<f64>,
+) -> anyhow::Result<Option<Derived>> {
     let kind = mission_route_kind(files, mission)?;
     if kind.is_none() && mission.is_some() && zones_file.is_none() {
         return Ok(None);
@@ -186,7 +199,10 @@ pub fn derive(
         None => mission.unwrap_or(DERIVE_MISSION),
         Some(_) => DERIVE_MISSION,
     };
-    let settings = companion_core::guarantee::derive_settings(files, panorama)?;
+    let mut settings = companion_core::guarantee::derive_settings(files, panorama)?;
+    if let Some(v) = cruise_speed_mps {
+        settings.cruise_speed_mps = v;
+    }
     // Home-relative zones are placed from the route's home: `--home`, a `.plan`'s planned home
     // or WPL seq 0; a route TOML relative to home and home-relative zones need none (both are
     // placed from the same point, so the geometry is the same anywhere: 0, 0 stands in).
@@ -309,9 +325,26 @@ pub fn summary(derived: Option<&Derived>, spec: &MissionSpec) -> PlanSummary {
     for g in &mut lifted.problem.goals {
         g.bound = f64::MAX;
     }
-    let totals = companion_core::guarantee::Guarantee::pre_flight(&lifted)
-        .map(|r| r.totals)
-        .unwrap_or_default();
+    let ras0 = companion_core::guarantee::Guarantee::pre_flight(&lifted).ok();
+    let goal = |name: &str| (spec.problem.goals.iter()).position(|g| g.name == name);
+    let (energy, duration) = (
+        goal(companion_core::guarantee::ENERGY),
+        goal(companion_core::guarantee::DURATION),
+    );
+    let planned = ras0.as_ref().map_or_else(Vec::new, |r| {
+        (spec.problem.activities.iter().zip(&r.choice))
+            .map(|(a, &i)| {
+                let ia = &a.ias[i];
+                PlannedActivity {
+                    name: a.name.clone(),
+                    ia: ia.name.clone(),
+                    energy_j: energy.map(|g| ia.cost[g]),
+                    duration_s: duration.map(|g| ia.cost[g]),
+                }
+            })
+            .collect()
+    });
+    let totals = ras0.map(|r| r.totals).unwrap_or_default();
     PlanSummary {
         mission: derived.map_or_else(|| spec.name.clone(), |d| d.panorama.clone()),
         route_file: derived.map(|d| d.route_file.display().to_string()),
@@ -320,6 +353,7 @@ pub fn summary(derived: Option<&Derived>, spec: &MissionSpec) -> PlanSummary {
         planned_energy_j: totals.get("energy_j").copied(),
         planned_duration_s: totals.get("duration_s").copied(),
         derived: derived.map(|d| d.activities.clone()).unwrap_or_default(),
+        planned,
     }
 }
 

@@ -86,3 +86,52 @@ fn route_activity_names_the_activity_and_the_state_is_the_fallback() {
         );
     }
 }
+
+/// How far into an activity the guarantee counts is the autopilot's time when it reports one
+/// (`vehicle_time_s`): a SITL at speedup 3 flies 30 s of a hold in 10 s of the shell's clock, and
+/// the remainder planned shrinks by 30 s' worth, not 10 s'. Without it, the observation time.
+#[test]
+fn activity_progress_runs_on_the_autopilots_clock() {
+    let model = Arc::new(Model::load(&crate::shipped::params()).unwrap());
+    let hold = (model.guarantee.problem.activities.iter())
+        .position(|a| a.name == "tracking_area")
+        .expect("the typed plan's tracking hold");
+    let duration = model.guarantee.activities[hold].hold_s;
+    let mut core = Core::new(
+        Arc::clone(&model),
+        ModelKind::Bfm,
+        model.policy("safety").unwrap(),
+    );
+    let mut at = |shell_s: f64, vehicle_s: Option<f64>| {
+        let mut obs = Observations {
+            state: "wpf".into(),
+            time_s: shell_s,
+            ..Default::default()
+        };
+        obs.set("battery_pct", 100.0);
+        obs.set(crate::evidence::ROUTE_ACTIVITY, hold as f64);
+        if let Some(v) = vehicle_s {
+            obs.set("vehicle_time_s", v);
+        }
+        let g = core.step(&obs).1.guarantee.expect("a guarantee record");
+        assert_eq!(g.activity_name, "tracking_area");
+        (g.margins["energy_j"], g.planned_j)
+    };
+    let (m0, planned) = at(100.0, Some(300.0));
+    let (m1, _) = at(110.0, Some(330.0));
+    let want = 30.0 / duration * planned;
+    assert!(
+        (m1 - m0 - want).abs() < 1e-6 * planned,
+        "margin grew {} J, want {want} J (30 s of {duration} s)",
+        m1 - m0
+    );
+    // No vehicle clock: the observation time counts (the activity restarts on the other clock).
+    let (n0, _) = at(200.0, None);
+    let (n1, _) = at(210.0, None);
+    let want = 10.0 / duration * planned;
+    assert!(
+        (n1 - n0 - want).abs() < 1e-6 * planned,
+        "{} vs {want}",
+        n1 - n0
+    );
+}

@@ -542,10 +542,15 @@ impl<'f> Compiler<'f> {
             .flat_map(|t| t.resources.iter().cloned())
             .collect();
         let speed = if a.length_m > 0.0 {
-            let cap = tios
-                .iter()
-                .filter_map(|t| t.v_max_mps)
-                .fold(f64::INFINITY, f64::min);
+            // A commanded speed is what the vehicle flies whichever IA runs (no IA commands its
+            // own); otherwise the slowest TIO caps it.
+            let cap = if a.speed_commanded {
+                f64::INFINITY
+            } else {
+                tios.iter()
+                    .filter_map(|t| t.v_max_mps)
+                    .fold(f64::INFINITY, f64::min)
+            };
             let v = a.v_max_mps.unwrap_or(f64::INFINITY).min(cap);
             if !(v.is_finite() && v > 0.0) {
                 return Err(self.err(

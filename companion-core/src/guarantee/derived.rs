@@ -144,6 +144,7 @@ pub fn derived_mission(
             tasks,
             length_m: a.length_m,
             v_max_mps: (a.speed_mps > 0.0).then_some(a.speed_mps),
+            speed_commanded: a.speed_mps > 0.0,
             hold_s: a.hold_s,
             hold_speed_mps: if tracking {
                 derive.tracking_speed_mps

@@ -268,6 +268,11 @@ pub(super) struct ActivityFile {
     pub(super) length_m: f64,
     #[serde(default)]
     pub(super) v_max_mps: Option<f64>,
+    /// `v_max_mps` is the speed the vehicle is commanded (a derived activity: the route's
+    /// DO_CHANGE_SPEED or the autopilot's cruise speed), so the TIOs' caps do not slow it: `fly`
+    /// commands no IA's speed (docs/guarantee.md).
+    #[serde(default)]
+    pub(super) speed_commanded: bool,
     /// Fixed time spent in the activity besides moving (turn, detection, climb, tracking hold).
     #[serde(default)]
     pub(super) hold_s: f64,

@@ -687,3 +687,58 @@ fn a_home_relative_zone_splits_the_same_leg_wherever_home_is() {
         .to_string();
     assert!(e.contains("features[0]") && e.contains("100 km"), "{e}");
 }
+
+/// A leg is planned as the vehicle flies it: at the commanded speed (the route's DO_CHANGE_SPEED
+/// or the autopilot's cruise speed) through the profile's leg model, t = L / (fraction x v) +
+/// overhead, whichever IA runs: `fly` commands no IA's speed, so a TIO's cap (vision 6 m/s,
+/// IR/US fusion 4 m/s) does not slow the plan below what is flown.
+#[test]
+fn a_leg_at_the_commanded_speed_takes_the_profiles_time_whatever_the_ia() {
+    let params = crate::shipped::params();
+    let vehicle = DeriveSettings {
+        cruise_speed_mps: 10.0,
+        waypoint_overhead_s: 4.5,
+        speed_fraction: 0.8,
+        ..SETTINGS
+    };
+    let r = route(
+        (0.0, 0.0),
+        vec![
+            Item {
+                index: 0,
+                kind: ItemKind::TakeOff { alt_m: 20.0 },
+            },
+            wp(1, 0.0, 0.003, 20.0),
+            Item {
+                index: 2,
+                kind: ItemKind::ChangeSpeed { mps: 5.0 },
+            },
+            wp(3, 0.0, 0.0, 20.0),
+        ],
+    );
+    let acts = derive_activities(&r, &[], &vehicle);
+    let spec = crate::guarantee::derived_mission(&params, "tracking", &acts, &[]).unwrap();
+    let dur = (spec.problem.goals.iter())
+        .position(|g| g.name == crate::guarantee::DURATION)
+        .unwrap();
+    for (name, v_cmd) in [("leghome-1", 10.0), ("leg1-3", 5.0)] {
+        let j = acts.iter().position(|a| a.name == name).unwrap();
+        let length = acts[j].length_m;
+        let want = length / (0.8 * v_cmd) + 4.5;
+        let info = &spec.activities[j];
+        assert!(
+            info.ia_tios.iter().flatten().any(|t| t == "fusion"),
+            "the 4 m/s TIO is an alternative: {:?}",
+            info.ia_tios
+        );
+        for (i, ia) in spec.problem.activities[j].ias.iter().enumerate() {
+            assert_eq!(info.ia_speed[i], Some(0.8 * v_cmd), "{name} {}", ia.name);
+            assert!(
+                (ia.cost[dur] - want).abs() < 1e-9,
+                "{name} {}: {} s, want {want} s",
+                ia.name,
+                ia.cost[dur]
+            );
+        }
+    }
+}

@@ -106,6 +106,25 @@ pub struct PlanSummary {
     /// The derived activities (replay re-compiles the mission from them); empty when typed.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub derived: Vec<companion_core::route_plan::DerivedActivity>,
+    /// Per activity, in flight order: the pre-flight allocation's IA and its planned energy and
+    /// duration (what a flight is compared against, activity by activity).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub planned: Vec<PlannedActivity>,
+}
+
+/// One activity's cell of the pre-flight allocation.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PlannedActivity {
+    /// The activity's name.
+    pub name: String,
+    /// The IA allocated (its TIO names).
+    pub ia: String,
+    /// Planned energy (J), when the mission has an energy goal.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub energy_j: Option<f64>,
+    /// Planned duration (s), when the mission has a duration goal.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub duration_s: Option<f64>,
 }
 
 impl Header {

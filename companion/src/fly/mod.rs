@@ -28,6 +28,7 @@ pub mod gate;
 pub mod link_security;
 mod restart;
 pub mod route_progress;
+mod route_replan;
 mod run_loop;
 mod setup;
 mod shell;

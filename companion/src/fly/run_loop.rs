@@ -75,6 +75,8 @@ pub(super) struct RunLoop<'s, D, S> {
     last_cycle_done: Option<Duration>,
     /// `--mission autopilot`: the autopilot's mission is planned as it is downloaded.
     autopilot_plan: Option<super::autopilot_plan::AutopilotPlan>,
+    /// The companion's own route: re-planned at the autopilot's cruise speed on the ground.
+    route_replan: Option<super::route_replan::RouteReplan>,
 }
 
 impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
@@ -98,6 +100,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             vehicle.watch_autopilot_mission();
             super::autopilot_plan::AutopilotPlan::new(setup.files.clone(), speeds, &mut shell)
         });
+        let route_replan = super::route_replan::RouteReplan::new(&args, &setup.files);
         let signing = || setup.key.map(ingest::signing_data);
         tracing::info!(url = %args.connect, "connecting to the autopilot");
         Self {
@@ -129,6 +132,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             watchdog: watchdog::Watchdog::from_env(setup.link.decision_period_s),
             last_cycle_done: None,
             autopilot_plan,
+            route_replan,
             args,
             setup,
             decider,
@@ -208,6 +212,10 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
                     plan.on_mission(m, &self.vehicle, &mut self.decider, &mut self.shell);
                     wake = true;
                 }
+                plan.recheck(&self.vehicle, &mut self.decider, &mut self.shell);
+                out.extend(plan.say(&mut self.shell, t));
+            }
+            if let Some(plan) = self.route_replan.as_mut() {
                 plan.recheck(&self.vehicle, &mut self.decider, &mut self.shell);
                 out.extend(plan.say(&mut self.shell, t));
             }
