@@ -260,6 +260,8 @@ pub struct Review {
     /// The last start refusal of the log, in the operator's words (the gate's event, with the
     /// guarantee's verdict when the refused cycle has one).
     refused: Option<String>,
+    /// Started next to a flight in progress: handed off (why) or resumed (fly/restart.rs).
+    restart: Option<String>,
     /// The previous record's `vehicle.armed`.
     prev_armed: Option<bool>,
     /// (action, command) -> in-progress results not yet followed by an outcome.
@@ -718,6 +720,9 @@ impl Review {
         // waiting ...`), and the guarantee's typed verdict when the models refused on energy.
         for e in &r.events {
             let text = e.to_string();
+            if let Some(rest) = text.strip_prefix("started in flight: ") {
+                self.restart = restart_words(rest).or(self.restart.take());
+            }
             if let Some(rest) = text.strip_prefix("operator: start refused") {
                 let why = rest.split_once(": ").map_or(rest, |(_, w)| w);
                 let why = why.split("; still waiting").next().unwrap_or(why).trim();
@@ -806,6 +811,9 @@ impl Review {
                 out.push_str("; no end line (process stopped?)");
             }
         }
+        if let Some(r) = &self.restart {
+            out = format!("started in flight, {r}; {out}");
+        }
         s.outcome = out;
         if let Some(v) = self.newer_schema {
             self.notes.insert(
@@ -828,6 +836,24 @@ impl Review {
         r.finish();
         r
     }
+}
+
+/// A started-in-flight event (after its prefix) as the summary tells it: `resumed (facts)` or
+/// `handed off (why not resumed)`; None for the other lines (the proof under way).
+fn restart_words(rest: &str) -> Option<String> {
+    if let Some(facts) = rest.strip_prefix("resumed") {
+        let facts = facts.split_once("; ").map_or("", |(_, f)| f);
+        return Some(format!("resumed on the operator's consent ({facts})"));
+    }
+    let (_, why) = rest.split_once("not resumed")?;
+    let why = why.trim_start_matches([':', ' ', '(']);
+    let why = why.split("; no start until").next().unwrap_or(why);
+    let done = if rest.contains("handed off") {
+        "handed off"
+    } else {
+        "not resumed"
+    };
+    Some(format!("{done} ({})", why.trim_end_matches(')')))
 }
 
 /// How a fly log ends, from its last record: taken over (by which mode), landed and disarmed
