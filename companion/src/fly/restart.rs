@@ -776,4 +776,144 @@ mod tests {
                 .any(|e| e.to_string().contains("not yet known to be on the ground"))
         );
     }
+
+    fn resuming(previous: Option<Result<PreviousRun, String>>) -> StartLook {
+        StartLook::new(RestartInAir::ResumeWithConsent, previous)
+    }
+
+    fn own_run(autopilot: &str) -> PreviousRun {
+        PreviousRun {
+            folder: "runs/x".into(),
+            last_utc_us: Some(utc_us_now()),
+            autopilot: Some(autopilot.into()),
+            operator: Some("started".into()),
+            uploaded: true,
+            state: "wpi".into(),
+            ..Default::default()
+        }
+    }
+
+    fn in_air_auto() -> [Frame; 2] {
+        [
+            heartbeat(true, 3),
+            landed(MavLandedState::MAV_LANDED_STATE_IN_AIR),
+        ]
+    }
+
+    fn events(shell: &Shell) -> Vec<String> {
+        shell.pending_events.iter().map(|e| e.to_string()).collect()
+    }
+
+    /// With resume_with_consent, a log that proves nothing (another autopilot's, or none)
+    /// hands off at once, the reason said to the ground station and in the record; a log that
+    /// holds starts the proof (the mission downloaded) and commands nothing yet.
+    #[test]
+    fn a_log_that_is_not_its_own_hands_off_at_once_with_the_reason() {
+        for (previous, short) in [
+            (Some(Ok(own_run("7/1"))), "other autopilot"),
+            (Some(Err("no run folder in runs".to_string())), "no run log"),
+        ] {
+            let (mut shell, mut v) = setup(false);
+            let mut look = resuming(previous);
+            let (texts, modes) = turn(&mut look, &mut shell, &mut v, 0.0, &in_air_auto());
+            assert_eq!(modes, vec![6.0], "RTL at once");
+            assert_eq!(
+                texts,
+                vec![
+                    "companion: flight in progress, hand-off RTL".to_string(),
+                    format!("companion: not resumed: {short}")
+                ]
+            );
+            assert!(
+                events(&shell)
+                    .iter()
+                    .any(|e| e.contains("handed off: hand-off RTL") && e.contains("not resumed:"))
+            );
+        }
+        let (mut shell, mut v) = setup(false);
+        let mut look = resuming(Some(Ok(own_run("1/1"))));
+        let (texts, modes) = turn(&mut look, &mut shell, &mut v, 0.0, &in_air_auto());
+        assert!(modes.is_empty(), "no hand-off while the proof runs");
+        assert_eq!(texts, vec!["companion: flight in progress, checking it"]);
+        assert!(
+            v.flies_autopilot_mission(),
+            "the mission is downloaded to compare"
+        );
+        assert!(matches!(look.resume, Resume::Proving { .. }));
+        // No download and no judged guarantee within the proof's wait: handed off.
+        let (texts, modes) = turn(&mut look, &mut shell, &mut v, 16.0, &[]);
+        assert_eq!(modes, vec![6.0]);
+        assert!(
+            texts.contains(&"companion: not resumed: proof timed out".to_string()),
+            "{texts:?}"
+        );
+        assert!(!v.flies_autopilot_mission());
+        assert_eq!(shell.operator.control, Control::FlightInProgress);
+    }
+
+    fn offered(look: &mut StartLook, shell: &mut Shell, v: &mut Vehicle) {
+        turn(look, shell, v, 0.0, &in_air_auto());
+        look.resume = Resume::AwaitingConsent {
+            until: s(20.0),
+            facts: vec!["fact one".into(), "fact two".into()],
+        };
+        assert!(look.awaits_consent());
+    }
+
+    /// The operator's consent inside the window: the companion commands again, without a
+    /// hand-off, and the record says resumed with the proof's facts.
+    #[test]
+    fn a_consent_in_the_window_resumes_the_flight() {
+        let (mut shell, mut v) = setup(false);
+        let mut look = resuming(Some(Ok(own_run("1/1"))));
+        offered(&mut look, &mut shell, &mut v);
+        let (texts, modes) = turn(&mut look, &mut shell, &mut v, 10.0, &[heartbeat(true, 3)]);
+        assert!(texts.is_empty() && modes.is_empty());
+        let mut out = Vec::new();
+        assert!(look.consent(&mut shell, &mut v, (255, 190), s(10.5), &mut out));
+        assert_eq!(shell.operator.control, Control::Started);
+        assert_eq!(look.found, AtStart::Resumed);
+        assert!(!look.awaits_consent());
+        let resumed: Vec<String> = events(&shell)
+            .into_iter()
+            .filter(|e| e.starts_with(resume::RESUMED))
+            .collect();
+        assert_eq!(resumed.len(), 1);
+        assert!(
+            resumed[0].contains("MISSION_START from 255/190")
+                && resumed[0].contains("fact one; fact two"),
+            "{resumed:?}"
+        );
+        // After the window no hand-off comes: the companion flies it.
+        let (_, modes) = turn(&mut look, &mut shell, &mut v, 30.0, &[heartbeat(true, 3)]);
+        assert!(modes.is_empty());
+        // A second consent does nothing.
+        assert!(!look.consent(&mut shell, &mut v, (255, 190), s(31.0), &mut Vec::new()));
+    }
+
+    /// No consent within the window: handed off, said why; a pilot's mode meanwhile: theirs.
+    #[test]
+    fn no_consent_hands_off_and_a_pilots_mode_is_left_alone() {
+        let (mut shell, mut v) = setup(false);
+        let mut look = resuming(Some(Ok(own_run("1/1"))));
+        offered(&mut look, &mut shell, &mut v);
+        let (_, modes) = turn(&mut look, &mut shell, &mut v, 19.0, &[heartbeat(true, 3)]);
+        assert!(modes.is_empty(), "still inside the window");
+        let (texts, modes) = turn(&mut look, &mut shell, &mut v, 20.0, &[heartbeat(true, 3)]);
+        assert_eq!(modes, vec![6.0]);
+        assert!(
+            texts.contains(&"companion: not resumed: no consent".to_string()),
+            "{texts:?}"
+        );
+        assert!(!look.consent(&mut shell, &mut v, (255, 190), s(21.0), &mut Vec::new()));
+        assert_eq!(shell.operator.control, Control::FlightInProgress);
+
+        let (mut shell, mut v) = setup(false);
+        let mut look = resuming(Some(Ok(own_run("1/1"))));
+        offered(&mut look, &mut shell, &mut v);
+        let (texts, modes) = turn(&mut look, &mut shell, &mut v, 5.0, &[heartbeat(true, 5)]);
+        assert!(modes.is_empty(), "a pilot's LOITER is not overridden");
+        assert_eq!(texts, vec!["companion: flight in LOITER, no action"]);
+        assert!(!look.awaits_consent());
+    }
 }

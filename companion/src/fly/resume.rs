@@ -321,4 +321,106 @@ mod tests {
         assert_eq!(short(check_plan(Some(&g), None)), "plan does not fit");
         assert_eq!(short(check_plan(None, None)), "no guarantee");
     }
+
+    /// The latest run folder by name is read; a killed one has no clean end; the facts are
+    /// the last record's (operator, state, time) and any record's autopilot and verified upload.
+    #[test]
+    fn the_previous_run_is_the_latest_folder_read_as_it_ended() {
+        use crate::decision_log::{DecisionLog, Header, WriterOptions};
+        use companion_core::record::{CommandRecord, DecisionRecord};
+        let base = std::env::temp_dir().join(format!("h8-previous-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&base);
+        assert!(
+            read_previous_run(&base)
+                .unwrap_err()
+                .contains("cannot list")
+        );
+        std::fs::create_dir_all(&base).unwrap();
+        assert!(
+            read_previous_run(&base)
+                .unwrap_err()
+                .contains("no run folder")
+        );
+        let write = |name: &str, killed: bool| {
+            let dir = base.join(name);
+            std::fs::create_dir_all(&dir).unwrap();
+            let header = Header::new("fly", std::time::SystemTime::now());
+            let log = DecisionLog::start(&dir, header, WriterOptions::default()).unwrap();
+            let mut first = DecisionRecord::default();
+            first.vehicle.insert("autopilot".into(), "1/1".into());
+            first.commands.push(CommandRecord {
+                action: "follow_trajectory".into(),
+                command: "MISSION_UPLOAD".into(),
+                result: CommandOutcome::AcceptedVerified { items: 8 },
+                attempts: 1,
+                latency_ms: None,
+            });
+            log.record(first);
+            let mut last = DecisionRecord {
+                cycle: 2,
+                state: "wpi".into(),
+                utc_us: Some(42),
+                ..Default::default()
+            };
+            last.vehicle.insert("operator".into(), "started".into());
+            log.record(last);
+            log.close();
+            if killed {
+                let path = dir.join("decisions.jsonl");
+                let text = std::fs::read_to_string(&path).unwrap();
+                let kept: Vec<&str> = text
+                    .lines()
+                    .filter(|l| l.contains("\"cycle\"") || l.contains("schema"))
+                    .collect();
+                std::fs::write(&path, kept.join("\n") + "\n").unwrap();
+            }
+        };
+        write("2026-11-28T13-00-00Z", false);
+        write("2026-11-28T13-05-00Z", true);
+        let run = read_previous_run(&base).unwrap();
+        assert!(run.folder.ends_with("2026-11-28T13-05-00Z"), "{run:?}");
+        assert!(!run.ended_cleanly);
+        assert_eq!(run.autopilot.as_deref(), Some("1/1"));
+        assert_eq!(run.operator.as_deref(), Some("started"));
+        assert!(run.uploaded);
+        assert_eq!((run.last_utc_us, run.state.as_str()), (Some(42), "wpi"));
+        write("2026-11-28T13-05-00Z-1", false);
+        assert!(read_previous_run(&base).unwrap().ended_cleanly);
+        let _ = std::fs::remove_dir_all(&base);
+    }
+
+    /// The autopilot's mission is the route only item for item (ArduPilot's home at seq 0
+    /// placing it); another mission, or no home to place it (PX4), is no proof.
+    #[test]
+    fn the_mission_is_compared_item_for_item_with_the_route() {
+        let args = crate::fly::FlyArgs::from_cli(["--connect", "udpin:127.0.0.1:14550"]).unwrap();
+        let setup = crate::fly::FlySetup::load(&args).unwrap();
+        let home = (-353_632_610, 1_491_652_300);
+        let items = setup.route.mission_items(Flavor::ArduPilot, home);
+        let ok = check_mission(&setup.route, Flavor::ArduPilot, true, None, &items).unwrap();
+        assert!(ok.contains("is the route"), "{ok}");
+        let mut moved = items.clone();
+        moved[2].x += 1000;
+        assert_eq!(
+            check_mission(&setup.route, Flavor::ArduPilot, true, None, &moved)
+                .unwrap_err()
+                .short,
+            "mission changed"
+        );
+        let shorter = &items[..items.len() - 1];
+        assert_eq!(
+            check_mission(&setup.route, Flavor::ArduPilot, true, None, shorter)
+                .unwrap_err()
+                .short,
+            "mission changed"
+        );
+        let px4 = setup.route.mission_items(Flavor::Px4, home);
+        assert_eq!(
+            check_mission(&setup.route, Flavor::Px4, false, None, &px4)
+                .unwrap_err()
+                .short,
+            "no home"
+        );
+        assert!(check_mission(&setup.route, Flavor::Px4, false, Some(home), &px4).is_ok());
+    }
 }

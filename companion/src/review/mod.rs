@@ -721,7 +721,7 @@ impl Review {
         for e in &r.events {
             let text = e.to_string();
             if let Some(rest) = text.strip_prefix("started in flight: ") {
-                self.restart = restart_words(rest).or(self.restart.take());
+                self.restart = outcomes::restart_words(rest).or(self.restart.take());
             }
             if let Some(rest) = text.strip_prefix("operator: start refused") {
                 let why = rest.split_once(": ").map_or(rest, |(_, w)| w);
@@ -836,24 +836,6 @@ impl Review {
         r.finish();
         r
     }
-}
-
-/// A started-in-flight event (after its prefix) as the summary tells it: `resumed (facts)` or
-/// `handed off (why not resumed)`; None for the other lines (the proof under way).
-fn restart_words(rest: &str) -> Option<String> {
-    if let Some(facts) = rest.strip_prefix("resumed") {
-        let facts = facts.split_once("; ").map_or("", |(_, f)| f);
-        return Some(format!("resumed on the operator's consent ({facts})"));
-    }
-    let (_, why) = rest.split_once("not resumed")?;
-    let why = why.trim_start_matches([':', ' ', '(']);
-    let why = why.split("; no start until").next().unwrap_or(why);
-    let done = if rest.contains("handed off") {
-        "handed off"
-    } else {
-        "not resumed"
-    };
-    Some(format!("{done} ({})", why.trim_end_matches(')')))
 }
 
 /// How a fly log ends, from its last record: taken over (by which mode), landed and disarmed
