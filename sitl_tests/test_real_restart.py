@@ -14,6 +14,7 @@ is the default one with a 20 s search limit (the mission's loiter at wpf), so th
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import time
 from pathlib import Path
@@ -21,6 +22,7 @@ from typing import Any, Tuple
 
 import pytest
 
+from helpers import read_decision_log
 from standin import mavlink
 
 pytestmark = [pytest.mark.real_autopilot, pytest.mark.companion_fly]
@@ -39,13 +41,14 @@ def short_search_route(tmp_path: Path) -> Path:
     return p
 
 
-def fly_until_waypoint_2(arducopter: Any, fly: Any, relay: Any, tmp_path: Path) -> Tuple[Any, Any, Any, Path]:
+def fly_until_waypoint_2(arducopter: Any, fly: Any, relay: Any, tmp_path: Path,
+                         extra: Tuple[str, ...] = ()) -> Tuple[Any, Any, Any, Path]:
     """A fresh vehicle, the companion flying its route in AUTO through a relay, up to MISSION_ITEM_REACHED 2."""
     veh = arducopter(speedup=SPEEDUP)
     rl = relay(int(veh.autopilot.url.rsplit(":", 1)[1]))
     via = type(veh.autopilot)(url=rl.url, monitor_url=veh.autopilot.monitor_url)
     route = short_search_route(tmp_path)
-    run = fly(via, mission=route)
+    run = fly(via, mission=route, extra=extra)
     gcs = veh.gcs
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline and run.proc.poll() is None:
@@ -102,3 +105,42 @@ def test_real_killed_in_auto_and_not_restarted_the_mission_brings_it_home(arduco
     with rl._lock:
         after = [m for (t, m, _) in rl.sent if t > killed_at]
     assert not after, f"something spoke for the dead companion: {after[:5]}"
+
+
+def test_real_killed_in_auto_restarted_resumes_its_own_flight_on_consent_and_lands(arducopter, fly, relay, tmp_path):
+    """[flight] restart_in_air = "resume_with_consent": the restarted companion proves the flight its own (its run
+    log, the mission on the autopilot, the guarantee with the battery now), offers to resume, the operator's
+    MISSION_START resumes it without arming, taking off or uploading, and the flight ends landed and disarmed."""
+    params = tmp_path / "params-resume"
+    shutil.copytree(REPO / "params", params)
+    link = params / "link.toml"
+    text = link.read_text()
+    assert 'restart_in_air = "handoff"' in text
+    link.write_text(text.replace('restart_in_air = "handoff"', 'restart_in_air = "resume_with_consent"'))
+    veh, rl, via, route = fly_until_waypoint_2(arducopter, fly, relay, tmp_path, extra=("--params", str(params)))
+    gcs = veh.gcs
+    time.sleep(3.0)
+    assert gcs.armed and gcs.alt > 5.0, "the vehicle is no longer flying at the restart" + gcs.summary()
+    restarted_at = time.monotonic()
+    log_dir = next(tmp_path.glob("companion-log-*"))
+    run = fly(via, mission=route, log_dir=log_dir, extra=("--params", str(params)))
+    # (gcs.wait holds the observer's lock: the condition reads its lists directly.)
+    said_since = lambda: [s for tt, _, c, s in gcs.statustext_from if c == COMPANION and tt >= restarted_at]
+    gcs.wait(lambda: any("MISSION_START in 20s resumes" in t for t in said_since()), 20.0,
+             "no offer to resume from the restarted companion")
+    assert gcs.mode == "AUTO", "handed off before the operator answered" + gcs.summary()
+    result = gcs.command_long(mavlink.MAV_CMD_MISSION_START, component=COMPANION, timeout=10.0)
+    assert result == mavlink.MAV_RESULT_ACCEPTED, result
+    gcs.wait(lambda: any("resumed its own flight" in t for t in said_since()), 10.0,
+             "no 'resumed' from the restarted companion")
+    wait_landed_disarmed(gcs, 300, "the resumed flight did not end landed and disarmed")
+    assert run.wait_exit(60) == 0, "the restarted companion did not end its run (--once)" + run.output()
+    newest = max((d for d in log_dir.iterdir() if (d / "decisions.jsonl").is_file()), key=lambda d: d.name)
+    records = read_decision_log(newest)
+    events = [e if isinstance(e, str) else str(e) for r in records for e in r.get("events", [])]
+    assert any(e.startswith("started in flight: resumed on the operator's consent") for e in events), events[-20:]
+    commands = [c["command"] for r in records for c in r.get("commands", [])]
+    assert not {"MAV_CMD_COMPONENT_ARM_DISARM", "MAV_CMD_NAV_TAKEOFF", "MISSION_UPLOAD"} & set(commands), commands
+    assert gcs.arm_count(since=restarted_at) == 0
+    said = gcs.texts_from(COMPANION, since=restarted_at)
+    assert not [t for t in said if "hand-off" in t and "MISSION_START" not in t], said

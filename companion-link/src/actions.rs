@@ -720,6 +720,9 @@ pub struct FlightParams {
     /// What the vehicle is told to do when the companion stops while it commands an armed
     /// vehicle (SIGINT, SIGTERM, a fatal error): `none`, `hold`, `rtl` or `land`.
     pub handoff: Handoff,
+    /// Started next to an armed vehicle in the air: hand off at once, or resume its own flight
+    /// on the operator's consent (crate::restart_in_air).
+    pub restart_in_air: crate::restart_in_air::RestartInAir,
 }
 
 /// The hand-off when the companion stops in flight (params/link.toml `[flight] handoff`).
@@ -773,6 +776,7 @@ impl Default for FlightParams {
             operator_confirm_s: 2.0,
             command_max_age_s: 2.0,
             handoff: Handoff::Rtl,
+            restart_in_air: Default::default(),
         }
     }
 }

@@ -30,6 +30,7 @@ pub mod mission_state;
 pub mod modes;
 pub mod operator;
 pub mod readiness;
+pub mod restart_in_air;
 pub mod telemetry;
 pub mod url;
 pub mod vehicle;

@@ -145,3 +145,55 @@ fn a_takeover_names_the_pilots_mode() {
         "{out}"
     );
 }
+
+/// A companion started next to a flight in progress (fly/restart.rs): the summary begins with
+/// what it did, handed off (and why it did not resume) or resumed (and the proof's facts).
+#[test]
+fn a_flight_found_in_progress_says_handed_off_or_resumed() {
+    let with_event = |event: &str, operator: &'static str| {
+        let mut first = air(100.0, 20.0, "AUTO", 300.0);
+        first.operator = operator;
+        let mut items = vec![rec(0, &first)];
+        if let LogItem::Record(r, _) = &mut items[0] {
+            r.events.push(event.into());
+        }
+        let mut landed = ground(0.0, 200.0);
+        landed.mode = "RTL";
+        items.push(rec(1, &air(50.0, 10.0, "RTL", 250.0)));
+        items.push(rec(2, &landed));
+        items.push(LogItem::End);
+        Review::from_items(items, None).summary.outcome
+    };
+    let out = with_event(
+        "started in flight: the vehicle is armed, landed state IN_AIR, altitude 20.0 m above home, mode AUTO; handed off: hand-off RTL (params/link.toml [flight] handoff); not resumed: no MISSION_START from the operator within 20 s; no start until it is landed and disarmed",
+        "flight_in_progress",
+    );
+    assert!(
+        out.starts_with(
+            "started in flight, handed off (no MISSION_START from the operator within 20 s); landed and disarmed"
+        ),
+        "{out}"
+    );
+    let out = with_event(
+        "started in flight: resumed on the operator's consent (MISSION_START from 255/190): the vehicle is armed, landed state IN_AIR, altitude 20.0 m above home, mode AUTO; the last run died 3 s ago; the guarantee fits",
+        "started",
+    );
+    assert!(
+        out.starts_with("started in flight, resumed on the operator's consent (the last run died 3 s ago; the guarantee fits); landed and disarmed"),
+        "{out}"
+    );
+    let out = with_event(
+        "started in flight: the vehicle is armed, ...; handed off: hand-off RTL (params/link.toml [flight] handoff); not resumed: params/link.toml [flight] restart_in_air = \"handoff\" (the default); no start until it is landed and disarmed",
+        "flight_in_progress",
+    );
+    assert!(
+        out.starts_with("started in flight, handed off (params/link.toml [flight] restart_in_air = \"handoff\" (the default)); landed"),
+        "{out}"
+    );
+    // The proof under way says neither.
+    let out = with_event(
+        "started in flight: the vehicle is armed, ...; checking whether it is the companion's own flight to resume (restart_in_air = resume_with_consent)",
+        "flight_in_progress",
+    );
+    assert!(out.starts_with("landed and disarmed"), "{out}");
+}

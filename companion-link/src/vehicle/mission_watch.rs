@@ -66,6 +66,12 @@ impl Vehicle {
         self.watch.due = true;
     }
 
+    /// Stop watching (a restarted companion downloaded the mission once to compare it with its
+    /// own route, and flies that route): no more downloads, the route's upload step uploads.
+    pub fn unwatch_autopilot_mission(&mut self) {
+        self.watch = MissionWatch::default();
+    }
+
     /// Whether the autopilot's own mission is the one flown (and watched).
     pub fn flies_autopilot_mission(&self) -> bool {
         self.watch.enabled

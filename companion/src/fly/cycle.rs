@@ -43,6 +43,10 @@ pub(super) async fn run_cycle_at<D: Decider, S: RecordSink>(
         .map(|c| vehicle.actions.name(Flown::Action(c.action())).to_string());
     let mut rec = finish_record(decided, shell, vehicle, report.cycles, transport_events);
     rec.decide_ms = Some(decide_ms);
+    if shell.operator.control == companion_link::operator::Control::FlightInProgress {
+        let battery = rec.vehicle.get("battery_pct").and_then(|v| v.as_f64());
+        shell.guarantee_in_flight = Some((now(), rec.guarantee.clone(), battery));
+    }
     if !shell.operator.commanding() {
         shell.launch = match super::autopilot_plan::unplanned_refusal(shell) {
             Some(refusal) => Err(refusal),
@@ -264,6 +268,13 @@ pub fn finish_record(
     // small enough to be logged.
     companion_core::record::coalesce_link_events(&mut rec.link_events);
     rec.vehicle.extend(vehicle.telemetry.vehicle());
+    // Which autopilot this run flies: a restarted companion proves a flight its own by it.
+    if let Some((sys, comp)) = vehicle.target {
+        rec.vehicle.insert(
+            "autopilot".into(),
+            serde_json::Value::from(format!("{sys}/{comp}")),
+        );
+    }
     rec.vehicle.insert(
         "link_alive".into(),
         serde_json::Value::from(vehicle.liveness.alive()),

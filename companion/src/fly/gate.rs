@@ -79,6 +79,18 @@ impl GroundStations {
     }
 }
 
+/// A command addressed to us that the gate's rules accept (an accepted ground station, not
+/// stale, the autopilot heard first): the same rules as a start.
+pub(super) fn start_acceptable(
+    cmd: &CommandToUs,
+    now: Duration,
+    max_age: Duration,
+    vehicle: &Vehicle,
+    gcs: &GroundStations,
+) -> bool {
+    command_refusal(cmd, now, max_age, vehicle, gcs).is_none()
+}
+
 /// Why a command addressed to us is refused before the gate sees it, or None.
 fn command_refusal(
     cmd: &CommandToUs,

@@ -18,7 +18,8 @@
 //! loop, one method per event source, and the stop), `cycle` (one decision cycle), `shell` (what
 //! is kept between cycles), `gate` (the operator gate's shell side), `words` (texts for the
 //! ground station), `link_security` (signing warnings), `transport` (bytes in and out),
-//! `restart` (started next to a vehicle already flying: said, handed off, never waited on),
+//! `restart` (started next to a vehicle already flying: said, handed off or resumed on the
+//! operator's consent, never waited on), `resume` (the proof that such a flight is its own),
 //! `watchdog` (systemd's READY=1, WATCHDOG=1 from the loop, STOPPING=1).
 
 mod args;
@@ -27,6 +28,7 @@ mod cycle;
 pub mod gate;
 pub mod link_security;
 mod restart;
+mod resume;
 pub mod route_progress;
 mod route_replan;
 mod run_loop;
@@ -155,7 +157,13 @@ pub struct FlyReport {
 pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
     use crate::decision_log::{self as dlog, Header, TlogWriter, WriterOptions};
     // Params first: a start that fails on them leaves no run folder behind.
-    let setup = FlySetup::load(&args)?;
+    let mut setup = FlySetup::load(&args)?;
+    if setup.link.flight.restart_in_air
+        == companion_link::restart_in_air::RestartInAir::ResumeWithConsent
+    {
+        // The previous run's log, before this run's own folder becomes the latest.
+        setup.previous_run = Some(resume::read_previous_run(&args.log_dir));
+    }
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()

@@ -83,11 +83,13 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
     /// Set up the run (the operator gate, the vehicle, the transports) and say how it will start.
     pub(super) fn new(
         args: FlyArgs,
-        setup: FlySetup,
+        mut setup: FlySetup,
         decider: D,
         sink: &'s mut S,
         tlog: Option<Tlog>,
     ) -> Self {
+        let start_look =
+            restart::StartLook::new(setup.link.flight.restart_in_air, setup.previous_run.take());
         let mut shell = Shell::new(&setup);
         shell.operator = OperatorGate::new(args.auto_start);
         shell.operator.confirm = Duration::from_secs_f64(setup.link.flight.operator_confirm_s);
@@ -128,7 +130,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             was_alive: false,
             announced_auto_start: false,
             gcs: GcsWatch::default(),
-            start_look: restart::StartLook::default(),
+            start_look,
             watchdog: watchdog::Watchdog::from_env(setup.link.decision_period_s),
             last_cycle_done: None,
             autopilot_plan,
@@ -408,6 +410,32 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
                 // Armed, and not yet known to be on the ground: no start, whatever the models say.
                 wake |= restart::refuse_start_until_known(&mut self.shell, &cmd, t, out);
                 continue;
+            }
+            // The operator's consent to resume a flight found in progress: a start the gate's
+            // rules accept (an accepted ground station, not stale), answered here.
+            if self.start_look.awaits_consent()
+                && cmd.command == companion_link::operator::START_COMMAND
+                && gate::start_acceptable(
+                    &cmd,
+                    t,
+                    self.shell.command_max_age,
+                    &self.vehicle,
+                    &self.stations,
+                )
+            {
+                let from = cmd.from;
+                if self
+                    .start_look
+                    .consent(&mut self.shell, &mut self.vehicle, from, t, out)
+                {
+                    out.push(companion_link::operator::ack(
+                        cmd.command,
+                        companion_link::dialect::MavResult::MAV_RESULT_ACCEPTED,
+                        from,
+                    ));
+                    wake = true;
+                    continue;
+                }
             }
             wake |= gate::answer_command(
                 &mut self.shell,

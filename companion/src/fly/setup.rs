@@ -26,6 +26,9 @@ pub struct FlySetup {
     pub autopilot_speeds: Option<companion_core::route_plan::DeriveSettings>,
     /// The derived plan against the route flown (`route_activity`); `None` for the typed plan.
     pub route_progress: Option<super::route_progress::RouteProgress>,
+    /// `[flight] restart_in_air = "resume_with_consent"`: the previous run's log in `--log-dir`
+    /// (or why there is none), read before this run's folder was made.
+    pub previous_run: Option<Result<super::resume::PreviousRun, String>>,
 }
 
 impl FlySetup {
@@ -83,6 +86,7 @@ impl FlySetup {
             .filter(|_| !args.flies_autopilot_mission())
             .and_then(|p| super::route_progress::RouteProgress::new(p, &route, states.clone()));
         Ok(Self {
+            previous_run: None,
             route_progress,
             link,
             actions,

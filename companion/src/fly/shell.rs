@@ -4,7 +4,7 @@
 use super::{FlySetup, NOTICE, WARNING, words};
 use companion_core::launch::LaunchRefusal;
 use companion_core::mission::RouteRole;
-use companion_core::record::{DecisionRecord, Event, LinkEvent};
+use companion_core::record::{DecisionRecord, Event, GuaranteeRecord, LinkEvent};
 use companion_core::vocabulary::ActionId;
 use companion_link::ingest;
 use companion_link::mission_state::MissionState;
@@ -56,6 +56,9 @@ pub struct Shell {
     pub(super) command_max_age: Duration,
     /// `fly --mission autopilot`: why the mission is not planned (no start is granted then).
     pub(super) mission_unplanned: Option<String>,
+    /// While a flight found in progress goes on: the last cycle's guarantee and battery
+    /// percentage, and when (the resume's proof reads them).
+    pub(super) guarantee_in_flight: Option<(Duration, Option<GuaranteeRecord>, Option<f64>)>,
 }
 
 impl Shell {
@@ -100,6 +103,7 @@ impl Shell {
             refusal_told: None,
             command_max_age: Duration::from_secs_f64(f.command_max_age_s),
             mission_unplanned: None,
+            guarantee_in_flight: None,
         }
     }
 

@@ -261,6 +261,8 @@ pub struct Review {
     /// The last start refusal of the log, in the operator's words (the gate's event, with the
     /// guarantee's verdict when the refused cycle has one).
     refused: Option<String>,
+    /// Started next to a flight in progress: handed off (why) or resumed (fly/restart.rs).
+    restart: Option<String>,
     /// The previous record's `vehicle.armed`.
     prev_armed: Option<bool>,
     /// (action, command) -> in-progress results not yet followed by an outcome.
@@ -719,6 +721,9 @@ impl Review {
         // waiting ...`), and the guarantee's typed verdict when the models refused on energy.
         for e in &r.events {
             let text = e.to_string();
+            if let Some(rest) = text.strip_prefix("started in flight: ") {
+                self.restart = outcomes::restart_words(rest).or(self.restart.take());
+            }
             if let Some(rest) = text.strip_prefix("operator: start refused") {
                 let why = rest.split_once(": ").map_or(rest, |(_, w)| w);
                 let why = why.split("; still waiting").next().unwrap_or(why).trim();
@@ -806,6 +811,9 @@ impl Review {
             } else if !s.ended_cleanly {
                 out.push_str("; no end line (process stopped?)");
             }
+        }
+        if let Some(r) = &self.restart {
+            out = format!("started in flight, {r}; {out}");
         }
         s.outcome = out;
         if let Some(v) = self.newer_schema {

@@ -115,6 +115,30 @@ impl OutcomeCounts {
     }
 }
 
+/// A started-in-flight event (after its prefix) as the summary tells it: `resumed (facts)` or
+/// `handed off (why not resumed)`; None for the other lines (the proof under way).
+pub(super) fn restart_words(rest: &str) -> Option<String> {
+    if let Some(facts) = rest.strip_prefix("resumed") {
+        let facts = facts.split_once("; ").map_or("", |(_, f)| f);
+        return Some(format!("resumed on the operator's consent ({facts})"));
+    }
+    let (_, why) = rest.split_once("not resumed")?;
+    let why = why.split("; no start until").next().unwrap_or(why);
+    // Logs before restart_in_air: `not resumed (the companion resumes no flight ...)`.
+    let why = (why.strip_prefix(" (").and_then(|w| w.strip_suffix(')')))
+        .unwrap_or_else(|| why.trim_start_matches([':', ' ']));
+    let done = if rest.contains("hand-off") {
+        "handed off"
+    } else {
+        "not resumed"
+    };
+    Some(if why.is_empty() {
+        done.to_string()
+    } else {
+        format!("{done} ({why})")
+    })
+}
+
 #[cfg(test)]
 mod tests {
 
