@@ -111,6 +111,19 @@ struct SimulateArgs {
     /// absolute ones.
     #[arg(long, value_name = "LAT,LON")]
     home: Option<String>,
+    #[command(flatten)]
+    live: companion::live::LiveArgs,
+    /// With --live: wait at most this long (seconds) for a viewer to subscribe before the first
+    /// step, so it sees the whole run (then the run goes on without one).
+    #[arg(long, default_value_t = 30.0, requires = "live", value_parser = live_wait_s)]
+    live_wait: f64,
+}
+
+fn live_wait_s(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(x) if (0.0..=3600.0).contains(&x) => Ok(x),
+        _ => Err(format!("`{s}`: seconds from 0 to 3600")),
+    }
 }
 
 #[derive(Subcommand)]
@@ -332,10 +345,36 @@ fn simulate_plan(
     .context("loading params")
 }
 
+/// `simulate --live`: the server, and the wait for a first viewer (bounded, said).
+fn simulate_live_start(
+    args: &SimulateArgs,
+    started: std::time::SystemTime,
+) -> Result<Option<companion::live::LiveServer>> {
+    let header_start = companion::decision_log::Header::new(String::new(), started).started_utc;
+    let start_ns = companion::export::rfc3339_ns(&header_start).unwrap_or(0);
+    let Some(live) = companion::live::start(&args.live, start_ns)? else {
+        return Ok(None);
+    };
+    eprintln!(
+        "live: waiting up to {} s for a viewer to subscribe before the first step",
+        args.live_wait
+    );
+    let wait = std::time::Duration::from_secs_f64(args.live_wait);
+    if !live.hub().wait_for_subscriber(wait) {
+        eprintln!(
+            "live: no viewer subscribed within {} s: simulating without one",
+            args.live_wait
+        );
+    }
+    Ok(Some(live))
+}
+
 fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
     // An unparsable COMPANION_LOG_MAX_BYTES stops the start, before any work.
     let log_opts = companion::decision_log::WriterOptions::from_env()?;
     let (loaded, plan) = simulate_plan(params, &args)?;
+    let started = std::time::SystemTime::now();
+    let live = simulate_live_start(&args, started)?;
     let world = loaded.world;
     let mut scenario = Scenario::load(&loaded.files, &args.scenario)?;
     if let Some(s) = args.steps {
@@ -388,9 +427,28 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
     }
     let (first_kind, first) = first_records.expect("at least one run");
 
-    // The first run goes to a run folder (decision log with its header), for `companion review`.
+    // The first run goes to a run folder (decision log with its header), for `companion review`,
+    // and to the live viewers (paced by them, at most 1 s each).
+    let mut sink = companion::live::LiveSink::new(
+        Vec::with_capacity(first.records.len()),
+        live.as_ref().map(|l| l.hub()),
+    );
+    for r in &first.records {
+        companion::fly::RecordSink::write(&mut sink, r)?;
+        if let Some(l) = &live {
+            l.hub().wait_for_room(std::time::Duration::from_secs(1));
+        }
+    }
+    let live_line = companion::live::finish(live);
+    if !live_line.is_empty() {
+        eprintln!("companion simulate:{live_line}");
+    }
+    let first = sim::RunResult {
+        records: sink.inner,
+        ..first
+    };
     if !args.no_log {
-        let now = std::time::SystemTime::now();
+        let now = started;
         let command: Vec<String> = std::env::args().collect();
         let mut header = companion::decision_log::Header::new(command.join(" "), now)
             .with_params_dir(params)

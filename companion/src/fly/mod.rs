@@ -173,6 +173,8 @@ pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
     header.plan = args.plan.clone();
     header.model = Some(companion_core::decision::ModelKind::Bfm.name().to_string());
     let opts = WriterOptions::from_env()?;
+    // Live messages are stamped as the export stamps them: the header's start plus `time_s`.
+    let start_ns = crate::export::rfc3339_ns(&header.started_utc).unwrap_or(0);
     let mut log = dlog::start_run(&args.log_dir, now, header, opts.clone())
         .with_context(|| format!("starting a run folder in {}", args.log_dir.display()))?;
     let dir = log.dir().to_path_buf();
@@ -187,17 +189,20 @@ pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
         .with_max_bytes(opts.max_bytes);
     // The tlog's cap is told like the decision log's: a loss line there, the end line, the exit.
     log.watch_tlog(tlog.capped_counter());
-    let mut sink = LogSink(log);
+    // `--live`: served beside the loop, never waited on (crate::live).
+    let live = crate::live::start(&args.live, start_ns)?;
+    let mut sink = crate::live::LiveSink::new(LogSink(log), live.as_ref().map(|l| l.hub()));
     let result = rt.block_on(async {
         // Inside the runtime: the loop spawns its transport tasks as it starts.
         RunLoop::new(args, setup, decider, &mut sink, Some(Tlog(tlog)))
             .run()
             .await
     });
-    let stats = sink.0.close();
+    let stats = sink.inner.0.close();
+    let live_line = crate::live::finish(live);
     let report = result?;
     eprintln!(
-        "companion fly: {} records {} dropped {} tlog_capped {}",
+        "companion fly: {} records {} dropped {} tlog_capped {}{live_line}",
         serde_json::to_string(&report).unwrap_or_default(),
         stats.records,
         stats.dropped,
