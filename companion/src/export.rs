@@ -267,6 +267,19 @@ pub fn run_cli(input: &Path, format: Format, out: Option<&Path>) -> anyhow::Resu
     Ok(())
 }
 
+/// The proposals' `inputs` as the log holds them (the reader takes them out of the record), so
+/// the file's messages are the record's, as the live view's are.
+fn restore_inputs(v: &mut serde_json::Value, inputs: Vec<Option<serde_json::Value>>) {
+    let Some(ps) = v.get_mut("proposals").and_then(|p| p.as_array_mut()) else {
+        return;
+    };
+    for (p, i) in ps.iter_mut().zip(inputs) {
+        if let (Some(o), Some(i)) = (p.as_object_mut(), i) {
+            o.insert("inputs".into(), i);
+        }
+    }
+}
+
 pub fn export_mcap(input: &Path, path: &Path) -> Result<ExportStats, ExportError> {
     let werr = |source| ExportError::Write {
         path: path.to_path_buf(),
@@ -290,9 +303,10 @@ pub fn export_mcap(input: &Path, path: &Path) -> Result<ExportStats, ExportError
         match item? {
             LogItem::Header(h) => start_ns = rfc3339_ns(&h.started_utc).unwrap_or(0),
             LogItem::Corrupted(i) | LogItem::Truncated(i) => stats.skip(i),
-            LogItem::Record(r, _) => {
+            LogItem::Record(r, inputs) => {
                 stats.records += 1;
-                let v = record_value(&r);
+                let mut v = record_value(&r);
+                restore_inputs(&mut v, inputs);
                 let t = channels::log_time_ns(start_ns, &r);
                 for g in GROUPS {
                     let topic = channels::topic(g);

@@ -32,14 +32,14 @@ impl LiveServer {
     /// Listen on `addr` (errors here, before the run starts) and serve on a thread of its own.
     pub fn start(addr: SocketAddr, hub: Arc<Hub>) -> anyhow::Result<Self> {
         use anyhow::Context;
-        let listener = std::net::TcpListener::bind(addr)
-            .with_context(|| format!("--live {addr}: cannot listen"))?;
-        listener.set_nonblocking(true)?;
-        let addr = listener.local_addr()?;
         let rt = tokio::runtime::Builder::new_current_thread()
             .enable_all()
             .build()
             .context("--live: starting its runtime")?;
+        let listener = rt
+            .block_on(async { listen(addr) })
+            .with_context(|| format!("--live {addr}: cannot listen"))?;
+        let addr = listener.local_addr()?;
         let (tx, done) = std::sync::mpsc::channel();
         let stop = Arc::new(tokio::sync::Notify::new());
         let (h, s) = (Arc::clone(&hub), Arc::clone(&stop));
@@ -71,11 +71,24 @@ impl LiveServer {
     }
 }
 
-async fn serve(listener: std::net::TcpListener, hub: Arc<Hub>, stop: Arc<tokio::sync::Notify>) {
-    let Ok(listener) = tokio::net::TcpListener::from_std(listener) else {
-        tracing::warn!("--live: the listening socket could not join the runtime");
-        return;
+/// Viewers' sockets keep at most this much unsent (SO_SNDBUF, inherited from the listener):
+/// without it the kernel's buffer grows to megabytes on loopback, and a stalled viewer would
+/// hold that much instead of losing messages from its bounded queue.
+const SEND_BUFFER: u32 = 64 * 1024;
+
+fn listen(addr: SocketAddr) -> std::io::Result<tokio::net::TcpListener> {
+    let socket = if addr.is_ipv4() {
+        tokio::net::TcpSocket::new_v4()?
+    } else {
+        tokio::net::TcpSocket::new_v6()?
     };
+    socket.set_reuseaddr(true)?;
+    socket.set_send_buffer_size(SEND_BUFFER)?;
+    socket.bind(addr)?;
+    socket.listen(64)
+}
+
+async fn serve(listener: tokio::net::TcpListener, hub: Arc<Hub>, stop: Arc<tokio::sync::Notify>) {
     let mut viewers = tokio::task::JoinSet::new();
     loop {
         tokio::select! {
@@ -256,7 +269,11 @@ async fn viewer(stream: tokio::net::TcpStream, peer: SocketAddr, hub: Arc<Hub>) 
                     None => hub.count_ignored(),
                 },
                 Some(Ok(Message::Binary(_))) => hub.count_ignored(),
-                Some(Ok(Message::Close(_))) | None | Some(Err(_)) => break,
+                Some(Ok(Message::Close(_))) | None => break,
+                Some(Err(e)) => {
+                    tracing::info!("--live: viewer {peer}: {e}");
+                    break;
+                }
                 Some(Ok(_)) => {} // ping/pong: answered by tungstenite
             },
             () = wake.notified() => {
@@ -278,7 +295,10 @@ async fn viewer(stream: tokio::net::TcpStream, peer: SocketAddr, hub: Arc<Hub>) 
         for f in frames {
             ok &= tx.feed(Message::binary(f)).await.is_ok();
         }
-        ok &= tx.flush().await.is_ok();
+        if let Err(e) = tx.flush().await {
+            tracing::info!("--live: viewer {peer}: {e}");
+            ok = false;
+        }
     }
     hub.disconnect(&id);
     tracing::info!("--live: viewer {peer} left");
