@@ -90,6 +90,11 @@ impl Decider for companion_core::decision::Core {
 /// Where decision records go (the log helper provides the file writer).
 pub trait RecordSink {
     fn write(&mut self, rec: &DecisionRecord) -> std::io::Result<()>;
+    /// [`RecordSink::write`] of a record the caller shares (`--live`): a sink that keeps records
+    /// keeps this one without copying it.
+    fn write_shared(&mut self, rec: std::sync::Arc<DecisionRecord>) -> std::io::Result<()> {
+        self.write(&rec)
+    }
 }
 
 /// One JSON object per line.
@@ -117,6 +122,10 @@ impl RecordSink for LogSink {
     fn write(&mut self, rec: &DecisionRecord) -> std::io::Result<()> {
         // A full queue drops the record; the log itself says so with a `loss` line.
         self.0.record(rec.clone());
+        Ok(())
+    }
+    fn write_shared(&mut self, rec: std::sync::Arc<DecisionRecord>) -> std::io::Result<()> {
+        self.0.record_shared(rec);
         Ok(())
     }
 }

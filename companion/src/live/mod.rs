@@ -132,7 +132,14 @@ struct HubState {
     next_viewer: u64,
     subscribed_ever: bool,
     closed: bool,
+    /// Records the hub let go of (the previous latest, a full queue's oldest): freed on the
+    /// server's thread ([`Hub::bury`]), not on the cycle's.
+    graveyard: Vec<Arc<DecisionRecord>>,
 }
+
+/// Records let go of at most, waiting for the server's thread to free them (beyond: freed at
+/// once, on the cycle).
+const GRAVEYARD_MAX: usize = 4096;
 
 /// What the cycle hands records to and the viewers take them from (see the module's text).
 #[derive(Debug)]
@@ -143,6 +150,8 @@ pub struct Hub {
     capacity: usize,
     dropped: AtomicU64,
     ignored: AtomicU64,
+    /// Wakes the server's thread to free what the hub let go of.
+    pub(crate) janitor: tokio::sync::Notify,
     /// The run's start (ns since the epoch): message time = start + `time_s`, as the export.
     pub start_ns: u64,
 }
@@ -159,6 +168,7 @@ impl Hub {
             capacity: capacity.max(1),
             dropped: AtomicU64::new(0),
             ignored: AtomicU64::new(0),
+            janitor: tokio::sync::Notify::new(),
             start_ns,
         }
     }
@@ -174,20 +184,39 @@ impl Hub {
         let mut s = self.lock();
         s.seq += 1;
         let seq = s.seq;
-        s.latest = Some((seq, Arc::clone(&rec)));
+        let HubState {
+            latest,
+            viewers,
+            graveyard,
+            ..
+        } = &mut *s;
+        graveyard.extend(latest.replace((seq, Arc::clone(&rec))).map(|(_, r)| r));
         let mut lost = 0u64;
-        for v in s.viewers.values_mut().filter(|v| v.channels > 0) {
+        for v in viewers.values_mut().filter(|v| v.channels > 0) {
             if v.queue.len() >= self.capacity {
-                v.queue.pop_front();
+                graveyard.extend(v.queue.pop_front().map(|(_, r)| r));
                 lost += v.channels as u64;
             }
             v.queue.push_back((seq, Arc::clone(&rec)));
             v.wake.notify_one();
         }
+        let overflow = if graveyard.len() > GRAVEYARD_MAX {
+            std::mem::take(graveyard)
+        } else {
+            Vec::new()
+        };
         drop(s);
+        drop(overflow);
         if lost > 0 {
             self.dropped.fetch_add(lost, Ordering::Relaxed);
         }
+        self.janitor.notify_one();
+    }
+
+    /// Free the records the hub let go of (the server's thread).
+    pub(crate) fn bury(&self) {
+        let dead = std::mem::take(&mut self.lock().graveyard);
+        drop(dead);
     }
 
     /// Messages the viewers lost so far (summed over viewers).
@@ -334,9 +363,10 @@ impl<S: RecordSink> RecordSink for LiveSink<S> {
         };
         let mut rec = rec.clone();
         rec.live_dropped = Some(hub.dropped());
+        let rec = Arc::new(rec);
         // The log first: what is written never depends on the viewers.
-        self.inner.write(&rec)?;
-        hub.publish(Arc::new(rec));
+        self.inner.write_shared(Arc::clone(&rec))?;
+        hub.publish(rec);
         Ok(())
     }
 }

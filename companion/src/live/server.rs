@@ -99,6 +99,7 @@ async fn serve(listener: tokio::net::TcpListener, hub: Arc<Hub>, stop: Arc<tokio
                 }
                 Err(e) => tracing::warn!("--live: accept failed: {e}"),
             },
+            () = hub.janitor.notified() => hub.bury(),
             () = stop.notified() => break,
         }
     }
