@@ -130,6 +130,19 @@ impl RecordSink for LogSink {
     }
 }
 
+/// `--live`: the record written (with `live_dropped`), then served; without a hub, as it is.
+impl<S: RecordSink> RecordSink for crate::live::LiveSink<S> {
+    fn write(&mut self, rec: &DecisionRecord) -> std::io::Result<()> {
+        let Some(rec) = self.stamp(rec) else {
+            return self.inner.write(rec);
+        };
+        // The log first: what is written never depends on the viewers.
+        self.inner.write_shared(std::sync::Arc::clone(&rec))?;
+        self.publish(rec);
+        Ok(())
+    }
+}
+
 /// Raw MAVLink traffic to `flight.tlog`: frames sent exactly as encoded, frames received exactly
 /// as they arrived (signature included), so the tlog is the wire. Only frames the ingest accepted
 /// are logged: garbage, bad signatures and refused unsigned commands are counted, not kept.
@@ -320,5 +333,31 @@ mod tests {
             e.contains("unknown policy `yolo`") && e.contains("safety"),
             "{e}"
         );
+    }
+
+    fn rec(cycle: u64) -> DecisionRecord {
+        DecisionRecord {
+            cycle,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn the_live_sink_writes_the_record_first_with_the_losses_so_far() {
+        use std::sync::Arc;
+        let hub = Arc::new(crate::live::Hub::new(1, 0));
+        let (v, _wake) = hub.connect();
+        hub.subscribed(&v, 1);
+        let mut sink =
+            crate::live::LiveSink::new(Vec::<DecisionRecord>::new(), Some(Arc::clone(&hub)));
+        for c in 1..=3 {
+            sink.write(&rec(c)).unwrap();
+        }
+        let lost: Vec<_> = sink.inner.iter().map(|r| r.live_dropped).collect();
+        assert_eq!(lost, [Some(0), Some(0), Some(1)]);
+        // Without a hub the record goes through as it is.
+        let mut plain = crate::live::LiveSink::new(Vec::<DecisionRecord>::new(), None);
+        plain.write(&rec(1)).unwrap();
+        assert_eq!(plain.inner[0].live_dropped, None);
     }
 }

@@ -14,7 +14,6 @@
 
 pub mod server;
 
-use crate::fly::RecordSink;
 use companion_core::record::DecisionRecord;
 use std::collections::{BTreeMap, VecDeque};
 use std::net::SocketAddr;
@@ -343,7 +342,7 @@ impl Hub {
     }
 }
 
-/// A record sink that also serves the records live: the record is written to `inner` with the
+/// A record sink (`fly::RecordSink`) that also serves the records live: the record is written to `inner` with the
 /// drop count so far (`live_dropped`), then handed to the hub. Without a hub, `inner` alone.
 pub struct LiveSink<S> {
     pub inner: S,
@@ -356,18 +355,21 @@ impl<S> LiveSink<S> {
     }
 }
 
-impl<S: RecordSink> RecordSink for LiveSink<S> {
-    fn write(&mut self, rec: &DecisionRecord) -> std::io::Result<()> {
-        let Some(hub) = &self.hub else {
-            return self.inner.write(rec);
-        };
+impl<S> LiveSink<S> {
+    /// With a hub: the record to write and serve, stamped with the losses so far (its
+    /// `RecordSink` impl, in `fly`, writes it to `inner` first, then [`LiveSink::publish`]es it).
+    pub fn stamp(&self, rec: &DecisionRecord) -> Option<Arc<DecisionRecord>> {
+        let hub = self.hub.as_ref()?;
         let mut rec = rec.clone();
         rec.live_dropped = Some(hub.dropped());
-        let rec = Arc::new(rec);
-        // The log first: what is written never depends on the viewers.
-        self.inner.write_shared(Arc::clone(&rec))?;
-        hub.publish(rec);
-        Ok(())
+        Some(Arc::new(rec))
+    }
+
+    /// Hand a written record to the viewers.
+    pub fn publish(&self, rec: Arc<DecisionRecord>) {
+        if let Some(hub) = &self.hub {
+            hub.publish(rec);
+        }
     }
 }
 

@@ -119,23 +119,6 @@ fn client_messages_other_than_subscriptions_are_not_understood() {
 }
 
 #[test]
-fn the_sink_writes_the_record_first_with_the_losses_so_far() {
-    let hub = Arc::new(Hub::new(1, 0));
-    let (v, _wake) = hub.connect();
-    hub.subscribed(&v, 1);
-    let mut sink = LiveSink::new(Vec::<DecisionRecord>::new(), Some(Arc::clone(&hub)));
-    for c in 1..=3 {
-        sink.write(&rec(c)).unwrap();
-    }
-    let lost: Vec<_> = sink.inner.iter().map(|r| r.live_dropped).collect();
-    assert_eq!(lost, [Some(0), Some(0), Some(1)]);
-    // Without a hub the record goes through as it is.
-    let mut plain = LiveSink::new(Vec::<DecisionRecord>::new(), None);
-    plain.write(&rec(1)).unwrap();
-    assert_eq!(plain.inner[0].live_dropped, None);
-}
-
-#[test]
 fn pacing_gives_up_on_a_viewer_that_does_not_take() {
     let hub = Hub::new(1, 0);
     let (v, _wake) = hub.connect();
