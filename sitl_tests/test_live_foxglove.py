@@ -203,6 +203,10 @@ def test_a_viewer_that_never_reads_loses_messages_not_records(tmp_path):
     assert dropped == sorted(dropped) and dropped[-1] > 0, dropped
     total = int(re.search(r"live_dropped (\d+)", err.read_text()).group(1))
     assert total >= dropped[-1] > 0
+    # The run's summary says it too.
+    summary = subprocess.run([exe(), "review", str(run_folder(out)), "--summary"], capture_output=True, text=True,
+                             timeout=60, check=True).stdout
+    assert re.search(rf"live viewers lost +{dropped[-1]} messages", summary), summary
 
 
 def test_fly_live_viewer_receives_every_record_of_a_standin_flight(tmp_path, standin, fly):
