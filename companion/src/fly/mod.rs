@@ -195,8 +195,10 @@ pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
     header.plan = args.plan.clone();
     header.model = Some(companion_core::decision::ModelKind::Bfm.name().to_string());
     let opts = WriterOptions::from_env()?;
-    // Live messages are stamped as the export stamps them: the header's start plus `time_s`.
+    // `--live` before the run folder (an address in use leaves none behind); messages stamped
+    // as the export stamps them: the header's start plus `time_s`.
     let start_ns = crate::export::rfc3339_ns(&header.started_utc).unwrap_or(0);
+    let live = crate::live::start(&args.live, start_ns)?;
     let mut log = dlog::start_run(&args.log_dir, now, header, opts.clone())
         .with_context(|| format!("starting a run folder in {}", args.log_dir.display()))?;
     let dir = log.dir().to_path_buf();
@@ -212,7 +214,6 @@ pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
     // The tlog's cap is told like the decision log's: a loss line there, the end line, the exit.
     log.watch_tlog(tlog.capped_counter());
     // `--live`: served beside the loop, never waited on (crate::live).
-    let live = crate::live::start(&args.live, start_ns)?;
     let mut sink = crate::live::LiveSink::new(LogSink(log), live.as_ref().map(|l| l.hub()));
     let result = rt.block_on(async {
         // Inside the runtime: the loop spawns its transport tasks as it starts.
