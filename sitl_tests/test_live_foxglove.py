@@ -26,6 +26,8 @@ mcap_reader = pytest.importorskip("mcap.reader", reason="pip install -r sitl_tes
 websockets = pytest.importorskip("websockets", reason="pip install -r sitl_tests/requirements.txt (websockets)")
 from websockets.sync.client import connect as sync_connect  # noqa: E402
 
+pytestmark = [pytest.mark.companion_fly, pytest.mark.standin_only]
+
 SUBPROTOCOL = "foxglove.websocket.v1"
 LIVE_LINE = re.compile(r"live: Foxglove WebSocket at (ws://\S+)")
 
