@@ -139,6 +139,8 @@ struct HubState {
 /// Records let go of at most, waiting for the server's thread to free them (beyond: freed at
 /// once, on the cycle).
 const GRAVEYARD_MAX: usize = 4096;
+/// Records let go of before the server's thread is woken to free them.
+const GRAVEYARD_BATCH: usize = 32;
 
 /// What the cycle hands records to and the viewers take them from (see the module's text).
 #[derive(Debug)]
@@ -199,7 +201,8 @@ impl Hub {
             v.queue.push_back((seq, Arc::clone(&rec)));
             v.wake.notify_one();
         }
-        let overflow = if graveyard.len() > GRAVEYARD_MAX {
+        let buried = graveyard.len();
+        let overflow = if buried > GRAVEYARD_MAX {
             std::mem::take(graveyard)
         } else {
             Vec::new()
@@ -209,7 +212,10 @@ impl Hub {
         if lost > 0 {
             self.dropped.fetch_add(lost, Ordering::Relaxed);
         }
-        self.janitor.notify_one();
+        // Waking the server's thread is a system call: once per batch, not per record.
+        if buried >= GRAVEYARD_BATCH {
+            self.janitor.notify_one();
+        }
     }
 
     /// Free the records the hub let go of (the server's thread).
