@@ -107,6 +107,7 @@ async fn serve(listener: tokio::net::TcpListener, hub: Arc<Hub>, stop: Arc<tokio
 }
 
 /// Offer the Foxglove subprotocol when the client asks for it.
+#[allow(clippy::result_large_err)] // the signature tungstenite's handshake callback takes
 fn choose_subprotocol(req: &Request, mut resp: Response) -> Result<Response, ErrorResponse> {
     let offered = req
         .headers()
