@@ -389,6 +389,10 @@ pub struct DecisionRecord {
     /// outcome updated, in force from the next cycle. Absent when learning is off.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub cpt_learned: Vec<CptUpdate>,
+    /// With `--live` only: messages the live viewers lost so far in this run (a slow or stalled
+    /// viewer's bounded queue overflowed), summed over the viewers; absent without `--live`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub live_dropped: Option<u64>,
 }
 
 /// One CPT row learned in flight: which row, its counts, the value before and after.
@@ -493,7 +497,7 @@ reuse_clone!(GuaranteeRecord {
 } maps { margins, goals, drift });
 reuse_clone!(DecisionRecord {
     cycle, time_s, state, events, proposals, conflicts, actions, resources, guarantee, commands,
-    link_events, utc_us, decide_ms, shell_actions, absent_evidence, cpt_learned
+    link_events, utc_us, decide_ms, shell_actions, absent_evidence, cpt_learned, live_dropped
 } maps { observations, evidence, probabilities, vehicle });
 reuse_clone!(Plan { vehicle_actions, applications } maps {});
 

@@ -350,6 +350,7 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
         actions,
         shell_actions: Vec::new(),
         cpt_learned: Vec::new(),
+        live_dropped: None,
         resources: Some(ResourcesRecord {
             placements,
             cpu_load,

@@ -67,59 +67,8 @@ pub enum ExportError {
     },
 }
 
-/// Record field groups, each an MCAP channel.
-pub const GROUPS: [&str; 10] = [
-    "summary",
-    "observations",
-    "evidence",
-    "probabilities",
-    "proposals",
-    "conflicts",
-    "resources",
-    "guarantee",
-    "commands",
-    "vehicle",
-];
-
-fn group_value(r: &serde_json::Value, group: &str) -> serde_json::Value {
-    let get = |k: &str| r.get(k).cloned().unwrap_or(serde_json::Value::Null);
-    let mut o = serde_json::Map::new();
-    o.insert("cycle".into(), get("cycle"));
-    o.insert("time_s".into(), get("time_s"));
-    match group {
-        "summary" => {
-            for k in ["state", "actions", "events", "link_events"] {
-                o.insert(k.into(), get(k));
-            }
-        }
-        "proposals" | "conflicts" | "commands" => {
-            o.insert(group.into(), get(group));
-        }
-        _ => {
-            // Maps and optional objects: their fields at top level, where plotting tools look.
-            if let Some(m) = r.get(group).and_then(|v| v.as_object()) {
-                for (k, v) in m {
-                    o.insert(k.clone(), v.clone());
-                }
-            }
-        }
-    }
-    serde_json::Value::Object(o)
-}
-
-fn schema_for(group: &str) -> String {
-    serde_json::json!({
-        "$schema": "https://json-schema.org/draft/2020-12/schema",
-        "title": format!("companion.decisions.{group}"),
-        "type": "object",
-        "properties": {
-            "cycle": {"type": "integer"},
-            "time_s": {"type": "number"}
-        },
-        "additionalProperties": true
-    })
-    .to_string()
-}
+pub use crate::decision_channels::GROUPS;
+use crate::decision_channels::{self as channels, record_value};
 
 /// `2025-06-01T12:00:00Z` -> nanoseconds since the Unix epoch (None when not in that form).
 pub fn rfc3339_ns(s: &str) -> Option<u64> {
@@ -318,8 +267,17 @@ pub fn run_cli(input: &Path, format: Format, out: Option<&Path>) -> anyhow::Resu
     Ok(())
 }
 
-fn record_value(r: &DecisionRecord) -> serde_json::Value {
-    serde_json::to_value(r).unwrap_or(serde_json::Value::Null)
+/// The proposals' `inputs` as the log holds them (the reader takes them out of the record), so
+/// the file's messages are the record's, as the live view's are.
+fn restore_inputs(v: &mut serde_json::Value, inputs: Vec<Option<serde_json::Value>>) {
+    let Some(ps) = v.get_mut("proposals").and_then(|p| p.as_array_mut()) else {
+        return;
+    };
+    for (p, i) in ps.iter_mut().zip(inputs) {
+        if let (Some(o), Some(i)) = (p.as_object_mut(), i) {
+            o.insert("inputs".into(), i);
+        }
+    }
 }
 
 pub fn export_mcap(input: &Path, path: &Path) -> Result<ExportStats, ExportError> {
@@ -345,30 +303,31 @@ pub fn export_mcap(input: &Path, path: &Path) -> Result<ExportStats, ExportError
         match item? {
             LogItem::Header(h) => start_ns = rfc3339_ns(&h.started_utc).unwrap_or(0),
             LogItem::Corrupted(i) | LogItem::Truncated(i) => stats.skip(i),
-            LogItem::Record(r, _) => {
+            LogItem::Record(r, inputs) => {
                 stats.records += 1;
-                let v = record_value(&r);
-                let t = start_ns.saturating_add((r.time_s.max(0.0) * 1e9) as u64);
+                let mut v = record_value(&r);
+                restore_inputs(&mut v, inputs);
+                let t = channels::log_time_ns(start_ns, &r);
                 for g in GROUPS {
-                    let topic = format!("/decisions/{g}");
+                    let topic = channels::topic(g);
                     let id = match channels.get(&topic) {
                         Some(id) => *id,
                         None => {
                             let schema = w
                                 .add_schema(
-                                    &format!("companion.decisions.{g}"),
-                                    "jsonschema",
-                                    schema_for(g).as_bytes(),
+                                    &channels::schema_name(g),
+                                    channels::SCHEMA_ENCODING,
+                                    channels::schema(g).as_bytes(),
                                 )
                                 .map_err(merr)?;
                             let id = w
-                                .add_channel(schema, &topic, "json", &no_meta)
+                                .add_channel(schema, &topic, channels::MESSAGE_ENCODING, &no_meta)
                                 .map_err(merr)?;
                             channels.insert(topic.clone(), id);
                             id
                         }
                     };
-                    let data = serde_json::to_vec(&group_value(&v, g)).unwrap_or_default();
+                    let data = serde_json::to_vec(&channels::message(&v, g)).unwrap_or_default();
                     seq = seq.wrapping_add(1);
                     w.write_to_known_channel(
                         &mcap::records::MessageHeader {

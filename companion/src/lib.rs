@@ -20,7 +20,8 @@
 //!   params overlay `--params FILE` reads).
 //! - `check`: `companion check` (params validation and the compiled models, text or JSON).
 //! - `review`: `companion review` (HTML report, summary, why of a cycle).
-//! - `export`: `companion export` (MCAP or CSV).
+//! - `export`: `companion export` (MCAP or CSV); `decision_channels`: the MCAP channels, shared
+//!   with `live`: the Foxglove WebSocket server of `fly --live` / `simulate --live`.
 //! - `replay`: `companion replay` (a run's log fed back through a fresh core).
 //! - `text`: text leaving the process: HTML-escaped, or cleaned or escaped for a terminal.
 //! - `signing_setup`: `companion signing-setup` (a MAVLink 2 signing key made, provisioned, proven).
@@ -30,11 +31,13 @@
 pub mod autopilot_mission;
 pub mod calibrate;
 pub mod check;
+pub mod decision_channels;
 pub mod decision_log;
 pub mod export;
 pub mod fly;
 pub mod learn_cpt;
 pub mod learning_params;
+pub mod live;
 pub mod output_file;
 pub mod params;
 pub mod params_files;

@@ -111,6 +111,19 @@ struct SimulateArgs {
     /// absolute ones.
     #[arg(long, value_name = "LAT,LON")]
     home: Option<String>,
+    #[command(flatten)]
+    live: companion::live::LiveArgs,
+    /// With --live: wait at most this long (seconds) for a viewer to subscribe before the first
+    /// step, so it sees the whole run (then the run goes on without one).
+    #[arg(long, default_value_t = 30.0, requires = "live", value_parser = live_wait_s)]
+    live_wait: f64,
+}
+
+fn live_wait_s(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(x) if (0.0..=3600.0).contains(&x) => Ok(x),
+        _ => Err(format!("`{s}`: seconds from 0 to 3600")),
+    }
 }
 
 #[derive(Subcommand)]
@@ -332,19 +345,71 @@ fn simulate_plan(
     .context("loading params")
 }
 
+/// `--model bfm,reference,...`.
+fn model_kinds(list: &str) -> Result<Vec<ModelKind>> {
+    (list.split(','))
+        .map(|m| m.trim().parse::<ModelKind>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| anyhow::anyhow!("--model: {e}"))
+}
+
+/// `simulate --live`: the server, and the wait for a first viewer (bounded, said).
+fn simulate_live_start(
+    args: &SimulateArgs,
+) -> Result<(std::time::SystemTime, Option<companion::live::LiveServer>)> {
+    let started = std::time::SystemTime::now();
+    let header_start = companion::decision_log::Header::new(String::new(), started).started_utc;
+    let start_ns = companion::export::rfc3339_ns(&header_start).unwrap_or(0);
+    let Some(live) = companion::live::start(&args.live, start_ns)? else {
+        return Ok((started, None));
+    };
+    eprintln!(
+        "live: waiting up to {} s for a viewer to subscribe before the first step",
+        args.live_wait
+    );
+    let wait = std::time::Duration::from_secs_f64(args.live_wait);
+    if !live.hub().wait_for_subscriber(wait) {
+        eprintln!(
+            "live: no viewer subscribed within {} s: simulating without one",
+            args.live_wait
+        );
+    }
+    Ok((started, Some(live)))
+}
+
+/// `simulate --live`: the first run's records stamped (`live_dropped`) and served, paced by the
+/// viewers (at most 1 s each); the records as the log gets them.
+fn simulate_live_serve(
+    first: sim::RunResult,
+    live: Option<companion::live::LiveServer>,
+) -> Result<sim::RunResult> {
+    let Some(live) = live else {
+        return Ok(first);
+    };
+    let mut sink =
+        companion::live::LiveSink::new(Vec::with_capacity(first.records.len()), Some(live.hub()));
+    for r in &first.records {
+        companion::fly::RecordSink::write(&mut sink, r)?;
+        live.hub().wait_for_room(std::time::Duration::from_secs(1));
+    }
+    eprintln!("companion simulate:{}", companion::live::finish(Some(live)));
+    Ok(sim::RunResult {
+        records: sink.inner,
+        ..first
+    })
+}
+
 fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
     // An unparsable COMPANION_LOG_MAX_BYTES stops the start, before any work.
     let log_opts = companion::decision_log::WriterOptions::from_env()?;
     let (loaded, plan) = simulate_plan(params, &args)?;
+    let (started, live) = simulate_live_start(&args)?;
     let world = loaded.world;
     let mut scenario = Scenario::load(&loaded.files, &args.scenario)?;
     if let Some(s) = args.steps {
         scenario.steps = s;
     }
-    let kinds: Vec<ModelKind> = (args.model.split(','))
-        .map(|m| m.trim().parse::<ModelKind>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| anyhow::anyhow!("--model: {e}"))?;
+    let kinds = model_kinds(&args.model)?;
     let model = Arc::new(loaded.model);
     let policy: Policy = model
         .policy(&args.policy)
@@ -388,11 +453,10 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
     }
     let (first_kind, first) = first_records.expect("at least one run");
 
-    // The first run goes to a run folder (decision log with its header), for `companion review`.
+    let first = simulate_live_serve(first, live)?; // served live, then logged for `review`
     if !args.no_log {
-        let now = std::time::SystemTime::now();
         let command: Vec<String> = std::env::args().collect();
-        let mut header = companion::decision_log::Header::new(command.join(" "), now)
+        let mut header = companion::decision_log::Header::new(command.join(" "), started)
             .with_params_dir(params)
             .with_context(|| format!("reading {} for the log header", params.display()))?;
         header.policy = Some(model.policy_name(policy).to_string());
@@ -401,7 +465,7 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         header.seed = Some(args.seed);
         header.step_s = Some(world.step_s);
         header.plan = Some(plan.clone());
-        let log = companion::decision_log::start_run(&args.runs_dir, now, header, log_opts)
+        let log = companion::decision_log::start_run(&args.runs_dir, started, header, log_opts)
             .with_context(|| format!("starting a run folder in {}", args.runs_dir.display()))?;
         let dir = log.dir().to_path_buf();
         if args.json {

@@ -133,7 +133,8 @@ pub struct WriterStats {
 }
 
 enum Payload {
-    Record(Box<DecisionRecord>),
+    // Shared: `--live` serves the same record (crate::live), no second copy on the cycle.
+    Record(Arc<DecisionRecord>),
     Event {
         cycle: u64,
         time_s: f64,
@@ -260,7 +261,12 @@ impl DecisionLog {
     /// Queue one record. Returns false when it was dropped (channel full); the drop is counted
     /// and reported in the file by a loss line.
     pub fn record(&self, record: DecisionRecord) -> bool {
-        self.send(Payload::Record(Box::new(record)))
+        self.record_shared(Arc::new(record))
+    }
+
+    /// [`DecisionLog::record`] of a record shared with other readers.
+    pub fn record_shared(&self, record: Arc<DecisionRecord>) -> bool {
+        self.send(Payload::Record(record))
     }
 
     /// Queue one event line (`failsafe`, `link lost`, `mode RTL`, ...) outside the records.

@@ -111,6 +111,8 @@ pub struct FlyArgs {
     /// Home as LAT,LON (degrees), to place a route relative to home among absolute zones.
     #[arg(long, value_name = "LAT,LON")]
     pub home: Option<String>,
+    #[command(flatten)]
+    pub live: crate::live::LiveArgs,
     /// The plan the guarantee judges, as `companion fly` derived it before any socket (the
     /// shell names the activity flown from it); `None`: the typed mission.
     #[arg(skip)]

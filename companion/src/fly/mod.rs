@@ -93,6 +93,11 @@ impl Decider for companion_core::decision::Core {
 /// Where decision records go (the log helper provides the file writer).
 pub trait RecordSink {
     fn write(&mut self, rec: &DecisionRecord) -> std::io::Result<()>;
+    /// [`RecordSink::write`] of a record the caller shares (`--live`): a sink that keeps records
+    /// keeps this one without copying it.
+    fn write_shared(&mut self, rec: std::sync::Arc<DecisionRecord>) -> std::io::Result<()> {
+        self.write(&rec)
+    }
 }
 
 /// One JSON object per line.
@@ -120,6 +125,23 @@ impl RecordSink for LogSink {
     fn write(&mut self, rec: &DecisionRecord) -> std::io::Result<()> {
         // A full queue drops the record; the log itself says so with a `loss` line.
         self.0.record(rec.clone());
+        Ok(())
+    }
+    fn write_shared(&mut self, rec: std::sync::Arc<DecisionRecord>) -> std::io::Result<()> {
+        self.0.record_shared(rec);
+        Ok(())
+    }
+}
+
+/// `--live`: the record written (with `live_dropped`), then served; without a hub, as it is.
+impl<S: RecordSink> RecordSink for crate::live::LiveSink<S> {
+    fn write(&mut self, rec: &DecisionRecord) -> std::io::Result<()> {
+        let Some(rec) = self.stamp(rec) else {
+            return self.inner.write(rec);
+        };
+        // The log first: what is written never depends on the viewers.
+        self.inner.write_shared(std::sync::Arc::clone(&rec))?;
+        self.publish(rec);
         Ok(())
     }
 }
@@ -182,6 +204,10 @@ pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
     header.plan = args.plan.clone();
     header.model = Some(companion_core::decision::ModelKind::Bfm.name().to_string());
     let opts = WriterOptions::from_env()?;
+    // `--live` before the run folder (an address in use leaves none behind); messages stamped
+    // as the export stamps them: the header's start plus `time_s`.
+    let start_ns = crate::export::rfc3339_ns(&header.started_utc).unwrap_or(0);
+    let live = crate::live::start(&args.live, start_ns)?;
     let mut log = dlog::start_run(&args.log_dir, now, header, opts.clone())
         .with_context(|| format!("starting a run folder in {}", args.log_dir.display()))?;
     let dir = log.dir().to_path_buf();
@@ -196,17 +222,19 @@ pub fn run<D: Decider>(args: FlyArgs, decider: D) -> anyhow::Result<()> {
         .with_max_bytes(opts.max_bytes);
     // The tlog's cap is told like the decision log's: a loss line there, the end line, the exit.
     log.watch_tlog(tlog.capped_counter());
-    let mut sink = LogSink(log);
+    // `--live`: served beside the loop, never waited on (crate::live).
+    let mut sink = crate::live::LiveSink::new(LogSink(log), live.as_ref().map(|l| l.hub()));
     let result = rt.block_on(async {
         // Inside the runtime: the loop spawns its transport tasks as it starts.
         RunLoop::new(args, setup, decider, &mut sink, Some(Tlog(tlog)))
             .run()
             .await
     });
-    let stats = sink.0.close();
+    let stats = sink.inner.0.close();
+    let live_line = crate::live::finish(live);
     let report = result?;
     eprintln!(
-        "companion fly: {} records {} dropped {} tlog_capped {}",
+        "companion fly: {} records {} dropped {} tlog_capped {}{live_line}",
         serde_json::to_string(&report).unwrap_or_default(),
         stats.records,
         stats.dropped,
@@ -315,5 +343,31 @@ mod tests {
             e.contains("unknown policy `yolo`") && e.contains("safety"),
             "{e}"
         );
+    }
+
+    fn rec(cycle: u64) -> DecisionRecord {
+        DecisionRecord {
+            cycle,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn the_live_sink_writes_the_record_first_with_the_losses_so_far() {
+        use std::sync::Arc;
+        let hub = Arc::new(crate::live::Hub::new(1, 0));
+        let (v, _wake) = hub.connect();
+        hub.subscribed(&v, 1);
+        let mut sink =
+            crate::live::LiveSink::new(Vec::<DecisionRecord>::new(), Some(Arc::clone(&hub)));
+        for c in 1..=3 {
+            sink.write(&rec(c)).unwrap();
+        }
+        let lost: Vec<_> = sink.inner.iter().map(|r| r.live_dropped).collect();
+        assert_eq!(lost, [Some(0), Some(0), Some(1)]);
+        // Without a hub the record goes through as it is.
+        let mut plain = crate::live::LiveSink::new(Vec::<DecisionRecord>::new(), None);
+        plain.write(&rec(1)).unwrap();
+        assert_eq!(plain.inner[0].live_dropped, None);
     }
 }

@@ -363,7 +363,7 @@ mod tests {
         let (line, severity, text) = shell.guarantee_change(&rec(true, -4210.0)).unwrap();
         assert_eq!(severity, WARNING);
         assert!(line.contains("negative energy_j margin -4210.0"), "{line}");
-        assert_eq!(text, "Cannot meet goals: energy short 4.2 kJ");
+        assert_eq!(text, "Cannot meet goals: not enough energy");
         for cycle in 0..30 {
             assert!(
                 shell

@@ -1,7 +1,9 @@
 //! What the fly shell tells the ground station, in a pilot's words: what the vehicle will do and
 //! why (`Battery 7%: returning home`, `Search time over: landing here`, `Vibration high:
-//! tracking with V3`), and when the guarantee cannot meet the goals (`Cannot meet goals: energy
-//! short 4.2 kJ`). Sans IO: every text is built from the decision record's typed fields (the
+//! tracking with V3`), and when the guarantee cannot meet the goals (`Cannot meet goals: not
+//! enough energy`). No text repeats a number the ground station already plots (the margins, the
+//! spendable energy, P_battery: docs/mavlink.md, "Values a ground station plots"): the text says
+//! what changed and why, the plot says how much. Sans IO: every text is built from the decision record's typed fields (the
 //! action flown, the proposal that chose it and the probabilities it read, observations,
 //! evidence, the guarantee's margins and failed resources, the mission's end), never by reading
 //! its sentences back. docs/mavlink.md, "Words to the ground station".
@@ -190,18 +192,18 @@ fn capitalised(s: &str) -> String {
 }
 
 /// What the guarantee is short of, in words, most pressing first: each goal with a negative
-/// margin (`energy short 4.2 kJ`, `time short 35 s`), then each failed resource.
+/// margin (`not enough energy`, `not enough time`: the amounts are plotted, `e_margin` and
+/// `t_margin`), then each failed resource.
 fn shortfalls(g: &GuaranteeRecord) -> Vec<String> {
     let mut out = Vec::new();
     for (goal, margin) in &g.margins {
         if *margin >= 0.0 || !margin.is_finite() {
             continue;
         }
-        let short = -margin;
         out.push(match goal.as_str() {
-            "energy_j" => format!("energy short {:.1} kJ", short / 1000.0),
-            "duration_s" => format!("time short {short:.0} s"),
-            other => format!("{} short {short:.1}", other.replace('_', " ")),
+            "energy_j" => "not enough energy".to_string(),
+            "duration_s" => "not enough time".to_string(),
+            other => format!("not enough {}", other.replace('_', " ")),
         });
     }
     let mut failed: Vec<String> = g
@@ -305,7 +307,7 @@ mod tests {
     }
 
     #[test]
-    fn an_energy_shortfall_return_says_how_much_energy_is_missing() {
+    fn an_energy_shortfall_return_says_energy_is_missing_not_the_plotted_amount() {
         let rec = DecisionRecord {
             actions: vec!["return_to_base".into()],
             proposals: vec![proposal(
@@ -327,7 +329,7 @@ mod tests {
             &BTreeMap::new(),
             NONE,
         );
-        assert_eq!(text, "Energy short 4.2 kJ: returning home");
+        assert_eq!(text, "Not enough energy: returning home");
     }
 
     #[test]
@@ -465,7 +467,7 @@ mod tests {
         );
         assert_eq!(
             guarantee_text(&g),
-            "Cannot meet goals: time short 35 s, energy short 4.2 kJ, lidar failed, FPGA tile failed"
+            "Cannot meet goals: not enough time, not enough energy, lidar failed, FPGA tile failed"
         );
         let mut later = g.clone();
         later.margins.insert("energy_j".into(), -5000.0);
@@ -474,5 +476,65 @@ mod tests {
         assert_ne!(guarantee_key(&g), guarantee_key(&later));
         later.infeasible = false;
         assert_eq!(guarantee_key(&later), None);
+    }
+
+    /// The numbers in `text` (`4.2`, `35`, `12`).
+    fn numbers(text: &str) -> Vec<f64> {
+        text.split(|c: char| !(c.is_ascii_digit() || c == '.'))
+            .filter_map(|t| t.trim_matches('.').parse().ok())
+            .collect()
+    }
+
+    #[test]
+    fn no_decision_text_repeats_a_plotted_value() {
+        use companion_link::ground_values::{GroundValue, GroundValues, GroundValuesParams};
+        let params = GroundValuesParams::default();
+        let plotted = GroundValues::new(&params, std::iter::empty());
+        let mut g = guarantee(&[("duration_s", -35.2), ("energy_j", -4210.0)], &["lidar"]);
+        g.pack = Some(companion_core::record::PackRecord {
+            spendable_j: Some(98_900.0),
+            ..Default::default()
+        });
+        let rec = DecisionRecord {
+            cycle: 417,
+            actions: vec!["return_to_base".into()],
+            proposals: vec![proposal(
+                "landing",
+                &["return_to_base"],
+                &[("P_battery", 0.9)],
+            )],
+            probabilities: BTreeMap::from([("P_battery".to_string(), 0.9)]),
+            observations: obs(&[("battery_pct", 64.0)]),
+            guarantee: Some(g.clone()),
+            ..Default::default()
+        };
+        let texts = [
+            behaviour_text(
+                &b(Some("return_to_base"), None),
+                &b(Some("follow_trajectory"), None),
+                &rec,
+                &BTreeMap::new(),
+                NONE,
+            ),
+            guarantee_text(&g),
+        ];
+        let values: Vec<f64> = (plotted.values(&rec).into_iter())
+            .filter(|v| !matches!(v, GroundValue::Int("cycle", _)))
+            .map(|v| match v {
+                GroundValue::Float(_, x) => f64::from(x),
+                GroundValue::Int(_, x) => f64::from(x),
+            })
+            .collect();
+        assert!(values.len() >= 3, "{values:?}");
+        for text in &texts {
+            for n in numbers(text) {
+                for v in &values {
+                    // As the value, in thousands (kJ) or as a percentage, rounded as a text would.
+                    for shown in [v.abs(), v.abs() / 1000.0, v.abs() * 100.0] {
+                        assert!((n - shown).abs() > 0.5, "`{text}` repeats the plotted {v}");
+                    }
+                }
+            }
+        }
     }
 }

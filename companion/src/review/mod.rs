@@ -104,6 +104,8 @@ pub struct Summary {
     pub lost_capped: u64,
     /// Telemetry frames `flight.tlog` did not write because it reached its size cap.
     pub tlog_capped: u64,
+    /// `--live` runs: messages the live viewers lost, as the last record counts them.
+    pub live_dropped: Option<u64>,
 }
 
 /// Something to flag on a cycle.
@@ -406,6 +408,7 @@ impl Review {
 
     fn finalize(&mut self, r: DecisionRecord, inputs: &[Option<serde_json::Value>]) {
         let armed = self.count(&r);
+        self.summary.live_dropped = r.live_dropped.max(self.summary.live_dropped);
         self.count_commands(&r);
         let marks = self.marks(&r);
         let (started, n_texts) = self.spans(&r);

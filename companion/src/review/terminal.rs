@@ -93,6 +93,9 @@ pub fn render_terminal(rev: &Review, color: bool) -> String {
     kv("mode changes", s.mode_changes.to_string());
     kv("link events", s.link_events.to_string());
     kv("records lost", s.dropped.to_string());
+    if let Some(n) = s.live_dropped {
+        kv("live viewers lost", format!("{n} messages (--live)"));
+    }
     if s.lost_write_failed > 0 {
         kv(
             "lost to failed writes",
