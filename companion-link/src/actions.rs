@@ -444,6 +444,10 @@ pub struct Route {
     pub takeoff_first: bool,
     /// How the uploaded mission ends (RTL unless params/link.toml `[flight] handoff` is land).
     pub end: RouteEnd,
+    /// An operator's mission (a QGroundControl `.plan` or a WPL 110 file, `fly --mission FILE`):
+    /// its items, uploaded after home (seq 0) in this order, so item k is seq k + 1; empty for
+    /// the route TOML, whose `waypoints` are uploaded. `waypoints` then holds its positions.
+    pub operator_items: Vec<MissionItem>,
 }
 
 impl RouteEnd {
@@ -591,6 +595,7 @@ impl Route {
             tracking_time_limit_s: raw.tracking_time_limit_s,
             takeoff_first: raw.takeoff_first,
             end: RouteEnd::ReturnToLaunch,
+            operator_items: Vec::new(),
         })
     }
 
@@ -603,6 +608,9 @@ impl Route {
             frame: MavFrame::MAV_FRAME_GLOBAL,
             ..MissionItem::waypoint(home.0, home.1, 0.0)
         }];
+        if !self.operator_items.is_empty() {
+            return self.operator_mission(items);
+        }
         if self.takeoff_first {
             items.push(MissionItem {
                 command: MavCmd::MAV_CMD_NAV_TAKEOFF,
@@ -636,10 +644,63 @@ impl Route {
         items
     }
 
+    /// The operator's items after `home`, and when they do not end the flight (no RTL or LAND)
+    /// the route's own end ([`RouteEnd`], as `[flight] handoff` says): a companion that dies
+    /// after the last item never leaves the vehicle hovering.
+    fn operator_mission(&self, mut items: Vec<MissionItem>) -> Vec<MissionItem> {
+        items.extend(self.operator_items.iter().cloned());
+        let ends = self.operator_items.iter().any(|i| {
+            matches!(
+                i.command,
+                MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH | MavCmd::MAV_CMD_NAV_LAND
+            )
+        });
+        if !ends {
+            let last_nav = self
+                .operator_items
+                .iter()
+                .rev()
+                .find(|i| is_nav_position(i));
+            items.extend(route_end::end_items(self.end, None, last_nav.cloned()));
+        }
+        items
+    }
+
+    /// Mission seq of the first waypoint (`wp1`): after the take-off.
+    pub fn first_waypoint_seq(&self) -> u16 {
+        if self.operator_items.is_empty() {
+            return 1 + u16::from(self.takeoff_first);
+        }
+        let seqs = self.operator_nav_seqs();
+        seqs.first().copied().unwrap_or(1)
+    }
+
     /// Mission seq of the last waypoint (`wpf`): the items after it are the mission's end.
     pub fn last_waypoint_seq(&self) -> u16 {
-        (self.waypoints.len() + usize::from(self.takeoff_first)) as u16
+        if self.operator_items.is_empty() {
+            return (self.waypoints.len() + usize::from(self.takeoff_first)) as u16;
+        }
+        let seqs = self.operator_nav_seqs();
+        seqs.last().copied().unwrap_or(1)
     }
+
+    /// The seqs of the operator's items that fly to a position (waypoints, loiters).
+    fn operator_nav_seqs(&self) -> Vec<u16> {
+        (self.operator_items.iter().enumerate())
+            .filter(|(_, i)| is_nav_position(i) && i.command != MavCmd::MAV_CMD_NAV_LAND)
+            .map(|(k, _)| (k + 1) as u16)
+            .collect()
+    }
+}
+
+/// An item that flies to a position: waypoint, loiter, or a land at a given point.
+fn is_nav_position(i: &MissionItem) -> bool {
+    matches!(
+        i.command,
+        MavCmd::MAV_CMD_NAV_WAYPOINT
+            | MavCmd::MAV_CMD_NAV_LOITER_TIME
+            | MavCmd::MAV_CMD_NAV_LOITER_TURNS
+    ) || (i.command == MavCmd::MAV_CMD_NAV_LAND && (i.x != 0 || i.y != 0))
 }
 
 /// `params/link.toml`: stream rates and telemetry settings.

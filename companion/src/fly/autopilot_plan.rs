@@ -28,6 +28,8 @@ pub(super) struct AutopilotPlan {
     /// speed the autopilot reports later (its PARAM_VALUE after the download, a ground station's
     /// PARAM_SET) or PX4's home arriving re-plans it.
     last: Option<(Vec<MissionItem>, DeriveSettings, bool)>,
+    /// The mission's states (the route progress of a planned mission reads the phase).
+    states: companion_core::mission::MissionStates,
     /// What the ground station must still be told (held back by the STATUSTEXT rate cap, said
     /// as soon as it allows: a plan, a change or a refusal is never lost).
     unsaid: Option<(MavSeverity, String)>,
@@ -38,12 +40,14 @@ impl AutopilotPlan {
     pub(super) fn new(
         files: ParamsFiles,
         params_speeds: DeriveSettings,
+        states: companion_core::mission::MissionStates,
         shell: &mut Shell,
     ) -> Self {
         shell.mission_unplanned = Some(NOT_DOWNLOADED.to_string());
         Self {
             files,
             params_speeds,
+            states,
             last: None,
             unsaid: None,
         }
@@ -139,6 +143,15 @@ impl AutopilotPlan {
                 );
                 if let Ok(route) = route {
                     set_waypoints(shell, &route.items);
+                    // The autopilot's seq is the item's index.
+                    shell.route_progress = super::route_progress::RouteProgress::for_items(
+                        &d.activities,
+                        0,
+                        &route.items,
+                        |i| u16::try_from(i).ok(),
+                        None,
+                        self.states.clone(),
+                    );
                 }
                 let feasible = decider.replace_mission(d.spec);
                 shell.mission_unplanned =

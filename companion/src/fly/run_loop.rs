@@ -96,7 +96,12 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         vehicle.cfg.autopilot_compid = args.autopilot_compid;
         let autopilot_plan = setup.autopilot_speeds.map(|speeds| {
             vehicle.watch_autopilot_mission();
-            super::autopilot_plan::AutopilotPlan::new(setup.files.clone(), speeds, &mut shell)
+            super::autopilot_plan::AutopilotPlan::new(
+                setup.files.clone(),
+                speeds,
+                setup.states.clone(),
+                &mut shell,
+            )
         });
         let signing = || setup.key.map(ingest::signing_data);
         tracing::info!(url = %args.connect, "connecting to the autopilot");
