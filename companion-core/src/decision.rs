@@ -269,6 +269,26 @@ impl Core {
         self.guarantee.is_some()
     }
 
+    /// A mission changed in flight, planned from the point reached
+    /// ([`Guarantee::replan_from`]): `spec`'s first `flown` activities are those flown, kept as
+    /// allocated; the energy and time spent so far stay counted and the rest is re-allocated
+    /// against what is left. Without a guarantee in force, as [`Core::replace_mission`].
+    pub fn replan_from(&mut self, spec: crate::guarantee::MissionSpec, flown: usize) -> bool {
+        let Some(g) = self.guarantee.as_ref() else {
+            return self.replace_mission(spec);
+        };
+        let Some(next) = g.replan_from(spec.clone(), flown) else {
+            return self.replace_mission(spec);
+        };
+        self.guarantee = Some(next);
+        self.planned = planned_of(self.guarantee.as_ref(), &self.model);
+        self.guarantee_infeasible = false;
+        self.capped_versions.clear();
+        self.capped_for.clear();
+        self.activity_started = None;
+        true
+    }
+
     /// Work done by the cycles stepped so far.
     pub fn work_done(&self) -> WorkDone {
         WorkDone {

@@ -269,6 +269,17 @@ impl Decider for CoreDecider {
         self.core.replace_mission(spec)
     }
 
+    fn replan_from(
+        &mut self,
+        whole: companion_core::guarantee::MissionSpec,
+        spliced: companion_core::guarantee::MissionSpec,
+        flown: usize,
+    ) -> bool {
+        // The next flight plans the new mission from home.
+        self.mission = Some(whole);
+        self.core.replan_from(spliced, flown)
+    }
+
     fn new_flight(&mut self) {
         self.core = Core::new(Arc::clone(&self.model), ModelKind::Bfm, self.policy);
         if let Some(spec) = &self.mission {

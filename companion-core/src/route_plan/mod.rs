@@ -10,7 +10,10 @@ mod derive;
 mod sources;
 mod zones;
 
-pub use derive::{ActivityKind, DeriveSettings, DerivedActivity, derive_activities, leg_length_m};
+pub use derive::{
+    ActivityKind, DeriveSettings, DerivedActivity, derive_activities, derive_activities_from,
+    leg_length_m,
+};
 pub use sources::{
     AUTOPILOT_MISSION, AutopilotItem, DEFAULT_LOITER_RADIUS_M, MissionSourceKind, detect_kind,
     parse_autopilot_mission, parse_plan, parse_wpl,

@@ -49,6 +49,8 @@ pub struct RouteProgress {
 /// the leg at each piece's end.
 fn pieces(derived: &[DerivedActivity], from: usize, label: &str, rtl: bool) -> Vec<(usize, f64)> {
     let unsplit = |n: &str| -> String {
+        // A re-plan's activity named as a flown one is `new:`-prefixed.
+        let n = n.strip_prefix("new:").unwrap_or(n);
         match n.rsplit_once('.') {
             Some((base, k)) if k.parse::<u32>().is_ok() => base.to_string(),
             _ => n.to_string(),
