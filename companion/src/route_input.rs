@@ -150,6 +150,31 @@ pub fn add_plan_files(
     }
 }
 
+/// `fly` with a route relative to home among absolute zones and no `--home`: the geometry
+/// depends on where home is, so the plan waits for the autopilot's (`fly::home_plan`).
+pub fn plan_needs_home(
+    dir: &Path,
+    zones: Option<&Path>,
+    route: Option<&Path>,
+    home: Option<&str>,
+) -> anyhow::Result<bool> {
+    let Some(z) = zones.filter(|_| home.is_none()) else {
+        return Ok(false);
+    };
+    let mut files = crate::params::read_params_dir(dir)?;
+    add_plan_files(&mut files, None, Some(z), route);
+    let route = route.map_or_else(|| dir.join(crate::params::DEFAULT_ROUTE), Path::to_path_buf);
+    if operator_kind(&files, &route)?.is_some()
+        || companion_core::route_plan::zones_home_relative(files.text(z)?)
+    {
+        return Ok(false);
+    }
+    let r = Route::load(&files, &route)?;
+    Ok(r.waypoints
+        .iter()
+        .any(|w| matches!(w, Waypoint::Relative { .. })))
+}
+
 /// Derive the activities and the PANORAMA mission on them: the plan `check`, `simulate` and
 /// `fly` judge (the module's rules); `None` only for a PANORAMA mission named without `--zones`
 /// (its typed activities, the legacy plan).

@@ -25,6 +25,7 @@ mod args;
 mod autopilot_plan;
 mod cycle;
 pub mod gate;
+mod home_plan;
 pub mod link_security;
 mod restart;
 pub mod route_progress;

@@ -75,6 +75,8 @@ pub(super) struct RunLoop<'s, D, S> {
     last_cycle_done: Option<Duration>,
     /// `--mission autopilot`: the autopilot's mission is planned as it is downloaded.
     autopilot_plan: Option<super::autopilot_plan::AutopilotPlan>,
+    /// A route relative to home among absolute zones: planned once home is known.
+    home_plan: Option<super::home_plan::HomePlan>,
 }
 
 impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
@@ -103,6 +105,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
                 &mut shell,
             )
         });
+        let home_plan = super::home_plan::HomePlan::new(&setup, &args, &mut shell);
         let signing = || setup.key.map(ingest::signing_data);
         tracing::info!(url = %args.connect, "connecting to the autopilot");
         Self {
@@ -134,6 +137,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             watchdog: watchdog::Watchdog::from_env(setup.link.decision_period_s),
             last_cycle_done: None,
             autopilot_plan,
+            home_plan,
             args,
             setup,
             decider,
@@ -213,6 +217,10 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
                     plan.on_mission(m, &self.vehicle, &mut self.decider, &mut self.shell);
                     wake = true;
                 }
+                plan.recheck(&self.vehicle, &mut self.decider, &mut self.shell);
+                out.extend(plan.say(&mut self.shell, t));
+            }
+            if let Some(plan) = self.home_plan.as_mut() {
                 plan.recheck(&self.vehicle, &mut self.decider, &mut self.shell);
                 out.extend(plan.say(&mut self.shell, t));
             }
