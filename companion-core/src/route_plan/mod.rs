@@ -7,6 +7,7 @@
 //! goals) stays typed in the PANORAMA mission; `crate::guarantee::derived_mission` joins the two.
 
 mod derive;
+pub mod mav_cmd;
 mod sources;
 mod zones;
 
