@@ -80,8 +80,9 @@ def test_real_the_uploaded_mission_is_planned_flown_and_a_change_in_flight_re_pl
     # A ground station uploads a new mission of the same length in flight: the last waypoint moved.
     upload_when_ready(gcs, mission((0.0, 120.0)))
     t_up = time.monotonic()
-    gcs.wait(lambda: said_by_companion(gcs, "mission changed", since=t_up), 5.0,
-             "the companion's STATUSTEXT that the mission changed, within 5 s of the upload")
+    gcs.wait(lambda: said_by_companion(gcs, "mission changed, re-planned from the point reached", since=t_up), 5.0,
+             "the companion's STATUSTEXT that the mission changed and was re-planned from the point reached, "
+             "within 5 s of the upload")
     gcs.wait(lambda: {3, 4} <= reached(gcs), 240, "the waypoints of the new mission reached")
     gcs.wait(lambda: not gcs.armed and gcs.landed, 240, "the mission's RTL landed the vehicle")
     rc = run.wait_exit(60)
@@ -89,7 +90,15 @@ def test_real_the_uploaded_mission_is_planned_flown_and_a_change_in_flight_re_pl
     records = run.records()
     said = [str(e) for e in events(records)]
     assert any("mission planned" in e for e in said), said[-20:]
-    assert any("mission changed, re-planned" in e for e in said), said[-20:]
+    assert any("mission changed, re-planned from the point reached" in e for e in said), said[-20:]
+    # The route progress follows the autopilot's mission, then the re-plan from the point reached (`leghere-N`).
+    walked: List[str] = []
+    for r in records:
+        name = (r.get("guarantee") or {}).get("activity_name")
+        if name and (not walked or walked[-1] != name):
+            walked.append(name)
+    assert walked[0] == "take_off" and any(a.startswith("leghome-") for a in walked), walked
+    assert any(a.startswith("leghere-") for a in walked), walked
     # Nothing uploaded by the companion: the route step kept the autopilot's mission.
     cmds = [c for r in records for c in r.get("commands", [])]
     uploads = [c for c in cmds if c.get("command") == "MISSION_UPLOAD"]

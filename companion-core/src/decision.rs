@@ -261,18 +261,21 @@ impl Core {
     /// ([`Guarantee::start_or_unbounded`]).
     pub fn replace_mission(&mut self, spec: crate::guarantee::MissionSpec) -> bool {
         self.guarantee = Guarantee::start_or_unbounded(spec);
+        self.mission_changed();
+        self.guarantee.is_some()
+    }
+
+    /// What the guarantee in force planned, after it changed; the activity flown forgotten.
+    fn mission_changed(&mut self) {
         self.planned = planned_of(self.guarantee.as_ref(), &self.model);
         self.guarantee_infeasible = false;
         self.capped_versions.clear();
         self.capped_for.clear();
         self.activity_started = None;
-        self.guarantee.is_some()
     }
 
-    /// A mission changed in flight, planned from the point reached
-    /// ([`Guarantee::replan_from`]): `spec`'s first `flown` activities are those flown, kept as
-    /// allocated; the energy and time spent so far stay counted and the rest is re-allocated
-    /// against what is left. Without a guarantee in force, as [`Core::replace_mission`].
+    /// A mission changed in flight, planned from the point reached ([`Guarantee::replan_from`];
+    /// without a guarantee in force, as [`Core::replace_mission`]).
     pub fn replan_from(&mut self, spec: crate::guarantee::MissionSpec, flown: usize) -> bool {
         let Some(g) = self.guarantee.as_ref() else {
             return self.replace_mission(spec);
@@ -281,11 +284,7 @@ impl Core {
             return self.replace_mission(spec);
         };
         self.guarantee = Some(next);
-        self.planned = planned_of(self.guarantee.as_ref(), &self.model);
-        self.guarantee_infeasible = false;
-        self.capped_versions.clear();
-        self.capped_for.clear();
-        self.activity_started = None;
+        self.mission_changed();
         true
     }
 

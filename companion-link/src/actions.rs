@@ -609,7 +609,7 @@ impl Route {
             ..MissionItem::waypoint(home.0, home.1, 0.0)
         }];
         if !self.operator_items.is_empty() {
-            return self.operator_mission(items);
+            return route_end::operator_mission(self, items);
         }
         if self.takeoff_first {
             items.push(MissionItem {
@@ -644,63 +644,21 @@ impl Route {
         items
     }
 
-    /// The operator's items after `home`, and when they do not end the flight (no RTL or LAND)
-    /// the route's own end ([`RouteEnd`], as `[flight] handoff` says): a companion that dies
-    /// after the last item never leaves the vehicle hovering.
-    fn operator_mission(&self, mut items: Vec<MissionItem>) -> Vec<MissionItem> {
-        items.extend(self.operator_items.iter().cloned());
-        let ends = self.operator_items.iter().any(|i| {
-            matches!(
-                i.command,
-                MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH | MavCmd::MAV_CMD_NAV_LAND
-            )
-        });
-        if !ends {
-            let last_nav = self
-                .operator_items
-                .iter()
-                .rev()
-                .find(|i| is_nav_position(i));
-            items.extend(route_end::end_items(self.end, None, last_nav.cloned()));
-        }
-        items
-    }
-
     /// Mission seq of the first waypoint (`wp1`): after the take-off.
     pub fn first_waypoint_seq(&self) -> u16 {
-        if self.operator_items.is_empty() {
-            return 1 + u16::from(self.takeoff_first);
+        match route_end::operator_nav_seqs(&self.operator_items).first() {
+            Some(&s) => s,
+            None => 1 + u16::from(self.takeoff_first),
         }
-        let seqs = self.operator_nav_seqs();
-        seqs.first().copied().unwrap_or(1)
     }
 
     /// Mission seq of the last waypoint (`wpf`): the items after it are the mission's end.
     pub fn last_waypoint_seq(&self) -> u16 {
-        if self.operator_items.is_empty() {
-            return (self.waypoints.len() + usize::from(self.takeoff_first)) as u16;
+        match route_end::operator_nav_seqs(&self.operator_items).last() {
+            Some(&s) => s,
+            None => (self.waypoints.len() + usize::from(self.takeoff_first)) as u16,
         }
-        let seqs = self.operator_nav_seqs();
-        seqs.last().copied().unwrap_or(1)
     }
-
-    /// The seqs of the operator's items that fly to a position (waypoints, loiters).
-    fn operator_nav_seqs(&self) -> Vec<u16> {
-        (self.operator_items.iter().enumerate())
-            .filter(|(_, i)| is_nav_position(i) && i.command != MavCmd::MAV_CMD_NAV_LAND)
-            .map(|(k, _)| (k + 1) as u16)
-            .collect()
-    }
-}
-
-/// An item that flies to a position: waypoint, loiter, or a land at a given point.
-fn is_nav_position(i: &MissionItem) -> bool {
-    matches!(
-        i.command,
-        MavCmd::MAV_CMD_NAV_WAYPOINT
-            | MavCmd::MAV_CMD_NAV_LOITER_TIME
-            | MavCmd::MAV_CMD_NAV_LOITER_TURNS
-    ) || (i.command == MavCmd::MAV_CMD_NAV_LAND && (i.x != 0 || i.y != 0))
 }
 
 /// `params/link.toml`: stream rates and telemetry settings.

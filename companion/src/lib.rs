@@ -30,6 +30,7 @@ pub mod decision_log;
 pub mod export;
 pub mod fly;
 pub mod learn_cpt;
+pub mod operator_mission;
 pub mod output_file;
 pub mod params;
 pub mod params_files;

@@ -214,43 +214,14 @@ pub fn load_fly_files(
     let commands = ActionTable::load(files, &dir.join("commands.toml"), actions)?;
     let route_file = route.map_or_else(|| dir.join(DEFAULT_ROUTE), Path::to_path_buf);
     let end = companion_link::actions::RouteEnd::for_handoff(link.flight.handoff);
-    let route = match operator_mission(files, &route_file)? {
-        Some(planned) => crate::route_input::operator_route(&planned, end).0,
+    let route = match crate::operator_mission::parse(files, &route_file)? {
+        Some(planned) => crate::operator_mission::operator_route(&planned, end).0,
         None => Route {
             end,
             ..Route::load(files, &route_file)?
         },
     };
     Ok((link, commands, route, route_file))
-}
-
-/// `fly --mission FILE`, when FILE is an operator's `.plan` or WPL 110 file (told by content):
-/// parsed by `check`'s rules (LOITER_TURNS timed at the derived mission's cruise speed), so a
-/// malformed one is refused at start with file, item and reason; ended as `[flight] handoff`
-/// says when it does not end the flight itself (what is uploaded is what is planned).
-pub fn operator_mission(
-    files: &ParamsFiles,
-    route_file: &Path,
-) -> Result<Option<companion_core::route_plan::PlannedRoute>, SpecError> {
-    use companion_core::route_plan::{MissionSourceKind, detect_kind, parse_plan, parse_wpl};
-    let Ok(text) = files.text(route_file) else {
-        return Ok(None);
-    };
-    let kind = detect_kind(route_file, text)?;
-    if !matches!(kind, MissionSourceKind::QgcPlan | MissionSourceKind::Wpl110) {
-        return Ok(None);
-    }
-    let speed =
-        companion_core::guarantee::derive_settings(files, crate::route_input::DERIVE_MISSION)?
-            .cruise_speed_mps;
-    let mut planned = match kind {
-        MissionSourceKind::QgcPlan => parse_plan(route_file, text, speed)?,
-        _ => parse_wpl(route_file, text, speed)?,
-    };
-    let link = LinkParams::load(files, &files.dir().join("link.toml"))?;
-    let end = companion_link::actions::RouteEnd::for_handoff(link.flight.handoff);
-    crate::route_input::end_operator_mission(&mut planned, end);
-    Ok(Some(planned))
 }
 
 /// The model alone from a params directory (tests, tools).

@@ -21,9 +21,7 @@ use companion_core::spec::ParamsFiles;
 use companion_link::actions::{Route, Waypoint};
 use std::path::{Path, PathBuf};
 
-/// The PANORAMA mission derived activities are planned against (its tasks, TIOs, goals) unless
-/// `--mission` names another.
-pub const DERIVE_MISSION: &str = "tracking";
+pub use crate::operator_mission::DERIVE_MISSION;
 
 /// The zones of the default route, relative to the params directory (home-relative: they sit on
 /// the route wherever the autopilot's home is).
@@ -230,8 +228,8 @@ pub fn derive(
         {
             // `fly --mission FILE`: planned as uploaded (its end included).
             let p = Path::new(m);
-            let plan = crate::params::operator_mission(files, p)?
-                .context("the operator's mission file")?;
+            let plan =
+                crate::operator_mission::parse(files, p)?.context("the operator's mission file")?;
             (p.to_path_buf(), plan)
         }
         (Some(MissionSourceKind::QgcPlan), Some(m)) => {
@@ -320,116 +318,6 @@ pub fn operator_kind(
     };
     let kind = companion_core::route_plan::detect_kind(route, text)?;
     Ok(matches!(kind, MissionSourceKind::QgcPlan | MissionSourceKind::Wpl110).then_some(kind))
-}
-
-/// An operator's mission that does not end the flight (no RTL or LAND) ends as the route TOML
-/// does ([`companion_link::actions::RouteEnd`], `[flight] handoff`): RTL, or LAND at its last
-/// position. A companion that dies after the last item never leaves the vehicle hovering, and
-/// the plan holds the end flown. Items after an RTL or LAND are not flown: dropped.
-pub fn end_operator_mission(planned: &mut PlannedRoute, end: companion_link::actions::RouteEnd) {
-    if let Some(k) = (planned.items.iter())
-        .position(|i| matches!(i.kind, ItemKind::ReturnToLaunch | ItemKind::Land { .. }))
-    {
-        planned.items.truncate(k + 1);
-        return;
-    }
-    let last = planned.items.iter().rev().find_map(|i| match i.kind {
-        ItemKind::Waypoint(p) | ItemKind::Loiter { at: p, .. } => Some(p),
-        _ => None,
-    });
-    let index = planned.items.last().map_or(0, |i| i.index + 1);
-    let kind = match end {
-        companion_link::actions::RouteEnd::ReturnToLaunch => ItemKind::ReturnToLaunch,
-        companion_link::actions::RouteEnd::Land => ItemKind::Land { at: last },
-    };
-    planned
-        .items
-        .push(companion_core::route_plan::Item { index, kind });
-}
-
-/// The operator's mission as the route `fly` uploads: each planned item as a mission item
-/// (positions in the relative-altitude frame, metres above the plan's home; a LOITER_TURNS as
-/// the LOITER_TIME it was planned to take; a DO_CHANGE_SPEED as a ground speed), item k of the
-/// plan at seq k + 1, and nothing after its RTL or LAND. Returns the route and, per planned
-/// item, its file index and upload seq (the route progress follows MISSION_CURRENT by them).
-pub fn operator_route(
-    planned: &PlannedRoute,
-    end: companion_link::actions::RouteEnd,
-) -> (Route, Vec<(usize, u16)>) {
-    use companion_link::dialect::{MavCmd, MavFrame};
-    use companion_link::mission::MissionItem;
-    let e7 = |d: f64| (d * 1e7).round() as i32;
-    let at = |p: &Position| MissionItem::waypoint(e7(p.lat_deg), e7(p.lon_deg), p.alt_m as f32);
-    let mut out = Vec::with_capacity(planned.items.len());
-    let mut seqs = Vec::with_capacity(planned.items.len());
-    let mut waypoints = Vec::new();
-    let mut takeoff_alt = None;
-    for item in &planned.items {
-        let it = match &item.kind {
-            ItemKind::TakeOff { alt_m } => {
-                takeoff_alt.get_or_insert(*alt_m);
-                MissionItem {
-                    command: MavCmd::MAV_CMD_NAV_TAKEOFF,
-                    ..MissionItem::waypoint(0, 0, *alt_m as f32)
-                }
-            }
-            ItemKind::Waypoint(p) => at(p),
-            ItemKind::Loiter { at: p, hold_s } => MissionItem {
-                command: MavCmd::MAV_CMD_NAV_LOITER_TIME,
-                params: [*hold_s as f32, 0.0, 0.0, 0.0],
-                ..at(p)
-            },
-            ItemKind::ChangeSpeed { mps } => MissionItem {
-                command: MavCmd::MAV_CMD_DO_CHANGE_SPEED,
-                frame: MavFrame::MAV_FRAME_MISSION,
-                // param1 1: ground speed; param3 -1: throttle unchanged.
-                params: [1.0, *mps as f32, -1.0, 0.0],
-                ..MissionItem::waypoint(0, 0, 0.0)
-            },
-            ItemKind::ReturnToLaunch => MissionItem {
-                command: MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH,
-                ..MissionItem::waypoint(0, 0, 0.0)
-            },
-            ItemKind::Land { at: p } => MissionItem {
-                command: MavCmd::MAV_CMD_NAV_LAND,
-                ..p.as_ref().map_or(MissionItem::waypoint(0, 0, 0.0), at)
-            },
-        };
-        if let ItemKind::Waypoint(p) | ItemKind::Loiter { at: p, .. } = &item.kind {
-            waypoints.push(Waypoint::Absolute {
-                lat_e7: e7(p.lat_deg),
-                lon_e7: e7(p.lon_deg),
-                alt_m: p.alt_m,
-            });
-        }
-        let ends = matches!(item.kind, ItemKind::ReturnToLaunch | ItemKind::Land { .. });
-        out.push(it);
-        seqs.push((item.index, out.len() as u16));
-        if ends {
-            break;
-        }
-    }
-    let altitude_m = takeoff_alt
-        .or_else(|| {
-            waypoints.iter().find_map(|w| match w {
-                Waypoint::Absolute { alt_m, .. } | Waypoint::Relative { alt_m, .. } => Some(*alt_m),
-            })
-        })
-        .filter(|a| *a > 0.0)
-        .unwrap_or(10.0);
-    let route = Route {
-        waypoints,
-        altitude_m,
-        search_time_limit_s: None,
-        tracking_time_limit_s: None,
-        takeoff_first: matches!(
-            planned.items.first().map(|i| i.kind),
-            Some(ItemKind::TakeOff { .. })
-        ),
-        end,
-        operator_items: out,
-    };
-    (route, seqs)
 }
 
 /// A route TOML as mission items; `home_free`: where home is does not change its geometry

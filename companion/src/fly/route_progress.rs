@@ -349,7 +349,7 @@ mod operator_tests {
         let planned = parse_plan(Path::new("m.plan"), PLAN, s.cruise_speed_mps).unwrap();
         let zones = parse_zones(Path::new("z.geojson"), ZONES).unwrap();
         let derived = companion_core::route_plan::derive_activities(&planned, &zones, &s);
-        let (route, seqs) = crate::route_input::operator_route(
+        let (route, seqs) = crate::operator_mission::operator_route(
             &planned,
             companion_link::actions::RouteEnd::ReturnToLaunch,
         );

@@ -82,9 +82,9 @@ impl FlySetup {
         // downloaded and planned (`autopilot_plan`).
         let route_progress = match (args.plan.as_ref(), args.route_file()) {
             (_, None) if args.flies_autopilot_mission() => None,
-            (Some(plan), Some(file)) => match crate::params::operator_mission(files, file)? {
+            (Some(plan), Some(file)) => match crate::operator_mission::parse(files, file)? {
                 Some(planned) => {
-                    let (_, seqs) = crate::route_input::operator_route(&planned, route.end);
+                    let (_, seqs) = crate::operator_mission::operator_route(&planned, route.end);
                     let seq_of = |i: usize| seqs.iter().find(|s| s.0 == i).map(|s| s.1);
                     super::route_progress::RouteProgress::for_items(
                         &plan.derived,
