@@ -53,7 +53,9 @@ def upload_when_ready(gcs: Any, items: List[Tuple[int, int, float, float, float,
 # GcsObserver.wait calls its condition holding the observer's lock (not re-entrant): conditions read its
 # lists directly, never through the query methods that take the lock again.
 def said_by_companion(gcs: Any, what: str, since: float = 0.0) -> bool:
-    return any(what in s for t, _, c, s in gcs.statustext_from if c == COMPANION and t >= since)
+    """A text longer than one STATUSTEXT (50 characters) comes in chunks: searched joined too."""
+    said = [s for t, _, c, s in gcs.statustext_from if c == COMPANION and t >= since]
+    return any(what in s for s in said) or what in "".join(said)
 
 
 def reached(gcs: Any) -> set:

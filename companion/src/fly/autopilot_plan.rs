@@ -147,7 +147,8 @@ impl AutopilotPlan {
         let from = flown.len();
         let left: f64 = part.activities[from..].iter().map(|a| a.length_m).sum();
         let text = format!(
-            "companion: mission changed, re-planned from the point reached (item {seq}):              {} activities flown kept, {} left {left:.0} m",
+            "companion: mission changed, re-planned from the point reached (item {seq}): \
+             {} activities flown kept, {} left {left:.0} m",
             from,
             part.activities.len() - from
         );
