@@ -99,8 +99,12 @@ def test_real_the_uploaded_mission_is_planned_flown_and_a_change_in_flight_re_pl
         name = (r.get("guarantee") or {}).get("activity_name")
         if name and (not walked or walked[-1] != name):
             walked.append(name)
-    assert walked[0] == "take_off" and any(a.startswith("leghome-") for a in walked), walked
-    assert any(a.startswith("leghere-") for a in walked), walked
+    # (a short first leg at SITL's speed-up may fall between two records: any leg of the first plan)
+    here = [i for i, a in enumerate(walked) if a.startswith("leghere-")]
+    assert walked[0] == "take_off" and here, walked
+    assert any(a.startswith("leg") for a in walked[1:here[0]]), walked
+    # forward only: nothing after the re-plan goes back to an activity flown before it
+    assert not set(walked[here[0]:]) & set(walked[:here[0]]), walked
     # Nothing uploaded by the companion: the route step kept the autopilot's mission.
     cmds = [c for r in records for c in r.get("commands", [])]
     uploads = [c for c in cmds if c.get("command") == "MISSION_UPLOAD"]
