@@ -67,14 +67,23 @@ def test_the_uploaded_mission_is_planned_flown_as_is_and_a_change_re_planned(aut
          "the uploaded mission flown in AUTO", run)
     t_up = time.monotonic()
     assert gcs.upload_mission(mission(250.0)).type == mavlink.MAV_MISSION_ACCEPTED
-    wait(lambda: any("mission changed" in t for t in texts(gcs, since=t_up)), 5.0,
-         "the STATUSTEXT that the mission changed, within 5 s of the upload", run)
+    wait(lambda: any("mission changed, re-planned from the point reached" in t for t in texts(gcs, since=t_up)), 5.0,
+         "the STATUSTEXT that the mission changed and was re-planned from the point reached, within 5 s", run)
     wait(lambda: run.proc.poll() is not None, 180, "the flight to end (--once)")
     assert run.proc.returncode == 0, run.output()
     assert not companion_uploads(sa), "the companion uploaded a mission of its own"
     said = [str(e) for e in events(run.records())]
     assert any("mission planned" in e for e in said), said[-20:]
-    assert any("mission changed, re-planned" in e for e in said), said[-20:]
+    assert any("mission changed, re-planned from the point reached" in e for e in said), said[-20:]
+    # Followed on the new plan: the activity flown comes from the re-derived mission (the leg from the point
+    # reached, `leghere-N`), after the ones flown before the change; the guarantee re-allocated from there.
+    walked = []
+    for r in run.records():
+        name = (r.get("guarantee") or {}).get("activity_name")
+        if name and (not walked or walked[-1] != name):
+            walked.append(name)
+    assert walked[0] == "take_off" and any(a.startswith("leghere-") for a in walked), walked
+    assert walked.index(next(a for a in walked if a.startswith("leghere-"))) > walked.index("leghome-2"), walked
     cruise = [r["observations"]["cruise_speed_mps"] for r in run.records()
               if "cruise_speed_mps" in r.get("observations", {})]
     assert cruise and cruise[-1] == 7.0, cruise[-3:]

@@ -14,6 +14,7 @@ mod compile;
 mod derived;
 pub mod power_bounds;
 mod reason;
+mod replan;
 mod schema;
 mod tuning;
 mod verdict;

@@ -101,7 +101,7 @@ impl MissionState {
             .iter()
             .map(|a| states.actions().role_of(&a.id))
             .collect();
-        let first = if route.takeoff_first { 2 } else { 1 };
+        let first = route.first_waypoint_seq();
         // The mission's own end (search loiter, RTL or LAND) follows wpf: past it the vehicle is
         // still at or beyond the last waypoint (`seq >= last_seq`).
         let last = route.last_waypoint_seq();

@@ -81,6 +81,44 @@ pub fn plan(
     })
 }
 
+/// A mission changed in flight, planned from the point reached: the activities already flown
+/// (`flown`: the old plan's, before the one being flown), then the new mission from `here` (the
+/// vehicle's position, altitude above home) on, from its item `current_seq` (MISSION_CURRENT
+/// after the change; the speed in force is its last DO_CHANGE_SPEED before it). A new activity
+/// named as a flown one is prefixed `new:`. The PANORAMA mission of the whole (`Derived::spec`)
+/// is what the guarantee re-allocates from activity `flown.len()` on
+/// (`companion_core::decision::Core::replan_from`).
+pub fn from_point_reached(
+    files: &ParamsFiles,
+    flown: &[companion_core::route_plan::DerivedActivity],
+    route: &PlannedRoute,
+    current_seq: usize,
+    here: companion_core::route_plan::Position,
+    settings: &DeriveSettings,
+) -> anyhow::Result<Derived> {
+    use companion_core::route_plan::ItemKind;
+    let mut rest = route.clone();
+    rest.items
+        .retain(|i| i.index >= current_seq || matches!(i.kind, ItemKind::ChangeSpeed { .. }));
+    let mut activities = flown.to_vec();
+    for mut a in
+        companion_core::route_plan::derive_activities_from(&rest, &[], settings, Some(here))
+    {
+        if flown.iter().any(|f| f.name == a.name) {
+            a.name = format!("new:{}", a.name);
+        }
+        activities.push(a);
+    }
+    let spec = companion_core::guarantee::derived_mission(files, DERIVE_MISSION, &activities, &[])?;
+    Ok(Derived {
+        panorama: DERIVE_MISSION.to_string(),
+        route_file: PathBuf::from(companion_core::route_plan::AUTOPILOT_MISSION),
+        zones_file: None,
+        activities,
+        spec,
+    })
+}
+
 /// What the ground station is told of a plan: activities, length and the planned energy and
 /// time of the pre-flight allocation (or that none meets the goals), and where the speeds came
 /// from.
@@ -175,5 +213,66 @@ mod tests {
             format!("{e:#}").starts_with("autopilot mission: item 2: LOITER_UNLIM"),
             "{e:#}"
         );
+    }
+
+    /// A mission changed in flight is planned from the point reached: the activities flown
+    /// kept (and their allocation), the new mission's items from MISSION_CURRENT on derived from
+    /// where the vehicle is (`leghere-N`), and the guarantee re-allocates only from there, with
+    /// what was spent kept and a RAS row saying why.
+    #[test]
+    fn a_mission_changed_in_flight_is_planned_from_the_point_reached() {
+        use companion_core::guarantee::{Guarantee, PackReading, Progress};
+        use companion_core::route_plan::Position;
+        let files = files();
+        let (s, _) = speeds(&params_speeds(&files).unwrap(), |_| None);
+        let old = plan(&files, &items(16), true, None, &s).unwrap();
+        let mut g = Guarantee::start_or_unbounded(old.spec.clone()).unwrap();
+        // Flying leg home-2 (activity 1), 40 % of the pack gone.
+        let progress = Progress {
+            activity_index: 1,
+            activity_fraction: 0.5,
+            energy_used_j: None,
+            battery_remaining_pct: Some(60.0),
+            elapsed_s: 30.0,
+            failed_resources: &[],
+            pack: PackReading::default(),
+        };
+        let _ = g.watch(progress);
+        // The ground station moves the waypoint further east; the vehicle is half-way.
+        let mut new = items(16);
+        new[2].params[5] = 149.169230;
+        let planned: Vec<_> = new.clone();
+        let route = autopilot_mission(&planned, true, None, s.cruise_speed_mps).unwrap();
+        let here = Position::offset((-35.363261, 149.165230), 0.0, 90.0, 20.0);
+        let part = from_point_reached(&files, &old.activities[..1], &route, 2, here, &s).unwrap();
+        let names: Vec<&str> = part.activities.iter().map(|a| a.name.as_str()).collect();
+        assert_eq!(names, ["take_off", "leghere-2", "return", "land"]);
+        let to = Position::offset((-35.363261, 149.165230), 0.0, 0.0, 20.0);
+        let wp = Position {
+            lon_deg: 149.169230,
+            ..to
+        };
+        let expect = companion_core::route_plan::leg_length_m(here, wp);
+        assert!((part.activities[1].length_m - expect).abs() < 1e-6);
+        assert_eq!(
+            part.activities[0], old.activities[0],
+            "the flown activity kept as planned"
+        );
+        let g2 = g.replan_from(part.spec.clone(), 1).unwrap();
+        assert_eq!(
+            g2.choice()[0],
+            g.choice()[0],
+            "the flown activity keeps its allocation"
+        );
+        assert_eq!(g2.reallocations(), g.reallocations() + 1);
+        let row = g2.ras_rows().last().unwrap();
+        assert_eq!(row.from_activity, 1);
+        assert!(
+            row.reason.contains("mission changed in flight"),
+            "{}",
+            row.reason
+        );
+        assert!(row.cells[0].is_none() && row.cells[1].is_some());
+        assert_eq!(g2.ras_rows()[0].cells[0], g.ras_rows()[0].cells[0]);
     }
 }

@@ -38,6 +38,7 @@ pub mod fly;
 pub mod learn_cpt;
 pub mod learning_params;
 pub mod live;
+pub mod operator_mission;
 pub mod output_file;
 pub mod params;
 pub mod params_files;

@@ -282,6 +282,17 @@ impl Decider for CoreDecider {
         self.core.replace_mission(spec)
     }
 
+    fn replan_from(
+        &mut self,
+        whole: companion_core::guarantee::MissionSpec,
+        spliced: companion_core::guarantee::MissionSpec,
+        flown: usize,
+    ) -> bool {
+        // The next flight plans the new mission from home.
+        self.mission = Some(whole);
+        self.core.replan_from(spliced, flown)
+    }
+
     fn new_flight(&mut self) {
         self.core = Core::new(Arc::clone(&self.model), ModelKind::Bfm, self.policy);
         if let Some(spec) = &self.mission {
@@ -300,14 +311,34 @@ fn fly(mut args: FlyArgs) -> Result<()> {
     let legacy = args
         .legacy_plan
         .then_some(companion::route_input::DERIVE_MISSION);
-    let (loaded, plan) = companion::route_input::load_with_plan(
+    // A route relative to home among absolute zones waits for the autopilot's home to be
+    // planned (fly::home_plan; no start until then); the route alone stands in meanwhile.
+    args.plan_waits_for_home = companion::route_input::plan_needs_home(
         &params,
-        legacy,
         args.zones.as_deref(),
         args.route_file(),
         args.home.as_deref(),
     )
     .context("loading params")?;
+    let zones = args.zones.as_deref().filter(|_| !args.plan_waits_for_home);
+    let (loaded, plan) = companion::route_input::load_with_plan(
+        &params,
+        legacy,
+        zones,
+        args.route_file(),
+        args.home.as_deref(),
+    )
+    .context("loading params")?;
+    if args.plan_waits_for_home {
+        println!(
+            "plan: waiting for the autopilot's home to place the route among the zones of {} \
+            (no start until then; the plan below stands in)",
+            args.zones
+                .as_deref()
+                .map(|z| z.display().to_string())
+                .unwrap_or_default()
+        );
+    }
     println!("{}", companion::route_input::summary_line(&plan));
     tracing::info!("{}", companion::route_input::summary_line(&plan));
     args.plan = Some(plan);

@@ -213,8 +213,14 @@ pub fn load_fly_files(
     let link = LinkParams::load(files, &dir.join("link.toml"))?;
     let commands = ActionTable::load(files, &dir.join("commands.toml"), actions)?;
     let route_file = route.map_or_else(|| dir.join(DEFAULT_ROUTE), Path::to_path_buf);
-    let mut route = Route::load(files, &route_file)?;
-    route.end = companion_link::actions::RouteEnd::for_handoff(link.flight.handoff);
+    let end = companion_link::actions::RouteEnd::for_handoff(link.flight.handoff);
+    let route = match crate::operator_mission::parse(files, &route_file)? {
+        Some(planned) => crate::operator_mission::operator_route(&planned, end).0,
+        None => Route {
+            end,
+            ..Route::load(files, &route_file)?
+        },
+    };
     Ok((link, commands, route, route_file))
 }
 

@@ -25,9 +25,7 @@ use std::path::{Path, PathBuf};
 // its old path.
 pub use crate::decision_log::{PlanSummary, PlannedActivity};
 
-/// The PANORAMA mission derived activities are planned against (its tasks, TIOs, goals) unless
-/// `--mission` names another.
-pub const DERIVE_MISSION: &str = "tracking";
+pub use crate::operator_mission::DERIVE_MISSION;
 
 /// The zones of the default route, relative to the params directory (home-relative: they sit on
 /// the route wherever the autopilot's home is).
@@ -154,6 +152,31 @@ pub fn add_plan_files(
     }
 }
 
+/// `fly` with a route relative to home among absolute zones and no `--home`: the geometry
+/// depends on where home is, so the plan waits for the autopilot's (`fly::home_plan`).
+pub fn plan_needs_home(
+    dir: &Path,
+    zones: Option<&Path>,
+    route: Option<&Path>,
+    home: Option<&str>,
+) -> anyhow::Result<bool> {
+    let Some(z) = zones.filter(|_| home.is_none()) else {
+        return Ok(false);
+    };
+    let mut files = crate::params::read_params_dir(dir)?;
+    add_plan_files(&mut files, None, Some(z), route);
+    let route = route.map_or_else(|| dir.join(crate::params::DEFAULT_ROUTE), Path::to_path_buf);
+    if operator_kind(&files, &route)?.is_some()
+        || companion_core::route_plan::zones_home_relative(files.text(z)?)
+    {
+        return Ok(false);
+    }
+    let r = Route::load(&files, &route)?;
+    Ok(r.waypoints
+        .iter()
+        .any(|w| matches!(w, Waypoint::Relative { .. })))
+}
+
 /// Derive the activities and the PANORAMA mission on them: the plan `check`, `simulate` and
 /// `fly` judge (the module's rules); `None` only for a PANORAMA mission named without `--zones`
 /// (its typed activities, the legacy plan).
@@ -177,9 +200,18 @@ pub fn derive_at_cruise(
     home: Option<&str>,
     cruise_speed_mps: Option<f64>,
 ) -> anyhow::Result<Option<Derived>> {
-    let kind = mission_route_kind(files, mission)?;
+    let mut kind = mission_route_kind(files, mission)?;
     if kind.is_none() && mission.is_some() && zones_file.is_none() {
         return Ok(None);
+    }
+    // `fly --mission FILE.plan`: the route flown is the operator's file (told by content).
+    let mut mission = mission;
+    if kind.is_none()
+        && let Some(r) = route_file
+        && let Some(k) = operator_kind(files, r)?
+    {
+        kind = Some(k);
+        mission = r.to_str();
     }
     // The shipped zones belong to the shipped route: only the default route gets them unasked.
     let default_zones = files.dir().join(DEFAULT_ZONES);
@@ -211,6 +243,15 @@ pub fn derive_at_cruise(
         None => false,
     };
     let (file, planned) = match (kind, mission) {
+        (Some(MissionSourceKind::QgcPlan | MissionSourceKind::Wpl110), Some(m))
+            if route_file.is_some_and(|r| Some(r) == Some(Path::new(m))) =>
+        {
+            // `fly --mission FILE`: planned as uploaded (its end included).
+            let p = Path::new(m);
+            let plan =
+                crate::operator_mission::parse(files, p)?.context("the operator's mission file")?;
+            (p.to_path_buf(), plan)
+        }
         (Some(MissionSourceKind::QgcPlan), Some(m)) => {
             let p = Path::new(m);
             let plan = companion_core::route_plan::parse_plan(
@@ -277,23 +318,6 @@ pub fn load_with_plan(
 ) -> anyhow::Result<(crate::params::Params, PlanSummary)> {
     let mut files = crate::params::read_params_dir(dir)?;
     add_plan_files(&mut files, mission, zones, route);
-    if let Some(r) = route
-        && let Ok(text) = files.text(r)
-    {
-        let kind = companion_core::route_plan::detect_kind(r, text);
-        if let Ok(k @ (MissionSourceKind::QgcPlan | MissionSourceKind::Wpl110)) = kind {
-            let what = match k {
-                MissionSourceKind::QgcPlan => "a QGroundControl .plan",
-                _ => "a WPL 110 file",
-            };
-            anyhow::bail!(
-                "{}: {what}: `fly` uploads only a route TOML yet (params/missions/\
-                 tracking_route.toml's format); `check --mission FILE` and `simulate --mission \
-                 FILE` plan it (docs/guarantee.md)",
-                r.display()
-            );
-        }
-    }
     let mut loaded = crate::params::Params::from_files(files, route)?;
     let derived = derive(&loaded.files, mission, zones, route, home)?;
     let plan = apply(&mut loaded.model, derived.as_ref());
@@ -301,6 +325,19 @@ pub fn load_with_plan(
     loaded.world.plan =
         derived.map_or_else(Vec::new, |d| d.activities.iter().map(|a| a.kind).collect());
     Ok((loaded, plan))
+}
+
+/// `fly --mission FILE`'s kind when it is an operator's mission (a `.plan` or WPL 110 file, by
+/// content); `None` for the route TOML.
+pub fn operator_kind(
+    files: &ParamsFiles,
+    route: &Path,
+) -> anyhow::Result<Option<MissionSourceKind>> {
+    let Ok(text) = files.text(route) else {
+        return Ok(None);
+    };
+    let kind = companion_core::route_plan::detect_kind(route, text)?;
+    Ok(matches!(kind, MissionSourceKind::QgcPlan | MissionSourceKind::Wpl110).then_some(kind))
 }
 
 /// A route TOML as mission items; `home_free`: where home is does not change its geometry

@@ -83,6 +83,17 @@ pub fn derive_activities(
     zones: &[Zone],
     s: &DeriveSettings,
 ) -> Vec<DerivedActivity> {
+    derive_activities_from(route, zones, s, None)
+}
+
+/// [`derive_activities`] of a route flown from `start` (the point reached in flight, labelled
+/// `here`; a mission changed in flight is re-planned from it) instead of home on the ground.
+pub fn derive_activities_from(
+    route: &PlannedRoute,
+    zones: &[Zone],
+    s: &DeriveSettings,
+    start: Option<Position>,
+) -> Vec<DerivedActivity> {
     let all: Vec<&Zone> = zones.iter().chain(&route.zones).collect();
     let home = route
         .home
@@ -96,8 +107,8 @@ pub fn derive_activities(
     let mut w = Walk {
         zones: &all,
         out: Vec::new(),
-        here: home,
-        here_label: "home".into(),
+        here: start.unwrap_or(home),
+        here_label: if start.is_some() { "here" } else { "home" }.into(),
         speed: s.cruise_speed_mps,
         overhead_s: s.waypoint_overhead_s,
         speed_fraction: s.speed_fraction,

@@ -7,10 +7,14 @@
 //! goals) stays typed in the PANORAMA mission; `crate::guarantee::derived_mission` joins the two.
 
 mod derive;
+pub mod mav_cmd;
 mod sources;
 mod zones;
 
-pub use derive::{ActivityKind, DeriveSettings, DerivedActivity, derive_activities, leg_length_m};
+pub use derive::{
+    ActivityKind, DeriveSettings, DerivedActivity, derive_activities, derive_activities_from,
+    leg_length_m,
+};
 pub use sources::{
     AUTOPILOT_MISSION, AutopilotItem, DEFAULT_LOITER_RADIUS_M, MissionSourceKind, detect_kind,
     parse_autopilot_mission, parse_plan, parse_wpl,

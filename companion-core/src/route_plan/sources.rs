@@ -49,15 +49,12 @@ pub fn detect_kind(path: &Path, text: &str) -> Result<MissionSourceKind, SpecErr
     }
 }
 
-// MAVLink MAV_CMD and MAV_FRAME numbers (common.xml).
-const NAV_WAYPOINT: u64 = 16;
-const NAV_LOITER_UNLIM: u64 = 17;
-const NAV_LOITER_TURNS: u64 = 18;
-const NAV_LOITER_TIME: u64 = 19;
-const NAV_RETURN_TO_LAUNCH: u64 = 20;
-const NAV_LAND: u64 = 21;
-const NAV_TAKEOFF: u64 = 22;
-const DO_CHANGE_SPEED: u64 = 178;
+use super::mav_cmd::{
+    DO_CHANGE_SPEED, NAV_LAND, NAV_LOITER_TIME, NAV_LOITER_TURNS, NAV_LOITER_UNLIM,
+    NAV_RETURN_TO_LAUNCH, NAV_TAKEOFF, NAV_WAYPOINT,
+};
+
+// MAVLink MAV_FRAME numbers (common.xml).
 const FRAME_GLOBAL: u64 = 0;
 const FRAME_GLOBAL_RELATIVE_ALT: u64 = 3;
 const FRAME_GLOBAL_INT: u64 = 5;
@@ -107,7 +104,7 @@ fn mav_item(
     };
     // Lat/lon 0,0 on a take-off, land or RTL means "where the vehicle is".
     let here = p[4] == 0.0 && p[5] == 0.0;
-    let kind = match command {
+    let kind = match u16::try_from(command).unwrap_or(u16::MAX) {
         NAV_WAYPOINT => ItemKind::Waypoint(position()?),
         NAV_TAKEOFF => {
             let alt_m = position()
@@ -165,9 +162,9 @@ fn mav_item(
         NAV_LAND => ItemKind::Land {
             at: if here { None } else { Some(position()?) },
         },
-        c => {
+        _ => {
             return Err(format!(
-                "command {c} (MAV_CMD) is not one the companion plans: take-off (22), waypoint (16), loiter time/turns (19/18), change speed (178), RTL (20), land (21)"
+                "command {command} (MAV_CMD) is not one the companion plans: take-off (22), waypoint (16), loiter time/turns (19/18), change speed (178), RTL (20), land (21)"
             ));
         }
     };

@@ -54,3 +54,44 @@ pub(super) fn px4_frames(items: &mut [MissionItem]) {
         }
     }
 }
+
+/// An operator's mission (`fly --mission FILE.plan`): its items after `home`, and when they do
+/// not end the flight (no RTL or LAND) the route's own end ([`RouteEnd`], as `[flight] handoff`
+/// says): a companion that dies after the last item never leaves the vehicle hovering.
+pub(super) fn operator_mission(
+    route: &super::Route,
+    mut items: Vec<MissionItem>,
+) -> Vec<MissionItem> {
+    let ops = &route.operator_items;
+    items.extend(ops.iter().cloned());
+    let ends = ops.iter().any(|i| {
+        matches!(
+            i.command,
+            MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH | MavCmd::MAV_CMD_NAV_LAND
+        )
+    });
+    if !ends {
+        let last_nav = ops.iter().rev().find(|i| is_nav_position(i));
+        items.extend(end_items(route.end, None, last_nav.cloned()));
+    }
+    items
+}
+
+/// The seqs (item k at k + 1) of the operator's items that fly to a position (waypoints,
+/// loiters): the mission estimate's first and last waypoint.
+pub(super) fn operator_nav_seqs(ops: &[MissionItem]) -> Vec<u16> {
+    (ops.iter().enumerate())
+        .filter(|(_, i)| is_nav_position(i) && i.command != MavCmd::MAV_CMD_NAV_LAND)
+        .map(|(k, _)| (k + 1) as u16)
+        .collect()
+}
+
+/// An item that flies to a position: waypoint, loiter, or a land at a given point.
+fn is_nav_position(i: &MissionItem) -> bool {
+    matches!(
+        i.command,
+        MavCmd::MAV_CMD_NAV_WAYPOINT
+            | MavCmd::MAV_CMD_NAV_LOITER_TIME
+            | MavCmd::MAV_CMD_NAV_LOITER_TURNS
+    ) || (i.command == MavCmd::MAV_CMD_NAV_LAND && (i.x != 0 || i.y != 0))
+}

@@ -295,6 +295,7 @@ fn route(takeoff_first: bool) -> Route {
         tracking_time_limit_s: None,
         takeoff_first,
         end: crate::actions::RouteEnd::ReturnToLaunch,
+        operator_items: Vec::new(),
     }
 }
 
@@ -452,4 +453,48 @@ fn the_uploaded_mission_ends_with_the_search_loiter_then_rtl_or_land() {
     for h in [Handoff::Rtl, Handoff::Hold, Handoff::None] {
         assert_eq!(RouteEnd::for_handoff(h), RouteEnd::ReturnToLaunch);
     }
+}
+
+/// An operator's mission (`fly --mission FILE.plan`) is uploaded as its items after home; one
+/// that does not end the flight gets the route's end (RTL here), so a dead companion never
+/// leaves the vehicle hovering; one ending with RTL or LAND gets nothing more. The mission
+/// estimate's first and last waypoint are its first and last item flying to a position.
+#[test]
+fn an_operator_mission_is_uploaded_as_given_and_ended_when_it_does_not_end() {
+    let home = (-353_632_610, 1_491_652_300);
+    let takeoff = MissionItem {
+        command: MavCmd::MAV_CMD_NAV_TAKEOFF,
+        ..MissionItem::waypoint(0, 0, 20.0)
+    };
+    let speed = MissionItem {
+        command: MavCmd::MAV_CMD_DO_CHANGE_SPEED,
+        params: [1.0, 8.0, -1.0, 0.0],
+        ..MissionItem::waypoint(0, 0, 0.0)
+    };
+    let wp1 = MissionItem::waypoint(-353_622_610, 1_491_652_300, 20.0);
+    let wp2 = MissionItem::waypoint(-353_622_610, 1_491_672_300, 25.0);
+    let mut r = route(true);
+    r.operator_items = vec![takeoff.clone(), speed.clone(), wp1.clone(), wp2.clone()];
+    let items = r.mission_items(Flavor::ArduPilot, home);
+    assert_eq!(items.len(), 6, "{items:#?}");
+    assert_eq!(items[0].x, home.0, "home at seq 0");
+    assert_eq!(items[1..5], [takeoff.clone(), speed, wp1, wp2.clone()]);
+    assert_eq!(items[5].command, MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH);
+    assert_eq!((r.first_waypoint_seq(), r.last_waypoint_seq()), (3, 4));
+    r.end = crate::actions::RouteEnd::Land;
+    let items = r.items(home);
+    assert_eq!(items[5].command, MavCmd::MAV_CMD_NAV_LAND);
+    assert_eq!(
+        (items[5].x, items[5].y),
+        (wp2.x, wp2.y),
+        "land at the last waypoint"
+    );
+    let land = MissionItem {
+        command: MavCmd::MAV_CMD_NAV_LAND,
+        ..MissionItem::waypoint(0, 0, 0.0)
+    };
+    r.operator_items = vec![takeoff, wp2, land];
+    let items = r.items(home);
+    assert_eq!(items.len(), 4, "ends with its own LAND: nothing added");
+    assert_eq!((r.first_waypoint_seq(), r.last_waypoint_seq()), (2, 2));
 }

@@ -973,6 +973,7 @@ fn route_vehicle() -> Vehicle {
         tracking_time_limit_s: None,
         takeoff_first: false,
         end: crate::actions::RouteEnd::ReturnToLaunch,
+        operator_items: Vec::new(),
     };
     let cfg = VehicleConfig {
         streams: vec![],
@@ -1468,6 +1469,7 @@ fn px4_auto_waits_until_px4_reports_the_uploaded_mission() {
         tracking_time_limit_s: None,
         takeoff_first: true,
         end: crate::actions::RouteEnd::ReturnToLaunch,
+        operator_items: Vec::new(),
     };
     let mut v = Vehicle::new(VehicleConfig::default(), t, Some(route));
     px4_ready(&mut v, 0.0);

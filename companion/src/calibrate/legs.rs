@@ -42,9 +42,7 @@ const CURRENT_STREAM_SLACK_S: f64 = 2.0;
 const LANDED_ALT_M: f64 = 2.5;
 /// A climb or descent of less than this is no take-off or landing (m).
 const MIN_VERTICAL_M: f64 = 2.0;
-/// MAV_CMD_NAV_WAYPOINT, MAV_CMD_DO_CHANGE_SPEED.
-const NAV_WAYPOINT: u16 = 16;
-const DO_CHANGE_SPEED: u16 = 178;
+use companion_core::route_plan::mav_cmd::{DO_CHANGE_SPEED, NAV_WAYPOINT};
 /// Take-off samples kept per flight (about 30 min at 5 Hz): the climb is found in them.
 const MAX_CLIMB_SAMPLES: usize = 10_000;
 

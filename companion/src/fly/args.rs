@@ -117,6 +117,10 @@ pub struct FlyArgs {
     /// shell names the activity flown from it); `None`: the typed mission.
     #[arg(skip)]
     pub plan: Option<crate::route_input::PlanSummary>,
+    /// The route is relative to home and the zones absolute, with no `--home`: the plan is made
+    /// once the autopilot's home is known (`fly::home_plan`); `plan` stands in until then.
+    #[arg(skip)]
+    pub plan_waits_for_home: bool,
 }
 
 impl FlyArgs {

@@ -28,6 +28,10 @@ pub(super) struct AutopilotPlan {
     /// speed the autopilot reports later (its PARAM_VALUE after the download, a ground station's
     /// PARAM_SET) or PX4's home arriving re-plans it.
     last: Option<(Vec<MissionItem>, DeriveSettings, bool)>,
+    /// The mission's states (the route progress of a planned mission reads the phase).
+    states: companion_core::mission::MissionStates,
+    /// The activities the guarantee plans now (a change in flight keeps those flown).
+    activities: Vec<companion_core::route_plan::DerivedActivity>,
     /// What the ground station must still be told (held back by the STATUSTEXT rate cap, said
     /// as soon as it allows: a plan, a change or a refusal is never lost).
     unsaid: Option<(MavSeverity, String)>,
@@ -38,12 +42,15 @@ impl AutopilotPlan {
     pub(super) fn new(
         files: ParamsFiles,
         params_speeds: DeriveSettings,
+        states: companion_core::mission::MissionStates,
         shell: &mut Shell,
     ) -> Self {
         shell.mission_unplanned = Some(NOT_DOWNLOADED.to_string());
         Self {
             files,
             params_speeds,
+            states,
+            activities: Vec::new(),
             last: None,
             unsaid: None,
         }
@@ -72,9 +79,97 @@ impl AutopilotPlan {
     ) {
         let (items, what) = match update {
             AutopilotMission::Loaded(i) => (i, "mission planned"),
-            AutopilotMission::Changed(i) => (i, "mission changed, re-planned"),
+            AutopilotMission::Changed(i) => {
+                if self.from_point_reached(&i, vehicle, decider, shell) {
+                    return;
+                }
+                (i, "mission changed, re-planned")
+            }
         };
         self.plan(items, what, vehicle, decider, shell);
+    }
+
+    /// A mission changed in flight (armed, the activity flown known): planned from the point
+    /// reached ([`crate::autopilot_mission::from_point_reached`]), the activities flown and what
+    /// they spent kept, the rest re-allocated; said to the ground station. `false`: not in
+    /// flight or not plannable so, and the whole mission is planned afresh instead.
+    fn from_point_reached<D: Decider>(
+        &mut self,
+        items: &[MissionItem],
+        vehicle: &Vehicle,
+        decider: &mut D,
+        shell: &mut Shell,
+    ) -> bool {
+        let t = &vehicle.telemetry;
+        let (Some(at), Some(pos), true) = (shell.route_activity, t.position, t.armed) else {
+            return false;
+        };
+        let Some(flown) = self.activities.get(..at) else {
+            return false;
+        };
+        let planned: Vec<_> = items
+            .iter()
+            .enumerate()
+            .map(|(k, i)| i.planned(k))
+            .collect();
+        let home = t
+            .home
+            .map(|(lat, lon, alt)| (f64::from(lat) / 1e7, f64::from(lon) / 1e7, alt));
+        let (speeds, _) = crate::autopilot_mission::speeds(&self.params_speeds, |n| t.get(n));
+        let home_at_seq0 = vehicle.mission.home_at_seq0;
+        let Ok(route) = crate::autopilot_mission::autopilot_mission(
+            &planned,
+            home_at_seq0,
+            home,
+            speeds.cruise_speed_mps,
+        ) else {
+            return false;
+        };
+        let here = companion_core::route_plan::Position {
+            lat_deg: f64::from(pos.lat_e7) / 1e7,
+            lon_deg: f64::from(pos.lon_e7) / 1e7,
+            alt_m: pos.alt_rel_m,
+        };
+        let seq = usize::from(t.mission_seq.unwrap_or(1));
+        let whole =
+            crate::autopilot_mission::plan(&self.files, &planned, home_at_seq0, home, &speeds);
+        let part = crate::autopilot_mission::from_point_reached(
+            &self.files,
+            flown,
+            &route,
+            seq,
+            here,
+            &speeds,
+        );
+        let (Ok(whole), Ok(part)) = (whole, part) else {
+            return false;
+        };
+        let from = flown.len();
+        let left: f64 = part.activities[from..].iter().map(|a| a.length_m).sum();
+        let text = format!(
+            "companion: mission changed, re-planned from the point reached (item {seq}): \
+             {} activities flown kept, {} left {left:.0} m",
+            from,
+            part.activities.len() - from
+        );
+        set_waypoints(shell, &route.items);
+        shell.route_progress = super::route_progress::RouteProgress::for_items(
+            &part.activities,
+            from,
+            &route.items,
+            |i| u16::try_from(i).ok(),
+            Some((here.lat_deg, here.lon_deg)),
+            self.states.clone(),
+        );
+        let feasible = decider.replan_from(whole.spec, part.spec, from);
+        shell.mission_unplanned =
+            (!feasible).then(|| "the guarantee finds no allocation for it".to_string());
+        self.activities = part.activities;
+        tracing::info!("{text}");
+        shell.pending_events.push(Event::from(text.as_str()));
+        self.unsaid = Some((NOTICE, text));
+        self.last = Some((items.to_vec(), speeds, home_at_seq0 || home.is_some()));
+        true
     }
 
     /// Every turn: the same mission planned again when the autopilot now reports a speed other
@@ -139,7 +234,17 @@ impl AutopilotPlan {
                 );
                 if let Ok(route) = route {
                     set_waypoints(shell, &route.items);
+                    // The autopilot's seq is the item's index.
+                    shell.route_progress = super::route_progress::RouteProgress::for_items(
+                        &d.activities,
+                        0,
+                        &route.items,
+                        |i| u16::try_from(i).ok(),
+                        None,
+                        self.states.clone(),
+                    );
                 }
+                self.activities = d.activities.clone();
                 let feasible = decider.replace_mission(d.spec);
                 shell.mission_unplanned =
                     (!feasible).then(|| "the guarantee finds no allocation for it".to_string());

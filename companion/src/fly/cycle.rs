@@ -105,8 +105,8 @@ pub fn decide<D: Decider>(
     obs.state = shell.mission.update(&obs, &extra).to_string();
     complete_observations(&mut obs, &shell.mission);
     let home = vehicle.telemetry.home;
-    let wp1_seq = shell.mission.wp1_seq;
-    if let Some(a) = (shell.route_progress.as_ref()).and_then(|p| p.activity(&obs, wp1_seq, home)) {
+    shell.route_activity = (shell.route_progress.as_ref()).and_then(|p| p.activity(&obs, home));
+    if let Some(a) = shell.route_activity {
         obs.set(companion_core::evidence::ROUTE_ACTIVITY, a as f64);
     }
     let (plan, mut rec) = decider.step(&obs);

@@ -26,6 +26,7 @@ mod args;
 mod autopilot_plan;
 mod cycle;
 pub mod gate;
+mod home_plan;
 pub mod link_security;
 mod restart;
 mod resume;
@@ -72,6 +73,18 @@ pub trait Decider {
     fn replace_mission(&mut self, _spec: companion_core::guarantee::MissionSpec) -> bool {
         false
     }
+    /// A mission changed in flight, guaranteed from the point reached: `spliced`'s first
+    /// `flown` activities are those flown (what they spent stays counted), the rest the new
+    /// mission from where the vehicle is; `whole` (the new mission from home) is planned for the
+    /// next flights. By default the whole mission is planned afresh.
+    fn replan_from(
+        &mut self,
+        whole: companion_core::guarantee::MissionSpec,
+        _spliced: companion_core::guarantee::MissionSpec,
+        _flown: usize,
+    ) -> bool {
+        self.replace_mission(whole)
+    }
 }
 
 /// The real core is a decider as it is (fuzzing and the soak drive it without a wrapper).
@@ -87,6 +100,14 @@ impl Decider for companion_core::decision::Core {
     }
     fn replace_mission(&mut self, spec: companion_core::guarantee::MissionSpec) -> bool {
         companion_core::decision::Core::replace_mission(self, spec)
+    }
+    fn replan_from(
+        &mut self,
+        _whole: companion_core::guarantee::MissionSpec,
+        spliced: companion_core::guarantee::MissionSpec,
+        flown: usize,
+    ) -> bool {
+        companion_core::decision::Core::replan_from(self, spliced, flown)
     }
 }
 

@@ -77,6 +77,8 @@ pub(super) struct RunLoop<'s, D, S> {
     autopilot_plan: Option<super::autopilot_plan::AutopilotPlan>,
     /// The companion's own route: re-planned at the autopilot's cruise speed on the ground.
     route_replan: Option<super::route_replan::RouteReplan>,
+    /// A route relative to home among absolute zones: planned once home is known.
+    home_plan: Option<super::home_plan::HomePlan>,
 }
 
 impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
@@ -100,9 +102,15 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         vehicle.cfg.autopilot_compid = args.autopilot_compid;
         let autopilot_plan = setup.autopilot_speeds.map(|speeds| {
             vehicle.watch_autopilot_mission();
-            super::autopilot_plan::AutopilotPlan::new(setup.files.clone(), speeds, &mut shell)
+            super::autopilot_plan::AutopilotPlan::new(
+                setup.files.clone(),
+                speeds,
+                setup.states.clone(),
+                &mut shell,
+            )
         });
         let route_replan = super::route_replan::RouteReplan::new(&args, &setup.files);
+        let home_plan = super::home_plan::HomePlan::new(&setup, &args, &mut shell);
         let signing = || setup.key.map(ingest::signing_data);
         tracing::info!(url = %args.connect, "connecting to the autopilot");
         Self {
@@ -135,6 +143,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             last_cycle_done: None,
             autopilot_plan,
             route_replan,
+            home_plan,
             args,
             setup,
             decider,
@@ -218,6 +227,10 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
                 out.extend(plan.say(&mut self.shell, t));
             }
             if let Some(plan) = self.route_replan.as_mut() {
+                plan.recheck(&self.vehicle, &mut self.decider, &mut self.shell);
+                out.extend(plan.say(&mut self.shell, t));
+            }
+            if let Some(plan) = self.home_plan.as_mut() {
                 plan.recheck(&self.vehicle, &mut self.decider, &mut self.shell);
                 out.extend(plan.say(&mut self.shell, t));
             }

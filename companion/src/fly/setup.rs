@@ -80,11 +80,31 @@ impl FlySetup {
                 })
             })
             .unwrap_or(route.altitude_m);
-        // The route progress follows the companion's own route; an autopilot mission's activities
-        // are not those of the route loaded (docs/guarantee.md, "Not yet").
-        let route_progress = (args.plan.as_ref())
-            .filter(|_| !args.flies_autopilot_mission())
-            .and_then(|p| super::route_progress::RouteProgress::new(p, &route, states.clone()));
+        // The route progress follows the mission flown: the route TOML's waypoints, an
+        // operator's `.plan` / WPL items by their upload seq; an autopilot mission's once it is
+        // downloaded and planned (`autopilot_plan`).
+        let route_progress = match (args.plan.as_ref(), args.route_file()) {
+            (_, None) if args.flies_autopilot_mission() => None,
+            (Some(plan), Some(file)) => match crate::operator_mission::parse(files, file)? {
+                Some(planned) => {
+                    let (_, seqs) = crate::operator_mission::operator_route(&planned, route.end);
+                    let seq_of = |i: usize| seqs.iter().find(|s| s.0 == i).map(|s| s.1);
+                    super::route_progress::RouteProgress::for_items(
+                        &plan.derived,
+                        0,
+                        &planned.items,
+                        seq_of,
+                        None,
+                        states.clone(),
+                    )
+                }
+                None => super::route_progress::RouteProgress::new(plan, &route, states.clone()),
+            },
+            (Some(plan), None) => {
+                super::route_progress::RouteProgress::new(plan, &route, states.clone())
+            }
+            (None, _) => None,
+        };
         Ok(Self {
             previous_run: None,
             route_progress,

@@ -16,6 +16,8 @@ pub struct Shell {
     pub(super) mission: MissionState,
     /// The derived plan against the route flown: names `route_activity` each cycle.
     pub(super) route_progress: Option<super::route_progress::RouteProgress>,
+    /// The derived activity the last cycle found flown (`route_activity`), when any.
+    pub(super) route_activity: Option<usize>,
     /// The mission state a new flight starts from.
     pub(super) fresh_mission: MissionState,
     pub(super) precedence: Vec<String>,
@@ -74,6 +76,7 @@ impl Shell {
         mission.ground_altitude_m = f.ground_altitude_m;
         Self {
             route_progress: setup.route_progress.clone(),
+            route_activity: None,
             fresh_mission: mission.clone(),
             mission,
             precedence: setup.link.vehicle_action_precedence.clone(),

@@ -359,3 +359,23 @@ fn a_landing_whose_altitude_estimate_drifted_counts_and_a_disarm_in_the_air_does
     s.arm(false);
     assert!(read(&s.out, 10.0).descents.is_empty());
 }
+
+/// The MAV_CMD numbers the planner and calibrate share (companion-core has no `mavlink`) are
+/// mavlink's.
+#[test]
+fn the_shared_mav_cmd_numbers_are_mavlinks() {
+    use companion_core::route_plan::mav_cmd as n;
+    use companion_link::dialect::MavCmd as C;
+    for (k, c) in [
+        (n::NAV_WAYPOINT, C::MAV_CMD_NAV_WAYPOINT),
+        (n::NAV_LOITER_UNLIM, C::MAV_CMD_NAV_LOITER_UNLIM),
+        (n::NAV_LOITER_TURNS, C::MAV_CMD_NAV_LOITER_TURNS),
+        (n::NAV_LOITER_TIME, C::MAV_CMD_NAV_LOITER_TIME),
+        (n::NAV_RETURN_TO_LAUNCH, C::MAV_CMD_NAV_RETURN_TO_LAUNCH),
+        (n::NAV_LAND, C::MAV_CMD_NAV_LAND),
+        (n::NAV_TAKEOFF, C::MAV_CMD_NAV_TAKEOFF),
+        (n::DO_CHANGE_SPEED, C::MAV_CMD_DO_CHANGE_SPEED),
+    ] {
+        assert_eq!(k, c as u16, "{c:?}");
+    }
+}
