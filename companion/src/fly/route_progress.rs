@@ -44,7 +44,7 @@ pub struct RouteProgress {
     states: MissionStates,
     /// The last activity found: the flight goes forward (an autopilot's MISSION_CURRENT that
     /// falls back after its RTL never takes the plan back to a leg flown), until on the ground.
-    last: std::cell::Cell<Option<usize>>,
+    last: Option<usize>,
 }
 
 /// The leg pieces of `derived` (from activity `from` on) flying to the item labelled `label`
@@ -115,7 +115,7 @@ impl RouteProgress {
             targets,
             start: Place::Home,
             states,
-            last: std::cell::Cell::new(None),
+            last: None,
         })
     }
 
@@ -164,19 +164,19 @@ impl RouteProgress {
                 lon_deg,
             }),
             states,
-            last: std::cell::Cell::new(None),
+            last: None,
         })
     }
 
     /// The activity being flown; `home`: the autopilot's (HOME_POSITION, lat/lon * 1e7).
-    pub fn activity(&self, obs: &Observations, home: Option<(i32, i32, f64)>) -> Option<usize> {
+    pub fn activity(&mut self, obs: &Observations, home: Option<(i32, i32, f64)>) -> Option<usize> {
         let found = self.found(obs, home);
         let on_ground = self.states.route().role_of(&obs.state) == Some(RouteRole::OnGround);
-        let kept = match (found, self.last.get()) {
+        let kept = match (found, self.last) {
             (Some(a), Some(l)) if a < l && !on_ground => Some(l),
             (a, _) => a,
         };
-        self.last.set(kept);
+        self.last = kept;
         kept
     }
 
@@ -254,8 +254,8 @@ mod tests {
     use super::*;
 
     /// The progress without its memory of the last activity (each query on its own).
-    pub(super) fn fresh(p: &RouteProgress) -> &RouteProgress {
-        p.last.set(None);
+    pub(super) fn fresh(p: &mut RouteProgress) -> &mut RouteProgress {
+        p.last = None;
         p
     }
 
@@ -286,7 +286,7 @@ mod tests {
     /// take-off, search, tracking and landing.
     #[test]
     fn the_mission_item_and_the_position_name_the_leg_piece() {
-        let (p, plan) = progress();
+        let (mut p, plan) = progress();
         let name = |a: Option<usize>| plan.derived[a.unwrap()].name.clone();
         let home = (-35.363261, 149.165230);
         let h = Some(((home.0 * 1e7) as i32, (home.1 * 1e7) as i32, 584.0));
@@ -296,57 +296,57 @@ mod tests {
         };
         // wp1 is mission seq 2 (take-off at 1).
         assert_eq!(
-            name(fresh(&p).activity(&obs("base", 0.0, None), h)),
+            name(fresh(&mut p).activity(&obs("base", 0.0, None), h)),
             "take_off"
         );
         assert_eq!(
-            name(fresh(&p).activity(&obs("wp1", 2.0, north(20.0)), h)),
+            name(fresh(&mut p).activity(&obs("wp1", 2.0, north(20.0)), h)),
             "leghome-1"
         );
         assert_eq!(
-            name(fresh(&p).activity(&obs("wpi", 3.0, north(70.0)), h)),
+            name(fresh(&mut p).activity(&obs("wpi", 3.0, north(70.0)), h)),
             "leg1-2.1"
         );
         assert_eq!(
-            name(fresh(&p).activity(&obs("wpi", 3.0, north(130.0)), h)),
+            name(fresh(&mut p).activity(&obs("wpi", 3.0, north(130.0)), h)),
             "leg1-2.2"
         );
         assert_eq!(
-            name(fresh(&p).activity(&obs("wpi", 3.0, north(180.0)), h)),
+            name(fresh(&mut p).activity(&obs("wpi", 3.0, north(180.0)), h)),
             "leg1-2.3"
         );
         // Without a position: the leg's first piece.
         assert_eq!(
-            name(fresh(&p).activity(&obs("wpi", 3.0, None), h)),
+            name(fresh(&mut p).activity(&obs("wpi", 3.0, None), h)),
             "leg1-2.1"
         );
         assert_eq!(
-            name(fresh(&p).activity(&obs("wpi", 4.0, north(200.0)), h)),
+            name(fresh(&mut p).activity(&obs("wpi", 4.0, north(200.0)), h)),
             "leg2-3"
         );
         assert_eq!(
-            name(fresh(&p).activity(&obs("wpf", 5.0, None), h)),
+            name(fresh(&mut p).activity(&obs("wpf", 5.0, None), h)),
             "search"
         );
         assert_eq!(
-            name(fresh(&p).activity(&obs("target", 5.0, None), h)),
+            name(fresh(&mut p).activity(&obs("target", 5.0, None), h)),
             "tracking"
         );
         assert_eq!(
-            name(fresh(&p).activity(&obs("v3", 5.0, None), h)),
+            name(fresh(&mut p).activity(&obs("v3", 5.0, None), h)),
             "tracking"
         );
         assert_eq!(
-            name(fresh(&p).activity(&obs("landing", 5.0, None), h)),
+            name(fresh(&mut p).activity(&obs("landing", 5.0, None), h)),
             "land"
         );
         // A seq beyond the route, NaN: clamped to the route's legs, never a panic.
         assert_eq!(
-            name(fresh(&p).activity(&obs("wpi", 99.0, None), h)),
+            name(fresh(&mut p).activity(&obs("wpi", 99.0, None), h)),
             "leg3-4.1"
         );
         assert_eq!(
-            name(fresh(&p).activity(&obs("wpi", f64::NAN, None), h)),
+            name(fresh(&mut p).activity(&obs("wpi", f64::NAN, None), h)),
             "leghome-1"
         );
     }
@@ -401,46 +401,46 @@ mod operator_tests {
         assert_eq!(seqs, [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5)]);
         let seq_of = |i: usize| seqs.iter().find(|x| x.0 == i).map(|x| x.1);
         let states = companion_core::mission::MissionStates::load(&files).unwrap();
-        let p =
+        let mut p =
             RouteProgress::for_items(&derived, 0, &planned.items, seq_of, None, states).unwrap();
         let name = |a: Option<usize>| derived[a.unwrap()].name.clone();
         let h = Some((0, 0, 0.0));
         assert_eq!(
-            name(fresh(&p).activity(&obs("base", 0.0, 0.0, 0.0), h)),
+            name(fresh(&mut p).activity(&obs("base", 0.0, 0.0, 0.0), h)),
             "take_off"
         );
         // Flying to item 2 (seq 3): the piece by the position.
         assert_eq!(
-            name(fresh(&p).activity(&obs("wp1", 3.0, 0.0, 0.0005), h)),
+            name(fresh(&mut p).activity(&obs("wp1", 3.0, 0.0, 0.0005), h)),
             "leghome-2.1"
         );
         assert_eq!(
-            name(fresh(&p).activity(&obs("wp1", 3.0, 0.0, 0.0015), h)),
+            name(fresh(&mut p).activity(&obs("wp1", 3.0, 0.0, 0.0015), h)),
             "leghome-2.2"
         );
         assert_eq!(
-            name(fresh(&p).activity(&obs("wpi", 3.0, 0.0, 0.0025), h)),
+            name(fresh(&mut p).activity(&obs("wpi", 3.0, 0.0, 0.0025), h)),
             "leghome-2.3"
         );
         // The speed change (seq 2) is flown on the way to item 2.
         assert_eq!(
-            name(fresh(&p).activity(&obs("wp1", 2.0, 0.0, 0.0), h)),
+            name(fresh(&mut p).activity(&obs("wp1", 2.0, 0.0, 0.0), h)),
             "leghome-2.1"
         );
         assert_eq!(
-            name(fresh(&p).activity(&obs("wpi", 4.0, 0.0005, 0.003), h)),
+            name(fresh(&mut p).activity(&obs("wpi", 4.0, 0.0005, 0.003), h)),
             "leg2-3"
         );
         // After the last waypoint the RTL (seq 5) is the return, split by the zone too.
-        let back = fresh(&p).activity(&obs("wpf", 5.0, 0.0005, 0.0025), h);
+        let back = fresh(&mut p).activity(&obs("wpf", 5.0, 0.0005, 0.0025), h);
         assert!(name(back).starts_with("return"), "{}", name(back));
         assert_eq!(
-            name(fresh(&p).activity(&obs("landing", 5.0, 0.0, 0.0), h)),
+            name(fresh(&mut p).activity(&obs("landing", 5.0, 0.0, 0.0), h)),
             "land"
         );
         // Forward only: once on the return, an autopilot's MISSION_CURRENT falling back (after
         // its RTL) keeps the return, not a leg flown; on the ground the next flight starts over.
-        let back = fresh(&p).activity(&obs("wpf", 5.0, 0.0005, 0.0025), h);
+        let back = fresh(&mut p).activity(&obs("wpf", 5.0, 0.0005, 0.0025), h);
         assert_eq!(p.activity(&obs("wpf", 0.0, 0.0, 0.0), h), back);
         assert_eq!(name(p.activity(&obs("base", 0.0, 0.0, 0.0), h)), "take_off");
     }
