@@ -130,32 +130,40 @@ fn simulate_takes_a_plan_file_and_zones_and_the_typed_plan_by_name() {
     assert!(walked(&v).contains(&"tracking_area".to_string()));
 }
 
-/// `fly --mission FILE.plan|.waypoints` is refused before any socket or run folder, naming the
-/// file and what plans it today (fly uploads only its route TOML).
+/// `fly --mission FILE.plan | WPL` flies the operator's items (sitl_tests/test_plan_file_standin.py
+/// flies them); a file it cannot plan stops it before any socket, naming the file and the item,
+/// and leaves no run folder.
 #[test]
-fn fly_refuses_a_plan_or_wpl_mission_before_any_socket() {
+fn fly_refuses_a_malformed_plan_or_wpl_mission_before_any_socket() {
     let d = tempfile::tempdir().unwrap();
-    for (name, text) in [
-        ("m.plan", PLAN),
-        (
-            "m.txt",
-            "QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t0\t0\t0\t1\n",
-        ),
+    // LOITER_UNLIM (17) never ends: no plan holds it.
+    let unlimited = PLAN.replacen("\"command\":16", "\"command\":17", 1);
+    for (name, text, item) in [
+        ("m.plan", unlimited.as_str(), "items[2]"),
+        ("m.txt", "QGC WPL 110\n0\t1\t0\t16\t0\n", "line 2"),
     ] {
         let f = d.path().join(name);
         std::fs::write(&f, text).unwrap();
         let runs = d.path().join("runs");
         let out = Command::new(env!("CARGO_BIN_EXE_companion"))
-            .args(["fly", "--connect", "tcp:127.0.0.1:1", "--mission"])
+            .args([
+                "fly",
+                "--connect",
+                "tcp:127.0.0.1:1",
+                "--connect-timeout",
+                "2",
+                "--mission",
+            ])
             .arg(&f)
             .arg("--log-dir")
             .arg(&runs)
             .output()
             .unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success());
+        assert!(!out.status.success(), "{err}");
         assert!(err.contains(f.to_str().unwrap()), "{err}");
-        assert!(err.contains("uploads only a route TOML"), "{err}");
+        assert!(err.contains(item), "{err}");
+        assert!(!err.contains("connect"), "refused before any socket: {err}");
         assert!(!runs.exists(), "no run folder");
     }
 }
