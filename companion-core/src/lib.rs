@@ -120,6 +120,10 @@ pub(crate) mod shipped {
             include_str!("../../params/missions/tracking_route.toml"),
         ),
         (
+            "missions/tracking_route_long.toml",
+            include_str!("../../params/missions/tracking_route_long.toml"),
+        ),
+        (
             "observations.toml",
             include_str!("../../params/observations.toml"),
         ),
