@@ -421,7 +421,10 @@ pub fn params_one(fx: &ParamsFixture, data: &[u8]) -> ParamsOutcome {
     } else {
         "complete-1".into()
     };
-    let panorama_mission = if in_dir("missions") && stem != "tracking_route" {
+    // Route files (`*_route*.toml`: the default and the long route) are routes, not PANORAMA
+    // missions: the mission planned with them is the tracking one.
+    let is_route = stem.contains("_route");
+    let panorama_mission = if in_dir("missions") && !is_route {
         stem.clone()
     } else {
         "tracking".into()
