@@ -58,15 +58,7 @@ impl AutopilotPlan {
 
     /// Tell the ground station what is still unsaid, unless the rate cap holds it back again.
     pub(super) fn say(&mut self, shell: &mut Shell, now: Duration) -> Vec<Msg> {
-        let Some((severity, text)) = &self.unsaid else {
-            return Vec::new();
-        };
-        let dropped = shell.texts.dropped;
-        let out = shell.texts.say(now, *severity, text);
-        if shell.texts.dropped == dropped {
-            self.unsaid = None;
-        }
-        out
+        super::shell::say_until_said(shell, now, &mut self.unsaid)
     }
 
     /// The mission loaded or changed on the autopilot: planned.

@@ -27,7 +27,7 @@ pub(super) struct RouteReplan {
     /// The cruise speed the plan in force was derived at (m/s) and whether it was params'.
     planned_cruise: f64,
     /// What the ground station must still be told (the STATUSTEXT rate cap may hold it back).
-    unsaid: Option<String>,
+    unsaid: Option<(companion_link::dialect::MavSeverity, String)>,
 }
 
 impl RouteReplan {
@@ -114,19 +114,11 @@ impl RouteReplan {
         };
         tracing::info!("{text}");
         shell.pending_events.push(Event::from(text.as_str()));
-        self.unsaid = Some(text);
+        self.unsaid = Some((NOTICE, text));
     }
 
     /// Tell the ground station what is still unsaid, unless the rate cap holds it back again.
     pub(super) fn say(&mut self, shell: &mut Shell, now: Duration) -> Vec<Msg> {
-        let Some(text) = &self.unsaid else {
-            return Vec::new();
-        };
-        let dropped = shell.texts.dropped;
-        let out = shell.texts.say(now, NOTICE, text);
-        if shell.texts.dropped == dropped {
-            self.unsaid = None;
-        }
-        out
+        super::shell::say_until_said(shell, now, &mut self.unsaid)
     }
 }

@@ -260,6 +260,24 @@ impl Shell {
 /// Longest MAVLink 2 frame (signed): a frame still arriving is at most this many bytes.
 const MAX_FRAME_BYTES: u64 = 280;
 
+/// Say `unsaid` to the ground station now; when the STATUSTEXT rate cap holds it back it stays
+/// unsaid, for a later turn (a plan's word is never lost to the cap).
+pub(super) fn say_until_said(
+    shell: &mut Shell,
+    now: Duration,
+    unsaid: &mut Option<(companion_link::dialect::MavSeverity, String)>,
+) -> Vec<companion_link::Msg> {
+    let Some((severity, text)) = unsaid.as_ref() else {
+        return Vec::new();
+    };
+    let dropped = shell.texts.dropped;
+    let out = shell.texts.say(now, *severity, text);
+    if shell.texts.dropped == dropped {
+        *unsaid = None;
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
