@@ -220,6 +220,22 @@ class GcsClient:
         raise AssertionError("mission upload: no MISSION_ACK")
 
 
+
+def joined_statustexts(msgs: Iterable[Any], compid: int) -> List[str]:
+    """The STATUSTEXTs from component `compid` as a ground station shows them: the MAVLink 2 chunks of one text (one
+    non-zero `id`, `chunk_seq` 0, 1, ...) joined, each text once."""
+    out: List[str] = []
+    open_id = None
+    for m in msgs:
+        if m.get_srcComponent() != compid:
+            continue
+        if m.id != 0 and m.id == open_id and m.chunk_seq > 0:
+            out[-1] += m.text
+        else:
+            out.append(m.text)
+        open_id = m.id if m.id != 0 else None
+    return out
+
 def wp(lat: float, lon: float, alt: float, command: int = mavlink.MAV_CMD_NAV_WAYPOINT,
        frame: int = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, **params: float) -> Dict[str, Any]:
     d = {"lat": lat, "lon": lon, "alt": alt, "command": command, "frame": frame}

@@ -24,7 +24,7 @@ from typing import Any, List, Optional
 
 import pytest
 
-from helpers import GcsClient
+from helpers import GcsClient, joined_statustexts
 from standin import MODES, mavlink
 
 pytestmark = [pytest.mark.companion_fly, pytest.mark.standin_only]
@@ -74,7 +74,8 @@ def wait(pred, timeout: float, what: str, run: Any = None, poll: float = 0.05) -
 
 
 def statustexts_from_companion(gcs: GcsClient, since: float = 0.0) -> List[str]:
-    return [m.text for m in gcs.since(since, "STATUSTEXT") if m.get_srcComponent() == COMPANION]
+    """Chunks joined: one text each, as the ground station shows it."""
+    return joined_statustexts(gcs.since(since, "STATUSTEXT"), COMPANION)
 
 
 def events(records: List[dict]) -> List[str]:

@@ -16,7 +16,7 @@ from typing import Any, Callable, Dict, List
 
 import pytest
 
-from helpers import offset, read_decision_log, wp
+from helpers import joined_statustexts, offset, read_decision_log, wp
 from standin.vocabulary import HOME_ALT_AMSL, HOME_LAT, HOME_LON
 from standin import mavlink
 
@@ -37,7 +37,8 @@ def wait(pred: Callable[[], bool], timeout: float, what: str, run: Any = None) -
 
 
 def texts_from_companion(gcs: Any, since: float) -> List[str]:
-    return [m.text for m in gcs.since(since, "STATUSTEXT") if m.get_srcComponent() == COMPANION]
+    """Chunks joined: one text each, as the ground station shows it."""
+    return joined_statustexts(gcs.since(since, "STATUSTEXT"), COMPANION)
 
 
 def test_restarted_in_the_air_says_a_flight_is_in_progress_and_hands_off(autopilot_factory, fly, client):

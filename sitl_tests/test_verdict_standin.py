@@ -1,6 +1,6 @@
 """The verdict in the operator's terms (issue 36 item 4), against the stand-in: on a pack too small for the default
-mission, the operator's MISSION_START is refused with two STATUSTEXTs that name the planned and the available energy
-and what would fit, the words of the refused cycle's decision record (`guarantee.verdict`, typed), whose available
+mission, the operator's MISSION_START is refused with one STATUSTEXT (a change of decision is one text, issue 37 item
+4; MAVLink 2 chunks, joined by the ground station) that names the planned and the available energy and what would fit, the words of the refused cycle's decision record (`guarantee.verdict`, typed), whose available
 energy is what the autopilot's own pack can spend (its BATT_CAPACITY, `guarantee.pack.spendable_j`).
 """
 from __future__ import annotations
@@ -52,9 +52,11 @@ def test_a_refused_start_names_planned_available_and_what_fits(autopilot_factory
     assert not sa.state()["armed"]
     stop(run)
 
-    i = next(k for k, t in enumerate(texts) if t.startswith("Start refused"))
-    head, fit = texts[i], texts[i + 1]
-    assert all(len(t) <= 50 for t in (head, fit)), texts
+    refusals = [t for t in texts if t.startswith("Start refused")]
+    assert len(refusals) == 1, texts
+    # One text: planned against available, then what fits, each line within 50 characters.
+    head, sep, fit = refusals[0].partition(". ")
+    assert sep and all(len(t) <= 50 for t in (head, fit)), refusals
     refused: List[Dict[str, Any]] = [r for r in run.records() if (r.get("guarantee") or {}).get("verdict")]
     assert refused, "no decision record holds the verdict"
     # The texts are the words of a refused cycle's record: planned against available at the pack's percentage.

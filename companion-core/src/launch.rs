@@ -123,21 +123,19 @@ pub enum LaunchRefusal {
 
 impl LaunchRefusal {
     /// The refusal in plain words for the ground station: at most [`PILOT_TEXT_MAX`] characters
-    /// (one MAVLink STATUSTEXT), e.g. `Start refused: battery 12%, 9.6 kJ short`.
+    /// (one MAVLink STATUSTEXT), e.g. `Start refused: battery 12%, not enough energy`. By how
+    /// much is not said: the margins are plotted (`e_margin`, `t_margin`, docs/mavlink.md), and
+    /// a text never repeats a number the ground station plots.
     pub fn pilot_text(&self) -> String {
         let text = match self {
             LaunchRefusal::NotOnGround { .. } => "Start refused: not on the ground".to_string(),
             LaunchRefusal::NoGuarantee => "Start refused: mission cannot be met".to_string(),
             LaunchRefusal::MissionNotPlanned { .. } => "Start refused: mission not planned".into(),
-            LaunchRefusal::BatteryLow { pct, short_j, .. } => {
-                format!("Start refused: battery {pct:.0}%, {} short", kj(*short_j))
+            LaunchRefusal::BatteryLow { pct, .. } => {
+                format!("Start refused: battery {pct:.0}%, not enough energy")
             }
-            LaunchRefusal::EnergyShort { short_j, .. } => {
-                format!("Start refused: energy short {}", kj(*short_j))
-            }
-            LaunchRefusal::DurationShort { short_s, .. } => {
-                format!("Start refused: time short {short_s:.0} s")
-            }
+            LaunchRefusal::EnergyShort { .. } => "Start refused: not enough energy".to_string(),
+            LaunchRefusal::DurationShort { .. } => "Start refused: not enough time".to_string(),
             LaunchRefusal::GoalsUnmet { .. } => "Start refused: goals cannot be met".to_string(),
             LaunchRefusal::ModelsStay { mdp, .. } => format!("Start refused: {mdp} says stay"),
             LaunchRefusal::NoTakeOff { .. } => "Start refused: no model proposes take-off".into(),
@@ -160,11 +158,11 @@ impl LaunchRefusal {
         }
     }
 
-    /// The STATUSTEXTs that tell the refusal, each at most [`PILOT_TEXT_MAX`] characters: with
-    /// the guarantee's verdict, `Start refused: plan 143 kJ, have 98.9 kJ at 100%` then what
-    /// fits (`Time 1012 s of 1800 s; fits: search 180 s`, [`Verdict::words`]); else
+    /// The lines that tell the refusal, each at most [`PILOT_TEXT_MAX`] characters: with the
+    /// guarantee's verdict, `Start refused: plan 143 kJ, have 98.9 kJ at 100%` then what fits
+    /// (`Time 1012 s of 1800 s; fits: search 180 s`, [`Verdict::words`]); else
     /// [`LaunchRefusal::pilot_text`] alone.
-    pub fn pilot_texts(&self) -> Vec<String> {
+    pub fn pilot_lines(&self) -> Vec<String> {
         match self.guarantee_verdict() {
             Some(v) => {
                 let [plan, fit] = v.words();
@@ -176,6 +174,14 @@ impl LaunchRefusal {
             None => vec![self.pilot_text()],
         }
     }
+
+    /// The one STATUSTEXT that tells the refusal (a change of decision is one text, issue 37):
+    /// [`LaunchRefusal::pilot_lines`] joined, `Start refused: plan 143 kJ, have 98.9 kJ at
+    /// 100%. Time 1012 s of 1800 s; fits: search 180 s`. At most 2 x [`PILOT_TEXT_MAX`] + 2
+    /// characters: MAVLink 2 chunks of one text (3 at most), which ground stations join.
+    pub fn pilot_words(&self) -> String {
+        self.pilot_lines().join(". ")
+    }
 }
 
 /// `; plan ...; ...` (the verdict's words) or empty.
@@ -184,11 +190,6 @@ fn verdict_words(v: Option<&Verdict>) -> String {
         let [plan, fit] = v.words();
         format!("; {plan}; {fit}")
     })
-}
-
-/// Joules as kJ with one decimal (`4.2 kJ`).
-fn kj(j: f64) -> String {
-    format!("{:.1} kJ", j / 1000.0)
 }
 
 /// At most `max` characters, cut at a character boundary.
@@ -379,8 +380,7 @@ mod tests {
             // The pack holds 12 % of 74 Wh; the mission's estimate is far above what is left.
             assert!(*short_j > 100_000.0, "{short_j}");
             let text = v.as_ref().unwrap_err().pilot_text();
-            assert!(text.starts_with("Start refused: battery 12%, "), "{text}");
-            assert!(text.ends_with(" kJ short"), "{text}");
+            assert_eq!(text, "Start refused: battery 12%, not enough energy");
             // The guarantee's verdict rides with the refusal: 12 % is under the reserve, so
             // nothing is available and not even the route without tracking fits.
             let g = rec.guarantee.as_ref().unwrap();
@@ -399,8 +399,11 @@ mod tests {
             );
             assert_eq!(verdict.longest_tracking_s, None);
             assert!(verdict.route_energy_j.unwrap() > 0.0);
-            let texts = v.as_ref().unwrap_err().pilot_texts();
+            let texts = v.as_ref().unwrap_err().pilot_lines();
             assert_eq!(texts.len(), 2, "{texts:?}");
+            // One STATUSTEXT (chunked): both lines, in order.
+            let words = v.as_ref().unwrap_err().pilot_words();
+            assert_eq!(words, format!("{}. {}", texts[0], texts[1]));
             assert!(texts[0].starts_with("Start refused: plan "), "{texts:?}");
             assert!(texts[0].ends_with(" kJ, have 0.0 kJ at 12%"), "{texts:?}");
             assert!(texts[1].contains("othing fits: route alone "), "{texts:?}");
@@ -459,10 +462,13 @@ mod tests {
             .margins
             .insert(ENERGY.into(), -4213.0);
         let e = verdict(&r, &m).unwrap_err();
-        assert_eq!(e.pilot_text(), "Start refused: battery 80%, 4.2 kJ short");
+        assert_eq!(
+            e.pilot_text(),
+            "Start refused: battery 80%, not enough energy"
+        );
         r.guarantee.as_mut().unwrap().energy_source = EnergySource::EnergyConsumed;
         let e = verdict(&r, &m).unwrap_err();
-        assert_eq!(e.pilot_text(), "Start refused: energy short 4.2 kJ");
+        assert_eq!(e.pilot_text(), "Start refused: not enough energy");
         assert!(e.description().contains("energy_consumed"), "{e}");
 
         let mut r = base_record();
@@ -471,7 +477,7 @@ mod tests {
         g.infeasible = true;
         g.infeasible_reason = Some("negative duration_s margin -120.4".into());
         let e = verdict(&r, &m).unwrap_err();
-        assert_eq!(e.pilot_text(), "Start refused: time short 120 s");
+        assert_eq!(e.pilot_text(), "Start refused: not enough time");
         assert!(
             e.description().contains("negative duration_s margin"),
             "{e}"

@@ -3,6 +3,7 @@
 //! ([`finish_record`]); [`run_cycle_at`] sends and writes between them.
 
 use super::shell::Shell;
+use super::words;
 use super::{Decider, FlyReport, NOTICE, RecordSink, Tlog, WARNING, send};
 use anyhow::Context;
 use companion_core::action_role::ActionRole;
@@ -63,18 +64,31 @@ pub(super) async fn run_cycle_at<D: Decider, S: RecordSink>(
     if let Some(change) = shell.action_change(&rec) {
         tracing::info!("actions: {change}");
     }
+    // One change of decision, one STATUSTEXT (chunked when long): what the vehicle does, a
+    // re-allocation and the guarantee's verdict of this cycle are said together.
+    let mut said: Vec<String> = Vec::new();
+    let mut severity = NOTICE;
     if shell.operator.commanding()
         && let Some(text) = shell.behaviour_text(&rec, flown.as_deref())
     {
-        texts.extend(shell.texts.say(now(), NOTICE, &text));
+        said.push(text);
     }
-    if let Some((line, severity, text)) = shell.guarantee_change(&rec) {
-        if severity == WARNING {
+    if shell.operator.commanding()
+        && let Some(text) = rec.guarantee.as_ref().and_then(words::reallocation_text)
+    {
+        said.push(text);
+    }
+    if let Some((line, sev, text)) = shell.guarantee_change(&rec) {
+        if sev == WARNING {
             tracing::warn!("{line}");
+            severity = WARNING;
         } else {
             tracing::info!("{line}");
         }
-        texts.extend(shell.texts.say(now(), severity, &text));
+        said.push(text);
+    }
+    if !said.is_empty() {
+        texts.extend(shell.texts.say(now(), severity, &said.join(". ")));
     }
     // The plotted values ride the same queue as the texts, after them.
     texts.extend(shell.ground_values.due(&rec, now()));

@@ -228,19 +228,20 @@ pub fn request_start(
                 return Err(refusal); // asked again once the first record is in
             }
             let ev = shell.operator.refuse(by, &refusal.description());
-            let texts = if no_decision_yet {
+            let lines = if no_decision_yet {
                 vec!["Start refused: not ready yet, send again".to_string()]
             } else {
                 // With the guarantee's verdict: planned against available, then what fits.
-                refusal.pilot_texts()
+                refusal.pilot_lines()
             };
             // Said once per first line: the verdict's time left changes every second.
-            let first = texts.first().cloned().unwrap_or_default();
+            let first = lines.first().cloned().unwrap_or_default();
             if by != StartBy::AutoStart || shell.refusal_told.as_deref() != Some(&first) {
                 let line = ev.describe();
                 tracing::warn!("{line}");
                 shell.pending_events.push(Event::from(line));
-                out.extend(shell.texts.say_together(now, WARNING, &texts));
+                // One change of decision, one STATUSTEXT (chunked when longer than 50).
+                out.extend(shell.texts.say(now, WARNING, &lines.join(". ")));
                 shell.refusal_told = Some(first);
             }
             Err(refusal)
@@ -565,16 +566,11 @@ mod tests {
         for cmd in v.take_commands_to_us() {
             answer_command(&mut shell, &mut v, &gcs, cmd, now, &mut out);
         }
-        let texts: Vec<String> = out
-            .iter()
-            .filter_map(|m| match m {
-                Msg::STATUSTEXT(t) => Some(t.text.to_str().unwrap_or("").to_string()),
-                _ => None,
-            })
-            .collect();
+        let texts = crate::fly::said::statustexts(&out);
+        // The margin (-9.6 kJ) is plotted (`e_margin`): the text does not repeat it.
         assert_eq!(
             texts,
-            vec!["Start refused: battery 12%, 9.6 kJ short".to_string()]
+            vec!["Start refused: battery 12%, not enough energy".to_string()]
         );
         assert!(
             matches!(&out[..], [.., Msg::COMMAND_ACK(a)] if a.result == MavResult::MAV_RESULT_DENIED)
@@ -588,8 +584,9 @@ mod tests {
         );
     }
 
-    /// With the guarantee's verdict the refusal is two STATUSTEXTs: planned against available,
-    /// then what fits (the verdict's own words), each within one STATUSTEXT.
+    /// With the guarantee's verdict the refusal is one STATUSTEXT (a change of decision is one
+    /// text; MAVLink 2 chunks when longer than 50): planned against available, then what fits
+    /// (the verdict's own words).
     #[test]
     fn a_refusal_with_the_verdict_names_planned_available_and_what_fits() {
         let (mut shell, mut v) = setup();
@@ -618,18 +615,11 @@ mod tests {
             &mut out,
         );
         assert!(r.is_err());
-        let texts: Vec<String> = out
-            .iter()
-            .filter_map(|m| match m {
-                Msg::STATUSTEXT(t) => Some(t.text.to_str().unwrap_or("").to_string()),
-                _ => None,
-            })
-            .collect();
+        let texts = crate::fly::said::statustexts(&out);
         assert_eq!(
             texts,
             [
-                "Start refused: plan 143 kJ, have 98.9 kJ at 100%",
-                "Time 1012 s of 1800 s; fits: search 180 s"
+                "Start refused: plan 143 kJ, have 98.9 kJ at 100%. Time 1012 s of 1800 s; fits: search 180 s"
             ]
         );
         let journal: Vec<String> = shell.pending_events.iter().map(|e| e.to_string()).collect();

@@ -33,6 +33,8 @@ mod resume;
 pub mod route_progress;
 mod route_replan;
 mod run_loop;
+#[cfg(test)]
+mod said;
 mod setup;
 mod shell;
 pub mod stop;

@@ -316,8 +316,12 @@ impl StartLook {
                 vec!["companion: flight in progress, no hand-off".to_string()],
             ),
         };
-        if !no.short.is_empty() {
-            texts.push(format!("companion: not resumed: {}", no.short));
+        // One change of decision, one STATUSTEXT: the hand-off and why it is not resumed together
+        // (chunked when longer than 50).
+        if !no.short.is_empty()
+            && let Some(t) = texts.first_mut()
+        {
+            t.push_str(&format!(", not resumed: {}", no.short));
         }
         let does = format!(
             "{does}; not resumed: {}; no start until it is landed and disarmed",
@@ -633,13 +637,7 @@ mod tests {
         }
         let mut out = Vec::new();
         look.look(shell, v, Handoff::Rtl, s(t), &mut out);
-        let texts = out
-            .iter()
-            .filter_map(|m| match m {
-                Msg::STATUSTEXT(st) => Some(st.text.to_str().unwrap_or_default().to_string()),
-                _ => None,
-            })
-            .collect();
+        let texts = crate::fly::said::statustexts(&out);
         let modes = out
             .iter()
             .filter_map(|m| match m {
@@ -819,10 +817,9 @@ mod tests {
             assert_eq!(modes, vec![6.0], "RTL at once");
             assert_eq!(
                 texts,
-                vec![
-                    "companion: flight in progress, hand-off RTL".to_string(),
-                    format!("companion: not resumed: {short}")
-                ]
+                vec![format!(
+                    "companion: flight in progress, hand-off RTL, not resumed: {short}"
+                )]
             );
             assert!(
                 events(&shell)
@@ -844,7 +841,9 @@ mod tests {
         let (texts, modes) = turn(&mut look, &mut shell, &mut v, 16.0, &[]);
         assert_eq!(modes, vec![6.0]);
         assert!(
-            texts.contains(&"companion: not resumed: proof timed out".to_string()),
+            texts
+                .iter()
+                .any(|t| t.ends_with(", not resumed: proof timed out")),
             "{texts:?}"
         );
         assert!(!v.flies_autopilot_mission());
@@ -902,7 +901,9 @@ mod tests {
         let (texts, modes) = turn(&mut look, &mut shell, &mut v, 20.0, &[heartbeat(true, 3)]);
         assert_eq!(modes, vec![6.0]);
         assert!(
-            texts.contains(&"companion: not resumed: no consent".to_string()),
+            texts
+                .iter()
+                .any(|t| t.ends_with(", not resumed: no consent")),
             "{texts:?}"
         );
         assert!(!look.consent(&mut shell, &mut v, (255, 190), s(21.0), &mut Vec::new()));

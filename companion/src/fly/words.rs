@@ -249,6 +249,29 @@ pub fn guarantee_text(g: &GuaranteeRecord) -> String {
     }
 }
 
+/// The STATUSTEXT for this cycle's re-allocation for a margin or a failure: why (what the
+/// guarantee is short of, not by how much), then the plan in force, `Not enough energy: plan
+/// changed, search S1, tracking V2`. None without one, and for the plan following the versions
+/// the models run (told as the version switch it follows: one text per change).
+pub fn reallocation_text(g: &GuaranteeRecord) -> Option<String> {
+    let re = g.reallocation.as_ref().filter(|r| !r.trigger.is_follow())?;
+    let head = shortfalls(g)
+        .first()
+        .map_or("Plan changed".to_string(), |why| {
+            format!("{}: plan changed", capitalised(why))
+        });
+    let plan: Vec<String> = re
+        .allocation
+        .iter()
+        .map(|(activity, ia)| format!("{} {ia}", activity.replace('_', " ")))
+        .collect();
+    Some(if plan.is_empty() {
+        head
+    } else {
+        format!("{head}, {}", plan.join(", "))
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -479,9 +502,11 @@ mod tests {
     }
 
     /// The numbers in `text` (`4.2`, `35`, `12`).
+    /// The numbers a text shows: its words that are numbers (`7%`, `4.2`); the digit of a name
+    /// (`V3`, `S1`, an implementation alternative) is not a value.
     fn numbers(text: &str) -> Vec<f64> {
-        text.split(|c: char| !(c.is_ascii_digit() || c == '.'))
-            .filter_map(|t| t.trim_matches('.').parse().ok())
+        text.split(|c: char| c.is_whitespace() || ",;:()".contains(c))
+            .filter_map(|t| t.trim_matches(|c| c == '.' || c == '%').parse().ok())
             .collect()
     }
 
@@ -491,6 +516,15 @@ mod tests {
         let params = GroundValuesParams::default();
         let plotted = GroundValues::new(&params, std::iter::empty());
         let mut g = guarantee(&[("duration_s", -35.2), ("energy_j", -4210.0)], &["lidar"]);
+        g.reallocation = Some(companion_core::record::Reallocation {
+            trigger: companion_core::record::ReallocationTrigger::Margin,
+            reason: "negative energy_j margin -4210.0".into(),
+            allocation: vec![
+                ("search".into(), "S1".into()),
+                ("tracking".into(), "V2".into()),
+            ],
+            margins_after: BTreeMap::from([("energy_j".to_string(), 98.9)]),
+        });
         g.pack = Some(companion_core::record::PackRecord {
             spendable_j: Some(98_900.0),
             ..Default::default()
@@ -517,6 +551,17 @@ mod tests {
                 NONE,
             ),
             guarantee_text(&g),
+            reallocation_text(&g).expect("a re-allocation for a margin is told"),
+            // The start refusal without the guarantee's verdict. With it, the refusal says the
+            // planned and the available energy (issue 36 item 4), and the available energy is
+            // the plotted `e_spend` at that moment: kept, as issue 36 asks.
+            companion_core::launch::LaunchRefusal::BatteryLow {
+                pct: 64.0,
+                short_j: 4210.0,
+                reason: String::new(),
+                verdict: None,
+            }
+            .pilot_words(),
         ];
         let values: Vec<f64> = (plotted.values(&rec).into_iter())
             .filter(|v| !matches!(v, GroundValue::Int("cycle", _)))
@@ -535,6 +580,42 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    /// A re-allocation for a margin or a failure is told once, in words: why, then the plan
+    /// in force; the plan following the running versions is not (the version switch says it).
+    #[test]
+    fn a_reallocation_says_why_and_the_plan_in_force() {
+        use companion_core::record::{Reallocation, ReallocationTrigger};
+        let mut g = guarantee(&[("energy_j", -4210.0)], &[]);
+        g.infeasible = false;
+        let re = |trigger| Reallocation {
+            trigger,
+            allocation: vec![
+                ("search_area".into(), "S1".into()),
+                ("tracking".into(), "V2".into()),
+            ],
+            ..Default::default()
+        };
+        assert_eq!(reallocation_text(&g), None, "no re-allocation this cycle");
+        g.reallocation = Some(re(ReallocationTrigger::Margin));
+        assert_eq!(
+            reallocation_text(&g).as_deref(),
+            Some("Not enough energy: plan changed, search area S1, tracking V2")
+        );
+        let mut failed = guarantee(&[], &["tile_slot:2"]);
+        failed.reallocation = Some(re(ReallocationTrigger::Failure));
+        assert_eq!(
+            reallocation_text(&failed).as_deref(),
+            Some("FPGA tile failed: plan changed, search area S1, tracking V2")
+        );
+        for follow in [
+            ReallocationTrigger::FollowsVersions,
+            ReallocationTrigger::FollowsPlacement,
+        ] {
+            g.reallocation = Some(re(follow));
+            assert_eq!(reallocation_text(&g), None, "{follow:?}");
         }
     }
 }
