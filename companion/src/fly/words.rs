@@ -263,7 +263,7 @@ pub fn reallocation_text(g: &GuaranteeRecord) -> Option<String> {
     let plan: Vec<String> = re
         .allocation
         .iter()
-        .map(|(activity, ia)| format!("{} {ia}", activity.replace('_', " ")))
+        .map(|(activity, ia)| format!("{} {}", activity.replace('_', " "), ia.replace('_', " ")))
         .collect();
     Some(if plan.is_empty() {
         head
@@ -593,7 +593,7 @@ mod tests {
         let re = |trigger| Reallocation {
             trigger,
             allocation: vec![
-                ("search_area".into(), "S1".into()),
+                ("search_area".into(), "gps_vision S1".into()),
                 ("tracking".into(), "V2".into()),
             ],
             ..Default::default()
@@ -602,13 +602,13 @@ mod tests {
         g.reallocation = Some(re(ReallocationTrigger::Margin));
         assert_eq!(
             reallocation_text(&g).as_deref(),
-            Some("Not enough energy: plan changed, search area S1, tracking V2")
+            Some("Not enough energy: plan changed, search area gps vision S1, tracking V2")
         );
         let mut failed = guarantee(&[], &["tile_slot:2"]);
         failed.reallocation = Some(re(ReallocationTrigger::Failure));
         assert_eq!(
             reallocation_text(&failed).as_deref(),
-            Some("FPGA tile failed: plan changed, search area S1, tracking V2")
+            Some("FPGA tile failed: plan changed, search area gps vision S1, tracking V2")
         );
         for follow in [
             ReallocationTrigger::FollowsVersions,
