@@ -38,9 +38,10 @@ pub struct Core {
     /// the MDP has no rewards for the policy, an error each cycle as the name lookup gave).
     mdp_policy: Vec<Option<usize>>,
     /// Per MDP of `mdp_names`, the slot of each probability it reads among the published ones
-    /// (`HealthModel::slot_names`), and the cycle's probabilities by slot.
+    /// (`HealthModel::slot_names`), and the cycle's probabilities by slot (`None`: not
+    /// published this cycle), what every MDP and the re-solve read.
     mdp_slots: Vec<Vec<Option<usize>>>,
-    prob_values: Vec<f64>,
+    prob_values: Vec<Option<f64>>,
     /// Per MDP of `mdp_names`, per MDP action: the catalogue ids of its primitives (`does`),
     /// resolved in `new` so the cycle merges proposals without looking names up.
     mdp_primitives: Vec<Vec<Vec<ActionId>>>,
@@ -393,12 +394,12 @@ impl Core {
             }
         }
         self.cap_versions(rec);
-        // The probabilities by slot for the MDPs, when the map holds exactly the published ones
-        // (every cycle the health layer succeeded): one walk instead of a merge by name per MDP.
-        self.prob_values.clear();
-        if rec.probabilities.len() == self.health.slot_names().len() {
-            self.prob_values.extend(rec.probabilities.values());
-        }
+        // The probabilities by slot, what every MDP reads.
+        by_slot(
+            &mut self.prob_values,
+            self.health.slot_names(),
+            &rec.probabilities,
+        );
 
         // decision: every MDP of the model, solved at its projected state
         let mut sc = std::mem::take(&mut self.scratch);
@@ -423,26 +424,15 @@ impl Core {
                 });
                 continue;
             };
-            let decided = match self.mdp_policy[j] {
-                Some(pi) => mdp.decide_slots(
-                    &mut self.workspace,
-                    s,
-                    &rec.probabilities,
-                    &self.prob_values,
-                    &self.mdp_slots[j],
-                    pi,
-                    model.mission.horizon,
-                ),
-                None => decide(
-                    mdp,
-                    &mut self.workspace,
-                    s,
-                    &rec.probabilities,
-                    None,
-                    model,
-                    self.policy,
-                ),
-            };
+            let decided = decide(
+                mdp,
+                &mut self.workspace,
+                s,
+                (&self.prob_values, &self.mdp_slots[j]),
+                self.mdp_policy[j],
+                model,
+                self.policy,
+            );
             match decided {
                 Ok(Some(d)) => {
                     for &id in &self.mdp_primitives[j][d.action] {
@@ -667,11 +657,17 @@ impl Core {
         let Some(s) = mdp.state_index(&rec.proposals[k].state) else {
             return false;
         };
+        // The re-evaluated manager's probabilities, by slot as the cycle's MDPs read them.
+        by_slot(
+            &mut self.prob_values,
+            self.health.slot_names(),
+            &rec.probabilities,
+        );
         let decided = decide(
             mdp,
             &mut self.workspace,
             s,
-            &rec.probabilities,
+            (&self.prob_values, &self.mdp_slots[j]),
             pi,
             model,
             self.policy,
@@ -751,23 +747,36 @@ impl Core {
     }
 }
 
-/// The error an MDP without rewards for `policy` gives (as its name lookup did).
 /// One MDP's decision at state `s` under its reward slot `pi` (resolved at load; `None`: the
-/// policy has no slot in this MDP, an error the record names).
+/// policy has no slot in this MDP, the error the record names), from `probs`: the cycle's
+/// probabilities by slot and where this MDP's sit among them.
 fn decide(
     mdp: &mut crate::mission_mdp::MissionMdp,
     ws: &mut Workspace,
     s: usize,
-    probs: &BTreeMap<String, f64>,
+    (values, slots): (&[Option<f64>], &[Option<usize>]),
     pi: Option<usize>,
     model: &Model,
     policy: Policy,
 ) -> Result<Option<crate::mission_mdp::Decision>, crate::mission_mdp::InstantiateError> {
     match pi {
-        Some(pi) => mdp.decide_resolved(ws, s, probs, pi, model.mission.horizon),
+        Some(pi) => mdp.decide_slots(ws, s, values, slots, pi, model.mission.horizon),
         None => Err(crate::mission_mdp::InstantiateError::UnknownPolicy(
             model.policy_name(policy).to_string(),
         )),
+    }
+}
+
+/// The published probabilities `probs` (the health layer's map, keyed by `names`, sorted) into
+/// `into` by slot (`None`: not in the map). The map holds exactly the published names every
+/// cycle the health layer succeeded: then its values in key order are the slots, no name
+/// compared; otherwise (a failed or partial evaluation) each slot is looked up.
+fn by_slot(into: &mut Vec<Option<f64>>, names: &[String], probs: &BTreeMap<String, f64>) {
+    into.clear();
+    if probs.len() == names.len() {
+        into.extend(probs.values().map(|&v| Some(v)));
+    } else {
+        into.extend(names.iter().map(|n| probs.get(n).copied()));
     }
 }
 

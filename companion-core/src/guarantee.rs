@@ -198,6 +198,20 @@ pub struct Progress<'a> {
     pub pack: PackReading,
 }
 
+/// The observations a [`PackReading`] is read from, in its field order: the vocabulary the link's
+/// telemetry must write (`companion check` refuses a params set or build where fly's telemetry
+/// writes one of them under another name: the energy goal would silently fall back to the
+/// params' pack in flight).
+pub const PACK_OBSERVATIONS: [&str; 7] = [
+    "battery_capacity_mah",
+    "battery_cells",
+    "battery_v",
+    "battery_current_a",
+    "consumed_mah",
+    "vehicle_time_s",
+    "armed",
+];
+
 /// The pack as the autopilot reports it (fly's telemetry; docs/mavlink.md).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct PackReading {

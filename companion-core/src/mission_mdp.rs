@@ -268,7 +268,7 @@ impl MissionMdp {
     }
 
     /// Where `policy`'s rewards sit in this MDP: resolved once per core, then handed to
-    /// [`MissionMdp::decide_resolved`] every cycle.
+    /// [`MissionMdp::decide_slots`] every cycle.
     pub fn policy_index(&self, policy: &str) -> Result<usize, InstantiateError> {
         self.policies
             .iter()
@@ -276,30 +276,7 @@ impl MissionMdp {
             .ok_or_else(|| InstantiateError::UnknownPolicy(policy.to_string()))
     }
 
-    /// Read every probability this MDP uses into `self.values`, checking range.
-    /// [`MissionMdp::load_values`] from a name-ordered map: one walk over both (names compared
-    /// as the map's lookups would), the same values and the same errors.
-    fn load_values_from(&mut self, probs: &BTreeMap<String, f64>) -> Result<(), InstantiateError> {
-        let mut it = probs.iter();
-        for &k in &self.by_name {
-            let name = self.vars[k].as_str();
-            let v = loop {
-                match it.next() {
-                    Some((key, v)) if key.as_str() == name => break Some(*v),
-                    Some((key, _)) if key.as_str() < name => continue,
-                    // Passed it or ran out: not in the map.
-                    _ => break None,
-                }
-            };
-            match v {
-                Some(v) if (0.0..=1.0).contains(&v) => self.values[k] = v,
-                // The error the lookup order (file order) finds first.
-                _ => return self.load_values(|n| probs.get(n).copied()),
-            }
-        }
-        Ok(())
-    }
-
+    /// Read every probability this MDP uses into `self.values` by name, checking range.
     fn load_values(
         &mut self,
         lookup: impl Fn(&str) -> Option<f64>,
@@ -367,7 +344,8 @@ impl MissionMdp {
         horizon: usize,
     ) -> Result<Option<Decision>, InstantiateError> {
         let pi = self.policy_index(policy)?;
-        self.decide_resolved(ws, state, probs, pi, horizon)
+        self.load_values(|n| probs.get(n).copied())?;
+        self.decide_loaded(ws, state, pi, horizon)
     }
 
     /// The slot of each probability this MDP reads in `slot_names` (sorted names; None: not
@@ -379,47 +357,36 @@ impl MissionMdp {
             .collect()
     }
 
-    /// [`MissionMdp::decide_resolved`] with the probabilities read by slot from `values` (the
-    /// map `probs`'s values in key order, its keys the `slot_names` `slots` came from): the same
-    /// values without a name compared. Any probability missing or out of range: the map's path,
-    /// so the same error.
-    #[allow(clippy::too_many_arguments)] // decide_resolved's, and the slots beside the map
+    /// [`MissionMdp::decide`] with the probabilities read by slot (the decision cycle's only
+    /// path): `values` the cycle's probabilities by slot (`HealthModel::slot_names` order;
+    /// `None`: not published this cycle), `slots` where each of this MDP's probabilities sits
+    /// there ([`MissionMdp::slots_in`]), `pi` the policy's rewards ([`MissionMdp::policy_index`]).
+    /// A probability missing or outside `[0, 1]` is the error [`MissionMdp::decide`] gives: the
+    /// first in file order, by name.
     pub fn decide_slots(
         &mut self,
         ws: &mut Workspace,
         state: usize,
-        probs: &BTreeMap<String, f64>,
-        values: &[f64],
+        values: &[Option<f64>],
         slots: &[Option<usize>],
         pi: usize,
         horizon: usize,
     ) -> Result<Option<Decision>, InstantiateError> {
-        let mut ok = slots.len() == self.vars.len();
-        for (k, slot) in slots.iter().enumerate() {
-            match slot.and_then(|s| values.get(s)) {
-                Some(&v) if ok && (0.0..=1.0).contains(&v) => self.values[k] = v,
-                _ => {
-                    ok = false;
-                    break;
-                }
+        for (k, name) in self.vars.iter().enumerate() {
+            let v = slots
+                .get(k)
+                .copied()
+                .flatten()
+                .and_then(|s| values.get(s).copied().flatten())
+                .ok_or_else(|| InstantiateError::MissingProbability(name.clone()))?;
+            if !(0.0..=1.0).contains(&v) {
+                return Err(InstantiateError::BadProbability {
+                    name: name.clone(),
+                    value: v,
+                });
             }
+            self.values[k] = v;
         }
-        if !ok {
-            self.load_values_from(probs)?;
-        }
-        self.decide_loaded(ws, state, pi, horizon)
-    }
-
-    /// [`MissionMdp::decide`] under the policy at `pi` ([`MissionMdp::policy_index`]).
-    pub fn decide_resolved(
-        &mut self,
-        ws: &mut Workspace,
-        state: usize,
-        probs: &BTreeMap<String, f64>,
-        pi: usize,
-        horizon: usize,
-    ) -> Result<Option<Decision>, InstantiateError> {
-        self.load_values_from(probs)?;
         self.decide_loaded(ws, state, pi, horizon)
     }
 

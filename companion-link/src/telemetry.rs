@@ -40,6 +40,11 @@ pub struct TelemetryConfig {
     /// good value stays). Names not listed need only be finite.
     #[serde(default)]
     pub ranges: BTreeMap<String, [f64; 2]>,
+    /// Onboard observations (values of `onboard`) kept for the record alone: nothing else need
+    /// read them. Any other mapped observation nothing reads fails the load (a rename on one
+    /// side only).
+    #[serde(default)]
+    pub recorded_only: Vec<String>,
 }
 
 fn half() -> f64 {
@@ -147,6 +152,10 @@ pub const TELEMETRY_OBSERVATIONS: [&str; 28] = [
     "armed",
 ];
 
+/// Observations the link itself reads (the `goto_zone` step flies to the zone they place), so an
+/// onboard monitor's mapping to them (params/link.toml `[telemetry.onboard]`) has a reader.
+pub const LINK_READS: [&str; 2] = ["zone_north_m", "zone_east_m"];
+
 /// Which pack parameter an autopilot reported ([`Telemetry::on_pack_param`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum PackParam {
@@ -222,6 +231,17 @@ impl TelemetryConfig {
                     "expected [min, max], finite, min <= max".into(),
                 ));
             }
+            // A range guards only what a NAMED_VALUE_FLOAT is written as: a key naming no such
+            // observation (one side renamed) would let every value through unchecked.
+            if !name.starts_with("onboard.") && !self.onboard.values().any(|o| o == name) {
+                return Err((
+                    format!("telemetry.ranges.{name}"),
+                    format!(
+                        "`{name}` is no observation of [telemetry.onboard] (nor `onboard.NAME`, an \
+                         unmapped NAMED_VALUE_FLOAT): the range would guard nothing"
+                    ),
+                ));
+            }
         }
         let m = &self.monitors;
         if m.autopilot_system_components.contains(&0) {
@@ -255,6 +275,7 @@ impl Default for TelemetryConfig {
             monitors: MonitorSources::default(),
             max_onboard_names: default_max_onboard_names(),
             ranges: BTreeMap::new(),
+            recorded_only: vec!["track_confidence".into()],
         }
     }
 }

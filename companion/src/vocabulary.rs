@@ -13,10 +13,11 @@ use crate::world_spec::WorldSpec;
 use crate::world_spec::{Scenario, WORLD_OBSERVATIONS};
 use companion_core::decision::Model;
 use companion_core::evidence::{CORE_COMPUTES, CORE_READS};
+use companion_core::guarantee::PACK_OBSERVATIONS;
 use companion_core::spec::{ParamsFiles, SpecError};
 use companion_core::vocabulary::NamedAction;
 use companion_link::actions::{ActionTable, Flown, LinkParams};
-use companion_link::telemetry::TELEMETRY_OBSERVATIONS;
+use companion_link::telemetry::{LINK_READS, TELEMETRY_OBSERVATIONS};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -316,5 +317,105 @@ pub fn actions(p: &Sources) -> Vec<ActionEntry> {
 /// The vocabulary's load check (the commands' entries are checked against the action catalogue
 /// when params/commands.toml loads: `ActionTable::load`).
 pub fn check(p: &Sources) -> Result<(), SpecError> {
-    check_observations(p)
+    check_observations(p)?;
+    check_link_writes(p, &consumers(p))?;
+    check_pack_written(&TELEMETRY_OBSERVATIONS, &PACK_OBSERVATIONS)
+}
+
+/// Refuse an onboard monitor's observation (params/link.toml `[telemetry.onboard]`) that nothing
+/// of fly reads: one side renamed, the frame would give evidence to nothing, even where the
+/// simulated world still produces the old name (so `check_observations` finds a producer).
+pub fn check_link_writes(
+    p: &Sources,
+    consumers: &BTreeMap<String, Vec<Role>>,
+) -> Result<(), SpecError> {
+    let t = &p.link.telemetry;
+    for (i, o) in t.recorded_only.iter().enumerate() {
+        if !t.onboard.values().any(|m| m == o) {
+            return Err(SpecError::new(
+                p.dir.join("link.toml"),
+                format!("telemetry.recorded_only[{i}]"),
+                format!("`{o}` is no observation of [telemetry.onboard]"),
+            ));
+        }
+    }
+    for (nvf, o) in &t.onboard {
+        if !consumers.contains_key(o)
+            && !LINK_READS.contains(&o.as_str())
+            && !t.recorded_only.contains(o)
+        {
+            return Err(SpecError::new(
+                p.dir.join("link.toml"),
+                format!("telemetry.onboard.{nvf}"),
+                format!(
+                    "`{o}` is written by the link and nothing reads it: not params/observations.toml, \
+                     not params/mission.toml (projection, rates, guarantee.failures), not the decision \
+                     core ({}), not the link's own steps ({}), not [telemetry] recorded_only",
+                    CORE_READS.join(", "),
+                    LINK_READS.join(", ")
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Refuse a build whose guarantee reads a pack observation fly's telemetry does not write
+/// (`writes`: companion-link's `TELEMETRY_OBSERVATIONS`, kept equal to what the telemetry writes
+/// by its test; `pack`: companion-core's `PACK_OBSERVATIONS`): renamed on one side only, the
+/// energy goal would silently fall back to the params' pack in flight.
+pub fn check_pack_written(writes: &[&str], pack: &[&str]) -> Result<(), SpecError> {
+    match pack.iter().position(|o| !writes.contains(o)) {
+        None => Ok(()),
+        Some(i) => Err(SpecError::new(
+            "companion-core/src/guarantee.rs",
+            format!("PACK_OBSERVATIONS[{i}]({})", pack[i]),
+            format!(
+                "the guarantee reads the pack's `{}` and fly's telemetry writes no such observation \
+                 (companion-link/src/telemetry.rs TELEMETRY_OBSERVATIONS): one side was renamed",
+                pack[i]
+            ),
+        )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `list` with `from` renamed to `to` (which must be in it).
+    fn renamed<'a>(list: &[&'a str], from: &str, to: &'a str) -> Vec<&'a str> {
+        assert!(list.contains(&from), "{from}");
+        list.iter()
+            .map(|o| if *o == from { to } else { o })
+            .collect()
+    }
+
+    #[test]
+    fn the_shipped_pack_is_written_by_the_telemetry() {
+        assert_eq!(
+            check_pack_written(&TELEMETRY_OBSERVATIONS, &PACK_OBSERVATIONS),
+            Ok(())
+        );
+    }
+
+    /// The link renames `consumed_mah` (its telemetry writes `consumed_mAh`, and its list says
+    /// so, as its test keeps it): the guarantee's pack reading is refused at load.
+    #[test]
+    fn the_pack_renamed_on_the_link_side_only_fails_at_load() {
+        let writes = renamed(&TELEMETRY_OBSERVATIONS, "consumed_mah", "consumed_mAh");
+        let e = check_pack_written(&writes, &PACK_OBSERVATIONS).unwrap_err();
+        assert_eq!(e.entry, "PACK_OBSERVATIONS[4](consumed_mah)", "{e}");
+        assert!(e.file.ends_with("guarantee.rs"), "{e}");
+        assert!(e.reason.contains("one side was renamed"), "{e}");
+    }
+
+    /// The core renames the pack's `consumed_mah`: the telemetry writes no such name.
+    #[test]
+    fn the_pack_renamed_on_the_core_side_only_fails_at_load() {
+        let pack = renamed(&PACK_OBSERVATIONS, "consumed_mah", "consumed_charge_mah");
+        let e = check_pack_written(&TELEMETRY_OBSERVATIONS, &pack).unwrap_err();
+        assert_eq!(e.entry, "PACK_OBSERVATIONS[4](consumed_charge_mah)", "{e}");
+        assert!(e.reason.contains("`consumed_charge_mah`"), "{e}");
+    }
 }

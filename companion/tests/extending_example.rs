@@ -269,17 +269,23 @@ fn a_hot_esc_lowers_p_sys_as_full_enumeration_of_the_system_bn_says() {
 }
 
 /// Renaming the observation on one side only (issue 39 item 1), as it stands today.
+/// `esc_temp_c` renamed everywhere in link.toml (the mapping and its range).
+fn rename_in_link_toml(dir: &Path) {
+    edit(
+        dir,
+        "link.toml",
+        "esc_temp = \"esc_temp_c\"",
+        "esc_temp = \"esc_temperature_c\"",
+    );
+    edit(dir, "link.toml", "esc_temp_c = [", "esc_temperature_c = [");
+}
+
 #[test]
 fn renaming_the_observation_on_one_side_only() {
     // In link.toml alone, or in observations.toml alone: the node's observation has no
     // producer, and the load names it.
     let dir = extended_params();
-    edit(
-        dir.path(),
-        "link.toml",
-        "esc_temp = \"esc_temp_c\"",
-        "esc_temp = \"esc_temperature_c\"",
-    );
+    rename_in_link_toml(dir.path());
     let err = Params::load(dir.path(), None)
         .err()
         .expect("refused")
@@ -301,8 +307,9 @@ fn renaming_the_observation_on_one_side_only() {
     assert!(err.contains("(esc_temperature_c)"), "{err}");
     assert!(err.contains("nothing produces it"), "{err}");
 
-    // Known gap 1: when the simulated world also produces the name (a world.toml baseline), a
-    // rename in link.toml alone loads, and in flight the frame gives evidence to nothing.
+    // Even when the simulated world also produces the old name (a world.toml baseline, so the
+    // observation has a producer): renamed in link.toml alone, the link writes a name nothing
+    // reads, and the load names the mapping (issue 39 item 1; this loaded before).
     let dir = extended_params();
     edit(
         dir.path(),
@@ -310,19 +317,18 @@ fn renaming_the_observation_on_one_side_only() {
         "temperature_c = 20.0\n",
         "temperature_c = 20.0\nesc_temp_c = 40.0\n",
     );
-    edit(
-        dir.path(),
-        "link.toml",
-        "esc_temp = \"esc_temp_c\"",
-        "esc_temp = \"esc_temperature_c\"",
-    );
-    let p = Params::load(dir.path(), None).expect("loads today (issue 39 item 1)");
-    let obs = link_observations(&p.link.telemetry, 95.0);
-    assert_eq!(obs.get("esc_temperature_c"), Some(95.0));
-    assert_eq!(p.model.health.evidence(&obs).get("A_esc_temp"), None);
+    rename_in_link_toml(dir.path());
+    let err = Params::load(dir.path(), None)
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(err.contains("link.toml"), "{err}");
+    assert!(err.contains("telemetry.onboard.esc_temp"), "{err}");
+    assert!(err.contains("`esc_temperature_c`"), "{err}");
+    assert!(err.contains("nothing reads it"), "{err}");
 
-    // Known gap 2: a [telemetry.ranges] key naming no observation loads, and the range guards
-    // nothing: an impossible 500 degC is taken.
+    // A [telemetry.ranges] key renamed alone names no observation the link writes: the range
+    // would guard nothing (an impossible 500 degC taken), so the load refuses it.
     let dir = extended_params();
     edit(
         dir.path(),
@@ -330,7 +336,11 @@ fn renaming_the_observation_on_one_side_only() {
         "esc_temp_c = [",
         "esc_temperature_c = [",
     );
-    let p = Params::load(dir.path(), None).expect("loads today (issue 39 item 1)");
-    let obs = link_observations(&p.link.telemetry, 500.0);
-    assert_eq!(obs.get("esc_temp_c"), Some(500.0));
+    let err = Params::load(dir.path(), None)
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(err.contains("link.toml"), "{err}");
+    assert!(err.contains("telemetry.ranges.esc_temperature_c"), "{err}");
+    assert!(err.contains("would guard nothing"), "{err}");
 }

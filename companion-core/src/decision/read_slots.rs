@@ -6,17 +6,9 @@ use crate::arbitration::RequiredRate;
 use crate::model::Model;
 use crate::readings::{Readings, Slot};
 
-/// The pack readings the guarantee's energy goal is reckoned from (docs/guarantee.md, "Energy
-/// from the autopilot"), in [`crate::guarantee::PackReading`]'s field order.
-const PACK: [&str; 7] = [
-    "battery_capacity_mah",
-    "battery_cells",
-    "battery_v",
-    "battery_current_a",
-    "consumed_mah",
-    "vehicle_time_s",
-    "armed",
-];
+// The pack readings the guarantee's energy goal is reckoned from (docs/guarantee.md, "Energy
+// from the autopilot"), in `PackReading`'s field order.
+use crate::guarantee::PACK_OBSERVATIONS as PACK;
 
 /// The slots of every name the cycle reads besides the declared observations.
 #[derive(Debug, Clone)]

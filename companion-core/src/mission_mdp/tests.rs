@@ -1162,9 +1162,10 @@ fn proposal_records_solver_stages_beside_the_horizon() {
     assert!(fewer > 0, "no MDP stopped before the horizon");
 }
 
-/// Reading the probabilities by slot (the cycle's path) decides as reading them by name: the
-/// same decision, value and iterations in every state of every concurrent MDP and the monolithic
-/// one, over random probabilities; and the same error when one is missing or out of range.
+/// Reading the probabilities by slot (the cycle's only path) decides as the by-name edge the
+/// paper tests use: the same decision, value and iterations in every state of every concurrent
+/// MDP and the monolithic one, over random probabilities; and the same error, naming the
+/// probability, when one is missing or out of range.
 #[test]
 fn decide_by_slot_equals_decide_by_name() {
     let mut by_name = load_all();
@@ -1196,20 +1197,15 @@ fn decide_by_slot_equals_decide_by_name() {
                 .map(|_| ()),
             _ => None,
         };
-        let values: Vec<f64> = probs.values().copied().collect();
+        let values: Vec<Option<f64>> = names.iter().map(|n| probs.get(n).copied()).collect();
         for name in &mdps {
             let a = by_name.get_mut(name).unwrap();
             let b = by_slot.get_mut(name).unwrap();
             let pi = a.policy_index("safety").unwrap();
-            // The cycle takes the values by slot only when the map holds every published name.
-            let slots = b.slots_in(if probs.len() == names.len() {
-                &names
-            } else {
-                &[]
-            });
+            let slots = b.slots_in(&names);
             for s in 0..a.states().len() {
-                let want = a.decide_resolved(&mut ws_a, s, &probs, pi, 100);
-                let got = b.decide_slots(&mut ws_b, s, &probs, &values, &slots, pi, 100);
+                let want = a.decide(&mut ws_a, s, &probs, "safety", 100);
+                let got = b.decide_slots(&mut ws_b, s, &values, &slots, pi, 100);
                 assert_eq!(
                     got, want,
                     "round {round} {name} state {s} (broken: {broken:?})"

@@ -569,6 +569,33 @@ fn link_params_carry_and_check_the_trust_settings() {
     );
 }
 
+/// A range whose key one side renamed (the observation in `[telemetry.onboard]`, or the range's
+/// own key) guards nothing: the load refuses it, naming the range (issue 39 item 1).
+#[test]
+fn a_range_naming_no_onboard_observation_is_refused() {
+    use crate::actions::LinkParams;
+    let shipped = crate::test_support::default_params_dir().join("link.toml");
+    let text = std::fs::read_to_string(&shipped).unwrap();
+    for (from, to) in [
+        // the mapping renamed, the range not
+        ("zone_n = \"zone_north_m\"", "zone_n = \"zone_n_m\""),
+        // the range renamed, the mapping not
+        ("zone_north_m = [-2000.0", "zone_n_m = [-2000.0"),
+    ] {
+        assert!(text.contains(from), "{from}");
+        let dir = tempfile::tempdir().unwrap();
+        let bad = dir.path().join("link.toml");
+        std::fs::write(&bad, text.replacen(from, to, 1)).unwrap();
+        let e = crate::test_support::disk(LinkParams::load)(&bad).unwrap_err();
+        assert!(e.entry.starts_with("telemetry.ranges.zone_"), "{e}");
+        assert!(e.reason.contains("would guard nothing"), "{e}");
+    }
+    // An unmapped NAMED_VALUE_FLOAT is written as `onboard.NAME`, and a range may guard it.
+    let mut c = TelemetryConfig::default();
+    c.ranges.insert("onboard.rpm".into(), [0.0, 1.0e5]);
+    assert_eq!(c.check_trust(), Ok(()));
+}
+
 #[test]
 fn monitor_sources_follow_the_allow_list() {
     let m = MonitorSources {

@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::actions::Flown;
+use crate::telemetry::LINK_READS;
 
 /// What a command ticket is for.
 #[derive(Debug, Clone)]
@@ -577,8 +578,8 @@ impl Vehicle {
         out: &mut Vec<Msg>,
     ) -> Advance {
         let zone = (
-            self.telemetry.get("zone_north_m"),
-            self.telemetry.get("zone_east_m"),
+            self.telemetry.get(LINK_READS[0]),
+            self.telemetry.get(LINK_READS[1]),
             self.telemetry.position,
         );
         match zone {
