@@ -7,7 +7,7 @@
 //! read) to `Ingest`, and the frames go through `Vehicle::on_frame` exactly as `fly` does. The
 //! fly shell's timers are replayed on the simulated clock: the 10 Hz protocol tick, the 1 Hz
 //! heartbeat, a decision cycle every `decision_period_s` (params/link.toml) and one after any
-//! significant event, each through `fly::decide` / `fly::finish_record` (the real `Core::step`),
+//! significant event, each through `fly::decide` / `fly::finish_record` (the real `Core::step` behind `companion::decider::CoreDecider`),
 //! the record serialised to JSON as the decision log would. What the companion sends is encoded,
 //! decoded by a second `Ingest` and answered by a minimal autopilot (commands acked, missions
 //! accepted). The world advances every `step_s` under the latest plan (plus any landing commanded
@@ -24,9 +24,10 @@
 //! Run: `cargo run --release -p companion --example soak -- [--minutes 60] [--scenario NAME]
 //! [--seed N] [--tolerance-kib 16] [--params DIR]`.
 
-use companion::fly::{self, Decider, FlyArgs, FlySetup, JsonLines, RecordSink, Shell};
+use companion::decider::CoreDecider;
+use companion::fly::{self, FlyArgs, FlySetup, JsonLines, RecordSink, Shell};
 use companion::sim::{Scenario, World, WorldSpec};
-use companion_core::decision::{Core, Model, ModelKind};
+use companion_core::decision::{Model, ModelKind};
 use companion_core::observations::Observations;
 use companion_core::record::{DecisionRecord, Plan};
 use companion_link::Msg;
@@ -72,23 +73,6 @@ fn rss_kib() -> Option<u64> {
     let s = std::fs::read_to_string("/proc/self/status").ok()?;
     let line = s.lines().find(|l| l.starts_with("VmRSS:"))?;
     line.split_whitespace().nth(1)?.parse().ok()
-}
-
-struct CoreDecider(Core);
-
-impl Decider for CoreDecider {
-    fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
-        self.0.step(obs)
-    }
-    fn actions(&self) -> &companion_core::mission::ActionCatalogue {
-        &self.0.model.actions
-    }
-    fn launch_verdict(
-        &self,
-        rec: &DecisionRecord,
-    ) -> Result<(), companion_core::launch::LaunchRefusal> {
-        companion_core::launch::verdict(rec, &self.0.model)
-    }
 }
 
 struct Opts {
@@ -204,11 +188,12 @@ impl<'m> Session<'m> {
         let period = Duration::from_secs_f64(setup.link.decision_period_s);
         Self {
             start,
-            decider: CoreDecider(Core::new(
+            decider: CoreDecider::new(
                 std::sync::Arc::clone(model),
                 ModelKind::Bfm,
                 model.policy("safety").unwrap(),
-            )),
+                None,
+            ),
             vehicle: setup.vehicle(Duration::from_secs(3)),
             shell: Shell::new(setup),
             ingest: Ingest::new(None),

@@ -14,8 +14,9 @@
 //! Both panic when an invariant breaks (that is how a fuzzer sees it); neither panics otherwise,
 //! whatever the bytes.
 
+use companion::decider::CoreDecider;
 use companion::fly::{self, FlyArgs, FlySetup, Shell};
-use companion_core::decision::{Core, Model, ModelKind};
+use companion_core::decision::{Model, ModelKind};
 use companion_core::spec::{ParamsFiles, SpecError};
 use companion_link::Msg;
 use companion_link::actions::LinkParams;
@@ -211,7 +212,7 @@ fn send(encoder: &mut Encoder, vehicle: &Vehicle, signing: bool, msgs: &[Msg]) -
 /// One decision cycle exactly as `companion fly` runs it (`link::fly::decide` then
 /// `finish_record`), without the sink and the socket; the record must serialise to JSON.
 fn cycle(
-    core: &mut Core,
+    core: &mut CoreDecider,
     shell: &mut Shell,
     vehicle: &mut Vehicle,
     now: Duration,
@@ -246,7 +247,7 @@ pub fn ingest_one(fx: &IngestFixture, data: &[u8]) -> IngestOutcome {
         .model
         .policy(input.policy)
         .expect("a policy of the shipped params");
-    let mut core = Core::new(Arc::clone(&fx.model), ModelKind::Bfm, policy);
+    let mut core = CoreDecider::new(Arc::clone(&fx.model), ModelKind::Bfm, policy, None);
     let mut out = IngestOutcome::default();
     let (mut pushed, mut returned) = (0u64, 0u64);
     let (mut ob_pushed, mut ob_returned) = (0u64, 0u64);
@@ -478,8 +479,8 @@ pub fn params_one(fx: &ParamsFixture, data: &[u8]) -> ParamsOutcome {
             scen.steps = scen.steps.min(PARAMS_SIM_STEPS);
             for name in &model.policies {
                 let policy = model.policy(name).expect("a policy of this model");
-                let mut core = Core::new(Arc::clone(model), ModelKind::Bfm, policy);
-                let run = companion::sim::run(world, &scen, 1, |o| core.step(o));
+                let mut core = CoreDecider::new(Arc::clone(model), ModelKind::Bfm, policy, None);
+                let run = companion::sim::run_cycle(world, &scen, 1, &mut core);
                 out.cycles += run.records.len();
             }
         }

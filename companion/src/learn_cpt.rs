@@ -167,42 +167,6 @@ impl OnlineCpt {
     }
 }
 
-/// One seeded simulated run of `core`, learning its rows as it goes when `learner` is given.
-pub fn run(
-    world: &crate::sim::WorldSpec,
-    scenario: &crate::sim::Scenario,
-    seed: u64,
-    core: &mut Core,
-    learner: Option<&mut OnlineCpt>,
-) -> crate::sim::RunResult {
-    match learner {
-        Some(learner) => {
-            learner.start_run();
-            crate::sim::run_cycle(world, scenario, seed, LearningCore { core, learner })
-        }
-        None => crate::sim::run(world, scenario, seed, |obs| core.step(obs)),
-    }
-}
-
-/// A core that learns from each simulated cycle's outcome ([`crate::sim::Cycle`]).
-pub struct LearningCore<'c> {
-    pub core: &'c mut Core,
-    pub learner: &'c mut OnlineCpt,
-}
-
-impl crate::sim::Cycle for LearningCore<'_> {
-    fn decide(
-        &mut self,
-        obs: &companion_core::observations::Observations,
-    ) -> (companion_core::record::Plan, DecisionRecord) {
-        self.core.step(obs)
-    }
-
-    fn outcome(&mut self, record: &mut DecisionRecord) {
-        record.cpt_learned = self.learner.learn_simulated(self.core, record);
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

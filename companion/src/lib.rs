@@ -31,6 +31,7 @@
 pub mod autopilot_mission;
 pub mod calibrate;
 pub mod check;
+pub mod decider;
 pub mod decision_channels;
 pub mod decision_log;
 pub mod export;

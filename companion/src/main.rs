@@ -2,10 +2,11 @@
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use companion::fly::{Decider, FlyArgs};
+use companion::decider::CoreDecider;
+use companion::fly::FlyArgs;
 use companion::params::default_params_dir;
 use companion::sim::{self, Scenario};
-use companion_core::decision::{Core, Model, ModelKind, Policy};
+use companion_core::decision::{ModelKind, Policy};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -240,70 +241,6 @@ fn profile(params: Option<PathBuf>, vehicle: Option<&str>) -> Result<Option<Path
     }
 }
 
-/// The real decision core behind the fly loop.
-struct CoreDecider {
-    core: Core,
-    model: Arc<Model>,
-    policy: Policy,
-    /// `--learn-cpt`: the rows learned this flight.
-    learner: Option<companion::learn_cpt::OnlineCpt>,
-    /// The mission planned in place of the model's (`fly --mission autopilot`), for every flight.
-    mission: Option<companion_core::guarantee::MissionSpec>,
-}
-
-impl Decider for CoreDecider {
-    fn step(
-        &mut self,
-        obs: &companion_core::observations::Observations,
-    ) -> (
-        companion_core::record::Plan,
-        companion_core::record::DecisionRecord,
-    ) {
-        let (plan, mut rec) = self.core.step(obs);
-        if let Some(learner) = self.learner.as_mut() {
-            rec.cpt_learned = learner.learn_flown(&mut self.core, &rec, &obs.events);
-        }
-        (plan, rec)
-    }
-
-    fn actions(&self) -> &companion_core::mission::ActionCatalogue {
-        &self.model.actions
-    }
-
-    fn launch_verdict(
-        &self,
-        rec: &companion_core::record::DecisionRecord,
-    ) -> Result<(), companion_core::launch::LaunchRefusal> {
-        companion_core::launch::verdict(rec, &self.model)
-    }
-
-    fn replace_mission(&mut self, spec: companion_core::guarantee::MissionSpec) -> bool {
-        self.mission = Some(spec.clone());
-        self.core.replace_mission(spec)
-    }
-
-    fn replan_from(
-        &mut self,
-        whole: companion_core::guarantee::MissionSpec,
-        spliced: companion_core::guarantee::MissionSpec,
-        flown: usize,
-    ) -> bool {
-        // The next flight plans the new mission from home.
-        self.mission = Some(whole);
-        self.core.replan_from(spliced, flown)
-    }
-
-    fn new_flight(&mut self) {
-        self.core = Core::new(Arc::clone(&self.model), ModelKind::Bfm, self.policy);
-        if let Some(spec) = &self.mission {
-            self.core.replace_mission(spec.clone());
-        }
-        if let Some(learner) = self.learner.as_mut() {
-            learner.start_run();
-        }
-    }
-}
-
 fn fly(mut args: FlyArgs) -> Result<()> {
     let params = args.params.clone().unwrap_or_else(default_params_dir);
     // Every params file, as `check` loads it, before any run folder or socket; the plan judged
@@ -348,13 +285,7 @@ fn fly(mut args: FlyArgs) -> Result<()> {
         .map_err(|e| anyhow::anyhow!("--policy: {e}"))?;
     let learner =
         companion::learn_cpt::OnlineCpt::when(args.learn_cpt, &loaded.files, loaded.learning)?;
-    let decider = CoreDecider {
-        core: Core::new(Arc::clone(&model), ModelKind::Bfm, policy),
-        model,
-        policy,
-        learner,
-        mission: None,
-    };
+    let decider = CoreDecider::new(model, ModelKind::Bfm, policy, learner);
     companion::fly::run(args, decider)
 }
 
@@ -445,8 +376,11 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
     let policy: Policy = model
         .policy(&args.policy)
         .map_err(|e| anyhow::anyhow!("--policy: {e}"))?;
-    let mut learner =
+    let learner =
         companion::learn_cpt::OnlineCpt::when(args.learn_cpt, &loaded.files, loaded.learning)?;
+    // One decider for every run: each run is a new flight (a fresh core of the run's kind, the
+    // learner from the loaded rows).
+    let mut decider = CoreDecider::new(Arc::clone(&model), ModelKind::Bfm, policy, learner);
     let runs = args.runs.max(1);
     let progress = (!args.json && runs > 1 && std::io::stderr().is_terminal()).then(|| {
         let pb = indicatif::ProgressBar::new(runs as u64 * kinds.len() as u64);
@@ -463,10 +397,10 @@ fn simulate(params: &std::path::Path, args: SimulateArgs) -> Result<()> {
         let mut steps = Vec::with_capacity(runs as usize);
         for r in 0..runs {
             let seed = args.seed + r as u64;
-            let mut core = Core::new(Arc::clone(&model), *kind, policy);
-            let result =
-                companion::learn_cpt::run(&world, &scenario, seed, &mut core, learner.as_mut());
+            decider.new_flight_of(*kind);
+            let result = sim::run_cycle(&world, &scenario, seed, &mut decider);
             if first_allocations.is_none() {
+                let core = decider.core();
                 first_allocations = Some((core.reallocations(), core.allocation_table()));
             }
             steps.push(result.tracking_steps as f64);

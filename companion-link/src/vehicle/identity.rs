@@ -26,10 +26,31 @@ pub(super) enum Choice {
     Other,
 }
 
-impl Vehicle {
+/// Which autopilot is obeyed and who else was heard (inside [`Vehicle`]): the candidate on
+/// another component, the other autopilots, and the trust counters.
+#[derive(Debug, Clone, Default)]
+pub(super) struct Identity {
+    /// Without a pin: an autopilot on a component other than 1, and when it was first heard,
+    /// waiting [`OTHER_COMPONENT_WAIT`] for a component-1 autopilot before it is chosen.
+    pub(super) candidate: Option<((u8, u8), Duration)>,
+    /// Other autopilots heard (reported once each, never obeyed).
+    other_autopilots: std::collections::BTreeSet<(u8, u8)>,
+    /// Refused for trust reasons since start: monitor frames from components not allowed ...
+    pub(super) foreign_monitor_frames: u64,
+    /// ... and HEARTBEATs from other autopilots, ignored.
+    pub(super) other_autopilot_heartbeats: u64,
+    /// The totals as last reported in a link event.
+    trust_reported: (u64, u64, u64, u64),
+}
+
+impl Identity {
     /// One link event when frames or values were refused for trust since the last report.
-    pub(super) fn trust_note(&mut self) -> Option<String> {
-        let r = &self.telemetry.rejected;
+    pub(super) fn trust_note(
+        &mut self,
+        telemetry: &Telemetry,
+        cfg: &VehicleConfig,
+    ) -> Option<String> {
+        let r = &telemetry.rejected;
         let now = (
             self.foreign_monitor_frames,
             r.out_of_range,
@@ -47,24 +68,29 @@ impl Vehicle {
             .unwrap_or_default();
         Some(format!(
             "trust: {} monitor frames from components not allowed, {} values out of range{last}, {} onboard names dropped (over the cap of {} or not printable), {} heartbeats from other autopilots refused (since start)",
-            now.0, now.1, now.2, self.cfg.telemetry.max_onboard_names, now.3
+            now.0, now.1, now.2, cfg.telemetry.max_onboard_names, now.3
         ))
     }
 
     /// An autopilot other than the chosen one (or than the one `--autopilot-sysid` asks for)
-    /// speaks: reported once per identity, never obeyed.
-    pub(super) fn other_autopilot(&mut self, sys: u8, comp: u8) {
+    /// speaks: reported once per identity (the link event returned), never obeyed.
+    pub(super) fn other_autopilot(
+        &mut self,
+        (sys, comp): (u8, u8),
+        target: Option<(u8, u8)>,
+        cfg: &VehicleConfig,
+    ) -> Option<LinkEvent> {
         self.other_autopilot_heartbeats += 1;
         if self.other_autopilots.len() >= MAX_OTHER_AUTOPILOTS
             || !self.other_autopilots.insert((sys, comp))
         {
-            return;
+            return None;
         }
-        let why = match (self.target, self.cfg.autopilot_sysid) {
+        let why = match (target, cfg.autopilot_sysid) {
             (Some((ts, tc)), _) => format!("autopilot {ts}/{tc} already chosen"),
             (None, Some(want)) => format!(
                 "--autopilot-sysid {want} --autopilot-compid {}",
-                self.cfg.autopilot_compid
+                cfg.autopilot_compid
             ),
             (None, None) => match self.candidate {
                 Some(((cs, cc), _)) => format!("autopilot {cs}/{cc} heard first"),
@@ -76,25 +102,28 @@ impl Vehicle {
             comp,
             "another autopilot {sys}/{comp} heard and ignored ({why})"
         );
-        self.link_event(
-            LinkEvent::OtherAutopilot {
-                system: sys,
-                component: comp,
-                why: why.to_string(),
-            },
-            false,
-        );
+        Some(LinkEvent::OtherAutopilot {
+            system: sys,
+            component: comp,
+            why: why.to_string(),
+        })
     }
 
     /// Whether the autopilot HEARTBEAT of `sys`/`comp` (not the chosen one) chooses it: with a
     /// pin only that system and component; without one, component 1 at once and another
     /// component only after [`OTHER_COMPONENT_WAIT`] with no component 1 heard.
-    pub(super) fn choice(&mut self, now: Duration, sys: u8, comp: u8) -> Choice {
-        if self.target.is_some() {
+    pub(super) fn choice(
+        &mut self,
+        now: Duration,
+        (sys, comp): (u8, u8),
+        target: Option<(u8, u8)>,
+        cfg: &VehicleConfig,
+    ) -> Choice {
+        if target.is_some() {
             return Choice::Other;
         }
-        if let Some(want) = self.cfg.autopilot_sysid {
-            return if (sys, comp) == (want, self.cfg.autopilot_compid) {
+        if let Some(want) = cfg.autopilot_sysid {
+            return if (sys, comp) == (want, cfg.autopilot_compid) {
                 Choice::Take
             } else {
                 Choice::Other
@@ -122,11 +151,11 @@ impl Vehicle {
     /// When the autopilot was chosen without a pin (`--autopilot-sysid`): which one, that it was
     /// the first heard, and how to pin it. `fly` says it on stderr and to the ground station on
     /// a network link, where anyone who can reach the port can speak first.
-    pub fn identity_note(&self) -> Option<String> {
-        if self.cfg.autopilot_sysid.is_some() {
+    pub(super) fn note(cfg: &VehicleConfig, target: Option<(u8, u8)>) -> Option<String> {
+        if cfg.autopilot_sysid.is_some() {
             return None;
         }
-        let (sys, comp) = self.target?;
+        let (sys, comp) = target?;
         let compid = if comp == AUTOPILOT_COMPONENT {
             String::new()
         } else {

@@ -166,9 +166,18 @@ pub fn stop_verdict(control: &Control, reading: &StopReading) -> StopVerdict {
     }
 }
 
-impl Vehicle {
+/// The stop's memory (inside [`Vehicle`]): the companion's last ARM and last take-off command
+/// with their answers so far, and the last autopilot frame that said armed or in the air.
+#[derive(Debug, Clone, Default)]
+pub(super) struct Launches {
+    launches: Vec<Launch>,
+    /// The last autopilot frame that said armed or in the air: what, and when.
+    up_seen: Option<(UpEvidence, Duration)>,
+}
+
+impl Launches {
     /// A step's command went out as `ticket`: remembered when it is a launch command.
-    pub(super) fn launch_sent(
+    pub(super) fn sent(
         &mut self,
         now: Duration,
         ticket: u64,
@@ -185,7 +194,7 @@ impl Vehicle {
     }
 
     /// A command ended: the launch command's answer, if it was that.
-    pub(super) fn launch_finished(&mut self, ticket: u64, outcome: &Outcome) {
+    pub(super) fn finished(&mut self, ticket: u64, outcome: &Outcome) {
         let Some(l) = self.launches.iter_mut().find(|l| l.ticket == ticket) else {
             return;
         };
@@ -203,19 +212,32 @@ impl Vehicle {
     }
 
     /// A launch command still waits for its answer.
-    pub fn launch_awaiting(&self) -> bool {
+    pub(super) fn awaiting(&self) -> bool {
         self.launches
             .iter()
             .any(|l| l.outcome == LaunchOutcome::Awaiting)
     }
 
-    /// The stop's conservative reading at `now`: what the companion launched and what any
-    /// frame said, unless every autopilot frame has agreed for `landed_confirm` since that the
-    /// vehicle is disarmed on the ground.
-    pub fn stop_reading(&self, now: Duration, landed_confirm: Duration) -> StopReading {
-        let down_since = self
-            .down_since
-            .filter(|&d| now.saturating_sub(d) >= landed_confirm);
+    /// The launch commands still waiting for their answer: ticket and command.
+    pub(super) fn awaiting_commands(&self) -> Vec<(u64, MavCmd)> {
+        self.launches
+            .iter()
+            .filter(|l| l.outcome == LaunchOutcome::Awaiting)
+            .map(|l| (l.ticket, l.mav_cmd))
+            .collect()
+    }
+
+    /// The stop's conservative reading at `now` (see [`Vehicle::stop_reading`]): `down_since`
+    /// is when every autopilot frame began to agree that the vehicle is down, `armed_now` what
+    /// the last heartbeat said.
+    pub(super) fn reading(
+        &self,
+        now: Duration,
+        landed_confirm: Duration,
+        down_since: Option<Duration>,
+        armed_now: bool,
+    ) -> StopReading {
+        let down_since = down_since.filter(|&d| now.saturating_sub(d) >= landed_confirm);
         let since_down = |t: Duration| down_since.is_none_or(|d| t > d);
         StopReading {
             launches: self
@@ -229,30 +251,7 @@ impl Vehicle {
                 .up_seen
                 .filter(|_| down_since.is_none())
                 .map(|(w, _)| w),
-            armed_now: self.readiness.armed,
-        }
-    }
-
-    /// The companion stops: the running action, its queued steps and every command in flight
-    /// end now (recorded CANCELLED), except a launch command still waiting for its answer,
-    /// which is kept (never resent) so that the stop can hear whether the vehicle armed or took
-    /// off ([`Vehicle::launch_awaiting`]).
-    pub fn stop_commanding(&mut self, now: Duration, why: &str) {
-        let awaiting: Vec<(u64, MavCmd)> = self
-            .launches
-            .iter()
-            .filter(|l| l.outcome == LaunchOutcome::Awaiting)
-            .map(|l| (l.ticket, l.mav_cmd))
-            .collect();
-        let kept: Vec<_> = awaiting
-            .into_iter()
-            .filter_map(|(t, c)| self.purposes.remove(&t).map(|p| (t, c, p)))
-            .collect();
-        // `stop_actions` cancels the commands of the steps it knows of: not these.
-        self.stop_actions(now, why);
-        for (ticket, command, purpose) in kept {
-            self.purposes.insert(ticket, purpose);
-            self.commands.no_resend(command);
+            armed_now,
         }
     }
 }

@@ -18,7 +18,7 @@
 //! download (ArduPilot's home at seq 0, which moves when the vehicle arms, excluded) or from the
 //! companion's own verified upload, which is therefore never reported as a change.
 
-use super::executor::Advance;
+use super::executor::Ports;
 use super::*;
 use crate::mission::{MissionItem, compare_from};
 
@@ -56,41 +56,32 @@ pub(super) struct MissionWatch {
     pending: Option<AutopilotMission>,
 }
 
-impl Vehicle {
-    /// Watch the autopilot's own mission (`fly --mission autopilot`): download it once the
-    /// autopilot is chosen and whenever it may have changed; [`Vehicle::take_autopilot_mission`]
-    /// hands it over. The route's upload step then uploads nothing: the autopilot's mission is
-    /// the one flown.
-    pub fn watch_autopilot_mission(&mut self) {
-        self.watch.enabled = true;
-        self.watch.due = true;
-    }
-
-    /// Stop watching (a restarted companion downloaded the mission once to compare it with its
-    /// own route, and flies that route): no more downloads, the route's upload step uploads.
-    pub fn unwatch_autopilot_mission(&mut self) {
-        self.watch = MissionWatch::default();
+impl MissionWatch {
+    /// Watch the autopilot's own mission (`fly --mission autopilot`).
+    pub(super) fn enable(&mut self) {
+        self.enabled = true;
+        self.due = true;
     }
 
     /// Whether the autopilot's own mission is the one flown (and watched).
-    pub fn flies_autopilot_mission(&self) -> bool {
-        self.watch.enabled
+    pub(super) fn flies(&self) -> bool {
+        self.enabled
     }
 
     /// The autopilot's mission as last downloaded, if any.
-    pub fn autopilot_mission(&self) -> Option<&[MissionItem]> {
-        self.watch.known.as_deref()
+    pub(super) fn known(&self) -> Option<&[MissionItem]> {
+        self.known.as_deref()
     }
 
     /// The mission loaded or changed since the last call.
-    pub fn take_autopilot_mission(&mut self) -> Option<AutopilotMission> {
-        self.watch.pending.take()
+    pub(super) fn take_pending(&mut self) -> Option<AutopilotMission> {
+        self.pending.take()
     }
 
     /// A new autopilot (or the same one rebooted): its mission is downloaded afresh.
-    pub(super) fn reset_mission_watch(&mut self) {
-        let enabled = self.watch.enabled;
-        self.watch = MissionWatch {
+    pub(super) fn reset(&mut self) {
+        let enabled = self.enabled;
+        *self = MissionWatch {
             enabled,
             due: enabled,
             ..MissionWatch::default()
@@ -98,8 +89,8 @@ impl Vehicle {
     }
 
     /// MISSION_CURRENT from the autopilot: a changed `total` or `mission_id` asks for a download.
-    pub(super) fn watch_mission_current(&mut self, m: &MISSION_CURRENT_DATA) {
-        let w = &mut self.watch;
+    pub(super) fn on_mission_current(&mut self, m: &MISSION_CURRENT_DATA) {
+        let w = self;
         if !w.enabled {
             return;
         }
@@ -116,20 +107,26 @@ impl Vehicle {
         w.total_seen = Some(m.total);
     }
 
-    /// Start a download when one is due and the mission protocol is free.
-    pub(super) fn pump_mission_watch(&mut self, now: Duration, out: &mut Vec<Msg>) {
-        let w = &mut self.watch;
-        if !w.enabled || w.downloading || self.target.is_none() {
+    /// Start a download when one is due and the mission protocol is free (`target`: the
+    /// autopilot is chosen).
+    pub(super) fn pump(
+        &mut self,
+        now: Duration,
+        target: Option<(u8, u8)>,
+        mission: &mut MissionClient,
+        out: &mut Vec<Msg>,
+    ) {
+        let w = self;
+        if !w.enabled || w.downloading || target.is_none() {
             return;
         }
         if !w.has_id && now >= w.next_poll {
             w.due = true;
         }
-        if !w.due || self.mission.busy() {
+        if !w.due || mission.busy() {
             return;
         }
-        if let Ok(msgs) = self.mission.download(now) {
-            let w = &mut self.watch;
+        if let Ok(msgs) = mission.download(now) {
             w.due = false;
             w.downloading = true;
             w.next_poll = now + MISSION_POLL;
@@ -137,6 +134,15 @@ impl Vehicle {
         }
     }
 
+    /// Our own upload was verified: that mission is known, so it is no change.
+    pub(super) fn uploaded(&mut self, items: &[MissionItem]) {
+        if self.enabled {
+            self.known = Some(items.to_vec());
+        }
+    }
+}
+
+impl Ports<'_> {
     /// Our download ended: `Some(items)` when it completed.
     pub(super) fn watch_downloaded(&mut self, items: Option<Vec<MissionItem>>, why: &str) {
         self.watch.downloading = false;
@@ -175,32 +181,5 @@ impl Vehicle {
             });
             self.link_event(LinkEvent::from(what.as_str()), significant);
         }
-    }
-
-    /// Our own upload was verified: that mission is known, so it is no change.
-    pub(super) fn watch_uploaded(&mut self, items: &[MissionItem]) {
-        if self.watch.enabled {
-            self.watch.known = Some(items.to_vec());
-        }
-    }
-
-    /// The route's upload step when the autopilot's mission is flown: nothing to upload once it
-    /// is known; refused before (no start on a mission not yet read).
-    pub(super) fn keep_autopilot_mission_step(&mut self, now: Duration, action: String) -> Advance {
-        let (command, result) = if self.watch.known.is_some() {
-            self.step_done();
-            (
-                "MISSION_UPLOAD",
-                "SKIPPED (the autopilot's own mission is flown)",
-            )
-        } else {
-            self.job_failed(now);
-            (
-                "MISSION_UPLOAD",
-                "FAILED (the autopilot's mission is not downloaded yet)",
-            )
-        };
-        self.record_step(action, command.into(), result.into());
-        Advance::Again
     }
 }

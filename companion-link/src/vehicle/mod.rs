@@ -12,6 +12,7 @@ mod pack;
 mod tests;
 
 use super::Msg;
+use super::actions::Flown;
 use super::actions::{ActionTable, Offset, Route, Step};
 use super::command::{
     CommandClient, CommandConfig, CommandEvent, CommandSpec, FailReason, Outcome,
@@ -19,24 +20,26 @@ use super::command::{
 use super::dialect::*;
 use super::ingest::Frame;
 use super::liveness::{Liveness, LivenessEvent};
+use super::mission::MissionItem;
 use super::mission::{MissionClient, MissionConfig, MissionEvent, MissionOp};
 use super::modes::{self, Flavor, FlightMode, ReportedMode};
 use super::readiness::Readiness;
 use super::telemetry::{PackParam, Telemetry, TelemetryConfig, displace};
 use companion_core::observations::Observations;
 use companion_core::record::{CommandOutcome, CommandRecord, Event, LinkEvent};
-use executor::{Purpose, step_name};
-use identity::Choice;
+use executor::{Executor, Ports};
 pub use identity::{AUTOPILOT_COMPONENT, OTHER_COMPONENT_WAIT, is_autopilot_heartbeat};
+use identity::{Choice, Identity};
 use job::{Job, JobKey, JobStatus, Running};
+use launch::Launches;
 pub use launch::{
     Launch, LaunchCommand, LaunchOutcome, StopReading, StopVerdict, UpEvidence, stop_verdict,
 };
 use mission_watch::MissionWatch;
 pub use mission_watch::{AutopilotMission, MISSION_POLL};
-use pack::PackRequest;
+use pack::PackRequests;
 pub use pack::{PACK_PARAM_ATTEMPTS, PACK_PARAM_RETRY, ParamUse, pack_params, speed_params};
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::VecDeque;
 use std::time::Duration;
 
 /// Settings of the vehicle link, from params/link.toml and the `fly` flags.
@@ -154,38 +157,20 @@ pub struct Vehicle {
     pub actions: ActionTable,
     /// The route `follow_trajectory` uploads, if one was given.
     pub route: Option<Route>,
-    purposes: BTreeMap<u64, Purpose>,
-    job: Option<Job>,
-    last: Option<(JobKey, JobStatus)>,
+    /// The command executor: the running action's steps, the commands in flight, the records.
+    exec: Executor,
     stream_queue: VecDeque<(u32, f32)>,
     /// Significant events since the last `take_events` (trigger a decision cycle).
     events: Vec<Event>,
-    /// Command records since the last `take_records`.
-    records: Vec<CommandRecord>,
     link_events: Vec<LinkEvent>,
-    /// Retry a failed action asked for again no sooner than this.
-    pub retry_failed_after: Duration,
     /// When the stream requests were last queued, and whether another set is waiting for the
     /// minimum interval.
     streams_queued_at: Option<Duration>,
     streams_deferred: bool,
-    /// Without a pin: an autopilot on a component other than 1, and when it was first heard,
-    /// waiting [`OTHER_COMPONENT_WAIT`] for a component-1 autopilot before it is chosen.
-    candidate: Option<((u8, u8), Duration)>,
-    /// Other autopilots heard (reported once each, never obeyed).
-    other_autopilots: std::collections::BTreeSet<(u8, u8)>,
-    /// Refused for trust reasons since start: monitor frames from components not allowed, and
-    /// the totals as last reported in a link event.
-    pub foreign_monitor_frames: u64,
-    /// HEARTBEATs from other autopilots, ignored, since start.
-    pub other_autopilot_heartbeats: u64,
-    trust_reported: (u64, u64, u64, u64),
+    /// Which autopilot is obeyed, who else was heard, the trust counters.
+    identity: Identity,
     /// Consecutive autopilot heartbeats reporting the vehicle armed (0 once one says disarmed).
     pub armed_heartbeats: u32,
-    /// Modes this companion commanded (or made the autopilot enter, as a reposition enters
-    /// GUIDED), with when; the newest last, a few kept. The operator gate tells its own mode
-    /// changes from a pilot's with them.
-    pub commanded_modes: Vec<(FlightMode, Duration)>,
     /// Commands addressed to this companion (component 191) since the last
     /// [`Vehicle::take_commands_to_us`].
     commands_to_us: Vec<CommandToUs>,
@@ -199,33 +184,12 @@ pub struct Vehicle {
     /// (heartbeats disarmed, altitude at most `ground_altitude_m`, landed state ON_GROUND);
     /// any contradicting frame resets it.
     down_since: Option<Duration>,
-    /// The hand-off job's mode, once [`Vehicle::hand_off`] issued it.
-    handoff: Option<FlightMode>,
-    /// Where the running zone reposition goes.
-    zone_target: Option<(i32, i32)>,
     /// When the autopilot last reported its mode (its heartbeat).
     mode_heard_at: Option<Duration>,
-    /// When the autopilot last accepted a mode step of a job (its COMMAND_ACK): only a
-    /// heartbeat heard after that can show the new mode (one sent before the autopilot handled
-    /// the command may arrive after we sent it, still showing the old mode).
-    mode_acked_at: Option<Duration>,
-    /// PX4 only: after an upload, (item count, give-up time) until MISSION_CURRENT reports the
-    /// new mission's total. PX4's navigator loads an uploaded mission asynchronously; AUTO
-    /// requested before that flies the old (empty) one, "finishes" it at once and falls back to
-    /// Hold (seen on PX4 SITL with the mode switch 10 ms after the upload).
-    px4_mission_pending: Option<(u16, Duration)>,
-    /// PX4 only: give-up time for waiting out AUTO.TAKEOFF before another mode. PX4 ends a
-    /// take-off by switching itself to Hold; a mode requested in the take-off's last moments is
-    /// acknowledged and then overridden by that switch (seen on PX4 SITL: AUTO accepted at 8-9 m
-    /// of a 10 m take-off, then Hold, the mission never flown).
-    px4_takeoff_wait: Option<Duration>,
-    /// The pack parameters asked for (the chosen autopilot's family's [`pack_params`]).
-    pack_requests: Vec<PackRequest>,
-    /// The companion's last ARM and last take-off command, and their answers so far (the stop
-    /// reads them).
-    launches: Vec<Launch>,
-    /// The last autopilot frame that said armed or in the air: what, and when.
-    up_seen: Option<(UpEvidence, Duration)>,
+    /// The pack parameters asked for.
+    pack_requests: PackRequests,
+    /// The stop's memory: the companion's last ARM and take-off, the last frame that said up.
+    launches: Launches,
     /// The autopilot's own mission, when it is the one flown (`fly --mission autopilot`).
     watch: MissionWatch,
 }
@@ -244,36 +208,21 @@ impl Vehicle {
             flavor: Flavor::Other,
             actions,
             route,
-            purposes: BTreeMap::new(),
-            job: None,
-            last: None,
+            exec: Executor::default(),
             stream_queue: VecDeque::new(),
             events: Vec::new(),
-            records: Vec::new(),
             link_events: Vec::new(),
-            retry_failed_after: Duration::from_secs(5),
             streams_queued_at: None,
             streams_deferred: false,
-            candidate: None,
-            other_autopilots: Default::default(),
-            foreign_monitor_frames: 0,
-            other_autopilot_heartbeats: 0,
-            trust_reported: (0, 0, 0, 0),
+            identity: Identity::default(),
             armed_heartbeats: 0,
-            commanded_modes: Vec::new(),
             commands_to_us: Vec::new(),
             armed_since: None,
             mode_since: None,
             down_since: None,
-            handoff: None,
-            zone_target: None,
             mode_heard_at: None,
-            mode_acked_at: None,
-            px4_mission_pending: None,
-            px4_takeoff_wait: None,
-            pack_requests: Vec::new(),
-            launches: Vec::new(),
-            up_seen: None,
+            pack_requests: PackRequests::default(),
+            launches: Launches::default(),
             watch: MissionWatch::default(),
         }
     }
@@ -305,12 +254,12 @@ impl Vehicle {
     }
     /// Take the command records since the last call.
     pub fn take_records(&mut self) -> Vec<CommandRecord> {
-        std::mem::take(&mut self.records)
+        self.exec.take_records()
     }
     /// Take the link events since the last call, with a trust note when refused frames were
     /// counted.
     pub fn take_link_events(&mut self) -> Vec<LinkEvent> {
-        if let Some(note) = self.trust_note() {
+        if let Some(note) = self.identity.trust_note(&self.telemetry, &self.cfg) {
             self.link_events.push(LinkEvent::from(note));
         }
         std::mem::take(&mut self.link_events)
@@ -348,10 +297,7 @@ impl Vehicle {
     }
 
     fn link_event(&mut self, e: LinkEvent, significant: bool) {
-        if significant {
-            self.events.push(Event::from(e.clone()));
-        }
-        self.link_events.push(e);
+        self.ports().1.link_event(e, significant);
     }
 
     /// A frame from the autopilot link.
@@ -365,17 +311,19 @@ impl Vehicle {
             && is_autopilot_heartbeat(h)
             && self.target != Some((sys, comp))
         {
-            let choice = self.choice(now, sys, comp);
+            let choice = self
+                .identity
+                .choice(now, (sys, comp), self.target, &self.cfg);
             if choice == Choice::Take {
-                self.candidate = None;
+                self.identity.candidate = None;
                 self.target = Some((sys, comp));
                 self.flavor = Flavor::from_autopilot(h.autopilot);
                 self.readiness.flavor = self.flavor;
                 self.mission.home_at_seq0 = self.flavor != Flavor::Px4;
                 self.commands.set_target(sys, comp);
                 self.mission.set_target(sys, comp);
-                self.reset_pack_requests();
-                self.reset_mission_watch();
+                self.pack_requests.reset(self.flavor);
+                self.watch.reset();
                 tracing::info!(sys, comp, flavor = ?self.flavor, "autopilot chosen");
                 self.link_event(
                     LinkEvent::Autopilot {
@@ -388,20 +336,24 @@ impl Vehicle {
                 if let Some(note) = self.identity_note() {
                     self.link_event(LinkEvent::from(note.as_str()), false);
                 }
-            } else if choice == Choice::Other {
-                self.other_autopilot(sys, comp);
+            } else if choice == Choice::Other
+                && let Some(e) = self
+                    .identity
+                    .other_autopilot((sys, comp), self.target, &self.cfg)
+            {
+                self.link_event(e, false);
             }
         }
         let from_autopilot = self.target == Some((sys, comp));
         if self.cfg.tracker_onboard_only && is_tracker_report(&f.msg) {
-            if self.foreign_monitor_frames == 0 {
+            if self.identity.foreign_monitor_frames == 0 {
                 tracing::warn!(
                     sys,
                     comp,
                     "a tracker report on the autopilot link ignored: taken only from the --onboard link"
                 );
             }
-            self.foreign_monitor_frames += 1;
+            self.identity.foreign_monitor_frames += 1;
             return Vec::new();
         }
         if !from_autopilot {
@@ -434,7 +386,7 @@ impl Vehicle {
                 if self.readiness.armed {
                     self.armed_since.get_or_insert(now);
                     self.down_since = None;
-                    self.note_up(now, UpEvidence::Armed);
+                    self.launches.note_up(now, UpEvidence::Armed);
                 } else {
                     self.armed_since = None;
                     if self.low_now() {
@@ -452,15 +404,13 @@ impl Vehicle {
             // Frames that say "in the air" reset the end-of-flight window.
             Msg::GLOBAL_POSITION_INT(_) | Msg::EXTENDED_SYS_STATE(_) if !self.low_now() => {
                 self.down_since = None;
-                self.note_up(now, UpEvidence::Airborne);
+                self.launches.note_up(now, UpEvidence::Airborne);
             }
             Msg::EKF_STATUS_REPORT(e) => self.readiness.on_ekf(now, e),
             Msg::ESTIMATOR_STATUS(e) => self.readiness.on_estimator(now, e),
             Msg::MISSION_CURRENT(m) => {
-                if matches!(self.px4_mission_pending, Some((n, _)) if n == m.total) {
-                    self.px4_mission_pending = None;
-                }
-                self.watch_mission_current(m);
+                self.exec.mission_total_seen(m.total);
+                self.watch.on_mission_current(m);
             }
             Msg::STATUSTEXT(t) => {
                 let text = t.text.to_str().unwrap_or("").to_string();
@@ -469,7 +419,15 @@ impl Vehicle {
                     self.link_event(LinkEvent::AutopilotText(text), false);
                 }
             }
-            Msg::PARAM_VALUE(p) => self.on_param_value(p),
+            Msg::PARAM_VALUE(p) => {
+                let flavor = self.flavor;
+                if let Some(e) = self
+                    .pack_requests
+                    .on_param_value(p, flavor, &mut self.telemetry)
+                {
+                    self.link_event(e, false);
+                }
+            }
             Msg::COMMAND_ACK(a) => {
                 let (msgs, evs) = self.commands.on_ack(now, a);
                 out.extend(msgs);
@@ -498,14 +456,14 @@ impl Vehicle {
             let sys = f.header.system_id.min(255) as u8;
             let comp = f.header.component_id;
             if !self.cfg.telemetry.monitors.allows(sys, comp, self.target) {
-                if self.foreign_monitor_frames == 0 {
+                if self.identity.foreign_monitor_frames == 0 {
                     tracing::warn!(
                         sys,
                         comp,
                         "onboard-monitor values from a component not in [telemetry.monitors] ignored"
                     );
                 }
-                self.foreign_monitor_frames += 1;
+                self.identity.foreign_monitor_frames += 1;
                 return Vec::new();
             }
             let flavor = self.flavor;
@@ -520,9 +478,9 @@ impl Vehicle {
             LivenessEvent::Connected | LivenessEvent::Regained | LivenessEvent::Rebooted => {
                 if ev == LivenessEvent::Rebooted {
                     self.readiness.reset();
-                    self.reset_pack_requests();
+                    self.pack_requests.reset(self.flavor);
                     self.drop_everything(now, "autopilot rebooted");
-                    self.reset_mission_watch();
+                    self.watch.reset();
                 }
                 let link = match ev {
                     LivenessEvent::Connected => LinkEvent::Connected,
@@ -554,21 +512,10 @@ impl Vehicle {
         if let Some(ev) = self.mission.cancel(why) {
             let _ = self.on_mission_events(now, vec![ev]);
         }
-        if let Some(job) = self.job.take() {
-            for (action, step) in job.steps {
-                self.records.push(CommandRecord {
-                    action,
-                    command: step_name(&step),
-                    result: CommandOutcome::Cancelled(Some(why.to_string())),
-                    attempts: 0,
-                    latency_ms: None,
-                });
-            }
-            self.last = Some((job.key, JobStatus::Failed(now)));
-        }
+        self.exec.drop_job(now, why);
         self.stream_queue.clear();
         self.streams_deferred = false;
-        self.purposes.clear();
+        self.exec.forget_tickets();
     }
 
     /// Transport reconnected: the new stream is a new session (streams re-requested, sent once
@@ -619,12 +566,13 @@ impl Vehicle {
                 [id as f32, 1e6 / hz, 0., 0., 0., 0., 0.],
             );
             if let Ok((ticket, msgs)) = self.commands.submit(now, spec) {
-                self.purposes.insert(ticket, Purpose::Stream(id));
+                self.exec.stream_requested(ticket, id);
                 out.extend(msgs);
             }
         }
-        self.request_pack_params(now, &mut out);
-        self.pump_mission_watch(now, &mut out);
+        self.pack_requests.request(now, self.target, &mut out);
+        self.watch
+            .pump(now, self.target, &mut self.mission, &mut out);
         out.extend(self.advance_job(now));
         out
     }
@@ -674,6 +622,172 @@ impl Vehicle {
     /// ground (None: the last one disagreed).
     pub fn down_for(&self, now: Duration) -> Option<Duration> {
         self.down_since.map(|s| now.saturating_sub(s))
+    }
+
+    /// The executor, and what it drives and reads of the rest of the vehicle, for one call.
+    fn ports(&mut self) -> (&mut Executor, Ports<'_>) {
+        let ports = Ports {
+            cfg: &self.cfg,
+            flavor: self.flavor,
+            liveness: &self.liveness,
+            target: self.target,
+            commands: &mut self.commands,
+            mission: &mut self.mission,
+            readiness: &mut self.readiness,
+            telemetry: &self.telemetry,
+            actions: &self.actions,
+            route: self.route.as_ref(),
+            events: &mut self.events,
+            link_events: &mut self.link_events,
+            launches: &mut self.launches,
+            watch: &mut self.watch,
+            mode_heard_at: self.mode_heard_at,
+        };
+        (&mut self.exec, ports)
+    }
+
+    fn on_command_events(&mut self, now: Duration, evs: Vec<CommandEvent>) -> Vec<Msg> {
+        let (exec, mut io) = self.ports();
+        exec.on_command_events(&mut io, now, evs)
+    }
+
+    fn on_mission_events(&mut self, now: Duration, evs: Vec<MissionEvent>) -> Vec<Msg> {
+        let (exec, mut io) = self.ports();
+        exec.on_mission_events(&mut io, now, evs)
+    }
+
+    fn advance_job(&mut self, now: Duration) -> Vec<Msg> {
+        let (exec, mut io) = self.ports();
+        exec.advance_job(&mut io, now)
+    }
+
+    /// The decision core asked for these vehicle actions.
+    /// The same action already running or done is not restarted; a different one replaces it.
+    pub fn request_actions(&mut self, now: Duration, actions: &[Flown]) -> Vec<Msg> {
+        let (exec, mut io) = self.ports();
+        exec.request_actions(&mut io, now, actions)
+    }
+
+    /// Latency of everything sent since the last call: from the message (or decision trigger)
+    /// that caused it, `trigger_at`, to the moment it was handed to the transport, `sent_at`.
+    /// The shell calls this right after sending, so the measurement includes decision and
+    /// encoding time, which the injected clock of the state machines cannot see.
+    pub fn stamp_latency(&mut self, trigger_at: Duration, sent_at: Duration) {
+        self.exec.stamp_latency(trigger_at, sent_at);
+    }
+
+    /// Whether an action is being executed (for tests and the log).
+    pub fn busy(&self) -> bool {
+        self.exec.busy()
+    }
+
+    /// `action` is being flown or was flown to the end (asking for it again does nothing).
+    pub fn settled(&self, action: Flown) -> bool {
+        self.exec.settled(action)
+    }
+
+    /// When the last action failed (its key and the time), if it did and nothing ran since.
+    pub fn failed_action(&self) -> Option<(String, Duration)> {
+        self.exec.failed_action(&self.actions)
+    }
+
+    /// The companion stops: whatever it was doing ends now (recorded CANCELLED) and the vehicle
+    /// is put in `mode` (`LOITER`, `RTL`, `LAND`) for the autopilot to fly on its own. The
+    /// step is acknowledged (or fails) like any other; [`Vehicle::handoff_status`] tells.
+    pub fn hand_off(&mut self, now: Duration, mode: FlightMode) -> Vec<Msg> {
+        let (exec, mut io) = self.ports();
+        exec.hand_off(&mut io, now, mode)
+    }
+
+    /// The hand-off's outcome: None while it runs (or none was issued), Some(true) when the
+    /// autopilot accepted the mode, Some(false) when the step failed.
+    pub fn handoff_status(&self) -> Option<bool> {
+        self.exec.handoff_status()
+    }
+
+    /// Stop commanding motion (the pilot took over, or the flight is over): the running action
+    /// and its commands in flight end now (recorded CANCELLED), nothing of them is resent, and
+    /// any action may be asked for afresh later. Stream requests go on.
+    pub fn stop_actions(&mut self, now: Duration, why: &str) {
+        let (exec, mut io) = self.ports();
+        exec.stop_actions(&mut io, now, why);
+    }
+
+    /// Modes this companion commanded (or made the autopilot enter, as a reposition enters
+    /// GUIDED), with when; the newest last, a few kept. The operator gate tells its own mode
+    /// changes from a pilot's with them.
+    pub fn commanded_modes(&self) -> &[(FlightMode, Duration)] {
+        self.exec.commanded_modes()
+    }
+
+    /// A launch command still waits for its answer.
+    pub fn launch_awaiting(&self) -> bool {
+        self.launches.awaiting()
+    }
+
+    /// The stop's conservative reading at `now`: what the companion launched and what any
+    /// frame said, unless every autopilot frame has agreed for `landed_confirm` since that the
+    /// vehicle is disarmed on the ground.
+    pub fn stop_reading(&self, now: Duration, landed_confirm: Duration) -> StopReading {
+        self.launches
+            .reading(now, landed_confirm, self.down_since, self.readiness.armed)
+    }
+
+    /// The companion stops: the running action, its queued steps and every command in flight
+    /// end now (recorded CANCELLED), except a launch command still waiting for its answer,
+    /// which is kept (never resent) so that the stop can hear whether the vehicle armed or took
+    /// off ([`Vehicle::launch_awaiting`]).
+    pub fn stop_commanding(&mut self, now: Duration, why: &str) {
+        let awaiting = self.launches.awaiting_commands();
+        let (exec, mut io) = self.ports();
+        exec.stop_keeping(&mut io, now, why, awaiting);
+    }
+
+    /// Watch the autopilot's own mission (`fly --mission autopilot`): download it once the
+    /// autopilot is chosen and whenever it may have changed; [`Vehicle::take_autopilot_mission`]
+    /// hands it over. The route's upload step then uploads nothing: the autopilot's mission is
+    /// the one flown.
+    pub fn watch_autopilot_mission(&mut self) {
+        self.watch.enable();
+    }
+
+    /// Stop watching (a restarted companion downloaded the mission once to compare it with its
+    /// own route, and flies that route): no more downloads, the route's upload step uploads.
+    pub fn unwatch_autopilot_mission(&mut self) {
+        self.watch = MissionWatch::default();
+    }
+
+    /// Whether the autopilot's own mission is the one flown (and watched).
+    pub fn flies_autopilot_mission(&self) -> bool {
+        self.watch.flies()
+    }
+
+    /// The autopilot's mission as last downloaded, if any.
+    pub fn autopilot_mission(&self) -> Option<&[MissionItem]> {
+        self.watch.known()
+    }
+
+    /// The mission loaded or changed since the last call.
+    pub fn take_autopilot_mission(&mut self) -> Option<AutopilotMission> {
+        self.watch.take_pending()
+    }
+
+    /// When the autopilot was chosen without a pin (`--autopilot-sysid`): which one, that it was
+    /// the first heard, and how to pin it. `fly` says it on stderr and to the ground station on
+    /// a network link, where anyone who can reach the port can speak first.
+    pub fn identity_note(&self) -> Option<String> {
+        Identity::note(&self.cfg, self.target)
+    }
+
+    /// Monitor frames refused since start: from components not allowed, or tracker reports on
+    /// the autopilot link when they are taken only from the `--onboard` link.
+    pub fn foreign_monitor_frames(&self) -> u64 {
+        self.identity.foreign_monitor_frames
+    }
+
+    /// HEARTBEATs from other autopilots, ignored, since start.
+    pub fn other_autopilot_heartbeats(&self) -> u64 {
+        self.identity.other_autopilot_heartbeats
     }
 
     /// The last telemetry puts the vehicle low: landed state ON_GROUND when the autopilot

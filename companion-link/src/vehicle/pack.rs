@@ -61,9 +61,14 @@ pub const PACK_PARAM_ATTEMPTS: u32 = 5;
 /// ... this far apart, until the autopilot answers (PARAM_VALUE is not acknowledged otherwise).
 pub const PACK_PARAM_RETRY: Duration = Duration::from_secs(2);
 
+/// The pack and speed parameters asked for (the chosen autopilot's family's [`pack_params`]
+/// and [`speed_params`]), inside [`Vehicle`].
+#[derive(Debug, Clone, Default)]
+pub(super) struct PackRequests(Vec<PackRequest>);
+
 /// One pack parameter asked for until the autopilot answers.
 #[derive(Debug, Clone)]
-pub(super) struct PackRequest {
+struct PackRequest {
     name: &'static str,
     what: ParamUse,
     sent: u32,
@@ -71,14 +76,14 @@ pub(super) struct PackRequest {
     answered: bool,
 }
 
-impl Vehicle {
+impl PackRequests {
     /// Ask (again) for the pack and speed parameters of the chosen autopilot's family.
-    pub(super) fn reset_pack_requests(&mut self) {
-        let pack = pack_params(self.flavor)
+    pub(super) fn reset(&mut self, flavor: Flavor) {
+        let pack = pack_params(flavor)
             .iter()
             .map(|&(name, what)| (name, ParamUse::Pack(what)));
-        self.pack_requests = pack
-            .chain(speed_params(self.flavor).iter().copied())
+        self.0 = pack
+            .chain(speed_params(flavor).iter().copied())
             .map(|(name, what)| PackRequest {
                 name,
                 what,
@@ -90,11 +95,11 @@ impl Vehicle {
     }
 
     /// PARAM_REQUEST_READ of the pack parameters not answered yet, each retried a few times.
-    pub(super) fn request_pack_params(&mut self, now: Duration, out: &mut Vec<Msg>) {
-        let Some((sys, comp)) = self.target else {
+    pub(super) fn request(&mut self, now: Duration, target: Option<(u8, u8)>, out: &mut Vec<Msg>) {
+        let Some((sys, comp)) = target else {
             return;
         };
-        for r in &mut self.pack_requests {
+        for r in &mut self.0 {
             if r.answered || r.sent >= PACK_PARAM_ATTEMPTS || now < r.next_at {
                 continue;
             }
@@ -111,10 +116,16 @@ impl Vehicle {
 
     /// A PARAM_VALUE from the autopilot: a parameter asked for goes to the telemetry (also the
     /// PARAM_VALUE the autopilot broadcasts after anyone's PARAM_SET: the value in force).
-    pub(super) fn on_param_value(&mut self, p: &PARAM_VALUE_DATA) {
+    /// A link event when the value says something the operator should hear.
+    pub(super) fn on_param_value(
+        &mut self,
+        p: &PARAM_VALUE_DATA,
+        flavor: Flavor,
+        telemetry: &mut Telemetry,
+    ) -> Option<LinkEvent> {
         let id = p.param_id.to_str().unwrap_or("").trim_end_matches('\0');
-        let Some(r) = self.pack_requests.iter_mut().find(|r| r.name == id) else {
-            return;
+        let Some(r) = self.0.iter_mut().find(|r| r.name == id) else {
+            return None;
         };
         // PX4 sends integer parameters bytewise in the float (MAV_PROTOCOL_CAPABILITY_PARAM_
         // ENCODE_BYTEWISE); ArduPilot casts them to float.
@@ -127,7 +138,7 @@ impl Vehicle {
                 | MavParamType::MAV_PARAM_TYPE_INT8
                 | MavParamType::MAV_PARAM_TYPE_UINT8
         );
-        let value = if int && self.flavor == Flavor::Px4 {
+        let value = if int && flavor == Flavor::Px4 {
             p.param_value.to_bits() as i32 as f64
         } else {
             p.param_value as f64
@@ -136,21 +147,18 @@ impl Vehicle {
         let (name, what) = match r.what {
             ParamUse::Pack(what) => (r.name, what),
             ParamUse::Speed { what, to_mps } => {
-                self.telemetry.on_speed_param(what, value * to_mps);
-                return;
+                telemetry.on_speed_param(what, value * to_mps);
+                return None;
             }
         };
-        self.telemetry.on_pack_param(what, value);
-        if what == PackParam::CapacityMah && value <= 0.0 {
-            self.link_event(
-                LinkEvent::from(
-                    format!(
-                        "autopilot {name} = {value}: the pack's capacity is not set, the guarantee uses params [battery]"
-                    )
-                    .as_str(),
-                ),
-                false,
-            );
-        }
+        telemetry.on_pack_param(what, value);
+        (what == PackParam::CapacityMah && value <= 0.0).then(|| {
+            LinkEvent::from(
+                format!(
+                    "autopilot {name} = {value}: the pack's capacity is not set, the guarantee uses params [battery]"
+                )
+                .as_str(),
+            )
+        })
     }
 }

@@ -918,7 +918,7 @@ fn foreign_distance_sensor_raises_no_obstacle() {
             .any(|e| e.to_string().contains("obstacle"))
     );
     assert_eq!(v.telemetry.obstacle_m(s(3.0)), None);
-    assert_eq!(v.foreign_monitor_frames, 30);
+    assert_eq!(v.foreign_monitor_frames(), 30);
     // The autopilot's own rangefinder still counts.
     v.on_frame(s(4.0), &near);
     assert!(v.take_events().contains(&Event::ObstacleDetected));
@@ -1222,7 +1222,10 @@ fn stop_actions_cancels_the_running_action_and_nothing_is_resent() {
     // Asked again later (control handed back), the same action runs afresh.
     let out = v.request_actions(s(6.0), &[a("return_to_base")]);
     assert_eq!(commands(&out), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
-    assert_eq!(v.commanded_modes.last().map(|m| m.0), Some(FlightMode::Rtl));
+    assert_eq!(
+        v.commanded_modes().last().map(|m| m.0),
+        Some(FlightMode::Rtl)
+    );
 }
 
 #[test]
@@ -1838,7 +1841,7 @@ fn tracker_reports_only_from_the_onboard_link_when_asked() {
     v.on_frame(s(0.1), &from(1, 100, frame(nvf("tgt_det", 1.0))));
     v.on_frame(s(0.2), &frame(nvf("tgt_det", 1.0)));
     assert_eq!(v.telemetry.get("target_detected"), None);
-    assert_eq!(v.foreign_monitor_frames, 2);
+    assert_eq!(v.foreign_monitor_frames(), 2);
     v.on_monitor_frame(s(0.3), &from(1, 100, frame(nvf("tgt_det", 1.0))));
     assert_eq!(v.telemetry.get("target_detected"), Some(1.0));
     let near = frame(Msg::DISTANCE_SENSOR(DISTANCE_SENSOR_DATA {

@@ -266,7 +266,7 @@ pub fn observe(
         armed_for: vehicle.armed_for(now),
         mode_for: vehicle.mode_for(now),
         airborne: shell.mission.flown(),
-        commanded_modes: &vehicle.commanded_modes,
+        commanded_modes: vehicle.commanded_modes(),
     };
     let mut changed = false;
     match shell.operator.observe(now, &view) {

@@ -89,27 +89,31 @@ pub trait Decider {
     }
 }
 
-/// The real core is a decider as it is (fuzzing and the soak drive it without a wrapper).
-impl Decider for companion_core::decision::Core {
+/// The one decision core of every driver (fly, simulate, soak, fuzzing): it learns and starts
+/// afresh between flights.
+impl Decider for crate::decider::CoreDecider {
     fn step(&mut self, obs: &Observations) -> (Plan, DecisionRecord) {
-        companion_core::decision::Core::step(self, obs)
+        self.step_flown(obs)
     }
     fn actions(&self) -> &ActionCatalogue {
-        &self.model.actions
+        &self.model().actions
     }
     fn launch_verdict(&self, rec: &DecisionRecord) -> Result<(), LaunchRefusal> {
-        companion_core::launch::verdict(rec, &self.model)
+        companion_core::launch::verdict(rec, self.model())
+    }
+    fn new_flight(&mut self) {
+        crate::decider::CoreDecider::new_flight(self)
     }
     fn replace_mission(&mut self, spec: companion_core::guarantee::MissionSpec) -> bool {
-        companion_core::decision::Core::replace_mission(self, spec)
+        crate::decider::CoreDecider::replace_mission(self, spec)
     }
     fn replan_from(
         &mut self,
-        _whole: companion_core::guarantee::MissionSpec,
+        whole: companion_core::guarantee::MissionSpec,
         spliced: companion_core::guarantee::MissionSpec,
         flown: usize,
     ) -> bool {
-        companion_core::decision::Core::replan_from(self, spliced, flown)
+        crate::decider::CoreDecider::replan_from(self, whole, spliced, flown)
     }
 }
 

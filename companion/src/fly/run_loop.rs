@@ -388,7 +388,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             "no autopilot HEARTBEAT on {} within {:?} (--connect-timeout){}",
             self.args.connect,
             waited,
-            if self.vehicle.other_autopilot_heartbeats > 0 {
+            if self.vehicle.other_autopilot_heartbeats() > 0 {
                 "; other autopilots were heard, see --autopilot-sysid"
             } else {
                 ""

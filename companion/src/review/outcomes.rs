@@ -1,6 +1,6 @@
 //! What became of each vehicle command, in categories an operator reads at a glance. The result
 //! strings are those of `CommandRecord.result` (companion-link's `command::Outcome::label`,
-//! `vehicle/executor.rs`, `mission::MissionError::outcome`; simulate's `SIMULATED`). Only real failures count as failed: a step sent and still awaiting
+//! `vehicle/executor/`, `mission::MissionError::outcome`; simulate's `SIMULATED`). Only real failures count as failed: a step sent and still awaiting
 //! its answer, a mode already set, a step skipped because an earlier one failed or the operator
 //! took over are each their own category.
 

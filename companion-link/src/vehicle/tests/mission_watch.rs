@@ -209,7 +209,7 @@ fn the_route_step_uploads_nothing_and_waits_for_the_downloaded_mission() {
         "{recs:?}"
     );
     answer(&mut v, 0.1, &mission(20.0), false);
-    v.retry_failed_after = Duration::ZERO;
+    v.exec.retry_failed_after = Duration::ZERO;
     let out = v.request_actions(s(10.0), &[a("follow_trajectory")]);
     assert!(
         !out.iter().any(|m| matches!(m, Msg::MISSION_COUNT(_))),

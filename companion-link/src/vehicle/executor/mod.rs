@@ -1,9 +1,10 @@
 //! The command executor: primitive vehicle actions turned into protocol steps (modes, arm,
 //! commands, mission upload, repositions), one job at a time, and their records.
 
+mod steps;
+
 use super::*;
-use crate::actions::Flown;
-use crate::telemetry::LINK_READS;
+use std::collections::BTreeMap;
 
 /// What a command ticket is for.
 #[derive(Debug, Clone)]
@@ -23,10 +24,97 @@ pub(super) enum Advance {
     Wait,
 }
 
-impl Vehicle {
+/// The executor's own state: the job running and the last one, the commands in flight and
+/// what each is for, the records not taken yet, and what the running steps wait on.
+pub(super) struct Executor {
+    purposes: BTreeMap<u64, Purpose>,
+    job: Option<Job>,
+    last: Option<(JobKey, JobStatus)>,
+    /// Command records since the last `take_records`.
+    records: Vec<CommandRecord>,
+    /// Retry a failed action asked for again no sooner than this.
+    pub(super) retry_failed_after: Duration,
+    /// Modes this companion commanded (or made the autopilot enter, as a reposition enters
+    /// GUIDED), with when; the newest last, a few kept. The operator gate tells its own mode
+    /// changes from a pilot's with them.
+    commanded_modes: Vec<(FlightMode, Duration)>,
+    /// The hand-off job's mode, once [`Vehicle::hand_off`] issued it.
+    handoff: Option<FlightMode>,
+    /// Where the running zone reposition goes.
+    zone_target: Option<(i32, i32)>,
+    /// When the autopilot last accepted a mode step of a job (its COMMAND_ACK): only a
+    /// heartbeat heard after that can show the new mode (one sent before the autopilot handled
+    /// the command may arrive after we sent it, still showing the old mode).
+    mode_acked_at: Option<Duration>,
+    /// PX4 only: after an upload, (item count, give-up time) until MISSION_CURRENT reports the
+    /// new mission's total. PX4's navigator loads an uploaded mission asynchronously; AUTO
+    /// requested before that flies the old (empty) one, "finishes" it at once and falls back to
+    /// Hold (seen on PX4 SITL with the mode switch 10 ms after the upload).
+    px4_mission_pending: Option<(u16, Duration)>,
+    /// PX4 only: give-up time for waiting out AUTO.TAKEOFF before another mode. PX4 ends a
+    /// take-off by switching itself to Hold; a mode requested in the take-off's last moments is
+    /// acknowledged and then overridden by that switch (seen on PX4 SITL: AUTO accepted at 8-9 m
+    /// of a 10 m take-off, then Hold, the mission never flown).
+    px4_takeoff_wait: Option<Duration>,
+}
+
+/// What the executor drives and reads of the rest of the vehicle, borrowed for one call
+/// ([`Vehicle::ports`]).
+pub(super) struct Ports<'a> {
+    pub(super) cfg: &'a VehicleConfig,
+    pub(super) flavor: Flavor,
+    pub(super) liveness: &'a Liveness,
+    pub(super) target: Option<(u8, u8)>,
+    pub(super) commands: &'a mut CommandClient,
+    pub(super) mission: &'a mut MissionClient,
+    pub(super) readiness: &'a mut Readiness,
+    pub(super) telemetry: &'a Telemetry,
+    pub(super) actions: &'a ActionTable,
+    pub(super) route: Option<&'a Route>,
+    pub(super) events: &'a mut Vec<Event>,
+    pub(super) link_events: &'a mut Vec<LinkEvent>,
+    pub(super) launches: &'a mut Launches,
+    pub(super) watch: &'a mut MissionWatch,
+    pub(super) mode_heard_at: Option<Duration>,
+}
+
+impl Ports<'_> {
+    /// A link event for the record; a significant one also triggers a decision cycle.
+    pub(super) fn link_event(&mut self, e: LinkEvent, significant: bool) {
+        if significant {
+            self.events.push(Event::from(e.clone()));
+        }
+        self.link_events.push(e);
+    }
+}
+
+impl Default for Executor {
+    fn default() -> Self {
+        Self {
+            purposes: BTreeMap::new(),
+            job: None,
+            last: None,
+            records: Vec::new(),
+            retry_failed_after: Duration::from_secs(5),
+            commanded_modes: Vec::new(),
+            handoff: None,
+            zone_target: None,
+            mode_acked_at: None,
+            px4_mission_pending: None,
+            px4_takeoff_wait: None,
+        }
+    }
+}
+
+impl Executor {
     /// The decision core asked for these vehicle actions.
     /// The same action already running or done is not restarted; a different one replaces it.
-    pub fn request_actions(&mut self, now: Duration, actions: &[Flown]) -> Vec<Msg> {
+    pub(super) fn request_actions(
+        &mut self,
+        io: &mut Ports<'_>,
+        now: Duration,
+        actions: &[Flown],
+    ) -> Vec<Msg> {
         if actions.is_empty() {
             return Vec::new();
         }
@@ -44,10 +132,10 @@ impl Vehicle {
                 JobStatus::Failed(_) => {}
             }
         }
-        if !self.liveness.alive() || self.target.is_none() {
+        if !io.liveness.alive() || io.target.is_none() {
             for &a in actions {
                 self.records.push(CommandRecord {
-                    action: self.actions.name(a).to_string(),
+                    action: io.actions.name(a).to_string(),
                     command: "-".into(),
                     result: CommandOutcome::NotSent("no link".into()),
                     attempts: 0,
@@ -61,8 +149,8 @@ impl Vehicle {
         let mut steps = VecDeque::new();
         let mut unmapped = false;
         for &a in actions {
-            let name = self.actions.name(a).to_string();
-            match self.actions.steps(a) {
+            let name = io.actions.name(a).to_string();
+            match io.actions.steps(a) {
                 Some(s) => steps.extend(s.iter().cloned().map(|st| (name.clone(), st))),
                 None => {
                     unmapped = true;
@@ -104,14 +192,14 @@ impl Vehicle {
             mode_from: None,
         });
         self.last = Some((key, JobStatus::Running));
-        self.advance_job(now)
+        self.advance_job(io, now)
     }
 
     /// Latency of everything sent since the last call: from the message (or decision trigger)
     /// that caused it, `trigger_at`, to the moment it was handed to the transport, `sent_at`.
     /// The shell calls this right after sending, so the measurement includes decision and
     /// encoding time, which the injected clock of the state machines cannot see.
-    pub fn stamp_latency(&mut self, trigger_at: Duration, sent_at: Duration) {
+    pub(super) fn stamp_latency(&mut self, trigger_at: Duration, sent_at: Duration) {
         let ms = sent_at.saturating_sub(trigger_at).as_secs_f64() * 1000.0;
         for r in self
             .records
@@ -157,9 +245,9 @@ impl Vehicle {
     }
 
     /// Run steps until one has to wait.
-    pub(super) fn advance_job(&mut self, now: Duration) -> Vec<Msg> {
+    pub(super) fn advance_job(&mut self, io: &mut Ports<'_>, now: Duration) -> Vec<Msg> {
         let mut out = Vec::new();
-        let keep_mission = self.flies_autopilot_mission();
+        let keep_mission = io.watch.flies();
         loop {
             let Some(job) = &mut self.job else { return out };
             let Some((action, step)) = job.steps.front().cloned() else {
@@ -172,33 +260,35 @@ impl Vehicle {
                 (Running::Command(_) | Running::Mission, _) => Advance::Wait,
                 (Running::Arrive { target, since }, _) => {
                     let (target, since) = (*target, *since);
-                    self.arrive_step(now, action, target, since)
+                    self.arrive_step(io, now, action, target, since)
                 }
                 (Running::ConfirmMode { since }, Step::Mode(mode)) => {
                     let (from, since) = (job.mode_from, *since);
-                    self.confirm_mode_step(now, action, *mode, from, since)
+                    self.confirm_mode_step(io, now, action, *mode, from, since)
                 }
                 (Running::ConfirmMode { .. }, _) => {
                     job.running = Running::Idle;
                     Advance::Again
                 }
-                (Running::Idle, Step::Mode(mode)) => self.mode_step(now, action, *mode, &mut out),
+                (Running::Idle, Step::Mode(mode)) => {
+                    self.mode_step(io, now, action, *mode, &mut out)
+                }
                 (Running::Idle | Running::WaitReady { .. }, Step::Arm) => {
-                    self.arm_step(now, action, &mut out)
+                    self.arm_step(io, now, action, &mut out)
                 }
                 (Running::Idle, Step::Command { command, params }) => {
-                    self.command_step(now, action, *command, *params, &mut out)
+                    self.command_step(io, now, action, *command, *params, &mut out)
                 }
                 (Running::Idle, Step::UploadMission) if keep_mission => {
-                    self.keep_autopilot_mission_step(now, action)
+                    self.keep_autopilot_mission_step(io, now, action)
                 }
                 (Running::Idle, Step::UploadMission) => {
-                    self.upload_mission_step(now, action, &mut out)
+                    self.upload_mission_step(io, now, action, &mut out)
                 }
                 (Running::Idle, Step::Reposition(o)) => {
-                    self.reposition_step(now, action, *o, &mut out)
+                    self.reposition_step(io, now, action, *o, &mut out)
                 }
-                (Running::Idle, Step::GotoZone) => self.goto_zone_step(now, action, &mut out),
+                (Running::Idle, Step::GotoZone) => self.goto_zone_step(io, now, action, &mut out),
                 (Running::WaitReady { .. }, _) => {
                     job.running = Running::Idle;
                     Advance::Again
@@ -213,13 +303,14 @@ impl Vehicle {
     /// A step's command: issued (the next step waits for its answer), or waiting to be.
     pub(super) fn issued(
         &mut self,
+        io: &mut Ports<'_>,
         now: Duration,
         action: &str,
         name: String,
         spec: CommandSpec,
         out: &mut Vec<Msg>,
     ) -> Advance {
-        if self.issue(now, action, name, spec, out) {
+        if self.issue(io, now, action, name, spec, out) {
             Advance::Again
         } else {
             Advance::Wait
@@ -238,392 +329,10 @@ impl Vehicle {
         });
     }
 
-    /// The zone reposition was accepted: done when within the zone radius, or after the
-    /// timeout (landing where the vehicle is).
-    pub(super) fn arrive_step(
-        &mut self,
-        now: Duration,
-        action: String,
-        target: (i32, i32),
-        since: Duration,
-    ) -> Advance {
-        let off = self.telemetry.position.map(|p| {
-            let (n, e) = crate::telemetry::offset_m(target, (p.lat_e7, p.lon_e7));
-            n.hypot(e)
-        });
-        let result = match off {
-            Some(d) if d <= self.cfg.zone_radius_m => format!("ARRIVED ({d:.1} m from the zone)"),
-            _ if now.saturating_sub(since) >= self.cfg.zone_arrive_timeout => format!(
-                "TIMEOUT (not within {:.1} m of the zone after {:.0} s{}; landing here)",
-                self.cfg.zone_radius_m,
-                self.cfg.zone_arrive_timeout.as_secs_f64(),
-                off.map(|d| format!(", {d:.1} m away")).unwrap_or_default()
-            ),
-            _ => return Advance::Wait,
-        };
-        self.record_step(action, "ARRIVE (zone)".into(), result);
-        self.zone_target = None;
-        self.step_done();
-        Advance::Again
-    }
-
-    pub(super) fn mode_step(
-        &mut self,
-        now: Duration,
-        action: String,
-        mode: FlightMode,
-        out: &mut Vec<Msg>,
-    ) -> Advance {
-        // Landing and return never wait.
-        let shown = self.telemetry.mode.and_then(ReportedMode::known);
-        if self.flavor == Flavor::Px4
-            && !matches!(
-                mode,
-                FlightMode::Land | FlightMode::Rtl | FlightMode::SmartRtl | FlightMode::Takeoff
-            )
-            && shown == Some(FlightMode::Takeoff)
-        {
-            let until = *self
-                .px4_takeoff_wait
-                .get_or_insert(now + Duration::from_secs(30));
-            if now < until {
-                return Advance::Wait; // the heartbeat that shows Hold moves on
-            }
-        }
-        self.px4_takeoff_wait = None;
-        if mode == FlightMode::Auto
-            && let Some((_, until)) = self.px4_mission_pending
-        {
-            if now < until {
-                return Advance::Wait; // the next MISSION_CURRENT or tick moves on
-            }
-            self.px4_mission_pending = None;
-        }
-        // A different mode commanded since the last heartbeat: the reported mode is
-        // stale (LAND reported, GUIDED just accepted for a sidestep).
-        let stale = self
-            .commanded_modes
-            .iter()
-            .rev()
-            .find(|(_, at)| self.mode_heard_at.is_none_or(|h| *at >= h))
-            .is_some_and(|(m, _)| *m != mode);
-        self.note_mode(now, mode);
-        if modes::is_in_mode(self.flavor, self.telemetry.custom_mode, mode)
-            && self.telemetry.mode.is_some()
-            && !stale
-        {
-            self.record_step(action, format!("SET_MODE {mode}"), "ALREADY".into());
-            self.step_done();
-            return Advance::Again;
-        }
-        match modes::set_mode_command(self.flavor, mode) {
-            Some(spec) => {
-                let shown = self
-                    .telemetry
-                    .mode
-                    .is_some()
-                    .then_some(self.telemetry.custom_mode);
-                if let Some(j) = &mut self.job {
-                    if j.mode_attempts == 0 {
-                        j.mode_from = shown;
-                    }
-                    j.mode_attempts += 1;
-                }
-                self.issued(now, &action, format!("SET_MODE {mode}"), spec, out)
-            }
-            None => {
-                let result = format!("FAILED (no {mode} mode for {})", self.flavor.name());
-                self.record_step(action, format!("SET_MODE {mode}"), result);
-                self.job_failed(now);
-                Advance::Again
-            }
-        }
-    }
-
-    /// PX4 accepted SET_MODE `name`: PX4's ACK says the user's intention changed, not the mode
-    /// (it can still refuse to run it, e.g. a mission not yet valid). Done when a HEARTBEAT newer
-    /// than the acceptance shows the mode. After `mode_confirm` without it: sent again while the
-    /// vehicle still shows the mode it was in (the command had no effect), at most
-    /// `max_mode_attempts` in all; a third mode is someone else's and is never overridden.
-    pub(super) fn confirm_mode_step(
-        &mut self,
-        now: Duration,
-        action: String,
-        name: FlightMode,
-        from: Option<u32>,
-        since: Duration,
-    ) -> Advance {
-        let heard_since = self.mode_heard_at.is_some_and(|h| h > since);
-        if heard_since && modes::is_in_mode(self.flavor, self.telemetry.custom_mode, name) {
-            self.step_done();
-            return Advance::Again;
-        }
-        if now.saturating_sub(since) < self.cfg.mode_confirm {
-            return Advance::Wait;
-        }
-        let shown = self
-            .telemetry
-            .mode
-            .map_or_else(|| "?".into(), |m| m.to_string());
-        let unchanged = heard_since && from == Some(self.telemetry.custom_mode);
-        let attempts = self.job.as_ref().map_or(0, |j| j.mode_attempts);
-        let waited = self.cfg.mode_confirm.as_secs_f64();
-        if unchanged && attempts < self.cfg.max_mode_attempts {
-            self.record_step(
-                action,
-                format!("SET_MODE {name}"),
-                format!(
-                    "NOT_CONFIRMED (still {shown} {waited:.0} s after ACCEPTED; sending again)"
-                ),
-            );
-            if let Some(j) = &mut self.job {
-                j.running = Running::Idle;
-            }
-            return Advance::Again;
-        }
-        let why = if !heard_since {
-            format!("accepted, but no HEARTBEAT in {waited:.0} s to show it")
-        } else if unchanged {
-            format!("accepted {attempts} times, but the vehicle stays in {shown}")
-        } else {
-            format!("accepted, but the vehicle went to {shown}, not {name}: not overriding")
-        };
-        self.record_step(
-            action,
-            format!("SET_MODE {name}"),
-            format!("FAILED ({why})"),
-        );
-        self.job_failed(now);
-        Advance::Again
-    }
-
-    pub(super) fn arm_step(
-        &mut self,
-        now: Duration,
-        action: String,
-        out: &mut Vec<Msg>,
-    ) -> Advance {
-        if self.telemetry.armed {
-            self.record_step(action, "ARM".into(), "ALREADY".into());
-            self.step_done();
-            return Advance::Again;
-        }
-        match self.readiness.check() {
-            Ok(()) => {
-                // Arm only in the mode this companion set last (ArduCopter may leave GUIDED
-                // for its RC mode switch right after accepting it): wait for a heartbeat
-                // newer than the mode command; if it shows another mode, this take-off
-                // fails and the next request sets the mode again.
-                if self.flavor == Flavor::ArduPilot
-                    && let Some((want, at)) = self.commanded_modes.last().copied()
-                    && !modes::is_in_mode(self.flavor, self.telemetry.custom_mode, want)
-                {
-                    // The mode is shown by a heartbeat sent after the autopilot handled the
-                    // command: on an ordered link, one heard after its ACK (a heartbeat heard
-                    // between our send and the ACK may predate the change).
-                    let shown_after = self.mode_acked_at.filter(|&a| a >= at).unwrap_or(at);
-                    if self.mode_heard_at.is_none_or(|h| h <= shown_after) {
-                        return Advance::Wait;
-                    }
-                    let now_mode = self
-                        .telemetry
-                        .mode
-                        .map_or_else(|| "?".into(), |m| m.to_string());
-                    self.record_step(
-                        action,
-                        "ARM".into(),
-                        format!(
-                            "FAILED (vehicle in {now_mode}, not {want} as commanded: not arming)"
-                        ),
-                    );
-                    self.job_failed(now);
-                    return Advance::Again;
-                }
-                let spec = CommandSpec::long(
-                    MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-                    [1., 0., 0., 0., 0., 0., 0.],
-                )
-                .once();
-                if let Some(j) = &mut self.job {
-                    j.arm_attempts += 1;
-                }
-                self.issued(now, &action, "ARM".into(), spec, out)
-            }
-            Err(why) => {
-                let Some(job) = self.job.as_mut() else {
-                    return Advance::Wait;
-                };
-                let since = match job.running {
-                    Running::WaitReady { since } => since,
-                    _ => {
-                        job.running = Running::WaitReady { since: now };
-                        self.record_step(
-                            action.clone(),
-                            "ARM".into(),
-                            format!("WAITING_READY ({})", why.join("; ")),
-                        );
-                        now
-                    }
-                };
-                if now.saturating_sub(since) >= self.cfg.arm_wait {
-                    self.record_step(
-                        action,
-                        "ARM".into(),
-                        format!("NOT_READY ({})", why.join("; ")),
-                    );
-                    self.job_failed(now);
-                }
-                Advance::Wait
-            }
-        }
-    }
-
-    pub(super) fn command_step(
-        &mut self,
-        now: Duration,
-        action: String,
-        command: MavCmd,
-        params: [f32; 7],
-        out: &mut Vec<Msg>,
-    ) -> Advance {
-        // Before take-off the vehicle stands at home: its AMSL altitude serves
-        // until HOME_POSITION arrives.
-        let home_amsl_m = self.telemetry.home.map(|h| h.2).or_else(|| {
-            self.telemetry
-                .position
-                .filter(|_| !self.telemetry.armed)
-                .map(|p| p.alt_amsl_m)
-        });
-        let Some(params) = modes::command_params(self.flavor, command, params, home_amsl_m) else {
-            self.record_step(
-                action,
-                crate::mavlink_name(&command),
-                "FAILED (no home position yet)".into(),
-            );
-            self.job_failed(now);
-            return Advance::Again;
-        };
-        if command == MavCmd::MAV_CMD_NAV_TAKEOFF && self.flavor == Flavor::Px4 {
-            // PX4 flies a take-off command in its TAKEOFF mode.
-            self.note_mode(now, FlightMode::Takeoff);
-        }
-        let spec = CommandSpec::long(command, params);
-        self.issued(now, &action, crate::mavlink_name(&command), spec, out)
-    }
-
-    pub(super) fn upload_mission_step(
-        &mut self,
-        now: Duration,
-        action: String,
-        out: &mut Vec<Msg>,
-    ) -> Advance {
-        let home = self
-            .telemetry
-            .home
-            .map(|h| (h.0, h.1))
-            .or_else(|| self.telemetry.position.map(|p| (p.lat_e7, p.lon_e7)));
-        let (Some(route), Some(home)) = (&self.route, home) else {
-            let why = if self.route.is_none() {
-                "no route loaded"
-            } else {
-                "no home position yet"
-            };
-            self.record_step(action, "MISSION_UPLOAD".into(), format!("FAILED ({why})"));
-            self.job_failed(now);
-            return Advance::Again;
-        };
-        let items = route.mission_items(self.flavor, home);
-        match self.mission.upload(now, items) {
-            Ok(msgs) => {
-                self.step_sent(
-                    (msgs, out),
-                    Running::Mission,
-                    action,
-                    "MISSION_UPLOAD".into(),
-                );
-                Advance::Wait
-            }
-            Err(_) => Advance::Wait, // another transfer still running: wait for it
-        }
-    }
-
-    pub(super) fn reposition_step(
-        &mut self,
-        now: Duration,
-        action: String,
-        o: Offset,
-        out: &mut Vec<Msg>,
-    ) -> Advance {
-        match self.reposition_spec(o) {
-            Some(spec) => {
-                self.note_reposition(now);
-                self.issued(now, &action, "MAV_CMD_DO_REPOSITION".into(), spec, out)
-            }
-            None => {
-                self.record_step(
-                    action,
-                    "MAV_CMD_DO_REPOSITION".into(),
-                    "FAILED (no position/heading yet)".into(),
-                );
-                self.job_failed(now);
-                Advance::Again
-            }
-        }
-    }
-
-    pub(super) fn goto_zone_step(
-        &mut self,
-        now: Duration,
-        action: String,
-        out: &mut Vec<Msg>,
-    ) -> Advance {
-        let zone = (
-            self.telemetry.get(LINK_READS[0]),
-            self.telemetry.get(LINK_READS[1]),
-            self.telemetry.position,
-        );
-        match zone {
-            (Some(n), Some(e), Some(p)) => {
-                let (x, y) = displace((p.lat_e7, p.lon_e7), n, e);
-                let (frame, z) = modes::reposition_frame_alt(
-                    self.flavor,
-                    p.alt_rel_m,
-                    p.alt_amsl_m,
-                    p.alt_rel_m,
-                );
-                let spec = CommandSpec::int(
-                    MavCmd::MAV_CMD_DO_REPOSITION,
-                    frame,
-                    [-1.0, 1.0, 0.0, f32::NAN],
-                    x,
-                    y,
-                    z,
-                );
-                self.note_reposition(now);
-                self.zone_target = Some((x, y));
-                self.issued(
-                    now,
-                    &action,
-                    "MAV_CMD_DO_REPOSITION (zone)".into(),
-                    spec,
-                    out,
-                )
-            }
-            _ => {
-                self.record_step(
-                    action,
-                    "MAV_CMD_DO_REPOSITION (zone)".into(),
-                    "SKIPPED (no zone reported; landing here)".into(),
-                );
-                self.step_done();
-                Advance::Again
-            }
-        }
-    }
-
     /// Submit a step's command; false when it has to wait (in flight or sent).
     pub(super) fn issue(
         &mut self,
+        io: &mut Ports<'_>,
         now: Duration,
         action: &str,
         name: String,
@@ -631,10 +340,10 @@ impl Vehicle {
         out: &mut Vec<Msg>,
     ) -> bool {
         let launch = LaunchCommand::of(&spec).map(|c| (c, spec.command));
-        match self.commands.submit(now, spec) {
+        match io.commands.submit(now, spec) {
             Ok((ticket, msgs)) => {
                 if let Some(l) = launch {
-                    self.launch_sent(now, ticket, l);
+                    io.launches.sent(now, ticket, l);
                 }
                 self.step_sent(
                     (msgs, out),
@@ -678,30 +387,12 @@ impl Vehicle {
         });
     }
 
-    pub(super) fn reposition_spec(&self, o: Offset) -> Option<CommandSpec> {
-        let p = self.telemetry.position?;
-        let h = p.heading_deg?.to_radians();
-        let north = o.forward_m * h.cos() - o.right_m * h.sin();
-        let east = o.forward_m * h.sin() + o.right_m * h.cos();
-        let (x, y) = displace((p.lat_e7, p.lon_e7), north, east);
-        let (frame, z) = modes::reposition_frame_alt(
-            self.flavor,
-            p.alt_rel_m + o.up_m,
-            p.alt_amsl_m,
-            p.alt_rel_m,
-        );
-        // param1 -1: default speed; param2 1: MAV_DO_REPOSITION_FLAGS_CHANGE_MODE; param4 NaN: keep yaw.
-        Some(CommandSpec::int(
-            MavCmd::MAV_CMD_DO_REPOSITION,
-            frame,
-            [-1.0, 1.0, 0.0, f32::NAN],
-            x,
-            y,
-            z,
-        ))
-    }
-
-    pub(super) fn on_command_events(&mut self, now: Duration, evs: Vec<CommandEvent>) -> Vec<Msg> {
+    pub(super) fn on_command_events(
+        &mut self,
+        io: &mut Ports<'_>,
+        now: Duration,
+        evs: Vec<CommandEvent>,
+    ) -> Vec<Msg> {
         let mut out = Vec::new();
         for ev in evs {
             let CommandEvent::Finished {
@@ -714,13 +405,13 @@ impl Vehicle {
             else {
                 continue;
             };
-            self.launch_finished(ticket, &outcome);
+            io.launches.finished(ticket, &outcome);
             match self.purposes.remove(&ticket) {
                 Some(Purpose::Stream(id)) => {
                     let name = <Msg as mavlink::Message>::default_message_from_id(id)
                         .map(|m| mavlink::Message::message_name(&m))
                         .unwrap_or("?");
-                    self.link_event(
+                    io.link_event(
                         LinkEvent::Stream {
                             name: name.to_string(),
                             outcome: outcome.label(),
@@ -740,7 +431,7 @@ impl Vehicle {
                         attempts,
                         latency_ms,
                     });
-                    self.events.push(Event::Command {
+                    io.events.push(Event::Command {
                         action: action.clone(),
                         outcome: outcome.label(),
                     });
@@ -749,7 +440,7 @@ impl Vehicle {
                     if !is_current {
                         continue;
                     }
-                    let px4 = self.flavor == Flavor::Px4;
+                    let px4 = io.flavor == Flavor::Px4;
                     match outcome {
                         Outcome::Acked => match (&mut self.job, self.zone_target) {
                             (Some(j), Some(target))
@@ -775,11 +466,11 @@ impl Vehicle {
                             if command == MavCmd::MAV_CMD_COMPONENT_ARM_DISARM =>
                         {
                             // Not ready after all: wait for a fresh ready report, never resend blindly.
-                            self.readiness.invalidate(now);
+                            io.readiness.invalidate(now);
                             let attempts_used =
                                 self.job.as_ref().map(|j| j.arm_attempts).unwrap_or(0);
                             if matches!(reason, FailReason::Cancelled(_))
-                                || attempts_used >= self.cfg.max_arm_attempts
+                                || attempts_used >= io.cfg.max_arm_attempts
                             {
                                 self.job_failed(now);
                             } else if let Some(j) = &mut self.job {
@@ -792,11 +483,16 @@ impl Vehicle {
                 None => {}
             }
         }
-        out.extend(self.advance_job(now));
+        out.extend(self.advance_job(io, now));
         out
     }
 
-    pub(super) fn on_mission_events(&mut self, now: Duration, evs: Vec<MissionEvent>) -> Vec<Msg> {
+    pub(super) fn on_mission_events(
+        &mut self,
+        io: &mut Ports<'_>,
+        now: Duration,
+        evs: Vec<MissionEvent>,
+    ) -> Vec<Msg> {
         for ev in evs {
             let action = self
                 .job
@@ -809,12 +505,12 @@ impl Vehicle {
                 MissionEvent::Done {
                     op: MissionOp::Download,
                     items,
-                } => self.watch_downloaded(Some(items), ""),
+                } => io.watch_downloaded(Some(items), ""),
                 MissionEvent::Failed {
                     op: MissionOp::Download,
                     error,
-                } => self.watch_downloaded(None, &error.outcome().to_string()),
-                MissionEvent::Uploaded { count } => self.link_event(
+                } => io.watch_downloaded(None, &error.outcome().to_string()),
+                MissionEvent::Uploaded { count } => io.link_event(
                     LinkEvent::MissionUploaded {
                         items: count as usize,
                     },
@@ -831,8 +527,8 @@ impl Vehicle {
                         attempts: 1,
                         latency_ms: None,
                     });
-                    self.watch_uploaded(&items);
-                    if self.flavor == Flavor::Px4 {
+                    io.watch.uploaded(&items);
+                    if io.flavor == Flavor::Px4 {
                         self.px4_mission_pending =
                             Some((items.len() as u16, now + Duration::from_secs(5)));
                     }
@@ -849,7 +545,7 @@ impl Vehicle {
                         attempts: 1,
                         latency_ms: None,
                     });
-                    self.events.push(Event::Command {
+                    io.events.push(Event::Command {
                         action: "mission".into(),
                         outcome: CommandOutcome::Failed(None),
                     });
@@ -859,16 +555,16 @@ impl Vehicle {
                 }
             }
         }
-        self.advance_job(now)
+        self.advance_job(io, now)
     }
 
     /// Whether an action is being executed (for tests and the log).
-    pub fn busy(&self) -> bool {
+    pub(super) fn busy(&self) -> bool {
         self.job.is_some()
     }
 
     /// `action` is being flown or was flown to the end (asking for it again does nothing).
-    pub fn settled(&self, action: Flown) -> bool {
+    pub(super) fn settled(&self, action: Flown) -> bool {
         let only = std::slice::from_ref(&action);
         matches!(&self.job, Some(j) if j.key.is(only))
             || matches!(&self.last, Some((k, JobStatus::Done | JobStatus::Running)) if k.is(only))
@@ -888,18 +584,18 @@ impl Vehicle {
     }
 
     /// When the last action failed (its key and the time), if it did and nothing ran since.
-    pub fn failed_action(&self) -> Option<(String, Duration)> {
+    pub(super) fn failed_action(&self, actions: &ActionTable) -> Option<(String, Duration)> {
         match &self.last {
-            Some((k, JobStatus::Failed(at))) => Some((self.job_name(k), *at)),
+            Some((k, JobStatus::Failed(at))) => Some((self.job_name(actions, k), *at)),
             _ => None,
         }
     }
 
     /// The name a job goes by (`take_off`, `a+b` for several entries, `handoff:RTL`).
-    fn job_name(&self, key: &JobKey) -> String {
+    fn job_name(&self, actions: &ActionTable, key: &JobKey) -> String {
         match key {
             JobKey::Request(r) => {
-                let names: Vec<&str> = r.iter().map(|&f| self.actions.name(f)).collect();
+                let names: Vec<&str> = r.iter().map(|&f| actions.name(f)).collect();
                 names.join("+")
             }
             JobKey::Handoff(mode) => format!("handoff:{mode}"),
@@ -909,11 +605,16 @@ impl Vehicle {
     /// The companion stops: whatever it was doing ends now (recorded CANCELLED) and the vehicle
     /// is put in `mode` (`LOITER`, `RTL`, `LAND`) for the autopilot to fly on its own. The
     /// step is acknowledged (or fails) like any other; [`Vehicle::handoff_status`] tells.
-    pub fn hand_off(&mut self, now: Duration, mode: FlightMode) -> Vec<Msg> {
-        self.stop_actions(now, "companion stopping");
+    pub(super) fn hand_off(
+        &mut self,
+        io: &mut Ports<'_>,
+        now: Duration,
+        mode: FlightMode,
+    ) -> Vec<Msg> {
+        self.stop_actions(io, now, "companion stopping");
         let key = JobKey::Handoff(mode);
         self.job = Some(Job {
-            steps: VecDeque::from([(self.job_name(&key), Step::Mode(mode))]),
+            steps: VecDeque::from([(self.job_name(io.actions, &key), Step::Mode(mode))]),
             key: key.clone(),
             running: Running::Idle,
             arm_attempts: 0,
@@ -922,12 +623,12 @@ impl Vehicle {
         });
         self.last = Some((key, JobStatus::Running));
         self.handoff = Some(mode);
-        self.advance_job(now)
+        self.advance_job(io, now)
     }
 
     /// The hand-off's outcome: None while it runs (or none was issued), Some(true) when the
     /// autopilot accepted the mode, Some(false) when the step failed.
-    pub fn handoff_status(&self) -> Option<bool> {
+    pub(super) fn handoff_status(&self) -> Option<bool> {
         let ours = JobKey::Handoff(self.handoff?);
         match &self.last {
             Some((k, JobStatus::Done)) if *k == ours => Some(true),
@@ -939,19 +640,19 @@ impl Vehicle {
     /// Stop commanding motion (the pilot took over, or the flight is over): the running action
     /// and its commands in flight end now (recorded CANCELLED), nothing of them is resent, and
     /// any action may be asked for afresh later. Stream requests go on.
-    pub fn stop_actions(&mut self, now: Duration, why: &str) {
+    pub(super) fn stop_actions(&mut self, io: &mut Ports<'_>, now: Duration, why: &str) {
         let step_tickets: Vec<u64> = self
             .purposes
             .iter()
             .filter(|(_, p)| matches!(p, Purpose::Step { .. }))
             .map(|(t, _)| *t)
             .collect();
-        let evs = self
+        let evs = io
             .commands
             .cancel_tickets(now, why, |t| step_tickets.contains(&t));
         let job = self.job.take();
         // With the job gone, the cancelled commands are only recorded.
-        let _ = self.on_command_events(now, evs);
+        let _ = self.on_command_events(io, now, evs);
         if let Some(job) = job {
             let running = matches!(job.running, Running::Command(_));
             for (action, step) in job.steps.into_iter().skip(usize::from(running)) {
@@ -964,11 +665,102 @@ impl Vehicle {
                 });
             }
         }
-        if self.mission.cancel(why).is_some() {
-            self.link_event(LinkEvent::MissionTransferCancelled(why.to_string()), false);
+        if io.mission.cancel(why).is_some() {
+            io.link_event(LinkEvent::MissionTransferCancelled(why.to_string()), false);
         }
         self.zone_target = None;
         self.last = None;
+    }
+
+    /// The stop: as [`Executor::stop_actions`], except the launch commands still waiting for
+    /// their answer (`awaiting`: ticket and command), which are kept (never resent).
+    pub(super) fn stop_keeping(
+        &mut self,
+        io: &mut Ports<'_>,
+        now: Duration,
+        why: &str,
+        awaiting: Vec<(u64, MavCmd)>,
+    ) {
+        let kept: Vec<_> = awaiting
+            .into_iter()
+            .filter_map(|(t, c)| self.purposes.remove(&t).map(|p| (t, c, p)))
+            .collect();
+        // `stop_actions` cancels the commands of the steps it knows of: not these.
+        self.stop_actions(io, now, why);
+        for (ticket, command, purpose) in kept {
+            self.purposes.insert(ticket, purpose);
+            io.commands.no_resend(command);
+        }
+    }
+
+    /// The link is gone (lost, or the autopilot rebooted): the running job's steps end now,
+    /// recorded CANCELLED, and no command in flight is answered any more.
+    pub(super) fn drop_job(&mut self, now: Duration, why: &str) {
+        if let Some(job) = self.job.take() {
+            for (action, step) in job.steps {
+                self.records.push(CommandRecord {
+                    action,
+                    command: step_name(&step),
+                    result: CommandOutcome::Cancelled(Some(why.to_string())),
+                    attempts: 0,
+                    latency_ms: None,
+                });
+            }
+            self.last = Some((job.key, JobStatus::Failed(now)));
+        }
+    }
+
+    /// After [`Executor::drop_job`] and the streams: no ticket is waited on.
+    pub(super) fn forget_tickets(&mut self) {
+        self.purposes.clear();
+    }
+
+    /// A stream request went out as `ticket`.
+    pub(super) fn stream_requested(&mut self, ticket: u64, id: u32) {
+        self.purposes.insert(ticket, Purpose::Stream(id));
+    }
+
+    /// MISSION_CURRENT reported `total` items: PX4 has loaded the mission uploaded with that
+    /// many.
+    pub(super) fn mission_total_seen(&mut self, total: u16) {
+        if matches!(self.px4_mission_pending, Some((n, _)) if n == total) {
+            self.px4_mission_pending = None;
+        }
+    }
+
+    /// Take the command records since the last call.
+    pub(super) fn take_records(&mut self) -> Vec<CommandRecord> {
+        std::mem::take(&mut self.records)
+    }
+
+    /// Modes this companion commanded, with when, the newest last.
+    pub(super) fn commanded_modes(&self) -> &[(FlightMode, Duration)] {
+        &self.commanded_modes
+    }
+
+    /// The route's upload step when the autopilot's mission is flown: nothing to upload once it
+    /// is known; refused before (no start on a mission not yet read).
+    pub(super) fn keep_autopilot_mission_step(
+        &mut self,
+        io: &mut Ports<'_>,
+        now: Duration,
+        action: String,
+    ) -> Advance {
+        let (command, result) = if io.watch.known().is_some() {
+            self.step_done();
+            (
+                "MISSION_UPLOAD",
+                "SKIPPED (the autopilot's own mission is flown)",
+            )
+        } else {
+            self.job_failed(now);
+            (
+                "MISSION_UPLOAD",
+                "FAILED (the autopilot's mission is not downloaded yet)",
+            )
+        };
+        self.record_step(action, command.into(), result.into());
+        Advance::Again
     }
 }
 
