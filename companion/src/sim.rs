@@ -117,7 +117,7 @@ impl<'a> World<'a> {
             if fire {
                 let end = h.duration.map_or(u32::MAX, |d| self.step + d);
                 self.active[i] = Some((self.step, end));
-                events.push(Event::from(h.event.as_str()));
+                events.push(h.started());
             }
         }
         events

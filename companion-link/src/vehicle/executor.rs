@@ -225,13 +225,12 @@ impl Vehicle {
         }
     }
 
-    /// Record a step that did not need a command (`ALREADY`, `SKIPPED ...`).
-    /// A step settled without a command on the wire; `result` in the log's spelling.
-    pub(super) fn record_step(&mut self, action: String, command: String, result: String) {
+    /// Record a step settled without a command on the wire (`ALREADY`, `SKIPPED ...`).
+    pub(super) fn record_step(&mut self, action: String, command: String, result: CommandOutcome) {
         self.records.push(CommandRecord {
             action,
             command,
-            result: CommandOutcome::from(result.as_str()),
+            result,
             attempts: 0,
             latency_ms: None,
         });
@@ -251,13 +250,17 @@ impl Vehicle {
             n.hypot(e)
         });
         let result = match off {
-            Some(d) if d <= self.cfg.zone_radius_m => format!("ARRIVED ({d:.1} m from the zone)"),
-            _ if now.saturating_sub(since) >= self.cfg.zone_arrive_timeout => format!(
-                "TIMEOUT (not within {:.1} m of the zone after {:.0} s{}; landing here)",
-                self.cfg.zone_radius_m,
-                self.cfg.zone_arrive_timeout.as_secs_f64(),
-                off.map(|d| format!(", {d:.1} m away")).unwrap_or_default()
-            ),
+            Some(d) if d <= self.cfg.zone_radius_m => {
+                CommandOutcome::Arrived(format!("{d:.1} m from the zone"))
+            }
+            _ if now.saturating_sub(since) >= self.cfg.zone_arrive_timeout => {
+                CommandOutcome::Timeout(Some(format!(
+                    "not within {:.1} m of the zone after {:.0} s{}; landing here",
+                    self.cfg.zone_radius_m,
+                    self.cfg.zone_arrive_timeout.as_secs_f64(),
+                    off.map(|d| format!(", {d:.1} m away")).unwrap_or_default()
+                )))
+            }
             _ => return Advance::Wait,
         };
         self.record_step(action, "ARRIVE (zone)".into(), result);
@@ -311,7 +314,7 @@ impl Vehicle {
             && self.telemetry.mode.is_some()
             && !stale
         {
-            self.record_step(action, format!("SET_MODE {mode}"), "ALREADY".into());
+            self.record_step(action, format!("SET_MODE {mode}"), CommandOutcome::Already);
             self.step_done();
             return Advance::Again;
         }
@@ -331,7 +334,10 @@ impl Vehicle {
                 self.issued(now, &action, format!("SET_MODE {mode}"), spec, out)
             }
             None => {
-                let result = format!("FAILED (no {mode} mode for {})", self.flavor.name());
+                let result = CommandOutcome::Failed(Some(format!(
+                    "no {mode} mode for {}",
+                    self.flavor.name()
+                )));
                 self.record_step(action, format!("SET_MODE {mode}"), result);
                 self.job_failed(now);
                 Advance::Again
@@ -371,9 +377,9 @@ impl Vehicle {
             self.record_step(
                 action,
                 format!("SET_MODE {name}"),
-                format!(
-                    "NOT_CONFIRMED (still {shown} {waited:.0} s after ACCEPTED; sending again)"
-                ),
+                CommandOutcome::NotConfirmed(format!(
+                    "still {shown} {waited:.0} s after ACCEPTED; sending again"
+                )),
             );
             if let Some(j) = &mut self.job {
                 j.running = Running::Idle;
@@ -390,7 +396,7 @@ impl Vehicle {
         self.record_step(
             action,
             format!("SET_MODE {name}"),
-            format!("FAILED ({why})"),
+            CommandOutcome::Failed(Some(why)),
         );
         self.job_failed(now);
         Advance::Again
@@ -403,7 +409,7 @@ impl Vehicle {
         out: &mut Vec<Msg>,
     ) -> Advance {
         if self.telemetry.armed {
-            self.record_step(action, "ARM".into(), "ALREADY".into());
+            self.record_step(action, "ARM".into(), CommandOutcome::Already);
             self.step_done();
             return Advance::Again;
         }
@@ -431,9 +437,9 @@ impl Vehicle {
                     self.record_step(
                         action,
                         "ARM".into(),
-                        format!(
-                            "FAILED (vehicle in {now_mode}, not {want} as commanded: not arming)"
-                        ),
+                        CommandOutcome::Failed(Some(format!(
+                            "vehicle in {now_mode}, not {want} as commanded: not arming"
+                        ))),
                     );
                     self.job_failed(now);
                     return Advance::Again;
@@ -459,7 +465,7 @@ impl Vehicle {
                         self.record_step(
                             action.clone(),
                             "ARM".into(),
-                            format!("WAITING_READY ({})", why.join("; ")),
+                            CommandOutcome::WaitingReady(why.join("; ")),
                         );
                         now
                     }
@@ -468,7 +474,7 @@ impl Vehicle {
                     self.record_step(
                         action,
                         "ARM".into(),
-                        format!("NOT_READY ({})", why.join("; ")),
+                        CommandOutcome::NotReady(why.join("; ")),
                     );
                     self.job_failed(now);
                 }
@@ -497,7 +503,7 @@ impl Vehicle {
             self.record_step(
                 action,
                 crate::mavlink_name(&command),
-                "FAILED (no home position yet)".into(),
+                CommandOutcome::Failed(Some("no home position yet".into())),
             );
             self.job_failed(now);
             return Advance::Again;
@@ -527,7 +533,11 @@ impl Vehicle {
             } else {
                 "no home position yet"
             };
-            self.record_step(action, "MISSION_UPLOAD".into(), format!("FAILED ({why})"));
+            self.record_step(
+                action,
+                "MISSION_UPLOAD".into(),
+                CommandOutcome::Failed(Some(why.into())),
+            );
             self.job_failed(now);
             return Advance::Again;
         };
@@ -562,7 +572,7 @@ impl Vehicle {
                 self.record_step(
                     action,
                     "MAV_CMD_DO_REPOSITION".into(),
-                    "FAILED (no position/heading yet)".into(),
+                    CommandOutcome::Failed(Some("no position/heading yet".into())),
                 );
                 self.job_failed(now);
                 Advance::Again
@@ -612,7 +622,7 @@ impl Vehicle {
                 self.record_step(
                     action,
                     "MAV_CMD_DO_REPOSITION (zone)".into(),
-                    "SKIPPED (no zone reported; landing here)".into(),
+                    CommandOutcome::Skipped("no zone reported; landing here".into()),
                 );
                 self.step_done();
                 Advance::Again

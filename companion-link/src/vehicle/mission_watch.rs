@@ -144,7 +144,7 @@ impl Vehicle {
             // Tried again at the next poll (or the next MISSION_CURRENT change).
             self.watch.due = self.watch.has_id;
             self.link_event(
-                LinkEvent::from(format!("autopilot mission download failed: {why}").as_str()),
+                LinkEvent::Other(format!("autopilot mission download failed: {why}")),
                 false,
             );
             return;
@@ -173,7 +173,7 @@ impl Vehicle {
                 }
                 (_, u) => u,
             });
-            self.link_event(LinkEvent::from(what.as_str()), significant);
+            self.link_event(LinkEvent::Other(what), significant);
         }
     }
 
@@ -187,20 +187,14 @@ impl Vehicle {
     /// The route's upload step when the autopilot's mission is flown: nothing to upload once it
     /// is known; refused before (no start on a mission not yet read).
     pub(super) fn keep_autopilot_mission_step(&mut self, now: Duration, action: String) -> Advance {
-        let (command, result) = if self.watch.known.is_some() {
+        let result = if self.watch.known.is_some() {
             self.step_done();
-            (
-                "MISSION_UPLOAD",
-                "SKIPPED (the autopilot's own mission is flown)",
-            )
+            CommandOutcome::Skipped("the autopilot's own mission is flown".into())
         } else {
             self.job_failed(now);
-            (
-                "MISSION_UPLOAD",
-                "FAILED (the autopilot's mission is not downloaded yet)",
-            )
+            CommandOutcome::Failed(Some("the autopilot's mission is not downloaded yet".into()))
         };
-        self.record_step(action, command.into(), result.into());
+        self.record_step(action, "MISSION_UPLOAD".into(), result);
         Advance::Again
     }
 }

@@ -311,7 +311,7 @@ impl Vehicle {
     /// counted.
     pub fn take_link_events(&mut self) -> Vec<LinkEvent> {
         if let Some(note) = self.trust_note() {
-            self.link_events.push(LinkEvent::from(note));
+            self.link_events.push(LinkEvent::Other(note));
         }
         std::mem::take(&mut self.link_events)
     }
@@ -386,7 +386,7 @@ impl Vehicle {
                     false,
                 );
                 if let Some(note) = self.identity_note() {
-                    self.link_event(LinkEvent::from(note.as_str()), false);
+                    self.link_event(LinkEvent::Other(note), false);
                 }
             } else if choice == Choice::Other {
                 self.other_autopilot(sys, comp);

@@ -143,12 +143,9 @@ impl Vehicle {
         self.telemetry.on_pack_param(what, value);
         if what == PackParam::CapacityMah && value <= 0.0 {
             self.link_event(
-                LinkEvent::from(
-                    format!(
-                        "autopilot {name} = {value}: the pack's capacity is not set, the guarantee uses params [battery]"
-                    )
-                    .as_str(),
-                ),
+                LinkEvent::Other(format!(
+                    "autopilot {name} = {value}: the pack's capacity is not set, the guarantee uses params [battery]"
+                )),
                 false,
             );
         }
