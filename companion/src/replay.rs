@@ -681,7 +681,9 @@ mod tests {
     use super::*;
 
     fn s(v: &[&str]) -> Vec<Event> {
-        v.iter().map(|x| Event::from(*x)).collect()
+        v.iter()
+            .map(|x| crate::decision_log::migration::event(x))
+            .collect()
     }
 
     #[test]

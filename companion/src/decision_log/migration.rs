@@ -37,7 +37,24 @@ pub fn record_v1(value: &mut Value) {
     let Some(obj) = value.as_object_mut() else {
         return;
     };
-    migrate_list(obj.get_mut("events"), |s| to_value(&event(s)));
+    // A degradation's event is its sentence in the same record's resources (the arbitration
+    // says one when it starts): read by that, not by its shape, which free text shares.
+    let resource_list = |key: &str| -> Vec<String> {
+        let list = obj.get("resources").and_then(|r| r.get(key));
+        let items = list.and_then(Value::as_array).map(Vec::as_slice);
+        let text = items.unwrap_or_default().iter().filter_map(Value::as_str);
+        text.map(str::to_string).collect()
+    };
+    let (was_degraded, was_dropped) = (resource_list("degraded"), resource_list("dropped"));
+    migrate_list(obj.get_mut("events"), |s| {
+        if was_degraded.iter().any(|d| d == s) {
+            to_value(&Event::Degraded(degraded(s)))
+        } else if was_dropped.iter().any(|d| d == s) {
+            to_value(&Event::Dropped(dropped(s)))
+        } else {
+            to_value(&event(s))
+        }
+    });
     migrate_list(obj.get_mut("link_events"), |s| to_value(&link_event(s)));
     if let Some(commands) = obj.get_mut("commands").and_then(Value::as_array_mut) {
         for c in commands {
@@ -153,7 +170,7 @@ fn is_mdp_error(mdp: &str, error: &str) -> bool {
     word && known
 }
 
-/// A schema-1 `events` sentence.
+/// A schema-1 `events` sentence (a resource degradation's needs its record: [`record_v1`]).
 pub fn event(s: &str) -> Event {
     parse_exact(s, event_known, Event::Other)
 }
@@ -236,13 +253,7 @@ fn event_with_fields(s: &str) -> Option<Event> {
             state: state.to_string(),
         });
     }
-    // Last: a resource degradation's sentence (`APP FROM -> TO: WHY`, `APP VERSION: WHY`).
-    let d = degraded(s);
-    if !d.app.is_empty() {
-        return Some(Degraded(d));
-    }
-    let x = dropped(s);
-    (!x.app.is_empty()).then_some(Dropped(x))
+    None
 }
 
 /// A schema-1 `link_events` sentence.

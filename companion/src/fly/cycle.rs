@@ -371,7 +371,7 @@ mod tests {
             "{}",
             many[MAX_EVENTS]
         );
-        let mut few = vec![Event::from("a"), Event::from("b")];
+        let mut few = vec![Event::Other("a".into()), Event::Other("b".into())];
         coalesce_events(&mut few);
         assert_eq!(few, ["a", "b"]);
     }
