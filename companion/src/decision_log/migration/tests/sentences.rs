@@ -161,8 +161,9 @@ fn known_sentences_read_as_their_variants() {
             O::Cancelled(Some("pilot took control".into())),
         ),
         (
+            // Older logs' Debug text of a cancelled transfer: the cancel it was.
             "FAILED (Cancelled(\"link lost\"))",
-            O::Failed(Some("Cancelled(\"link lost\")".into())),
+            O::Cancelled(Some("link lost".into())),
         ),
         ("UNMAPPED (not in commands.toml)", O::Unmapped),
         (
@@ -367,7 +368,7 @@ fn a_schema_1_record_reads_as_its_typed_values() {
     );
     assert_eq!(
         r.vehicle["world_events_after"],
-        serde_json::json!([{"kind": "collision"}])
+        serde_json::json!([{"kind": "collision", "text": "collision"}])
     );
 }
 
