@@ -38,7 +38,7 @@ pub fn record_v1(value: &mut Value) {
         return;
     };
     // A degradation's event is its sentence in the same record's resources (the arbitration
-    // says one when it starts): read by that, not by its shape, which free text shares.
+    // says one when it starts), not any text of its shape (`performance drift: ...`).
     let resource_list = |key: &str| -> Vec<String> {
         let list = obj.get("resources").and_then(|r| r.get(key));
         let items = list.and_then(Value::as_array).map(Vec::as_slice);
@@ -46,11 +46,16 @@ pub fn record_v1(value: &mut Value) {
         text.map(str::to_string).collect()
     };
     let (was_degraded, was_dropped) = (resource_list("degraded"), resource_list("dropped"));
+    // A re-solve within the cycle can clear the resources the event was said for: the
+    // scheduler's own reason (`insufficient resources ...`) then tells it.
+    let scheduler =
+        |app: &str, reason: &str| !app.is_empty() && reason.starts_with("insufficient resources");
     migrate_list(obj.get_mut("events"), |s| {
-        if was_degraded.iter().any(|d| d == s) {
-            to_value(&Event::Degraded(degraded(s)))
-        } else if was_dropped.iter().any(|d| d == s) {
-            to_value(&Event::Dropped(dropped(s)))
+        let (d, x) = (degraded(s), dropped(s));
+        if was_degraded.iter().any(|w| w == s) || scheduler(&d.app, &d.reason) {
+            to_value(&Event::Degraded(d))
+        } else if was_dropped.iter().any(|w| w == s) || scheduler(&x.app, &x.reason) {
+            to_value(&Event::Dropped(x))
         } else {
             to_value(&event(s))
         }

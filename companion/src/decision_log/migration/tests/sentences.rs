@@ -318,7 +318,8 @@ fn known_sentences_read_as_their_variants() {
 fn a_schema_1_record_reads_as_its_typed_values() {
     let mut v: Value = serde_json::from_str(
         r#"{"cycle":3,"events":["target detected","command land TIMEOUT (no answer)","lidar failed",
-            "tracking V3 -> V1: insufficient resources","performance drift: x"],
+            "tracking V3 -> V1: insufficient resources","performance drift: x",
+            "tracking V2: insufficient resources (no tile); policy safety ranks tracking 5 of 5"],
             "link_events":["link lost","autopilot 1/1 (ArduPilot)"],
             "commands":[{"action":"land","command":"SET_MODE LAND","result":"FAILED (Cancelled(\"link lost\"))"}],
             "resources":{"degraded":["tracking V3 -> V1: insufficient resources"],"dropped":["odd text"]},
@@ -339,6 +340,13 @@ fn a_schema_1_record_reads_as_its_typed_values() {
             // The degradation the record's resources hold; free text of the same shape stays text.
             Event::Degraded(res_degraded()),
             Event::Other("performance drift: x".into()),
+            // Said by the scheduler though a re-solve cleared the record's `dropped`.
+            Event::Dropped(companion_core::record::Dropped {
+                app: "tracking".into(),
+                version: "V2".into(),
+                reason: "insufficient resources (no tile); policy safety ranks tracking 5 of 5"
+                    .into(),
+            }),
         ]
     );
     assert_eq!(
