@@ -23,6 +23,12 @@
 #       started_utc, git_revision, command
 #     (the header's `params` map, holding every params file's contents, is compared byte for byte);
 #   - the `--json` stdout byte for byte, and the exit status.
+# Logs of an older schema: when the base writes a lower header `schema` than the new side (schema 1
+# sentences, schema 2 typed events), each base part is first rewritten by the new side's
+# `companion-log-migrate` (companion-testkit: decision_log::migration, then the record written
+# again from its typed value), so the records are compared after migration, byte for byte.
+# The --json output of a migrated base is compared without its `decisions` (the log's records in
+# the older schema; they are compared in the log). MIGRATE=0 compares the logs as written.
 # PARAMS_MAY_DIFFER="mission.toml ..." names params files whose contents changed on purpose
 # between the revisions (a new key the new loader reads, say): their entries in the header's
 # `params` map are cut out too, and said so in the summary; every record is still compared
@@ -90,6 +96,14 @@ if [ -n "$NEW_REV" ]; then prepare new "$NEW_REV"; else prepare new ""; fi
 # shellcheck disable=SC1090
 BASE_SRC=$(. "$WORK/base.env"; echo "$SRC"); BASE_DESC=$(. "$WORK/base.env"; echo "$DESC")
 NEW_SRC=$(. "$WORK/new.env"; echo "$SRC"); NEW_DESC=$(. "$WORK/new.env"; echo "$DESC")
+# The new side's migration tool (always from the working tree's sources: it is the reader).
+MIGRATE=${MIGRATE:-1}
+if [ "$MIGRATE" = 1 ]; then
+  log "building companion-log-migrate ..."
+  (cd "$ROOT" && cargo build -q -p companion-testkit --bin companion-log-migrate)
+  cp "$ROOT/target/debug/companion-log-migrate" "$WORK/companion-log-migrate"
+fi
+export MIGRATE
 t_built=$(date +%s)
 
 # Policies: the [priority] keys of the base's params/policies.toml (the new side must accept the
@@ -134,6 +148,17 @@ run_side() {
       --json --params "$src/params" --runs-dir "$dir/runs" >"$dir/stdout.json" 2>"$dir/stderr.txt") \
       || rc=$?
   echo "$rc" >"$dir/exit"
+  # The base's parts at the new schema, when they are older (their header says so).
+  if [ "$side" = base ] && [ "$MIGRATE" = 1 ]; then
+    local part
+    for part in "$dir"/runs/*/decisions*.jsonl; do
+      [ -f "$part" ] || continue
+      if head -c 200 "$part" | grep -q '"schema":1[,}]'; then
+        "$WORK/companion-log-migrate" "$part" "$part.migrated" && mv "$part.migrated" "$part"
+        : >"$dir/migrated"
+      fi
+    done
+  fi
 }
 
 # Compare one case's two sides; print "same" or "DIFFERS <where>" on one line.
@@ -212,9 +237,19 @@ eb, en = read(os.path.join(base, "exit")).strip(), read(os.path.join(new, "exit"
 (fb, sb), (fn, sn) = run_folder(base), run_folder(new)
 if eb != en:
     diff = f"exit status {eb.decode()} vs {en.decode()}"
+def json_out(side, cut):
+    # A migrated base's --json still holds its records in the older schema (`decisions`, the
+    # log's records, compared above after migration): cut out on both sides, the rest bytewise.
+    raw = read(os.path.join(side, "stdout.json"))
+    if not cut:
+        return raw
+    obj = json.loads(raw)
+    obj.pop("decisions", None)
+    return json.dumps(obj, sort_keys=True).encode()
+migrated = os.path.exists(os.path.join(base, "migrated"))
 if diff is None:
-    diff = first_diff(read(os.path.join(base, "stdout.json")), read(os.path.join(new, "stdout.json")),
-                      "--json stdout")
+    diff = first_diff(json_out(base, migrated), json_out(new, migrated),
+                      "--json stdout" + (" (without decisions: base migrated)" if migrated else ""))
 if diff is None and len(sb) != len(sn):
     diff = f"run folders: {len(sb)} vs {len(sn)}"
 elif fb is not None and fn is not None:

@@ -44,9 +44,27 @@ COMPANION_LINK_TIMEOUT_S = 3.0
 # Decision log (JSON Lines of DecisionRecord, companion-core/src/record.rs); a header line without `cycle` is skipped.
 # ------------------------------------------------------------------------------------------------
 
+def said(value: Any) -> Any:
+    """The sentence of a typed event, link event or command outcome (schema 2 writes each as an object
+    with `kind`, its fields and `text`, the sentence for people); a sentence (schema 1) as it is."""
+    return value.get("text", "") if isinstance(value, dict) else value
+
+
+def sentences(record: Dict[str, Any]) -> Dict[str, Any]:
+    """The record with its events, link events and command results as the sentences the tests assert on."""
+    for key in ("events", "link_events"):
+        if isinstance(record.get(key), list):
+            record[key] = [said(e) for e in record[key]]
+    for c in record.get("commands") or []:
+        if isinstance(c, dict) and "result" in c:
+            c["result"] = said(c["result"])
+    return record
+
+
 def read_decision_log(log_dir: Path, fallback: Optional[Path] = None) -> List[Dict[str, Any]]:
     """Records from every *.jsonl under `log_dir`; when there is none, from `fallback` (the run's stdout,
-    where `fly` writes JSON lines when no log dir is given)."""
+    where `fly` writes JSON lines when no log dir is given). Events, link events and command results are
+    given as their sentences (`sentences`)."""
     records: List[Dict[str, Any]] = []
     files = sorted(glob.glob(str(Path(log_dir) / "**" / "*.jsonl"), recursive=True))
     if not files and fallback is not None and Path(fallback).exists():
@@ -64,7 +82,7 @@ def read_decision_log(log_dir: Path, fallback: Optional[Path] = None) -> List[Di
                 except json.JSONDecodeError as e:
                     raise AssertionError(f"{f}:{n}: decision log line is not JSON: {e}: {line[:200]}")
                 if isinstance(obj, dict) and "cycle" in obj:
-                    records.append(obj)
+                    records.append(sentences(obj))
     return records
 
 

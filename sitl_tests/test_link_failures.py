@@ -67,7 +67,8 @@ if run:
             continue
         if "cycle" in r:
             records.append(r)
-events = [e for r in records for e in r.get("link_events", [])]
+# The sentences (schema 2 writes each link event as an object with its `text`).
+events = [e.get("text", "") if isinstance(e, dict) else e for r in records for e in r.get("link_events", [])]
 print(json.dumps({"fly_rc": fly.returncode, "fly_stderr": err[-2000:], "junk_sent": sent, "junk_received": received,
                   "records": len(records), "events": events}))
 """

@@ -365,7 +365,7 @@ fn rewrite_actions(model: &Model, record: &ResourcesRecord, sc: &mut Scratch) {
     }
 }
 
-/// Degradations are events (their sentences) when they start, not on every cycle they last.
+/// Degradations are events when they start, not on every cycle they last.
 fn degradation_events(
     (last_degraded, last_dropped): (&mut Vec<Degraded>, &mut Vec<Dropped>),
     record: &ResourcesRecord,
@@ -376,12 +376,12 @@ fn degradation_events(
     }
     for d in &record.degraded {
         if !last_degraded.contains(d) {
-            rec.events.push(Event::from(d.to_string()));
+            rec.events.push(Event::Degraded(d.clone()));
         }
     }
     for d in &record.dropped {
         if !last_dropped.contains(d) {
-            rec.events.push(Event::from(d.to_string()));
+            rec.events.push(Event::Dropped(d.clone()));
         }
     }
     last_degraded.clone_from(&record.degraded);

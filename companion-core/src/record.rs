@@ -15,7 +15,7 @@ pub use resources::{Degraded, Dropped};
 pub use verdict::{FIT_LINE_MAX, Lowered, PLAN_LINE_MAX, Verdict};
 
 /// Version of the decision-log schema, written in each log's header.
-pub const SCHEMA_VERSION: u32 = 1;
+pub const SCHEMA_VERSION: u32 = 2;
 
 /// One MDP's view of the cycle.
 #[derive(Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -509,7 +509,7 @@ mod tests {
         DecisionRecord {
             cycle: x as u64,
             state: format!("s{x}"),
-            events: keys.iter().map(|k| Event::from(*k)).collect(),
+            events: keys.iter().map(|k| Event::Other(k.to_string())).collect(),
             observations: keys.iter().map(|k| (k.to_string(), x)).collect(),
             evidence: keys
                 .iter()
@@ -530,7 +530,10 @@ mod tests {
                     tiles: vec![1, 2],
                     ..Default::default()
                 }],
-                degraded: vec![Degraded::from(format!("d{x}").as_str())],
+                degraded: vec![Degraded {
+                    reason: format!("d{x}"),
+                    ..Default::default()
+                }],
                 ..Default::default()
             }),
             guarantee: Some(GuaranteeRecord {

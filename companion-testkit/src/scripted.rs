@@ -172,7 +172,6 @@ impl Decider for ScriptedDecider {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use companion_core::record::Event;
 
     fn obs(t: f64, vals: &[(&str, f64)], events: &[&str]) -> Observations {
         let mut o = Observations {
@@ -182,7 +181,10 @@ mod tests {
         for (k, v) in vals {
             o.set(k, *v);
         }
-        o.events = events.iter().map(|s| Event::from(*s)).collect();
+        o.events = events
+            .iter()
+            .map(|s| companion::decision_log::migration::event(s))
+            .collect();
         o
     }
 

@@ -201,7 +201,7 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
         events.push(Event::ObstacleDetected);
     }
     if first_degraded {
-        events.push(Event::from("insufficient resources to execute V3"));
+        events.push(Event::Other("insufficient resources to execute V3".into()));
     }
     let tiles_used = placements.iter().flat_map(|p| p.tiles.iter()).count() as u8;
     let cpu_load: f64 = placements.iter().map(|p| p.cpu_share).sum();
@@ -289,10 +289,10 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
         });
     }
     if i == n / 2 {
-        link_events.push(LinkEvent::from("heartbeat lost for 1.5 s"));
+        link_events.push(LinkEvent::Other("heartbeat lost for 1.5 s".into()));
     }
     if i == n / 2 + 1 {
-        link_events.push(LinkEvent::from("heartbeat regained"));
+        link_events.push(LinkEvent::Other("heartbeat regained".into()));
     }
     let altitude = match state {
         "base" => 0.0,

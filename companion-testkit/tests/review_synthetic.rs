@@ -8,7 +8,7 @@ use companion::decision_log::{Header, LogEvent, ReadIssue};
 use companion::review::outcomes::Category;
 use companion::review::*;
 use companion_core::record::DecisionRecord;
-use companion_core::record::{CommandRecord, Conflict, Event, MdpProposal};
+use companion_core::record::{CommandRecord, Conflict, Event, LinkEvent, MdpProposal};
 use companion_testkit::synthetic;
 use std::time::UNIX_EPOCH;
 
@@ -65,7 +65,7 @@ fn command(result: &str) -> CommandRecord {
     CommandRecord {
         action: "take_off".into(),
         command: "X".into(),
-        result: result.into(),
+        result: companion::decision_log::migration::outcome(result),
         attempts: 1,
         latency_ms: None,
     }
@@ -149,9 +149,9 @@ fn phases_follow_table_4_shape() {
 fn repeated_event_folds_into_one_span() {
     let mut recs = synthetic::mission(40);
     for r in &mut recs[12..=23] {
-        r.events.push("battery low".into());
+        r.events.push(Event::Other("battery low".into()));
     }
-    recs[30].events.push("battery low".into());
+    recs[30].events.push(Event::Other("battery low".into()));
     let rev = review(recs);
     let spans: Vec<&Span> = rev
         .spans
@@ -178,7 +178,9 @@ fn r_has(rev: &Review, row: usize, text: &str) -> bool {
 #[test]
 fn failsafe_events_and_losses_are_marked() {
     let mut recs = synthetic::mission(30);
-    recs[10].link_events.push("FAILSAFE: radio".into());
+    recs[10]
+        .link_events
+        .push(LinkEvent::Other("FAILSAFE: radio".into()));
     let mut it = items(recs);
     // An event line after record 12, and a loss line before record 20 (index 21 with header).
     it.insert(
@@ -343,7 +345,9 @@ fn why_of_a_cycle_has_the_proposals_action_and_value() {
 #[test]
 fn html_escapes_log_text() {
     let mut recs = synthetic::mission(20);
-    recs[3].events.push("<script>alert(1)</script>".into());
+    recs[3]
+        .events
+        .push(Event::Other("<script>alert(1)</script>".into()));
     let html = render_html(&review(recs));
     assert!(!html.contains("<script>"));
     assert!(html.contains("&lt;script&gt;alert(1)&lt;/script&gt;"));
@@ -391,13 +395,13 @@ fn crafted_keys_and_values_are_escaped_everywhere_attributes_included() {
 #[test]
 fn terminal_summary_strips_control_characters() {
     let mut recs = synthetic::mission(20);
-    recs[4]
-        .events
-        .push("EKF\x1b[2J\x1b]0;pwned\x07 variance\x08".into());
+    recs[4].events.push(Event::Other(
+        "EKF\x1b[2J\x1b]0;pwned\x07 variance\x08".into(),
+    ));
     recs[5].state = "v\x1b[31m3".into();
-    recs[6]
-        .link_events
-        .push("STATUSTEXT: \x1b[1;31mPreArm\x1b[0m\r\n".into());
+    recs[6].link_events.push(LinkEvent::Other(
+        "STATUSTEXT: \x1b[1;31mPreArm\x1b[0m\r\n".into(),
+    ));
     let rev = review(recs);
     let out = render_terminal(&rev, false);
     assert!(!out.chars().any(|c| c.is_control() && c != '\n'), "{out:?}");
@@ -450,7 +454,7 @@ fn review_of_a_long_log_keeps_bounded_state() {
         let mut r = one[(i % 100) as usize].clone();
         r.cycle = i;
         r.time_s = i as f64;
-        r.events.push(Event::from(format!("distinct event {i}")));
+        r.events.push(Event::Other(format!("distinct event {i}")));
         rev.push(LogItem::Record(Box::new(r), Vec::new()));
     }
     rev.finish();

@@ -99,11 +99,9 @@ impl OnlineCpt {
     ) -> Vec<CptUpdate> {
         let updates = match self.pending.take() {
             Some(prev) => {
-                let names: Vec<String> = observed.iter().map(|e| e.to_string()).collect();
-                let events: Vec<&str> = names.iter().map(String::as_str).collect();
                 let trials = self.counts.trials(
                     &prev,
-                    &events,
+                    observed,
                     // Kept is "no `target lost`": fly's states do not say more.
                     None,
                     &core.model.states,

@@ -117,6 +117,8 @@ pub fn replay(path: &Path) -> Result<Outcome, Refusal> {
         .files()
         .to_vec();
     let mut run: Option<Run> = None;
+    // The header's schema: a schema-1 record (sentences) is migrated before it is compared.
+    let mut schema: Option<u32> = None;
     let mut equal = 0u64;
     let n_files = files.len();
     for (k, file) in files.iter().enumerate() {
@@ -143,7 +145,7 @@ pub fn replay(path: &Path) -> Result<Outcome, Refusal> {
             if text.trim().is_empty() {
                 continue;
             }
-            let value: Value = match serde_json::from_str(text) {
+            let mut value: Value = match serde_json::from_str(text) {
                 Ok(v) => v,
                 // A cut-off last line: the process was killed while writing it.
                 Err(_) if !complete && k + 1 == n_files => {
@@ -164,6 +166,10 @@ pub fn replay(path: &Path) -> Result<Outcome, Refusal> {
                             return Err(refuse(file, at, "the header is not the first line"));
                         }
                         let (model, setup, learner) = Run::from_header(&value, file)?;
+                        schema = value
+                            .get("schema")
+                            .and_then(Value::as_u64)
+                            .and_then(|v| u32::try_from(v).ok());
                         let mut r = Run::new(Arc::new(model), setup);
                         r.learner = learner;
                         r.route_plan = Run::route_plan(&value, file);
@@ -194,6 +200,9 @@ pub fn replay(path: &Path) -> Result<Outcome, Refusal> {
                             "a record before any header: no params to rebuild the model from",
                         ));
                     };
+                    if crate::decision_log::migration::needs_migration(schema) {
+                        crate::decision_log::migration::record_v1(&mut value);
+                    }
                     if let Some(mut d) = run.replay_record(&value, file, line_no)? {
                         d.equal = equal;
                         return Ok(Outcome::Differs(Box::new(d)));
@@ -672,7 +681,9 @@ mod tests {
     use super::*;
 
     fn s(v: &[&str]) -> Vec<Event> {
-        v.iter().map(|x| Event::from(*x)).collect()
+        v.iter()
+            .map(|x| crate::decision_log::migration::event(x))
+            .collect()
     }
 
     #[test]

@@ -117,7 +117,7 @@ impl<'a> World<'a> {
             if fire {
                 let end = h.duration.map_or(u32::MAX, |d| self.step + d);
                 self.active[i] = Some((self.step, end));
-                events.push(Event::from(h.event.as_str()));
+                events.push(h.started());
             }
         }
         events
@@ -628,7 +628,10 @@ mod tests {
         );
         let r = run(&w, &s, 2, scripted("track_v3", 25.0));
         let first_wpf = r.records.iter().position(|x| x.state == "wpf").unwrap();
-        assert_eq!(r.records[first_wpf].events, vec![Event::from("vibrations")]);
+        assert_eq!(
+            r.records[first_wpf].events,
+            vec![Event::Other("vibrations".into())]
+        );
         for (i, x) in r.records.iter().enumerate() {
             let vib = x.observations.get("vibration_mps2").copied();
             assert_eq!(

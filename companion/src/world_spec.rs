@@ -130,6 +130,30 @@ pub struct Hazard {
     pub duration: Option<u32>,
 }
 
+impl Hazard {
+    /// The event said when the hazard starts: the world's own happening when the scenario names
+    /// one (`obstacle detected`, `target lost`, ...), else the scenario's words as they are.
+    pub fn started(&self) -> companion_core::record::Event {
+        use companion_core::record::Event::*;
+        let world = [
+            TargetDetected,
+            TargetLost,
+            ObstacleDetected,
+            ObstacleCleared,
+            ObstacleAvoided,
+            Collision,
+            TZoneFound,
+            EmergencyZoneFound,
+            Landing,
+            BatteryExhausted,
+        ];
+        world
+            .into_iter()
+            .find(|e| *e == self.event.as_str())
+            .unwrap_or_else(|| Other(self.event.clone()))
+    }
+}
+
 /// When a hazard starts: at an absolute step, or `after` steps into a mission phase.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -306,11 +306,7 @@ fn an_event_after_the_core_added_ones_is_reported_on_events() {
         .as_str()
         .unwrap()
         .to_string();
-    let last = rec["events"]
-        .as_array()
-        .unwrap()
-        .last()
-        .unwrap()
+    let last = rec["events"].as_array().unwrap().last().unwrap()["text"]
         .as_str()
         .unwrap();
     assert!(last.contains(&reason), "{rec}");
@@ -318,7 +314,7 @@ fn an_event_after_the_core_added_ones_is_reported_on_events() {
     rec["events"]
         .as_array_mut()
         .unwrap()
-        .push(Value::from("mode LAND"));
+        .push(serde_json::to_value(companion_core::record::Event::Mode("LAND".into())).unwrap());
     lines[i] = rec.to_string();
     let edited = tmp.path().join("edited");
     std::fs::create_dir_all(&edited).unwrap();
@@ -406,14 +402,14 @@ fn a_fly_log_restarts_the_core_at_the_new_flight_event() {
         .take(20)
         .collect();
     assert_eq!(flight.len(), 20);
-    let two_flights = |event: Option<&str>| {
+    let two_flights = |event: Option<Value>| {
         let mut second = flight.clone();
         if let Some(e) = event {
             // Observed before the cycle: the head of the record's events.
             second[0]["events"]
                 .as_array_mut()
                 .unwrap()
-                .insert(0, Value::from(e));
+                .insert(0, e.clone());
         }
         let mut out = vec![header.to_string()];
         out.extend(flight.iter().chain(&second).map(Value::to_string));
@@ -424,7 +420,7 @@ fn a_fly_log_restarts_the_core_at_the_new_flight_event() {
     write_lines(
         &dir,
         &two_flights(Some(
-            "flight over: landed and disarmed; waiting for the operator",
+            serde_json::to_value(companion_core::record::Event::NewFlight).unwrap(),
         )),
     );
     let out = replay(&dir);

@@ -5,7 +5,7 @@
 
 use companion::decision_log::LogItem;
 use companion::review::{Review, outcomes::Category, render_terminal};
-use companion_core::record::{CommandOutcome, CommandRecord, DecisionRecord, GuaranteeRecord};
+use companion_core::record::{CommandRecord, DecisionRecord, GuaranteeRecord};
 
 const HOME: (f64, f64) = (47.397742, 8.545594);
 /// Degrees of latitude per metre north (mean Earth radius 6,371,008.8 m).
@@ -44,7 +44,7 @@ fn rec(cycle: u64, x: &Rec) -> LogItem {
         r.commands.push(CommandRecord {
             action: "take_off".into(),
             command: (*command).into(),
-            result: CommandOutcome::from(*result),
+            result: companion::decision_log::migration::outcome(result),
             ..Default::default()
         });
     }
@@ -155,7 +155,8 @@ fn a_flight_found_in_progress_says_handed_off_or_resumed() {
         first.operator = operator;
         let mut items = vec![rec(0, &first)];
         if let LogItem::Record(r, _) = &mut items[0] {
-            r.events.push(event.into());
+            r.events
+                .push(companion::decision_log::migration::event(event));
         }
         let mut landed = ground(0.0, 200.0);
         landed.mode = "RTL";

@@ -16,12 +16,10 @@ fn record_with_events(cycle: u64, n: usize) -> DecisionRecord {
     };
     // Every sentence twice: the second of each is a repeat and must not count again.
     for i in 0..n {
-        r.events
-            .push(Event::from(format!("autopilot: flood {i}").as_str()));
+        r.events.push(Event::Other(format!("autopilot: flood {i}")));
     }
     for i in 0..n {
-        r.events
-            .push(Event::from(format!("autopilot: flood {i}").as_str()));
+        r.events.push(Event::Other(format!("autopilot: flood {i}")));
     }
     r
 }

@@ -1,5 +1,5 @@
-//! The typed events, link events and command outcomes of real runs are written as sentences and
-//! read back as the same values: every `simulate` scenario under both policies and the three
+//! The typed events, link events and command outcomes of real runs are written as objects tagged
+//! by `kind` (schema 2, their sentence in `text`) and read back as the same values: every `simulate` scenario under both policies and the three
 //! models (the fly loop's records are checked the same way in link_loopback.rs).
 
 use companion::sim::{self, Scenario, WorldSpec};
@@ -8,15 +8,28 @@ use companion_core::record::{DecisionRecord, Event};
 use std::collections::BTreeSet;
 
 /// A record written to JSON reads back with equal events, link events and command results,
-/// each written as the plain sentence its `Display` gives.
+/// each written as an object with its `kind` and, for people, the sentence its `Display` gives.
 pub fn assert_reads_back(r: &DecisionRecord) {
     let json = serde_json::to_value(r).unwrap();
     let back: DecisionRecord = serde_json::from_value(json.clone()).unwrap();
     assert_eq!(back.events, r.events, "cycle {}", r.cycle);
     assert_eq!(back.link_events, r.link_events, "cycle {}", r.cycle);
     assert_eq!(back.commands, r.commands, "cycle {}", r.cycle);
-    let written: Vec<String> = r.events.iter().map(Event::to_string).collect();
-    assert_eq!(json["events"], serde_json::json!(written));
+    let written: Vec<serde_json::Value> = r
+        .events
+        .iter()
+        .map(|e| serde_json::json!(e.to_string()))
+        .collect();
+    let said: Vec<serde_json::Value> = json["events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| {
+            assert!(e["kind"].is_string(), "{e}");
+            e["text"].clone()
+        })
+        .collect();
+    assert_eq!(said, written);
 }
 
 #[test]

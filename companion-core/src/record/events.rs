@@ -1,61 +1,18 @@
 //! What happened in a cycle ([`Event`]), on the link ([`LinkEvent`]) and to a vehicle command
-//! ([`CommandOutcome`]), as types. Each is written to the decision log as the sentence it has
-//! always been (docs/decision-log.md) and read back from it: a sentence this build does not
-//! know (an older or newer log, free text) is kept whole in `Other`, so reading never fails and
-//! writing it again gives the same bytes.
+//! ([`CommandOutcome`]), as types built by their producers with their fields. The decision log
+//! (schema 2) writes each as a JSON object tagged by `kind` (`wire`); `Display` gives the
+//! sentence for people (the review, the journal, the ground station's text). Schema-1 logs wrote
+//! the sentences; `companion::decision_log::migration` reads them.
 
-use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use std::fmt;
-use std::str::FromStr;
 
-/// `WORD (detail)` split into `WORD` and `detail`; `WORD` alone gives no detail.
-fn word_and_detail(s: &str) -> (&str, Option<&str>) {
-    match s.split_once(" (") {
-        Some((w, rest)) if rest.ends_with(')') => (w, Some(&rest[..rest.len() - 1])),
-        _ => (s, None),
-    }
-}
+mod wire;
 
-/// Parses with `known`; keeps `s` whole in `other` unless the value found writes back exactly
-/// as `s` (so `display(parse(s)) == s` for every string).
-fn parse_exact<T: fmt::Display>(
-    s: &str,
-    known: impl FnOnce(&str) -> Option<T>,
-    other: impl FnOnce(String) -> T,
-) -> T {
-    match known(s) {
-        Some(v) if v.to_string() == s => v,
-        _ => other(s.to_string()),
-    }
-}
-
-macro_rules! string_serde {
+/// `value == "sentence"`: compares the written form (`Display`) without allocating.
+macro_rules! eq_sentence {
     ($t:ty) => {
-        impl Serialize for $t {
-            fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-                serializer.collect_str(self)
-            }
-        }
-        impl<'de> Deserialize<'de> for $t {
-            fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-                let s = <std::borrow::Cow<'de, str>>::deserialize(deserializer)?;
-                Ok(Self::from(s.as_ref()))
-            }
-        }
-        impl FromStr for $t {
-            type Err = std::convert::Infallible;
-            fn from_str(s: &str) -> Result<Self, Self::Err> {
-                Ok(Self::from(s))
-            }
-        }
-        impl From<String> for $t {
-            fn from(s: String) -> Self {
-                Self::from(s.as_str())
-            }
-        }
         impl PartialEq<str> for $t {
             fn eq(&self, other: &str) -> bool {
-                // Compares the written form without allocating.
                 struct Eq<'a>(&'a str, bool);
                 impl fmt::Write for Eq<'_> {
                     fn write_str(&mut self, s: &str) -> fmt::Result {
@@ -176,62 +133,7 @@ impl fmt::Display for CommandOutcome {
     }
 }
 
-impl CommandOutcome {
-    fn known(s: &str) -> Option<Self> {
-        use CommandOutcome::*;
-        let (word, detail) = word_and_detail(s);
-        let d = || detail.map(str::to_string);
-        Some(match (word, detail) {
-            ("ACCEPTED", None) => Accepted,
-            ("ACCEPTED", Some(x)) => AcceptedVerified {
-                items: x
-                    .strip_prefix("verified ")?
-                    .strip_suffix(" items")?
-                    .parse()
-                    .ok()?,
-            },
-            ("SIMULATED", None) => Simulated,
-            ("SENT", None) => Sent,
-            ("IN_PROGRESS", None) => InProgress,
-            ("PENDING", None) => Pending,
-            ("WAITING_READY", Some(_)) => WaitingReady(d()?),
-            ("NOT_READY", Some(_)) => NotReady(d()?),
-            ("ALREADY", None) => Already,
-            ("SKIPPED", Some(_)) => Skipped(d()?),
-            ("SUPERSEDED", None) => Superseded,
-            ("NOT_SENT", Some(_)) => NotSent(d()?),
-            ("CANCELLED", _) => Cancelled(d()),
-            ("UNMAPPED", Some(_)) => Unmapped,
-            ("DENIED", None) => Denied,
-            ("TEMPORARILY_REJECTED", None) => TemporarilyRejected,
-            ("UNSUPPORTED", None) => Unsupported,
-            ("TIMEOUT", _) => Timeout(d()),
-            ("ARRIVED", Some(_)) => Arrived(d()?),
-            ("NOT_CONFIRMED", Some(_)) => NotConfirmed(d()?),
-            ("FAILED", _) => Failed(d()),
-            _ => return None,
-        })
-    }
-}
-
-impl From<&str> for CommandOutcome {
-    fn from(s: &str) -> Self {
-        parse_exact(s, Self::known, CommandOutcome::Other)
-    }
-}
-
-string_serde!(CommandOutcome);
-
-/// Whether `MDP: ERROR` is an MDP's instantiate or solve error (the sentences of
-/// `mission_mdp::InstantiateError`), not free text that happens to hold a colon.
-fn is_mdp_error(mdp: &str, error: &str) -> bool {
-    let word = !mdp.is_empty() && !mdp.contains(char::is_whitespace);
-    let known = (error.starts_with("probability ")
-        && (error.ends_with(" not provided") || error.ends_with(" not in [0, 1]")))
-        || (error.starts_with("unknown policy '") && error.ends_with('\''))
-        || error.starts_with("mdp '");
-    word && known
-}
+eq_sentence!(CommandOutcome);
 
 /// The sentence of [`Event::NewFlight`].
 const NEW_FLIGHT: &str = "flight over: landed and disarmed; waiting for the operator";
@@ -302,6 +204,11 @@ pub enum Event {
     },
     /// `re-allocation: REASON`: PANORAMA re-allocated the remaining activities.
     Reallocation(String),
+    /// `APP FROM -> TO: REASON`: the resource arbitration started placing an application in a
+    /// lower version (said when it starts, not on every cycle it lasts).
+    Degraded(super::Degraded),
+    /// `APP VERSION: REASON`: the resource arbitration started leaving an application out.
+    Dropped(super::Dropped),
     /// `guarantee: no allocation meets the goals`
     GuaranteeInfeasible,
     /// `WHY: land`: the fly shell ended the mission on its own rule (not a model's proposal)
@@ -357,6 +264,8 @@ impl Clone for Event {
                 error: error.clone(),
             },
             Reallocation(r) => Reallocation(r.clone()),
+            Degraded(d) => Degraded(d.clone()),
+            Dropped(d) => Dropped(d.clone()),
             GuaranteeInfeasible => GuaranteeInfeasible,
             ShellLand(w) => ShellLand(w.clone()),
             LandingKept(a) => LandingKept(a.clone()),
@@ -430,6 +339,8 @@ impl fmt::Display for Event {
             }
             MdpError { mdp, error } => write!(f, "{mdp}: {error}"),
             Reallocation(r) => write!(f, "re-allocation: {r}"),
+            Degraded(d) => d.fmt(f),
+            Dropped(d) => d.fmt(f),
             GuaranteeInfeasible => f.write_str("guarantee: no allocation meets the goals"),
             ShellLand(why) => write!(f, "{why}: land"),
             LandingKept(action) => write!(
@@ -447,90 +358,9 @@ impl Event {
     pub fn is_shell(&self) -> bool {
         matches!(self, Event::ShellLand(_) | Event::LandingKept(_))
     }
-
-    fn known(s: &str) -> Option<Self> {
-        use Event::*;
-        Some(match s {
-            "target detected" => TargetDetected,
-            "target lost" => TargetLost,
-            "obstacle detected" => ObstacleDetected,
-            "obstacle cleared" => ObstacleCleared,
-            "obstacle avoided" => ObstacleAvoided,
-            "collision" => Collision,
-            "'T' zone found" => TZoneFound,
-            "emergency zone found" => EmergencyZoneFound,
-            "landing" => Landing,
-            "battery exhausted" => BatteryExhausted,
-            "armed" => Armed,
-            "disarmed" => Disarmed,
-            "guarantee: no allocation meets the goals" => GuaranteeInfeasible,
-            NEW_FLIGHT => NewFlight,
-            _ => {
-                if let Some(l) = LinkEvent::known(s).filter(LinkEvent::is_significant) {
-                    return Some(Link(l));
-                }
-                if let Some(m) = s.strip_prefix("mode ") {
-                    return Some(Mode(m.to_string()));
-                }
-                if let Some(n) = s.strip_prefix("waypoint ") {
-                    return n.parse().ok().map(Waypoint);
-                }
-                if let Some(t) = s.strip_prefix("battery below ") {
-                    return t.strip_suffix('%')?.parse().ok().map(BatteryBelow);
-                }
-                if let Some(rest) = s.strip_prefix("command ") {
-                    let (action, outcome) = rest.split_once(' ')?;
-                    return Some(Command {
-                        action: action.to_string(),
-                        outcome: CommandOutcome::from(outcome),
-                    });
-                }
-                if let Some(e) = s.strip_prefix("health: ") {
-                    return Some(HealthError(e.to_string()));
-                }
-                if let Some(e) = s.strip_prefix("arbitration: ") {
-                    return Some(ArbitrationError(e.to_string()));
-                }
-                if let Some(e) = s.strip_prefix("resources: ") {
-                    return Some(ResourcesError(e.to_string()));
-                }
-                if let Some(r) = s.strip_prefix("re-allocation: ") {
-                    return Some(Reallocation(r.to_string()));
-                }
-                if let Some(a) = s.strip_prefix("landing: ").and_then(|r| {
-                    r.strip_suffix(" again (the landing was interrupted or not done)")
-                }) {
-                    return Some(LandingKept(a.to_string()));
-                }
-                if let Some(why) = s.strip_suffix(": land") {
-                    return Some(ShellLand(why.to_string()));
-                }
-                if let Some((mdp, error)) = s.split_once(": ")
-                    && is_mdp_error(mdp, error)
-                {
-                    return Some(MdpError {
-                        mdp: mdp.to_string(),
-                        error: error.to_string(),
-                    });
-                }
-                let (mdp, rest) = s.split_once(": state `")?;
-                let state = rest.strip_suffix("` unknown to this MDP")?;
-                return Some(MdpStateUnknown {
-                    mdp: mdp.to_string(),
-                    state: state.to_string(),
-                });
-            }
-        })
-    }
 }
 
-impl From<&str> for Event {
-    fn from(s: &str) -> Self {
-        parse_exact(s, Self::known, Event::Other)
-    }
-}
-
-string_serde!(Event);
+eq_sentence!(Event);
 
 /// What happened on the MAVLink link or its transport (`DecisionRecord.link_events`, fly only).
 #[derive(Debug, Clone, PartialEq)]
@@ -642,80 +472,9 @@ impl LinkEvent {
             Connected | Regained | Lost | Rebooted | TransportReconnected
         )
     }
-
-    fn known(s: &str) -> Option<Self> {
-        use LinkEvent::*;
-        let sys_comp = |x: &str| -> Option<(u8, u8)> {
-            let (a, b) = x.split_once('/')?;
-            Some((a.parse().ok()?, b.parse().ok()?))
-        };
-        Some(match s {
-            "link connected" => Connected,
-            "link regained" => Regained,
-            "link lost" => Lost,
-            "autopilot rebooted" => Rebooted,
-            "transport reconnected" => TransportReconnected,
-            _ => {
-                if let Some(t) = s.strip_prefix("autopilot: ") {
-                    return Some(AutopilotText(t.to_string()));
-                }
-                if let Some(rest) = s.strip_prefix("another autopilot ") {
-                    let (ids, why) = rest.split_once(" heard, ignored (")?;
-                    let (system, component) = sys_comp(ids)?;
-                    return Some(OtherAutopilot {
-                        system,
-                        component,
-                        why: why.strip_suffix(')')?.to_string(),
-                    });
-                }
-                if let Some(rest) = s.strip_prefix("autopilot ") {
-                    let (ids, flavor) = rest.split_once(" (")?;
-                    let (system, component) = sys_comp(ids)?;
-                    return Some(Autopilot {
-                        system,
-                        component,
-                        flavor: flavor.strip_suffix(')')?.to_string(),
-                    });
-                }
-                if let Some(rest) = s.strip_prefix("stream ") {
-                    let (name, outcome) = rest.split_once(": ")?;
-                    return Some(Stream {
-                        name: name.to_string(),
-                        outcome: CommandOutcome::from(outcome),
-                    });
-                }
-                if let Some(rest) = s.strip_prefix("mission uploaded (") {
-                    let n = rest.strip_suffix(" items), verifying")?;
-                    return n.parse().ok().map(|items| MissionUploaded { items });
-                }
-                if let Some(rest) = s.strip_prefix("mission transfer cancelled (") {
-                    return Some(MissionTransferCancelled(
-                        rest.strip_suffix(')')?.to_string(),
-                    ));
-                }
-                if let Some(n) = s.strip_prefix("connected ") {
-                    return Some(TransportConnected(n.to_string()));
-                }
-                if let Some(w) = s.strip_prefix("disconnected: ") {
-                    return Some(TransportDisconnected(w.to_string()));
-                }
-                if let Some(n) = s.strip_prefix("onboard connected ") {
-                    return Some(OnboardConnected(n.to_string()));
-                }
-                let w = s.strip_prefix("onboard disconnected: ")?;
-                return Some(OnboardDisconnected(w.to_string()));
-            }
-        })
-    }
 }
 
-impl From<&str> for LinkEvent {
-    fn from(s: &str) -> Self {
-        parse_exact(s, Self::known, LinkEvent::Other)
-    }
-}
-
-string_serde!(LinkEvent);
+eq_sentence!(LinkEvent);
 
 /// At most this many link events in one record (as for events): a flood of STATUSTEXT from the
 /// autopilot is summarised, not copied, so it cannot make the record too large to log.

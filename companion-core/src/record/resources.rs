@@ -1,14 +1,15 @@
 //! What the resource arbitration degraded or dropped (`ResourcesRecord.degraded`, `.dropped`), as
-//! types with their fields. Each is written to the decision log as the sentence it has always
-//! been (`tracking V3 -> V1: insufficient resources ...`, `tracking V3: ...`) and read back from
-//! it; a sentence that does not split into the fields (free text, a newer log's wording) is kept
-//! whole in `reason`, so reading never fails and writing it again gives the same bytes.
+//! types with their fields, written to the decision log (schema 2) as objects with those fields.
+//! `Display` gives the sentence for people (`tracking V3 -> V1: insufficient resources ...`,
+//! `tracking V3: ...`); schema-1 logs wrote it, and `companion::decision_log::migration` reads
+//! it back into the fields.
 
-use serde::{Deserialize, Deserializer, Serialize, Serializer};
+use serde::{Deserialize, Serialize};
 use std::fmt;
 
 /// A requested variant placed in a lower version.
-#[derive(Debug, Default, PartialEq, Eq)]
+#[derive(Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct Degraded {
     /// The application (`tracking`); empty for a sentence kept whole in `reason`.
     pub app: String,
@@ -21,7 +22,8 @@ pub struct Degraded {
 }
 
 /// A requested application left out of the schedule.
-#[derive(Debug, Default, PartialEq, Eq)]
+#[derive(Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct Dropped {
     /// The application; empty for a sentence kept whole in `reason`.
     pub app: String,
@@ -50,55 +52,6 @@ impl fmt::Display for Dropped {
             return f.write_str(&self.reason);
         }
         write!(f, "{} {}: {}", self.app, self.version, self.reason)
-    }
-}
-
-/// `APP VERSION` split at its one space; None unless both are single words.
-fn app_and_version(s: &str) -> Option<(&str, &str)> {
-    let (app, version) = s.split_once(' ')?;
-    let word = |w: &str| !w.is_empty() && !w.contains(char::is_whitespace);
-    (word(app) && word(version)).then_some((app, version))
-}
-
-impl From<&str> for Degraded {
-    fn from(s: &str) -> Self {
-        let parsed = s.split_once(": ").and_then(|(head, reason)| {
-            let (app_from, to) = head.split_once(" -> ")?;
-            let (app, from) = app_and_version(app_from)?;
-            Some(Degraded {
-                app: app.into(),
-                from: from.into(),
-                to: to.into(),
-                reason: reason.into(),
-            })
-        });
-        match parsed {
-            Some(d) if d.to_string() == s => d,
-            _ => Degraded {
-                reason: s.into(),
-                ..Default::default()
-            },
-        }
-    }
-}
-
-impl From<&str> for Dropped {
-    fn from(s: &str) -> Self {
-        let parsed = s.split_once(": ").and_then(|(head, reason)| {
-            let (app, version) = app_and_version(head)?;
-            Some(Dropped {
-                app: app.into(),
-                version: version.into(),
-                reason: reason.into(),
-            })
-        });
-        match parsed {
-            Some(d) if d.to_string() == s => d,
-            _ => Dropped {
-                reason: s.into(),
-                ..Default::default()
-            },
-        }
     }
 }
 
@@ -135,66 +88,35 @@ impl Clone for Dropped {
     }
 }
 
-macro_rules! sentence_serde {
-    ($t:ty) => {
-        impl Serialize for $t {
-            fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-                serializer.collect_str(self)
-            }
-        }
-        impl<'de> Deserialize<'de> for $t {
-            fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-                let s = <std::borrow::Cow<'de, str>>::deserialize(deserializer)?;
-                Ok(Self::from(s.as_ref()))
-            }
-        }
-    };
-}
-
-sentence_serde!(Degraded);
-sentence_serde!(Dropped);
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
-    fn the_logged_sentences_read_as_their_fields() {
-        let d = Degraded::from("tracking V3 -> V1: insufficient resources (cpu 1.12 > 1.00)");
+    fn written_as_their_fields_and_said_as_the_sentence() {
+        let d = Degraded {
+            app: "tracking".into(),
+            from: "V3".into(),
+            to: "V1".into(),
+            reason: "insufficient resources (cpu 1.12 > 1.00)".into(),
+        };
         assert_eq!(
-            (d.app.as_str(), d.from.as_str(), d.to.as_str()),
-            ("tracking", "V3", "V1")
+            d.to_string(),
+            "tracking V3 -> V1: insufficient resources (cpu 1.12 > 1.00)"
         );
-        assert_eq!(d.reason, "insufficient resources (cpu 1.12 > 1.00)");
-        let x = Dropped::from(
-            "tracking V3: insufficient resources: policy safety ranks tracking 5 of 5",
-        );
-        assert_eq!((x.app.as_str(), x.version.as_str()), ("tracking", "V3"));
+        let json = serde_json::to_string(&d).unwrap();
         assert_eq!(
-            x.reason,
-            "insufficient resources: policy safety ranks tracking 5 of 5"
+            json,
+            r#"{"app":"tracking","from":"V3","to":"V1","reason":"insufficient resources (cpu 1.12 > 1.00)"}"#
         );
-    }
-
-    #[test]
-    fn any_sentence_writes_back_unchanged() {
-        for s in [
-            "tracking V3 -> V1: insufficient resources (cpu 1.12 > 1.00)",
-            "tracking V3: no room",
-            "free text",
-            "",
-            "a b c -> d: e",
-            "a  b: two spaces",
-            "x -> y: no version",
-        ] {
-            let (d, x) = (Degraded::from(s), Dropped::from(s));
-            assert_eq!(d.to_string(), s);
-            assert_eq!(x.to_string(), s);
-            let json = serde_json::to_string(&d).unwrap();
-            assert_eq!(json, serde_json::to_string(s).unwrap());
-            assert_eq!(serde_json::from_str::<Degraded>(&json).unwrap(), d);
-            assert_eq!(serde_json::from_str::<Dropped>(&json).unwrap(), x);
-        }
-        assert!(Degraded::from("free text").app.is_empty());
+        assert_eq!(serde_json::from_str::<Degraded>(&json).unwrap(), d);
+        let x = Dropped {
+            app: "tracking".into(),
+            version: "V3".into(),
+            reason: "no room".into(),
+        };
+        assert_eq!(x.to_string(), "tracking V3: no room");
+        let json = serde_json::to_string(&x).unwrap();
+        assert_eq!(serde_json::from_str::<Dropped>(&json).unwrap(), x);
     }
 }

@@ -150,7 +150,7 @@ impl Ports<'_> {
             // Tried again at the next poll (or the next MISSION_CURRENT change).
             self.watch.due = self.watch.has_id;
             self.link_event(
-                LinkEvent::from(format!("autopilot mission download failed: {why}").as_str()),
+                LinkEvent::Other(format!("autopilot mission download failed: {why}")),
                 false,
             );
             return;
@@ -179,7 +179,7 @@ impl Ports<'_> {
                 }
                 (_, u) => u,
             });
-            self.link_event(LinkEvent::from(what.as_str()), significant);
+            self.link_event(LinkEvent::Other(what), significant);
         }
     }
 }

@@ -260,7 +260,7 @@ impl Vehicle {
     /// counted.
     pub fn take_link_events(&mut self) -> Vec<LinkEvent> {
         if let Some(note) = self.identity.trust_note(&self.telemetry, &self.cfg) {
-            self.link_events.push(LinkEvent::from(note));
+            self.link_events.push(LinkEvent::Other(note));
         }
         std::mem::take(&mut self.link_events)
     }
@@ -334,7 +334,7 @@ impl Vehicle {
                     false,
                 );
                 if let Some(note) = self.identity_note() {
-                    self.link_event(LinkEvent::from(note.as_str()), false);
+                    self.link_event(LinkEvent::Other(note), false);
                 }
             } else if choice == Choice::Other
                 && let Some(e) = self

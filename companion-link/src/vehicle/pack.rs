@@ -153,12 +153,9 @@ impl PackRequests {
         };
         telemetry.on_pack_param(what, value);
         (what == PackParam::CapacityMah && value <= 0.0).then(|| {
-            LinkEvent::from(
-                format!(
-                    "autopilot {name} = {value}: the pack's capacity is not set, the guarantee uses params [battery]"
-                )
-                .as_str(),
-            )
+            LinkEvent::Other(format!(
+                "autopilot {name} = {value}: the pack's capacity is not set, the guarantee uses params [battery]"
+            ))
         })
     }
 }

@@ -131,7 +131,7 @@ impl CptCounts {
     pub fn trials(
         &mut self,
         r: &DecisionRecord,
-        events: &[&str],
+        events: &[Event],
         state_after: Option<&str>,
         states: &MissionStates,
         shipped: &ShippedRows,
@@ -162,7 +162,7 @@ impl CptCounts {
             else {
                 continue; // a parent without evidence: the row is unknown
             };
-            let ok = events.contains(&c.success.to_string().as_str());
+            let ok = events.contains(&c.success);
             out.push(Trial {
                 node: c.node.to_string(),
                 when: row,
@@ -174,7 +174,7 @@ impl CptCounts {
                 self.done.insert(c.node, true);
             }
         }
-        if events.contains(&Event::ObstacleAvoided.to_string().as_str()) {
+        if events.contains(&Event::ObstacleAvoided) {
             self.avoided = true;
         }
         out.extend(tracking_trial(r, events, state_after, states, shipped));
@@ -223,7 +223,7 @@ impl CptCounts {
 /// (docs/calibrate.md: hard assignment, an approximation).
 fn tracking_trial(
     r: &DecisionRecord,
-    events: &[&str],
+    events: &[Event],
     state_after: Option<&str>,
     states: &MissionStates,
     shipped: &ShippedRows,
@@ -242,7 +242,7 @@ fn tracking_trial(
                 .map(|s| (e.clone(), s.to_string()))
         })
         .collect::<Option<Vec<_>>>()?;
-    let lost = events.contains(&Event::TargetLost.to_string().as_str());
+    let lost = events.contains(&Event::TargetLost);
     // A step that re-detects a lost target (`simulate`'s world, docs/simulation.md) neither
     // keeps nor loses it: not a trial of the version's row. Kept: the step ended tracking.
     let kept = state_after.map_or(!lost, |after| states.is_tracking(after));
@@ -260,9 +260,14 @@ fn tracking_trial(
 
 /// A `simulate` record's outcome: the world's events after its cycle and the mission state
 /// after it; `None` for a record without them (`fly`).
-pub fn simulated_outcome(r: &DecisionRecord) -> Option<(Vec<&str>, Option<&str>)> {
+pub fn simulated_outcome(r: &DecisionRecord) -> Option<(Vec<Event>, Option<&str>)> {
     let after = r.vehicle.get("world_events_after")?.as_array()?;
-    let events = after.iter().filter_map(|e| e.as_str()).collect();
+    // Typed events (schema 2; a schema-1 log is migrated when read); one that does not read is
+    // no outcome of this build's world.
+    let events = after
+        .iter()
+        .filter_map(|e| serde_json::from_value(e.clone()).ok())
+        .collect();
     let state_after = r
         .vehicle
         .get(companion_core::tracking::STATE_AFTER_KEY)

@@ -9,6 +9,7 @@
 //!
 //! [`DecisionRecord`]: companion_core::record::DecisionRecord
 
+pub mod migration;
 mod reader;
 mod stream;
 mod tlog;

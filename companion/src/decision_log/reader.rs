@@ -219,6 +219,8 @@ fn read_part(out: &mut LogRead, file: &Path, bytes: &[u8], first_part: bool, las
         lines.len()
     };
     let mut saw_header = false;
+    // The schema of this part's lines, from its header (schema 1: sentences, migrated).
+    let mut schema = None;
     for (idx, raw) in lines.iter().take(n).enumerate() {
         let lineno = idx + 1;
         let is_last = idx + 1 == n;
@@ -235,7 +237,7 @@ fn read_part(out: &mut LogRead, file: &Path, bytes: &[u8], first_part: bool, las
             .and_then(|s| {
                 serde_json::from_str::<serde_json::Value>(s).map_err(|e| format!("not JSON: {e}"))
             });
-        let value = match parsed {
+        let mut value = match parsed {
             Ok(v) => v,
             Err(reason) => {
                 if is_last && !ends_with_newline && last_part {
@@ -257,10 +259,11 @@ fn read_part(out: &mut LogRead, file: &Path, bytes: &[u8], first_part: bool, las
         match kind.as_deref() {
             Some("header") => {
                 saw_header = true;
-                let schema = value.get("schema").and_then(|s| s.as_u64()).unwrap_or(0) as u32;
-                if schema > SCHEMA_VERSION {
-                    out.newer_schema = Some(out.newer_schema.unwrap_or(0).max(schema));
+                let v = value.get("schema").and_then(|s| s.as_u64()).unwrap_or(0) as u32;
+                if v > SCHEMA_VERSION {
+                    out.newer_schema = Some(out.newer_schema.unwrap_or(0).max(v));
                 }
+                schema = Some(v);
                 if first_part && out.header.is_none() {
                     match serde_json::from_value::<Header>(value) {
                         Ok(h) => out.header = Some(h),
@@ -291,7 +294,12 @@ fn read_part(out: &mut LogRead, file: &Path, bytes: &[u8], first_part: bool, las
                 Err(e) => out.corrupted.push(issue(format!("unreadable event: {e}"))),
             },
             Some("end") => out.ended_cleanly = true,
-            None | Some("record") => match serde_json::from_value::<DecisionRecord>(value) {
+            None | Some("record") => match {
+                if super::migration::needs_migration(schema) {
+                    super::migration::record_v1(&mut value);
+                }
+                serde_json::from_value::<DecisionRecord>(value)
+            } {
                 Ok(r) => out.records.push(r),
                 Err(e) => out
                     .corrupted

@@ -92,6 +92,8 @@ struct Part {
     last: bool,
     saw_header: bool,
     lines_read: usize,
+    /// The schema of this part's lines, from its header (schema 1: sentences, migrated).
+    schema: Option<u32>,
 }
 
 /// Open a run folder or `.jsonl` file for streaming. The parts are listed as `read_log` lists
@@ -196,6 +198,7 @@ impl LogStream {
                     last: i + 1 == self.files.len(),
                     saw_header: false,
                     lines_read: 0,
+                    schema: None,
                 })
             }
             Err(source) => {
@@ -207,8 +210,16 @@ impl LogStream {
     }
 }
 
-/// A decision record line, its proposals' `inputs` taken out (kept as read, in order).
-fn record_item(mut value: serde_json::Value, issue: impl Fn(String) -> ReadIssue) -> LogItem {
+/// A decision record line, its proposals' `inputs` taken out (kept as read, in order); a
+/// schema-1 line (`schema`, from its part's header) is migrated first.
+fn record_item(
+    mut value: serde_json::Value,
+    schema: Option<u32>,
+    issue: impl Fn(String) -> ReadIssue,
+) -> LogItem {
+    if super::migration::needs_migration(schema) {
+        super::migration::record_v1(&mut value);
+    }
     let inputs: Vec<Option<serde_json::Value>> = value
         .get_mut("proposals")
         .and_then(|p| p.as_array_mut())
@@ -312,6 +323,7 @@ impl Iterator for LogStream {
                     part.saw_header = true;
                     let schema = value.get("schema").and_then(|s| s.as_u64()).unwrap_or(0);
                     let schema = u32::try_from(schema).unwrap_or(u32::MAX);
+                    part.schema = Some(schema);
                     if schema > SCHEMA_VERSION {
                         if !part.first {
                             return Some(Ok(LogItem::NewerSchema(schema)));
@@ -335,7 +347,7 @@ impl Iterator for LogStream {
                     Err(e) => LogItem::Corrupted(issue(format!("unreadable event: {e}"))),
                 },
                 Some("end") => LogItem::End,
-                None | Some("record") => record_item(value, issue),
+                None | Some("record") => record_item(value, part.schema, issue),
                 Some(other) => LogItem::Note(format!(
                     "{}:{lineno}: line of unknown kind {other:?} skipped",
                     part.file.display()

@@ -158,7 +158,7 @@ impl AutopilotPlan {
             (!feasible).then(|| "the guarantee finds no allocation for it".to_string());
         self.activities = part.activities;
         tracing::info!("{text}");
-        shell.pending_events.push(Event::from(text.as_str()));
+        shell.pending_events.push(Event::Other(text.clone()));
         self.unsaid = Some((NOTICE, text));
         self.last = Some((items.to_vec(), speeds, home_at_seq0 || home.is_some()));
         true
@@ -249,7 +249,7 @@ impl AutopilotPlan {
             }
         };
         tracing::info!("{text}");
-        shell.pending_events.push(Event::from(text.as_str()));
+        shell.pending_events.push(Event::Other(text.clone()));
         self.unsaid = Some((severity, text));
         self.last = Some((items, speeds, home_at_seq0 || home.is_some()));
     }

@@ -217,7 +217,7 @@ fn coalesce_events(events: &mut Vec<Event>) {
     if let Some((more, repeats, not_listed)) =
         companion_core::record::dedupe_capped(events, MAX_EVENTS)
     {
-        events.push(Event::from(format!(
+        events.push(Event::Other(format!(
             "({more} more events since the last cycle: {repeats} repeats, {not_listed} not listed)"
         )));
     }
@@ -371,7 +371,7 @@ mod tests {
             "{}",
             many[MAX_EVENTS]
         );
-        let mut few = vec![Event::from("a"), Event::from("b")];
+        let mut few = vec![Event::Other("a".into()), Event::Other("b".into())];
         coalesce_events(&mut few);
         assert_eq!(few, ["a", "b"]);
     }

@@ -164,7 +164,7 @@ pub fn answer_command(
     {
         let line = format!("operator: {name} from {sys}/{comp} refused: {why}");
         tracing::warn!("{line}");
-        shell.pending_events.push(Event::from(line));
+        shell.pending_events.push(Event::Other(line.into()));
         out.extend(shell.texts.say(now, WARNING, text));
         changed = true;
         result
@@ -239,7 +239,7 @@ pub fn request_start(
             if by != StartBy::AutoStart || shell.refusal_told.as_deref() != Some(&first) {
                 let line = ev.describe();
                 tracing::warn!("{line}");
-                shell.pending_events.push(Event::from(line));
+                shell.pending_events.push(Event::Other(line.into()));
                 // One change of decision, one STATUSTEXT (chunked when longer than 50).
                 out.extend(shell.texts.say(now, WARNING, &lines.join(". ")));
                 shell.refusal_told = Some(first);
@@ -307,7 +307,7 @@ pub fn on_gate_event(
     out: &mut Vec<Msg>,
 ) {
     let text = ev.describe();
-    shell.pending_events.push(Event::from(text.as_str()));
+    shell.pending_events.push(Event::Other(text.clone()));
     let said: Option<(MavSeverity, String)> = match ev {
         GateEvent::Started(_) => Some((NOTICE, "companion: mission started".to_string())),
         GateEvent::StartRequested(_) | GateEvent::StartRefused(..) => None,
@@ -429,7 +429,7 @@ mod tests {
     ) -> Vec<MavResult> {
         let now = Duration::from_secs_f64(t);
         if let Some(line) = gcs.on_frame(f) {
-            shell.pending_events.push(Event::from(line));
+            shell.pending_events.push(Event::Other(line.into()));
         }
         v.on_frame(now, f);
         let mut out = Vec::new();

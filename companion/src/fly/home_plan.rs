@@ -111,7 +111,7 @@ impl HomePlan {
             }
         };
         tracing::info!("{text}");
-        shell.pending_events.push(Event::from(text.as_str()));
+        shell.pending_events.push(Event::Other(text.clone()));
         self.unsaid = Some((severity, text));
     }
 

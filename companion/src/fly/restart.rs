@@ -281,7 +281,7 @@ impl StartLook {
             self.found_as
         );
         tracing::warn!("{line}");
-        shell.pending_events.push(Event::from(line));
+        shell.pending_events.push(Event::Other(line.into()));
         // Newer words replace older ones not yet said: what the companion does now counts.
         self.unsaid = texts.to_vec();
         self.say_unsaid(shell, now, out);
@@ -484,7 +484,7 @@ impl StartLook {
             facts.join("; ")
         );
         tracing::warn!("{line}");
-        shell.pending_events.push(Event::from(line));
+        shell.pending_events.push(Event::Other(line.into()));
         self.unsaid = vec!["companion: resumed its own flight".to_string()];
         self.say_unsaid(shell, now, out);
         vehicle.unwatch_autopilot_mission();
@@ -551,7 +551,7 @@ pub(super) fn refuse_start_until_known(
         "operator: MAV_CMD_MISSION_START from {sys}/{comp} refused: the vehicle is armed and not yet known to be on the ground"
     );
     tracing::warn!("{line}");
-    shell.pending_events.push(Event::from(line));
+    shell.pending_events.push(Event::Other(line.into()));
     out.extend(
         shell
             .texts

@@ -113,7 +113,7 @@ impl RouteReplan {
             Err(e) => format!("companion: route not re-planned at {cruise:.1} m/s: {e:#}"),
         };
         tracing::info!("{text}");
-        shell.pending_events.push(Event::from(text.as_str()));
+        shell.pending_events.push(Event::Other(text.clone()));
         self.unsaid = Some((NOTICE, text));
     }
 

@@ -286,7 +286,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
                     if let Some(ev) = self.udp_peer.on_frame(from, autopilot) {
                         tracing::info!("{ev}");
                         let _ = self.link.peer.send(self.udp_peer.addr);
-                        self.transport_events.push(LinkEvent::from(ev));
+                        self.transport_events.push(LinkEvent::Other(ev));
                     }
                 }
                 self.ingest.set_our_system(self.vehicle.our_system());
@@ -323,7 +323,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         }
         if let Some(line) = self.stations.on_frame(f) {
             tracing::warn!("{line}");
-            self.shell.pending_events.push(Event::from(line));
+            self.shell.pending_events.push(Event::Other(line.into()));
         }
         // Only the operator's ground stations count for the ground-station watch.
         if self.stations.counts(f.header.system_id.min(255) as u8) {
@@ -500,7 +500,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             } else {
                 tracing::info!("{text}");
             }
-            self.shell.pending_events.push(Event::from(text));
+            self.shell.pending_events.push(Event::Other(text.into()));
             out.extend(self.shell.texts.say(
                 t,
                 if lost { WARNING } else { INFO },

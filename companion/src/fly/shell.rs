@@ -129,9 +129,7 @@ impl Shell {
         self.last_actions.clear();
         self.last_told = Default::default();
         self.told_evidence.clear();
-        self.pending_events.push(Event::from(
-            "flight over: landed and disarmed; waiting for the operator",
-        ));
+        self.pending_events.push(Event::NewFlight);
     }
 
     /// A change of the cycle's action set, described for the journal and the ground station
@@ -246,7 +244,7 @@ impl Shell {
             return None;
         }
         self.ingest_reported = *now;
-        Some(LinkEvent::from(format!(
+        Some(LinkEvent::Other(format!(
             "ingest: {} bytes outside valid frames (garbage or corrupt), {} malformed frames, {} bad signatures, {} unsigned commands refused, {} other unsigned frames refused (since start)",
             now.bytes_unframed(),
             now.frames_malformed,

@@ -119,7 +119,7 @@ pub fn begin_stop(
     } else {
         tracing::info!("{line}");
     }
-    shell.pending_events.push(Event::from(line));
+    shell.pending_events.push(Event::Other(line.into()));
     // The stop's words go first, ahead of the mode command.
     let mut msgs = shell.texts.say(now, severity, &text);
     msgs.extend(out);
@@ -148,7 +148,7 @@ pub fn end_stop(shell: &mut Shell, vehicle: &Vehicle, commanded: bool, now: Dura
         ),
     };
     tracing::warn!("{line}");
-    shell.pending_events.push(Event::from(line));
+    shell.pending_events.push(Event::Other(line.into()));
     gcs.map_or_else(Vec::new, |text| shell.texts.say(now, CRITICAL, text))
 }
 

@@ -17,9 +17,10 @@ mod terminal;
 pub use crate::text;
 pub mod why;
 
+use crate::decision_log::migration::mission_states_of;
 pub use html::render_html;
 pub use records::{distance_m, policy_from_command};
-use records::{is_failsafe, mission_states_of, mode, position, vehicle_f64};
+use records::{is_failsafe, mode, position, vehicle_f64};
 pub use terminal::{render_terminal, render_why};
 
 use crate::decision_log::{Header, LogItem, LossReason, ReadError, ReadIssue, stream_log};
@@ -317,7 +318,7 @@ impl Review {
                 self.pending = Some((r, inputs));
             }
             LogItem::Event(e) => match &mut self.pending {
-                Some((r, _)) if r.cycle == e.cycle => r.events.push(Event::from(e.event)),
+                Some((r, _)) if r.cycle == e.cycle => r.events.push(Event::Other(e.event)),
                 Some((r, _)) if e.cycle < r.cycle => self.attach_late_event(e.cycle, e.event),
                 _ => {
                     if self.pending_events.len() < MAX_PENDING_EVENT_CYCLES
@@ -325,7 +326,7 @@ impl Review {
                     {
                         let v = self.pending_events.entry(e.cycle).or_default();
                         if v.len() < MAX_ISSUES {
-                            v.push(Event::from(e.event));
+                            v.push(Event::Other(e.event));
                         }
                     }
                 }

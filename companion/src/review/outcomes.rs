@@ -77,9 +77,6 @@ pub fn categorize(result: &CommandOutcome) -> Category {
         Skipped(_) | Superseded | NotSent(_) | Cancelled(_) => Category::Skipped,
         Denied | Unsupported | TemporarilyRejected | NotReady(_) => Category::Denied,
         Timeout(_) => Category::TimedOut,
-        // Logs written before the mission error was typed: a transfer stopped by a cancel was
-        // `FAILED (Cancelled("why"))` (its error's Debug text); now it is `CANCELLED (why)`.
-        Failed(Some(why)) if why.starts_with("Cancelled(") => Category::Skipped,
         Failed(_) | Unmapped | Other(_) => Category::Failed,
     }
 }
@@ -144,10 +141,10 @@ mod tests {
 
     #[test]
     fn an_arrival_at_the_zone_counts_as_accepted_and_a_timeout_does_not() {
-        let arrived = CommandOutcome::from("ARRIVED (1.2 m from the zone)");
+        let arrived = crate::decision_log::migration::outcome("ARRIVED (1.2 m from the zone)");
         assert!(matches!(arrived, CommandOutcome::Arrived(_)), "{arrived:?}");
         assert_eq!(categorize(&arrived), Category::Accepted);
-        let late = CommandOutcome::from(
+        let late = crate::decision_log::migration::outcome(
             "TIMEOUT (not within 3.0 m of the zone after 30 s, 7.5 m away; landing here)",
         );
         assert_eq!(categorize(&late), Category::TimedOut);
@@ -188,7 +185,11 @@ mod tests {
             ("something new", Category::Failed),
             ("TIMEOUT", Category::TimedOut),
         ] {
-            assert_eq!(categorize(&CommandOutcome::from(r)), c, "{r}");
+            assert_eq!(
+                categorize(&crate::decision_log::migration::outcome(r)),
+                c,
+                "{r}"
+            );
         }
     }
 }

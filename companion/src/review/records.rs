@@ -1,10 +1,7 @@
 //! Values read out of decision records and the log header (mode, position, policy, the
 //! mission states the run declared), for the review's aggregates.
 
-use crate::decision_log::Header;
-use companion_core::mission::{MissionStates, RouteRole};
 use companion_core::record::DecisionRecord;
-use std::path::Path;
 
 /// Metres between two (longitude, latitude) points in degrees (haversine, mean Earth radius:
 /// well under a metre off at the distances of one flight).
@@ -57,48 +54,3 @@ pub fn policy_from_command(cmd: &str) -> Option<String> {
     }
     None
 }
-
-/// A `[route_states]` table naming the route states of the logs before params/mission.toml
-/// declared them ([`MissionStates::undeclared`]).
-pub(super) fn route_states_before_declared() -> String {
-    let undeclared = MissionStates::undeclared();
-    let mut table = String::from("\n[route_states]\n");
-    for role in RouteRole::ALL {
-        table.push_str(&format!(
-            "{} = {:?}\n",
-            role.key(),
-            undeclared.route().state(role)
-        ));
-    }
-    table
-}
-
-/// The mission's states as the run's own params declared them (embedded in the log's header).
-/// Logs whose mission.toml declared states and phases but not yet `[route_states]` take the
-/// route names of that time; logs written before the states were declared, or whose header
-/// carries no readable params, are read by the rule of that time
-/// ([`MissionStates::undeclared`]).
-pub(super) fn mission_states_of(h: &Header) -> MissionStates {
-    let dir = Path::new("params");
-    let mut files = companion_core::spec::ParamsFiles::new(dir);
-    for name in ["mission.toml", "actions.toml"] {
-        if let Some(text) = h.params.get(name) {
-            files.insert(dir.join(name), text.as_str());
-        }
-    }
-    MissionStates::load(&files)
-        .or_else(|e| match h.params.get("mission.toml") {
-            Some(text) if !text.contains("[route_states]") => {
-                files.insert(
-                    dir.join("mission.toml"),
-                    format!("{text}{}", route_states_before_declared()),
-                );
-                MissionStates::load(&files)
-            }
-            _ => Err(e),
-        })
-        .unwrap_or_else(|_| MissionStates::undeclared())
-}
-
-#[cfg(test)]
-mod tests;

@@ -1,5 +1,6 @@
 use super::*;
 use proptest::prelude::*;
+use serde::Serialize;
 
 /// Free text as producers write it: words of letters, digits and the punctuation the
 /// sentences use, never empty.
@@ -116,212 +117,86 @@ fn json<T: Serialize>(v: &T) -> String {
 }
 
 proptest! {
-    /// Every outcome written reads back as itself, in JSON as a plain string.
+    /// Every outcome reads back as itself from its schema-2 JSON: an object tagged by `kind`.
     #[test]
     fn command_outcome_reads_back_as_written(o in outcome()) {
-        let s = o.to_string();
-        prop_assert_eq!(CommandOutcome::from(s.as_str()), o.clone());
-        prop_assert_eq!(json(&o), json(&s));
-        prop_assert_eq!(serde_json::from_str::<CommandOutcome>(&json(&s)).unwrap(), o);
+        let v = serde_json::to_value(&o).unwrap();
+        prop_assert!(v["kind"].is_string(), "{}", v);
+        prop_assert_eq!(serde_json::from_str::<CommandOutcome>(&json(&o)).unwrap(), o);
     }
 
     #[test]
     fn link_event_reads_back_as_written(e in link_event()) {
-        let s = e.to_string();
-        prop_assert_eq!(LinkEvent::from(s.as_str()), e.clone());
-        prop_assert_eq!(json(&e), json(&s));
-        prop_assert_eq!(serde_json::from_str::<LinkEvent>(&json(&s)).unwrap(), e);
+        let v = serde_json::to_value(&e).unwrap();
+        prop_assert!(v["kind"].is_string(), "{}", v);
+        prop_assert_eq!(serde_json::from_str::<LinkEvent>(&json(&e)).unwrap(), e);
     }
 
     #[test]
     fn event_reads_back_as_written(e in event()) {
-        let s = e.to_string();
-        prop_assert_eq!(Event::from(s.as_str()), e.clone());
-        prop_assert!(e == s.as_str());
-        prop_assert_eq!(json(&e), json(&s));
-        prop_assert_eq!(serde_json::from_str::<Event>(&json(&s)).unwrap(), e);
-    }
-
-    /// Any string at all (an older or newer log, free text) reads without failing and
-    /// writes back byte for byte.
-    #[test]
-    fn any_string_writes_back_unchanged(s in ".{0,60}") {
-        prop_assert_eq!(Event::from(s.as_str()).to_string(), s.clone());
-        prop_assert_eq!(LinkEvent::from(s.as_str()).to_string(), s.clone());
-        prop_assert_eq!(CommandOutcome::from(s.as_str()).to_string(), s.clone());
-        prop_assert_eq!(json(&Event::from(s.as_str())), json(&s));
+        let v = serde_json::to_value(&e).unwrap();
+        prop_assert!(v["kind"].is_string(), "{}", v);
+        prop_assert!(e == e.to_string().as_str());
+        prop_assert_eq!(serde_json::from_str::<Event>(&json(&e)).unwrap(), e);
     }
 }
 
-/// The sentences producers have always written read as their variants, not as `Other`.
+/// The wire form names the variant and its fields: what a script reads with `jq`.
 #[test]
-fn known_sentences_read_as_their_variants() {
-    use CommandOutcome as O;
-    for (s, o) in [
+fn events_are_written_as_objects_with_their_fields() {
+    let cases: [(Event, &str); 6] = [
         (
-            "ACCEPTED (verified 4 items)",
-            O::AcceptedVerified { items: 4 },
+            Event::TargetDetected,
+            r#"{"kind":"target_detected","text":"target detected"}"#,
         ),
         (
-            "WAITING_READY (gps; ekf)",
-            O::WaitingReady("gps; ekf".into()),
-        ),
-        ("CANCELLED", O::Cancelled(None)),
-        (
-            "CANCELLED (pilot took control)",
-            O::Cancelled(Some("pilot took control".into())),
+            Event::Mode("RTL".into()),
+            r#"{"kind":"mode","mode":"RTL","text":"mode RTL"}"#,
         ),
         (
-            "FAILED (Cancelled(\"link lost\"))",
-            O::Failed(Some("Cancelled(\"link lost\")".into())),
-        ),
-        ("UNMAPPED (not in commands.toml)", O::Unmapped),
-        (
-            "TIMEOUT (not within 5.0 m of the zone after 60 s; landing here)",
-            O::Timeout(Some(
-                "not within 5.0 m of the zone after 60 s; landing here".into(),
-            )),
+            Event::Link(LinkEvent::Lost),
+            r#"{"kind":"link","link":{"kind":"lost","text":"link lost"},"text":"link lost"}"#,
         ),
         (
-            "ARRIVED (2.1 m from the zone)",
-            O::Arrived("2.1 m from the zone".into()),
-        ),
-        ("COMMAND_LONG_ONLY", O::Other("COMMAND_LONG_ONLY".into())),
-        (
-            "UNMAPPED (something else)",
-            O::Other("UNMAPPED (something else)".into()),
-        ),
-    ] {
-        assert_eq!(O::from(s), o, "{s}");
-    }
-    for (s, e) in [
-        (
-            "command take_off ACCEPTED",
             Event::Command {
-                action: "take_off".into(),
-                outcome: O::Accepted,
+                action: "land".into(),
+                outcome: CommandOutcome::Timeout(Some("zone not reached".into())),
             },
+            r#"{"kind":"command","action":"land","outcome":{"kind":"TIMEOUT","why":"zone not reached","text":"TIMEOUT (zone not reached)"},"text":"command land TIMEOUT (zone not reached)"}"#,
         ),
         (
-            "command mission FAILED",
-            Event::Command {
-                action: "mission".into(),
-                outcome: O::Failed(None),
-            },
-        ),
-        ("battery below 30%", Event::BatteryBelow(30.0)),
-        ("battery below 27.5%", Event::BatteryBelow(27.5)),
-        ("waypoint 3", Event::Waypoint(3)),
-        ("link lost", Event::Link(LinkEvent::Lost)),
-        (
-            "tracking: state `v9` unknown to this MDP",
-            Event::MdpStateUnknown {
-                mdp: "tracking".into(),
-                state: "v9".into(),
-            },
+            Event::Degraded(super::super::Degraded {
+                app: "tracking".into(),
+                from: "V3".into(),
+                to: "V1".into(),
+                reason: "no room".into(),
+            }),
+            r#"{"kind":"degraded","degraded":{"app":"tracking","from":"V3","to":"V1","reason":"no room"},"text":"tracking V3 -> V1: no room"}"#,
         ),
         (
-            "guarantee: no allocation meets the goals",
-            Event::GuaranteeInfeasible,
+            Event::Other("vibrations".into()),
+            r#"{"kind":"other","text":"vibrations"}"#,
         ),
-        (
-            "tracking: probability P_V3 not provided",
-            Event::MdpError {
-                mdp: "tracking".into(),
-                error: "probability P_V3 not provided".into(),
-            },
-        ),
-        (
-            "landing: probability P_appZ = 1.5 not in [0, 1]",
-            Event::MdpError {
-                mdp: "landing".into(),
-                error: "probability P_appZ = 1.5 not in [0, 1]".into(),
-            },
-        ),
-        (
-            "navigation: unknown policy 'fast'",
-            Event::MdpError {
-                mdp: "navigation".into(),
-                error: "unknown policy 'fast'".into(),
-            },
-        ),
-        // Free text with a colon stays free text.
-        (
-            "operator: probability of rain high",
-            Event::Other("operator: probability of rain high".into()),
-        ),
-        (
-            "mission: search time 120 s over, target not found: land",
-            Event::ShellLand("mission: search time 120 s over, target not found".into()),
-        ),
-        (
-            "landing: land_at_zone again (the landing was interrupted or not done)",
-            Event::LandingKept("land_at_zone".into()),
-        ),
-        // As fly has always written it (logs before the variant): read as the variant.
-        (
-            "flight over: landed and disarmed; waiting for the operator",
-            Event::NewFlight,
-        ),
-        ("vibrations", Event::Other("vibrations".into())),
-        ("waypoint 03", Event::Other("waypoint 03".into())),
-        (
-            "battery below 30.0%",
-            Event::Other("battery below 30.0%".into()),
-        ),
-    ] {
-        assert_eq!(Event::from(s), e, "{s}");
+    ];
+    for (e, written) in cases {
+        assert_eq!(json(&e), written);
+        assert_eq!(serde_json::from_str::<Event>(written).unwrap(), e);
     }
-    for (s, e) in [
-        (
-            "autopilot 1/1 (ArduPilot)",
-            LinkEvent::Autopilot {
-                system: 1,
-                component: 1,
-                flavor: "ArduPilot".into(),
-            },
-        ),
-        (
-            "another autopilot 7/1 heard, ignored (not the chosen one)",
-            LinkEvent::OtherAutopilot {
-                system: 7,
-                component: 1,
-                why: "not the chosen one".into(),
-            },
-        ),
-        (
-            "autopilot: PreArm: GPS",
-            LinkEvent::AutopilotText("PreArm: GPS".into()),
-        ),
-        (
-            "stream GPS_RAW_INT: ACCEPTED",
-            LinkEvent::Stream {
-                name: "GPS_RAW_INT".into(),
-                outcome: O::Accepted,
-            },
-        ),
-        (
-            "mission uploaded (4 items), verifying",
-            LinkEvent::MissionUploaded { items: 4 },
-        ),
-        (
-            "connected tcp:127.0.0.1:5760",
-            LinkEvent::TransportConnected("tcp:127.0.0.1:5760".into()),
-        ),
-        (
-            "onboard disconnected: refused",
-            LinkEvent::OnboardDisconnected("refused".into()),
-        ),
-        (
-            "autopilot 300/1 (PX4)",
-            LinkEvent::Other("autopilot 300/1 (PX4)".into()),
-        ),
-    ] {
-        assert_eq!(LinkEvent::from(s), e, "{s}");
-    }
+    assert_eq!(
+        json(&CommandOutcome::Accepted),
+        r#"{"kind":"ACCEPTED","text":"ACCEPTED"}"#
+    );
+    assert_eq!(
+        json(&LinkEvent::Stream {
+            name: "ATTITUDE".into(),
+            outcome: CommandOutcome::Denied
+        }),
+        r#"{"kind":"stream","name":"ATTITUDE","outcome":{"kind":"DENIED","text":"DENIED"},"text":"stream ATTITUDE: DENIED"}"#
+    );
+    // A sentence is schema 1: not read here (decision_log::migration reads it).
+    assert!(serde_json::from_str::<Event>(r#""target detected""#).is_err());
 }
 
-/// A copy into an event of the same kind keeps its text buffer (the cycle's reused record).
 #[test]
 fn clone_from_keeps_the_buffer_of_the_same_kind() {
     let src = Event::Other("gps jamming".into());

@@ -317,13 +317,12 @@ impl Executor {
         }
     }
 
-    /// Record a step that did not need a command (`ALREADY`, `SKIPPED ...`).
-    /// A step settled without a command on the wire; `result` in the log's spelling.
-    pub(super) fn record_step(&mut self, action: String, command: String, result: String) {
+    /// Record a step settled without a command on the wire (`ALREADY`, `SKIPPED ...`).
+    pub(super) fn record_step(&mut self, action: String, command: String, result: CommandOutcome) {
         self.records.push(CommandRecord {
             action,
             command,
-            result: CommandOutcome::from(result.as_str()),
+            result,
             attempts: 0,
             latency_ms: None,
         });
@@ -746,20 +745,14 @@ impl Executor {
         now: Duration,
         action: String,
     ) -> Advance {
-        let (command, result) = if io.watch.known().is_some() {
+        let result = if io.watch.known().is_some() {
             self.step_done();
-            (
-                "MISSION_UPLOAD",
-                "SKIPPED (the autopilot's own mission is flown)",
-            )
+            CommandOutcome::Skipped("the autopilot's own mission is flown".into())
         } else {
             self.job_failed(now);
-            (
-                "MISSION_UPLOAD",
-                "FAILED (the autopilot's mission is not downloaded yet)",
-            )
+            CommandOutcome::Failed(Some("the autopilot's mission is not downloaded yet".into()))
         };
-        self.record_step(action, command.into(), result.into());
+        self.record_step(action, "MISSION_UPLOAD".into(), result);
         Advance::Again
     }
 }

@@ -20,13 +20,17 @@ impl Executor {
             n.hypot(e)
         });
         let result = match off {
-            Some(d) if d <= io.cfg.zone_radius_m => format!("ARRIVED ({d:.1} m from the zone)"),
-            _ if now.saturating_sub(since) >= io.cfg.zone_arrive_timeout => format!(
-                "TIMEOUT (not within {:.1} m of the zone after {:.0} s{}; landing here)",
-                io.cfg.zone_radius_m,
-                io.cfg.zone_arrive_timeout.as_secs_f64(),
-                off.map(|d| format!(", {d:.1} m away")).unwrap_or_default()
-            ),
+            Some(d) if d <= io.cfg.zone_radius_m => {
+                CommandOutcome::Arrived(format!("{d:.1} m from the zone"))
+            }
+            _ if now.saturating_sub(since) >= io.cfg.zone_arrive_timeout => {
+                CommandOutcome::Timeout(Some(format!(
+                    "not within {:.1} m of the zone after {:.0} s{}; landing here",
+                    io.cfg.zone_radius_m,
+                    io.cfg.zone_arrive_timeout.as_secs_f64(),
+                    off.map(|d| format!(", {d:.1} m away")).unwrap_or_default()
+                )))
+            }
             _ => return Advance::Wait,
         };
         self.record_step(action, "ARRIVE (zone)".into(), result);
@@ -81,7 +85,7 @@ impl Executor {
             && io.telemetry.mode.is_some()
             && !stale
         {
-            self.record_step(action, format!("SET_MODE {mode}"), "ALREADY".into());
+            self.record_step(action, format!("SET_MODE {mode}"), CommandOutcome::Already);
             self.step_done();
             return Advance::Again;
         }
@@ -101,7 +105,10 @@ impl Executor {
                 self.issued(io, now, &action, format!("SET_MODE {mode}"), spec, out)
             }
             None => {
-                let result = format!("FAILED (no {mode} mode for {})", io.flavor.name());
+                let result = CommandOutcome::Failed(Some(format!(
+                    "no {mode} mode for {}",
+                    io.flavor.name()
+                )));
                 self.record_step(action, format!("SET_MODE {mode}"), result);
                 self.job_failed(now);
                 Advance::Again
@@ -142,9 +149,9 @@ impl Executor {
             self.record_step(
                 action,
                 format!("SET_MODE {name}"),
-                format!(
-                    "NOT_CONFIRMED (still {shown} {waited:.0} s after ACCEPTED; sending again)"
-                ),
+                CommandOutcome::NotConfirmed(format!(
+                    "still {shown} {waited:.0} s after ACCEPTED; sending again"
+                )),
             );
             if let Some(j) = &mut self.job {
                 j.running = Running::Idle;
@@ -161,7 +168,7 @@ impl Executor {
         self.record_step(
             action,
             format!("SET_MODE {name}"),
-            format!("FAILED ({why})"),
+            CommandOutcome::Failed(Some(why)),
         );
         self.job_failed(now);
         Advance::Again
@@ -175,7 +182,7 @@ impl Executor {
         out: &mut Vec<Msg>,
     ) -> Advance {
         if io.telemetry.armed {
-            self.record_step(action, "ARM".into(), "ALREADY".into());
+            self.record_step(action, "ARM".into(), CommandOutcome::Already);
             self.step_done();
             return Advance::Again;
         }
@@ -203,9 +210,9 @@ impl Executor {
                     self.record_step(
                         action,
                         "ARM".into(),
-                        format!(
-                            "FAILED (vehicle in {now_mode}, not {want} as commanded: not arming)"
-                        ),
+                        CommandOutcome::Failed(Some(format!(
+                            "vehicle in {now_mode}, not {want} as commanded: not arming"
+                        ))),
                     );
                     self.job_failed(now);
                     return Advance::Again;
@@ -231,7 +238,7 @@ impl Executor {
                         self.record_step(
                             action.clone(),
                             "ARM".into(),
-                            format!("WAITING_READY ({})", why.join("; ")),
+                            CommandOutcome::WaitingReady(why.join("; ")),
                         );
                         now
                     }
@@ -240,7 +247,7 @@ impl Executor {
                     self.record_step(
                         action,
                         "ARM".into(),
-                        format!("NOT_READY ({})", why.join("; ")),
+                        CommandOutcome::NotReady(why.join("; ")),
                     );
                     self.job_failed(now);
                 }
@@ -270,7 +277,7 @@ impl Executor {
             self.record_step(
                 action,
                 crate::mavlink_name(&command),
-                "FAILED (no home position yet)".into(),
+                CommandOutcome::Failed(Some("no home position yet".into())),
             );
             self.job_failed(now);
             return Advance::Again;
@@ -301,7 +308,11 @@ impl Executor {
             } else {
                 "no home position yet"
             };
-            self.record_step(action, "MISSION_UPLOAD".into(), format!("FAILED ({why})"));
+            self.record_step(
+                action,
+                "MISSION_UPLOAD".into(),
+                CommandOutcome::Failed(Some(why.into())),
+            );
             self.job_failed(now);
             return Advance::Again;
         };
@@ -337,7 +348,7 @@ impl Executor {
                 self.record_step(
                     action,
                     "MAV_CMD_DO_REPOSITION".into(),
-                    "FAILED (no position/heading yet)".into(),
+                    CommandOutcome::Failed(Some("no position/heading yet".into())),
                 );
                 self.job_failed(now);
                 Advance::Again
@@ -385,7 +396,7 @@ impl Executor {
                 self.record_step(
                     action,
                     "MAV_CMD_DO_REPOSITION (zone)".into(),
-                    "SKIPPED (no zone reported; landing here)".into(),
+                    CommandOutcome::Skipped("no zone reported; landing here".into()),
                 );
                 self.step_done();
                 Advance::Again

@@ -1,4 +1,7 @@
 use super::*;
+use crate::decision_log::Header;
+
+mod sentences;
 
 fn header_with(mission: Option<String>) -> Header {
     let dir = crate::params::default_params_dir();
