@@ -187,6 +187,7 @@ class GcsObserver:
         self.landed_state = 0
         self.texts: List[str] = []
         self.battery_pct: Optional[int] = None
+        self.battery_currents_ca: set = set()
         self.heartbeats = 0
         # (time, source component, command, result) of every COMMAND_ACK from the vehicle's system
         self.acks: List[tuple] = []
@@ -237,6 +238,7 @@ class GcsObserver:
                     self.texts.append(m.text)
                 elif t == "SYS_STATUS":
                     self.battery_pct = m.battery_remaining
+                    self.battery_currents_ca.add(m.current_battery)     # -1: not measured
                 elif t == "COMMAND_ACK":
                     self.acks.append((time.time(), m.get_srcComponent(), m.command, m.result))
                 elif t in ("MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK") and m.target_system == 255:

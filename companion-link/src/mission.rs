@@ -131,10 +131,14 @@ fn normalise_frame(f: MavFrame) -> MavFrame {
 }
 
 /// An item whose command flies to no position of its own: ArduPilot stores none for it and
-/// answers it in MAV_FRAME_GLOBAL at 0/0/0 whatever was sent (seen on ArduCopter 4.7 SITL), so only
-/// the command is compared.
+/// answers it in MAV_FRAME_GLOBAL at 0/0/0 whatever was sent (seen on ArduCopter 4.7 SITL: an
+/// RTL, and a DO_CHANGE_SPEED sent in MAV_FRAME_MISSION), so only the command (and a speed
+/// change's speed, param2) is compared.
 fn positionless(command: MavCmd) -> bool {
-    command == MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH
+    matches!(
+        command,
+        MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH | MavCmd::MAV_CMD_DO_CHANGE_SPEED
+    )
 }
 
 /// First difference between what we uploaded and what came back, seq 0 (home) excluded.
@@ -160,6 +164,14 @@ pub fn compare_from(sent: &[MissionItem], got: &[MissionItem], first: usize) -> 
             ));
         }
         if positionless(a.command) {
+            let speed = |i: &MissionItem| i.params[1];
+            if a.command == MavCmd::MAV_CMD_DO_CHANGE_SPEED && (speed(a) - speed(b)).abs() > 0.01 {
+                return Err(format!(
+                    "item {seq}: speed {} came back as {}",
+                    speed(a),
+                    speed(b)
+                ));
+            }
             continue;
         }
         if normalise_frame(a.frame) != normalise_frame(b.frame) {
@@ -794,6 +806,26 @@ mod tests {
         assert_eq!(compare(&sent, &got), Ok(()));
         got[3].command = MavCmd::MAV_CMD_NAV_LAND;
         assert!(compare(&sent, &got).is_err_and(|d| d.contains("item 3")));
+    }
+
+    /// ArduPilot answers a DO_CHANGE_SPEED sent in MAV_FRAME_MISSION in MAV_FRAME_GLOBAL (ArduCopter
+    /// 4.7 SITL, a QGroundControl `.plan`'s speed change): its command and speed count, a changed
+    /// speed fails.
+    #[test]
+    fn a_speed_change_is_compared_by_its_command_and_speed() {
+        let speed = |frame, mps| MissionItem {
+            command: MavCmd::MAV_CMD_DO_CHANGE_SPEED,
+            frame,
+            params: [1.0, mps, -1.0, 0.0],
+            ..MissionItem::waypoint(0, 0, 0.0)
+        };
+        let mut sent = items();
+        sent.insert(2, speed(MavFrame::MAV_FRAME_MISSION, 6.0));
+        let mut got = sent.clone();
+        got[2] = speed(MavFrame::MAV_FRAME_GLOBAL, 6.0);
+        assert_eq!(compare(&sent, &got), Ok(()));
+        got[2].params[1] = 10.0;
+        assert!(compare(&sent, &got).is_err_and(|d| d.contains("item 2") && d.contains("speed")));
     }
 
     #[test]

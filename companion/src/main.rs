@@ -250,14 +250,18 @@ fn fly(mut args: FlyArgs) -> Result<()> {
         .then_some(companion::route_input::DERIVE_MISSION);
     // A route relative to home among absolute zones waits for the autopilot's home to be
     // planned (fly::home_plan; no start until then); the route alone stands in meanwhile.
-    args.plan_waits_for_home = companion::route_input::plan_needs_home(
-        &params,
-        args.zones.as_deref(),
-        args.route_file(),
-        args.home.as_deref(),
-    )
-    .context("loading params")?;
-    let zones = args.zones.as_deref().filter(|_| !args.plan_waits_for_home);
+    // `--mission autopilot --zones`: the zones are the autopilot mission's, placed from its own
+    // home when it is planned (fly::autopilot_plan), not the default route's.
+    let autopilot = args.flies_autopilot_mission();
+    args.plan_waits_for_home = !autopilot
+        && companion::route_input::plan_needs_home(
+            &params,
+            args.zones.as_deref(),
+            args.route_file(),
+            args.home.as_deref(),
+        )
+        .context("loading params")?;
+    let zones = (args.zones.as_deref()).filter(|_| !args.plan_waits_for_home && !autopilot);
     let (loaded, plan) = companion::route_input::load_with_plan(
         &params,
         legacy,

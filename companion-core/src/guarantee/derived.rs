@@ -44,14 +44,17 @@ fn read(
             "expected 0..100 m/s",
         ));
     }
-    if !(derive.waypoint_overhead_s.is_finite()
-        && (0.0..=600.0).contains(&derive.waypoint_overhead_s))
-    {
-        return Err(SpecError::new(
-            &path,
-            "derive.waypoint_overhead_s",
-            format!("{}: expected 0..600 s", derive.waypoint_overhead_s),
-        ));
+    for (key, v) in [
+        ("waypoint_overhead_s", derive.waypoint_overhead_s),
+        ("rtl_loiter_s", derive.rtl_loiter_s),
+    ] {
+        if !(v.is_finite() && (0.0..=600.0).contains(&v)) {
+            return Err(SpecError::new(
+                &path,
+                format!("derive.{key}"),
+                format!("{v}: expected 0..600 s"),
+            ));
+        }
     }
     if !(derive.speed_fraction.is_finite()
         && derive.speed_fraction > 0.0
@@ -76,6 +79,7 @@ pub fn derive_settings(params: &ParamsFiles, mission: &str) -> Result<DeriveSett
         descent_speed_mps: d.descent_speed_mps,
         waypoint_overhead_s: d.waypoint_overhead_s,
         speed_fraction: d.speed_fraction,
+        rtl_loiter_s: d.rtl_loiter_s,
     })
 }
 

@@ -68,6 +68,9 @@ pub(super) struct DeriveFile {
     /// (`calibrate`), 1 without one.
     #[serde(default = "one")]
     pub(super) speed_fraction: f64,
+    /// The autopilot's hover over home before an RTL descends (s; RTL_LOIT_TIME), 0 if none.
+    #[serde(default)]
+    pub(super) rtl_loiter_s: f64,
     /// The tasks each kind of derived activity runs: `take_off`, `leg`, `loiter`, `search`,
     /// `tracking`, `return`, `land`.
     pub(super) tasks: BTreeMap<String, Vec<String>>,

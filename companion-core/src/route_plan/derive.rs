@@ -21,6 +21,9 @@ pub struct DeriveSettings {
     /// Fraction of the commanded horizontal speed the vehicle reaches on a leg (1: it flies the
     /// commanded speed); the vehicle profile's, fitted by `calibrate`.
     pub speed_fraction: f64,
+    /// The autopilot's hover over home before an RTL descends (s): ArduCopter's RTL_LOIT_TIME
+    /// (default 5 s), PX4's RTL_LAND_DELAY; held by the return's last piece.
+    pub rtl_loiter_s: f64,
 }
 
 /// What part of the flight an activity is.
@@ -148,6 +151,10 @@ pub fn derive_activities_from(
             }
             ItemKind::ReturnToLaunch => {
                 w.limits(route, s);
+                // RTL flies at the autopilot's own return speed, not the mission's last
+                // DO_CHANGE_SPEED: ArduCopter's RTL starts its waypoint navigation afresh at
+                // RTL_SPEED (0: WPNAV_SPEED), PX4's at MPC_XY_CRUISE.
+                w.speed = s.cruise_speed_mps;
                 w.legs(
                     Position {
                         alt_m: w.here.alt_m,
@@ -156,6 +163,9 @@ pub fn derive_activities_from(
                     "home".into(),
                     ActivityKind::Return,
                 );
+                if let Some(a) = (w.out.last_mut()).filter(|a| a.kind == ActivityKind::Return) {
+                    a.hold_s += s.rtl_loiter_s;
+                }
                 w.land(&format!("item {i}: RTL, land at home"), s);
                 landed = true;
                 break;

@@ -7,6 +7,7 @@ const SETTINGS: DeriveSettings = DeriveSettings {
     descent_speed_mps: 1.5,
     waypoint_overhead_s: 0.0,
     speed_fraction: 1.0,
+    rtl_loiter_s: 0.0,
 };
 
 /// Great-circle distance on a sphere of the mean Earth radius, by hand (independent of `geo`).
@@ -244,6 +245,24 @@ fn a_qgc_plan_gives_take_off_speed_changes_loiters_return_and_landing() {
             .iter()
             .filter(|a| a.kind == ActivityKind::Leg)
             .all(|a| a.speed_mps == 4.0)
+    );
+    // The autopilot's hover over home before the RTL descends is the return's last piece's.
+    let loitering = DeriveSettings {
+        rtl_loiter_s: 5.0,
+        ..SETTINGS
+    };
+    let held: Vec<f64> = derive_activities(&r, &[], &loitering)
+        .iter()
+        .filter(|a| a.kind == ActivityKind::Return)
+        .map(|a| a.hold_s)
+        .collect();
+    assert_eq!(held, [0.0, 0.0, 5.0]);
+    // The RTL flies at the autopilot's return speed (its cruise), not the DO_CHANGE_SPEED's.
+    assert!(
+        acts.iter()
+            .filter(|a| a.kind == ActivityKind::Return)
+            .all(|a| a.speed_mps == SETTINGS.cruise_speed_mps && a.speed_mps != 4.0),
+        "{acts:#?}"
     );
     assert_eq!(acts[2].constraints, ["gps_degraded"]);
     // The AMSL 130 m of item 3 is 30 m above the 100 m home: the climb to it is 10 m.

@@ -23,7 +23,9 @@ pub(super) struct AutopilotPlan {
     /// The params the activities' tasks and goals come from.
     files: ParamsFiles,
     /// The speeds' params fallback (`[derive]`, read at start).
-    params_speeds: DeriveSettings,
+    params_speeds: crate::autopilot_mission::ParamsSpeeds,
+    /// `--zones`: the zones the mission is planned among (placed from its home).
+    zones: Option<crate::autopilot_mission::MissionZones>,
     /// The mission last planned (or refused), the speeds and whether a home was known then: a
     /// speed the autopilot reports later (its PARAM_VALUE after the download, a ground station's
     /// PARAM_SET) or PX4's home arriving re-plans it.
@@ -41,7 +43,8 @@ impl AutopilotPlan {
     /// Planning from `files`; the start stays refused until the first plan stands.
     pub(super) fn new(
         files: ParamsFiles,
-        params_speeds: DeriveSettings,
+        params_speeds: crate::autopilot_mission::ParamsSpeeds,
+        zones: Option<crate::autopilot_mission::MissionZones>,
         states: companion_core::mission::MissionStates,
         shell: &mut Shell,
     ) -> Self {
@@ -49,6 +52,7 @@ impl AutopilotPlan {
         Self {
             files,
             params_speeds,
+            zones,
             states,
             activities: Vec::new(),
             last: None,
@@ -123,8 +127,14 @@ impl AutopilotPlan {
             alt_m: pos.alt_rel_m,
         };
         let seq = usize::from(t.mission_seq.unwrap_or(1));
-        let whole =
-            crate::autopilot_mission::plan(&self.files, &planned, home_at_seq0, home, &speeds);
+        let whole = crate::autopilot_mission::plan(
+            &self.files,
+            &planned,
+            home_at_seq0,
+            home,
+            &speeds,
+            self.zones.as_ref(),
+        );
         let part = crate::autopilot_mission::from_point_reached(
             &self.files,
             flown,
@@ -132,6 +142,7 @@ impl AutopilotPlan {
             seq,
             here,
             &speeds,
+            self.zones.as_ref(),
         );
         let (Ok(whole), Ok(part)) = (whole, part) else {
             return false;
@@ -213,8 +224,14 @@ impl AutopilotPlan {
         let (speeds, fallback) =
             crate::autopilot_mission::speeds(&self.params_speeds, |n| vehicle.telemetry.get(n));
         let home_at_seq0 = vehicle.mission.home_at_seq0;
-        let result =
-            crate::autopilot_mission::plan(&self.files, &planned, home_at_seq0, home, &speeds);
+        let result = crate::autopilot_mission::plan(
+            &self.files,
+            &planned,
+            home_at_seq0,
+            home,
+            &speeds,
+            self.zones.as_ref(),
+        );
         let (text, severity) = match result {
             Ok(d) => {
                 let summary = crate::autopilot_mission::summary(&d, &fallback);

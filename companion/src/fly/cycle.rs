@@ -119,7 +119,9 @@ pub fn decide<D: Decider>(
     obs.state = shell.mission.update(&obs, &extra).to_string();
     complete_observations(&mut obs, &shell.mission);
     let home = vehicle.telemetry.home;
-    shell.route_activity = (shell.route_progress.as_mut()).and_then(|p| p.activity(&obs, home));
+    let landed = vehicle.telemetry.landed_state.as_deref();
+    shell.route_activity =
+        (shell.route_progress.as_mut()).and_then(|p| p.activity_landing(&obs, home, landed));
     if let Some(a) = shell.route_activity {
         obs.set(companion_core::evidence::ROUTE_ACTIVITY, a as f64);
     }

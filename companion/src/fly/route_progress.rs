@@ -45,7 +45,15 @@ pub struct RouteProgress {
     /// The last activity found: the flight goes forward (an autopilot's MISSION_CURRENT that
     /// falls back after its RTL never takes the plan back to a leg flown), until on the ground.
     last: Option<usize>,
+    /// The mission's take-off item's seq: while MISSION_CURRENT is on it the vehicle is still
+    /// climbing (the shell took off lower, the item climbs the rest), the `take_off` activity.
+    takeoff_seq: Option<u16>,
 }
+
+/// EXTENDED_SYS_STATE's landed state while the autopilot descends to land (ArduCopter's RTL
+/// final descent and LAND, PX4's land): the plan's `land`, whatever item or phase it is in (an
+/// RTL item lands at home with the mission estimate still at the last waypoint).
+const LANDING: &str = "LANDING";
 
 /// The leg pieces of `derived` (from activity `from` on) flying to the item labelled `label`
 /// (`leg{a}-{label}`, split `.1`, `.2`, ... at zones; `return` for RTL), with the fraction of
@@ -116,6 +124,7 @@ impl RouteProgress {
             start: Place::Home,
             states,
             last: None,
+            takeoff_seq: None,
         })
     }
 
@@ -136,6 +145,9 @@ impl RouteProgress {
         }
         let mut targets = Vec::new();
         let mut route_over = false;
+        let takeoff_seq = (items.iter())
+            .find(|i| matches!(i.kind, ItemKind::TakeOff { .. }))
+            .and_then(|i| seq_of(i.index));
         for it in items {
             let (place, rtl) = match it.kind {
                 ItemKind::Waypoint(p)
@@ -165,12 +177,28 @@ impl RouteProgress {
             }),
             states,
             last: None,
+            takeoff_seq,
         })
     }
 
     /// The activity being flown; `home`: the autopilot's (HOME_POSITION, lat/lon * 1e7).
     pub fn activity(&mut self, obs: &Observations, home: Option<(i32, i32, f64)>) -> Option<usize> {
-        let found = self.found(obs, home);
+        self.activity_landing(obs, home, None)
+    }
+
+    /// [`Self::activity`] with the autopilot's landed state (EXTENDED_SYS_STATE): `LANDING` is
+    /// the plan's `land`.
+    pub fn activity_landing(
+        &mut self,
+        obs: &Observations,
+        home: Option<(i32, i32, f64)>,
+        landed_state: Option<&str>,
+    ) -> Option<usize> {
+        let land = (self.kinds.iter()).rposition(|k| *k == ActivityKind::Land);
+        let found = match land {
+            Some(l) if landed_state == Some(LANDING) => Some(l),
+            _ => self.found(obs, home),
+        };
         let on_ground = self.states.route().role_of(&obs.state) == Some(RouteRole::OnGround);
         let kept = match (found, self.last) {
             (Some(a), Some(l)) if a < l && !on_ground => Some(l),
@@ -197,6 +225,12 @@ impl RouteProgress {
             role,
             Some(RouteRole::FirstLeg | RouteRole::BetweenWaypoints)
         );
+        // Before the mission's take-off item is done (MISSION_CURRENT on it, or still 0 while
+        // the shell's own take-off ends and the mission starts) the vehicle is taking off.
+        let climbing = self.takeoff_seq.is_some_and(|t| seq <= f64::from(t));
+        if climbing && on_legs {
+            return (self.kinds.iter()).position(|k| *k == ActivityKind::TakeOff);
+        }
         // An RTL or a LAND at a point after the last waypoint is flown as a leg whatever the
         // mission estimate's phase says (until the landing itself).
         let after = target.is_some_and(|t| t.after_route && f64::from(t.seq) == seq)
@@ -422,6 +456,16 @@ mod operator_tests {
             name(fresh(&mut p).activity(&obs("wpi", 3.0, 0.0, 0.0025), h)),
             "leghome-2.3"
         );
+        // The shell took off lower: MISSION_CURRENT on the take-off item (seq 1), or still 0
+        // before the mission starts, is the climb.
+        assert_eq!(
+            name(fresh(&mut p).activity(&obs("wp1", 1.0, 0.0, 0.0), h)),
+            "take_off"
+        );
+        assert_eq!(
+            name(fresh(&mut p).activity(&obs("wp1", 0.0, 0.0, 0.0), h)),
+            "take_off"
+        );
         // The speed change (seq 2) is flown on the way to item 2.
         assert_eq!(
             name(fresh(&mut p).activity(&obs("wp1", 2.0, 0.0, 0.0), h)),
@@ -436,6 +480,14 @@ mod operator_tests {
         assert!(name(back).starts_with("return"), "{}", name(back));
         assert_eq!(
             name(fresh(&mut p).activity(&obs("landing", 5.0, 0.0, 0.0), h)),
+            "land"
+        );
+        // The RTL item's own descent at home, the mission estimate still at the last waypoint:
+        // the autopilot's LANDING is the land.
+        let over_home = obs("wpf", 5.0, 0.0, 0.0);
+        assert!(name(fresh(&mut p).activity(&over_home, h)).starts_with("return"));
+        assert_eq!(
+            name(fresh(&mut p).activity_landing(&over_home, h, Some("LANDING"))),
             "land"
         );
         // Forward only: once on the return, an autopilot's MISSION_CURRENT falling back (after

@@ -105,6 +105,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             super::autopilot_plan::AutopilotPlan::new(
                 setup.files.clone(),
                 speeds,
+                setup.autopilot_zones.clone(),
                 setup.states.clone(),
                 &mut shell,
             )

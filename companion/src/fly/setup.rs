@@ -23,7 +23,9 @@ pub struct FlySetup {
     /// The params as read (`fly --mission autopilot` plans the autopilot's mission on them).
     pub files: companion_core::spec::ParamsFiles,
     /// `fly --mission autopilot`: the speeds' params fallback (`[derive]`), checked at start.
-    pub autopilot_speeds: Option<companion_core::route_plan::DeriveSettings>,
+    pub autopilot_speeds: Option<crate::autopilot_mission::ParamsSpeeds>,
+    /// `fly --mission autopilot --zones FILE`: the zones it is planned among, checked at start.
+    pub autopilot_zones: Option<crate::autopilot_mission::MissionZones>,
     /// The derived plan against the route flown (`route_activity`); `None` for the typed plan.
     pub route_progress: Option<super::route_progress::RouteProgress>,
     /// `[flight] restart_in_air = "resume_with_consent"`: the previous run's log in `--log-dir`
@@ -119,7 +121,11 @@ impl FlySetup {
             files: files.clone(),
             autopilot_speeds: args
                 .flies_autopilot_mission()
-                .then(|| crate::autopilot_mission::params_speeds(files))
+                .then(|| crate::autopilot_mission::params_speeds(files, args.params.as_deref()))
+                .transpose()?,
+            autopilot_zones: (args.zones.as_deref())
+                .filter(|_| args.flies_autopilot_mission())
+                .map(|z| crate::autopilot_mission::MissionZones::load(files, z))
                 .transpose()?,
         })
     }
