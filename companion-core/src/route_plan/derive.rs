@@ -298,6 +298,8 @@ impl Walk<'_> {
         };
         let n = kept.len();
         let speed = self.speed * self.speed_fraction;
+        let lengths: Vec<f64> = kept.iter().map(|p| full * (p.1 - p.0)).collect();
+        let speeds = piece_speeds(&lengths, self.speed, speed);
         for (k, (t0, t1, inside)) in kept.into_iter().enumerate() {
             let (constraints, words) = zone_words(inside);
             let (name, part) = if n > 1 {
@@ -310,13 +312,40 @@ impl Walk<'_> {
             };
             let length = full * (t1 - t0);
             let source = format!("leg {}->{}{part}{words}", self.here_label, to_label);
-            // The waypoint's overhead is spent where the leg ends (braking, turning).
-            let hold = if k + 1 == n { self.overhead_s } else { 0.0 };
-            self.push(name, kind, length, hold, speed, constraints, source);
+            // The waypoint's overhead is speeding up out of one waypoint and braking into the
+            // next: a leg split by zones holds half in its first piece and half in its last
+            // (assumed symmetric: ArduCopter's WPNAV_ACCEL serves both).
+            let hold = match (n, k) {
+                (1, _) => self.overhead_s,
+                (_, 0) => self.overhead_s / 2.0,
+                _ if k + 1 == n => self.overhead_s / 2.0,
+                _ => 0.0,
+            };
+            self.push(name, kind, length, hold, speeds[k], constraints, source);
         }
         self.here = to;
         self.here_label = to_label;
     }
+}
+
+/// The speeds of one leg's pieces (split at zone boundaries). The leg model's speed (commanded
+/// times the fitted fraction) is a whole leg's average: the vehicle accelerates in its first
+/// piece and brakes in its last, and crosses a zone boundary at the commanded speed. So a middle
+/// piece flies at `commanded`, and the two end pieces share what is left of the leg's time
+/// (a leg's total time is unchanged). One or two pieces: all at the average.
+fn piece_speeds(lengths: &[f64], commanded: f64, average: f64) -> Vec<f64> {
+    let n = lengths.len();
+    if n < 3 || commanded <= average {
+        return vec![average; n];
+    }
+    let total_s: f64 = lengths.iter().sum::<f64>() / average;
+    let middle_s: f64 = lengths[1..n - 1].iter().sum::<f64>() / commanded;
+    let ends_m = lengths[0] + lengths[n - 1];
+    let ends = ends_m / (total_s - middle_s);
+    let mut v = vec![commanded; n];
+    v[0] = ends;
+    v[n - 1] = ends;
+    v
 }
 
 /// A leg's length as the derivation counts it: the geodesic distance (WGS84) plus the altitude

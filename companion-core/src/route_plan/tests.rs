@@ -124,8 +124,9 @@ fn a_square_zone_crossed_by_a_straight_leg_splits_it_at_its_edges() {
 
 #[test]
 fn the_vehicles_waypoint_overhead_and_speed_fraction_reach_every_leg_once() {
-    // A leg split in three by a zone, then an RTL: the overhead is held once per leg (on the piece
-    // that ends at the waypoint) and once by the return; take-off, landing and the search are not legs.
+    // A leg split in three by a zone, then an RTL: the overhead is held once per leg (half where
+    // it speeds up, half where it brakes) and once by the return; take-off, landing and the search
+    // are not legs.
     let zones = parse_zones(
         Path::new("z.geojson"),
         &square_zone(0.001, 0.002, -0.001, 0.001, "gps_degraded"),
@@ -152,23 +153,37 @@ fn the_vehicles_waypoint_overhead_and_speed_fraction_reach_every_leg_once() {
         ..SETTINGS
     };
     let acts = derive_activities(&r, &zones, &vehicle);
+    // The middle third crosses the zone at the commanded 10 m/s; the end thirds, where the
+    // vehicle accelerates and brakes, share the rest of the leg's L/8 s: (2L/3)/(L/8 - L/30).
+    let ends = 80.0 / 11.0;
     let holds: Vec<(&str, f64, f64)> = acts
         .iter()
-        .map(|a| (a.name.as_str(), a.hold_s, a.speed_mps))
+        .map(|a| (a.name.as_str(), a.hold_s, (a.speed_mps * 1e9).round() / 1e9))
         .collect();
+    let ends = (ends * 1e9_f64).round() / 1e9;
     assert_eq!(
         holds,
         [
             ("take_off", 0.0, 2.5),
-            ("leghome-1.1", 0.0, 8.0),
-            ("leghome-1.2", 0.0, 8.0),
-            ("leghome-1.3", 4.5, 8.0),
+            ("leghome-1.1", 2.25, ends),
+            ("leghome-1.2", 0.0, 10.0),
+            ("leghome-1.3", 2.25, ends),
             ("search", 30.0, 0.0),
-            ("return.1", 0.0, 8.0),
-            ("return.2", 0.0, 8.0),
-            ("return.3", 4.5, 8.0),
+            ("return.1", 2.25, ends),
+            ("return.2", 0.0, 10.0),
+            ("return.3", 2.25, ends),
             ("land", 0.0, 1.5),
         ]
+    );
+    // A leg's moving time is the leg model's, L / (0.8 * 10), however it is split.
+    let legs = acts.iter().filter(|a| a.kind == ActivityKind::Leg);
+    let (moving_s, length_m) = legs.fold((0.0, 0.0), |(t, l), a| {
+        (t + a.length_m / a.speed_mps, l + a.length_m)
+    });
+    assert!(
+        (moving_s - length_m / 8.0).abs() < 1e-9,
+        "{moving_s} vs {}",
+        length_m / 8.0
     );
     // The defaults (no profile) plan as before: no hold on a leg, the commanded speed.
     let plain = derive_activities(&r, &zones, &SETTINGS);
