@@ -83,7 +83,10 @@ def test_the_uploaded_mission_is_planned_flown_as_is_and_a_change_re_planned(aut
         if name and (not walked or walked[-1] != name):
             walked.append(name)
     assert walked[0] == "take_off" and any(a.startswith("leghere-") for a in walked), walked
-    assert walked.index(next(a for a in walked if a.startswith("leghere-"))) > walked.index("leghome-2"), walked
+    # Before it, only the first plan's activities (the climb is named take_off until the take-off item is done, so
+    # a change uploaded just after it may come before the first leg is named).
+    first = walked.index(next(a for a in walked if a.startswith("leghere-")))
+    assert all(a == "take_off" or a.startswith("leghome-") for a in walked[:first]), walked
     cruise = [r["observations"]["cruise_speed_mps"] for r in run.records()
               if "cruise_speed_mps" in r.get("observations", {})]
     assert cruise and cruise[-1] == 7.0, cruise[-3:]

@@ -504,6 +504,23 @@ impl GcsText {
             self.dropped += 1;
             return Vec::new();
         }
+        self.send(now, severity, text)
+    }
+
+    /// A text the ground station must get whatever the rate cap: the companion stopping and a
+    /// hand-off the pilot must take over. Once per run, so it cannot flood the link; it still
+    /// counts against the cap for the texts after it.
+    pub fn say_always(&mut self, now: Duration, severity: MavSeverity, text: &str) -> Vec<Msg> {
+        let text: String = text
+            .chars()
+            .filter(|c| !c.is_control())
+            .map(|c| if c.is_ascii() { c } else { '?' })
+            .take(MAX_CHUNKS * TEXT_LEN - 1)
+            .collect();
+        self.send(now, severity, text)
+    }
+
+    fn send(&mut self, now: Duration, severity: MavSeverity, text: String) -> Vec<Msg> {
         self.window.push_back(now);
         // Old texts no longer hold anything back: keep the map small.
         let repeat = self.repeat;

@@ -508,3 +508,30 @@ fn texts_that_belong_together_count_once_against_the_cap() {
     assert!(t.say_together(s(0.4), sev, &other).is_empty());
     assert_eq!(t.say_together(s(1.5), sev, &other).len(), 2);
 }
+
+#[test]
+fn the_stop_text_goes_out_when_the_per_second_cap_is_reached() {
+    // Found in CI under load: a re-allocation's text and the stop within one second, cap 1/s,
+    // and the ground station never heard that the companion stopped.
+    let mut t = GcsText::new(Duration::from_secs(5), 1);
+    let now = Duration::from_secs(10);
+    assert_eq!(
+        t.say(now, MavSeverity::MAV_SEVERITY_INFO, "plan changed")
+            .len(),
+        1
+    );
+    assert!(
+        t.say(
+            now,
+            MavSeverity::MAV_SEVERITY_CRITICAL,
+            "Companion stopping"
+        )
+        .is_empty()
+    );
+    let stop = t.say_always(
+        now,
+        MavSeverity::MAV_SEVERITY_CRITICAL,
+        "Companion stopping",
+    );
+    assert_eq!(stop.len(), 1);
+}

@@ -121,7 +121,7 @@ pub fn begin_stop(
     }
     shell.pending_events.push(Event::Other(line.into()));
     // The stop's words go first, ahead of the mode command.
-    let mut msgs = shell.texts.say(now, severity, &text);
+    let mut msgs = shell.texts.say_always(now, severity, &text);
     msgs.extend(out);
     (msgs, stopped)
 }
@@ -149,7 +149,7 @@ pub fn end_stop(shell: &mut Shell, vehicle: &Vehicle, commanded: bool, now: Dura
     };
     tracing::warn!("{line}");
     shell.pending_events.push(Event::Other(line.into()));
-    gcs.map_or_else(Vec::new, |text| shell.texts.say(now, CRITICAL, text))
+    gcs.map_or_else(Vec::new, |text| shell.texts.say_always(now, CRITICAL, text))
 }
 
 #[cfg(test)]
