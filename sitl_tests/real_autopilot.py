@@ -210,6 +210,7 @@ class GcsObserver:
         self.reached: List[Tuple[float, int]] = []              # (t, seq) of MISSION_ITEM_REACHED
         self.statustext: List[Tuple[float, str]] = []
         self.statustext_from: List[Tuple[float, int, int, str]] = []  # (t, system, component, text)
+        self._open_chunks: Dict[Any, Any] = {}
         self.battery_pct: Optional[int] = None
         self.battery_consumed_mah: Optional[int] = None
         self.battery_energy_j: Optional[float] = None            # BATTERY_STATUS.energy_consumed (hJ) in J
@@ -340,8 +341,21 @@ class GcsObserver:
             elif t == "MISSION_ITEM_REACHED":
                 self.reached.append((now, m.seq))
             elif t == "STATUSTEXT":
-                self.statustext.append((now, m.text))
-                self.statustext_from.append((now, m.get_srcSystem(), m.get_srcComponent(), m.text))
+                # A long text comes in MAVLink 2 chunks (one non-zero `id`, `chunk_seq` 1, 2, ... after the
+                # first): joined into one text, as QGroundControl shows it.
+                src = (m.get_srcSystem(), m.get_srcComponent())
+                cid, seq = getattr(m, "id", 0), getattr(m, "chunk_seq", 0)
+                open_at = self._open_chunks.get(src)
+                if cid and seq > 0 and open_at is not None and open_at[0] == cid:
+                    _, k, j = open_at
+                    self.statustext[k] = (self.statustext[k][0], self.statustext[k][1] + m.text)
+                    e = self.statustext_from[j]
+                    self.statustext_from[j] = (e[0], e[1], e[2], e[3] + m.text)
+                else:
+                    self.statustext.append((now, m.text))
+                    self.statustext_from.append((now, src[0], src[1], m.text))
+                    self._open_chunks[src] = (cid, len(self.statustext) - 1, len(self.statustext_from) - 1) \
+                        if cid else None
             elif t == "BATTERY_STATUS":
                 self.battery_pct = m.battery_remaining if m.battery_remaining >= 0 else None
                 self.battery_consumed_mah = m.current_consumed if m.current_consumed >= 0 else None

@@ -50,7 +50,8 @@ def test_real_default_pack_refusal_names_planned_available_and_what_fits(arducop
     assert not gcs.ever_armed(), "the vehicle armed after a refused start" + gcs.summary()
 
     i = next(k for k, s in enumerate(texts) if s.startswith("Start refused"))
-    head, fit = texts[i], texts[i + 1]
+    # One text (its chunks joined by the observer): the verdict, then the time and what fits.
+    head, _, fit = texts[i].partition(". ")
     m = re.fullmatch(r"Start refused: plan (\d+(?:\.\d)?) kJ, have (\d+(?:\.\d)?) kJ at (\d+)%", head)
     assert m, texts
     planned_kj, have_kj, pct = float(m[1]), float(m[2]), int(m[3])
