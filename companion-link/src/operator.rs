@@ -459,6 +459,16 @@ pub struct GcsText {
 /// STATUSTEXT carries 50 bytes of text.
 const TEXT_LEN: usize = 50;
 
+/// The text as it can go out. ASCII only: a non-final chunk must be exactly 50 bytes, which a
+/// multi-byte character could not always fill, and ground stations show STATUSTEXT as plain bytes.
+fn sendable(text: &str) -> String {
+    text.chars()
+        .filter(|c| !c.is_control())
+        .map(|c| if c.is_ascii() { c } else { '?' })
+        .take(MAX_CHUNKS * TEXT_LEN - 1)
+        .collect()
+}
+
 impl GcsText {
     /// A limiter sending a text again after `repeat` at the earliest, at most `max_per_s` a second.
     pub fn new(repeat: Duration, max_per_s: u32) -> Self {
@@ -480,14 +490,7 @@ impl GcsText {
     /// [`MAX_CHUNKS`] chunks; a longer text is cut. One text counts once against `max_per_s`,
     /// however many chunks it takes, so its chunks are never split by the cap.
     pub fn say(&mut self, now: Duration, severity: MavSeverity, text: &str) -> Vec<Msg> {
-        // ASCII only: a non-final chunk must be exactly 50 bytes, which a multi-byte character
-        // could not always fill, and ground stations show STATUSTEXT as plain bytes.
-        let text: String = text
-            .chars()
-            .filter(|c| !c.is_control())
-            .map(|c| if c.is_ascii() { c } else { '?' })
-            .take(MAX_CHUNKS * TEXT_LEN - 1)
-            .collect();
+        let text = sendable(text);
         if let Some(at) = self.last.get(&text)
             && now.saturating_sub(*at) < self.repeat
         {
@@ -511,12 +514,7 @@ impl GcsText {
     /// hand-off the pilot must take over. Once per run, so it cannot flood the link; it still
     /// counts against the cap for the texts after it.
     pub fn say_always(&mut self, now: Duration, severity: MavSeverity, text: &str) -> Vec<Msg> {
-        let text: String = text
-            .chars()
-            .filter(|c| !c.is_control())
-            .map(|c| if c.is_ascii() { c } else { '?' })
-            .take(MAX_CHUNKS * TEXT_LEN - 1)
-            .collect();
+        let text = sendable(text);
         self.send(now, severity, text)
     }
 
