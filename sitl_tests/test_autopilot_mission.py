@@ -11,7 +11,7 @@ from typing import Any, List
 
 import pytest
 
-from helpers import offset, wp
+from helpers import joined_statustexts, offset, wp
 from standin import mavlink
 from standin.vocabulary import HOME_ALT_AMSL, HOME_LAT, HOME_LON
 from test_operator_and_landing import COMPANION, events, wait
@@ -32,18 +32,8 @@ def mission(last_east_m: float, loiter_unlim: bool = False) -> List[dict]:
 
 
 def texts(gcs: Any, since: float = 0.0) -> List[str]:
-    """The companion's STATUSTEXTs, chunks joined (MAVLink 2: one non-zero `id`, `chunk_seq` 0, 1, ...)."""
-    out: List[str] = []
-    open_id = None
-    for m in gcs.since(since, "STATUSTEXT"):
-        if m.get_srcComponent() != COMPANION:
-            continue
-        if m.id != 0 and m.id == open_id and m.chunk_seq > 0:
-            out[-1] += m.text
-        else:
-            out.append(m.text)
-        open_id = m.id if m.id != 0 else None
-    return out
+    """The companion's STATUSTEXTs, chunks joined."""
+    return joined_statustexts(gcs.since(since, "STATUSTEXT"), COMPANION)
 
 
 def companion_uploads(sa: Any) -> List[Any]:
