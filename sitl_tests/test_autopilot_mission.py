@@ -82,6 +82,30 @@ def test_the_uploaded_mission_is_planned_flown_as_is_and_a_change_re_planned(aut
     assert cruise and cruise[-1] == 7.0, cruise[-3:]
 
 
+def test_speeds_the_autopilot_reports_after_the_plan_re_plan_it_even_when_equal_to_the_params(
+        autopilot_factory, fly, client):
+    """The autopilot's speeds answered after the mission was planned at the params' fallback (CI stop 43, ArduCopter
+    SITL): re-planned and said at the autopilot's speeds, also when they equal [derive]'s (ArduCopter's defaults)."""
+    ap = autopilot_factory()
+    sa = ap.standin
+    speeds = {"WPNAV_SPEED": 1000, "WPNAV_SPEED_UP": 250, "WPNAV_SPEED_DN": 150}   # = params [derive] in cm/s
+    for name, v in speeds.items():
+        sa.set_param(name, v)
+    sa.hold_param_reads(list(speeds))
+    gcs = client(sa.url)
+    assert gcs.upload_mission(mission(150.0)).type == mavlink.MAV_MISSION_ACCEPTED
+    run = fly(ap, mission=Path("autopilot"), auto_start=False)
+    wait(lambda: any("mission planned" in t and "params speeds" in t for t in texts(gcs)), 30,
+         "the STATUSTEXT that the mission is planned at the params' speeds (the autopilot's not answered)", run)
+    t_release = time.monotonic()
+    sa.release_param_reads()
+    wait(lambda: any("re-planned at the autopilot's speeds" in t and "params speeds" not in t
+                     for t in texts(gcs, since=t_release)), 5.0,
+         "the STATUSTEXT that the mission was re-planned at the autopilot's speeds (PARAM_REQUEST_READ retried)", run)
+    said = [str(e) for e in events(run.records())]
+    assert any("re-planned at the autopilot's speeds" in e and "params speeds" not in e for e in said), said[-20:]
+
+
 def test_an_item_the_companion_cannot_plan_refuses_the_start_naming_it(autopilot_factory, fly, client):
     ap = autopilot_factory()
     sa = ap.standin

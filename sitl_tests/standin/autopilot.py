@@ -68,6 +68,7 @@ class StandinAutopilot(LinkIO, MessageHandlers, MissionProtocol, ArmingAndModes,
         self._item_warning_sent = False
         # link faults
         self._outages: List[Tuple[float, float]] = []
+        self.held_param_reads: set = set()     # PARAM_REQUEST_READ of these names is not answered yet
         self._next_garbage = 0.0
         # counters (read by tests)
         self.counters: Dict[str, int] = {
@@ -174,6 +175,16 @@ class StandinAutopilot(LinkIO, MessageHandlers, MissionProtocol, ArmingAndModes,
             start = self.wall()
             self._outages.append((start, start + seconds))
             self.rec.add(start, self._sim, "link_outage", start=start, end=start + seconds)
+
+    def hold_param_reads(self, names: List[str]) -> None:
+        """Leave PARAM_REQUEST_READ of `names` unanswered until released, as ArduCopter SITL did in its first
+        seconds (its PARAM_VALUEs came after the mission download, CI stop 43)."""
+        with self.lock:
+            self.held_param_reads = set(names)
+
+    def release_param_reads(self) -> None:
+        with self.lock:
+            self.held_param_reads = set()
 
     def in_outage(self) -> bool:
         now = self.wall()

@@ -50,7 +50,7 @@ class MessageHandlers:
         names = list(self.params)
         pid = m.param_id if isinstance(m.param_id, str) else m.param_id.decode(errors="replace")
         name = pid.rstrip("\x00") if m.param_index < 0 else (names[m.param_index] if 0 <= m.param_index < len(names) else None)
-        if name in self.params:
+        if name in self.params and name not in self.held_param_reads:
             self._send_param(link, name)
 
     def _h_PARAM_REQUEST_LIST(self, link: Link, m: Any) -> None:

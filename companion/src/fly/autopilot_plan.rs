@@ -26,10 +26,10 @@ pub(super) struct AutopilotPlan {
     params_speeds: crate::autopilot_mission::ParamsSpeeds,
     /// `--zones`: the zones the mission is planned among (placed from its home).
     zones: Option<crate::autopilot_mission::MissionZones>,
-    /// The mission last planned (or refused), the speeds and whether a home was known then: a
-    /// speed the autopilot reports later (its PARAM_VALUE after the download, a ground station's
+    /// The mission last planned (or refused) and what it was planned from: a speed the
+    /// autopilot reports later (its PARAM_VALUE after the download, a ground station's
     /// PARAM_SET) or PX4's home arriving re-plans it.
-    last: Option<(Vec<MissionItem>, DeriveSettings, bool)>,
+    last: Option<Planned>,
     /// The mission's states (the route progress of a planned mission reads the phase).
     states: companion_core::mission::MissionStates,
     /// The activities the guarantee plans now (a change in flight keeps those flown).
@@ -37,6 +37,17 @@ pub(super) struct AutopilotPlan {
     /// What the ground station must still be told (held back by the STATUSTEXT rate cap, said
     /// as soon as it allows: a plan, a change or a refusal is never lost).
     unsaid: Option<(MavSeverity, String)>,
+}
+
+/// What the last plan was made from.
+struct Planned {
+    items: Vec<MissionItem>,
+    /// The speeds used ...
+    speeds: DeriveSettings,
+    /// ... and which of them were the params' fallback (the autopilot had not reported them).
+    fallback: Vec<&'static str>,
+    /// Whether the autopilot's home was known.
+    had_home: bool,
 }
 
 impl AutopilotPlan {
@@ -111,7 +122,8 @@ impl AutopilotPlan {
         let home = t
             .home
             .map(|(lat, lon, alt)| (f64::from(lat) / 1e7, f64::from(lon) / 1e7, alt));
-        let (speeds, _) = crate::autopilot_mission::speeds(&self.params_speeds, |n| t.get(n));
+        let (speeds, fallback) =
+            crate::autopilot_mission::speeds(&self.params_speeds, |n| t.get(n));
         let home_at_seq0 = vehicle.mission.home_at_seq0;
         let Ok(route) = crate::autopilot_mission::autopilot_mission(
             &planned,
@@ -171,34 +183,43 @@ impl AutopilotPlan {
         tracing::info!("{text}");
         shell.pending_events.push(Event::Other(text.clone()));
         self.unsaid = Some((NOTICE, text));
-        self.last = Some((items.to_vec(), speeds, home_at_seq0 || home.is_some()));
+        self.last = Some(Planned {
+            items: items.to_vec(),
+            speeds,
+            fallback,
+            had_home: home_at_seq0 || home.is_some(),
+        });
         true
     }
 
     /// Every turn: the same mission planned again when the autopilot now reports a speed other
-    /// than the one planned with, or (PX4) its home arrived after the plan.
+    /// than the one planned with, or (PX4) its home arrived after the plan. On the ground, also
+    /// when a speed planned from the params' fallback is now reported at the same value (the
+    /// [derive] defaults are ArduCopter's own): the plan then says it is the autopilot's, seen
+    /// on ArduCopter SITL when its PARAM_VALUEs came after the mission download.
     pub(super) fn recheck<D: Decider>(
         &mut self,
         vehicle: &Vehicle,
         decider: &mut D,
         shell: &mut Shell,
     ) {
-        let Some((_, used, had_home)) = &self.last else {
+        let Some(last) = &self.last else {
             return;
         };
-        let (now, _) =
+        let (now, fallback) =
             crate::autopilot_mission::speeds(&self.params_speeds, |n| vehicle.telemetry.get(n));
-        let home_came = !had_home && vehicle.telemetry.home.is_some();
-        if now == *used && !home_came {
+        let home_came = !last.had_home && vehicle.telemetry.home.is_some();
+        let confirmed = fallback.len() < last.fallback.len() && !vehicle.telemetry.armed;
+        if now == last.speeds && !home_came && !confirmed {
             return;
         }
-        let what = if now == *used {
+        let what = if now == last.speeds && home_came {
             "mission re-planned from the autopilot's home"
         } else {
             "mission re-planned at the autopilot's speeds"
         };
-        if let Some((items, _, _)) = self.last.take() {
-            self.plan(items, what, vehicle, decider, shell);
+        if let Some(last) = self.last.take() {
+            self.plan(last.items, what, vehicle, decider, shell);
         }
     }
 
@@ -268,7 +289,12 @@ impl AutopilotPlan {
         tracing::info!("{text}");
         shell.pending_events.push(Event::Other(text.clone()));
         self.unsaid = Some((severity, text));
-        self.last = Some((items, speeds, home_at_seq0 || home.is_some()));
+        self.last = Some(Planned {
+            items,
+            speeds,
+            fallback,
+            had_home: home_at_seq0 || home.is_some(),
+        });
     }
 }
 
