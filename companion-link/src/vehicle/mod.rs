@@ -409,7 +409,8 @@ impl Vehicle {
             Msg::EKF_STATUS_REPORT(e) => self.readiness.on_ekf(now, e),
             Msg::ESTIMATOR_STATUS(e) => self.readiness.on_estimator(now, e),
             Msg::MISSION_CURRENT(m) => {
-                self.exec.mission_total_seen(m.total);
+                self.exec
+                    .mission_current_seen(now, m.total, m.mission_state);
                 self.watch.on_mission_current(m);
             }
             Msg::STATUSTEXT(t) => {

@@ -1453,7 +1453,7 @@ fn px4_not_ready_while_prearm_health_bit_is_clear() {
 }
 
 #[test]
-fn px4_auto_waits_until_px4_reports_the_uploaded_mission() {
+fn px4_auto_waits_until_px4_reports_the_uploaded_mission_loaded_and_valid() {
     use crate::actions::{Route, Waypoint};
     let mut t = table();
     t.insert(
@@ -1529,11 +1529,26 @@ fn px4_auto_waits_until_px4_reports_the_uploaded_mission() {
         ..MISSION_CURRENT_DATA::DEFAULT
     });
     assert!(commands(&v.on_frame(s(2.1), &px4_frame(stale))).is_empty());
-    let loaded = Msg::MISSION_CURRENT(MISSION_CURRENT_DATA {
+    // The MAVLink module counts the upload at once; the navigator has not yet found it valid.
+    let not_valid = Msg::MISSION_CURRENT(MISSION_CURRENT_DATA {
         total: 4,
+        mission_state: MissionState::MISSION_STATE_NO_MISSION,
         ..MISSION_CURRENT_DATA::DEFAULT
     });
-    let out = v.on_frame(s(2.5), &px4_frame(loaded));
+    assert!(
+        commands(&v.on_frame(s(2.3), &px4_frame(not_valid))).is_empty(),
+        "no AUTO while PX4 reports the mission not valid"
+    );
+    let loaded = Msg::MISSION_CURRENT(MISSION_CURRENT_DATA {
+        total: 4,
+        mission_state: MissionState::MISSION_STATE_NOT_STARTED,
+        ..MISSION_CURRENT_DATA::DEFAULT
+    });
+    assert!(
+        commands(&v.on_frame(s(2.5), &px4_frame(loaded))).is_empty(),
+        "valid: AUTO waits for PX4's commander (10 Hz checks) to see it too"
+    );
+    let out = v.tick(s(2.9));
     match &out[..] {
         [Msg::COMMAND_LONG(c)] => {
             assert_eq!(c.command, MavCmd::MAV_CMD_DO_SET_MODE);

@@ -6,6 +6,15 @@ mod steps;
 use super::*;
 use std::collections::BTreeMap;
 
+/// PX4: how long AUTO waits after an upload for MISSION_CURRENT to show the mission loaded and
+/// valid; then AUTO is sent anyway (and confirmed, or sent again, as any mode).
+const PX4_MISSION_VALID_WAIT: Duration = Duration::from_secs(10);
+/// PX4: AUTO after MISSION_CURRENT first shows the upload valid, no sooner than this. Its
+/// commander reads the navigator's `mission_result.valid` in health checks run every 100 ms
+/// (Commander.cpp, "Run arming checks @ 10Hz"): AUTO sent 4 ms after the mission became valid was
+/// ACCEPTED, then TEMPORARILY_REJECTED (docs/mavlink.md). Two periods and a margin.
+const PX4_COMMANDER_SETTLE: Duration = Duration::from_millis(300);
+
 /// What a command ticket is for.
 #[derive(Debug, Clone)]
 pub(super) enum Purpose {
@@ -47,9 +56,13 @@ pub(super) struct Executor {
     /// the command may arrive after we sent it, still showing the old mode).
     mode_acked_at: Option<Duration>,
     /// PX4 only: after an upload, (item count, give-up time) until MISSION_CURRENT reports the
-    /// new mission's total. PX4's navigator loads an uploaded mission asynchronously; AUTO
-    /// requested before that flies the old (empty) one, "finishes" it at once and falls back to
-    /// Hold (seen on PX4 SITL with the mode switch 10 ms after the upload).
+    /// new mission's total and a valid mission. PX4's navigator loads and checks an uploaded
+    /// mission asynchronously; AUTO requested before that flies the old (empty) one, "finishes"
+    /// it at once and falls back to Hold (seen on PX4 SITL with the mode switch 10 ms after the
+    /// upload), or is accepted and not run while the mission is not yet valid (PX4 SIH stayed in
+    /// Hold ~3 s, CI rehearsal). `total` alone is the MAVLink module's own count, set at the
+    /// upload; `mission_state` is NO_MISSION until the navigator's `mission_result.valid`
+    /// (mavlink_mission.cpp, `update_mission_state`).
     px4_mission_pending: Option<(u16, Duration)>,
     /// PX4 only: give-up time for waiting out AUTO.TAKEOFF before another mode. PX4 ends a
     /// take-off by switching itself to Hold; a mode requested in the take-off's last moments is
@@ -529,7 +542,7 @@ impl Executor {
                     io.watch.uploaded(&items);
                     if io.flavor == Flavor::Px4 {
                         self.px4_mission_pending =
-                            Some((items.len() as u16, now + Duration::from_secs(5)));
+                            Some((items.len() as u16, now + PX4_MISSION_VALID_WAIT));
                     }
                     if in_job {
                         self.step_done();
@@ -719,11 +732,16 @@ impl Executor {
         self.purposes.insert(ticket, Purpose::Stream(id));
     }
 
-    /// MISSION_CURRENT reported `total` items: PX4 has loaded the mission uploaded with that
-    /// many.
-    pub(super) fn mission_total_seen(&mut self, total: u16) {
-        if matches!(self.px4_mission_pending, Some((n, _)) if n == total) {
-            self.px4_mission_pending = None;
+    /// MISSION_CURRENT reported `total` items in `state`: PX4 has loaded the mission uploaded
+    /// with that many, and found it valid unless the state is NO_MISSION (an autopilot that
+    /// reports no state, UNKNOWN, is taken at its total). AUTO then waits
+    /// [`PX4_COMMANDER_SETTLE`] more, for PX4's commander to see the valid mission too.
+    pub(super) fn mission_current_seen(&mut self, now: Duration, total: u16, state: MissionState) {
+        if let Some((n, until)) = &mut self.px4_mission_pending
+            && *n == total
+            && state != MissionState::MISSION_STATE_NO_MISSION
+        {
+            *until = (*until).min(now + PX4_COMMANDER_SETTLE);
         }
     }
 
