@@ -7,9 +7,12 @@ use std::collections::BTreeMap;
 
 mod events;
 mod resources;
+#[cfg(any(test, feature = "test-support"))]
+pub mod strategies;
 mod verdict;
 pub use events::{
-    CommandOutcome, Event, LinkEvent, MAX_LINK_EVENTS, coalesce_link_events, dedupe_capped,
+    CommandOutcome, Event, LinkEvent, MAX_LINK_EVENTS, OperatorEvent, ROUTE_REPLANNED,
+    STARTED_IN_FLIGHT, StartBy, coalesce_link_events, dedupe_capped,
 };
 pub use resources::{Degraded, Dropped};
 pub use verdict::{FIT_LINE_MAX, Lowered, PLAN_LINE_MAX, Verdict};

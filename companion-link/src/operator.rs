@@ -21,6 +21,7 @@
 use super::Msg;
 use super::dialect::*;
 use super::modes::{self, Flavor, FlightMode, ReportedMode};
+use companion_core::record::OperatorEvent;
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
@@ -70,30 +71,9 @@ impl Control {
     }
 }
 
-/// How a mission start or a hand-back came about.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum StartBy {
-    /// `fly --auto-start`: no operator.
-    AutoStart,
-    /// The pilot armed the vehicle (`--start-on-arm` only).
-    PilotArmed,
-    /// MAV_CMD_MISSION_START from the ground station.
-    StartCommand,
-    /// The pilot switched an armed vehicle to GUIDED (ArduPilot).
-    GuidedSwitch,
-}
-
-impl StartBy {
-    /// How the operator asked, in words.
-    pub fn describe(self) -> &'static str {
-        match self {
-            StartBy::AutoStart => "--auto-start (no operator)",
-            StartBy::PilotArmed => "the pilot armed the vehicle (--start-on-arm)",
-            StartBy::StartCommand => "MAV_CMD_MISSION_START from the ground station",
-            StartBy::GuidedSwitch => "the pilot switched the armed vehicle to GUIDED",
-        }
-    }
-}
+/// How a mission start or a hand-back came about (a record type: the record's operator events
+/// carry it).
+pub use companion_core::record::StartBy;
 
 /// Why a granted start was voided before the vehicle was airborne.
 #[derive(Debug, Clone, PartialEq)]
@@ -130,38 +110,37 @@ pub enum GateEvent {
 }
 
 impl GateEvent {
+    /// The decision record's event (its sentence is the journal's line).
+    pub fn record(&self) -> OperatorEvent {
+        use OperatorEvent as O;
+        match self {
+            GateEvent::StartRequested(by) => O::StartRequested { by: *by },
+            GateEvent::Started(by) => O::Started { by: *by },
+            GateEvent::StartRefused(by, why) => O::StartRefused {
+                by: *by,
+                why: why.clone(),
+            },
+            GateEvent::StartVoided(VoidReason::Disarmed) => O::StartVoidedDisarmed,
+            GateEvent::StartVoided(VoidReason::TakeoffFailed(why)) => {
+                O::StartVoidedTakeoffFailed { why: why.clone() }
+            }
+            GateEvent::TakeoverSuspected(m) => O::TakeoverSuspected {
+                mode: m.to_string(),
+            },
+            GateEvent::TakenOver(m) => O::TakenOver {
+                mode: m.to_string(),
+            },
+            GateEvent::FalseAlarm(m, own) => O::FalseAlarm {
+                mode: m.to_string(),
+                own: own.to_string(),
+            },
+            GateEvent::HandedBack(by) => O::HandedBack { by: *by },
+        }
+    }
+
     /// The decision record's event text.
     pub fn describe(&self) -> String {
-        match self {
-            GateEvent::StartRequested(by) => {
-                format!("operator: start requested ({})", by.describe())
-            }
-            GateEvent::Started(by) => format!("operator: mission started ({})", by.describe()),
-            GateEvent::StartRefused(by, why) => format!(
-                "operator: start refused ({}): {why}; still waiting for the operator",
-                by.describe()
-            ),
-            GateEvent::StartVoided(VoidReason::Disarmed) => "operator: start void: the vehicle was disarmed before it was airborne; waiting for a new start".into(),
-            GateEvent::StartVoided(VoidReason::TakeoffFailed(why)) => format!(
-                "operator: start void: the take-off failed before the vehicle was airborne ({why}); waiting for a new start"
-            ),
-            GateEvent::TakeoverSuspected(m) => format!(
-                "operator: mode {m} was not commanded by the companion: commanding stopped until every heartbeat confirms it or shows the companion's mode again"
-            ),
-            GateEvent::TakenOver(m) => format!(
-                "operator: mode {m} was not commanded by the companion: the pilot or the autopilot has control; the companion stops commanding"
-            ),
-            GateEvent::FalseAlarm(m, own) => format!(
-                "operator: takeover not confirmed: {m} was reported, then the autopilot showed the companion's {own} again; commanding resumed (false alarm)"
-            ),
-            GateEvent::HandedBack(StartBy::GuidedSwitch) => {
-                "operator: control handed back (switch to GUIDED)".into()
-            }
-            GateEvent::HandedBack(_) => {
-                "operator: control handed back (MAV_CMD_MISSION_START from the ground station)"
-                    .into()
-            }
-        }
+        self.record().to_string()
     }
 }
 

@@ -254,9 +254,6 @@ struct RoutePlan {
     derived: Vec<companion_core::route_plan::DerivedActivity>,
 }
 
-/// The event `fly` records when it re-plans its route at the autopilot's cruise speed.
-pub const ROUTE_REPLANNED: &str = "companion: route re-planned at the autopilot's cruise ";
-
 impl RoutePlan {
     /// The route's activities at cruise speed `cruise` (m/s): its legs and return at `cruise`
     /// through the profile's speed fraction, as `fly` derives a route TOML (which has no
@@ -282,10 +279,9 @@ impl RoutePlan {
 
 /// The cruise speed of a route re-plan among a record's events.
 fn replanned_cruise(events: &[Event]) -> Option<f64> {
-    events.iter().find_map(|e| {
-        let text = e.to_string();
-        let rest = text.strip_prefix(ROUTE_REPLANNED)?;
-        rest.split(" m/s").next()?.parse().ok()
+    events.iter().find_map(|e| match e {
+        Event::RouteReplanned { cruise_mps, .. } => Some(*cruise_mps),
+        _ => None,
     })
 }
 

@@ -31,12 +31,11 @@ impl Core {
                 }
             }
             if !self.capped_versions.is_empty() {
-                rec.events.push(Event::Other(format!(
-                    "guarantee: no alternative carrying {} meets the goals: {} capped at {}",
-                    versions.join(", "),
-                    self.capped_versions.join(", "),
-                    model.mission.guarantee.infeasible_p_battery
-                )));
+                rec.events.push(Event::VersionsCapped {
+                    versions: versions.clone(),
+                    capped: self.capped_versions.clone(),
+                    at: model.mission.guarantee.infeasible_p_battery,
+                });
             }
         }
         self.versions_scratch = versions;
@@ -216,14 +215,13 @@ pub(super) fn drift_event(
     tolerance: f64,
 ) -> Option<Event> {
     let pw = record.power.as_ref().filter(|pw| pw.drift_began)?;
-    Some(Event::Other(format!(
-        "performance drift: {} measured {:.0} J against {:.0} J predicted in {:.0} s (x{:.2}, beyond {:.0} %); remaining energy estimates x{:.2}",
-        record.activity_name,
-        pw.measured_j.unwrap_or(0.0),
-        pw.predicted_j,
-        pw.activity_s,
-        pw.ratio.unwrap_or(1.0),
-        tolerance * 100.0,
-        pw.energy_scale
-    )))
+    Some(Event::PerformanceDrift {
+        activity: record.activity_name.clone(),
+        measured_j: pw.measured_j.unwrap_or(0.0),
+        predicted_j: pw.predicted_j,
+        activity_s: pw.activity_s,
+        ratio: pw.ratio.unwrap_or(1.0),
+        tolerance_pct: tolerance * 100.0,
+        energy_scale: pw.energy_scale,
+    })
 }

@@ -41,6 +41,9 @@ macro_rules! eq_sentence {
     };
 }
 
+mod operator;
+pub use operator::{OperatorEvent, StartBy};
+
 /// What became of a vehicle command (`CommandRecord.result`).
 #[derive(Debug, Clone, PartialEq)]
 pub enum CommandOutcome {
@@ -138,6 +141,12 @@ eq_sentence!(CommandOutcome);
 /// The sentence of [`Event::NewFlight`].
 const NEW_FLIGHT: &str = "flight over: landed and disarmed; waiting for the operator";
 
+/// How [`Event::StartedInFlight`] and [`Event::ResumedInFlight`] begin.
+pub const STARTED_IN_FLIGHT: &str = "started in flight: ";
+
+/// How [`Event::RouteReplanned`] begins.
+pub const ROUTE_REPLANNED: &str = "companion: route re-planned at the autopilot's cruise ";
+
 /// What triggered or happened at a cycle (`DecisionRecord.events`).
 #[derive(Debug, PartialEq)]
 pub enum Event {
@@ -220,6 +229,113 @@ pub enum Event {
     /// `flight over: landed and disarmed; waiting for the operator`: the fly shell starts a
     /// fresh core for the next flight at this cycle (replay restarts its core there).
     NewFlight,
+    /// `operator: ...`: the fly shell's operator gate decided, or heard a ground station.
+    Operator(OperatorEvent),
+    /// `started in flight: the vehicle is FOUND; DOES`: `fly` started with the vehicle in the
+    /// air, and what it does about it (hand-off, proof of its own flight, not resumed).
+    StartedInFlight {
+        /// What the vehicle was found doing (armed, landed state, altitude, mode).
+        found_as: String,
+        /// What the companion does about it, in words.
+        does: String,
+    },
+    /// `started in flight: resumed on the operator's consent (MISSION_START from SYS/COMP): the
+    /// vehicle is FOUND; FACTS`: the companion resumed its own flight.
+    ResumedInFlight {
+        /// MAVLink system id of the consenting ground station.
+        system: u8,
+        /// MAVLink component id of the consenting ground station.
+        component: u8,
+        /// What the vehicle was found doing.
+        found_as: String,
+        /// Why the flight is the companion's own (the proof's facts).
+        facts: Vec<String>,
+    },
+    /// `performance drift: ACTIVITY measured M J against P J predicted in T s (xR, beyond
+    /// TOL %); remaining energy estimates xS`: the activity's power left the tolerance.
+    PerformanceDrift {
+        /// Activity flown.
+        activity: String,
+        /// Energy measured so far in the activity (J).
+        measured_j: f64,
+        /// Energy predicted for the same time (J).
+        predicted_j: f64,
+        /// Time in the activity (s).
+        activity_s: f64,
+        /// Measured over predicted.
+        ratio: f64,
+        /// The tolerance passed (percent).
+        tolerance_pct: f64,
+        /// The factor the remaining activities' energy estimates now carry.
+        energy_scale: f64,
+    },
+    /// `guarantee: no alternative carrying VERSIONS meets the goals: PROBABILITIES capped at P`
+    VersionsCapped {
+        /// Versions no feasible alternative carries.
+        versions: Vec<String>,
+        /// Probabilities their activation nodes publish, capped.
+        capped: Vec<String>,
+        /// The cap (the mission's `infeasible_p_battery`).
+        at: f64,
+    },
+    /// `companion: route re-planned at the autopilot's cruise C m/s (params W): PLAN`: `fly`
+    /// planned its route again at the autopilot's cruise speed (replay plans again at `cruise_mps`).
+    RouteReplanned {
+        /// The autopilot's cruise speed as read (m/s).
+        cruise_mps: f64,
+        /// The cruise speed planned before (m/s).
+        was_mps: f64,
+        /// `E kJ T s`, or `no allocation meets the goals`.
+        plan: String,
+    },
+    /// `companion: route not re-planned at C m/s: WHY`
+    RouteNotReplanned {
+        /// The autopilot's cruise speed as read (m/s).
+        cruise_mps: f64,
+        /// Why the route could not be derived at it.
+        why: String,
+    },
+    /// `companion: mission planned from the autopilot's home (FROM): N activities, E kJ T s`
+    MissionPlannedFromHome {
+        /// The home used, in words.
+        home: String,
+        /// Activities planned.
+        activities: usize,
+        /// Planned energy (J), when the guarantee planned it.
+        energy_j: Option<f64>,
+        /// Planned duration (s), when the guarantee planned it.
+        duration_s: Option<f64>,
+    },
+    /// `companion: WHAT: SUMMARY`: the autopilot's mission planned, changed or re-planned.
+    AutopilotMissionPlanned {
+        /// `mission planned`, `mission changed, re-planned`, `mission re-planned at ...`.
+        what: String,
+        /// Activities, length, planned energy and time, the params speeds used.
+        summary: String,
+    },
+    /// `companion: mission changed, re-planned from the point reached (item SEQ): K activities
+    /// flown kept, L left M m`
+    MissionReplannedFromPoint {
+        /// Mission item reached.
+        item: usize,
+        /// Activities flown, kept.
+        kept: usize,
+        /// Activities left.
+        left: usize,
+        /// Length left (m).
+        left_m: f64,
+    },
+    /// `companion: mission refused: WHY`: the mission could not be planned.
+    MissionRefused(String),
+    /// `(N more events since the last cycle: R repeats, K not listed)`: a flood summarised.
+    EventsNotListed {
+        /// Events left out.
+        more: usize,
+        /// Of which repeats.
+        repeats: usize,
+        /// Of which distinct, not listed.
+        not_listed: usize,
+    },
     /// Free text: a scenario's hazard, a resource degradation, an MDP's error, a shell's or
     /// operator's sentence, or a spelling this build does not know.
     Other(String),
@@ -270,6 +386,97 @@ impl Clone for Event {
             ShellLand(w) => ShellLand(w.clone()),
             LandingKept(a) => LandingKept(a.clone()),
             NewFlight => NewFlight,
+            Operator(o) => Operator(o.clone()),
+            StartedInFlight { found_as, does } => StartedInFlight {
+                found_as: found_as.clone(),
+                does: does.clone(),
+            },
+            ResumedInFlight {
+                system,
+                component,
+                found_as,
+                facts,
+            } => ResumedInFlight {
+                system: *system,
+                component: *component,
+                found_as: found_as.clone(),
+                facts: facts.clone(),
+            },
+            PerformanceDrift {
+                activity,
+                measured_j,
+                predicted_j,
+                activity_s,
+                ratio,
+                tolerance_pct,
+                energy_scale,
+            } => PerformanceDrift {
+                activity: activity.clone(),
+                measured_j: *measured_j,
+                predicted_j: *predicted_j,
+                activity_s: *activity_s,
+                ratio: *ratio,
+                tolerance_pct: *tolerance_pct,
+                energy_scale: *energy_scale,
+            },
+            VersionsCapped {
+                versions,
+                capped,
+                at,
+            } => VersionsCapped {
+                versions: versions.clone(),
+                capped: capped.clone(),
+                at: *at,
+            },
+            RouteReplanned {
+                cruise_mps,
+                was_mps,
+                plan,
+            } => RouteReplanned {
+                cruise_mps: *cruise_mps,
+                was_mps: *was_mps,
+                plan: plan.clone(),
+            },
+            RouteNotReplanned { cruise_mps, why } => RouteNotReplanned {
+                cruise_mps: *cruise_mps,
+                why: why.clone(),
+            },
+            MissionPlannedFromHome {
+                home,
+                activities,
+                energy_j,
+                duration_s,
+            } => MissionPlannedFromHome {
+                home: home.clone(),
+                activities: *activities,
+                energy_j: *energy_j,
+                duration_s: *duration_s,
+            },
+            AutopilotMissionPlanned { what, summary } => AutopilotMissionPlanned {
+                what: what.clone(),
+                summary: summary.clone(),
+            },
+            MissionReplannedFromPoint {
+                item,
+                kept,
+                left,
+                left_m,
+            } => MissionReplannedFromPoint {
+                item: *item,
+                kept: *kept,
+                left: *left,
+                left_m: *left_m,
+            },
+            MissionRefused(w) => MissionRefused(w.clone()),
+            EventsNotListed {
+                more,
+                repeats,
+                not_listed,
+            } => EventsNotListed {
+                more: *more,
+                repeats: *repeats,
+                not_listed: *not_listed,
+            },
             Other(s) => Other(s.clone()),
         }
     }
@@ -348,6 +555,86 @@ impl fmt::Display for Event {
                 "landing: {action} again (the landing was interrupted or not done)"
             ),
             NewFlight => f.write_str(NEW_FLIGHT),
+            Operator(o) => o.fmt(f),
+            StartedInFlight { found_as, does } => {
+                write!(f, "{STARTED_IN_FLIGHT}the vehicle is {found_as}; {does}")
+            }
+            ResumedInFlight {
+                system,
+                component,
+                found_as,
+                facts,
+            } => write!(
+                f,
+                "{STARTED_IN_FLIGHT}resumed on the operator's consent (MISSION_START from {system}/{component}): the vehicle is {found_as}; {}",
+                facts.join("; ")
+            ),
+            PerformanceDrift {
+                activity,
+                measured_j,
+                predicted_j,
+                activity_s,
+                ratio,
+                tolerance_pct,
+                energy_scale,
+            } => write!(
+                f,
+                "performance drift: {activity} measured {measured_j:.0} J against {predicted_j:.0} J predicted in {activity_s:.0} s (x{ratio:.2}, beyond {tolerance_pct:.0} %); remaining energy estimates x{energy_scale:.2}"
+            ),
+            VersionsCapped {
+                versions,
+                capped,
+                at,
+            } => write!(
+                f,
+                "guarantee: no alternative carrying {} meets the goals: {} capped at {at}",
+                versions.join(", "),
+                capped.join(", ")
+            ),
+            RouteReplanned {
+                cruise_mps,
+                was_mps,
+                plan,
+            } => write!(
+                f,
+                "{ROUTE_REPLANNED}{cruise_mps} m/s (params {was_mps}): {plan}"
+            ),
+            RouteNotReplanned { cruise_mps, why } => write!(
+                f,
+                "companion: route not re-planned at {cruise_mps:.1} m/s: {why}"
+            ),
+            MissionPlannedFromHome {
+                home,
+                activities,
+                energy_j,
+                duration_s,
+            } => write!(
+                f,
+                "companion: mission planned from the autopilot's home ({home}): {activities} activities, {:.1} kJ {:.0} s",
+                energy_j.unwrap_or(f64::NAN) / 1000.0,
+                duration_s.unwrap_or(f64::NAN)
+            ),
+            AutopilotMissionPlanned { what, summary } => {
+                write!(f, "companion: {what}: {summary}")
+            }
+            MissionReplannedFromPoint {
+                item,
+                kept,
+                left,
+                left_m,
+            } => write!(
+                f,
+                "companion: mission changed, re-planned from the point reached (item {item}): {kept} activities flown kept, {left} left {left_m:.0} m"
+            ),
+            MissionRefused(why) => write!(f, "companion: mission refused: {why}"),
+            EventsNotListed {
+                more,
+                repeats,
+                not_listed,
+            } => write!(
+                f,
+                "({more} more events since the last cycle: {repeats} repeats, {not_listed} not listed)"
+            ),
             Other(s) => f.write_str(s),
         }
     }

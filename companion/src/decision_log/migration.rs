@@ -258,7 +258,7 @@ fn event_with_fields(s: &str) -> Option<Event> {
             state: state.to_string(),
         });
     }
-    None
+    shell::shell_event(s)
 }
 
 /// A schema-1 `link_events` sentence.
@@ -421,6 +421,8 @@ pub fn mission_states_of(h: &Header) -> MissionStates {
         })
         .unwrap_or_else(|_| MissionStates::undeclared())
 }
+
+mod shell;
 
 #[cfg(test)]
 mod tests;

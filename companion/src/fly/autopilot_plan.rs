@@ -161,12 +161,12 @@ impl AutopilotPlan {
         };
         let from = flown.len();
         let left: f64 = part.activities[from..].iter().map(|a| a.length_m).sum();
-        let text = format!(
-            "companion: mission changed, re-planned from the point reached (item {seq}): \
-             {} activities flown kept, {} left {left:.0} m",
-            from,
-            part.activities.len() - from
-        );
+        let replanned = Event::MissionReplannedFromPoint {
+            item: seq,
+            kept: from,
+            left: part.activities.len() - from,
+            left_m: left,
+        };
         set_waypoints(shell, &route.items);
         shell.route_progress = super::route_progress::RouteProgress::for_items(
             &part.activities,
@@ -180,8 +180,9 @@ impl AutopilotPlan {
         shell.mission_unplanned =
             (!feasible).then(|| "the guarantee finds no allocation for it".to_string());
         self.activities = part.activities;
+        let text = replanned.to_string();
         tracing::info!("{text}");
-        shell.pending_events.push(Event::Other(text.clone()));
+        shell.pending_events.push(replanned);
         self.unsaid = Some((NOTICE, text));
         self.last = Some(Planned {
             items: items.to_vec(),
@@ -253,7 +254,7 @@ impl AutopilotPlan {
             &speeds,
             self.zones.as_ref(),
         );
-        let (text, severity) = match result {
+        let (event, severity) = match result {
             Ok(d) => {
                 let summary = crate::autopilot_mission::summary(&d, &fallback);
                 let route = crate::autopilot_mission::autopilot_mission(
@@ -278,16 +279,21 @@ impl AutopilotPlan {
                 let feasible = decider.replace_mission(d.spec);
                 shell.mission_unplanned =
                     (!feasible).then(|| "the guarantee finds no allocation for it".to_string());
-                (format!("companion: {what}: {summary}"), NOTICE)
+                let planned = Event::AutopilotMissionPlanned {
+                    what: what.to_string(),
+                    summary,
+                };
+                (planned, NOTICE)
             }
             Err(e) => {
                 let why = format!("{e:#}");
                 shell.mission_unplanned = Some(why.clone());
-                (format!("companion: mission refused: {why}"), WARNING)
+                (Event::MissionRefused(why), WARNING)
             }
         };
+        let text = event.to_string();
         tracing::info!("{text}");
-        shell.pending_events.push(Event::Other(text.clone()));
+        shell.pending_events.push(event);
         self.unsaid = Some((severity, text));
         self.last = Some(Planned {
             items,

@@ -219,9 +219,11 @@ fn coalesce_events(events: &mut Vec<Event>) {
     if let Some((more, repeats, not_listed)) =
         companion_core::record::dedupe_capped(events, MAX_EVENTS)
     {
-        events.push(Event::Other(format!(
-            "({more} more events since the last cycle: {repeats} repeats, {not_listed} not listed)"
-        )));
+        events.push(Event::EventsNotListed {
+            more,
+            repeats,
+            not_listed,
+        });
     }
 }
 

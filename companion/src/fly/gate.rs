@@ -5,7 +5,7 @@
 
 use super::{NOTICE, Shell, WARNING};
 use companion_core::launch::LaunchRefusal;
-use companion_core::record::Event;
+use companion_core::record::{Event, OperatorEvent};
 use companion_link::Msg;
 use companion_link::dialect::{MavResult, MavSeverity};
 use companion_link::operator::{self, GateEvent, StartBy, VehicleView};
@@ -35,7 +35,7 @@ impl GroundStations {
     /// A frame from the autopilot link: a GCS HEARTBEAT makes its system a ground station, or,
     /// when `--gcs-sysid` names others, is reported: the line for the journal and the record,
     /// once per system.
-    pub fn on_frame(&mut self, f: &companion_link::ingest::Frame) -> Option<String> {
+    pub fn on_frame(&mut self, f: &companion_link::ingest::Frame) -> Option<OperatorEvent> {
         let Msg::HEARTBEAT(h) = &f.msg else {
             return None;
         };
@@ -55,11 +55,11 @@ impl GroundStations {
         {
             return None;
         }
-        Some(format!(
-            "operator: a ground station {sys}/{} is heard (GCS HEARTBEAT) but --gcs-sysid names {}: its commands are refused, never obeyed",
-            f.header.component_id,
-            self.named()
-        ))
+        Some(OperatorEvent::GroundStationNotNamed {
+            system: sys,
+            component: f.header.component_id,
+            named: self.named(),
+        })
     }
 
     /// The `--gcs-sysid` list, in words.
@@ -162,9 +162,14 @@ pub fn answer_command(
     } else if let Some((result, why, text)) =
         command_refusal(&cmd, now, shell.command_max_age, vehicle, gcs)
     {
-        let line = format!("operator: {name} from {sys}/{comp} refused: {why}");
-        tracing::warn!("{line}");
-        shell.pending_events.push(Event::Other(line.into()));
+        let refused = OperatorEvent::CommandRefused {
+            command: name.to_string(),
+            system: sys,
+            component: comp,
+            why,
+        };
+        tracing::warn!("{refused}");
+        shell.pending_events.push(Event::Operator(refused));
         out.extend(shell.texts.say(now, WARNING, text));
         changed = true;
         result
@@ -237,9 +242,9 @@ pub fn request_start(
             // Said once per first line: the verdict's time left changes every second.
             let first = lines.first().cloned().unwrap_or_default();
             if by != StartBy::AutoStart || shell.refusal_told.as_deref() != Some(&first) {
-                let line = ev.describe();
-                tracing::warn!("{line}");
-                shell.pending_events.push(Event::Other(line.into()));
+                let refused = ev.record();
+                tracing::warn!("{refused}");
+                shell.pending_events.push(Event::Operator(refused));
                 // One change of decision, one STATUSTEXT (chunked when longer than 50).
                 out.extend(shell.texts.say(now, WARNING, &lines.join(". ")));
                 shell.refusal_told = Some(first);
@@ -306,8 +311,13 @@ pub fn on_gate_event(
     ev: &GateEvent,
     out: &mut Vec<Msg>,
 ) {
-    let text = ev.describe();
-    shell.pending_events.push(Event::Other(text.clone()));
+    let decided = ev.record();
+    if matches!(ev, GateEvent::Started(_) | GateEvent::HandedBack(_)) {
+        tracing::info!("{decided}");
+    } else {
+        tracing::warn!("{decided}");
+    }
+    shell.pending_events.push(Event::Operator(decided));
     let said: Option<(MavSeverity, String)> = match ev {
         GateEvent::Started(_) => Some((NOTICE, "companion: mission started".to_string())),
         GateEvent::StartRequested(_) | GateEvent::StartRefused(..) => None,
@@ -340,11 +350,6 @@ pub fn on_gate_event(
         )),
         GateEvent::HandedBack(_) => Some((NOTICE, "companion: control handed back".to_string())),
     };
-    if matches!(ev, GateEvent::Started(_) | GateEvent::HandedBack(_)) {
-        tracing::info!("{text}");
-    } else {
-        tracing::warn!("{text}");
-    }
     if let Some((severity, gcs)) = said {
         out.extend(shell.texts.say(now, severity, &gcs));
     }
@@ -428,8 +433,8 @@ mod tests {
         f: &Frame,
     ) -> Vec<MavResult> {
         let now = Duration::from_secs_f64(t);
-        if let Some(line) = gcs.on_frame(f) {
-            shell.pending_events.push(Event::Other(line.into()));
+        if let Some(heard) = gcs.on_frame(f) {
+            shell.pending_events.push(Event::Operator(heard));
         }
         v.on_frame(now, f);
         let mut out = Vec::new();
@@ -576,11 +581,20 @@ mod tests {
             matches!(&out[..], [.., Msg::COMMAND_ACK(a)] if a.result == MavResult::MAV_RESULT_DENIED)
         );
         assert_eq!(shell.operator.control, Control::Waiting);
+        // The refusal by kind (review reads it so), its sentence as the journal says it.
+        let refused = shell.pending_events.iter().find(|e| {
+            matches!(
+                e,
+                Event::Operator(OperatorEvent::StartRefused {
+                    by: StartBy::StartCommand,
+                    ..
+                })
+            )
+        });
         assert!(
-            shell
-                .pending_events
-                .iter()
-                .any(|e| e.to_string().starts_with("operator: start refused"))
+            refused.is_some_and(|e| e.to_string().starts_with("operator: start refused")),
+            "{:?}",
+            shell.pending_events
         );
     }
 

@@ -81,7 +81,7 @@ impl HomePlan {
             self.route.as_deref(),
             Some(&home),
         );
-        let (text, severity) = match derived {
+        let (event, severity) = match derived {
             Ok(Some(d)) => {
                 let spec = d.spec.clone();
                 let summary = crate::route_input::summary(Some(&d), &spec);
@@ -94,24 +94,24 @@ impl HomePlan {
                 shell.mission_unplanned =
                     (!feasible).then(|| "the guarantee finds no allocation for it".to_string());
                 tracing::info!("{}", crate::route_input::summary_line(&summary));
-                let e = summary.planned_energy_j.unwrap_or(f64::NAN) / 1000.0;
-                let t = summary.planned_duration_s.unwrap_or(f64::NAN);
-                let n = summary.activities;
-                let text = format!(
-                    "companion: mission planned from the autopilot's home ({from}): \
-                     {n} activities, {e:.1} kJ {t:.0} s"
-                );
-                (text, NOTICE)
+                let planned = Event::MissionPlannedFromHome {
+                    home: from.to_string(),
+                    activities: summary.activities,
+                    energy_j: summary.planned_energy_j,
+                    duration_s: summary.planned_duration_s,
+                };
+                (planned, NOTICE)
             }
             Ok(None) => return,
             Err(e) => {
                 let why = format!("{e:#}");
                 shell.mission_unplanned = Some(why.clone());
-                (format!("companion: mission refused: {why}"), WARNING)
+                (Event::MissionRefused(why), WARNING)
             }
         };
+        let text = event.to_string();
         tracing::info!("{text}");
-        shell.pending_events.push(Event::Other(text.clone()));
+        shell.pending_events.push(event);
         self.unsaid = Some((severity, text));
     }
 

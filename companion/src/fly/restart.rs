@@ -16,7 +16,7 @@
 
 use super::resume::{self, NotProved, PreviousRun};
 use super::{Shell, WARNING};
-use companion_core::record::Event;
+use companion_core::record::{Event, OperatorEvent};
 use companion_link::Msg;
 use companion_link::actions::Handoff;
 use companion_link::dialect::MavResult;
@@ -276,12 +276,12 @@ impl StartLook {
         now: Duration,
         out: &mut Vec<Msg>,
     ) {
-        let line = format!(
-            "started in flight: the vehicle is {}; {does}",
-            self.found_as
-        );
-        tracing::warn!("{line}");
-        shell.pending_events.push(Event::Other(line.into()));
+        let found = Event::StartedInFlight {
+            found_as: self.found_as.clone(),
+            does: does.to_string(),
+        };
+        tracing::warn!("{found}");
+        shell.pending_events.push(found);
         // Newer words replace older ones not yet said: what the companion does now counts.
         self.unsaid = texts.to_vec();
         self.say_unsaid(shell, now, out);
@@ -475,16 +475,14 @@ impl StartLook {
         shell.operator.control = Control::Started;
         shell.granted_at = None; // no take-off to void: the vehicle is in the air
         shell.guarantee_in_flight = None;
-        let line = format!(
-            "{} on the operator's consent (MISSION_START from {}/{}): the vehicle is {}; {}",
-            resume::RESUMED,
-            from.0,
-            from.1,
-            self.found_as,
-            facts.join("; ")
-        );
-        tracing::warn!("{line}");
-        shell.pending_events.push(Event::Other(line.into()));
+        let resumed = Event::ResumedInFlight {
+            system: from.0,
+            component: from.1,
+            found_as: self.found_as.clone(),
+            facts,
+        };
+        tracing::warn!("{resumed}");
+        shell.pending_events.push(resumed);
         self.unsaid = vec!["companion: resumed its own flight".to_string()];
         self.say_unsaid(shell, now, out);
         vehicle.unwatch_autopilot_mission();
@@ -547,11 +545,14 @@ pub(super) fn refuse_start_until_known(
     out: &mut Vec<Msg>,
 ) -> bool {
     let (sys, comp) = cmd.from;
-    let line = format!(
-        "operator: MAV_CMD_MISSION_START from {sys}/{comp} refused: the vehicle is armed and not yet known to be on the ground"
-    );
-    tracing::warn!("{line}");
-    shell.pending_events.push(Event::Other(line.into()));
+    let refused = OperatorEvent::CommandRefused {
+        command: "MAV_CMD_MISSION_START".to_string(),
+        system: sys,
+        component: comp,
+        why: "the vehicle is armed and not yet known to be on the ground".to_string(),
+    };
+    tracing::warn!("{refused}");
+    shell.pending_events.push(Event::Operator(refused));
     out.extend(
         shell
             .texts
@@ -875,7 +876,7 @@ mod tests {
         assert!(!look.awaits_consent());
         let resumed: Vec<String> = events(&shell)
             .into_iter()
-            .filter(|e| e.starts_with(resume::RESUMED))
+            .filter(|e| e.starts_with("started in flight: resumed"))
             .collect();
         assert_eq!(resumed.len(), 1);
         assert!(

@@ -11,7 +11,7 @@
 //! the remaining activities with the battery now (a decision cycle after the flight was found),
 //! fits.
 
-use companion_core::record::{CommandOutcome, GuaranteeRecord};
+use companion_core::record::{CommandOutcome, Event, GuaranteeRecord};
 use companion_link::actions::Route;
 use companion_link::mission::{MissionItem, compare_from};
 use companion_link::modes::Flavor;
@@ -28,9 +28,6 @@ pub(super) const CONSENT_WINDOW: Duration = Duration::from_secs(20);
 /// How long the mission download and a judged guarantee may take before the companion gives up
 /// on the proof and hands off.
 pub(super) const PROOF_WAIT: Duration = Duration::from_secs(15);
-
-/// How the record's event of a resumed flight begins.
-pub(super) const RESUMED: &str = "started in flight: resumed";
 
 /// Why a flight found in progress is not resumed.
 #[derive(Debug, Clone, PartialEq)]
@@ -99,7 +96,10 @@ pub(super) fn read_previous_run(log_dir: &Path) -> Result<PreviousRun, String> {
                 && matches!(c.result, CommandOutcome::AcceptedVerified { .. })
         });
         // A run that resumed the flight flies the route its predecessor uploaded.
-        run.uploaded |= r.events.iter().any(|e| e.to_string().starts_with(RESUMED));
+        run.uploaded |= r
+            .events
+            .iter()
+            .any(|e| matches!(e, Event::ResumedInFlight { .. }));
         if let Some(a) = text(r, "autopilot") {
             run.autopilot = Some(a);
         }

@@ -95,7 +95,7 @@ impl RouteReplan {
             self.home.as_deref(),
             Some(cruise),
         );
-        let text = match derived {
+        let event = match derived {
             Ok(Some(d)) => {
                 let summary = crate::route_input::summary(Some(&d), &d.spec);
                 let feasible = decider.replace_mission(d.spec);
@@ -103,17 +103,22 @@ impl RouteReplan {
                     (Some(e), Some(t)) if feasible => format!("{:.1} kJ {t:.0} s", e / 1000.0),
                     _ => "no allocation meets the goals".to_string(),
                 };
-                // The speed as read (replay plans again from these words).
-                format!(
-                    "{}{cruise} m/s (params {was}): {plan}",
-                    crate::replay::ROUTE_REPLANNED
-                )
+                // The speed as read (replay plans again at `cruise_mps`).
+                Event::RouteReplanned {
+                    cruise_mps: cruise,
+                    was_mps: was,
+                    plan,
+                }
             }
             Ok(None) => return,
-            Err(e) => format!("companion: route not re-planned at {cruise:.1} m/s: {e:#}"),
+            Err(e) => Event::RouteNotReplanned {
+                cruise_mps: cruise,
+                why: format!("{e:#}"),
+            },
         };
+        let text = event.to_string();
         tracing::info!("{text}");
-        shell.pending_events.push(Event::Other(text.clone()));
+        shell.pending_events.push(event);
         self.unsaid = Some((NOTICE, text));
     }
 

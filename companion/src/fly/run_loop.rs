@@ -11,7 +11,7 @@ use super::{
     link_security, send, stop,
 };
 use super::{restart, watchdog};
-use companion_core::record::{Event, LinkEvent};
+use companion_core::record::{Event, LinkEvent, OperatorEvent};
 use companion_link::Msg;
 use companion_link::ingest::{self, Encoder, Ingest};
 use companion_link::operator::{Control, OperatorGate};
@@ -322,9 +322,9 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         if let Some(w) = self.tlog.as_mut() {
             w.received(f);
         }
-        if let Some(line) = self.stations.on_frame(f) {
-            tracing::warn!("{line}");
-            self.shell.pending_events.push(Event::Other(line.into()));
+        if let Some(heard) = self.stations.on_frame(f) {
+            tracing::warn!("{heard}");
+            self.shell.pending_events.push(Event::Operator(heard));
         }
         // Only the operator's ground stations count for the ground-station watch.
         if self.stations.counts(f.header.system_id.min(255) as u8) {
@@ -495,18 +495,23 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
                 ));
             }
         }
-        if let Some((text, lost)) = self.gcs.check(t) {
-            if lost {
-                tracing::warn!("{text}");
+        if let Some(lost) = self.gcs.check(t) {
+            let heard = if lost {
+                OperatorEvent::GroundStationLost
             } else {
-                tracing::info!("{text}");
+                OperatorEvent::GroundStationBack
+            };
+            if lost {
+                tracing::warn!("{heard}");
+            } else {
+                tracing::info!("{heard}");
             }
-            self.shell.pending_events.push(Event::Other(text.into()));
             out.extend(self.shell.texts.say(
                 t,
                 if lost { WARNING } else { INFO },
-                &format!("companion: {text}"),
+                &format!("companion: {heard}"),
             ));
+            self.shell.pending_events.push(Event::Operator(heard));
         }
         wake
     }
@@ -754,18 +759,18 @@ impl GcsWatch {
         }
     }
 
-    /// ("link to the ground station lost" or "... back", lost) when that changed.
-    fn check(&mut self, now: Duration) -> Option<(&'static str, bool)> {
+    /// Whether the ground station is lost (true) or back (false), when that changed.
+    fn check(&mut self, now: Duration) -> Option<bool> {
         let silent = self
             .last
             .is_some_and(|t| now.saturating_sub(t) > Self::TIMEOUT);
         if silent && !self.lost {
             self.lost = true;
-            return Some(("link to the ground station lost", true));
+            return Some(true);
         }
         if !silent && self.lost {
             self.lost = false;
-            return Some(("link to the ground station back", false));
+            return Some(false);
         }
         None
     }

@@ -25,7 +25,7 @@ pub use terminal::{render_terminal, render_why};
 
 use crate::decision_log::{Header, LogItem, LossReason, ReadError, ReadIssue, stream_log};
 use companion_core::mission::{ActionRole, RouteRole};
-use companion_core::record::{CommandRecord, DecisionRecord, Event, LinkEvent};
+use companion_core::record::{CommandRecord, DecisionRecord, Event, LinkEvent, OperatorEvent};
 use companion_core::tracking::TrackingCounter;
 use outcomes::{Category, OutcomeCounts, categorize};
 use plot::Decimator;
@@ -721,16 +721,12 @@ impl Review {
 
     /// What the outcome is judged from: a crash, and the last record.
     fn outcome_inputs(&mut self, r: &DecisionRecord, armed: Option<bool>) {
-        // The gate's refusal event (fly/gate.rs: `operator: start refused (BY): WHY; still
-        // waiting ...`), and the guarantee's typed verdict when the models refused on energy.
+        // The gate's refusal event (fly/gate.rs), and the guarantee's typed verdict when the
+        // models refused on energy.
         for e in &r.events {
-            let text = e.to_string();
-            if let Some(rest) = text.strip_prefix("started in flight: ") {
-                self.restart = outcomes::restart_words(rest).or(self.restart.take());
-            }
-            if let Some(rest) = text.strip_prefix("operator: start refused") {
-                let why = rest.split_once(": ").map_or(rest, |(_, w)| w);
-                let why = why.split("; still waiting").next().unwrap_or(why).trim();
+            self.restart = outcomes::restart_words(e).or(self.restart.take());
+            if let Event::Operator(OperatorEvent::StartRefused { why, .. }) = e {
+                let why = why.trim();
                 let verdict = (r.guarantee.as_ref())
                     .and_then(|g| g.verdict.as_ref())
                     .filter(|v| !v.fits)

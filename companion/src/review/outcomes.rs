@@ -4,7 +4,7 @@
 //! its answer, a mode already set, a step skipped because an earlier one failed or the operator
 //! took over are each their own category.
 
-use companion_core::record::CommandOutcome;
+use companion_core::record::{CommandOutcome, Event};
 
 /// The category of one command result.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -112,19 +112,25 @@ impl OutcomeCounts {
     }
 }
 
-/// A started-in-flight event (after its prefix) as the summary tells it: `resumed (facts)` or
-/// `handed off (why not resumed)`; None for the other lines (the proof under way).
-pub(super) fn restart_words(rest: &str) -> Option<String> {
-    if let Some(facts) = rest.strip_prefix("resumed") {
-        let facts = facts.split_once("; ").map_or("", |(_, f)| f);
-        return Some(format!("resumed on the operator's consent ({facts})"));
-    }
-    let (_, why) = rest.split_once("not resumed")?;
+/// A started-in-flight event as the summary tells it: `resumed (facts)` or `handed off (why not
+/// resumed)`; None for the other events and lines (the proof under way).
+pub(super) fn restart_words(event: &Event) -> Option<String> {
+    let does = match event {
+        Event::ResumedInFlight { facts, .. } => {
+            return Some(format!(
+                "resumed on the operator's consent ({})",
+                facts.join("; ")
+            ));
+        }
+        Event::StartedInFlight { does, .. } => does.as_str(),
+        _ => return None,
+    };
+    let (_, why) = does.split_once("not resumed")?;
     let why = why.split("; no start until").next().unwrap_or(why);
     // Logs before restart_in_air: `not resumed (the companion resumes no flight ...)`.
     let why = (why.strip_prefix(" (").and_then(|w| w.strip_suffix(')')))
         .unwrap_or_else(|| why.trim_start_matches([':', ' ']));
-    let done = if rest.contains("hand-off") {
+    let done = if does.contains("hand-off") {
         "handed off"
     } else {
         "not resumed"

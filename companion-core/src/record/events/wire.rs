@@ -5,7 +5,7 @@
 //! an owned one. Schema-1 logs (plain sentences) are read by `companion::decision_log::migration`.
 
 use super::super::{Degraded, Dropped};
-use super::{CommandOutcome, Event, LinkEvent};
+use super::{CommandOutcome, Event, LinkEvent, OperatorEvent};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use std::borrow::Cow;
 use std::fmt;
@@ -280,7 +280,7 @@ impl From<LinkWire<'_, CommandOutcome>> for LinkEvent {
 /// (`{"kind":"link","link":{"kind":"lost"}}`), as is a command's outcome.
 #[derive(Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
-enum EventWire<'a, L, O, D, X> {
+enum EventWire<'a, L, O, D, X, P, V> {
     TargetDetected,
     TargetLost,
     ObstacleDetected,
@@ -293,28 +293,134 @@ enum EventWire<'a, L, O, D, X> {
     BatteryExhausted,
     Armed,
     Disarmed,
-    Mode { mode: Text<'a> },
-    Waypoint { seq: u16 },
-    BatteryBelow { threshold_pct: f64 },
-    Link { link: L },
-    Command { action: Text<'a>, outcome: O },
-    HealthError { error: Text<'a> },
-    ArbitrationError { error: Text<'a> },
-    ResourcesError { error: Text<'a> },
-    MdpStateUnknown { mdp: Text<'a>, state: Text<'a> },
-    MdpError { mdp: Text<'a>, error: Text<'a> },
-    Reallocation { reason: Text<'a> },
-    Degraded { degraded: D },
-    Dropped { dropped: X },
+    Mode {
+        mode: Text<'a>,
+    },
+    Waypoint {
+        seq: u16,
+    },
+    BatteryBelow {
+        threshold_pct: f64,
+    },
+    Link {
+        link: L,
+    },
+    Command {
+        action: Text<'a>,
+        outcome: O,
+    },
+    HealthError {
+        error: Text<'a>,
+    },
+    ArbitrationError {
+        error: Text<'a>,
+    },
+    ResourcesError {
+        error: Text<'a>,
+    },
+    MdpStateUnknown {
+        mdp: Text<'a>,
+        state: Text<'a>,
+    },
+    MdpError {
+        mdp: Text<'a>,
+        error: Text<'a>,
+    },
+    Reallocation {
+        reason: Text<'a>,
+    },
+    Degraded {
+        degraded: D,
+    },
+    Dropped {
+        dropped: X,
+    },
     GuaranteeInfeasible,
-    ShellLand { why: Text<'a> },
-    LandingKept { action: Text<'a> },
+    ShellLand {
+        why: Text<'a>,
+    },
+    LandingKept {
+        action: Text<'a>,
+    },
     NewFlight,
-    Other { text: Text<'a> },
+    Operator {
+        operator: P,
+    },
+    StartedInFlight {
+        found_as: Text<'a>,
+        does: Text<'a>,
+    },
+    ResumedInFlight {
+        system: u8,
+        component: u8,
+        found_as: Text<'a>,
+        facts: V,
+    },
+    PerformanceDrift {
+        activity: Text<'a>,
+        measured_j: f64,
+        predicted_j: f64,
+        activity_s: f64,
+        ratio: f64,
+        tolerance_pct: f64,
+        energy_scale: f64,
+    },
+    VersionsCapped {
+        versions: V,
+        capped: V,
+        at: f64,
+    },
+    RouteReplanned {
+        cruise_mps: f64,
+        was_mps: f64,
+        plan: Text<'a>,
+    },
+    RouteNotReplanned {
+        cruise_mps: f64,
+        why: Text<'a>,
+    },
+    MissionPlannedFromHome {
+        home: Text<'a>,
+        activities: usize,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        energy_j: Option<f64>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        duration_s: Option<f64>,
+    },
+    AutopilotMissionPlanned {
+        what: Text<'a>,
+        summary: Text<'a>,
+    },
+    MissionReplannedFromPoint {
+        item: usize,
+        kept: usize,
+        left: usize,
+        left_m: f64,
+    },
+    MissionRefused {
+        why: Text<'a>,
+    },
+    EventsNotListed {
+        more: usize,
+        repeats: usize,
+        not_listed: usize,
+    },
+    Other {
+        text: Text<'a>,
+    },
 }
 
-type EventOut<'a> = EventWire<'a, &'a LinkEvent, &'a CommandOutcome, &'a Degraded, &'a Dropped>;
-type EventIn<'a> = EventWire<'a, LinkEvent, CommandOutcome, Degraded, Dropped>;
+type EventOut<'a> = EventWire<
+    'a,
+    &'a LinkEvent,
+    &'a CommandOutcome,
+    &'a Degraded,
+    &'a Dropped,
+    &'a OperatorEvent,
+    &'a [String],
+>;
+type EventIn<'a> =
+    EventWire<'a, LinkEvent, CommandOutcome, Degraded, Dropped, OperatorEvent, Vec<String>>;
 
 impl<'a> From<&'a Event> for EventOut<'a> {
     fn from(e: &'a Event) -> Self {
@@ -359,6 +465,97 @@ impl<'a> From<&'a Event> for EventOut<'a> {
             E::ShellLand(why) => W::ShellLand { why: b(why) },
             E::LandingKept(a) => W::LandingKept { action: b(a) },
             E::NewFlight => W::NewFlight,
+            E::Operator(o) => W::Operator { operator: o },
+            E::StartedInFlight { found_as, does } => W::StartedInFlight {
+                found_as: b(found_as),
+                does: b(does),
+            },
+            E::ResumedInFlight {
+                system,
+                component,
+                found_as,
+                facts,
+            } => W::ResumedInFlight {
+                system: *system,
+                component: *component,
+                found_as: b(found_as),
+                facts,
+            },
+            E::PerformanceDrift {
+                activity,
+                measured_j,
+                predicted_j,
+                activity_s,
+                ratio,
+                tolerance_pct,
+                energy_scale,
+            } => W::PerformanceDrift {
+                activity: b(activity),
+                measured_j: *measured_j,
+                predicted_j: *predicted_j,
+                activity_s: *activity_s,
+                ratio: *ratio,
+                tolerance_pct: *tolerance_pct,
+                energy_scale: *energy_scale,
+            },
+            E::VersionsCapped {
+                versions,
+                capped,
+                at,
+            } => W::VersionsCapped {
+                versions,
+                capped,
+                at: *at,
+            },
+            E::RouteReplanned {
+                cruise_mps,
+                was_mps,
+                plan,
+            } => W::RouteReplanned {
+                cruise_mps: *cruise_mps,
+                was_mps: *was_mps,
+                plan: b(plan),
+            },
+            E::RouteNotReplanned { cruise_mps, why } => W::RouteNotReplanned {
+                cruise_mps: *cruise_mps,
+                why: b(why),
+            },
+            E::MissionPlannedFromHome {
+                home,
+                activities,
+                energy_j,
+                duration_s,
+            } => W::MissionPlannedFromHome {
+                home: b(home),
+                activities: *activities,
+                energy_j: *energy_j,
+                duration_s: *duration_s,
+            },
+            E::AutopilotMissionPlanned { what, summary } => W::AutopilotMissionPlanned {
+                what: b(what),
+                summary: b(summary),
+            },
+            E::MissionReplannedFromPoint {
+                item,
+                kept,
+                left,
+                left_m,
+            } => W::MissionReplannedFromPoint {
+                item: *item,
+                kept: *kept,
+                left: *left,
+                left_m: *left_m,
+            },
+            E::MissionRefused(why) => W::MissionRefused { why: b(why) },
+            E::EventsNotListed {
+                more,
+                repeats,
+                not_listed,
+            } => W::EventsNotListed {
+                more: *more,
+                repeats: *repeats,
+                not_listed: *not_listed,
+            },
             E::Other(text) => W::Other { text: b(text) },
         }
     }
@@ -407,6 +604,97 @@ impl From<EventIn<'_>> for Event {
             W::ShellLand { why } => E::ShellLand(own(why)),
             W::LandingKept { action } => E::LandingKept(own(action)),
             W::NewFlight => E::NewFlight,
+            W::Operator { operator } => E::Operator(operator),
+            W::StartedInFlight { found_as, does } => E::StartedInFlight {
+                found_as: own(found_as),
+                does: own(does),
+            },
+            W::ResumedInFlight {
+                system,
+                component,
+                found_as,
+                facts,
+            } => E::ResumedInFlight {
+                system,
+                component,
+                found_as: own(found_as),
+                facts,
+            },
+            W::PerformanceDrift {
+                activity,
+                measured_j,
+                predicted_j,
+                activity_s,
+                ratio,
+                tolerance_pct,
+                energy_scale,
+            } => E::PerformanceDrift {
+                activity: own(activity),
+                measured_j,
+                predicted_j,
+                activity_s,
+                ratio,
+                tolerance_pct,
+                energy_scale,
+            },
+            W::VersionsCapped {
+                versions,
+                capped,
+                at,
+            } => E::VersionsCapped {
+                versions,
+                capped,
+                at,
+            },
+            W::RouteReplanned {
+                cruise_mps,
+                was_mps,
+                plan,
+            } => E::RouteReplanned {
+                cruise_mps,
+                was_mps,
+                plan: own(plan),
+            },
+            W::RouteNotReplanned { cruise_mps, why } => E::RouteNotReplanned {
+                cruise_mps,
+                why: own(why),
+            },
+            W::MissionPlannedFromHome {
+                home,
+                activities,
+                energy_j,
+                duration_s,
+            } => E::MissionPlannedFromHome {
+                home: own(home),
+                activities,
+                energy_j,
+                duration_s,
+            },
+            W::AutopilotMissionPlanned { what, summary } => E::AutopilotMissionPlanned {
+                what: own(what),
+                summary: own(summary),
+            },
+            W::MissionReplannedFromPoint {
+                item,
+                kept,
+                left,
+                left_m,
+            } => E::MissionReplannedFromPoint {
+                item,
+                kept,
+                left,
+                left_m,
+            },
+            W::MissionRefused { why } => E::MissionRefused(own(why)),
+            W::EventsNotListed {
+                more,
+                repeats,
+                not_listed,
+            } => E::EventsNotListed {
+                more,
+                repeats,
+                not_listed,
+            },
             W::Other { text } => E::Other(own(text)),
         }
     }
@@ -415,11 +703,11 @@ impl From<EventIn<'_>> for Event {
 /// A wire form written with `text`: the sentence `Display` gives, for people and for scripts
 /// that read sentences (never read back: the fields are the data). `Other` is its text already.
 #[derive(Serialize)]
-struct WithText<'a, W, T: fmt::Display> {
+pub(super) struct WithText<'a, W, T: fmt::Display> {
     #[serde(flatten)]
-    wire: W,
+    pub(super) wire: W,
     #[serde(serialize_with = "said")]
-    text: &'a T,
+    pub(super) text: &'a T,
 }
 
 fn said<T: fmt::Display, S: Serializer>(t: &&T, s: S) -> Result<S::Ok, S::Error> {
