@@ -35,7 +35,22 @@ proptest! {
 /// The wire form names the variant and its fields: what a script reads with `jq`.
 #[test]
 fn events_are_written_as_objects_with_their_fields() {
-    let cases: [(Event, &str); 6] = [
+    let cases: [(Event, &str); 8] = [
+        (
+            Event::Operator(OperatorEvent::StartRefused {
+                by: StartBy::StartCommand,
+                why: "battery 12%".into(),
+            }),
+            r#"{"kind":"operator","operator":{"kind":"start_refused","by":"start_command","why":"battery 12%","text":"operator: start refused (MAV_CMD_MISSION_START from the ground station): battery 12%; still waiting for the operator"},"text":"operator: start refused (MAV_CMD_MISSION_START from the ground station): battery 12%; still waiting for the operator"}"#,
+        ),
+        (
+            Event::RouteReplanned {
+                cruise_mps: 7.5,
+                was_mps: 5.0,
+                plan: "81.9 kJ 386 s".into(),
+            },
+            r#"{"kind":"route_replanned","cruise_mps":7.5,"was_mps":5.0,"plan":"81.9 kJ 386 s","text":"companion: route re-planned at the autopilot's cruise 7.5 m/s (params 5): 81.9 kJ 386 s"}"#,
+        ),
         (
             Event::TargetDetected,
             r#"{"kind":"target_detected","text":"target detected"}"#,
