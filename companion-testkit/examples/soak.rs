@@ -364,7 +364,7 @@ fn main() -> anyhow::Result<()> {
         }
         s.send(&out);
         s.vehicle.stamp_latency(t, t);
-        let mut run = periodic && s.vehicle.target.is_some();
+        let mut run = periodic && s.vehicle.target().is_some();
         for _ in 0..2 {
             if run {
                 let d = fly::decide(&mut s.decider, &mut s.shell, &mut s.vehicle, || t);
@@ -391,7 +391,7 @@ fn main() -> anyhow::Result<()> {
                 s.last = Some((plan, rec));
             }
             // Then one for significant events, as fly does after every message.
-            run = s.vehicle.has_events() && s.vehicle.target.is_some();
+            run = s.vehicle.has_events() && s.vehicle.target().is_some();
         }
 
         let done = i + 1;

@@ -219,7 +219,9 @@ fn cycle(
     n: u64,
 ) -> (Option<String>, Vec<Msg>) {
     let decided = fly::decide(core, shell, vehicle, || now);
-    let chosen = decided.chosen.map(|f| vehicle.actions.name(f).to_string());
+    let chosen = decided
+        .chosen
+        .map(|f| vehicle.actions().name(f).to_string());
     let msgs = decided.msgs.clone();
     let rec = fly::finish_record(decided, shell, vehicle, n, &mut Vec::new());
     serde_json::to_string(&rec).expect("a decision record serialises");
@@ -295,7 +297,7 @@ pub fn ingest_one(fx: &IngestFixture, data: &[u8]) -> IngestOutcome {
         }
         msgs.extend(vehicle.tick(now));
         out.messages_out += send(&mut encoder, &vehicle, input.signing, &msgs);
-        if vehicle.has_events() && vehicle.target.is_some() && out.cycles < MAX_CYCLES {
+        if vehicle.has_events() && vehicle.target().is_some() && out.cycles < MAX_CYCLES {
             let (chosen, msgs) = {
                 out.cycles += 1;
                 cycle(&mut core, &mut shell, &mut vehicle, now, out.cycles as u64)

@@ -168,7 +168,7 @@ impl Provisioner {
 
     /// The chosen autopilot (system, component), once heard.
     pub fn target(&self) -> Option<(u8, u8)> {
-        self.vehicle.target
+        self.vehicle.target()
     }
 
     /// Ok(what was proven) or Err(why not), once finished.
@@ -220,14 +220,14 @@ impl Provisioner {
             self.another_autopilot(src);
             return Vec::new();
         }
-        let Some(target) = self.vehicle.target else {
+        let Some(target) = self.vehicle.target() else {
             return Vec::new();
         };
         self.plain.system_id = target.0;
         self.signed.system_id = target.0;
         let from_target = src == target;
         if matches!(self.phase, Phase::WaitAutopilot | Phase::Listen(_))
-            && self.vehicle.readiness.armed
+            && self.vehicle.readiness().armed
         {
             self.phase = Phase::Done(Err(format!(
                 "autopilot {}/{} is armed: a key is set up on the ground, disarmed, not in flight",

@@ -138,25 +138,25 @@ pub struct CommandToUs {
 /// The link protocol state for one autopilot.
 pub struct Vehicle {
     /// Link settings.
-    pub cfg: VehicleConfig,
+    cfg: VehicleConfig,
     /// (system, component) of the autopilot, once its HEARTBEAT is seen.
-    pub target: Option<(u8, u8)>,
+    target: Option<(u8, u8)>,
     /// Autopilot family, from its HEARTBEAT (`Other` until one is seen).
-    pub flavor: Flavor,
+    flavor: Flavor,
     /// COMMAND_LONG / COMMAND_INT client.
-    pub commands: CommandClient,
+    commands: CommandClient,
     /// Mission protocol client.
-    pub mission: MissionClient,
+    mission: MissionClient,
     /// Whether the autopilot is still heard.
-    pub liveness: Liveness,
+    liveness: Liveness,
     /// Whether the autopilot reports itself ready to arm.
-    pub readiness: Readiness,
+    readiness: Readiness,
     /// Telemetry turned into observations.
-    pub telemetry: Telemetry,
+    telemetry: Telemetry,
     /// Vehicle action name -> steps (params/commands.toml).
-    pub actions: ActionTable,
+    actions: ActionTable,
     /// The route `follow_trajectory` uploads, if one was given.
-    pub route: Option<Route>,
+    route: Option<Route>,
     /// The command executor: the running action's steps, the commands in flight, the records.
     exec: Executor,
     stream_queue: VecDeque<(u32, f32)>,
@@ -170,7 +170,7 @@ pub struct Vehicle {
     /// Which autopilot is obeyed, who else was heard, the trust counters.
     identity: Identity,
     /// Consecutive autopilot heartbeats reporting the vehicle armed (0 once one says disarmed).
-    pub armed_heartbeats: u32,
+    armed_heartbeats: u32,
     /// Commands addressed to this companion (component 191) since the last
     /// [`Vehicle::take_commands_to_us`].
     commands_to_us: Vec<CommandToUs>,
@@ -263,6 +263,59 @@ impl Vehicle {
             self.link_events.push(LinkEvent::Other(note));
         }
         std::mem::take(&mut self.link_events)
+    }
+
+    /// Pin the autopilot to obey (`--autopilot-sysid`, `--autopilot-compid`), before any
+    /// HEARTBEAT is heard: without a system id the first autopilot heard is chosen.
+    pub fn obeying(mut self, sysid: Option<u8>, compid: u8) -> Self {
+        self.cfg.autopilot_sysid = sysid;
+        self.cfg.autopilot_compid = compid;
+        self
+    }
+
+    // Read-only views for the shell: it reads the link's state here and changes it only through
+    // the operations above and below, so the protocol clients keep their invariants.
+
+    /// Link settings.
+    pub fn cfg(&self) -> &VehicleConfig {
+        &self.cfg
+    }
+    /// (system, component) of the autopilot, once its HEARTBEAT is seen.
+    pub fn target(&self) -> Option<(u8, u8)> {
+        self.target
+    }
+    /// Autopilot family, from its HEARTBEAT (`Other` until one is seen).
+    pub fn flavor(&self) -> Flavor {
+        self.flavor
+    }
+    /// The latest telemetry.
+    pub fn telemetry(&self) -> &Telemetry {
+        &self.telemetry
+    }
+    /// Whether the autopilot is still heard, and how often it was lost.
+    pub fn liveness(&self) -> &Liveness {
+        &self.liveness
+    }
+    /// Whether the autopilot reports itself ready to arm (and armed).
+    pub fn readiness(&self) -> &Readiness {
+        &self.readiness
+    }
+    /// Vehicle action name -> steps (params/commands.toml).
+    pub fn actions(&self) -> &ActionTable {
+        &self.actions
+    }
+    /// The route `follow_trajectory` uploads, if one was given.
+    pub fn route(&self) -> Option<&Route> {
+        self.route.as_ref()
+    }
+    /// Whether the autopilot answers its own home at mission seq 0 (ArduPilot) rather than
+    /// storing it like any other item (PX4): set when the autopilot is chosen.
+    pub fn home_at_seq0(&self) -> bool {
+        self.mission.home_at_seq0
+    }
+    /// Consecutive autopilot heartbeats reporting the vehicle armed (0 once one says disarmed).
+    pub fn armed_heartbeats(&self) -> u32 {
+        self.armed_heartbeats
     }
 
     /// Queue every stream request, unless a set was queued less than the minimum interval ago:

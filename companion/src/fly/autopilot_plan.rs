@@ -107,7 +107,7 @@ impl AutopilotPlan {
         decider: &mut D,
         shell: &mut Shell,
     ) -> bool {
-        let t = &vehicle.telemetry;
+        let t = vehicle.telemetry();
         let (Some(at), Some(pos), true) = (shell.route_activity, t.position, t.armed) else {
             return false;
         };
@@ -124,7 +124,7 @@ impl AutopilotPlan {
             .map(|(lat, lon, alt)| (f64::from(lat) / 1e7, f64::from(lon) / 1e7, alt));
         let (speeds, fallback) =
             crate::autopilot_mission::speeds(&self.params_speeds, |n| t.get(n));
-        let home_at_seq0 = vehicle.mission.home_at_seq0;
+        let home_at_seq0 = vehicle.home_at_seq0();
         let Ok(route) = crate::autopilot_mission::autopilot_mission(
             &planned,
             home_at_seq0,
@@ -208,9 +208,9 @@ impl AutopilotPlan {
             return;
         };
         let (now, fallback) =
-            crate::autopilot_mission::speeds(&self.params_speeds, |n| vehicle.telemetry.get(n));
-        let home_came = !last.had_home && vehicle.telemetry.home.is_some();
-        let confirmed = fallback.len() < last.fallback.len() && !vehicle.telemetry.armed;
+            crate::autopilot_mission::speeds(&self.params_speeds, |n| vehicle.telemetry().get(n));
+        let home_came = !last.had_home && vehicle.telemetry().home.is_some();
+        let confirmed = fallback.len() < last.fallback.len() && !vehicle.telemetry().armed;
         if now == last.speeds && !home_came && !confirmed {
             return;
         }
@@ -240,12 +240,12 @@ impl AutopilotPlan {
             .map(|(k, i)| i.planned(k))
             .collect();
         let home = vehicle
-            .telemetry
+            .telemetry()
             .home
             .map(|(lat, lon, alt)| (f64::from(lat) / 1e7, f64::from(lon) / 1e7, alt));
         let (speeds, fallback) =
-            crate::autopilot_mission::speeds(&self.params_speeds, |n| vehicle.telemetry.get(n));
-        let home_at_seq0 = vehicle.mission.home_at_seq0;
+            crate::autopilot_mission::speeds(&self.params_speeds, |n| vehicle.telemetry().get(n));
+        let home_at_seq0 = vehicle.home_at_seq0();
         let result = crate::autopilot_mission::plan(
             &self.files,
             &planned,

@@ -39,9 +39,12 @@ pub(super) async fn run_cycle_at<D: Decider, S: RecordSink>(
     report.cycles += 1;
     // The action flown, under its own name (a shell-only entry such as the route's resume is
     // told as the action it is flown for).
-    let flown = decided
-        .chosen
-        .map(|c| vehicle.actions.name(Flown::Action(c.action())).to_string());
+    let flown = decided.chosen.map(|c| {
+        vehicle
+            .actions()
+            .name(Flown::Action(c.action()))
+            .to_string()
+    });
     let mut rec = finish_record(decided, shell, vehicle, report.cycles, transport_events);
     rec.decide_ms = Some(decide_ms);
     if shell.operator.control == companion_link::operator::Control::FlightInProgress {
@@ -112,14 +115,14 @@ pub fn decide<D: Decider>(
     coalesce_events(&mut events);
     let mut obs = vehicle.observations(now(), events.clone());
     let extra = Extra {
-        mode: vehicle.telemetry.mode.and_then(ReportedMode::known),
-        landed_state: vehicle.telemetry.landed_state.as_deref(),
+        mode: vehicle.telemetry().mode.and_then(ReportedMode::known),
+        landed_state: vehicle.telemetry().landed_state.as_deref(),
         down_for_s: Some(vehicle.down_for(now()).map_or(0.0, |d| d.as_secs_f64())),
     };
     obs.state = shell.mission.update(&obs, &extra).to_string();
     complete_observations(&mut obs, &shell.mission);
-    let home = vehicle.telemetry.home;
-    let landed = vehicle.telemetry.landed_state.as_deref();
+    let home = vehicle.telemetry().home;
+    let landed = vehicle.telemetry().landed_state.as_deref();
     shell.route_activity =
         (shell.route_progress.as_mut()).and_then(|p| p.activity_landing(&obs, home, landed));
     if let Some(a) = shell.route_activity {
@@ -189,7 +192,7 @@ pub fn decide<D: Decider>(
     let mut flown = chosen.map(Flown::Action);
     if shell.mission.route_on_vehicle()
         && let Some(action) = chosen
-        && let Some(resume) = vehicle.actions.in_place_of(action)
+        && let Some(resume) = vehicle.actions().in_place_of(action)
     {
         flown = Some(resume);
     }
@@ -232,7 +235,7 @@ pub struct Decided {
     /// Commands for the chosen vehicle action, to send now.
     pub msgs: Vec<Msg>,
     /// The vehicle action chosen this cycle (after the mission's end and the route's resume),
-    /// as an entry of the vehicle's commands table (`vehicle.actions.name` names it).
+    /// as an entry of the vehicle's commands table (`vehicle.actions().name` names it).
     pub chosen: Option<Flown>,
     pub plan: Plan,
     rec: DecisionRecord,
@@ -285,9 +288,9 @@ pub fn finish_record(
     // A flood (STATUSTEXT from the autopilot) is summarised like events are, so the record stays
     // small enough to be logged.
     companion_core::record::coalesce_link_events(&mut rec.link_events);
-    rec.vehicle.extend(vehicle.telemetry.vehicle());
+    rec.vehicle.extend(vehicle.telemetry().vehicle());
     // Which autopilot this run flies: a restarted companion proves a flight its own by it.
-    if let Some((sys, comp)) = vehicle.target {
+    if let Some((sys, comp)) = vehicle.target() {
         rec.vehicle.insert(
             "autopilot".into(),
             serde_json::Value::from(format!("{sys}/{comp}")),
@@ -295,7 +298,7 @@ pub fn finish_record(
     }
     rec.vehicle.insert(
         "link_alive".into(),
-        serde_json::Value::from(vehicle.liveness.alive()),
+        serde_json::Value::from(vehicle.liveness().alive()),
     );
     rec.vehicle.insert(
         "operator".into(),

@@ -119,7 +119,7 @@ fn command_refusal(
             "Start refused: command too old, send again",
         ));
     }
-    if comp == AUTOPILOT_COMPONENT || vehicle.target == Some((sys, comp)) {
+    if comp == AUTOPILOT_COMPONENT || vehicle.target() == Some((sys, comp)) {
         return Some((
             MavResult::MAV_RESULT_DENIED,
             format!("the sender {sys}/{comp} is an autopilot component, not a ground station"),
@@ -264,10 +264,10 @@ pub fn observe(
     out: &mut Vec<Msg>,
 ) -> bool {
     let view = VehicleView {
-        flavor: vehicle.flavor,
-        custom_mode: vehicle.telemetry.custom_mode,
-        mode: vehicle.telemetry.mode,
-        armed_heartbeats: vehicle.armed_heartbeats,
+        flavor: vehicle.flavor(),
+        custom_mode: vehicle.telemetry().custom_mode,
+        mode: vehicle.telemetry().mode,
+        armed_heartbeats: vehicle.armed_heartbeats(),
         armed_for: vehicle.armed_for(now),
         mode_for: vehicle.mode_for(now),
         airborne: shell.mission.flown(),

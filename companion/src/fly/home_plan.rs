@@ -63,7 +63,7 @@ impl HomePlan {
         if self.planned {
             return;
         }
-        let t = &vehicle.telemetry;
+        let t = vehicle.telemetry();
         let (home, from) = match (t.home, t.position) {
             (Some((lat, lon, _)), _) => ((lat, lon), "HOME_POSITION"),
             (None, Some(p)) if p.lat_e7 != 0 || p.lon_e7 != 0 => (

@@ -128,7 +128,7 @@ impl LinkSecurity {
         texts: &mut GcsText,
     ) -> Vec<Msg> {
         let mut out = Vec::new();
-        let chosen = vehicle.target.is_some() && vehicle.liveness.alive();
+        let chosen = vehicle.target().is_some() && vehicle.liveness().alive();
         let first_due = self.first_due;
         let mut last_said = self.last_said;
         let mut due = false;
@@ -169,7 +169,7 @@ impl LinkSecurity {
                 UNPINNED_TEXT,
             );
         }
-        if self.keyed && vehicle.target.is_none() && stats.unsigned_refused > 0 {
+        if self.keyed && vehicle.target().is_none() && stats.unsigned_refused > 0 {
             if !self.refused_printed {
                 self.refused_printed = true;
                 let line = format!(
@@ -225,8 +225,8 @@ mod tests {
     fn texts_said(args: &[&str], keyed: bool, frames: &[Vec<u8>]) -> Vec<(f64, String)> {
         let args = FlyArgs::from_cli(args.iter().copied()).unwrap();
         let mut sec = LinkSecurity::start(&args, keyed);
-        let mut v = Vehicle::new(Default::default(), Default::default(), None);
-        v.cfg.autopilot_sysid = args.autopilot_sysid;
+        let mut v = Vehicle::new(Default::default(), Default::default(), None)
+            .obeying(args.autopilot_sysid, args.autopilot_compid);
         let mut texts = GcsText::new(Duration::from_secs(15), 2);
         let mut ingest = companion_link::ingest::Ingest::new(None);
         let mut said = Vec::new();

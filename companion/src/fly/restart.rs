@@ -95,10 +95,10 @@ impl Seen {
     fn of(vehicle: &Vehicle) -> Self {
         Self {
             // Any armed report counts: the conservative reading for leaving a vehicle alone.
-            armed: vehicle.telemetry.armed || vehicle.armed_heartbeats > 0,
-            landed_state: vehicle.telemetry.landed_state.clone(),
-            alt_rel_m: vehicle.telemetry.position.map(|p| p.alt_rel_m),
-            mode: vehicle.telemetry.mode,
+            armed: vehicle.telemetry().armed || vehicle.armed_heartbeats() > 0,
+            landed_state: vehicle.telemetry().landed_state.clone(),
+            alt_rel_m: vehicle.telemetry().position.map(|p| p.alt_rel_m),
+            mode: vehicle.telemetry().mode,
         }
     }
 
@@ -190,7 +190,7 @@ impl StartLook {
         now: Duration,
         out: &mut Vec<Msg>,
     ) -> bool {
-        if vehicle.target.is_none() || vehicle.telemetry.mode.is_none() {
+        if vehicle.target().is_none() || vehicle.telemetry().mode.is_none() {
             return false; // no autopilot heartbeat yet
         }
         if shell.operator.control != Control::Waiting {
@@ -203,7 +203,7 @@ impl StartLook {
             return false;
         }
         let since = *self.armed_since.get_or_insert(now);
-        let airborne = match seen.airborne(vehicle.cfg.ground_altitude_m) {
+        let airborne = match seen.airborne(vehicle.cfg().ground_altitude_m) {
             Some(a) => a,
             None if now.saturating_sub(since) >= EVIDENCE_WAIT => true,
             None => return false,
@@ -215,7 +215,7 @@ impl StartLook {
         self.found = AtStart::InFlight;
         self.found_as = seen.describe();
         shell.operator.control = Control::FlightInProgress;
-        if !companion_mode(vehicle.flavor, seen.mode) {
+        if !companion_mode(vehicle.flavor(), seen.mode) {
             let mode = seen.mode.map_or_else(|| "?".to_string(), |m| m.to_string());
             self.say_found(
                 shell,
@@ -233,7 +233,7 @@ impl StartLook {
             self.hand_off(shell, vehicle, handoff, &not_offered(why), now, out);
             return true;
         }
-        let target = vehicle.target.unwrap_or_default();
+        let target = vehicle.target().unwrap_or_default();
         match resume::check_log(self.previous.as_ref(), target, utc_us_now()) {
             Ok(fact) => {
                 // The mission on the autopilot is downloaded once to compare it with the route.
@@ -342,11 +342,12 @@ impl StartLook {
         if self.resume == Resume::Off {
             return false;
         }
-        if !companion_mode(vehicle.flavor, vehicle.telemetry.mode) {
+        if !companion_mode(vehicle.flavor(), vehicle.telemetry().mode) {
             // The pilot or the autopilot took it meanwhile: theirs now.
             self.resume = Resume::Off;
             vehicle.unwatch_autopilot_mission();
-            let mode = (vehicle.telemetry.mode).map_or_else(|| "?".to_string(), |m| m.to_string());
+            let mode =
+                (vehicle.telemetry().mode).map_or_else(|| "?".to_string(), |m| m.to_string());
             self.say_found(
                 shell,
                 &format!("not resumed: the vehicle flies in {mode} now; standing by"),
@@ -419,15 +420,15 @@ impl StartLook {
                 AutopilotMission::Loaded(i) | AutopilotMission::Changed(i) => i,
             };
             vehicle.unwatch_autopilot_mission();
-            let home = vehicle.telemetry.home.map(|h| (h.0, h.1));
-            let route = vehicle.route.as_ref().ok_or_else(|| NotProved {
+            let home = vehicle.telemetry().home.map(|h| (h.0, h.1));
+            let route = vehicle.route().ok_or_else(|| NotProved {
                 short: "no route",
                 why: "no route loaded".into(),
             })?;
-            let home_at_seq0 = vehicle.mission.home_at_seq0;
+            let home_at_seq0 = vehicle.home_at_seq0();
             facts.push(resume::check_mission(
                 route,
-                vehicle.flavor,
+                vehicle.flavor(),
                 home_at_seq0,
                 home,
                 &items,
@@ -503,7 +504,7 @@ impl StartLook {
             return false;
         }
         let confirm = Duration::from_secs_f64(shell.mission.landed_confirm_s);
-        if vehicle.armed_heartbeats > 0 || vehicle.down_for(now).is_none_or(|d| d < confirm) {
+        if vehicle.armed_heartbeats() > 0 || vehicle.down_for(now).is_none_or(|d| d < confirm) {
             return false;
         }
         vehicle.stop_actions(now, "flight over");

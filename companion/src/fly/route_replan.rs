@@ -76,10 +76,10 @@ impl RouteReplan {
         decider: &mut D,
         shell: &mut Shell,
     ) {
-        let Some(cruise) = vehicle.telemetry.get(CRUISE) else {
+        let Some(cruise) = vehicle.telemetry().get(CRUISE) else {
             return;
         };
-        if vehicle.telemetry.armed
+        if vehicle.telemetry().armed
             || !(cruise.is_finite() && cruise > 0.0)
             || (cruise - self.planned_cruise).abs() < 1e-6
         {

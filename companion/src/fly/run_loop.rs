@@ -97,9 +97,9 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         shell.operator.confirm = Duration::from_secs_f64(setup.link.flight.operator_confirm_s);
         shell.operator.start_on_arm = args.start_on_arm;
         announce_start(&args);
-        let mut vehicle = setup.vehicle(args.link_timeout);
-        vehicle.cfg.autopilot_sysid = args.autopilot_sysid;
-        vehicle.cfg.autopilot_compid = args.autopilot_compid;
+        let mut vehicle = setup
+            .vehicle(args.link_timeout)
+            .obeying(args.autopilot_sysid, args.autopilot_compid);
         let autopilot_plan = setup.autopilot_speeds.map(|speeds| {
             vehicle.watch_autopilot_mission();
             super::autopilot_plan::AutopilotPlan::new(
@@ -196,7 +196,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             let mut out: Vec<Msg> = Vec::new();
             let mut trigger: Option<Duration> = None;
             let mut wake = false;
-            let connect_wait = connect_by.filter(|_| self.vehicle.target.is_none());
+            let connect_wait = connect_by.filter(|_| self.vehicle.target().is_none());
             let due = self.cycle_due.map(|t| self.start + t);
             tokio::select! {
                 m = self.link.inbound.recv() => trigger = self.on_link(m, &mut out)?,
@@ -246,7 +246,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             self.vehicle.stamp_latency(trigger.unwrap_or(t), self.now());
             self.maybe_cycle(trigger, wake).await?;
             // The turn ended: systemd hears the loop is alive (its cycles too).
-            let (t, known) = (self.now(), self.vehicle.target.is_some());
+            let (t, known) = (self.now(), self.vehicle.target().is_some());
             self.watchdog.turn(t, known, self.last_cycle_done);
             if self.shell.finished()
                 && let Some(why) = self.flight_over().await
@@ -283,7 +283,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
                     self.on_autopilot_frame(t, &f, out);
                     // Replies go to the autopilot's address, learned from its own frames only.
                     let src = (f.header.system_id.min(255) as u8, f.header.component_id);
-                    let autopilot = (self.vehicle.target == Some(src)).then_some(src);
+                    let autopilot = (self.vehicle.target() == Some(src)).then_some(src);
                     if let Some(ev) = self.udp_peer.on_frame(from, autopilot) {
                         tracing::info!("{ev}");
                         let _ = self.link.peer.send(self.udp_peer.addr);
@@ -373,7 +373,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
 
     /// The periodic decision cycle (once the autopilot is known).
     async fn on_period(&mut self) -> anyhow::Result<()> {
-        if self.vehicle.target.is_some() {
+        if self.vehicle.target().is_some() {
             let t = self.held_trigger.take().unwrap_or_else(|| self.now());
             self.cycle_due = None;
             self.run_cycle(t).await?;
@@ -408,7 +408,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         let mut wake = false;
         // A vehicle found flying when the companion started: said and handed off, before the
         // gate may take any start (an --auto-start of this run included).
-        if self.vehicle.target.is_some() {
+        if self.vehicle.target().is_some() {
             wake |= self.start_look.look(
                 &mut self.shell,
                 &mut self.vehicle,
@@ -418,7 +418,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
             );
         }
         let undecided =
-            self.vehicle.target.is_some() && self.start_look.found == restart::AtStart::Undecided;
+            self.vehicle.target().is_some() && self.start_look.found == restart::AtStart::Undecided;
         for cmd in self.vehicle.take_commands_to_us() {
             if undecided && cmd.command == companion_link::operator::START_COMMAND {
                 // Armed, and not yet known to be on the ground: no start, whatever the models say.
@@ -460,14 +460,14 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
                 out,
             );
         }
-        if self.vehicle.target.is_none() {
+        if self.vehicle.target().is_none() {
             return wake;
         }
         // A pilot's arming, GUIDED or mode change; a start voided.
         if self.start_look.found != restart::AtStart::Undecided {
             wake |= gate::observe(&mut self.shell, &mut self.vehicle, t, out);
         }
-        let alive = self.vehicle.liveness.alive();
+        let alive = self.vehicle.liveness().alive();
         if alive != self.was_alive {
             if alive {
                 tracing::info!("autopilot link up");
@@ -522,7 +522,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
     /// it. Link loss found by the protocol tick counts too (its trigger is the tick itself).
     async fn maybe_cycle(&mut self, trigger: Option<Duration>, wake: bool) -> anyhow::Result<()> {
         let pending = self.vehicle.has_events() || wake || self.held_trigger.is_some();
-        if !pending || self.vehicle.target.is_none() {
+        if !pending || self.vehicle.target().is_none() {
             return Ok(());
         }
         let t_now = self.now();
@@ -629,7 +629,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         outcome?;
         self.report.ingest = self.ingest.stats;
         self.report.frames_out = self.encoder.frames_out;
-        self.report.link_losses = self.vehicle.liveness.losses;
+        self.report.link_losses = self.vehicle.liveness().losses;
         Ok(self.report)
     }
 
@@ -640,7 +640,7 @@ impl<'s, D: Decider, S: RecordSink> RunLoop<'s, D, S> {
         if !self.vehicle.launch_awaiting() {
             return;
         }
-        let wait = self.vehicle.cfg.command.ack_timeout + LAUNCH_WAIT_MARGIN;
+        let wait = self.vehicle.cfg().command.ack_timeout + LAUNCH_WAIT_MARGIN;
         tracing::info!(
             "companion stopping ({why}): waiting up to {:.1} s for the answer to its last ARM or take-off",
             wait.as_secs_f64()

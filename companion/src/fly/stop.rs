@@ -42,17 +42,17 @@ pub fn begin_stop(
     landed_confirm: Duration,
 ) -> (Vec<Msg>, Stopped) {
     let mut out = Vec::new();
-    if vehicle.target.is_none() {
+    if vehicle.target().is_none() {
         return (out, Stopped::default());
     }
     let reading = vehicle.stop_reading(now, landed_confirm);
     let verdict = stop_verdict(&shell.operator.control, &reading);
     let was = shell.operator.control.label();
     let mode = vehicle
-        .telemetry
+        .telemetry()
         .mode
         .map_or_else(|| "?".into(), |m| m.to_string());
-    let alt = vehicle.telemetry.position.map(|p| p.alt_rel_m);
+    let alt = vehicle.telemetry().position.map(|p| p.alt_rel_m);
     let at = alt.map_or(String::new(), |a| format!(" at {a:.0} m"));
     let mut stopped = Stopped {
         commanded: false,
