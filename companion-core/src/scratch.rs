@@ -22,7 +22,7 @@ pub(crate) struct Scratch {
     pub(crate) superseded: Vec<usize>,
     /// Per proposal of the record (same index): the MDP (its index in the core's MDP list) and
     /// the MDP action chosen, whose primitives' ids the core resolved at start
-    /// (`Core::mdp_primitives`), so arbitration merges ids without looking names up.
+    /// (`HealthMdpStage::mdp_primitives`), so arbitration merges ids without looking names up.
     pub(crate) proposed: Vec<(usize, usize)>,
     /// The resource requests, one key each.
     pub(crate) key: Vec<RequestKey>,

@@ -4,6 +4,7 @@
 use super::*;
 use fpga_model::{PlatformState, Request, Schedule};
 use proptest::prelude::*;
+use std::collections::BTreeMap;
 use std::sync::{Arc, OnceLock};
 
 /// The shipped model, loaded once per test binary and shared (each core holds its `Arc`).
@@ -51,9 +52,9 @@ fn published(
         ModelKind::Bfm,
         model.policy("safety").unwrap(),
     );
-    core.platform = state.clone();
-    core.others_tiles = placed.placements.iter().map(|p| p.tiles.len() as u32).sum();
-    core.others_cpu = placed.placements.iter().map(|p| p.cpu_share).sum();
+    core.platform.platform = state.clone();
+    core.platform.others_tiles = placed.placements.iter().map(|p| p.tiles.len() as u32).sum();
+    core.platform.others_cpu = placed.placements.iter().map(|p| p.cpu_share).sum();
     let mut obs = Observations {
         state: "v0".into(),
         ..Default::default()
@@ -61,11 +62,13 @@ fn published(
     obs.set("target_speed_rel", speed);
     obs.set("vibration_mps2", vibration);
     obs.set("battery_pct", 90.0);
-    let mut evidence = core.health.evidence(&obs);
+    let mut evidence = core.health_mdp.health.evidence(&obs);
     core.readings.read(&obs);
-    core.platform_evidence(&mut evidence);
+    let at = (&core.read_slots, &core.readings);
+    (core.platform).platform_evidence(&model, &core.health_mdp.health, at, &mut evidence);
     let mut probs = BTreeMap::new();
-    core.health
+    core.health_mdp
+        .health
         .evaluate_into(&evidence, &mut probs)
         .expect("the core's evidence is consistent");
     let name = format!("P_{version}");
@@ -75,7 +78,8 @@ fn published(
         let mut ev = evidence.clone();
         ev.insert(fit_node.clone(), state.into());
         let mut out = probs.clone();
-        core.health
+        core.health_mdp
+            .health
             .reevaluate_manager_into("resources", &ev, &mut out)
             .unwrap();
         out[&name]
