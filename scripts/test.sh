@@ -80,8 +80,8 @@ else
 fi
 
 # ---- 4: the companion binary the python tests fly ---------------------------------------------------
-begin "build: companion binary (and the testkit's tlog sample writer) for sitl_tests"
-cargo build --quiet -p companion -p companion-testkit --bins
+begin "build: companion binary, companion-fleet and the testkit's tlog sample writer for sitl_tests"
+cargo build --quiet -p companion -p companion-testkit -p companion-fleet --bins
 export COMPANION_BIN="${CARGO_TARGET_DIR:-$ROOT/target}/debug/companion"
 done_
 
