@@ -66,17 +66,51 @@ def runs(tmp_path_factory) -> Dict[str, Any]:
             assert out.returncode == 0, out.stderr[-2000:]
         finally:
             sa.stop()
+    crafted = base / "crafted"
+    write_crafted_run(crafted / "run")
     sim_runs = sorted(p for p in sim.iterdir() if (p / "decisions.jsonl").is_file())
     flight_runs = sorted(p for p in flights.iterdir() if (p / "decisions.jsonl").is_file())
     assert len(sim_runs) == 50 and len(flight_runs) == 3, (sim_runs, flight_runs)
     assert all((p / "flight.tlog").is_file() for p in flight_runs)
-    return {"base": base, "sim": sim, "flights": flights,
-            "vehicle_of": {**{p: "sim" for p in sim_runs}, **{p: "standin" for p in flight_runs}}}
+    return {"base": base, "sim": sim, "flights": flights, "crafted": crafted,
+            "vehicle_of": {**{p: "sim" for p in sim_runs}, **{p: "standin" for p in flight_runs},
+                           crafted / "run": "crafted"}}
+
+
+def write_crafted_run(d: Path) -> None:
+    """A run with what neither the simulated runs nor the short stand-in flights show: a refused start, a
+    performance drift, failed and cancelled commands, a link loss (the report's every figure is then non-zero
+    somewhere)."""
+    d.mkdir(parents=True)
+    lines = [{"schema": 1, "kind": "header", "started_utc": "2026-01-02T03:04:05Z", "git_revision": "crafted",
+              "command": "companion fly --connect tcp:x", "params": {}, "part": 0,
+              "plan": {"mission": "tracking", "route_file": "/somewhere/else/tracking_route.toml", "zones_file": None,
+                       "activities": 3, "planned_energy_j": 1000.0,
+                       "planned_duration_s": 100.0}}]
+    for c in range(6):
+        lines.append({
+            "cycle": c, "time_s": 2.0 * c, "state": "base",
+            "events": ["operator: start refused (models): needs 162 kJ, 150 available; still waiting for the operator"]
+            if c < 2 else [],
+            "link_events": ["link lost"] if c == 3 else [],
+            "commands": [{"action": "take_off", "command": "MAV_CMD_NAV_TAKEOFF", "result": r, "attempts": 1}
+                         for r in (["TIMEOUT (no answer)", "DENIED", "FAILED (Cancelled(\"x\"))", "ACCEPTED"]
+                                   if c == 4 else [])],
+            "guarantee": {"activity": 0, "activity_name": "transit", "goals": {"energy_j": 2000.0, "duration_s": 200.0},
+                          "margins": {"energy_j": 900.0 - c, "duration_s": 95.0 - c},
+                          "power": {"predicted_w": 10.0, "activity_s": c, "predicted_j": 1.0, "drift": c >= 3,
+                                    "drift_began": c == 3, "energy_scale": 1.0},
+                          "reallocation": {"trigger": "margin", "reason": "x", "allocation": [], "margins_after": {}}
+                          if c == 5 else None},
+        })
+    lines.append({"kind": "event", "cycle": 5, "time_s": 10.0, "event": "link lost"})
+    (d / "decisions.jsonl").write_text("".join(json.dumps(o) + "\n" for o in lines))
 
 
 def ingest_all(runs: Dict[str, Any], into: Path) -> None:
     fleet("ingest", str(runs["sim"]), "--into", str(into))
     fleet("ingest", str(runs["flights"]), "--into", str(into), "--vehicle", "standin")
+    fleet("ingest", str(runs["crafted"]), "--into", str(into), "--vehicle", "crafted")
 
 
 # ------------------------------------------------------------------------------------------------
@@ -157,7 +191,7 @@ def expected(runs: Dict[str, Any], present: set) -> Dict[str, Any]:
                "hours": max((r.get("time_s", 0.0) for r in records), default=0.0) / 3600.0,
                "planned_e": plan.get("planned_energy_j"), "planned_d": plan.get("planned_duration_s"),
                "flown_e": flown(records, "energy_j"), "flown_d": flown(records, "duration_s"),
-               "refused": 0, "drift": 0, "fails": 0, "links": 0}
+               "refused": 0, "drift": 0, "realloc": 0, "fails": 0, "links": 0}
         for r in records:
             for e in r.get("events") or []:
                 if e.startswith("operator: start refused"):
@@ -167,6 +201,8 @@ def expected(runs: Dict[str, Any], present: set) -> Dict[str, Any]:
                     refusals[(*key, by, why)] = refusals.get((*key, by, why), 0) + 1
             if (((r.get("guarantee") or {}).get("power") or {}).get("drift_began")):
                 row["drift"] += 1
+            if ((r.get("guarantee") or {}).get("reallocation") or {}).get("trigger") is not None:
+                row["realloc"] += 1
             row["links"] += sum(1 for e in r.get("link_events") or [] if e == "link lost")
             for c in r.get("commands") or []:
                 res = c.get("result", "")
@@ -186,6 +222,7 @@ def expected(runs: Dict[str, Any], present: set) -> Dict[str, Any]:
             "vehicle": key[0], "route": key[1], "flights": len(rs), "hours": sum(r["hours"] for r in rs),
             "records": sum(r["records"] for r in rs), "versions": len({r["version"] for r in rs}),
             "refused_starts": sum(r["refused"] for r in rs), "drift_events": sum(r["drift"] for r in rs),
+            "reallocations": sum(r["realloc"] for r in rs),
             "command_failures": sum(r["fails"] for r in rs), "link_losses": sum(r["links"] for r in rs),
             "planned_energy_j": mean([r["planned_e"] for r in rs]), "flown_energy_j": mean([r["flown_e"] for r in rs]),
             "energy_error_j": mean(both_e),
@@ -238,11 +275,13 @@ def test_report_figures_equal_the_json_lines(runs, tmp_path):
     ds = tmp_path / "fleet"
     ingest_all(runs, ds)
     ids = {content_id(r) for r in runs["vehicle_of"]}
-    assert present_ids(ds) == ids and len(ids) == 53
+    assert present_ids(ds) == ids and len(ids) == 54
     want = expected(runs, ids)
-    # The runs teach something: two routes of simulated runs, the flights' own, some drift.
-    assert len(want["summary"]) >= 3, want["summary"]
-    assert sum(r["drift_events"] for r in want["summary"]) > 0, want["summary"]
+    # Every figure is non-zero somewhere: two routes of simulated runs, the flights', the crafted run's.
+    assert len(want["summary"]) >= 4, want["summary"]
+    for figure in ("drift_events", "reallocations", "refused_starts", "command_failures", "link_losses"):
+        assert sum(r[figure] for r in want["summary"]) > 0, (figure, want["summary"])
+    assert want["refused_starts"] and want["command_failures"], want
     assert_report_matches(report(ds), want)
     # run ids are the content hashes; each row of runs names its source folder
     rows = json.loads(fleet("sql", str(ds), "SELECT run_id, source FROM runs ORDER BY source", "--json").stdout)
@@ -275,9 +314,14 @@ def documented_schema() -> Dict[str, Dict[str, str]]:
     """Column -> type of each table, from docs/fleet.md's schema tables."""
     doc = (ROOT / "docs" / "fleet.md").read_text()
     out: Dict[str, Dict[str, str]] = {}
-    for m in re.finditer(r"^### (\w+) \(.*?\)\n\n(.*?)(?:\n\n|\Z)", doc, re.S | re.M):
+    for section in re.split(r"^### ", doc, flags=re.M)[1:]:
+        m = re.match(r"(\w+) \(one row per", section)
+        if not m:
+            continue
         cols = {}
-        for line in m.group(2).splitlines()[2:]:
+        for line in section.split("\n## ")[0].splitlines():
+            if not line.startswith("| `"):
+                continue
             cells = [c.strip() for c in line.strip("|").split("|")]
             for name in re.findall(r"`([a-z_0-9]+)`", cells[0]):
                 cols[name] = cells[1]
@@ -296,7 +340,7 @@ def test_pyarrow_and_duckdb_read_the_documented_schema(runs, tmp_path):
     ingest_all(runs, ds)
     schema = documented_schema()
     run_dirs = sorted(ds.glob("vehicle=*/date=*/run=*"))
-    assert len(run_dirs) == 53
+    assert len(run_dirs) == 54
     for d in run_dirs:
         for table, cols in schema.items():
             s = pq.read_schema(d / f"{table}.parquet")
@@ -312,7 +356,7 @@ def test_pyarrow_and_duckdb_read_the_documented_schema(runs, tmp_path):
     assert n == sum(len(read_run(r)[1]) for r in runs["vehicle_of"])
     per_vehicle = dict(con.execute(f"SELECT vehicle, COUNT(*) FROM read_parquet('{glob}/runs.parquet') "
                                    "GROUP BY vehicle").fetchall())
-    assert per_vehicle == {"sim": 50, "standin": 3}
+    assert per_vehicle == {"sim": 50, "standin": 3, "crafted": 1}
     # one flight's telemetry: as many rows as the tlog has frames (counted here from the headers)
     flight = sorted(runs["flights"].iterdir())[0]
     data, i, frames = (flight / "flight.tlog").read_bytes(), 0, 0

@@ -22,6 +22,8 @@ fn summary_sql() -> String {
          d AS (SELECT run_id, last_value(goal_duration_s - margin_duration_s ORDER BY record_idx) AS flown \
                FROM records WHERE goal_duration_s IS NOT NULL AND margin_duration_s IS NOT NULL GROUP BY run_id), \
          drift AS (SELECT run_id, COUNT(*) AS n FROM records WHERE power_drift_began GROUP BY run_id), \
+         realloc AS (SELECT run_id, COUNT(*) AS n FROM records \
+               WHERE guarantee_reallocation_trigger IS NOT NULL GROUP BY run_id), \
          refused AS (SELECT run_id, COUNT(*) AS n FROM events \
                WHERE source = 'record' AND event LIKE 'operator: start refused%' GROUP BY run_id), \
          fails AS (SELECT c.run_id, COUNT(*) AS n FROM commands c WHERE {FAILURE_SQL} GROUP BY c.run_id), \
@@ -33,6 +35,7 @@ fn summary_sql() -> String {
            COUNT(DISTINCT r.git_revision) AS versions, \
            SUM(COALESCE(refused.n, 0)) AS refused_starts, \
            SUM(COALESCE(drift.n, 0)) AS drift_events, \
+           SUM(COALESCE(realloc.n, 0)) AS reallocations, \
            SUM(COALESCE(fails.n, 0)) AS command_failures, \
            SUM(COALESCE(links.n, 0)) AS link_losses, \
            AVG(r.planned_energy_j) AS planned_energy_j, \
@@ -46,6 +49,7 @@ fn summary_sql() -> String {
            LEFT JOIN e ON e.run_id = r.run_id \
            LEFT JOIN d ON d.run_id = r.run_id \
            LEFT JOIN drift ON drift.run_id = r.run_id \
+           LEFT JOIN realloc ON realloc.run_id = r.run_id \
            LEFT JOIN refused ON refused.run_id = r.run_id \
            LEFT JOIN fails ON fails.run_id = r.run_id \
            LEFT JOIN links ON links.run_id = r.run_id \
