@@ -5,12 +5,15 @@
 # runs, side by side; wall time and peak memory from /usr/bin/time -v. Run at 100 and 1000 runs
 # to see the memory stay flat:
 #   scripts/fleet_bench.sh 100 && scripts/fleet_bench.sh 1000
-# PROFILE=release (default) builds the binaries with --release; PROFILE=debug uses target/debug.
+# PROFILE=release (default) builds the binaries with --release; PROFILE=debug uses target/debug;
+# SKIP_BUILD=1 uses the binaries as built.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 N=${1:-1000}
 PROFILE=${PROFILE:-release}
-if [ "$PROFILE" = release ]; then
+if [ -n "${SKIP_BUILD:-}" ]; then
+  :   # the binaries are built already
+elif [ "$PROFILE" = release ]; then
   cargo build --quiet --release -p companion -p companion-fleet --bins
 else
   cargo build --quiet -p companion -p companion-fleet --bins
@@ -32,7 +35,8 @@ for k in range(n):
         f.write(json.dumps({"schema": 1, "kind": "header", "started_utc": f"2026-06-{day:02d}T12:00:00Z",
                             "git_revision": f"rev{k % 3}", "command": "companion fly --connect tcp:x",
                             "params": {}, "part": 0,
-                            "plan": {"route_file": f"route{k % 4}.plan", "planned_energy_j": 50000.0,
+                            "plan": {"mission": "tracking", "route_file": f"route{k % 4}.plan", "zones_file": None,
+                                     "activities": 3, "planned_energy_j": 50000.0,
                                      "planned_duration_s": 200.0}}) + "\n")
         for c in range(200):
             armed = c >= 20
@@ -50,7 +54,7 @@ for k in range(n):
             f.write(json.dumps(rec) + "\n")
 PY
 DS="$WORK/fleet"
-t() { /usr/bin/time -f "%e s wall, %M KiB peak" "$@" >/dev/null 2>"$WORK/time" || { cat "$WORK/time"; exit 1; }; tail -1 "$WORK/time"; }
+t() { /usr/bin/time -f "%e s wall, %M KiB peak" "$@" >"$WORK/out" 2>"$WORK/time" || { echo "FAILED: $*" >&2; tail -5 "$WORK/out" "$WORK/time" >&2; exit 1; }; tail -1 "$WORK/time"; }
 echo "runs: $N ($PROFILE build)"
 echo "  companion-fleet ingest:    $(t "$BIN/companion-fleet" ingest "$WORK/runs" --into "$DS")"
 echo "  companion-fleet report:    $(t "$BIN/companion-fleet" report "$DS" --json)"
