@@ -192,13 +192,42 @@ pub async fn statistics(
     Ok(st)
 }
 
-/// `calibrate DIR [--vehicle ID] [--out FILE] [--params DIR] [--json]`.
+/// The queries and the sums they gave, as JSON (`--statistics`): what another engine (Spark,
+/// scripts/fleet_spark.sh) runs over the same files and compares.
+fn statistics_json(
+    m: &PowerModel,
+    grid: &[f64],
+    vehicle: Option<&str>,
+    st: &Statistics,
+) -> serde_json::Value {
+    serde_json::json!({
+        "grid": grid,
+        "queries": {
+            "totals": totals_sql(m, vehicle),
+            "bins": bins_sql(vehicle),
+            "normals": normals_sql(m, vehicle),
+        },
+        "statistics": {
+            "n_ground": st.n_ground,
+            "n_air": st.n_air,
+            "yy": st.yy,
+            "sum_y": st.sum_y,
+            "shipped_sse": st.shipped_sse,
+            "v_min": st.v_min,
+            "v_max": st.v_max,
+            "bins": st.speed_bins,
+            "normals": st.normals,
+        },
+    })
+}
+
+/// `calibrate DIR [--vehicle ID] [--out FILE] [--params DIR] [--json] [--statistics]`.
 pub async fn calibrate_cli(
     dir: &Path,
     vehicle: Option<&str>,
     out: Option<&Path>,
     params: Option<&Path>,
-    json: bool,
+    (json, statistics_only): (bool, bool),
 ) -> anyhow::Result<()> {
     let Some(ctx) = context(dir).await? else {
         anyhow::bail!(
@@ -225,6 +254,13 @@ pub async fn calibrate_cli(
     }
     let fit = PowerFit::new(shipped.power);
     let st = statistics(&ctx, &shipped.power, fit.grid(), vehicle).await?;
+    if statistics_only {
+        println!(
+            "{}",
+            statistics_json(&shipped.power, fit.grid(), vehicle, &st)
+        );
+        return Ok(());
+    }
     let fit = fit.with_statistics(st).map_err(|e| anyhow::anyhow!(e))?;
     let result = fit.solve().map_err(|e| anyhow::anyhow!("calibrate: {e}"))?;
     let m = result.fitted;

@@ -86,6 +86,10 @@ enum Command {
         /// Print the fitted model as one JSON object (full precision).
         #[arg(long)]
         json: bool,
+        /// Print only the SQL queries and the sufficient statistics they gave (JSON), for
+        /// another engine to compare (scripts/fleet_spark.sh).
+        #[arg(long)]
+        statistics: bool,
     },
 }
 
@@ -121,13 +125,14 @@ fn main() -> std::process::ExitCode {
                 out,
                 params,
                 json,
+                statistics,
             } => {
                 calibrate::calibrate_cli(
                     &dir,
                     vehicle.as_deref(),
                     out.as_deref(),
                     params.as_deref(),
-                    json,
+                    (json, statistics),
                 )
                 .await
             }
