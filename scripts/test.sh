@@ -106,13 +106,13 @@ done_
 # start here, one after the other in one background chain at nice 19: the flights below leave most
 # of both cores idle, and nice keeps the vehicles' and the companion's CPU theirs. In a chain, not
 # side by side: both are CPU-bound builds, so running them at once would end no sooner. Stages 7
-# and 8 wait for their part and print its log. Each part's exit code goes to LOG.rc.
+# and 8 wait for their part and print its log. Each part's exit code goes to LOG.rc (written whole: renamed into place).
 arm_log=$(mktemp "${TMPDIR:-/tmp}/arm-log.XXXXXX")
 fleet_log=$(mktemp "${TMPDIR:-/tmp}/fleet-log.XXXXXX")
 rm -f "$arm_log.rc" "$fleet_log.rc"
 setsid nice -n 19 bash -c '
-  rc=0; if [ "$1" != 1 ]; then ./scripts/arm.sh >"$2" 2>&1 || rc=$?; fi; echo "$rc" >"$2.rc"
-  rc=0; if [ "$3" != 1 ]; then ./scripts/fleet_tests.sh >"$4" 2>&1 || rc=$?; fi; echo "$rc" >"$4.rc"
+  rc=0; if [ "$1" != 1 ]; then ./scripts/arm.sh >"$2" 2>&1 || rc=$?; fi; echo "$rc" >"$2.rc.tmp"; mv "$2.rc.tmp" "$2.rc"
+  rc=0; if [ "$3" != 1 ]; then ./scripts/fleet_tests.sh >"$4" 2>&1 || rc=$?; fi; echo "$rc" >"$4.rc.tmp"; mv "$4.rc.tmp" "$4.rc"
 ' background-chain "${SKIP_ARM:-0}" "$arm_log" "${SKIP_FLEET:-0}" "$fleet_log" &
 bg_pid=$!
 begin "real autopilots: ArduCopter and PX4 SITL tests (side by side; the armv7 and fleet stages beside them)"
