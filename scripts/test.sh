@@ -88,6 +88,24 @@ cargo build --quiet -p companion -p companion-testkit --bins
 export COMPANION_BIN="${CARGO_TARGET_DIR:-$ROOT/target}/debug/companion"
 done_
 
+# ---- background chain: the armv7 stage (7), then the fleet stage (8) -----------------------------
+# The armv7 cross-build and its qemu run, then companion-fleet's build and tests, start here, one
+# after the other in one background chain at nice 19, beside the stand-in tests (5) and the real-SITL
+# flights (6): the flights leave most of both cores idle, and nice keeps the tests', vehicles' and
+# the companion's CPU theirs. CI measured stage 6 at ~17 min and the armv7 part at ~15 min, so the
+# fleet's build (docs/performance.md, Fleet) needs the stand-in stage's idle CPU as well to end
+# near stage 6. In a chain, not side by side: both are CPU-bound builds, so running them at once
+# would end no sooner. Stages 7 and 8 wait for their part and print its log. Each part's exit code
+# goes to LOG.rc (written whole: renamed into place).
+arm_log=$(mktemp "${TMPDIR:-/tmp}/arm-log.XXXXXX")
+fleet_log=$(mktemp "${TMPDIR:-/tmp}/fleet-log.XXXXXX")
+rm -f "$arm_log.rc" "$fleet_log.rc"
+setsid nice -n 19 bash -c '
+  rc=0; if [ "$1" != 1 ]; then ./scripts/arm.sh >"$2" 2>&1 || rc=$?; fi; echo "$rc" >"$2.rc.tmp"; mv "$2.rc.tmp" "$2.rc"
+  rc=0; if [ "$3" != 1 ]; then ./scripts/fleet_tests.sh >"$4" 2>&1 || rc=$?; fi; echo "$rc" >"$4.rc.tmp"; mv "$4.rc.tmp" "$4.rc"
+' background-chain "${SKIP_ARM:-0}" "$arm_log" "${SKIP_FLEET:-0}" "$fleet_log" &
+bg_pid=$!
+
 # ---- 5: sitl_tests against the stand-in ------------------------------------------------------------
 begin "python: pytest sitl_tests (stand-in)"
 set +e
@@ -102,19 +120,6 @@ done_
 # ---- 6: real autopilots, ArduCopter and PX4 side by side -------------------------------------------
 # Each script runs its vehicles in its own network namespace (ports cannot collide) and each vehicle
 # uses a few % of a core, so the two run at once; their output goes to a log each, printed after.
-# The armv7 cross-build and its qemu run (stage 7), then companion-fleet's build and tests (stage 8),
-# start here, one after the other in one background chain at nice 19: the flights below leave most
-# of both cores idle, and nice keeps the vehicles' and the companion's CPU theirs. In a chain, not
-# side by side: both are CPU-bound builds, so running them at once would end no sooner. Stages 7
-# and 8 wait for their part and print its log. Each part's exit code goes to LOG.rc (written whole: renamed into place).
-arm_log=$(mktemp "${TMPDIR:-/tmp}/arm-log.XXXXXX")
-fleet_log=$(mktemp "${TMPDIR:-/tmp}/fleet-log.XXXXXX")
-rm -f "$arm_log.rc" "$fleet_log.rc"
-setsid nice -n 19 bash -c '
-  rc=0; if [ "$1" != 1 ]; then ./scripts/arm.sh >"$2" 2>&1 || rc=$?; fi; echo "$rc" >"$2.rc.tmp"; mv "$2.rc.tmp" "$2.rc"
-  rc=0; if [ "$3" != 1 ]; then ./scripts/fleet_tests.sh >"$4" 2>&1 || rc=$?; fi; echo "$rc" >"$4.rc.tmp"; mv "$4.rc.tmp" "$4.rc"
-' background-chain "${SKIP_ARM:-0}" "$arm_log" "${SKIP_FLEET:-0}" "$fleet_log" &
-bg_pid=$!
 begin "real autopilots: ArduCopter and PX4 SITL tests (side by side; the armv7 and fleet stages beside them)"
 ardu_summary="ArduCopter: not run"
 px4_summary="PX4: not run"
@@ -189,7 +194,7 @@ done_ "ok ($ardu_summary; $px4_summary)"
 # (docs/deploy-arm.md).
 # A part of the chain is done when its LOG.rc exists; a chain that died without writing it failed.
 wait_part() { while [ ! -f "$1.rc" ] && alive "$bg_pid"; do sleep 5; done; [ -f "$1.rc" ] && cat "$1.rc" || echo 1; }
-begin "arm: scripts/arm.sh (armv7 cross-build, tests under qemu; started with stage 6)"
+begin "arm: scripts/arm.sh (armv7 cross-build, tests under qemu; started before stage 5)"
 if [ "${SKIP_ARM:-0}" = 1 ]; then
   done_ "skipped (SKIP_ARM=1)"
 else
