@@ -48,8 +48,24 @@ for r in spark.sql(q["normals"]).collect():
     for name, i in {"ay": 1, "iy": 2, "cy": 3}.items():
         close(f"normals[{r['k']}].{name}", r[name], aty[i])
     n += 1
+# The activity durations' sums (a query over records, window functions).
+spark.read.option("mergeSchema", "true").parquet(f"{ds}/*/*/*/records.parquet").createOrReplaceTempView("records")
+nd = 0
+for r in spark.sql(q["durations"]).collect():
+    want = stats["durations"].get(r["a"])
+    if r["n"] == 0:
+        continue
+    if want is None:
+        bad.append(f"durations: {r['a']} from spark only")
+        continue
+    close(f"durations[{r['a']}].n", float(r["n"]), float(want["n"]))
+    close(f"durations[{r['a']}].sum_d", r["sum_d"], want["sum_d"])
+    close(f"durations[{r['a']}].sum_dd", r["sum_dd"], want["sum_dd"])
+    nd += 1
+if nd != len(stats["durations"]):
+    bad.append(f"durations: {nd} activities from spark, {len(stats['durations'])} from datafusion")
 print(f"spark {spark.version}: {int(t['n_air'])} airborne and {int(t['n_ground'])} ground samples, "
-      f"{len(bins)} speed bins, normal equations at {n} candidate v0")
+      f"{len(bins)} speed bins, normal equations at {n} candidate v0, durations of {nd} activities")
 print(f"  sum_y {t['sum_y']!r} (datafusion {df['sum_y']!r}); yy {t['yy']!r} (datafusion {df['yy']!r})")
 if bad:
     print("DIFFER:\n  " + "\n  ".join(bad[:20]))

@@ -98,7 +98,7 @@ pub fn normals_sql(m: &PowerModel, vehicle: Option<&str>) -> String {
     )
 }
 
-fn f64_at(b: &RecordBatch, col: &str, row: usize) -> anyhow::Result<Option<f64>> {
+pub(crate) fn f64_at(b: &RecordBatch, col: &str, row: usize) -> anyhow::Result<Option<f64>> {
     let a = b
         .column_by_name(col)
         .with_context(|| format!("no column {col}"))?;
@@ -107,7 +107,7 @@ fn f64_at(b: &RecordBatch, col: &str, row: usize) -> anyhow::Result<Option<f64>>
     Ok((!a.is_null(row)).then(|| a.value(row)))
 }
 
-fn i64_at(b: &RecordBatch, col: &str, row: usize) -> anyhow::Result<Option<i64>> {
+pub(crate) fn i64_at(b: &RecordBatch, col: &str, row: usize) -> anyhow::Result<Option<i64>> {
     let a = b
         .column_by_name(col)
         .with_context(|| format!("no column {col}"))?;
@@ -116,7 +116,7 @@ fn i64_at(b: &RecordBatch, col: &str, row: usize) -> anyhow::Result<Option<i64>>
     Ok((!a.is_null(row)).then(|| a.value(row)))
 }
 
-async fn rows(ctx: &SessionContext, sql: &str) -> anyhow::Result<Vec<RecordBatch>> {
+pub(crate) async fn rows(ctx: &SessionContext, sql: &str) -> anyhow::Result<Vec<RecordBatch>> {
     ctx.sql(sql)
         .await
         .with_context(|| format!("query: {sql}"))?
@@ -199,14 +199,26 @@ fn statistics_json(
     grid: &[f64],
     vehicle: Option<&str>,
     st: &Statistics,
+    (durations_sql, durations): (&str, &crate::durations::FleetDurations),
 ) -> serde_json::Value {
+    let sums: serde_json::Map<String, serde_json::Value> = (durations.stats.iter())
+        .map(|(a, s)| {
+            let (n, sum_d, sum_dd) = s.sums();
+            (
+                a.clone(),
+                serde_json::json!({"n": n, "sum_d": sum_d, "sum_dd": sum_dd}),
+            )
+        })
+        .collect();
     serde_json::json!({
         "grid": grid,
         "queries": {
             "totals": totals_sql(m, vehicle),
             "bins": bins_sql(vehicle),
             "normals": normals_sql(m, vehicle),
+            "durations": durations_sql,
         },
+        "durations": sums,
         "statistics": {
             "n_ground": st.n_ground,
             "n_air": st.n_air,
@@ -254,10 +266,18 @@ pub async fn calibrate_cli(
     }
     let fit = PowerFit::new(shipped.power);
     let st = statistics(&ctx, &shipped.power, fit.grid(), vehicle).await?;
+    let durations_sql = crate::durations::query(&ctx, &vehicle_filter(vehicle)).await?;
+    let durations = crate::durations::durations(&ctx, &durations_sql).await?;
     if statistics_only {
         println!(
             "{}",
-            statistics_json(&shipped.power, fit.grid(), vehicle, &st)
+            statistics_json(
+                &shipped.power,
+                fit.grid(),
+                vehicle,
+                &st,
+                (&durations_sql, &durations)
+            )
         );
         return Ok(());
     }
@@ -276,6 +296,7 @@ pub async fn calibrate_cli(
         "shipped_rms_w": result.shipped_rms_w,
         "mean_w": result.mean_w,
         "v0_lower_bound_only": result.v0_lower_bound_only,
+        "durations": crate::durations::to_json(&durations),
     });
     if json {
         println!("{values}");
@@ -297,6 +318,14 @@ pub async fn calibrate_cli(
             result.rms_w,
             result.shipped_rms_w
         );
+        for (a, s) in &durations.stats {
+            println!(
+                "  {a}: {:.1} s (sd {:.1} s, {} runs)",
+                s.mean(),
+                s.sd(),
+                s.n
+            );
+        }
     }
     if let Some(out) = out {
         let ids = rows(

@@ -7,6 +7,7 @@
 
 mod calibrate;
 mod dataset;
+mod durations;
 mod export;
 mod overlay;
 mod query;

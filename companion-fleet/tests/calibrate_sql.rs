@@ -45,36 +45,49 @@ fn write_run(dir: &Path, t: Truth, seed: u64, speeds: &[(f64, u32)]) {
     let h = Header::new("companion fly --connect tcp:x", started);
     writeln!(f, "{}", serde_json::to_string(&h).unwrap()).unwrap();
     let mut cycle = 0u64;
-    let mut write = |armed: bool, v: f64, p: f64| {
+    // The activity in force (calibrate's durations): a name per speed stretch, names repeating
+    // within a run, every 7th record without one (skipped), the autopilot's clock (at 3x, with
+    // jitter) in even runs only.
+    let mut write = |armed: bool, v: f64, p: f64, activity: &str| {
         let volts = 15.0 + noise(cycle + seed, 0.5);
+        let mut observations: std::collections::BTreeMap<String, f64> = [
+            ("battery_v", volts),
+            ("battery_current_a", p / volts),
+            ("armed", if armed { 1.0 } else { 0.0 }),
+            ("groundspeed_mps", v),
+            ("altitude_m", if armed { 30.0 } else { 0.0 }),
+        ]
+        .into_iter()
+        .map(|(k, x)| (k.to_string(), x))
+        .collect();
+        if seed % 2 == 0 {
+            let jitter = noise(seed * 31 + cycle, 0.4);
+            observations.insert("vehicle_time_s".into(), 500.0 + 3.0 * cycle as f64 + jitter);
+        }
+        let activity_name = if cycle % 7 == 3 { "" } else { activity };
         let r = DecisionRecord {
             cycle,
             time_s: cycle as f64,
-            observations: [
-                ("battery_v", volts),
-                ("battery_current_a", p / volts),
-                ("armed", if armed { 1.0 } else { 0.0 }),
-                ("groundspeed_mps", v),
-                ("altitude_m", if armed { 30.0 } else { 0.0 }),
-            ]
-            .into_iter()
-            .map(|(k, x)| (k.to_string(), x))
-            .collect(),
-            guarantee: Some(GuaranteeRecord::default()),
+            observations: observations.into_iter().collect(),
+            guarantee: Some(GuaranteeRecord {
+                activity_name: activity_name.to_string(),
+                ..Default::default()
+            }),
             ..Default::default()
         };
         writeln!(f, "{}", serde_json::to_string(&r).unwrap()).unwrap();
         cycle += 1;
     };
     for i in 0..20 {
-        write(false, 0.0, t.base + noise(seed * 1000 + i, 0.3));
+        write(false, 0.0, t.base + noise(seed * 1000 + i, 0.3), "take_off");
     }
     let mut k = 0;
-    for (v, n) in speeds {
+    for (j, (v, n)) in speeds.iter().enumerate() {
+        let activity = format!("leg{}", (j + seed as usize) % 3);
         for _ in 0..*n {
             k += 1;
             let v = v + noise(seed * 7 + k, 0.2).abs();
-            write(true, v, power(t, v) + noise(seed * 13 + k, 3.0));
+            write(true, v, power(t, v) + noise(seed * 13 + k, 3.0), &activity);
         }
     }
 }
@@ -117,14 +130,18 @@ fn fleet(args: &[&str]) -> String {
     String::from_utf8(o.stdout).unwrap()
 }
 
-/// The fit of `companion calibrate RUN...` on `runs`.
-fn companion_fit(runs: Vec<PathBuf>) -> companion::calibrate::power_fit::FitResult {
+/// What `companion calibrate RUN...` learns from `runs`.
+fn companion_fit(runs: Vec<PathBuf>) -> companion::calibrate::Calibration {
     let shipped = Shipped::load(&companion::params::default_params_dir()).unwrap();
-    let cal = calibrate(&shipped, runs, None, false, false, None).unwrap();
-    cal.power.expect("the runs determine the model")
+    calibrate(&shipped, runs, None, false, false, None).unwrap()
 }
 
-fn assert_close(fleet: &serde_json::Value, c: &companion::calibrate::power_fit::FitResult) {
+fn close(got: f64, want: f64) -> bool {
+    (got - want).abs() <= 1e-9 * want.abs().max(1e-12)
+}
+
+fn assert_close(fleet: &serde_json::Value, cal: &companion::calibrate::Calibration) {
+    let c = cal.power.as_ref().expect("the runs determine the model");
     let m = c.fitted;
     for (name, want) in [
         ("base_w", m.base_w),
@@ -139,13 +156,34 @@ fn assert_close(fleet: &serde_json::Value, c: &companion::calibrate::power_fit::
         let got = fleet[name]
             .as_f64()
             .unwrap_or_else(|| panic!("{name}: {fleet}"));
-        assert!(
-            (got - want).abs() <= 1e-9 * want.abs().max(1e-12),
-            "{name}: fleet {got} vs calibrate {want}"
-        );
+        assert!(close(got, want), "{name}: fleet {got} vs calibrate {want}");
     }
     assert_eq!(fleet["samples"].as_u64(), Some(c.samples));
     assert_eq!(fleet["ground_samples"].as_u64(), Some(c.ground_samples));
+    // The activity durations: every activity calibrate timed, n, mean and spread.
+    let got = fleet["durations"]["activities"]
+        .as_object()
+        .unwrap_or_else(|| panic!("durations: {fleet}"));
+    let want = cal.durations.stats();
+    assert!(!want.is_empty());
+    assert_eq!(
+        got.keys().collect::<Vec<_>>(),
+        want.keys().collect::<Vec<_>>()
+    );
+    for (a, w) in want {
+        let g = &got[a];
+        assert_eq!(g["n"].as_u64(), Some(w.n), "{a}: {g}");
+        for (field, want) in [("mean_s", w.mean()), ("sd_s", w.sd())] {
+            let v = g[field].as_f64().unwrap();
+            assert!(close(v, want), "{a}.{field}: fleet {v} vs calibrate {want}");
+        }
+    }
+    let got_np = fleet["durations"]["non_positive"].as_object().unwrap();
+    assert_eq!(
+        got_np.len(),
+        cal.durations.non_positive().len(),
+        "{got_np:?}"
+    );
 }
 
 #[test]
