@@ -21,5 +21,5 @@ if cargo clippy --version >/dev/null 2>&1; then
   cargo clippy --quiet -p companion-fleet --bins -- -A clippy::all -D clippy::too_many_lines 2>&1
 fi
 step "pytest sitl_tests/test_fleet.py"
-"$PYTHON" -m pytest -q sitl_tests/test_fleet.py
+"$PYTHON" -m pytest -q -n 2 sitl_tests/test_fleet.py
 step "done"
