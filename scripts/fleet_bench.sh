@@ -32,7 +32,7 @@ for k in range(n):
     os.makedirs(d)
     with open(os.path.join(d, "decisions.jsonl"), "w") as f:
         day = 1 + k % 28
-        f.write(json.dumps({"schema": 1, "kind": "header", "started_utc": f"2026-06-{day:02d}T12:00:00Z",
+        f.write(json.dumps({"schema": 2, "kind": "header", "started_utc": f"2026-06-{day:02d}T12:00:00Z",
                             "git_revision": f"rev{k % 3}", "command": "companion fly --connect tcp:x",
                             "params": {}, "part": 0,
                             "plan": {"mission": "tracking", "route_file": f"route{k % 4}.plan", "zones_file": None,
@@ -48,7 +48,8 @@ for k in range(n):
                                     "groundspeed_mps": v, "altitude_m": 30.0 if armed else 0.0},
                    "actions": ["follow_trajectory"] if armed else [],
                    "commands": [{"action": "take_off", "command": "MAV_CMD_NAV_TAKEOFF",
-                                 "result": "TIMEOUT" if (k + c) % 97 == 0 else "ACCEPTED", "attempts": 1}] if c % 50 == 0 else [],
+                                 "result": {"kind": w, "text": w}, "attempts": 1}
+                                for w in ["TIMEOUT" if (k + c) % 97 == 0 else "ACCEPTED"]] if c % 50 == 0 else [],
                    "guarantee": {"activity": 0, "activity_name": "transit", "goals": {"energy_j": 60000.0},
                                  "margins": {"energy_j": 10000.0 - c}, "planned_j": 50000.0, "planned_s": 200.0}}
             f.write(json.dumps(rec) + "\n")

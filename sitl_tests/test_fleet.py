@@ -67,22 +67,37 @@ def runs(tmp_path_factory) -> Dict[str, Any]:
         finally:
             sa.stop()
     crafted = base / "crafted"
-    write_crafted_run(crafted / "run")
+    write_crafted_run(crafted / "run1", schema=1)
+    write_crafted_run(crafted / "run2", schema=2)
     sim_runs = sorted(p for p in sim.iterdir() if (p / "decisions.jsonl").is_file())
     flight_runs = sorted(p for p in flights.iterdir() if (p / "decisions.jsonl").is_file())
     assert len(sim_runs) == 50 and len(flight_runs) == 3, (sim_runs, flight_runs)
     assert all((p / "flight.tlog").is_file() for p in flight_runs)
     return {"base": base, "sim": sim, "flights": flights, "crafted": crafted,
             "vehicle_of": {**{p: "sim" for p in sim_runs}, **{p: "standin" for p in flight_runs},
-                           crafted / "run": "crafted"}}
+                           crafted / "run1": "crafted", crafted / "run2": "crafted"}}
 
 
-def write_crafted_run(d: Path) -> None:
+# The crafted run's events and command results: as record schema 1 wrote them (sentences; an old log, read
+# through the companion's migration) and as schema 2 writes them (objects tagged by kind, with their text).
+REFUSED = "operator: start refused (models): needs 162 kJ, 150 available; still waiting for the operator"
+CRAFTED = {
+    1: {"refused": REFUSED, "lost": "link lost",
+        "results": ["TIMEOUT (no answer)", "DENIED", "FAILED (Cancelled(\"x\"))", "ACCEPTED"]},
+    2: {"refused": {"kind": "other", "text": REFUSED}, "lost": {"kind": "lost", "text": "link lost"},
+        "results": [{"kind": "TIMEOUT", "why": "no answer", "text": "TIMEOUT (no answer)"},
+                    {"kind": "DENIED", "text": "DENIED"}, {"kind": "CANCELLED", "why": "x", "text": "CANCELLED (x)"},
+                    {"kind": "ACCEPTED", "text": "ACCEPTED"}]},
+}
+
+
+def write_crafted_run(d: Path, schema: int) -> None:
     """A run with what neither the simulated runs nor the short stand-in flights show: a refused start, a
     performance drift, failed and cancelled commands, a link loss (the report's every figure is then non-zero
-    somewhere)."""
+    somewhere), written in the decision log's record `schema` 1 or 2."""
     d.mkdir(parents=True)
-    lines = [{"schema": 1, "kind": "header", "started_utc": "2026-01-02T03:04:05Z", "git_revision": "crafted",
+    said = CRAFTED[schema]
+    lines = [{"schema": schema, "kind": "header", "started_utc": "2026-01-02T03:04:05Z", "git_revision": "crafted",
               "command": "companion fly --connect tcp:x", "params": {}, "part": 0,
               "plan": {"mission": "tracking", "route_file": "/somewhere/else/tracking_route.toml", "zones_file": None,
                        "activities": 3, "planned_energy_j": 1000.0,
@@ -90,12 +105,10 @@ def write_crafted_run(d: Path) -> None:
     for c in range(6):
         lines.append({
             "cycle": c, "time_s": 2.0 * c, "state": "base",
-            "events": ["operator: start refused (models): needs 162 kJ, 150 available; still waiting for the operator"]
-            if c < 2 else [],
-            "link_events": ["link lost"] if c == 3 else [],
+            "events": [said["refused"]] if c < 2 else [],
+            "link_events": [said["lost"]] if c == 3 else [],
             "commands": [{"action": "take_off", "command": "MAV_CMD_NAV_TAKEOFF", "result": r, "attempts": 1}
-                         for r in (["TIMEOUT (no answer)", "DENIED", "FAILED (Cancelled(\"x\"))", "ACCEPTED"]
-                                   if c == 4 else [])],
+                         for r in (said["results"] if c == 4 else [])],
             "guarantee": {"activity": 0, "activity_name": "transit", "goals": {"energy_j": 2000.0, "duration_s": 200.0},
                           "margins": {"energy_j": 900.0 - c, "duration_s": 95.0 - c},
                           "power": {"predicted_w": 10.0, "activity_s": c, "predicted_j": 1.0, "drift": c >= 3,
@@ -192,8 +205,12 @@ def expected(runs: Dict[str, Any], present: set) -> Dict[str, Any]:
                "planned_e": plan.get("planned_energy_j"), "planned_d": plan.get("planned_duration_s"),
                "flown_e": flown(records, "energy_j"), "flown_d": flown(records, "duration_s"),
                "refused": 0, "drift": 0, "realloc": 0, "fails": 0, "links": 0}
+        typed = header.get("schema", 1) >= 2   # record schema 2: events and results tagged by kind
         for r in records:
             for e in r.get("events") or []:
+                # the start refusal has no kind of its own: free text (`other`) in schema 2
+                if typed:
+                    e = e["text"] if e["kind"] == "other" else ""
                 if e.startswith("operator: start refused"):
                     row["refused"] += 1
                     by = e.split("(", 1)[1].split(")", 1)[0] if "(" in e else ""
@@ -203,11 +220,13 @@ def expected(runs: Dict[str, Any], present: set) -> Dict[str, Any]:
                 row["drift"] += 1
             if ((r.get("guarantee") or {}).get("reallocation") or {}).get("trigger") is not None:
                 row["realloc"] += 1
-            row["links"] += sum(1 for e in r.get("link_events") or [] if e == "link lost")
+            row["links"] += sum(1 for e in r.get("link_events") or []
+                                if (e["kind"] == "lost" if typed else e == "link lost"))
             for c in r.get("commands") or []:
                 res = c.get("result", "")
-                word = res.split(" ", 1)[0]
-                if word in FAILURE_WORDS and not res.startswith("FAILED (Cancelled("):
+                word = res["kind"] if typed else res.split(" ", 1)[0]
+                # schema 1: `FAILED (Cancelled(..))` was a cancel (the migration reads it as CANCELLED)
+                if word in FAILURE_WORDS and not (not typed and res.startswith("FAILED (Cancelled(")):
                     row["fails"] += 1
                     k = (*key, c.get("command"), word)
                     failures[k] = failures.get(k, 0) + 1
@@ -233,7 +252,7 @@ def expected(runs: Dict[str, Any], present: set) -> Dict[str, Any]:
         "summary": summary,
         "refused_starts": [{"vehicle": k[0], "route": k[1], "refused_by": k[2], "reason": k[3], "starts": n}
                            for k, n in sorted(refusals.items())],
-        "command_failures": [{"vehicle": k[0], "route": k[1], "command": k[2], "result": k[3], "failures": n}
+        "command_failures": [{"vehicle": k[0], "route": k[1], "command": k[2], "kind": k[3], "failures": n}
                              for k, n in sorted(failures.items())],
         "versions": [{"vehicle": k[0], "route": k[1], "git_revision": k[2], "flights": n}
                      for k, n in sorted(versions.items())],
@@ -275,7 +294,7 @@ def test_report_figures_equal_the_json_lines(runs, tmp_path):
     ds = tmp_path / "fleet"
     ingest_all(runs, ds)
     ids = {content_id(r) for r in runs["vehicle_of"]}
-    assert present_ids(ds) == ids and len(ids) == 54
+    assert present_ids(ds) == ids and len(ids) == 55
     want = expected(runs, ids)
     # Every figure is non-zero somewhere: two routes of simulated runs, the flights', the crafted run's.
     assert len(want["summary"]) >= 4, want["summary"]
@@ -306,6 +325,20 @@ def test_sql_answers_over_every_table(runs, tmp_path):
     got = json.loads(fleet("sql", str(ds), "SELECT vehicle, COUNT(DISTINCT run_id) AS n FROM telemetry "
                            "GROUP BY vehicle", "--json").stdout)
     assert got == [{"vehicle": "standin", "n": 3}]
+    # events and commands by their kinds (record schema 2), as the flights' JSON lines tag them
+    want: Dict[tuple, int] = {}
+    for run in sorted(runs["flights"].iterdir()):
+        for rec in read_run(run)[1]:
+            for source, field in (("record", "events"), ("link", "link_events")):
+                for e in rec.get(field) or []:
+                    want[(source, e["kind"])] = want.get((source, e["kind"]), 0) + 1
+            for c in rec.get("commands") or []:
+                want[("command", c["result"]["kind"])] = want.get(("command", c["result"]["kind"]), 0) + 1
+    got = json.loads(fleet("sql", str(ds), "SELECT source, kind, COUNT(*) AS n FROM events WHERE vehicle = 'standin' "
+                           "AND source <> 'log' GROUP BY 1, 2 UNION ALL SELECT 'command', kind, COUNT(*) FROM commands "
+                           "WHERE vehicle = 'standin' GROUP BY 1, 2", "--json").stdout)
+    assert {(r["source"], r["kind"]): r["n"] for r in got} == want
+    assert ("record", "command") in want and ("link", "autopilot") in want, want
     out = fleet("sql", str(ds), "SELECT nope FROM records", check=False)
     assert out.returncode != 0 and "nope" in out.stderr and "panicked" not in out.stderr
 
@@ -340,7 +373,7 @@ def test_pyarrow_and_duckdb_read_the_documented_schema(runs, tmp_path):
     ingest_all(runs, ds)
     schema = documented_schema()
     run_dirs = sorted(ds.glob("vehicle=*/date=*/run=*"))
-    assert len(run_dirs) == 54
+    assert len(run_dirs) == 55
     for d in run_dirs:
         for table, cols in schema.items():
             s = pq.read_schema(d / f"{table}.parquet")
@@ -356,7 +389,7 @@ def test_pyarrow_and_duckdb_read_the_documented_schema(runs, tmp_path):
     assert n == sum(len(read_run(r)[1]) for r in runs["vehicle_of"])
     per_vehicle = dict(con.execute(f"SELECT vehicle, COUNT(*) FROM read_parquet('{glob}/runs.parquet') "
                                    "GROUP BY vehicle").fetchall())
-    assert per_vehicle == {"sim": 50, "standin": 3, "crafted": 1}
+    assert per_vehicle == {"sim": 50, "standin": 3, "crafted": 2}
     # one flight's telemetry: as many rows as the tlog has frames (counted here from the headers)
     flight = sorted(runs["flights"].iterdir())[0]
     data, i, frames = (flight / "flight.tlog").read_bytes(), 0, 0
@@ -418,6 +451,27 @@ def test_sigkill_mid_ingest_leaves_a_dataset_that_reports_right(runs, tmp_path):
     assert present_ids(ds) == all_ids
     assert not list(ds.glob(".tmp-*")), "the last ingest removes the killed ingests' temporary folders"
     assert_report_matches(report(ds), expected(runs, all_ids))
+
+
+def test_an_old_log_exports_as_the_new(runs, tmp_path):
+    """The crafted run as record schema 1 wrote it (sentences) exports, through the companion's log reader and
+    its migration, the same events and commands rows, by kind, as the same run written in schema 2."""
+    tables = {}
+    for name in ("run1", "run2"):
+        out = tmp_path / name
+        fleet("export", str(runs["crafted"] / name), "--out", str(out), "--vehicle", "crafted")
+        tables[name] = {t: [{k: v for k, v in row.items() if k != "run_id"}
+                            for row in pq.read_table(out / f"{t}.parquet").to_pylist()]
+                        for t in ("events", "commands")}
+    assert tables["run1"] == tables["run2"]
+    commands = tables["run1"]["commands"]
+    assert [(c["kind"], c["text"], c["why"]) for c in commands] == [
+        ("TIMEOUT", "TIMEOUT (no answer)", "no answer"), ("DENIED", "DENIED", None),
+        ("CANCELLED", "CANCELLED (x)", "x"), ("ACCEPTED", "ACCEPTED", None)]
+    events = tables["run1"]["events"]
+    assert [(e["source"], e["kind"], e["text"]) for e in events] == [
+        ("record", "other", REFUSED), ("record", "other", REFUSED), ("link", "lost", "link lost"),
+        ("log", "other", "link lost")]
 
 
 def test_export_writes_one_runs_tables(runs, tmp_path):

@@ -14,7 +14,9 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 /// The fleet dataset's schema version (docs/fleet.md): bumped on an incompatible change.
-pub const FLEET_SCHEMA: i64 = 1;
+/// 2: `events` and `commands` read the decision log's typed events and outcomes (record schema
+/// 2): `kind` and `text` columns replace the sentence columns `event` and `result`.
+pub const FLEET_SCHEMA: i64 = 2;
 
 /// The tables of a run, in the order they are written.
 pub const TABLES: [&str; 7] = [
@@ -58,6 +60,42 @@ fn i(v: &Value) -> Cell {
 
 fn b(v: &Value) -> Cell {
     v.as_bool().map_or(Cell::Null, Cell::Bool)
+}
+
+/// A typed event, link event or command outcome (record schema 2: an object tagged by `kind`
+/// with its fields and its sentence as `text`): its kind, its sentence and its other fields as
+/// one JSON object (null when it has none). A plain string (a note line) is an `other`.
+fn typed(v: &Value) -> (Cell, Cell, Cell) {
+    let Some(o) = v.as_object() else {
+        return ("other".into(), s(v), Cell::Null);
+    };
+    let fields: serde_json::Map<String, Value> = o
+        .iter()
+        .filter(|(k, _)| *k != "kind" && *k != "text")
+        .map(|(k, v)| (k.clone(), v.clone()))
+        .collect();
+    let fields = if fields.is_empty() {
+        Cell::Null
+    } else {
+        Value::Object(fields).to_string().into()
+    };
+    (s(&v["kind"]), s(&v["text"]), fields)
+}
+
+/// A list of typed events as their sentences.
+fn texts(v: &Value) -> Cell {
+    Cell::StrList(
+        v.as_array()
+            .map(|a| {
+                a.iter()
+                    .map(|x| match x {
+                        Value::String(t) => t.clone(),
+                        x => x["text"].as_str().unwrap_or_default().to_string(),
+                    })
+                    .collect()
+            })
+            .unwrap_or_default(),
+    )
 }
 
 fn strs(v: &Value) -> Cell {
@@ -248,8 +286,8 @@ fn record_row(key: &RunKey, d: &Dynamic, r: &Value, idx: u64) -> Vec<Cell> {
         i(&r["utc_us"]),
         s(&r["state"]),
         strs(&r["actions"]),
-        strs(&r["events"]),
-        strs(&r["link_events"]),
+        texts(&r["events"]),
+        texts(&r["link_events"]),
         strs(&r["absent_evidence"]),
         f(&res["cpu_load"]),
         i(&res["tiles_used"]),
@@ -305,6 +343,24 @@ fn key_cells(key: &RunKey, cycle: Cell, time_s: Cell) -> Vec<Cell> {
     ]
 }
 
+/// An `events` row after its key and source: kind, text, the nested link event's kind (a `link`
+/// event), the command's action, the command's or stream's outcome kind, the other fields.
+fn event_cells(e: &Value) -> [Cell; 6] {
+    let (kind, text, fields) = typed(e);
+    let outcome = match &e["outcome"] {
+        Value::Null => Cell::Null,
+        o => s(&o["kind"]),
+    };
+    [
+        kind,
+        text,
+        s(&e["link"]["kind"]),
+        s(&e["action"]),
+        outcome,
+        fields,
+    ]
+}
+
 /// The run's other tables, written beside `records`.
 struct Side {
     proposals: TableWriter,
@@ -332,7 +388,15 @@ impl Side {
             )?,
             events: TableWriter::create(
                 &out.join("events.parquet"),
-                &keyed(&[("source", Kind::Str), ("event", Kind::Str)]),
+                &keyed(&[
+                    ("source", Kind::Str),
+                    ("kind", Kind::Str),
+                    ("text", Kind::Str),
+                    ("link", Kind::Str),
+                    ("action", Kind::Str),
+                    ("outcome", Kind::Str),
+                    ("fields", Kind::Str),
+                ]),
             )?,
             commands: TableWriter::create(
                 &out.join("commands.parquet"),
@@ -340,7 +404,9 @@ impl Side {
                     ("idx", Kind::I64),
                     ("action", Kind::Str),
                     ("command", Kind::Str),
-                    ("result", Kind::Str),
+                    ("kind", Kind::Str),
+                    ("text", Kind::Str),
+                    ("why", Kind::Str),
                     ("attempts", Kind::I64),
                     ("latency_ms", Kind::F64),
                 ]),
@@ -373,17 +439,27 @@ impl Side {
         for (source, field) in [("record", "events"), ("link", "link_events")] {
             for e in r[field].as_array().into_iter().flatten() {
                 let mut row = k();
-                row.extend([source.into(), s(e)]);
+                row.push(source.into());
+                row.extend(event_cells(e));
                 self.events.push(row)?;
             }
         }
         for (n, c) in r["commands"].as_array().into_iter().flatten().enumerate() {
             let mut row = k();
+            let (kind, text, _) = typed(&c["result"]);
+            let res = &c["result"];
+            let why = if res["why"].is_null() {
+                &res["at"]
+            } else {
+                &res["why"]
+            };
             row.extend([
                 (n as i64).into(),
                 s(&c["action"]),
                 s(&c["command"]),
-                s(&c["result"]),
+                kind,
+                text,
+                s(why),
                 i(&c["attempts"]),
                 f(&c["latency_ms"]),
             ]);
@@ -433,7 +509,8 @@ pub fn export_run(dir: &Path, out: &Path, key: &RunKey) -> anyhow::Result<LogCou
             }
             LogItem::Event(e) => {
                 let mut row = key_cells(key, e.cycle.into(), e.time_s.into());
-                row.extend(["log".into(), e.event.into()]);
+                row.push("log".into());
+                row.extend(event_cells(&Value::String(e.event)));
                 side.events.push(row)?;
                 counts.log_events += 1;
             }

@@ -5,12 +5,17 @@ use crate::query::{context, to_json, to_text};
 use anyhow::Context;
 use std::path::Path;
 
-/// The command results that count as failures: the vehicle refused, the command failed, or it
-/// went unanswered (`companion review`'s red marks; a `FAILED (Cancelled(..))` of an older log
-/// was a cancel, not a failure).
-pub const FAILURE_SQL: &str = "split_part(c.result, ' ', 1) IN ('DENIED', 'UNSUPPORTED', \
-     'TEMPORARILY_REJECTED', 'NOT_READY', 'TIMEOUT', 'FAILED') \
-     AND c.result NOT LIKE 'FAILED (Cancelled(%'";
+/// The command outcomes that count as failures, by their kind: the vehicle refused, the command
+/// failed, or it went unanswered (`companion review`'s red marks). A schema-1 log's `FAILED
+/// (Cancelled(..))` was a cancel: the log reader's migration reads it as `CANCELLED`.
+pub const FAILURE_SQL: &str = "c.kind IN ('DENIED', 'UNSUPPORTED', 'TEMPORARILY_REJECTED', \
+     'NOT_READY', 'TIMEOUT', 'FAILED')";
+
+/// The operator gate's refusal of a start. The decision log has no kind of its own for it (the
+/// gate writes it as free text, kind `other`: docs/decision-log.md), so it is told by its
+/// sentence, `operator: start refused (BY): WHY; still waiting for the operator`.
+const REFUSED_SQL: &str = "e.source = 'record' AND e.kind = 'other' \
+     AND e.text LIKE 'operator: start refused%'";
 
 /// Per vehicle and route: flights, hours, refusals, drift, failures, link losses, versions and
 /// planned against flown energy and duration.
@@ -24,11 +29,10 @@ fn summary_sql() -> String {
          drift AS (SELECT run_id, COUNT(*) AS n FROM records WHERE power_drift_began GROUP BY run_id), \
          realloc AS (SELECT run_id, COUNT(*) AS n FROM records \
                WHERE guarantee_reallocation_trigger IS NOT NULL GROUP BY run_id), \
-         refused AS (SELECT run_id, COUNT(*) AS n FROM events \
-               WHERE source = 'record' AND event LIKE 'operator: start refused%' GROUP BY run_id), \
+         refused AS (SELECT e.run_id, COUNT(*) AS n FROM events e WHERE {REFUSED_SQL} GROUP BY e.run_id), \
          fails AS (SELECT c.run_id, COUNT(*) AS n FROM commands c WHERE {FAILURE_SQL} GROUP BY c.run_id), \
          links AS (SELECT run_id, COUNT(*) AS n FROM events \
-               WHERE source = 'link' AND event = 'link lost' GROUP BY run_id) \
+               WHERE source = 'link' AND kind = 'lost' GROUP BY run_id) \
          SELECT r.vehicle, r.route, COUNT(*) AS flights, \
            SUM(COALESCE(dur.t_end, 0.0)) / 3600.0 AS hours, \
            SUM(r.records) AS records, \
@@ -57,17 +61,20 @@ fn summary_sql() -> String {
     )
 }
 
-const REFUSALS_SQL: &str = "SELECT r.vehicle, r.route, \
-       split_part(split_part(e.event, '(', 2), ')', 1) AS refused_by, \
-       split_part(split_part(e.event, '): ', 2), '; still waiting', 1) AS reason, \
-       COUNT(*) AS starts \
-     FROM events e JOIN runs r ON e.run_id = r.run_id \
-     WHERE e.source = 'record' AND e.event LIKE 'operator: start refused%' \
-     GROUP BY 1, 2, 3, 4 ORDER BY 1, 2, 3, 4";
+fn refusals_sql() -> String {
+    format!(
+        "SELECT r.vehicle, r.route, \
+           split_part(split_part(e.text, '(', 2), ')', 1) AS refused_by, \
+           split_part(split_part(e.text, '): ', 2), '; still waiting', 1) AS reason, \
+           COUNT(*) AS starts \
+         FROM events e JOIN runs r ON e.run_id = r.run_id WHERE {REFUSED_SQL} \
+         GROUP BY 1, 2, 3, 4 ORDER BY 1, 2, 3, 4"
+    )
+}
 
 fn failures_sql() -> String {
     format!(
-        "SELECT r.vehicle, r.route, c.command, split_part(c.result, ' ', 1) AS result, \
+        "SELECT r.vehicle, r.route, c.command, c.kind, \
            COUNT(*) AS failures \
          FROM commands c JOIN runs r ON c.run_id = r.run_id WHERE {FAILURE_SQL} \
          GROUP BY 1, 2, 3, 4 ORDER BY 1, 2, 3, 4"
@@ -81,7 +88,7 @@ const VERSIONS_SQL: &str = "SELECT vehicle, route, git_revision, COUNT(*) AS fli
 pub fn sections() -> Vec<(&'static str, String)> {
     vec![
         ("summary", summary_sql()),
-        ("refused_starts", REFUSALS_SQL.to_string()),
+        ("refused_starts", refusals_sql()),
         ("command_failures", failures_sql()),
         ("versions", VERSIONS_SQL.to_string()),
     ]
