@@ -25,7 +25,7 @@ from standin.config import StandinConfig
 from standin_autopilot import StandinAutopilot
 
 ROOT = Path(__file__).resolve().parent.parent
-TABLES = ["runs", "records", "proposals", "events", "commands", "telemetry", "samples"]
+TABLES = ["runs", "records", "proposals", "events", "commands", "telemetry", "samples", "legs"]
 SCENARIOS = ["complete-1", "energy-drift", "vibrations", "nominal", "lidar-failure"]
 FAILURE_WORDS = {"DENIED", "UNSUPPORTED", "TEMPORARILY_REJECTED", "NOT_READY", "TIMEOUT", "FAILED"}
 

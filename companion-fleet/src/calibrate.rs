@@ -16,7 +16,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 /// A float as a SQL literal that reads back to the same f64 (Rust's shortest round trip).
-fn lit(x: f64) -> String {
+pub(crate) fn lit(x: f64) -> String {
     let s = format!("{x:?}");
     if s.contains(['.', 'e', 'E']) {
         s
@@ -239,8 +239,12 @@ pub async fn calibrate_cli(
     vehicle: Option<&str>,
     out: Option<&Path>,
     params: Option<&Path>,
+    cruise_mps: Option<f64>,
     (json, statistics_only): (bool, bool),
 ) -> anyhow::Result<()> {
+    if let Some(v) = cruise_mps.filter(|v| !(v.is_finite() && *v > 0.0)) {
+        anyhow::bail!("--cruise-speed-mps {v}: not a speed (a number above 0 m/s)");
+    }
     let Some(ctx) = context(dir).await? else {
         anyhow::bail!(
             "{}: no runs ingested (companion-fleet ingest RUN... --into DIR)",
@@ -284,6 +288,9 @@ pub async fn calibrate_cli(
     let fit = fit.with_statistics(st).map_err(|e| anyhow::anyhow!(e))?;
     let result = fit.solve().map_err(|e| anyhow::anyhow!("calibrate: {e}"))?;
     let m = result.fitted;
+    // The legs' fallback commanded speed, as `companion calibrate` takes it.
+    let fallback = cruise_mps.or(shipped.cruise_mps);
+    let legs = crate::legs::legs_json(&ctx, fallback, &vehicle_filter(vehicle)).await?;
     let values = serde_json::json!({
         "samples": result.samples,
         "ground_samples": result.ground_samples,
@@ -297,6 +304,9 @@ pub async fn calibrate_cli(
         "mean_w": result.mean_w,
         "v0_lower_bound_only": result.v0_lower_bound_only,
         "durations": crate::durations::to_json(&durations),
+        "legs": legs["legs"],
+        "climb": legs["climb"],
+        "descent": legs["descent"],
     });
     if json {
         println!("{values}");
@@ -317,6 +327,10 @@ pub async fn calibrate_cli(
             m.drag_area_m2,
             result.rms_w,
             result.shipped_rms_w
+        );
+        println!(
+            "  legs {}\n  climb {}\n  descent {}",
+            legs["legs"], legs["climb"], legs["descent"]
         );
         for (a, s) in &durations.stats {
             println!(

@@ -19,7 +19,7 @@ use std::path::Path;
 pub const FLEET_SCHEMA: i64 = 2;
 
 /// The tables of a run, in the order they are written.
-pub const TABLES: [&str; 7] = [
+pub const TABLES: [&str; 8] = [
     "runs",
     "records",
     "proposals",
@@ -27,6 +27,7 @@ pub const TABLES: [&str; 7] = [
     "commands",
     "telemetry",
     "samples",
+    "legs",
 ];
 
 /// Who a run is: its content id, vehicle, date and route.
@@ -527,7 +528,8 @@ pub fn export_run(dir: &Path, out: &Path, key: &RunKey) -> anyhow::Result<LogCou
     side.commands.finish()?;
     let frames = crate::telemetry::export_tlog(dir, &out.join("telemetry.parquet"), key)?;
     let samples = crate::samples::export_samples(dir, &out.join("samples.parquet"), key)?;
-    write_runs_row(out, key, &header, &counts, (frames, samples), dir)?;
+    let legs = crate::legs::export_legs(dir, &out.join("legs.parquet"), key)?;
+    write_runs_row(out, key, &header, &counts, (frames, samples, legs), dir)?;
     Ok(counts)
 }
 
@@ -536,7 +538,7 @@ fn write_runs_row(
     key: &RunKey,
     h: &Value,
     c: &LogCounts,
-    (tlog_frames, samples): (u64, Result<u64, String>),
+    (tlog_frames, samples, legs): (u64, Result<u64, String>, u64),
     dir: &Path,
 ) -> anyhow::Result<()> {
     let mut w = TableWriter::create(
@@ -566,6 +568,7 @@ fn write_runs_row(
             ("tlog_frames", Kind::I64),
             ("samples", Kind::I64),
             ("samples_error", Kind::Str),
+            ("legs", Kind::I64),
             ("source", Kind::Str),
         ]),
     )?;
@@ -599,6 +602,7 @@ fn write_runs_row(
         tlog_frames.into(),
         samples.as_ref().map_or(Cell::Null, |n| (*n).into()),
         samples.err().into(),
+        legs.into(),
         source.into(),
     ])?;
     w.finish().context("runs.parquet")?;

@@ -9,6 +9,7 @@ mod calibrate;
 mod dataset;
 mod durations;
 mod export;
+mod legs;
 mod overlay;
 mod query;
 mod report;
@@ -84,6 +85,10 @@ enum Command {
         /// The params the fit starts from (default: $COMPANION_PARAMS or the workspace's params/).
         #[arg(long)]
         params: Option<PathBuf>,
+        /// The commanded speed of legs whose run says none (m/s), as `companion calibrate
+        /// --cruise-speed-mps`; default: the params' `[derive].cruise_speed_mps`.
+        #[arg(long, value_name = "MPS")]
+        cruise_speed_mps: Option<f64>,
         /// Print the fitted model as one JSON object (full precision).
         #[arg(long)]
         json: bool,
@@ -125,6 +130,7 @@ fn main() -> std::process::ExitCode {
                 vehicle,
                 out,
                 params,
+                cruise_speed_mps,
                 json,
                 statistics,
             } => {
@@ -133,6 +139,7 @@ fn main() -> std::process::ExitCode {
                     vehicle.as_deref(),
                     out.as_deref(),
                     params.as_deref(),
+                    cruise_speed_mps,
                     (json, statistics),
                 )
                 .await
