@@ -4,15 +4,17 @@
 # pymavlink into the project's own .venv), nothing already there is upgraded. Then the Rust tests, the
 # SITL tests against the stand-in, the real-autopilot tests (when an ArduCopter SITL or PX4 SITL is found:
 # ARDUCOPTER_BIN/SITL_DEFAULTS and PX4_SITL_DIR, or ../shared/sitl/ beside the checkout), and the armv7 build.
-# One progress line per stage with its elapsed time. The armv7 stage runs beside the real-autopilot
-# stage (niced: the flights keep their CPU), and reports after it.
+# One progress line per stage with its elapsed time. The armv7 stage and then the companion-fleet stage
+# (scripts/fleet_tests.sh: DataFusion's build is most of the workspace's) run in one background chain
+# beside the real-autopilot stage (niced: the flights keep their CPU), and report after it.
 #
 #   SKIP_ARM=1        skip the armv7 cross-build and qemu run
+#   SKIP_FLEET=1      skip the companion-fleet stage
 #   SKIP_REAL_SITL=1  skip the real-autopilot stage
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
-STAGES=8
+STAGES=9
 T_ALL=$SECONDS
 
 fmt() { printf '%dm%02ds' $(($1 / 60)) $(($1 % 60)); }
@@ -24,8 +26,8 @@ done_() { echo "== [$stage_n/$STAGES] $stage_name ... ${1:-ok} in $(fmt $((SECON
 # The real-SITL scripts run in process groups of their own (setsid): stopped with this script.
 ardu_pid=""
 px4_pid=""
-arm_pid=""
-stop_bg() { for p in $ardu_pid $px4_pid $arm_pid; do kill -TERM -- "-$p" 2>/dev/null || true; done; }
+bg_pid=""
+stop_bg() { for p in $ardu_pid $px4_pid $bg_pid; do kill -TERM -- "-$p" 2>/dev/null || true; done; }
 trap 'rc=$?; stop_bg; [ $rc -ne 0 ] && echo "== [$stage_n/$STAGES] $stage_name ... FAILED (exit $rc) after $(fmt $((SECONDS - stage_t)))"; exit $rc' EXIT
 
 SUDO=""
@@ -64,15 +66,16 @@ else
 fi
 
 # ---- 3: rust ----------------------------------------------------------------------------------------
-begin "rust: cargo test (workspace)"
-cargo test --workspace --quiet 2>&1
+# companion-fleet is built and tested in its own stage (8), in the background beside stage 6.
+begin "rust: cargo test (workspace, companion-fleet in stage 8)"
+cargo test --workspace --exclude companion-fleet --quiet 2>&1
 done_
 
 # ---- 3b: no shipped function over 150 lines (clippy.toml's too-many-lines-threshold) ---------------
 # Only that lint (the others are advice, not a gate); the testkit is test support, not shipped.
 begin "rust: clippy::too_many_lines on shipped code"
 if cargo clippy --version >/dev/null 2>&1; then
-  cargo clippy --workspace --exclude companion-testkit --lib --bins --quiet -- -A clippy::all -D clippy::too_many_lines 2>&1
+  cargo clippy --workspace --exclude companion-testkit --exclude companion-fleet --lib --bins --quiet -- -A clippy::all -D clippy::too_many_lines 2>&1
   done_
 else
   echo "   clippy not installed (rustup component add clippy): not checked"
@@ -85,10 +88,29 @@ cargo build --quiet -p companion -p companion-testkit --bins
 export COMPANION_BIN="${CARGO_TARGET_DIR:-$ROOT/target}/debug/companion"
 done_
 
+# ---- background chain: the armv7 stage (7), then the fleet stage (8) -----------------------------
+# The armv7 cross-build and its qemu run, then companion-fleet's build and tests, start here, one
+# after the other in one background chain at nice 19, beside the stand-in tests (5) and the real-SITL
+# flights (6): the flights leave most of both cores idle, and nice keeps the tests', vehicles' and
+# the companion's CPU theirs. CI measured stage 6 at ~17 min and the armv7 part at ~15 min, so the
+# fleet's build (docs/performance.md, Fleet) needs the stand-in stage's idle CPU as well to end
+# near stage 6. In a chain, not side by side: both are CPU-bound builds, so running them at once
+# would end no sooner. Stages 7 and 8 wait for their part and print its log. Each part's exit code
+# goes to LOG.rc (written whole: renamed into place).
+arm_log=$(mktemp "${TMPDIR:-/tmp}/arm-log.XXXXXX")
+fleet_log=$(mktemp "${TMPDIR:-/tmp}/fleet-log.XXXXXX")
+rm -f "$arm_log.rc" "$fleet_log.rc"
+setsid nice -n 19 bash -c '
+  rc=0; if [ "$1" != 1 ]; then ./scripts/arm.sh >"$2" 2>&1 || rc=$?; fi; echo "$rc" >"$2.rc.tmp"; mv "$2.rc.tmp" "$2.rc"
+  rc=0; if [ "$3" != 1 ]; then ./scripts/fleet_tests.sh >"$4" 2>&1 || rc=$?; fi; echo "$rc" >"$4.rc.tmp"; mv "$4.rc.tmp" "$4.rc"
+' background-chain "${SKIP_ARM:-0}" "$arm_log" "${SKIP_FLEET:-0}" "$fleet_log" &
+bg_pid=$!
+
 # ---- 5: sitl_tests against the stand-in ------------------------------------------------------------
 begin "python: pytest sitl_tests (stand-in)"
 set +e
-.venv/bin/python -m pytest -q -n 4 sitl_tests -m "not real_autopilot" --ignore-glob='sitl_tests/test_px4_*.py'
+.venv/bin/python -m pytest -q -n 4 sitl_tests -m "not real_autopilot" --ignore-glob='sitl_tests/test_px4_*.py' \
+  --ignore=sitl_tests/test_fleet.py
 rc=$?
 set -e
 # pytest exits 5 when it collected nothing; that is a failure of the suite, not a pass.
@@ -98,15 +120,7 @@ done_
 # ---- 6: real autopilots, ArduCopter and PX4 side by side -------------------------------------------
 # Each script runs its vehicles in its own network namespace (ports cannot collide) and each vehicle
 # uses a few % of a core, so the two run at once; their output goes to a log each, printed after.
-# The armv7 cross-build and its qemu run (stage 7) start here, in the background at nice 19: the
-# flights below leave most of both cores idle, and nice keeps the vehicles' and the companion's CPU
-# theirs. Stage 7 waits for it and prints its log.
-arm_log=$(mktemp "${TMPDIR:-/tmp}/arm-log.XXXXXX")
-if [ "${SKIP_ARM:-0}" != 1 ]; then
-  setsid nice -n 19 ./scripts/arm.sh >"$arm_log" 2>&1 &
-  arm_pid=$!
-fi
-begin "real autopilots: ArduCopter and PX4 SITL tests (side by side; the armv7 stage beside them)"
+begin "real autopilots: ArduCopter and PX4 SITL tests (side by side; the armv7 and fleet stages beside them)"
 ardu_summary="ArduCopter: not run"
 px4_summary="PX4: not run"
 ARDUCOPTER_BIN=${ARDUCOPTER_BIN:-$ROOT/../shared/sitl/ardupilot/arducopter}
@@ -149,7 +163,9 @@ while alive "$ardu_pid" || alive "$px4_pid"; do
     running=""
     if alive "$ardu_pid"; then running="$running ArduCopter"; fi
     if alive "$px4_pid"; then running="$running PX4"; fi
-    if alive "$arm_pid"; then running="$running (armv7 stage running)"; fi
+    if alive "$bg_pid"; then
+      if [ -f "$arm_log.rc" ]; then running="$running (fleet stage running)"; else running="$running (armv7 stage running)"; fi
+    fi
     echo "   ... $(fmt $((SECONDS - stage_t))): still flying:$running"
   fi
 done
@@ -176,16 +192,34 @@ done_ "ok ($ardu_summary; $px4_summary)"
 # ---- 7: the board ------------------------------------------------------------------------------------
 # armv7 (the SoCKit's Cortex-A9) release binary, engine and companion tests under qemu-user
 # (docs/deploy-arm.md).
-begin "arm: scripts/arm.sh (armv7 cross-build, tests under qemu; started with stage 6)"
+# A part of the chain is done when its LOG.rc exists; a chain that died without writing it failed.
+wait_part() { while [ ! -f "$1.rc" ] && alive "$bg_pid"; do sleep 5; done; [ -f "$1.rc" ] && cat "$1.rc" || echo 1; }
+begin "arm: scripts/arm.sh (armv7 cross-build, tests under qemu; started before stage 5)"
 if [ "${SKIP_ARM:-0}" = 1 ]; then
   done_ "skipped (SKIP_ARM=1)"
 else
-  set +e; wait "$arm_pid"; rc=$?; set -e
-  arm_pid=""
-  cat "$arm_log"; rm -f "$arm_log"
+  rc=$(wait_part "$arm_log")
+  cat "$arm_log"
   [ "$rc" -eq 0 ] || exit "$rc"
   done_ "ok (waited $(fmt $((SECONDS - stage_t))) after stage 6)"
 fi
+rm -f "$arm_log" "$arm_log.rc"
+
+# ---- 8: the fleet (ground side) -------------------------------------------------------------------------
+# companion-fleet (docs/fleet.md): built, its Rust tests, its too-many-lines check and
+# sitl_tests/test_fleet.py, after the armv7 stage in the background chain.
+begin "fleet: scripts/fleet_tests.sh (companion-fleet build and tests, test_fleet.py; after stage 7 in the background)"
+if [ "${SKIP_FLEET:-0}" = 1 ]; then
+  done_ "skipped (SKIP_FLEET=1)"
+else
+  rc=$(wait_part "$fleet_log")
+  cat "$fleet_log"
+  [ "$rc" -eq 0 ] || exit "$rc"
+  done_ "ok (waited $(fmt $((SECONDS - stage_t))) after stage 7)"
+fi
+rm -f "$fleet_log" "$fleet_log.rc"
+set +e; wait "$bg_pid"; set -e
+bg_pid=""
 
 echo "== real autopilots: $ardu_summary; $px4_summary"
 echo "== all $STAGES stages passed in $(fmt $((SECONDS - T_ALL)))"

@@ -88,6 +88,36 @@ fn the_core_depends_on_no_io_runtime_cli_or_randomness_crate() {
     );
 }
 
+/// The fleet's query engine is ground side only (issue 38): the onboard binary links no
+/// DataFusion, Arrow or Parquet crate, while `companion-fleet` does (so the names are right).
+#[test]
+#[cfg_attr(
+    not(target_arch = "x86_64"),
+    ignore = "runs cargo, a host binary (the cross-built tests run under qemu)"
+)]
+fn the_onboard_binary_links_no_query_engine() {
+    let engine = |d: &String| {
+        ["datafusion", "arrow", "parquet"]
+            .iter()
+            .any(|e| d.starts_with(e))
+    };
+    let fleet = normal_deps("companion-fleet");
+    for e in ["datafusion", "arrow", "parquet"] {
+        assert!(
+            fleet.iter().any(|d| d == e),
+            "companion-fleet without {e}: {fleet:?}"
+        );
+    }
+    let onboard: Vec<String> = normal_deps("companion")
+        .into_iter()
+        .filter(|d| engine(d))
+        .collect();
+    assert!(
+        onboard.is_empty(),
+        "the onboard companion links {onboard:?}"
+    );
+}
+
 /// The workspace members' `src/` folders (every crate the workspace builds).
 fn crate_src_dirs() -> Vec<PathBuf> {
     let manifest = std::fs::read_to_string(root().join("Cargo.toml")).unwrap();

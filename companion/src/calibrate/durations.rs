@@ -25,6 +25,16 @@ impl DurationStats {
         self.sum_sq += x * x;
     }
 
+    /// From the sums another engine computed (companion-fleet's SQL): n, Σd and Σd².
+    pub fn from_sums(n: u64, sum: f64, sum_sq: f64) -> Self {
+        DurationStats { n, sum, sum_sq }
+    }
+
+    /// n, Σd and Σd² (what companion-fleet's SQL sums; scripts/fleet_spark.sh compares them).
+    pub fn sums(&self) -> (u64, f64, f64) {
+        (self.n, self.sum, self.sum_sq)
+    }
+
     pub fn mean(&self) -> f64 {
         self.sum / self.n as f64
     }

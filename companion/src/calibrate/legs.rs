@@ -359,9 +359,102 @@ impl std::fmt::Display for LegFitError {
     }
 }
 
+/// The leg fit's inputs in the three passes [`fit_legs`] makes, each needing the last's result:
+/// the legs' sums and ranges ([`LegSums`]), the sums about their means ([`LegCentred`]), then
+/// the two-parameter fit's squared residuals. `companion-fleet calibrate` sums the same as SQL
+/// aggregates over its `legs` table and gets the same model ([`LegSums::model`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LegSums {
+    pub n: usize,
+    /// Σ x, x = L / v_cmd (s).
+    pub sum_x: f64,
+    /// Σ t (s).
+    pub sum_t: f64,
+    /// The least and greatest x.
+    pub x_range: (f64, f64),
+    pub commanded: (f64, f64),
+    pub lengths: (f64, f64),
+    /// Distinct, sorted.
+    pub sources: Vec<SpeedSource>,
+}
+
+/// The second pass: sums about the means `LegSums::means` gives, and the squared residuals of
+/// the one-parameter fit (`c1 = mean t - mean x`) and of the commanded speed alone.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LegCentred {
+    /// Σ (x - mean x)².
+    pub sxx: f64,
+    /// Σ (x - mean x)(t - mean t).
+    pub sxt: f64,
+    /// Σ (t - x - c1)².
+    pub ss_one: f64,
+    /// Σ (t - x)².
+    pub ss_before: f64,
+}
+
 fn rms(res: impl Iterator<Item = f64>) -> f64 {
     let (n, ss) = res.fold((0usize, 0.0), |(n, s), r| (n + 1, s + r * r));
     (ss / n.max(1) as f64).sqrt()
+}
+
+fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
+    v.fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
+        (lo.min(v), hi.max(v))
+    })
+}
+
+impl LegSums {
+    /// (mean x, mean t).
+    pub fn means(&self) -> (f64, f64) {
+        let n = self.n as f64;
+        (self.sum_x / n, self.sum_t / n)
+    }
+
+    /// The one-parameter fit's overhead: `t = x + c1`.
+    pub fn overhead_one(&self) -> f64 {
+        let (mx, mt) = self.means();
+        mt - mx
+    }
+
+    /// `t = a x + c` when the legs' x spread enough to tell `a` and `c` apart (the longest at
+    /// least twice the shortest).
+    pub fn two(&self, c: &LegCentred) -> Option<(f64, f64)> {
+        let (lo, hi) = self.x_range;
+        let (mx, mt) = self.means();
+        (hi >= 2.0 * lo && c.sxx > 0.0).then(|| {
+            let a = c.sxt / c.sxx;
+            (a, mt - a * mx)
+        })
+    }
+
+    /// The model, given the second pass and the two-parameter fit's Σ residual² (when
+    /// [`LegSums::two`] gave one).
+    pub fn model(&self, c: &LegCentred, ss_two: Option<f64>) -> Result<LegModel, LegFitError> {
+        if self.n < MIN_LEGS {
+            return Err(LegFitError::TooFew(self.n));
+        }
+        let n = self.n as f64;
+        let rms_of = |ss: f64| (ss / n).sqrt();
+        let two = self
+            .two(c)
+            .zip(ss_two)
+            .map(|((a, k), ss)| (a, k, rms_of(ss)));
+        let (overhead_s, speed_fraction, rms_s) = match two {
+            Some((a, k, r)) if a > 0.0 && 1.0 / a < REACHED_FRACTION => (k, Some(1.0 / a), r),
+            _ => (self.overhead_one(), None, rms_of(c.ss_one)),
+        };
+        Ok(LegModel {
+            legs: self.n,
+            overhead_s,
+            speed_fraction,
+            fitted_fraction: two.map(|(a, _, _)| 1.0 / a),
+            rms_s,
+            rms_before_s: rms_of(c.ss_before),
+            commanded: self.commanded,
+            lengths: self.lengths,
+            sources: self.sources.clone(),
+        })
+    }
 }
 
 /// Least squares over the legs: first with the commanded speed (`a = 1`: the overhead alone);
@@ -371,53 +464,32 @@ pub fn fit_legs(legs: &[Leg]) -> Result<LegModel, LegFitError> {
     if legs.len() < MIN_LEGS {
         return Err(LegFitError::TooFew(legs.len()));
     }
-    let n = legs.len() as f64;
     let x: Vec<f64> = legs.iter().map(|l| l.length_m / l.commanded_mps).collect();
     let t: Vec<f64> = legs.iter().map(|l| l.duration_s).collect();
-    let mean = |v: &[f64]| v.iter().sum::<f64>() / n;
-    let (mx, mt) = (mean(&x), mean(&t));
-    let c1 = mt - mx;
-    let rms1 = rms(x.iter().zip(&t).map(|(x, t)| t - x - c1));
-    let (lo, hi) = x.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
-        (lo.min(*v), hi.max(*v))
-    });
-    let sxx: f64 = x.iter().map(|v| (v - mx) * (v - mx)).sum();
-    let two = (hi >= 2.0 * lo && sxx > 0.0).then(|| {
-        let a = x
-            .iter()
-            .zip(&t)
-            .map(|(x, t)| (x - mx) * (t - mt))
-            .sum::<f64>()
-            / sxx;
-        let c = mt - a * mx;
-        (a, c, rms(x.iter().zip(&t).map(|(x, t)| t - a * x - c)))
-    });
-    let fitted_fraction = two.map(|(a, _, _)| 1.0 / a);
-    let (overhead_s, speed_fraction, rms_s) = match two {
-        Some((a, c, r)) if a > 0.0 && 1.0 / a < REACHED_FRACTION => (c, Some(1.0 / a), r),
-        _ => (c1, None, rms1),
-    };
     let mut sources: Vec<SpeedSource> = legs.iter().map(|l| l.source).collect();
     sources.sort();
     sources.dedup();
-    let range = |f: &dyn Fn(&Leg) -> f64| {
-        legs.iter()
-            .map(f)
-            .fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
-                (lo.min(v), hi.max(v))
-            })
-    };
-    Ok(LegModel {
-        legs: legs.len(),
-        overhead_s,
-        speed_fraction,
-        fitted_fraction,
-        rms_s,
-        rms_before_s: rms(x.iter().zip(&t).map(|(x, t)| t - x)),
-        commanded: range(&|l| l.commanded_mps),
-        lengths: range(&|l| l.length_m),
+    let sums = LegSums {
+        n: legs.len(),
+        sum_x: x.iter().sum(),
+        sum_t: t.iter().sum(),
+        x_range: range(x.iter().copied()),
+        commanded: range(legs.iter().map(|l| l.commanded_mps)),
+        lengths: range(legs.iter().map(|l| l.length_m)),
         sources,
-    })
+    };
+    let (mx, mt) = sums.means();
+    let c1 = sums.overhead_one();
+    let sq = |r: f64| r * r;
+    let centred = LegCentred {
+        sxx: x.iter().map(|v| sq(v - mx)).sum(),
+        sxt: x.iter().zip(&t).map(|(x, t)| (x - mx) * (t - mt)).sum(),
+        ss_one: x.iter().zip(&t).map(|(x, t)| sq(t - x - c1)).sum(),
+        ss_before: x.iter().zip(&t).map(|(x, t)| sq(t - x)).sum(),
+    };
+    let ss_two =
+        (sums.two(&centred)).map(|(a, c)| x.iter().zip(&t).map(|(x, t)| sq(t - a * x - c)).sum());
+    sums.model(&centred, ss_two)
 }
 
 /// A vertical rate over flights: total height over total time (so the time planned for them

@@ -129,6 +129,23 @@ pub struct PowerFit {
     v_max: f64,
 }
 
+/// The sums a [`PowerFit`] holds, for [`PowerFit::with_statistics`]: per candidate v0 (in
+/// [`PowerFit::grid`]'s order) `AᵀA` and `Aᵀy` of the regressors (base, P0, Pi, CdA), and over
+/// all samples Σy², Σy, the shipped model's squared error, the counts, the airborne speeds'
+/// 0.5 m/s bins (`round(v / 0.5)`) and their least and greatest speed.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Statistics {
+    pub normals: Vec<([[f64; 4]; 4], [f64; 4])>,
+    pub yy: f64,
+    pub sum_y: f64,
+    pub shipped_sse: f64,
+    pub n_ground: u64,
+    pub n_air: u64,
+    pub speed_bins: BTreeSet<i64>,
+    pub v_min: f64,
+    pub v_max: f64,
+}
+
 /// The fitted model and its errors.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FitResult {
@@ -226,6 +243,39 @@ impl PowerFit {
         let mut f = Self::with_grid(shipped, vec![0.0]);
         f.polynomial = true;
         f
+    }
+
+    /// The candidate induced velocities, one set of normal equations each (one for a kept v0 or
+    /// the polynomial).
+    pub fn grid(&self) -> &[f64] {
+        &self.grid
+    }
+
+    /// The same fit from statistics summed elsewhere (`companion-fleet calibrate` sums them as
+    /// SQL aggregates over a fleet's samples): what [`PowerFit::add`] would have summed.
+    pub fn with_statistics(mut self, st: Statistics) -> Result<Self, String> {
+        if self.polynomial || st.normals.len() != self.grid.len() {
+            return Err(format!(
+                "{} sets of normal equations for {} candidate induced velocities (the rotary-wing fit only)",
+                st.normals.len(),
+                self.grid.len()
+            ));
+        }
+        self.normals = (st.normals.iter())
+            .map(|(ata, aty)| Normal {
+                ata: SMatrix::from_fn(|i, j| ata[i][j]),
+                aty: SVector::from_fn(|i, _| aty[i]),
+            })
+            .collect();
+        self.yy = st.yy;
+        self.sum_y = st.sum_y;
+        self.shipped_sse = st.shipped_sse;
+        self.n_ground = st.n_ground;
+        self.n_air = st.n_air;
+        self.speed_bins = st.speed_bins;
+        self.v_min = st.v_min;
+        self.v_max = st.v_max;
+        Ok(self)
     }
 
     fn names(&self) -> &'static [&'static str; 4] {

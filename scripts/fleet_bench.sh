@@ -1,0 +1,64 @@
+#!/usr/bin/env bash
+# Benchmark of companion-fleet (docs/performance.md, "Fleet"; outside the test command):
+# N generated runs (fly-like decision logs with the power observations calibrate reads, 200
+# records each) ingested, reported and calibrated, and `companion calibrate RUN...` on the same
+# runs, side by side; wall time and peak memory from /usr/bin/time -v. Run at 100 and 1000 runs
+# to see the memory stay flat:
+#   scripts/fleet_bench.sh 100 && scripts/fleet_bench.sh 1000
+# PROFILE=release (default) builds the binaries with --release; PROFILE=debug uses target/debug;
+# SKIP_BUILD=1 uses the binaries as built.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+N=${1:-1000}
+PROFILE=${PROFILE:-release}
+if [ -n "${SKIP_BUILD:-}" ]; then
+  :   # the binaries are built already
+elif [ "$PROFILE" = release ]; then
+  cargo build --quiet --release -p companion -p companion-fleet --bins
+else
+  cargo build --quiet -p companion -p companion-fleet --bins
+fi
+BIN="${CARGO_TARGET_DIR:-$PWD/target}/$PROFILE"
+WORK=$(mktemp -d /tmp/fleet-bench.XXXXXX)
+trap 'rm -rf "$WORK"' EXIT
+python3 - "$WORK/runs" "$N" <<'PY'
+import json, math, os, sys
+out, n = sys.argv[1], int(sys.argv[2])
+def power(v):   # a rotary-wing vehicle (Zeng et al. eq. 12): base 12, P0 95, Pi 230, v0 7.5, CdA 0.08
+    ind = math.sqrt(math.sqrt(1 + v**4 / (4 * 7.5**4)) - v * v / (2 * 7.5**2))
+    return 12 + 95 * (1 + 3 * v * v / 6400) + 230 * ind + 0.5 * 1.225 * 0.08 * v**3
+for k in range(n):
+    d = os.path.join(out, f"run{k:05d}")
+    os.makedirs(d)
+    with open(os.path.join(d, "decisions.jsonl"), "w") as f:
+        day = 1 + k % 28
+        f.write(json.dumps({"schema": 2, "kind": "header", "started_utc": f"2026-06-{day:02d}T12:00:00Z",
+                            "git_revision": f"rev{k % 3}", "command": "companion fly --connect tcp:x",
+                            "params": {}, "part": 0,
+                            "plan": {"mission": "tracking", "route_file": f"route{k % 4}.plan", "zones_file": None,
+                                     "activities": 3, "planned_energy_j": 50000.0,
+                                     "planned_duration_s": 200.0}}) + "\n")
+        for c in range(200):
+            armed = c >= 20
+            v = 0.0 if not armed else (c % 17) * 1.0
+            p = 12.0 if not armed else power(v)
+            p += math.sin(k * 7.0 + c) * 2.0
+            rec = {"cycle": c, "time_s": float(c),
+                   "observations": {"battery_v": 15.0, "battery_current_a": p / 15.0, "armed": 1.0 if armed else 0.0,
+                                    "groundspeed_mps": v, "altitude_m": 30.0 if armed else 0.0},
+                   "actions": ["follow_trajectory"] if armed else [],
+                   "commands": [{"action": "take_off", "command": "MAV_CMD_NAV_TAKEOFF",
+                                 "result": {"kind": w, "text": w}, "attempts": 1}
+                                for w in ["TIMEOUT" if (k + c) % 97 == 0 else "ACCEPTED"]] if c % 50 == 0 else [],
+                   "guarantee": {"activity": 0, "activity_name": "transit", "goals": {"energy_j": 60000.0},
+                                 "margins": {"energy_j": 10000.0 - c}, "planned_j": 50000.0, "planned_s": 200.0}}
+            f.write(json.dumps(rec) + "\n")
+PY
+DS="$WORK/fleet"
+t() { /usr/bin/time -f "%e s wall, %M KiB peak" "$@" >"$WORK/out" 2>"$WORK/time" || { echo "FAILED: $*" >&2; tail -5 "$WORK/out" "$WORK/time" >&2; exit 1; }; tail -1 "$WORK/time"; }
+echo "runs: $N ($PROFILE build)"
+echo "  companion-fleet ingest:    $(t "$BIN/companion-fleet" ingest "$WORK/runs" --into "$DS")"
+echo "  companion-fleet report:    $(t "$BIN/companion-fleet" report "$DS" --json)"
+echo "  companion-fleet calibrate: $(t "$BIN/companion-fleet" calibrate "$DS" --json)"
+echo "  companion calibrate RUN...: $(t "$BIN/companion" calibrate "$WORK/runs")"
+echo "  dataset size: $(du -sh "$DS" | cut -f1)"
