@@ -430,7 +430,11 @@ def test_sigkill_mid_ingest_leaves_a_dataset_that_reports_right(runs, tmp_path):
     whole = time.monotonic() - t0
     rng = random.Random(38)
     kills = 0
-    for k in range(20):
+    # 20 kills that land mid-ingest: a kill that comes after the ingest ended is not one, so under a loaded
+    # machine's timing more attempts are made (bounded), each still checked.
+    for k in range(60):
+        if kills == 20:
+            break
         src = runs["sim"] if k % 4 else runs["flights"]
         extra = [] if k % 4 else ["--vehicle", "standin"]
         proc = subprocess.Popen([fleet_bin(), "ingest", str(src), "--into", str(ds), *extra],
@@ -446,7 +450,7 @@ def test_sigkill_mid_ingest_leaves_a_dataset_that_reports_right(runs, tmp_path):
             assert all((d / f"{t}.parquet").is_file() for t in TABLES), d
         if present:
             assert_report_matches(report(ds), expected(runs, present))
-    assert kills >= 10, f"only {kills} of 20 ingests were killed mid-way"
+    assert kills == 20, f"only {kills} of {k + 1} ingests were killed mid-way"
     ingest_all(runs, ds)
     assert present_ids(ds) == all_ids
     assert not list(ds.glob(".tmp-*")), "the last ingest removes the killed ingests' temporary folders"
