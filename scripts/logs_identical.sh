@@ -23,6 +23,8 @@
 #       started_utc, git_revision, command
 #     (the header's `params` map, holding every params file's contents, is compared byte for byte);
 #   - the `--json` stdout byte for byte, and the exit status.
+#   Paths inside each side's source tree (the header's plan.route_file and zones_file) are compared
+#   relative to it (each side's checkout is elsewhere).
 # Logs of an older schema: when the base writes a lower header `schema` than the new side (schema 1
 # sentences, schema 2 typed events), each base part is first rewritten by the new side's
 # `companion-log-migrate` (companion-testkit: decision_log::migration, then the record written
@@ -223,9 +225,14 @@ def first_diff(a, b, label):
         found.append(f"{label} line {min(len(la), len(lb)) + 1} (one side ends: {len(la)} vs {len(lb)} lines)")
     return "; ".join(found) or None
 
-def read(p):
+# Paths inside a side's source tree (the header's plan.route_file / zones_file, the --json's) are
+# compared relative to it: each side's checkout is elsewhere.
+SRC = {base: os.environ["BASE_SRC"].encode(), new: os.environ["NEW_SRC"].encode()}
+
+def read(p, side=None):
     with open(p, "rb") as f:
-        return f.read()
+        raw = f.read()
+    return raw.replace(SRC[side], b"<source tree>") if side in SRC else raw
 
 def run_folder(side):
     runs = os.path.join(side, "runs")
@@ -240,7 +247,7 @@ if eb != en:
 def json_out(side, cut):
     # A migrated base's --json still holds its records in the older schema (`decisions`, the
     # log's records, compared above after migration): cut out on both sides, the rest bytewise.
-    raw = read(os.path.join(side, "stdout.json"))
+    raw = read(os.path.join(side, "stdout.json"), side)
     if not cut:
         return raw
     obj = json.loads(raw)
@@ -258,7 +265,7 @@ elif fb is not None and fn is not None:
         diff = (diff + "; " if diff else "") + f"run folder files {lb} vs {ln}"
     else:
         for name in lb:
-            d = first_diff(read(os.path.join(fb, name)), read(os.path.join(fn, name)), name)
+            d = first_diff(read(os.path.join(fb, name), base), read(os.path.join(fn, name), new), name)
             if d:
                 diff = (diff + "; " if diff else "") + d
                 break
