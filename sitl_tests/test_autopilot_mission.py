@@ -102,8 +102,10 @@ def test_speeds_the_autopilot_reports_after_the_plan_re_plan_it_even_when_equal_
     wait(lambda: any("re-planned at the autopilot's speeds" in t and "params speeds" not in t
                      for t in texts(gcs, since=t_release)), 5.0,
          "the STATUSTEXT that the mission was re-planned at the autopilot's speeds (PARAM_REQUEST_READ retried)", run)
-    said = [str(e) for e in events(run.records())]
-    assert any("re-planned at the autopilot's speeds" in e and "params speeds" not in e for e in said), said[-20:]
+    # The record holding the re-plan is written with the cycle's record (at most one decision period later).
+    wait(lambda: any("re-planned at the autopilot's speeds" in e and "params speeds" not in e
+                     for e in map(str, events(run.records()))), 5.0,
+         "the re-plan at the autopilot's speeds in the decision record", run)
 
 
 def test_an_item_the_companion_cannot_plan_refuses_the_start_naming_it(autopilot_factory, fly, client):
