@@ -46,8 +46,8 @@ def test_the_uploaded_mission_is_planned_flown_as_is_and_a_change_re_planned(aut
     gcs = client(sa.url)
     assert gcs.upload_mission(mission(150.0)).type == mavlink.MAV_MISSION_ACCEPTED
     run = fly(ap, mission=Path("autopilot"))            # --auto-start --once
-    wait(lambda: any("mission planned" in t for t in texts(gcs)), 30,
-         "the STATUSTEXT that the uploaded mission is planned", run)
+    wait(lambda: any("mission planned" in t or "mission re-planned at the autopilot's speeds" in t
+                     for t in texts(gcs)), 30, "the STATUSTEXT that the uploaded mission is planned", run)
     # A ground station changes the cruise speed (the stand-in's WPNAV_SPEED is 500 cm/s): re-planned at it.
     t_set = time.monotonic()
     gcs.param_set("WPNAV_SPEED", 700)

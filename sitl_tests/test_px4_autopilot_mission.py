@@ -39,7 +39,7 @@ def test_px4_the_uploaded_mission_is_planned_flown_and_a_change_re_planned(px4_v
     proc, out = fly(exe, v.onboard_port, Path("autopilot"), tmp_path / "runs")
     try:
         o.wait("the companion's STATUSTEXT that the mission is planned",
-               lambda o: any("mission planned" in t for t in o.texts), 60)
+               lambda o: any("mission planned" in t or "re-planned at the autopilot's" in t for t in o.texts), 60)
         o.wait("the first waypoint reached in MISSION", lambda o: o.mode == "MISSION" and 1 in o.reached, 150)
         assert o.upload_mission(mission(80.0)) == mavlink.MAV_MISSION_ACCEPTED
         o.wait("the companion's STATUSTEXT that the mission changed, within 5 s",

@@ -35,7 +35,8 @@ pub(super) struct AutopilotPlan {
     /// The activities the guarantee plans now (a change in flight keeps those flown).
     activities: Vec<companion_core::route_plan::DerivedActivity>,
     /// What the ground station must still be told (held back by the STATUSTEXT rate cap, said
-    /// as soon as it allows: a plan, a change or a refusal is never lost).
+    /// as soon as it allows). A newer plan replaces one not yet said: the pilot hears the plan in
+    /// force; the record keeps both.
     unsaid: Option<(MavSeverity, String)>,
 }
 
