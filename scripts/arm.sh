@@ -266,6 +266,28 @@ for p in json.load(sys.stdin)["packages"]:
   local stripped="$target_dir/$t/release/companion.stripped"
   "$strip" -o "$stripped" "$bin"
   echo "   size: $(stat -c %s "$bin") bytes as built, $(stat -c %s "$stripped") bytes stripped ($stripped)"
+  check_size "$t" "$(stat -c %s "$stripped")"
+}
+
+# The onboard binary's size is a contract (issue 38: the ground side's DataFusion and Arrow stay out
+# of it): the stripped armv7 `companion` within 2 % of the figure docs/deploy-arm.md gives. A change
+# that moves it further updates that figure, on purpose, in the same commit.
+check_size() {
+  [ "$1" = armv7-unknown-linux-gnueabihf ] || return 0
+  local doc expected
+  doc="$(dirname "$0")/../docs/deploy-arm.md"
+  expected="$(sed -n 's/^| armv7 `companion`, stripped (what goes on the board) | \([0-9 ]*\) bytes.*/\1/p' "$doc" | tr -d ' ')"
+  if [ -z "$expected" ]; then
+    echo "arm.sh: docs/deploy-arm.md gives no stripped armv7 size to check against" >&2
+    failed+=("size: no documented figure")
+    return 0
+  fi
+  if ! python3 -c 'import sys; a, e = int(sys.argv[1]), int(sys.argv[2]); sys.exit(abs(a - e) > 0.02 * e)' "$2" "$expected"; then
+    echo "arm.sh: stripped armv7 companion is $2 bytes, docs/deploy-arm.md says $expected (more than 2 % apart): update the figure if the change is meant" >&2
+    failed+=("size $2 vs $expected")
+  else
+    echo "   size check: $2 bytes stripped, within 2 % of docs/deploy-arm.md's $expected"
+  fi
 }
 
 failed=()

@@ -12,7 +12,7 @@ pub mod strategies;
 mod verdict;
 pub use events::{
     CommandOutcome, Event, LinkEvent, MAX_LINK_EVENTS, OperatorEvent, ROUTE_REPLANNED,
-    STARTED_IN_FLIGHT, StartBy, coalesce_link_events, dedupe_capped,
+    STARTED_IN_FLIGHT, StartBy, StopEvent, coalesce_link_events, dedupe_capped,
 };
 pub use resources::{Degraded, Dropped};
 pub use verdict::{FIT_LINE_MAX, Lowered, PLAN_LINE_MAX, Verdict};

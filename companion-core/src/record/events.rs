@@ -42,7 +42,9 @@ macro_rules! eq_sentence {
 }
 
 mod operator;
+mod stop;
 pub use operator::{OperatorEvent, StartBy};
+pub use stop::StopEvent;
 
 /// What became of a vehicle command (`CommandRecord.result`).
 #[derive(Debug, Clone, PartialEq)]
@@ -231,6 +233,8 @@ pub enum Event {
     NewFlight,
     /// `operator: ...`: the fly shell's operator gate decided, or heard a ground station.
     Operator(OperatorEvent),
+    /// `companion stopping ...`: the fly shell's stop, and the hand-off's outcome.
+    Stop(StopEvent),
     /// `started in flight: the vehicle is FOUND; DOES`: `fly` started with the vehicle in the
     /// air, and what it does about it (hand-off, proof of its own flight, not resumed).
     StartedInFlight {
@@ -387,6 +391,7 @@ impl Clone for Event {
             LandingKept(a) => LandingKept(a.clone()),
             NewFlight => NewFlight,
             Operator(o) => Operator(o.clone()),
+            Stop(s) => Stop(s.clone()),
             StartedInFlight { found_as, does } => StartedInFlight {
                 found_as: found_as.clone(),
                 does: does.clone(),
@@ -556,6 +561,7 @@ impl fmt::Display for Event {
             ),
             NewFlight => f.write_str(NEW_FLIGHT),
             Operator(o) => o.fmt(f),
+            Stop(s) => s.fmt(f),
             StartedInFlight { found_as, does } => {
                 write!(f, "{STARTED_IN_FLIGHT}the vehicle is {found_as}; {does}")
             }

@@ -3,7 +3,7 @@
 //! (`decision_log/migration/tests`), so both generate the same values. Built for the core's
 //! own tests and, through the `test-support` feature, for the companion's dev build only.
 
-use super::events::{CommandOutcome, Event, LinkEvent, OperatorEvent, StartBy};
+use super::events::{CommandOutcome, Event, LinkEvent, OperatorEvent, StartBy, StopEvent};
 use proptest::prelude::*;
 
 /// Free text as producers write it: words of letters, digits and the punctuation the
@@ -122,6 +122,48 @@ pub fn operator_event() -> impl Strategy<Value = OperatorEvent> {
     ]
 }
 
+/// Every [`StopEvent`] (the height is rounded in its sentence).
+pub fn stop_event() -> impl Strategy<Value = StopEvent> {
+    use StopEvent::*;
+    let mode = || "[A-Z][A-Z_0-9]{0,11}";
+    let alt = || proptest::option::of(-1e3f64..1e4);
+    let up = || proptest::collection::vec("[a-z][a-z0-9 ]{0,15}", 1..3);
+    prop_oneof![
+        (text(), alt(), mode(), up(), mode()).prop_map(|(why, alt_m, mode, up, handoff)| {
+            HandOff {
+                why,
+                alt_m,
+                mode,
+                up,
+                handoff,
+            }
+        }),
+        (text(), alt(), mode(), up()).prop_map(|(why, alt_m, mode, up)| NoHandOff {
+            why,
+            alt_m,
+            mode,
+            up
+        }),
+        (text(), alt(), mode(), up(), word()).prop_map(|(why, alt_m, mode, up, was)| {
+            NotCommanding {
+                why,
+                alt_m,
+                mode,
+                up,
+                was,
+            }
+        }),
+        (
+            text(),
+            proptest::collection::vec(("[A-Z_]{1,12}", "[A-Z_]{1,20}"), 0..2)
+        )
+            .prop_map(|(why, refused)| Down { why, refused }),
+        Just(HandOffAccepted),
+        Just(HandOffFailed),
+        Just(HandOffUnanswered),
+    ]
+}
+
 /// The fly shell's events whose sentence carries every field (a schema-1 log's sentence reads
 /// back as the same value).
 fn shell_event_said_whole() -> impl Strategy<Value = Event> {
@@ -211,6 +253,7 @@ fn event_said_rounded() -> impl Strategy<Value = Event> {
                 }
             }),
         (text(), text()).prop_map(|(what, summary)| AutopilotMissionPlanned { what, summary }),
+        stop_event().prop_map(Stop),
         (any::<usize>(), any::<usize>(), any::<usize>(), f()).prop_map(
             |(item, kept, left, left_m)| MissionReplannedFromPoint {
                 item,

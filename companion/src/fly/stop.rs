@@ -6,7 +6,7 @@
 //! `companion_link::vehicle::launch`).
 
 use super::{NOTICE, Shell};
-use companion_core::record::Event;
+use companion_core::record::{Event, StopEvent};
 use companion_link::Msg;
 use companion_link::actions::Handoff;
 use companion_link::dialect::MavSeverity;
@@ -52,8 +52,7 @@ pub fn begin_stop(
         .telemetry()
         .mode
         .map_or_else(|| "?".into(), |m| m.to_string());
-    let alt = vehicle.telemetry().position.map(|p| p.alt_rel_m);
-    let at = alt.map_or(String::new(), |a| format!(" at {a:.0} m"));
+    let alt_m = vehicle.telemetry().position.map(|p| p.alt_rel_m);
     let mut stopped = Stopped {
         commanded: false,
         up: verdict != StopVerdict::Down,
@@ -63,63 +62,70 @@ pub fn begin_stop(
         ),
     };
     shell.operator.control = Control::Stopping;
-    let (severity, text, line) = match &verdict {
-        StopVerdict::HandOff(up) => {
-            let up = up.join("; ");
-            match handoff.mode() {
-                Some(m) => {
-                    out.extend(vehicle.hand_off(now, m));
-                    stopped.commanded = true;
-                    (
-                        CRITICAL,
-                        format!("Companion stopping: {}, take over", handoff.pilot_words()),
-                        format!(
-                            "companion stopping ({why}) while commanding the vehicle{at} in {mode}, armed or arming ({up}): hand-off {m} (params/link.toml [flight] handoff)"
-                        ),
-                    )
-                }
-                None => (
+    let why = why.to_string();
+    let (severity, text, event) = match verdict {
+        StopVerdict::HandOff(up) => match handoff.mode() {
+            Some(m) => {
+                out.extend(vehicle.hand_off(now, m));
+                stopped.commanded = true;
+                (
                     CRITICAL,
-                    "Companion stopping: vehicle continues, take over".into(),
-                    format!(
-                        "companion stopping ({why}) while commanding the vehicle{at} in {mode}, armed or arming ({up}): no hand-off (handoff = none), the vehicle goes on in {mode}"
-                    ),
-                ),
+                    format!("Companion stopping: {}, take over", handoff.pilot_words()),
+                    StopEvent::HandOff {
+                        why,
+                        alt_m,
+                        mode,
+                        up,
+                        handoff: m.to_string(),
+                    },
+                )
             }
-        }
+            None => (
+                CRITICAL,
+                "Companion stopping: vehicle continues, take over".into(),
+                StopEvent::NoHandOff {
+                    why,
+                    alt_m,
+                    mode,
+                    up,
+                },
+            ),
+        },
         StopVerdict::NotCommanding(up) => (
             CRITICAL,
             "Companion stopping: not commanding".into(),
-            format!(
-                "companion stopping ({why}); the vehicle is armed or in the air{at} in {mode} ({}) and the companion was not commanding it ({was})",
-                up.join("; ")
-            ),
+            StopEvent::NotCommanding {
+                why,
+                alt_m,
+                mode,
+                up,
+                was: was.to_string(),
+            },
         ),
         StopVerdict::Down => {
-            let refused: String = reading
+            let refused = reading
                 .launches
                 .iter()
                 .filter_map(|l| match &l.outcome {
-                    LaunchOutcome::Refused(r) => Some(format!(
-                        " (the autopilot refused its {}: {r})",
-                        l.command.name()
-                    )),
+                    LaunchOutcome::Refused(r) => {
+                        Some((l.command.name().to_string(), r.to_string()))
+                    }
                     _ => None,
                 })
                 .collect();
             (
                 NOTICE,
                 "Companion stopping".into(),
-                format!("companion stopping ({why}); the vehicle is disarmed{refused}"),
+                StopEvent::Down { why, refused },
             )
         }
     };
     if severity == CRITICAL {
-        tracing::warn!("{line}");
+        tracing::warn!("{event}");
     } else {
-        tracing::info!("{line}");
+        tracing::info!("{event}");
     }
-    shell.pending_events.push(Event::Other(line.into()));
+    shell.pending_events.push(Event::Stop(event));
     // The stop's words go first, ahead of the mode command.
     let mut msgs = shell.texts.say_always(now, severity, &text);
     msgs.extend(out);
@@ -133,22 +139,19 @@ pub fn end_stop(shell: &mut Shell, vehicle: &Vehicle, commanded: bool, now: Dura
     if !commanded {
         return Vec::new();
     }
-    let (line, gcs) = match vehicle.handoff_status() {
-        Some(true) => (
-            "companion stopping: the autopilot accepted the hand-off mode",
-            None,
-        ),
+    let (event, gcs) = match vehicle.handoff_status() {
+        Some(true) => (StopEvent::HandOffAccepted, None),
         Some(false) => (
-            "companion stopping: the hand-off mode failed (see commands); the pilot must take over",
+            StopEvent::HandOffFailed,
             Some("Companion: hand-off refused, take over"),
         ),
         None => (
-            "companion stopping: no answer to the hand-off mode before exit; the pilot must take over",
+            StopEvent::HandOffUnanswered,
             Some("Companion: hand-off unanswered, take over"),
         ),
     };
-    tracing::warn!("{line}");
-    shell.pending_events.push(Event::Other(line.into()));
+    tracing::warn!("{event}");
+    shell.pending_events.push(Event::Stop(event));
     gcs.map_or_else(Vec::new, |text| shell.texts.say_always(now, CRITICAL, text))
 }
 

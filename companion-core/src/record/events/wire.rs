@@ -5,7 +5,7 @@
 //! an owned one. Schema-1 logs (plain sentences) are read by `companion::decision_log::migration`.
 
 use super::super::{Degraded, Dropped};
-use super::{CommandOutcome, Event, LinkEvent, OperatorEvent};
+use super::{CommandOutcome, Event, LinkEvent, OperatorEvent, StopEvent};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use std::borrow::Cow;
 use std::fmt;
@@ -280,7 +280,7 @@ impl From<LinkWire<'_, CommandOutcome>> for LinkEvent {
 /// (`{"kind":"link","link":{"kind":"lost"}}`), as is a command's outcome.
 #[derive(Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
-enum EventWire<'a, L, O, D, X, P, V> {
+enum EventWire<'a, L, O, D, X, P, V, S> {
     TargetDetected,
     TargetLost,
     ObstacleDetected,
@@ -345,6 +345,9 @@ enum EventWire<'a, L, O, D, X, P, V> {
     NewFlight,
     Operator {
         operator: P,
+    },
+    Stop {
+        stop: S,
     },
     StartedInFlight {
         found_as: Text<'a>,
@@ -418,9 +421,18 @@ type EventOut<'a> = EventWire<
     &'a Dropped,
     &'a OperatorEvent,
     &'a [String],
+    &'a StopEvent,
 >;
-type EventIn<'a> =
-    EventWire<'a, LinkEvent, CommandOutcome, Degraded, Dropped, OperatorEvent, Vec<String>>;
+type EventIn<'a> = EventWire<
+    'a,
+    LinkEvent,
+    CommandOutcome,
+    Degraded,
+    Dropped,
+    OperatorEvent,
+    Vec<String>,
+    StopEvent,
+>;
 
 impl<'a> From<&'a Event> for EventOut<'a> {
     fn from(e: &'a Event) -> Self {
@@ -466,6 +478,7 @@ impl<'a> From<&'a Event> for EventOut<'a> {
             E::LandingKept(a) => W::LandingKept { action: b(a) },
             E::NewFlight => W::NewFlight,
             E::Operator(o) => W::Operator { operator: o },
+            E::Stop(s) => W::Stop { stop: s },
             E::StartedInFlight { found_as, does } => W::StartedInFlight {
                 found_as: b(found_as),
                 does: b(does),
@@ -605,6 +618,7 @@ impl From<EventIn<'_>> for Event {
             W::LandingKept { action } => E::LandingKept(own(action)),
             W::NewFlight => E::NewFlight,
             W::Operator { operator } => E::Operator(operator),
+            W::Stop { stop } => E::Stop(stop),
             W::StartedInFlight { found_as, does } => E::StartedInFlight {
                 found_as: own(found_as),
                 does: own(does),

@@ -185,6 +185,14 @@ fn a_stop_after_its_arm_was_refused_says_so_and_commands_nothing() {
             == "companion stopping (SIGTERM); the vehicle is disarmed (the autopilot refused its ARM: DENIED)"),
         "{said:?}"
     );
+    // The record holds the stop by kind, with its fields.
+    assert!(
+        shell.pending_events.iter().any(|e| matches!(e,
+            Event::Stop(StopEvent::Down { why, refused })
+                if why == "SIGTERM" && refused == &[("ARM".to_string(), "DENIED".to_string())])),
+        "{:?}",
+        shell.pending_events
+    );
 }
 
 #[test]
@@ -206,6 +214,12 @@ fn a_stop_with_handoff_none_says_the_vehicle_continues() {
         vec!["Companion stopping: vehicle continues, take over"]
     );
     assert!(commands(&out).is_empty());
+    assert!(
+        shell.pending_events.iter().any(|e| matches!(e,
+            Event::Stop(StopEvent::NoHandOff { why, up, .. }) if why == "SIGINT" && !up.is_empty())),
+        "{:?}",
+        shell.pending_events
+    );
 }
 
 #[test]
@@ -220,6 +234,12 @@ fn a_pilot_who_took_over_is_left_flying() {
     assert!(!stopped.commanded && stopped.up);
     assert_eq!(texts(&out), vec!["Companion stopping: not commanding"]);
     assert!(commands(&out).is_empty());
+    assert!(
+        shell.pending_events.iter().any(|e| matches!(e,
+            Event::Stop(StopEvent::NotCommanding { why, was, .. }) if why == "SIGINT" && !was.is_empty())),
+        "{:?}",
+        shell.pending_events
+    );
 }
 
 #[test]
@@ -241,6 +261,16 @@ fn a_refused_or_unanswered_hand_off_is_said_to_the_ground_station() {
         }
         let out = end_stop(&mut shell, &v, true, s(6.0));
         assert_eq!(texts(&out), vec![said]);
+        let outcome = if answer.is_some() {
+            StopEvent::HandOffFailed
+        } else {
+            StopEvent::HandOffUnanswered
+        };
+        assert!(
+            shell.pending_events.contains(&Event::Stop(outcome)),
+            "{:?}",
+            shell.pending_events
+        );
     }
     // Accepted: the record says so; the ground station already has the stop's words.
     let (mut shell, mut v) = arm_sent();
