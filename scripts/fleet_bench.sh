@@ -2,7 +2,7 @@
 # Benchmark of companion-fleet (docs/performance.md, "Fleet"; outside the test command):
 # N generated runs (fly-like decision logs with the power observations calibrate reads, 200
 # records each) ingested, reported and calibrated, and `companion calibrate RUN...` on the same
-# runs, side by side; wall time and peak memory from /usr/bin/time -v. Run at 100 and 1000 runs
+# runs, side by side; wall time and peak memory (maximum resident set size) from /usr/bin/time -v. Run at 100 and 1000 runs
 # to see the memory stay flat:
 #   scripts/fleet_bench.sh 100 && scripts/fleet_bench.sh 1000
 # PROFILE=release (default) builds the binaries with --release; PROFILE=debug uses target/debug;
@@ -55,10 +55,27 @@ for k in range(n):
             f.write(json.dumps(rec) + "\n")
 PY
 DS="$WORK/fleet"
-t() { /usr/bin/time -f "%e s wall, %M KiB peak" "$@" >"$WORK/out" 2>"$WORK/time" || { echo "FAILED: $*" >&2; tail -5 "$WORK/out" "$WORK/time" >&2; exit 1; }; tail -1 "$WORK/time"; }
-echo "runs: $N ($PROFILE build)"
-echo "  companion-fleet ingest:    $(t "$BIN/companion-fleet" ingest "$WORK/runs" --into "$DS")"
-echo "  companion-fleet report:    $(t "$BIN/companion-fleet" report "$DS" --json)"
-echo "  companion-fleet calibrate: $(t "$BIN/companion-fleet" calibrate "$DS" --json)"
+TOTAL=0
+# One command under /usr/bin/time -v: its wall time (s) and peak RSS (MB); the fleet's three
+# commands' times add up to the total the 60 s target is about.
+t() {
+  /usr/bin/time -v "$@" >"$WORK/out" 2>"$WORK/time" || { echo "FAILED: $*" >&2; tail -5 "$WORK/out" "$WORK/time" >&2; exit 1; }
+  python3 - "$WORK/time" <<'PY'
+import re, sys
+text = open(sys.argv[1]).read()
+wall = re.search(r"Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): (\S+)", text).group(1)
+secs = 0.0
+for part in wall.split(":"):
+    secs = secs * 60 + float(part)
+rss = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", text).group(1))
+print(f"{secs:.1f} s wall, {rss / 1024:.0f} MB peak RSS")
+PY
+}
+secs() { sed 's/ s wall.*//' <<<"$1"; }
+echo "runs: $N ($PROFILE build; $(nproc) cores; load average at start: $(cut -d' ' -f1-3 /proc/loadavg))"
+r=$(t "$BIN/companion-fleet" ingest "$WORK/runs" --into "$DS"); echo "  companion-fleet ingest:     $r"; TOTAL=$(python3 -c "print($TOTAL + $(secs "$r"))")
+r=$(t "$BIN/companion-fleet" report "$DS" --json); echo "  companion-fleet report:     $r"; TOTAL=$(python3 -c "print($TOTAL + $(secs "$r"))")
+r=$(t "$BIN/companion-fleet" calibrate "$DS" --json); echo "  companion-fleet calibrate:  $r"; TOTAL=$(python3 -c "print($TOTAL + $(secs "$r"))")
+echo "  companion-fleet total:      $TOTAL s (ingest + report + calibrate)"
 echo "  companion calibrate RUN...: $(t "$BIN/companion" calibrate "$WORK/runs")"
-echo "  dataset size: $(du -sh "$DS" | cut -f1)"
+echo "  dataset size: $(du -sh "$DS" | cut -f1); load average at end: $(cut -d' ' -f1-3 /proc/loadavg)"

@@ -64,8 +64,16 @@ for r in spark.sql(q["durations"]).collect():
     nd += 1
 if nd != len(stats["durations"]):
     bad.append(f"durations: {nd} activities from spark, {len(stats['durations'])} from datafusion")
+# The BN rows' counts (a GROUP BY over bn_trials).
+spark.read.parquet(f"{ds}/*/*/*/bn_trials.parquet").createOrReplaceTempView("bn_trials")
+want_bn = {(r["node"], r["parents"], r["success_state"]): (r["successes"], r["trials"]) for r in stats["bn_rows"]}
+got_bn = {(r["node"], r["parents"], r["success_state"]): (r["successes"], r["trials"])
+          for r in spark.sql(q["bn_rows"]).collect()}
+if got_bn != want_bn:
+    bad.append(f"bn_rows: spark {sorted(got_bn.items())[:5]}... datafusion {sorted(want_bn.items())[:5]}...")
 print(f"spark {spark.version}: {int(t['n_air'])} airborne and {int(t['n_ground'])} ground samples, "
-      f"{len(bins)} speed bins, normal equations at {n} candidate v0, durations of {nd} activities")
+      f"{len(bins)} speed bins, normal equations at {n} candidate v0, durations of {nd} activities, "
+      f"{len(got_bn)} BN rows")
 print(f"  sum_y {t['sum_y']!r} (datafusion {df['sum_y']!r}); yy {t['yy']!r} (datafusion {df['yy']!r})")
 if bad:
     print("DIFFER:\n  " + "\n  ".join(bad[:20]))

@@ -25,7 +25,7 @@ from standin.config import StandinConfig
 from standin_autopilot import StandinAutopilot
 
 ROOT = Path(__file__).resolve().parent.parent
-TABLES = ["runs", "records", "proposals", "events", "commands", "telemetry", "samples", "legs"]
+TABLES = ["runs", "records", "proposals", "events", "commands", "telemetry", "samples", "legs", "bn_trials"]
 SCENARIOS = ["complete-1", "energy-drift", "vibrations", "nominal", "lidar-failure"]
 FAILURE_WORDS = {"DENIED", "UNSUPPORTED", "TEMPORARILY_REJECTED", "NOT_READY", "TIMEOUT", "FAILED"}
 
@@ -80,15 +80,38 @@ def runs(tmp_path_factory) -> Dict[str, Any]:
 
 # The crafted run's events and command results: as record schema 1 wrote them (sentences; an old log, read
 # through the companion's migration) and as schema 2 writes them (objects tagged by kind, with their text).
-REFUSED = "operator: start refused (models): needs 162 kJ, 150 available; still waiting for the operator"
+# The gate's refusal is an `operator` event of kind `start_refused` (`by`, `why`); a free-text event shaped like
+# one (a scenario's hazard can say anything) is kind `other` and no refusal.
+REFUSED = ("operator: start refused (MAV_CMD_MISSION_START from the ground station): needs 162 kJ, 150 available; "
+           "still waiting for the operator")
+LOOKALIKE = "operator: start refused (models): not the gate's; still waiting for the operator"
 CRAFTED = {
-    1: {"refused": REFUSED, "lost": "link lost",
+    1: {"refused": REFUSED, "lookalike": LOOKALIKE, "lost": "link lost",
         "results": ["TIMEOUT (no answer)", "DENIED", "FAILED (Cancelled(\"x\"))", "ACCEPTED"]},
-    2: {"refused": {"kind": "other", "text": REFUSED}, "lost": {"kind": "lost", "text": "link lost"},
+    2: {"refused": {"kind": "operator", "operator": {"kind": "start_refused", "by": "start_command",
+                                                     "why": "needs 162 kJ, 150 available", "text": REFUSED},
+                    "text": REFUSED},
+        "lookalike": {"kind": "other", "text": LOOKALIKE}, "lost": {"kind": "lost", "text": "link lost"},
         "results": [{"kind": "TIMEOUT", "why": "no answer", "text": "TIMEOUT (no answer)"},
                     {"kind": "DENIED", "text": "DENIED"}, {"kind": "CANCELLED", "why": "x", "text": "CANCELLED (x)"},
                     {"kind": "ACCEPTED", "text": "ACCEPTED"}]},
 }
+# How a start came about (companion-core's StartBy), as a schema-1 sentence says it: the independent reading of
+# an old log's refusal (docs/decision-log.md, `operator` events).
+START_BY = {"--auto-start (no operator)": "auto_start",
+            "the pilot armed the vehicle (--start-on-arm)": "pilot_armed",
+            "MAV_CMD_MISSION_START from the ground station": "start_command",
+            "the pilot switched the armed vehicle to GUIDED": "guided_switch"}
+
+
+def refusal(e: Any, typed: bool):
+    """(by, why) of a start the operator gate refused, else None: schema 2 by the event's kind and fields,
+    schema 1 by the gate's sentence (`operator: start refused (<by>): <why>; still waiting for the operator`)."""
+    if typed:
+        op = e.get("operator") or {}
+        return (op["by"], op["why"]) if e["kind"] == "operator" and op.get("kind") == "start_refused" else None
+    m = re.fullmatch(r"operator: start refused \((.*?)\): (.*); still waiting for the operator", e)
+    return (START_BY[m.group(1)], m.group(2)) if m and m.group(1) in START_BY else None
 
 
 def write_crafted_run(d: Path, schema: int) -> None:
@@ -105,7 +128,7 @@ def write_crafted_run(d: Path, schema: int) -> None:
     for c in range(6):
         lines.append({
             "cycle": c, "time_s": 2.0 * c, "state": "base",
-            "events": [said["refused"]] if c < 2 else [],
+            "events": [said["refused"]] if c < 2 else [said["lookalike"]] if c == 2 else [],
             "link_events": [said["lost"]] if c == 3 else [],
             "commands": [{"action": "take_off", "command": "MAV_CMD_NAV_TAKEOFF", "result": r, "attempts": 1}
                          for r in (said["results"] if c == 4 else [])],
@@ -208,14 +231,10 @@ def expected(runs: Dict[str, Any], present: set) -> Dict[str, Any]:
         typed = header.get("schema", 1) >= 2   # record schema 2: events and results tagged by kind
         for r in records:
             for e in r.get("events") or []:
-                # the start refusal has no kind of its own: free text (`other`) in schema 2
-                if typed:
-                    e = e["text"] if e["kind"] == "other" else ""
-                if e.startswith("operator: start refused"):
+                refused = refusal(e, typed)
+                if refused:
                     row["refused"] += 1
-                    by = e.split("(", 1)[1].split(")", 1)[0] if "(" in e else ""
-                    why = e.split("): ", 1)[1].split("; still waiting", 1)[0] if "): " in e else ""
-                    refusals[(*key, by, why)] = refusals.get((*key, by, why), 0) + 1
+                    refusals[(*key, *refused)] = refusals.get((*key, *refused), 0) + 1
             if (((r.get("guarantee") or {}).get("power") or {}).get("drift_began")):
                 row["drift"] += 1
             if ((r.get("guarantee") or {}).get("reallocation") or {}).get("trigger") is not None:
@@ -473,9 +492,10 @@ def test_an_old_log_exports_as_the_new(runs, tmp_path):
         ("TIMEOUT", "TIMEOUT (no answer)", "no answer"), ("DENIED", "DENIED", None),
         ("CANCELLED", "CANCELLED (x)", "x"), ("ACCEPTED", "ACCEPTED", None)]
     events = tables["run1"]["events"]
-    assert [(e["source"], e["kind"], e["text"]) for e in events] == [
-        ("record", "other", REFUSED), ("record", "other", REFUSED), ("link", "lost", "link lost"),
-        ("log", "other", "link lost")]
+    refused = ("record", "operator", REFUSED, "start_refused", "start_command", "needs 162 kJ, 150 available")
+    assert [(e["source"], e["kind"], e["text"], e["operator"], e["start_by"], e["why"]) for e in events] == [
+        refused, refused, ("record", "other", LOOKALIKE, None, None, None),
+        ("link", "lost", "link lost", None, None, None), ("log", "other", "link lost", None, None, None)]
 
 
 def test_export_writes_one_runs_tables(runs, tmp_path):

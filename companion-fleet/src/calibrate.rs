@@ -251,6 +251,7 @@ pub async fn calibrate_cli(
             dir.display()
         );
     };
+    crate::report::refuse_old_runs(&ctx, dir).await?;
     let params = params.map_or_else(companion::params::default_params_dir, Path::to_path_buf);
     let shipped =
         companion::calibrate::shipped::Shipped::load(&params).context("loading params")?;
@@ -273,25 +274,63 @@ pub async fn calibrate_cli(
     let durations_sql = crate::durations::query(&ctx, &vehicle_filter(vehicle)).await?;
     let durations = crate::durations::durations(&ctx, &durations_sql).await?;
     if statistics_only {
-        println!(
-            "{}",
-            statistics_json(
-                &shipped.power,
-                fit.grid(),
-                vehicle,
-                &st,
-                (&durations_sql, &durations)
-            )
+        let mut stats = statistics_json(
+            &shipped.power,
+            fit.grid(),
+            vehicle,
+            &st,
+            (&durations_sql, &durations),
         );
+        // The BN rows' counts: the fifth query and what it gave.
+        let bn_sql = crate::bn_rows::counts_sql(&vehicle_filter(vehicle));
+        stats["bn_rows"] = crate::bn_rows::counts_json(&ctx, &bn_sql).await?;
+        stats["queries"]["bn_rows"] = bn_sql.into();
+        println!("{stats}");
         return Ok(());
     }
-    let fit = fit.with_statistics(st).map_err(|e| anyhow::anyhow!(e))?;
-    let result = fit.solve().map_err(|e| anyhow::anyhow!("calibrate: {e}"))?;
-    let m = result.fitted;
+    // A power fit the samples do not determine is said, as `companion calibrate` says it, and
+    // the rest is still learned; the command fails only when nothing is.
+    let power = fit
+        .with_statistics(st)
+        .and_then(|f| f.solve().map_err(|e| e.to_string()))
+        .map_err(|e| format!("calibrate: {e}"));
     // The legs' fallback commanded speed, as `companion calibrate` takes it.
     let fallback = cruise_mps.or(shipped.cruise_mps);
     let legs = crate::legs::legs_json(&ctx, fallback, &vehicle_filter(vehicle)).await?;
-    let values = serde_json::json!({
+    let bn_rows = crate::bn_rows::bn_rows_json(&ctx, &shipped, &vehicle_filter(vehicle)).await?;
+    let learned_else = durations.stats.is_empty()
+        && legs["legs"].get("error").is_some()
+        && bn_rows.as_array().is_none_or(Vec::is_empty);
+    let (result, mut values) = match power {
+        Ok(r) => {
+            let v = power_json(&r);
+            (Some(r), v)
+        }
+        Err(e) if learned_else || out.is_some() => anyhow::bail!("{e}"),
+        Err(e) => (None, serde_json::json!({ "power_error": e })),
+    };
+    values["durations"] = crate::durations::to_json(&durations);
+    for part in ["legs", "climb", "descent"] {
+        values[part] = legs[part].clone();
+    }
+    values["bn_rows"] = bn_rows;
+    if json {
+        println!("{values}");
+    } else {
+        print_text(result.as_ref(), &values, &durations);
+    }
+    if let (Some(out), Some(result)) = (out, &result) {
+        let ids = run_ids(&ctx, vehicle).await?;
+        crate::overlay::write_power_overlay(&shipped, result, &ids, out)?;
+        println!("overlay written: {}", out.display());
+    }
+    Ok(())
+}
+
+/// The fitted power model, at full precision (`--json`).
+fn power_json(result: &companion::calibrate::power_fit::FitResult) -> serde_json::Value {
+    let m = result.fitted;
+    serde_json::json!({
         "samples": result.samples,
         "ground_samples": result.ground_samples,
         "base_w": m.base_w,
@@ -303,63 +342,71 @@ pub async fn calibrate_cli(
         "shipped_rms_w": result.shipped_rms_w,
         "mean_w": result.mean_w,
         "v0_lower_bound_only": result.v0_lower_bound_only,
-        "durations": crate::durations::to_json(&durations),
-        "legs": legs["legs"],
-        "climb": legs["climb"],
-        "descent": legs["descent"],
-    });
-    if json {
-        println!("{values}");
-    } else {
-        println!(
-            "power model from {} samples ({} on the ground), speeds {:.1}..{:.1} m/s:\n  \
-             base.power_w {}\n  propulsion.blade_profile_w {}\n  propulsion.induced_hover_w {}\n  \
-             propulsion.induced_velocity_mps {}\n  propulsion.drag_area_m2 {}\n  \
-             rms {:.3} W (shipped {:.3} W)",
-            result.samples,
-            result.ground_samples,
-            result.v_min,
-            result.v_max,
-            m.base_w,
-            m.blade_profile_w,
-            m.induced_hover_w,
-            m.induced_velocity_mps,
-            m.drag_area_m2,
-            result.rms_w,
-            result.shipped_rms_w
-        );
-        println!(
-            "  legs {}\n  climb {}\n  descent {}",
-            legs["legs"], legs["climb"], legs["descent"]
-        );
-        for (a, s) in &durations.stats {
+    })
+}
+
+/// The fit for people: the power model (or why there is none), legs, BN rows, durations.
+fn print_text(
+    result: Option<&companion::calibrate::power_fit::FitResult>,
+    values: &serde_json::Value,
+    durations: &crate::durations::FleetDurations,
+) {
+    match result {
+        Some(result) => {
+            let m = result.fitted;
             println!(
-                "  {a}: {:.1} s (sd {:.1} s, {} runs)",
-                s.mean(),
-                s.sd(),
-                s.n
+                "power model from {} samples ({} on the ground), speeds {:.1}..{:.1} m/s:\n  \
+                 base.power_w {}\n  propulsion.blade_profile_w {}\n  propulsion.induced_hover_w {}\n  \
+                 propulsion.induced_velocity_mps {}\n  propulsion.drag_area_m2 {}\n  \
+                 rms {:.3} W (shipped {:.3} W)",
+                result.samples,
+                result.ground_samples,
+                result.v_min,
+                result.v_max,
+                m.base_w,
+                m.blade_profile_w,
+                m.induced_hover_w,
+                m.induced_velocity_mps,
+                m.drag_area_m2,
+                result.rms_w,
+                result.shipped_rms_w
             );
         }
+        None => println!(
+            "power model: {}",
+            values["power_error"].as_str().unwrap_or_default()
+        ),
     }
-    if let Some(out) = out {
-        let ids = rows(
-            &ctx,
-            &format!(
-                "SELECT run_id FROM runs WHERE true{} ORDER BY run_id",
-                vehicle_filter(vehicle)
-            ),
-        )
-        .await?;
-        let ids: Vec<String> = (ids.iter())
-            .flat_map(|b| {
-                let a = b.column(0).as_string::<i32>();
-                (0..a.len())
-                    .map(|i| a.value(i).to_string())
-                    .collect::<Vec<_>>()
-            })
-            .collect();
-        crate::overlay::write_power_overlay(&shipped, &result, &ids, out)?;
-        println!("overlay written: {}", out.display());
+    println!(
+        "  legs {}\n  climb {}\n  descent {}\n  BN rows {}",
+        values["legs"], values["climb"], values["descent"], values["bn_rows"]
+    );
+    for (a, s) in &durations.stats {
+        println!(
+            "  {a}: {:.1} s (sd {:.1} s, {} runs)",
+            s.mean(),
+            s.sd(),
+            s.n
+        );
     }
-    Ok(())
+}
+
+/// The ids of the runs calibrated (the overlay's `[calibration]`).
+async fn run_ids(ctx: &SessionContext, vehicle: Option<&str>) -> anyhow::Result<Vec<String>> {
+    let ids = rows(
+        ctx,
+        &format!(
+            "SELECT run_id FROM runs WHERE true{} ORDER BY run_id",
+            vehicle_filter(vehicle)
+        ),
+    )
+    .await?;
+    Ok((ids.iter())
+        .flat_map(|b| {
+            let a = b.column(0).as_string::<i32>();
+            (0..a.len())
+                .map(|i| a.value(i).to_string())
+                .collect::<Vec<_>>()
+        })
+        .collect())
 }

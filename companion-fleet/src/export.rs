@@ -16,10 +16,13 @@ use std::path::Path;
 /// The fleet dataset's schema version (docs/fleet.md): bumped on an incompatible change.
 /// 2: `events` and `commands` read the decision log's typed events and outcomes (record schema
 /// 2): `kind` and `text` columns replace the sentence columns `event` and `result`.
-pub const FLEET_SCHEMA: i64 = 2;
+/// 3: `events` holds the operator gate's events' fields (`operator`, `start_by`, `why`), which
+/// the report counts refused starts by; a schema-2 dataset lacks them (its refusals would read
+/// as none), so it is re-ingested.
+pub const FLEET_SCHEMA: i64 = 3;
 
 /// The tables of a run, in the order they are written.
-pub const TABLES: [&str; 8] = [
+pub const TABLES: [&str; 9] = [
     "runs",
     "records",
     "proposals",
@@ -28,6 +31,7 @@ pub const TABLES: [&str; 8] = [
     "telemetry",
     "samples",
     "legs",
+    "bn_trials",
 ];
 
 /// Who a run is: its content id, vehicle, date and route.
@@ -345,17 +349,26 @@ fn key_cells(key: &RunKey, cycle: Cell, time_s: Cell) -> Vec<Cell> {
 }
 
 /// An `events` row after its key and source: kind, text, the nested link event's kind (a `link`
-/// event), the command's action, the command's or stream's outcome kind, the other fields.
-fn event_cells(e: &Value) -> [Cell; 6] {
+/// event), the nested operator event's kind and how its start came about (an `operator` event),
+/// the reason (the event's `why`, else its nested operator or link event's), the command's
+/// action, the command's or stream's outcome kind, the other fields.
+fn event_cells(e: &Value) -> [Cell; 9] {
     let (kind, text, fields) = typed(e);
     let outcome = match &e["outcome"] {
         Value::Null => Cell::Null,
         o => s(&o["kind"]),
     };
+    let why = [&e["why"], &e["operator"]["why"], &e["link"]["why"]]
+        .into_iter()
+        .find(|w| !w.is_null())
+        .unwrap_or(&Value::Null);
     [
         kind,
         text,
         s(&e["link"]["kind"]),
+        s(&e["operator"]["kind"]),
+        s(&e["operator"]["by"]),
+        s(why),
         s(&e["action"]),
         outcome,
         fields,
@@ -394,6 +407,9 @@ impl Side {
                     ("kind", Kind::Str),
                     ("text", Kind::Str),
                     ("link", Kind::Str),
+                    ("operator", Kind::Str),
+                    ("start_by", Kind::Str),
+                    ("why", Kind::Str),
                     ("action", Kind::Str),
                     ("outcome", Kind::Str),
                     ("fields", Kind::Str),
@@ -496,6 +512,7 @@ pub fn export_run(dir: &Path, out: &Path, key: &RunKey) -> anyhow::Result<LogCou
     }
     let mut records = TableWriter::create(&out.join("records.parquet"), &record_columns(&dynamic))?;
     let mut side = Side::create(out)?;
+    let mut trials = crate::bn_rows::TrialWriter::create(&out.join("bn_trials.parquet"))?;
     let mut counts = LogCounts::default();
     let mut header = Value::Null;
     let stream = stream_log(dir).map_err(|e| anyhow::anyhow!("{shown}: {e}"))?;
@@ -506,6 +523,7 @@ pub fn export_run(dir: &Path, out: &Path, key: &RunKey) -> anyhow::Result<LogCou
                 let v = serde_json::to_value(&*r)?;
                 records.push(record_row(key, &dynamic, &v, counts.records))?;
                 side.add(key, &v)?;
+                trials.add(key, &r, counts.records)?;
                 counts.records += 1;
             }
             LogItem::Event(e) => {
@@ -516,7 +534,10 @@ pub fn export_run(dir: &Path, out: &Path, key: &RunKey) -> anyhow::Result<LogCou
                 counts.log_events += 1;
             }
             LogItem::Loss(n, _) => counts.dropped += n,
-            LogItem::Corrupted(_) => counts.corrupted += 1,
+            LogItem::Corrupted(c) => {
+                counts.corrupted += 1;
+                trials.fail(format!("line {}: {}", c.line, c.reason));
+            }
             LogItem::Truncated(_) => counts.truncated = true,
             LogItem::NewerSchema(v) => counts.newer_schema = Some(v),
             LogItem::End | LogItem::Note(_) => {}
@@ -529,7 +550,15 @@ pub fn export_run(dir: &Path, out: &Path, key: &RunKey) -> anyhow::Result<LogCou
     let frames = crate::telemetry::export_tlog(dir, &out.join("telemetry.parquet"), key)?;
     let samples = crate::samples::export_samples(dir, &out.join("samples.parquet"), key)?;
     let legs = crate::legs::export_legs(dir, &out.join("legs.parquet"), key)?;
-    write_runs_row(out, key, &header, &counts, (frames, samples, legs), dir)?;
+    let trials = trials.finish()?;
+    write_runs_row(
+        out,
+        key,
+        &header,
+        &counts,
+        (frames, samples, legs, trials),
+        dir,
+    )?;
     Ok(counts)
 }
 
@@ -538,7 +567,7 @@ fn write_runs_row(
     key: &RunKey,
     h: &Value,
     c: &LogCounts,
-    (tlog_frames, samples, legs): (u64, Result<u64, String>, u64),
+    (tlog_frames, samples, legs, trials): (u64, Result<u64, String>, u64, Result<u64, String>),
     dir: &Path,
 ) -> anyhow::Result<()> {
     let mut w = TableWriter::create(
@@ -569,6 +598,8 @@ fn write_runs_row(
             ("samples", Kind::I64),
             ("samples_error", Kind::Str),
             ("legs", Kind::I64),
+            ("bn_trials", Kind::I64),
+            ("trials_error", Kind::Str),
             ("source", Kind::Str),
         ]),
     )?;
@@ -603,6 +634,8 @@ fn write_runs_row(
         samples.as_ref().map_or(Cell::Null, |n| (*n).into()),
         samples.err().into(),
         legs.into(),
+        trials.as_ref().map_or(Cell::Null, |n| (*n).into()),
+        trials.err().into(),
         source.into(),
     ])?;
     w.finish().context("runs.parquet")?;

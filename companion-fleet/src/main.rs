@@ -5,6 +5,7 @@
 // A binary: `pub` marks what a module offers the others.
 #![allow(unreachable_pub)]
 
+mod bn_rows;
 mod calibrate;
 mod dataset;
 mod durations;

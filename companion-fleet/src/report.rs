@@ -11,11 +11,11 @@ use std::path::Path;
 pub const FAILURE_SQL: &str = "c.kind IN ('DENIED', 'UNSUPPORTED', 'TEMPORARILY_REJECTED', \
      'NOT_READY', 'TIMEOUT', 'FAILED')";
 
-/// The operator gate's refusal of a start. The decision log has no kind of its own for it (the
-/// gate writes it as free text, kind `other`: docs/decision-log.md), so it is told by its
-/// sentence, `operator: start refused (BY): WHY; still waiting for the operator`.
-const REFUSED_SQL: &str = "e.source = 'record' AND e.kind = 'other' \
-     AND e.text LIKE 'operator: start refused%'";
+/// The operator gate's refusal of a start: its typed event (record schema 2, an `operator` event
+/// of kind `start_refused`; a schema-1 log's sentence is read as one by the log reader's
+/// migration), never its text.
+const REFUSED_SQL: &str = "e.source = 'record' AND e.kind = 'operator' \
+     AND e.operator = 'start_refused'";
 
 /// Per vehicle and route: flights, hours, refusals, drift, failures, link losses, versions and
 /// planned against flown energy and duration.
@@ -64,8 +64,7 @@ fn summary_sql() -> String {
 fn refusals_sql() -> String {
     format!(
         "SELECT r.vehicle, r.route, \
-           split_part(split_part(e.text, '(', 2), ')', 1) AS refused_by, \
-           split_part(split_part(e.text, '): ', 2), '; still waiting', 1) AS reason, \
+           e.start_by AS refused_by, e.why AS reason, \
            COUNT(*) AS starts \
          FROM events e JOIN runs r ON e.run_id = r.run_id WHERE {REFUSED_SQL} \
          GROUP BY 1, 2, 3, 4 ORDER BY 1, 2, 3, 4"
@@ -127,6 +126,30 @@ fn html_table(rows: &serde_json::Value) -> String {
     out + "</table>\n"
 }
 
+/// A run ingested by an older fleet schema lacks columns the report counts by (fleet schema 3:
+/// the operator events' fields, the BN trials): its figures would read as zero, so the report
+/// and calibrate refuse it.
+pub async fn refuse_old_runs(
+    ctx: &datafusion::prelude::SessionContext,
+    dir: &Path,
+) -> anyhow::Result<()> {
+    let sql = format!(
+        "SELECT source, fleet_schema FROM runs WHERE fleet_schema IS NULL OR fleet_schema <> {} \
+         ORDER BY source LIMIT 3",
+        crate::export::FLEET_SCHEMA
+    );
+    let old = to_json(&ctx.sql(&sql).await?.collect().await?)?;
+    if old.as_array().is_some_and(|rows| !rows.is_empty()) {
+        anyhow::bail!(
+            "{}: runs ingested by another fleet schema than {} ({old}): re-ingest them into a new \
+             dataset (docs/fleet.md, Schema)",
+            dir.display(),
+            crate::export::FLEET_SCHEMA
+        );
+    }
+    Ok(())
+}
+
 /// `report DIR [--html FILE] [--json]`.
 pub async fn report_cli(dir: &Path, html: Option<&Path>, json: bool) -> anyhow::Result<()> {
     let Some(ctx) = context(dir).await? else {
@@ -135,6 +158,7 @@ pub async fn report_cli(dir: &Path, html: Option<&Path>, json: bool) -> anyhow::
             dir.display()
         );
     };
+    refuse_old_runs(&ctx, dir).await?;
     let mut out = serde_json::Map::new();
     let mut text = String::new();
     for (name, sql) in sections() {

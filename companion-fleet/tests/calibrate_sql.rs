@@ -2,13 +2,14 @@
 //! model as `companion calibrate RUN...` (its library entry, the code the CLI runs) on the same
 //! runs, within 1e-9 relative; `--vehicle` keeps one vehicle's runs; the overlay loads.
 
+mod support;
+
 use companion::calibrate::{calibrate, shipped::Shipped};
 use companion::decision_log::Header;
 use companion_core::record::{DecisionRecord, GuaranteeRecord};
 use std::io::Write;
 use std::path::{Path, PathBuf};
-
-const FLEET: &str = env!("CARGO_BIN_EXE_companion-fleet");
+use support::{FLEET, close, fleet};
 
 /// A vehicle's power (Zeng et al. eq. 12 plus base), written out here apart from the code.
 #[derive(Clone, Copy)]
@@ -116,28 +117,10 @@ const SPEEDS: [(f64, u32); 6] = [
     (6.0, 40),
 ];
 
-fn fleet(args: &[&str]) -> String {
-    let o = std::process::Command::new(FLEET)
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "companion-fleet {args:?}\n{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8(o.stdout).unwrap()
-}
-
 /// What `companion calibrate RUN...` learns from `runs`.
 fn companion_fit(runs: Vec<PathBuf>) -> companion::calibrate::Calibration {
     let shipped = Shipped::load(&companion::params::default_params_dir()).unwrap();
     calibrate(&shipped, runs, None, false, false, None).unwrap()
-}
-
-fn close(got: f64, want: f64) -> bool {
-    (got - want).abs() <= 1e-9 * want.abs().max(1e-12)
 }
 
 fn assert_close(fleet: &serde_json::Value, cal: &companion::calibrate::Calibration) {

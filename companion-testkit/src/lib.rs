@@ -4,6 +4,8 @@
 //! # Layout
 //! - `fuzzing`: the fuzz targets' bodies (MAVLink ingest, params loading), shared with the
 //!   corpus replay test.
+//! - `leg_tlog`: a generated flight.tlog of a vehicle of known legs, climb and descent (the
+//!   calibrate leg tests, the fleet's).
 //! - `scripted`: a rule-based decider for the fly loop's link tests.
 //! - `sim_link`: a simulated autopilot's byte stream and a minimal responder (ingest bench, soak).
 //! - `streams`: observation streams for measuring the decision cycle.
@@ -14,6 +16,7 @@
 #![allow(missing_docs)] // test support, never published
 
 pub mod fuzzing;
+pub mod leg_tlog;
 pub mod route_gen;
 pub mod scripted;
 pub mod sim_link;
