@@ -49,12 +49,6 @@ def armed_span(records: List[Dict[str, Any]]) -> Flight:
     return Flight(vt[arm][0], vt[disarm][0], [])
 
 
-# Flown once (2026-11-28, PX4 main 02e73e3b SIH, 244 s): take-off and every leg piece within a few seconds, the search
-# 29 s of 30 planned, but the end is not the plan's: the uploaded mission's NAV_LOITER_TIME at wpf ran out and PX4 flew
-# the mission's RTL end home before the shell's LAND, so `land` took 73 s against 24 s planned (a return home the plan
-# of a route TOML does not hold) and the guarantee re-allocated in flight; mission 227 s against 176 s planned.
-@pytest.mark.skip(reason="not passing yet: on PX4 the mission's RTL end races the shell's LAND after the search "
-                         "(land 73 s flown, 24 s planned); see the comment above")
 def test_px4_default_route_planned_duration_is_the_flight(px4_vehicle, tmp_path):
     exe = companion_bin()
     v = px4_vehicle({"SIM_BAT_DRAIN": 1800})          # the px4-sih profile's drain
@@ -86,6 +80,11 @@ def test_px4_default_route_planned_duration_is_the_flight(px4_vehicle, tmp_path)
     assert plan["zones_file"].endswith(zones.name), plan
     derived = [a["name"] for a in plan["derived"]]
     armed = [r for r in records if (r.get("vehicle") or {}).get("armed")]
+    # The mission's end is the shell's (LAND at wpf), never taken for a pilot's takeover (before: PX4 flew the uploaded
+    # RTL item as its RTL mode and the gate said "pilot has control (RTL)").
+    taken = [(r["cycle"], r["vehicle"]["operator"]) for r in armed
+             if (r.get("vehicle") or {}).get("operator") not in (None, "started")]
+    assert not taken, f"the gate left `started` in flight: {taken[:5]}"
     realloc = [r["cycle"] for r in armed if (r.get("guarantee") or {}).get("reallocation")]
     assert not realloc, f"re-allocated in flight at cycles {realloc}: the cells are no longer the pre-flight plan"
     flight = armed_span(records)
