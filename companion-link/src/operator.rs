@@ -164,6 +164,10 @@ pub struct VehicleView<'a> {
     pub airborne: bool,
     /// Modes the companion commanded, with the time it sent each (newest last).
     pub commanded_modes: &'a [(FlightMode, Duration)],
+    /// The mode the mission item MISSION_CURRENT names flies by itself: RTL for the mission's
+    /// own NAV_RETURN_TO_LAUNCH, LAND for its NAV_LAND ([`mission_item_mode`]); None for any
+    /// other item or an unknown mission. PX4 flies those items as its RTL and LAND modes.
+    pub mission_item_mode: Option<FlightMode>,
 }
 
 impl VehicleView<'_> {
@@ -399,9 +403,29 @@ impl OperatorGate {
                 return true;
             }
         }
+        let mission_flown = latest.is_some_and(|&(m, _)| m == FlightMode::Auto);
+        // The mission's own end: PX4 flies a mission's RTL (LAND) item by switching to its RTL
+        // (LAND) mode, and names the item in MISSION_CURRENT before its HEARTBEAT shows the mode.
+        // A pilot's RTL in the middle of the mission leaves MISSION_CURRENT on a waypoint.
+        if mission_flown
+            && v.mission_item_mode
+                .is_some_and(|m| modes::is_in_mode(v.flavor, v.custom_mode, m))
+        {
+            return true;
+        }
         v.flavor == Flavor::Px4
             && !v.commanded_modes.is_empty()
             && modes::is_in_mode(v.flavor, v.custom_mode, FlightMode::Loiter)
+    }
+}
+
+/// The mode a mission item flies by itself when it is the current one: RTL for
+/// NAV_RETURN_TO_LAUNCH, LAND for NAV_LAND, None for every other command.
+pub fn mission_item_mode(command: MavCmd) -> Option<FlightMode> {
+    match command {
+        MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH => Some(FlightMode::Rtl),
+        MavCmd::MAV_CMD_NAV_LAND => Some(FlightMode::Land),
+        _ => None,
     }
 }
 

@@ -110,11 +110,16 @@ impl Route {
     /// first item, and reads a take-off item's lat/lon; so for PX4 the take-off (at home) comes first
     /// and a waypoint over home at the route altitude takes the other slot, which keeps every
     /// waypoint at the same seq on both autopilots (the mission state counts on it).
+    ///
+    /// PX4 gets the route TOML's end as the shell flies it: after the search loiter a NAV_LAND at
+    /// the last waypoint, never an RTL. PX4 flies a mission's RTL item as its RTL mode, which
+    /// races the shell's LAND when the search limit runs out and returns home where the plan
+    /// lands at wpf (docs/guarantee.md, "PX4 SIH"); an operator's own mission keeps its end.
     pub fn mission_items(&self, flavor: Flavor, home: (i32, i32)) -> Vec<MissionItem> {
-        let mut items = self.items(home);
         if flavor != Flavor::Px4 {
-            return items;
+            return self.items(home);
         }
+        let mut items = self.items_ending(home, RouteEnd::Land);
         items[0] = MissionItem::waypoint(home.0, home.1, self.altitude_m as f32);
         if self.takeoff_first && items.len() > 1 {
             items[1].x = home.0;
@@ -246,6 +251,11 @@ impl Route {
     /// mission's own end for when nobody commands: NAV_LOITER_TIME at the last waypoint for
     /// `search_time_limit_s` (when set), and NAV_RETURN_TO_LAUNCH or NAV_LAND ([`RouteEnd`]).
     pub fn items(&self, home: (i32, i32)) -> Vec<MissionItem> {
+        self.items_ending(home, self.end)
+    }
+
+    /// [`Route::items`] with the route TOML's end `end` (an operator's mission keeps its own).
+    fn items_ending(&self, home: (i32, i32), end: RouteEnd) -> Vec<MissionItem> {
         use crate::dialect::MavFrame;
         let mut items = vec![MissionItem {
             frame: MavFrame::MAV_FRAME_GLOBAL,
@@ -279,11 +289,7 @@ impl Route {
             items.push(MissionItem::waypoint(x, y, alt as f32));
         }
         let wpf = items.last().cloned();
-        items.extend(route_end::end_items(
-            self.end,
-            self.search_time_limit_s,
-            wpf,
-        ));
+        items.extend(route_end::end_items(end, self.search_time_limit_s, wpf));
         items
     }
 

@@ -316,15 +316,12 @@ fn px4_mission_has_takeoff_first_no_home_item_and_same_waypoint_seqs() {
             px4[first_wp..last],
             "waypoints at the same seq"
         );
-        // No item at 0 m AMSL (ArduPilot's home placeholder) and none at lat/lon 0, but the
-        // mission's end (RTL, which has no position).
+        // No item at 0 m AMSL (ArduPilot's home placeholder) and none at lat/lon 0; the
+        // mission's end is a LAND at wpf (on the ground: z 0), not ArduPilot's RTL.
         let (route_items, end) = px4.split_at(px4.len() - 1);
-        assert_eq!(end[0].command, MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH);
-        assert_eq!(
-            end[0].frame,
-            MavFrame::MAV_FRAME_MISSION,
-            "PX4: else UNSUPPORTED"
-        );
+        assert_eq!(ap[last].command, MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH);
+        assert_eq!(end[0].command, MavCmd::MAV_CMD_NAV_LAND);
+        assert_eq!((end[0].x, end[0].y), (px4[last - 1].x, px4[last - 1].y));
         assert!(
             route_items
                 .iter()
@@ -413,7 +410,9 @@ fn a_shell_only_entry_is_flown_in_place_of_its_action() {
 
 /// Safe without the companion: after the last waypoint the mission loiters there for the search
 /// time limit, then ends by itself in RTL or LAND as params/link.toml's hand-off says, so a dead
-/// companion never leaves the vehicle hovering at wpf. The waypoints keep their seq numbers.
+/// companion never leaves the vehicle hovering at wpf; on PX4 in a LAND at wpf whatever the
+/// hand-off (the shell's own end: PX4 flies a mission RTL as its RTL mode, which raced the
+/// shell's LAND and flew home where the plan lands at wpf). The waypoints keep their seq numbers.
 #[test]
 fn the_uploaded_mission_ends_with_the_search_loiter_then_rtl_or_land() {
     let home = (473_977_420, 85_455_940);
@@ -436,9 +435,24 @@ fn the_uploaded_mission_ends_with_the_search_loiter_then_rtl_or_land() {
             (wpf.x, wpf.y, wpf.z),
             "at wpf"
         );
-        assert_eq!(end.command, MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH);
+        match flavor {
+            Flavor::Px4 => {
+                assert_eq!(end.command, MavCmd::MAV_CMD_NAV_LAND);
+                assert_eq!(
+                    (end.x, end.y, end.z),
+                    (wpf.x, wpf.y, 0.0),
+                    "PX4 lands at wpf"
+                );
+            }
+            _ => assert_eq!(end.command, MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH),
+        }
     }
     r.end = RouteEnd::Land;
+    assert_eq!(
+        r.mission_items(Flavor::Px4, home).last(),
+        r.items(home).last(),
+        "the hand-off's LAND: the same end on both"
+    );
     let items = r.items(home);
     let (wpf, end) = (&items[wpf_seq], items.last().unwrap());
     assert_eq!(end.command, MavCmd::MAV_CMD_NAV_LAND);
@@ -481,6 +495,14 @@ fn an_operator_mission_is_uploaded_as_given_and_ended_when_it_does_not_end() {
     assert_eq!(items[1..5], [takeoff.clone(), speed, wp1, wp2.clone()]);
     assert_eq!(items[5].command, MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH);
     assert_eq!((r.first_waypoint_seq(), r.last_waypoint_seq()), (3, 4));
+    // PX4 keeps an operator mission's end (the plan derives its return), in the frame it takes.
+    let px4 = r.mission_items(Flavor::Px4, home);
+    assert_eq!(px4[5].command, MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH);
+    assert_eq!(
+        px4[5].frame,
+        MavFrame::MAV_FRAME_MISSION,
+        "PX4: else UNSUPPORTED"
+    );
     r.end = crate::actions::RouteEnd::Land;
     let items = r.items(home);
     assert_eq!(items[5].command, MavCmd::MAV_CMD_NAV_LAND);

@@ -44,6 +44,9 @@ struct Feed {
     mode_since: Duration,
     airborne: bool,
     last: Option<(Duration, u32, bool)>,
+    /// The mode the current mission item flies by itself (`VehicleView::mission_item_mode`).
+    item_mode: Option<FlightMode>,
+    flavor: Flavor,
 }
 
 impl Feed {
@@ -56,6 +59,8 @@ impl Feed {
             mode_since: Duration::ZERO,
             airborne: false,
             last: None,
+            item_mode: None,
+            flavor: Flavor::ArduPilot,
         }
     }
     fn hb(&mut self, t: f64, mode: u32, armed: bool) {
@@ -75,16 +80,17 @@ impl Feed {
     }
     fn view(&self, now: Duration) -> VehicleView<'_> {
         VehicleView {
-            flavor: Flavor::ArduPilot,
+            flavor: self.flavor,
             custom_mode: self.mode,
             mode: self
                 .last
-                .map(|(_, m, _)| ReportedMode::decode(Flavor::ArduPilot, m)),
+                .map(|(_, m, _)| ReportedMode::decode(self.flavor, m)),
             armed_heartbeats: self.armed_hb,
             armed_for: self.armed_since.map(|a| now.saturating_sub(a)),
             mode_for: now.saturating_sub(self.mode_since),
             airborne: self.airborne,
             commanded_modes: &self.cmds,
+            mission_item_mode: self.item_mode,
         }
     }
     /// Feed a heartbeat and let the gate look, at the heartbeat's time.
@@ -264,6 +270,86 @@ fn a_takeover_stops_at_once_and_is_confirmed_after_two_seconds_of_heartbeats() {
         Some(GateEvent::HandedBack(StartBy::GuidedSwitch))
     );
     assert!(g.commanding());
+}
+
+/// PX4 modes (main AUTO, sub mode).
+fn px4_auto(sub: u8) -> u32 {
+    modes::px4_custom_mode(modes::px4_main::AUTO, sub)
+}
+
+/// A PX4 vehicle flying the companion's mission (AUTO.MISSION commanded at 10 s), airborne.
+fn px4_mission_flight(g: &mut OperatorGate) -> Feed {
+    let mut f = Feed::new();
+    f.flavor = Flavor::Px4;
+    f.airborne = true;
+    f.cmds = vec![(FlightMode::Auto, s(10.0))];
+    assert_eq!(
+        f.at(g, 11.0, px4_auto(modes::px4_auto::MISSION), true),
+        None
+    );
+    f
+}
+
+/// PX4 flies a mission's RTL (LAND) item by switching to its RTL (LAND) mode, MISSION_CURRENT
+/// naming the item first (real PX4 SIH, 2026-11-28: 0.1 s before the HEARTBEAT): the mission's
+/// own end, not a pilot's takeover. (Before: "pilot has control (RTL), standing by".)
+#[test]
+fn px4_entering_rtl_or_land_at_the_missions_own_item_is_not_a_takeover() {
+    for (item, sub) in [
+        (FlightMode::Rtl, modes::px4_auto::RTL),
+        (FlightMode::Land, modes::px4_auto::LAND),
+    ] {
+        let mut g = OperatorGate::started();
+        let mut f = px4_mission_flight(&mut g);
+        f.item_mode = Some(item);
+        assert_eq!(f.at(&mut g, 60.0, px4_auto(sub), true), None, "{item:?}");
+        assert_eq!(f.at(&mut g, 63.0, px4_auto(sub), true), None, "{item:?}");
+        assert!(g.commanding(), "{item:?}: {:?}", g.control);
+    }
+}
+
+/// A pilot's RTL in the middle of the mission (MISSION_CURRENT on a waypoint) is still a
+/// takeover, and so is a mode other than the one the current item flies (a pilot's LAND while
+/// the mission's RTL item is current), or the mission's RTL after the companion left the mission
+/// (its latest command not AUTO).
+#[test]
+fn px4_rtl_or_land_not_flown_by_the_current_mission_item_is_a_takeover() {
+    let rtl = px4_auto(modes::px4_auto::RTL);
+    let land = px4_auto(modes::px4_auto::LAND);
+    let cases: [(Option<FlightMode>, u32); 3] = [
+        (None, rtl),
+        (Some(FlightMode::Rtl), land),
+        (Some(FlightMode::Land), rtl),
+    ];
+    for (item, reported) in cases {
+        let mut g = OperatorGate::started();
+        let mut f = px4_mission_flight(&mut g);
+        f.item_mode = item;
+        let suspected = f.at(&mut g, 60.0, reported, true);
+        assert!(
+            matches!(&suspected, Some(GateEvent::TakeoverSuspected(_))),
+            "{item:?} {reported}: {suspected:?}"
+        );
+        assert_eq!(f.at(&mut g, 61.0, reported, true), None);
+        assert!(
+            matches!(
+                f.at(&mut g, 62.0, reported, true),
+                Some(GateEvent::TakenOver(_))
+            ),
+            "{item:?} {reported}"
+        );
+        assert!(!g.commanding());
+    }
+    // The companion's last command was not the mission (GUIDED-like position hold): the mission's
+    // RTL item being current does not make an RTL the companion's.
+    let mut g = OperatorGate::started();
+    let mut f = px4_mission_flight(&mut g);
+    f.cmds.push((FlightMode::PosHold, s(40.0)));
+    f.item_mode = Some(FlightMode::Rtl);
+    assert!(matches!(
+        f.at(&mut g, 60.0, rtl, true),
+        Some(GateEvent::TakeoverSuspected(_))
+    ));
 }
 
 #[test]

@@ -308,6 +308,25 @@ impl Vehicle {
     pub fn route(&self) -> Option<&Route> {
         self.route.as_ref()
     }
+    /// The mode the current mission item (MISSION_CURRENT) flies by itself, when the autopilot
+    /// reports that mode now: RTL for the flown mission's own NAV_RETURN_TO_LAUNCH, LAND for its
+    /// NAV_LAND ([`crate::operator::mission_item_mode`]). The mission is the autopilot's (`fly
+    /// --mission autopilot`) or the route uploaded. None otherwise or unknown.
+    pub fn mission_item_mode(&self) -> Option<FlightMode> {
+        let t = &self.telemetry;
+        let (seq, custom) = (usize::from(t.mission_seq?), t.custom_mode);
+        let reports = |m| modes::is_in_mode(self.flavor, custom, m);
+        if !reports(FlightMode::Rtl) && !reports(FlightMode::Land) {
+            return None; // only those two: no mission items built every loop turn
+        }
+        let command = if self.flies_autopilot_mission() {
+            self.autopilot_mission()?.get(seq)?.command
+        } else {
+            let items = self.route.as_ref()?.mission_items(self.flavor, (0, 0));
+            items.get(seq)?.command
+        };
+        crate::operator::mission_item_mode(command)
+    }
     /// Whether the autopilot answers its own home at mission seq 0 (ArduPilot) rather than
     /// storing it like any other item (PX4): set when the autopilot is chosen.
     pub fn home_at_seq0(&self) -> bool {

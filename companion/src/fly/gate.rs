@@ -272,6 +272,7 @@ pub fn observe(
         mode_for: vehicle.mode_for(now),
         airborne: shell.mission.flown(),
         commanded_modes: vehicle.commanded_modes(),
+        mission_item_mode: vehicle.mission_item_mode(),
     };
     let mut changed = false;
     match shell.operator.observe(now, &view) {
