@@ -10,6 +10,7 @@
 
 use crate::evidence::ObservationMap;
 use crate::fmea::{CompiledHm, NodeInfo, Publish};
+use crate::named_slots::{NamedSlots, SortedNames};
 use crate::observations::Observations;
 use crate::spec::SpecError;
 use bayes_net::{BnError, Engine, Evidence, NodeId};
@@ -101,8 +102,8 @@ pub struct HealthModel {
     /// manager holding its node, resolved at load ([`HealthModel::evaluate_states_into`]).
     observation_hits: Vec<Vec<Vec<(usize, NodeId, usize)>>>,
     /// Every published probability's name, sorted (the order of the published map's keys); a
-    /// slot is an index into it.
-    slot_names: Vec<String>,
+    /// slot is an index into it. Shared by every record's probabilities.
+    slot_names: SortedNames,
     /// Per manager, per entry of its `published`: its slot.
     publish_slots: Vec<Vec<usize>>,
 }
@@ -508,7 +509,7 @@ impl HealthModel {
             activations: Vec::new(),
             scratch: Scratch::default(),
             observation_hits,
-            slot_names,
+            slot_names: slot_names.into(),
             publish_slots,
         })
     }
@@ -540,8 +541,14 @@ impl HealthModel {
 
     /// The published probabilities' names, sorted: the keys of the map the cycle fills, in order
     /// (a slot is an index into it).
-    pub fn slot_names(&self) -> &[String] {
+    pub fn slot_names(&self) -> &SortedNames {
         &self.slot_names
+    }
+
+    /// The position of the manager named `name` among the managers (resolved once, the cycle
+    /// then names it by position), if loaded.
+    pub fn manager_position(&self, name: &str) -> Option<usize> {
+        self.managers.iter().position(|m| m.name == name)
     }
 
     /// The manager named `name`, if loaded.
@@ -630,7 +637,7 @@ impl HealthModel {
     pub fn evaluate_states_into(
         &mut self,
         states: &crate::evidence::EvidenceStates,
-        out: &mut BTreeMap<String, f64>,
+        out: &mut NamedSlots<f64>,
     ) -> Result<(), HealthError> {
         let per = &mut self.scratch.per;
         let same = (self.scratch.per_states.as_ref()).is_some_and(|s| *s == states.state);
@@ -651,7 +658,61 @@ impl HealthModel {
             }
         }
         crate::stage_hook::mark(crate::stage_hook::Stage::Evidence);
-        self.propagate_into(out, false)
+        self.propagate(false)?;
+        out.reset_over(&self.slot_names);
+        for (k, &p) in self.scratch.published.iter().enumerate() {
+            out.set(k, p);
+        }
+        Ok(())
+    }
+
+    /// As [`HealthModel::reevaluate_manager_into`], the manager at `index` under the evidence by
+    /// observation (the cycle's path: no name looked up), its published probabilities updated
+    /// in `out` by slot.
+    pub fn reevaluate_manager_states_into(
+        &mut self,
+        index: usize,
+        states: &crate::evidence::EvidenceStates,
+        out: &mut NamedSlots<f64>,
+    ) -> Result<(), HealthError> {
+        if index >= self.managers.len() {
+            return Ok(());
+        }
+        let mut ev = Evidence::new();
+        for id in self.observations.by_node() {
+            let Some(Some(s)) = states.state.get(id.index()) else {
+                continue;
+            };
+            for &(mi, node, st) in &self.observation_hits[id.index()][usize::from(*s)] {
+                if mi == index {
+                    ev.set_state(node, st);
+                }
+            }
+        }
+        self.requery_manager(index, &ev)?;
+        let m = &self.managers[index];
+        for (j, &(_, id, s, complement)) in m.published.iter().enumerate() {
+            let p = m.engine.marginal(id)[s];
+            out.set(
+                self.publish_slots[index][j],
+                if complement { 1.0 - p } else { p },
+            );
+        }
+        Ok(())
+    }
+
+    /// The manager at `index` queried under `ev` (its imported priors as the last evaluation
+    /// left them); its marginals then no longer match the evidence the next cycle compares.
+    fn requery_manager(&mut self, index: usize, ev: &Evidence) -> Result<(), HealthError> {
+        let m = &mut self.managers[index];
+        m.engine.query(ev).map_err(|error| HealthError::Inference {
+            manager: m.name.clone(),
+            error,
+        })?;
+        if let Some(f) = self.scratch.fresh.get_mut(index) {
+            *f = false;
+        }
+        Ok(())
     }
 
     /// Evaluate one manager again under `evidence` (its imported priors as the last evaluation
@@ -675,16 +736,7 @@ impl HealthModel {
                 ev.set_state(id, state_of(net, id, node, state)?);
             }
         }
-        m.engine
-            .query(&ev)
-            .map_err(|error| HealthError::Inference {
-                manager: m.name.clone(),
-                error,
-            })?;
-        // Its marginals no longer match the evidence the next cycle compares against.
-        if let Some(f) = self.scratch.fresh.get_mut(i) {
-            *f = false;
-        }
+        self.requery_manager(i, &ev)?;
         let m = &self.managers[i];
         for &(k, id, s, complement) in &m.published {
             let p = m.engine.marginal(id)[s];
@@ -737,16 +789,14 @@ impl HealthModel {
             }
         }
         crate::stage_hook::mark(crate::stage_hook::Stage::Evidence);
-        self.propagate_into(out, all)
+        self.propagate(all)?;
+        write_published(&self.slot_names, &self.scratch.published, out);
+        Ok(())
     }
 
     /// The managers under the evidence in `scratch.per`: imports, queries (or their memo),
-    /// published probabilities into `out`, carried beliefs advanced.
-    fn propagate_into(
-        &mut self,
-        out: &mut BTreeMap<String, f64>,
-        all: bool,
-    ) -> Result<(), HealthError> {
+    /// published probabilities into `scratch.published` by slot, carried beliefs advanced.
+    fn propagate(&mut self, all: bool) -> Result<(), HealthError> {
         let per = &self.scratch.per;
         let n = self.managers.len();
         let (last, fresh, full) = (
@@ -803,7 +853,6 @@ impl HealthModel {
             }
             crate::stage_hook::mark(crate::stage_hook::Stage::HealthManager(&m.name));
         }
-        write_published(&self.slot_names, &self.scratch.published, out);
         for (i, m) in self.managers.iter_mut().enumerate() {
             for &(from, to) in &m.carry {
                 let b = &mut self.scratch.belief;
