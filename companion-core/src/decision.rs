@@ -195,9 +195,9 @@ impl Core {
         let at = (&self.read_slots, &self.readings);
         self.platform.update(at);
         let extra = self.platform.room_evidence(model, at);
-        self.health_mdp.evidence_into(&self.readings, extra, rec);
+        self.health_mdp.record_evidence(&self.readings, extra, rec);
         mark(Stage::Evidence);
-        self.health_mdp.evaluate(rec);
+        self.health_mdp.write_probabilities(rec);
         self.guarantee.cap_probabilities(model, rec);
 
         // decision: every MDP of the model, solved at its projected state

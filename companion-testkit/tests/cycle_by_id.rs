@@ -207,7 +207,8 @@ fn no_string_keyed_map_is_built_inside_the_cycle() {
     let seen = reached(&all);
     // The cycle reaches its stages: a call graph that stopped at step_into would pass anything.
     for stage in [
-        "evidence_into",
+        "record_evidence",
+        "write_probabilities",
         "decide_slots",
         "arbitrate",
         "resolve_conflict",

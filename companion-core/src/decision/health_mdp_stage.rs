@@ -112,7 +112,7 @@ impl HealthMdpStage {
 
     /// The cycle's evidence into the record: the snapshot's values and the core's own (`extra`:
     /// the platform's room, the fit checks) by observation, and the nodes left without evidence.
-    pub(super) fn evidence_into(
+    pub(super) fn record_evidence(
         &mut self,
         readings: &Readings,
         extra: &[(ObservationId, f64)],
@@ -154,7 +154,7 @@ impl HealthMdpStage {
 
     /// The health managers on the evidence just written, by observation: the probabilities by
     /// slot.
-    pub(super) fn evaluate(&mut self, rec: &mut DecisionRecord) {
+    pub(super) fn write_probabilities(&mut self, rec: &mut DecisionRecord) {
         if let Err(e) = self
             .health
             .evaluate_states_into(&self.evidence_states, &mut rec.probabilities)
