@@ -195,11 +195,10 @@ impl Core {
         let at = (&self.read_slots, &self.readings);
         self.platform.update(at);
         let extra = self.platform.room_evidence(model, at);
-        self.health_mdp.evidence_into(&self.readings, extra, rec);
+        self.health_mdp.record_evidence(&self.readings, extra, rec);
         mark(Stage::Evidence);
-        self.health_mdp.evaluate(rec);
+        self.health_mdp.write_probabilities(rec);
         self.guarantee.cap_probabilities(model, rec);
-        self.health_mdp.read_probabilities(rec);
 
         // decision: every MDP of the model, solved at its projected state
         let mut sc = std::mem::take(&mut self.scratch);
@@ -306,9 +305,10 @@ impl Core {
         };
         // The room beside what was placed this cycle.
         self.platform.note_others(model, self.policy, rec);
-        let (health, at) = (&self.health_mdp.health, (&self.read_slots, &self.readings));
-        (self.platform).platform_evidence(model, health, at, &mut rec.evidence);
-        (self.health_mdp).resolve(model, self.policy, (k, &why), sc, rec)
+        let at = (&self.read_slots, &self.readings);
+        let extra = self.platform.room_evidence(model, at);
+        let at = (&self.readings, extra);
+        (self.health_mdp).resolve((model, self.policy), at, (k, &why), sc, rec)
     }
 
     /// Each application the resource policy left out becomes a conflict entry: the rule (policy

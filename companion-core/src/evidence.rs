@@ -8,6 +8,7 @@
 //! (the caller's computed values come as ids, resolved once; the snapshot is read in one ordered
 //! pass instead of one lookup per name).
 
+use crate::named_slots::{Label, NamedSlots, SortedNames};
 use crate::observations::Observations;
 use crate::spec::{SpecError, read_toml};
 use serde::Deserialize;
@@ -115,6 +116,12 @@ pub struct ObservationMap {
     by_name: Vec<ObservationId>,
     /// The ids sorted by node name: the order of the evidence map's keys.
     by_node: Vec<ObservationId>,
+    /// The nodes' names, sorted: the names the record's evidence is written over.
+    node_names: SortedNames,
+    /// Per observation id: its node's slot in `node_names`.
+    node_slot: Vec<usize>,
+    /// Per observation id: its states' names, compiled once (the record's evidence holds them).
+    labels: Vec<Vec<Label>>,
 }
 
 impl ObservationMap {
@@ -196,15 +203,26 @@ impl ObservationMap {
             .into_values()
             .map(|i| ObservationId(i as u16))
             .collect();
-        let by_node = nodes
+        let node_names: SortedNames = nodes.keys().cloned().collect::<Vec<_>>().into();
+        let by_node: Vec<ObservationId> = nodes
             .into_values()
             .map(|i| ObservationId(i as u16))
+            .collect();
+        let mut node_slot = vec![0; observations.len()];
+        for (k, id) in by_node.iter().enumerate() {
+            node_slot[id.index()] = k;
+        }
+        let labels = (observations.iter())
+            .map(|o| o.states.iter().map(|s| Label::from(s.as_str())).collect())
             .collect();
         Ok(Self {
             file: file.to_path_buf(),
             observations,
             by_name,
             by_node,
+            node_names,
+            node_slot,
+            labels,
         })
     }
 
@@ -337,11 +355,10 @@ impl ObservationMap {
         values: &[Option<f64>],
         extra: &[(ObservationId, f64)],
         states: &mut EvidenceStates,
-        out: &mut BTreeMap<String, String>,
+        out: &mut NamedSlots<Label>,
     ) {
         let st = &mut states.state;
         st.clear();
-        let mut n = 0;
         for (k, o) in self.observations.iter().enumerate() {
             let id = ObservationId(k as u16);
             let value = extra
@@ -350,10 +367,20 @@ impl ObservationMap {
                 .map(|&(_, v)| v)
                 .or(values.get(k).copied().flatten());
             let s = value.and_then(|v| o.state_index(v)).map(|i| i as u16);
-            n += usize::from(s.is_some());
             st.push(s);
         }
-        self.write_states(st, n, out);
+        self.write_evidence(st, out);
+    }
+
+    /// The evidence by node slot from the states by observation (the record's form: the
+    /// state's label shared, no string copied).
+    pub fn write_evidence(&self, st: &[Option<u16>], out: &mut NamedSlots<Label>) {
+        out.reset_over(&self.node_names);
+        for (i, s) in st.iter().enumerate() {
+            if let Some(s) = s {
+                out.set(self.node_slot[i], self.labels[i][usize::from(*s)].clone());
+            }
+        }
     }
 
     /// The evidence map from the states by observation (`n` of them given): rewritten in place
@@ -463,7 +490,7 @@ mod tests {
         };
         let (mut want_states, mut got_states) =
             (EvidenceStates::default(), EvidenceStates::default());
-        let (mut want, mut got) = (BTreeMap::new(), BTreeMap::new());
+        let (mut want, mut got) = (BTreeMap::new(), NamedSlots::default());
         for cycle in 0..300 {
             let mut obs = Observations::default();
             for o in &m.observations {
@@ -488,6 +515,10 @@ mod tests {
             readings.read(&obs);
             m.evidence_states_from_into(readings.values(), &extra, &mut got_states, &mut got);
             assert_eq!(want_states, got_states, "cycle {cycle}");
+            let got: BTreeMap<String, String> = got
+                .iter()
+                .map(|(k, v)| (k.clone(), v.to_string()))
+                .collect();
             assert_eq!(want, got, "cycle {cycle}");
         }
     }

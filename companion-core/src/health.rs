@@ -10,6 +10,7 @@
 
 use crate::evidence::ObservationMap;
 use crate::fmea::{CompiledHm, NodeInfo, Publish};
+use crate::named_slots::{NamedSlots, SortedNames};
 use crate::observations::Observations;
 use crate::spec::SpecError;
 use bayes_net::{BnError, Engine, Evidence, NodeId};
@@ -101,8 +102,8 @@ pub struct HealthModel {
     /// manager holding its node, resolved at load ([`HealthModel::evaluate_states_into`]).
     observation_hits: Vec<Vec<Vec<(usize, NodeId, usize)>>>,
     /// Every published probability's name, sorted (the order of the published map's keys); a
-    /// slot is an index into it.
-    slot_names: Vec<String>,
+    /// slot is an index into it. Shared by every record's probabilities.
+    slot_names: SortedNames,
     /// Per manager, per entry of its `published`: its slot.
     publish_slots: Vec<Vec<usize>>,
 }
@@ -508,7 +509,7 @@ impl HealthModel {
             activations: Vec::new(),
             scratch: Scratch::default(),
             observation_hits,
-            slot_names,
+            slot_names: slot_names.into(),
             publish_slots,
         })
     }
@@ -540,8 +541,14 @@ impl HealthModel {
 
     /// The published probabilities' names, sorted: the keys of the map the cycle fills, in order
     /// (a slot is an index into it).
-    pub fn slot_names(&self) -> &[String] {
+    pub fn slot_names(&self) -> &SortedNames {
         &self.slot_names
+    }
+
+    /// The position of the manager named `name` among the managers (resolved once, the cycle
+    /// then names it by position), if loaded.
+    pub fn manager_position(&self, name: &str) -> Option<usize> {
+        self.managers.iter().position(|m| m.name == name)
     }
 
     /// The manager named `name`, if loaded.
@@ -630,7 +637,7 @@ impl HealthModel {
     pub fn evaluate_states_into(
         &mut self,
         states: &crate::evidence::EvidenceStates,
-        out: &mut BTreeMap<String, f64>,
+        out: &mut NamedSlots<f64>,
     ) -> Result<(), HealthError> {
         let per = &mut self.scratch.per;
         let same = (self.scratch.per_states.as_ref()).is_some_and(|s| *s == states.state);
@@ -651,50 +658,10 @@ impl HealthModel {
             }
         }
         crate::stage_hook::mark(crate::stage_hook::Stage::Evidence);
-        self.propagate_into(out, false)
-    }
-
-    /// Evaluate one manager again under `evidence` (its imported priors as the last evaluation
-    /// left them) and update its published probabilities in `out`. The dynamic managers do not
-    /// advance: the decision core uses it within a cycle, when a placement changed what the
-    /// resource manager observes. Unknown manager: nothing changes.
-    pub fn reevaluate_manager_into(
-        &mut self,
-        name: &str,
-        evidence: &BTreeMap<String, String>,
-        out: &mut BTreeMap<String, f64>,
-    ) -> Result<(), HealthError> {
-        let Some(i) = self.managers.iter().position(|m| m.name == name) else {
-            return Ok(());
-        };
-        let m = &mut self.managers[i];
-        let mut ev = Evidence::new();
-        for (node, state) in evidence {
-            let net = m.engine.network();
-            if let Some(id) = net.id(node) {
-                ev.set_state(id, state_of(net, id, node, state)?);
-            }
-        }
-        m.engine
-            .query(&ev)
-            .map_err(|error| HealthError::Inference {
-                manager: m.name.clone(),
-                error,
-            })?;
-        // Its marginals no longer match the evidence the next cycle compares against.
-        if let Some(f) = self.scratch.fresh.get_mut(i) {
-            *f = false;
-        }
-        let m = &self.managers[i];
-        for &(k, id, s, complement) in &m.published {
-            let p = m.engine.marginal(id)[s];
-            let p = if complement { 1.0 - p } else { p };
-            match out.get_mut(m.publish[k].name.as_str()) {
-                Some(x) => *x = p,
-                None => {
-                    out.insert(m.publish[k].name.clone(), p);
-                }
-            }
+        self.propagate(false)?;
+        out.reset_over(&self.slot_names);
+        for (k, &p) in self.scratch.published.iter().enumerate() {
+            out.set(k, p);
         }
         Ok(())
     }
@@ -737,16 +704,14 @@ impl HealthModel {
             }
         }
         crate::stage_hook::mark(crate::stage_hook::Stage::Evidence);
-        self.propagate_into(out, all)
+        self.propagate(all)?;
+        write_published(&self.slot_names, &self.scratch.published, out);
+        Ok(())
     }
 
     /// The managers under the evidence in `scratch.per`: imports, queries (or their memo),
-    /// published probabilities into `out`, carried beliefs advanced.
-    fn propagate_into(
-        &mut self,
-        out: &mut BTreeMap<String, f64>,
-        all: bool,
-    ) -> Result<(), HealthError> {
+    /// published probabilities into `scratch.published` by slot, carried beliefs advanced.
+    fn propagate(&mut self, all: bool) -> Result<(), HealthError> {
         let per = &self.scratch.per;
         let n = self.managers.len();
         let (last, fresh, full) = (
@@ -803,7 +768,6 @@ impl HealthModel {
             }
             crate::stage_hook::mark(crate::stage_hook::Stage::HealthManager(&m.name));
         }
-        write_published(&self.slot_names, &self.scratch.published, out);
         for (i, m) in self.managers.iter_mut().enumerate() {
             for &(from, to) in &m.carry {
                 let b = &mut self.scratch.belief;
@@ -976,6 +940,7 @@ fn state_of(
 }
 
 mod cpt_rows;
+mod reevaluate;
 
 #[cfg(test)]
 mod tests;

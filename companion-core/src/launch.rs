@@ -499,7 +499,9 @@ mod tests {
         r.proposals.push(MdpProposal {
             mdp: "navigation".into(),
             actions: vec![STAY_ON_GROUND.into()],
-            inputs: [("P_battery".to_string(), 0.05), ("P_sys".to_string(), 0.9)].into(),
+            inputs: [("P_battery".to_string(), 0.05), ("P_sys".to_string(), 0.9)]
+                .into_iter()
+                .collect(),
             ..Default::default()
         });
         let e = verdict(&r, &m).unwrap_err();

@@ -40,6 +40,7 @@ pub mod launch;
 pub mod mission;
 pub mod mission_mdp;
 pub mod model;
+pub mod named_slots;
 pub mod observations;
 pub mod probabilities;
 pub mod readings;

@@ -76,6 +76,9 @@ pub struct MissionMdp {
     /// Indices into `vars` in name order (the order of the name-keyed maps the cycle reads and
     /// writes), so they are matched in one ordered walk instead of a lookup each.
     by_name: Vec<usize>,
+    /// `vars` in name order, shared by every proposal's `inputs` (their names, written only
+    /// when a record is).
+    input_names: crate::named_slots::SortedNames,
     values: Vec<f64>,
     /// Expression per engine transition index.
     trans_expr: Vec<Expr>,
@@ -464,30 +467,11 @@ impl MissionMdp {
         out.value = d.value;
         out.iterations = d.iterations;
         out.horizon = horizon as u32;
-        // Provenance: the named probabilities this solve read, at the values it read. Usually
-        // the entry already holds exactly these names: overwrite the values in one ordered walk.
-        if out.inputs.len() == self.vars.len() {
-            let mut same = true;
-            for ((key, x), &k) in out.inputs.iter_mut().zip(&self.by_name) {
-                if *key != self.vars[k] {
-                    same = false;
-                    break;
-                }
-                *x = self.values[k];
-            }
-            if same {
-                out.reason.clear();
-                return;
-            }
-        }
-        out.inputs.retain(|k, _| self.vars.contains(k));
-        for (name, &v) in self.vars.iter().zip(&self.values) {
-            match out.inputs.get_mut(name.as_str()) {
-                Some(x) => *x = v,
-                None => {
-                    out.inputs.insert(name.clone(), v);
-                }
-            }
+        // Provenance: the probabilities this solve read, at the values it read, by slot over
+        // the MDP's variables in name order (named when the record is written).
+        out.inputs.reset_over(&self.input_names);
+        for (slot, &k) in self.by_name.iter().enumerate() {
+            out.inputs.set(slot, self.values[k]);
         }
         out.reason.clear();
     }

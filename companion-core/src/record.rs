@@ -2,6 +2,7 @@
 //! decision log (docs/decision-log.md); bump [`SCHEMA_VERSION`] on any incompatible change.
 
 use crate::action_id::ActionId;
+use crate::named_slots::{Label, NamedSlots};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -40,9 +41,10 @@ pub struct MdpProposal {
     /// The horizon solved for (params/mission.toml `horizon`, the paper's 100).
     #[serde(default)]
     pub horizon: u32,
-    /// The named probabilities the solve read, with their values (`P_V3`: 0.91).
+    /// The named probabilities the solve read, with their values (`P_V3`: 0.91); by slot over
+    /// the MDP's sorted variables, named when written.
     #[serde(default)]
-    pub inputs: BTreeMap<String, f64>,
+    pub inputs: NamedSlots<f64>,
     /// Empty for the cycle's first solve; for a re-solve within the cycle, why (the resource
     /// conflict that made the MDP's earlier choice impossible).
     #[serde(default, skip_serializing_if = "String::is_empty")]
@@ -348,15 +350,16 @@ pub struct DecisionRecord {
     pub events: Vec<Event>,
     /// Raw observations by name (units in docs/params.md).
     pub observations: BTreeMap<String, f64>,
-    /// BN evidence: node -> state.
-    pub evidence: BTreeMap<String, String>,
+    /// BN evidence: node -> state (by slot over the evidence nodes, named when written).
+    pub evidence: NamedSlots<Label>,
     /// The evidence nodes of params/observations.toml that received no evidence this cycle (in
     /// file order): their observation was absent from the snapshot (a sensor never heard, an
     /// estimator not estimating: WIND all zero) or not finite. Their BN nodes keep their priors.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub absent_evidence: Vec<String>,
-    /// Named probabilities published by the health managers.
-    pub probabilities: BTreeMap<String, f64>,
+    /// Named probabilities published by the health managers (by slot over the published names,
+    /// named when written).
+    pub probabilities: NamedSlots<f64>,
     /// One proposal per MDP solve (re-solves included).
     pub proposals: Vec<MdpProposal>,
     /// Behaviour conflicts and how the policy resolved them.
@@ -485,7 +488,7 @@ macro_rules! reuse_clone {
     };
 }
 
-reuse_clone!(MdpProposal { mdp, state, action, actions, value, iterations, horizon, reason } maps { inputs });
+reuse_clone!(MdpProposal { mdp, state, action, actions, value, iterations, horizon, reason, inputs } maps {});
 reuse_clone!(Conflict { kept, dropped, rule } maps {});
 reuse_clone!(PlacementRecord {
     app, version, implementation, support, tiles, cpu_share, ms_per_frame
@@ -500,8 +503,9 @@ reuse_clone!(GuaranteeRecord {
 } maps { margins, goals, drift });
 reuse_clone!(DecisionRecord {
     cycle, time_s, state, events, proposals, conflicts, actions, resources, guarantee, commands,
-    link_events, utc_us, decide_ms, shell_actions, absent_evidence, cpt_learned, live_dropped
-} maps { observations, evidence, probabilities, vehicle });
+    link_events, utc_us, decide_ms, shell_actions, absent_evidence, cpt_learned, live_dropped,
+    evidence, probabilities
+} maps { observations, vehicle });
 reuse_clone!(Plan { vehicle_actions, applications } maps {});
 
 #[cfg(test)]
@@ -516,7 +520,7 @@ mod tests {
             observations: keys.iter().map(|k| (k.to_string(), x)).collect(),
             evidence: keys
                 .iter()
-                .map(|k| (k.to_string(), format!("st{x}")))
+                .map(|k| (k.to_string(), Label::from(format!("st{x}"))))
                 .collect(),
             probabilities: keys.iter().map(|k| (format!("P_{k}"), x / 10.0)).collect(),
             proposals: (0..n_props)

@@ -342,9 +342,11 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
         state: state.into(),
         events,
         observations,
-        evidence: BTreeMap::from([("vibration".to_string(), "high".to_string())]),
+        evidence: [("vibration".to_string(), "high".into())]
+            .into_iter()
+            .collect(),
         absent_evidence: Vec::new(),
-        probabilities,
+        probabilities: probabilities.into_iter().collect(),
         proposals,
         conflicts,
         actions,

@@ -176,7 +176,9 @@ mod tests {
         DecisionRecord {
             state: "v3".into(),
             actions: vec!["track_v3".into()],
-            evidence: [("A_vibration".to_string(), vibration.to_string())].into(),
+            evidence: [("A_vibration".to_string(), vibration.into())]
+                .into_iter()
+                .collect(),
             ..Default::default()
         }
     }

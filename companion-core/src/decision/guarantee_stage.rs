@@ -16,6 +16,8 @@ pub(super) struct GuaranteeStage {
     guarantee: Option<Guarantee>,
     /// Set when the guarantee stage found no allocation meeting the goals.
     guarantee_infeasible: bool,
+    /// The slot of the probability the guarantee caps when infeasible (`None`: not published).
+    capped_slot: Option<usize>,
     /// Probabilities (`P_V3`) of the versions no feasible alternative of the activity being
     /// flown carries, capped from the next cycle (guarantee/binding.rs).
     capped_versions: Vec<String>,
@@ -71,6 +73,9 @@ impl GuaranteeStage {
             planned: planned_of(guarantee.as_ref(), model),
             guarantee,
             guarantee_infeasible: false,
+            capped_slot: (model.health.slot_names())
+                .binary_search(&model.mission.guarantee.capped_probability)
+                .ok(),
             capped_versions: Vec::new(),
             capped_for: Vec::new(),
             versions_scratch: Vec::new(),
@@ -125,9 +130,7 @@ impl GuaranteeStage {
     pub(super) fn cap_probabilities(&self, model: &Model, rec: &mut DecisionRecord) {
         let cap = model.mission.guarantee.infeasible_p_battery;
         if self.guarantee_infeasible
-            && let Some(p) = rec
-                .probabilities
-                .get_mut(&model.mission.guarantee.capped_probability)
+            && let Some(p) = self.capped_slot.and_then(|k| rec.probabilities.slot_mut(k))
         {
             *p = p.min(cap);
         }

@@ -14,7 +14,6 @@ use crate::scratch::Scratch;
 use crate::stage_hook::{Stage, mark};
 use crate::vocabulary::ActionId;
 use mdp_engine::Workspace;
-use std::collections::BTreeMap;
 
 /// Distinct recent queries each health manager's engine answers from memory: evidence flapping
 /// across a threshold alternates between two, with the resource re-evaluation a few more.
@@ -27,18 +26,17 @@ pub(super) struct HealthMdpStage {
     /// the MDP has no rewards for the policy, an error each cycle as the name lookup gave).
     mdp_policy: Vec<Option<usize>>,
     /// Per MDP of `mdp_names`, the slot of each probability it reads among the published ones
-    /// (`HealthModel::slot_names`), and the cycle's probabilities by slot (`None`: not
-    /// published this cycle), what every MDP and the re-solve read.
+    /// (`HealthModel::slot_names`): every MDP and the re-solve read the record's probabilities
+    /// by these slots.
     mdp_slots: Vec<Vec<Option<usize>>>,
-    prob_values: Vec<Option<f64>>,
     /// Per MDP of `mdp_names`, per MDP action: the catalogue ids of its primitives (`does`),
     /// resolved in `new` so the cycle merges proposals without looking names up.
     mdp_primitives: Vec<Vec<Vec<ActionId>>>,
     pub(super) health: HealthModel,
     mdps: MissionMdps,
     workspace: Workspace,
-    /// Number of names the health managers publish (a reused probability map holds exactly these).
-    n_published: usize,
+    /// The health manager the resource conflict re-evaluates (the first activation's).
+    assessed_manager: Option<usize>,
     /// The cycle's evidence by observation (its state index), kept between cycles.
     evidence_states: EvidenceStates,
 }
@@ -82,7 +80,6 @@ impl HealthMdpStage {
                         .unwrap_or_default()
                 })
                 .collect(),
-            prob_values: Vec::new(),
             mdp_primitives: model
                 .mdp_names(kind)
                 .iter()
@@ -95,7 +92,8 @@ impl HealthMdpStage {
             },
             mdps: model.mdps.clone(),
             workspace: Workspace::new(),
-            n_published: model.health.publishes().len(),
+            assessed_manager: (model.health.activations.first())
+                .and_then(|a| model.health.manager_position(&a.manager)),
             evidence_states: Default::default(),
         }
     }
@@ -114,18 +112,13 @@ impl HealthMdpStage {
 
     /// The cycle's evidence into the record: the snapshot's values and the core's own (`extra`:
     /// the platform's room, the fit checks) by observation, and the nodes left without evidence.
-    pub(super) fn evidence_into(
+    pub(super) fn record_evidence(
         &mut self,
         readings: &Readings,
         extra: &[(ObservationId, f64)],
         rec: &mut DecisionRecord,
     ) {
-        self.health.observations.evidence_states_from_into(
-            readings.values(),
-            extra,
-            &mut self.evidence_states,
-            &mut rec.evidence,
-        );
+        self.evidence_states_into(readings, extra, rec);
         // Absent is not zero: the nodes no observation fed this cycle, listed (strings reused).
         // One observation per node (checked at load): a node is absent when its observation
         // gave no state.
@@ -143,34 +136,32 @@ impl HealthMdpStage {
         rec.absent_evidence.truncate(n_absent);
     }
 
-    /// The health managers on the evidence just written, by observation: no name lookups (same
-    /// probabilities).
-    pub(super) fn evaluate(&mut self, rec: &mut DecisionRecord) {
-        match self
+    /// The evidence from this cycle's readings and the core's own values (`extra`): by
+    /// observation into `evidence_states`, by node into the record.
+    fn evidence_states_into(
+        &mut self,
+        readings: &Readings,
+        extra: &[(ObservationId, f64)],
+        rec: &mut DecisionRecord,
+    ) {
+        self.health.observations.evidence_states_from_into(
+            readings.values(),
+            extra,
+            &mut self.evidence_states,
+            &mut rec.evidence,
+        );
+    }
+
+    /// The health managers on the evidence just written, by observation: the probabilities by
+    /// slot.
+    pub(super) fn write_probabilities(&mut self, rec: &mut DecisionRecord) {
+        if let Err(e) = self
             .health
             .evaluate_states_into(&self.evidence_states, &mut rec.probabilities)
         {
-            Ok(()) => {
-                if rec.probabilities.len() != self.n_published {
-                    // A reused map held other names: keep exactly what was published.
-                    let names = self.health.publishes();
-                    rec.probabilities.retain(|k, _| names.contains(k));
-                }
-            }
-            Err(e) => {
-                rec.probabilities.clear();
-                rec.events.push(Event::HealthError(e.to_string()));
-            }
+            rec.probabilities.reset_over(self.health.slot_names());
+            rec.events.push(Event::HealthError(e.to_string()));
         }
-    }
-
-    /// The record's probabilities by slot, what every MDP reads.
-    pub(super) fn read_probabilities(&mut self, rec: &DecisionRecord) {
-        by_slot(
-            &mut self.prob_values,
-            self.health.slot_names(),
-            &rec.probabilities,
-        );
     }
 
     /// Every MDP of the model solved at its projected state: its proposal into the record, its
@@ -204,7 +195,7 @@ impl HealthMdpStage {
                 mdp,
                 &mut self.workspace,
                 s,
-                (&self.prob_values, &self.mdp_slots[j]),
+                (rec.probabilities.slots(), &self.mdp_slots[j]),
                 self.mdp_policy[j],
                 model,
                 policy,
@@ -268,21 +259,26 @@ impl HealthMdpStage {
     }
 
     /// Proposal `k` solved again on the assessed application's manager re-evaluated on the
-    /// record's evidence (the room beside what was placed): its new proposal recorded with
-    /// `why`, and `k` superseded. False when the MDP's choice does not change.
+    /// cycle's readings and the core's own values `extra` (the room beside what was placed),
+    /// by observation: its new proposal recorded with `why`, and `k` superseded. False when the
+    /// MDP's choice does not change.
     pub(super) fn resolve(
         &mut self,
-        model: &Model,
-        policy: Policy,
+        (model, policy): (&Model, Policy),
+        (readings, extra): (&Readings, &[(ObservationId, f64)]),
         (k, why): (usize, &impl std::fmt::Display),
         sc: &mut Scratch,
         rec: &mut DecisionRecord,
     ) -> bool {
-        let manager = &model.health.activations[0].manager;
-        if let Err(e) =
-            self.health
-                .reevaluate_manager_into(manager, &rec.evidence, &mut rec.probabilities)
-        {
+        self.evidence_states_into(readings, extra, rec);
+        let Some(manager) = self.assessed_manager else {
+            return false;
+        };
+        if let Err(e) = self.health.reevaluate_manager_states_into(
+            manager,
+            &self.evidence_states,
+            &mut rec.probabilities,
+        ) {
             rec.events.push(Event::HealthError(e.to_string()));
             return false;
         }
@@ -295,17 +291,11 @@ impl HealthMdpStage {
         let Some(s) = mdp.state_index(&rec.proposals[k].state) else {
             return false;
         };
-        // The re-evaluated manager's probabilities, by slot as the cycle's MDPs read them.
-        by_slot(
-            &mut self.prob_values,
-            self.health.slot_names(),
-            &rec.probabilities,
-        );
         let decided = decide(
             mdp,
             &mut self.workspace,
             s,
-            (&self.prob_values, &self.mdp_slots[j]),
+            (rec.probabilities.slots(), &self.mdp_slots[j]),
             pi,
             model,
             policy,
@@ -351,18 +341,5 @@ fn decide(
         None => Err(crate::mission_mdp::InstantiateError::UnknownPolicy(
             model.policy_name(policy).to_string(),
         )),
-    }
-}
-
-/// The published probabilities `probs` (the health layer's map, keyed by `names`, sorted) into
-/// `into` by slot (`None`: not in the map). The map holds exactly the published names every
-/// cycle the health layer succeeded: then its values in key order are the slots, no name
-/// compared; otherwise (a failed or partial evaluation) each slot is looked up.
-fn by_slot(into: &mut Vec<Option<f64>>, names: &[String], probs: &BTreeMap<String, f64>) {
-    into.clear();
-    if probs.len() == names.len() {
-        into.extend(probs.values().map(|&v| Some(v)));
-    } else {
-        into.extend(names.iter().map(|n| probs.get(n).copied()));
     }
 }

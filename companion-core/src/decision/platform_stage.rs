@@ -7,12 +7,10 @@ use super::read_slots::ReadSlots;
 use super::{Model, Policy};
 use crate::arbitration::{PlannedVariant, ResourceArbiter};
 use crate::evidence::ObservationId;
-use crate::health::HealthModel;
 use crate::readings::Readings;
 use crate::record::DecisionRecord;
 use crate::scratch::Scratch;
 use fpga_model::PlatformState;
-use std::collections::BTreeMap;
 
 /// The observations [`PlatformStage::room`] gives, in its order.
 const ROOM: [&str; 3] = [
@@ -26,6 +24,8 @@ const ROOM: [&str; 3] = [
 #[derive(Debug, Clone)]
 struct FitCheck {
     id: ObservationId,
+    /// The observation's name: the fit tests' by-name evidence (the cycle uses `id`).
+    #[cfg_attr(not(test), allow(dead_code))]
     name: String,
     /// The catalogue's variants of the activation's `app version` (its implementations), by
     /// index.
@@ -172,13 +172,15 @@ impl PlatformStage {
     }
 
     /// [`PlatformStage::room`] and the fit checks written into the evidence by name, as
-    /// `health` observes them.
+    /// `health` observes them (the fit tests' by-name path; the cycle uses
+    /// [`PlatformStage::room_evidence`]).
+    #[cfg(test)]
     pub(super) fn platform_evidence(
         &self,
         model: &Model,
-        health: &HealthModel,
+        health: &crate::health::HealthModel,
         at: (&ReadSlots, &Readings),
-        evidence: &mut BTreeMap<String, String>,
+        evidence: &mut std::collections::BTreeMap<String, String>,
     ) {
         let room = self.room(model, at);
         for (name, v) in room {

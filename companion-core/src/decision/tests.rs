@@ -30,7 +30,7 @@ fn absent_observation_is_listed_and_gives_no_evidence() {
     assert!(rec.absent_evidence.iter().any(|n| n == "A_wind"));
     obs.set("wind_mps", 0.0);
     let (_, rec) = core.step(&obs);
-    assert_eq!(rec.evidence.get("A_wind").map(String::as_str), Some("calm"));
+    assert_eq!(rec.evidence.get("A_wind").map(|s| s.as_str()), Some("calm"));
     assert!(
         !rec.absent_evidence.iter().any(|n| n == "A_wind"),
         "{:?}",

@@ -274,6 +274,10 @@ fn compile(
     let n_vars = vars.len();
     let mut by_name: Vec<usize> = (0..vars.len()).collect();
     by_name.sort_by(|&a, &b| vars[a].cmp(&vars[b]));
+    let input_names = (by_name.iter())
+        .map(|&k| vars[k].clone())
+        .collect::<Vec<_>>()
+        .into();
     Ok(MissionMdp {
         name: f.name.clone(),
         file: path.to_path_buf(),
@@ -283,6 +287,7 @@ fn compile(
         does: f.action.iter().map(|a| a.does.clone()).collect(),
         vars,
         by_name,
+        input_names,
         values,
         trans_expr,
         policies: rewards.policies,

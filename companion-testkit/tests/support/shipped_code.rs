@@ -172,3 +172,35 @@ fn item_end(b: &[u8], start: usize) -> usize {
     }
     b.len()
 }
+
+/// The shipped code of `text` ([`shipped`]) with comments and the contents of string and char
+/// literals blanked too (line numbers kept): what a guard over identifiers and types reads.
+#[allow(dead_code)]
+pub(crate) fn code_only(text: &str) -> String {
+    let kept = shipped(text);
+    let b = kept.as_bytes();
+    let mut out = b.to_vec();
+    let mut i = 0;
+    while i < b.len() {
+        if let Some(next) = skip_non_code(b, i) {
+            let literal = matches!(b[i], b'"' | b'\'' | b'b' | b'c' | b'r');
+            // A literal keeps its quotes (so `""` is still an expression); its inside goes.
+            let (from, to) = if literal {
+                (i + 1, next.saturating_sub(1).max(i + 1))
+            } else {
+                (i, next)
+            };
+            for c in &mut out[from..to] {
+                if c.is_ascii() && *c != b'\n' {
+                    *c = b' ';
+                } else if !c.is_ascii() {
+                    *c = b' ';
+                }
+            }
+            i = next;
+            continue;
+        }
+        i += 1;
+    }
+    String::from_utf8(out).unwrap_or_default()
+}

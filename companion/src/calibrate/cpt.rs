@@ -157,7 +157,7 @@ impl CptCounts {
             };
             let Some(row) = parents
                 .iter()
-                .map(|p| r.evidence.get(p).map(|s| (p.clone(), s.clone())))
+                .map(|p| r.evidence.get(p).map(|s| (p.clone(), s.to_string())))
                 .collect::<Option<Vec<_>>>()
             else {
                 continue; // a parent without evidence: the row is unknown
@@ -234,11 +234,15 @@ fn tracking_trial(
     let (_, version) = states.tracking_target(&r.actions)?;
     let node = format!("C_{version}");
     let errors = shipped.version_errors(&node)?;
+    // The record's evidence by name, for the noisy-OR rows (a calibration tool: the edge).
+    let evidence: BTreeMap<String, String> = (r.evidence.iter())
+        .map(|(node, state)| (node.clone(), state.to_string()))
+        .collect();
     let row = errors
         .iter()
         .map(|e| {
             shipped
-                .map_error_state(e, &r.evidence)
+                .map_error_state(e, &evidence)
                 .map(|s| (e.clone(), s.to_string()))
         })
         .collect::<Option<Vec<_>>>()?;

@@ -41,7 +41,8 @@ pub struct Shell {
     /// The last behaviour told to the ground station (motion and tracking version), and the
     /// evidence of that cycle (to say what changed).
     pub(super) last_told: words::Behaviour,
-    pub(super) told_evidence: std::collections::BTreeMap<String, String>,
+    pub(super) told_evidence:
+        companion_core::named_slots::NamedSlots<companion_core::named_slots::Label>,
     /// What the guarantee's last verdict told was about (None: it could meet the goals).
     pub(super) guarantee_told: Option<Vec<String>>,
     /// Ingest counters now, and as last reported in a record's link_events.

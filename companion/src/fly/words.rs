@@ -9,9 +9,9 @@
 //! its sentences back. docs/mavlink.md, "Words to the ground station".
 
 use companion_core::action_role::ActionRole;
+use companion_core::named_slots::{Label, NamedSlots};
 use companion_core::record::{DecisionRecord, Event, GuaranteeRecord};
 use companion_link::mission_state::MissionEnd;
-use std::collections::BTreeMap;
 
 /// What the vehicle does, as told to the ground station: the motion flown (a primitive vehicle
 /// action, None for none) and the tracking version kept (`v3`), if any.
@@ -36,7 +36,7 @@ pub fn behaviour_text(
     now: &Behaviour,
     was: &Behaviour,
     rec: &DecisionRecord,
-    evidence_was: &BTreeMap<String, String>,
+    evidence_was: &NamedSlots<Label>,
     end: Option<&MissionEnd>,
 ) -> String {
     let doing = doing(now, rec);
@@ -77,7 +77,7 @@ fn reason(
     now: &Behaviour,
     was: &Behaviour,
     rec: &DecisionRecord,
-    evidence_was: &BTreeMap<String, String>,
+    evidence_was: &NamedSlots<Label>,
     end: Option<&MissionEnd>,
 ) -> Option<String> {
     let motion = now.motion.as_deref();
@@ -126,7 +126,7 @@ fn reason(
         if let Some((node, state)) = rec
             .evidence
             .iter()
-            .find(|(n, s)| evidence_was.get(*n).is_some_and(|w| w != *s))
+            .find(|(n, s)| evidence_was.get(n).is_some_and(|w| w != *s))
         {
             return Some(format!("{} {state}", evidence_words(node)));
         }
@@ -276,6 +276,7 @@ pub fn reallocation_text(g: &GuaranteeRecord) -> Option<String> {
 mod tests {
     use super::*;
     use companion_core::record::{MdpProposal, ResourcesRecord};
+    use std::collections::BTreeMap;
 
     fn b(motion: Option<&str>, tracking: Option<&str>) -> Behaviour {
         let roles = companion_core::action_role::ActionRoles::undeclared();
@@ -325,7 +326,7 @@ mod tests {
         };
         let was = b(Some("follow_trajectory"), None);
         let now = b(Some("return_to_base"), None);
-        let text = behaviour_text(&now, &was, &rec, &BTreeMap::new(), NONE);
+        let text = behaviour_text(&now, &was, &rec, &NamedSlots::default(), NONE);
         assert_eq!(text, "Battery 7%: returning home");
     }
 
@@ -349,7 +350,7 @@ mod tests {
             &b(Some("return_to_base"), None),
             &b(Some("follow_trajectory"), None),
             &rec,
-            &BTreeMap::new(),
+            &NamedSlots::default(),
             NONE,
         );
         assert_eq!(text, "Not enough energy: returning home");
@@ -370,7 +371,7 @@ mod tests {
             &b(Some("land"), None),
             &b(Some("follow_trajectory"), None),
             &rec,
-            &BTreeMap::new(),
+            &NamedSlots::default(),
             Some(&end),
         );
         assert_eq!(text, "Search time over: landing here");
@@ -378,9 +379,9 @@ mod tests {
 
     #[test]
     fn a_tracking_version_change_names_the_evidence_that_changed() {
-        let was_ev: BTreeMap<String, String> = [("A_vibration", "low"), ("A_wind", "calm")]
+        let was_ev: NamedSlots<Label> = [("A_vibration", "low"), ("A_wind", "calm")]
             .iter()
-            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .map(|(k, v)| (k.to_string(), Label::from(*v)))
             .collect();
         let mut now_ev = was_ev.clone();
         now_ev.insert("A_vibration".into(), "high".into());
@@ -428,7 +429,7 @@ mod tests {
                 &b(Some("avoid_obstacle"), None),
                 &b(Some("follow_trajectory"), None),
                 &rec,
-                &BTreeMap::new(),
+                &NamedSlots::default(),
                 NONE
             ),
             "Obstacle 4 m: avoiding the obstacle"
@@ -442,7 +443,7 @@ mod tests {
                 &b(None, Some("v0")),
                 &b(Some("follow_trajectory"), None),
                 &found,
-                &BTreeMap::new(),
+                &NamedSlots::default(),
                 NONE
             ),
             "Target found: tracking with V0"
@@ -457,7 +458,7 @@ mod tests {
                 &b(Some("take_off"), None),
                 &b(None, None),
                 &rec,
-                &BTreeMap::new(),
+                &NamedSlots::default(),
                 NONE
             ),
             "Taking off"
@@ -475,7 +476,7 @@ mod tests {
                 &b(Some("return_to_base"), None),
                 &b(Some("follow_trajectory"), None),
                 &by_model,
-                &BTreeMap::new(),
+                &NamedSlots::default(),
                 NONE
             ),
             "Tracking model: returning home"
@@ -537,7 +538,7 @@ mod tests {
                 &["return_to_base"],
                 &[("P_battery", 0.9)],
             )],
-            probabilities: BTreeMap::from([("P_battery".to_string(), 0.9)]),
+            probabilities: [("P_battery".to_string(), 0.9)].into_iter().collect(),
             observations: obs(&[("battery_pct", 64.0)]),
             guarantee: Some(g.clone()),
             ..Default::default()
@@ -547,7 +548,7 @@ mod tests {
                 &b(Some("return_to_base"), None),
                 &b(Some("follow_trajectory"), None),
                 &rec,
-                &BTreeMap::new(),
+                &NamedSlots::default(),
                 NONE,
             ),
             guarantee_text(&g),

@@ -1,0 +1,285 @@
+//! Inside the decision cycle observations, probabilities and evidence travel by id (issue 39,
+//! item 1): no `BTreeMap<String, _>` is built or filled inside `Core::step_into` or any function of
+//! the core it calls. Names are written only at the edges (the record's serialization, the
+//! shells). A source test over companion-core's shipped code (`support/shipped_code.rs`, comments
+//! and literals blanked), following the calls from `step_into` by name: an over-approximation of
+//! the call graph (every core function of a called name is followed), so a map built anywhere a
+//! cycle may reach is found.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+#[path = "support/shipped_code.rs"]
+mod shipped_code;
+
+/// One function of the core's shipped code.
+struct Function {
+    file: PathBuf,
+    line: usize,
+    name: String,
+    /// From `fn` to the end of its body (or its `;`).
+    text: String,
+}
+
+fn rs_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            rs_files(&p, out);
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+}
+
+fn is_ident(c: u8) -> bool {
+    c.is_ascii_alphanumeric() || c == b'_'
+}
+
+/// Every `fn` of `code` (comments and literals already blanked), nested ones included.
+fn functions(file: &Path, code: &str, out: &mut Vec<Function>) {
+    let b = code.as_bytes();
+    let mut i = 0;
+    while let Some(p) = code[i..].find("fn ") {
+        let at = i + p;
+        i = at + 3;
+        if at > 0 && is_ident(b[at - 1]) {
+            continue;
+        }
+        let name_end = at + 3 + b[at + 3..].iter().take_while(|&&c| is_ident(c)).count();
+        let name = &code[at + 3..name_end];
+        if name.is_empty() {
+            continue;
+        }
+        // The body: the first `{` at bracket depth 0 after the name (a `;` first: no body).
+        let mut depth = 0i32;
+        let mut k = name_end;
+        let mut end = b.len();
+        while k < b.len() {
+            match b[k] {
+                b'(' | b'[' | b'<' => depth += 1,
+                b')' | b']' => depth -= 1,
+                b'>' if b[k - 1] != b'-' && b[k - 1] != b'=' => depth -= 1,
+                b';' if depth <= 0 => {
+                    end = k + 1;
+                    break;
+                }
+                b'{' if depth <= 0 => {
+                    let mut braces = 0i32;
+                    for (j, &c) in b.iter().enumerate().skip(k) {
+                        match c {
+                            b'{' => braces += 1,
+                            b'}' => {
+                                braces -= 1;
+                                if braces == 0 {
+                                    end = j + 1;
+                                    break;
+                                }
+                            }
+                            _ => {}
+                        }
+                    }
+                    break;
+                }
+                _ => {}
+            }
+            k += 1;
+        }
+        out.push(Function {
+            file: file.to_path_buf(),
+            line: code[..at].matches('\n').count() + 1,
+            name: name.to_string(),
+            text: code[at..end].to_string(),
+        });
+    }
+}
+
+/// How a call is written: `self.f(` and `f(` name a function of the caller's own module first;
+/// `x.f(` and `T::f(` any function of that name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum Call {
+    Own,
+    Any,
+}
+
+/// The names `text` calls: an identifier followed by `(` (or by `::<...>(`), the declared name
+/// aside, with how each is written.
+fn called(text: &str) -> BTreeSet<(String, Call)> {
+    let b = text.as_bytes();
+    let mut out = BTreeSet::new();
+    let mut i = 0;
+    while i < b.len() {
+        if is_ident(b[i]) && (i == 0 || !is_ident(b[i - 1])) {
+            let end = i + b[i..].iter().take_while(|&&c| is_ident(c)).count();
+            let mut k = end;
+            if text[k..].starts_with("::<") {
+                let close = text[k..].find(">(").map_or(b.len(), |p| k + p + 1);
+                k = close;
+            }
+            let before = text[..i].trim_end();
+            let declared = before.ends_with("fn") && text[..i].ends_with(' ');
+            if b.get(k) == Some(&b'(') && !b[i].is_ascii_digit() && !declared {
+                let own =
+                    before.ends_with("self.") || !(before.ends_with('.') || before.ends_with("::"));
+                let how = if own { Call::Own } else { Call::Any };
+                out.insert((text[i..end].to_string(), how));
+            }
+            i = end;
+        } else {
+            i += 1;
+        }
+    }
+    out
+}
+
+/// The module a file is part of: `decision.rs` and `decision/*.rs` are one.
+fn module_of(file: &Path) -> PathBuf {
+    let stem = file.with_extension("");
+    match stem.parent() {
+        Some(dir) if stem.file_name().is_some_and(|n| n == "mod") => dir.to_path_buf(),
+        Some(dir) if dir.file_name().is_some_and(|n| n != "src") => dir.to_path_buf(),
+        _ => stem,
+    }
+}
+
+/// The core's shipped functions (test-only files and items left out).
+fn core_functions() -> Vec<Function> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../companion-core/src");
+    let mut files = Vec::new();
+    rs_files(&root, &mut files);
+    let mut out = Vec::new();
+    for f in files {
+        let name = f.file_name().unwrap().to_string_lossy();
+        if name == "tests.rs" || name.ends_with("_tests.rs") {
+            continue;
+        }
+        let text = std::fs::read_to_string(&f).unwrap();
+        functions(&f, &shipped_code::code_only(&text), &mut out);
+    }
+    out
+}
+
+/// The functions reachable from `Core::step_into` (by name), each with who reached it first.
+fn reached(all: &[Function]) -> BTreeMap<usize, String> {
+    let mut by_name: BTreeMap<&str, Vec<usize>> = BTreeMap::new();
+    for (k, f) in all.iter().enumerate() {
+        by_name.entry(&f.name).or_default().push(k);
+    }
+    let start = all
+        .iter()
+        .position(|f| f.name == "step_into" && f.file.ends_with("decision.rs"))
+        .expect("Core::step_into in companion-core/src/decision.rs");
+    let mut seen = BTreeMap::from([(start, "the cycle".to_string())]);
+    let mut todo = vec![start];
+    while let Some(k) = todo.pop() {
+        let module = module_of(&all[k].file);
+        for (name, how) in called(&all[k].text) {
+            let of_name = by_name.get(name.as_str()).map_or(&[][..], Vec::as_slice);
+            let own: Vec<usize> = (of_name.iter().copied())
+                .filter(|&j| module_of(&all[j].file) == module)
+                .collect();
+            let targets = if how == Call::Own && !own.is_empty() {
+                own
+            } else {
+                of_name.to_vec()
+            };
+            for j in targets {
+                if !seen.contains_key(&j) {
+                    seen.insert(j, all[k].name.clone());
+                    todo.push(j);
+                }
+            }
+        }
+    }
+    seen
+}
+
+/// Where `text` names a map keyed by strings (spaces ignored).
+fn names_a_string_map(text: &str) -> bool {
+    let squeezed: String = text.chars().filter(|c| !c.is_whitespace()).collect();
+    squeezed.contains("BTreeMap<String") || squeezed.contains("map_clone_from(")
+}
+
+#[test]
+fn no_string_keyed_map_is_built_inside_the_cycle() {
+    let all = core_functions();
+    assert!(all.len() > 200, "{} functions", all.len());
+    let seen = reached(&all);
+    // The cycle reaches its stages: a call graph that stopped at step_into would pass anything.
+    for stage in [
+        "record_evidence",
+        "write_probabilities",
+        "decide_slots",
+        "arbitrate",
+        "resolve_conflict",
+    ] {
+        assert!(
+            seen.keys().any(|&k| all[k].name == stage),
+            "step_into does not reach {stage}"
+        );
+    }
+    let mut found = Vec::new();
+    let mut known_seen = BTreeSet::new();
+    for (&k, from) in &seen {
+        let f = &all[k];
+        if !names_a_string_map(&f.text) {
+            continue;
+        }
+        let file = f.file.file_name().unwrap().to_string_lossy().to_string();
+        let key = (file.as_str(), f.name.as_str());
+        if GOAL_MAPS.contains(&key) {
+            continue;
+        }
+        if KNOWN.contains(&key) {
+            known_seen.insert(key.1.to_string());
+            continue;
+        }
+        found.push(format!(
+            "{}:{} fn {} (reached from {from})",
+            f.file.display(),
+            f.line,
+            f.name
+        ));
+    }
+    assert!(
+        found.is_empty(),
+        "string-keyed maps inside the cycle:\n{}",
+        found.join("\n")
+    );
+    for (file, name) in KNOWN {
+        assert!(
+            known_seen.contains(name),
+            "{file} fn {name} no longer builds a string-keyed map in the cycle: take it off KNOWN"
+        );
+    }
+}
+
+/// Maps keyed by the guarantee's goal names (`energy_j`, `duration_s`): neither observations,
+/// probabilities nor evidence (the record's margins, goals and drift).
+const GOAL_MAPS: [(&str, &str); 2] = [("guarantee.rs", "named_into"), ("guarantee.rs", "named")];
+
+/// Left to do (issue 39 item 1): the snapshot's observations are still a
+/// `BTreeMap<String, f64>` the shell builds and the record copies (`begin_record`, and the
+/// record's `clone_from`, which copies it and the vehicle's telemetry map). This list only
+/// shrinks: an entry that no longer builds a map fails the test until it is taken off.
+const KNOWN: [(&str, &str); 2] = [("decision.rs", "begin_record"), ("record.rs", "clone_from")];
+
+#[test]
+fn the_guard_sees_a_string_map_and_a_call() {
+    let mut fs = Vec::new();
+    let code = shipped_code::code_only(
+        "fn step_into() { helper::<u8>(x); }\n// fn ghost() { BTreeMap<String, f64> }\n\
+         fn helper() { let m: BTreeMap< String , f64> = BTreeMap::new(); s(\"a(\") }\n\
+         #[cfg(test)]\nfn tested() { BTreeMap<String, f64> }",
+    );
+    functions(Path::new("decision.rs"), &code, &mut fs);
+    let names: Vec<&str> = fs.iter().map(|f| f.name.as_str()).collect();
+    assert_eq!(names, ["step_into", "helper"]);
+    assert_eq!(
+        called(&fs[0].text),
+        BTreeSet::from([("helper".to_string(), Call::Own)])
+    );
+    assert!(names_a_string_map(&fs[1].text));
+    assert!(!names_a_string_map(&fs[0].text));
+    assert_eq!(fs[1].line, 3);
+}
