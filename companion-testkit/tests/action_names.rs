@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 #[path = "support/shipped_code.rs"]
 mod shipped_code;
+use shipped_code::rs_files;
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -15,17 +16,6 @@ fn root() -> PathBuf {
 /// Files not yet moved to roles, each with why: none now (the fly shell asks the role since its
 /// split; the scripted decider is test support in companion-testkit).
 const NOT_YET: [(&str, &str); 0] = [];
-
-fn rs_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for e in std::fs::read_dir(dir).unwrap() {
-        let p = e.unwrap().path();
-        if p.is_dir() {
-            rs_files(&p, out);
-        } else if p.extension().is_some_and(|x| x == "rs") {
-            out.push(p);
-        }
-    }
-}
 
 /// The action ids of params/actions.toml.
 fn action_ids() -> Vec<String> {

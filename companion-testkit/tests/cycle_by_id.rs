@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 
 #[path = "support/shipped_code.rs"]
 mod shipped_code;
+use shipped_code::rs_files;
 
 /// One function of the core's shipped code.
 struct Function {
@@ -19,17 +20,6 @@ struct Function {
     name: String,
     /// From `fn` to the end of its body (or its `;`).
     text: String,
-}
-
-fn rs_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for e in std::fs::read_dir(dir).unwrap() {
-        let p = e.unwrap().path();
-        if p.is_dir() {
-            rs_files(&p, out);
-        } else if p.extension().is_some_and(|x| x == "rs") {
-            out.push(p);
-        }
-    }
 }
 
 fn is_ident(c: u8) -> bool {

@@ -7,7 +7,21 @@
 //! raw strings), char literals against lifetimes, and bracket depth, which is what finding the end
 //! of an item needs. Removed text becomes spaces, newlines stay: line numbers are kept.
 
+use std::path::{Path, PathBuf};
+
 const CFG_TEST: &str = "#[cfg(test)]";
+
+/// Every `.rs` file below `dir`, into `out`.
+pub(crate) fn rs_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            rs_files(&p, out);
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+}
 
 /// `text` with every `#[cfg(test)]` item blanked (spaces; newlines kept).
 pub(crate) fn shipped(text: &str) -> String {
