@@ -211,28 +211,39 @@ run_target() {
   # otherwise rebuild mavlink and tokio a second time); `cargo test` then compiles only the
   # unit-test harnesses (cfg(test) builds of the libraries) on top.
   local sel=(--release --target "$t" -p companion -p companion-core -p companion-link -p companion-testkit -p bayes_net -p mdp_engine -p fpga_model -p panorama)
-  # Integration tests that start the companion binary as a child process (CARGO_BIN_EXE_*) need
-  # the kernel to exec an ARM ELF, i.e. qemu registered with binfmt_misc; without it they cannot
-  # run here and are left to the host's `cargo test --workspace`. The rest run under qemu.
-  if [ -e "/proc/sys/fs/binfmt_misc/$qemu" ]; then
-    sel+=(--tests --bins)
-  else
-    local picked
-    picked="$(cargo metadata --no-deps --format-version 1 | python3 -c '
+  # Which integration tests run under qemu: not the source guards (their header says "Source
+  # guard:": they read the repository's text, which no target changes; the host runs them), and
+  # those that start the companion binary as a child process (CARGO_BIN_EXE_*) only when the kernel
+  # can exec an ARM ELF, i.e. qemu is registered with binfmt_misc (else the host's `cargo test
+  # --workspace` runs them). The rest run under qemu: the libraries' and binaries' unit tests too.
+  local binfmt=0 picked name what
+  [ -e "/proc/sys/fs/binfmt_misc/$qemu" ] && binfmt=1
+  picked="$(cargo metadata --no-deps --format-version 1 | python3 -c '
 import json, sys
+binfmt = sys.argv[1] == "1"
 pkgs = {"companion", "companion-core", "companion-link", "companion-testkit", "bayes_net", "mdp_engine", "fpga_model", "panorama"}
 for p in json.load(sys.stdin)["packages"]:
     for t in p["targets"] if p["name"] in pkgs else []:
         if "test" in t["kind"]:
-            spawns = "CARGO_BIN_EXE" in open(t["src_path"], encoding="utf-8").read()
-            print(("skip " if spawns else "run ") + t["name"])
-')"
-    sel+=(--lib --bins)
-    local name
-    while read -r what name; do
-      if [ "$what" = run ]; then sel+=(--test "$name"); else echo "   not under qemu (starts the binary; no binfmt_misc): $name"; fi
-    done <<<"$picked"
-  fi
+            src = open(t["src_path"], encoding="utf-8").read()
+            if "//! Source guard:" in src:
+                print("host " + t["name"])
+            elif "CARGO_BIN_EXE" in src and not binfmt:
+                print("skip " + t["name"])
+            else:
+                print("run " + t["name"])
+' "$binfmt")"
+  sel+=(--lib --bins)
+  local host=() skipped=()
+  while read -r what name; do
+    case "$what" in
+      run) sel+=(--test "$name") ;;
+      host) host+=("$name") ;;
+      skip) skipped+=("$name") ;;
+    esac
+  done <<<"$picked"
+  [ "${#host[@]}" -eq 0 ] || echo "   on the host only (source guards): ${host[*]}"
+  [ "${#skipped[@]}" -eq 0 ] || echo "   not under qemu (start the binary; no binfmt_misc): ${skipped[*]}"
   stage "$t: cargo build --release: companion binary + test binaries"
   cargo build --quiet "${sel[@]}"
   stage "$t: cargo test (release profile) under $qemu: engines + companion (unit and integration tests)"

@@ -14,7 +14,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
-STAGES=9
+STAGES=8
 T_ALL=$SECONDS
 
 fmt() { printf '%dm%02ds' $(($1 / 60)) $(($1 % 60)); }
@@ -67,20 +67,18 @@ fi
 
 # ---- 3: rust ----------------------------------------------------------------------------------------
 # companion-fleet is built and tested in its own stage (8), in the background beside stage 6.
-begin "rust: cargo test (workspace, companion-fleet in stage 8)"
-cargo test --workspace --exclude companion-fleet --quiet 2>&1
-done_
-
-# ---- 3b: no shipped function over 150 lines (clippy.toml's too-many-lines-threshold) ---------------
-# Only that lint (the others are advice, not a gate); the testkit is test support, not shipped.
-begin "rust: clippy::too_many_lines on shipped code"
-if cargo clippy --version >/dev/null 2>&1; then
-  cargo clippy --workspace --exclude companion-testkit --exclude companion-fleet --lib --bins --quiet -- -A clippy::all -D clippy::too_many_lines 2>&1
-  done_
-else
-  echo "   clippy not installed (rustup component add clippy): not checked"
-  done_
+# No shipped function over 150 lines (clippy.toml's too-many-lines-threshold): clippy-driver lints
+# the workspace's libraries and binaries while they compile for the tests (scripts/lib/lint_wrapper.sh,
+# as cargo's RUSTC_WORKSPACE_WRAPPER for every later build too, so none compiles them again); only that
+# lint (the others are advice, not a gate); the testkit is test support, not shipped.
+lint_note="functions over 150 lines NOT checked (no clippy-driver: rustup component add clippy)"
+if clippy-driver --version >/dev/null 2>&1; then
+  export RUSTC_WORKSPACE_WRAPPER="$ROOT/scripts/lib/lint_wrapper.sh"
+  lint_note="shipped code linted for clippy::too_many_lines as it compiled"
 fi
+begin "rust: cargo test (workspace, companion-fleet in stage 8; shipped code linted as it compiles)"
+cargo test --workspace --exclude companion-fleet --quiet 2>&1
+done_ "ok ($lint_note)"
 
 # ---- 4: the companion binary the python tests fly ---------------------------------------------------
 begin "build: companion binary (and the testkit's tlog sample writer) for sitl_tests"
@@ -96,12 +94,13 @@ done_
 # fleet's build (docs/performance.md, Fleet) needs the stand-in stage's idle CPU as well to end
 # near stage 6. In a chain, not side by side: both are CPU-bound builds, so running them at once
 # would end no sooner. Stages 7 and 8 wait for their part and print its log. Each part's exit code
-# goes to LOG.rc (written whole: renamed into place).
+# goes to LOG.rc (written whole: renamed into place). The armv7 builds are not linted again (the
+# code is stage 3's); the fleet's build reuses stage 3's crates and lints the fleet's own code.
 arm_log=$(mktemp "${TMPDIR:-/tmp}/arm-log.XXXXXX")
 fleet_log=$(mktemp "${TMPDIR:-/tmp}/fleet-log.XXXXXX")
 rm -f "$arm_log.rc" "$fleet_log.rc"
 setsid nice -n 19 bash -c '
-  rc=0; if [ "$1" != 1 ]; then ./scripts/arm.sh >"$2" 2>&1 || rc=$?; fi; echo "$rc" >"$2.rc.tmp"; mv "$2.rc.tmp" "$2.rc"
+  rc=0; if [ "$1" != 1 ]; then env -u RUSTC_WORKSPACE_WRAPPER ./scripts/arm.sh >"$2" 2>&1 || rc=$?; fi; echo "$rc" >"$2.rc.tmp"; mv "$2.rc.tmp" "$2.rc"
   rc=0; if [ "$3" != 1 ]; then ./scripts/fleet_tests.sh >"$4" 2>&1 || rc=$?; fi; echo "$rc" >"$4.rc.tmp"; mv "$4.rc.tmp" "$4.rc"
 ' background-chain "${SKIP_ARM:-0}" "$arm_log" "${SKIP_FLEET:-0}" "$fleet_log" &
 bg_pid=$!

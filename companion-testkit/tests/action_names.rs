@@ -2,6 +2,9 @@
 //! declares appears as a string literal in the non-test code of `companion/` or
 //! `companion-link/` (the world, the flight shell, the link, the review). Renaming an action is an
 //! edit of params alone (companion/tests/actions_renamed.rs flies it).
+//!
+//! Source guard: it reads the repository's text, not the code as compiled for a target, so
+//! scripts/arm.sh leaves it to the host's run.
 
 use std::path::{Path, PathBuf};
 

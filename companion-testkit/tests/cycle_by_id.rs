@@ -5,6 +5,9 @@
 //! and literals blanked), following the calls from `step_into` by name: an over-approximation of
 //! the call graph (every core function of a called name is followed), so a map built anywhere a
 //! cycle may reach is found.
+//!
+//! Source guard: it reads the repository's text, not the code as compiled for a target, so
+//! scripts/arm.sh leaves it to the host's run.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};

@@ -4,6 +4,9 @@
 //! is a `crate::`/`super::` path (the binary's `companion::` too) in the shipped code; each module
 //! is on its top-level module's floor. Same-floor imports are allowed (`import_circles.rs` keeps
 //! them from going round).
+//!
+//! Source guard: it reads the repository's text, not the code as compiled for a target, so
+//! scripts/arm.sh leaves it to the host's run.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};

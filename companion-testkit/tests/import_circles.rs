@@ -2,6 +2,9 @@
 //! while b, directly or around a longer circle, names A. A circle means two concerns that cannot
 //! be read, changed or tested apart (issue 25). The core has none; the shells' known circles are
 //! listed by name until their files are split (none left).
+//!
+//! Source guard: it reads the repository's text, not the code as compiled for a target, so
+//! scripts/arm.sh leaves it to the host's run.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};

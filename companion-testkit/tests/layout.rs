@@ -1,6 +1,9 @@
 //! The crate boundaries hold: the core reads no files and depends on no I/O, runtime, CLI or
 //! randomness crate (directly or through its dependencies), and the binary does not link the
 //! testkit (its hidden-subcommand check is in companion/tests/cli_refused.rs).
+//!
+//! Source guard: it reads the repository's text, not the code as compiled for a target, so
+//! scripts/arm.sh leaves it to the host's run.
 
 use std::path::{Path, PathBuf};
 

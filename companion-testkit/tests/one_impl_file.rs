@@ -3,6 +3,9 @@
 //! companion-link/src/vehicle/mod.rs. The rest of their behaviour lives in the stage and
 //! executor types beside them, each with its own state; a second `impl Core` block in another
 //! file would spread the core's state back over the files.
+//!
+//! Source guard: it reads the repository's text, not the code as compiled for a target, so
+//! scripts/arm.sh leaves it to the host's run.
 
 use std::path::{Path, PathBuf};
 
