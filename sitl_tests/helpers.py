@@ -61,10 +61,10 @@ def sentences(record: Dict[str, Any]) -> Dict[str, Any]:
     return record
 
 
-def read_decision_log(log_dir: Path, fallback: Optional[Path] = None) -> List[Dict[str, Any]]:
+def read_decision_log(log_dir: Path, fallback: Optional[Path] = None, typed: bool = False) -> List[Dict[str, Any]]:
     """Records from every *.jsonl under `log_dir`; when there is none, from `fallback` (the run's stdout,
     where `fly` writes JSON lines when no log dir is given). Events, link events and command results are
-    given as their sentences (`sentences`)."""
+    given as their sentences (`sentences`), or as written (`typed`: schema 2's objects with `kind` and fields)."""
     records: List[Dict[str, Any]] = []
     files = sorted(glob.glob(str(Path(log_dir) / "**" / "*.jsonl"), recursive=True))
     if not files and fallback is not None and Path(fallback).exists():
@@ -82,7 +82,7 @@ def read_decision_log(log_dir: Path, fallback: Optional[Path] = None) -> List[Di
                 except json.JSONDecodeError as e:
                     raise AssertionError(f"{f}:{n}: decision log line is not JSON: {e}: {line[:200]}")
                 if isinstance(obj, dict) and "cycle" in obj:
-                    records.append(sentences(obj))
+                    records.append(obj if typed else sentences(obj))
     return records
 
 

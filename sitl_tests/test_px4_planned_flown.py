@@ -96,11 +96,13 @@ def test_px4_default_route_planned_duration_is_the_flight(px4_vehicle, tmp_path)
     # the pre-flight total of the ground re-plan.
     realloc = [(r["cycle"], r["guarantee"]["reallocation"].get("trigger")) for r in armed
                if (r.get("guarantee") or {}).get("reallocation")]
-    # the event's sentence: "companion: route re-planned at the autopilot's cruise 5 m/s (params 10): 30.4 kJ 196 s"
-    replans = [m for r in records for e in r.get("events") or []
-               if (m := re.search(r"route re-planned at the autopilot's cruise .*: [0-9.]+ kJ ([0-9.]+) s$", str(e)))]
-    assert len(replans) == 1, f"one ground re-plan at MPC_XY_CRUISE expected: {[m.group(0) for m in replans]}"
-    preflight_s = float(replans[0].group(1))
+    # the typed event (schema 2): {"kind": "route_replanned", "cruise_mps": 5.0, "was_mps": 10.0, "plan": "30.4 kJ 196 s"}
+    replans = [e for r in read_decision_log(log_dir, typed=True) for e in r.get("events") or []
+               if isinstance(e, dict) and e.get("kind") == "route_replanned"]
+    assert len(replans) == 1, f"one ground re-plan at MPC_XY_CRUISE expected: {replans}"
+    total = re.fullmatch(r"[0-9.]+ kJ ([0-9.]+) s", replans[0]["plan"])
+    assert total, f"the re-plan's total is energy and duration: {replans[0]}"
+    preflight_s = float(total.group(1))
     flight = armed_span(records)
     windows = activity_windows(records, flight)
     planned_s: Dict[str, float] = {}
