@@ -21,7 +21,7 @@ pub use stream::{LogItem, LogStream, LossReason, MAX_LINE_BYTES, stream_log};
 pub(crate) use tlog::frame_len;
 pub use tlog::{TlogFrame, TlogWriter, read_tlog};
 pub use writer::{
-    DEFAULT_MAX_BYTES, DEFAULT_MAX_LINE_BYTES, DecisionLog, LogCapError, RESERVE_BYTES,
+    DEFAULT_MAX_BYTES, DEFAULT_MAX_LINE_BYTES, DecisionLog, LetGo, LogCapError, RESERVE_BYTES,
     RESERVE_FILE, WriterOptions, WriterStats, max_bytes_from_env, parse_max_bytes,
 };
 

@@ -132,9 +132,15 @@ pub struct WriterStats {
     pub last_error: Option<String>,
 }
 
+/// Records another reader let go of (`--live`'s hub: its previous latest and a full viewer
+/// queue's oldest), handed over with a record to be dropped on the writer's thread after it: their
+/// memory is then freed where a log without `--live` frees its records, one at a time, not in
+/// bursts on another thread contending with the cycle's allocations (issue 37).
+pub type LetGo = [Option<Arc<DecisionRecord>>; 2];
+
 enum Payload {
     // Shared: `--live` serves the same record (crate::live), no second copy on the cycle.
-    Record(Arc<DecisionRecord>),
+    Record(Arc<DecisionRecord>, LetGo),
     Event {
         cycle: u64,
         time_s: f64,
@@ -266,7 +272,13 @@ impl DecisionLog {
 
     /// [`DecisionLog::record`] of a record shared with other readers.
     pub fn record_shared(&self, record: Arc<DecisionRecord>) -> bool {
-        self.send(Payload::Record(record))
+        self.send(Payload::Record(record, LetGo::default()))
+    }
+
+    /// [`DecisionLog::record_shared`], and records the caller lets go of, dropped on the writer's
+    /// thread after this one ([`LetGo`]); when the queue is full they drop here.
+    pub fn record_letting_go(&self, record: Arc<DecisionRecord>, let_go: LetGo) -> bool {
+        self.send(Payload::Record(record, let_go))
     }
 
     /// Queue one event line (`failsafe`, `link lost`, `mode RTL`, ...) outside the records.
@@ -534,10 +546,11 @@ impl WriterThread {
                 self.write_loss(Loss::QueueFull, msg.lost_before);
             }
             match msg.payload {
-                Payload::Record(r) => {
+                Payload::Record(r, let_go) => {
                     if self.write_json(&*r, LineKind::Payload) {
                         self.stats.records += 1;
                     }
+                    drop((r, let_go));
                 }
                 Payload::Event {
                     cycle,

@@ -125,6 +125,16 @@ pub trait RecordSink {
     fn write_shared(&mut self, rec: std::sync::Arc<DecisionRecord>) -> std::io::Result<()> {
         self.write(&rec)
     }
+    /// [`RecordSink::write_shared`], and records the caller lets go of: a sink with a thread of
+    /// its own drops them there ([`crate::decision_log::LetGo`]); by default, here.
+    fn write_shared_letting_go(
+        &mut self,
+        rec: std::sync::Arc<DecisionRecord>,
+        let_go: crate::decision_log::LetGo,
+    ) -> std::io::Result<()> {
+        drop(let_go);
+        self.write_shared(rec)
+    }
 }
 
 /// One JSON object per line.
@@ -158,6 +168,14 @@ impl RecordSink for LogSink {
         self.0.record_shared(rec);
         Ok(())
     }
+    fn write_shared_letting_go(
+        &mut self,
+        rec: std::sync::Arc<DecisionRecord>,
+        let_go: crate::decision_log::LetGo,
+    ) -> std::io::Result<()> {
+        self.0.record_letting_go(rec, let_go);
+        Ok(())
+    }
 }
 
 /// `--live`: the record written (with `live_dropped`), then served; without a hub, as it is.
@@ -166,10 +184,10 @@ impl<S: RecordSink> RecordSink for crate::live::LiveSink<S> {
         let Some(rec) = self.stamp(rec) else {
             return self.inner.write(rec);
         };
-        // The log first: what is written never depends on the viewers.
-        self.inner.write_shared(std::sync::Arc::clone(&rec))?;
-        self.publish(rec);
-        Ok(())
+        // Served, then logged with what the hub let go of (freed on the log's thread). What is
+        // written never depends on the viewers: the record was stamped before either.
+        let let_go = self.publish(std::sync::Arc::clone(&rec));
+        self.inner.write_shared_letting_go(rec, let_go)
     }
 }
 

@@ -14,6 +14,7 @@
 
 pub mod server;
 
+use crate::decision_log::LetGo;
 use companion_core::record::DecisionRecord;
 use std::collections::{BTreeMap, VecDeque};
 use std::net::SocketAddr;
@@ -131,8 +132,9 @@ struct HubState {
     next_viewer: u64,
     subscribed_ever: bool,
     closed: bool,
-    /// Records the hub let go of (the previous latest, a full queue's oldest): freed on the
-    /// server's thread ([`Hub::bury`]), not on the cycle's.
+    /// Records the hub let go of (the previous latest, a full queue's oldest): handed back by
+    /// [`Hub::publish`] two at a time, to be freed on the log's thread; more than that (several
+    /// viewers) wait here for the server's thread ([`Hub::bury`]), beyond [`GRAVEYARD_MAX`] freed at once.
     graveyard: Vec<Arc<DecisionRecord>>,
 }
 
@@ -180,8 +182,9 @@ impl Hub {
     }
 
     /// Hand one record to every subscribed viewer; never waits. A full queue loses its oldest
-    /// record (its messages counted in [`Hub::dropped`]).
-    pub fn publish(&self, rec: Arc<DecisionRecord>) {
+    /// record (its messages counted in [`Hub::dropped`]). Returns up to two records the hub let
+    /// go of, for the caller to free off the cycle (the log's thread: [`LetGo`]).
+    pub fn publish(&self, rec: Arc<DecisionRecord>) -> LetGo {
         let mut s = self.lock();
         s.seq += 1;
         let seq = s.seq;
@@ -201,6 +204,7 @@ impl Hub {
             v.queue.push_back((seq, Arc::clone(&rec)));
             v.wake.notify_one();
         }
+        let let_go = [graveyard.pop(), graveyard.pop()];
         let buried = graveyard.len();
         let overflow = if buried > GRAVEYARD_MAX {
             std::mem::take(graveyard)
@@ -216,6 +220,7 @@ impl Hub {
         if buried >= GRAVEYARD_BATCH {
             self.janitor.notify_one();
         }
+        let_go
     }
 
     /// Free the records the hub let go of (the server's thread).
@@ -371,10 +376,11 @@ impl<S> LiveSink<S> {
         Some(Arc::new(rec))
     }
 
-    /// Hand a written record to the viewers.
-    pub fn publish(&self, rec: Arc<DecisionRecord>) {
-        if let Some(hub) = &self.hub {
-            hub.publish(rec);
+    /// Hand a record to the viewers; what the hub let go of comes back ([`Hub::publish`]).
+    pub fn publish(&self, rec: Arc<DecisionRecord>) -> LetGo {
+        match &self.hub {
+            Some(hub) => hub.publish(rec),
+            None => LetGo::default(),
         }
     }
 }

@@ -32,6 +32,31 @@ fn a_full_queue_keeps_the_newest_records_and_counts_each_lost_message() {
     assert_eq!(hub.dropped(), 4);
 }
 
+/// Issue 37: what a stalled viewer's queue lets go of comes back to the caller (to be freed on the
+/// log's thread, as without `--live`), never piled up for the server's thread to free in bursts.
+#[test]
+fn a_stalled_viewer_s_lost_records_come_back_to_the_caller_not_the_server() {
+    let hub = Hub::new(2, 0);
+    let (v, _wake) = hub.connect();
+    hub.subscribed(&v, 1);
+    let cycles_of = |g: LetGo| -> Vec<u64> { g.iter().flatten().map(|r| r.cycle).collect() };
+    assert!(cycles_of(hub.publish(rec(1))).is_empty());
+    // The previous latest (1) goes; the queue [1, 2] still has room.
+    assert_eq!(cycles_of(hub.publish(rec(2))), [1]);
+    for c in 3..=100 {
+        // Full: the oldest queued (c - 2) and the previous latest (c - 1) both come back.
+        let mut got = cycles_of(hub.publish(rec(c)));
+        got.sort_unstable();
+        assert_eq!(got, [c - 2, c - 1], "publish {c}");
+        assert!(
+            hub.lock().graveyard.is_empty(),
+            "nothing left for the server at {c}"
+        );
+    }
+    assert_eq!(cycles(&hub.take(&v).0), [99, 100]);
+    assert_eq!(hub.dropped(), 98);
+}
+
 #[test]
 fn a_viewer_without_subscriptions_queues_nothing_and_loses_nothing() {
     let hub = Hub::new(1, 0);
