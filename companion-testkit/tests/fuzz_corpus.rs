@@ -70,12 +70,33 @@ fn params_corpus_replays_without_panic() {
         corpus.len() >= fx.files.len(),
         "fuzz/corpus/params_loader holds at least the real files"
     );
-    let mut rejected = 0;
-    for (path, data) in &corpus {
-        let r = std::panic::catch_unwind(|| params_one(fx, data));
-        let out = r.unwrap_or_else(|_| panic!("{} panicked", path.display()));
-        rejected += usize::from(!out.all_ok());
-    }
+    // Each input loads every params file: the suite's longest test (a minute and a half in
+    // debug, three under qemu), so its inputs are shared out over the cores.
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let part_len = corpus.len().div_ceil(threads).max(1);
+    let rejected: usize = std::thread::scope(|s| {
+        let parts: Vec<_> = corpus
+            .chunks(part_len)
+            .map(|part| {
+                s.spawn(move || {
+                    let mut rejected = 0;
+                    for (path, data) in part {
+                        let r = std::panic::catch_unwind(|| params_one(fx, data));
+                        let out = r.unwrap_or_else(|_| panic!("{} panicked", path.display()));
+                        rejected += usize::from(!out.all_ok());
+                    }
+                    rejected
+                })
+            })
+            .collect();
+        parts
+            .into_iter()
+            .map(|p| {
+                p.join()
+                    .expect("an input panicked (its path is printed above)")
+            })
+            .sum()
+    });
     assert!(rejected > 0, "the corpus holds inputs the loaders reject");
 }
 
