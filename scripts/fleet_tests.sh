@@ -20,6 +20,7 @@ lint="NOT linted (no clippy-driver)"
 if clippy-driver --version >/dev/null 2>&1; then
   export RUSTC_WORKSPACE_WRAPPER=${RUSTC_WORKSPACE_WRAPPER:-$ROOT/scripts/lib/lint_wrapper.sh}
   lint="clippy::too_many_lines linted as it compiles"
+  unset RUSTC_WRAPPER # sccache would be handed the lint wrapper as its compiler, which it refuses
 fi
 step "cargo build -p companion-fleet --bins --tests ($lint)"
 cargo build --quiet -p companion-fleet --bins --tests 2>&1

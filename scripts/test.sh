@@ -75,6 +75,11 @@ lint_note="functions over 150 lines NOT checked (no clippy-driver: rustup compon
 if clippy-driver --version >/dev/null 2>&1; then
   export RUSTC_WORKSPACE_WRAPPER="$ROOT/scripts/lib/lint_wrapper.sh"
   lint_note="shipped code linted for clippy::too_many_lines as it compiled"
+  # A RUSTC_WRAPPER (sccache) would be handed the lint wrapper as its compiler, which it refuses.
+  if [ -n "${RUSTC_WRAPPER:-}" ]; then
+    echo "   RUSTC_WRAPPER=$RUSTC_WRAPPER unset for this run (it cannot wrap the lint wrapper)"
+    unset RUSTC_WRAPPER
+  fi
 fi
 begin "rust: cargo test (workspace, companion-fleet in stage 8; shipped code linted as it compiles)"
 cargo test --workspace --exclude companion-fleet --quiet 2>&1
