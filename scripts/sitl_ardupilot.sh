@@ -139,4 +139,4 @@ if [ -n "${SITL_DEFAULT_ONLY:-}" ]; then echo "== SITL_DEFAULT_ONLY: tests not r
 echo "== pytest sitl_tests/test_real_*.py: a fresh ArduCopter SITL per test, ${SITL_WORKERS:-4} side by side"
 export ARDUCOPTER_BIN=$BIN SITL_DEFAULTS=$DEFAULTS
 # shellcheck disable=SC2086
-.venv/bin/python -m pytest -q -n "${SITL_WORKERS:-4}" -p no:cacheprovider sitl_tests/test_real_*.py ${SITL_PYTEST_ARGS:-}
+.venv/bin/python -m pytest -q -n "${SITL_WORKERS:-4}" --durations=12 -p no:cacheprovider sitl_tests/test_real_*.py ${SITL_PYTEST_ARGS:-}

@@ -119,4 +119,4 @@ echo "== pytest sitl_tests -m px4"
 # shellcheck disable=SC2086
 # the default flight's run, for test_px4_profile.py (the profile's prediction against what SIH reported)
 export PX4_DEFAULT_RUN="$WORK/runs"
-.venv/bin/python -m pytest -q -p no:cacheprovider sitl_tests/test_px4_flight.py sitl_tests/test_px4_profile.py sitl_tests/test_px4_autopilot_mission.py sitl_tests/test_px4_planned_flown.py -m px4 ${PX4_PYTEST_ARGS:--n 2}
+.venv/bin/python -m pytest -q --durations=8 -p no:cacheprovider sitl_tests/test_px4_flight.py sitl_tests/test_px4_profile.py sitl_tests/test_px4_autopilot_mission.py sitl_tests/test_px4_planned_flown.py -m px4 ${PX4_PYTEST_ARGS:--n 2}

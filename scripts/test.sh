@@ -113,7 +113,7 @@ bg_pid=$!
 # ---- 5: sitl_tests against the stand-in ------------------------------------------------------------
 begin "python: pytest sitl_tests (stand-in)"
 set +e
-.venv/bin/python -m pytest -q -n 4 sitl_tests -m "not real_autopilot" --ignore-glob='sitl_tests/test_px4_*.py' \
+.venv/bin/python -m pytest -q -n 4 --durations=12 sitl_tests -m "not real_autopilot" --ignore-glob='sitl_tests/test_px4_*.py' \
   --ignore=sitl_tests/test_fleet.py
 rc=$?
 set -e
