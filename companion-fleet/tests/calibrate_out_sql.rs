@@ -73,6 +73,13 @@ fn the_fleet_overlay_is_calibrates_with_legs_and_bn_rows() {
     args.extend(runs.iter().map(|p| p.to_str().unwrap()));
     args.extend(["--into", ds_s, "--vehicle", "V"]);
     fleet(&args);
+    // FLEET_TEST_DATASET=DIR: the same runs ingested into DIR too, kept (scripts/fleet_spark.sh
+    // compares their statistics, legs and BN rows included, on Spark: docs/fleet.md).
+    if let Some(keep) = std::env::var_os("FLEET_TEST_DATASET") {
+        let n = args.len();
+        args[n - 3] = keep.to_str().unwrap();
+        fleet(&args);
+    }
     let shipped = Shipped::load(&companion::params::default_params_dir()).unwrap();
     let cruise = shipped.cruise_mps.map(|v| {
         (
