@@ -20,7 +20,8 @@ else
 fi
 BIN="${CARGO_TARGET_DIR:-$PWD/target}/$PROFILE"
 WORK=$(mktemp -d /tmp/fleet-bench.XXXXXX)
-trap 'rm -rf "$WORK"' EXIT
+# KEEP=1 keeps the runs and the dataset (their folder is printed) for a closer look.
+trap '[ -n "${KEEP:-}" ] && echo "kept: $WORK" || rm -rf "$WORK"' EXIT
 python3 - "$WORK/runs" "$N" <<'PY'
 import json, math, os, sys
 out, n = sys.argv[1], int(sys.argv[2])

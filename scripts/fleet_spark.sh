@@ -23,7 +23,7 @@ ds, stats = sys.argv[1], json.load(open(sys.argv[2]))
 spark = (SparkSession.builder.master("local[2]").appName("fleet-statistics")
          .config("spark.ui.enabled", "false").getOrCreate())
 spark.sparkContext.setLogLevel("ERROR")
-spark.read.parquet(f"{ds}/*/*/*/samples.parquet").createOrReplaceTempView("samples")
+spark.read.parquet(f"{ds}/*/*/*/samples*.parquet").createOrReplaceTempView("samples")
 grid = [(k, float(v)) for k, v in enumerate(stats["grid"])]
 spark.createDataFrame(grid, StructType([StructField("k", LongType()), StructField("v0", DoubleType())])) \
      .createOrReplaceTempView("grid")
@@ -49,7 +49,7 @@ for r in spark.sql(q["normals"]).collect():
         close(f"normals[{r['k']}].{name}", r[name], aty[i])
     n += 1
 # The activity durations' sums (a query over records, window functions).
-spark.read.option("mergeSchema", "true").parquet(f"{ds}/*/*/*/records.parquet").createOrReplaceTempView("records")
+spark.read.option("mergeSchema", "true").parquet(f"{ds}/*/*/*/records*.parquet").createOrReplaceTempView("records")
 nd = 0
 for r in spark.sql(q["durations"]).collect():
     want = stats["durations"].get(r["a"])
@@ -65,15 +65,29 @@ for r in spark.sql(q["durations"]).collect():
 if nd != len(stats["durations"]):
     bad.append(f"durations: {nd} activities from spark, {len(stats['durations'])} from datafusion")
 # The BN rows' counts (a GROUP BY over bn_trials).
-spark.read.parquet(f"{ds}/*/*/*/bn_trials.parquet").createOrReplaceTempView("bn_trials")
+spark.read.parquet(f"{ds}/*/*/*/bn_trials*.parquet").createOrReplaceTempView("bn_trials")
 want_bn = {(r["node"], r["parents"], r["success_state"]): (r["successes"], r["trials"]) for r in stats["bn_rows"]}
 got_bn = {(r["node"], r["parents"], r["success_state"]): (r["successes"], r["trials"])
           for r in spark.sql(q["bn_rows"]).collect()}
 if got_bn != want_bn:
     bad.append(f"bn_rows: spark {sorted(got_bn.items())[:5]}... datafusion {sorted(want_bn.items())[:5]}...")
+# The legs' and vertical rates' sums (each query with the previous pass's results as literals).
+spark.read.parquet(f"{ds}/*/*/*/legs*.parquet").createOrReplaceTempView("legs")
+nl = 0
+for name, entry in stats["legs"].items():
+    got = spark.sql(entry["query"]).collect()[0].asDict()
+    for col, want in entry["sums"].items():
+        g = got.get(col)
+        if g is None or want is None:
+            if (g is None) != (want is None):
+                bad.append(f"legs.{name}.{col}: spark {g!r} datafusion {want!r}")
+            continue
+        close(f"legs.{name}.{col}", float(g), float(want))
+    nl += 1
+legs_n = int(stats["legs"]["legs_sums"]["sums"]["n"] or 0)
 print(f"spark {spark.version}: {int(t['n_air'])} airborne and {int(t['n_ground'])} ground samples, "
       f"{len(bins)} speed bins, normal equations at {n} candidate v0, durations of {nd} activities, "
-      f"{len(got_bn)} BN rows")
+      f"{len(got_bn)} BN rows, {nl} legs/rates queries over {legs_n} legs")
 print(f"  sum_y {t['sum_y']!r} (datafusion {df['sum_y']!r}); yy {t['yy']!r} (datafusion {df['yy']!r})")
 if bad:
     print("DIFFER:\n  " + "\n  ".join(bad[:20]))

@@ -294,10 +294,21 @@ def assert_report_matches(got: Dict[str, Any], want: Dict[str, Any]) -> None:
                 assert same(gr.get(col), v), (section, col, gr, wr)
 
 
+def batch_dirs(dataset: Path) -> List[Path]:
+    """The dataset's batch folders: one per ingest and partition (vehicle, date)."""
+    return sorted(dataset.glob("vehicle=*/date=*/batch=*"))
+
+
+def table_files(batch: Path, table: str) -> List[Path]:
+    """A table's files in a batch folder: <table>.parquet, then <table>.<n>.parquet when a run's columns differ."""
+    return sorted(p for p in batch.iterdir() if re.fullmatch(rf"{table}(\.\d+)?\.parquet", p.name))
+
+
 def present_ids(dataset: Path) -> set:
     ids = set()
-    for p in dataset.glob("vehicle=*/date=*/run=*"):
-        ids.add("sha256:" + p.name.removeprefix("run="))
+    for d in batch_dirs(dataset):
+        for f in table_files(d, "runs"):
+            ids.update(pq.ParquetFile(f).read(columns=["run_id"]).column("run_id").to_pylist())
     return ids
 
 
@@ -391,22 +402,27 @@ def test_pyarrow_and_duckdb_read_the_documented_schema(runs, tmp_path):
     ds = tmp_path / "fleet"
     ingest_all(runs, ds)
     schema = documented_schema()
-    run_dirs = sorted(ds.glob("vehicle=*/date=*/run=*"))
-    assert len(run_dirs) == 55
-    for d in run_dirs:
+    assert len(present_ids(ds)) == 55
+    # compacted: one folder per ingest and partition (vehicle, date), not one per run
+    partitions = {(r["vehicle"], r["date"]) for d in batch_dirs(ds) for f in table_files(d, "runs")
+                  for r in pq.ParquetFile(f).read(columns=["vehicle", "date"]).to_pylist()}
+    assert len(batch_dirs(ds)) == len(partitions) < 55
+    for d in batch_dirs(ds):
         for table, cols in schema.items():
-            s = pq.read_schema(d / f"{table}.parquet")
-            got = {f.name: str(f.type) for f in s}
-            for name, typ in cols.items():
-                assert got.get(name) == ARROW_TYPES[typ], (d, table, name, got.get(name))
-            extra = [c for c in got if c not in cols]
-            assert table == "records" or not extra, (table, extra)
-            assert all(c.startswith(DYNAMIC) for c in extra), extra
+            files = table_files(d, table)
+            assert files, (d, table)
+            for f in files:
+                got = {fld.name: str(fld.type) for fld in pq.read_schema(f)}
+                for name, typ in cols.items():
+                    assert got.get(name) == ARROW_TYPES[typ], (f, name, got.get(name))
+                extra = [c for c in got if c not in cols]
+                assert table == "records" or not extra, (table, extra)
+                assert all(c.startswith(DYNAMIC) for c in extra), extra
     con = duckdb.connect()
     glob = str(ds / "*" / "*" / "*")
-    n = con.execute(f"SELECT COUNT(*) FROM read_parquet('{glob}/records.parquet', union_by_name = true)").fetchone()[0]
+    n = con.execute(f"SELECT COUNT(*) FROM read_parquet('{glob}/records*.parquet', union_by_name = true)").fetchone()[0]
     assert n == sum(len(read_run(r)[1]) for r in runs["vehicle_of"])
-    per_vehicle = dict(con.execute(f"SELECT vehicle, COUNT(*) FROM read_parquet('{glob}/runs.parquet') "
+    per_vehicle = dict(con.execute(f"SELECT vehicle, COUNT(*) FROM read_parquet('{glob}/runs*.parquet') "
                                    "GROUP BY vehicle").fetchall())
     assert per_vehicle == {"sim": 50, "standin": 3, "crafted": 2}
     # one flight's telemetry: as many rows as the tlog has frames (counted here from the headers)
@@ -417,7 +433,7 @@ def test_pyarrow_and_duckdb_read_the_documented_schema(runs, tmp_path):
         i += 8 + (12 + plen + (13 if data[i + 10] & 1 else 0) if stx == 0xFD else 8 + plen)
         frames += 1
     rid = content_id(flight)
-    t = con.execute(f"SELECT COUNT(*) FROM read_parquet('{glob}/telemetry.parquet') WHERE run_id = ?", [rid])
+    t = con.execute(f"SELECT COUNT(*) FROM read_parquet('{glob}/telemetry*.parquet', union_by_name = true) WHERE run_id = ?", [rid])
     assert t.fetchone()[0] == frames > 0
 
 
@@ -465,8 +481,8 @@ def test_sigkill_mid_ingest_leaves_a_dataset_that_reports_right(runs, tmp_path):
         proc.wait(timeout=60)
         present = present_ids(ds)
         assert present <= all_ids
-        for d in ds.glob("vehicle=*/date=*/run=*"):
-            assert all((d / f"{t}.parquet").is_file() for t in TABLES), d
+        for d in batch_dirs(ds):
+            assert all(table_files(d, t) for t in TABLES), d
         if present:
             assert_report_matches(report(ds), expected(runs, present))
     assert kills == 20, f"only {kills} of {k + 1} ingests were killed mid-way"

@@ -16,7 +16,7 @@ use crate::export::RunKey;
 use crate::table::{Kind, TableWriter};
 use anyhow::Context;
 use arrow::array::AsArray;
-use companion::calibrate::cpt::{CptCounts, Row, dirichlet_mean, simulated_outcome};
+use companion::calibrate::cpt::{CptCounts, LearnedRow, Row, dirichlet_mean, simulated_outcome};
 use companion::calibrate::shipped::Shipped;
 use companion_core::record::DecisionRecord;
 use datafusion::prelude::SessionContext;
@@ -161,12 +161,13 @@ pub async fn counts_json(ctx: &SessionContext, sql: &str) -> anyhow::Result<serd
 }
 
 /// The learned rows from the counts `counts_sql` gives, as calibrate learns them: per row, the
-/// shipped P(success state) worth the prior's trials, then the counts (its Dirichlet mean).
-pub async fn learned_json(
+/// shipped P(success state) worth the prior's trials, then the counts (its Dirichlet mean); in
+/// calibrate's order (the error nodes' rows, then the versions', each by node and row).
+pub async fn learned_rows(
     ctx: &SessionContext,
     shipped: &Shipped,
     sql: &str,
-) -> anyhow::Result<serde_json::Value> {
+) -> anyhow::Result<Vec<LearnedRow>> {
     let mut out = Vec::new();
     for b in rows(ctx, sql).await? {
         let text = |c: usize| b.column(c).as_string::<i32>();
@@ -180,31 +181,52 @@ pub async fn learned_json(
             })?;
             let k = i64_at(&b, "successes", r)?.unwrap_or(0).max(0) as u64;
             let n = i64_at(&b, "trials", r)?.unwrap_or(0).max(0) as u64;
-            let p0 = match state.value(r) {
-                "absent" => shipped.rows.p_absent(node.value(r), &when),
-                _ => shipped.rows.p_activate(node.value(r), &when),
+            let (success_state, success_index, p0) = match state.value(r) {
+                "absent" => ("absent", 0, shipped.rows.p_absent(node.value(r), &when)),
+                _ => ("activate", 1, shipped.rows.p_activate(node.value(r), &when)),
             };
-            out.push(serde_json::json!({
-                "node": node.value(r),
-                "when": when,
-                "success_state": state.value(r),
-                "shipped": p0,
-                "successes": k,
-                "trials": n,
-                "learned": dirichlet_mean(p0, k, n),
-            }));
+            out.push(LearnedRow {
+                node: node.value(r).to_string(),
+                when,
+                success_state,
+                success_index,
+                shipped: p0,
+                successes: k,
+                trials: n,
+                learned: dirichlet_mean(p0, k, n),
+            });
         }
     }
-    Ok(serde_json::Value::Array(out))
+    out.sort_by(|a, b| {
+        (a.success_index, &a.node, &a.when).cmp(&(b.success_index, &b.node, &b.when))
+    });
+    Ok(out)
 }
 
-/// `calibrate --json`'s `bn_rows`: the learned rows of the runs selected by `vehicle_filter`, or
-/// `{"error": ...}` naming a run whose trials are unknown (the params did not load at ingest).
-pub async fn bn_rows_json(
+/// The learned rows as `--json` gives them.
+pub fn learned_json(rows: &[LearnedRow]) -> serde_json::Value {
+    (rows.iter())
+        .map(|r| {
+            serde_json::json!({
+                "node": r.node,
+                "when": r.when,
+                "success_state": r.success_state,
+                "shipped": r.shipped,
+                "successes": r.successes,
+                "trials": r.trials,
+                "learned": r.learned,
+            })
+        })
+        .collect()
+}
+
+/// The learned rows of the runs selected by `vehicle_filter`, or the error naming a run whose
+/// trials are unknown (the params did not load at ingest, a corrupted line).
+pub async fn bn_rows(
     ctx: &SessionContext,
     shipped: &Shipped,
     vehicle_filter: &str,
-) -> anyhow::Result<serde_json::Value> {
+) -> anyhow::Result<Result<Vec<LearnedRow>, String>> {
     let bad = rows(
         ctx,
         &format!(
@@ -218,8 +240,9 @@ pub async fn bn_rows_json(
             b.column(0).as_string::<i32>(),
             b.column(1).as_string::<i32>(),
         );
-        let error = format!("run {}: {}", src.value(0), why.value(0));
-        return Ok(serde_json::json!({ "error": error }));
+        return Ok(Err(format!("run {}: {}", src.value(0), why.value(0))));
     }
-    learned_json(ctx, shipped, &counts_sql(vehicle_filter)).await
+    Ok(Ok(
+        learned_rows(ctx, shipped, &counts_sql(vehicle_filter)).await?
+    ))
 }

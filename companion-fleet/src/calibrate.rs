@@ -273,6 +273,23 @@ pub async fn calibrate_cli(
     let st = statistics(&ctx, &shipped.power, fit.grid(), vehicle).await?;
     let durations_sql = crate::durations::query(&ctx, &vehicle_filter(vehicle)).await?;
     let durations = crate::durations::durations(&ctx, &durations_sql).await?;
+    // The legs' fallback commanded speed, as `companion calibrate` takes it (with its words,
+    // which the overlay's sources say).
+    let fallback = match cruise_mps {
+        Some(v) => Some((v, "--cruise-speed-mps".to_string())),
+        None => (shipped.cruise_mps).map(|v| {
+            (
+                v,
+                format!("{} [derive].cruise_speed_mps", shipped.mission_file),
+            )
+        }),
+    };
+    let legs = crate::legs::fit_sql(
+        &ctx,
+        fallback.as_ref().map(|f| f.0),
+        &vehicle_filter(vehicle),
+    )
+    .await?;
     if statistics_only {
         let mut stats = statistics_json(
             &shipped.power,
@@ -285,6 +302,9 @@ pub async fn calibrate_cli(
         let bn_sql = crate::bn_rows::counts_sql(&vehicle_filter(vehicle));
         stats["bn_rows"] = crate::bn_rows::counts_json(&ctx, &bn_sql).await?;
         stats["queries"]["bn_rows"] = bn_sql.into();
+        // The legs' and vertical rates' sums: each query (with the last pass's results as
+        // literals) and its one row.
+        stats["legs"] = legs.statistics.into();
         println!("{stats}");
         return Ok(());
     }
@@ -294,34 +314,49 @@ pub async fn calibrate_cli(
         .with_statistics(st)
         .and_then(|f| f.solve().map_err(|e| e.to_string()))
         .map_err(|e| format!("calibrate: {e}"));
-    // The legs' fallback commanded speed, as `companion calibrate` takes it.
-    let fallback = cruise_mps.or(shipped.cruise_mps);
-    let legs = crate::legs::legs_json(&ctx, fallback, &vehicle_filter(vehicle)).await?;
-    let bn_rows = crate::bn_rows::bn_rows_json(&ctx, &shipped, &vehicle_filter(vehicle)).await?;
+    let legs_values = crate::legs::legs_json(&legs);
+    let bn_rows = crate::bn_rows::bn_rows(&ctx, &shipped, &vehicle_filter(vehicle)).await?;
     let learned_else = durations.stats.is_empty()
-        && legs["legs"].get("error").is_some()
-        && bn_rows.as_array().is_none_or(Vec::is_empty);
+        && legs.model.is_err()
+        && bn_rows.as_ref().is_ok_and(Vec::is_empty);
     let (result, mut values) = match power {
         Ok(r) => {
             let v = power_json(&r);
             (Some(r), v)
         }
-        Err(e) if learned_else || out.is_some() => anyhow::bail!("{e}"),
+        Err(e) if learned_else => anyhow::bail!("{e}"),
         Err(e) => (None, serde_json::json!({ "power_error": e })),
     };
     values["durations"] = crate::durations::to_json(&durations);
     for part in ["legs", "climb", "descent"] {
-        values[part] = legs[part].clone();
+        values[part] = legs_values[part].clone();
     }
-    values["bn_rows"] = bn_rows;
+    values["bn_rows"] = match &bn_rows {
+        Ok(r) => crate::bn_rows::learned_json(r),
+        Err(e) => serde_json::json!({ "error": e }),
+    };
     if json {
         println!("{values}");
     } else {
         print_text(result.as_ref(), &values, &durations);
     }
-    if let (Some(out), Some(result)) = (out, &result) {
-        let ids = run_ids(&ctx, vehicle).await?;
-        crate::overlay::write_power_overlay(&shipped, result, &ids, out)?;
+    if let Some(out) = out {
+        // The BN rows are written only when every run's trials are known, as calibrate
+        // refuses a run it cannot count.
+        let bn_rows = bn_rows.map_err(|e| anyhow::anyhow!("calibrate --out: BN rows: {e}"))?;
+        let parts = companion::calibrate::write::OverlayParts {
+            made_by: "companion-fleet calibrate",
+            run_ids: run_ids(&ctx, vehicle).await?,
+            power: result.as_ref(),
+            legs: companion::calibrate::write::FittedLegs {
+                fallback: fallback.as_ref().map(|(v, w)| (*v, w.as_str())),
+                model: legs.model.ok(),
+                climb: legs.climb,
+                descent: legs.descent,
+            },
+            rows: &bn_rows,
+        };
+        crate::overlay::write_overlay(&shipped, &parts, out)?;
         println!("overlay written: {}", out.display());
     }
     Ok(())

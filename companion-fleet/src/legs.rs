@@ -15,7 +15,7 @@
 //! and with one (`with_fallback` false and true); calibrate picks its case's rows and puts its
 //! fallback speed in the legs whose `commanded_mps` is null.
 
-use crate::calibrate::{f64_at, i64_at, lit, rows};
+use crate::calibrate::{f64_at, lit, rows};
 use crate::export::RunKey;
 use crate::table::{Cell, Kind, TableWriter};
 use anyhow::Context;
@@ -23,7 +23,9 @@ use arrow::array::{Array, AsArray};
 use companion::calibrate::legs::{
     LegCentred, LegFitError, LegFlights, LegModel, LegSums, MIN_LEGS, SpeedSource,
 };
+use companion::calibrate::write::FittedRate;
 use datafusion::prelude::SessionContext;
+use std::collections::BTreeMap;
 use std::path::Path;
 
 /// The table's columns (docs/fleet.md "legs").
@@ -140,21 +142,81 @@ fn legs_sql(fallback: Option<f64>, filter: &str) -> String {
     )
 }
 
+/// The legs, climb and descent fitted from SQL sums, and each query with the sums it gave
+/// (`calibrate --statistics`: what another engine runs over the same files and compares).
+pub struct SqlLegs {
+    pub model: Result<LegModel, LegFitError>,
+    pub climb: Option<FittedRate>,
+    pub descent: Option<FittedRate>,
+    /// Name -> `{"query": SQL, "sums": {column: value}}`, in the order run.
+    pub statistics: serde_json::Map<String, serde_json::Value>,
+}
+
+impl SqlLegs {
+    /// One query's single row of sums (a null sum, over no rows, reads `None`), kept with its
+    /// query under `name`.
+    async fn sums(
+        &mut self,
+        ctx: &SessionContext,
+        name: &str,
+        sql: String,
+    ) -> anyhow::Result<BTreeMap<String, Option<f64>>> {
+        let b = rows(ctx, &sql).await?;
+        let b = b
+            .first()
+            .with_context(|| format!("no row of sums: {sql}"))?;
+        let mut out = BTreeMap::new();
+        for f in b.schema().fields() {
+            out.insert(f.name().clone(), f64_at(b, f.name(), 0)?);
+        }
+        self.statistics
+            .insert(name.into(), serde_json::json!({"query": sql, "sums": out}));
+        Ok(out)
+    }
+}
+
+fn get(sums: &BTreeMap<String, Option<f64>>, c: &str) -> f64 {
+    sums.get(c).copied().flatten().unwrap_or(0.0)
+}
+
 /// The leg model from SQL sums in the three passes of companion's `fit_legs` (`LegSums`,
-/// `LegCentred`, then the two-parameter fit's residuals): the same model on the same runs.
-pub async fn fit_legs_sql(
+/// `LegCentred`, then the two-parameter fit's residuals), then the climb and descent rates:
+/// the same fits on the same runs.
+pub async fn fit_sql(
     ctx: &SessionContext,
+    fallback: Option<f64>,
+    filter: &str,
+) -> anyhow::Result<SqlLegs> {
+    let mut out = SqlLegs {
+        model: Err(LegFitError::TooFew(0)),
+        climb: None,
+        descent: None,
+        statistics: serde_json::Map::new(),
+    };
+    out.model = fit_legs_sql(ctx, &mut out, fallback, filter).await?;
+    out.climb = rate_sql(ctx, &mut out, "climb", fallback, filter).await?;
+    out.descent = rate_sql(ctx, &mut out, "descent", fallback, filter).await?;
+    Ok(out)
+}
+
+async fn fit_legs_sql(
+    ctx: &SessionContext,
+    out: &mut SqlLegs,
     fallback: Option<f64>,
     filter: &str,
 ) -> anyhow::Result<Result<LegModel, LegFitError>> {
     let legs = legs_sql(fallback, filter);
-    let sums_sql = format!(
-        "SELECT COUNT(*) AS n, SUM(x) AS sx, SUM(t) AS st, MIN(x) AS x_lo, MAX(x) AS x_hi, \
-           MIN(v) AS v_lo, MAX(v) AS v_hi, MIN(l) AS l_lo, MAX(l) AS l_hi FROM ({legs})"
-    );
-    let b = rows(ctx, &sums_sql).await?;
-    let b = b.first().context("no row of sums")?;
-    let g = |c: &str| f64_at(b, c, 0).map(|v| v.unwrap_or(0.0));
+    let s = out
+        .sums(
+            ctx,
+            "legs_sums",
+            format!(
+                "SELECT COUNT(*) AS n, SUM(x) AS sx, SUM(t) AS st, MIN(x) AS x_lo, MAX(x) AS x_hi, \
+                   MIN(v) AS v_lo, MAX(v) AS v_hi, MIN(l) AS l_lo, MAX(l) AS l_hi FROM ({legs})"
+            ),
+        )
+        .await?;
+    let g = |c: &str| get(&s, c);
     let mut sources = Vec::new();
     for s in rows(ctx, &format!("SELECT DISTINCT source FROM ({legs})")).await? {
         let a = s.column(0).as_string::<i32>();
@@ -169,12 +231,12 @@ pub async fn fit_legs_sql(
     sources.sort();
     sources.dedup();
     let sums = LegSums {
-        n: i64_at(b, "n", 0)?.unwrap_or(0).max(0) as usize,
-        sum_x: g("sx")?,
-        sum_t: g("st")?,
-        x_range: (g("x_lo")?, g("x_hi")?),
-        commanded: (g("v_lo")?, g("v_hi")?),
-        lengths: (g("l_lo")?, g("l_hi")?),
+        n: g("n").max(0.0) as usize,
+        sum_x: g("sx"),
+        sum_t: g("st"),
+        x_range: (g("x_lo"), g("x_hi")),
+        commanded: (g("v_lo"), g("v_hi")),
+        lengths: (g("l_lo"), g("l_hi")),
         sources,
     };
     if sums.n < MIN_LEGS {
@@ -190,14 +252,12 @@ pub async fn fit_legs_sql(
         mt = lit(mt),
         c1 = lit(c1),
     );
-    let b = rows(ctx, &centred_sql).await?;
-    let b = b.first().context("no row of centred sums")?;
-    let g = |c: &str| f64_at(b, c, 0).map(|v| v.unwrap_or(0.0));
+    let c = out.sums(ctx, "legs_centred", centred_sql).await?;
     let centred = LegCentred {
-        sxx: g("sxx")?,
-        sxt: g("sxt")?,
-        ss_one: g("ss_one")?,
-        ss_before: g("ss_before")?,
+        sxx: get(&c, "sxx"),
+        sxt: get(&c, "sxt"),
+        ss_one: get(&c, "ss_one"),
+        ss_before: get(&c, "ss_before"),
     };
     let mut ss_two = None;
     if let Some((a, c)) = sums.two(&centred) {
@@ -206,36 +266,36 @@ pub async fn fit_legs_sql(
             a = lit(a),
             c = lit(c),
         );
-        let b = rows(ctx, &sql).await?;
-        ss_two = Some(f64_at(b.first().context("no row")?, "ss", 0)?.unwrap_or(0.0));
+        ss_two = Some(get(&out.sums(ctx, "legs_two", sql).await?, "ss"));
     }
     Ok(sums.model(&centred, ss_two))
 }
 
 /// A vertical rate (`climb`, `descent`) from SQL sums, as companion's `legs::rate`: total
 /// height over total time, and the RMS of each one's time against it (s).
-pub async fn rate_sql(
+async fn rate_sql(
     ctx: &SessionContext,
+    out: &mut SqlLegs,
     kind: &str,
     fallback: Option<f64>,
     filter: &str,
-) -> anyhow::Result<Option<(f64, f64)>> {
+) -> anyhow::Result<Option<FittedRate>> {
     let rows_of = format!(
         "FROM legs WHERE kind = '{kind}' AND with_fallback = {}{filter}",
         fallback.is_some()
     );
-    let b = rows(
-        ctx,
-        &format!("SELECT COUNT(*) AS n, SUM(length_m) AS h, SUM(duration_s) AS t {rows_of}"),
-    )
-    .await?;
-    let b = b.first().context("no row of sums")?;
-    let n = i64_at(b, "n", 0)?.unwrap_or(0);
-    let (h, t) = (f64_at(b, "h", 0)?, f64_at(b, "t", 0)?);
-    let (Some(h), Some(t)) = (h, t) else {
+    let s = out
+        .sums(
+            ctx,
+            &format!("{kind}_sums"),
+            format!("SELECT COUNT(*) AS n, SUM(length_m) AS h, SUM(duration_s) AS t {rows_of}"),
+        )
+        .await?;
+    let n = get(&s, "n");
+    let (Some(h), Some(t)) = (s.get("h").copied().flatten(), s.get("t").copied().flatten()) else {
         return Ok(None);
     };
-    if n == 0 || t <= 0.0 {
+    if n < 1.0 || t <= 0.0 {
         return Ok(None);
     }
     let r = h / t;
@@ -243,19 +303,21 @@ pub async fn rate_sql(
         "SELECT SUM((duration_s - length_m / {r}) * (duration_s - length_m / {r})) AS ss {rows_of}",
         r = lit(r)
     );
-    let b = rows(ctx, &sql).await?;
-    let ss = f64_at(b.first().context("no row")?, "ss", 0)?.unwrap_or(0.0);
-    Ok(Some((r, (ss / n as f64).sqrt())))
+    let ss = get(
+        &out.sums(ctx, &format!("{kind}_residuals"), sql).await?,
+        "ss",
+    );
+    Ok(Some(FittedRate {
+        flights: n as usize,
+        mean_height_m: h / n,
+        rate_mps: r,
+        rms_s: (ss / n).sqrt(),
+    }))
 }
 
 /// The legs, climb and descent fitted, as `--json` gives them.
-pub async fn legs_json(
-    ctx: &SessionContext,
-    fallback: Option<f64>,
-    filter: &str,
-) -> anyhow::Result<serde_json::Value> {
-    let model = fit_legs_sql(ctx, fallback, filter).await?;
-    let legs = match model {
+pub fn legs_json(fit: &SqlLegs) -> serde_json::Value {
+    let legs = match &fit.model {
         Ok(m) => serde_json::json!({
             "legs": m.legs,
             "overhead_s": m.overhead_s,
@@ -269,12 +331,9 @@ pub async fn legs_json(
         }),
         Err(e) => serde_json::json!({"error": e.to_string()}),
     };
-    let mut out = serde_json::json!({"legs": legs});
-    for kind in ["climb", "descent"] {
-        out[kind] = match rate_sql(ctx, kind, fallback, filter).await? {
-            Some((r, rms)) => serde_json::json!({"speed_mps": r, "rms_s": rms}),
-            None => serde_json::Value::Null,
-        };
-    }
-    Ok(out)
+    let rate = |r: &Option<FittedRate>| match r {
+        Some(r) => serde_json::json!({"speed_mps": r.rate_mps, "rms_s": r.rms_s}),
+        None => serde_json::Value::Null,
+    };
+    serde_json::json!({"legs": legs, "climb": rate(&fit.climb), "descent": rate(&fit.descent)})
 }

@@ -5,6 +5,7 @@
 // A binary: `pub` marks what a module offers the others.
 #![allow(unreachable_pub)]
 
+mod batch;
 mod bn_rows;
 mod calibrate;
 mod dataset;
@@ -42,7 +43,7 @@ enum Command {
         #[arg(long)]
         vehicle: Option<String>,
     },
-    /// Add runs to the dataset DIR (vehicle=.../date=.../run=.../): once each by content,
+    /// Add runs to the dataset DIR (vehicle=.../date=.../batch=.../): once each by content,
     /// atomically.
     Ingest {
         /// Run folders, or folders of run folders.
@@ -80,7 +81,8 @@ enum Command {
         /// Only this vehicle's runs.
         #[arg(long)]
         vehicle: Option<String>,
-        /// Write the power model as a params overlay to FILE (read by --params FILE).
+        /// Write the fits (power, legs, BN rows) as a params overlay to FILE, as `companion
+        /// calibrate --out` writes it (read by --params FILE).
         #[arg(long, value_name = "FILE")]
         out: Option<PathBuf>,
         /// The params the fit starts from (default: $COMPANION_PARAMS or the workspace's params/).

@@ -17,7 +17,7 @@ use std::sync::Arc;
 pub async fn context(dir: &Path) -> anyhow::Result<Option<SessionContext>> {
     let ctx = SessionContext::new();
     let dir = std::path::absolute(dir).with_context(|| format!("{}", dir.display()))?;
-    if crate::dataset::run_dirs(&dir)?.is_empty() {
+    if crate::dataset::batch_dirs(&dir)?.is_empty() {
         return Ok(None);
     }
     for table in crate::export::TABLES {

@@ -218,15 +218,14 @@ impl TableWriter {
         Ok(())
     }
 
-    /// Write what is pending, close the file and sync it to disk; the rows written.
+    /// Write what is pending and close the file; the rows written. Not synced: a run's files
+    /// are a scratch copy that ingest appends to its batch, and the batch's files are synced
+    /// (batch.rs).
     pub fn finish(mut self) -> anyhow::Result<u64> {
         self.flush()?;
-        let file = self
-            .writer
+        self.writer
             .into_inner()
             .with_context(|| format!("closing {}", self.path.display()))?;
-        file.sync_all()
-            .with_context(|| format!("syncing {}", self.path.display()))?;
         Ok(self.rows)
     }
 }

@@ -8,38 +8,9 @@ mod support;
 
 use companion::calibrate::cpt::LearnedRow;
 use companion::calibrate::{calibrate, shipped::Shipped};
-use companion::decision_log::Header;
-use companion::sim::{self, Scenario, WorldSpec};
-use companion_core::decision::{Core, ModelKind};
 use std::collections::BTreeMap;
-use std::io::Write;
 use std::path::{Path, PathBuf};
-use support::{assert_near, fleet};
-
-/// A simulated mission's run folder: the header, then its records (with the world's outcome).
-fn write_simulated(dir: &Path, scenario: &str, seed: u64) {
-    let params = companion::params::default_params_dir();
-    let files = companion::params::read_params_dir(&params).unwrap();
-    let model = std::sync::Arc::new(companion::params::load_model(&params).unwrap());
-    let world = WorldSpec::load(&files).unwrap();
-    let s = Scenario::load(&files, scenario).unwrap();
-    let mut core = Core::new(
-        std::sync::Arc::clone(&model),
-        ModelKind::Bfm,
-        model.policy("mission").unwrap(),
-    );
-    let run = sim::run(&world, &s, seed, |obs| core.step(obs));
-    std::fs::create_dir_all(dir).unwrap();
-    let mut f = std::fs::File::create(dir.join("decisions.jsonl")).unwrap();
-    let h = Header::new(
-        &format!("companion simulate --scenario {scenario} --seed {seed}"),
-        std::time::UNIX_EPOCH + std::time::Duration::from_secs(1_750_000_000 + seed * 86_400),
-    );
-    writeln!(f, "{}", serde_json::to_string(&h).unwrap()).unwrap();
-    for r in &run.records {
-        writeln!(f, "{}", serde_json::to_string(r).unwrap()).unwrap();
-    }
-}
+use support::{assert_near, fleet, write_simulated};
 
 type Key = (String, Vec<(String, String)>);
 

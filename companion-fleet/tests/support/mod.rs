@@ -3,6 +3,12 @@
 
 #![allow(dead_code)] // each test file uses its part
 
+use companion::decision_log::Header;
+use companion::sim::{self, Scenario, WorldSpec};
+use companion_core::decision::{Core, ModelKind};
+use std::io::Write;
+use std::path::Path;
+
 /// The binary under test.
 pub(crate) const FLEET: &str = env!("CARGO_BIN_EXE_companion-fleet");
 
@@ -32,4 +38,29 @@ pub(crate) fn assert_near(got: &serde_json::Value, want: f64, what: &str) {
         .as_f64()
         .unwrap_or_else(|| panic!("{what}: not a number: {got}"));
     assert!(close(g, want), "{what}: fleet {g} vs calibrate {want}");
+}
+
+/// A simulated mission's run folder: the header, then its records (with the world's outcome).
+pub(crate) fn write_simulated(dir: &Path, scenario: &str, seed: u64) {
+    let params = companion::params::default_params_dir();
+    let files = companion::params::read_params_dir(&params).unwrap();
+    let model = std::sync::Arc::new(companion::params::load_model(&params).unwrap());
+    let world = WorldSpec::load(&files).unwrap();
+    let s = Scenario::load(&files, scenario).unwrap();
+    let mut core = Core::new(
+        std::sync::Arc::clone(&model),
+        ModelKind::Bfm,
+        model.policy("mission").unwrap(),
+    );
+    let run = sim::run(&world, &s, seed, |obs| core.step(obs));
+    std::fs::create_dir_all(dir).unwrap();
+    let mut f = std::fs::File::create(dir.join("decisions.jsonl")).unwrap();
+    let h = Header::new(
+        &format!("companion simulate --scenario {scenario} --seed {seed}"),
+        std::time::UNIX_EPOCH + std::time::Duration::from_secs(1_750_000_000 + seed * 86_400),
+    );
+    writeln!(f, "{}", serde_json::to_string(&h).unwrap()).unwrap();
+    for r in &run.records {
+        writeln!(f, "{}", serde_json::to_string(r).unwrap()).unwrap();
+    }
 }

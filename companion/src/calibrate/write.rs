@@ -6,6 +6,7 @@ use super::cpt::{LearnedRow, PRIOR_PSEUDO_COUNTS};
 use super::power_fit::{FitResult, PowerModel};
 use super::shipped::Shipped;
 use super::toml_table::{round4, round6, table_at};
+pub use super::write_legs::{FittedLegs, FittedRate};
 use crate::review::text::escape_controls;
 use std::fmt::Write;
 use std::path::Path;
@@ -29,12 +30,12 @@ fn v0_note(r: &FitResult) -> &'static str {
     }
 }
 
-/// The fit's provenance, the text of each fitted number's `source`.
-pub fn power_source(cal: &Calibration, r: &FitResult) -> String {
+/// The fit's provenance, the text of each fitted number's `source`: made by `made_by` from
+/// `runs` runs.
+pub fn power_source(made_by: &str, runs: usize, r: &FitResult) -> String {
     let s = format!(
-        "companion calibrate: {} run(s), {} power samples ({} on the ground), speeds {:.1}..{:.1} m/s; \
+        "{made_by}: {runs} run(s), {} power samples ({} on the ground), speeds {:.1}..{:.1} m/s; \
          fit RMS {:.1} W ({:.1} % of the mean measured {:.1} W); the shipped params' RMS {:.1} W ({:.1} %)",
-        cal.runs.len(),
         r.samples,
         r.ground_samples,
         r.v_min,
@@ -274,16 +275,49 @@ fn when_text(r: &LearnedRow) -> String {
         .join(",")
 }
 
-/// The overlay text: `[calibration]` (what made it, the sources of entries that have no
-/// `source` key of their own), then the fitted entries per params file.
+/// What an overlay is made of: the fits, not the runs' data, so that `companion-fleet
+/// calibrate`, which has the same fits from SQL sums over its dataset, writes the same overlay
+/// (docs/fleet.md).
+pub struct OverlayParts<'a> {
+    /// What made it (`companion calibrate`): the start of every `source`.
+    pub made_by: &'a str,
+    /// The runs' content ids (`runs::content_id`).
+    pub run_ids: Vec<String>,
+    pub power: Option<&'a FitResult>,
+    pub legs: FittedLegs<'a>,
+    pub rows: &'a [LearnedRow],
+}
+
+/// The overlay text of `cal`: `[calibration]` (what made it, the sources of entries that have
+/// no `source` key of their own), then the fitted entries per params file.
 pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Result<String> {
+    // A run by its content, never by a path on the machine that made the overlay.
+    let mut run_ids = Vec::new();
+    for r in &cal.runs {
+        run_ids.push(super::runs::content_id(r)?);
+    }
+    let parts = OverlayParts {
+        made_by: "companion calibrate",
+        run_ids,
+        power: cal.power.as_ref().ok(),
+        legs: FittedLegs::of(cal),
+        rows: &cal.rows,
+    };
+    overlay_of(shipped, &parts, out)
+}
+
+/// The overlay text of `parts` (see [`overlay`]).
+pub fn overlay_of(
+    shipped: &Shipped,
+    parts: &OverlayParts<'_>,
+    out: &Path,
+) -> anyhow::Result<String> {
+    let made_by = parts.made_by;
+    let runs = parts.run_ids.len();
     let mut t = Table::new();
     let mut sources = Table::new();
     let cal_t = table_at(&mut t, &["calibration"]);
-    cal_t.insert(
-        "made_by".into(),
-        Value::String("companion calibrate".into()),
-    );
+    cal_t.insert("made_by".into(), Value::String(made_by.into()));
     let canon = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
     let base = canon(&shipped.dir);
     let out_dir = canon(
@@ -293,50 +327,27 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
     );
     let rel = relative(&out_dir, &base);
     cal_t.insert("params".into(), Value::String(rel));
-    // A run by its content, never by a path on the machine that made the overlay.
-    let mut runs = Vec::new();
-    for r in &cal.runs {
-        runs.push(Value::String(super::runs::content_id(r)?));
-    }
-    cal_t.insert("runs".into(), Value::Array(runs));
+    let ids = (parts.run_ids.iter()).map(|id| Value::String(id.clone()));
+    cal_t.insert("runs".into(), Value::Array(ids.collect()));
     cal_t.insert(
         "prior_pseudo_counts".into(),
         Value::Float(PRIOR_PSEUDO_COUNTS),
     );
     let mf = shipped.mission_file.clone();
-    if let Ok(r) = &cal.power {
-        let src = Value::String(power_source(cal, r));
-        let p = table_at(&mut t, &[&mf, "propulsion"]);
-        if let Some(c) = r.polynomial_w {
-            // A different model: the overlay's table replaces the shipped one whole.
-            p.insert("model".into(), Value::String("polynomial".into()));
-            let c: Vec<Value> =
-                [round4(c[0]), Value::Float(0.0), round6(c[2]), round6(c[3])].to_vec();
-            p.insert("coefficients_w".into(), Value::Array(c));
-            p.insert("source".into(), src.clone());
-            let b = table_at(&mut t, &[&mf, "base"]);
-            b.insert("power_w".into(), round4(r.fitted.base_w));
-            b.insert("source".into(), src);
-        } else {
-            p.insert("blade_profile_w".into(), round4(r.fitted.blade_profile_w));
-            p.insert("induced_hover_w".into(), round4(r.fitted.induced_hover_w));
-            p.insert(
-                "induced_velocity_mps".into(),
-                round4(r.fitted.induced_velocity_mps),
-            );
-            p.insert("drag_area_m2".into(), round4(r.fitted.drag_area_m2));
-            p.insert("source".into(), src.clone());
-            let b = table_at(&mut t, &[&mf, "base"]);
-            b.insert("power_w".into(), round4(r.fitted.base_w));
-            b.insert("source".into(), src);
-        }
+    if let Some(r) = parts.power {
+        power_overlay(
+            &mut t,
+            &mf,
+            r,
+            Value::String(power_source(made_by, runs, r)),
+        );
     }
-    super::write_legs::overlay(&mut t, &mut sources, &mf, cal);
+    super::write_legs::overlay(&mut t, &mut sources, &mf, (&parts.legs, runs, made_by));
     let file = super::cpt::APPLICATIONS_FILE;
-    let mut nodes: Vec<&str> = cal.rows.iter().map(|r| r.node.as_str()).collect();
+    let mut nodes: Vec<&str> = parts.rows.iter().map(|r| r.node.as_str()).collect();
     nodes.dedup();
     for node in nodes {
-        let learned: Vec<&LearnedRow> = cal.rows.iter().filter(|r| r.node == node).collect();
+        let learned: Vec<&LearnedRow> = parts.rows.iter().filter(|r| r.node == node).collect();
         table_at(&mut t, &[file, "node", node]).insert(
             "override".into(),
             shipped.rows.overrides_with(node, &learned),
@@ -345,13 +356,9 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
             sources.insert(
                 format!("{file}:node.{node}.override[{}]", when_text(r)),
                 Value::String(format!(
-                    "companion calibrate: {}/{} successes in {} run(s), prior: the shipped row \
+                    "{made_by}: {}/{} successes in {runs} run(s), prior: the shipped row \
                      P({}) {:.4} worth {PRIOR_PSEUDO_COUNTS} trials",
-                    r.successes,
-                    r.trials,
-                    cal.runs.len(),
-                    r.success_state,
-                    r.shipped
+                    r.successes, r.trials, r.success_state, r.shipped
                 )),
             );
         }
@@ -361,9 +368,32 @@ pub fn overlay(shipped: &Shipped, cal: &Calibration, out: &Path) -> anyhow::Resu
     // The name as a TOML string (escaped by the serializer): data, never TOML text.
     let name = Value::String(out.display().to_string()).to_string();
     Ok(format!(
-        "# Params overlay written by `companion calibrate` (docs/calibrate.md). Use it with\n\
+        "# Params overlay written by `{made_by}` (docs/calibrate.md). Use it with\n\
          # `companion check|simulate|fly --params {name}`.\n\n{body}"
     ))
+}
+
+/// The power model's entries: `[<mission>.propulsion]` and `[<mission>.base]`, each with `src`.
+fn power_overlay(t: &mut Table, mf: &str, r: &FitResult, src: Value) {
+    let p = table_at(t, &[mf, "propulsion"]);
+    if let Some(c) = r.polynomial_w {
+        // A different model: the overlay's table replaces the shipped one whole.
+        p.insert("model".into(), Value::String("polynomial".into()));
+        let c: Vec<Value> = [round4(c[0]), Value::Float(0.0), round6(c[2]), round6(c[3])].to_vec();
+        p.insert("coefficients_w".into(), Value::Array(c));
+    } else {
+        p.insert("blade_profile_w".into(), round4(r.fitted.blade_profile_w));
+        p.insert("induced_hover_w".into(), round4(r.fitted.induced_hover_w));
+        p.insert(
+            "induced_velocity_mps".into(),
+            round4(r.fitted.induced_velocity_mps),
+        );
+        p.insert("drag_area_m2".into(), round4(r.fitted.drag_area_m2));
+    }
+    p.insert("source".into(), src.clone());
+    let b = table_at(t, &[mf, "base"]);
+    b.insert("power_w".into(), round4(r.fitted.base_w));
+    b.insert("source".into(), src);
 }
 
 /// `to` relative to `from` when it lies below it, else `to` as is (both absolute).

@@ -19,7 +19,12 @@ const RATE_RANGE: (f64, f64) = (0.05, 30.0);
 /// Legs listed one by one in the report.
 const SHOWN_LEGS: usize = 12;
 
-fn speed_words(cal: &Calibration, m: &LegModel) -> String {
+/// The fallback commanded speed calibrate was given, and its words.
+fn fallback_of(cal: &Calibration) -> Option<(f64, &str)> {
+    cal.legs.fallback().map(|(v, from)| (*v, from.as_str()))
+}
+
+fn speed_words(fallback: Option<(f64, &str)>, m: &LegModel) -> String {
     let words: Vec<String> = m
         .sources
         .iter()
@@ -28,7 +33,7 @@ fn speed_words(cal: &Calibration, m: &LegModel) -> String {
             SpeedSource::AutopilotParam => {
                 "the autopilot's WPNAV_SPEED / MPC_XY_CRUISE (PARAM_VALUE)".to_string()
             }
-            SpeedSource::Fallback => match cal.legs.fallback() {
+            SpeedSource::Fallback => match fallback {
                 Some((v, from)) => format!("{from} {v} m/s (the tlog does not say it)"),
                 None => "the fallback".to_string(),
             },
@@ -37,17 +42,16 @@ fn speed_words(cal: &Calibration, m: &LegModel) -> String {
     words.join(", ")
 }
 
-fn leg_source(cal: &Calibration, m: &LegModel) -> String {
+fn leg_source(made_by: &str, runs: usize, fallback: Option<(f64, &str)>, m: &LegModel) -> String {
     format!(
-        "companion calibrate: {} legs in {} run(s), {:.0}..{:.0} m, commanded {:.1}..{:.1} m/s ({}); \
+        "{made_by}: {} legs in {runs} run(s), {:.0}..{:.0} m, commanded {:.1}..{:.1} m/s ({}); \
          model t = L / {} + c, fit RMS {:.2} s; without it (c = 0, the commanded speed) RMS {:.2} s",
         m.legs,
-        cal.runs.len(),
         m.lengths.0,
         m.lengths.1,
         m.commanded.0,
         m.commanded.1,
-        speed_words(cal, m),
+        speed_words(fallback, m),
         if m.speed_fraction.is_some() {
             "(f v_cmd)"
         } else {
@@ -58,14 +62,59 @@ fn leg_source(cal: &Calibration, m: &LegModel) -> String {
     )
 }
 
-fn vertical_source(what: &str, v: &[Vertical], r: (f64, f64), runs: usize) -> String {
-    let h: f64 = v.iter().map(|x| x.height_m).sum::<f64>() / v.len() as f64;
+fn vertical_source(made_by: &str, what: &str, r: &FittedRate, runs: usize) -> String {
     format!(
-        "companion calibrate: {} {what}(s) in {runs} run(s), {h:.1} m on average; rate = height / time \
+        "{made_by}: {} {what}(s) in {runs} run(s), {:.1} m on average; rate = height / time \
          over them all; RMS of each one's time against it {:.2} s",
-        v.len(),
-        r.1
+        r.flights, r.mean_height_m, r.rms_s
     )
+}
+
+/// A climb or descent rate fitted: over how many flights, their mean height, the rate (height
+/// over time, all of them) and the RMS of each one's time against it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FittedRate {
+    pub flights: usize,
+    pub mean_height_m: f64,
+    pub rate_mps: f64,
+    pub rms_s: f64,
+}
+
+impl FittedRate {
+    /// The rate of `v` (`legs::rate`), none without a flight.
+    fn of(v: &[Vertical]) -> Option<Self> {
+        let (rate_mps, rms_s) = rate(v)?;
+        Some(FittedRate {
+            flights: v.len(),
+            mean_height_m: v.iter().map(|x| x.height_m).sum::<f64>() / v.len() as f64,
+            rate_mps,
+            rms_s,
+        })
+    }
+}
+
+/// How the vehicle flies as the overlay writes it: the fits, not the legs (`companion-fleet
+/// calibrate` has the same fits from SQL sums over its `legs` table).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FittedLegs<'a> {
+    /// The fallback commanded speed and its words; without one the mission has no `[derive]`
+    /// to plan with and nothing is written.
+    pub fallback: Option<(f64, &'a str)>,
+    pub model: Option<LegModel>,
+    pub climb: Option<FittedRate>,
+    pub descent: Option<FittedRate>,
+}
+
+impl<'a> FittedLegs<'a> {
+    /// The fits of calibrate's legs.
+    pub(super) fn of(cal: &'a Calibration) -> Self {
+        FittedLegs {
+            fallback: fallback_of(cal),
+            model: fit_legs(&cal.legs.legs).ok(),
+            climb: FittedRate::of(&cal.legs.climbs),
+            descent: FittedRate::of(&cal.legs.descents),
+        }
+    }
 }
 
 /// What the leg, climb and descent fits say no vehicle can be: each a reason.
@@ -84,7 +133,7 @@ pub(super) fn refusals(cal: &Calibration) -> Vec<String> {
                 "legs: flown at {:.2} x the commanded speed ({}): that is not the speed the autopilot \
                  commanded; give it with --cruise-speed-mps",
                 f,
-                speed_words(cal, &m)
+                speed_words(fallback_of(cal), &m)
             ));
         }
     }
@@ -120,7 +169,7 @@ pub(super) fn report(s: &mut String, cal: &Calibration) {
                 m.lengths.1,
                 m.commanded.0,
                 m.commanded.1,
-                speed_words(cal, &m),
+                speed_words(fallback_of(cal), &m),
                 m.rms_before_s,
                 m.rms_s,
                 m.overhead_s
@@ -176,27 +225,32 @@ pub(super) fn report(s: &mut String, cal: &Calibration) {
     }
 }
 
-/// The overlay's `[derive]` entries (only when the mission has a `[derive]` to plan with).
-pub(super) fn overlay(t: &mut Table, sources: &mut Table, mf: &str, cal: &Calibration) {
-    if cal.legs.fallback().is_none() {
+/// The overlay's `[derive]` entries (only when the mission has a `[derive]` to plan with), the
+/// fits `legs` of `runs` runs, made by `made_by`.
+pub(super) fn overlay(
+    t: &mut Table,
+    sources: &mut Table,
+    mf: &str,
+    (legs, runs, made_by): (&FittedLegs<'_>, usize, &str),
+) {
+    if legs.fallback.is_none() {
         return;
     }
-    let runs = cal.runs.len();
     let mut entries: Vec<(&str, f64, String)> = Vec::new();
-    if let Ok(m) = fit_legs(&cal.legs.legs) {
-        let src = leg_source(cal, &m);
+    if let Some(m) = &legs.model {
+        let src = leg_source(made_by, runs, legs.fallback, m);
         // A small negative overhead (within the refusal's slack) is none.
         entries.push(("waypoint_overhead_s", m.overhead_s.max(0.0), src.clone()));
         if let Some(f) = m.speed_fraction {
             entries.push(("speed_fraction", f, src));
         }
     }
-    for (what, key, v) in [
-        ("climb", "climb_speed_mps", &cal.legs.climbs),
-        ("descent", "descent_speed_mps", &cal.legs.descents),
+    for (what, key, r) in [
+        ("climb", "climb_speed_mps", &legs.climb),
+        ("descent", "descent_speed_mps", &legs.descent),
     ] {
-        if let Some(r) = rate(v) {
-            entries.push((key, r.0, vertical_source(what, v, r, runs)));
+        if let Some(r) = r {
+            entries.push((key, r.rate_mps, vertical_source(made_by, what, r, runs)));
         }
     }
     if entries.is_empty() {
