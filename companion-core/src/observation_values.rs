@@ -187,7 +187,14 @@ impl Clone for ObservationValues {
     }
     fn clone_from(&mut self, src: &Self) {
         self.slots.clone_from(&src.slots);
-        self.overflow.clone_from(&src.overflow);
+        // By element: a tuple's `clone_from` would clone the name anew.
+        self.overflow.truncate(src.overflow.len());
+        for (d, s) in self.overflow.iter_mut().zip(&src.overflow) {
+            d.0.clone_from(&s.0);
+            d.1 = s.1;
+        }
+        let n = self.overflow.len();
+        self.overflow.extend_from_slice(&src.overflow[n..]);
     }
 }
 
