@@ -173,7 +173,7 @@ impl Core {
             self.guarantee.keep_event_text(std::mem::take(s));
         }
         rec.events.clone_from(&obs.events);
-        crate::record::map_clone_from(&mut rec.observations, &obs.values);
+        rec.observations.clone_from(&obs.values);
         rec.commands.clear();
         rec.link_events.clear();
         rec.vehicle.clear();

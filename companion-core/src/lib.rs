@@ -41,6 +41,7 @@ pub mod mission;
 pub mod mission_mdp;
 pub mod model;
 pub mod named_slots;
+pub mod observation_values;
 pub mod observations;
 pub mod probabilities;
 pub mod readings;

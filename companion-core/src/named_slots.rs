@@ -68,6 +68,11 @@ impl<V> NamedSlots<V> {
         self.values[slot] = Some(value);
     }
 
+    /// Empty the slot `slot`.
+    pub fn reset_slot(&mut self, slot: usize) {
+        self.values[slot] = None;
+    }
+
     /// The value at `slot`, mutable.
     pub fn slot_mut(&mut self, slot: usize) -> Option<&mut V> {
         self.values.get_mut(slot).and_then(Option::as_mut)
@@ -193,6 +198,15 @@ impl<V: Clone> FromIterator<(String, V)> for NamedSlots<V> {
         NamedSlots {
             names,
             values: map.into_values().map(Some).collect(),
+        }
+    }
+}
+
+/// Each pair set as by [`NamedSlots::insert`] (an edge's write).
+impl<V: Clone> Extend<(String, V)> for NamedSlots<V> {
+    fn extend<I: IntoIterator<Item = (String, V)>>(&mut self, iter: I) {
+        for (name, value) in iter {
+            self.insert(name, value);
         }
     }
 }

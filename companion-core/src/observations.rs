@@ -1,8 +1,8 @@
 //! One timestamped snapshot of everything observed: autopilot telemetry and onboard monitors.
 //! The shell (simulation world or MAVLink) fills it; the pure core only reads it.
 
+pub use crate::observation_values::ObservationValues;
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeMap;
 
 /// Observation names and units are data (params/observations.toml, documented in docs/params.md):
 /// `vibration_mps2`, `wind_mps`, `battery_pct`, `gps_fix`, `gps_sats`, `luminosity_lux`,
@@ -15,8 +15,8 @@ pub struct Observations {
     /// detected/tracked by the onboard application): `base`, `wp1`, `wpi`, `wpf`, `target`, `v3`, ...
     #[serde(default)]
     pub state: String,
-    /// Raw observations by name (units in docs/params/health.md).
-    pub values: BTreeMap<String, f64>,
+    /// Raw observations by slot over the run's vocabulary (units in docs/params/health.md).
+    pub values: ObservationValues,
     /// Discrete happenings since the last snapshot (`target detected`, `obstacle detected`).
     pub events: Vec<crate::record::Event>,
 }
@@ -26,34 +26,20 @@ impl Observations {
     pub fn get(&self, name: &str) -> Option<f64> {
         self.values.get(name).copied()
     }
-    /// The value of each of `names` (given in sorted order), in one pass over both sorted lists:
-    /// `f(k, value)` for the `k`-th name (`None`: absent from the snapshot).
+    /// The value of each of `names` (given in sorted order): `f(k, value)` for the `k`-th name
+    /// (`None`: absent from the snapshot).
     pub fn each_sorted<'a>(
         &self,
         names: impl IntoIterator<Item = &'a str>,
         mut f: impl FnMut(usize, Option<f64>),
     ) {
-        let mut snapshot = self.values.iter().peekable();
         for (k, name) in names.into_iter().enumerate() {
-            let mut value = None;
-            while let Some((n, v)) = snapshot.peek() {
-                match n.as_str().cmp(name) {
-                    std::cmp::Ordering::Less => {
-                        snapshot.next();
-                    }
-                    std::cmp::Ordering::Equal => {
-                        value = Some(**v);
-                        break;
-                    }
-                    std::cmp::Ordering::Greater => break,
-                }
-            }
-            f(k, value);
+            f(k, self.get(name));
         }
     }
 
     /// Set (or replace) the observation named `name`.
     pub fn set(&mut self, name: &str, value: f64) {
-        self.values.insert(name.to_string(), value);
+        self.values.set(name, value);
     }
 }

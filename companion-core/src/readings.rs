@@ -4,7 +4,9 @@
 //! once, walking its sorted map beside the sorted names, and every stage then reads by index
 //! (a name lookup per reading per stage took a sixth of the steady cycle).
 
+use crate::named_slots::SortedNames;
 use crate::observations::Observations;
+use std::sync::Arc;
 
 /// Where one reading sits among [`Readings`]' values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -15,17 +17,14 @@ pub struct Slot(u32);
 pub struct Readings {
     /// Names by slot, in the order they were first asked for.
     names: Vec<String>,
-    /// Slots in name order (the walk's order).
-    by_name: Vec<u32>,
     /// The last snapshot's value per slot (`None`: absent from it).
     values: Vec<Option<f64>>,
-    /// The last snapshot's names in its order, with the slot each one fed: a snapshot of the
-    /// same names (compared name by name, the steady case) is read down this list instead of
-    /// the walk. Not used once a slot is added (`layout_valid`).
-    layout: Vec<(String, Option<u32>)>,
-    layout_valid: bool,
+    /// The vocabulary the last snapshot was written over (`None`: none read yet, or a slot was
+    /// added since), and where each slot sits in it: a snapshot over the same vocabulary (the
+    /// steady case, one `Arc` from load) is read by index, no name compared.
+    vocabulary: Option<SortedNames>,
+    in_vocabulary: Vec<Option<usize>>,
 }
-
 impl Readings {
     /// Readings whose first slots are `first`, in order (slot `k` is `first[k]`; a repeated name
     /// keeps its first slot).
@@ -44,68 +43,29 @@ impl Readings {
         }
         let k = self.names.len() as u32;
         self.names.push(name.to_string());
-        let at = self
-            .by_name
-            .partition_point(|&j| self.names[j as usize].as_str() < name);
-        self.by_name.insert(at, k);
         self.values.push(None);
-        self.layout_valid = false;
+        self.vocabulary = None;
         Slot(k)
     }
 
-    /// Read `obs`: every slot's value from the snapshot (`None` when absent), in one pass over
-    /// both sorted lists.
+    /// Read `obs`: every slot's value from the snapshot (`None` when absent): by the slot of
+    /// the vocabulary it is written over, else (a name outside it) from its overflow.
     pub fn read(&mut self, obs: &Observations) {
-        if self.read_as_last(obs) {
-            return;
+        let values = &obs.values;
+        let same = (self.vocabulary.as_ref()).is_some_and(|v| Arc::ptr_eq(v, values.names()));
+        if !same {
+            self.in_vocabulary.clear();
+            (self.in_vocabulary).extend(self.names.iter().map(|n| values.slot_of(n)));
+            self.vocabulary = Some(Arc::clone(values.names()));
         }
-        let (names, values) = (&self.names, &mut self.values);
-        let sorted = self.by_name.iter().map(|&k| names[k as usize].as_str());
-        obs.each_sorted(sorted, |j, value| {
-            values[self.by_name[j] as usize] = value;
-        });
-        self.remember_layout(obs);
-    }
-
-    /// When `obs` holds the last snapshot's names: its values written down the remembered
-    /// layout (the slots it does not feed stay absent, as the last walk left them).
-    fn read_as_last(&mut self, obs: &Observations) -> bool {
-        if !self.layout_valid
-            || obs.values.len() != self.layout.len()
-            || !obs
-                .values
-                .keys()
-                .zip(&self.layout)
-                .all(|(n, (m, _))| n == m)
-        {
-            return false;
+        let slots = values.slots();
+        for (k, at) in self.in_vocabulary.iter().enumerate() {
+            self.values[k] = match at {
+                Some(j) => slots[*j],
+                None if values.overflow().is_empty() => None,
+                None => values.get(&self.names[k]).copied(),
+            };
         }
-        for (v, (_, slot)) in obs.values.values().zip(&self.layout) {
-            if let Some(k) = slot {
-                self.values[*k as usize] = Some(*v);
-            }
-        }
-        true
-    }
-
-    /// The snapshot's names and the slot each fed (strings reused).
-    fn remember_layout(&mut self, obs: &Observations) {
-        self.layout.truncate(obs.values.len());
-        for (i, name) in obs.values.keys().enumerate() {
-            let slot = self
-                .by_name
-                .binary_search_by(|&k| self.names[k as usize].as_str().cmp(name))
-                .ok()
-                .map(|j| self.by_name[j]);
-            match self.layout.get_mut(i) {
-                Some((n, s)) => {
-                    n.clone_from(name);
-                    *s = slot;
-                }
-                None => self.layout.push((name.clone(), slot)),
-            }
-        }
-        self.layout_valid = true;
     }
 
     /// The value read at `slot`.
@@ -127,6 +87,8 @@ impl Readings {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::named_slots::sorted_names;
+    use crate::observation_values::ObservationValues;
     use proptest::prelude::*;
 
     proptest! {
@@ -139,7 +101,7 @@ mod tests {
         ) {
             let mut r = Readings::starting_with(asked.iter().take(3).map(String::as_str));
             let slots: Vec<Slot> = asked.iter().map(|n| r.slot(n)).collect();
-            let obs = Observations { values: held, ..Default::default() };
+            let obs = Observations { values: held.into_iter().collect(), ..Default::default() };
             r.read(&obs);
             for (name, &slot) in asked.iter().zip(&slots) {
                 prop_assert_eq!(r.name(slot), name.as_str());
@@ -171,7 +133,9 @@ mod tests {
             shapes in proptest::collection::vec(
                 proptest::collection::btree_map("[a-d]{1,2}", -5.0f64..5.0, 0..12), 1..4),
             stream in proptest::collection::vec((0usize..4, -5.0f64..5.0, 0usize..6), 1..20),
+            vocabulary in proptest::collection::vec("[a-d]{1,2}", 0..8),
         ) {
+            let vocabulary = sorted_names(vocabulary);
             let mut r = Readings::default();
             asked.iter().for_each(|n| { r.slot(n); });
             for (k, &(shape, shift, add)) in stream.iter().enumerate() {
@@ -179,14 +143,15 @@ mod tests {
                     r.slot(n);
                 }
                 // The shape's names with values moved by `shift`: same names, new values.
-                let values = shapes[shape % shapes.len()]
+                // Over the stream's one vocabulary (the shape's names in part), read by index.
+                let pairs = shapes[shape % shapes.len()]
                     .iter()
-                    .map(|(n, v)| (n.clone(), v + shift))
-                    .collect();
+                    .map(|(n, v)| (n.clone(), v + shift));
+                let values = ObservationValues::over_with(&vocabulary, pairs);
                 let obs = Observations { values, ..Default::default() };
                 r.read(&obs);
                 let mut fresh = r.clone();
-                fresh.layout_valid = false;
+                fresh.vocabulary = None;
                 fresh.read(&obs);
                 prop_assert_eq!(r.values(), fresh.values());
                 for k in 0..r.values().len() {

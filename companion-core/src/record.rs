@@ -3,10 +3,12 @@
 
 use crate::action_id::ActionId;
 use crate::named_slots::{Label, NamedSlots};
+use crate::observation_values::ObservationValues;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
 mod events;
+mod goal_maps;
 mod resources;
 #[cfg(any(test, feature = "test-support"))]
 pub mod strategies;
@@ -348,8 +350,9 @@ pub struct DecisionRecord {
     pub state: String,
     /// What triggered or happened at this cycle (`target detected`, `obstacle detected`, ...).
     pub events: Vec<Event>,
-    /// Raw observations by name (units in docs/params.md).
-    pub observations: BTreeMap<String, f64>,
+    /// Raw observations by slot over the run's vocabulary, with the overflow (units in
+    /// docs/params.md); written as the `name -> value` map.
+    pub observations: ObservationValues,
     /// BN evidence: node -> state (by slot over the evidence nodes, named when written).
     pub evidence: NamedSlots<Label>,
     /// The evidence nodes of params/observations.toml that received no evidence this cycle (in
@@ -380,8 +383,9 @@ pub struct DecisionRecord {
     pub commands: Vec<CommandRecord>,
     /// MAVLink link happenings this cycle.
     pub link_events: Vec<LinkEvent>,
-    /// Telemetry worth plotting that is not an observation (altitude_m, battery_pct, mode).
-    pub vehicle: BTreeMap<String, serde_json::Value>,
+    /// Telemetry worth plotting that is not an observation (altitude_m, battery_pct, mode): by
+    /// slot over the names the shell wrote (kept from cycle to cycle), written as the map.
+    pub vehicle: NamedSlots<serde_json::Value>,
     /// Wall-clock time of the record, microseconds since the Unix epoch (UTC), the unit and
     /// clock of the tlog's timestamps, so records and telemetry line up. `fly` only (the
     /// simulated world has no wall clock): absent in `simulate` records.
@@ -475,38 +479,104 @@ pub fn map_clone_from<K: Ord + Clone, V: Clone>(dst: &mut BTreeMap<K, V>, src: &
 }
 
 macro_rules! reuse_clone {
-    ($t:ident { $($f:ident),* } maps { $($m:ident),* }) => {
+    ($t:ident { $($f:ident),* }) => {
         impl Clone for $t {
             fn clone(&self) -> Self {
-                Self { $($f: self.$f.clone(),)* $($m: self.$m.clone(),)* }
+                Self { $($f: self.$f.clone(),)* }
             }
             fn clone_from(&mut self, src: &Self) {
                 $(self.$f.clone_from(&src.$f);)*
-                $(map_clone_from(&mut self.$m, &src.$m);)*
+            }
+        }
+    };
+    // `$also(dst, src)` copies the fields not listed (`clone` starts them at their default).
+    ($t:ident { $($f:ident),* } then $also:path) => {
+        impl Clone for $t {
+            fn clone(&self) -> Self {
+                let mut c = Self { $($f: self.$f.clone(),)* ..Default::default() };
+                $also(&mut c, self);
+                c
+            }
+            fn clone_from(&mut self, src: &Self) {
+                $(self.$f.clone_from(&src.$f);)*
+                $also(self, src);
             }
         }
     };
 }
 
-reuse_clone!(MdpProposal { mdp, state, action, actions, value, iterations, horizon, reason, inputs } maps {});
-reuse_clone!(Conflict { kept, dropped, rule } maps {});
+reuse_clone!(MdpProposal {
+    mdp,
+    state,
+    action,
+    actions,
+    value,
+    iterations,
+    horizon,
+    reason,
+    inputs
+});
+reuse_clone!(Conflict {
+    kept,
+    dropped,
+    rule
+});
 reuse_clone!(PlacementRecord {
-    app, version, implementation, support, tiles, cpu_share, ms_per_frame
-} maps {});
+    app,
+    version,
+    implementation,
+    support,
+    tiles,
+    cpu_share,
+    ms_per_frame
+});
 reuse_clone!(ResourcesRecord {
-    placements, cpu_load, tiles_used, reconfigurations, degraded, dropped, summary, policy,
-    free_tiles, failed_tiles, reconfiguration_ms, power_w
-} maps {});
+    placements,
+    cpu_load,
+    tiles_used,
+    reconfigurations,
+    degraded,
+    dropped,
+    summary,
+    policy,
+    free_tiles,
+    failed_tiles,
+    reconfiguration_ms,
+    power_w
+});
 reuse_clone!(GuaranteeRecord {
     activity, activity_name, reallocation, infeasible, infeasible_reason, failed_resources,
     plan_differs, energy_source, pack, power, planned_j, planned_s, verdict
-} maps { margins, goals, drift });
+} then goal_maps::clone_goal_maps_from);
+// The observations and the vehicle's telemetry are by slot (`ObservationValues`, `NamedSlots`):
+// their `clone_from` keeps the buffers and shares the names.
 reuse_clone!(DecisionRecord {
-    cycle, time_s, state, events, proposals, conflicts, actions, resources, guarantee, commands,
-    link_events, utc_us, decide_ms, shell_actions, absent_evidence, cpt_learned, live_dropped,
-    evidence, probabilities
-} maps { observations, vehicle });
-reuse_clone!(Plan { vehicle_actions, applications } maps {});
+    cycle,
+    time_s,
+    state,
+    events,
+    proposals,
+    conflicts,
+    actions,
+    resources,
+    guarantee,
+    commands,
+    link_events,
+    utc_us,
+    decide_ms,
+    shell_actions,
+    absent_evidence,
+    cpt_learned,
+    live_dropped,
+    evidence,
+    probabilities,
+    observations,
+    vehicle
+});
+reuse_clone!(Plan {
+    vehicle_actions,
+    applications
+});
 
 #[cfg(test)]
 mod tests {

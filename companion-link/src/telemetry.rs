@@ -7,7 +7,8 @@
 use super::Msg;
 use super::dialect::*;
 use super::modes::{Flavor, ReportedMode};
-use companion_core::observations::Observations;
+use companion_core::named_slots::SortedNames;
+use companion_core::observations::{ObservationValues, Observations};
 use companion_core::record::Event;
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -45,6 +46,11 @@ pub struct TelemetryConfig {
     /// side only).
     #[serde(default)]
     pub recorded_only: Vec<String>,
+    /// The observation vocabulary compiled once at load (`companion::vocabulary::Vocabulary`,
+    /// set by `Params::load`), shared with the decision core: the telemetry writes the snapshot
+    /// by its slots. Empty (every name in the snapshot's overflow) until set.
+    #[serde(skip, default = "no_vocabulary")]
+    pub vocabulary: SortedNames,
 }
 
 fn half() -> f64 {
@@ -260,6 +266,10 @@ impl TelemetryConfig {
     }
 }
 
+fn no_vocabulary() -> SortedNames {
+    std::sync::Arc::from(Vec::new())
+}
+
 impl Default for TelemetryConfig {
     fn default() -> Self {
         let onboard = DEFAULT_ONBOARD
@@ -276,6 +286,7 @@ impl Default for TelemetryConfig {
             max_onboard_names: default_max_onboard_names(),
             ranges: BTreeMap::new(),
             recorded_only: vec!["track_confidence".into()],
+            vocabulary: std::sync::Arc::from(Vec::new()),
         }
     }
 }
@@ -300,7 +311,8 @@ pub struct Position {
 pub struct Telemetry {
     /// Telemetry settings (params/link.toml `[telemetry]`).
     pub cfg: TelemetryConfig,
-    values: BTreeMap<String, f64>,
+    /// The observations heard, by slot over `cfg.vocabulary`.
+    values: ObservationValues,
     /// Latest GLOBAL_POSITION_INT, with the heading.
     pub position: Option<Position>,
     /// HOME_POSITION (lat e7, lon e7, amsl m).
@@ -331,6 +343,7 @@ impl Telemetry {
     /// Empty telemetry with these settings.
     pub fn new(cfg: TelemetryConfig) -> Self {
         Self {
+            values: ObservationValues::over(&cfg.vocabulary),
             cfg,
             ..Default::default()
         }
@@ -622,7 +635,7 @@ impl Telemetry {
     }
 
     fn set(&mut self, name: &str, v: f64) {
-        self.values.insert(name.to_string(), v);
+        self.values.set(name, v);
     }
 
     /// The pack as the autopilot's parameters describe it (the caller decoded the PARAM_VALUE):
@@ -720,9 +733,9 @@ impl Telemetry {
         values.remove("battery_status_pct");
         values.remove("battery_status_v");
         if let Some(o) = self.obstacle_m(now) {
-            values.insert("obstacle_m".into(), o);
+            values.set("obstacle_m", o);
         }
-        values.insert("armed".into(), if self.armed { 1.0 } else { 0.0 });
+        values.set("armed", if self.armed { 1.0 } else { 0.0 });
         Observations {
             time_s: now.as_secs_f64(),
             // The mission state is estimated by the fly loop (it knows the route progress).

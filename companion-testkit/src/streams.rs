@@ -2,7 +2,7 @@
 //! a tracking-phase snapshot from the simulated world, then advanced in place cycle by cycle the
 //! way flight telemetry moves. Not used by the decision core itself.
 
-use companion::sim::{Scenario, World, WorldSpec};
+use companion::sim::{Scenario, World};
 use companion_core::decision::{Core, Model, ModelKind};
 use companion_core::observations::Observations;
 use std::path::Path;
@@ -12,7 +12,10 @@ use std::sync::Arc;
 /// BFM core from take-off.
 pub fn tracking_snapshot(model: &Arc<Model>, params: &Path, scenario: &str) -> Observations {
     let files = companion::params::read_params_dir(params).expect("params");
-    let spec = WorldSpec::load(&files).expect("world params");
+    // The world of the loaded params: its snapshots are written over the run's vocabulary.
+    let spec = companion::params::Params::load(params, None)
+        .expect("params")
+        .world;
     let scenario = Scenario::load(&files, scenario).expect("scenario");
     let mut world = World::new(&spec, &scenario, 1);
     let mut core = Core::new(

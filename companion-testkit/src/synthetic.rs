@@ -341,7 +341,7 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
         time_s: i as f64,
         state: state.into(),
         events,
-        observations,
+        observations: observations.into_iter().collect(),
         evidence: [("vibration".to_string(), "high".into())]
             .into_iter()
             .collect(),
@@ -391,7 +391,7 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
         }),
         commands,
         link_events,
-        vehicle,
+        vehicle: vehicle.into_iter().collect(),
         utc_us: None,
         decide_ms: None,
     }

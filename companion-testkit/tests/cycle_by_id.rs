@@ -248,14 +248,17 @@ fn no_string_keyed_map_is_built_inside_the_cycle() {
 }
 
 /// Maps keyed by the guarantee's goal names (`energy_j`, `duration_s`): neither observations,
-/// probabilities nor evidence (the record's margins, goals and drift).
-const GOAL_MAPS: [(&str, &str); 2] = [("guarantee.rs", "named_into"), ("guarantee.rs", "named")];
+/// probabilities nor evidence (the record's margins, goals and drift, and their copy).
+const GOAL_MAPS: [(&str, &str); 3] = [
+    ("guarantee.rs", "named_into"),
+    ("guarantee.rs", "named"),
+    ("goal_maps.rs", "clone_goal_maps_from"),
+];
 
-/// Left to do (issue 39 item 1): the snapshot's observations are still a
-/// `BTreeMap<String, f64>` the shell builds and the record copies (`begin_record`, and the
-/// record's `clone_from`, which copies it and the vehicle's telemetry map). This list only
-/// shrinks: an entry that no longer builds a map fails the test until it is taken off.
-const KNOWN: [(&str, &str); 2] = [("decision.rs", "begin_record"), ("record.rs", "clone_from")];
+/// Left to do: nothing (the snapshot's observations and the vehicle's telemetry are by slot since
+/// issue 39 item 1). This list only shrinks: an entry that no longer builds a map fails the test
+/// until it is taken off.
+const KNOWN: [(&str, &str); 0] = [];
 
 #[test]
 fn the_guard_sees_a_string_map_and_a_call() {

@@ -21,6 +21,13 @@ fn tracking_core(kind: ModelKind, policy: &str, stream: Stream) -> (Core, Stream
     let params = default_params_dir();
     let model = std::sync::Arc::new(companion::params::load_model(&params).unwrap());
     let base = tracking_snapshot(&model, &params, "complete-1");
+    // Written over the run's vocabulary, as the shells write it: every name by slot.
+    assert!(
+        base.values.overflow().is_empty(),
+        "{:?}",
+        base.values.overflow()
+    );
+    assert!(base.values.names().len() > 20);
     let stream_gen = StreamGen::new(&model, base.clone(), stream);
     let core = Core::new(
         std::sync::Arc::clone(&model),

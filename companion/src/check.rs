@@ -167,7 +167,7 @@ pub fn probabilities_section(cx: &CheckContext) -> anyhow::Result<(Value, String
 /// core) and who reads it, as the load checks them.
 pub fn observations_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
     use std::fmt::Write;
-    let all = crate::vocabulary::named_observations(&cx.loaded.vocabulary())?;
+    let all = crate::vocabulary::named_observations(&cx.loaded.sources())?;
     let roles = |rs: &[crate::vocabulary::Role]| {
         rs.iter()
             .map(|r| format!("{} {}", r.kind, r.name))
@@ -193,7 +193,7 @@ pub fn observations_section(cx: &CheckContext) -> anyhow::Result<(Value, String)
 /// onboard monitor that does not run, the autopilot not estimating the wind.
 pub fn absent_evidence_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
     use std::fmt::Write;
-    let all = crate::vocabulary::named_observations(&cx.loaded.vocabulary())?;
+    let all = crate::vocabulary::named_observations(&cx.loaded.sources())?;
     let mut rows = Vec::new();
     let mut text = String::from("\nEvidence absent when not fed (the record's absent_evidence):\n");
     for o in &all {
@@ -258,7 +258,7 @@ pub fn absent_evidence_section(cx: &CheckContext) -> anyhow::Result<(Value, Stri
 /// maps it to MAVLink steps (params/commands.toml).
 pub fn actions_section(cx: &CheckContext) -> anyhow::Result<(Value, String)> {
     use std::fmt::Write;
-    let all = crate::vocabulary::actions(&cx.loaded.vocabulary());
+    let all = crate::vocabulary::actions(&cx.loaded.sources());
     let mut text = String::from("\nActions (proposed by; application or MAVLink steps):\n");
     for a in &all {
         let runs = match &a.action.application {

@@ -9,9 +9,11 @@ pub use crate::params_files::{
 use crate::world_spec::WorldSpec;
 use companion_core::decision::Model;
 use companion_core::mission::ActionKind;
+use companion_core::named_slots::SortedNames;
 use companion_core::spec::{ParamsFiles, SpecError};
 use companion_link::actions::{ActionTable, Flown, LinkParams, Route};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// The route `fly` follows when `--mission` names none, relative to the params directory.
 pub const DEFAULT_ROUTE: &str = "missions/tracking_route.toml";
@@ -34,6 +36,9 @@ pub struct Params {
     pub route_file: PathBuf,
     /// In-flight CPT learning's bound (`learning.toml`, optional; `--learn-cpt`).
     pub learning: crate::learning_params::LearningParams,
+    /// The observation vocabulary compiled at load (`vocabulary::Vocabulary`), shared by the
+    /// link's telemetry, the simulated world and, through their snapshots, the core.
+    pub vocabulary: SortedNames,
 }
 
 impl Params {
@@ -53,7 +58,8 @@ impl Params {
         let world = WorldSpec::load(&files)?;
         let (link, commands, route, route_file) = load_fly_files(&files, route, &model.actions)?;
         let learning = crate::learning_params::LearningParams::load(&files)?;
-        let p = Params {
+        let mut p = Params {
+            vocabulary: Arc::from(Vec::new()),
             learning,
             dir,
             files,
@@ -64,13 +70,16 @@ impl Params {
             route,
             route_file,
         };
-        p.cross_check()?;
+        p.vocabulary = p.cross_check()?.names;
+        // One vocabulary for the run: the link's telemetry and the world write by its slots.
+        p.link.telemetry.vocabulary = Arc::clone(&p.vocabulary);
+        p.world.vocabulary = Arc::clone(&p.vocabulary);
         Ok(p)
     }
 
     /// Checks between the link files and the model: every vehicle action the MDPs can choose
     /// has MAVLink steps, and the precedence list names only vehicle actions.
-    fn cross_check(&self) -> Result<(), SpecError> {
+    fn cross_check(&self) -> Result<crate::vocabulary::Vocabulary, SpecError> {
         let commands = self.dir.join("commands.toml");
         let link = self.dir.join("link.toml");
         let vehicle: Vec<&str> = self
@@ -108,11 +117,12 @@ impl Params {
         }
         self.check_mission_projections()?;
         self.check_performance_models()?;
-        crate::vocabulary::check(&self.vocabulary())
+        let code = crate::vocabulary::CodeLists::SHIPPED;
+        crate::vocabulary::Vocabulary::compile(&self.sources(), &code)
     }
 
     /// The loaded files as the vocabulary checks see them.
-    pub fn vocabulary(&self) -> crate::vocabulary::Sources<'_> {
+    pub fn sources(&self) -> crate::vocabulary::Sources<'_> {
         crate::vocabulary::Sources {
             dir: &self.dir,
             files: &self.files,

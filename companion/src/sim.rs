@@ -7,7 +7,7 @@
 //! chose. The core never reads the truth.
 
 use companion_core::mission::{ActionRole, RouteRole};
-use companion_core::observations::Observations;
+use companion_core::observations::{ObservationValues, Observations};
 use companion_core::record::{DecisionRecord, Event, Plan};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -193,7 +193,7 @@ impl<'a> World<'a> {
         Observations {
             time_s: self.step as f64 * self.spec.step_s,
             state: self.phase.clone(),
-            values,
+            values: ObservationValues::over_with(&self.spec.vocabulary, values),
             events,
         }
     }

@@ -14,6 +14,7 @@ use crate::world_spec::{Scenario, WORLD_OBSERVATIONS};
 use companion_core::decision::Model;
 use companion_core::evidence::{CORE_COMPUTES, CORE_READS};
 use companion_core::guarantee::PACK_OBSERVATIONS;
+use companion_core::named_slots::{SortedNames, sorted_names};
 use companion_core::spec::{ParamsFiles, SpecError};
 use companion_core::vocabulary::NamedAction;
 use companion_link::actions::{ActionTable, Flown, LinkParams};
@@ -317,9 +318,61 @@ pub fn actions(p: &Sources) -> Vec<ActionEntry> {
 /// The vocabulary's load check (the commands' entries are checked against the action catalogue
 /// when params/commands.toml loads: `ActionTable::load`).
 pub fn check(p: &Sources) -> Result<(), SpecError> {
-    check_observations(p)?;
-    check_link_writes(p, &consumers(p))?;
-    check_pack_written(&TELEMETRY_OBSERVATIONS, &PACK_OBSERVATIONS)
+    Vocabulary::compile(p, &CodeLists::SHIPPED).map(|_| ())
+}
+
+/// The observation names written into the code of the link and the core, beside the params':
+/// what fly's telemetry writes and what the guarantee reads of the pack (a test renames one).
+#[derive(Clone, Copy)]
+pub struct CodeLists<'a> {
+    /// companion-link's `TELEMETRY_OBSERVATIONS` (kept equal to what the telemetry writes by its
+    /// test).
+    pub telemetry_writes: &'a [&'a str],
+    /// companion-core's `PACK_OBSERVATIONS`.
+    pub pack_reads: &'a [&'a str],
+}
+
+impl CodeLists<'static> {
+    /// The lists of this build.
+    pub const SHIPPED: CodeLists<'static> = CodeLists {
+        telemetry_writes: &TELEMETRY_OBSERVATIONS,
+        pack_reads: &PACK_OBSERVATIONS,
+    };
+}
+
+/// The observation vocabulary, compiled once at load: every name a producer of the params and
+/// the shells writes or a consumer reads, sorted. The link's telemetry and the simulated world
+/// write their snapshots by its slots and the core reads them by the same slots (one `Arc`,
+/// `Params::load` hands it to both), so a snapshot copies no name; a name outside it (an onboard
+/// monitor's that params do not declare) goes to the snapshot's overflow.
+#[derive(Debug, Clone)]
+pub struct Vocabulary {
+    /// The names, sorted.
+    pub names: SortedNames,
+}
+
+impl Vocabulary {
+    /// Check the producers and consumers across the params, the shells and `code`, and compile
+    /// the names; a name one side writes and the other does not read (or reads and nothing
+    /// writes) stops the load naming both places.
+    pub fn compile(p: &Sources, code: &CodeLists) -> Result<Self, SpecError> {
+        check_observations(p)?;
+        let consumers = consumers(p);
+        check_link_writes(p, &consumers)?;
+        check_pack_written(code.telemetry_writes, code.pack_reads)?;
+        let scenarios = scenarios(p)?;
+        let producers = producers(p, &scenarios);
+        let code_names = (code.telemetry_writes.iter().chain(code.pack_reads))
+            .chain(&LINK_READS)
+            .map(|o| o.to_string());
+        let names = sorted_names(
+            (consumers.into_keys())
+                .chain(producers.into_keys())
+                .chain(code_names)
+                .chain(p.link.telemetry.recorded_only.iter().cloned()),
+        );
+        Ok(Vocabulary { names })
+    }
 }
 
 /// Refuse an onboard monitor's observation (params/link.toml `[telemetry.onboard]`) that nothing

@@ -29,6 +29,10 @@ pub const WORLD_OBSERVATIONS: [(&str, &str); 15] = [
     ("extra_power_w", "reads"),
 ];
 
+fn no_vocabulary() -> companion_core::named_slots::SortedNames {
+    std::sync::Arc::from(Vec::new())
+}
+
 /// params/world.toml.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -51,6 +55,10 @@ pub struct WorldSpec {
     /// `route_activity` on them (`crate::sim_plan`); empty for the typed plan.
     #[serde(skip)]
     pub plan: Vec<companion_core::route_plan::ActivityKind>,
+    /// The observation vocabulary compiled at load (`Params::load`): the world writes its
+    /// snapshots by its slots. Empty (every name in the snapshot's overflow) until set.
+    #[serde(skip, default = "no_vocabulary")]
+    pub vocabulary: companion_core::named_slots::SortedNames,
 }
 
 #[derive(Debug, Clone, Deserialize)]

@@ -362,3 +362,105 @@ fn a_second_shell_only_entry_for_one_action_is_refused() {
         "`follow_trajectory_again` is already flown for `follow_trajectory`",
     );
 }
+
+/// `list` with `from` renamed to `to` (which must be in it).
+fn renamed<'a>(list: &[&'a str], from: &str, to: &'a str) -> Vec<&'a str> {
+    assert!(list.contains(&from), "{from}");
+    list.iter()
+        .map(|o| if *o == from { to } else { o })
+        .collect()
+}
+
+/// The guarantee reads the pack's `consumed_mah`; fly's telemetry writes it. Renamed on either
+/// side only, the shipped params no longer load, and the error names both places (in flight the
+/// energy goal would silently fall back to the params' pack).
+#[test]
+fn an_observation_renamed_on_one_side_only_fails_at_load() {
+    use companion::vocabulary::{CodeLists, Vocabulary};
+    let p = Params::load(&default_params_dir(), None).unwrap();
+    let shipped = CodeLists::SHIPPED;
+    let v = Vocabulary::compile(&p.sources(), &shipped).unwrap();
+    assert!(v.names.iter().any(|n| n == "consumed_mah"));
+    // The link side renamed.
+    let writes = renamed(shipped.telemetry_writes, "consumed_mah", "consumed_mAh");
+    let link_renamed = CodeLists {
+        telemetry_writes: &writes,
+        ..shipped
+    };
+    let e = Vocabulary::compile(&p.sources(), &link_renamed).unwrap_err();
+    assert_eq!(e.entry, "PACK_OBSERVATIONS[4](consumed_mah)", "{e}");
+    assert!(e.file.ends_with("companion-core/src/guarantee.rs"), "{e}");
+    assert!(e.reason.contains("TELEMETRY_OBSERVATIONS"), "{e}");
+    // The core side renamed.
+    let reads = renamed(shipped.pack_reads, "consumed_mah", "consumed_charge_mah");
+    let core_renamed = CodeLists {
+        pack_reads: &reads,
+        ..shipped
+    };
+    let e = Vocabulary::compile(&p.sources(), &core_renamed).unwrap_err();
+    assert_eq!(e.entry, "PACK_OBSERVATIONS[4](consumed_charge_mah)", "{e}");
+    assert!(e.reason.contains("companion-link/src/telemetry.rs"), "{e}");
+}
+
+/// One vocabulary for the run: the link's telemetry and the simulated world write their
+/// snapshots over the `Arc` the load compiled, every name they write in it (nothing in the
+/// overflow); an onboard name params do not declare goes to the overflow and is kept in the
+/// record's observations, in name order, as before.
+#[test]
+fn the_link_and_the_world_write_over_the_one_vocabulary() {
+    use companion_core::decision::{Core, ModelKind};
+    use companion_link::Msg;
+    use companion_link::dialect::NAMED_VALUE_FLOAT_DATA;
+    use companion_link::modes::Flavor;
+    use companion_link::telemetry::Telemetry;
+    use std::sync::Arc;
+    use std::time::Duration;
+    let p = Params::load(&default_params_dir(), None).unwrap();
+    let (vocabulary, world_spec) = (&p.vocabulary.clone(), p.world.clone());
+    // Every name `check --json` lists as read is in it.
+    for name in names(&check_json()["observations"]) {
+        assert!(vocabulary.iter().any(|n| n == name), "{name}");
+    }
+    let mut t = Telemetry::new(p.link.telemetry.clone());
+    let frame = |name: &str, value: f32| {
+        Msg::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA {
+            time_boot_ms: 0,
+            value,
+            name: name.into(),
+        })
+    };
+    t.on_message(Duration::ZERO, &frame("cpu_load", 0.5), Flavor::ArduPilot);
+    t.on_message(Duration::ZERO, &frame("esc_temp", 95.0), Flavor::ArduPilot);
+    let obs = t.observations(Duration::ZERO, vec![]);
+    assert!(Arc::ptr_eq(obs.values.names(), vocabulary));
+    assert_eq!(obs.get("cpu_load"), Some(0.5));
+    assert!(obs.values.slot_of("armed").is_some());
+    let overflow: Vec<&str> = (obs.values.overflow().iter())
+        .map(|(n, _)| n.as_str())
+        .collect();
+    assert_eq!(overflow, ["onboard.esc_temp"]);
+    // The core reads it by slot and the record keeps the overflow, serialized as the map.
+    let model = Arc::new(p.model);
+    let policy = model.policy("safety").unwrap();
+    let mut core = Core::new(Arc::clone(&model), ModelKind::Bfm, policy);
+    let (_, rec) = core.step(&obs);
+    assert!(Arc::ptr_eq(rec.observations.names(), vocabulary));
+    let want: std::collections::BTreeMap<&String, &f64> = obs.values.iter().collect();
+    assert_eq!(
+        serde_json::to_string(&rec.observations).unwrap(),
+        serde_json::to_string(&want).unwrap()
+    );
+    assert!(want.contains_key(&"onboard.esc_temp".to_string()));
+    // The simulated world writes every name it produces by slot.
+    let files = read_params_dir(&default_params_dir()).unwrap();
+    let scenario = companion::sim::Scenario::load(&files, "complete-1").unwrap();
+    let mut world = companion::sim::World::new(&world_spec, &scenario, 1);
+    let obs = world.observe();
+    assert!(Arc::ptr_eq(obs.values.names(), vocabulary));
+    assert!(
+        obs.values.overflow().is_empty(),
+        "{:?}",
+        obs.values.overflow()
+    );
+    assert!(obs.values.len() > 10);
+}

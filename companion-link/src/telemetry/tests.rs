@@ -79,7 +79,12 @@ fn telemetry_observations_lists_every_name_the_autopilot_messages_produce() {
     for what in [SpeedParam::Cruise, SpeedParam::Climb, SpeedParam::Descent] {
         t.on_speed_param(what, 5.0);
     }
-    let mut produced: Vec<String> = t.observations(s(0.0), vec![]).values.into_keys().collect();
+    let mut produced: Vec<String> = t
+        .observations(s(0.0), vec![])
+        .values
+        .keys()
+        .cloned()
+        .collect();
     // BATTERY_STATUS's copy of the percentage is internal (removed from the snapshot).
     produced.sort();
     let mut listed: Vec<String> = TELEMETRY_OBSERVATIONS

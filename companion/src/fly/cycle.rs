@@ -342,8 +342,10 @@ pub fn finish_record(
 
 /// Observations the health BNs read under names the telemetry does not produce directly.
 fn complete_observations(obs: &mut Observations, mission: &MissionState) {
-    if let Some(v) = obs.get("groundspeed_mps") {
-        obs.values.entry("drone_speed_mps".into()).or_insert(v);
+    if let Some(v) = obs.get("groundspeed_mps")
+        && !obs.values.contains_key("drone_speed_mps")
+    {
+        obs.set("drone_speed_mps", v);
     }
     let remaining = mission.waypoints_remaining(obs);
     obs.set("waypoints_remaining", remaining);

@@ -306,7 +306,7 @@ mod tests {
         }
     }
 
-    fn obs(vals: &[(&str, f64)]) -> BTreeMap<String, f64> {
+    fn obs(vals: &[(&str, f64)]) -> companion_core::observations::ObservationValues {
         vals.iter().map(|(k, v)| (k.to_string(), *v)).collect()
     }
 
