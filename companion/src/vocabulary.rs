@@ -436,14 +436,6 @@ pub fn check_pack_written(writes: &[&str], pack: &[&str]) -> Result<(), SpecErro
 mod tests {
     use super::*;
 
-    /// `list` with `from` renamed to `to` (which must be in it).
-    fn renamed<'a>(list: &[&'a str], from: &str, to: &'a str) -> Vec<&'a str> {
-        assert!(list.contains(&from), "{from}");
-        list.iter()
-            .map(|o| if *o == from { to } else { o })
-            .collect()
-    }
-
     #[test]
     fn the_shipped_pack_is_written_by_the_telemetry() {
         assert_eq!(
@@ -451,24 +443,5 @@ mod tests {
             Ok(())
         );
     }
-
-    /// The link renames `consumed_mah` (its telemetry writes `consumed_mAh`, and its list says
-    /// so, as its test keeps it): the guarantee's pack reading is refused at load.
-    #[test]
-    fn the_pack_renamed_on_the_link_side_only_fails_at_load() {
-        let writes = renamed(&TELEMETRY_OBSERVATIONS, "consumed_mah", "consumed_mAh");
-        let e = check_pack_written(&writes, &PACK_OBSERVATIONS).unwrap_err();
-        assert_eq!(e.entry, "PACK_OBSERVATIONS[4](consumed_mah)", "{e}");
-        assert!(e.file.ends_with("guarantee.rs"), "{e}");
-        assert!(e.reason.contains("one side was renamed"), "{e}");
-    }
-
-    /// The core renames the pack's `consumed_mah`: the telemetry writes no such name.
-    #[test]
-    fn the_pack_renamed_on_the_core_side_only_fails_at_load() {
-        let pack = renamed(&PACK_OBSERVATIONS, "consumed_mah", "consumed_charge_mah");
-        let e = check_pack_written(&TELEMETRY_OBSERVATIONS, &pack).unwrap_err();
-        assert_eq!(e.entry, "PACK_OBSERVATIONS[4](consumed_charge_mah)", "{e}");
-        assert!(e.reason.contains("`consumed_charge_mah`"), "{e}");
-    }
+    // Renamed on one side only: companion/tests/vocabulary.rs, through `Vocabulary::compile`.
 }
