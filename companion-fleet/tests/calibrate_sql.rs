@@ -7,7 +7,6 @@ mod support;
 use companion::calibrate::{calibrate, shipped::Shipped};
 use companion::decision_log::Header;
 use companion_core::record::{DecisionRecord, GuaranteeRecord};
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use support::{FLEET, close, fleet};
 
@@ -39,12 +38,10 @@ fn noise(i: u64, a: f64) -> f64 {
 
 /// A run folder as `fly` writes it: records with the observations calibrate reads.
 fn write_run(dir: &Path, t: Truth, seed: u64, speeds: &[(f64, u32)]) {
-    std::fs::create_dir_all(dir).unwrap();
-    let mut f = std::fs::File::create(dir.join("decisions.jsonl")).unwrap();
     let started =
         std::time::UNIX_EPOCH + std::time::Duration::from_secs(1_750_000_000 + seed * 86_400);
     let h = Header::new("companion fly --connect tcp:x", started);
-    writeln!(f, "{}", serde_json::to_string(&h).unwrap()).unwrap();
+    let mut f = companion_testkit::run_log::RunLog::create(dir, &h);
     let mut cycle = 0u64;
     // The activity in force (calibrate's durations): a name per speed stretch, names repeating
     // within a run, every 7th record without one (skipped), the autopilot's clock (at 3x, with
@@ -76,7 +73,7 @@ fn write_run(dir: &Path, t: Truth, seed: u64, speeds: &[(f64, u32)]) {
             }),
             ..Default::default()
         };
-        writeln!(f, "{}", serde_json::to_string(&r).unwrap()).unwrap();
+        f.record(&r);
         cycle += 1;
     };
     for i in 0..20 {

@@ -7,7 +7,6 @@ use companion::decision_log::Header;
 use companion_core::route_plan::Position;
 use companion_link::Msg;
 use companion_link::dialect::*;
-use std::io::Write;
 use std::path::Path;
 
 /// A rotary-wing vehicle's power (Zeng et al. eq. 12, v0 7.5 m/s): a determined power fit,
@@ -183,11 +182,9 @@ pub fn fly(v: &Vehicle) -> Vec<u8> {
 
 /// A run folder: a decision log (header and one record) and the tlog.
 pub fn write_run(dir: &Path, v: &Vehicle) {
-    std::fs::create_dir_all(dir).unwrap();
-    let mut f = std::fs::File::create(dir.join("decisions.jsonl")).unwrap();
     let h = Header::new("test", std::time::SystemTime::UNIX_EPOCH);
-    writeln!(f, "{}", serde_json::to_string(&h).unwrap()).unwrap();
+    let mut f = crate::run_log::RunLog::create(dir, &h);
     let r = companion_core::record::DecisionRecord::default();
-    writeln!(f, "{}", serde_json::to_string(&r).unwrap()).unwrap();
+    f.record(&r);
     std::fs::write(dir.join("flight.tlog"), fly(v)).unwrap();
 }

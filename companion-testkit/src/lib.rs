@@ -18,6 +18,7 @@
 pub mod fuzzing;
 pub mod leg_tlog;
 pub mod route_gen;
+pub mod run_log;
 pub mod scripted;
 pub mod sim_link;
 pub mod streams;

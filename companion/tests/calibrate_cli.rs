@@ -8,7 +8,6 @@ use common::text;
 use companion::decision_log::Header;
 use companion::params::default_params_dir;
 use companion_core::record::{DecisionRecord, GuaranteeRecord};
-use std::io::Write;
 use std::path::Path;
 
 /// The binary under test (named here: scripts/arm.sh skips tests that start it under qemu).
@@ -50,10 +49,8 @@ fn truth_power(v: f64) -> f64 {
 /// A run folder as `fly` writes it: header, then one record a second with the observations
 /// calibrate reads. 20 s on the ground, then activities at speeds 0..16 m/s.
 fn write_run(dir: &Path, speeds: &[(&str, f64, u32)], noise: bool) {
-    std::fs::create_dir_all(dir).unwrap();
-    let mut f = std::fs::File::create(dir.join("decisions.jsonl")).unwrap();
     let h = Header::new("test", std::time::SystemTime::UNIX_EPOCH);
-    writeln!(f, "{}", serde_json::to_string(&h).unwrap()).unwrap();
+    let mut f = companion_testkit::run_log::RunLog::create(dir, &h);
     let mut t = 0.0;
     let mut cycle = 0;
     let mut write = |activity: &str, armed: bool, v: f64, alt: f64, p: f64| {
@@ -77,7 +74,7 @@ fn write_run(dir: &Path, speeds: &[(&str, f64, u32)], noise: bool) {
             }),
             ..Default::default()
         };
-        writeln!(f, "{}", serde_json::to_string(&r).unwrap()).unwrap();
+        f.record(&r);
         cycle += 1;
         t += 1.0;
     };

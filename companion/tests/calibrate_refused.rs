@@ -8,7 +8,6 @@ mod common;
 use common::text;
 use companion::decision_log::Header;
 use companion_core::record::{DecisionRecord, GuaranteeRecord};
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// The binary under test (named here: scripts/arm.sh skips tests that start it under qemu).
@@ -41,10 +40,8 @@ fn write_run(
     power: Option<&dyn Fn(f64) -> f64>,
     clock: &dyn Fn(u32) -> f64,
 ) {
-    std::fs::create_dir_all(dir).unwrap();
-    let mut f = std::fs::File::create(dir.join("decisions.jsonl")).unwrap();
     let h = Header::new("test", std::time::SystemTime::UNIX_EPOCH);
-    writeln!(f, "{}", serde_json::to_string(&h).unwrap()).unwrap();
+    let mut f = companion_testkit::run_log::RunLog::create(dir, &h);
     let mut i = 0u32;
     let mut write = |activity: &str, armed: bool, v: f64, p: Option<f64>| {
         let mut obs = vec![
@@ -65,7 +62,7 @@ fn write_run(
             }),
             ..Default::default()
         };
-        writeln!(f, "{}", serde_json::to_string(&r).unwrap()).unwrap();
+        f.record(&r);
         i += 1;
     };
     for _ in 0..20 {

@@ -6,7 +6,6 @@
 use companion::decision_log::Header;
 use companion::sim::{self, Scenario, WorldSpec};
 use companion_core::decision::{Core, ModelKind};
-use std::io::Write;
 use std::path::Path;
 
 /// The binary under test.
@@ -53,14 +52,12 @@ pub(crate) fn write_simulated(dir: &Path, scenario: &str, seed: u64) {
         model.policy("mission").unwrap(),
     );
     let run = sim::run(&world, &s, seed, |obs| core.step(obs));
-    std::fs::create_dir_all(dir).unwrap();
-    let mut f = std::fs::File::create(dir.join("decisions.jsonl")).unwrap();
     let h = Header::new(
         &format!("companion simulate --scenario {scenario} --seed {seed}"),
         std::time::UNIX_EPOCH + std::time::Duration::from_secs(1_750_000_000 + seed * 86_400),
     );
-    writeln!(f, "{}", serde_json::to_string(&h).unwrap()).unwrap();
+    let mut f = companion_testkit::run_log::RunLog::create(dir, &h);
     for r in &run.records {
-        writeln!(f, "{}", serde_json::to_string(r).unwrap()).unwrap();
+        f.record(r);
     }
 }
