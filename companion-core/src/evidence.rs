@@ -292,26 +292,24 @@ impl ObservationMap {
         self.evidence_with_ids_into(obs, &ids[..n], out)
     }
 
-    /// The values of every declared observation this cycle, by id: `extra` first (the first
-    /// entry of an id wins), else the snapshot's, read in one pass over both sorted lists.
+    /// The values of every declared observation this cycle, by id in name order: `extra` first
+    /// (the first entry of an id wins), else the snapshot's.
     fn values_by_id(
         &self,
         obs: &Observations,
         extra: &[(ObservationId, f64)],
         mut f: impl FnMut(ObservationId, f64),
     ) {
-        let sorted = (self.by_name.iter()).map(|id| self.observations[id.index()].name.as_str());
-        obs.each_sorted(sorted, |k, from_snapshot| {
-            let id = self.by_name[k];
+        for &id in &self.by_name {
             let value = extra
                 .iter()
                 .find(|(x, _)| *x == id)
                 .map(|&(_, v)| v)
-                .or(from_snapshot);
+                .or_else(|| obs.get(&self.observations[id.index()].name));
             if let Some(v) = value {
                 f(id, v);
             }
-        });
+        }
     }
 
     /// As [`ObservationMap::evidence_with_into`], with the caller's values given by id.

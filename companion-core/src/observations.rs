@@ -26,18 +26,6 @@ impl Observations {
     pub fn get(&self, name: &str) -> Option<f64> {
         self.values.get(name).copied()
     }
-    /// The value of each of `names` (given in sorted order): `f(k, value)` for the `k`-th name
-    /// (`None`: absent from the snapshot).
-    pub fn each_sorted<'a>(
-        &self,
-        names: impl IntoIterator<Item = &'a str>,
-        mut f: impl FnMut(usize, Option<f64>),
-    ) {
-        for (k, name) in names.into_iter().enumerate() {
-            f(k, self.get(name));
-        }
-    }
-
     /// Set (or replace) the observation named `name`.
     pub fn set(&mut self, name: &str, value: f64) {
         self.values.set(name, value);

@@ -1,7 +1,7 @@
 //! The snapshot's values the cycle reads, by slot. Every name the core reads (the declared
 //! observations, the rates, the projection rules', the guarantee's pack and failure readings,
 //! the platform's faults) is given a slot when the core starts; each cycle reads the snapshot
-//! once, walking its sorted map beside the sorted names, and every stage then reads by index
+//! once, by the vocabulary's slots it is written over, and every stage then reads by index
 //! (a name lookup per reading per stage took a sixth of the steady cycle).
 
 use crate::named_slots::SortedNames;
