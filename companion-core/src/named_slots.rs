@@ -20,6 +20,11 @@ pub fn sorted_names<I: IntoIterator<Item = String>>(names: I) -> SortedNames {
     v.into()
 }
 
+/// No names (a vocabulary not set yet: every name written goes to an overflow).
+pub fn no_names() -> SortedNames {
+    Arc::from(Vec::new())
+}
+
 /// Values by slot over [`SortedNames`] (`None`: no value this cycle, absent when serialized).
 pub struct NamedSlots<V> {
     names: SortedNames,
@@ -29,7 +34,7 @@ pub struct NamedSlots<V> {
 impl<V> Default for NamedSlots<V> {
     fn default() -> Self {
         NamedSlots {
-            names: Arc::from(Vec::new()),
+            names: no_names(),
             values: Vec::new(),
         }
     }

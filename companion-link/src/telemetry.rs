@@ -49,7 +49,7 @@ pub struct TelemetryConfig {
     /// The observation vocabulary compiled once at load (`companion::vocabulary::Vocabulary`,
     /// set by `Params::load`), shared with the decision core: the telemetry writes the snapshot
     /// by its slots. Empty (every name in the snapshot's overflow) until set.
-    #[serde(skip, default = "no_vocabulary")]
+    #[serde(skip, default = "companion_core::named_slots::no_names")]
     pub vocabulary: SortedNames,
 }
 
@@ -266,10 +266,6 @@ impl TelemetryConfig {
     }
 }
 
-fn no_vocabulary() -> SortedNames {
-    std::sync::Arc::from(Vec::new())
-}
-
 impl Default for TelemetryConfig {
     fn default() -> Self {
         let onboard = DEFAULT_ONBOARD
@@ -286,7 +282,7 @@ impl Default for TelemetryConfig {
             max_onboard_names: default_max_onboard_names(),
             ranges: BTreeMap::new(),
             recorded_only: vec!["track_confidence".into()],
-            vocabulary: std::sync::Arc::from(Vec::new()),
+            vocabulary: companion_core::named_slots::no_names(),
         }
     }
 }

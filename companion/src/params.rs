@@ -59,7 +59,7 @@ impl Params {
         let (link, commands, route, route_file) = load_fly_files(&files, route, &model.actions)?;
         let learning = crate::learning_params::LearningParams::load(&files)?;
         let mut p = Params {
-            vocabulary: Arc::from(Vec::new()),
+            vocabulary: companion_core::named_slots::no_names(),
             learning,
             dir,
             files,

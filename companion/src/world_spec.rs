@@ -29,10 +29,6 @@ pub const WORLD_OBSERVATIONS: [(&str, &str); 15] = [
     ("extra_power_w", "reads"),
 ];
 
-fn no_vocabulary() -> companion_core::named_slots::SortedNames {
-    std::sync::Arc::from(Vec::new())
-}
-
 /// params/world.toml.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -57,7 +53,7 @@ pub struct WorldSpec {
     pub plan: Vec<companion_core::route_plan::ActivityKind>,
     /// The observation vocabulary compiled at load (`Params::load`): the world writes its
     /// snapshots by its slots. Empty (every name in the snapshot's overflow) until set.
-    #[serde(skip, default = "no_vocabulary")]
+    #[serde(skip, default = "companion_core::named_slots::no_names")]
     pub vocabulary: companion_core::named_slots::SortedNames,
 }
 
