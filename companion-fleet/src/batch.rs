@@ -7,13 +7,11 @@
 //! when they are not. Only the batch's files are synced, once, before the folder is renamed into
 //! place: the batch is atomic, as a run folder was.
 
-use crate::table::{BATCH_ROWS, ROW_GROUP_ROWS};
+use crate::table::{BATCH_ROWS, writer_properties};
 use anyhow::Context;
 use arrow::datatypes::SchemaRef;
 use parquet::arrow::ArrowWriter;
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
-use parquet::basic::Compression;
-use parquet::file::properties::WriterProperties;
 use std::fs::File;
 use std::path::{Path, PathBuf};
 
@@ -53,13 +51,6 @@ struct TableFiles {
 pub struct BatchWriter {
     dir: PathBuf,
     tables: Vec<TableFiles>,
-}
-
-fn props() -> WriterProperties {
-    WriterProperties::builder()
-        .set_compression(Compression::SNAPPY)
-        .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
-        .build()
 }
 
 impl BatchWriter {
@@ -132,7 +123,7 @@ impl TableFiles {
         self.close()?;
         let path = dir.join(file_name(self.table, self.files));
         let file = File::create(&path).with_context(|| format!("creating {}", path.display()))?;
-        let w = ArrowWriter::try_new(file, schema.clone(), Some(props()))
+        let w = ArrowWriter::try_new(file, schema.clone(), Some(writer_properties()))
             .with_context(|| format!("writing {}", path.display()))?;
         self.current = Some((schema, w));
         self.files += 1;

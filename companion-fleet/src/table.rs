@@ -169,16 +169,21 @@ pub struct TableWriter {
     writer: ArrowWriter<File>,
 }
 
+/// How every Parquet file of the fleet is written: snappy (read by pyarrow, DuckDB, Spark), row
+/// groups cut at [`ROW_GROUP_ROWS`].
+pub fn writer_properties() -> WriterProperties {
+    WriterProperties::builder()
+        .set_compression(Compression::SNAPPY)
+        .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
+        .build()
+}
+
 impl TableWriter {
     /// Create `path` with `columns`.
     pub fn create(path: &Path, columns: &[(String, Kind)]) -> anyhow::Result<Self> {
         let schema = schema(columns);
         let file = File::create(path).with_context(|| format!("creating {}", path.display()))?;
-        let props = WriterProperties::builder()
-            .set_compression(Compression::SNAPPY)
-            .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
-            .build();
-        let writer = ArrowWriter::try_new(file, schema.clone(), Some(props))
+        let writer = ArrowWriter::try_new(file, schema.clone(), Some(writer_properties()))
             .with_context(|| format!("writing {}", path.display()))?;
         Ok(TableWriter {
             path: path.to_path_buf(),
