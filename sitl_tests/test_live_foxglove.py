@@ -48,6 +48,15 @@ def wait_live_url(stderr_path: Path, proc: subprocess.Popen, timeout: float = 30
     raise AssertionError(f"no live address said on stderr: {stderr_path.read_text()[-2000:]}")
 
 
+def wait_said_text(stderr_path: Path, proc: subprocess.Popen, text: str, timeout: float = 10.0) -> None:
+    """Until the companion has said `text` on stderr (it must, while still running, before the timeout)."""
+    deadline = time.monotonic() + timeout
+    while text not in stderr_path.read_text():
+        assert proc.poll() is None, f"exited without saying {text!r}: {stderr_path.read_text()[-2000:]}"
+        assert time.monotonic() < deadline, f"{text!r} not said: {stderr_path.read_text()[-2000:]}"
+        time.sleep(0.02)
+
+
 class Viewer:
     """A Foxglove WebSocket client on its own thread: subscribes to every advertised channel and keeps each
     messageData (topic, log time ns, JSON) until the server closes."""
@@ -168,7 +177,8 @@ def test_simulate_live_viewer_receives_every_record(tmp_path):
                             stdout=subprocess.PIPE, stderr=open(err, "w"), text=True)
     try:
         url = wait_live_url(err, proc)
-        assert "waiting up to 30 s" in err.read_text()
+        # Said on its own line, just after the address: a read between the two writes sees only the first.
+        wait_said_text(err, proc, "waiting up to 30 s")
         viewer = Viewer(url).start()
         out, _ = proc.communicate(timeout=120)
     finally:
