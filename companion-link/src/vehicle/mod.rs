@@ -157,6 +157,10 @@ pub struct Vehicle {
     actions: ActionTable,
     /// The route `follow_trajectory` uploads, if one was given.
     route: Option<Route>,
+    /// The mode each uploaded route item flies by itself, by seq, for each upload flavour: the
+    /// route is fixed at construction, and [`Vehicle::mission_item_mode`] asks on every loop
+    /// turn while the autopilot reports RTL or LAND.
+    route_item_modes: RouteItemModes,
     /// The command executor: the running action's steps, the commands in flight, the records.
     exec: Executor,
     stream_queue: VecDeque<(u32, f32)>,
@@ -194,6 +198,41 @@ pub struct Vehicle {
     watch: MissionWatch,
 }
 
+/// The mode each item of the uploaded route flies by itself (RTL, LAND or none), by seq: PX4
+/// gets other items than the rest ([`Route::mission_items`]).
+#[derive(Debug, Default)]
+struct RouteItemModes {
+    px4: Vec<Option<FlightMode>>,
+    others: Vec<Option<FlightMode>>,
+}
+
+impl RouteItemModes {
+    fn of(route: Option<&Route>) -> Self {
+        let Some(route) = route else {
+            return Self::default();
+        };
+        let modes = |flavor| {
+            let items = route.mission_items(flavor, (0, 0));
+            (items.iter())
+                .map(|i| crate::operator::mission_item_mode(i.command))
+                .collect()
+        };
+        Self {
+            px4: modes(Flavor::Px4),
+            others: modes(Flavor::ArduPilot),
+        }
+    }
+
+    fn at(&self, flavor: Flavor, seq: usize) -> Option<FlightMode> {
+        let modes = if flavor == Flavor::Px4 {
+            &self.px4
+        } else {
+            &self.others
+        };
+        *modes.get(seq)?
+    }
+}
+
 impl Vehicle {
     /// A link to no autopilot yet: it chooses one on its first HEARTBEAT.
     pub fn new(cfg: VehicleConfig, actions: ActionTable, route: Option<Route>) -> Self {
@@ -207,6 +246,7 @@ impl Vehicle {
             target: None,
             flavor: Flavor::Other,
             actions,
+            route_item_modes: RouteItemModes::of(route.as_ref()),
             route,
             exec: Executor::default(),
             stream_queue: VecDeque::new(),
@@ -319,13 +359,11 @@ impl Vehicle {
         if !reports(FlightMode::Rtl) && !reports(FlightMode::Land) {
             return None; // only those two: no mission items built every loop turn
         }
-        let command = if self.flies_autopilot_mission() {
-            self.autopilot_mission()?.get(seq)?.command
-        } else {
-            let items = self.route.as_ref()?.mission_items(self.flavor, (0, 0));
-            items.get(seq)?.command
-        };
-        crate::operator::mission_item_mode(command)
+        if self.flies_autopilot_mission() {
+            let command = self.autopilot_mission()?.get(seq)?.command;
+            return crate::operator::mission_item_mode(command);
+        }
+        self.route_item_modes.at(self.flavor, seq)
     }
     /// Whether the autopilot answers its own home at mission seq 0 (ArduPilot) rather than
     /// storing it like any other item (PX4): set when the autopilot is chosen.

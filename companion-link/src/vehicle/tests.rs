@@ -1004,6 +1004,74 @@ fn route_vehicle() -> Vehicle {
     v
 }
 
+#[test]
+fn the_route_items_mode_is_its_own_end_and_only_while_the_autopilot_reports_it() {
+    // route_vehicle's route on ArduPilot: seq 0 home, 1 the waypoint, 2 NAV_RETURN_TO_LAUNCH.
+    let mut v = route_vehicle();
+    let current = |seq| {
+        frame(Msg::MISSION_CURRENT(MISSION_CURRENT_DATA {
+            seq,
+            total: 3,
+            ..MISSION_CURRENT_DATA::DEFAULT
+        }))
+    };
+    let (auto, rtl, land) = (3, 6, 9); // ArduCopter's custom modes
+    for (mode, seq, expect) in [
+        (rtl, 2, Some(FlightMode::Rtl)),
+        (land, 2, Some(FlightMode::Rtl)), // the item's mode, whichever of the two is reported
+        (rtl, 1, None),                   // a waypoint flies no mode of its own
+        (auto, 2, None),                  // neither RTL nor LAND reported
+        (rtl, 7, None),                   // past the route's end
+    ] {
+        v.on_frame(s(1.0), &hb(mode, true));
+        v.on_frame(s(1.0), &current(seq));
+        assert_eq!(v.mission_item_mode(), expect, "mode {mode}, seq {seq}");
+    }
+}
+
+#[test]
+fn px4s_route_item_mode_is_the_land_it_was_given() {
+    use crate::actions::{Route, Waypoint};
+    let route = Route {
+        waypoints: vec![Waypoint::Relative {
+            north_m: 30.0,
+            east_m: 0.0,
+            alt_m: 15.0,
+        }],
+        altitude_m: 15.0,
+        search_time_limit_s: None,
+        tracking_time_limit_s: None,
+        takeoff_first: true,
+        end: crate::actions::RouteEnd::ReturnToLaunch,
+        operator_items: Vec::new(),
+    };
+    let mut v = Vehicle::new(VehicleConfig::default(), table(), Some(route));
+    px4_ready(&mut v, 0.0);
+    // PX4's upload: take-off, a waypoint over home, the waypoint, NAV_LAND (never its RTL).
+    let land_mode = modes::px4_custom_mode(4, 6);
+    for (seq, expect) in [(3, Some(FlightMode::Land)), (2, None)] {
+        for msg in [
+            Msg::HEARTBEAT(HEARTBEAT_DATA {
+                custom_mode: land_mode,
+                mavtype: MavType::MAV_TYPE_QUADROTOR,
+                autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+                base_mode: MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED
+                    | MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                system_status: MavState::MAV_STATE_ACTIVE,
+                mavlink_version: 3,
+            }),
+            Msg::MISSION_CURRENT(MISSION_CURRENT_DATA {
+                seq,
+                total: 4,
+                ..MISSION_CURRENT_DATA::DEFAULT
+            }),
+        ] {
+            v.on_frame(s(1.0), &px4_frame(msg));
+        }
+        assert_eq!(v.mission_item_mode(), expect, "seq {seq}");
+    }
+}
+
 /// Run the autopilot side of upload + download; `stored` is what the autopilot keeps.
 fn serve_upload(v: &mut Vehicle, first: Vec<Msg>, stored_alt: f32) -> Vec<Msg> {
     let count = match &first[0] {
