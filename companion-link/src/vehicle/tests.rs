@@ -1031,20 +1031,7 @@ fn the_route_items_mode_is_its_own_end_and_only_while_the_autopilot_reports_it()
 
 #[test]
 fn px4s_route_item_mode_is_the_land_it_was_given() {
-    use crate::actions::{Route, Waypoint};
-    let route = Route {
-        waypoints: vec![Waypoint::Relative {
-            north_m: 30.0,
-            east_m: 0.0,
-            alt_m: 15.0,
-        }],
-        altitude_m: 15.0,
-        search_time_limit_s: None,
-        tracking_time_limit_s: None,
-        takeoff_first: true,
-        end: crate::actions::RouteEnd::ReturnToLaunch,
-        operator_items: Vec::new(),
-    };
+    let route = px4_route();
     let mut v = Vehicle::new(VehicleConfig::default(), table(), Some(route));
     px4_ready(&mut v, 0.0);
     // PX4's upload: take-off, a waypoint over home, the waypoint, NAV_LAND (never its RTL).
@@ -1439,6 +1426,23 @@ fn sidestep_is_to_the_right_of_the_heading() {
     }
 }
 
+/// A one-waypoint route 30 m north at 15 m, taking off first: four items on PX4.
+fn px4_route() -> crate::actions::Route {
+    crate::actions::Route {
+        waypoints: vec![crate::actions::Waypoint::Relative {
+            north_m: 30.0,
+            east_m: 0.0,
+            alt_m: 15.0,
+        }],
+        altitude_m: 15.0,
+        search_time_limit_s: None,
+        tracking_time_limit_s: None,
+        takeoff_first: true,
+        end: crate::actions::RouteEnd::ReturnToLaunch,
+        operator_items: Vec::new(),
+    }
+}
+
 fn px4_frame(msg: Msg) -> Frame {
     let mut f = frame(msg);
     f.header.system_id = 2; // PX4 instance 1: MAV_SYS_ID 2
@@ -1522,26 +1526,13 @@ fn px4_not_ready_while_prearm_health_bit_is_clear() {
 
 #[test]
 fn px4_auto_waits_until_px4_reports_the_uploaded_mission_loaded_and_valid() {
-    use crate::actions::{Route, Waypoint};
     let mut t = table();
     t.insert(
         a("follow_trajectory"),
         "follow_trajectory",
         vec![Step::UploadMission, Step::Mode(FlightMode::Auto)],
     );
-    let route = Route {
-        waypoints: vec![Waypoint::Relative {
-            north_m: 30.0,
-            east_m: 0.0,
-            alt_m: 15.0,
-        }],
-        altitude_m: 15.0,
-        search_time_limit_s: None,
-        tracking_time_limit_s: None,
-        takeoff_first: true,
-        end: crate::actions::RouteEnd::ReturnToLaunch,
-        operator_items: Vec::new(),
-    };
+    let route = px4_route();
     let mut v = Vehicle::new(VehicleConfig::default(), t, Some(route));
     px4_ready(&mut v, 0.0);
     let out = v.request_actions(s(1.0), &[a("follow_trajectory")]);
