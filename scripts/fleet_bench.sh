@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Benchmark of companion-fleet (docs/performance.md, "Fleet"; outside the test command):
 # N generated runs (fly-like decision logs with the power observations calibrate reads, 200
-# records each) ingested, reported and calibrated, and `companion calibrate RUN...` on the same
-# runs, side by side; wall time and peak memory (maximum resident set size) from /usr/bin/time -v. Run at 100 and 1000 runs
+# records each, three activities: two timed per run) ingested, reported and calibrated, and
+# `companion calibrate RUN...` on the same runs, side by side; wall time and peak memory (maximum resident set size) from /usr/bin/time -v. Run at 100 and 1000 runs
 # to see the memory stay flat:
 #   scripts/fleet_bench.sh 100 && scripts/fleet_bench.sh 1000
 # PROFILE=release (default) builds the binaries with --release; PROFILE=debug uses target/debug;
@@ -41,6 +41,7 @@ for k in range(n):
                                      "planned_duration_s": 200.0}}) + "\n")
         for c in range(200):
             armed = c >= 20
+            act = 0 if c < 100 else 1 if c < 150 else 2
             v = 0.0 if not armed else (c % 17) * 1.0
             p = 12.0 if not armed else power(v)
             p += math.sin(k * 7.0 + c) * 2.0
@@ -51,7 +52,9 @@ for k in range(n):
                    "commands": [{"action": "take_off", "command": "MAV_CMD_NAV_TAKEOFF",
                                  "result": {"kind": w, "text": w}, "attempts": 1}
                                 for w in ["TIMEOUT" if (k + c) % 97 == 0 else "ACCEPTED"]] if c % 50 == 0 else [],
-                   "guarantee": {"activity": 0, "activity_name": "transit", "goals": {"energy_j": 60000.0},
+                   # three activities, so calibrate times two completed ones per run (durations)
+                   "guarantee": {"activity": act, "activity_name": ["transit", "survey", "return"][act],
+                                 "goals": {"energy_j": 60000.0},
                                  "margins": {"energy_j": 10000.0 - c}, "planned_j": 50000.0, "planned_s": 200.0}}
             f.write(json.dumps(rec) + "\n")
 PY

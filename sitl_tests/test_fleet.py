@@ -25,7 +25,8 @@ from standin.config import StandinConfig
 from standin_autopilot import StandinAutopilot
 
 ROOT = Path(__file__).resolve().parent.parent
-TABLES = ["runs", "records", "proposals", "events", "commands", "telemetry", "samples", "legs", "bn_trials"]
+TABLES = ["runs", "records", "proposals", "events", "commands", "telemetry", "samples", "legs", "bn_trials",
+          "stretches"]
 SCENARIOS = ["complete-1", "energy-drift", "vibrations", "nominal", "lidar-failure"]
 FAILURE_WORDS = {"DENIED", "UNSUPPORTED", "TEMPORARILY_REJECTED", "NOT_READY", "TIMEOUT", "FAILED"}
 

@@ -271,7 +271,7 @@ pub async fn calibrate_cli(
     }
     let fit = PowerFit::new(shipped.power);
     let st = statistics(&ctx, &shipped.power, fit.grid(), vehicle).await?;
-    let durations_sql = crate::durations::query(&ctx, &vehicle_filter(vehicle)).await?;
+    let durations_sql = crate::durations::durations_sql(&vehicle_filter(vehicle));
     let durations = crate::durations::durations(&ctx, &durations_sql).await?;
     // The legs' fallback commanded speed, as `companion calibrate` takes it (with its words,
     // which the overlay's sources say).

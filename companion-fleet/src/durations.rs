@@ -1,20 +1,29 @@
 //! The activity durations `companion calibrate RUN...` reports (companion/src/calibrate/
-//! durations.rs), as one SQL query over `records`: per activity name, the count, Σd and Σd² of
-//! its completed runs (the sufficient statistics of the mean and spread), and the count and
-//! shortest of those that lasted zero or less. Window functions (LAG, LEAD, a running SUM) cut
-//! each run's records into stretches of one activity; Spark SQL runs the same text.
+//! durations.rs): ingest writes each run's completed stretches of one activity, with how long
+//! each lasted, as the table `stretches` (its rules are a state machine over the run's records
+//! in order, as `bn_trials`' are), and the statistics are one SQL aggregate over that table: per
+//! activity name, the count, Σd and Σd² of the stretches that lasted more than zero (the
+//! sufficient statistics of the mean and spread), and the count and shortest of the others.
+//! Spark SQL runs the same text.
 //!
-//! The rules are calibrate's: records without an activity are skipped; the clock is
-//! `obs_vehicle_time_s` when recorded, else `time_s`; a stretch starts at its first record or at
-//! its last disarmed record (`obs_armed` < 0.5), whichever is later; it ends at the next
-//! stretch's first record, and the run's last stretch (cut) is not counted.
+//! Why a table and not windows over `records` (LAG/LEAD per run, as until fleet schema 4): the
+//! windows sort every record of the fleet by run and index, and that sort's memory grew with
+//! the fleet (docs/performance.md, "Fleet"); the aggregate over `stretches` holds a few rows.
+//!
+//! The rules are calibrate's (`Durations::add`): records without an activity, or whose clock is
+//! not finite, are skipped; the clock is `vehicle_time_s` when recorded, else `time_s`; a
+//! stretch starts at its first record and again at each of its disarmed records (`armed` < 0.5),
+//! it ends at the next stretch's first record, and the run's last stretch (cut) is not counted.
 
 use crate::calibrate::{f64_at, i64_at, rows};
-use anyhow::Context;
+use crate::export::RunKey;
+use crate::table::{Cell, Kind, TableWriter};
 use arrow::array::AsArray;
 use companion::calibrate::durations::DurationStats;
+use companion_core::record::DecisionRecord;
 use datafusion::prelude::SessionContext;
 use std::collections::BTreeMap;
+use std::path::Path;
 
 /// Per activity name: the completed stretches' statistics, and (count, shortest) of those that
 /// lasted zero or less.
@@ -24,67 +33,84 @@ pub struct FleetDurations {
     pub non_positive: BTreeMap<String, (u64, f64)>,
 }
 
-/// The query. `has_vehicle_time` / `has_armed`: whether the dataset has those observation
-/// columns at all (a column no run has is not in the table; then no record has the value).
-pub fn durations_sql(vehicle_filter: &str, has_vehicle_time: bool, has_armed: bool) -> String {
-    let t = if has_vehicle_time {
-        "COALESCE(obs_vehicle_time_s, time_s)"
-    } else {
-        "time_s"
-    };
-    let disarmed = if has_armed {
-        "COALESCE(obs_armed < 0.5, false)"
-    } else {
-        "false"
-    };
+/// The `stretches` table's columns (docs/fleet.md "stretches").
+fn columns() -> Vec<(String, Kind)> {
+    [
+        ("run_id", Kind::Str),
+        ("vehicle", Kind::Str),
+        ("cycle", Kind::I64),
+        ("activity", Kind::Str),
+        ("duration_s", Kind::F64),
+    ]
+    .iter()
+    .map(|(n, k)| (n.to_string(), *k))
+    .collect()
+}
+
+/// One run's completed stretches, fed its records in order.
+pub struct StretchWriter {
+    w: TableWriter,
+    /// The activity in force and when its stretch started.
+    current: Option<(String, f64)>,
+}
+
+impl StretchWriter {
+    pub fn create(path: &Path) -> anyhow::Result<Self> {
+        Ok(StretchWriter {
+            w: TableWriter::create(path, &columns())?,
+            current: None,
+        })
+    }
+
+    pub fn add(&mut self, key: &RunKey, r: &DecisionRecord) -> anyhow::Result<()> {
+        let Some(g) = &r.guarantee else {
+            return Ok(());
+        };
+        let t = (r.observations.get("vehicle_time_s").copied()).unwrap_or(r.time_s);
+        if g.activity_name.is_empty() || !t.is_finite() {
+            return Ok(());
+        }
+        let disarmed = r.observations.get("armed").is_some_and(|a| *a < 0.5);
+        match &mut self.current {
+            Some((name, t0)) if *name == g.activity_name => {
+                if disarmed {
+                    *t0 = t;
+                }
+            }
+            Some((name, t0)) => {
+                let row: Vec<Cell> = vec![
+                    key.run_id.as_str().into(),
+                    key.vehicle.as_str().into(),
+                    (r.cycle as i64).into(),
+                    name.as_str().into(),
+                    (t - *t0).into(),
+                ];
+                self.w.push(row)?;
+                self.current = Some((g.activity_name.clone(), t));
+            }
+            None => self.current = Some((g.activity_name.clone(), t)),
+        }
+        Ok(())
+    }
+
+    /// Close the table (the run's last stretch, cut, is not written); the rows written.
+    pub fn finish(self) -> anyhow::Result<u64> {
+        self.w.finish()
+    }
+}
+
+/// The query over `stretches` (`vehicle_filter`: `""` or `" AND vehicle = '...'"`).
+pub fn durations_sql(vehicle_filter: &str) -> String {
     format!(
-        "WITH r AS ( \
-           SELECT run_id, record_idx, guarantee_activity_name AS a, {t} AS t, {disarmed} AS disarmed \
-           FROM records \
-           WHERE guarantee_activity_name IS NOT NULL AND guarantee_activity_name <> '' \
-             AND {t} IS NOT NULL{vehicle_filter}), \
-         s AS ( \
-           SELECT *, CASE WHEN a = LAG(a) OVER (PARTITION BY run_id ORDER BY record_idx) \
-                          THEN 0 ELSE 1 END AS first_of_stretch \
-           FROM r), \
-         g AS ( \
-           SELECT *, SUM(first_of_stretch) OVER (PARTITION BY run_id ORDER BY record_idx \
-                       ROWS BETWEEN UNBOUNDED PRECEDING AND CURRENT ROW) AS stretch \
-           FROM s), \
-         st AS ( \
-           SELECT run_id, stretch, MIN(a) AS a, MIN(record_idx) AS first_idx, \
-                  MAX(CASE WHEN first_of_stretch = 1 OR disarmed THEN record_idx END) AS start_idx \
-           FROM g GROUP BY run_id, stretch), \
-         times AS ( \
-           SELECT st.run_id, st.stretch, st.a, b.t AS t_start, f.t AS t_first \
-           FROM st JOIN g b ON b.run_id = st.run_id AND b.record_idx = st.start_idx \
-                   JOIN g f ON f.run_id = st.run_id AND f.record_idx = st.first_idx), \
-         d AS ( \
-           SELECT a, LEAD(t_first) OVER (PARTITION BY run_id ORDER BY stretch) - t_start AS d \
-           FROM times) \
-         SELECT a, \
-           SUM(CASE WHEN d > 0.0 THEN 1 ELSE 0 END) AS n, \
-           SUM(CASE WHEN d > 0.0 THEN d ELSE 0.0 END) AS sum_d, \
-           SUM(CASE WHEN d > 0.0 THEN d * d ELSE 0.0 END) AS sum_dd, \
-           SUM(CASE WHEN d > 0.0 THEN 0 ELSE 1 END) AS n_non_positive, \
-           MIN(CASE WHEN d > 0.0 THEN NULL ELSE d END) AS shortest \
-         FROM d WHERE d IS NOT NULL GROUP BY a ORDER BY a"
+        "SELECT activity AS a, \
+           SUM(CASE WHEN duration_s > 0.0 THEN 1 ELSE 0 END) AS n, \
+           SUM(CASE WHEN duration_s > 0.0 THEN duration_s ELSE 0.0 END) AS sum_d, \
+           SUM(CASE WHEN duration_s > 0.0 THEN duration_s * duration_s ELSE 0.0 END) AS sum_dd, \
+           SUM(CASE WHEN duration_s > 0.0 THEN 0 ELSE 1 END) AS n_non_positive, \
+           MIN(CASE WHEN duration_s > 0.0 THEN NULL ELSE duration_s END) AS shortest \
+         FROM stretches WHERE duration_s IS NOT NULL{vehicle_filter} \
+         GROUP BY activity ORDER BY activity"
     )
-}
-
-/// Whether the `records` table has a column of that name.
-async fn has_column(ctx: &SessionContext, name: &str) -> anyhow::Result<bool> {
-    let t = ctx.table("records").await.context("table records")?;
-    Ok(t.schema().fields().iter().any(|f| f.name() == name))
-}
-
-/// The query for this dataset (its columns decide the clock's and the arming's expressions).
-pub async fn query(ctx: &SessionContext, vehicle_filter: &str) -> anyhow::Result<String> {
-    Ok(durations_sql(
-        vehicle_filter,
-        has_column(ctx, "obs_vehicle_time_s").await?,
-        has_column(ctx, "obs_armed").await?,
-    ))
 }
 
 /// The durations of the runs in `ctx`.

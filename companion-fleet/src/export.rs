@@ -19,10 +19,10 @@ use std::path::Path;
 /// 3: `events` holds the operator gate's events' fields (`operator`, `start_by`, `why`), which
 /// the report counts refused starts by; a schema-2 dataset lacks them (its refusals would read
 /// as none), so it is re-ingested.
-pub const FLEET_SCHEMA: i64 = 3;
+pub const FLEET_SCHEMA: i64 = 4;
 
 /// The tables of a run, in the order they are written.
-pub const TABLES: [&str; 9] = [
+pub const TABLES: [&str; 10] = [
     "runs",
     "records",
     "proposals",
@@ -32,6 +32,7 @@ pub const TABLES: [&str; 9] = [
     "samples",
     "legs",
     "bn_trials",
+    "stretches",
 ];
 
 /// Who a run is: its content id, vehicle, date and route.
@@ -513,6 +514,7 @@ pub fn export_run(dir: &Path, out: &Path, key: &RunKey) -> anyhow::Result<LogCou
     let mut records = TableWriter::create(&out.join("records.parquet"), &record_columns(&dynamic))?;
     let mut side = Side::create(out)?;
     let mut trials = crate::bn_rows::TrialWriter::create(&out.join("bn_trials.parquet"))?;
+    let mut stretches = crate::durations::StretchWriter::create(&out.join("stretches.parquet"))?;
     let mut counts = LogCounts::default();
     let mut header = Value::Null;
     let stream = stream_log(dir).map_err(|e| anyhow::anyhow!("{shown}: {e}"))?;
@@ -524,6 +526,7 @@ pub fn export_run(dir: &Path, out: &Path, key: &RunKey) -> anyhow::Result<LogCou
                 records.push(record_row(key, &dynamic, &v, counts.records))?;
                 side.add(key, &v)?;
                 trials.add(key, &r, counts.records)?;
+                stretches.add(key, &r)?;
                 counts.records += 1;
             }
             LogItem::Event(e) => {
@@ -547,6 +550,7 @@ pub fn export_run(dir: &Path, out: &Path, key: &RunKey) -> anyhow::Result<LogCou
     side.proposals.finish()?;
     side.events.finish()?;
     side.commands.finish()?;
+    stretches.finish()?;
     let frames = crate::telemetry::export_tlog(dir, &out.join("telemetry.parquet"), key)?;
     let samples = crate::samples::export_samples(dir, &out.join("samples.parquet"), key)?;
     let legs = crate::legs::export_legs(dir, &out.join("legs.parquet"), key)?;
