@@ -48,8 +48,8 @@ for r in spark.sql(q["normals"]).collect():
     for name, i in {"ay": 1, "iy": 2, "cy": 3}.items():
         close(f"normals[{r['k']}].{name}", r[name], aty[i])
     n += 1
-# The activity durations' sums (a query over records, window functions).
-spark.read.option("mergeSchema", "true").parquet(f"{ds}/*/*/*/records*.parquet").createOrReplaceTempView("records")
+# The activity durations' sums (a GROUP BY over stretches).
+spark.read.parquet(f"{ds}/*/*/*/stretches*.parquet").createOrReplaceTempView("stretches")
 nd = 0
 for r in spark.sql(q["durations"]).collect():
     want = stats["durations"].get(r["a"])

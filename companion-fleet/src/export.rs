@@ -19,6 +19,8 @@ use std::path::Path;
 /// 3: `events` holds the operator gate's events' fields (`operator`, `start_by`, `why`), which
 /// the report counts refused starts by; a schema-2 dataset lacks them (its refusals would read
 /// as none), so it is re-ingested.
+/// 4: the table `stretches` (the activity durations calibrate sums, written at ingest); a
+/// schema-3 dataset has none, so it is re-ingested.
 pub const FLEET_SCHEMA: i64 = 4;
 
 /// The tables of a run, in the order they are written.

@@ -127,8 +127,8 @@ fn html_table(rows: &serde_json::Value) -> String {
 }
 
 /// A run ingested by an older fleet schema lacks columns the report counts by (fleet schema 3:
-/// the operator events' fields, the BN trials): its figures would read as zero, so the report
-/// and calibrate refuse it.
+/// the operator events' fields, the BN trials; 4: the stretches calibrate times): its figures
+/// would read as zero, so the report and calibrate refuse it.
 pub async fn refuse_old_runs(
     ctx: &datafusion::prelude::SessionContext,
     dir: &Path,
