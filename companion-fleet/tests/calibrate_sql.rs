@@ -254,3 +254,78 @@ fn a_vehicle_without_runs_is_refused_with_why() {
     );
     assert!(!err.contains("panicked"), "{err}");
 }
+
+/// Make the ingested dataset `ds` look written by fleet schema 3: no `stretches` table, and the
+/// runs' `fleet_schema` 3.
+fn downgrade_to_schema_3(ds: &Path) {
+    use arrow::array::{ArrayRef, Int64Array};
+    use parquet::arrow::ArrowWriter;
+    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    let mut batches = 0;
+    for entry in walk(ds) {
+        let name = entry.file_name().unwrap().to_string_lossy().to_string();
+        if name.starts_with("stretches") {
+            std::fs::remove_file(&entry).unwrap();
+            batches += 1;
+        } else if name.starts_with("runs") && name.ends_with(".parquet") {
+            let reader =
+                ParquetRecordBatchReaderBuilder::try_new(std::fs::File::open(&entry).unwrap())
+                    .unwrap();
+            let schema = reader.schema().clone();
+            let rows: Vec<_> = reader.build().unwrap().map(Result::unwrap).collect();
+            let mut w =
+                ArrowWriter::try_new(std::fs::File::create(&entry).unwrap(), schema, None).unwrap();
+            for b in rows {
+                let i = b.schema().index_of("fleet_schema").unwrap();
+                let mut cols = b.columns().to_vec();
+                cols[i] = std::sync::Arc::new(Int64Array::from(vec![3; b.num_rows()])) as ArrayRef;
+                w.write(&arrow::record_batch::RecordBatch::try_new(b.schema(), cols).unwrap())
+                    .unwrap();
+            }
+            w.close().unwrap();
+        }
+    }
+    assert!(batches > 0, "no stretches table in {}", ds.display());
+}
+
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            out.extend(walk(&p));
+        } else {
+            out.push(p);
+        }
+    }
+    out
+}
+
+#[test]
+fn a_dataset_of_fleet_schema_3_is_refused_with_re_ingest() {
+    // Schema 3 had no `stretches` (the durations were windows over `records`): calibrate says to
+    // re-ingest instead of failing on the missing table or timing nothing.
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("r");
+    write_run(&run, A, 1, &SPEEDS);
+    let ds = tmp.path().join("fleet");
+    fleet(&[
+        "ingest",
+        run.to_str().unwrap(),
+        "--into",
+        ds.to_str().unwrap(),
+    ]);
+    downgrade_to_schema_3(&ds);
+    for cmd in ["calibrate", "report"] {
+        let o = std::process::Command::new(FLEET)
+            .args([cmd, ds.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            !o.status.success() && err.contains("re-ingest"),
+            "{cmd}: {err}"
+        );
+        assert!(!err.contains("panicked"), "{err}");
+    }
+}
