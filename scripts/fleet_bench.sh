@@ -77,9 +77,9 @@ PY
 }
 secs() { sed 's/ s wall.*//' <<<"$1"; }
 echo "runs: $N ($PROFILE build; $(nproc) cores; load average at start: $(cut -d' ' -f1-3 /proc/loadavg))"
-r=$(t "$BIN/companion-fleet" ingest "$WORK/runs" --into "$DS"); echo "  companion-fleet ingest:     $r"; TOTAL=$(python3 -c "print($TOTAL + $(secs "$r"))")
-r=$(t "$BIN/companion-fleet" report "$DS" --json); echo "  companion-fleet report:     $r"; TOTAL=$(python3 -c "print($TOTAL + $(secs "$r"))")
-r=$(t "$BIN/companion-fleet" calibrate "$DS" --json); echo "  companion-fleet calibrate:  $r"; TOTAL=$(python3 -c "print($TOTAL + $(secs "$r"))")
+r=$(t "$BIN/companion-fleet" ingest "$WORK/runs" --into "$DS"); echo "  companion-fleet ingest:     $r"; TOTAL=$(python3 -c "print(round($TOTAL + $(secs "$r"), 1))")
+r=$(t "$BIN/companion-fleet" report "$DS" --json); echo "  companion-fleet report:     $r"; TOTAL=$(python3 -c "print(round($TOTAL + $(secs "$r"), 1))")
+r=$(t "$BIN/companion-fleet" calibrate "$DS" --json); echo "  companion-fleet calibrate:  $r"; TOTAL=$(python3 -c "print(round($TOTAL + $(secs "$r"), 1))")
 echo "  companion-fleet total:      $TOTAL s (ingest + report + calibrate)"
 echo "  companion calibrate RUN...: $(t "$BIN/companion" calibrate "$WORK/runs")"
 echo "  dataset size: $(du -sh "$DS" | cut -f1); load average at end: $(cut -d' ' -f1-3 /proc/loadavg)"
