@@ -31,8 +31,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Write one run folder's tables (runs, records, proposals, events, commands, telemetry) as
-    /// Parquet files into DIR.
+    /// Write one run folder's tables (runs, records, proposals, events, commands, telemetry,
+    /// samples, legs, bn_trials, stretches) as Parquet files into DIR.
     Export {
         /// A run folder (decisions.jsonl, flight.tlog).
         run: PathBuf,
@@ -66,7 +66,8 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Run a SQL query over the tables records, proposals, events, commands, telemetry, runs.
+    /// Run a SQL query over the tables records, proposals, events, commands, telemetry, runs,
+    /// samples, legs, bn_trials, stretches.
     Sql {
         dir: PathBuf,
         query: String,
