@@ -53,20 +53,6 @@ pub struct WorkDone {
 /// At most this many re-solves per cycle (one per version the MDP may turn to is plenty).
 const MAX_RESOLVES: usize = 3;
 
-/// `dst = src` element by element, reusing `dst`'s strings.
-fn fill_strings<'a>(dst: &mut Vec<String>, src: impl ExactSizeIterator<Item = &'a str>) {
-    dst.truncate(src.len());
-    for (i, a) in src.enumerate() {
-        match dst.get_mut(i) {
-            Some(d) => {
-                d.clear();
-                d.push_str(a);
-            }
-            None => dst.push(a.to_string()),
-        }
-    }
-}
-
 impl Core {
     /// A core at cycle 0 with fresh copies of the model's stateful parts.
     pub fn new(model: Arc<Model>, kind: ModelKind, policy: Policy) -> Self {
@@ -222,10 +208,9 @@ impl Core {
         }
         self.record_resource_conflicts(&sc, rec);
         self.platform.note_others(model, self.policy, rec);
-        fill_strings(
-            &mut rec.actions,
-            sc.actions.iter().map(|&a| model.actions.name(a)),
-        );
+        // By id over the catalogue's names: named only when the record is written.
+        rec.actions.reset_over(model.actions.names());
+        sc.actions.iter().for_each(|&a| rec.actions.push(a));
         mark(Stage::Arbitration);
 
         // guarantee: PANORAMA margins on the activity being flown
@@ -325,7 +310,7 @@ impl Core {
                 .map_or(String::new(), |p| p.actions.join("+"));
             rec.conflicts.push(crate::record::Conflict {
                 kept: new,
-                dropped: old.actions.clone(),
+                dropped: old.actions.to_names(),
                 rule: format!("resource policy {policy}: {} re-solved", old.mdp),
             });
         }

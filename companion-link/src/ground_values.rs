@@ -214,7 +214,7 @@ mod tests {
         let mut rec = DecisionRecord {
             cycle,
             time_s,
-            actions: vec!["track_v3".into(), "detect_obstacles_lidar".into()],
+            actions: ["track_v3", "detect_obstacles_lidar"].into_iter().collect(),
             decide_ms: Some(0.8),
             ..Default::default()
         };

@@ -122,7 +122,7 @@ impl Why {
                     mdp: p.mdp.clone(),
                     state: p.state.clone(),
                     action: p.action.clone(),
-                    actions: capped(&p.actions, MAX_LIST, &mut omitted),
+                    actions: capped(&p.actions.to_names(), MAX_LIST, &mut omitted),
                     value: p.value,
                     inputs: capped(&all, MAX_INPUTS, &mut omitted),
                 }
@@ -171,8 +171,8 @@ impl Why {
             cycle: r.cycle,
             time_s: r.time_s,
             state: r.state.clone(),
-            actions: capped(&r.actions, MAX_LIST, &mut omitted),
-            shell_actions: capped(&r.shell_actions, MAX_LIST, &mut omitted),
+            actions: capped(&r.actions.to_names(), MAX_LIST, &mut omitted),
+            shell_actions: capped(&r.shell_actions.to_names(), MAX_LIST, &mut omitted),
             proposals,
             probabilities: r
                 .probabilities
