@@ -269,6 +269,48 @@ impl<'de> Deserialize<'de> for ActionIds {
     }
 }
 
+/// The names of an [`ActionIds`] joined by `+` (`avoid_obstacle+search_zone_t`), as a message
+/// or a conflict's `kept` writes them.
+pub struct Joined<'a>(pub &'a ActionIds);
+
+impl std::fmt::Display for Joined<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for (i, name) in self.0.iter().enumerate() {
+            if i > 0 {
+                f.write_str("+")?;
+            }
+            f.write_str(name)?;
+        }
+        Ok(())
+    }
+}
+
+/// Serde for an [`ActionIds`] written as one string, its names joined by `+` (a conflict's
+/// `kept`, as the record wrote it when it was that string); read back split at `+` (the empty
+/// string: no action), so a string read is written again byte for byte.
+pub mod joined {
+    use super::{ActionIds, Joined, MAX_NAMES};
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    /// The names joined by `+`.
+    pub fn serialize<S: Serializer>(a: &ActionIds, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(&Joined(a))
+    }
+
+    /// A `+`-joined string of names, over a vocabulary of its own.
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<ActionIds, D::Error> {
+        let text = String::deserialize(d)?;
+        if text.is_empty() {
+            return Ok(ActionIds::default());
+        }
+        ActionIds::try_from_names(text.split('+')).ok_or_else(|| {
+            serde::de::Error::custom(format!(
+                "a `+`-joined action list naming more than {MAX_NAMES} distinct actions"
+            ))
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -295,6 +337,24 @@ mod tests {
         assert_eq!(serde_json::to_string(&twice).unwrap(), r#"["land","land"]"#);
         assert_eq!(serde_json::to_string(&ActionIds::default()).unwrap(), "[]");
         assert!(serde_json::from_str::<ActionIds>(r#"["land",3]"#).is_err());
+    }
+
+    #[test]
+    fn a_joined_list_is_written_and_read_as_its_string() {
+        #[derive(serde::Serialize, serde::Deserialize)]
+        struct Kept(#[serde(with = "joined")] ActionIds);
+        for text in [
+            r#""""#,
+            r#""avoid_obstacle""#,
+            r#""land+track_v3""#,
+            r#""a++b""#,
+        ] {
+            let k: Kept = serde_json::from_str(text).unwrap();
+            assert_eq!(serde_json::to_string(&k).unwrap(), text);
+        }
+        let k: Kept = serde_json::from_str(r#""land+track_v3""#).unwrap();
+        assert_eq!(k.0, ["land", "track_v3"]);
+        assert_eq!(Joined(&k.0).to_string(), "land+track_v3");
     }
 
     #[test]

@@ -5,6 +5,7 @@
 //! core carries between cycles (its own fields) and one [`Observations`] snapshot. No clock, file,
 //! socket or randomness.
 
+use crate::action_id::ActionIds;
 use crate::mission::ActionKind;
 pub use crate::mission::Policy;
 pub use crate::model::{Model, ModelKind};
@@ -242,7 +243,7 @@ impl Core {
         self.health_mdp.merge_live(sc);
         if let Err(e) = model.conflicts.resolve_by(
             &sc.merged,
-            |a| model.actions.name(a),
+            model.actions.names(),
             // Model::policies lists the policies in the conflicts' order: the index is theirs.
             self.policy.index(),
             &mut sc.kept,
@@ -307,10 +308,10 @@ impl Core {
             let new = rec.proposals[k + 1..]
                 .iter()
                 .rfind(|p| p.mdp == old.mdp)
-                .map_or(String::new(), |p| p.actions.join("+"));
+                .map_or_else(ActionIds::default, |p| p.actions.clone());
             rec.conflicts.push(crate::record::Conflict {
                 kept: new,
-                dropped: old.actions.to_names(),
+                dropped: old.actions.clone(),
                 rule: format!("resource policy {policy}: {} re-solved", old.mdp),
             });
         }
@@ -319,17 +320,15 @@ impl Core {
         };
         for d in &res.dropped {
             let app = d.app.as_str();
-            let gave_way: Vec<String> = sc
-                .kept
-                .iter()
+            let mut gave_way = ActionIds::over(model.actions.names());
+            (sc.kept.iter())
                 .filter(|&&a| model.actions.by_id(a).app.as_deref() == Some(app))
-                .map(|&a| model.actions.name(a).to_string())
-                .collect();
+                .for_each(|&a| gave_way.push(a));
             if gave_way.is_empty() {
                 continue;
             }
             rec.conflicts.push(crate::record::Conflict {
-                kept: String::new(),
+                kept: ActionIds::default(),
                 dropped: gave_way,
                 rule: format!("resource policy {policy}: {d}"),
             });

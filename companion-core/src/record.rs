@@ -58,10 +58,11 @@ pub struct MdpProposal {
 #[derive(Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct Conflict {
-    /// Primitive action kept.
-    pub kept: String,
-    /// Primitive actions dropped in its favour.
-    pub dropped: Vec<String>,
+    /// Primitive actions kept, by id (written as their names joined by `+`).
+    #[serde(with = "crate::action_id::joined")]
+    pub kept: ActionIds,
+    /// Primitive actions dropped in their favour, by id (written as the list of names).
+    pub dropped: ActionIds,
     /// The rule from params/policies.toml that decided it.
     pub rule: String,
 }

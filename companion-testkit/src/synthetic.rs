@@ -107,8 +107,8 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
         "landing" => (s(&["land"]), "-", vec![]),
         _ if obstacle => {
             conflicts.push(Conflict {
-                kept: "avoid_obstacle".into(),
-                dropped: s(&["follow_trajectory"]),
+                kept: ["avoid_obstacle"].into_iter().collect(),
+                dropped: ["follow_trajectory"].into_iter().collect(),
                 rule: "safety: avoid_obstacle > follow_trajectory".into(),
             });
             (

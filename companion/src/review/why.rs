@@ -135,8 +135,13 @@ impl Why {
             .iter()
             .take(MAX_LIST)
             .map(|c| ConflictWhy {
-                kept: c.kept.clone(),
-                dropped: c.dropped.iter().take(MAX_LIST).cloned().collect(),
+                kept: c.kept.join("+"),
+                dropped: c
+                    .dropped
+                    .iter()
+                    .take(MAX_LIST)
+                    .map(str::to_string)
+                    .collect(),
                 rule: c.rule.clone(),
             })
             .collect();
