@@ -212,8 +212,12 @@ impl ActionRoles {
     }
 
     /// Whether some action of `actions` plays `role`.
-    pub fn any<S: AsRef<str>>(&self, actions: &[S], role: ActionRole) -> bool {
-        actions.iter().any(|a| self.is(a.as_ref(), role))
+    pub fn any<I>(&self, actions: I, role: ActionRole) -> bool
+    where
+        I: IntoIterator,
+        I::Item: AsRef<str>,
+    {
+        actions.into_iter().any(|a| self.is(a.as_ref(), role))
     }
 
     /// Whether action `id` ends the flight ([`ActionRole::ends_flight`]).
@@ -222,8 +226,12 @@ impl ActionRoles {
     }
 
     /// The first action of `actions` that ends the flight.
-    pub fn first_ending<'a, S: AsRef<str>>(&self, actions: &'a [S]) -> Option<&'a S> {
-        actions.iter().find(|a| self.ends_flight(a.as_ref()))
+    pub fn first_ending<I>(&self, actions: I) -> Option<I::Item>
+    where
+        I: IntoIterator,
+        I::Item: AsRef<str>,
+    {
+        actions.into_iter().find(|a| self.ends_flight(a.as_ref()))
     }
 }
 

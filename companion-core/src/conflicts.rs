@@ -2,6 +2,7 @@
 //! each policy's priority order (BFM section 6.2), loaded with the model and applied each cycle
 //! by the arbitration stage.
 
+use crate::action_id::{ActionId, ActionIds, ActionNames};
 use crate::mission_mdp::InstantiateError;
 use crate::record::Conflict;
 use crate::spec::{ParamsFiles, SpecError, read_toml};
@@ -166,8 +167,9 @@ impl BehaviourConflicts {
         Ok((kept.into_iter().map(str::to_string).collect(), conflicts))
     }
 
-    /// As [`BehaviourConflicts::resolve`] into reused buffers: `kept` is overwritten, and
-    /// `conflicts` is rewritten entry by entry (no allocation once its strings have grown).
+    /// As [`BehaviourConflicts::resolve`] over names: `kept` is overwritten, `conflicts`
+    /// rewritten entry by entry (a test's or a tool's form; the cycle runs
+    /// [`BehaviourConflicts::resolve_by`] on the catalogue's ids).
     pub fn resolve_into<'a>(
         &self,
         actions: &[&'a str],
@@ -176,18 +178,25 @@ impl BehaviourConflicts {
         conflicts: &mut Vec<Conflict>,
     ) -> Result<(), InstantiateError> {
         let at = self.policy_position(policy)?;
-        self.resolve_by(actions, |a| a, at, kept, conflicts)
+        let list = ActionIds::from_names(actions);
+        let mut ids = Vec::new();
+        self.resolve_by(list.ids(), list.vocabulary(), at, &mut ids, conflicts)?;
+        kept.clear();
+        for a in ids {
+            kept.extend(actions.iter().find(|&&x| x == list.name(a)));
+        }
+        Ok(())
     }
 
-    /// As [`BehaviourConflicts::resolve_into`] over actions of any copyable kind (catalogue ids),
-    /// `name` giving each one's name (what patterns match and conflicts record), under the
-    /// policy at position `policy` of [`BehaviourConflicts::policies`] (resolved at load).
-    pub fn resolve_by<'n, T: Copy>(
+    /// As [`BehaviourConflicts::resolve_into`] over catalogue ids, `names` their names by id
+    /// (what patterns match; the conflicts record the ids over them), under the policy at
+    /// position `policy` of [`BehaviourConflicts::policies`] (resolved at load).
+    pub fn resolve_by(
         &self,
-        actions: &[T],
-        name: impl Fn(T) -> &'n str,
+        actions: &[ActionId],
+        names: &ActionNames,
         policy: usize,
-        kept: &mut Vec<T>,
+        kept: &mut Vec<ActionId>,
         conflicts: &mut Vec<Conflict>,
     ) -> Result<(), InstantiateError> {
         let (_, order) = self
@@ -202,10 +211,12 @@ impl BehaviourConflicts {
                 .filter_map(|p| order.iter().position(|q| q == p))
                 .min()
         };
+        let name = |a: ActionId| names[a.index()].as_str();
         let mut fired = 0;
         for rule in &self.rules {
-            let in_group =
-                |g: usize, a: &T| rule.groups[g].iter().any(|p| pattern_matches(p, name(*a)));
+            let in_group = |g: usize, a: &ActionId| {
+                rule.groups[g].iter().any(|p| pattern_matches(p, name(*a)))
+            };
             let present = |g: usize| kept.iter().any(|a| in_group(g, a));
             if !present(0) || !present(1) {
                 continue;
@@ -217,23 +228,14 @@ impl BehaviourConflicts {
             }
             let c = &mut conflicts[fired];
             fired += 1;
-            c.kept.clear();
-            for (i, a) in kept.iter().filter(|a| in_group(win, a)).enumerate() {
-                if i > 0 {
-                    c.kept.push('+');
-                }
-                c.kept.push_str(name(*a));
-            }
-            let mut n = 0;
-            for a in kept.iter().filter(|a| in_group(lose, a)) {
-                if n == c.dropped.len() {
-                    c.dropped.push(String::new());
-                }
-                c.dropped[n].clear();
-                c.dropped[n].push_str(name(*a));
-                n += 1;
-            }
-            c.dropped.truncate(n);
+            c.kept.reset_over(names);
+            c.dropped.reset_over(names);
+            kept.iter()
+                .filter(|a| in_group(win, a))
+                .for_each(|&a| c.kept.push(a));
+            kept.iter()
+                .filter(|a| in_group(lose, a))
+                .for_each(|&a| c.dropped.push(a));
             c.rule.clone_from(&rule.name);
             kept.retain(|a| !in_group(lose, a));
         }
@@ -272,8 +274,8 @@ impl BehaviourConflicts {
             let (win, lose) = if a_wins { (in_a, in_b) } else { (in_b, in_a) };
             kept.retain(|a| !lose.contains(a));
             conflicts.push(Conflict {
-                kept: win.join("+"),
-                dropped: lose,
+                kept: win.iter().collect(),
+                dropped: lose.iter().collect(),
                 rule: rule.name.clone(),
             });
         }

@@ -5,6 +5,7 @@
 //! core carries between cycles (its own fields) and one [`Observations`] snapshot. No clock, file,
 //! socket or randomness.
 
+use crate::action_id::ActionIds;
 use crate::mission::ActionKind;
 pub use crate::mission::Policy;
 pub use crate::model::{Model, ModelKind};
@@ -52,20 +53,6 @@ pub struct WorkDone {
 
 /// At most this many re-solves per cycle (one per version the MDP may turn to is plenty).
 const MAX_RESOLVES: usize = 3;
-
-/// `dst = src` element by element, reusing `dst`'s strings.
-fn fill_strings<'a>(dst: &mut Vec<String>, src: impl ExactSizeIterator<Item = &'a str>) {
-    dst.truncate(src.len());
-    for (i, a) in src.enumerate() {
-        match dst.get_mut(i) {
-            Some(d) => {
-                d.clear();
-                d.push_str(a);
-            }
-            None => dst.push(a.to_string()),
-        }
-    }
-}
 
 impl Core {
     /// A core at cycle 0 with fresh copies of the model's stateful parts.
@@ -222,10 +209,9 @@ impl Core {
         }
         self.record_resource_conflicts(&sc, rec);
         self.platform.note_others(model, self.policy, rec);
-        fill_strings(
-            &mut rec.actions,
-            sc.actions.iter().map(|&a| model.actions.name(a)),
-        );
+        // By id over the catalogue's names: named only when the record is written.
+        rec.actions.reset_over(model.actions.names());
+        sc.actions.iter().for_each(|&a| rec.actions.push(a));
         mark(Stage::Arbitration);
 
         // guarantee: PANORAMA margins on the activity being flown
@@ -257,7 +243,7 @@ impl Core {
         self.health_mdp.merge_live(sc);
         if let Err(e) = model.conflicts.resolve_by(
             &sc.merged,
-            |a| model.actions.name(a),
+            model.actions.names(),
             // Model::policies lists the policies in the conflicts' order: the index is theirs.
             self.policy.index(),
             &mut sc.kept,
@@ -322,7 +308,7 @@ impl Core {
             let new = rec.proposals[k + 1..]
                 .iter()
                 .rfind(|p| p.mdp == old.mdp)
-                .map_or(String::new(), |p| p.actions.join("+"));
+                .map_or_else(ActionIds::default, |p| p.actions.clone());
             rec.conflicts.push(crate::record::Conflict {
                 kept: new,
                 dropped: old.actions.clone(),
@@ -334,17 +320,15 @@ impl Core {
         };
         for d in &res.dropped {
             let app = d.app.as_str();
-            let gave_way: Vec<String> = sc
-                .kept
-                .iter()
+            let mut gave_way = ActionIds::over(model.actions.names());
+            (sc.kept.iter())
                 .filter(|&&a| model.actions.by_id(a).app.as_deref() == Some(app))
-                .map(|&a| model.actions.name(a).to_string())
-                .collect();
+                .for_each(|&a| gave_way.push(a));
             if gave_way.is_empty() {
                 continue;
             }
             rec.conflicts.push(crate::record::Conflict {
-                kept: String::new(),
+                kept: ActionIds::default(),
                 dropped: gave_way,
                 rule: format!("resource policy {policy}: {d}"),
             });

@@ -431,7 +431,7 @@ mod tests {
         let mut r = DecisionRecord {
             state: "base".into(),
             guarantee: Some(g),
-            actions: vec![TAKE_OFF.into()],
+            actions: crate::action_id::ActionIds::from_names([TAKE_OFF]),
             ..Default::default()
         };
         r.observations.insert("battery_pct".into(), 80.0);
@@ -495,10 +495,10 @@ mod tests {
         );
 
         let mut r = base_record();
-        r.actions = vec![STAY_ON_GROUND.into()];
+        r.actions = crate::action_id::ActionIds::from_names([STAY_ON_GROUND]);
         r.proposals.push(MdpProposal {
             mdp: "navigation".into(),
-            actions: vec![STAY_ON_GROUND.into()],
+            actions: crate::action_id::ActionIds::from_names([STAY_ON_GROUND]),
             inputs: [("P_battery".to_string(), 0.05), ("P_sys".to_string(), 0.9)]
                 .into_iter()
                 .collect(),
@@ -517,7 +517,7 @@ mod tests {
         assert!(e.description().contains("P_battery 0.050"), "{e}");
 
         let mut r = base_record();
-        r.actions = vec!["detect_obstacles_lidar".into()];
+        r.actions = crate::action_id::ActionIds::from_names(["detect_obstacles_lidar"]);
         assert!(matches!(
             verdict(&r, &m),
             Err(LaunchRefusal::NoTakeOff { .. })

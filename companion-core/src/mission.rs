@@ -65,6 +65,8 @@ pub struct ActionCatalogue {
     /// Per action, the first action starting the same application variant (itself when it is
     /// the first or starts none): `variant_id`, asked every cycle, computed once.
     variant_of: Vec<crate::action_id::ActionId>,
+    /// The actions' names by id, shared by every record's action lists ([`ActionCatalogue::names`]).
+    names: crate::action_id::ActionNames,
 }
 
 #[derive(Deserialize)]
@@ -124,11 +126,19 @@ impl ActionCatalogue {
                 crate::action_id::ActionId::from_index(first as u16)
             })
             .collect();
+        let names = actions.iter().map(|a| a.id.clone()).collect();
         Self {
             actions,
             roles,
             variant_of,
+            names,
         }
+    }
+
+    /// The actions' names by id, compiled once: the vocabulary a record's
+    /// [`crate::action_id::ActionIds`] are written over.
+    pub fn names(&self) -> &crate::action_id::ActionNames {
+        &self.names
     }
 
     /// The first action of the catalogue starting the same application variant as `id` (or
@@ -645,8 +655,12 @@ impl MissionStates {
 
     /// The tracking state the action set aims at, and the tracking variant version flown there:
     /// the first action that keeps a tracking state.
-    pub fn tracking_target<S: AsRef<str>>(&self, actions: &[S]) -> Option<(&str, &str)> {
-        actions.iter().find_map(|a| {
+    pub fn tracking_target<I>(&self, actions: I) -> Option<(&str, &str)>
+    where
+        I: IntoIterator,
+        I::Item: AsRef<str>,
+    {
+        actions.into_iter().find_map(|a| {
             self.states.iter().find_map(|s| match &s.keeping {
                 Some((k, v)) if k == a.as_ref() => Some((s.name.as_str(), v.as_str())),
                 _ => None,

@@ -444,7 +444,7 @@ impl MissionMdp {
             mdp: self.name.clone(),
             state: self.states[state].clone(),
             action: self.actions[d.action].clone(),
-            actions: self.does[d.action].clone(),
+            actions: crate::action_id::ActionIds::from_names(&self.does[d.action]),
             value: d.value,
             iterations: d.iterations,
             horizon: horizon as u32,
@@ -458,12 +458,12 @@ impl MissionMdp {
         }
     }
 
-    /// As [`MissionMdp::proposal`], into a reused entry (its strings keep their capacity).
+    /// As [`MissionMdp::proposal`], into a reused entry (its strings keep their capacity); its
+    /// `actions` are left to the caller, who holds the catalogue their ids index.
     pub fn proposal_into(&self, state: usize, d: &Decision, horizon: usize, out: &mut MdpProposal) {
         out.mdp.clone_from(&self.name);
         out.state.clone_from(&self.states[state]);
         out.action.clone_from(&self.actions[d.action]);
-        out.actions.clone_from(&self.does[d.action]);
         out.value = d.value;
         out.iterations = d.iterations;
         out.horizon = horizon as u32;

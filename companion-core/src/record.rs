@@ -1,7 +1,7 @@
 //! The decision record: one per decision cycle, every stage in order. This is the schema of the
 //! decision log (docs/decision-log.md); bump [`SCHEMA_VERSION`] on any incompatible change.
 
-use crate::action_id::ActionId;
+use crate::action_id::{ActionId, ActionIds};
 use crate::named_slots::{Label, NamedSlots};
 use crate::observation_values::ObservationValues;
 use serde::{Deserialize, Serialize};
@@ -33,8 +33,9 @@ pub struct MdpProposal {
     pub state: String,
     /// The chosen MDP action (as named in params) and the primitive actions it stands for.
     pub action: String,
-    /// Primitive actions the chosen MDP action stands for (`take_off`, `track_v3`, ...).
-    pub actions: Vec<String>,
+    /// Primitive actions the chosen MDP action stands for (`take_off`, `track_v3`, ...), by id
+    /// over the catalogue (named when written).
+    pub actions: ActionIds,
     /// Optimal expected value at `state` under the active policy's rewards.
     pub value: f64,
     /// Stages the finite-horizon solver computed by backward induction (at most `horizon`: the
@@ -57,10 +58,11 @@ pub struct MdpProposal {
 #[derive(Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct Conflict {
-    /// Primitive action kept.
-    pub kept: String,
-    /// Primitive actions dropped in its favour.
-    pub dropped: Vec<String>,
+    /// Primitive actions kept, by id (written as their names joined by `+`).
+    #[serde(with = "crate::action_id::joined")]
+    pub kept: ActionIds,
+    /// Primitive actions dropped in their favour, by id (written as the list of names).
+    pub dropped: ActionIds,
     /// The rule from params/policies.toml that decided it.
     pub rule: String,
 }
@@ -367,14 +369,15 @@ pub struct DecisionRecord {
     pub proposals: Vec<MdpProposal>,
     /// Behaviour conflicts and how the policy resolved them.
     pub conflicts: Vec<Conflict>,
-    /// Final primitive action set after behaviour and resource arbitration.
-    pub actions: Vec<String>,
+    /// Final primitive action set after behaviour and resource arbitration, by id over the
+    /// catalogue (named when written).
+    pub actions: ActionIds,
     /// Vehicle actions the fly shell flew this cycle on its own safety rules, not on a model's
     /// proposal: the flight's end ("land" once the mission is over) and a landing kept up until
     /// the vehicle is down. Kept apart from `actions`, which hold only what the MDPs chose; the
     /// record's events say why. Empty in `simulate`.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub shell_actions: Vec<String>,
+    #[serde(skip_serializing_if = "ActionIds::is_empty")]
+    pub shell_actions: ActionIds,
     /// Resource arbitration result; `None` when it did not run.
     pub resources: Option<ResourcesRecord>,
     /// PANORAMA margins; `None` without a guarantee.
@@ -596,7 +599,7 @@ mod tests {
             proposals: (0..n_props)
                 .map(|i| MdpProposal {
                     mdp: format!("m{i}"),
-                    actions: vec![format!("a{x}"); i],
+                    actions: ActionIds::from_names(vec![format!("a{x}"); i]),
                     value: x + i as f64,
                     ..Default::default()
                 })

@@ -10,12 +10,11 @@ use crate::mission::MissionStates;
 use crate::record::DecisionRecord;
 
 /// One cycle: in state `before`, the action set `actions`, then in state `after`.
-pub fn is_tracking_step<S: AsRef<str>>(
-    states: &MissionStates,
-    before: &str,
-    actions: &[S],
-    after: &str,
-) -> bool {
+pub fn is_tracking_step<I>(states: &MissionStates, before: &str, actions: I, after: &str) -> bool
+where
+    I: IntoIterator,
+    I::Item: AsRef<str>,
+{
     if !states.is_target_in_sight(before) {
         return false;
     }

@@ -10,7 +10,7 @@ use crate::spec::SpecError;
 use serde::Serialize;
 use std::path::Path;
 
-pub use crate::action_id::ActionId;
+pub use crate::action_id::{ActionId, ActionIds};
 
 /// Most actions params/actions.toml may declare (ids are `u16`).
 pub const MAX_ACTIONS: usize = u16::MAX as usize;
@@ -34,6 +34,19 @@ impl ActionCatalogue {
     /// The action an id of this catalogue names.
     pub fn by_id(&self, id: ActionId) -> &crate::mission::Action {
         &self.actions[id.index()]
+    }
+
+    /// The actions of `list`: by id when it is over this catalogue's names (every list the core
+    /// writes), by name otherwise (a list read from a file; a name not in the catalogue skipped).
+    pub fn actions_of<'a>(
+        &'a self,
+        list: &'a ActionIds,
+    ) -> impl Iterator<Item = &'a crate::mission::Action> + 'a {
+        let ours = std::sync::Arc::ptr_eq(list.vocabulary(), self.names());
+        list.ids().iter().filter_map(move |&a| match ours {
+            true => Some(self.by_id(a)),
+            false => self.get(list.name(a)),
+        })
     }
 
     /// The name of the action an id of this catalogue names (what the record writes).

@@ -6,11 +6,13 @@
 
 use crate::Msg;
 use crate::dialect::{NAMED_VALUE_FLOAT_DATA, NAMED_VALUE_INT_DATA};
+use companion_core::action_id::ActionNames;
 use companion_core::record::DecisionRecord;
 use companion_core::spec::SpecError;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
+use std::sync::Arc;
 use std::time::Duration;
 
 /// `params/link.toml` `[ground_values]`.
@@ -85,6 +87,9 @@ pub struct GroundValues {
     next_due: Option<Duration>,
     /// Action name -> its paper number (`A12` -> 12), the bit it sets in `actions`.
     action_bits: BTreeMap<String, u32>,
+    /// The same bits by id over the action names of the records seen (the catalogue's, shared
+    /// by `Arc`): resolved once per vocabulary, then read by id.
+    bits_by_id: Option<(ActionNames, Vec<Option<u32>>)>,
 }
 
 impl GroundValues {
@@ -106,6 +111,7 @@ impl GroundValues {
             period: (params.rate_hz > 0.0).then(|| Duration::from_secs_f64(1.0 / params.rate_hz)),
             next_due: None,
             action_bits,
+            bits_by_id: None,
         }
     }
 
@@ -125,6 +131,11 @@ impl GroundValues {
         // Far behind (a stalled loop, a reconnect): start again from now rather than burst.
         self.next_due = Some(if next <= now { now + period } else { next });
         let time_boot_ms = (rec.time_s.max(0.0) * 1000.0).round() as u32;
+        let vocabulary = rec.actions.vocabulary();
+        if !(self.bits_by_id.as_ref()).is_some_and(|(v, _)| Arc::ptr_eq(v, vocabulary)) {
+            let bits = vocabulary.iter().map(|a| self.action_bits.get(a).copied());
+            self.bits_by_id = Some((Arc::clone(vocabulary), bits.collect()));
+        }
         self.values(rec)
             .into_iter()
             .map(|v| message(v, time_boot_ms))
@@ -169,11 +180,18 @@ impl GroundValues {
                 out.push(Float("p_trk_ver", *pv as f32));
             }
         }
-        let mask = rec
-            .actions
-            .iter()
-            .filter_map(|a| self.action_bits.get(a))
-            .fold(0i32, |m, bit| m | (1 << bit));
+        let by_id = (self.bits_by_id.as_ref())
+            .filter(|(v, _)| Arc::ptr_eq(v, rec.actions.vocabulary()))
+            .map(|(_, bits)| bits);
+        let mask = match by_id {
+            Some(bits) => (rec.actions.ids().iter())
+                .filter_map(|a| bits[a.index()])
+                .fold(0i32, |m, bit| m | (1 << bit)),
+            // A record over other names (a test's): by name.
+            None => (rec.actions.iter())
+                .filter_map(|a| self.action_bits.get(a))
+                .fold(0i32, |m, bit| m | (1 << bit)),
+        };
         out.push(Int("actions", mask));
         if let Some(ms) = rec.decide_ms {
             out.push(Float("cycle_ms", ms as f32));
@@ -214,7 +232,7 @@ mod tests {
         let mut rec = DecisionRecord {
             cycle,
             time_s,
-            actions: vec!["track_v3".into(), "detect_obstacles_lidar".into()],
+            actions: ["track_v3", "detect_obstacles_lidar"].into_iter().collect(),
             decide_ms: Some(0.8),
             ..Default::default()
         };
@@ -243,6 +261,32 @@ mod tests {
             ("detect_obstacles_lidar", "A11"),
             ("take_off", "A1"),
         ]
+    }
+
+    /// Once a record was due, its actions are read by id over its vocabulary: the same bits.
+    #[test]
+    fn actions_by_id_set_the_bits_their_names_set() {
+        let mut gv = GroundValues::new(&params(), names());
+        let mut rec = record(7, 12.5);
+        let names: ActionNames = ["take_off", "track_v3", "detect_obstacles_lidar"]
+            .map(String::from)
+            .into();
+        rec.actions = companion_core::action_id::ActionIds::over(&names);
+        for name in ["track_v3", "detect_obstacles_lidar"] {
+            rec.actions
+                .push(companion_core::action_id::id_in(&names, name).unwrap());
+        }
+        assert_eq!(gv.due(&rec, Duration::from_secs(1)).len(), 8);
+        assert!(
+            gv.bits_by_id
+                .as_ref()
+                .is_some_and(|(v, _)| Arc::ptr_eq(v, &names))
+        );
+        let mask = gv.values(&rec).into_iter().find_map(|v| match v {
+            GroundValue::Int("actions", m) => Some(m),
+            _ => None,
+        });
+        assert_eq!(mask, Some((1 << 15) | (1 << 11)));
     }
 
     #[test]

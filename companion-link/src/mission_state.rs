@@ -85,6 +85,8 @@ pub struct MissionState {
     actions: ActionCatalogue,
     /// The role of each action of `actions`, by id.
     roles: Vec<Option<ActionRole>>,
+    /// The tracking state each action of `actions` keeps (`track_v3` keeps `v3`), by id.
+    keeping: Vec<Option<String>>,
 }
 
 impl MissionState {
@@ -100,6 +102,13 @@ impl MissionState {
             .actions
             .iter()
             .map(|a| states.actions().role_of(&a.id))
+            .collect();
+        let keeping = (actions.actions.iter())
+            .map(|a| {
+                states
+                    .tracking_target([&a.id])
+                    .map(|(kept, _)| kept.to_string())
+            })
             .collect();
         let first = route.first_waypoint_seq();
         // The mission's own end (search loiter, RTL or LAND) follows wpf: past it the vehicle is
@@ -129,6 +138,7 @@ impl MissionState {
             states,
             actions: actions.clone(),
             roles,
+            keeping,
         }
     }
 
@@ -168,6 +178,12 @@ impl MissionState {
     /// The action catalogue whose ids this estimator speaks.
     pub fn actions(&self) -> &ActionCatalogue {
         &self.actions
+    }
+
+    /// The tracking state the action set `actions` (ids of [`MissionState::actions`]) aims at:
+    /// the one the first action keeping a tracking state keeps (`track_v3` keeps `v3`).
+    pub fn tracking_target(&self, actions: impl IntoIterator<Item = ActionId>) -> Option<&str> {
+        (actions.into_iter()).find_map(|a| self.keeping.get(a.index()).and_then(Option::as_deref))
     }
 
     /// The name of action `id`, for a record.
@@ -298,17 +314,21 @@ impl MissionState {
     }
 
     /// After the core's decision: remember the tracking version it runs and whether it chose to
-    /// land. `time_s` is the cycle's observation time.
-    pub fn after_plan(&mut self, actions: &[String]) {
-        self.tracking = self
-            .states
-            .tracking_target(actions)
-            .map(|(kept, _)| kept.to_string());
+    /// land. `actions` are ids of this estimator's catalogue ([`MissionState::actions`]).
+    pub fn after_plan(&mut self, actions: impl IntoIterator<Item = ActionId> + Clone) {
+        let keeping = |a: ActionId| self.keeping.get(a.index()).and_then(Option::as_deref);
+        match actions.clone().into_iter().find_map(keeping) {
+            Some(kept) if self.tracking.as_deref() != Some(kept) => {
+                self.tracking = Some(kept.to_string());
+            }
+            Some(_) => {}
+            None => self.tracking = None,
+        }
         if self.flown
-            && let Some(a) = self.states.actions().first_ending(actions)
+            && let Some(a) = (actions.into_iter()).find(|&a| self.is_landing_action(a))
         {
             self.landing = true;
-            self.landing_action = self.actions.id(a);
+            self.landing_action = Some(a);
         }
     }
 
@@ -405,6 +425,11 @@ mod tests {
         crate::test_support::catalogue()
     }
 
+    /// The ids of `names` in `m`'s catalogue.
+    fn ids(m: &MissionState, names: &[&str]) -> Vec<ActionId> {
+        names.iter().map(|n| m.actions().id(n).unwrap()).collect()
+    }
+
     /// The landing action's name.
     fn landing(m: &MissionState) -> Option<&str> {
         m.landing_action().map(|a| m.name(a))
@@ -460,10 +485,10 @@ mod tests {
         assert_eq!(m.update(&obs(5.0, &fly(5.0, 5.0, 1.0)), &auto), "wpi");
         assert_eq!(m.update(&obs(6.0, &fly(5.0, 0.2, 0.0)), &auto), "wpf");
         assert_eq!(m.update(&obs(7.0, &fly(5.0, 0.2, 1.0)), &auto), "target");
-        m.after_plan(&["detect_obstacles_lidar".into(), "track_v3".into()]);
+        m.after_plan(ids(&m, &["detect_obstacles_lidar", "track_v3"]));
         assert_eq!(m.update(&obs(8.0, &fly(5.0, 0.2, 1.0)), &auto), "v3");
         assert_eq!(m.mission_end(&obs(8.0, &[])), None);
-        m.after_plan(&["track_v2".into()]);
+        m.after_plan(ids(&m, &["track_v2"]));
         assert_eq!(m.update(&obs(9.0, &fly(5.0, 0.2, 1.0)), &auto), "v2");
         // lost target: back to searching at wpf
         assert_eq!(m.update(&obs(10.0, &fly(5.0, 0.2, 0.0)), &auto), "wpf");
@@ -478,7 +503,7 @@ mod tests {
             None,
             "reported once"
         );
-        m.after_plan(&["land".into()]);
+        m.after_plan(ids(&m, &["land"]));
         assert_eq!(m.update(&obs(30.0, &fly(5.0, 0.0, 1.0)), &auto), "landing");
         assert_eq!(landing(&m), Some("land"));
         assert!(!m.finished());
@@ -670,14 +695,14 @@ mod tests {
             )
         };
         // (snapshot, plan after it, the shipped state expected)
-        let flight: Vec<(Observations, Vec<String>, &str)> = vec![
+        let flight: Vec<(Observations, Vec<&str>, &str)> = vec![
             (obs(0.0, &[("armed", 0.0)]), vec![], "base"),
             (fly(1.0, 1.0, 0.0, 0.0), vec![], "wp1"),
             (fly(2.0, 3.0, 5.0, 0.0), vec![], "wpi"),
             (fly(3.0, 5.0, 0.2, 0.0), vec![], "wpf"),
-            (fly(4.0, 5.0, 0.2, 1.0), vec!["track_v3".into()], "target"),
+            (fly(4.0, 5.0, 0.2, 1.0), vec!["track_v3"], "target"),
             (fly(5.0, 5.0, 0.2, 1.0), vec![], "v3"),
-            (fly(6.0, 5.0, 0.2, 1.0), vec!["land".into()], "target"),
+            (fly(6.0, 5.0, 0.2, 1.0), vec!["land"], "target"),
             (fly(7.0, 5.0, 0.2, 1.0), vec![], "landing"),
         ];
         for (o, plan, expected) in flight {
@@ -693,8 +718,8 @@ mod tests {
             };
             assert_eq!(b, want, "renamed at t={}", o.time_s);
             assert_eq!(old.waypoints_remaining(&o), new.waypoints_remaining(&o));
-            old.after_plan(&plan);
-            new.after_plan(&plan);
+            old.after_plan(ids(&old, &plan));
+            new.after_plan(ids(&new, &plan));
         }
         assert_eq!(landing(&new), Some("land"));
     }

@@ -165,7 +165,7 @@ struct Session<'m> {
     next_step: Duration,
     landed_until: Option<Duration>,
     last: Option<(Plan, DecisionRecord)>,
-    landing_cmd: Option<String>,
+    landing_cmd: Option<companion_core::action_id::ActionId>,
     period: Duration,
     next_tick: Duration,
     next_hb: Duration,
@@ -295,7 +295,7 @@ fn main() -> anyhow::Result<()> {
                     // records after it propose nothing: the vehicle is already landing).
                     if let Some((plan, rec)) = &mut s.last {
                         if let Some(l) = s.landing_cmd.take()
-                            && !rec.actions.contains(&l)
+                            && !rec.actions.contains(l)
                         {
                             rec.actions.push(l);
                         }
@@ -381,12 +381,11 @@ fn main() -> anyhow::Result<()> {
                         .entry(model.actions.name(a).to_string())
                         .or_default() += 1;
                 }
-                if let Some(a) = rec
-                    .actions
-                    .iter()
-                    .find(|a| model.states.actions().ends_flight(a))
-                {
-                    s.landing_cmd = Some(a.clone());
+                let ends = |&a: &companion_core::action_id::ActionId| {
+                    model.states.actions().ends_flight(rec.actions.name(a))
+                };
+                if let Some(&a) = rec.actions.ids().iter().find(|a| ends(a)) {
+                    s.landing_cmd = Some(a);
                 }
                 s.last = Some((plan, rec));
             }

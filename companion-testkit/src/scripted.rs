@@ -3,6 +3,7 @@
 //! out of the shipped binary (issue 25).
 
 use companion::fly::{Decider, FlyArgs, FlySetup};
+use companion_core::action_id::ActionIds;
 use companion_core::launch::LaunchRefusal;
 use companion_core::mission::{Action, ActionCatalogue, ActionKind, ActionRoles};
 use companion_core::observations::Observations;
@@ -100,7 +101,7 @@ impl Decider for ScriptedDecider {
 
     /// The script agrees to a start when it proposes to take off (it has no guarantee).
     fn launch_verdict(&self, rec: &DecisionRecord) -> Result<(), LaunchRefusal> {
-        if rec.actions.iter().any(|a| a == "take_off") {
+        if rec.actions.contains_name("take_off") {
             Ok(())
         } else {
             Err(LaunchRefusal::NoTakeOff {
@@ -160,7 +161,11 @@ impl Decider for ScriptedDecider {
         };
         let rec = DecisionRecord {
             state: self.phase.name().to_string(),
-            actions: vec![action.to_string()],
+            actions: {
+                let mut a = ActionIds::over(self.actions.names());
+                a.push(id);
+                a
+            },
             events: obs.events.clone(),
             observations: obs.values.clone(),
             ..Default::default()

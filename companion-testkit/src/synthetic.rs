@@ -107,8 +107,8 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
         "landing" => (s(&["land"]), "-", vec![]),
         _ if obstacle => {
             conflicts.push(Conflict {
-                kept: "avoid_obstacle".into(),
-                dropped: s(&["follow_trajectory"]),
+                kept: ["avoid_obstacle"].into_iter().collect(),
+                dropped: ["follow_trajectory"].into_iter().collect(),
                 rule: "safety: avoid_obstacle > follow_trajectory".into(),
             });
             (
@@ -321,7 +321,7 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
             mdp: "navigation".into(),
             state: state.into(),
             action: actions.first().cloned().unwrap_or_default(),
-            actions: actions.clone(),
+            actions: actions.iter().collect(),
             value: 10.0 - f,
             iterations: 4,
             ..Default::default()
@@ -349,8 +349,8 @@ pub fn record(i: u64, n: u64) -> DecisionRecord {
         probabilities: probabilities.into_iter().collect(),
         proposals,
         conflicts,
-        actions,
-        shell_actions: Vec::new(),
+        actions: actions.iter().collect(),
+        shell_actions: Default::default(),
         cpt_learned: Vec::new(),
         live_dropped: None,
         resources: Some(ResourcesRecord {

@@ -1,6 +1,6 @@
-//! Inside the decision cycle observations, probabilities and evidence travel by id (issue 39,
-//! item 1): no `BTreeMap<String, _>` is built or filled inside `Core::step_into` or any function of
-//! the core it calls. Names are written only at the edges (the record's serialization, the
+//! Inside the decision cycle observations, probabilities, evidence and actions travel by id
+//! (issue 39, item 1): no `BTreeMap<String, _>` and no list of action names is built or filled
+//! inside `Core::step_into` or any function of the core it calls. Names are written only at the edges (the record's serialization, the
 //! shells). A source test over companion-core's shipped code (`support/shipped_code.rs`, comments
 //! and literals blanked), following the calls from `step_into` by name: an over-approximation of
 //! the call graph (every core function of a called name is followed), so a map built anywhere a
@@ -260,6 +260,73 @@ const GOAL_MAPS: [(&str, &str); 3] = [
 /// until it is taken off.
 const KNOWN: [(&str, &str); 0] = [];
 
+/// Where `text` builds a list of action names: it turns an action id into its name (the
+/// catalogue's `actions.name(`, an `ActionIds`' `to_names(`, the old record filler
+/// `fill_strings(`), or copies an MDP action's primitives by name (a clone of `does[`, the
+/// MDP's `Vec<Vec<String>>`; reading them is not building).
+fn builds_action_names(text: &str) -> bool {
+    let squeezed: String = text.chars().filter(|c| !c.is_whitespace()).collect();
+    let copies_does = squeezed.contains("does[") && squeezed.contains("clone");
+    copies_does
+        || ["actions.name(", "to_names(", "fill_strings("]
+            .iter()
+            .any(|p| squeezed.contains(p))
+}
+
+/// Inside the cycle actions travel by id (issue 39 item 1): the record's action lists are
+/// `ActionIds` over the catalogue's names, and no function `Core::step_into` reaches builds a list
+/// of action names (names are written when the record is serialized).
+#[test]
+fn no_action_name_list_is_built_inside_the_cycle() {
+    let all = core_functions();
+    let seen = reached(&all);
+    for stage in ["propose", "resolve_by", "record_resource_conflicts"] {
+        assert!(
+            seen.keys().any(|&k| all[k].name == stage),
+            "step_into does not reach {stage}"
+        );
+    }
+    let mut found = Vec::new();
+    for (&k, from) in &seen {
+        let f = &all[k];
+        if !builds_action_names(&f.text) {
+            continue;
+        }
+        found.push(format!(
+            "{}:{} fn {} (reached from {from})",
+            f.file.display(),
+            f.line,
+            f.name
+        ));
+    }
+    assert!(
+        found.is_empty(),
+        "action names built inside the cycle:\n{}",
+        found.join("\n")
+    );
+    // The record's action lists, by their declared type (record.rs, comments blanked).
+    let record = Path::new(env!("CARGO_MANIFEST_DIR")).join("../companion-core/src/record.rs");
+    let code = shipped_code::code_only(&std::fs::read_to_string(&record).unwrap());
+    let squeezed: String = code.chars().filter(|c| !c.is_whitespace()).collect();
+    for field in [
+        "pubactions:ActionIds,",
+        "pubshell_actions:ActionIds,",
+        "pubkept:ActionIds,",
+        "pubdropped:ActionIds,",
+    ] {
+        assert_eq!(
+            squeezed.matches(field).count(),
+            if field == "pubactions:ActionIds," {
+                2
+            } else {
+                1
+            },
+            "record.rs: `{field}` (a proposal's and the record's actions, the shell's, a \
+             conflict's kept and dropped are ids over the catalogue)"
+        );
+    }
+}
+
 #[test]
 fn the_guard_sees_a_string_map_and_a_call() {
     let mut fs = Vec::new();
@@ -277,5 +344,16 @@ fn the_guard_sees_a_string_map_and_a_call() {
     );
     assert!(names_a_string_map(&fs[1].text));
     assert!(!names_a_string_map(&fs[0].text));
+    assert!(builds_action_names("fn f() { let v = list.to_names(); }"));
+    assert!(builds_action_names(
+        "fn f() { push(model.actions.name(a)) }"
+    ));
+    assert!(builds_action_names(
+        "fn f() { out.clone_from(&self.does[d.action]) }"
+    ));
+    assert!(!builds_action_names("fn f() { rec.actions.push(a) }"));
+    assert!(!builds_action_names(
+        "fn primitives(&self, a: usize) { &self.does[a] }"
+    ));
     assert_eq!(fs[1].line, 3);
 }

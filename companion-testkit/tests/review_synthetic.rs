@@ -302,7 +302,7 @@ fn why_of_a_cycle_has_the_proposals_action_and_value() {
             mdp: "navigation".into(),
             state: "wpf".into(),
             action: "continue_route".into(),
-            actions: vec!["follow_trajectory".into()],
+            actions: ["follow_trajectory"].into_iter().collect(),
             value: 12.345,
             iterations: 3,
             ..Default::default()
@@ -315,8 +315,8 @@ fn why_of_a_cycle_has_the_proposals_action_and_value() {
         },
     ];
     recs[17].conflicts = vec![Conflict {
-        kept: "avoid_obstacle".into(),
-        dropped: vec!["follow_trajectory".into()],
+        kept: ["avoid_obstacle"].into_iter().collect(),
+        dropped: ["follow_trajectory"].into_iter().collect(),
         rule: "safety first".into(),
     }];
     let mut it = items(recs);

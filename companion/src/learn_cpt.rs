@@ -175,7 +175,7 @@ mod tests {
     fn tracking_v3(vibration: &str) -> DecisionRecord {
         DecisionRecord {
             state: "v3".into(),
-            actions: vec!["track_v3".into()],
+            actions: ["track_v3"].into_iter().collect(),
             evidence: [("A_vibration".to_string(), vibration.into())]
                 .into_iter()
                 .collect(),

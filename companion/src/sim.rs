@@ -238,7 +238,7 @@ impl<'a> World<'a> {
     pub fn advance(&mut self, plan: &Plan, record: &DecisionRecord) -> Vec<Event> {
         let mut events = Vec::new();
         let values = self.values();
-        let acts: Vec<&str> = record.actions.iter().map(String::as_str).collect();
+        let acts: Vec<&str> = record.actions.iter().collect();
         // The spec outlives the world: the route's names are read while the world changes.
         let spec: &'a WorldSpec = self.spec;
         // What the chosen actions do, by their roles (params/actions.toml), never their names.
@@ -607,7 +607,7 @@ mod tests {
             (
                 Plan::default(),
                 DecisionRecord {
-                    actions: vec![a.into()],
+                    actions: [a].into_iter().collect(),
                     state: obs.state.clone(),
                     ..Default::default()
                 },

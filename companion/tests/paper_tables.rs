@@ -175,7 +175,7 @@ fn every_running_action_is_in_a_proposal_of_its_record() {
                 for r in run(scenario, policy, seed) {
                     for a in &r.actions {
                         assert!(
-                            r.proposals.iter().any(|p| p.actions.contains(a)),
+                            r.proposals.iter().any(|p| p.actions.contains_name(a)),
                             "{scenario} {policy:?} seed {seed} cycle {}: `{a}` runs but no proposal chose it: {:?}",
                             r.cycle,
                             r.proposals
@@ -448,7 +448,7 @@ fn table6_safety_v2_gives_way_and_the_tracking_mdp_is_solved_again() {
     assert!(tracking[1].inputs["P_V2"] < 0.1);
     for a in &tracking[1].actions {
         assert!(
-            r.actions.contains(a),
+            r.actions.contains_name(a),
             "{a} of the re-solve does not run: {:?}",
             r.actions
         );

@@ -251,7 +251,7 @@ fn monolithic_and_concurrent_reach_the_same_decisions() {
                 same += a
                     .iter()
                     .zip(&b)
-                    .filter(|(x, y)| norm(&x.actions) == norm(&y.actions))
+                    .filter(|(x, y)| norm(&x.actions.to_names()) == norm(&y.actions.to_names()))
                     .count();
             }
             let share = same as f64 / total as f64;

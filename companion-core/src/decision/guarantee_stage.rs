@@ -305,9 +305,7 @@ impl GuaranteeStage {
                     // planned and the running version (the allocation is only an estimate).
                     let actions = &model.actions;
                     let proposal = rec.proposals.iter().rev().find(|pr| {
-                        pr.actions
-                            .iter()
-                            .any(|a| actions.get(a).and_then(|x| x.app.as_deref()) == Some(app))
+                        (actions.actions_of(&pr.actions)).any(|x| x.app.as_deref() == Some(app))
                     });
                     if p.version != version
                         && let Some(pr) = proposal

@@ -9,7 +9,7 @@ use crate::evidence::{EvidenceStates, ObservationId};
 use crate::health::HealthModel;
 use crate::mission_mdp::MissionMdps;
 use crate::readings::Readings;
-use crate::record::{DecisionRecord, Event};
+use crate::record::{DecisionRecord, Event, MdpProposal};
 use crate::scratch::Scratch;
 use crate::stage_hook::{Stage, mark};
 use crate::vocabulary::ActionId;
@@ -211,12 +211,9 @@ impl HealthMdpStage {
                         rec.proposals.push(Default::default());
                     }
                     sc.proposed.push((j, d.action));
-                    mdp.proposal_into(
-                        s,
-                        &d,
-                        model.mission.horizon,
-                        &mut rec.proposals[n_proposals],
-                    );
+                    let p = &mut rec.proposals[n_proposals];
+                    mdp.proposal_into(s, &d, model.mission.horizon, p);
+                    self.primitives_into(model, (j, d.action), p);
                     n_proposals += 1;
                 }
                 Ok(None) => {}
@@ -231,7 +228,7 @@ impl HealthMdpStage {
     }
 
     /// Each live proposal's primitives into `sc.merged`, by the ids resolved when the core
-    /// started (the proposal's `actions` are the same primitives by name, for the record).
+    /// started (the proposal's `actions` are the same ids, named when the record is written).
     pub(super) fn merge_live(&self, sc: &mut Scratch) {
         sc.merged.clear();
         for (k, &(j, a)) in sc.proposed.iter().enumerate() {
@@ -244,6 +241,14 @@ impl HealthMdpStage {
                 }
             }
         }
+    }
+
+    /// The primitives of action `a` of MDP `j` into proposal `p`, by id over the catalogue.
+    fn primitives_into(&self, model: &Model, (j, a): (usize, usize), p: &mut MdpProposal) {
+        p.actions.reset_over(model.actions.names());
+        self.mdp_primitives[j][a]
+            .iter()
+            .for_each(|&id| p.actions.push(id));
     }
 
     /// The last proposal (not superseded) whose action starts application `app`, by its ids.
@@ -311,8 +316,9 @@ impl HealthMdpStage {
                 return false;
             }
         };
-        let mut p = crate::record::MdpProposal::default();
+        let mut p = MdpProposal::default();
         mdp.proposal_into(s, &d, model.mission.horizon, &mut p);
+        self.primitives_into(model, (j, d.action), &mut p);
         if p.action == rec.proposals[k].action {
             return false;
         }

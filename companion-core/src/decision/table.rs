@@ -9,7 +9,7 @@ pub fn table(records: &[DecisionRecord], model: &Model) -> String {
     // Consecutive cycles with the same action set and no event are one row; its state column
     // lists the states they passed through (a tracked target lost and re-acquired: `v1/target`).
     let mut rows: Vec<[String; 5]> = Vec::new();
-    let mut last: Option<&Vec<String>> = None;
+    let mut last: Option<&crate::action_id::ActionIds> = None;
     for r in records {
         let events = r
             .events

@@ -873,8 +873,8 @@ fn section_6_2_conflicts_by_policy() {
     assert_eq!(
         why,
         [Conflict {
-            kept: "avoid_obstacle".into(),
-            dropped: vec!["track_v3".into()],
+            kept: ["avoid_obstacle"].into_iter().collect(),
+            dropped: ["track_v3"].into_iter().collect(),
             rule: "avoidance_vs_tracking".into()
         }]
     );

@@ -138,7 +138,7 @@ impl CptCounts {
         parents_of: &BTreeMap<String, Vec<String>>,
     ) -> Vec<Trial> {
         let mut out = Vec::new();
-        let acts: Vec<&str> = r.actions.iter().map(String::as_str).collect();
+        let acts: Vec<&str> = r.actions.iter().collect();
         let roles = states.actions();
         let at_last_wp = states.route().is(RouteRole::LastWaypoint, &r.state);
         for c in &COUNTABLE {

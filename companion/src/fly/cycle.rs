@@ -2,10 +2,11 @@
 //! core's step, the commands for the chosen vehicle action ([`decide`]), then the record
 //! ([`finish_record`]); [`run_cycle_at`] sends and writes between them.
 
-use super::shell::Shell;
+use super::shell::{DeciderIds, Shell, our_ids};
 use super::words;
 use super::{Decider, FlyReport, NOTICE, RecordSink, Tlog, WARNING, send};
 use anyhow::Context;
+use companion_core::action_id::{ActionId, ActionNames};
 use companion_core::action_role::ActionRole;
 use companion_core::observations::Observations;
 use companion_core::record::{CommandOutcome, DecisionRecord, Event, LinkEvent, Plan};
@@ -129,15 +130,15 @@ pub fn decide<D: Decider>(
         obs.set(companion_core::evidence::ROUTE_ACTIVITY, a as f64);
     }
     let (plan, mut rec) = decider.step(&obs);
-    shell.mission.after_plan(&rec.actions);
     let catalogue = decider.actions();
+    let decider_ids = (shell.shell_ids)
+        .get_or_insert_with(|| DeciderIds::new(catalogue, shell.mission.actions()));
+    // The core's actions as ids of the shell's catalogue: no name is looked up in the cycle.
+    let ours = shell.mission.actions().names().clone();
+    (shell.mission).after_plan(our_ids(&ours, Some(decider_ids), &rec.actions));
+    let shell_ids = &decider_ids.to_ours;
     let precedence = shell.precedence_ids.get_or_insert_with(|| {
         let ids = shell.precedence.iter().filter_map(|p| catalogue.id(p));
-        ids.collect()
-    });
-    let ours = shell.mission.actions();
-    let shell_ids = shell.shell_ids.get_or_insert_with(|| {
-        let ids = catalogue.actions.iter().map(|a| ours.id(&a.id));
         ids.collect()
     });
     // The chosen action as an id of the shell's catalogue, which the commands table and the
@@ -158,9 +159,8 @@ pub fn decide<D: Decider>(
         // The mission's end, not the core's decision: recorded as an event with the action.
         shell_events.push(Event::ShellLand(why.to_string()));
         if let Some(land) = shell.mission.action(ActionRole::Land) {
-            let name = shell.mission.name(land).to_string();
-            rec.shell_actions.push(name.clone());
-            shell.mission.after_plan(std::slice::from_ref(&name));
+            shell_action(&mut rec, &ours, land);
+            shell.mission.after_plan([land]);
             chosen = Some(land);
         }
     }
@@ -179,9 +179,11 @@ pub fn decide<D: Decider>(
             if !vehicle.settled(Flown::Action(landing)) {
                 shell_events.push(Event::LandingKept(name.to_string()));
             }
-            let planned = |names: &[String]| names.iter().any(|a| a == name);
-            if !planned(&rec.actions) && !planned(&rec.shell_actions) {
-                rec.shell_actions.push(name.to_string());
+            let planned = our_ids(&ours, Some(decider_ids), &rec.actions)
+                .chain(our_ids(&ours, None, &rec.shell_actions))
+                .any(|a| a == landing);
+            if !planned {
+                shell_action(&mut rec, &ours, landing);
             }
             chosen = Some(landing);
         }
@@ -211,6 +213,18 @@ pub fn decide<D: Decider>(
         events,
         shell_events,
     }
+}
+
+/// The shell flies `action` (an id of its catalogue, whose names are `ours`) on its own rules:
+/// into the record's `shell_actions`, over that catalogue.
+fn shell_action(rec: &mut DecisionRecord, ours: &ActionNames, action: ActionId) {
+    let list = &mut rec.shell_actions;
+    if !std::sync::Arc::ptr_eq(list.vocabulary(), ours) {
+        let had: Vec<ActionId> = our_ids(ours, None, list).collect();
+        list.reset_over(ours);
+        had.into_iter().for_each(|a| list.push(a));
+    }
+    list.push(action);
 }
 
 /// At most this many events in one record: a flood is summarised, not copied.

@@ -2,10 +2,11 @@
 //! operator gate, the words to the ground station and what they last told.
 
 use super::{FlySetup, NOTICE, WARNING, words};
+use companion_core::action_id::{ActionNames, id_in};
 use companion_core::launch::LaunchRefusal;
 use companion_core::mission::RouteRole;
 use companion_core::record::{DecisionRecord, Event, GuaranteeRecord, LinkEvent};
-use companion_core::vocabulary::ActionId;
+use companion_core::vocabulary::{ActionId, ActionIds};
 use companion_link::ingest;
 use companion_link::mission_state::MissionState;
 use companion_link::operator::{GcsText, OperatorGate};
@@ -26,7 +27,7 @@ pub struct Shell {
     /// Per action of the decider's catalogue (by its id), the same action's id in the shell's
     /// (params/actions.toml, which the commands table and the mission estimate index), resolved
     /// on the first cycle: a scripted decider has a catalogue of its own.
-    pub(super) shell_ids: Option<Vec<Option<ActionId>>>,
+    pub(super) shell_ids: Option<DeciderIds>,
     /// Events of the shell itself (the mission's end, the operator) for the next record.
     pub(super) pending_events: Vec<Event>,
     /// Who commands: the companion only once the operator started the mission. `Shell::new`
@@ -37,7 +38,7 @@ pub struct Shell {
     /// The values a ground station plots, and when the next are due.
     pub(super) ground_values: companion_link::ground_values::GroundValues,
     /// The last cycle's action set, to tell a change of behaviour.
-    pub(super) last_actions: Vec<String>,
+    pub(super) last_actions: ActionIds,
     /// The last behaviour told to the ground station (motion and tracking version), and the
     /// evidence of that cycle (to say what changed).
     pub(super) last_told: words::Behaviour,
@@ -93,7 +94,7 @@ impl Shell {
                 &setup.link.ground_values,
                 (setup.catalogue.actions.iter()).map(|a| (a.id.as_str(), a.paper.as_str())),
             ),
-            last_actions: Vec::new(),
+            last_actions: ActionIds::default(),
             last_told: Default::default(),
             told_evidence: Default::default(),
             guarantee_told: None,
@@ -146,7 +147,7 @@ impl Shell {
             .iter()
             .find(|e| !matches!(e, Event::Command { .. }))
             .map_or_else(|| format!("state {}", rec.state), Event::to_string);
-        let show = |a: &[String]| {
+        let show = |a: &ActionIds| {
             if a.is_empty() {
                 "-".to_string()
             } else {
@@ -169,11 +170,11 @@ impl Shell {
         let now = words::Behaviour {
             motion: flown.map(str::to_string),
             motion_role: flown.and_then(|a| self.mission.states().actions().role_of(a)),
-            tracking: self
-                .mission
-                .states()
-                .tracking_target(&rec.actions)
-                .map(|(kept, _)| kept.to_string()),
+            tracking: {
+                let ours = self.mission.actions().names();
+                let ids = our_ids(ours, self.shell_ids.as_ref(), &rec.actions);
+                self.mission.tracking_target(ids).map(str::to_string)
+            },
         };
         if now == self.last_told {
             return None;
@@ -259,6 +260,48 @@ impl Shell {
 /// Longest MAVLink 2 frame (signed): a frame still arriving is at most this many bytes.
 const MAX_FRAME_BYTES: u64 = 280;
 
+/// The decider's catalogue as the shell's: per action of the decider's (by its id), the same
+/// action's id in the shell's (params/actions.toml, which the commands table and the mission
+/// estimate index). A scripted decider has a catalogue of its own.
+pub(super) struct DeciderIds {
+    /// The decider's action names, the vocabulary of the records it writes.
+    pub(super) names: ActionNames,
+    /// By the decider's id, the shell's.
+    pub(super) to_ours: Vec<Option<ActionId>>,
+}
+
+impl DeciderIds {
+    /// The map from `decider`'s catalogue to `ours`.
+    pub(super) fn new(
+        decider: &companion_core::mission::ActionCatalogue,
+        ours: &companion_core::mission::ActionCatalogue,
+    ) -> Self {
+        DeciderIds {
+            names: decider.names().clone(),
+            to_ours: decider.actions.iter().map(|a| ours.id(&a.id)).collect(),
+        }
+    }
+}
+
+/// The ids in the shell's catalogue (its action names `ours`) of the record's action list `list`: as they are when it is
+/// over that catalogue (the shell's `shell_actions`), through `decider` when over the decider's
+/// (the core's `actions`), by name otherwise. An action the shell's catalogue lacks is skipped.
+pub(super) fn our_ids<'a>(
+    ours: &'a ActionNames,
+    decider: Option<&'a DeciderIds>,
+    list: &'a ActionIds,
+) -> impl Iterator<Item = ActionId> + Clone + 'a {
+    let direct = std::sync::Arc::ptr_eq(list.vocabulary(), ours);
+    let mapped = decider.filter(|d| std::sync::Arc::ptr_eq(list.vocabulary(), &d.names));
+    list.ids()
+        .iter()
+        .filter_map(move |&a| match (direct, mapped) {
+            (true, _) => Some(a),
+            (false, Some(d)) => d.to_ours.get(a.index()).copied().flatten(),
+            (false, None) => id_in(ours, list.name(a)),
+        })
+}
+
 /// Say `unsaid` to the ground station now; when the STATUSTEXT rate cap holds it back it stays
 /// unsaid, for a later turn (a plan's word is never lost to the cap).
 pub(super) fn say_until_said(
@@ -339,7 +382,7 @@ mod tests {
     fn a_kept_landing_is_told_once_as_a_landing() {
         let mut shell = test_shell();
         let flying = DecisionRecord {
-            actions: vec!["follow_trajectory".into()],
+            actions: ["follow_trajectory"].into_iter().collect(),
             ..Default::default()
         };
         assert!(
@@ -349,7 +392,7 @@ mod tests {
         );
         let landing = DecisionRecord {
             state: "landing".into(),
-            shell_actions: vec!["land".into()],
+            shell_actions: ["land"].into_iter().collect(),
             events: vec![Event::Mode("LAND".into())],
             observations: [("zone_found".to_string(), 0.0)].into_iter().collect(),
             ..Default::default()

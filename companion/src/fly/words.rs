@@ -315,7 +315,7 @@ mod tests {
     #[test]
     fn a_low_battery_return_says_the_battery_and_what_the_vehicle_does() {
         let rec = DecisionRecord {
-            actions: vec!["return_to_base".into()],
+            actions: ["return_to_base"].into_iter().collect(),
             proposals: vec![
                 proposal("navigation", &["follow_trajectory"], &[("P_battery", 0.02)]),
                 proposal("landing", &["return_to_base"], &[("P_battery", 0.02)]),
@@ -333,7 +333,7 @@ mod tests {
     #[test]
     fn an_energy_shortfall_return_says_energy_is_missing_not_the_plotted_amount() {
         let rec = DecisionRecord {
-            actions: vec!["return_to_base".into()],
+            actions: ["return_to_base"].into_iter().collect(),
             proposals: vec![proposal(
                 "landing",
                 &["return_to_base"],
@@ -359,7 +359,7 @@ mod tests {
     #[test]
     fn the_mission_scripts_landing_says_why_and_where() {
         let rec = DecisionRecord {
-            shell_actions: vec!["land".into()],
+            shell_actions: ["land"].into_iter().collect(),
             events: vec![Event::ShellLand(
                 MissionEnd::SearchTimeLimit(120.0).to_string(),
             )],
@@ -386,7 +386,7 @@ mod tests {
         let mut now_ev = was_ev.clone();
         now_ev.insert("A_vibration".into(), "high".into());
         let rec = DecisionRecord {
-            actions: vec!["track_v3".into()],
+            actions: ["track_v3"].into_iter().collect(),
             evidence: now_ev,
             ..Default::default()
         };
@@ -532,7 +532,7 @@ mod tests {
         });
         let rec = DecisionRecord {
             cycle: 417,
-            actions: vec!["return_to_base".into()],
+            actions: ["return_to_base"].into_iter().collect(),
             proposals: vec![proposal(
                 "landing",
                 &["return_to_base"],

@@ -426,7 +426,7 @@ impl Review {
                 cycle: r.cycle,
                 time_s: r.time_s,
                 state: r.state.clone(),
-                actions: r.actions.clone(),
+                actions: r.actions.to_names(),
                 events: started,
                 event_count: n_texts,
                 resources: res,
@@ -633,13 +633,13 @@ impl Review {
         let same = self
             .phases
             .last()
-            .is_some_and(|p| p.state == r.state && p.actions == r.actions)
+            .is_some_and(|p| p.state == r.state && r.actions == p.actions[..])
             && self.phases_omitted == 0;
         if !same {
             if self.phases.len() < MAX_PHASES {
                 self.phases.push(Phase {
                     state: r.state.clone(),
-                    actions: r.actions.clone(),
+                    actions: r.actions.to_names(),
                     events: Vec::new(),
                     resources: Vec::new(),
                     first_cycle: r.cycle,

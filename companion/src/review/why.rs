@@ -122,7 +122,7 @@ impl Why {
                     mdp: p.mdp.clone(),
                     state: p.state.clone(),
                     action: p.action.clone(),
-                    actions: capped(&p.actions, MAX_LIST, &mut omitted),
+                    actions: capped(&p.actions.to_names(), MAX_LIST, &mut omitted),
                     value: p.value,
                     inputs: capped(&all, MAX_INPUTS, &mut omitted),
                 }
@@ -135,8 +135,13 @@ impl Why {
             .iter()
             .take(MAX_LIST)
             .map(|c| ConflictWhy {
-                kept: c.kept.clone(),
-                dropped: c.dropped.iter().take(MAX_LIST).cloned().collect(),
+                kept: c.kept.join("+"),
+                dropped: c
+                    .dropped
+                    .iter()
+                    .take(MAX_LIST)
+                    .map(str::to_string)
+                    .collect(),
                 rule: c.rule.clone(),
             })
             .collect();
@@ -171,8 +176,8 @@ impl Why {
             cycle: r.cycle,
             time_s: r.time_s,
             state: r.state.clone(),
-            actions: capped(&r.actions, MAX_LIST, &mut omitted),
-            shell_actions: capped(&r.shell_actions, MAX_LIST, &mut omitted),
+            actions: capped(&r.actions.to_names(), MAX_LIST, &mut omitted),
+            shell_actions: capped(&r.shell_actions.to_names(), MAX_LIST, &mut omitted),
             proposals,
             probabilities: r
                 .probabilities
