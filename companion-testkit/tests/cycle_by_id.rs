@@ -136,6 +136,14 @@ fn module_of(file: &Path) -> PathBuf {
 }
 
 /// The core's shipped functions (test-only files and items left out).
+impl Function {
+    /// Where it is, and the function `step_into` reached it from, for a failure message.
+    fn place(&self, from: &str) -> String {
+        let (file, line, name) = (self.file.display(), self.line, &self.name);
+        format!("{file}:{line} fn {name} (reached from {from})")
+    }
+}
+
 fn core_functions() -> Vec<Function> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../companion-core/src");
     let mut files = Vec::new();
@@ -227,12 +235,7 @@ fn no_string_keyed_map_is_built_inside_the_cycle() {
             known_seen.insert(key.1.to_string());
             continue;
         }
-        found.push(format!(
-            "{}:{} fn {} (reached from {from})",
-            f.file.display(),
-            f.line,
-            f.name
-        ));
+        found.push(f.place(from));
     }
     assert!(
         found.is_empty(),
@@ -292,12 +295,7 @@ fn no_action_name_list_is_built_inside_the_cycle() {
         if !builds_action_names(&f.text) {
             continue;
         }
-        found.push(format!(
-            "{}:{} fn {} (reached from {from})",
-            f.file.display(),
-            f.line,
-            f.name
-        ));
+        found.push(f.place(from));
     }
     assert!(
         found.is_empty(),
