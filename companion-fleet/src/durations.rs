@@ -10,16 +10,17 @@
 //! windows sort every record of the fleet by run and index, and that sort's memory grew with
 //! the fleet (docs/performance.md, "Fleet"); the aggregate over `stretches` holds a few rows.
 //!
-//! The rules are calibrate's (`Durations::add`): records without an activity, or whose clock is
-//! not finite, are skipped; the clock is `vehicle_time_s` when recorded, else `time_s`; a
-//! stretch starts at its first record and again at each of its disarmed records (`armed` < 0.5),
-//! it ends at the next stretch's first record, and the run's last stretch (cut) is not counted.
+//! The rules are calibrate's own, run here at ingest ([`Stretches`], which `Durations::add` feeds
+//! on): records without an activity, or whose clock is not finite, are skipped; the clock is
+//! `vehicle_time_s` when recorded, else `time_s`; a stretch starts at its first record and again
+//! at each of its disarmed records (`armed` < 0.5), it ends at the next stretch's first record,
+//! and the run's last stretch (cut) is not counted.
 
 use crate::calibrate::{f64_at, i64_at, rows};
 use crate::export::RunKey;
 use crate::table::{Cell, Kind, TableWriter};
 use arrow::array::AsArray;
-use companion::calibrate::durations::DurationStats;
+use companion::calibrate::durations::{DurationStats, Stretches};
 use companion_core::record::DecisionRecord;
 use datafusion::prelude::SessionContext;
 use std::collections::BTreeMap;
@@ -50,47 +51,29 @@ fn columns() -> Vec<(String, Kind)> {
 /// One run's completed stretches, fed its records in order.
 pub struct StretchWriter {
     w: TableWriter,
-    /// The activity in force and when its stretch started.
-    current: Option<(String, f64)>,
+    stretches: Stretches,
 }
 
 impl StretchWriter {
     pub fn create(path: &Path) -> anyhow::Result<Self> {
         Ok(StretchWriter {
             w: TableWriter::create(path, &columns())?,
-            current: None,
+            stretches: Stretches::default(),
         })
     }
 
     pub fn add(&mut self, key: &RunKey, r: &DecisionRecord) -> anyhow::Result<()> {
-        let Some(g) = &r.guarantee else {
+        let Some((activity, duration_s)) = self.stretches.next(r) else {
             return Ok(());
         };
-        let t = (r.observations.get("vehicle_time_s").copied()).unwrap_or(r.time_s);
-        if g.activity_name.is_empty() || !t.is_finite() {
-            return Ok(());
-        }
-        let disarmed = r.observations.get("armed").is_some_and(|a| *a < 0.5);
-        match &mut self.current {
-            Some((name, t0)) if *name == g.activity_name => {
-                if disarmed {
-                    *t0 = t;
-                }
-            }
-            Some((name, t0)) => {
-                let row: Vec<Cell> = vec![
-                    key.run_id.as_str().into(),
-                    key.vehicle.as_str().into(),
-                    (r.cycle as i64).into(),
-                    name.as_str().into(),
-                    (t - *t0).into(),
-                ];
-                self.w.push(row)?;
-                self.current = Some((g.activity_name.clone(), t));
-            }
-            None => self.current = Some((g.activity_name.clone(), t)),
-        }
-        Ok(())
+        let row: Vec<Cell> = vec![
+            key.run_id.as_str().into(),
+            key.vehicle.as_str().into(),
+            (r.cycle as i64).into(),
+            activity.as_str().into(),
+            duration_s.into(),
+        ];
+        self.w.push(row)
     }
 
     /// Close the table (the run's last stretch, cut, is not written); the rows written.

@@ -51,31 +51,32 @@ impl DurationStats {
     }
 }
 
-/// Activity durations over many runs, fed one record at a time.
-#[derive(Default)]
-pub struct Durations {
-    stats: BTreeMap<String, DurationStats>,
-    /// Completed activities that lasted zero or less (the clock stood or went back): per name,
-    /// how many and the shortest. No duration is fitted from records like these.
-    non_positive: BTreeMap<String, (u64, f64)>,
+/// One run's stretches of one activity, fed its records in order: the rule of the module's
+/// header, which companion-fleet's `stretches` table follows too (it writes each stretch as a
+/// row at ingest; [`Durations`] sums them here).
+#[derive(Debug, Default)]
+pub struct Stretches {
+    /// The activity in force and when its stretch started.
     current: Option<(String, f64)>,
 }
 
-impl Durations {
+impl Stretches {
     /// A new run begins: the activity in force of the last one was not completed.
     pub fn start_run(&mut self) {
         self.current = None;
     }
 
-    pub fn add(&mut self, r: &DecisionRecord) {
-        let Some(g) = &r.guarantee else { return };
+    /// Feed record `r`: the stretch it completes, when it starts another activity (that
+    /// stretch's activity and how long it lasted, which may be zero or less).
+    pub fn next(&mut self, r: &DecisionRecord) -> Option<(String, f64)> {
+        let g = r.guarantee.as_ref()?;
         let t = r
             .observations
             .get("vehicle_time_s")
             .copied()
             .unwrap_or(r.time_s);
         if g.activity_name.is_empty() || !t.is_finite() {
-            return;
+            return None;
         }
         let disarmed = r.observations.get("armed").is_some_and(|a| *a < 0.5);
         match &mut self.current {
@@ -83,19 +84,47 @@ impl Durations {
                 if disarmed {
                     *t0 = t;
                 }
+                None
             }
             Some((name, t0)) => {
-                let d = t - *t0;
-                if d > 0.0 {
-                    self.stats.entry(name.clone()).or_default().add(d);
-                } else {
-                    let e = self.non_positive.entry(name.clone()).or_insert((0, d));
-                    e.0 += 1;
-                    e.1 = e.1.min(d);
-                }
-                self.current = Some((g.activity_name.clone(), t));
+                let done = (std::mem::replace(name, g.activity_name.clone()), t - *t0);
+                *t0 = t;
+                Some(done)
             }
-            None => self.current = Some((g.activity_name.clone(), t)),
+            None => {
+                self.current = Some((g.activity_name.clone(), t));
+                None
+            }
+        }
+    }
+}
+
+/// Activity durations over many runs, fed one record at a time.
+#[derive(Default)]
+pub struct Durations {
+    stats: BTreeMap<String, DurationStats>,
+    /// Completed activities that lasted zero or less (the clock stood or went back): per name,
+    /// how many and the shortest. No duration is fitted from records like these.
+    non_positive: BTreeMap<String, (u64, f64)>,
+    stretches: Stretches,
+}
+
+impl Durations {
+    /// A new run begins: the activity in force of the last one was not completed.
+    pub fn start_run(&mut self) {
+        self.stretches.start_run();
+    }
+
+    pub fn add(&mut self, r: &DecisionRecord) {
+        let Some((name, d)) = self.stretches.next(r) else {
+            return;
+        };
+        if d > 0.0 {
+            self.stats.entry(name).or_default().add(d);
+        } else {
+            let e = self.non_positive.entry(name).or_insert((0, d));
+            e.0 += 1;
+            e.1 = e.1.min(d);
         }
     }
 
