@@ -49,7 +49,7 @@ pub struct ActionIds {
 impl Default for ActionIds {
     fn default() -> Self {
         ActionIds {
-            names: Arc::from(Vec::new()),
+            names: crate::named_slots::no_names(),
             ids: Vec::new(),
         }
     }
@@ -73,6 +73,13 @@ impl ActionIds {
             self.names = Arc::clone(names);
         }
         self.ids.clear();
+    }
+
+    /// The list rewritten as `ids` over `names` (the buffer kept: no allocation in the steady
+    /// cycle).
+    pub fn set(&mut self, names: &ActionNames, ids: impl IntoIterator<Item = ActionId>) {
+        self.reset_over(names);
+        ids.into_iter().for_each(|id| self.push(id));
     }
 
     /// Add action `id` (an id over [`ActionIds::vocabulary`]).

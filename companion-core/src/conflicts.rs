@@ -228,14 +228,9 @@ impl BehaviourConflicts {
             }
             let c = &mut conflicts[fired];
             fired += 1;
-            c.kept.reset_over(names);
-            c.dropped.reset_over(names);
-            kept.iter()
-                .filter(|a| in_group(win, a))
-                .for_each(|&a| c.kept.push(a));
-            kept.iter()
-                .filter(|a| in_group(lose, a))
-                .for_each(|&a| c.dropped.push(a));
+            let of_group = |g: usize| kept.iter().copied().filter(move |a| in_group(g, a));
+            c.kept.set(names, of_group(win));
+            c.dropped.set(names, of_group(lose));
             c.rule.clone_from(&rule.name);
             kept.retain(|a| !in_group(lose, a));
         }

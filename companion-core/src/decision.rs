@@ -210,8 +210,8 @@ impl Core {
         self.record_resource_conflicts(&sc, rec);
         self.platform.note_others(model, self.policy, rec);
         // By id over the catalogue's names: named only when the record is written.
-        rec.actions.reset_over(model.actions.names());
-        sc.actions.iter().for_each(|&a| rec.actions.push(a));
+        rec.actions
+            .set(model.actions.names(), sc.actions.iter().copied());
         mark(Stage::Arbitration);
 
         // guarantee: PANORAMA margins on the activity being flown

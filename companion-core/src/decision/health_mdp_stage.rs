@@ -245,10 +245,10 @@ impl HealthMdpStage {
 
     /// The primitives of action `a` of MDP `j` into proposal `p`, by id over the catalogue.
     fn primitives_into(&self, model: &Model, (j, a): (usize, usize), p: &mut MdpProposal) {
-        p.actions.reset_over(model.actions.names());
-        self.mdp_primitives[j][a]
-            .iter()
-            .for_each(|&id| p.actions.push(id));
+        (p.actions).set(
+            model.actions.names(),
+            self.mdp_primitives[j][a].iter().copied(),
+        );
     }
 
     /// The last proposal (not superseded) whose action starts application `app`, by its ids.

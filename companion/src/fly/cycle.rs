@@ -221,8 +221,7 @@ fn shell_action(rec: &mut DecisionRecord, ours: &ActionNames, action: ActionId) 
     let list = &mut rec.shell_actions;
     if !std::sync::Arc::ptr_eq(list.vocabulary(), ours) {
         let had: Vec<ActionId> = our_ids(ours, None, list).collect();
-        list.reset_over(ours);
-        had.into_iter().for_each(|a| list.push(a));
+        list.set(ours, had);
     }
     list.push(action);
 }
