@@ -231,18 +231,24 @@ fn the_fleet_fit_equals_calibrate_on_the_same_runs() {
     assert!(table.contains_key("calibration"), "{table:?}");
 }
 
-#[test]
-fn a_vehicle_without_runs_is_refused_with_why() {
-    let tmp = tempfile::tempdir().unwrap();
-    let run = tmp.path().join("r");
+/// A dataset under `dir` holding one run of vehicle A.
+fn one_run_dataset(dir: &Path) -> PathBuf {
+    let run = dir.join("r");
     write_run(&run, A, 1, &SPEEDS);
-    let ds = tmp.path().join("fleet");
+    let ds = dir.join("fleet");
     fleet(&[
         "ingest",
         run.to_str().unwrap(),
         "--into",
         ds.to_str().unwrap(),
     ]);
+    ds
+}
+
+#[test]
+fn a_vehicle_without_runs_is_refused_with_why() {
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = one_run_dataset(tmp.path());
     let o = std::process::Command::new(FLEET)
         .args(["calibrate", ds.to_str().unwrap(), "--vehicle", "nobody"])
         .output()
@@ -306,15 +312,7 @@ fn a_dataset_of_fleet_schema_3_is_refused_with_re_ingest() {
     // Schema 3 had no `stretches` (the durations were windows over `records`): calibrate says to
     // re-ingest instead of failing on the missing table or timing nothing.
     let tmp = tempfile::tempdir().unwrap();
-    let run = tmp.path().join("r");
-    write_run(&run, A, 1, &SPEEDS);
-    let ds = tmp.path().join("fleet");
-    fleet(&[
-        "ingest",
-        run.to_str().unwrap(),
-        "--into",
-        ds.to_str().unwrap(),
-    ]);
+    let ds = one_run_dataset(tmp.path());
     downgrade_to_schema_3(&ds);
     for cmd in ["calibrate", "report"] {
         let o = std::process::Command::new(FLEET)
