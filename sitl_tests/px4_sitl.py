@@ -376,7 +376,8 @@ def px4_vehicle(request, tmp_path):
         if failed:
             print(f"\nPX4 instance {v.instance} kept: {v.workdir} (log {v.log_path})")
     lock.release()
-    if not failed:
+    # PX4_KEEP_PASSED=1 keeps a passed test's folder too (a flaky flight's good runs, to compare)
+    if not failed and not os.environ.get("PX4_KEEP_PASSED"):
         shutil.rmtree(tmp_path, ignore_errors=True)
 
 

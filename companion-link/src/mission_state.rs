@@ -55,6 +55,14 @@ pub struct MissionState {
     pub detection_threshold: f64,
     /// Below this ground speed at the last waypoint the route is finished (m/s).
     pub arrived_speed_mps: f64,
+    /// While the autopilot still flies *to* the last waypoint (MISSION_CURRENT is its seq), slow
+    /// counts as arrived only after this long (s, the autopilot's clock): the turn at the
+    /// waypoint before also slows it, just after MISSION_CURRENT moved on (PX4 SIH: 1.3-1.6 m/s
+    /// at a 90-degree corner, 2.4 m/s a second later; a CI rehearsal's run dipped below 1 m/s
+    /// there and started the search 30 m short). A mission that ends at its last waypoint
+    /// hovers there for good. Past the last waypoint's seq (the mission's own end items) slow
+    /// is arrived at once.
+    pub arrived_hold_s: f64,
     /// Mission end: land after tracking this long (s); see the route file.
     pub tracking_time_limit_s: Option<f64>,
     /// Mission end: land when the target is not found this long after reaching wpf (s).
@@ -68,6 +76,9 @@ pub struct MissionState {
     /// Tracking version the last plan ran (`v3` for `track_v3`).
     tracking: Option<String>,
     wpf_at: Option<f64>,
+    /// Since when (the autopilot's clock) the vehicle has been slow with MISSION_CURRENT on the
+    /// last waypoint's seq, without a break.
+    slow_at_last_since: Option<f64>,
     tracking_since: Option<f64>,
     /// Why the shell ended the mission, once.
     end_reason: Option<MissionEnd>,
@@ -120,6 +131,7 @@ impl MissionState {
             airborne_m: 0.8 * takeoff_alt_m,
             detection_threshold: 0.5,
             arrived_speed_mps: 1.0,
+            arrived_hold_s: 2.0,
             tracking_time_limit_s: route.tracking_time_limit_s,
             search_time_limit_s: route.search_time_limit_s,
             state: states.route_state(RouteRole::OnGround).to_string(),
@@ -129,6 +141,7 @@ impl MissionState {
             auto_seen: false,
             tracking: None,
             wpf_at: None,
+            slow_at_last_since: None,
             tracking_since: None,
             end_reason: None,
             landed_confirm_s: 3.0,
@@ -224,6 +237,20 @@ impl MissionState {
         self.auto_seen
     }
 
+    /// Whether the vehicle is at the last waypoint, slow: past its seq (the mission's own end
+    /// items, the search loiter at wpf) at once, on its seq after [`MissionState::arrived_hold_s`].
+    fn arrived(&mut self, seq: Option<u16>, speed: f64, clock: f64) -> bool {
+        let slow = speed < self.arrived_speed_mps;
+        let on_last = slow && seq == Some(self.last_seq);
+        self.slow_at_last_since = if on_last {
+            Some(self.slow_at_last_since.unwrap_or(clock))
+        } else {
+            None
+        };
+        (slow && seq.is_some_and(|s| s > self.last_seq))
+            || (self.slow_at_last_since).is_some_and(|t0| clock - t0 >= self.arrived_hold_s)
+    }
+
     /// Update from one snapshot; returns the state for `obs.state`.
     pub fn update(&mut self, obs: &Observations, extra: &Extra) -> &str {
         let clock = mission_clock(obs);
@@ -267,6 +294,7 @@ impl MissionState {
             self.landing = true;
             self.finished = true;
         }
+        let arrived = self.arrived(seq, speed, clock);
         let route = self.states.route();
         let named = |role: RouteRole| route.state(role).to_string();
         if self.landing {
@@ -278,9 +306,7 @@ impl MissionState {
             || self.states.is_target_in_sight(&self.state);
         self.state = if !self.flown {
             named(RouteRole::OnGround)
-        } else if past
-            || (seq.is_some_and(|s| s >= self.last_seq) && speed < self.arrived_speed_mps)
-        {
+        } else if past || arrived {
             self.wpf_at.get_or_insert(clock);
             if detected {
                 self.tracking_since.get_or_insert(clock);
@@ -483,23 +509,25 @@ mod tests {
         assert_eq!(m.waypoints_remaining(&obs(4.0, &fly(3.0, 5.0, 1.0))), 3.0);
         // flying the last leg is not arriving
         assert_eq!(m.update(&obs(5.0, &fly(5.0, 5.0, 1.0)), &auto), "wpi");
-        assert_eq!(m.update(&obs(6.0, &fly(5.0, 0.2, 0.0)), &auto), "wpf");
-        assert_eq!(m.update(&obs(7.0, &fly(5.0, 0.2, 1.0)), &auto), "target");
+        // slow on the last waypoint's seq: a turn or the arrival; arrived once it lasts 2 s
+        assert_eq!(m.update(&obs(6.0, &fly(5.0, 0.2, 0.0)), &auto), "wpi");
+        assert_eq!(m.update(&obs(8.0, &fly(5.0, 0.2, 0.0)), &auto), "wpf");
+        assert_eq!(m.update(&obs(9.0, &fly(5.0, 0.2, 1.0)), &auto), "target");
         m.after_plan(ids(&m, &["detect_obstacles_lidar", "track_v3"]));
-        assert_eq!(m.update(&obs(8.0, &fly(5.0, 0.2, 1.0)), &auto), "v3");
-        assert_eq!(m.mission_end(&obs(8.0, &[])), None);
+        assert_eq!(m.update(&obs(10.0, &fly(5.0, 0.2, 1.0)), &auto), "v3");
+        assert_eq!(m.mission_end(&obs(10.0, &[])), None);
         m.after_plan(ids(&m, &["track_v2"]));
-        assert_eq!(m.update(&obs(9.0, &fly(5.0, 0.2, 1.0)), &auto), "v2");
+        assert_eq!(m.update(&obs(11.0, &fly(5.0, 0.2, 1.0)), &auto), "v2");
         // lost target: back to searching at wpf
-        assert_eq!(m.update(&obs(10.0, &fly(5.0, 0.2, 0.0)), &auto), "wpf");
+        assert_eq!(m.update(&obs(12.0, &fly(5.0, 0.2, 0.0)), &auto), "wpf");
         assert!(m.route_on_vehicle());
         let limit = m.tracking_time_limit_s.unwrap();
         // the autopilot's clock wins over the shell's
         let at = |shell: f64, vehicle: f64| obs(shell, &[("vehicle_time_s", vehicle)]);
-        assert_eq!(m.mission_end(&at(7.0 + limit, 0.0)), None);
-        assert!(m.mission_end(&at(0.0, 7.0 + limit)).is_some());
+        assert_eq!(m.mission_end(&at(9.0 + limit, 0.0)), None);
+        assert!(m.mission_end(&at(0.0, 9.0 + limit)).is_some());
         assert_eq!(
-            m.mission_end(&at(7.0 + limit + 1.0, 0.0)),
+            m.mission_end(&at(9.0 + limit + 1.0, 0.0)),
             None,
             "reported once"
         );
@@ -546,6 +574,44 @@ mod tests {
         assert_eq!(m.update(&obs(3.0, &fly(6.0, 0.1)), &auto), "wpf");
         assert_eq!(m.waypoints_remaining(&obs(3.0, &fly(6.0, 0.1))), 0.0);
         assert_eq!(m.update(&obs(4.0, &fly(7.0, 6.0)), &auto), "wpf");
+    }
+
+    /// PX4 makes the last waypoint current as it turns at the one before, where it slows (SIH:
+    /// 1.3-1.6 m/s at a 90-degree corner): a dip below the arrival speed there is not wpf,
+    /// hovering on the last waypoint's seq is, after `arrived_hold_s`; the hold restarts when the
+    /// vehicle speeds up again.
+    #[test]
+    fn slowing_in_the_turn_before_the_last_waypoint_is_not_arriving() {
+        let mut m = MissionState::new(&route(), 10.0, states(), &catalogue());
+        let auto = Extra {
+            mode: Some(FlightMode::Auto),
+            ..Extra::default()
+        };
+        let at = |t: f64, seq: f64, spd: f64| {
+            let vals = [
+                ("armed", 1.0),
+                ("altitude_m", 20.0),
+                ("mission_seq", seq),
+                ("groundspeed_mps", spd),
+                ("vehicle_time_s", t),
+            ];
+            obs(100.0, &vals)
+        };
+        assert_eq!((m.last_seq, m.arrived_hold_s), (5, 2.0));
+        assert_eq!(m.update(&at(10.0, 4.0, 2.0), &auto), "wpi");
+        // the turn: MISSION_CURRENT moved on, the vehicle slowest just after
+        assert_eq!(m.update(&at(10.5, 5.0, 0.6), &auto), "wpi");
+        assert_eq!(m.update(&at(11.5, 5.0, 0.9), &auto), "wpi");
+        assert_eq!(m.update(&at(12.0, 5.0, 2.4), &auto), "wpi");
+        // slow again later (a gust, a slow-down): the hold counts from here, by the vehicle's clock
+        assert_eq!(m.update(&at(13.0, 5.0, 0.5), &auto), "wpi");
+        assert_eq!(m.update(&at(14.9, 5.0, 0.2), &auto), "wpi");
+        assert_eq!(m.update(&at(15.0, 5.0, 0.1), &auto), "wpf");
+        assert_eq!(
+            m.update(&at(16.0, 5.0, 3.0), &auto),
+            "wpf",
+            "wpf reached stays"
+        );
     }
 
     fn flying() -> [(&'static str, f64); 3] {
@@ -699,11 +765,12 @@ mod tests {
             (obs(0.0, &[("armed", 0.0)]), vec![], "base"),
             (fly(1.0, 1.0, 0.0, 0.0), vec![], "wp1"),
             (fly(2.0, 3.0, 5.0, 0.0), vec![], "wpi"),
-            (fly(3.0, 5.0, 0.2, 0.0), vec![], "wpf"),
-            (fly(4.0, 5.0, 0.2, 1.0), vec!["track_v3"], "target"),
-            (fly(5.0, 5.0, 0.2, 1.0), vec![], "v3"),
-            (fly(6.0, 5.0, 0.2, 1.0), vec!["land"], "target"),
-            (fly(7.0, 5.0, 0.2, 1.0), vec![], "landing"),
+            // the search loiter at wpf (seq 6) is current: arrived
+            (fly(3.0, 6.0, 0.2, 0.0), vec![], "wpf"),
+            (fly(4.0, 6.0, 0.2, 1.0), vec!["track_v3"], "target"),
+            (fly(5.0, 6.0, 0.2, 1.0), vec![], "v3"),
+            (fly(6.0, 6.0, 0.2, 1.0), vec!["land"], "target"),
+            (fly(7.0, 6.0, 0.2, 1.0), vec![], "landing"),
         ];
         for (o, plan, expected) in flight {
             let (a, b) = (
