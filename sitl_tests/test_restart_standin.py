@@ -159,8 +159,10 @@ def test_restarted_in_the_air_without_consent_hands_off(autopilot_factory, fly, 
     offered = time.monotonic()
     wait(lambda: sa.state()["mode"] == "RTL", 40, "the hand-off RTL once the consent window passed", again)
     assert time.monotonic() - offered > 15.0, "handed off before the consent window passed"
-    said = texts_from_companion(gcs, t0)
-    assert any("not resumed: no consent" in t for t in said), said
+    # The companion sends the hand-off mode before the words saying why (restart.rs `hand_off`: the mode command,
+    # then `say_found`, whose STATUSTEXT the rate limit may hold back): wait for the words too.
+    wait(lambda: any("not resumed: no consent" in t for t in texts_from_companion(gcs, t0)), 5,
+         "the STATUSTEXT 'not resumed: no consent' from 191", again)
     ack = gcs.start_mission()
     assert ack.result == mavlink.MAV_RESULT_DENIED, "a start was taken after the hand-off"
     again.proc.terminate()

@@ -297,8 +297,9 @@ def test_mission_errors_out_of_range_wrong_sequence_other_uploader_clear(standin
     t2 = time.monotonic()
     other.mav.mission_count_send(1, 1, 2, 0)
     assert other.wait("MISSION_ACK", since=t2).type == mavlink.MAV_MISSION_DENIED
+    t_list = time.monotonic()          # before the request: its answer cannot come before it
     other.mav.mission_request_list_send(1, 1, 0)
-    assert other.wait("MISSION_ACK", lambda m: True, since=time.monotonic() - 0.01).type == mavlink.MAV_MISSION_DENIED
+    assert other.wait("MISSION_ACK", since=t_list).type == mavlink.MAV_MISSION_DENIED
     # finish the open upload correctly
     for seq in range(3):
         c.mav.mission_item_int_send(1, 1, seq, 6, 16, 0, 1, 0, 0, 0, 0, int(HOME[0] * 1e7), int(HOME[1] * 1e7), 10, 0)
@@ -375,7 +376,9 @@ def test_auto_refused_on_ground_without_takeoff_item(standin, client):
     assert c.arm().result == mavlink.MAV_RESULT_ACCEPTED
     t0 = time.monotonic()
     assert c.set_mode("AUTO").result == mavlink.MAV_RESULT_FAILED
-    assert c.wait("STATUSTEXT", since=t0 - 0.2).text == "Auto: Missing Takeoff Cmd"   # ModeAuto::init
+    # Since t0, not before it: the upload's "Flight plan received" may have come just before t0 (ready() returns at
+    # once when the EKF converged during the upload), and the refusal's text is sent after t0 (before its ack).
+    assert c.wait("STATUSTEXT", since=t0).text == "Auto: Missing Takeoff Cmd"   # ModeAuto::init
 
 
 def test_rtl_returns_home_lands_and_disarms(standin, client):
@@ -505,16 +508,19 @@ def test_vibration_battery_obstacle_and_gps_hazards_change_telemetry(standin, cl
     # vibration: quiet in flight, then SIM_VIB_MOT_MAX raises VIBRATION above ArduPilot's 30 m/s/s "bad" line
     quiet = c.wait("VIBRATION", timeout=5)
     assert max(quiet.vibration_x, quiet.vibration_y, quiet.vibration_z) < 15
-    t0 = time.monotonic()
+    # Each check reads the first message that arrived after the PARAM_VALUE answering the change (the stand-in
+    # applies the parameter, then sends PARAM_VALUE, handlers.py `_h_PARAM_SET`; one link, in order): a time taken
+    # before the PARAM_SET, even plus 50 ms, lets a message built before the change through when this reader is late.
     c.param_set("SIM_VIB_MOT_MAX", 400)
-    loud = c.wait("VIBRATION", since=t0 + 0.05, timeout=5)
+    t0 = time.monotonic()
+    loud = c.wait("VIBRATION", since=t0, timeout=5)
     assert max(loud.vibration_x, loud.vibration_y, loud.vibration_z) > 30
     # battery: set 18 % -> SYS_STATUS / BATTERY_STATUS follow, and the charge state turns LOW
-    t1 = time.monotonic()
     c.param_set("SIM_BATT_PCT", 18)
-    ss = c.wait("SYS_STATUS", since=t1 + 0.05, timeout=5)
+    t1 = time.monotonic()
+    ss = c.wait("SYS_STATUS", since=t1, timeout=5)
     assert 14 <= ss.battery_remaining <= 18             # it keeps draining (~1 %/wall s at speedup 10)
-    bs = c.wait("BATTERY_STATUS", since=t1 + 0.05, timeout=5)
+    bs = c.wait("BATTERY_STATUS", since=t1, timeout=5)
     assert 14 <= bs.battery_remaining <= 18 and bs.charge_state == mavlink.MAV_BATTERY_CHARGE_STATE_LOW
     # obstacle 12 m ahead: DISTANCE_SENSOR reads it in cm, forward
     t2 = time.monotonic()
@@ -522,11 +528,11 @@ def test_vibration_battery_obstacle_and_gps_hazards_change_telemetry(standin, cl
     ds = c.wait("DISTANCE_SENSOR", lambda m: m.current_distance <= 4000, since=t2, timeout=5)
     assert ds.current_distance == pytest.approx(1200, abs=30) and ds.orientation == 0
     # GPS off: no fix, GPS health bit cleared, then the EKF drops the absolute position
-    t3 = time.monotonic()
     c.param_set("SIM_GPS_DISABLE", 1)
-    g = c.wait("GPS_RAW_INT", since=t3 + 0.05, timeout=5)
+    t3 = time.monotonic()
+    g = c.wait("GPS_RAW_INT", since=t3, timeout=5)
     assert g.fix_type < 2 and g.satellites_visible == 0
-    ss = c.wait("SYS_STATUS", since=t3 + 0.05, timeout=5)
+    ss = c.wait("SYS_STATUS", since=t3, timeout=5)
     assert not ss.onboard_control_sensors_health & mavlink.MAV_SYS_STATUS_SENSOR_GPS
     c.wait("EKF_STATUS_REPORT", lambda m: not m.flags & mavlink.EKF_POS_HORIZ_ABS, since=t3, timeout=10)
 
@@ -607,7 +613,10 @@ def test_signing_rejects_unsigned_commands(standin, client):
     assert sa.counters["rx_unsigned_rejected"] >= 1
     assert not [e for e in sa.commands() if e.data["src"][0] == 250]
     assert sa.v.mode == 0
+    n0 = len(sa.commands(mavlink.MAV_CMD_DO_SET_MODE))
     assert signed.set_mode("LOITER").result == mavlink.MAV_RESULT_ACCEPTED
+    # The stand-in records a command after it has sent its COMMAND_ACK (handlers.py `_command`): wait for the record
+    sa.wait_for(lambda: len(sa.commands(mavlink.MAV_CMD_DO_SET_MODE)) > n0, timeout=2, what="the DO_SET_MODE recorded")
     assert sa.commands(mavlink.MAV_CMD_DO_SET_MODE)[-1].data["signed"] is True
 
 
