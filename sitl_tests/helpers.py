@@ -71,8 +71,8 @@ def read_decision_log(log_dir: Path, fallback: Optional[Path] = None, typed: boo
         files = [str(fallback)]
     for f in files:
         with open(f) as fh:
-            for n, line in enumerate(fh, 1):
-                line = line.strip()
+            for n, raw in enumerate(fh, 1):
+                line = raw.strip()
                 if not line:
                     continue
                 if f == str(fallback) and not line.startswith("{"):
@@ -80,6 +80,8 @@ def read_decision_log(log_dir: Path, fallback: Optional[Path] = None, typed: boo
                 try:
                     obj = json.loads(line)
                 except json.JSONDecodeError as e:
+                    if not raw.endswith("\n"):
+                        break                     # the last line, still being written by a running companion
                     raise AssertionError(f"{f}:{n}: decision log line is not JSON: {e}: {line[:200]}")
                 if isinstance(obj, dict) and "cycle" in obj:
                     records.append(obj if typed else sentences(obj))

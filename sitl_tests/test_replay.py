@@ -114,8 +114,9 @@ def test_two_flights_in_one_run_replay_equal_with_the_core_restarted_between(aut
     gcs = client(sa.url)
     run = fly(ap, mission=short_route(tmp_path), once=False)
     wait(lambda: sa.rec.of("arm") and not sa.state()["armed"] and sa.state()["landed"], 240, "the first landing", run)
-    # the companion sees the landing and starts waiting for the operator (as the operator test waits)
-    time.sleep(6.0)
+    # the companion sees the landing and starts waiting for the operator: the start is taken from then on
+    wait(lambda: any(NEW_FLIGHT_EVENT in r.get("events", []) for r in run.records()), 30,
+         "the companion waiting for the operator again", run, poll=0.5)
     ack = gcs.start_mission()
     assert ack.result == mavlink.MAV_RESULT_ACCEPTED
     wait(lambda: len(sa.rec.of("arm")) == 2 and sa.state()["alt"] > 5.0, 90, "the second take-off", run)
