@@ -57,11 +57,11 @@ pub struct MissionState {
     pub arrived_speed_mps: f64,
     /// While the autopilot still flies *to* the last waypoint (MISSION_CURRENT is its seq), slow
     /// counts as arrived only after this long (s, the autopilot's clock): the turn at the
-    /// waypoint before also slows it, just after MISSION_CURRENT moved on (PX4 SIH: 1.3-1.6 m/s
-    /// at a 90-degree corner, 2.4 m/s a second later; a CI rehearsal's run dipped below 1 m/s
-    /// there and started the search 30 m short). A mission that ends at its last waypoint
-    /// hovers there for good. Past the last waypoint's seq (the mission's own end items) slow
-    /// is arrived at once.
+    /// waypoint before also slows it, just after MISSION_CURRENT moved on (PX4 SIH: 1.1-1.9 m/s
+    /// at a 90-degree corner in six flights, 2.4 m/s a second later; a CI rehearsal's run dipped
+    /// below 1 m/s there and started the search 30 m short). A mission that ends at its last
+    /// waypoint hovers there for good. Past the last waypoint's seq (the mission's own end
+    /// items) slow is arrived at once.
     pub arrived_hold_s: f64,
     /// Mission end: land after tracking this long (s); see the route file.
     pub tracking_time_limit_s: Option<f64>,
@@ -577,7 +577,7 @@ mod tests {
     }
 
     /// PX4 makes the last waypoint current as it turns at the one before, where it slows (SIH:
-    /// 1.3-1.6 m/s at a 90-degree corner): a dip below the arrival speed there is not wpf,
+    /// 1.1-1.9 m/s at a 90-degree corner): a dip below the arrival speed there is not wpf,
     /// hovering on the last waypoint's seq is, after `arrived_hold_s`; the hold restarts when the
     /// vehicle speeds up again.
     #[test]
