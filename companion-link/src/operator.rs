@@ -16,7 +16,7 @@
 //! companion resumes and records a false alarm.
 //!
 //! [`GcsText`] is the STATUSTEXT outbox: MAVLink severities, no repeat of the same text within
-//! `repeat`, and at most `max_per_s` texts in any second.
+//! `repeat`, and at most `max_per_s` texts in any second (an answer to a refused start one more).
 
 use super::Msg;
 use super::dialect::*;
@@ -457,6 +457,8 @@ pub struct GcsText {
     pub dropped: u64,
     /// The `id` of the last text sent in chunks.
     chunk_id: u16,
+    /// When an answer last went out over the per-second cap ([`GcsText::say_answer`]).
+    answer_over_cap: Option<Duration>,
 }
 
 /// STATUSTEXT carries 50 bytes of text.
@@ -482,6 +484,7 @@ impl GcsText {
             window: VecDeque::new(),
             dropped: 0,
             chunk_id: 0,
+            answer_over_cap: None,
         }
     }
 
@@ -511,6 +514,25 @@ impl GcsText {
             return Vec::new();
         }
         self.send(now, severity, text)
+    }
+
+    /// The words answering a ground station's request (a start refused by the models, with why):
+    /// as [`GcsText::say`], but when the per-second cap is full it still goes out, at most one
+    /// such answer a second, so the operator who was just refused is told why even right after
+    /// the start-up texts (a CI run's MISSION_START refused 0.35 s after "Cannot meet goals" got
+    /// its DENIED and no words). At most `max_per_s` + 1 texts in any second.
+    pub fn say_answer(&mut self, now: Duration, severity: MavSeverity, text: &str) -> Vec<Msg> {
+        let dropped = self.dropped;
+        let out = self.say(now, severity, text);
+        let over_cap = self.dropped != dropped;
+        let answered_lately =
+            (self.answer_over_cap).is_some_and(|t| now.saturating_sub(t) < Duration::from_secs(1));
+        if !over_cap || answered_lately {
+            return out; // sent, held back as a repeat, or a second answer over the cap this second
+        }
+        self.dropped = dropped; // counted by `say`, sent after all
+        self.answer_over_cap = Some(now);
+        self.send(now, severity, sendable(text))
     }
 
     /// A text the ground station must get whatever the rate cap: the companion stopping and a

@@ -479,6 +479,36 @@ fn statustext_is_rate_limited_per_text_and_per_second() {
     );
 }
 
+/// The words answering a refused start go out even when the start-up texts filled the second's
+/// cap (a CI run's refusal came 0.35 s after two texts and was dropped), one such answer a second
+/// at most, and never a repeat of the same words.
+#[test]
+fn an_answer_goes_out_over_a_full_cap_once_a_second() {
+    let mut t = GcsText::new(Duration::from_secs(10), 2);
+    let sev = MavSeverity::MAV_SEVERITY_WARNING;
+    assert_eq!(t.say(s(0.0), sev, "ready").len(), 1);
+    assert_eq!(t.say(s(0.1), sev, "Cannot meet goals").len(), 1);
+    assert!(
+        t.say(s(0.2), sev, "other").is_empty(),
+        "the cap holds for texts"
+    );
+    assert_eq!(t.dropped, 1);
+    assert_eq!(t.say_answer(s(0.4), sev, "Start refused: plan").len(), 1);
+    assert_eq!(t.dropped, 1, "the answer was sent, not dropped");
+    assert!(
+        t.say_answer(s(0.9), sev, "Start refused: again").is_empty(),
+        "a second answer over the cap within a second"
+    );
+    assert_eq!(t.dropped, 2);
+    assert!(
+        t.say_answer(s(1.3), sev, "Start refused: plan").is_empty(),
+        "the same words within the repeat interval"
+    );
+    assert_eq!(t.dropped, 2, "a repeat is not a drop");
+    // under the cap it is an ordinary text
+    assert_eq!(t.say_answer(s(5.0), sev, "Start refused: other").len(), 1);
+}
+
 /// (id, chunk_seq, text) of each STATUSTEXT.
 fn parts(msgs: &[Msg]) -> Vec<(u16, u8, String)> {
     msgs.iter()

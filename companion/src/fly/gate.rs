@@ -246,7 +246,7 @@ pub fn request_start(
                 tracing::warn!("{refused}");
                 shell.pending_events.push(Event::Operator(refused));
                 // One change of decision, one STATUSTEXT (chunked when longer than 50).
-                out.extend(shell.texts.say(now, WARNING, &lines.join(". ")));
+                out.extend(shell.texts.say_answer(now, WARNING, &lines.join(". ")));
                 shell.refusal_told = Some(first);
             }
             Err(refusal)
