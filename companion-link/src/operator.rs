@@ -461,6 +461,15 @@ pub struct GcsText {
     answer_over_cap: Option<Duration>,
 }
 
+/// Why [`GcsText`] holds a text back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Held {
+    /// The same text went out less than `repeat` ago.
+    Repeat,
+    /// The per-second cap is full.
+    Cap,
+}
+
 /// STATUSTEXT carries 50 bytes of text.
 const TEXT_LEN: usize = 50;
 
@@ -497,10 +506,23 @@ impl GcsText {
     /// however many chunks it takes, so its chunks are never split by the cap.
     pub fn say(&mut self, now: Duration, severity: MavSeverity, text: &str) -> Vec<Msg> {
         let text = sendable(text);
-        if let Some(at) = self.last.get(&text)
+        match self.held(now, &text) {
+            Some(Held::Repeat) => Vec::new(),
+            Some(Held::Cap) => {
+                self.dropped += 1;
+                Vec::new()
+            }
+            None => self.send(now, severity, text),
+        }
+    }
+
+    /// Why `text` cannot go out now, if it cannot: the same text went out less than `repeat`
+    /// ago, or `max_per_s` texts went out in the last second.
+    fn held(&mut self, now: Duration, text: &str) -> Option<Held> {
+        if let Some(at) = self.last.get(text)
             && now.saturating_sub(*at) < self.repeat
         {
-            return Vec::new();
+            return Some(Held::Repeat);
         }
         while self
             .window
@@ -509,11 +531,7 @@ impl GcsText {
         {
             self.window.pop_front();
         }
-        if self.window.len() as u32 >= self.max_per_s {
-            self.dropped += 1;
-            return Vec::new();
-        }
-        self.send(now, severity, text)
+        (self.window.len() as u32 >= self.max_per_s).then_some(Held::Cap)
     }
 
     /// The words answering a ground station's request (a start refused by the models, with why):
@@ -522,17 +540,21 @@ impl GcsText {
     /// the start-up texts (a CI run's MISSION_START refused 0.35 s after "Cannot meet goals" got
     /// its DENIED and no words). At most `max_per_s` + 1 texts in any second.
     pub fn say_answer(&mut self, now: Duration, severity: MavSeverity, text: &str) -> Vec<Msg> {
-        let dropped = self.dropped;
-        let out = self.say(now, severity, text);
-        let over_cap = self.dropped != dropped;
         let answered_lately =
             (self.answer_over_cap).is_some_and(|t| now.saturating_sub(t) < Duration::from_secs(1));
-        if !over_cap || answered_lately {
-            return out; // sent, held back as a repeat, or a second answer over the cap this second
+        let text = sendable(text);
+        match self.held(now, &text) {
+            Some(Held::Cap) if !answered_lately => {
+                self.answer_over_cap = Some(now);
+                self.send(now, severity, text)
+            }
+            Some(Held::Repeat) => Vec::new(),
+            Some(Held::Cap) => {
+                self.dropped += 1;
+                Vec::new()
+            }
+            None => self.send(now, severity, text),
         }
-        self.dropped = dropped; // counted by `say`, sent after all
-        self.answer_over_cap = Some(now);
-        self.send(now, severity, sendable(text))
     }
 
     /// A text the ground station must get whatever the rate cap: the companion stopping and a
