@@ -124,9 +124,7 @@ impl PackRequests {
         telemetry: &mut Telemetry,
     ) -> Option<LinkEvent> {
         let id = p.param_id.to_str().unwrap_or("").trim_end_matches('\0');
-        let Some(r) = self.0.iter_mut().find(|r| r.name == id) else {
-            return None;
-        };
+        let r = self.0.iter_mut().find(|r| r.name == id)?;
         // PX4 sends integer parameters bytewise in the float (MAV_PROTOCOL_CAPABILITY_PARAM_
         // ENCODE_BYTEWISE); ArduPilot casts them to float.
         let int = matches!(
