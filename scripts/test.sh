@@ -4,9 +4,10 @@
 # pymavlink into the project's own .venv), nothing already there is upgraded. Then the Rust tests, the
 # SITL tests against the stand-in, the real-autopilot tests (when an ArduCopter SITL or PX4 SITL is found:
 # ARDUCOPTER_BIN/SITL_DEFAULTS and PX4_SITL_DIR, or ../shared/sitl/ beside the checkout), and the armv7 build.
-# One progress line per stage with its elapsed time. The armv7 stage and then the companion-fleet stage
-# (scripts/fleet_tests.sh: DataFusion's build is most of the workspace's) run in one background chain
-# beside the real-autopilot stage (niced: the flights keep their CPU), and report after it.
+# One progress line per stage with its elapsed time. The armv7 stage and the companion-fleet stage
+# (scripts/fleet_tests.sh: DataFusion's build is most of the workspace's) run side by side in the
+# background beside the stand-in and real-autopilot stages (niced: the flights keep their CPU), and
+# report after them.
 #
 #   SKIP_ARM=1        skip the armv7 cross-build and qemu run
 #   SKIP_FLEET=1      skip the companion-fleet stage
@@ -26,8 +27,9 @@ done_() { echo "== [$stage_n/$STAGES] $stage_name ... ${1:-ok} in $(fmt $((SECON
 # The real-SITL scripts run in process groups of their own (setsid): stopped with this script.
 ardu_pid=""
 px4_pid=""
-bg_pid=""
-stop_bg() { for p in $ardu_pid $px4_pid $bg_pid; do kill -TERM -- "-$p" 2>/dev/null || true; done; }
+arm_pid=""
+fleet_pid=""
+stop_bg() { for p in $ardu_pid $px4_pid $arm_pid $fleet_pid; do kill -TERM -- "-$p" 2>/dev/null || true; done; }
 trap 'rc=$?; stop_bg; [ $rc -ne 0 ] && echo "== [$stage_n/$STAGES] $stage_name ... FAILED (exit $rc) after $(fmt $((SECONDS - stage_t)))"; exit $rc' EXIT
 
 SUDO=""
@@ -91,24 +93,32 @@ cargo build --quiet -p companion -p companion-testkit --bins
 export COMPANION_BIN="${CARGO_TARGET_DIR:-$ROOT/target}/debug/companion"
 done_
 
-# ---- background chain: the armv7 stage (7), then the fleet stage (8) -----------------------------
-# The armv7 cross-build and its qemu run, then companion-fleet's build and tests, start here, one
-# after the other in one background chain at nice 19, beside the stand-in tests (5) and the real-SITL
-# flights (6): the flights leave most of both cores idle, and nice keeps the tests', vehicles' and
-# the companion's CPU theirs. CI measured stage 6 at ~17 min and the armv7 part at ~15 min, so the
-# fleet's build (docs/performance.md, Fleet) needs the stand-in stage's idle CPU as well to end
-# near stage 6. In a chain, not side by side: both are CPU-bound builds, so running them at once
-# would end no sooner. Stages 7 and 8 wait for their part and print its log. Each part's exit code
-# goes to LOG.rc (written whole: renamed into place). The armv7 builds are not linted again (the
-# code is stage 3's); the fleet's build reuses stage 3's crates and lints the fleet's own code.
+# ---- in the background: the armv7 stage (7) and the fleet stage (8), side by side ----------------
+# The armv7 cross-build and its qemu run, and companion-fleet's build and tests, start here, side by
+# side at nice 19, beside the stand-in tests (5) and the real-SITL flights (6); nice keeps the tests',
+# vehicles' and the companion's CPU theirs. Side by side, not in a chain: the armv7 part's qemu run
+# is mostly one test binary on one core at a time, and the flights leave the rest idle (a chain of
+# the two ended 13 min after stage 6 in stop 48's rehearsal, 88 % of both cores used over the run);
+# their builds do not wait for each other (the armv7 release build locks target/release and
+# target/armv7-*, the fleet's debug build target/debug). Stages 7 and 8 wait for their part and
+# print its log. Each part's exit code goes to LOG.rc (written whole: renamed into place). The armv7
+# builds are not linted again (the code is stage 3's); the fleet's build reuses stage 3's crates and
+# lints the fleet's own code.
 arm_log=$(mktemp "${TMPDIR:-/tmp}/arm-log.XXXXXX")
 fleet_log=$(mktemp "${TMPDIR:-/tmp}/fleet-log.XXXXXX")
 rm -f "$arm_log.rc" "$fleet_log.rc"
-setsid nice -n 19 bash -c '
-  rc=0; if [ "$1" != 1 ]; then env -u RUSTC_WORKSPACE_WRAPPER ./scripts/arm.sh >"$2" 2>&1 || rc=$?; fi; echo "$rc" >"$2.rc.tmp"; mv "$2.rc.tmp" "$2.rc"
-  rc=0; if [ "$3" != 1 ]; then ./scripts/fleet_tests.sh >"$4" 2>&1 || rc=$?; fi; echo "$rc" >"$4.rc.tmp"; mv "$4.rc.tmp" "$4.rc"
-' background-chain "${SKIP_ARM:-0}" "$arm_log" "${SKIP_FLEET:-0}" "$fleet_log" &
-bg_pid=$!
+# part SKIP LOG CMD...: CMD's output to LOG, its exit code (0 when skipped) to LOG.rc
+part() {
+  local skip=$1 log=$2; shift 2
+  setsid nice -n 19 bash -c '
+    skip=$1 log=$2; shift 2
+    rc=0; if [ "$skip" != 1 ]; then "$@" >"$log" 2>&1 || rc=$?; fi; echo "$rc" >"$log.rc.tmp"; mv "$log.rc.tmp" "$log.rc"
+  ' background-part "$skip" "$log" "$@" &
+}
+part "${SKIP_ARM:-0}" "$arm_log" env -u RUSTC_WORKSPACE_WRAPPER ./scripts/arm.sh
+arm_pid=$!
+part "${SKIP_FLEET:-0}" "$fleet_log" ./scripts/fleet_tests.sh
+fleet_pid=$!
 
 # ---- 5: sitl_tests against the stand-in ------------------------------------------------------------
 begin "python: pytest sitl_tests (stand-in)"
@@ -167,9 +177,8 @@ while alive "$ardu_pid" || alive "$px4_pid"; do
     running=""
     if alive "$ardu_pid"; then running="$running ArduCopter"; fi
     if alive "$px4_pid"; then running="$running PX4"; fi
-    if alive "$bg_pid"; then
-      if [ -f "$arm_log.rc" ]; then running="$running (fleet stage running)"; else running="$running (armv7 stage running)"; fi
-    fi
+    if alive "$arm_pid"; then running="$running (armv7 stage running)"; fi
+    if alive "$fleet_pid"; then running="$running (fleet stage running)"; fi
     echo "   ... $(fmt $((SECONDS - stage_t))): still flying:$running"
   fi
 done
@@ -196,13 +205,13 @@ done_ "ok ($ardu_summary; $px4_summary)"
 # ---- 7: the board ------------------------------------------------------------------------------------
 # armv7 (the SoCKit's Cortex-A9) release binary, engine and companion tests under qemu-user
 # (docs/deploy-arm.md).
-# A part of the chain is done when its LOG.rc exists; a chain that died without writing it failed.
-wait_part() { while [ ! -f "$1.rc" ] && alive "$bg_pid"; do sleep 5; done; [ -f "$1.rc" ] && cat "$1.rc" || echo 1; }
+# A background part is done when its LOG.rc exists; a part that died without writing it failed.
+wait_part() { while [ ! -f "$1.rc" ] && alive "$2"; do sleep 5; done; [ -f "$1.rc" ] && cat "$1.rc" || echo 1; }
 begin "arm: scripts/arm.sh (armv7 cross-build, tests under qemu; started before stage 5)"
 if [ "${SKIP_ARM:-0}" = 1 ]; then
   done_ "skipped (SKIP_ARM=1)"
 else
-  rc=$(wait_part "$arm_log")
+  rc=$(wait_part "$arm_log" "$arm_pid")
   cat "$arm_log"
   [ "$rc" -eq 0 ] || exit "$rc"
   done_ "ok (waited $(fmt $((SECONDS - stage_t))) after stage 6)"
@@ -211,19 +220,20 @@ rm -f "$arm_log" "$arm_log.rc"
 
 # ---- 8: the fleet (ground side) -------------------------------------------------------------------------
 # companion-fleet (docs/fleet.md): built, its Rust tests, its too-many-lines check and
-# sitl_tests/test_fleet.py, after the armv7 stage in the background chain.
-begin "fleet: scripts/fleet_tests.sh (companion-fleet build and tests, test_fleet.py; after stage 7 in the background)"
+# sitl_tests/test_fleet.py, beside the armv7 stage in the background.
+begin "fleet: scripts/fleet_tests.sh (companion-fleet build and tests, test_fleet.py; beside stage 7 in the background)"
 if [ "${SKIP_FLEET:-0}" = 1 ]; then
   done_ "skipped (SKIP_FLEET=1)"
 else
-  rc=$(wait_part "$fleet_log")
+  rc=$(wait_part "$fleet_log" "$fleet_pid")
   cat "$fleet_log"
   [ "$rc" -eq 0 ] || exit "$rc"
   done_ "ok (waited $(fmt $((SECONDS - stage_t))) after stage 7)"
 fi
 rm -f "$fleet_log" "$fleet_log.rc"
-set +e; wait "$bg_pid"; set -e
-bg_pid=""
+set +e; wait "$arm_pid" "$fleet_pid"; set -e
+arm_pid=""
+fleet_pid=""
 
 echo "== real autopilots: $ardu_summary; $px4_summary"
 echo "== all $STAGES stages passed in $(fmt $((SECONDS - T_ALL)))"
