@@ -3,9 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from profile_check import check_vehicle_numbers, t975
-
-MISSION = "missions/tracking.toml"
+from profile_check import MISSION, check_vehicle_numbers, t975
 
 
 @pytest.mark.parametrize("df,table", [(1, 12.706), (2, 4.303), (7, 2.365), (11, 2.201), (30, 2.042)])

@@ -505,9 +505,25 @@ impl GcsText {
     /// [`MAX_CHUNKS`] chunks; a longer text is cut. One text counts once against `max_per_s`,
     /// however many chunks it takes, so its chunks are never split by the cap.
     pub fn say(&mut self, now: Duration, severity: MavSeverity, text: &str) -> Vec<Msg> {
+        self.say_unless_held(now, severity, text, false)
+    }
+
+    /// `text` out unless [`GcsText::held`]; over a full cap when `past_cap` (then noted as the
+    /// last answer over it).
+    fn say_unless_held(
+        &mut self,
+        now: Duration,
+        severity: MavSeverity,
+        text: &str,
+        past_cap: bool,
+    ) -> Vec<Msg> {
         let text = sendable(text);
         match self.held(now, &text) {
             Some(Held::Repeat) => Vec::new(),
+            Some(Held::Cap) if past_cap => {
+                self.answer_over_cap = Some(now);
+                self.send(now, severity, text)
+            }
             Some(Held::Cap) => {
                 self.dropped += 1;
                 Vec::new()
@@ -540,21 +556,10 @@ impl GcsText {
     /// the start-up texts (a CI run's MISSION_START refused 0.35 s after "Cannot meet goals" got
     /// its DENIED and no words). At most `max_per_s` + 1 texts in any second.
     pub fn say_answer(&mut self, now: Duration, severity: MavSeverity, text: &str) -> Vec<Msg> {
-        let answered_lately =
-            (self.answer_over_cap).is_some_and(|t| now.saturating_sub(t) < Duration::from_secs(1));
-        let text = sendable(text);
-        match self.held(now, &text) {
-            Some(Held::Cap) if !answered_lately => {
-                self.answer_over_cap = Some(now);
-                self.send(now, severity, text)
-            }
-            Some(Held::Repeat) => Vec::new(),
-            Some(Held::Cap) => {
-                self.dropped += 1;
-                Vec::new()
-            }
-            None => self.send(now, severity, text),
-        }
+        let answered_lately = self
+            .answer_over_cap
+            .is_some_and(|t| now.saturating_sub(t) < Duration::from_secs(1));
+        self.say_unless_held(now, severity, text, !answered_lately)
     }
 
     /// A text the ground station must get whatever the rate cap: the companion stopping and a
